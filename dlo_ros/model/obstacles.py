@@ -1,0 +1,130 @@
+"""Obstacles as inequality constraints h(x) ≤ 0 (paper eq. 8): h > 0 inside, h < 0 outside.
+
+Each obstacle type has a fixed-size parameter vector (its pose and size), so moving an obstacle changes
+parameter values of the NLP, never its structure.  Every h is a signed distance [m] (exact for
+half-space, sphere and capsule; for the box a smooth inscribed approximation, see ``box``), which lets
+the string's radius be added as a clearance: h(x) + radius ≤ 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import casadi as ca
+import numpy as np
+
+from .rotations import check_quaternion, quat_to_matrix
+
+
+def _vec(value: object, n: int, where: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=float).ravel()
+    if arr.size != n or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{where}: expected {n} finite numbers, got {value!r}")
+    return arr
+
+
+def _halfspace(x: ca.SX, p: ca.SX) -> ca.SX:
+    """p = [point(3), unit outward normal(3)];  h = −n·(x − point) (inside = behind the surface)."""
+    return -ca.dot(p[3:6], x - p[0:3])
+
+
+def _sphere(x: ca.SX, p: ca.SX) -> ca.SX:
+    """p = [centre(3), radius];  h = radius − |x − centre|."""
+    return p[3] - ca.norm_2(x - p[0:3])
+
+
+def _capsule(x: ca.SX, p: ca.SX) -> ca.SX:
+    """p = [a(3), b(3), radius];  h = radius − distance(x, segment ab)."""
+    a, b, r = p[0:3], p[3:6], p[6]
+    ab = b - a
+    t = ca.fmin(1, ca.fmax(0, ca.dot(x - a, ab) / ca.dot(ab, ab)))
+    return r - ca.norm_2(x - (a + t * ab))
+
+
+BOX_EXPONENT = 8
+
+
+def _box(x: ca.SX, p: ca.SX) -> ca.SX:
+    """p = [centre(3), rotation matrix Rᵀ row-major (9), half extents e(3)].
+
+    q = Rᵀ(x − c) in the box frame; h = min(e) · (1 − ‖q/e‖_8): a superellipsoid of exponent 8,
+    inscribed in the box (touches each face centre, rounds the edges), smooth for IPOPT.  Its zero set
+    is exact on the faces' centres; near edges and corners the string may cut the box's edge by up to
+    1 − 3^(−1/8) ≈ 13 % of the half-diagonal — give the box a margin if that matters.
+    """
+    c, rt, e = p[0:3], ca.reshape(p[3:12], 3, 3).T, p[12:15]
+    q = ca.mtimes(rt, x - c) / e
+    return ca.mmin(e) * (1 - ca.sum1(q**BOX_EXPONENT) ** (1.0 / BOX_EXPONENT))
+
+
+@dataclass(frozen=True)
+class ObstacleType:
+    size: int
+    h: Callable[[ca.SX, ca.SX], ca.SX]
+    parse: Callable[[dict, str], np.ndarray]
+
+
+def _parse_halfspace(d: dict, where: str) -> np.ndarray:
+    n = _vec(d.get("normal", [0, 0, 1]), 3, f"{where}.normal")
+    if np.linalg.norm(n) < 1e-12:
+        raise ValueError(f"{where}.normal: must be non-zero")
+    return np.concatenate([_vec(d.get("point", [0, 0, 0]), 3, f"{where}.point"), n / np.linalg.norm(n)])
+
+
+def _positive(value: object, where: str) -> float:
+    v = float(_vec(value, 1, where)[0])
+    if v <= 0:
+        raise ValueError(f"{where}: must be > 0, got {v}")
+    return v
+
+
+def _parse_sphere(d: dict, where: str) -> np.ndarray:
+    return np.concatenate([_vec(d.get("center"), 3, f"{where}.center"), [_positive(d.get("radius"), f"{where}.radius")]])
+
+
+def _parse_capsule(d: dict, where: str) -> np.ndarray:
+    a, b = _vec(d.get("a"), 3, f"{where}.a"), _vec(d.get("b"), 3, f"{where}.b")
+    if np.linalg.norm(b - a) < 1e-9:
+        raise ValueError(f"{where}: a and b must differ (use a sphere otherwise)")
+    return np.concatenate([a, b, [_positive(d.get("radius"), f"{where}.radius")]])
+
+
+def _parse_box(d: dict, where: str) -> np.ndarray:
+    q = check_quaternion(d.get("orientation", [0, 0, 0, 1]), f"{where}.orientation")
+    e = _vec(d.get("half_extents"), 3, f"{where}.half_extents")
+    if np.any(e <= 0):
+        raise ValueError(f"{where}.half_extents: must all be > 0")
+    return np.concatenate([_vec(d.get("center"), 3, f"{where}.center"), quat_to_matrix(q).T.ravel(), e])
+
+
+OBSTACLE_TYPES: dict[str, ObstacleType] = {
+    "halfspace": ObstacleType(6, _halfspace, _parse_halfspace),
+    "sphere": ObstacleType(4, _sphere, _parse_sphere),
+    "capsule": ObstacleType(7, _capsule, _parse_capsule),
+    "box": ObstacleType(15, _box, _parse_box),
+}
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A rigid obstacle the string must stay outside of, with its parameter vector (pose and size)."""
+
+    type: str
+    params: np.ndarray = field(compare=False)
+    name: str = ""
+
+    @staticmethod
+    def from_dict(d: dict, where: str = "obstacles[0]") -> "Obstacle":
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}: must be a mapping with a 'type'")
+        kind = d.get("type")
+        if kind not in OBSTACLE_TYPES:
+            raise ValueError(f"{where}.type: must be one of {sorted(OBSTACLE_TYPES)}, got {kind!r}")
+        return Obstacle(kind, OBSTACLE_TYPES[kind].parse(d, where), str(d.get("name", "")))
+
+    def h(self, x: np.ndarray) -> float:
+        """Numerical h(x) [m] (positive inside)."""
+        xs = ca.SX.sym("x", 3)
+        ps = ca.SX.sym("p", OBSTACLE_TYPES[self.type].size)
+        f = ca.Function("h", [xs, ps], [OBSTACLE_TYPES[self.type].h(xs, ps)])
+        return float(f(x, self.params))

@@ -1,0 +1,169 @@
+"""The physical problem: a string, where it is held, what acts on it, what it must avoid.
+
+Every quantity is SI: lengths in m, stiffnesses Rf, Rt in N·m², Re in N, weight per length D in N/m,
+forces in N, moments in N·m.  Orientations are quaternions (x, y, z, w) of a pose whose x-axis is the
+string's tangent, pointing toward increasing s.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .obstacles import Obstacle
+from .profile import Profile
+from .rotations import check_quaternion
+
+GRIP_MODES = ("clamp", "pin", "tangent")
+
+
+def finite_vector(value: object, n: int, where: str) -> np.ndarray:
+    """``value`` as a float array of n finite numbers, or ValueError naming ``where``."""
+    try:
+        arr = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: expected {n} numbers, got {value!r}") from None
+    if arr.size != n:
+        raise ValueError(f"{where}: expected {n} numbers, got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{where}: contains NaN or infinity")
+    return arr
+
+
+@dataclass(frozen=True)
+class StringProperties:
+    """Length L and the stiffness / weight profiles of the paper's energy (sec. 2.2).
+
+    stretch_stiffness None means inextensible (‖dx/ds‖ = 1 exactly); radius is the clearance kept
+    from obstacles.
+    """
+
+    length: float
+    bend_stiffness: Profile
+    twist_stiffness: Profile
+    weight_per_length: Profile
+    stretch_stiffness: Profile | None = None
+    radius: float = 0.0
+
+    def validate(self) -> None:
+        if not (np.isfinite(self.length) and self.length > 0):
+            raise ValueError(f"string.length: must be > 0, got {self.length}")
+        if self.bend_stiffness.minimum <= 0:
+            raise ValueError("string.bend_stiffness: must be > 0 everywhere")
+        if self.twist_stiffness.minimum < 0:
+            raise ValueError("string.twist_stiffness: must be >= 0 everywhere")
+        if self.weight_per_length.minimum < 0:
+            raise ValueError("string.weight_per_length: must be >= 0 everywhere")
+        if self.stretch_stiffness is not None and self.stretch_stiffness.minimum <= 0:
+            raise ValueError("string.stretch_stiffness: must be > 0 everywhere (omit it for inextensible)")
+        if not (np.isfinite(self.radius) and self.radius >= 0):
+            raise ValueError(f"string.radius: must be >= 0, got {self.radius}")
+        for name in ("bend_stiffness", "twist_stiffness", "weight_per_length", "stretch_stiffness"):
+            prof = getattr(self, name)
+            if prof is not None and not all(np.isfinite(prof.values)):
+                raise ValueError(f"string.{name}: contains NaN or infinity")
+
+
+@dataclass(frozen=True)
+class GripPose:
+    """Where a grip holds the string: position [m] and orientation (x, y, z, w), x along the tangent."""
+
+    position: np.ndarray
+    orientation: np.ndarray
+
+    @staticmethod
+    def checked(position: object, orientation: object, where: str, quat_tolerance: float = 1e-3) -> "GripPose":
+        return GripPose(
+            finite_vector(position, 3, f"{where}.position"),
+            check_quaternion(orientation, f"{where}.orientation", quat_tolerance),
+        )
+
+
+@dataclass(frozen=True)
+class Grip:
+    """A gripper holding the string at arc length s.
+
+    mode: 'clamp' fixes position and full orientation; 'pin' position only; 'tangent' position and
+    tangent direction, twist free about it.
+    """
+
+    name: str
+    s: float
+    mode: str
+    pose: GripPose
+
+
+@dataclass(frozen=True)
+class Load:
+    """A point force [N] and/or moment [N·m] applied at arc length s (world frame, constant)."""
+
+    s: float
+    force: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    moment: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass(frozen=True)
+class RelativePosition:
+    """Paper eq. 6: x(s_b) − x(s_a) = offset [m]."""
+
+    s_a: float
+    s_b: float
+    offset: np.ndarray
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything the energy and constraints need.  gravity is the unit direction of weight."""
+
+    string: StringProperties
+    grips: tuple[Grip, ...]
+    gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -1.0]))
+    loads: tuple[Load, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
+    relative_positions: tuple[RelativePosition, ...] = ()
+
+    def validate(self) -> None:
+        """Raise ValueError naming the offending field."""
+        self.string.validate()
+        L = self.string.length
+        g = np.asarray(self.gravity, dtype=float)
+        if g.size != 3 or not np.all(np.isfinite(g)) or np.linalg.norm(g) < 1e-12:
+            raise ValueError("gravity.direction: must be a non-zero finite 3-vector")
+        if not self.grips:
+            raise ValueError("grips: at least one grip is needed to hold the string")
+        names = set()
+        for i, grip in enumerate(self.grips):
+            where = f"grips[{i}]"
+            if not grip.name or grip.name in names:
+                raise ValueError(f"{where}.name: must be a unique, non-empty name")
+            names.add(grip.name)
+            if grip.mode not in GRIP_MODES:
+                raise ValueError(f"{where}.mode: must be one of {GRIP_MODES}, got {grip.mode!r}")
+            if not (0.0 <= grip.s <= L):
+                raise ValueError(f"{where}.s: must lie in [0, string.length = {L}], got {grip.s}")
+        if len({g.s for g in self.grips}) != len(self.grips):
+            raise ValueError("grips: two grips hold the same arc length s")
+        for i, load in enumerate(self.loads):
+            if not (0.0 <= load.s <= L):
+                raise ValueError(f"loads[{i}].s: must lie in [0, {L}], got {load.s}")
+            finite_vector(load.force, 3, f"loads[{i}].force")
+            finite_vector(load.moment, 3, f"loads[{i}].moment")
+        for i, rel in enumerate(self.relative_positions):
+            for name in ("s_a", "s_b"):
+                if not (0.0 <= getattr(rel, name) <= L):
+                    raise ValueError(f"relative_positions[{i}].{name}: must lie in [0, {L}]")
+            finite_vector(rel.offset, 3, f"relative_positions[{i}].offset")
+
+    @property
+    def gravity_unit(self) -> np.ndarray:
+        g = np.asarray(self.gravity, dtype=float)
+        return g / np.linalg.norm(g)
+
+    def grip(self, name: str) -> Grip:
+        for g in self.grips:
+            if g.name == name:
+                return g
+        raise KeyError(f"no grip named {name!r}; grips are {[g.name for g in self.grips]}")
+
+    def with_grip_poses(self, poses: dict[str, GripPose]) -> "Problem":
+        return replace(self, grips=tuple(replace(g, pose=poses.get(g.name, g.pose)) for g in self.grips))

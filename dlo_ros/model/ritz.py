@@ -1,0 +1,167 @@
+"""Ritz discretisation of the string energy (Hirai & Wakamatsu, secs. 2–3) as CasADi expressions.
+
+Unknowns z = [x0/L (3), c_φ (n), c_θ (n), c_ψ (n, only if twist is held), c_ε (n, only if extensible)]:
+the position of s = 0 scaled by L, and the coefficients of the Euler angles φ(s), θ(s), ψ(s) and of the
+strain ε(s) in a basis of n functions.  On M Chebyshev–Lobatto nodes s_j:
+
+    ζ_j   = R0 [−sinθ cosφ, sinθ sinφ, cosθ]_j                       unit tangent (eq. 1)
+    x(σ)  = x0 + Σ_j W_j(σ) (1 + ε_j) ζ_j                            centreline (eq. 2)
+    U_bend    = Σ_j w_j ½ Rf_j (θ'_j² + sin²θ_j φ'_j²)                 ½ Rf κ²
+    U_twist   = Σ_j w_j ½ Rt_j (φ'_j cosθ_j + ψ'_j)²                   ½ Rt ω²
+    U_stretch = Σ_j w_j ½ Re_j ε_j²
+    U_grav    = Σ_j w_j D_j (−ĝ · x(s_j))                              D × height
+    W         = Σ_k F_k · x(s_k) − m_k φ(s_k)                          eq. 5, m_k = M_k · n
+
+with Clenshaw–Curtis weights w and the cumulative integration matrix W (see quadrature.py).  The
+point-moment work −m φ is exact for moments about the reference normal n = R0 e_z (a rotation of the
+frame about n by α changes φ by −α).  Material profiles (Rf, Rt, Re, D at the nodes) and the gravity
+direction are NLP parameters, so changing them never rebuilds the problem.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from .basis import Basis, make_basis
+from .quadrature import ChebyshevQuadrature
+
+
+@dataclass(frozen=True)
+class FieldLayout:
+    """Which fields are unknowns, and where their coefficients sit in z."""
+
+    order: int
+    twist: bool
+    stretch: bool
+
+    @property
+    def size(self) -> int:
+        return 3 + self.order * (2 + int(self.twist) + int(self.stretch))
+
+    def slice(self, name: str) -> slice:
+        n = self.order
+        start = {"phi": 3, "theta": 3 + n}
+        offset = 3 + 2 * n
+        if self.twist:
+            start["psi"] = offset
+            offset += n
+        if self.stretch:
+            start["eps"] = offset
+        if name not in start:
+            raise KeyError(name)
+        return slice(start[name], start[name] + n)
+
+
+class RitzModel:
+    """Maps the unknowns z to fields, positions and energy terms, numerically and symbolically."""
+
+    def __init__(self, length: float, basis: str, order: int, nodes: int, r0: np.ndarray, twist: bool, stretch: bool):
+        self.length = float(length)
+        self.basis: Basis = make_basis(basis, order, length)
+        self.quad = ChebyshevQuadrature(nodes, length)
+        self.r0 = np.asarray(r0, dtype=float)
+        self.layout = FieldLayout(order, twist, stretch)
+        s = self.quad.nodes
+        self._cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.B = self.basis.values(s)        # (M, n)
+        self.dB = self.basis.derivatives(s)  # (M, n)
+
+    # ---- fields -----------------------------------------------------------------------------------
+    def coefficients(self, z, name: str):
+        """Coefficient vector of field ``name``, or None when the field is not an unknown."""
+        try:
+            return z[self.layout.slice(name)]
+        except KeyError:
+            return None
+
+    def tangents(self, phi, theta, eps=None, lib=ca):
+        """(1 + ε) ζ at the nodes: a 3×M expression (lib = casadi) or array (lib = numpy)."""
+        st = lib.sin(theta)
+        local = [-st * lib.cos(phi), st * lib.sin(phi), lib.cos(theta)]
+        if lib is ca:
+            t = ca.mtimes(ca.DM(self.r0), ca.vertcat(*[ca.reshape(c, 1, -1) for c in local]))
+            if eps is not None:
+                t = t * ca.repmat(ca.reshape(1 + eps, 1, -1), 3, 1)
+            return t
+        t = self.r0 @ np.stack(local)
+        return t if eps is None else t * (1 + eps)[None, :]
+
+    def matrices(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(B(s), B'(s), W(s)) for arc lengths s, memoised: a running solver asks for the same s again."""
+        s = np.ascontiguousarray(s, dtype=float).ravel()
+        key = s.tobytes()
+        hit = self._cache.get(key)
+        if hit is None:
+            if len(self._cache) > 256:
+                self._cache.clear()
+            hit = (self.basis.values(s), self.basis.derivatives(s), self.quad.integration_matrix(s))
+            self._cache[key] = hit
+        return hit
+
+    def position_matrix(self, s: np.ndarray) -> np.ndarray:
+        """W(s) with x(s) = x0 + tangents · W(s)ᵀ."""
+        return self.matrices(s)[2]
+
+    # ---- symbolic energy ----------------------------------------------------------------------------
+    def energy_terms(self, z: ca.SX, profiles: dict[str, ca.SX], gravity: ca.SX):
+        """Return (bend, twist, stretch, gravity) energies [J] and the node tangents, as CasADi SX."""
+        B, dB, w = ca.DM(self.B), ca.DM(self.dB), ca.DM(self.quad.weights)
+        cphi, cth = self.coefficients(z, "phi"), self.coefficients(z, "theta")
+        cpsi, ceps = self.coefficients(z, "psi"), self.coefficients(z, "eps")
+        phi, th = ca.mtimes(B, cphi), ca.mtimes(B, cth)
+        dphi, dth = ca.mtimes(dB, cphi), ca.mtimes(dB, cth)
+        eps = ca.mtimes(B, ceps) if ceps is not None else None
+        st = ca.sin(th)
+        bend = 0.5 * ca.dot(w, profiles["Rf"] * (dth**2 + st**2 * dphi**2))
+        if cpsi is not None:
+            omega = dphi * ca.cos(th) + ca.mtimes(dB, cpsi)
+            twist = 0.5 * ca.dot(w, profiles["Rt"] * omega**2)
+        else:
+            twist = ca.SX(0)
+        stretch = 0.5 * ca.dot(w, profiles["Re"] * eps**2) if eps is not None else ca.SX(0)
+        t = self.tangents(phi, th, eps)
+        # Σ_j w_j D_j x(s_j) = x0 Σ w D + t · (W_nodesᵀ (w∘D))
+        wd = w * profiles["D"]
+        x0 = z[0:3] * self.length
+        moment_of_weight = x0 * ca.sum1(wd) + ca.mtimes(t, ca.mtimes(ca.DM(self.position_matrix(self.quad.nodes)).T, wd))
+        grav = -ca.dot(gravity, moment_of_weight)
+        return bend, twist, stretch, grav, t
+
+    def positions_sym(self, z: ca.SX, t: ca.SX, s: np.ndarray) -> ca.SX:
+        """Centreline positions at arc lengths s as a 3×len(s) SX expression."""
+        W = ca.DM(self.position_matrix(s))
+        return ca.repmat(z[0:3] * self.length, 1, len(s)) + ca.mtimes(t, W.T)
+
+    def angle_sym(self, z: ca.SX, name: str, s: float) -> ca.SX:
+        return ca.mtimes(ca.DM(self.basis.values(np.array([s]))), self.coefficients(z, name))
+
+    # ---- numerical evaluation of a solution -------------------------------------------------------
+    def fields(self, z: np.ndarray, s: np.ndarray) -> dict[str, np.ndarray]:
+        """φ, θ, ψ (zeros if not an unknown), ε and their s-derivatives at arc lengths s."""
+        B, dB, _ = self.matrices(s)
+        out = {}
+        for name in ("phi", "theta", "psi", "eps"):
+            c = self.coefficients(z, name)
+            out[name] = B @ c if c is not None else np.zeros(len(s))
+            out["d" + name] = dB @ c if c is not None else np.zeros(len(s))
+        return out
+
+    def node_tangents(self, z: np.ndarray) -> np.ndarray:
+        f = self.fields(z, self.quad.nodes)
+        eps = f["eps"] if self.layout.stretch else None
+        return self.tangents(f["phi"], f["theta"], eps, lib=np)
+
+    def positions(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """(len(s), 3) centreline positions [m]."""
+        t = self.node_tangents(z)
+        return (np.asarray(z[0:3]) * self.length)[None, :] + self.position_matrix(s) @ t.T
+
+    def zero_twist_psi(self, z: np.ndarray, s: np.ndarray, s_anchor: float, psi_anchor: float) -> np.ndarray:
+        """ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles to."""
+        f = self.fields(z, self.quad.nodes)
+        g = -f["dphi"] * np.cos(f["theta"])
+        W = self.position_matrix(np.append(np.asarray(s, dtype=float), s_anchor))
+        integral = W @ g
+        return psi_anchor + integral[:-1] - integral[-1]

@@ -1,0 +1,135 @@
+"""Rotations, quaternions (x, y, z, w) and the Euler-angle convention of the string model.
+
+Convention (Hirai & Wakamatsu, eq. 1, generalised by a constant reference rotation R0):
+    Q(s) = R0 · Rz(−φ) · Ry(−θ) · Rz(−ψ)
+is the material frame with columns (ξ, η, ζ); ζ is the unit tangent
+    ζ = R0 · [−sinθ cosφ, sinθ sinφ, cosθ]ᵀ.
+With R0 = I this is the paper's frame, whose singular direction (θ = 0) is the natural straight state.
+The curvature and twist are frame-independent:  κ² = θ'² + sin²θ φ'²,  ω = φ' cosθ + ψ'.
+
+Published poses use the ROS convention "x along the tangent": Q_out = Q · P with P e_x = e_z,
+P e_y = e_x, P e_z = e_y, i.e. (x_out, y_out, z_out) = (ζ, ξ, η).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Q_out = Q @ TANGENT_X, maps material axes (ξ, η, ζ) to ROS pose axes (x = ζ, y = ξ, z = η).
+TANGENT_X = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+
+
+def rot_z(a: np.ndarray) -> np.ndarray:
+    """Rotation matrices about z by angles a (…) → (…, 3, 3)."""
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def rot_y(a: np.ndarray) -> np.ndarray:
+    """Rotation matrices about y by angles a (…) → (…, 3, 3)."""
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+
+
+def material_frames(r0: np.ndarray, phi: np.ndarray, theta: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    """Q = R0 Rz(−φ) Ry(−θ) Rz(−ψ) for arrays of angles → (N, 3, 3), columns (ξ, η, ζ)."""
+    return r0 @ rot_z(-np.asarray(phi)) @ rot_y(-np.asarray(theta)) @ rot_z(-np.asarray(psi))
+
+
+def euler_from_frame(r0: np.ndarray, q: np.ndarray) -> tuple[float, float, float]:
+    """Inverse of :func:`material_frames` for one frame, θ ∈ [0, π]; φ, ψ ∈ (−π, π].
+
+    A = R0ᵀ Q = Rz(−φ) Ry(−θ) Rz(−ψ) gives cosθ = A33, (−cosφ, sinφ) sinθ = (A13, A23),
+    (cosψ, sinψ) sinθ = (A31, A32).  At sinθ = 0 (the singular direction) ψ is set to 0.
+    """
+    a = r0.T @ q
+    theta = float(np.arccos(np.clip(a[2, 2], -1.0, 1.0)))
+    if np.hypot(a[0, 2], a[1, 2]) < 1e-12:
+        # A = Rz(−φ) Ry(0 or −π) Rz(−ψ): only φ ± ψ is defined; put it all in φ.
+        return float(np.arctan2(a[0, 1], a[1, 1])), theta, 0.0
+    phi = float(np.arctan2(a[1, 2], -a[0, 2]))
+    psi = float(np.arctan2(a[2, 1], a[2, 0]))
+    return phi, theta, psi
+
+
+def unwrap_to(angle: float, reference: float) -> float:
+    """The angle + 2πk closest to ``reference`` (keeps multi-turn rotations continuous)."""
+    return float(angle + 2.0 * np.pi * np.round((reference - angle) / (2.0 * np.pi)))
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Unit quaternion (x, y, z, w) → rotation matrix."""
+    x, y, z, w = np.asarray(q, dtype=float)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def matrix_to_quat(m: np.ndarray) -> np.ndarray:
+    """Rotation matrices (…, 3, 3) → quaternions (…, 4) as (x, y, z, w) with w ≥ 0."""
+    m = np.asarray(m, dtype=float)
+    flat = m.reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4))
+    for i, r in enumerate(flat):
+        tr = r[0, 0] + r[1, 1] + r[2, 2]
+        if tr > 0:
+            k = 2.0 * np.sqrt(tr + 1.0)
+            q = [(r[2, 1] - r[1, 2]) / k, (r[0, 2] - r[2, 0]) / k, (r[1, 0] - r[0, 1]) / k, 0.25 * k]
+        elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+            k = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
+            q = [0.25 * k, (r[0, 1] + r[1, 0]) / k, (r[0, 2] + r[2, 0]) / k, (r[2, 1] - r[1, 2]) / k]
+        elif r[1, 1] > r[2, 2]:
+            k = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
+            q = [(r[0, 1] + r[1, 0]) / k, 0.25 * k, (r[1, 2] + r[2, 1]) / k, (r[0, 2] - r[2, 0]) / k]
+        else:
+            k = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
+            q = [(r[0, 2] + r[2, 0]) / k, (r[1, 2] + r[2, 1]) / k, 0.25 * k, (r[1, 0] - r[0, 1]) / k]
+        q = np.array(q)
+        out[i] = q if q[3] >= 0 else -q
+    return out.reshape(m.shape[:-2] + (4,))
+
+
+def check_quaternion(q: object, field: str, tolerance: float = 1e-3) -> np.ndarray:
+    """Validate a quaternion (x, y, z, w): finite, non-zero, unit within ``tolerance``; return it normalised.
+
+    Raises ValueError naming ``field`` otherwise.
+    """
+    arr = np.asarray(q, dtype=float).ravel()
+    if arr.size != 4:
+        raise ValueError(f"{field}: a quaternion needs 4 numbers (x, y, z, w), got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{field}: quaternion has a NaN or infinite component")
+    norm = float(np.linalg.norm(arr))
+    if norm < 1e-9:
+        raise ValueError(f"{field}: quaternion is zero")
+    if abs(norm - 1.0) > tolerance:
+        raise ValueError(f"{field}: quaternion norm is {norm:.6g}, not 1 (tolerance {tolerance:g})")
+    return arr / norm
+
+
+def reference_frame(chord: np.ndarray, up_hint: np.ndarray) -> np.ndarray:
+    """R0 whose singular axis n = R0 e_z is normal to the plane spanned by ``chord`` and ``up_hint``.
+
+    Columns (e1, e2, n) with e1 = −d (d the unit chord), n = d × up / |d × up|, e2 = n × e1 (= the part
+    of ``up_hint`` normal to d).  The straight string along d is then φ = 0, θ = π/2: as far from
+    the singularity θ ∈ {0, π} as possible, and a planar shape in that plane keeps θ ≡ π/2.
+    """
+    d = np.asarray(chord, dtype=float)
+    dn = np.linalg.norm(d)
+    d = d / dn if dn > 1e-12 else np.array([1.0, 0.0, 0.0])
+    up = np.asarray(up_hint, dtype=float)
+    n = np.cross(d, up)
+    if np.linalg.norm(n) < 1e-9:
+        for trial in (np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])):
+            n = np.cross(d, trial)
+            if np.linalg.norm(n) > 1e-6:
+                break
+    n = n / np.linalg.norm(n)
+    e1 = -d
+    e2 = np.cross(n, e1)
+    return np.stack([e1, e2, n], axis=1)

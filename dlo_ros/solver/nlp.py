@@ -1,0 +1,243 @@
+"""The NLP of one scene structure, built once; everything that moves is a parameter.
+
+    minimise   σ (U_bend + U_twist + U_stretch + U_grav − W)(z; p)
+    subject to (x(s_g) − p_g)/L = 0                      every grip            (paper eq. 6 / grips)
+               φ(s_g) − φ_g = 0, θ(s_g) − θ_g = 0        clamp, tangent grips  (eq. 7)
+               ψ(s_g) − ψ_g = 0                          clamp grips, when twist is modelled
+               (x(s_b) − x(s_a) − l)/L = 0               relative positions    (eq. 6)
+               (h_i(x(σ_j)) + r)/L ≤ 0                   obstacles × samples   (eq. 8)
+
+σ = L / max Rf makes the objective dimensionless and O(1); constraint rows are scaled as shown.
+``row_scale`` converts IPOPT's multipliers back to SI: λ_SI = λ_ipopt / (row_scale · σ).
+Structure (which grips, their s and modes, loads' s, obstacle types, twist and stretch fields) is fixed
+per NLP; parameter values (grip targets, profiles, gravity, load values, obstacle poses) are not.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ..model.obstacles import OBSTACLE_TYPES
+from ..model.problem import Problem
+from ..model.ritz import RitzModel
+from ..model.rotations import reference_frame
+from .options import SolverOptions
+
+
+@dataclass
+class ParameterLayout:
+    """Named slices of the parameter vector p."""
+
+    slices: dict[str, slice] = field(default_factory=dict)
+    size: int = 0
+
+    def add(self, name: str, n: int) -> None:
+        self.slices[name] = slice(self.size, self.size + n)
+        self.size += n
+
+    def __getitem__(self, name: str) -> slice:
+        return self.slices[name]
+
+
+def twist_is_held(problem: Problem) -> bool:
+    """Twist is an unknown only when something can hold it: two clamps and Rt > 0.
+
+    With fewer clamps the string untwists to ω ≡ 0 at equilibrium (no point moment about the tangent
+    is modelled), so ψ follows from φ and θ and need not be solved for.
+    """
+    clamps = sum(1 for g in problem.grips if g.mode == "clamp")
+    return clamps >= 2 and not problem.string.twist_stiffness.is_zero
+
+
+def choose_reference_frame(problem: Problem, frame: str) -> np.ndarray:
+    """R0 for the Euler angles: identity for 'paper'; for 'auto' the working plane's frame.
+
+    The working plane holds the chord between the first two grips (or the first grip's tangent) and
+    gravity; its normal becomes the singular axis n = R0 e_z, which planar and near-planar shapes avoid.
+    """
+    if frame == "paper":
+        return np.eye(3)
+    grips = sorted(problem.grips, key=lambda g: g.s)
+    if len(grips) >= 2 and np.linalg.norm(grips[-1].pose.position - grips[0].pose.position) > 1e-9 * problem.string.length:
+        chord = grips[-1].pose.position - grips[0].pose.position
+    else:
+        from ..model.rotations import quat_to_matrix
+
+        chord = quat_to_matrix(grips[0].pose.orientation)[:, 0]
+    up = -problem.gravity_unit
+    if abs(np.dot(chord / np.linalg.norm(chord), up)) > 0.999:
+        # chord along gravity: take the plane of the chord and the first grip's tangent or normal
+        from ..model.rotations import quat_to_matrix
+
+        r = quat_to_matrix(grips[0].pose.orientation)
+        up = r[:, 0] if abs(np.dot(r[:, 0], up)) < 0.999 else r[:, 1]
+    return reference_frame(chord, up)
+
+
+class StringNLP:
+    """CasADi functions of one scene structure: the NLP, reactions, energies and the Lagrangian Hessian."""
+
+    def __init__(self, problem: Problem, options: SolverOptions):
+        problem.validate()
+        options.validate()
+        self.problem = problem
+        self.options = options
+        L = problem.string.length
+        self.length = L
+        self.twist = twist_is_held(problem)
+        self.stretch = problem.string.stretch_stiffness is not None
+        self.r0 = choose_reference_frame(problem, options.frame)
+        self.model = RitzModel(L, options.basis, options.order, options.quadrature_nodes, self.r0, self.twist, self.stretch)
+        self.sigma = L / problem.string.bend_stiffness.maximum
+        self._build()
+
+    # ------------------------------------------------------------------------------------------------
+    def _build(self) -> None:
+        P, m, L = self.problem, self.model, self.length
+        M = m.quad.count
+        lay = ParameterLayout()
+        for name in ("Rf", "Rt", "Re", "D"):
+            lay.add(name, M)
+        lay.add("gravity", 3)
+        lay.add("radius", 1)
+        for g in P.grips:
+            lay.add(f"grip:{g.name}:position", 3)
+            lay.add(f"grip:{g.name}:angles", 3)
+        for i, _ in enumerate(P.loads):
+            lay.add(f"load:{i}:force", 3)
+            lay.add(f"load:{i}:moment", 1)
+        for i, _ in enumerate(P.relative_positions):
+            lay.add(f"relative:{i}", 3)
+        for i, ob in enumerate(P.obstacles):
+            lay.add(f"obstacle:{i}", OBSTACLE_TYPES[ob.type].size)
+        self.params = lay
+
+        z = ca.SX.sym("z", m.layout.size)
+        p = ca.SX.sym("p", lay.size)
+        profiles = {k: p[lay[k]] for k in ("Rf", "Rt", "Re", "D")}
+        bend, twist, stretch, grav, t = m.energy_terms(z, profiles, p[lay["gravity"]])
+
+        # every arc length where a position is needed, evaluated with one matrix product
+        s_points: list[float] = [g.s for g in P.grips]
+        s_points += [ld.s for ld in P.loads]
+        for rel in P.relative_positions:
+            s_points += [rel.s_a, rel.s_b]
+        self.obstacle_s = np.linspace(0.0, L, self.options.obstacle_samples) if P.obstacles else np.zeros(0)
+        s_all = np.concatenate([np.asarray(s_points, dtype=float), self.obstacle_s])
+        X = m.positions_sym(z, t, s_all) if len(s_all) else ca.SX(3, 0)
+        col = 0
+        grip_x = X[:, col : col + len(P.grips)]
+        col += len(P.grips)
+        load_x = X[:, col : col + len(P.loads)]
+        col += len(P.loads)
+        rel_x = X[:, col : col + 2 * len(P.relative_positions)]
+        col += 2 * len(P.relative_positions)
+        obs_x = X[:, col:]
+
+        work = ca.SX(0)
+        for i, _ in enumerate(P.loads):
+            work += ca.dot(p[lay[f"load:{i}:force"]], load_x[:, i])
+            work -= p[lay[f"load:{i}:moment"]][0] * m.angle_sym(z, "phi", P.loads[i].s)
+
+        g_rows: list[ca.SX] = []
+        self.row_scale: list[float] = []
+        self.row_kind: list[tuple] = []
+        lbg: list[float] = []
+        ubg: list[float] = []
+
+        def add(expr: ca.SX, scale: float, kind: tuple, lower: float = 0.0, upper: float = 0.0) -> None:
+            g_rows.append(expr / scale)
+            self.row_scale.append(scale)
+            self.row_kind.append(kind)
+            lbg.append(lower)
+            ubg.append(upper)
+
+        self.grip_rows: dict[str, dict[str, list[int]]] = {}
+        for gi, g in enumerate(P.grips):
+            rows: dict[str, list[int]] = {"position": [], "angles": []}
+            target = p[lay[f"grip:{g.name}:position"]]
+            for k in range(3):
+                rows["position"].append(len(g_rows))
+                add(grip_x[k, gi] - target[k], L, ("grip", g.name, "position", k))
+            angles = p[lay[f"grip:{g.name}:angles"]]
+            names = {"clamp": ["phi", "theta", "psi"] if self.twist else ["phi", "theta"], "tangent": ["phi", "theta"], "pin": []}[g.mode]
+            for k, name in enumerate(names):
+                rows["angles"].append(len(g_rows))
+                add(m.angle_sym(z, name, g.s) - angles[k], 1.0, ("grip", g.name, name, k))
+            self.grip_rows[g.name] = rows
+        for i, _ in enumerate(P.relative_positions):
+            off = p[lay[f"relative:{i}"]]
+            for k in range(3):
+                add(rel_x[k, 2 * i + 1] - rel_x[k, 2 * i] - off[k], L, ("relative", i, k))
+        self.obstacle_rows: list[list[int]] = []
+        radius = p[lay["radius"]][0]
+        for i, ob in enumerate(P.obstacles):
+            rows = []
+            h = OBSTACLE_TYPES[ob.type].h
+            for j in range(len(self.obstacle_s)):
+                rows.append(len(g_rows))
+                expr = h(obs_x[:, j], p[lay[f"obstacle:{i}"]])
+                add(expr + radius, L, ("obstacle", i, j), -ca.inf, 0.0)
+            self.obstacle_rows.append(rows)
+
+        self.n_grip_equalities = sum(len(r["position"]) + len(r["angles"]) for r in self.grip_rows.values())
+        objective = self.sigma * (bend + twist + stretch + grav - work)
+        g = ca.vertcat(*g_rows) if g_rows else ca.SX(0, 1)
+        self.lbg, self.ubg = np.array(lbg), np.array(ubg)
+        self.row_scale = np.array(self.row_scale)
+        self.nlp = {"x": z, "p": p, "f": objective, "g": g}
+        self.z_sym, self.p_sym, self.g_sym = z, p, g
+
+        self.energy_fn = ca.Function("energy", [z, p], [bend, twist, stretch, grav, work])
+        lam = ca.SX.sym("lam", g.shape[0])
+        lagrangian = objective + ca.dot(lam, g)
+        self.hessian_fn = ca.Function("lagrangian_hessian", [z, p, lam], [ca.hessian(lagrangian, z)[0]])
+        jac = ca.jacobian(g, z)
+        self.jac_g_fn = ca.Function("constraint_jacobian", [z, p], [jac])
+        # everything one Newton step on the KKT conditions needs, in one call (compiled to C later)
+        self.kkt_fn = ca.Function(
+            "dlo_kkt", [z, p, lam],
+            [ca.densify(ca.gradient(objective, z)), ca.densify(g), ca.densify(jac),
+             ca.densify(ca.hessian(lagrangian, z)[0]), ca.densify(ca.vertcat(bend, twist, stretch, grav, work))],
+        )
+        self.g_fn = ca.Function("g", [z, p], [g])
+        # contact normals ∂h/∂x at every obstacle sample, for the contact forces
+        if P.obstacles:
+            xs = ca.SX.sym("x", 3)
+            grads = []
+            for i, ob in enumerate(P.obstacles):
+                ps = ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
+                fn = ca.Function("dh", [xs, ps], [ca.gradient(OBSTACLE_TYPES[ob.type].h(xs, ps), xs)])
+                grads.append(ca.horzcat(*[fn(obs_x[:, j], p[lay[f"obstacle:{i}"]]) for j in range(len(self.obstacle_s))]))
+            self.contact_normal_fn = ca.Function("normals", [z, p], grads)
+        else:
+            self.contact_normal_fn = None
+
+    # ------------------------------------------------------------------------------------------------
+    def make_solver(self, warm: bool) -> ca.Function:
+        """An IPOPT solver for this NLP: cold (default barrier start) or warm (primal-dual warm start)."""
+        o = self.options
+        ipopt = {
+            "print_level": 0,
+            "sb": "yes",
+            "tol": o.tolerance,
+            "acceptable_tol": 1e-7,
+            "constr_viol_tol": 1e-10,
+            "max_iter": o.max_iterations,
+            "linear_solver": "mumps",
+            "hessian_approximation": "exact",
+        }
+        if warm:
+            ipopt.update(
+                {
+                    "warm_start_init_point": "yes",
+                    "mu_init": 1e-7,
+                    "warm_start_bound_push": 1e-9,
+                    "warm_start_slack_bound_push": 1e-9,
+                    "warm_start_mult_bound_push": 1e-9,
+                    "max_iter": min(o.max_iterations, 200),
+                }
+            )
+        return ca.nlpsol("dlo_warm" if warm else "dlo_cold", "ipopt", self.nlp, {"ipopt": ipopt, "print_time": False, "error_on_fail": False})

@@ -1,0 +1,77 @@
+"""Solver options (the ``solver`` section of a scene file)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+FRAMES = ("auto", "paper")
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """How the Ritz NLP is built and solved.
+
+    basis/order: Ritz basis ('chebyshev' default, or the paper's 'fourier') and number of functions
+    per field.  quadrature_nodes: Chebyshev–Lobatto nodes for the energy integrals and the centreline.
+    obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) ≤ 0 is
+    imposed.  frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2
+    (away from the singularity); 'paper' is the paper's frame (singular at the straight state).
+    output_points: centreline samples in a result.  tolerance: IPOPT's (scaled) convergence tolerance.
+    max_continuation_steps: the largest number of equal steps a failed warm update is split into.
+    """
+
+    basis: str = "chebyshev"
+    order: int = 12
+    quadrature_nodes: int = 40
+    obstacle_samples: int = 41
+    frame: str = "auto"
+    output_points: int = 51
+    tolerance: float = 1e-10
+    max_iterations: int = 500
+    max_continuation_steps: int = 8
+    max_strain: float = 0.2
+
+    def validate(self) -> None:
+        if self.basis not in ("chebyshev", "fourier"):
+            raise ValueError(f"solver.basis: must be 'chebyshev' or 'fourier', got {self.basis!r}")
+        if not (2 <= self.order <= 60):
+            raise ValueError(f"solver.order: must be in [2, 60], got {self.order}")
+        if not (max(8, self.order + 2) <= self.quadrature_nodes <= 400):
+            raise ValueError(f"solver.quadrature_nodes: must be in [max(8, order+2), 400], got {self.quadrature_nodes}")
+        if not (2 <= self.obstacle_samples <= 1000):
+            raise ValueError(f"solver.obstacle_samples: must be in [2, 1000], got {self.obstacle_samples}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"solver.frame: must be one of {FRAMES}, got {self.frame!r}")
+        if not (2 <= self.output_points <= 10000):
+            raise ValueError(f"solver.output_points: must be in [2, 10000], got {self.output_points}")
+        if not (0 < self.tolerance < 1e-2):
+            raise ValueError(f"solver.tolerance: must be in (0, 1e-2), got {self.tolerance}")
+        if not (1 <= self.max_iterations <= 100000):
+            raise ValueError(f"solver.max_iterations: must be in [1, 100000], got {self.max_iterations}")
+        if not (1 <= self.max_continuation_steps <= 1024):
+            raise ValueError("solver.max_continuation_steps: must be in [1, 1024]")
+        if not (0 < self.max_strain < 10):
+            raise ValueError("solver.max_strain: must be in (0, 10)")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SolverOptions":
+        known = {f.name: f.type for f in fields(cls)}
+        unknown = set(d) - set(known)
+        if unknown:
+            raise ValueError(f"solver.{sorted(unknown)[0]}: unknown option (known: {sorted(known)})")
+        kwargs = {}
+        for key, value in d.items():
+            default = getattr(cls, key)
+            try:
+                if isinstance(default, bool) or isinstance(default, str):
+                    kwargs[key] = str(value)
+                elif isinstance(default, int):
+                    if isinstance(value, float) and not value.is_integer():
+                        raise ValueError
+                    kwargs[key] = int(value)
+                else:
+                    kwargs[key] = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"solver.{key}: expected a {type(default).__name__}, got {value!r}") from None
+        opts = cls(**kwargs)
+        opts.validate()
+        return opts

@@ -1,0 +1,83 @@
+"""The result of one solve: what the node, the CLI, rerun logging and the benchmarks all consume."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+STATUSES = ("ok", "unreachable", "infeasible", "failed", "invalid")
+
+
+@dataclass
+class GripWrench:
+    """Reaction at a grip: the force [N] and torque [N·m] the gripper exerts ON the string, world frame.
+
+    The torque is about the grip point.  The gripper feels the opposite (−force, −torque).
+    """
+
+    force: np.ndarray
+    torque: np.ndarray
+
+
+@dataclass
+class ShapeResult:
+    """One equilibrium (or the reason there is none).
+
+    points (N, 3) [m] and orientations (N, 4) (x, y, z, w; pose x-axis along the tangent) at arc
+    lengths s (N,).  energy [J]: bend, twist, stretch, gravity, external_work and total = U − W.
+    min_eigenvalue: smallest eigenvalue of the Hessian of the Lagrangian reduced to the null space of
+    the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable.
+    constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
+    """
+
+    status: str
+    message: str
+    s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    orientations: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    energy: dict[str, float] = field(default_factory=dict)
+    grips: dict[str, GripWrench] = field(default_factory=dict)
+    contact_forces: dict[int, np.ndarray] = field(default_factory=dict)
+    stable: bool | None = None
+    min_eigenvalue: float | None = None
+    iterations: int = 0
+    solve_time_ms: float = 0.0
+    constraint_violation: float = float("nan")
+    warm_started: bool = False
+    continuation_steps: int = 0
+    basis: str = ""
+    order: int = 0
+    ipopt_status: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary (the schema of ``dlo solve --json``, documented in msg_docs/)."""
+
+        def arr(a: np.ndarray) -> list:
+            return np.asarray(a, dtype=float).round(12).tolist()
+
+        return {
+            "status": self.status,
+            "message": self.message,
+            "stable": self.stable,
+            "min_eigenvalue": self.min_eigenvalue,
+            "s": arr(self.s),
+            "points": arr(self.points),
+            "orientations": arr(self.orientations),
+            "energy": {k: float(v) for k, v in self.energy.items()},
+            "grips": {name: {"force": arr(w.force), "torque": arr(w.torque)} for name, w in self.grips.items()},
+            "contact_forces": {str(i): arr(f) for i, f in self.contact_forces.items()},
+            "solver": {
+                "iterations": self.iterations,
+                "time_ms": self.solve_time_ms,
+                "basis": self.basis,
+                "order": self.order,
+                "constraint_violation": self.constraint_violation,
+                "warm_started": self.warm_started,
+                "continuation_steps": self.continuation_steps,
+                "ipopt_status": self.ipopt_status,
+            },
+        }

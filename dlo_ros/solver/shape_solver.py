@@ -1,0 +1,495 @@
+"""ShapeSolver: warm-started, thread-safe equilibrium solves of one scene structure.
+
+Contract:
+* The NLP is built once per structure (StringNLP); ``solve`` only changes parameter values.
+* ``solve(poses)`` warm-starts from the last committed equilibrium (primal z and IPOPT multipliers);
+  if that fails the jump is split into 2, 4, … ``max_continuation_steps`` equal steps; if that fails too,
+  a cold start from a buckled guess is tried.  ``commit=False`` answers a query without touching the
+  warm-start state.
+* Grip orientations become Euler-angle targets unwrapped to the current shape (φ, ψ + 2πk), so an end
+  turned by several revolutions in small steps is tracked continuously.
+* Every call returns a ShapeResult; bad input gives status 'invalid', grips farther apart than the
+  string reaches 'unreachable' — never an exception.
+* One lock serialises every entry: CasADi's IPOPT must never run in two threads at once.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.linalg import null_space
+from scipy.special import j0
+
+from ..model.problem import GripPose, Problem
+from ..model.rotations import TANGENT_X, euler_from_frame, material_frames, matrix_to_quat, quat_to_matrix, rot_y, rot_z
+from .compiled import compiled
+from .nlp import StringNLP
+from .options import SolverOptions
+from .result import GripWrench, ShapeResult
+
+SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+@dataclass
+class _State:
+    """A committed equilibrium: the warm start of the next solve."""
+
+    z: np.ndarray
+    lam_g: np.ndarray
+    lam_x: np.ndarray
+    p: np.ndarray
+    hessian: np.ndarray | None = None   # ∇²L at z, when the solve already has it
+    jacobian: np.ndarray | None = None  # ∂g/∂z at z
+    energies: np.ndarray | None = None  # bend, twist, stretch, gravity, work at z
+
+
+def structure_key(problem: Problem, options: SolverOptions) -> tuple:
+    """What fixes the NLP's structure; problems with equal keys share one NLP."""
+    return (
+        problem.string.length,
+        tuple((g.name, g.s, g.mode) for g in problem.grips),
+        tuple(ld.s for ld in problem.loads),
+        tuple((r.s_a, r.s_b) for r in problem.relative_positions),
+        tuple(o.type for o in problem.obstacles),
+        problem.string.stretch_stiffness is not None,
+        problem.string.twist_stiffness.is_zero,
+        options,
+    )
+
+
+class ShapeSolver:
+    """Solve the string's static shape for changing grip targets (see module docstring)."""
+
+    def __init__(self, problem: Problem, options: SolverOptions | None = None):
+        self.options = options or SolverOptions()
+        self._lock = threading.Lock()
+        self._build(problem)
+
+    def _build(self, problem: Problem) -> None:
+        t0 = time.perf_counter()
+        self.nlp = StringNLP(problem, self.options)
+        self._check_moments(problem)
+        self._cold = self.nlp.make_solver(warm=False)
+        self._warm = self.nlp.make_solver(warm=True)
+        t1 = time.perf_counter()
+        self._kkt, self.kkt_compiled = compiled(self.nlp.kkt_fn)
+        self.compile_time_s = time.perf_counter() - t1
+        self.problem = problem
+        self._key = structure_key(problem, self.options)
+        self._state: _State | None = None
+        self.build_time_s = time.perf_counter() - t0
+
+    # ---- public API ---------------------------------------------------------------------------------
+    @property
+    def model(self):
+        return self.nlp.model
+
+    @property
+    def has_warm_start(self) -> bool:
+        return self._state is not None
+
+    def reset(self) -> None:
+        """Forget the warm start: the next solve starts cold."""
+        with self._lock:
+            self._state = None
+
+    def set_problem(self, problem: Problem) -> None:
+        """Replace the scene's values (properties, loads, obstacles, grips).
+
+        Same structure: only parameter values change and the warm start is kept.  Otherwise the NLP is
+        rebuilt (and the next solve is cold).  Raises ValueError naming the offending field.
+        """
+        problem.validate()
+        with self._lock:
+            if structure_key(problem, self.options) == self._key:
+                self._check_moments(problem)
+                self.problem = problem
+            else:
+                self._build(problem)
+
+    def solve(
+        self,
+        poses: dict[str, GripPose | tuple] | None = None,
+        *,
+        warm: bool = True,
+        commit: bool = True,
+    ) -> ShapeResult:
+        """Equilibrium with the given grip poses (missing grips keep their current target)."""
+        with self._lock:
+            t0 = time.perf_counter()
+            try:
+                problem = self._with_poses(poses)
+            except (ValueError, KeyError) as exc:
+                return self._failure("invalid", str(exc).strip("'\""), t0)
+            reason = self.unreachable_reason(problem)
+            if reason:
+                return self._failure("unreachable", reason, t0)
+            result, state = self._solve_locked(problem, warm and self._state is not None)
+            result.solve_time_ms = (time.perf_counter() - t0) * 1e3
+            if commit and result.ok:
+                self._state = state
+                self.problem = problem
+            return result
+
+    # ---- input handling -----------------------------------------------------------------------------
+    def _with_poses(self, poses: dict | None) -> Problem:
+        if not poses:
+            return self.problem
+        names = {g.name for g in self.problem.grips}
+        checked = {}
+        for name, pose in poses.items():
+            if name not in names:
+                raise ValueError(f"grip {name!r}: unknown (configured grips: {sorted(names)})")
+            if not isinstance(pose, GripPose):
+                pose = GripPose.checked(pose[0], pose[1], f"grips.{name}")
+            else:
+                pose = GripPose.checked(pose.position, pose.orientation, f"grips.{name}")
+            checked[name] = pose
+        return self.problem.with_grip_poses(checked)
+
+    def _check_moments(self, problem: Problem) -> None:
+        n = self.nlp.r0[:, 2]
+        for i, ld in enumerate(problem.loads):
+            m = np.asarray(ld.moment, dtype=float)
+            if np.linalg.norm(m - np.dot(m, n) * n) > 1e-9 * max(1.0, np.linalg.norm(m)):
+                raise ValueError(
+                    f"loads[{i}].moment: only moments about the working-plane normal n = {np.round(n, 6).tolist()} "
+                    "are supported (their work −m·φ is exact); this moment has other components"
+                )
+
+    def unreachable_reason(self, problem: Problem) -> str:
+        """Why the position constraints cannot all hold (empty string if they can)."""
+        reach = 1.0 + (self.options.max_strain if problem.string.stretch_stiffness is not None else 0.0)
+        grips = problem.grips
+        for i in range(len(grips)):
+            for j in range(i + 1, len(grips)):
+                a, b = grips[i], grips[j]
+                dist = float(np.linalg.norm(a.pose.position - b.pose.position))
+                span = abs(a.s - b.s) * reach
+                if dist > span + 1e-12:
+                    return (
+                        f"grips {a.name!r} and {b.name!r} are {dist:.4g} m apart but the string between them "
+                        f"reaches at most {span:.4g} m"
+                    )
+        for k, rel in enumerate(problem.relative_positions):
+            dist = float(np.linalg.norm(rel.offset))
+            if dist > abs(rel.s_b - rel.s_a) * reach + 1e-12:
+                return f"relative_positions[{k}].offset: {dist:.4g} m is longer than the string between s_a and s_b"
+        return ""
+
+    # ---- parameters -------------------------------------------------------------------------------
+    def _reference_angles(self, z: np.ndarray, s: float) -> tuple[float, float, float]:
+        f = self.model.fields(z, np.array([s]))
+        return float(f["phi"][0]), float(f["theta"][0]), float(f["psi"][0])
+
+    def grip_angles(self, pose: GripPose, reference: tuple[float, float, float]) -> np.ndarray:
+        """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
+        q = quat_to_matrix(pose.orientation) @ TANGENT_X.T
+        phi, theta, psi = euler_from_frame(self.nlp.r0, q)
+        best, best_d = None, np.inf
+        two_pi = 2.0 * np.pi
+        for ph, th, ps in ((phi, theta, psi), (phi + np.pi, -theta, psi + np.pi)):
+            th = th + two_pi * np.round((reference[1] - th) / two_pi)
+            ph = ph + two_pi * np.round((reference[0] - ph) / two_pi)
+            ps = ps + two_pi * np.round((reference[2] - ps) / two_pi)
+            d = (ph - reference[0]) ** 2 + (th - reference[1]) ** 2 + (ps - reference[2]) ** 2
+            if d < best_d:
+                best, best_d = np.array([ph, th, ps]), d
+        return best
+
+    def pack_parameters(self, problem: Problem, z_reference: np.ndarray) -> np.ndarray:
+        """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
+        nlp, lay = self.nlp, self.nlp.params
+        nodes = nlp.model.quad.nodes
+        st = problem.string
+        p = np.zeros(lay.size)
+        p[lay["Rf"]] = st.bend_stiffness(nodes)
+        p[lay["Rt"]] = st.twist_stiffness(nodes)
+        p[lay["Re"]] = st.stretch_stiffness(nodes) if st.stretch_stiffness is not None else 0.0
+        p[lay["D"]] = st.weight_per_length(nodes)
+        p[lay["gravity"]] = problem.gravity_unit
+        p[lay["radius"]] = st.radius
+        for g in problem.grips:
+            p[lay[f"grip:{g.name}:position"]] = g.pose.position
+            p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, self._reference_angles(z_reference, g.s))
+        n = nlp.r0[:, 2]
+        for i, ld in enumerate(problem.loads):
+            p[lay[f"load:{i}:force"]] = ld.force
+            p[lay[f"load:{i}:moment"]] = float(np.dot(ld.moment, n))
+        for i, rel in enumerate(problem.relative_positions):
+            p[lay[f"relative:{i}"]] = rel.offset
+        for i, ob in enumerate(problem.obstacles):
+            p[lay[f"obstacle:{i}"]] = ob.params
+        return p
+
+    # ---- initial guess ----------------------------------------------------------------------------
+    def initial_guess(self, problem: Problem) -> np.ndarray:
+        """A buckled planar guess: tangent angle β(s) = β0 − α sin(2π u) between the outermost grips.
+
+        u = (s − s_a)/(s_b − s_a); α solves J0(α) = chord/span so the guess has the grips' chord; the
+        buckle bends toward gravity (a hanging cable's sag).  A single grip gives a straight string
+        along its tangent.  x0 is chosen so the first grip sits on its target.
+        """
+        m, lay = self.model, self.model.layout
+        nodes = m.quad.nodes
+        grips = sorted(problem.grips, key=lambda g: g.s)
+        a, b = grips[0], grips[-1]
+        r0 = self.nlp.r0
+        if len(grips) >= 2 and np.linalg.norm(b.pose.position - a.pose.position) > 1e-9:
+            chord = b.pose.position - a.pose.position
+            span = b.s - a.s
+            ratio = min(1.0, np.linalg.norm(chord) / span)
+            alpha = _inverse_j0(ratio)
+            d = chord / np.linalg.norm(chord)
+        else:
+            d = quat_to_matrix(a.pose.orientation)[:, 0]
+            alpha, span = 0.0, 1.0
+        local = r0.T @ d
+        theta0 = float(np.arccos(np.clip(local[2], -1, 1)))
+        phi0 = float(np.arctan2(local[1], -local[0])) if np.hypot(local[0], local[1]) > 1e-12 else 0.0
+        u = np.clip((nodes - a.s) / span, 0.0, 1.0)
+        wave = alpha * np.sin(2 * np.pi * u)
+        # bend toward gravity, within the plane of the chord and gravity
+        g = problem.gravity_unit
+        down_perp = g - np.dot(g, d) * d
+        phi, theta = np.full_like(nodes, phi0), np.full_like(nodes, theta0)
+        if np.linalg.norm(down_perp) > 1e-9 and abs(np.sin(theta0)) > 0.3:
+            # dζ/dφ at (φ0, θ0): +φ turns the tangent toward this direction
+            dz_dphi = r0 @ np.array([np.sin(theta0) * np.sin(phi0), np.sin(theta0) * np.cos(phi0), 0.0])
+            sign = np.sign(np.dot(dz_dphi, down_perp)) or 1.0
+            phi = phi0 + sign * wave
+        else:
+            theta = theta0 + wave
+        z = np.zeros(lay.size)
+        fit = lambda f: np.linalg.lstsq(m.B, f, rcond=None)[0]  # noqa: E731
+        z[lay.slice("phi")] = fit(phi)
+        z[lay.slice("theta")] = fit(theta)
+        if lay.twist:
+            z[lay.slice("psi")] = 0.0
+        x_a = m.positions(z, np.array([a.s]))[0]
+        z[0:3] = (a.pose.position - x_a) / m.length
+        return z
+
+    # ---- solving ----------------------------------------------------------------------------------
+    def _call(self, solver, z0, p, lam_g0=None, lam_x0=None):
+        nlp = self.nlp
+        args = {"x0": z0, "p": p, "lbg": nlp.lbg, "ubg": nlp.ubg}
+        if lam_g0 is not None:
+            args["lam_g0"] = lam_g0
+            args["lam_x0"] = lam_x0
+        sol = solver(**args)
+        stats = solver.stats()
+        z = np.asarray(sol["x"]).ravel()
+        lam_g = np.asarray(sol["lam_g"]).ravel()
+        lam_x = np.asarray(sol["lam_x"]).ravel()
+        violation = self._violation(z, p)
+        ok = stats["return_status"] in SUCCESS and violation < 1e-6 * nlp.length and np.all(np.isfinite(z))
+        return ok, _State(z, lam_g, lam_x, p), stats["return_status"], int(stats.get("iter_count", 0)), violation
+
+    def _newton(self, start: _State, p: np.ndarray, max_steps: int = 10) -> tuple[bool, _State, int, float]:
+        """Warm update by Newton's method on the KKT conditions with the start's active set.
+
+        Solves [H Jᵀ; J 0] [Δz; Δλ] = −[∇f + Jᵀλ; g − g_bound] over the equality rows and the
+        inequality rows active at the start (λ > 0), until both residuals are below tolerance.
+        Gives up (→ IPOPT) if a step is large (> 0.5 in any scaled unknown), the active set changes
+        (an inactive obstacle row is violated or an active one's λ turns negative), or it does not
+        converge in ``max_steps``.  It lands on the stationary point nearest the start, so the caller
+        still checks stability.
+        """
+        nlp = self.nlp
+        z, lam = start.z.copy(), np.zeros_like(start.lam_g)
+        equality = nlp.lbg == nlp.ubg
+        active = equality | (start.lam_g > 1e-10)
+        lam[active] = start.lam_g[active]
+        idx = np.flatnonzero(active)
+        bound = nlp.ubg[idx]
+        n = z.size
+        for it in range(max_steps + 1):
+            grad, g, jac, hess, energies = self._kkt(z, p, lam)
+            grad, g = grad.ravel(), g.ravel()
+            ja = jac[idx]
+            r_dual = grad + ja.T @ lam[idx]
+            r_prim = g[idx] - bound
+            if np.max(np.abs(r_dual), initial=0.0) < 1e-9 and np.max(np.abs(r_prim), initial=0.0) < 1e-11:
+                inactive_ok = np.all(g[~active] <= nlp.ubg[~active] + 1e-9)
+                signs_ok = np.all(lam[active & ~equality] >= -1e-12)
+                if not (inactive_ok and signs_ok):
+                    return False, start, it, np.inf
+                violation = self._violation_from_g(g)
+                return True, _State(z, lam, start.lam_x, p, hess, jac, energies.ravel()), it, violation
+            if it == max_steps:
+                break
+            kkt = np.zeros((n + idx.size, n + idx.size))
+            kkt[:n, :n] = hess
+            kkt[:n, n:] = ja.T
+            kkt[n:, :n] = ja
+            try:
+                step = np.linalg.solve(kkt, -np.concatenate([r_dual, r_prim]))
+            except np.linalg.LinAlgError:
+                return False, start, it, np.inf
+            if not np.all(np.isfinite(step)) or np.max(np.abs(step[:n])) > 0.5:
+                return False, start, it, np.inf
+            z += step[:n]
+            lam[idx] += step[n:]
+        return False, start, max_steps, np.inf
+
+    def _violation_from_g(self, g: np.ndarray) -> float:
+        nlp = self.nlp
+        if g.size == 0:
+            return 0.0
+        return float(np.max(np.maximum(np.maximum(nlp.lbg - g, 0.0), np.maximum(g - nlp.ubg, 0.0)) * nlp.row_scale))
+
+    def _violation(self, z: np.ndarray, p: np.ndarray) -> float:
+        nlp = self.nlp
+        if nlp.lbg.size == 0:
+            return 0.0
+        g = np.asarray(nlp.g_fn(z, p)).ravel()
+        lo = np.maximum(nlp.lbg - g, 0.0)
+        hi = np.maximum(g - nlp.ubg, 0.0)
+        return float(np.max(np.maximum(lo, hi) * nlp.row_scale)) if g.size else 0.0
+
+    def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, _State | None]:
+        iterations, steps, last_status = 0, 0, ""
+        if warm:
+            start = self._state
+            p1 = self.pack_parameters(problem, start.z)
+            ok, state, it, viol = self._newton(start, p1)
+            iterations += it
+            if ok:
+                result = self._result(problem, state, "Newton", iterations, viol, True, 0)
+                if result.stable is not False:
+                    return result, state
+                ok = False
+            ok, state, last_status, it, viol = self._call(self._warm, start.z, p1, start.lam_g, start.lam_x)
+            iterations += it
+            k = 2
+            while not ok and k <= self.options.max_continuation_steps:
+                state, ok = start, True
+                for i in range(1, k + 1):
+                    p_i = start.p + (p1 - start.p) * (i / k)
+                    ok, state, last_status, it, viol = self._call(self._warm, state.z, p_i, state.lam_g, state.lam_x)
+                    iterations += it
+                    if not ok:
+                        break
+                steps = k if ok else 0
+                k *= 2
+            if ok:
+                return self._result(problem, state, last_status, iterations, viol, True, steps), state
+        z0 = self.initial_guess(problem)
+        p = self.pack_parameters(problem, z0)
+        ok, state, last_status, it, viol = self._call(self._cold, z0, p)
+        iterations += it
+        result = self._result(problem, state, last_status, iterations, viol, False, 0)
+        if not ok:
+            status = "infeasible" if last_status == "Infeasible_Problem_Detected" else "failed"
+            result.status = status
+            result.message = f"IPOPT: {last_status} (constraint violation {viol:.3g})" + (
+                "; warm start and continuation also failed" if warm else ""
+            )
+            result.stable = None
+        return result, state if ok else None
+
+    # ---- results ----------------------------------------------------------------------------------
+    def _failure(self, status: str, message: str, t0: float) -> ShapeResult:
+        return ShapeResult(status=status, message=message, solve_time_ms=(time.perf_counter() - t0) * 1e3,
+                           basis=self.options.basis, order=self.options.order)
+
+    def _result(self, problem, state: _State, ipopt_status, iterations, violation, warm, steps) -> ShapeResult:
+        nlp, m = self.nlp, self.model
+        z, p = state.z, state.p
+        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        s_out = np.linspace(0.0, nlp.length, self.options.output_points)
+        points = m.positions(z, s_out)
+        quats = matrix_to_quat(self.frames(z, s_out, p) @ TANGENT_X)
+        min_eig = self._min_reduced_eigenvalue(state)  # also fills state.energies
+        bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
+        energy = {"bend": bend, "twist": twist, "stretch": stretch, "gravity": grav, "external_work": work,
+                  "total": bend + twist + stretch + grav - work}
+        grips = {g.name: self._wrench(g, z, lam_si) for g in problem.grips}
+        contacts = {}
+        if nlp.contact_normal_fn is not None:
+            normals = nlp.contact_normal_fn(z, p)
+            normals = normals if isinstance(normals, (list, tuple)) else [normals]
+            for i, rows in enumerate(nlp.obstacle_rows):
+                lam = lam_si[rows]
+                contacts[i] = -(np.asarray(normals[i]) @ lam).ravel()
+        stable = None if min_eig is None else bool(min_eig > -1e-7)
+        return ShapeResult(
+            status="ok", message="converged" + (f" after {steps} continuation steps" if steps else ""),
+            s=s_out, points=points, orientations=quats, energy=energy, grips=grips, contact_forces=contacts,
+            stable=stable, min_eigenvalue=min_eig, iterations=iterations, constraint_violation=violation,
+            warm_started=warm, continuation_steps=steps, basis=self.options.basis, order=self.options.order,
+            ipopt_status=ipopt_status,
+        )
+
+    def frames(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
+        """Material frames Q(s) (columns ξ, η, ζ) of solution z; ψ from the zero-twist rule if not solved."""
+        m = self.model
+        f = m.fields(z, s)
+        psi = f["psi"]
+        if not m.layout.twist:
+            anchor = next((g for g in sorted(self.problem.grips, key=lambda g: g.s) if g.mode != "pin"), None)
+            if anchor is not None:
+                pp = p if p is not None else self.pack_parameters(self.problem, z)
+                psi_a = float(pp[self.nlp.params[f"grip:{anchor.name}:angles"]][2])
+                psi = m.zero_twist_psi(z, s, anchor.s, psi_a)
+            else:
+                psi = m.zero_twist_psi(z, s, 0.0, 0.0)
+        return material_frames(self.nlp.r0, f["phi"], f["theta"], psi)
+
+    def _wrench(self, grip, z: np.ndarray, lam_si: np.ndarray) -> GripWrench:
+        """Force = −λ_position; torque T solves J_aᵀ T = −μ_a for the held angles a (J_a = ∂ω/∂ȧ),
+        plus T·ζ = 0 when the twist about the tangent is free."""
+        rows = self.nlp.grip_rows[grip.name]
+        force = -lam_si[rows["position"]]
+        torque = np.zeros(3)
+        if rows["angles"]:
+            phi, theta, _ = self._reference_angles(z, grip.s)
+            r0 = self.nlp.r0
+            j_phi = -r0[:, 2]
+            j_theta = -(r0 @ rot_z(np.array(-phi)) @ np.array([0.0, 1.0, 0.0]))
+            tangent = r0 @ rot_z(np.array(-phi)) @ rot_y(np.array(-theta)) @ np.array([0.0, 0.0, 1.0])
+            mu = lam_si[rows["angles"]]
+            a = [j_phi, j_theta]
+            rhs = [-mu[0], -mu[1]]
+            if len(mu) == 3:
+                a.append(-tangent)
+                rhs.append(-mu[2])
+            else:
+                a.append(tangent)
+                rhs.append(0.0)
+            torque = np.linalg.solve(np.array(a), np.array(rhs))
+        return GripWrench(force=force, torque=torque)
+
+    def _min_reduced_eigenvalue(self, state: _State) -> float | None:
+        nlp = self.nlp
+        if state.hessian is None:
+            _, _, state.jacobian, state.hessian, state.energies = self._kkt(state.z, state.p, state.lam_g)
+        h = state.hessian
+        if nlp.lbg.size:
+            g = np.asarray(nlp.g_fn(state.z, state.p)).ravel()
+            equality = nlp.lbg == nlp.ubg
+            active = equality | (np.abs(state.lam_g) > 1e-9) | (g > nlp.ubg - 1e-9)
+            jac = state.jacobian[active]
+            basis = null_space(jac) if jac.size else np.eye(h.shape[0])
+        else:
+            basis = np.eye(h.shape[0])
+        if basis.shape[1] == 0:
+            return None
+        return float(np.linalg.eigvalsh(basis.T @ h @ basis)[0])
+
+
+def _inverse_j0(ratio: float) -> float:
+    """α in [0, 2.4048] with J0(α) = ratio (chord/length of the guess β = −α sin 2πu)."""
+    lo, hi = 0.0, 2.404825557695773
+    if ratio >= 1.0:
+        return 0.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if j0(mid) > ratio:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)

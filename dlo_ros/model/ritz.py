@@ -35,15 +35,19 @@ class FieldLayout:
     order: int
     twist: bool
     stretch: bool
+    planar: bool = False  # θ ≡ π/2: the string stays in the plane normal to n = R0 e_z
 
     @property
     def size(self) -> int:
-        return 3 + self.order * (2 + int(self.twist) + int(self.stretch))
+        return 3 + self.order * (1 + int(not self.planar) + int(self.twist) + int(self.stretch))
 
     def slice(self, name: str) -> slice:
         n = self.order
-        start = {"phi": 3, "theta": 3 + n}
-        offset = 3 + 2 * n
+        start = {"phi": 3}
+        offset = 3 + n
+        if not self.planar:
+            start["theta"] = offset
+            offset += n
         if self.twist:
             start["psi"] = offset
             offset += n
@@ -57,12 +61,15 @@ class FieldLayout:
 class RitzModel:
     """Maps the unknowns z to fields, positions and energy terms, numerically and symbolically."""
 
-    def __init__(self, length: float, basis: str, order: int, nodes: int, r0: np.ndarray, twist: bool, stretch: bool):
+    def __init__(self, length: float, basis: str, order: int, nodes: int, r0: np.ndarray, twist: bool, stretch: bool,
+                 planar: bool = False):
         self.length = float(length)
         self.basis: Basis = make_basis(basis, order, length)
         self.quad = ChebyshevQuadrature(nodes, length)
         self.r0 = np.asarray(r0, dtype=float)
-        self.layout = FieldLayout(order, twist, stretch)
+        if planar and twist:
+            raise ValueError("a planar model has no twist field")
+        self.layout = FieldLayout(order, twist, stretch, planar)
         s = self.quad.nodes
         self._cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.B = self.basis.values(s)        # (M, n)
@@ -110,8 +117,11 @@ class RitzModel:
         B, dB, w = ca.DM(self.B), ca.DM(self.dB), ca.DM(self.quad.weights)
         cphi, cth = self.coefficients(z, "phi"), self.coefficients(z, "theta")
         cpsi, ceps = self.coefficients(z, "psi"), self.coefficients(z, "eps")
-        phi, th = ca.mtimes(B, cphi), ca.mtimes(B, cth)
-        dphi, dth = ca.mtimes(dB, cphi), ca.mtimes(dB, cth)
+        phi, dphi = ca.mtimes(B, cphi), ca.mtimes(dB, cphi)
+        if cth is None:  # planar: θ ≡ π/2
+            th, dth = ca.DM.ones(self.quad.count) * (np.pi / 2), ca.DM.zeros(self.quad.count)
+        else:
+            th, dth = ca.mtimes(B, cth), ca.mtimes(dB, cth)
         eps = ca.mtimes(B, ceps) if ceps is not None else None
         st = ca.sin(th)
         bend = 0.5 * ca.dot(w, profiles["Rf"] * (dth**2 + st**2 * dphi**2))
@@ -135,16 +145,23 @@ class RitzModel:
         return ca.repmat(z[0:3] * self.length, 1, len(s)) + ca.mtimes(t, W.T)
 
     def angle_sym(self, z: ca.SX, name: str, s: float) -> ca.SX:
-        return ca.mtimes(ca.DM(self.basis.values(np.array([s]))), self.coefficients(z, name))
+        c = self.coefficients(z, name)
+        if c is None:
+            raise KeyError(f"{name} is not an unknown of this model")
+        return ca.mtimes(ca.DM(self.basis.values(np.array([s]))), c)
 
     # ---- numerical evaluation of a solution -------------------------------------------------------
     def fields(self, z: np.ndarray, s: np.ndarray) -> dict[str, np.ndarray]:
-        """φ, θ, ψ (zeros if not an unknown), ε and their s-derivatives at arc lengths s."""
+        """φ, θ, ψ, ε and their s-derivatives at arc lengths s.
+
+        Fields that are not unknowns are constants: θ = π/2 in a planar model, ψ = ε = 0.
+        """
         B, dB, _ = self.matrices(s)
         out = {}
         for name in ("phi", "theta", "psi", "eps"):
             c = self.coefficients(z, name)
-            out[name] = B @ c if c is not None else np.zeros(len(s))
+            constant = np.pi / 2 if name == "theta" else 0.0
+            out[name] = B @ c if c is not None else np.full(len(s), constant)
             out["d" + name] = dB @ c if c is not None else np.zeros(len(s))
         return out
 

@@ -76,6 +76,43 @@ def choose_reference_frame(problem: Problem, frame: str) -> np.ndarray:
     return reference_frame(chord, up)
 
 
+def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float = 1e-9) -> str:
+    """Why the scene is not planar in the plane through the first grip with ``normal`` ('' if it is).
+
+    Planar means: every grip position lies in the plane and every held tangent lies in it; gravity,
+    forces and relative offsets lie in it; moments are along the normal; obstacles are half-spaces
+    whose normals lie in the plane, or spheres/capsules/boxes centred on it (symmetric about it).
+    """
+    from ..model.rotations import quat_to_matrix
+
+    n = normal / np.linalg.norm(normal)
+    L = problem.string.length
+    origin = problem.grips[0].pose.position
+    for i, g in enumerate(problem.grips):
+        off = abs(np.dot(g.pose.position - origin, n))
+        if off > tolerance * L:
+            return f"grips[{i}].position is {off:.3g} m out of the plane"
+        if g.mode != "pin" and abs(np.dot(quat_to_matrix(g.pose.orientation)[:, 0], n)) > tolerance:
+            return f"grips[{i}].orientation: the tangent leaves the plane"
+    if abs(np.dot(problem.gravity_unit, n)) > tolerance:
+        return "gravity.direction is not in the plane"
+    for i, ld in enumerate(problem.loads):
+        if abs(np.dot(ld.force, n)) > tolerance * (1 + np.linalg.norm(ld.force)):
+            return f"loads[{i}].force is not in the plane"
+    for i, rel in enumerate(problem.relative_positions):
+        if abs(np.dot(rel.offset, n)) > tolerance * L:
+            return f"relative_positions[{i}].offset is not in the plane"
+    for i, ob in enumerate(problem.obstacles):
+        prm = ob.params
+        if ob.type == "halfspace" and abs(np.dot(prm[3:6], n)) > tolerance:
+            return f"obstacles[{i}]: the half-space's normal is not in the plane"
+        if ob.type in ("sphere", "box") and abs(np.dot(prm[0:3] - origin, n)) > tolerance * L:
+            return f"obstacles[{i}]: not centred on the plane"
+        if ob.type == "capsule" and max(abs(np.dot(prm[0:3] - origin, n)), abs(np.dot(prm[3:6] - origin, n))) > tolerance * L:
+            return f"obstacles[{i}]: not centred on the plane"
+    return ""
+
+
 class StringNLP:
     """CasADi functions of one scene structure: the NLP, reactions, energies and the Lagrangian Hessian."""
 
@@ -86,10 +123,16 @@ class StringNLP:
         self.options = options
         L = problem.string.length
         self.length = L
-        self.twist = twist_is_held(problem)
+        self.planar = options.model == "planar"
+        self.twist = twist_is_held(problem) and not self.planar
         self.stretch = problem.string.stretch_stiffness is not None
         self.r0 = choose_reference_frame(problem, options.frame)
-        self.model = RitzModel(L, options.basis, options.order, options.quadrature_nodes, self.r0, self.twist, self.stretch)
+        if self.planar:
+            reason = planarity_violation(problem, self.r0[:, 2])
+            if reason:
+                raise ValueError(f"solver.model: 'planar' does not fit this scene: {reason}")
+        self.model = RitzModel(L, options.basis, options.order, options.quadrature_nodes, self.r0, self.twist,
+                               self.stretch, self.planar)
         self.sigma = L / problem.string.bend_stiffness.maximum
         self._build()
 
@@ -155,22 +198,29 @@ class StringNLP:
             ubg.append(upper)
 
         self.grip_rows: dict[str, dict[str, list[int]]] = {}
+        self.grip_axes: dict[str, np.ndarray] = {}
+        in_plane = self.r0[:, :2].T  # e1, e2
         for gi, g in enumerate(P.grips):
             rows: dict[str, list[int]] = {"position": [], "angles": []}
             target = p[lay[f"grip:{g.name}:position"]]
-            for k in range(3):
+            # A planar model moves out of its plane only through x0·n: one grip fixes that, and the
+            # other grips' out-of-plane rows would repeat it (dependent rows break IPOPT's LICQ).
+            axes = np.eye(3) if (not self.planar or gi == 0) else in_plane
+            for k, axis in enumerate(axes):
                 rows["position"].append(len(g_rows))
-                add(grip_x[k, gi] - target[k], L, ("grip", g.name, "position", k))
+                add(ca.dot(ca.DM(axis), grip_x[:, gi] - target), L, ("grip", g.name, "position", k))
+            self.grip_axes[g.name] = axes
             angles = p[lay[f"grip:{g.name}:angles"]]
-            names = {"clamp": ["phi", "theta", "psi"] if self.twist else ["phi", "theta"], "tangent": ["phi", "theta"], "pin": []}[g.mode]
+            held = ["phi"] if self.planar else ["phi", "theta"]
+            names = {"clamp": held + ["psi"] if self.twist else held, "tangent": held, "pin": []}[g.mode]
             for k, name in enumerate(names):
                 rows["angles"].append(len(g_rows))
                 add(m.angle_sym(z, name, g.s) - angles[k], 1.0, ("grip", g.name, name, k))
             self.grip_rows[g.name] = rows
         for i, _ in enumerate(P.relative_positions):
             off = p[lay[f"relative:{i}"]]
-            for k in range(3):
-                add(rel_x[k, 2 * i + 1] - rel_x[k, 2 * i] - off[k], L, ("relative", i, k))
+            for k, axis in enumerate(in_plane if self.planar else np.eye(3)):
+                add(ca.dot(ca.DM(axis), rel_x[:, 2 * i + 1] - rel_x[:, 2 * i] - off), L, ("relative", i, k))
         self.obstacle_rows: list[list[int]] = []
         radius = p[lay["radius"]][0]
         for i, ob in enumerate(P.obstacles):

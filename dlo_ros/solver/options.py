@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 FRAMES = ("auto", "paper")
+MODELS = ("full", "planar")
 
 
 @dataclass(frozen=True)
@@ -15,12 +16,14 @@ class SolverOptions:
     obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) ≤ 0 is
     imposed.  frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2
     (away from the singularity); 'paper' is the paper's frame (singular at the straight state).
+    model: 'full' (3D: φ, θ and, when two clamps hold it, ψ) or 'planar' (φ only, θ ≡ π/2: the
+    string stays in the working plane; requires a planar scene and frame 'auto').
     output_points: centreline samples in a result.  tolerance: IPOPT's (scaled) convergence tolerance.
     max_continuation_steps: the largest number of equal steps a failed warm update is split into.
     """
 
     basis: str = "chebyshev"
-    order: int = 12
+    order: int = 16
     quadrature_nodes: int = 40
     obstacle_samples: int = 41
     frame: str = "auto"
@@ -29,6 +32,7 @@ class SolverOptions:
     max_iterations: int = 500
     max_continuation_steps: int = 8
     max_strain: float = 0.2
+    model: str = "full"
 
     def validate(self) -> None:
         if self.basis not in ("chebyshev", "fourier"):
@@ -49,6 +53,10 @@ class SolverOptions:
             raise ValueError(f"solver.max_iterations: must be in [1, 100000], got {self.max_iterations}")
         if not (1 <= self.max_continuation_steps <= 1024):
             raise ValueError("solver.max_continuation_steps: must be in [1, 1024]")
+        if self.model not in MODELS:
+            raise ValueError(f"solver.model: must be one of {MODELS}, got {self.model!r}")
+        if self.model == "planar" and self.frame != "auto":
+            raise ValueError("solver.model: 'planar' needs solver.frame 'auto'")
         if not (0 < self.max_strain < 10):
             raise ValueError("solver.max_strain: must be in (0, 10)")
 

@@ -14,6 +14,7 @@ Contract:
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 from dataclasses import dataclass, replace
@@ -24,7 +25,7 @@ from scipy.special import j0
 
 from ..model.problem import GripPose, Problem
 from ..model.rotations import TANGENT_X, euler_from_frame, material_frames, matrix_to_quat, quat_to_matrix, rot_y, rot_z
-from .compiled import compiled
+from .compiled import InterpretedFunction, NativeFunction, cached_library, compiled
 from .nlp import StringNLP
 from .options import SolverOptions
 from .result import GripWrench, ShapeResult
@@ -43,6 +44,8 @@ class _State:
     hessian: np.ndarray | None = None   # ∇²L at z, when the solve already has it
     jacobian: np.ndarray | None = None  # ∂g/∂z at z
     energies: np.ndarray | None = None  # bend, twist, stretch, gravity, work at z
+    g: np.ndarray | None = None  # constraint values (scaled rows) at z
+    unstable_direction: np.ndarray | None = None  # eigenvector of the most negative reduced curvature
 
 
 def structure_key(problem: Problem, options: SolverOptions) -> tuple:
@@ -62,9 +65,16 @@ def structure_key(problem: Problem, options: SolverOptions) -> tuple:
 class ShapeSolver:
     """Solve the string's static shape for changing grip targets (see module docstring)."""
 
-    def __init__(self, problem: Problem, options: SolverOptions | None = None):
+    def __init__(self, problem: Problem, options: SolverOptions | None = None, compile: str = "background"):
+        """compile: 'background' (solve at once with interpreted derivatives, compile them to C in a
+        background thread and switch when ready; cached per machine), 'blocking' (compile or load
+        now), or 'off'.  $DLO_NO_COMPILE forces 'off'."""
+        if compile not in ("background", "blocking", "off"):
+            raise ValueError(f"compile: must be 'background', 'blocking' or 'off', got {compile!r}")
         self.options = options or SolverOptions()
+        self.compile_mode = compile
         self._lock = threading.Lock()
+        self._compile_thread: threading.Thread | None = None
         self._build(problem)
 
     def _build(self, problem: Problem) -> None:
@@ -73,13 +83,44 @@ class ShapeSolver:
         self._check_moments(problem)
         self._cold = self.nlp.make_solver(warm=False)
         self._warm = self.nlp.make_solver(warm=True)
-        t1 = time.perf_counter()
-        self._kkt, self.kkt_compiled = compiled(self.nlp.kkt_fn)
-        self.compile_time_s = time.perf_counter() - t1
+        self._kkt = InterpretedFunction(self.nlp.kkt_fn)
+        self.kkt_compiled = False
+        self.compile_time_s = 0.0
+        self._start_compile()
         self.problem = problem
         self._key = structure_key(problem, self.options)
         self._state: _State | None = None
         self.build_time_s = time.perf_counter() - t0
+
+    def _start_compile(self) -> None:
+        mode = "off" if os.environ.get("DLO_NO_COMPILE") else self.compile_mode
+        if mode == "off":
+            return
+        fn, nlp = self.nlp.kkt_fn, self.nlp
+        lib = cached_library(fn)
+        if lib is not None:  # compiled on an earlier start: load now, no waiting
+            self._kkt, self.kkt_compiled = NativeFunction(lib, fn), True
+            return
+
+        def work() -> None:
+            t0 = time.perf_counter()
+            native, ok = compiled(fn, nice=10 if mode == "background" else 0)
+            with self._lock:
+                if ok and self.nlp is nlp:  # the scene may have been rebuilt meanwhile
+                    self._kkt, self.kkt_compiled = native, True
+                    self.compile_time_s = time.perf_counter() - t0
+
+        if mode == "blocking":
+            work()
+        else:
+            self._compile_thread = threading.Thread(target=work, name="dlo-compile", daemon=True)
+            self._compile_thread.start()
+
+    def wait_for_compile(self, timeout: float | None = None) -> bool:
+        """Block until a background compile has finished; True if compiled derivatives are in use."""
+        if self._compile_thread is not None:
+            self._compile_thread.join(timeout)
+        return self.kkt_compiled
 
     # ---- public API ---------------------------------------------------------------------------------
     @property
@@ -251,11 +292,12 @@ class ShapeSolver:
         phi0 = float(np.arctan2(local[1], -local[0])) if np.hypot(local[0], local[1]) > 1e-12 else 0.0
         u = np.clip((nodes - a.s) / span, 0.0, 1.0)
         wave = alpha * np.sin(2 * np.pi * u)
-        # bend toward gravity, within the plane of the chord and gravity
+        # bend toward gravity, within the plane of the chord and gravity; a planar model bends in φ
         g = problem.gravity_unit
         down_perp = g - np.dot(g, d) * d
         phi, theta = np.full_like(nodes, phi0), np.full_like(nodes, theta0)
-        if np.linalg.norm(down_perp) > 1e-9 and abs(np.sin(theta0)) > 0.3:
+        bend_in_phi = lay.planar or (np.linalg.norm(down_perp) > 1e-9 and abs(np.sin(theta0)) > 0.3)
+        if bend_in_phi:
             # dζ/dφ at (φ0, θ0): +φ turns the tangent toward this direction
             dz_dphi = r0 @ np.array([np.sin(theta0) * np.sin(phi0), np.sin(theta0) * np.cos(phi0), 0.0])
             sign = np.sign(np.dot(dz_dphi, down_perp)) or 1.0
@@ -265,9 +307,21 @@ class ShapeSolver:
         z = np.zeros(lay.size)
         fit = lambda f: np.linalg.lstsq(m.B, f, rcond=None)[0]  # noqa: E731
         z[lay.slice("phi")] = fit(phi)
-        z[lay.slice("theta")] = fit(theta)
-        if lay.twist:
-            z[lay.slice("psi")] = 0.0
+        if not lay.planar:
+            z[lay.slice("theta")] = fit(theta)
+        # bend the guess so it meets every held angle: add the piecewise-linear interpolant of the
+        # residuals at the grips (a guess that breaks the clamps lets IPOPT wander into loops)
+        p = self.pack_parameters(problem, z)
+        fields = {"phi": phi, "theta": theta, "psi": np.zeros_like(nodes)}
+        for k, name in enumerate(("phi", "theta", "psi")):
+            if lay.planar and name != "phi" or name == "psi" and not lay.twist:
+                continue
+            holders = [g for g in grips if g.mode == "clamp" or (g.mode == "tangent" and name != "psi")]
+            if not holders:
+                continue
+            current = m.fields(z, np.array([g.s for g in holders]))[name]
+            residual = [p[self.nlp.params[f"grip:{g.name}:angles"]][k] - c for g, c in zip(holders, current)]
+            z[lay.slice(name)] = fit(fields[name] + np.interp(nodes, [g.s for g in holders], residual))
         x_a = m.positions(z, np.array([a.s]))[0]
         z[0:3] = (a.pose.position - x_a) / m.length
         return z
@@ -284,9 +338,10 @@ class ShapeSolver:
         z = np.asarray(sol["x"]).ravel()
         lam_g = np.asarray(sol["lam_g"]).ravel()
         lam_x = np.asarray(sol["lam_x"]).ravel()
-        violation = self._violation(z, p)
+        g = np.asarray(sol["g"]).ravel()
+        violation = self._violation_from_g(g)
         ok = stats["return_status"] in SUCCESS and violation < 1e-6 * nlp.length and np.all(np.isfinite(z))
-        return ok, _State(z, lam_g, lam_x, p), stats["return_status"], int(stats.get("iter_count", 0)), violation
+        return ok, _State(z, lam_g, lam_x, p, g=g), stats["return_status"], int(stats.get("iter_count", 0)), violation
 
     def _newton(self, start: _State, p: np.ndarray, max_steps: int = 10) -> tuple[bool, _State, int, float]:
         """Warm update by Newton's method on the KKT conditions with the start's active set.
@@ -301,7 +356,9 @@ class ShapeSolver:
         nlp = self.nlp
         z, lam = start.z.copy(), np.zeros_like(start.lam_g)
         equality = nlp.lbg == nlp.ubg
-        active = equality | (start.lam_g > 1e-10)
+        # active = at its bound with a positive multiplier (IPOPT leaves ~1e-10 barrier multipliers
+        # on rows far from their bound; those are inactive)
+        active = equality | ((start.lam_g > 1e-8) & (start.g > nlp.ubg - 1e-7))
         lam[active] = start.lam_g[active]
         idx = np.flatnonzero(active)
         bound = nlp.ubg[idx]
@@ -318,7 +375,7 @@ class ShapeSolver:
                 if not (inactive_ok and signs_ok):
                     return False, start, it, np.inf
                 violation = self._violation_from_g(g)
-                return True, _State(z, lam, start.lam_x, p, hess, jac, energies.ravel()), it, violation
+                return True, _State(z, lam, start.lam_x, p, hess, jac, energies.ravel(), g), it, violation
             if it == max_steps:
                 break
             kkt = np.zeros((n + idx.size, n + idx.size))
@@ -340,15 +397,6 @@ class ShapeSolver:
         if g.size == 0:
             return 0.0
         return float(np.max(np.maximum(np.maximum(nlp.lbg - g, 0.0), np.maximum(g - nlp.ubg, 0.0)) * nlp.row_scale))
-
-    def _violation(self, z: np.ndarray, p: np.ndarray) -> float:
-        nlp = self.nlp
-        if nlp.lbg.size == 0:
-            return 0.0
-        g = np.asarray(nlp.g_fn(z, p)).ravel()
-        lo = np.maximum(nlp.lbg - g, 0.0)
-        hi = np.maximum(g - nlp.ubg, 0.0)
-        return float(np.max(np.maximum(lo, hi) * nlp.row_scale)) if g.size else 0.0
 
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, _State | None]:
         iterations, steps, last_status = 0, 0, ""
@@ -376,12 +424,15 @@ class ShapeSolver:
                 steps = k if ok else 0
                 k *= 2
             if ok:
-                return self._result(problem, state, last_status, iterations, viol, True, steps), state
+                result = self._result(problem, state, last_status, iterations, viol, True, steps)
+                return self._escape_saddle(problem, result, state)
         z0 = self.initial_guess(problem)
         p = self.pack_parameters(problem, z0)
         ok, state, last_status, it, viol = self._call(self._cold, z0, p)
         iterations += it
         result = self._result(problem, state, last_status, iterations, viol, False, 0)
+        if ok:
+            return self._escape_saddle(problem, result, state)
         if not ok:
             status = "infeasible" if last_status == "Infeasible_Problem_Detected" else "failed"
             result.status = status
@@ -390,6 +441,29 @@ class ShapeSolver:
             )
             result.stable = None
         return result, state if ok else None
+
+    def _escape_saddle(self, problem: Problem, result: ShapeResult, state: _State) -> tuple[ShapeResult, _State]:
+        """A stationary point with negative reduced curvature is not a shape a string rests in.
+
+        Step along the unstable eigenvector (both signs, 0.2 rad at most in any coefficient) and
+        re-solve; keep the first stable result of lower energy.  Symmetric starts (a planar guess for a
+        scene whose minimum is twisted, paper Fig. 2) land on such saddles.
+        """
+        if result.stable is not False or state.unstable_direction is None:
+            return result, state
+        d = state.unstable_direction / np.max(np.abs(state.unstable_direction))
+        for sign in (1.0, -1.0):
+            ok, trial, status, it, viol = self._call(self._cold, state.z + sign * 0.2 * d, state.p)
+            result.iterations += it
+            if not ok:
+                continue
+            candidate = self._result(problem, trial, status, result.iterations, viol, result.warm_started,
+                                     result.continuation_steps)
+            if candidate.stable and candidate.energy["total"] < result.energy["total"]:
+                candidate.message += "; left an unstable equilibrium along its negative-curvature mode"
+                return candidate, trial
+        result.message += "; unstable equilibrium (no stable one found nearby)"
+        return result, state
 
     # ---- results ----------------------------------------------------------------------------------
     def _failure(self, status: str, message: str, t0: float) -> ShapeResult:
@@ -415,7 +489,8 @@ class ShapeSolver:
             for i, rows in enumerate(nlp.obstacle_rows):
                 lam = lam_si[rows]
                 contacts[i] = -(np.asarray(normals[i]) @ lam).ravel()
-        stable = None if min_eig is None else bool(min_eig > -1e-7)
+        # a neutral mode (e.g. rotation about the chord without gravity) shows as ±1e-8·|H|
+        stable = None if min_eig is None else bool(min_eig > -1e-8 * max(1.0, float(np.abs(state.hessian).max())))
         return ShapeResult(
             status="ok", message="converged" + (f" after {steps} continuation steps" if steps else ""),
             s=s_out, points=points, orientations=quats, energy=energy, grips=grips, contact_forces=contacts,
@@ -443,9 +518,12 @@ class ShapeSolver:
         """Force = −λ_position; torque T solves J_aᵀ T = −μ_a for the held angles a (J_a = ∂ω/∂ȧ),
         plus T·ζ = 0 when the twist about the tangent is free."""
         rows = self.nlp.grip_rows[grip.name]
-        force = -lam_si[rows["position"]]
+        force = -self.nlp.grip_axes[grip.name].T @ lam_si[rows["position"]]
         torque = np.zeros(3)
-        if rows["angles"]:
+        if rows["angles"] and self.nlp.planar:
+            # only φ is held: the reaction torque is along the plane normal, n·T = μ_φ
+            torque = lam_si[rows["angles"][0]] * self.nlp.r0[:, 2]
+        elif rows["angles"]:
             phi, theta, _ = self._reference_angles(z, grip.s)
             r0 = self.nlp.r0
             j_phi = -r0[:, 2]
@@ -469,7 +547,7 @@ class ShapeSolver:
             _, _, state.jacobian, state.hessian, state.energies = self._kkt(state.z, state.p, state.lam_g)
         h = state.hessian
         if nlp.lbg.size:
-            g = np.asarray(nlp.g_fn(state.z, state.p)).ravel()
+            g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
             equality = nlp.lbg == nlp.ubg
             active = equality | (np.abs(state.lam_g) > 1e-9) | (g > nlp.ubg - 1e-9)
             jac = state.jacobian[active]
@@ -478,7 +556,9 @@ class ShapeSolver:
             basis = np.eye(h.shape[0])
         if basis.shape[1] == 0:
             return None
-        return float(np.linalg.eigvalsh(basis.T @ h @ basis)[0])
+        values, vectors = np.linalg.eigh(basis.T @ h @ basis)
+        state.unstable_direction = basis @ vectors[:, 0] if values[0] < 0 else None
+        return float(values[0])
 
 
 def _inverse_j0(ratio: float) -> float:

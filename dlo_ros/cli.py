@@ -1,0 +1,419 @@
+"""``dlo``: command-line access to scenes and the shape solver (no ROS needed).
+
+    dlo solve SCENE [--json] [--points N] [--basis B] [--order N] [--compile]
+    dlo scenes
+    dlo demo [--scene NAME] [--steps N] [--json] [--compile]
+
+SCENE is a scene file path or the name of a shipped scene (config/scenes/<name>.yaml).
+Exit codes: 0 success (solve: status ok), 1 the solve (or a demo step) did not reach status ok,
+2 malformed scene or bad usage (the message names the offending key, on stderr, no traceback).
+Documented in msg_docs/cli.md; also runs as ``python -m dlo_ros.cli``.
+
+Other subcommands (``node``, ``replay``, ...) plug into :data:`SUBCOMMANDS` at the bottom of this file.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import replace
+from typing import Any, Callable, Iterator
+
+import numpy as np
+
+from .paths import available_scenes, scene_path
+
+EXIT_OK = 0
+EXIT_NOT_OK = 1
+EXIT_USAGE = 2
+
+#: Keys of ``dlo solve --json`` output (ShapeResult.to_dict() plus scene and frame_id).
+JSON_KEYS = ("scene", "frame_id", "status", "message", "stable", "min_eigenvalue", "s", "points", "orientations",
+             "energy", "grips", "contact_forces", "solver")
+
+
+class UsageError(Exception):
+    """Bad command-line input: printed as ``dlo: error: ...`` and exit code 2."""
+
+
+# ---- helpers ----------------------------------------------------------------------------------------
+def _err(message: str) -> None:
+    print(f"dlo: error: {message}", file=sys.stderr)
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr() -> Iterator[None]:
+    """Send everything written to file descriptor 1 (also by C code: IPOPT, CasADi) to stderr.
+
+    Keeps ``--json`` output exactly one JSON document.
+    """
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError):  # no real stdout (e.g. closed): nothing to protect
+        yield
+        return
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _json_safe(value: Any) -> Any:
+    """Non-finite floats -> None (strict JSON), numpy scalars/arrays -> Python."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value) + 0.0  # + 0.0 turns -0.0 into 0.0
+        return v if math.isfinite(v) else None
+    return value
+
+
+def _set_compile(enabled: bool) -> None:
+    """Whether ShapeSolver compiles its KKT function to C (read by solver.compiled at build time).
+
+    Compiling pays off only for many warm Newton updates, and little even then: the first build of a
+    scene structure takes about a minute of gcc, a cold solve needs the function once, and a warm
+    update spends most of its time outside it.  ``solve`` and ``demo`` therefore skip it unless
+    ``--compile`` is given (which also overrides DLO_NO_COMPILE in the environment); without it an
+    explicit DLO_NO_COMPILE is left alone.
+    """
+    if enabled:
+        os.environ.pop("DLO_NO_COMPILE", None)
+    else:
+        os.environ.setdefault("DLO_NO_COMPILE", "1")
+
+
+def _load(scene_arg: str):
+    from .scene import load_scene
+
+    return load_scene(scene_arg)
+
+
+def _with_overrides(options, points: int | None, basis: str | None, order: int | None):
+    """SolverOptions with the command-line overrides; raises UsageError naming the option."""
+    changes: dict[str, Any] = {}
+    if points is not None:
+        changes["output_points"] = points
+    if basis is not None:
+        changes["basis"] = basis
+    if order is not None:
+        changes["order"] = order
+        # keep the default ratio of quadrature nodes to basis functions (40 for 12)
+        needed = max(8, order + 2, math.ceil(10 * order / 3))
+        if options.quadrature_nodes < needed:
+            changes["quadrature_nodes"] = min(400, needed)
+    new = replace(options, **changes)
+    try:
+        new.validate()
+    except ValueError as exc:
+        flag = {"solver.output_points": "--points", "solver.basis": "--basis", "solver.order": "--order"}
+        key = str(exc).split(":", 1)[0]
+        raise UsageError(f"{flag.get(key, key)}: {str(exc).split(':', 1)[-1].strip()}") from None
+    return new
+
+
+def max_sag(points: np.ndarray, grip_positions: list[np.ndarray], gravity: np.ndarray) -> float:
+    """How far the lowest point of the string hangs below the lowest grip, along gravity [m].
+
+    Negative when the whole string is above its lowest grip (e.g. buckled upward).
+    """
+    g = np.asarray(gravity, dtype=float)
+    g = g / np.linalg.norm(g)
+    if len(points) == 0 or not grip_positions:
+        return float("nan")
+    depth = np.asarray(points) @ g
+    return float(depth.max() - max(float(np.dot(p, g)) for p in grip_positions))
+
+
+def _vec(a: Any, digits: int = 4) -> str:
+    return "[" + ", ".join(f"{float(v) + 0.0:+.{digits}g}" for v in np.asarray(a, dtype=float).ravel()) + "]"
+
+
+def format_summary(scene, result) -> str:
+    """Short human-readable summary of one solve."""
+    lines = [f"scene   {scene.name}  ({scene.source})", f"status  {result.status}: {result.message}"]
+    if result.ok:
+        eig = "" if result.min_eigenvalue is None else f"  (min reduced eigenvalue {result.min_eigenvalue:.4g})"
+        lines.append(f"stable  {result.stable}{eig}")
+        lines.append("energy  " + "  ".join(f"{k} {v + 0.0:.6g}" for k, v in result.energy.items()) + "  [J]")
+        width = max(len(n) for n in result.grips) if result.grips else 0
+        for name, w in result.grips.items():
+            lines.append(f"grip    {name:<{width}}  force {_vec(w.force)} N  torque {_vec(w.torque)} N m")
+        for i, f in result.contact_forces.items():
+            if np.linalg.norm(f) > 0:
+                ob = scene.problem.obstacles[i]
+                lines.append(f"contact obstacles[{i}] {ob.name or ob.type}: total force {_vec(f)} N")
+        sag = max_sag(result.points, [g.pose.position for g in scene.problem.grips], scene.problem.gravity)
+        lines.append(f"sag     {sag:.4g} m  (lowest point below the lowest grip, along gravity)")
+    lines.append(
+        f"solver  {result.iterations} iterations, {result.solve_time_ms:.1f} ms, "
+        f"{result.basis} order {result.order}" + (f", IPOPT {result.ipopt_status}" if result.ipopt_status else "")
+    )
+    return "\n".join(lines)
+
+
+# ---- solve ------------------------------------------------------------------------------------------
+def _add_solve_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", metavar="SCENE", help="scene file path, or the name of a shipped scene (see `dlo scenes`)")
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object (schema in msg_docs/cli.md)")
+    p.add_argument("--points", type=int, metavar="N", help="number of output samples along s (solver.output_points)")
+    p.add_argument("--basis", choices=("chebyshev", "fourier"), help="Ritz basis (solver.basis)")
+    p.add_argument("--order", type=int, metavar="N",
+                   help="basis functions per field (solver.order); raises solver.quadrature_nodes to "
+                        "ceil(10 N / 3) if the scene's is smaller")
+    p.add_argument("--compile", action="store_true",
+                   help="compile the solver's KKT function to C (slow first build; only useful for benchmarks)")
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    from .solver import ShapeSolver
+
+    _set_compile(args.compile)
+    scene = _load(args.scene)
+    options = _with_overrides(scene.options, args.points, args.basis, args.order)
+    guard = _stdout_to_stderr() if args.json else contextlib.nullcontext()
+    with guard:
+        try:
+            solver = ShapeSolver(scene.problem, options)
+        except ValueError as exc:  # the solver's own checks (e.g. loads[i].moment); they name the field
+            raise UsageError(str(exc)) from None
+        result = solver.solve()
+    if args.json:
+        out = {"scene": scene.name, "frame_id": scene.frame_id, **result.to_dict()}
+        print(json.dumps(_json_safe(out), allow_nan=False))
+    else:
+        print(format_summary(scene, result))
+    return EXIT_OK if result.ok else EXIT_NOT_OK
+
+
+# ---- scenes -----------------------------------------------------------------------------------------
+def _add_scenes_arguments(p: argparse.ArgumentParser) -> None:
+    del p  # no options
+
+
+def scene_summaries() -> list[tuple[str, str]]:
+    """(name, first line of the description) of every shipped scene; unreadable files say why."""
+    import yaml
+
+    from .scene import _SceneLoader
+
+    out = []
+    for name in available_scenes():
+        try:
+            data = yaml.load(scene_path(name).read_text(encoding="utf-8"), Loader=_SceneLoader)  # noqa: S506
+            desc = data.get("description") if isinstance(data, dict) else None
+            first = next((ln.strip() for ln in str(desc or "").splitlines() if ln.strip()), "(no description)")
+        except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
+            first = f"(unreadable: {type(exc).__name__})"
+        out.append((name, first))
+    return out
+
+
+def cmd_scenes(args: argparse.Namespace) -> int:
+    del args
+    rows = scene_summaries()
+    if not rows:
+        print("no shipped scenes found")
+        return EXIT_OK
+    width = max(len(n) for n, _ in rows)
+    for name, first in rows:
+        print(f"{name:<{width}}  {first}")
+    return EXIT_OK
+
+
+# ---- demo -------------------------------------------------------------------------------------------
+def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
+    """The moving grip (named 'right', else the one with the largest s) and its ``steps`` target positions.
+
+    It moves in a straight line, in equal steps, by 15 % of the chord toward the first grip and by 5 % of
+    the string length against gravity: small steps, always reachable.
+    """
+    grips = scene.problem.grips
+    moving = next((g for g in grips if g.name == "right"), max(grips, key=lambda g: g.s))
+    start = np.asarray(moving.pose.position, dtype=float)
+    first = min(grips, key=lambda g: g.s)
+    chord = start - np.asarray(first.pose.position, dtype=float) if first is not moving else np.zeros(3)
+    up = -scene.problem.gravity_unit
+    total = -0.15 * chord + 0.05 * scene.problem.string.length * up
+    return moving.name, [start + total * (k / steps) for k in range(1, steps + 1)]
+
+
+def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str], None] | None = None) -> dict:
+    """Solve a scene cold, then move one grip through ``steps`` small warm-started updates.
+
+    Returns a summary dict: scene, moving_grip, steps, build_time_s, cold {status, message, time_ms,
+    iterations, stable}, warm {time_ms (list), median_ms, p90_ms, max_ms, iterations (list),
+    mean_iterations, statuses (status -> count), stable_count, ok_count}, final_sag_m, ok.
+    (A placeholder for the ROS node demo; the CLI prints it with :func:`format_demo`.)
+    """
+    from .model.problem import GripPose
+    from .scene import DEFAULT_SCENE, SceneError
+    from .solver import ShapeSolver
+
+    scene = _load(scene_name or DEFAULT_SCENE)
+    log = log or (lambda _msg: None)
+    if not os.environ.get("DLO_NO_COMPILE"):
+        log(f"building the solver for {scene.name} (compiling C code: up to a minute the first time)")
+    t0 = time.perf_counter()
+    try:
+        solver = ShapeSolver(scene.problem, scene.options)
+    except ValueError as exc:  # the solver's own checks name the field
+        raise SceneError(str(exc), source=scene.source) from None
+    build_s = time.perf_counter() - t0
+    cold = solver.solve(warm=False)
+    name, targets = demo_path(scene, steps)
+    orientation = scene.problem.grip(name).pose.orientation
+
+    times, iters, statuses, stable, last = [], [], {}, 0, cold
+    if cold.ok:
+        for target in targets:
+            r = solver.solve({name: GripPose(target, orientation)})
+            times.append(r.solve_time_ms)
+            iters.append(r.iterations)
+            statuses[r.status] = statuses.get(r.status, 0) + 1
+            stable += int(bool(r.stable))
+            if r.ok:
+                last = r
+    grip_positions = [g.pose.position for g in solver.problem.grips]
+    warm = {
+        "time_ms": times,
+        "median_ms": float(np.median(times)) if times else None,
+        "p90_ms": float(np.percentile(times, 90)) if times else None,
+        "max_ms": float(np.max(times)) if times else None,
+        "iterations": iters,
+        "mean_iterations": float(np.mean(iters)) if iters else None,
+        "statuses": statuses,
+        "ok_count": statuses.get("ok", 0),
+        "stable_count": stable,
+    }
+    return {
+        "scene": scene.name,
+        "moving_grip": name,
+        "steps": steps,
+        "build_time_s": build_s,
+        "cold": {"status": cold.status, "message": cold.message, "time_ms": cold.solve_time_ms,
+                 "iterations": cold.iterations, "stable": cold.stable},
+        "warm": warm,
+        "final_sag_m": max_sag(last.points, grip_positions, scene.problem.gravity) if last.ok else None,
+        "ok": cold.ok and warm["ok_count"] == steps,
+    }
+
+
+def format_demo(summary: dict) -> str:
+    c, w = summary["cold"], summary["warm"]
+    lines = [
+        f"demo    scene {summary['scene']}: grip {summary['moving_grip']!r} moved in {summary['steps']} warm-started steps",
+        f"build   {summary['build_time_s']:.2f} s",
+        f"cold    {c['status']} ({c['message']}), {c['time_ms']:.1f} ms, {c['iterations']} iterations, stable {c['stable']}",
+    ]
+    if w["time_ms"]:
+        statuses = ", ".join(f"{k} {v}" for k, v in sorted(w["statuses"].items()))
+        lines += [
+            f"warm    median {w['median_ms']:.2f} ms, p90 {w['p90_ms']:.2f} ms, max {w['max_ms']:.2f} ms",
+            f"        mean {w['mean_iterations']:.1f} iterations; statuses: {statuses}; "
+            f"stable {w['stable_count']}/{summary['steps']}",
+        ]
+        if summary["final_sag_m"] is not None:
+            lines.append(f"final   sag {summary['final_sag_m']:.4g} m")
+    else:
+        lines.append("warm    skipped: the cold solve failed")
+    return "\n".join(lines)
+
+
+def _add_demo_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scene", default=None, metavar="NAME", help="scene name or file (default: default_cable)")
+    p.add_argument("--steps", type=int, default=50, metavar="N", help="number of warm-started grip moves (default 50)")
+    p.add_argument("--json", action="store_true", help="print the summary dict as JSON")
+    p.add_argument("--compile", action="store_true",
+                   help="compile the solver's KKT function to C (about a minute per new scene structure)")
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    if args.steps < 1:
+        raise UsageError(f"--steps: must be >= 1, got {args.steps}")
+    _set_compile(args.compile)
+    log = (lambda msg: print(msg, file=sys.stderr)) if not args.json else None
+    guard = _stdout_to_stderr() if args.json else contextlib.nullcontext()
+    with guard:
+        summary = run_demo(args.scene, args.steps, log=log)
+    print(json.dumps(_json_safe(summary)) if args.json else format_demo(summary))
+    return EXIT_OK if summary["ok"] else EXIT_NOT_OK
+
+
+# =====================================================================================================
+# SUBCOMMAND REGISTRY — add new subcommands here (or call register_subcommand() from your module).
+#   name -> (help, add_arguments(parser) -> None, handler(args) -> exit code)
+# The handler may raise SceneError / FileNotFoundError / UsageError: main() prints them as
+# "dlo: error: ..." and returns exit code 2.  Planned: "node" (run the ROS node), "replay".
+# =====================================================================================================
+Subcommand = tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]
+
+SUBCOMMANDS: dict[str, Subcommand] = {
+    "solve": ("solve a scene once and print the shape (exit 0 if status ok)", _add_solve_arguments, cmd_solve),
+    "scenes": ("list the shipped scenes", _add_scenes_arguments, cmd_scenes),
+    "demo": ("solve a scene, then move a grip in small warm-started steps", _add_demo_arguments, cmd_demo),
+}
+
+
+def register_subcommand(name: str, help: str, add_arguments: Callable[[argparse.ArgumentParser], None],
+                        handler: Callable[[argparse.Namespace], int]) -> None:
+    """Add (or replace) a subcommand of ``dlo``."""
+    SUBCOMMANDS[name] = (help, add_arguments, handler)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="dlo", description="Static shape of a cable/rope/paper strip held by grippers (Hirai & Wakamatsu).",
+        epilog="Exit codes: 0 ok, 1 solve status not ok, 2 malformed scene or usage.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, (help_text, add_arguments, handler) in SUBCOMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        add_arguments(p)
+        p.set_defaults(_handler=handler)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .scene import SceneError
+
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
+        return int(exc.code or 0) if isinstance(exc.code, int) else EXIT_USAGE
+    try:
+        return int(args._handler(args))
+    except (SceneError, FileNotFoundError, UsageError) as exc:
+        # FileNotFoundError/KeyError-style messages may come quoted; SceneError's never start with a quote
+        text = exc.args[0] if isinstance(exc, FileNotFoundError) and len(exc.args) == 1 else str(exc)
+        _err(str(text))
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:  # e.g. `dlo scenes | head -1`
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silence the flush at exit
+        return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -85,19 +85,11 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
-def _set_compile(enabled: bool) -> None:
-    """Whether ShapeSolver compiles its KKT function to C (read by solver.compiled at build time).
-
-    Compiling pays off only for many warm Newton updates, and little even then: the first build of a
-    scene structure takes about a minute of gcc, a cold solve needs the function once, and a warm
-    update spends most of its time outside it.  ``solve`` and ``demo`` therefore skip it unless
-    ``--compile`` is given (which also overrides DLO_NO_COMPILE in the environment); without it an
-    explicit DLO_NO_COMPILE is left alone.
-    """
-    if enabled:
-        os.environ.pop("DLO_NO_COMPILE", None)
-    else:
-        os.environ.setdefault("DLO_NO_COMPILE", "1")
+def _compile_mode(enabled: bool) -> str:
+    """ShapeSolver's compile mode for a one-shot command: 'blocking' with --compile (compile the KKT
+    function to C now, about a minute per new scene structure, cached), else 'cached' (use a library
+    an earlier run compiled, never wait for gcc)."""
+    return "blocking" if enabled else "cached"
 
 
 def _load(scene_arg: str):
@@ -185,13 +177,12 @@ def _add_solve_arguments(p: argparse.ArgumentParser) -> None:
 def cmd_solve(args: argparse.Namespace) -> int:
     from .solver import ShapeSolver
 
-    _set_compile(args.compile)
     scene = _load(args.scene)
     options = _with_overrides(scene.options, args.points, args.basis, args.order)
     guard = _stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         try:
-            solver = ShapeSolver(scene.problem, options)
+            solver = ShapeSolver(scene.problem, options, compile=_compile_mode(args.compile))
         except ValueError as exc:  # the solver's own checks (e.g. loads[i].moment); they name the field
             raise UsageError(str(exc)) from None
         result = solver.solve()
@@ -255,7 +246,8 @@ def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
     return moving.name, [start + total * (k / steps) for k in range(1, steps + 1)]
 
 
-def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str], None] | None = None) -> dict:
+def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str], None] | None = None,
+             compile: str = "cached") -> dict:
     """Solve a scene cold, then move one grip through ``steps`` small warm-started updates.
 
     Returns a summary dict: scene, moving_grip, steps, build_time_s, cold {status, message, time_ms,
@@ -269,11 +261,11 @@ def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str]
 
     scene = _load(scene_name or DEFAULT_SCENE)
     log = log or (lambda _msg: None)
-    if not os.environ.get("DLO_NO_COMPILE"):
+    if compile == "blocking":
         log(f"building the solver for {scene.name} (compiling C code: up to a minute the first time)")
     t0 = time.perf_counter()
     try:
-        solver = ShapeSolver(scene.problem, scene.options)
+        solver = ShapeSolver(scene.problem, scene.options, compile=compile)
     except ValueError as exc:  # the solver's own checks name the field
         raise SceneError(str(exc), source=scene.source) from None
     build_s = time.perf_counter() - t0
@@ -348,11 +340,10 @@ def _add_demo_arguments(p: argparse.ArgumentParser) -> None:
 def cmd_demo(args: argparse.Namespace) -> int:
     if args.steps < 1:
         raise UsageError(f"--steps: must be >= 1, got {args.steps}")
-    _set_compile(args.compile)
     log = (lambda msg: print(msg, file=sys.stderr)) if not args.json else None
     guard = _stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
-        summary = run_demo(args.scene, args.steps, log=log)
+        summary = run_demo(args.scene, args.steps, log=log, compile=_compile_mode(args.compile))
     print(json.dumps(_json_safe(summary)) if args.json else format_demo(summary))
     return EXIT_OK if summary["ok"] else EXIT_NOT_OK
 

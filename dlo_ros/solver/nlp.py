@@ -253,17 +253,25 @@ class StringNLP:
              ca.densify(ca.hessian(lagrangian, z)[0]), ca.densify(ca.vertcat(bend, twist, stretch, grav, work))],
         )
         self.g_fn = ca.Function("g", [z, p], [g])
-        # contact normals ∂h/∂x at every obstacle sample, for the contact forces
-        if P.obstacles:
-            xs = ca.SX.sym("x", 3)
-            grads = []
-            for i, ob in enumerate(P.obstacles):
-                ps = ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
-                fn = ca.Function("dh", [xs, ps], [ca.gradient(OBSTACLE_TYPES[ob.type].h(xs, ps), xs)])
-                grads.append(ca.horzcat(*[fn(obs_x[:, j], p[lay[f"obstacle:{i}"]]) for j in range(len(self.obstacle_s))]))
-            self.contact_normal_fn = ca.Function("normals", [z, p], grads)
-        else:
-            self.contact_normal_fn = None
+        # ∂h/∂x of each obstacle type, evaluated only where a contact is active (for contact forces)
+        self.obstacle_gradient = {}
+        xs = ca.SX.sym("x", 3)
+        for kind in {ob.type for ob in P.obstacles}:
+            ps = ca.SX.sym("po", OBSTACLE_TYPES[kind].size)
+            self.obstacle_gradient[kind] = ca.Function(f"dh_{kind}", [xs, ps], [ca.gradient(OBSTACLE_TYPES[kind].h(xs, ps), xs)])
+        # rows of p that only grip targets occupy: they enter g linearly, so H and J do not depend on them
+        grip_only = np.zeros(lay.size, dtype=bool)
+        for grip in P.grips:
+            grip_only[lay[f"grip:{grip.name}:position"]] = True
+            grip_only[lay[f"grip:{grip.name}:angles"]] = True
+        self.grip_parameter_mask = grip_only
+        # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale)
+        self._target_jacobian = np.asarray(ca.Function("dg_dp", [z, p], [ca.jacobian(g, p)])(np.zeros(z.shape[0]), np.zeros(lay.size)))
+        self._target_jacobian[:, ~grip_only] = 0.0
+
+    def target_shift(self, p_old: np.ndarray, p_new: np.ndarray) -> np.ndarray:
+        """g(z, p_new) − g(z, p_old) when only grip targets differ (exact: they enter g linearly)."""
+        return self._target_jacobian @ (p_new - p_old)
 
     # ------------------------------------------------------------------------------------------------
     def make_solver(self, warm: bool) -> ca.Function:

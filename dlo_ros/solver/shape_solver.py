@@ -31,6 +31,7 @@ from .options import SolverOptions
 from .result import GripWrench, ShapeResult
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+COMPILE_MODES = ("background", "blocking", "cached", "off")
 
 
 @dataclass
@@ -44,6 +45,7 @@ class _State:
     hessian: np.ndarray | None = None   # ∇²L at z, when the solve already has it
     jacobian: np.ndarray | None = None  # ∂g/∂z at z
     energies: np.ndarray | None = None  # bend, twist, stretch, gravity, work at z
+    gradient: np.ndarray | None = None  # ∇f at z
     g: np.ndarray | None = None  # constraint values (scaled rows) at z
     unstable_direction: np.ndarray | None = None  # eigenvector of the most negative reduced curvature
 
@@ -68,9 +70,10 @@ class ShapeSolver:
     def __init__(self, problem: Problem, options: SolverOptions | None = None, compile: str = "background"):
         """compile: 'background' (solve at once with interpreted derivatives, compile them to C in a
         background thread and switch when ready; cached per machine), 'blocking' (compile or load
-        now), or 'off'.  $DLO_NO_COMPILE forces 'off'."""
-        if compile not in ("background", "blocking", "off"):
-            raise ValueError(f"compile: must be 'background', 'blocking' or 'off', got {compile!r}")
+        now), 'cached' (use a library compiled earlier, never compile), or 'off'.
+        $DLO_NO_COMPILE forces 'off'."""
+        if compile not in COMPILE_MODES:
+            raise ValueError(f"compile: must be one of {COMPILE_MODES}, got {compile!r}")
         self.options = options or SolverOptions()
         self.compile_mode = compile
         self._lock = threading.Lock()
@@ -100,6 +103,8 @@ class ShapeSolver:
         lib = cached_library(fn)
         if lib is not None:  # compiled on an earlier start: load now, no waiting
             self._kkt, self.kkt_compiled = NativeFunction(lib, fn), True
+            return
+        if mode == "cached":
             return
 
         def work() -> None:
@@ -363,19 +368,31 @@ class ShapeSolver:
         idx = np.flatnonzero(active)
         bound = nlp.ubg[idx]
         n = z.size
+        # Only grip targets changed → they enter g linearly (row = (x − target)/scale), so ∇f, J and H
+        # stored at the start stay exact and g shifts by a known amount: the first step needs no evaluation.
+        reuse = (
+            start.hessian is not None and start.g is not None and start.gradient is not None
+            and np.array_equal(start.p[~nlp.grip_parameter_mask], p[~nlp.grip_parameter_mask])
+        )
         for it in range(max_steps + 1):
-            grad, g, jac, hess, energies = self._kkt(z, p, lam)
-            grad, g = grad.ravel(), g.ravel()
+            if it == 0 and reuse:
+                grad, jac, hess, energies = start.gradient, start.jacobian, start.hessian, None
+                g = start.g + nlp.target_shift(start.p, p)
+            else:
+                grad, g, jac, hess, energies = self._kkt(z, p, lam)
+                grad, g = grad.ravel(), g.ravel()
             ja = jac[idx]
             r_dual = grad + ja.T @ lam[idx]
             r_prim = g[idx] - bound
-            if np.max(np.abs(r_dual), initial=0.0) < 1e-9 and np.max(np.abs(r_prim), initial=0.0) < 1e-11:
+            converged = np.max(np.abs(r_dual), initial=0.0) < 1e-9 and np.max(np.abs(r_prim), initial=0.0) < 1e-11
+            if converged and energies is not None:
                 inactive_ok = np.all(g[~active] <= nlp.ubg[~active] + 1e-9)
                 signs_ok = np.all(lam[active & ~equality] >= -1e-12)
                 if not (inactive_ok and signs_ok):
                     return False, start, it, np.inf
                 violation = self._violation_from_g(g)
-                return True, _State(z, lam, start.lam_x, p, hess, jac, energies.ravel(), g), it, violation
+                state = _State(z, lam, start.lam_x, p, hessian=hess, jacobian=jac, energies=energies.ravel(), g=g, gradient=grad)
+                return True, state, it, violation
             if it == max_steps:
                 break
             kkt = np.zeros((n + idx.size, n + idx.size))
@@ -483,13 +500,16 @@ class ShapeSolver:
                   "total": bend + twist + stretch + grav - work}
         grips = {g.name: self._wrench(g, z, lam_si) for g in problem.grips}
         contacts = {}
-        if nlp.contact_normal_fn is not None:
-            normals = nlp.contact_normal_fn(z, p)
-            normals = normals if isinstance(normals, (list, tuple)) else [normals]
+        if nlp.obstacle_rows:
+            sample_x = m.positions(z, nlp.obstacle_s)
             for i, rows in enumerate(nlp.obstacle_rows):
+                ob = problem.obstacles[i]
                 lam = lam_si[rows]
-                contacts[i] = -(np.asarray(normals[i]) @ lam).ravel()
-        # a neutral mode (e.g. rotation about the chord without gravity) shows as ±1e-8·|H|
+                force = np.zeros(3)
+                for j in np.flatnonzero(lam > 0):
+                    grad = np.asarray(nlp.obstacle_gradient[ob.type](sample_x[j], ob.params)).ravel()
+                    force -= lam[j] * grad
+                contacts[i] = force
         stable = None if min_eig is None else bool(min_eig > -1e-8 * max(1.0, float(np.abs(state.hessian).max())))
         return ShapeResult(
             status="ok", message="converged" + (f" after {steps} continuation steps" if steps else ""),
@@ -544,7 +564,8 @@ class ShapeSolver:
     def _min_reduced_eigenvalue(self, state: _State) -> float | None:
         nlp = self.nlp
         if state.hessian is None:
-            _, _, state.jacobian, state.hessian, state.energies = self._kkt(state.z, state.p, state.lam_g)
+            gradient, _, state.jacobian, state.hessian, state.energies = self._kkt(state.z, state.p, state.lam_g)
+            state.gradient = gradient.ravel()
         h = state.hessian
         if nlp.lbg.size:
             g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()

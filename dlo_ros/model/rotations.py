@@ -72,26 +72,12 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     """Rotation matrices (…, 3, 3) → quaternions (…, 4) as (x, y, z, w) with w ≥ 0."""
+    from scipy.spatial.transform import Rotation
+
     m = np.asarray(m, dtype=float)
-    flat = m.reshape(-1, 3, 3)
-    out = np.empty((flat.shape[0], 4))
-    for i, r in enumerate(flat):
-        tr = r[0, 0] + r[1, 1] + r[2, 2]
-        if tr > 0:
-            k = 2.0 * np.sqrt(tr + 1.0)
-            q = [(r[2, 1] - r[1, 2]) / k, (r[0, 2] - r[2, 0]) / k, (r[1, 0] - r[0, 1]) / k, 0.25 * k]
-        elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-            k = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-            q = [0.25 * k, (r[0, 1] + r[1, 0]) / k, (r[0, 2] + r[2, 0]) / k, (r[2, 1] - r[1, 2]) / k]
-        elif r[1, 1] > r[2, 2]:
-            k = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-            q = [(r[0, 1] + r[1, 0]) / k, 0.25 * k, (r[1, 2] + r[2, 1]) / k, (r[0, 2] - r[2, 0]) / k]
-        else:
-            k = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-            q = [(r[0, 2] + r[2, 0]) / k, (r[1, 2] + r[2, 1]) / k, 0.25 * k, (r[1, 0] - r[0, 1]) / k]
-        q = np.array(q)
-        out[i] = q if q[3] >= 0 else -q
-    return out.reshape(m.shape[:-2] + (4,))
+    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat()
+    q[q[:, 3] < 0] *= -1.0
+    return q.reshape(m.shape[:-2] + (4,))
 
 
 def check_quaternion(q: object, field: str, tolerance: float = 1e-3) -> np.ndarray:

@@ -1,8 +1,9 @@
 """``dlo``: command-line access to scenes and the shape solver (no ROS needed).
 
-    dlo solve SCENE [--json] [--points N] [--basis B] [--order N] [--compile]
+    dlo solve SCENE [--json] [--points N] [--basis B] [--order N] [--compile] [--rrd FILE] [--spawn] [--connect [ADDR]]
     dlo scenes
-    dlo demo [--scene NAME] [--steps N] [--json] [--compile]
+    dlo demo [--scene NAME] [--steps N] [--json] [--compile] [--rrd FILE] [--spawn] [--connect [ADDR]]
+    dlo replay FILE.rrd [--resolve [--tolerance M] [--json]] [--web] [--screenshot PNG]
 
 SCENE is a scene file path or the name of a shipped scene (config/scenes/<name>.yaml).
 Exit codes: 0 success (solve: status ok), 1 the solve (or a demo step) did not reach status ok,
@@ -98,9 +99,44 @@ def _load(scene_arg: str):
     return load_scene(scene_arg)
 
 
-def _with_overrides(options, points: int | None, basis: str | None, order: int | None):
-    """SolverOptions with the command-line overrides; raises UsageError naming the option."""
+# ---- rerun recording (--rrd / --spawn / --connect; dlo_ros/recording.py, msg_docs/recording.md) --------
+def _add_record_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("rerun recording (any combination; default off)")
+    g.add_argument("--rrd", metavar="FILE", help="save a rerun recording to FILE (.rrd); `dlo replay FILE` opens it")
+    g.add_argument("--spawn", action="store_true", help="start a rerun viewer and stream the recording to it")
+    g.add_argument("--connect", nargs="?", const="", default=None, metavar="ADDR",
+                   help="stream to a running rerun viewer: HOST[:PORT] or rerun+http://HOST:PORT/proxy "
+                        "(no ADDR: 127.0.0.1:9876)")
+
+
+def _recorder(args: argparse.Namespace):
+    """The Recorder the recording flags ask for (a disabled one when none is given)."""
+    from .recording import Recorder, RecordingUnavailable
+
+    try:
+        return Recorder(rrd=args.rrd, spawn=args.spawn, connect=args.connect)
+    except (RecordingUnavailable, ValueError) as exc:
+        raise UsageError(str(exc)) from None
+    except RuntimeError as exc:  # e.g. the viewer could not be spawned
+        raise UsageError(f"--spawn/--connect: {exc}") from None
+
+
+def _close_recorder(recorder) -> None:
+    recorder.close()
+    if recorder.enabled and recorder.rrd is not None:
+        print(f"dlo: recording saved to {recorder.rrd}", file=sys.stderr)
+
+
+def _with_overrides(options, points: int | None, basis: str | None, order: int | None, model: str | None = None):
+    """SolverOptions with the command-line overrides; raises UsageError naming the option.
+
+    An explicit --order pins the order, so it implies --model full unless --model is given
+    (model 'auto' chooses the order itself)."""
     changes: dict[str, Any] = {}
+    if model is not None:
+        changes["model"] = model
+    elif order is not None and options.model == "auto":
+        changes["model"] = "full"
     if points is not None:
         changes["output_points"] = points
     if basis is not None:
@@ -115,7 +151,8 @@ def _with_overrides(options, points: int | None, basis: str | None, order: int |
     try:
         new.validate()
     except ValueError as exc:
-        flag = {"solver.output_points": "--points", "solver.basis": "--basis", "solver.order": "--order"}
+        flag = {"solver.output_points": "--points", "solver.basis": "--basis", "solver.order": "--order",
+                "solver.model": "--model"}
         key = str(exc).split(":", 1)[0]
         raise UsageError(f"{flag.get(key, key)}: {str(exc).split(':', 1)[-1].strip()}") from None
     return new
@@ -158,6 +195,17 @@ def format_summary(scene, result) -> str:
         f"solver  {result.iterations} iterations, {result.solve_time_ms:.1f} ms, "
         f"{result.basis} order {result.order}" + (f", IPOPT {result.ipopt_status}" if result.ipopt_status else "")
     )
+    m = result.model
+    if m:
+        kinds = [k for k in ("planar", "twist", "stretch", "gravity") if m.get(k)]
+        err = m.get("estimated_error_m")
+        lines.append(
+            f"model   {'auto' if m.get('auto') else 'fixed'}: {', '.join(kinds) or 'bend only'}; order {m.get('order')}, "
+            f"{m.get('obstacles')} obstacle(s) in the NLP, {m.get('variables')} unknowns"
+            + (f", estimated error {err:.2g} m (tolerance {m.get('tolerance_m'):.2g} m)" if err is not None else "")
+        )
+        for change in m.get("changes", []):
+            lines.append(f"        model change: {change}")
     return "\n".join(lines)
 
 
@@ -169,23 +217,37 @@ def _add_solve_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--basis", choices=("chebyshev", "fourier"), help="Ritz basis (solver.basis)")
     p.add_argument("--order", type=int, metavar="N",
                    help="basis functions per field (solver.order); raises solver.quadrature_nodes to "
-                        "ceil(10 N / 3) if the scene's is smaller")
+                        "ceil(10 N / 3) if the scene's is smaller; implies --model full unless --model is given")
+    p.add_argument("--model", choices=["auto", "full", "planar"],
+                   help="solver.model: auto (default: the smallest model the scene needs), full or planar")
     p.add_argument("--compile", action="store_true",
                    help="compile the solver's KKT function to C (slow first build; only useful for benchmarks)")
+    _add_record_arguments(p)
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
-    from .solver import ShapeSolver
+    from .solver import make_solver
 
     scene = _load(args.scene)
-    options = _with_overrides(scene.options, args.points, args.basis, args.order)
+    options = _with_overrides(scene.options, args.points, args.basis, args.order, args.model)
     guard = _stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         try:
-            solver = ShapeSolver(scene.problem, options, compile=_compile_mode(args.compile))
+            solver = make_solver(scene.problem, options, compile=_compile_mode(args.compile))
         except ValueError as exc:  # the solver's own checks (e.g. loads[i].moment); they name the field
             raise UsageError(str(exc)) from None
-        result = solver.solve()
+        recorder = _recorder(args)
+        try:
+            if recorder.enabled:
+                recorder.log_scene(replace(scene, options=options), solver=solver)
+                targets = {g.name: g.pose for g in scene.problem.grips}
+                stamp = time.time_ns()
+                recorder.log_targets(targets, update=0, ros_time_ns=stamp)
+            result = solver.solve()
+            if recorder.enabled:
+                recorder.log_result(result, update=0, ros_time_ns=stamp, targets=targets)
+        finally:
+            _close_recorder(recorder)
     if args.json:
         out = {"scene": scene.name, "frame_id": scene.frame_id, **result.to_dict()}
         print(json.dumps(_json_safe(out), allow_nan=False))
@@ -247,17 +309,18 @@ def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
 
 
 def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str], None] | None = None,
-             compile: str = "cached") -> dict:
+             compile: str = "cached", recorder=None) -> dict:
     """Solve a scene cold, then move one grip through ``steps`` small warm-started updates.
 
     Returns a summary dict: scene, moving_grip, steps, build_time_s, cold {status, message, time_ms,
     iterations, stable}, warm {time_ms (list), median_ms, p90_ms, max_ms, iterations (list),
     mean_iterations, statuses (status -> count), stable_count, ok_count}, final_sag_m, ok.
     (A placeholder for the ROS node demo; the CLI prints it with :func:`format_demo`.)
+    ``recorder``: a dlo_ros.recording.Recorder; update 0 is the cold solve, update k the k-th step.
     """
     from .model.problem import GripPose
     from .scene import DEFAULT_SCENE, SceneError
-    from .solver import ShapeSolver
+    from .solver import make_solver
 
     scene = _load(scene_name or DEFAULT_SCENE)
     log = log or (lambda _msg: None)
@@ -265,18 +328,32 @@ def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str]
         log(f"building the solver for {scene.name} (compiling C code: up to a minute the first time)")
     t0 = time.perf_counter()
     try:
-        solver = ShapeSolver(scene.problem, scene.options, compile=compile)
+        solver = make_solver(scene.problem, scene.options, compile=compile)
     except ValueError as exc:  # the solver's own checks name the field
         raise SceneError(str(exc), source=scene.source) from None
     build_s = time.perf_counter() - t0
+    record = recorder is not None and recorder.enabled
+    current = {g.name: g.pose for g in scene.problem.grips}
+    if record:
+        recorder.log_scene(scene, solver=solver)
+        stamp = time.time_ns()
+        recorder.log_targets(current, update=0, ros_time_ns=stamp)
     cold = solver.solve(warm=False)
+    if record:
+        recorder.log_result(cold, update=0, ros_time_ns=stamp, targets=current)
     name, targets = demo_path(scene, steps)
     orientation = scene.problem.grip(name).pose.orientation
 
     times, iters, statuses, stable, last = [], [], {}, 0, cold
     if cold.ok:
-        for target in targets:
+        for k, target in enumerate(targets, start=1):
+            if record:
+                stamp = time.time_ns()
+                current = {**current, name: GripPose(target, orientation)}
+                recorder.log_targets({name: current[name]}, update=k, ros_time_ns=stamp)
             r = solver.solve({name: GripPose(target, orientation)})
+            if record:
+                recorder.log_result(r, update=k, ros_time_ns=stamp, targets=current)
             times.append(r.solve_time_ms)
             iters.append(r.iterations)
             statuses[r.status] = statuses.get(r.status, 0) + 1
@@ -335,6 +412,7 @@ def _add_demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the summary dict as JSON")
     p.add_argument("--compile", action="store_true",
                    help="compile the solver's KKT function to C (about a minute per new scene structure)")
+    _add_record_arguments(p)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -343,7 +421,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
     log = (lambda msg: print(msg, file=sys.stderr)) if not args.json else None
     guard = _stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
-        summary = run_demo(args.scene, args.steps, log=log, compile=_compile_mode(args.compile))
+        recorder = _recorder(args)
+        try:
+            summary = run_demo(args.scene, args.steps, log=log, compile=_compile_mode(args.compile),
+                               recorder=recorder)
+        finally:
+            _close_recorder(recorder)
     print(json.dumps(_json_safe(summary)) if args.json else format_demo(summary))
     return EXIT_OK if summary["ok"] else EXIT_NOT_OK
 
@@ -352,7 +435,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # SUBCOMMAND REGISTRY — add new subcommands here (or call register_subcommand() from your module).
 #   name -> (help, add_arguments(parser) -> None, handler(args) -> exit code)
 # The handler may raise SceneError / FileNotFoundError / UsageError: main() prints them as
-# "dlo: error: ..." and returns exit code 2.  Planned: "node" (run the ROS node), "replay".
+# "dlo: error: ..." and returns exit code 2.  Planned: "node" (run the ROS node).  "replay": dlo_ros/replay.py.
 # =====================================================================================================
 Subcommand = tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]
 
@@ -367,6 +450,16 @@ def register_subcommand(name: str, help: str, add_arguments: Callable[[argparse.
                         handler: Callable[[argparse.Namespace], int]) -> None:
     """Add (or replace) a subcommand of ``dlo``."""
     SUBCOMMANDS[name] = (help, add_arguments, handler)
+
+
+def _register_replay() -> None:
+    """``dlo replay`` lives in dlo_ros/replay.py; registered here so that ``dlo --help`` lists it."""
+    from . import replay
+
+    register_subcommand("replay", replay.HELP, replay.add_arguments, replay.cmd_replay)
+
+
+_register_replay()
 
 
 def build_parser() -> argparse.ArgumentParser:

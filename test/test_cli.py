@@ -80,7 +80,11 @@ def test_solve_json_arrays_and_units(default_json):
             "continuation_steps", "ipopt_status"} <= set(out["solver"])
     from dlo_ros.solver import SolverOptions
 
-    assert out["solver"]["basis"] == "chebyshev" and out["solver"]["order"] == SolverOptions().order
+    assert out["solver"]["basis"] == "chebyshev" and SolverOptions().model == "auto"
+    # model 'auto' reports the order it chose and its a-posteriori error estimate
+    assert out["solver"]["order"] == out["model"]["order"]
+    assert {"planar", "twist", "stretch", "gravity", "order", "obstacles", "estimated_error_m"} <= set(out["model"])
+    assert out["model"]["estimated_error_m"] <= out["model"]["tolerance_m"]
 
 
 def test_solve_json_is_strict_json(default_json):

@@ -2,5 +2,6 @@
 from .options import SolverOptions
 from .result import STATUSES, GripWrench, ShapeResult
 from .shape_solver import ShapeSolver
+from .auto import AutoShapeSolver, make_solver
 
-__all__ = ["SolverOptions", "STATUSES", "GripWrench", "ShapeResult", "ShapeSolver"]
+__all__ = ["AutoShapeSolver", "make_solver", "SolverOptions", "STATUSES", "GripWrench", "ShapeResult", "ShapeSolver"]

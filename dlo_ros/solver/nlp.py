@@ -123,6 +123,7 @@ class StringNLP:
         self.options = options
         L = problem.string.length
         self.length = L
+        # 'auto' is resolved by AutoShapeSolver (solver.make_solver); a plain ShapeSolver solves 'full'
         self.planar = options.model == "planar"
         self.twist = twist_is_held(problem) and not self.planar
         self.stretch = problem.string.stretch_stiffness is not None
@@ -208,7 +209,7 @@ class StringNLP:
             axes = np.eye(3) if (not self.planar or gi == 0) else in_plane
             for k, axis in enumerate(axes):
                 rows["position"].append(len(g_rows))
-                add(ca.dot(ca.DM(axis), grip_x[:, gi] - target), L, ("grip", g.name, "position", k))
+                add(ca.dot(ca.DM(axis), grip_x[:, gi] - target), L, ("grip", g.name, "position", tuple(np.round(axis, 12))))
             self.grip_axes[g.name] = axes
             angles = p[lay[f"grip:{g.name}:angles"]]
             held = ["phi"] if self.planar else ["phi", "theta"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 FRAMES = ("auto", "paper")
-MODELS = ("full", "planar")
+MODELS = ("auto", "full", "planar")
 
 
 @dataclass(frozen=True)
@@ -16,8 +16,11 @@ class SolverOptions:
     obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) ≤ 0 is
     imposed.  frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2
     (away from the singularity); 'paper' is the paper's frame (singular at the straight state).
-    model: 'full' (3D: φ, θ and, when two clamps hold it, ψ) or 'planar' (φ only, θ ≡ π/2: the
-    string stays in the working plane; requires a planar scene and frame 'auto').
+    model: 'auto' (default: the smallest model the scene needs, checked a posteriori against
+    error_tolerance, see solver/auto.py), 'full' (3D: φ, θ and, when two clamps hold it, ψ) or 'planar'
+    (φ only, θ ≡ π/2: the string stays in the working plane; requires a planar scene and frame 'auto').
+    error_tolerance [m]: what 'auto' guarantees on the centreline; 0 means 1e-3·L (1 mm on 1 m).
+    recheck_every: 'auto' repeats its a-posteriori checks every this many streamed updates.
     output_points: centreline samples in a result.  tolerance: IPOPT's (scaled) convergence tolerance.
     max_continuation_steps: the largest number of equal steps a failed warm update is split into.
     """
@@ -32,7 +35,9 @@ class SolverOptions:
     max_iterations: int = 500
     max_continuation_steps: int = 8
     max_strain: float = 0.2
-    model: str = "full"
+    model: str = "auto"
+    error_tolerance: float = 0.0
+    recheck_every: int = 10
 
     def validate(self) -> None:
         if self.basis not in ("chebyshev", "fourier"):
@@ -57,6 +62,10 @@ class SolverOptions:
             raise ValueError(f"solver.model: must be one of {MODELS}, got {self.model!r}")
         if self.model == "planar" and self.frame != "auto":
             raise ValueError("solver.model: 'planar' needs solver.frame 'auto'")
+        if not (self.error_tolerance >= 0 and self.error_tolerance < 1e3):
+            raise ValueError(f"solver.error_tolerance: must be >= 0 m (0 = 1e-3·L), got {self.error_tolerance}")
+        if not (1 <= self.recheck_every <= 100000):
+            raise ValueError(f"solver.recheck_every: must be in [1, 100000], got {self.recheck_every}")
         if not (0 < self.max_strain < 10):
             raise ValueError("solver.max_strain: must be in (0, 10)")
 

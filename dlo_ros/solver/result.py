@@ -48,6 +48,7 @@ class ShapeResult:
     basis: str = ""
     order: int = 0
     ipopt_status: str = ""
+    model: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -70,6 +71,7 @@ class ShapeResult:
             "energy": {k: float(v) for k, v in self.energy.items()},
             "grips": {name: {"force": arr(w.force), "torque": arr(w.torque)} for name, w in self.grips.items()},
             "contact_forces": {str(i): arr(f) for i, f in self.contact_forces.items()},
+            "model": dict(self.model),
             "solver": {
                 "iterations": self.iterations,
                 "time_ms": self.solve_time_ms,

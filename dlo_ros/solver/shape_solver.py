@@ -136,6 +136,59 @@ class ShapeSolver:
     def has_warm_start(self) -> bool:
         return self._state is not None
 
+    def adopt_warm_start(self, other: "ShapeSolver") -> bool:
+        """Take ``other``'s committed equilibrium as this solver's warm start, across models.
+
+        Fields are re-expanded in this model's basis from their values at this model's quadrature nodes
+        (a planar solution gets θ ≡ π/2, a solution without ψ gets its zero-twist ψ, an inextensible one
+        ε ≡ 0); multipliers are matched by constraint-row identity (grip, name, component) and are
+        zero for rows the other model did not have.  Requires the same reference frame.
+        """
+        with other._lock:
+            src = other._state
+            if src is None or not np.allclose(other.nlp.r0, self.nlp.r0):
+                return False
+            nodes = self.model.quad.nodes
+            f = other.model.fields(src.z, nodes)
+            if not other.model.layout.twist and self.model.layout.twist:
+                f["psi"] = other.frames_psi(src.z, nodes, src.p)
+            src_rows = {kind: i for i, kind in enumerate(other.nlp.row_kind)}
+            lam_src = src.lam_g / (other.nlp.row_scale * other.nlp.sigma) if src.lam_g.size else src.lam_g
+        lay = self.model.layout
+        z = np.zeros(lay.size)
+        z[0:3] = src.z[0:3] * other.model.length / self.model.length
+        for name in ("phi", "theta", "psi", "eps"):
+            if self.model.coefficients(z, name) is not None:
+                z[lay.slice(name)] = np.linalg.lstsq(self.model.B, f[name], rcond=None)[0]
+        # grip position rows: carry the reaction force vector, whatever axes each model's rows use
+        forces = {}
+        for name, rows in other.nlp.grip_rows.items():
+            forces[name] = other.nlp.grip_axes[name].T @ lam_src[rows["position"]]
+        lam = np.zeros(self.nlp.lbg.size)
+        for i, kind in enumerate(self.nlp.row_kind):
+            if kind[0] == "grip" and kind[2] == "position" and kind[1] in forces:
+                value = float(np.dot(np.array(kind[3]), forces[kind[1]]))
+            elif kind in src_rows:
+                value = lam_src[src_rows[kind]]
+            else:
+                continue
+            lam[i] = value * self.nlp.row_scale[i] * self.nlp.sigma
+        p = self.pack_parameters(self.problem, z)
+        with self._lock:
+            self._state = _State(z, lam, np.zeros(lay.size), p)
+        return True
+
+    def frames_psi(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
+        """ψ(s) as published: the solved field, or the zero-twist ψ anchored at the first held grip."""
+        m = self.model
+        if m.layout.twist:
+            return m.fields(z, s)["psi"]
+        anchor = next((g for g in sorted(self.problem.grips, key=lambda g: g.s) if g.mode != "pin"), None)
+        if anchor is None:
+            return m.zero_twist_psi(z, s, 0.0, 0.0)
+        pp = p if p is not None else self.pack_parameters(self.problem, z)
+        return m.zero_twist_psi(z, s, anchor.s, float(pp[self.nlp.params[f"grip:{anchor.name}:angles"]][2]))
+
     def reset(self) -> None:
         """Forget the warm start: the next solve starts cold."""
         with self._lock:
@@ -363,6 +416,8 @@ class ShapeSolver:
         equality = nlp.lbg == nlp.ubg
         # active = at its bound with a positive multiplier (IPOPT leaves ~1e-10 barrier multipliers
         # on rows far from their bound; those are inactive)
+        if start.g is None:  # a warm start adopted from another model
+            start.g = np.asarray(nlp.g_fn(start.z, start.p)).ravel()
         active = equality | ((start.lam_g > 1e-8) & (start.g > nlp.ubg - 1e-7))
         lam[active] = start.lam_g[active]
         idx = np.flatnonzero(active)
@@ -485,7 +540,16 @@ class ShapeSolver:
     # ---- results ----------------------------------------------------------------------------------
     def _failure(self, status: str, message: str, t0: float) -> ShapeResult:
         return ShapeResult(status=status, message=message, solve_time_ms=(time.perf_counter() - t0) * 1e3,
-                           basis=self.options.basis, order=self.options.order)
+                           basis=self.options.basis, order=self.options.order, model=self.model_summary())
+
+    def model_summary(self) -> dict:
+        """What this solver models (the ``model`` object of a result)."""
+        lay = self.model.layout
+        return {
+            "planar": lay.planar, "twist": lay.twist, "stretch": lay.stretch,
+            "gravity": not self.problem.string.weight_per_length.is_zero, "order": lay.order,
+            "obstacles": len(self.problem.obstacles), "estimated_error_m": None, "variables": lay.size,
+        }
 
     def _result(self, problem, state: _State, ipopt_status, iterations, violation, warm, steps) -> ShapeResult:
         nlp, m = self.nlp, self.model
@@ -512,7 +576,7 @@ class ShapeSolver:
                 contacts[i] = force
         stable = None if min_eig is None else bool(min_eig > -1e-8 * max(1.0, float(np.abs(state.hessian).max())))
         return ShapeResult(
-            status="ok", message="converged" + (f" after {steps} continuation steps" if steps else ""),
+            model=self.model_summary(), status="ok", message="converged" + (f" after {steps} continuation steps" if steps else ""),
             s=s_out, points=points, orientations=quats, energy=energy, grips=grips, contact_forces=contacts,
             stable=stable, min_eigenvalue=min_eig, iterations=iterations, constraint_violation=violation,
             warm_started=warm, continuation_steps=steps, basis=self.options.basis, order=self.options.order,
@@ -521,18 +585,8 @@ class ShapeSolver:
 
     def frames(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
         """Material frames Q(s) (columns ξ, η, ζ) of solution z; ψ from the zero-twist rule if not solved."""
-        m = self.model
-        f = m.fields(z, s)
-        psi = f["psi"]
-        if not m.layout.twist:
-            anchor = next((g for g in sorted(self.problem.grips, key=lambda g: g.s) if g.mode != "pin"), None)
-            if anchor is not None:
-                pp = p if p is not None else self.pack_parameters(self.problem, z)
-                psi_a = float(pp[self.nlp.params[f"grip:{anchor.name}:angles"]][2])
-                psi = m.zero_twist_psi(z, s, anchor.s, psi_a)
-            else:
-                psi = m.zero_twist_psi(z, s, 0.0, 0.0)
-        return material_frames(self.nlp.r0, f["phi"], f["theta"], psi)
+        f = self.model.fields(z, s)
+        return material_frames(self.nlp.r0, f["phi"], f["theta"], self.frames_psi(z, s, p))
 
     def _wrench(self, grip, z: np.ndarray, lam_si: np.ndarray) -> GripWrench:
         """Force = −λ_position; torque T solves J_aᵀ T = −μ_a for the held angles a (J_a = ∂ω/∂ȧ),

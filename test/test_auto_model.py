@@ -1,0 +1,126 @@
+"""solver.model: auto — each reduction where it applies and where it must not, always within the
+tolerance of the full model's answer (solved here with the full 3D model at a high order)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dlo_ros.model import Obstacle, Profile
+from dlo_ros.solver import AutoShapeSolver, ShapeSolver, SolverOptions, make_solver
+from conftest import clamped_pair, quat_about
+
+TOL = 1e-3  # m, on a 1 m string (the default: 1e-3·L)
+
+
+def full_reference(problem):
+    r = ShapeSolver(problem, SolverOptions(model="full", order=24, output_points=51)).solve()
+    assert r.ok, r.message
+    return r
+
+
+def auto(problem, **opts):
+    solver = make_solver(problem, SolverOptions(output_points=51, **opts), compile="off")
+    assert isinstance(solver, AutoShapeSolver)
+    r = solver.solve()
+    assert r.ok, r.message
+    return solver, r
+
+
+def assert_close_to_full(r, problem):
+    ref = full_reference(problem)
+    dev = np.max(np.linalg.norm(r.points - ref.points, axis=1))
+    assert dev <= TOL, (dev, r.model)
+    assert r.model["estimated_error_m"] is not None and r.model["estimated_error_m"] <= TOL
+
+
+def hanging(**kw):
+    args = dict(left=(0, 0, 0.4), right=(0.6, 0, 0.4), bend=0.02, twist=0.015, weight=0.5)
+    return clamped_pair(**{**args, **kw})
+
+
+def test_planar_scene_gets_the_planar_model():
+    prob = hanging()
+    _, r = auto(prob)
+    assert r.model["planar"] and not r.model["twist"] and r.model["gravity"]
+    assert_close_to_full(r, prob)
+
+
+def test_small_out_of_plane_offset_makes_it_3d():
+    prob = hanging(right=(0.6, 0.01, 0.4))
+    _, r = auto(prob)
+    assert not r.model["planar"]
+    assert any(reason.startswith("3D:") for reason in r.model["reasons"]), r.model["reasons"]
+    assert_close_to_full(r, prob)
+
+
+def test_twist_free_scene_drops_twist_and_clamped_twist_keeps_it():
+    free = clamped_pair(right=(0.6, 0.1, 0.05), modes=("tangent", "tangent"), twist=0.5, weight=0.2)
+    _, r = auto(free)
+    assert not r.model["twist"]
+    assert_close_to_full(r, free)
+    twisted = clamped_pair(right=(0.6, 0.0, 0.0), q_right=quat_about("x", 1.5), twist=0.5, weight=0.2)
+    _, r = auto(twisted)
+    assert r.model["twist"] and not r.model["planar"]
+    assert any("twist" in reason for reason in r.model["reasons"])
+    assert_close_to_full(r, twisted)
+
+
+def test_planar_but_unstable_in_3d_escalates_to_full():
+    """A compressed strip with little twist stiffness leaves its plane (paper Fig. 2's regime)."""
+    prob = clamped_pair(right=(0.3, 0, 0), twist=0.0, weight=0.0)
+    _, r = auto(prob)
+    assert not r.model["planar"] and any("unstable in 3D" in c for c in r.model["changes"])
+    assert r.stable
+
+
+def test_stretch_only_when_it_matters():
+    stiff = replace(hanging().string, stretch_stiffness=Profile.constant(1e7))
+    prob = replace(hanging(), string=stiff)
+    _, r = auto(prob)
+    assert not r.model["stretch"]
+    soft = replace(hanging().string, stretch_stiffness=Profile.constant(20.0))
+    prob = replace(hanging(), string=soft)
+    _, r = auto(prob)
+    assert r.model["stretch"] and any("elongation" in c for c in r.model["changes"])
+    ref = ShapeSolver(prob, SolverOptions(model="full", order=24, output_points=51)).solve()
+    assert np.max(np.linalg.norm(r.points - ref.points, axis=1)) <= TOL
+
+
+def test_negligible_gravity_is_dropped():
+    prob = clamped_pair(right=(0.6, 0, 0), weight=1e-7)
+    _, r = auto(prob)
+    assert not r.model["gravity"]
+    assert_close_to_full(r, prob)
+    _, r = auto(hanging())
+    assert r.model["gravity"]
+
+
+def test_obstacles_enter_the_nlp_only_within_reach_and_keep_the_warm_start():
+    far = Obstacle.from_dict({"type": "sphere", "center": [0.3, 0, -3.0], "radius": 0.2})
+    prob = replace(hanging(), obstacles=(far,))
+    solver, r = auto(prob)
+    assert r.model["obstacles"] == 0
+    # carry both grips down toward the sphere: it comes within reach and is added, warm start kept
+    q = [0, 0, 0, 1]
+    for z in np.linspace(0.3, -1.9, 12):
+        r = solver.solve({"left": ([0, 0, z], q), "right": ([0.6, 0, z], q)})
+        assert r.ok, r.message
+    assert r.model["obstacles"] == 1
+    assert any("came within reach" in c for c in r.model["changes"])
+    assert r.warm_started
+
+
+def test_order_is_the_lowest_meeting_the_tolerance():
+    prob = clamped_pair(right=(0.5, 0, 0.05), q_left=quat_about("y", -0.5), twist=0.5)
+    _, r = auto(prob)
+    coarse, _ = auto(prob, error_tolerance=0.02)
+    assert coarse.choice.order <= r.model["order"]
+    assert_close_to_full(r, prob)
+
+
+def test_explicit_model_overrides_auto():
+    solver = make_solver(hanging(), SolverOptions(model="full"), compile="off")
+    assert isinstance(solver, ShapeSolver)
+    assert not solver.solve().model["planar"]

@@ -193,12 +193,13 @@ class AutoShapeSolver:
             result = self.inner.solve(inner_poses, warm=warm, commit=commit)
             if not result.ok:
                 return self._finish(result, t0, notes)
+            if not commit:
+                return self._finish(result, t0, notes)
+            self.problem = problem  # the checks build models of the current targets
             self._updates += 1
             first = not np.isfinite(self.choice.estimated_error_m)
-            if commit and (first or self._updates % self.options.recheck_every == 0):
+            if first or self._updates % self.options.recheck_every == 0:
                 result = self._check(problem, result, inner_poses, notes)
-            if commit:
-                self.problem = problem
             return self._finish(result, t0, notes)
 
     # ---- checks -------------------------------------------------------------------------------------
@@ -241,6 +242,9 @@ class AutoShapeSolver:
         higher = replace(self.choice, order=ORDERS[ORDERS.index(self.choice.order) + 1])
         if self._shadow is None or self._shadow.options.order != higher.order:
             self._shadow = self._make_inner(higher, self.inner)
+        else:  # start from the current shape, not the shadow's own (older) one: same branch
+            self._shadow.set_problem(self._reduced(higher, self.problem)[0])
+            self._shadow.adopt_warm_start(self.inner)
         shadow = self._shadow.solve(poses)
         if not shadow.ok:
             self._shadow = None

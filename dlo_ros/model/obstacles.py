@@ -124,7 +124,16 @@ class Obstacle:
 
     def h(self, x: np.ndarray) -> float:
         """Numerical h(x) [m] (positive inside)."""
+        return float(_numeric_h(self.type)(x, self.params))
+
+
+_NUMERIC_H: dict[str, ca.Function] = {}
+
+
+def _numeric_h(kind: str) -> ca.Function:
+    """h of an obstacle type as a CasADi Function, built once per type."""
+    if kind not in _NUMERIC_H:
         xs = ca.SX.sym("x", 3)
-        ps = ca.SX.sym("p", OBSTACLE_TYPES[self.type].size)
-        f = ca.Function("h", [xs, ps], [OBSTACLE_TYPES[self.type].h(xs, ps)])
-        return float(f(x, self.params))
+        ps = ca.SX.sym("p", OBSTACLE_TYPES[kind].size)
+        _NUMERIC_H[kind] = ca.Function(f"h_{kind}", [xs, ps], [OBSTACLE_TYPES[kind].h(xs, ps)])
+    return _NUMERIC_H[kind]

@@ -18,7 +18,9 @@ fails.  Reductions and their checks:
   within that range rebuilds the NLP with it, keeping the warm start.
 * order — the lowest of 8, 12, 16, 24, 32 whose centreline moves by less than δ/2 when the order is
   raised to the next one (the a-posteriori estimate, reported as estimated_error_m), re-checked every
-  ``recheck_every`` updates with a warm shadow solver; over δ/2 → next order.
+  ``recheck_every`` updates with a warm shadow solver; over δ/2 → next order.  At the highest order the
+  last estimate stays (with "tolerance not met" in reasons).  Known limit: with a neutral mode (no
+  gravity, clamps along one axis) the shadow can drift along it and inflate the estimate.
 
 Switching models maps the previous solution into the new one (ShapeSolver.adopt_warm_start), so a
 stream keeps its warm start.  Every change is kept in ``changes`` (time, reason) and reported in
@@ -39,7 +41,7 @@ from ..model.rotations import TANGENT_X, euler_from_frame, quat_to_matrix
 from .nlp import choose_reference_frame, planarity_violation, twist_is_held
 from .options import SolverOptions
 from .result import ShapeResult
-from .shape_solver import ShapeSolver
+from .shape_solver import ShapeSolver, is_stable
 
 ORDERS = (8, 12, 16, 24, 32)
 
@@ -102,6 +104,7 @@ class AutoShapeSolver:
         self._lock = threading.RLock()
         self._updates = 0
         self._shadow: ShapeSolver | None = None
+        self._checker: ShapeSolver | None = None
         self.choice = self._initial_choice(problem)
         self.inner = self._make_inner(self.choice)
 
@@ -135,19 +138,22 @@ class AutoShapeSolver:
                        quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8))
         return reduced, opts
 
-    def _make_inner(self, choice: ModelChoice, previous: ShapeSolver | None = None) -> ShapeSolver:
+    def _make_inner(self, choice: ModelChoice, previous: ShapeSolver | None = None, helper: bool = False) -> ShapeSolver:
+        """A ShapeSolver of ``choice``; helpers (order shadow, 3D checker) never start a compile."""
         reduced, opts = self._reduced(choice, self.problem)
-        inner = ShapeSolver(reduced, opts, compile=self.compile)
+        mode = ("off" if self.compile == "off" else "cached") if helper else self.compile
+        inner = ShapeSolver(reduced, opts, compile=mode)
         choice.twist = inner.model.layout.twist
         if previous is not None:
             inner.adopt_warm_start(previous)
         return inner
 
     def _switch(self, choice: ModelChoice, reason: str) -> None:
+        """Change model, mapping the warm start; the estimate carries over until re-measured."""
         self.changes.append((time.time(), reason))
         self.choice = choice
         self.inner = self._make_inner(choice, self.inner)
-        self._shadow = None
+        self._shadow = self._checker = None
 
     # ---- public API ---------------------------------------------------------------------------------
     @property
@@ -209,8 +215,8 @@ class AutoShapeSolver:
         for _ in range(8):
             reason = ""
             if self.choice.planar:
-                eig = self._planar_3d_eigenvalue(problem)
-                if eig is not None and eig < 0:
+                eig = self._planar_3d_eigenvalue(problem)  # None when stable (or neutral)
+                if eig is not None:
                     reason = f"planar shape unstable in 3D (eigenvalue {eig:.3g}): full model"
                     new = replace(self.choice, planar=False)
             if not reason and problem.string.stretch_stiffness is not None and not self.choice.stretch:
@@ -220,9 +226,13 @@ class AutoShapeSolver:
                     reason = f"elongation bound {elongation:.3g} m > {tol / 2:.3g} m: extensible model"
                     new = replace(self.choice, stretch=True)
             if not reason:
+                if self.choice.order >= ORDERS[-1]:  # nothing higher to compare with: keep the last estimate
+                    if self.choice.estimated_error_m > tol / 2 and not any("not met" in r for r in self.choice.reasons):
+                        self.choice.reasons.append(f"tolerance not met: highest order {ORDERS[-1]} reached")
+                    return result
                 error = self._order_error(poses, result)
                 self.choice.estimated_error_m = error
-                if error > tol / 2 and self.choice.order < ORDERS[-1]:
+                if error > tol / 2:
                     nxt = ORDERS[ORDERS.index(self.choice.order) + 1]
                     reason = f"order {self.choice.order} error estimate {error:.3g} m > {tol / 2:.3g} m: order {nxt}"
                     new = replace(self.choice, order=nxt)
@@ -237,11 +247,9 @@ class AutoShapeSolver:
 
     def _order_error(self, poses: dict, result: ShapeResult) -> float:
         """max |x_n(s) − x_{n+}(s)| over the output points: the change when the order is raised."""
-        if self.choice.order >= ORDERS[-1]:
-            return 0.0
         higher = replace(self.choice, order=ORDERS[ORDERS.index(self.choice.order) + 1])
         if self._shadow is None or self._shadow.options.order != higher.order:
-            self._shadow = self._make_inner(higher, self.inner)
+            self._shadow = self._make_inner(higher, self.inner, helper=True)
         else:  # start from the current shape, not the shadow's own (older) one: same branch
             self._shadow.set_problem(self._reduced(higher, self.problem)[0])
             self._shadow.adopt_warm_start(self.inner)
@@ -252,12 +260,21 @@ class AutoShapeSolver:
         return float(np.max(np.linalg.norm(shadow.points - result.points, axis=1)))
 
     def _planar_3d_eigenvalue(self, problem: Problem) -> float | None:
-        """Smallest reduced-Hessian eigenvalue of the full 3D model at the embedded planar solution."""
-        full = self._make_inner(replace(self.choice, planar=False), self.inner)
+        """Smallest reduced-Hessian eigenvalue of the full 3D model at the embedded planar solution.
+
+        The 3D checker is built once and refreshed with the current targets and shape."""
+        choice = replace(self.choice, planar=False)
+        full = self._checker
+        if full is None or full.options.order != choice.order or len(full.problem.obstacles) != len(choice.obstacles):
+            full = self._checker = self._make_inner(choice, self.inner, helper=True)
+        else:
+            full.set_problem(self._reduced(choice, self.problem)[0])
+            full.adopt_warm_start(self.inner)
         state = full._state
         if state is None:
             return None
-        return full._min_reduced_eigenvalue(state)
+        eig = full._min_reduced_eigenvalue(state)
+        return None if eig is None or is_stable(eig, state.hessian) else eig
 
     # ---- plumbing -----------------------------------------------------------------------------------
     def _with_poses(self, poses: dict | None) -> Problem:

@@ -574,7 +574,7 @@ class ShapeSolver:
                     grad = np.asarray(nlp.obstacle_gradient[ob.type](sample_x[j], ob.params)).ravel()
                     force -= lam[j] * grad
                 contacts[i] = force
-        stable = None if min_eig is None else bool(min_eig > -1e-8 * max(1.0, float(np.abs(state.hessian).max())))
+        stable = None if min_eig is None else is_stable(min_eig, state.hessian)
         return ShapeResult(
             model=self.model_summary(), status="ok", message="converged" + (f" after {steps} continuation steps" if steps else ""),
             s=s_out, points=points, orientations=quats, energy=energy, grips=grips, contact_forces=contacts,
@@ -634,6 +634,12 @@ class ShapeSolver:
         values, vectors = np.linalg.eigh(basis.T @ h @ basis)
         state.unstable_direction = basis @ vectors[:, 0] if values[0] < 0 else None
         return float(values[0])
+
+
+def is_stable(min_eigenvalue: float, hessian: np.ndarray) -> bool:
+    """The stability verdict: a neutral mode (e.g. rotation about the chord without gravity) shows as
+    ±1e-8·max|H|, so only eigenvalues below that count as unstable."""
+    return bool(min_eigenvalue > -1e-8 * max(1.0, float(np.abs(hessian).max())))
 
 
 def _inverse_j0(ratio: float) -> float:

@@ -35,13 +35,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..model.obstacles import Obstacle
-from ..model.problem import GripPose, Problem
+from ..model.problem import Problem
 from ..model.profile import Profile
 from ..model.rotations import TANGENT_X, euler_from_frame, quat_to_matrix
 from .nlp import choose_reference_frame, planarity_violation, twist_is_held
 from .options import SolverOptions
 from .result import ShapeResult
-from .shape_solver import ShapeSolver, is_stable
+from .shape_solver import ShapeSolver, is_stable, with_checked_poses
 
 ORDERS = (8, 12, 16, 24, 32)
 
@@ -278,16 +278,7 @@ class AutoShapeSolver:
 
     # ---- plumbing -----------------------------------------------------------------------------------
     def _with_poses(self, poses: dict | None) -> Problem:
-        if not poses:
-            return self.problem
-        names = {g.name for g in self.problem.grips}
-        checked = {}
-        for name, pose in poses.items():
-            if name not in names:
-                raise ValueError(f"grip {name!r}: unknown (configured grips: {sorted(names)})")
-            pos, quat = (pose.position, pose.orientation) if isinstance(pose, GripPose) else pose
-            checked[name] = GripPose.checked(pos, quat, f"grips.{name}")
-        return self.problem.with_grip_poses(checked)
+        return with_checked_poses(self.problem, poses)
 
     def model_summary(self) -> dict:
         c = self.choice

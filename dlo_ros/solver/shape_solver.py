@@ -234,19 +234,7 @@ class ShapeSolver:
 
     # ---- input handling -----------------------------------------------------------------------------
     def _with_poses(self, poses: dict | None) -> Problem:
-        if not poses:
-            return self.problem
-        names = {g.name for g in self.problem.grips}
-        checked = {}
-        for name, pose in poses.items():
-            if name not in names:
-                raise ValueError(f"grip {name!r}: unknown (configured grips: {sorted(names)})")
-            if not isinstance(pose, GripPose):
-                pose = GripPose.checked(pose[0], pose[1], f"grips.{name}")
-            else:
-                pose = GripPose.checked(pose.position, pose.orientation, f"grips.{name}")
-            checked[name] = pose
-        return self.problem.with_grip_poses(checked)
+        return with_checked_poses(self.problem, poses)
 
     def _check_moments(self, problem: Problem) -> None:
         n = self.nlp.r0[:, 2]
@@ -634,6 +622,21 @@ class ShapeSolver:
         values, vectors = np.linalg.eigh(basis.T @ h @ basis)
         state.unstable_direction = basis @ vectors[:, 0] if values[0] < 0 else None
         return float(values[0])
+
+
+def with_checked_poses(problem: Problem, poses: dict | None) -> Problem:
+    """``problem`` with new grip poses (GripPose or (position, quaternion) per grip name), validated:
+    unknown names, NaN and bad quaternions raise ValueError naming the grip."""
+    if not poses:
+        return problem
+    names = {g.name for g in problem.grips}
+    checked = {}
+    for name, pose in poses.items():
+        if name not in names:
+            raise ValueError(f"grip {name!r}: unknown (configured grips: {sorted(names)})")
+        pos, quat = (pose.position, pose.orientation) if isinstance(pose, GripPose) else pose
+        checked[name] = GripPose.checked(pos, quat, f"grips.{name}")
+    return problem.with_grip_poses(checked)
 
 
 def is_stable(min_eigenvalue: float, hessian: np.ndarray) -> bool:

@@ -117,12 +117,14 @@ def _recorder(args: argparse.Namespace):
         return Recorder(rrd=args.rrd, spawn=args.spawn, connect=args.connect)
     except (RecordingUnavailable, ValueError) as exc:
         raise UsageError(str(exc)) from None
-    except RuntimeError as exc:  # e.g. the viewer could not be spawned
-        raise UsageError(f"--spawn/--connect: {exc}") from None
+    except RuntimeError as exc:  # e.g. no display for --spawn, or the recorder process did not start
+        raise UsageError(f"{'--spawn' if args.spawn else 'recording'}: {exc}") from None
 
 
 def _close_recorder(recorder) -> None:
     recorder.close()
+    if recorder.enabled and recorder.errors:
+        print(f"dlo: warning: recording: {recorder.errors} error(s), last: {recorder.last_error}", file=sys.stderr)
     if recorder.enabled and recorder.rrd is not None:
         print(f"dlo: recording saved to {recorder.rrd}", file=sys.stderr)
 
@@ -245,7 +247,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
                 recorder.log_targets(targets, update=0, ros_time_ns=stamp)
             result = solver.solve()
             if recorder.enabled:
-                recorder.log_result(result, update=0, ros_time_ns=stamp, targets=targets)
+                recorder.log_result(result, update=0, ros_time_ns=stamp, targets=targets, warm=False)
         finally:
             _close_recorder(recorder)
     if args.json:
@@ -340,7 +342,7 @@ def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str]
         recorder.log_targets(current, update=0, ros_time_ns=stamp)
     cold = solver.solve(warm=False)
     if record:
-        recorder.log_result(cold, update=0, ros_time_ns=stamp, targets=current)
+        recorder.log_result(cold, update=0, ros_time_ns=stamp, targets=current, warm=False)
     name, targets = demo_path(scene, steps)
     orientation = scene.problem.grip(name).pose.orientation
 
@@ -353,7 +355,7 @@ def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str]
                 recorder.log_targets({name: current[name]}, update=k, ros_time_ns=stamp)
             r = solver.solve({name: GripPose(target, orientation)})
             if record:
-                recorder.log_result(r, update=k, ros_time_ns=stamp, targets=current)
+                recorder.log_result(r, update=k, ros_time_ns=stamp, targets=current, warm=True)
             times.append(r.solve_time_ms)
             iters.append(r.iterations)
             statuses[r.status] = statuses.get(r.status, 0) + 1
@@ -407,6 +409,9 @@ def format_demo(summary: dict) -> str:
 
 
 def _add_demo_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--solver-only", action="store_true",
+                   help="no ROS: solve the scene in this process and move a grip (the default demo runs the ROS "
+                        "node and a dual-arm driver over DDS; its options: python -m dlo_ros.node.demo --help)")
     p.add_argument("--scene", default=None, metavar="NAME", help="scene name or file (default: default_cable)")
     p.add_argument("--steps", type=int, default=50, metavar="N", help="number of warm-started grip moves (default 50)")
     p.add_argument("--json", action="store_true", help="print the summary dict as JSON")
@@ -416,6 +421,14 @@ def _add_demo_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    """The main job: the ROS node on the default scene with a dual-arm driver in this process (real DDS),
+    printing updates, latency p50/p99, failures and stable shapes; ``--solver-only`` for the ROS-free demo."""
+    if not args.solver_only:
+        from .node.demo import run_demo_job
+
+        if getattr(args, "rrd", None):
+            raise UsageError("--rrd: the node demo does not write recordings yet; use --solver-only --rrd FILE")
+        return run_demo_job(["--compile", "blocking" if args.compile else "cached"])
     if args.steps < 1:
         raise UsageError(f"--steps: must be >= 1, got {args.steps}")
     log = (lambda msg: print(msg, file=sys.stderr)) if not args.json else None
@@ -442,8 +455,18 @@ Subcommand = tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[arg
 SUBCOMMANDS: dict[str, Subcommand] = {
     "solve": ("solve a scene once and print the shape (exit 0 if status ok)", _add_solve_arguments, cmd_solve),
     "scenes": ("list the shipped scenes", _add_scenes_arguments, cmd_scenes),
-    "demo": ("solve a scene, then move a grip in small warm-started steps", _add_demo_arguments, cmd_demo),
+    "demo": ("the main job: the ROS node + a dual-arm driver over DDS, with a summary (--solver-only: no ROS)",
+             _add_demo_arguments, cmd_demo),
+    "node": ("run the ROS 2 node (arguments as for `ros2 run dlo_ros dlo_node`, e.g. --params-file F, --ros-args …)",
+             lambda p: p.add_argument("node_args", nargs=argparse.REMAINDER), lambda a: _run_node(a.node_args)),
 }
+
+
+def _run_node(argv: list[str]) -> int:
+    from .node import main as node_main
+
+    result = node_main(argv)
+    return int(result or 0)
 
 
 def register_subcommand(name: str, help: str, add_arguments: Callable[[argparse.ArgumentParser], None],
@@ -456,7 +479,13 @@ def _register_replay() -> None:
     """``dlo replay`` lives in dlo_ros/replay.py; registered here so that ``dlo --help`` lists it."""
     from . import replay
 
-    register_subcommand("replay", replay.HELP, replay.add_arguments, replay.cmd_replay)
+    def handler(args: argparse.Namespace) -> int:
+        try:
+            return replay.cmd_replay(args)
+        except replay.ReplayError as exc:
+            raise UsageError(str(exc)) from None
+
+    register_subcommand("replay", replay.HELP, replay.add_arguments, handler)
 
 
 _register_replay()

@@ -124,3 +124,23 @@ def test_explicit_model_overrides_auto():
     solver = make_solver(hanging(), SolverOptions(model="full"), compile="off")
     assert isinstance(solver, ShapeSolver)
     assert not solver.solve().model["planar"]
+
+
+def test_targets_leaving_the_plane_switch_to_3d_with_the_warm_start():
+    """A scene built planar must follow a target that leaves its plane (never project it)."""
+    prob = hanging()
+    solver, r = auto(prob)
+    assert r.model["planar"]
+    q = [0, 0, 0, 1]
+    r = solver.solve({"right": ([0.5, 0.05, 0.45], q)})
+    assert r.ok, r.message
+    assert not r.model["planar"] and any("left the plane" in c for c in r.model["changes"])
+    assert np.allclose(r.points[-1], [0.5, 0.05, 0.45], atol=1e-8)
+    assert r.warm_started
+
+
+def test_planar_model_rejects_out_of_plane_targets():
+    solver = ShapeSolver(hanging(), SolverOptions(model="planar"), compile="off")
+    assert solver.solve().ok
+    r = solver.solve({"right": ([0.5, 0.05, 0.45], [0, 0, 0, 1])})
+    assert r.status == "invalid" and "grips[1].position" in r.message

@@ -189,6 +189,18 @@ class AutoShapeSolver:
             except (ValueError, KeyError) as exc:
                 return self._finish(ShapeResult(status="invalid", message=str(exc).strip("'\"")), t0, [])
             notes: list[str] = []
+            if self.choice.planar:  # new targets may leave the plane (or twist a clamp): 3D before solving
+                why = planarity_violation(problem, self.inner.nlp.r0[:, 2], tolerance=1e-7) or (
+                    "the clamps impose twist" if imposes_twist(problem, self.inner.nlp.r0) else "")
+                if why:
+                    if not commit:  # a query must not change the streaming model: answer with a full model
+                        full = ShapeSolver(self._reduced(replace(self.choice, planar=False), problem)[0],
+                                           self._reduced(replace(self.choice, planar=False), problem)[1], compile="cached")
+                        full.adopt_warm_start(self.inner)
+                        return self._finish(full.solve({g.name: g.pose for g in problem.grips}, commit=False), t0, [])
+                    self.problem = problem
+                    self._switch(replace(self.choice, planar=False), f"targets left the plane ({why}): full model")
+                    notes.append(self.changes[-1][1])
             reach = reachable_obstacles(problem, problem.string.length / 4)
             if set(reach) - set(self.choice.obstacles) and commit:
                 new = replace(self.choice, obstacles=tuple(sorted(set(reach) | set(self.choice.obstacles))))

@@ -142,15 +142,20 @@ class ShapeSolver:
         Fields are re-expanded in this model's basis from their values at this model's quadrature nodes
         (a planar solution gets θ ≡ π/2, a solution without ψ gets its zero-twist ψ, an inextensible one
         ε ≡ 0); multipliers are matched by constraint-row identity (grip, name, component) and are
-        zero for rows the other model did not have.  Requires the same reference frame.
+        zero for rows the other model did not have.  A different reference frame is handled by
+        re-extracting the Euler angles of the material frames in this model's frame (unwrapped along s).
         """
         with other._lock:
             src = other._state
-            if src is None or not np.allclose(other.nlp.r0, self.nlp.r0):
+            if src is None:
                 return False
             nodes = self.model.quad.nodes
             f = other.model.fields(src.z, nodes)
-            if not other.model.layout.twist and self.model.layout.twist:
+            if not np.allclose(other.nlp.r0, self.nlp.r0):
+                frames = other.frames(src.z, nodes, src.p)
+                angles = np.array([euler_from_frame(self.nlp.r0, q) for q in frames])
+                f["phi"], f["theta"], f["psi"] = np.unwrap(angles[:, 0]), angles[:, 1], np.unwrap(angles[:, 2])
+            elif not other.model.layout.twist and self.model.layout.twist:
                 f["psi"] = other.frames_psi(src.z, nodes, src.p)
             src_rows = {kind: i for i, kind in enumerate(other.nlp.row_kind)}
             lam_src = src.lam_g / (other.nlp.row_scale * other.nlp.sigma) if src.lam_g.size else src.lam_g
@@ -222,6 +227,12 @@ class ShapeSolver:
                 problem = self._with_poses(poses)
             except (ValueError, KeyError) as exc:
                 return self._failure("invalid", str(exc).strip("'\""), t0)
+            if self.nlp.planar:
+                from .nlp import planarity_violation
+
+                why = planarity_violation(problem, self.nlp.r0[:, 2], tolerance=1e-7)
+                if why:
+                    return self._failure("invalid", f"solver.model planar: {why}", t0)
             reason = self.unreachable_reason(problem)
             if reason:
                 return self._failure("unreachable", reason, t0)

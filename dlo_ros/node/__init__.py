@@ -1,0 +1,23 @@
+"""The dlo ROS 2 node (issue 3): ``python -m dlo_ros.node``, ``ros2 run dlo_ros dlo_node``, launch/dlo.launch.py.
+
+Modules: ``dlo_node`` (the Node and ``main``), ``engine`` (the single solver worker thread and its
+"latest pending targets" slot), ``conversions`` (messages <-> numpy), ``validation`` (target checks),
+``params`` (parameter table and checks), ``health`` (diagnostics content and warning throttling),
+``client`` (node subprocess, domain-id leases and a small client, used by the demo, the benchmark and
+the tests), ``demo`` (the dual-arm demo job, ``run_demo_job``).  Interfaces: msg_docs/node.md.
+Only ``dlo_node``, ``conversions``, ``client`` and ``demo`` import rclpy or messages; importing this
+package does not.
+"""
+from __future__ import annotations
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the node (``dlo_node`` console script); see dlo_ros.node.dlo_node.main."""
+    try:
+        from .dlo_node import main as _main
+    except KeyboardInterrupt:  # Ctrl-C while importing rclpy / CasADi
+        return 0
+    return _main(argv)
+
+
+__all__ = ["main"]

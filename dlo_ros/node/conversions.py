@@ -1,0 +1,342 @@
+"""ROS messages <-> numpy, and the node's output messages built from a ShapeResult.
+
+Pure functions: they build or read message objects but need no node, context or graph, so they are
+unit-tested directly.  Conventions (see msg_docs/node.md): SI units, quaternions (x, y, z, w), a
+centreline pose's x-axis along the string's tangent, wrenches in the node's frame about the grip point.
+"""
+from __future__ import annotations
+
+from typing import Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Duration, Time
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, WrenchStamped
+from nav_msgs.msg import Path
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ..model.obstacles import Obstacle
+from ..model.problem import Problem
+from ..model.rotations import matrix_to_quat, quat_to_matrix
+from ..solver.result import GripWrench, ShapeResult
+from .validation import TargetError, check_frame, normalise_frame
+
+# ---- time ------------------------------------------------------------------------------------------
+
+
+def time_to_ns(stamp: Time) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_time(ns: int) -> Time:
+    ns = int(ns)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def header(frame_id: str, stamp_ns: int) -> Header:
+    return Header(frame_id=frame_id, stamp=ns_to_time(stamp_ns))
+
+
+# ---- poses -----------------------------------------------------------------------------------------
+
+
+def pose_to_arrays(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
+    """(position (3,) [m], quaternion (4,) x, y, z, w) of a geometry_msgs/Pose, unchecked."""
+    p, q = pose.position, pose.orientation
+    return np.array([p.x, p.y, p.z], dtype=float), np.array([q.x, q.y, q.z, q.w], dtype=float)
+
+
+def arrays_to_pose(position: Sequence[float], orientation: Sequence[float]) -> Pose:
+    p = [float(v) for v in position]
+    q = [float(v) for v in orientation]
+    return Pose(position=Point(x=p[0], y=p[1], z=p[2]),
+                orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))
+
+
+def pose_stamped(position: Sequence[float], orientation: Sequence[float], frame_id: str, stamp_ns: int) -> PoseStamped:
+    return PoseStamped(header=header(frame_id, stamp_ns), pose=arrays_to_pose(position, orientation))
+
+
+def quat_multiply(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
+    """Hamilton product a ⊗ b of quaternions (x, y, z, w)."""
+    ax, ay, az, aw = (float(v) for v in a)
+    bx, by, bz, bw = (float(v) for v in b)
+    return np.array([
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    ])
+
+
+def transform_pose(position: np.ndarray, orientation: np.ndarray, translation: Sequence[float],
+                   rotation: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Apply the transform (translation, rotation quaternion) — e.g. a tf2 TransformStamped from the
+    pose's frame into the target frame — to a pose: p' = R p + t, q' = r ⊗ q."""
+    r = np.asarray(rotation, dtype=float)
+    r = r / np.linalg.norm(r)
+    p = quat_to_matrix(r) @ np.asarray(position, dtype=float) + np.asarray(translation, dtype=float)
+    return p, quat_multiply(r, orientation)
+
+
+def in_frame(frame_id: str, node_frame: str, position: np.ndarray, orientation: np.ndarray, where: str,
+             lookup: Callable[[str, str], tuple[Sequence[float], Sequence[float]]] | None = None):
+    """(position, orientation) of a pose given in ``frame_id``, expressed in ``node_frame``.
+
+    Same frame (a leading '/' ignored): returned as is.  Otherwise ``lookup(node_frame, frame_id)``
+    (e.g. tf2's lookup_transform) gives (translation, rotation) from frame_id into node_frame; without a
+    lookup, for an empty frame_id, or when the lookup raises, TargetError('frame') names the problem.
+    """
+    if frame_id and normalise_frame(frame_id) == normalise_frame(node_frame):
+        return position, orientation
+    if lookup is None or not frame_id:
+        check_frame(frame_id, node_frame, where)  # raises
+    try:
+        translation, rotation = lookup(normalise_frame(node_frame), normalise_frame(frame_id))
+    except Exception as exc:  # noqa: BLE001 - tf2's lookup exceptions
+        raise TargetError("frame", f"{where}: no transform from '{frame_id}' to '{node_frame}': {exc}") from None
+    return transform_pose(position, orientation, translation, rotation)
+
+
+# ---- outputs ---------------------------------------------------------------------------------------
+
+
+def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
+    """The centreline: one PoseStamped per output sample, x-axis along the tangent."""
+    h = header(frame_id, stamp_ns)
+    poses = []
+    for p, q in zip(result.points.tolist(), result.orientations.tolist()):
+        poses.append(PoseStamped(
+            header=h,
+            pose=Pose(position=Point(x=p[0], y=p[1], z=p[2]), orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])),
+        ))
+    return Path(header=h, poses=poses)
+
+
+def path_to_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(points (N, 3), quaternions (N, 4)) of a nav_msgs/Path."""
+    if not path.poses:
+        return np.zeros((0, 3)), np.zeros((0, 4))
+    pts, qs = zip(*(pose_to_arrays(ps.pose) for ps in path.poses))
+    return np.array(pts), np.array(qs)
+
+
+def wrench_stamped(wrench: GripWrench, frame_id: str, stamp_ns: int) -> WrenchStamped:
+    """Force [N] and torque [N m] the gripper exerts on the string (frame axes, about the grip point)."""
+    f = [float(v) for v in wrench.force]
+    t = [float(v) for v in wrench.torque]
+    msg = WrenchStamped(header=header(frame_id, stamp_ns))
+    msg.wrench.force = Vector3(x=f[0], y=f[1], z=f[2])
+    msg.wrench.torque = Vector3(x=t[0], y=t[1], z=t[2])
+    return msg
+
+
+def wrench_to_arrays(msg: WrenchStamped) -> tuple[np.ndarray, np.ndarray]:
+    f, t = msg.wrench.force, msg.wrench.torque
+    return np.array([f.x, f.y, f.z]), np.array([t.x, t.y, t.z])
+
+
+# ---- bending energy density -------------------------------------------------------------------------
+
+
+def tangents(orientations: np.ndarray) -> np.ndarray:
+    """Unit tangents (the x-axes) of quaternions (N, 4) x, y, z, w."""
+    q = np.asarray(orientations, dtype=float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)], axis=1)
+
+
+def curvature(s: np.ndarray, orientations: np.ndarray) -> np.ndarray:
+    """κ(s) [1/m] ≈ (angle between neighbouring tangents) / Δs: central differences inside, one-sided
+    at the ends.  Exact for a circular arc sampled uniformly."""
+    s = np.asarray(s, dtype=float)
+    n = s.size
+    if n < 2:
+        return np.zeros(n)
+    t = tangents(orientations)
+    lo = np.r_[0, np.arange(n - 2), n - 2]
+    hi = np.r_[1, np.arange(2, n), n - 1]
+    dots = np.clip(np.einsum("ij,ij->i", t[lo], t[hi]), -1.0, 1.0)
+    cross = np.linalg.norm(np.cross(t[lo], t[hi]), axis=1)
+    angle = np.arctan2(cross, dots)
+    ds = s[hi] - s[lo]
+    return np.where(ds > 0, angle / np.where(ds > 0, ds, 1.0), 0.0)
+
+
+def bending_energy_density(s: np.ndarray, orientations: np.ndarray, bend_stiffness) -> np.ndarray:
+    """½ Rf(s) κ(s)² [J/m]; ``bend_stiffness`` is a Profile (callable on s) or a number."""
+    kappa = curvature(s, orientations)
+    rf = bend_stiffness(np.asarray(s, dtype=float)) if callable(bend_stiffness) else float(bend_stiffness)
+    return 0.5 * rf * kappa**2
+
+
+# Colour map: blue (low) -> cyan -> green -> yellow -> red (high).
+_STOPS = np.array([[0.0, 0.2, 1.0], [0.0, 0.9, 1.0], [0.1, 0.9, 0.1], [1.0, 0.9, 0.0], [1.0, 0.1, 0.0]])
+
+
+def colour_map(values: np.ndarray) -> np.ndarray:
+    """RGB (N, 3) for values in [0, 1] (clipped)."""
+    v = np.clip(np.asarray(values, dtype=float), 0.0, 1.0) * (len(_STOPS) - 1)
+    i = np.minimum(v.astype(int), len(_STOPS) - 2)
+    f = (v - i)[:, None]
+    return _STOPS[i] * (1 - f) + _STOPS[i + 1] * f
+
+
+def _rgba(rgb: Sequence[float], a: float = 1.0) -> ColorRGBA:
+    return ColorRGBA(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=float(a))
+
+
+def _point(p: Sequence[float]) -> Point:
+    return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+
+
+# ---- markers -----------------------------------------------------------------------------------------
+
+GRIP_COLOURS = {"clamp": (0.9, 0.5, 0.1), "pin": (0.6, 0.2, 0.9), "tangent": (0.2, 0.7, 0.9)}
+OBSTACLE_RGBA = (0.55, 0.55, 0.6, 0.5)
+FORCE_RGB = (0.9, 0.1, 0.6)
+HALFSPACE_SIZE = 2.0  # [m] edge of the plate drawn for a half-space
+MARKER_NAMESPACES = ("string", "grips", "obstacles", "forces")
+
+
+def _marker(h: Header, ns: str, mid: int, kind: int) -> Marker:
+    m = Marker(header=h, ns=ns, id=mid, type=kind, action=Marker.ADD)
+    m.pose.orientation.w = 1.0
+    m.frame_locked = False
+    m.lifetime = Duration(sec=0, nanosec=0)
+    return m
+
+
+def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0) -> list[Marker]:
+    """One marker per obstacle (a capsule is a cylinder plus two end spheres, a half-space a plate)."""
+    out: list[Marker] = []
+    mid = start_id
+    rgba = _rgba(OBSTACLE_RGBA[:3], OBSTACLE_RGBA[3])
+    for ob in obstacles:
+        p = np.asarray(ob.params, dtype=float)
+        if ob.type == "sphere":
+            m = _marker(h, "obstacles", mid, Marker.SPHERE)
+            m.pose.position = _point(p[0:3])
+            m.scale = Vector3(x=2 * p[3], y=2 * p[3], z=2 * p[3])
+            parts = [m]
+        elif ob.type == "box":
+            m = _marker(h, "obstacles", mid, Marker.CUBE)
+            m.pose = arrays_to_pose(p[0:3], matrix_to_quat(p[3:12].reshape(3, 3).T))
+            m.scale = Vector3(x=2 * p[12], y=2 * p[13], z=2 * p[14])
+            parts = [m]
+        elif ob.type == "capsule":
+            a, b, r = p[0:3], p[3:6], p[6]
+            axis = b - a
+            length = float(np.linalg.norm(axis))
+            m = _marker(h, "obstacles", mid, Marker.CYLINDER)
+            m.pose = arrays_to_pose((a + b) / 2, _quat_z_to(axis))
+            m.scale = Vector3(x=2 * r, y=2 * r, z=length)
+            parts = [m]
+            for k, end in enumerate((a, b)):
+                e = _marker(h, "obstacles", mid + 1 + k, Marker.SPHERE)
+                e.pose.position = _point(end)
+                e.scale = Vector3(x=2 * r, y=2 * r, z=2 * r)
+                parts.append(e)
+        elif ob.type == "halfspace":
+            point, normal = p[0:3], p[3:6]
+            thick = 0.01
+            m = _marker(h, "obstacles", mid, Marker.CUBE)
+            m.pose = arrays_to_pose(point - normal * thick / 2, _quat_z_to(normal))
+            m.scale = Vector3(x=HALFSPACE_SIZE, y=HALFSPACE_SIZE, z=thick)
+            parts = [m]
+        else:  # pragma: no cover - unknown future type: draw nothing
+            parts = []
+        for m in parts:
+            m.color = rgba
+            m.text = ob.name
+        out.extend(parts)
+        mid += 3
+    return out
+
+
+def _quat_z_to(direction: np.ndarray) -> np.ndarray:
+    """A quaternion rotating +z onto ``direction``."""
+    d = np.asarray(direction, dtype=float)
+    d = d / np.linalg.norm(d)
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(np.dot(z, d))
+    if c < -1 + 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    axis = np.cross(z, d)
+    q = np.array([axis[0], axis[1], axis[2], 1.0 + c])
+    return q / np.linalg.norm(q)
+
+
+def result_markers(result: ShapeResult, problem: Problem, frame_id: str, stamp_ns: int, *,
+                   force_scale: float = 0.1, energy_scale: float = 0.0) -> MarkerArray:
+    """The string (line strip coloured by bending energy density), the grips, the obstacles, the grip forces.
+
+    energy_scale [J/m]: density shown in full red (0: the shape's maximum).  Starts with DELETEALL so a
+    consumer never keeps markers of an earlier, larger scene.
+    """
+    h = header(frame_id, stamp_ns)
+    markers: list[Marker] = [Marker(header=h, action=Marker.DELETEALL)]
+    radius = float(problem.string.radius)
+    width = max(2 * radius, 0.004)
+
+    line = _marker(h, "string", 0, Marker.LINE_STRIP)
+    line.scale.x = width
+    line.points = [_point(p) for p in result.points.tolist()]
+    density = bending_energy_density(result.s, result.orientations, problem.string.bend_stiffness)
+    top = energy_scale if energy_scale > 0 else float(np.max(density, initial=0.0))
+    rgb = colour_map(density / top if top > 0 else np.zeros_like(density))
+    line.colors = [_rgba(c) for c in rgb.tolist()]
+    line.color = _rgba((1.0, 1.0, 1.0))
+    line.text = f"max bending energy density {float(np.max(density, initial=0.0)):.4g} J/m"
+    markers.append(line)
+
+    for i, g in enumerate(problem.grips):
+        m = _marker(h, "grips", i, Marker.ARROW)  # along the pose's x-axis = the held tangent
+        m.pose = arrays_to_pose(g.pose.position, g.pose.orientation)
+        m.scale = Vector3(x=0.08, y=0.015, z=0.015)
+        m.color = _rgba(GRIP_COLOURS.get(g.mode, (0.8, 0.8, 0.8)))
+        m.text = f"{g.name} ({g.mode})"
+        markers.append(m)
+        wrench = result.grips.get(g.name)
+        if wrench is not None:
+            f = _marker(h, "forces", i, Marker.ARROW)
+            start = np.asarray(g.pose.position, dtype=float)
+            f.points = [_point(start), _point(start + force_scale * np.asarray(wrench.force, dtype=float))]
+            f.scale = Vector3(x=0.006, y=0.012, z=0.0)
+            f.color = _rgba(FORCE_RGB)
+            f.text = f"{g.name}: {np.linalg.norm(wrench.force):.3g} N on the string"
+            markers.append(f)
+
+    markers.extend(obstacle_markers(problem.obstacles, h))
+    return MarkerArray(markers=markers)
+
+
+# ---- diagnostics ---------------------------------------------------------------------------------------
+
+LEVELS = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN, "error": DiagnosticStatus.ERROR,
+          "stale": DiagnosticStatus.STALE}
+
+
+def format_value(value: object) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def diagnostic_status(name: str, level: str, message: str, hardware_id: str,
+                      values: Mapping[str, object]) -> DiagnosticStatus:
+    """A DiagnosticStatus; ``level`` one of 'ok', 'warn', 'error', 'stale'; values become strings."""
+    return DiagnosticStatus(
+        level=LEVELS[level], name=name, message=message, hardware_id=hardware_id,
+        values=[KeyValue(key=str(k), value=format_value(v)) for k, v in values.items()],
+    )
+
+
+def diagnostic_values(status: DiagnosticStatus) -> dict[str, str]:
+    return {kv.key: kv.value for kv in status.values}

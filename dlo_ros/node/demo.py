@@ -1,0 +1,228 @@
+"""The dual-arm demo: the node in a subprocess, a driver in this process, real DDS between them.
+
+``run_demo_job(argv)`` starts ``python -m dlo_ros.node`` on the default scene with a sphere "post"
+added (a demo scene written to a temporary directory), waits for its first centreline, then moves the
+two grippers through a short manoeuvre by publishing ``~/grips/targets`` (PoseArray) at a fixed rate:
+
+1. bring the ends together (and raise them a little),
+2. twist the right end by half a turn about the cable's tangent,
+3. lift the cable, carry it over the post and lower it until it drapes over the post.
+
+It records every centreline it receives and prints a summary: targets sent, centrelines received,
+end-to-end latency target -> centreline (p50/p99/max; the centreline's header stamp is the stamp of
+the newest target it answers), failures and rejected inputs, how many shapes were stable, and where
+the cable ended.  The node is always stopped (SIGINT, then SIGTERM/SIGKILL of its process group) and
+the temporary directory removed.  Run it with ``python -m dlo_ros.node.demo`` (or through the CLI).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+DEMO_SCENE = "default_cable"
+#: Added to the default scene: the obstacle the cable is carried over.
+POST = {"type": "sphere", "name": "post", "center": [0.175, 0.35, 0.25], "radius": 0.08}
+
+#: (time [s], left position, right position, right twist about the tangent [rad], phase starting here)
+KEYFRAMES = (
+    (0.0, (0.0, 0.0, 0.40), (0.60, 0.0, 0.40), 0.0, "bring the ends together"),
+    (2.0, (0.0, 0.0, 0.55), (0.35, 0.0, 0.55), 0.0, "twist the right end by half a turn"),
+    (4.0, (0.0, 0.0, 0.55), (0.35, 0.0, 0.55), math.pi, "lift the cable"),
+    (5.0, (0.0, 0.0, 0.85), (0.35, 0.0, 0.85), math.pi, "carry it over the post"),
+    (7.0, (0.0, 0.35, 0.85), (0.35, 0.35, 0.85), math.pi, "lower it onto the post"),
+    (9.0, (0.0, 0.35, 0.55), (0.35, 0.35, 0.55), math.pi, "done"),
+)
+
+
+def _twist(angle: float) -> np.ndarray:
+    """Quaternion (x, y, z, w) of a rotation by ``angle`` about x (the held tangent)."""
+    return np.array([math.sin(angle / 2), 0.0, 0.0, math.cos(angle / 2)])
+
+
+def duration() -> float:
+    return KEYFRAMES[-1][0]
+
+
+def phase_at(t: float) -> str:
+    label = KEYFRAMES[0][4]
+    for k in KEYFRAMES[:-1]:
+        if t >= k[0]:
+            label = k[4]
+    return label
+
+
+def targets_at(t: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(left position, quaternion), (right position, quaternion)] at time t (smoothstep between keyframes)."""
+    t = min(max(t, 0.0), duration())
+    for (t0, l0, r0, a0, _), (t1, l1, r1, a1, _) in zip(KEYFRAMES, KEYFRAMES[1:]):
+        if t <= t1:
+            u = (t - t0) / (t1 - t0)
+            u = u * u * (3 - 2 * u)
+            break
+    def lerp(a, b):
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        return a + u * (b - a)
+    return [(lerp(l0, l1), _twist(0.0)), (lerp(r0, r1), _twist(a0 + u * (a1 - a0)))]
+
+
+def write_demo_scene(directory: Path) -> Path:
+    """The default scene plus the post, validated and written as ``<directory>/dual_arm_demo.yaml``."""
+    import yaml
+
+    from ..scene import load_scene, scene_from_dict, scene_to_dict
+
+    d = scene_to_dict(load_scene(DEMO_SCENE))
+    d["name"] = "dual_arm_demo"
+    d["description"] = f"{DEMO_SCENE} plus a sphere 'post' the cable is carried over (dlo_ros.node.demo)."
+    d["obstacles"] = list(d.get("obstacles", [])) + [dict(POST)]
+    scene_from_dict(d)  # validate before the node sees it
+    path = Path(directory) / "dual_arm_demo.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return path
+
+
+def _percentiles(values: Sequence[float]) -> tuple[float, float, float]:
+    if not values:
+        return float("nan"), float("nan"), float("nan")
+    a = np.asarray(values, dtype=float)
+    return float(np.percentile(a, 50)), float(np.percentile(a, 99)), float(a.max())
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="dlo demo", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rate", type=float, default=50.0, help="target publication rate [Hz] (default 50)")
+    ap.add_argument("--speed", type=float, default=1.0,
+                    help="manoeuvre speed factor (default 1: the manoeuvre takes %.0f s)" % duration())
+    ap.add_argument("--compile", default="off", choices=("background", "blocking", "cached", "off"),
+                    help="the node's compile mode (default off: interpreted derivatives, no gcc; 'blocking' "
+                         "compiles before the first solve, minutes the first time for this scene)")
+    ap.add_argument("--model", default="full", choices=("auto", "full", "planar", "scene"),
+                    help="solver.model of the node (default full: the manoeuvre twists the cable, so it is 3D; "
+                         "'scene': the scene's own setting)")
+    ap.add_argument("--startup-timeout", type=float, default=60.0,
+                    help="seconds to wait for the node's first centreline (default 60)")
+    ap.add_argument("--log", metavar="FILE", help="keep the node's output in FILE")
+    return ap
+
+
+def run_demo_job(argv: Sequence[str] | None = None) -> int:
+    """Run the demo (see the module docstring); returns the exit code (0: the demo ran and the node
+    shut down cleanly)."""
+    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    if args.rate <= 0 or args.speed <= 0:
+        print("dlo demo: --rate and --speed must be > 0", file=sys.stderr)
+        return 2
+    from .client import DloClient, NodeProcess, allocate_domain_id
+
+    t_job = time.monotonic()
+    tmp = Path(tempfile.mkdtemp(prefix="dlo_demo_"))
+    lease = node = client = None
+    code = 1
+    try:
+        scene = write_demo_scene(tmp)
+        lease = allocate_domain_id()
+        node_args = ["--scene", str(scene), "--ros-args", "-p", f"compile:={args.compile}",
+                     *([] if args.model == "scene" else ["-p", f"solver.model:={args.model}"]),
+                     "-p", "diagnostics_period:=0.25"]
+        node = NodeProcess(node_args, lease.domain_id, log_path=args.log or tmp / "node.log")
+        client = DloClient(lease.domain_id, client_name="dlo_demo_driver")
+        print(f"dlo demo: node pid {node.pid}, ROS_DOMAIN_ID={lease.domain_id}, scene {DEMO_SCENE} + sphere 'post' "
+              f"at {POST['center']} (r = {POST['radius']} m)")
+        t0 = time.monotonic()
+        first = None
+        while first is None and node.alive() and time.monotonic() - t0 < args.startup_timeout:
+            first = client.wait_for_path(0.5)
+        if first is None:
+            print(f"dlo demo: the node published no centreline within {args.startup_timeout:.0f} s "
+                  f"(alive: {node.alive()}); its output:\n{node.output()}", file=sys.stderr)
+            return 1
+        client.wait_for_subscribers(10.0)
+        print(f"dlo demo: first centreline after {time.monotonic() - t0:.1f} s; manoeuvre of "
+              f"{duration() / args.speed:.1f} s at {args.rate:g} Hz")
+
+        published: dict[int, float] = {}
+        period = 1.0 / args.rate
+        start = time.monotonic()
+        phase = None
+        k = 0
+        last_stamp = 0
+        while True:
+            t = (time.monotonic() - start) * args.speed
+            if t > duration():
+                break
+            label = phase_at(t)
+            if label != phase:
+                phase = label
+                print(f"  t = {t:4.1f} s  {label}")
+            last_stamp = client.publish_targets(targets_at(t))
+            published[last_stamp] = t
+            k += 1
+            time.sleep(max(0.0, start + k * period - time.monotonic()))
+        last_stamp = client.publish_targets(targets_at(duration()))
+        published[last_stamp] = duration()
+        final = client.wait_for_path(10.0, where=lambda ev: ev.stamp_ns == last_stamp)
+        diag = client.wait_for_diagnostics(
+            lambda v, st: v.get("targets received") == str(len(published)), 5.0)
+        values = diag[0] if diag else client.diagnostic_values()
+
+        events = [ev for ev in client.paths if ev.stamp_ns in published]
+        latencies = [(ev.received_ns - ev.stamp_ns) / 1e6 for ev in events]
+        p50, p99, pmax = _percentiles(latencies)
+        updates = int(values.get("updates", "0") or 0)
+        stable = int(values.get("stable updates", "0") or 0)
+        failures = int(values.get("failures", "0") or 0)
+        rejected = int(values.get("rejected inputs", "0") or 0)
+        print("dlo demo: summary")
+        print(f"  targets published       {len(published)} ({args.rate:g} Hz, PoseArray for both grips)")
+        print(f"  centrelines received    {len(events)} during the manoeuvre ({updates} shapes published by the node "
+              f"in total, {values.get('targets coalesced', '?')} targets coalesced)")
+        print(f"  latency target->path    p50 {p50:.1f} ms, p99 {p99:.1f} ms, max {pmax:.1f} ms")
+        print(f"  solve time (last)       {values.get('solve time ms', '?')} ms, "
+              f"{values.get('iterations', '?')} iterations")
+        print(f"  failures                {failures} failed solves, {rejected} rejected inputs"
+              + (f" (last: {values.get('last error')})" if failures + rejected else ""))
+        print(f"  stable shapes           {stable} of {updates}")
+        if final is not None:
+            centre, r = np.asarray(POST["center"]), float(POST["radius"])
+            gap = float(np.min(np.linalg.norm(final.points - centre, axis=1)) - r)
+            resting = "resting on the post" if gap < 0.02 else f"{gap * 100:.1f} cm from the post"
+            print(f"  final shape             ends at the last target; lowest point "
+                  f"z = {final.points[:, 2].min():.3f} m, {resting}")
+        else:
+            print("  final shape             the centreline of the last target did not arrive within 10 s")
+        code = 0 if events and final is not None else 1
+    except KeyboardInterrupt:
+        print("dlo demo: interrupted", file=sys.stderr)
+        code = 130
+    finally:
+        if client is not None:
+            client.close()
+        if node is not None:
+            rc = node.stop(timeout=15.0)
+            text = node.output()
+            clean = rc == 0 and "Traceback" not in text
+            print(f"dlo demo: node stopped (exit code {rc}{'' if clean else ', NOT clean'}); "
+                  f"total {time.monotonic() - t_job:.1f} s")
+            if not clean:
+                print(text[-4000:], file=sys.stderr)
+                code = code or 1
+        if lease is not None:
+            lease.release()
+        shutil.rmtree(tmp, ignore_errors=True)
+    return code
+
+
+def main() -> None:
+    sys.exit(run_demo_job())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,560 @@
+"""The `dlo` ROS 2 node: streams the predicted static shape of a cable for changing grip targets.
+
+Interfaces (all documented in msg_docs/node.md):
+  subscribes  ~/grips/<grip>/target  geometry_msgs/PoseStamped   one grip's target
+              ~/grips/targets        geometry_msgs/PoseArray     all grips at once, configuration order
+  publishes   ~/centerline           nav_msgs/Path               reliable, transient local
+              ~/markers              visualization_msgs/MarkerArray
+              ~/grips/<grip>/wrench  geometry_msgs/WrenchStamped
+              /diagnostics           diagnostic_msgs/DiagnosticArray
+  services    ~/query_shape          nav_msgs/srv/GetPlan        what-if query, never touches the stream
+              ~/reset                std_srvs/srv/Trigger        forget the warm start, re-solve cold
+
+Threads: a single-threaded executor (subscriptions, timers, parameters, and the services as
+coroutines) only checks inputs and hands them to the ShapeEngine's single worker thread, which runs
+every solve and publishes the centreline and wrenches.  Markers are published by a 10 Hz timer from
+the latest shape.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+import threading
+import time
+from concurrent.futures import Future
+from dataclasses import fields, replace
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
+from nav_msgs.msg import Path
+from nav_msgs.srv import GetPlan
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future as RclpyFuture
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from ..model.problem import GripPose
+from . import conversions as conv
+from . import params as P
+from .engine import ShapeEngine, Update, build_solver, options_with_output_points
+from .health import Health
+from .validation import TargetError, check_count, check_pose, normalise_frame
+
+try:  # optional: not on PyPI; present in a full ROS installation
+    import tf2_ros  # type: ignore
+except ImportError:  # pragma: no cover - depends on the installation
+    tf2_ros = None
+
+NODE_NAME = "dlo"
+TARGET_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+WRENCH_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
+DIAGNOSTICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.VOLATILE)
+MARKER_PERIOD_S = 0.1
+STOP_TIMEOUT_S = 5.0  # how long shutdown waits for the solve in progress
+IMMEDIATE_DIAGNOSTICS_MIN_S = 0.1
+_TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_KINDS = {"string": ParameterType.PARAMETER_STRING, "bool": ParameterType.PARAMETER_BOOL,
+          "integer": ParameterType.PARAMETER_INTEGER, "double": ParameterType.PARAMETER_DOUBLE,
+          "string_array": ParameterType.PARAMETER_STRING_ARRAY}
+
+
+class StartupError(Exception):
+    """The node cannot start (bad scene or parameters); the message says why.  main() exits with 2."""
+
+
+def _descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
+    d = ParameterDescriptor(name=spec.name, type=_KINDS[spec.kind], description=spec.description,
+                            read_only=spec.read_only, additional_constraints=spec.constraints,
+                            dynamic_typing=spec.dynamic)
+    if spec.low is not None and spec.kind == "double":
+        d.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)]
+    if spec.low is not None and spec.kind == "integer":
+        d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
+    return d
+
+
+class DloNode(Node):
+    """See the module docstring.  Keyword arguments go to rclpy.node.Node (context, namespace, ...)."""
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs):
+        super().__init__(node_name, **kwargs)
+        self._closing = False
+        self._declare(P.STATIC[:-1])
+        scene = self._load_scene(self.get_parameter("scene").value)
+        self.scene = scene
+        self.frame_id = normalise_frame(self.get_parameter("frame_id").value or scene.frame_id or "world")
+        self.grip_names = [g.name for g in scene.problem.grips]
+        for name in self.grip_names:
+            if not _TOKEN.match(name):
+                raise StartupError(f"grip name {name!r} cannot be used in a topic name (letters, digits, '_'; "
+                                   "not starting with a digit)")
+
+        defaults = P.scene_values(scene.problem, scene.options.output_points)
+        self.declare_parameter("grip_names", defaults["grip_names"], _descriptor(P.SPECS["grip_names"]),
+                               ignore_override=True)
+        self._declare([replace(s, default=defaults.get(s.name, s.default)) for s in P.LIVE])
+        problem, options = self._initial_problem(scene)
+        self._check_problem = problem  # the problem parameter checks run against (string props applied)
+
+        self.health = Health(scene=scene.name, frame_id=self.frame_id, grips=tuple(self.grip_names),
+                             throttle_s=self.get_parameter("warn_throttle").value)
+        self._diag_lock = threading.Lock()
+        self._last_immediate_diag = 0.0
+        self._latest: Update | None = None   # newest published streaming update (markers timer)
+        self._markers_dirty = False
+        self._latest_lock = threading.Lock()
+
+        try:
+            self.compile_mode = P.compile_mode(self.get_parameter("compile").value)
+        except ValueError as exc:
+            raise StartupError(f"parameter {exc}") from None
+        if self.compile_mode == "off":
+            os.environ["DLO_NO_COMPILE"] = "1"  # read by dlo_ros.solver.compiled (this process only)
+
+        self._tf_buffer = None
+        if self.get_parameter("use_tf").value and tf2_ros is not None:
+            self._tf_buffer = tf2_ros.Buffer()
+            self._tf_listener = tf2_ros.TransformListener(self._tf_buffer, self)
+
+        # ---- interfaces ------------------------------------------------------------------------------------
+        self._path_pub = self.create_publisher(Path, "~/centerline", LATCHED_QOS)
+        self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
+        self._wrench_pubs = {n: self.create_publisher(WrenchStamped, f"~/grips/{n}/wrench", WRENCH_QOS)
+                             for n in self.grip_names}
+        self._target_subs = [
+            self.create_subscription(PoseStamped, f"~/grips/{n}/target",
+                                     lambda msg, n=n: self._on_grip_target(n, msg), TARGET_QOS)
+            for n in self.grip_names
+        ]
+        self._targets_sub = self.create_subscription(PoseArray, "~/grips/targets", self._on_targets, TARGET_QOS)
+        # The services are coroutines that await the solver thread.  They get their own callback group:
+        # a pending coroutine keeps its group busy, and the default (mutually exclusive) group must stay
+        # free for the subscriptions, timers and parameter services meanwhile.
+        services = MutuallyExclusiveCallbackGroup()
+        self._query_srv = self.create_service(GetPlan, "~/query_shape", self._on_query, callback_group=services)
+        self._reset_srv = self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
+        self._diag_timer = self.create_timer(self.get_parameter("diagnostics_period").value,
+                                             lambda: self._publish_diagnostics())
+        self._marker_timer = self.create_timer(MARKER_PERIOD_S, self._publish_markers)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
+
+        self.engine = ShapeEngine(problem, options, make_solver=self._make_solver, on_update=self._on_update,
+                                  on_failure=self._on_failure, on_state=self._on_state)
+        self.get_logger().info(
+            f"scene '{scene.name}' ({scene.source}): grips {self.grip_names}, {len(problem.obstacles)} obstacle(s), "
+            f"frame '{self.frame_id}'; building the solver"
+        )
+        self._t_start = time.monotonic()
+        self.engine.start()
+
+    # ---- start-up -----------------------------------------------------------------------------------------
+    def _declare(self, specs) -> None:
+        for spec in specs:
+            try:
+                self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+            except ParameterException as exc:  # wrong type or out of range in the params file / -p
+                raise StartupError(f"parameter {spec.name}: {exc}") from None
+
+    def _load_scene(self, name: str):
+        from ..scene import SceneError, load_scene  # lazy: the scene module is optional for imports
+
+        try:
+            return load_scene(name)
+        except (SceneError, FileNotFoundError, OSError) as exc:
+            raise StartupError(f"parameter scene={name!r}: {exc}") from None
+
+    def _initial_problem(self, scene):
+        values = {name: self.get_parameter(name).value for name in P.STRING_FIELDS}
+        try:
+            string = P.apply_string(scene.problem.string, values)
+            problem = replace(scene.problem, string=string)
+            problem.validate()
+            options = options_with_output_points(scene.options, self.get_parameter("output_points").value)
+            model = self.get_parameter("solver.model").value
+            if model:
+                if "model" not in {f.name for f in fields(options)}:
+                    raise ValueError("solver.model: this solver has no model option")
+                options = replace(options, model=model)
+            options.validate()
+        except ValueError as exc:
+            raise StartupError(f"parameters: {exc}") from None
+        return problem, options
+
+    def _make_solver(self, problem, options):
+        t0 = time.monotonic()
+        solver = build_solver(problem, options, compile=self.compile_mode)
+        self.get_logger().info(f"solver ready in {time.monotonic() - t0:.1f} s (compile: {self.compile_mode})")
+        return solver
+
+    # ---- inputs (executor thread) --------------------------------------------------------------------------
+    def _tf_lookup(self, target: str, source: str):
+        """(translation, rotation) from ``source`` into ``target``: the latest transform tf2 has."""
+        t = self._tf_buffer.lookup_transform(target, source, rclpy.time.Time())
+        tr, rot = t.transform.translation, t.transform.rotation
+        return (tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w)
+
+    def _checked(self, pose_msg, frame_id: str, where: str) -> GripPose:
+        position, orientation = conv.pose_to_arrays(pose_msg)
+        pose = check_pose(position, orientation, where)  # before any transform: NaN etc. named as sent
+        position, orientation = conv.in_frame(frame_id, self.frame_id, pose.position, pose.orientation, where,
+                                              self._tf_lookup if self._tf_buffer is not None else None)
+        return GripPose(position, orientation)
+
+    def _on_grip_target(self, name: str, msg: PoseStamped) -> None:
+        received = time.monotonic_ns()
+        where = f"grips/{name}/target"
+        try:
+            pose = self._checked(msg.pose, msg.header.frame_id, where)
+        except TargetError as exc:
+            self._reject(exc)
+            return
+        self.engine.submit_targets({name: pose}, conv.time_to_ns(msg.header.stamp) or None, received)
+
+    def _on_targets(self, msg: PoseArray) -> None:
+        received = time.monotonic_ns()
+        where = "grips/targets"
+        try:
+            check_count(len(msg.poses), self.grip_names, where)
+            poses = {n: self._checked(p, msg.header.frame_id, f"{where}[{i}] ({n})")
+                     for i, (n, p) in enumerate(zip(self.grip_names, msg.poses))}
+        except TargetError as exc:
+            self._reject(exc)
+            return
+        self.engine.submit_targets(poses, conv.time_to_ns(msg.header.stamp) or None, received)
+
+    def _reject(self, exc: TargetError) -> None:
+        if self.health.error(exc.kind, str(exc), rejected=True):
+            self.get_logger().warning(f"rejected target ({exc.kind}): {exc}; the last good shape stays published")
+        self._publish_diagnostics(immediate=True)
+
+    # ---- services (coroutines: they await the solver thread without blocking the executor) ----------------
+    async def _await_job(self, job: Future):
+        """Await a ShapeEngine job from a service coroutine; returns its result (or raises its exception).
+
+        The executor keeps spinning meanwhile (targets, timers, parameters): the coroutine is resumed
+        when the solver thread completes the job, which wakes the executor through an rclpy Future.
+        """
+        executor = self.executor
+        done = RclpyFuture(executor=executor)
+        done.add_done_callback(lambda _f: None)  # completing it schedules a task: that wakes the executor
+        job.add_done_callback(lambda _job: done.set_result(None))
+        await done
+        return job.result(timeout=0)
+
+    async def _on_query(self, request: GetPlan.Request, response: GetPlan.Response) -> GetPlan.Response:
+        now = self.get_clock().now().nanoseconds
+        response.plan = Path(header=conv.header(self.frame_id, now))
+        try:
+            poses = {}
+            for name, ps, label in zip(self.grip_names, (request.start, request.goal), ("start", "goal")):
+                poses[name] = self._checked(ps.pose, ps.header.frame_id, f"query_shape.{label} ({name})")
+        except TargetError as exc:
+            return self._query_failed(response, f"{exc}")
+        if not self.engine.ready:
+            return self._query_failed(response, f"the solver is not ready ({self.engine.state})")
+        try:
+            result = await self._await_job(self.engine.query(poses))
+        except Exception as exc:  # noqa: BLE001 - cancelled at shutdown, or a solver exception
+            return self._query_failed(response, f"{type(exc).__name__}: {exc}")
+        if not result.ok:
+            return self._query_failed(response, f"no equilibrium ({result.status}): {result.message}")
+        if result.stable is False:
+            return self._query_failed(
+                response, f"the equilibrium found is unstable (min eigenvalue {result.min_eigenvalue:.3g})")
+        response.plan = conv.result_to_path(result, self.frame_id, now)
+        self.health.query(True)
+        return response
+
+    def _query_failed(self, response, reason: str):
+        self.health.query(False, reason)
+        self.get_logger().warning(f"query_shape: empty plan: {reason}")
+        return response
+
+    async def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if not self.engine.ready:
+            response.success, response.message = False, f"the solver is not ready ({self.engine.state})"
+            return response
+        try:
+            result = await self._await_job(self.engine.reset())
+        except Exception as exc:  # noqa: BLE001
+            response.success, response.message = False, f"{type(exc).__name__}: {exc}"
+            return response
+        if result is None:
+            response.success, response.message = False, "warm start cleared; the cold solve raised (see the log)"
+        else:
+            response.success = result.ok
+            response.message = (f"warm start cleared; cold solve: {result.status}: {result.message}"
+                                + ("" if result.ok else " (the last good shape stays published)"))
+        self.get_logger().info(f"reset: {response.message}")
+        return response
+
+    # ---- parameters -----------------------------------------------------------------------------------------
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        strings = {}
+        for p in parameters:
+            reason = P.check_live(p.name, p.value, self._check_problem)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
+            if p.name in P.STRING_FIELDS:
+                strings[p.name] = p.value
+        if strings:  # the combination must be valid too
+            try:
+                replace(self._check_problem, string=P.apply_string(self._check_problem.string, strings)).validate()
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _after_set_parameters(self, parameters) -> None:
+        names = {p.name for p in parameters}
+        if names & set(P.STRING_FIELDS):
+            values = {n: self.get_parameter(n).value for n in P.STRING_FIELDS}
+            self._check_problem = replace(self._check_problem,
+                                          string=P.apply_string(self._check_problem.string, values))
+            self.engine.change_problem(
+                lambda problem: replace(problem, string=P.apply_string(problem.string, values))
+            ).add_done_callback(self._job_done("string properties"))
+            self.get_logger().info("string properties changed: " + ", ".join(
+                f"{n}={self.get_parameter(n).value:g}" for n in sorted(names & set(P.STRING_FIELDS))))
+        if "output_points" in names:
+            n = self.get_parameter("output_points").value
+            self.engine.change_options(
+                lambda options: options_with_output_points(options, n)
+            ).add_done_callback(self._job_done("output_points"))
+            self.get_logger().info(f"output_points={n}: rebuilding the solver (the next solve is cold)")
+        if "warn_throttle" in names:
+            self.health.throttle_s = self.get_parameter("warn_throttle").value
+        if names & {"markers.force_scale", "markers.energy_scale"}:
+            with self._latest_lock:
+                self._markers_dirty = self._latest is not None
+
+    def _job_done(self, what: str):
+        """A done-callback logging a parameter change the solver thread could not apply."""
+        def done(future) -> None:
+            if future.cancelled() or self._closing:
+                return
+            exc = future.exception()
+            if exc is not None:
+                self.get_logger().error(f"applying {what} failed: {type(exc).__name__}: {exc}")
+        return done
+
+    # ---- outputs (worker thread) --------------------------------------------------------------------------------
+    def _on_state(self, state: str) -> None:
+        self.health.set_state(state)
+        if state.startswith("failed"):
+            self.get_logger().error(f"solver: {state}")
+        self._publish_diagnostics(immediate=True)
+
+    def _on_update(self, u: Update) -> None:
+        if self._closing:
+            return
+        r = u.result
+        stamp = u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds
+        self._path_pub.publish(conv.result_to_path(r, self.frame_id, stamp))
+        for name, wrench in r.grips.items():
+            pub = self._wrench_pubs.get(name)
+            if pub is not None:
+                pub.publish(conv.wrench_stamped(wrench, self.frame_id, stamp))
+        latency = None if u.received_ns is None else (time.monotonic_ns() - u.received_ns) / 1e6
+        self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
+        was_error = self.health.newest_is_error or self.health.updates == 0
+        self.health.update(r, u.trigger, latency)
+        with self._latest_lock:
+            self._latest = replace(u, stamp_ns=stamp)
+            self._markers_dirty = True
+        if self.health.updates == 1:
+            self.get_logger().info(f"first shape published {time.monotonic() - self._t_start:.1f} s after start "
+                                   f"({r.status}, stable={r.stable})")
+        if r.stable is False and self.health.should_warn("unstable"):
+            self.get_logger().warning(f"the published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g}): "
+                                      "the cable would not stay in this shape")
+        if was_error:
+            self._publish_diagnostics(immediate=True)
+
+    def _on_failure(self, kind: str, message: str, u: Update | None) -> None:
+        if self._closing:
+            return
+        self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
+        first_line = message.splitlines()[0] if message else kind
+        if self.health.error(kind, first_line, rejected=False):
+            if kind == "internal":
+                self.get_logger().error(f"solver error: {message}")
+            else:
+                self.get_logger().warning(f"no equilibrium ({kind}): {first_line}; the last good shape stays published")
+        self._publish_diagnostics(immediate=True)
+
+    def _publish_markers(self) -> None:
+        with self._latest_lock:
+            u, dirty = self._latest, self._markers_dirty
+            self._markers_dirty = False
+        if u is None or not dirty or self._closing:
+            return
+        self._marker_pub.publish(conv.result_markers(
+            u.result, u.problem, self.frame_id, u.stamp_ns,
+            force_scale=self.get_parameter("markers.force_scale").value,
+            energy_scale=self.get_parameter("markers.energy_scale").value,
+        ))
+
+    def _publish_diagnostics(self, immediate: bool = False) -> None:
+        if self._closing:
+            return
+        now = time.monotonic()
+        with self._diag_lock:
+            if immediate:
+                if now - self._last_immediate_diag < IMMEDIATE_DIAGNOSTICS_MIN_S:
+                    return
+                self._last_immediate_diag = now
+            if hasattr(self, "engine"):
+                self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
+            level, message = self.health.level_and_message()
+            status = conv.diagnostic_status(f"{self.get_fully_qualified_name()}: shape", level, message,
+                                            self.scene.name, self.health.values())
+            msg = DiagnosticArray(header=conv.header("", self.get_clock().now().nanoseconds), status=[status])
+            try:
+                self._diag_pub.publish(msg)
+            except Exception:  # noqa: BLE001 - the context may be shutting down
+                pass
+
+    # ---- shutdown -----------------------------------------------------------------------------------------------
+    def close(self, timeout: float = 10.0) -> bool:
+        """Stop the worker (after the solve in progress); True if it ended within ``timeout``."""
+        self._closing = True
+        return self.engine.stop(timeout) if hasattr(self, "engine") else True
+
+
+# ---- entry point --------------------------------------------------------------------------------------------------
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="python -m dlo_ros.node",
+        description="Run the dlo node (static cable shape for grip targets). ROS arguments go after --ros-args, "
+                    "e.g. --ros-args -r __ns:=/left_cell -p scene:=my_scene.",
+    )
+    ap.add_argument("--params-file", metavar="FILE",
+                    help="ROS parameters YAML (default: the shipped config/dlo_node.yaml when it exists)")
+    ap.add_argument("--scene", metavar="NAME_OR_PATH", help="shorthand for --ros-args -p scene:=NAME_OR_PATH")
+    return ap
+
+
+def _default_params_file() -> str | None:
+    try:
+        from ..paths import config_path
+
+        path = config_path("dlo_node.yaml")
+    except (FileNotFoundError, OSError):
+        return None
+    return str(path) if path.is_file() else None
+
+
+def _terminate_children() -> None:
+    """SIGTERM every descendant of this process (e.g. gcc and its cc1), deepest first (Linux /proc; best
+    effort, silent elsewhere)."""
+    import signal
+
+    parents: dict[int, int] = {}
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return
+    for entry in entries:
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                stat = f.read()
+            parents[int(entry)] = int(stat[stat.rindex(")") + 2:].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+    found, frontier = [], [os.getpid()]
+    while frontier:
+        children = [pid for pid, ppid in parents.items() if ppid in frontier]
+        found.extend(children)
+        frontier = children
+    for pid in reversed(found):
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except OSError:
+            pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the node until Ctrl-C / SIGINT / SIGTERM / shutdown; returns the exit code.
+
+    argv: command-line arguments without the program name (default: sys.argv[1:]); ROS arguments
+    (--ros-args ...) are passed through to rclpy.
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    from rclpy.utilities import remove_ros_args
+
+    own = remove_ros_args(["dlo_node"] + argv)[1:]
+    args = _parser().parse_args(own)
+    params_file = args.params_file or _default_params_file()
+    if args.params_file and not os.path.isfile(args.params_file):
+        print(f"dlo_node: error: --params-file {args.params_file}: no such file", file=sys.stderr)
+        return 2
+    ros_args = ["dlo_node"]
+    if params_file or args.scene:
+        ros_args.append("--ros-args")
+        if params_file:
+            ros_args += ["--params-file", params_file]
+        if args.scene:
+            ros_args += ["-p", f"scene:={args.scene}"]
+        ros_args.append("--")
+    ros_args += argv  # rcl takes the --ros-args sections (later ones win) and ignores the rest
+
+    node = executor = None
+    code = 0
+    try:
+        rclpy.init(args=ros_args)
+        node = DloNode()
+        # One thread: it only converts and checks messages (the solver has its own thread, and the
+        # services await it as coroutines).  rclpy's MultiThreadedExecutor measured several ms slower
+        # per message here, with >100 ms outliers when it competes with the solver thread for the GIL.
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except StartupError as exc:
+        print(f"dlo_node: error: {exc}", file=sys.stderr)
+        code = 2
+    except Exception:
+        if rclpy.ok():
+            raise
+        # SIGINT/SIGTERM during start-up shut the context down under the node's constructor: a clean stop
+    finally:
+        stuck = False
+        try:
+            if node is not None:
+                stuck = not node.close(STOP_TIMEOUT_S)
+                if stuck:
+                    print(f"dlo_node: warning: the solver thread is still busy after {STOP_TIMEOUT_S:g} s (a long "
+                          "solve or a compile); exiting without waiting for it", file=sys.stderr)
+                if executor is not None:
+                    executor.shutdown(timeout_sec=2.0)
+                node.destroy_node()
+            rclpy.try_shutdown()
+        except KeyboardInterrupt:  # a second Ctrl-C while shutting down
+            pass
+        if stuck:
+            # Interpreter finalisation with a thread still inside CasADi/IPOPT (C++) can abort the process
+            # ("terminate called without an active exception"); leave without it, and take our own
+            # children (a gcc compiling the solver's derivatives) along.
+            _terminate_children()
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+    return code

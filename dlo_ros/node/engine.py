@@ -1,0 +1,294 @@
+"""The node's solving engine: one worker thread owns the ShapeSolver (no ROS here).
+
+* Streaming targets go into a "latest pending targets" slot: per grip the newest accepted pose, plus
+  the stamp of the newest message.  The worker drains the slot, so a burst of targets never builds a
+  queue: whatever arrives while a solve runs is merged, and the next solve uses the newest of everything.
+* Every solve warm-starts from the last committed shape (``ShapeSolver.solve(..., warm=True)``).
+* Control jobs (query, reset, parameter changes, a rebuild for a new output resolution) are queued
+  and run before the next streaming solve; callers get a ``concurrent.futures.Future``.
+* A query solves with ``commit=False``: it never touches the streaming state or its warm start.
+* A failed solve (or an exception) is reported through ``on_failure``; the last good shape stays.
+
+Callbacks run in the worker thread.  All CasADi/IPOPT calls happen in that one thread.
+"""
+from __future__ import annotations
+
+import collections
+import threading
+import time
+import traceback
+from concurrent.futures import Future
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+from ..model.problem import GripPose, Problem
+from ..solver.options import SolverOptions
+from ..solver.result import ShapeResult
+from .validation import grip_miss
+
+
+@dataclass
+class Update:
+    """One solve of the streaming state, as handed to ``on_update`` / ``on_failure``."""
+
+    result: ShapeResult
+    problem: Problem          # the problem solved (grip poses = the targets)
+    trigger: str              # 'initial', 'targets', 'parameters', 'reset', 'rebuild'
+    stamp_ns: int | None      # header stamp of the newest target included (None: not target-driven)
+    received_ns: int | None   # monotonic time that target arrived
+    targets_merged: int = 0   # target messages folded into this solve
+    finished_ns: int = 0      # monotonic time the solve finished
+
+
+@dataclass
+class _Job:
+    kind: str
+    payload: object
+    future: Future = field(default_factory=Future)
+
+
+class ShapeEngine:
+    """Owns a ShapeSolver in a single worker thread (see the module docstring).
+
+    make_solver(problem, options) builds the solver (may take long: it runs in the worker).
+    on_update(update) gets every converged streaming solve; on_failure(kind, message, update) every
+    failed one (kind = the ShapeResult status or 'internal').  on_state(text) tells what the worker is
+    doing ('building', 'ready', 'failed: ...') for the diagnostics.
+    """
+
+    def __init__(self, problem: Problem, options: SolverOptions, *,
+                 make_solver: Callable[[Problem, SolverOptions], object],
+                 on_update: Callable[[Update], None],
+                 on_failure: Callable[[str, str, Update | None], None],
+                 on_state: Callable[[str], None] = lambda s: None,
+                 name: str = "dlo-solver"):
+        self._problem0 = problem
+        self._options = options
+        self._make_solver = make_solver
+        self._on_update = on_update
+        self._on_failure = on_failure
+        self._on_state = on_state
+        self._cond = threading.Condition()
+        self._jobs: collections.deque[_Job] = collections.deque()
+        self._targets: dict[str, GripPose] = {g.name: g.pose for g in problem.grips}
+        self._dirty = False
+        self._stamp_ns: int | None = None
+        self._received_ns: int | None = None
+        self._merged = 0
+        self._stop = False
+        self._solver = None
+        self.state = "not started"
+        self.targets_received = 0
+        self.targets_coalesced = 0   # received but superseded before a solve used them
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    # ---- called from any thread ----------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout: float = 10.0) -> bool:
+        """Ask the worker to finish (after the solve in progress) and wait; True if it ended."""
+        with self._cond:
+            self._stop = True
+            jobs, self._jobs = list(self._jobs), collections.deque()
+            self._cond.notify_all()
+        for job in jobs:
+            job.future.cancel()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout)
+        return not self._thread.is_alive()
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    @property
+    def ready(self) -> bool:
+        return self._solver is not None
+
+    def targets(self) -> dict[str, GripPose]:
+        with self._cond:
+            return dict(self._targets)
+
+    def submit_targets(self, poses: dict[str, GripPose], stamp_ns: int | None = None,
+                       received_ns: int | None = None) -> None:
+        """Merge checked poses into the pending slot (newest wins per grip) and wake the worker."""
+        with self._cond:
+            self._targets.update(poses)
+            self._dirty = True
+            self._merged += 1
+            self.targets_received += 1
+            if stamp_ns is not None:
+                self._stamp_ns = stamp_ns
+            self._received_ns = received_ns if received_ns is not None else time.monotonic_ns()
+            self._cond.notify_all()
+
+    def query(self, poses: dict[str, GripPose]) -> Future:
+        """Future of the ShapeResult for the current targets updated by ``poses`` (commit=False)."""
+        return self._submit("query", dict(poses))
+
+    def reset(self) -> Future:
+        """Future of the cold re-solve of the current targets after forgetting the warm start."""
+        return self._submit("reset", None)
+
+    def change_problem(self, edit: Callable[[Problem], Problem]) -> Future:
+        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem) and re-solve the targets."""
+        return self._submit("problem", edit)
+
+    def change_options(self, edit: Callable[[SolverOptions], SolverOptions]) -> Future:
+        """Rebuild the solver with edited options (the next solve is cold) and re-solve the targets."""
+        return self._submit("options", edit)
+
+    def _submit(self, kind: str, payload: object) -> Future:
+        job = _Job(kind, payload)
+        with self._cond:
+            if self._stop:
+                job.future.cancel()
+                return job.future
+            if self.state.startswith("failed"):  # the worker has ended: nobody would run the job
+                job.future.set_exception(RuntimeError(f"no solver: {self.state}"))
+                return job.future
+            self._jobs.append(job)
+            self._cond.notify_all()
+        return job.future
+
+    # ---- worker thread ------------------------------------------------------------------------------------
+    def _set_state(self, state: str) -> None:
+        self.state = state
+        self._on_state(state)
+
+    def _run(self) -> None:
+        self._set_state("building")
+        try:
+            self._solver = self._make_solver(self._problem0, self._options)
+        except Exception as exc:  # noqa: BLE001 - reported, the node stays up without a solver
+            self._set_state(f"failed: {exc}")
+            self._on_failure("internal", f"building the solver failed: {exc}", None)
+            self._fail_jobs(exc)
+            return
+        self._set_state("ready")
+        with self._cond:
+            if self._stop:
+                return
+            stamp, received, merged = self._take_slot()
+        self._stream("initial", stamp, received, merged)
+        while True:
+            with self._cond:
+                while not (self._stop or self._jobs or self._dirty):
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job = self._jobs.popleft() if self._jobs else None
+                if job is None:
+                    stamp, received, merged = self._take_slot()
+            if job is None:
+                self._stream("targets", stamp, received, merged)
+            else:
+                self._run_job(job)
+
+    def _take_slot(self) -> tuple[int | None, int | None, int]:
+        """Empty the pending slot (caller holds the lock): (newest stamp, its arrival, messages merged)."""
+        stamp, received, merged = self._stamp_ns, self._received_ns, self._merged
+        self.targets_coalesced += max(0, merged - 1)
+        self._dirty, self._stamp_ns, self._received_ns, self._merged = False, None, None, 0
+        return stamp, received, merged
+
+    def _fail_jobs(self, exc: Exception) -> None:
+        with self._cond:
+            jobs, self._jobs = list(self._jobs), collections.deque()
+        for job in jobs:
+            job.future.set_exception(exc)
+
+    def _stream(self, trigger: str, stamp_ns: int | None, received_ns: int | None, merged: int) -> ShapeResult | None:
+        with self._cond:
+            targets = dict(self._targets)
+        solver = self._solver
+        update = None
+        try:
+            result = solver.solve(targets, warm=True, commit=True)
+            problem = solver.problem if result.ok else solver.problem.with_grip_poses(targets)
+            update = Update(result, problem, trigger, stamp_ns, received_ns, merged, time.monotonic_ns())
+            miss = _miss(result, problem, targets)
+            if miss:
+                self._on_failure("internal", miss, update)
+            elif result.ok:
+                self._on_update(update)
+            else:
+                self._on_failure(result.status, result.message, update)
+            return result
+        except Exception as exc:  # noqa: BLE001 - a bug must not kill the worker
+            self._on_failure("internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", update)
+            return None
+
+    def _stream_now(self, trigger: str) -> ShapeResult | None:
+        """Re-solve the targets after a control job, folding in whatever is pending."""
+        with self._cond:
+            stamp, received, merged = self._take_slot()
+        return self._stream(trigger, stamp, received, merged)
+
+    def _run_job(self, job: _Job) -> None:
+        if not job.future.set_running_or_notify_cancel():
+            return
+        solver = self._solver
+        try:
+            if job.kind == "query":
+                with self._cond:
+                    targets = dict(self._targets)
+                targets.update(job.payload)
+                result = solver.solve(targets, warm=True, commit=False)
+                miss = _miss(result, solver.problem, targets)
+                if miss:
+                    result.status, result.message = "failed", miss
+                job.future.set_result(result)
+            elif job.kind == "reset":
+                solver.reset()
+                job.future.set_result(self._stream_now("reset"))
+            elif job.kind == "problem":
+                solver.set_problem(job.payload(solver.problem))
+                job.future.set_result(self._stream_now("parameters"))
+            elif job.kind == "options":
+                options = job.payload(solver.options)
+                if options != solver.options:
+                    self._set_state("building")
+                    new = self._make_solver(solver.problem, options)
+                    self._solver = solver = new
+                    self._set_state("ready")
+                job.future.set_result(self._stream_now("rebuild"))
+            else:  # pragma: no cover
+                raise ValueError(f"unknown job {job.kind!r}")
+        except Exception as exc:  # noqa: BLE001 - handed to the caller
+            if self._solver is not None:
+                self._set_state("ready")
+            job.future.set_exception(exc)
+
+
+def _miss(result: ShapeResult, problem: Problem, targets: dict[str, GripPose]) -> str:
+    """validation.grip_miss for a converged result (tolerance 1e-5 L); '' otherwise."""
+    if not result.ok or len(result.points) == 0:
+        return ""
+    return grip_miss(result.points, result.s,
+                     [(g.name, g.s, targets[g.name].position) for g in problem.grips if g.name in targets],
+                     1e-5 * problem.string.length)
+
+
+def build_solver(problem: Problem, options: SolverOptions, compile: str | None = None):
+    """The solver for a scene: ``dlo_ros.solver.make_solver`` when the solver package provides it (it
+    picks the model for solver.model 'auto'), else ``ShapeSolver``; both have the same interface.
+
+    compile: the solver's compile mode ('background', 'blocking', 'cached', 'off'); None: its default.
+    'off' also works with solvers that predate the mode (through DLO_NO_COMPILE, set by the caller).
+    """
+    import inspect
+
+    from .. import solver as solver_pkg
+
+    factory = getattr(solver_pkg, "make_solver", None)
+    if factory is None:
+        from ..solver.shape_solver import ShapeSolver as factory
+    if compile is not None and "compile" in inspect.signature(factory).parameters:
+        return factory(problem, options, compile=compile)
+    return factory(problem, options)
+
+
+def options_with_output_points(options: SolverOptions, n: int) -> SolverOptions:
+    return replace(options, output_points=int(n))

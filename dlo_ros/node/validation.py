@@ -1,0 +1,141 @@
+"""Checks of incoming grip targets (pure: numpy and the model only, no ROS).
+
+Every check raises :class:`TargetError`, whose ``kind`` says which class of bad input it is (the
+node counts and throttles warnings per kind, and reports them in the diagnostics) and whose message
+names the offending input (``grips/left/target: quaternion norm is 1.2, not 1 (tolerance 0.001)``).
+"""
+from __future__ import annotations
+
+import math
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from ..model.problem import GripPose, Problem
+
+#: |‖q‖ − 1| up to this is normalised silently; beyond it the target is rejected.
+QUATERNION_TOLERANCE = 1e-3
+
+#: The kinds of bad input and failures the node reports (diagnostics keys ``errors.<kind>``).
+KINDS = (
+    "non_finite",    # NaN or infinity in a position or quaternion
+    "quaternion",    # zero or not unit within QUATERNION_TOLERANCE
+    "frame",         # header.frame_id is not the node's frame (and no transform is available)
+    "count",         # a PoseArray whose length is not the number of grips
+    "unreachable",   # grips farther apart than the string between them reaches
+    "invalid",       # anything else the solver refused as input
+    "infeasible",    # IPOPT: no point satisfies the constraints (e.g. obstacles)
+    "failed",        # the solver found no equilibrium
+    "internal",      # an unexpected exception (a bug): reported, never fatal
+)
+
+
+class TargetError(ValueError):
+    """A rejected target; ``kind`` is one of :data:`KINDS`."""
+
+    def __init__(self, kind: str, message: str):
+        super().__init__(message)
+        self.kind = kind
+
+
+def normalise_frame(frame_id: str) -> str:
+    """tf2 frame ids carry no leading slash; ``/world`` and ``world`` are the same frame."""
+    return frame_id[1:] if frame_id.startswith("/") else frame_id
+
+
+def check_frame(frame_id: str, expected: str, where: str) -> None:
+    """TargetError('frame') unless ``frame_id`` names ``expected`` (an empty frame_id is rejected too)."""
+    if not frame_id:
+        raise TargetError("frame", f"{where}: header.frame_id is empty; targets must be given in '{expected}'")
+    if normalise_frame(frame_id) != normalise_frame(expected):
+        raise TargetError(
+            "frame",
+            f"{where}: header.frame_id is '{frame_id}', not '{expected}' (no transform available: "
+            "send targets in the node's frame_id or make tf2 available)",
+        )
+
+
+def check_pose(position: Sequence[float], orientation: Sequence[float], where: str,
+               tolerance: float = QUATERNION_TOLERANCE) -> GripPose:
+    """A GripPose with the quaternion normalised, or TargetError naming the problem.
+
+    position: (x, y, z) [m]; orientation: (x, y, z, w).
+    """
+    p = np.asarray(position, dtype=float).ravel()
+    q = np.asarray(orientation, dtype=float).ravel()
+    if p.size != 3:
+        raise TargetError("invalid", f"{where}: position needs 3 numbers, got {p.size}")
+    if q.size != 4:
+        raise TargetError("invalid", f"{where}: orientation needs 4 numbers (x, y, z, w), got {q.size}")
+    if not np.all(np.isfinite(p)):
+        raise TargetError("non_finite", f"{where}: position {_fmt(p)} contains NaN or infinity")
+    if not np.all(np.isfinite(q)):
+        raise TargetError("non_finite", f"{where}: orientation {_fmt(q)} contains NaN or infinity")
+    norm = float(np.linalg.norm(q))
+    if norm < 1e-9:
+        raise TargetError("quaternion", f"{where}: orientation is the zero quaternion")
+    if abs(norm - 1.0) > tolerance:
+        raise TargetError(
+            "quaternion", f"{where}: quaternion norm is {norm:.6g}, not 1 (tolerance {tolerance:g})"
+        )
+    return GripPose(p.copy(), q / norm)
+
+
+def check_count(count: int, grip_names: Sequence[str], where: str) -> None:
+    """TargetError('count') unless a PoseArray has one pose per configured grip."""
+    if count != len(grip_names):
+        raise TargetError(
+            "count",
+            f"{where}: {count} poses for {len(grip_names)} grips; send one pose per grip in the "
+            f"order {list(grip_names)}",
+        )
+
+
+def reach_reason(grips: Iterable[tuple[str, float]], positions: Mapping[str, np.ndarray],
+                 reach: float = 1.0) -> str:
+    """Why the grip positions cannot all be held by the string ('' if they can).
+
+    grips: (name, s) of every grip; positions: name -> position [m]; reach: the largest stretch
+    factor (1 for an inextensible string, 1 + max_strain otherwise).  The same condition as
+    ``ShapeSolver.unreachable_reason``, cheap enough for a subscription callback.
+    """
+    items = [(n, s) for n, s in grips if n in positions]
+    for i in range(len(items)):
+        for j in range(i + 1, len(items)):
+            (na, sa), (nb, sb) = items[i], items[j]
+            dist = float(np.linalg.norm(np.asarray(positions[na]) - np.asarray(positions[nb])))
+            span = abs(sa - sb) * reach
+            if dist > span + 1e-12:
+                return (f"grips '{na}' and '{nb}' are {dist:.4g} m apart but the string between them "
+                        f"reaches at most {span:.4g} m")
+    return ""
+
+
+def grip_miss(points: np.ndarray, s: np.ndarray, grips: Iterable[tuple[str, float, np.ndarray]],
+              tolerance: float) -> str:
+    """Why a converged shape does not pass through its grip targets ('' if it does, or if no grip sits
+    on an output sample).  A sanity check of the solver's result, never expected to fire.
+
+    points (N, 3), s (N,): the centreline; grips: (name, s, target position).
+    """
+    if len(s) == 0:
+        return ""
+    span = max(float(s[-1] - s[0]), 1.0)
+    for name, sg, target in grips:
+        k = int(np.argmin(np.abs(s - sg)))
+        if abs(s[k] - sg) > 1e-9 * span:
+            continue  # the grip is between output samples
+        miss = float(np.linalg.norm(points[k] - np.asarray(target, dtype=float)))
+        if not miss <= tolerance:
+            return (f"the solver reported an equilibrium that misses grip '{name}' by {miss:.3g} m "
+                    f"(at {_fmt(points[k])}, target {_fmt(np.asarray(target, dtype=float))})")
+    return ""
+
+
+def problem_reach(problem: Problem, max_strain: float) -> float:
+    """The stretch factor the solver allows for ``problem`` (see ``ShapeSolver.unreachable_reason``)."""
+    return 1.0 + (max_strain if problem.string.stretch_stiffness is not None else 0.0)
+
+
+def _fmt(a: np.ndarray) -> str:
+    return "[" + ", ".join("nan" if math.isnan(v) else f"{v:.6g}" for v in a) + "]"

@@ -1,0 +1,159 @@
+"""The node over real DDS: ~/query_shape, ~/reset and the live parameters.
+
+* query_shape returns the streaming shape for the same targets, publishes nothing, and the stream's
+  next update still warm-starts exactly as if no query had happened (same iterations as a reference
+  ShapeSolver that never saw the queries);
+* an impossible query answers an empty plan and leaves the stream alone;
+* reset goes back to a cold start;
+* parameters: a valid change re-solves with the new value, a refused one says why and changes nothing,
+  read-only parameters stay read-only, output_points changes the resolution.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dlo_ros.model import Profile
+from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, running_node
+
+NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
+             "-p", "compile:=off",
+             "-p", f"solver.model:={TEST_MODEL}",
+             "-p", "diagnostics_period:=0.2")
+Q = (0.0, 0.0, 0.0, 1.0)
+LEFT = ((0.0, 0.0, 0.4), Q)
+
+
+def qz(angle: float):
+    return (0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2))
+
+
+@pytest.fixture
+def node(tmp_path):
+    log = tmp_path / "node.log"
+    with running_node(*NODE_ARGS, log_path=log) as (proc, client):
+        yield proc, client
+    text = log.read_text()
+    assert proc.returncode == 0, text
+    assert "Traceback" not in text, text
+
+
+@pytest.fixture(scope="module")
+def scene_and_solver():
+    from dlo_ros.scene import load_scene
+    from dlo_ros.node.engine import build_solver as ShapeSolver  # = the node's factory
+
+    old = os.environ.get("DLO_NO_COMPILE")
+    os.environ["DLO_NO_COMPILE"] = "1"
+    try:
+        scene = load_scene(TEST_SCENE)
+        yield replace(scene, options=replace(scene.options, model=TEST_MODEL)), ShapeSolver
+    finally:
+        if old is None:
+            os.environ.pop("DLO_NO_COMPILE", None)
+        else:
+            os.environ["DLO_NO_COMPILE"] = old
+
+
+def stream(cl, poses, timeout=15.0):
+    stamp = cl.publish_targets(poses)
+    ev = cl.wait_for_path(timeout, where=lambda e: e.stamp_ns == stamp)
+    assert ev is not None, "no centreline for the target"
+    return ev
+
+
+def test_query_matches_stream_and_keeps_the_warm_start(node, scene_and_solver):
+    proc, cl = node
+    scene, ShapeSolver = scene_and_solver
+    t1 = ((0.5, 0.05, 0.45), qz(0.2))
+    t2 = ((0.48, 0.06, 0.46), qz(0.25))
+    ev1 = stream(cl, [LEFT, t1])
+
+    pts, qs = cl.query(LEFT, t1)
+    np.testing.assert_allclose(pts, ev1.points, atol=1e-9)
+    np.testing.assert_allclose(np.abs(np.sum(qs * ev1.orientations, axis=1)), 1.0, atol=1e-9)
+    n = cl.path_count
+    what_if = ((0.3, 0.1, 0.3), qz(1.0))
+    pts2, _ = cl.query(LEFT, what_if)
+    assert len(pts2) == 51 and np.allclose(pts2[-1], what_if[0], atol=1e-7)
+    empty, _ = cl.query(LEFT, ((3.0, 0.0, 0.4), Q))  # farther than the string reaches
+    assert len(empty) == 0
+    bad, _ = cl.query(LEFT, ((0.5, 0.0, 0.4), (0.0, 0.0, 0.0, 0.0)))  # zero quaternion
+    assert len(bad) == 0
+    time.sleep(0.3)
+    assert cl.path_count == n, "a query published a centreline"
+    values, st = cl.wait_for_diagnostics(lambda v, s: v.get("queries") == "4", 5.0)
+    assert values["queries failed"] == "2" and "zero quaternion" in values["last query error"]
+    assert st.level == b"\x00" and values["errors.unreachable"] == "0", "a query failure leaked into the stream"
+
+    ev2 = stream(cl, [LEFT, t2])
+    ref = ShapeSolver(scene.problem, scene.options)
+    assert ref.solve().ok
+    assert ref.solve({"left": LEFT, "right": t1}).ok
+    r2 = ref.solve({"left": LEFT, "right": t2})
+    np.testing.assert_allclose(ev2.points, r2.points, atol=1e-8)
+    values, _ = cl.wait_for_diagnostics(lambda v, s: v.get("updates") == "3", 5.0)
+    assert values["warm started"] == "true" and values["trigger"] == "targets"
+    assert int(values["iterations"]) == r2.iterations, "the stream's warm start was disturbed by the queries"
+
+    ok, message = cl.reset()
+    assert ok and "cold" in message
+    values, _ = cl.wait_for_diagnostics(lambda v, s: v.get("trigger") == "reset", 5.0)
+    assert values["warm started"] == "false" and values["updates"] == "4"
+    ev3 = cl.wait_for_path(5.0, after=n + 1)
+    np.testing.assert_allclose(ev3.points, ev2.points, atol=1e-6)  # same equilibrium from a cold start
+
+    # a slow query (grip below the table: IPOPT works ~1 s to prove it infeasible) does not stall the
+    # node's executor: /diagnostics keeps coming (period 0.2 s) while the solver thread works on it
+    n_diag, t0 = cl.diagnostics_count, time.monotonic()
+    empty, _ = cl.query(LEFT, ((0.5, 0.0, -0.05), Q))
+    took = time.monotonic() - t0
+    assert len(empty) == 0
+    if took > 0.6:
+        assert cl.diagnostics_count - n_diag >= int(took / 0.2) - 2, (took, cl.diagnostics_count - n_diag)
+    values, st = cl.wait_for_diagnostics(lambda v, s: v.get("queries") == "5", 5.0)
+    assert "infeasible" in values["last query error"] and values["errors.infeasible"] == "0"
+    assert proc.alive()
+
+
+def test_parameters(node, scene_and_solver):
+    proc, cl = node
+    scene, ShapeSolver = scene_and_solver
+    got = cl.get_parameters(["scene", "grip_names", "string.bend_stiffness", "output_points", "frame_id"])
+    assert got["scene"] == TEST_SCENE and got["grip_names"] == ["left", "right"]
+    assert got["string.bend_stiffness"] == 0.02 and got["output_points"] == 51
+
+    n = cl.path_count
+    accepted = cl.set_parameters({"string.bend_stiffness": 0.04, "string.weight_per_length": 0.8})
+    assert accepted == [(True, ""), (True, "")]
+    cl.wait_for_diagnostics(lambda v, s: v.get("updates") == "3", 10.0)  # both changes applied
+    ev = cl.latest_path()
+    string = replace(scene.problem.string, bend_stiffness=Profile.constant(0.04),
+                     weight_per_length=Profile.constant(0.8))
+    ref = ShapeSolver(replace(scene.problem, string=string), scene.options)
+    r = ref.solve()
+    np.testing.assert_allclose(ev.points, r.points, atol=1e-7)
+
+    refused = cl.set_parameters({
+        "string.bend_stiffness": 0.0, "string.twist_stiffness": 0.0, "string.weight_per_length": -1.0,
+        "scene": "elastica_clamped", "output_points": 1, "compile": "blocking",
+    })
+    assert [ok for ok, _ in refused] == [False] * 6
+    reasons = [reason for _, reason in refused]
+    assert "must be > 0" in reasons[0] and "cannot switch" in reasons[1]
+    assert "read-only" in reasons[3] and "read-only" in reasons[5]
+    assert all(reasons), reasons
+    got = cl.get_parameters(["string.bend_stiffness", "string.twist_stiffness", "scene", "output_points"])
+    assert got == {"string.bend_stiffness": 0.04, "string.twist_stiffness": 0.015, "scene": TEST_SCENE,
+                   "output_points": 51}
+
+    assert cl.set_parameters({"output_points": 21}) == [(True, "")]
+    ev = cl.wait_for_path(30.0, where=lambda e: len(e.points) == 21)
+    assert ev is not None
+    np.testing.assert_allclose(ev.points[[0, -1]], r.points[[0, -1]], atol=1e-7)
+    assert proc.alive()

@@ -1,0 +1,76 @@
+"""ShapeSolver's contract (no ROS): warm starts, queries, continuation, statuses, thread safety."""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from dlo_ros.solver import ShapeSolver, SolverOptions
+from conftest import clamped_pair
+
+Q = [0.0, 0.0, 0.0, 1.0]
+
+
+def solver():
+    s = ShapeSolver(clamped_pair(right=(0.6, 0, 0), weight=0.5, twist=0.5), SolverOptions(model="full"), compile="off")
+    assert s.solve().ok
+    return s
+
+
+def test_warm_update_takes_newton_steps_and_matches_a_cold_solve():
+    s = solver()
+    warm = s.solve({"right": ([0.61, 0.0, 0.01], Q)})
+    assert warm.ok and warm.warm_started and warm.ipopt_status == "Newton" and warm.iterations <= 5
+    cold = ShapeSolver(s.problem, s.options, compile="off").solve(warm=False)
+    assert np.max(np.abs(warm.points - cold.points)) < 1e-8
+
+
+def test_query_does_not_touch_the_warm_start():
+    s = solver()
+    before = s.solve({"right": ([0.62, 0.0, 0.0], Q)})
+    query = s.solve({"right": ([0.3, 0.1, 0.2], Q)}, commit=False)
+    assert query.ok and np.allclose(query.points[-1], [0.3, 0.1, 0.2], atol=1e-9)
+    again = s.solve({"right": ([0.62, 0.0, 0.0], Q)})
+    assert np.allclose(again.points, before.points, atol=1e-9)
+
+
+def test_large_jump_converges():
+    s = solver()
+    r = s.solve({"right": ([0.15, 0.2, 0.3], Q)})
+    assert r.ok, r.message
+    assert np.allclose(r.points[-1], [0.15, 0.2, 0.3], atol=1e-9)
+
+
+def test_statuses_for_bad_input_never_raise():
+    s = solver()
+    r = s.solve({"right": ([5.0, 0.0, 0.0], Q)})
+    assert r.status == "unreachable" and "'left' and 'right'" in r.message
+    r = s.solve({"right": ([np.nan, 0.0, 0.0], Q)})
+    assert r.status == "invalid" and "grips.right.position" in r.message
+    r = s.solve({"right": ([0.5, 0.0, 0.0], [0, 0, 0, 3])})
+    assert r.status == "invalid" and "grips.right.orientation" in r.message
+    r = s.solve({"elbow": ([0.5, 0.0, 0.0], Q)})
+    assert r.status == "invalid" and "elbow" in r.message
+    # nothing bad was committed: the next good target still warm-starts
+    r = s.solve({"right": ([0.6, 0.0, 0.01], Q)})
+    assert r.ok and r.warm_started
+
+
+def test_concurrent_callers_are_serialised():
+    """CasADi's IPOPT segfaults when one solver runs in two threads; the lock must serialise them."""
+    s = solver()
+    results, errors = [], []
+
+    def worker(offset):
+        try:
+            for i in range(15):
+                results.append(s.solve({"right": ([0.55 + 0.002 * i, offset, 0.0], Q)}).status)
+        except Exception as exc:  # noqa: BLE001 - any exception fails the test below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=worker, args=(o,)) for o in (0.0, 0.01, -0.01)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors and results.count("ok") == 45

@@ -184,14 +184,14 @@ def test_scenes_lists_every_shipped_scene():
 
 
 def test_demo_runs():
-    done = run("demo", "--steps", "3")
+    done = run("demo", "--solver-only", "--steps", "3")
     assert done.returncode == 0, done.stderr
     for needle in ("default_cable", "cold", "median", "p90", "iterations", "stable 3/3"):
         assert needle in done.stdout, needle
 
 
 def test_demo_json():
-    done = run("demo", "--scene", "elastica_clamped", "--steps", "2", "--json")
+    done = run("demo", "--solver-only", "--scene", "elastica_clamped", "--steps", "2", "--json")
     assert done.returncode == 0, done.stderr
     out = json.loads(done.stdout)
     assert out["scene"] == "elastica_clamped" and out["steps"] == 2 and out["ok"] is True

@@ -426,9 +426,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if not args.solver_only:
         from .node.demo import run_demo_job
 
-        if getattr(args, "rrd", None):
-            raise UsageError("--rrd: the node demo does not write recordings yet; use --solver-only --rrd FILE")
-        return run_demo_job(["--compile", "blocking" if args.compile else "cached"])
+        job = ["--compile", "blocking" if args.compile else "cached"]
+        if getattr(args, "rrd", None):  # without --rrd the demo records to its default, ./dlo_demo.rrd
+            job += ["--rrd", args.rrd]
+        return run_demo_job(job)
     if args.steps < 1:
         raise UsageError(f"--steps: must be >= 1, got {args.steps}")
     log = (lambda msg: print(msg, file=sys.stderr)) if not args.json else None

@@ -42,6 +42,10 @@ KEYFRAMES = (
 )
 
 
+#: The node's rerun recording of the run (in the current directory; overwritten by every run).
+DEFAULT_RRD = "dlo_demo.rrd"
+
+
 def _twist(angle: float) -> np.ndarray:
     """Quaternion (x, y, z, w) of a rotation by ``angle`` about x (the held tangent)."""
     return np.array([math.sin(angle / 2), 0.0, 0.0, math.cos(angle / 2)])
@@ -110,6 +114,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--startup-timeout", type=float, default=60.0,
                     help="seconds to wait for the node's first centreline (default 60)")
     ap.add_argument("--log", metavar="FILE", help="keep the node's output in FILE")
+    ap.add_argument("--rrd", metavar="FILE", default=DEFAULT_RRD,
+                    help=f"the node records the run to this rerun file (default ./{DEFAULT_RRD}, overwritten each "
+                         "run; `dlo replay FILE` opens it); '' for no recording")
     return ap
 
 
@@ -124,14 +131,19 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
 
     t_job = time.monotonic()
     tmp = Path(tempfile.mkdtemp(prefix="dlo_demo_"))
-    lease = node = client = None
+    lease = node = client = rrd = None
     code = 1
     try:
         scene = write_demo_scene(tmp)
         lease = allocate_domain_id()
+        rrd = Path(args.rrd).expanduser().resolve() if args.rrd else None
+        if rrd is not None:
+            rrd.parent.mkdir(parents=True, exist_ok=True)
+            rrd.unlink(missing_ok=True)  # a stale file must not pass for this run's recording
         node_args = ["--scene", str(scene), "--ros-args", "-p", f"compile:={args.compile}",
                      *([] if args.model == "scene" else ["-p", f"solver.model:={args.model}"]),
-                     "-p", "diagnostics_period:=0.25"]
+                     "-p", "diagnostics_period:=0.25",
+                     *([] if rrd is None else ["-p", f"record.rrd:={rrd}"])]
         node = NodeProcess(node_args, lease.domain_id, log_path=args.log or tmp / "node.log")
         client = DloClient(lease.domain_id, client_name="dlo_demo_driver")
         print(f"dlo demo: node pid {node.pid}, ROS_DOMAIN_ID={lease.domain_id}, scene {DEMO_SCENE} + sphere 'post' "
@@ -190,6 +202,8 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
         print(f"  failures                {failures} failed solves, {rejected} rejected inputs"
               + (f" (last: {values.get('last error')})" if failures + rejected else ""))
         print(f"  stable shapes           {stable} of {updates}")
+        print(f"  recording               {rrd if rrd is not None else 'off'}"
+              + (" (complete when the node has stopped; `dlo replay FILE` opens it)" if rrd is not None else ""))
         if final is not None:
             centre, r = np.asarray(POST["center"]), float(POST["radius"])
             gap = float(np.min(np.linalg.norm(final.points - centre, axis=1)) - r)
@@ -211,6 +225,10 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
             clean = rc == 0 and "Traceback" not in text
             print(f"dlo demo: node stopped (exit code {rc}{'' if clean else ', NOT clean'}); "
                   f"total {time.monotonic() - t_job:.1f} s")
+            if rrd is not None:
+                size = rrd.stat().st_size if rrd.is_file() else 0
+                print(f"dlo demo: recording: {rrd} ({size / 1e6:.1f} MB)" if size else
+                      f"dlo demo: recording: {rrd} was not written (see the node's output)")
             if not clean:
                 print(text[-4000:], file=sys.stderr)
                 code = code or 1

@@ -108,6 +108,12 @@ class DloNode(Node):
         self._declare([replace(s, default=defaults.get(s.name, s.default)) for s in P.LIVE])
         problem, options = self._initial_problem(scene)
         self._check_problem = problem  # the problem parameter checks run against (string props applied)
+        # rerun recording (record.rrd / record.connect; off when both are empty).  The recorded scene is
+        # the effective one (parameters applied), so that `dlo replay --resolve` repeats the node's solves.
+        self._record_scene = replace(scene, problem=problem, options=options)
+        self._record_n = 0  # update counter of the recording: one per streaming solve (ok or failed)
+        self._record_last: Update | None = None
+        self.recorder = None
 
         self.health = Health(scene=scene.name, frame_id=self.frame_id, grips=tuple(self.grip_names),
                              throttle_s=self.get_parameter("warn_throttle").value)
@@ -153,6 +159,7 @@ class DloNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
 
+        self.recorder = self._start_recorder()  # last start-up check: nothing can fail after it
         self.engine = ShapeEngine(problem, options, make_solver=self._make_solver, on_update=self._on_update,
                                   on_failure=self._on_failure, on_state=self._on_state)
         self.get_logger().info(
@@ -169,6 +176,25 @@ class DloNode(Node):
                 self.declare_parameter(spec.name, spec.default, _descriptor(spec))
             except ParameterException as exc:  # wrong type or out of range in the params file / -p
                 raise StartupError(f"parameter {spec.name}: {exc}") from None
+
+    def _start_recorder(self):
+        from ..recording import Recorder, RecordingUnavailable
+
+        rrd = self.get_parameter("record.rrd").value or None
+        connect = self.get_parameter("record.connect").value or None
+        try:
+            recorder = Recorder(rrd=rrd, connect=connect)
+        except (RecordingUnavailable, ValueError, RuntimeError, OSError) as exc:
+            raise StartupError(f"parameters record.rrd={rrd or ''!r} / record.connect={connect or ''!r}: {exc}") from None
+        if recorder.enabled:
+            try:
+                recorder.log_scene(self._record_scene, frame_id=self.frame_id)
+            except Exception:
+                recorder.close()
+                raise
+            where = " and ".join(x for x in (str(recorder.rrd) if recorder.rrd else "", recorder.url or "") if x)
+            self.get_logger().info(f"recording to {where}")
+        return recorder
 
     def _load_scene(self, name: str):
         from ..scene import SceneError, load_scene  # lazy: the scene module is optional for imports
@@ -221,9 +247,11 @@ class DloNode(Node):
         try:
             pose = self._checked(msg.pose, msg.header.frame_id, where)
         except TargetError as exc:
-            self._reject(exc)
+            self._reject(exc, conv.time_to_ns(msg.header.stamp))
             return
-        self.engine.submit_targets({name: pose}, conv.time_to_ns(msg.header.stamp) or None, received)
+        stamp = conv.time_to_ns(msg.header.stamp) or None
+        self.recorder.log_targets({name: pose}, update=self._record_n, ros_time_ns=stamp)
+        self.engine.submit_targets({name: pose}, stamp, received)
 
     def _on_targets(self, msg: PoseArray) -> None:
         received = time.monotonic_ns()
@@ -233,11 +261,15 @@ class DloNode(Node):
             poses = {n: self._checked(p, msg.header.frame_id, f"{where}[{i}] ({n})")
                      for i, (n, p) in enumerate(zip(self.grip_names, msg.poses))}
         except TargetError as exc:
-            self._reject(exc)
+            self._reject(exc, conv.time_to_ns(msg.header.stamp))
             return
-        self.engine.submit_targets(poses, conv.time_to_ns(msg.header.stamp) or None, received)
+        stamp = conv.time_to_ns(msg.header.stamp) or None
+        self.recorder.log_targets(poses, update=self._record_n, ros_time_ns=stamp)
+        self.engine.submit_targets(poses, stamp, received)
 
-    def _reject(self, exc: TargetError) -> None:
+    def _reject(self, exc: TargetError, stamp_ns: int = 0) -> None:
+        self.recorder.log_rejected(f"{exc.kind}: {exc}", update=self._record_n,
+                                   ros_time_ns=stamp_ns or self.get_clock().now().nanoseconds)
         if self.health.error(exc.kind, str(exc), rejected=True):
             self.get_logger().warning(f"rejected target ({exc.kind}): {exc}; the last good shape stays published")
         self._publish_diagnostics(immediate=True)
@@ -325,22 +357,38 @@ class DloNode(Node):
             values = {n: self.get_parameter(n).value for n in P.STRING_FIELDS}
             self._check_problem = replace(self._check_problem,
                                           string=P.apply_string(self._check_problem.string, values))
-            self.engine.change_problem(
-                lambda problem: replace(problem, string=P.apply_string(problem.string, values))
-            ).add_done_callback(self._job_done("string properties"))
-            self.get_logger().info("string properties changed: " + ", ".join(
-                f"{n}={self.get_parameter(n).value:g}" for n in sorted(names & set(P.STRING_FIELDS))))
+            text = "string properties changed: " + ", ".join(
+                f"{n}={self.get_parameter(n).value:g}" for n in sorted(names & set(P.STRING_FIELDS)))
+
+            def edit(problem):  # runs in the solver thread, before the re-solve it triggers
+                new = replace(problem, string=P.apply_string(problem.string, values))
+                self._record_model_change(text, problem=new)
+                return new
+            self.engine.change_problem(edit).add_done_callback(self._job_done("string properties"))
+            self.get_logger().info(text)
         if "output_points" in names:
             n = self.get_parameter("output_points").value
-            self.engine.change_options(
-                lambda options: options_with_output_points(options, n)
-            ).add_done_callback(self._job_done("output_points"))
+            def edit_options(options):  # solver thread, before the rebuild and its re-solve
+                new = options_with_output_points(options, n)
+                if new != options:
+                    self._record_model_change(f"output_points={n}: solver rebuilt", options=new)
+                return new
+            self.engine.change_options(edit_options).add_done_callback(self._job_done("output_points"))
             self.get_logger().info(f"output_points={n}: rebuilding the solver (the next solve is cold)")
         if "warn_throttle" in names:
             self.health.throttle_s = self.get_parameter("warn_throttle").value
         if names & {"markers.force_scale", "markers.energy_scale"}:
             with self._latest_lock:
                 self._markers_dirty = self._latest is not None
+
+    def _record_model_change(self, text: str, *, problem=None, options=None) -> None:
+        """Record a change of the solved problem / options (solver thread), with the new scene, so that
+        the recording stays re-solvable from the next update on."""
+        if problem is not None:
+            self._record_scene = replace(self._record_scene, problem=problem)
+        if options is not None:
+            self._record_scene = replace(self._record_scene, options=options)
+        self.recorder.log_model_change(text, update=self._record_n, scene=self._record_scene)
 
     def _job_done(self, what: str):
         """A done-callback logging a parameter change the solver thread could not apply."""
@@ -364,6 +412,7 @@ class DloNode(Node):
             return
         r = u.result
         stamp = u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds
+        self._record_update(u, stamp)
         self._path_pub.publish(conv.result_to_path(r, self.frame_id, stamp))
         for name, wrench in r.grips.items():
             pub = self._wrench_pubs.get(name)
@@ -385,9 +434,20 @@ class DloNode(Node):
         if was_error:
             self._publish_diagnostics(immediate=True)
 
+    def _record_update(self, u: Update, stamp_ns: int) -> None:
+        """One streaming solve into the recording (solver thread); the update counter advances."""
+        if u is self._record_last:  # on_update raised after recording it: on_failure gets the same update
+            return
+        self._record_last = u
+        self.recorder.log_update(u.result, update=self._record_n, problem=u.problem, ros_time_ns=stamp_ns,
+                                 warm=u.trigger not in ("initial", "reset", "rebuild"))
+        self._record_n += 1
+
     def _on_failure(self, kind: str, message: str, u: Update | None) -> None:
         if self._closing:
             return
+        if u is not None:
+            self._record_update(u, u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds)
         self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
         first_line = message.splitlines()[0] if message else kind
         if self.health.error(kind, first_line, rejected=False):
@@ -433,7 +493,14 @@ class DloNode(Node):
     def close(self, timeout: float = 10.0) -> bool:
         """Stop the worker (after the solve in progress); True if it ended within ``timeout``."""
         self._closing = True
-        return self.engine.stop(timeout) if hasattr(self, "engine") else True
+        stopped = self.engine.stop(timeout) if hasattr(self, "engine") else True
+        recorder = getattr(self, "recorder", None)
+        if recorder is not None:
+            try:
+                recorder.close(timeout)  # bounded: the recording file is complete afterwards
+            except Exception as exc:  # noqa: BLE001 - shutdown must go on
+                print(f"dlo_node: warning: closing the recording failed: {exc}", file=sys.stderr)
+        return stopped
 
 
 # ---- entry point --------------------------------------------------------------------------------------------------

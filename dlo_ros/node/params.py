@@ -56,6 +56,12 @@ STATIC = (
               read_only=True),
     ParamSpec("diagnostics_period", "double", 1.0, "Period [s] of /diagnostics.", read_only=True,
               low=0.05, high=60.0),
+    ParamSpec("record.rrd", "string", "",
+              "Save a rerun recording of every solve, target and rejected input to this .rrd file (dlo replay "
+              "FILE opens it); empty: no file.", read_only=True),
+    ParamSpec("record.connect", "string", "",
+              "Stream the rerun recording to a running viewer at HOST[:PORT] or a rerun+http://HOST:PORT/proxy "
+              "URL; empty: no streaming.", read_only=True),
     ParamSpec("grip_names", "string_array", [],
               "Informational: the scene's grips in configuration order (the order of ~/grips/targets poses).",
               read_only=True, from_scene=True),

@@ -26,6 +26,8 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from .jsonio import json_safe, stdout_to_stderr
+
 from .paths import available_scenes, scene_path
 
 EXIT_OK = 0
@@ -44,46 +46,6 @@ class UsageError(Exception):
 # ---- helpers ----------------------------------------------------------------------------------------
 def _err(message: str) -> None:
     print(f"dlo: error: {message}", file=sys.stderr)
-
-
-@contextlib.contextmanager
-def _stdout_to_stderr() -> Iterator[None]:
-    """Send everything written to file descriptor 1 (also by C code: IPOPT, CasADi) to stderr.
-
-    Keeps ``--json`` output exactly one JSON document.
-    """
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError):  # no real stdout (e.g. closed): nothing to protect
-        yield
-        return
-    try:
-        os.dup2(2, 1)
-        yield
-    finally:
-        with contextlib.suppress(OSError, ValueError):
-            sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
-def _json_safe(value: Any) -> Any:
-    """Non-finite floats -> None (strict JSON), numpy scalars/arrays -> Python."""
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _json_safe(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value) + 0.0  # + 0.0 turns -0.0 into 0.0
-        return v if math.isfinite(v) else None
-    return value
 
 
 def _compile_mode(enabled: bool) -> str:
@@ -232,7 +194,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
     scene = _load(args.scene)
     options = _with_overrides(scene.options, args.points, args.basis, args.order, args.model)
-    guard = _stdout_to_stderr() if args.json else contextlib.nullcontext()
+    guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         try:
             solver = make_solver(scene.problem, options, compile=_compile_mode(args.compile))
@@ -252,7 +214,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
             _close_recorder(recorder)
     if args.json:
         out = {"scene": scene.name, "frame_id": scene.frame_id, **result.to_dict()}
-        print(json.dumps(_json_safe(out), allow_nan=False))
+        print(json.dumps(json_safe(out), allow_nan=False))
     else:
         print(format_summary(scene, result))
     return EXIT_OK if result.ok else EXIT_NOT_OK
@@ -433,7 +395,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.steps < 1:
         raise UsageError(f"--steps: must be >= 1, got {args.steps}")
     log = (lambda msg: print(msg, file=sys.stderr)) if not args.json else None
-    guard = _stdout_to_stderr() if args.json else contextlib.nullcontext()
+    guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         recorder = _recorder(args)
         try:
@@ -441,7 +403,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
                                recorder=recorder)
         finally:
             _close_recorder(recorder)
-    print(json.dumps(_json_safe(summary)) if args.json else format_demo(summary))
+    print(json.dumps(json_safe(summary)) if args.json else format_demo(summary))
     return EXIT_OK if summary["ok"] else EXIT_NOT_OK
 
 

@@ -57,6 +57,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .model.rotations import quat_z_to
+
 log = logging.getLogger(__name__)
 
 DEFAULT_GRPC_URL = "rerun+http://127.0.0.1:9876/proxy"
@@ -198,19 +200,6 @@ def quats_to_matrices(q: np.ndarray) -> np.ndarray:
     return m
 
 
-def _quat_z_to(direction: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w) of the shortest rotation taking +z to ``direction``."""
-    d = np.asarray(direction, dtype=float)
-    d = d / np.linalg.norm(d)
-    z = np.array([0.0, 0.0, 1.0])
-    c = float(np.dot(z, d))
-    if c < -1 + 1e-12:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    axis = np.cross(z, d)
-    q = np.array([axis[0], axis[1], axis[2], 1.0 + c])
-    return q / np.linalg.norm(q)
-
-
 def obstacle_shape(ob: Any, centre: np.ndarray, extent: float) -> tuple[str, dict]:
     """(archetype name, keyword arguments) drawing an obstacle (``dlo_ros.model.Obstacle``).
 
@@ -223,13 +212,13 @@ def obstacle_shape(ob: Any, centre: np.ndarray, extent: float) -> tuple[str, dic
         foot = centre - np.dot(centre - point, normal) * normal
         thick = 0.01 * extent
         return "Boxes3D", dict(centers=[foot - 0.5 * thick * normal], half_sizes=[[extent, extent, 0.5 * thick]],
-                               quaternions=[_quat_z_to(normal)])
+                               quaternions=[quat_z_to(normal)])
     if ob.type == "sphere":
         return "Ellipsoids3D", dict(centers=[p[0:3]], half_sizes=[[p[3]] * 3])
     if ob.type == "capsule":
         a, b = p[0:3], p[3:6]
         return "Capsules3D", dict(translations=[a], lengths=[float(np.linalg.norm(b - a))], radii=[p[6]],
-                                  quaternions=[_quat_z_to(b - a)])
+                                  quaternions=[quat_z_to(b - a)])
     if ob.type == "box":
         rotation = p[3:12].reshape(3, 3).T  # params hold Rᵀ row-major
         from .model.rotations import matrix_to_quat

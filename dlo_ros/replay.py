@@ -28,6 +28,8 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from .jsonio import json_safe, stdout_to_stderr
+
 from . import recording as R
 
 HELP = "open a rerun recording (.rrd) in the viewer, or re-solve it and compare the shapes (--resolve)"
@@ -41,37 +43,6 @@ class ReplayError(ValueError):
     (dlo_ros.cli turns it into its UsageError; replay does not import the cli module, which may be
     running as ``__main__``.)
     """
-
-
-@contextlib.contextmanager
-def _stdout_to_stderr() -> Iterator[None]:
-    """File descriptor 1 (also C code: IPOPT's banner) → stderr, so that stdout carries only the report."""
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError):
-        yield
-        return
-    try:
-        os.dup2(2, 1)
-        yield
-    finally:
-        with contextlib.suppress(OSError, ValueError):
-            sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
 
 
 # ---- reading a recording back ------------------------------------------------------------------------
@@ -417,13 +388,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
             raise ReplayError(f"--tolerance: must be a finite number >= 0, got {args.tolerance}")
         try:
             rec = read_recording(path)
-            with _stdout_to_stderr():  # IPOPT's banner must not mix with the report
+            with stdout_to_stderr():  # IPOPT's banner must not mix with the report
                 report = resolve(rec, args.tolerance, compile="blocking" if args.compile else "cached")
         except ReplayError:
             raise
         except ValueError as exc:
             raise ReplayError(str(exc)) from None
-        print(json.dumps(_json_safe(report)) if args.json else format_resolve(report))
+        print(json.dumps(json_safe(report)) if args.json else format_resolve(report))
         return EXIT_OK if report["ok"] else EXIT_NOT_OK
     try:
         read_recording(path)  # a clear error for a file that is not a recording, before starting a viewer

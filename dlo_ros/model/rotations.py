@@ -119,3 +119,16 @@ def reference_frame(chord: np.ndarray, up_hint: np.ndarray) -> np.ndarray:
     e1 = -d
     e2 = np.cross(n, e1)
     return np.stack([e1, e2, n], axis=1)
+
+
+def quat_z_to(direction: np.ndarray) -> np.ndarray:
+    """Quaternion (x, y, z, w) of the shortest rotation taking +z to ``direction`` (for markers/arrows)."""
+    d = np.asarray(direction, dtype=float)
+    d = d / np.linalg.norm(d)
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(np.dot(z, d))
+    if c < -1 + 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    axis = np.cross(z, d)
+    q = np.array([axis[0], axis[1], axis[2], 1.0 + c])
+    return q / np.linalg.norm(q)

@@ -9,6 +9,8 @@ from __future__ import annotations
 from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
+
+from ..model.rotations import quat_z_to
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, WrenchStamped
@@ -231,7 +233,7 @@ def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0
             axis = b - a
             length = float(np.linalg.norm(axis))
             m = _marker(h, "obstacles", mid, Marker.CYLINDER)
-            m.pose = arrays_to_pose((a + b) / 2, _quat_z_to(axis))
+            m.pose = arrays_to_pose((a + b) / 2, quat_z_to(axis))
             m.scale = Vector3(x=2 * r, y=2 * r, z=length)
             parts = [m]
             for k, end in enumerate((a, b)):
@@ -243,7 +245,7 @@ def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0
             point, normal = p[0:3], p[3:6]
             thick = 0.01
             m = _marker(h, "obstacles", mid, Marker.CUBE)
-            m.pose = arrays_to_pose(point - normal * thick / 2, _quat_z_to(normal))
+            m.pose = arrays_to_pose(point - normal * thick / 2, quat_z_to(normal))
             m.scale = Vector3(x=HALFSPACE_SIZE, y=HALFSPACE_SIZE, z=thick)
             parts = [m]
         else:  # pragma: no cover - unknown future type: draw nothing
@@ -254,19 +256,6 @@ def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0
         out.extend(parts)
         mid += 3
     return out
-
-
-def _quat_z_to(direction: np.ndarray) -> np.ndarray:
-    """A quaternion rotating +z onto ``direction``."""
-    d = np.asarray(direction, dtype=float)
-    d = d / np.linalg.norm(d)
-    z = np.array([0.0, 0.0, 1.0])
-    c = float(np.dot(z, d))
-    if c < -1 + 1e-12:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    axis = np.cross(z, d)
-    q = np.array([axis[0], axis[1], axis[2], 1.0 + c])
-    return q / np.linalg.norm(q)
 
 
 def result_markers(result: ShapeResult, problem: Problem, frame_id: str, stamp_ns: int, *,

@@ -238,8 +238,8 @@ class Paper3DRunner(_Runner):
         bend, twist, stretch, grav, work = (float(v) for v in nlp.energy_fn(z, p))
         stable = None
         if info["ok"]:
-            # left-grip rows: recover their multipliers from stationarity (least squares), then the reduced Hessian
-            import casadi as ca
+            # reduced Hessian on the equality rows' null space (the AL multipliers of the other rows; the
+            # substituted left-grip rows' multipliers are zero, which leaves H unchanged: they are linear)
             from scipy.linalg import null_space
 
             h = np.asarray(nlp.hessian_fn(z, p, lam_full))

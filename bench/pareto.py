@@ -67,7 +67,7 @@ def run_case(case: Case, quick: bool, log=print, bar=None) -> dict:
                 kw = {"time_limit": 30.0 if quick else 60.0}
             runner = make_runner(method, setting, case, **kw)
             row["build_s"] = runner.build_time_s
-            target = ref_pts = reference_for(method, ref)
+            ref_pts = reference_for(method, ref)
             repeats = 1 if method in ("paper", "pyelastica", "mujoco") else 3
             cold = [runner.cold(case.problem) for _ in range(repeats)]
             c = cold[-1]
@@ -90,7 +90,6 @@ def run_case(case: Case, quick: bool, log=print, bar=None) -> dict:
                 row.update(warm_ok=False, warm_s=np.nan, warm_err=np.nan, warm_msg="pre-target solve failed")
             if method in ("pyelastica", "mujoco"):
                 row["peer"] = {k: (float(v) if isinstance(v, (int, float, np.floating)) else v) for k, v in c.extra.items()}
-            del target
         except ImportError as exc:
             row.update(error=f"not installed: {exc}")
         except Exception as exc:  # a method that crashes is a result, not a benchmark failure

@@ -35,7 +35,7 @@ def fmt(x, spec=".2g"):
 # ---------------------------------------------------------------------------------------------------
 def pareto_chart(result: dict, path: Path) -> None:
     plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.2), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 6.2), sharey=True)
     rows = result["rows"]
     floor = max(result["reference"].get("spread", 0.0), 1e-12)
     for ax, mode in zip(axes, ("cold", "warm")):
@@ -59,19 +59,20 @@ def pareto_chart(result: dict, path: Path) -> None:
                         mfc=COLORS[method] if ok else "white")
                 ax.annotate(str(r["setting"]), (x, max(y, 1e-12)), fontsize=6, xytext=(3, 2), textcoords="offset points")
             ax.plot([], [], MARKERS[method] + "-", color=COLORS[method], label=label)
+        ax.set_xscale("log")
         if floor > 1e-9:
             ax.axhline(floor, color="gray", ls=":", lw=1)
-            ax.text(ax.get_xlim()[0] if ax.get_xlim()[0] > 0 else 1e-4, floor * 1.15, "reference uncertainty", fontsize=7,
-                    color="gray")
-        ax.set_xscale("log")
+            ax.text(0.01, floor * 1.15, "reference uncertainty", fontsize=7, color="gray",
+                    transform=ax.get_yaxis_transform())
         ax.set_yscale("log")
         ax.set_xlabel(f"time per solve, {mode} [s]")
         ax.grid(True, which="both", alpha=0.25)
         ax.set_title(f"{mode}" + (" (from the 1 % L neighbour)" if mode == "warm" else ""))
     axes[0].set_ylabel("max centreline error / L")
-    axes[1].legend(fontsize=7, loc="upper right")
+    handles, labels = axes[1].get_legend_handles_labels()
     fig.suptitle(result["title"] + "   (hollow marker: failed, or stationary point called unstable)", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.16, 1, 1))
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -133,9 +134,9 @@ def stability_chart(results: list[dict], path: Path) -> None:
                       "weight": "weight ρ = D L³/Rf, table at −0.25L (cold solves)",
                       "jump": "single jump of the right grip by δ (warm from chord 0.7L)"}[res["sweep"]], fontsize=9)
     fig.suptitle("Stability map — ✓ right equilibrium (stable or no verdict), ✓u right but called unstable, ↓ another "
-                 "equilibrium of lower energy than the reference, ✗ wrong equilibrium, ✗u wrong and unstable, F failed; number = iterations "
-                 "(Nelder–Mead: function evaluations; peers: time steps)", fontsize=8)
-    fig.tight_layout()
+                 "equilibrium of lower energy than the reference,\n✗ wrong equilibrium, ✗u wrong and unstable, F failed; "
+                 "number = iterations (Nelder–Mead: function evaluations; peers: time steps)", fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

@@ -87,7 +87,8 @@ def headline(results: list[dict], mode: str, tol: float) -> str:
                     best = (t, r["setting"])
             ran = any(r["method"] == method for r in res["rows"])
             cells.append(f"{best[0] * 1e3:.3g} ms ({best[1]})" if best else ("not reached" if ran else "n/a"))
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+        if any(c != "n/a" for c in cells):
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -296,8 +297,22 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer cases, settings and sweep points (~15 min here)")
     ap.add_argument("--only", default="peers,pareto,stability,paper",
                     help="comma-separated subset of peers (settings study), pareto, stability, paper")
+    ap.add_argument("--from-json", metavar="RAW", help="re-render the pareto and stability charts and tables from a "
+                    "raw*.json of an earlier run (no solving)")
     args = ap.parse_args(argv)
     parts = set(args.only.split(","))
+    if args.from_json:
+        raw = json.loads(Path(args.from_json).read_text())
+        info, quick = raw["machine"], raw["quick"]
+        started = time.mktime(time.strptime(raw.get("started", time.strftime("%Y-%m-%d %H:%M")), "%Y-%m-%d %H:%M"))
+        if "pareto" in raw:
+            for res in raw["pareto"]:
+                pareto_chart(res, OUT / f"pareto_{res['case']}.png")
+            write_pareto(raw["pareto"], info, quick, started)
+        if "stability" in raw:
+            stability_chart(raw["stability"], OUT / "stability_map.png")
+            write_stability(raw["stability"], info, quick, started)
+        return 0
     OUT.mkdir(parents=True, exist_ok=True)
     started = time.time()
     info = machine()
@@ -311,7 +326,7 @@ def main(argv=None) -> int:
     total = (peer_tuning.count() if "peers" in parts else 0) + (pareto.count(args.quick) if "pareto" in parts else 0) + \
             (stability.count(args.quick) if "stability" in parts else 0) + (4 if "paper" in parts else 0)
     bar = _bar(total)
-    raw = {"machine": info, "quick": args.quick}
+    raw = {"machine": info, "quick": args.quick, "started": time.strftime("%Y-%m-%d %H:%M", time.localtime(started))}
     import warnings
 
     warnings.filterwarnings("ignore")

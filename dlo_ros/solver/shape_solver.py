@@ -611,8 +611,34 @@ class ShapeSolver:
             else:
                 a.append(tangent)
                 rhs.append(0.0)
-            torque = np.linalg.solve(np.array(a), np.array(rhs))
+            a = np.array(a)
+            if np.linalg.cond(a) < 1e8:
+                torque = np.linalg.solve(a, np.array(rhs))
+            elif grip.s in (0.0, self.problem.string.length):
+                # Euler pole (θ = 0 or π): φ and ψ rotate about the same axis, so the multipliers cannot
+                # give the torque; use the internal moment the clamp balances instead
+                torque = self._end_moment(z, grip.s)
+            else:
+                torque = np.linalg.lstsq(a, np.array(rhs), rcond=None)[0]
         return GripWrench(force=force, torque=torque)
+
+    def _end_moment(self, z: np.ndarray, s_end: float) -> np.ndarray:
+        """Torque [N·m] a clamp at an end exerts: −M(0) at s = 0, +M(L) at s = L, where
+        M = Q diag(Rf, Rf, Rt) ω is the internal moment and ω = axial(Qᵀ Q') the Darboux vector
+        (Q' by a second-order one-sided difference; Q(s) is smooth even where the Euler angles are not)."""
+        length = self.problem.string.length
+        h = 1e-4 * length
+        sign = 1.0 if s_end > 0 else -1.0
+        s = np.array([s_end, s_end - sign * h, s_end - 2 * sign * h])
+        q = self.frames(z, s)
+        dq = sign * (3 * q[0] - 4 * q[1] + q[2]) / (2 * h)
+        skew = q[0].T @ dq
+        omega = 0.5 * np.array([skew[2, 1] - skew[1, 2], skew[0, 2] - skew[2, 0], skew[1, 0] - skew[0, 1]])
+        st = self.problem.string
+        rt = float(st.twist_stiffness(np.array([s_end]))[0]) if self.model.layout.twist else 0.0
+        rf = float(st.bend_stiffness(np.array([s_end]))[0])
+        moment = q[0] @ (np.array([rf, rf, rt]) * omega)
+        return sign * moment
 
     def _min_reduced_eigenvalue(self, state: _State) -> float | None:
         nlp = self.nlp

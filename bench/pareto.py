@@ -14,12 +14,14 @@ from .methods import METHOD_LABELS, ORDERS, SEGMENTS, make_runner
 from .references import reference, reference_for
 
 
-def cases(quick: bool) -> list[Case]:
+def cases(quick: bool, methods=None) -> list[Case]:
+    """The cases; with ``methods`` (a set of method names) only those on which one of them runs."""
     chords = (0.9, 0.6, 0.3) if quick else (0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3)
-    return [elastica_case(c) for c in chords] + [asym_case(), heavy_case(), loads_case(), twist_case()]
+    every = [elastica_case(c) for c in chords] + [asym_case(), heavy_case(), loads_case(), twist_case()]
+    return [c for c in every if settings(c, quick, methods)]
 
 
-def settings(case: Case, quick: bool) -> list[tuple[str, object]]:
+def settings(case: Case, quick: bool, methods=None) -> list[tuple[str, object]]:
     orders = (4, 8, 12, 16) if quick else ORDERS
     segs = (10, 40, 160) if quick else SEGMENTS
     peers = (10, 20, 40) if quick else (10, 20, 40, 80)
@@ -34,7 +36,7 @@ def settings(case: Case, quick: bool) -> list[tuple[str, object]]:
     out += [("pyelastica", n) for n in peers]
     if case.planar:
         out += [("mujoco", n) for n in peers]
-    return out
+    return [(m, n) for m, n in out if methods is None or m in methods]
 
 
 def pre_target(case: Case):
@@ -44,7 +46,7 @@ def pre_target(case: Case):
     return case.problem.with_grip_poses({"right": GripPose(pos, right.pose.orientation)})
 
 
-def run_case(case: Case, quick: bool, log=print, bar=None) -> dict:
+def run_case(case: Case, quick: bool, log=print, bar=None, methods=None) -> dict:
     t0 = time.perf_counter()
     ref = reference(case, quick)
     ref_time = time.perf_counter() - t0
@@ -55,7 +57,7 @@ def run_case(case: Case, quick: bool, log=print, bar=None) -> dict:
 
         case = replace(case, problem=replace(case.problem, gravity=np.array([0.0, 0.0, 1.0])))
     rows = []
-    for method, setting in settings(case, quick):
+    for method, setting in settings(case, quick, methods):
         if bar is not None:
             bar.set_postfix_str(f"{case.name}: {method} {setting}")
         row = {"case": case.name, "method": method, "setting": setting}
@@ -102,8 +104,8 @@ def run_case(case: Case, quick: bool, log=print, bar=None) -> dict:
             "reference_time_s": ref_time, "rows": rows, "align": case.align_about_chord}
 
 
-def count(quick: bool) -> int:
-    return sum(len(settings(c, quick)) for c in cases(quick))
+def count(quick: bool, methods=None) -> int:
+    return sum(len(settings(c, quick, methods)) for c in cases(quick, methods))
 
 
 __all__ = ["cases", "settings", "run_case", "count", "METHOD_LABELS", "ORDERS", "SEGMENTS"]

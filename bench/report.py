@@ -32,8 +32,18 @@ def fmt(x, spec=".2g"):
     return format(float(x), spec)
 
 
+def mark(marks, method: str, key: str = "sym", sep: str = " ") -> str:
+    """The footnote mark (or its short text) of a method row re-run later than the rest (see run_all.rerun_marks)."""
+    return sep + marks[method][key] if marks and method in marks else ""
+
+
+def footnotes(marks, methods) -> str:
+    """The footnotes of the marked rows among ``methods``, to put under a table."""
+    return "".join(f"\n{marks[m]['note']}\n" for m in dict.fromkeys(methods) if marks and m in marks)
+
+
 # ---------------------------------------------------------------------------------------------------
-def pareto_chart(result: dict, path: Path) -> None:
+def pareto_chart(result: dict, path: Path, marks=None) -> None:
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(13, 6.2), sharey=True)
     rows = result["rows"]
@@ -50,7 +60,8 @@ def pareto_chart(result: dict, path: Path) -> None:
             good = np.isfinite(xs) & np.isfinite(ys)
             if not good.any():
                 continue
-            label = f"{METHOD_LABELS[method]} (build {np.nanmin(builds):.2g}–{np.nanmax(builds):.2g} s)"
+            label = (f"{METHOD_LABELS[method]} (build {np.nanmin(builds):.2g}–{np.nanmax(builds):.2g} s)"
+                     + mark(marks, method, "short"))
             ax.plot(xs[good], np.maximum(ys[good], 1e-12), "-", color=COLORS[method], alpha=0.6, lw=1.2)
             for x, y, ok, r in zip(xs, ys, oks, rs):
                 if not (np.isfinite(x) and np.isfinite(y)):
@@ -77,7 +88,7 @@ def pareto_chart(result: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def pareto_table(result: dict) -> str:
+def pareto_table(result: dict, marks=None) -> str:
     ref = result["reference"]
     lines = [f"### {result['title']}", "",
              f"Reference: {ref.get('kind')}, energy {fmt(ref.get('energy'), '.6g')} J, own uncertainty "
@@ -92,17 +103,18 @@ def pareto_table(result: dict) -> str:
             pe = r["peer"]
             note = (note + " " if note else "") + f"dt {pe.get('dt', np.nan):.1e} s, {int(pe.get('steps', 0))} steps"
         lines.append(
-            f"| {r['method']} | {r['setting']} | {fmt(r.get('build_s'))} | {fmt(r.get('cold_s'), '.3g')} | "
+            f"| {r['method']}{mark(marks, r['method'], sep='')} | {r['setting']} | {fmt(r.get('build_s'))} | "
+            f"{fmt(r.get('cold_s'), '.3g')} | "
             f"{fmt(r.get('cold_err'), '.1e')} | {fmt(r.get('cold_iter'))} | {fmt(r.get('cold_stable'))} | {fmt(r.get('dE'), '.2g')} | "
             f"{fmt(r.get('warm_s'), '.3g')} | {fmt(r.get('warm_err'), '.1e')} | {fmt(r.get('warm_iter'))} | {note} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + footnotes(marks, [r["method"] for r in result["rows"]])
 
 
 # ---------------------------------------------------------------------------------------------------
 CAT_TEXT = {3.0: "✓", 2.0: "✓u", 1.25: "↓", 1.0: "✗", 0.5: "✗u", 0.0: "F"}
 
 
-def stability_chart(results: list[dict], path: Path) -> None:
+def stability_chart(results: list[dict], path: Path, marks=None) -> None:
     plt = _plt()
     from matplotlib.colors import BoundaryNorm, ListedColormap
 
@@ -120,7 +132,7 @@ def stability_chart(results: list[dict], path: Path) -> None:
                     txt += f"\n{c['iters']}"
                 ax.text(j, i, txt, ha="center", va="center", fontsize=6)
         ax.set_yticks(range(len(keys)))
-        ax.set_yticklabels(keys, fontsize=7)
+        ax.set_yticklabels([k + mark(marks, k.split()[0], "short", "\n") for k in keys], fontsize=7)
         vals = res["values"]
         if res["sweep"] == "rotation":
             labels = [f"{v / np.pi:.2g}π" for v in vals]
@@ -141,7 +153,7 @@ def stability_chart(results: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def stability_table(res: dict) -> str:
+def stability_table(res: dict, marks=None) -> str:
     vals = res["values"]
     if res["sweep"] == "rotation":
         head = [f"{v / np.pi:.3g}π" for v in vals]
@@ -157,8 +169,8 @@ def stability_table(res: dict) -> str:
             if c.get("cat", 0) > 0:
                 t += f" {fmt(c.get('err'), '.0e')} ({c.get('iters')})"
             entries.append(t)
-        lines.append(f"| {k} | " + " | ".join(entries) + " |")
+        lines.append(f"| {k}{mark(marks, k.split()[0], sep='')} | " + " | ".join(entries) + " |")
     lines.append("| reference stable | " + " | ".join(fmt(s) for s in res["reference_stable"]) + " |")
     if any(res.get("reference_kind", [])):
         lines.append("| reference | " + " | ".join(k or "—" for k in res["reference_kind"]) + " |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + footnotes(marks, [k.split()[0] for k in res["cells"]])

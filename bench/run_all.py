@@ -2,6 +2,7 @@
 
     bash scripts/dlo-env run pip install -r requirements-bench.txt      # once: matplotlib, tqdm, pyelastica, mujoco
     bash scripts/dlo-env run python bench/run_all.py [--quick] [--only pareto,stability,paper]
+    bash scripts/dlo-env run python bench/run_all.py --methods fourier-3d-z   # re-run some rows, merge into raw.json
 
 Writes PNG charts and markdown tables into bench/results/ (see bench/README.md for what each shows).
 Timings are wall-clock on this machine while others may share it: compare them only as ratios within
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -26,7 +28,8 @@ from bench import paper_examples as paper  # noqa: E402
 from bench import peer_tuning  # noqa: E402
 from bench.common import machine  # noqa: E402
 from bench.methods import METHOD_LABELS  # noqa: E402
-from bench.report import (_plt, fmt, pareto_chart, pareto_table, stability_chart, stability_table)  # noqa: E402
+from bench.report import (_plt, fmt, footnotes, mark, pareto_chart, pareto_table, stability_chart,  # noqa: E402
+                          stability_table)
 
 OUT = Path(__file__).resolve().parent / "results"
 
@@ -71,7 +74,7 @@ def header(info: dict, quick: bool, started: float) -> str:
 
 
 # ---------------------------------------------------------------------------------------------------
-def headline(results: list[dict], mode: str, tol: float) -> str:
+def headline(results: list[dict], mode: str, tol: float, marks=None) -> str:
     """Fastest setting of each method reaching max error ≤ tol·L (right equilibrium), per case."""
     cases = [r["case"] for r in results]
     lines = [f"| method ({mode}, error ≤ {tol:g} L) | " + " | ".join(cases) + " |", "|---" * (len(cases) + 1) + "|"]
@@ -88,8 +91,9 @@ def headline(results: list[dict], mode: str, tol: float) -> str:
             ran = any(r["method"] == method for r in res["rows"])
             cells.append(f"{best[0] * 1e3:.3g} ms ({best[1]})" if best else ("not reached" if ran else "n/a"))
         if any(c != "n/a" for c in cells):
-            lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+            lines.append(f"| {label}{mark(marks, method, sep='')} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n" + footnotes(marks, [m for m in METHOD_LABELS if any(
+        r["method"] == m for res in results for r in res["rows"])])
 
 
 def run_pareto(quick: bool, bar, log) -> list[dict]:
@@ -101,7 +105,7 @@ def run_pareto(quick: bool, bar, log) -> list[dict]:
     return results
 
 
-def write_pareto(results, info, quick, started):
+def write_pareto(results, info, quick, started, marks=None):
     text = ["# Speed vs accuracy (issue 5)", "", header(info, quick, started),
             "One chart per case: `pareto_<case>.png` (left cold, right warm; log–log; one line per method, "
             "labels = order / segments; build time in the legend).  Error = max over 101 points of "
@@ -111,11 +115,11 @@ def write_pareto(results, info, quick, started):
             "ShapeSolver's include its stability check and outputs; the peers' exclude building the model except "
             "MuJoCo's, which is rebuilt from the vertex list at every solve.  Build = NLP construction (CasADi + "
             "IPOPT set-up; interpreted derivatives, `compile='off'`), or numba JIT for PyElastica.", "",
-            "## Fastest setting reaching 1e-3 L", "", headline(results, "cold", 1e-3), "", headline(results, "warm", 1e-3),
-            "", "## Fastest setting reaching 1e-5 L", "", headline(results, "cold", 1e-5), "",
-            headline(results, "warm", 1e-5), "", "## Every run", ""]
+            "## Fastest setting reaching 1e-3 L", "", headline(results, "cold", 1e-3, marks), "",
+            headline(results, "warm", 1e-3, marks), "", "## Fastest setting reaching 1e-5 L", "",
+            headline(results, "cold", 1e-5, marks), "", headline(results, "warm", 1e-5, marks), "", "## Every run", ""]
     for res in results:
-        text.append(pareto_table(res))
+        text.append(pareto_table(res, marks))
         text.append(f"![{res['case']}](pareto_{res['case']}.png)\n")
     (OUT / "speed_accuracy.md").write_text("\n".join(text))
 
@@ -126,7 +130,7 @@ def run_stability(quick: bool, bar, log) -> list[dict]:
     return results
 
 
-def write_stability(results, info, quick, started):
+def write_stability(results, info, quick, started, marks=None):
     text = ["# Stability map (issue 5)", "", header(info, quick, started),
             "![stability map](stability_map.png)", "",
             "Cells: ✓ right equilibrium (max error to the reference < 0.05 L) with a stable verdict (or none: the "
@@ -134,7 +138,7 @@ def write_stability(results, info, quick, started):
             "unstable one, F no convergence; then the error/L and iterations (Nelder–Mead: function evaluations; "
             "peers: time steps).  How each sweep runs and what its reference is: bench/stability.py.", ""]
     for res in results:
-        text.append(stability_table(res))
+        text.append(stability_table(res, marks))
         if res["sweep"] == "weight":
             text.append("Reference energies of the stable equilibria found (J): "
                         + "; ".join(f"ρ={v:g}: {e}" for v, e in zip(res["values"], res["reference_energies"])) + "\n")
@@ -292,6 +296,91 @@ def write_paper(out, info, quick, started):
 
 
 # ---------------------------------------------------------------------------------------------------
+def rerun_marks(raw: dict) -> dict:
+    """Footnote marks (†, ††, …) for the method rows that ``--methods`` re-ran after the run behind the rest."""
+    marks = {}
+    for i, (method, run) in enumerate(raw.get("method_runs", {}).items()):
+        sym = "†" * (i + 1)
+        marks[method] = {"sym": sym, "short": f"re-run {run['started'][:10]}",
+                         "note": f"{sym} Row {METHOD_LABELS[method].split()[0]} (`{method}`) re-run on {run['started']} "
+                                 f"(git {run['git']}){' ' + run['note'] if run.get('note') else ''}; the other rows are "
+                                 f"from {raw['started']} (git {raw['machine'].get('git')}). Its times are from a "
+                                 "different run: compare them with the other rows only roughly."}
+    return marks
+
+
+def render(raw: dict) -> None:
+    """The pareto and stability charts and tables from a raw dict (as read from raw*.json)."""
+    info, quick, marks = raw["machine"], raw["quick"], rerun_marks(raw)
+    started = time.mktime(time.strptime(raw.get("started", time.strftime("%Y-%m-%d %H:%M")), "%Y-%m-%d %H:%M"))
+    if "pareto" in raw:
+        for res in raw["pareto"]:
+            pareto_chart(res, OUT / f"pareto_{res['case']}.png", marks)
+        write_pareto(raw["pareto"], info, quick, started, marks)
+    if "stability" in raw:
+        stability_chart(raw["stability"], OUT / "stability_map.png", marks)
+        write_stability(raw["stability"], info, quick, started, marks)
+
+
+def rerun(methods: set, parts: set, quick: bool, note: str) -> int:
+    """Run the pareto and stability parts for ``methods`` only, replace their rows (case by case, sweep by
+    sweep) in raw*.json, record the run per method, and re-render every chart and table from the merge."""
+    path = OUT / ("raw_quick.json" if quick else "raw.json")
+    raw = json.loads(path.read_text())
+    if methods - set(METHOD_LABELS):
+        sys.exit(f"--methods: unknown {sorted(methods - set(METHOD_LABELS))}; known: {', '.join(METHOD_LABELS)}")
+    if raw["quick"] != quick:
+        sys.exit(f"--methods: {path.name} does not come from a {'--quick' if quick else 'full'} run")
+    started, info = time.time(), machine()
+    dirty = subprocess.run(["git", "status", "--porcelain", "--", "dlo_ros"], capture_output=True, text=True,
+                           cwd=OUT.parent.parent).stdout.strip()
+    log_file = (OUT / "run_all.log").open("a")  # the earlier run's tracebacks stay: its rows stay too
+    log_file.write(f"\n=== --methods {','.join(sorted(methods))}, {time.strftime('%Y-%m-%d %H:%M')} ===\n")
+
+    def log(msg):
+        log_file.write(str(msg) + "\n")
+        log_file.flush()
+
+    cases = pareto.cases(quick, methods) if "pareto" in parts else []
+    sweeps = [s for s in stability.SWEEPS if stability.sweep_methods(s, methods)] if "stability" in parts else []
+    bar = _bar(sum(len(pareto.settings(c, quick, methods)) for c in cases)
+               + sum(len(stability.sweep_methods(s, methods)) for s in sweeps))
+    import warnings
+
+    warnings.filterwarnings("ignore")
+    for case in cases:
+        new = pareto.run_case(case, quick, log=log, bar=bar, methods=methods)
+        old = next((r for r in raw.setdefault("pareto", []) if r["case"] == new["case"]), None)
+        if old is None:
+            raw["pareto"].append(new)
+            continue
+        old["rows"] = [r for r in old["rows"] if r["method"] not in methods] + new["rows"]
+        old["rows"].sort(key=lambda r: list(METHOD_LABELS).index(r["method"]))  # stable: settings keep their order
+    for sweep in sweeps:
+        new = stability.run_sweep(sweep, quick, bar=bar, log=log, methods=methods)
+        old = next((r for r in raw.setdefault("stability", []) if r["sweep"] == sweep), None)
+        if old is None:
+            raw["stability"].append(new)
+            continue
+        if old["values"] != new["values"]:
+            sys.exit(f"--methods: the {sweep} sweep's points changed since {path.name}; run everything instead")
+        for k in ("reference_stable", "reference_kind"):
+            if json.loads(json.dumps(new[k], default=_json_default)) != old[k]:
+                log(f"warning: {sweep} sweep: {k} differs from the earlier run's: {new[k]} vs {old[k]}")
+        old["cells"].update(new["cells"])
+    bar.close()
+    elapsed = time.time() - started
+    run = {"started": time.strftime("%Y-%m-%d %H:%M", time.localtime(started)),
+           "git": info.get("git", "?") + (" + local changes in dlo_ros/" if dirty else ""),
+           "load_average": info.get("load_average"), "elapsed_s": elapsed, "note": note}
+    raw.setdefault("method_runs", {}).update({m: run for m in sorted(methods)})
+    path.write_text(json.dumps(raw, default=_json_default, indent=1))
+    render(json.loads(path.read_text()))
+    print(f"bench/run_all.py --methods: done in {elapsed / 60:.1f} min; merged into {path}")
+    log(f"elapsed {elapsed:.1f} s")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer cases, settings and sweep points (~15 min here)")
@@ -299,20 +388,18 @@ def main(argv=None) -> int:
                     help="comma-separated subset of peers (settings study), pareto, stability, paper")
     ap.add_argument("--from-json", metavar="RAW", help="re-render the pareto and stability charts and tables from a "
                     "raw*.json of an earlier run (no solving)")
+    ap.add_argument("--methods", metavar="M1,M2", help="run the pareto and stability parts (as limited by --only) for "
+                    "these method rows only, e.g. fourier-3d-z; replace their rows in results/raw.json (raw_quick.json "
+                    "with --quick), record the run date per method and re-render every chart and table from the merge")
+    ap.add_argument("--note", default="", help="with --methods: why the rows were re-run, for raw.json and the "
+                    "tables' footnotes (e.g. 'after the pole fix')")
     args = ap.parse_args(argv)
     parts = set(args.only.split(","))
     if args.from_json:
-        raw = json.loads(Path(args.from_json).read_text())
-        info, quick = raw["machine"], raw["quick"]
-        started = time.mktime(time.strptime(raw.get("started", time.strftime("%Y-%m-%d %H:%M")), "%Y-%m-%d %H:%M"))
-        if "pareto" in raw:
-            for res in raw["pareto"]:
-                pareto_chart(res, OUT / f"pareto_{res['case']}.png")
-            write_pareto(raw["pareto"], info, quick, started)
-        if "stability" in raw:
-            stability_chart(raw["stability"], OUT / "stability_map.png")
-            write_stability(raw["stability"], info, quick, started)
+        render(json.loads(Path(args.from_json).read_text()))
         return 0
+    if args.methods:
+        return rerun(set(args.methods.split(",")), parts, args.quick, args.note)
     OUT.mkdir(parents=True, exist_ok=True)
     started = time.time()
     info = machine()

@@ -159,14 +159,19 @@ def verdict(ok, err, stable, energy=np.nan, ref_energy=np.nan) -> float:
     return 0.5 if stable is False else 1.0
 
 
-def run_sweep(sweep: str, quick: bool, bar=None, log=print) -> dict:
+def sweep_methods(sweep: str, methods=None) -> list[tuple[str, int]]:
+    """The method rows of a sweep; with ``methods`` (a set of method names) only theirs."""
+    rows = TWIST_METHODS if sweep == "rotation" else PLANAR_METHODS
+    return [(m, n) for m, n in rows if methods is None or m in methods]
+
+
+def run_sweep(sweep: str, quick: bool, bar=None, log=print, methods=None) -> dict:
     vals = values(sweep, quick)
     t0 = time.perf_counter()
     refs = references(sweep, vals, quick)
     ref_time = time.perf_counter() - t0
-    methods = TWIST_METHODS if sweep == "rotation" else PLANAR_METHODS
     cells: dict[str, list[dict]] = {}
-    for method, setting in methods:
+    for method, setting in sweep_methods(sweep, methods):
         key = f"{method} {setting}"
         cells[key] = []
         if bar is not None:
@@ -264,5 +269,5 @@ def _run_method(sweep, method, setting, vals, refs, quick) -> list[dict]:
 SWEEPS = ("compression", "rotation", "weight", "jump")
 
 
-def count(quick: bool) -> int:
-    return sum(len(TWIST_METHODS if s == "rotation" else PLANAR_METHODS) for s in SWEEPS)
+def count(quick: bool, methods=None) -> int:
+    return sum(len(sweep_methods(s, methods)) for s in SWEEPS)

@@ -27,9 +27,11 @@ Entity tree (world frame, right-handed, z up, metres; timelines ``update`` (sequ
 ``timeseries/iterations``      Newton steps or IPOPT iterations
 ``timeseries/energy``          bend, twist, stretch, gravity, external_work, total [J]
 ``timeseries/min_eigenvalue``  smallest reduced Hessian eigenvalue (< 0: unstable)
+``model/<key>``                the solver's model per update (``ShapeResult.model``): ``order``,
+                               ``variables``, ``planar`` (1/0), ``estimated_error_m``, ``tolerance_m``
 ``events/status``              status text, logged when it (or stability) changes
 ``events/rejected``            every rejected input with its reason (WARN)
-``events/model``               free-text model events (INFO)
+``events/model``               model events (INFO): changes of the model with their reasons, scene changes
 ``events/recorder``            the recorder's own warnings (dropped items)
 ``scene/yaml``                 the scene file (scene_to_dict as YAML), static; ``scene/changes`` later ones
 ``scene/legend``               colour and arrow scales (static)
@@ -80,6 +82,10 @@ E_SOLVE_TIME = "timeseries/solve_time_ms"
 E_ITERATIONS = "timeseries/iterations"
 E_ENERGY = "timeseries/energy"
 E_EIGEN = "timeseries/min_eigenvalue"
+E_MODEL_SERIES = "model"  # model/<key>: scalars of ShapeResult.model, one row per result that has them
+#: ShapeResult.model entries recorded as scalars (model/<key>; booleans as 1/0), with their series names.
+MODEL_SCALARS = {"order": "basis order", "variables": "unknowns", "planar": "planar (1) / 3D (0)",
+                 "estimated_error_m": "estimated error [m]", "tolerance_m": "tolerance [m]"}
 E_STATUS = "events/status"
 E_REJECTED = "events/rejected"
 E_MODEL = "events/model"
@@ -283,6 +289,7 @@ class _SceneInfo:
     solver_kind: str
     radius: float
     grip_positions: np.ndarray
+    model: str = ""  # the scene's solver.model ('auto', 'full', 'planar'; '' unknown)
 
     def bend_stiffness(self, s: np.ndarray) -> np.ndarray:
         xs, vs = self.rf_table
@@ -386,6 +393,7 @@ def scene_info(scene_or_problem: Any, frame_id: str | None = None, solver: Any =
         rf_table=(tuple(st.bend_stiffness.s), tuple(st.bend_stiffness.values)), force_scale=scale,
         yaml_text=scene_yaml(scene_or_problem) if is_scene else "", obstacles=obstacles, centre=centre,
         gravity=gu, solver_kind=kind, radius=float(st.radius), grip_positions=gpos,
+        model=str(getattr(getattr(scene_or_problem, "options", None), "model", "") or ""),
     )
 
 
@@ -656,14 +664,28 @@ class _Writer:
                             grip_forces=np.concatenate(list(r.forces.values())) if r.forces else np.zeros(0))
                 if r.stable is not None:
                     data["stable"] = bool(r.stable)
-                if r.model:
-                    data["model"] = _json(r.model)
+            if r.model:  # also for a failed solve: the model it was attempted with
+                data["model"] = _json(r.model)
             self._row(E_DATA_RESULT, "AnyValues", it, **data)
+        self._send_model_scalars(items, snaps)
         for rows in shapes.values():
             try:
                 self._send_shapes([items[i] for i in rows], [snaps[i] for i in rows])
             except Exception as exc:  # noqa: BLE001
                 self._error("drawing shapes", exc)
+
+    def _send_model_scalars(self, items: list[_Item], snaps: list[_ResultSnap]) -> None:
+        """model/<key>: the numbers of ShapeResult.model (None and non-numbers are skipped)."""
+        for key in MODEL_SCALARS:
+            have, values = [], []
+            for i, r in enumerate(snaps):
+                v = r.model.get(key) if r.model else None
+                if isinstance(v, (bool, int, float)) and math.isfinite(float(v)):
+                    have.append(i)
+                    values.append(float(v))
+            if have:
+                self._send(f"{E_MODEL_SERIES}/{key}", "Scalars", [items[i] for i in have],
+                           scalars=(np.array(values), [1] * len(have)))
 
     def _send_shapes(self, items: list[_Item], snaps: list[_ResultSnap]) -> None:
         """Centrelines, frames, grips, forces, energies, eigenvalues of ok results with N samples each."""
@@ -751,6 +773,8 @@ class _Writer:
         self.rec.log(E_SOLVE_TIME, rr.SeriesLines(names=["solve time [ms]"], colors=[[255, 170, 60]]), static=True)
         self.rec.log(E_ITERATIONS, rr.SeriesLines(names=["iterations"], colors=[[120, 180, 255]]), static=True)
         self.rec.log(E_EIGEN, rr.SeriesLines(names=["min eigenvalue"], colors=[[120, 220, 120]]), static=True)
+        for key, name in MODEL_SCALARS.items():
+            self.rec.log(f"{E_MODEL_SERIES}/{key}", rr.SeriesLines(names=[name]), static=True)
 
     def _handle_rejected(self, item: _Item) -> None:
         self._row(E_REJECTED, "TextLog", item, text=[item.payload], level=["WARN"])
@@ -1317,19 +1341,30 @@ def _json(value: Any) -> str:
     return json.dumps(value, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o), sort_keys=True)
 
 
+def auto_model(info: _SceneInfo | None) -> bool:
+    """Whether the recorded solver picks its model (solver.model 'auto', not a ShapeSolver of it)."""
+    return info is not None and info.model == "auto" and info.solver_kind in ("", "AutoShapeSolver")
+
+
 def default_blueprint(info: _SceneInfo | None = None) -> Any:
     """3D world view (left) beside the time series and the event log (right); timeline ``update``."""
     import rerun.blueprint as rrb
 
     world = rrb.Spatial3DView(origin=E_WORLD, name="World (m, z up)", eye_controls=_eye(info) if info else None)
-    right = rrb.Vertical(
+    views = [
         rrb.TimeSeriesView(origin=E_ENERGY, name="Energy [J]"),
         rrb.TimeSeriesView(origin=E_SOLVE_TIME, name="Solve time [ms]"),
         rrb.TimeSeriesView(origin=E_ITERATIONS, name="Iterations (Newton steps or IPOPT)"),
         rrb.TimeSeriesView(origin=E_EIGEN, name="Min reduced eigenvalue (< 0: unstable)"),
-        rrb.TextLogView(origin="events", name="Events: status, rejected inputs, model"),
-        row_shares=[3, 2, 2, 2, 2],
-    )
+    ]
+    shares = [3, 2, 2, 2]
+    if auto_model(info):  # the model changes: its error estimate beside the tolerance
+        views.append(rrb.TimeSeriesView(origin=E_MODEL_SERIES, name="Model: estimated error vs tolerance [m]",
+                                        contents=["$origin/estimated_error_m", "$origin/tolerance_m"]))
+        shares.append(2)
+    views.append(rrb.TextLogView(origin="events", name="Events: status, rejected inputs, model"))
+    shares.append(2)
+    right = rrb.Vertical(*views, row_shares=shares)
     return rrb.Blueprint(
         rrb.Horizontal(world, right, column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),

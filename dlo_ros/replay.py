@@ -58,6 +58,7 @@ class RecordedResult:
     points: np.ndarray  # (N, 3), float64 as solved
     targets: dict[str, tuple[np.ndarray, np.ndarray]] | None
     energy: dict[str, float] = field(default_factory=dict)
+    model: dict = field(default_factory=dict)  # ShapeResult.model as recorded (JSON in data/result)
 
 
 @dataclass
@@ -77,6 +78,7 @@ class Recording:
     rejected: list[tuple[int, str]]
     events: list[tuple[str, int | None, str]]
     centrelines: dict[int, np.ndarray]  # update -> (N, 3) as drawn (float32 in the file)
+    model_series: dict[str, list[tuple[int, float]]] = field(default_factory=dict)  # model/<key>: (update, value)
 
     @property
     def updates(self) -> list[int]:
@@ -108,6 +110,17 @@ def _first(value: Any) -> Any:
     if isinstance(value, list):
         return value[0] if value else None
     return value
+
+
+def _model(text: Any) -> dict:
+    """data/result's ``model`` (JSON text) → dict; {} when absent or unreadable."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except (TypeError, ValueError):
+        return {}
+    return value if isinstance(value, dict) else {}
 
 
 def _poses(names: list | None, flat: list | None) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
@@ -167,6 +180,7 @@ def read_recording(path: str | Path) -> Recording:
             points=np.asarray(pts if pts is not None else [], dtype=float).reshape(-1, 3),
             targets=_poses(row.get("target_names"), row.get("target_poses")),
             energy={str(k): float(v) for k, v in zip(energy_terms, energy)},
+            model=_model(_first(row.get("model"))),
         ))
     targets = []
     for row in rows(R.E_DATA_TARGETS):
@@ -181,12 +195,18 @@ def read_recording(path: str | Path) -> Recording:
         strips = row.get("LineStrips3D:strips")
         if strips and row.get(R.TIMELINE_UPDATE) is not None:
             centrelines[int(row[R.TIMELINE_UPDATE])] = np.array([seg[0] for seg in strips] + [strips[-1][-1]], dtype=float)
+    model_series: dict[str, list[tuple[int, float]]] = {}
+    for key in R.MODEL_SCALARS:
+        for row in rows(f"{R.E_MODEL_SERIES}/{key}"):
+            value = _first(row.get("Scalars:scalars"))
+            if value is not None and row.get(R.TIMELINE_UPDATE) is not None:
+                model_series.setdefault(key, []).append((int(row[R.TIMELINE_UPDATE]), float(value)))
     store = stores[0]
     return Recording(
         path=path, application_id=store.application_id, recording_id=store.recording_id,
         entities=set(by_entity), scene_yaml=scene_yaml, scene_name=scene_name, solver_kind=solver_kind,
         scene_changes=changes, results=results, targets=targets, rejected=rejected, events=events,
-        centrelines=centrelines,
+        centrelines=centrelines, model_series=model_series,
     )
 
 

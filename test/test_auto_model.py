@@ -97,6 +97,24 @@ def test_negligible_gravity_is_dropped():
     assert r.model["gravity"]
 
 
+def test_an_obstacle_clear_of_the_plane_keeps_the_planar_model_and_one_across_it_does_not():
+    """A sphere beside the plane (within reach, but farther from the plane than its radius) cannot
+    touch a planar string: the scene stays planar.  The same sphere cutting the plane, off-centre, makes
+    it 3D (the string may be pushed sideways)."""
+    beside = Obstacle.from_dict({"type": "sphere", "center": [0.3, 0.3, 0.2], "radius": 0.1})
+    prob = replace(hanging(), obstacles=(beside,))
+    solver, r = auto(prob)
+    assert r.model["planar"] and r.model["obstacles"] == 0, r.model
+    assert any("clear of the plane" in c for c in r.model["reasons"]), r.model["reasons"]
+    assert_close_to_full(r, prob)
+    across = Obstacle.from_dict({"type": "sphere", "center": [0.3, 0.05, 0.2], "radius": 0.1})
+    _, r = auto(replace(hanging(), obstacles=(across,)))
+    assert not r.model["planar"] and r.model["obstacles"] == 1, r.model
+    # moving one grip sideways toward the sphere: 3D, with the sphere in the model
+    r = solver.solve({"right": ([0.6, 0.05, 0.4], [0, 0, 0, 1])})
+    assert r.ok and not r.model["planar"] and r.model["obstacles"] == 1, r.model
+
+
 def test_obstacles_enter_the_nlp_only_within_reach_and_keep_the_warm_start():
     far = Obstacle.from_dict({"type": "sphere", "center": [0.3, 0, -3.0], "radius": 0.2})
     prob = replace(hanging(), obstacles=(far,))
@@ -115,9 +133,13 @@ def test_obstacles_enter_the_nlp_only_within_reach_and_keep_the_warm_start():
 def test_order_is_the_lowest_meeting_the_tolerance():
     prob = clamped_pair(right=(0.5, 0, 0.05), q_left=quat_about("y", -0.5), twist=0.5)
     _, r = auto(prob)
-    coarse, _ = auto(prob, error_tolerance=0.02)
-    assert coarse.choice.order <= r.model["order"]
+    coarse, rc = auto(prob, error_tolerance=0.02)
+    assert r.model["order"] > 8 and rc.model["order"] == 8, (r.model, rc.model)  # up for 1 mm, down for 2 cm
+    assert any(c.startswith("order 8 error estimate") for c in rc.model["changes"]), rc.model["changes"]
     assert_close_to_full(r, prob)
+    ref = full_reference(prob)  # the coarse model's estimate bounds its true error within a factor 2
+    true = np.max(np.linalg.norm(rc.points - ref.points, axis=1))
+    assert true <= 0.02 and true <= 2 * rc.model["estimated_error_m"], (true, rc.model)
 
 
 def test_explicit_model_overrides_auto():

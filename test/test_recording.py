@@ -26,6 +26,7 @@ from dlo_ros.model.obstacles import Obstacle  # noqa: E402
 from dlo_ros.replay import read_recording, resolve  # noqa: E402
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver import ShapeSolver  # noqa: E402
+from dlo_ros.solver.result import ShapeResult  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 RERUN = str(Path(sys.executable).parent / "rerun")
@@ -140,6 +141,13 @@ def test_recording_holds_every_update_and_the_shapes(recorded):
     assert (R.E_MODEL, UPDATES, "switched to the planar model (test)") in rec.events
     statuses = [e for e in rec.events if e[0] == R.E_STATUS]
     assert statuses == [(R.E_STATUS, 0, "ok: converged")]  # logged only when the status changes
+    # the (fixed) model on the timeline: order, size, planar; a ShapeSolver estimates no error
+    steps = list(range(UPDATES + 1))
+    assert rec.model_series["order"] == [(k, float(results[0].model["order"])) for k in steps]
+    assert rec.model_series["variables"] == [(k, float(results[0].model["variables"])) for k in steps]
+    assert rec.model_series["planar"] == [(k, 0.0) for k in steps]
+    assert "estimated_error_m" not in rec.model_series and "tolerance_m" not in rec.model_series
+    assert rec.results[0].model["order"] == results[0].model["order"]
 
 
 def test_resolve_reproduces_the_recording(recorded):
@@ -187,6 +195,50 @@ def test_log_update_is_the_one_call_a_node_needs(tmp_path, scene, solver):
     assert [x.ros_time_ns for x in got.results] == [1_700_000_000_000_000_000 + k for k in range(4)]
     np.testing.assert_allclose(got.results[-1].targets["right"][0], [0.54, 0.0, 0.4])
     assert resolve(got, tolerance=1e-9, compile="off")["ok"]
+
+
+def test_an_auto_model_is_on_the_timeline(tmp_path, scene, solver):
+    """ShapeResult.model of each update as model/<key> scalars and in data/result (a failed solve's too);
+    model events in events/model at their update; an auto scene gets the error-vs-tolerance plot."""
+    solver.reset()
+    q = scene.problem.grip("right").pose.orientation
+    base = {"planar": True, "twist": False, "stretch": False, "gravity": True, "order": 12, "obstacles": 1,
+            "estimated_error_m": 4.3e-5, "tolerance_m": 1e-3, "variables": 15, "auto": True,
+            "reasons": ["planar: scene lies in one plane"], "changes": [], "changed": []}
+    left_plane = "targets left the plane (grips[1].position is 0.05 m out of the plane): full model"
+    models = [base, base,
+              {**base, "planar": False, "twist": True, "order": 16, "variables": 51, "estimated_error_m": None,
+               "changes": [left_plane], "changed": [left_plane]},
+              {**base, "planar": False, "twist": True, "order": 16, "variables": 51, "estimated_error_m": 6.1e-5,
+               "changes": [left_plane]}]
+    auto_scene = replace(scene, options=replace(scene.options, model="auto"))
+    path = tmp_path / "auto.rrd"
+    with R.Recorder(rrd=path) as rec:
+        rec.log_scene(auto_scene)
+        for k, model in enumerate(models):
+            r = solver.solve({"right": ([0.6 - 0.02 * k, 0.0, 0.4], q)}, warm=True)
+            r.model = model
+            for reason in model["changed"]:
+                rec.log_model_change(f"model change: {reason}", update=k, ros_time_ns=1_000 + k)
+            rec.log_update(r, update=k, problem=solver.problem, ros_time_ns=1_000 + k, warm=k > 0)
+        failed = ShapeResult(status="unreachable", message="too far", model=models[-1])
+        rec.log_update(failed, update=len(models), ros_time_ns=2_000)
+    assert rec.errors == 0, rec.last_error
+    got = read_recording(path)
+    n = len(models) + 1
+    assert got.model_series["order"] == [(0, 12.0), (1, 12.0), (2, 16.0), (3, 16.0), (4, 16.0)]
+    assert got.model_series["variables"] == [(0, 15.0), (1, 15.0), (2, 51.0), (3, 51.0), (4, 51.0)]
+    assert got.model_series["planar"] == [(0, 1.0), (1, 1.0), (2, 0.0), (3, 0.0), (4, 0.0)]
+    assert got.model_series["estimated_error_m"] == [(0, 4.3e-5), (1, 4.3e-5), (3, 6.1e-5), (4, 6.1e-5)]  # None: none
+    assert got.model_series["tolerance_m"] == [(k, 1e-3) for k in range(n)]
+    assert [x.model.get("order") for x in got.results] == [12, 12, 16, 16, 16]
+    assert got.results[-1].status == "unreachable" and got.results[-1].model["planar"] is False
+    assert got.results[2].model["changed"] == [left_plane]
+    assert (R.E_MODEL, 2, f"model change: {left_plane}") in got.events
+    assert R.default_blueprint(R.scene_info(auto_scene)) is not None
+    assert R.auto_model(R.scene_info(auto_scene)) and R.auto_model(R.scene_info(auto_scene, solver="AutoShapeSolver"))
+    assert not R.auto_model(R.scene_info(auto_scene, solver=solver))  # a ShapeSolver: no error-estimate plot
+    assert not R.auto_model(R.scene_info(replace(scene, options=replace(scene.options, model="full"))))
 
 
 # ---- the recorder's mechanics ------------------------------------------------------------------------------

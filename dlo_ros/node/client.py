@@ -30,7 +30,10 @@ import numpy as np
 #: The scene the node tests run on: default_cable, or $DLO_NODE_TEST_SCENE (a name or a path), e.g. to
 #: tell a node problem from a solver problem by running the tests on a scene with another solver.model.
 TEST_SCENE = os.environ.get("DLO_NODE_TEST_SCENE") or "default_cable"
-#: The solver.model the node tests run with (the shipped config/dlo_node.yaml's), or $DLO_NODE_TEST_MODEL.
+#: The solver.model the node tests run with, or $DLO_NODE_TEST_MODEL.  'full', not the shipped 'auto':
+#: these tests compare the node's shapes with an in-process solver to 1e-7 m, which needs both to solve
+#: the same model at the same moment, while auto's background checks change the model on their own
+#: timing.  test/test_node_auto_model.py runs the node with auto (model changes, diagnostics, recording).
 TEST_MODEL = os.environ.get("DLO_NODE_TEST_MODEL") or "full"
 
 #: Domain ids that keep Fast DDS's UDP ports valid (0 is left to interactive use).

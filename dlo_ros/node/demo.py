@@ -100,6 +100,26 @@ def _percentiles(values: Sequence[float]) -> tuple[float, float, float]:
     return float(np.percentile(a, 50)), float(np.percentile(a, 99)), float(a.max())
 
 
+def _model_summary(values: dict) -> str:
+    """The node's final model from its diagnostics (model.* keys): what it solved, its estimated error
+    against the tolerance, and how many times it changed."""
+    if not values.get("model.order"):
+        return "not reported"
+    kind = "planar" if values.get("model.planar") == "True" else "3D"
+    fields = [f for f in ("twist", "stretch", "gravity") if values.get(f"model.{f}") == "True"]
+    text = (("auto: " if values.get("model.auto") == "True" else "") + ", ".join([kind, *fields])
+            + f", order {values['model.order']}, {values.get('model.variables', '?')} unknowns, "
+              f"{values.get('model.obstacles', '?')} obstacle(s) in the NLP")
+    est, tol = values.get("model.estimated_error_m"), values.get("model.tolerance_m")
+    if est not in (None, "", "None"):
+        met = "met" if float(est) <= float(tol) else "NOT met"
+        text += f"; estimated error {float(est):.2g} m (tolerance {float(tol):.2g} m: {met})"
+    changes = values.get("model.changes")
+    if changes not in (None, "", "0"):
+        text += f"; {changes} change(s) during the run"
+    return text
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="dlo demo", description=__doc__.split("\n\n")[0])
     ap.add_argument("--rate", type=float, default=50.0, help="target publication rate [Hz] (default 50)")
@@ -108,9 +128,10 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--compile", default="off", choices=("background", "blocking", "cached", "off"),
                     help="the node's compile mode (default off: interpreted derivatives, no gcc; 'blocking' "
                          "compiles before the first solve, minutes the first time for this scene)")
-    ap.add_argument("--model", default="full", choices=("auto", "full", "planar", "scene"),
-                    help="solver.model of the node (default full: the manoeuvre twists the cable, so it is 3D; "
-                         "'scene': the scene's own setting)")
+    ap.add_argument("--model", default="auto", choices=("auto", "full", "planar", "scene"),
+                    help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
+                         "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "
+                         "own setting)")
     ap.add_argument("--startup-timeout", type=float, default=60.0,
                     help="seconds to wait for the node's first centreline (default 60)")
     ap.add_argument("--log", metavar="FILE", help="keep the node's output in FILE")
@@ -202,6 +223,7 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
         print(f"  failures                {failures} failed solves, {rejected} rejected inputs"
               + (f" (last: {values.get('last error')})" if failures + rejected else ""))
         print(f"  stable shapes           {stable} of {updates}")
+        print(f"  model                   {_model_summary(values)}")
         print(f"  recording               {rrd if rrd is not None else 'off'}"
               + (" (complete when the node has stopped; `dlo replay FILE` opens it)" if rrd is not None else ""))
         if final is not None:
@@ -229,6 +251,9 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
                 size = rrd.stat().st_size if rrd.is_file() else 0
                 print(f"dlo demo: recording: {rrd} ({size / 1e6:.1f} MB)" if size else
                       f"dlo demo: recording: {rrd} was not written (see the node's output)")
+            for line in text.splitlines():  # the node's INFO lines for every change of model, with reasons
+                if "model change (update" in line:
+                    print("  " + line[line.index("model change"):])
             if not clean:
                 print(text[-4000:], file=sys.stderr)
                 code = code or 1

@@ -45,7 +45,7 @@ from ..model.problem import GripPose
 from . import conversions as conv
 from . import params as P
 from .engine import ShapeEngine, Update, build_solver, options_with_output_points
-from .health import Health
+from .health import Health, model_text, new_model_changes
 from .validation import TargetError, check_count, check_pose, normalise_frame
 
 try:  # optional: not on PyPI; present in a full ROS installation
@@ -114,6 +114,8 @@ class DloNode(Node):
         self._record_n = 0  # update counter of the recording: one per streaming solve (ok or failed)
         self._record_last: Update | None = None
         self.recorder = None
+        self._model_changes_seen = 0  # len(ShapeResult.model['changes']) of the current solver, seen so far
+        self._tolerance_warned = False
 
         self.health = Health(scene=scene.name, frame_id=self.frame_id, grips=tuple(self.grip_names),
                              throttle_s=self.get_parameter("warn_throttle").value)
@@ -224,7 +226,9 @@ class DloNode(Node):
     def _make_solver(self, problem, options):
         t0 = time.monotonic()
         solver = build_solver(problem, options, compile=self.compile_mode)
-        self.get_logger().info(f"solver ready in {time.monotonic() - t0:.1f} s (compile: {self.compile_mode})")
+        self._model_changes_seen = 0  # a new solver: a new history of model changes (solver thread)
+        self.get_logger().info(f"solver ready in {time.monotonic() - t0:.1f} s (compile: {self.compile_mode}, "
+                               f"solver.model: {options.model})")
         return solver
 
     # ---- inputs (executor thread) --------------------------------------------------------------------------
@@ -381,14 +385,16 @@ class DloNode(Node):
             with self._latest_lock:
                 self._markers_dirty = self._latest is not None
 
-    def _record_model_change(self, text: str, *, problem=None, options=None) -> None:
-        """Record a change of the solved problem / options (solver thread), with the new scene, so that
-        the recording stays re-solvable from the next update on."""
+    def _record_model_change(self, text: str, *, problem=None, options=None, ros_time_ns: int | None = None) -> None:
+        """Record a model event at the current update (solver thread): a change of the solved problem /
+        options, with the new scene, so that the recording stays re-solvable from the next update on; or,
+        with neither, a change of model the solver made itself (solver.model: auto; the scene is the same)."""
+        scene = None
         if problem is not None:
-            self._record_scene = replace(self._record_scene, problem=problem)
+            self._record_scene = scene = replace(self._record_scene, problem=problem)
         if options is not None:
-            self._record_scene = replace(self._record_scene, options=options)
-        self.recorder.log_model_change(text, update=self._record_n, scene=self._record_scene)
+            self._record_scene = scene = replace(self._record_scene, options=options)
+        self.recorder.log_model_change(text, update=self._record_n, ros_time_ns=ros_time_ns, scene=scene)
 
     def _job_done(self, what: str):
         """A done-callback logging a parameter change the solver thread could not apply."""
@@ -412,7 +418,7 @@ class DloNode(Node):
             return
         r = u.result
         stamp = u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds
-        self._record_update(u, stamp)
+        model_changed = self._record_update(u, stamp)
         self._path_pub.publish(conv.result_to_path(r, self.frame_id, stamp))
         for name, wrench in r.grips.items():
             pub = self._wrench_pubs.get(name)
@@ -427,21 +433,48 @@ class DloNode(Node):
             self._markers_dirty = True
         if self.health.updates == 1:
             self.get_logger().info(f"first shape published {time.monotonic() - self._t_start:.1f} s after start "
-                                   f"({r.status}, stable={r.stable})")
+                                   f"({r.status}, stable={r.stable}; model {model_text(r.model) or 'not reported'})")
         if r.stable is False and self.health.should_warn("unstable"):
             self.get_logger().warning(f"the published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g}): "
                                       "the cable would not stay in this shape")
-        if was_error:
+        if was_error or model_changed:
             self._publish_diagnostics(immediate=True)
 
-    def _record_update(self, u: Update, stamp_ns: int) -> None:
-        """One streaming solve into the recording (solver thread); the update counter advances."""
+    def _record_update(self, u: Update, stamp_ns: int) -> bool:
+        """One streaming solve into the model diagnostics and the recording (solver thread); the update
+        counter advances.  Returns whether the solver changed its model."""
         if u is self._record_last:  # on_update raised after recording it: on_failure gets the same update
-            return
+            return False
         self._record_last = u
+        changes = self._observe_model(u.result, stamp_ns)
         self.recorder.log_update(u.result, update=self._record_n, problem=u.problem, ros_time_ns=stamp_ns,
                                  warm=u.trigger not in ("initial", "reset", "rebuild"))
         self._record_n += 1
+        return bool(changes)
+
+    def _observe_model(self, result, stamp_ns: int) -> list[str]:
+        """The model of a streaming solve (ok or failed) into the diagnostics; each change of model it made
+        is logged (INFO) and recorded in events/model at this update, with its reason."""
+        model = dict(getattr(result, "model", None) or {})
+        changes = []
+        if model:
+            changes, self._model_changes_seen = new_model_changes(model, self._model_changes_seen)
+        now = model_text(model)
+        for reason in changes:
+            self.get_logger().info(f"model change (update {self._record_n}): {reason}")
+            self._record_model_change(f"model change: {reason}", ros_time_ns=stamp_ns)
+        if changes:  # the model after all of them
+            self.get_logger().info(f"model now (update {self._record_n}): {now}")
+            self._record_model_change(f"model now: {now}", ros_time_ns=stamp_ns)
+        self.health.set_model(model, changes, stamp_ns=stamp_ns, update=self._record_n)
+        problem = self.health.tolerance_problem()
+        if bool(problem) != self._tolerance_warned:
+            self._tolerance_warned = bool(problem)
+            if problem:
+                self.get_logger().warning(problem)
+            else:
+                self.get_logger().info(f"model meets its error tolerance again: {now}")
+        return changes
 
     def _on_failure(self, kind: str, message: str, u: Update | None) -> None:
         if self._closing:

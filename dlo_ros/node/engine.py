@@ -167,6 +167,13 @@ class ShapeEngine:
             self._fail_jobs(exc)
             return
         self._set_state("ready")
+        try:
+            self._serve()
+        finally:
+            close_solver(self._solver)
+
+    def _serve(self) -> None:
+        """The first shape, then targets and jobs until stopped."""
         with self._cond:
             if self._stop:
                 return
@@ -251,6 +258,7 @@ class ShapeEngine:
                 if options != solver.options:
                     self._set_state("building")
                     new = self._make_solver(solver.problem, options)
+                    close_solver(solver)
                     self._solver = solver = new
                     self._set_state("ready")
                 job.future.set_result(self._stream_now("rebuild"))
@@ -272,22 +280,19 @@ def _miss(result: ShapeResult, problem: Problem, targets: dict[str, GripPose]) -
 
 
 def build_solver(problem: Problem, options: SolverOptions, compile: str | None = None):
-    """The solver for a scene: ``dlo_ros.solver.make_solver`` when the solver package provides it (it
-    picks the model for solver.model 'auto'), else ``ShapeSolver``; both have the same interface.
+    """The node's solver for a scene: ``dlo_ros.solver.make_solver`` (it picks the model for
+    solver.model 'auto', with its a-posteriori checks on a worker thread so that the stream never
+    waits for them).  compile: 'background', 'blocking', 'cached' or 'off'; None: 'background'."""
+    from ..solver import make_solver
 
-    compile: the solver's compile mode ('background', 'blocking', 'cached', 'off'); None: its default.
-    'off' also works with solvers that predate the mode (through DLO_NO_COMPILE, set by the caller).
-    """
-    import inspect
+    return make_solver(problem, options, compile=compile or "background", checks="background")
 
-    from .. import solver as solver_pkg
 
-    factory = getattr(solver_pkg, "make_solver", None)
-    if factory is None:
-        from ..solver.shape_solver import ShapeSolver as factory
-    if compile is not None and "compile" in inspect.signature(factory).parameters:
-        return factory(problem, options, compile=compile)
-    return factory(problem, options)
+def close_solver(solver) -> None:
+    """Stop a solver's helper threads (auto's check worker), if it has any."""
+    close = getattr(solver, "close", None)
+    if close is not None:
+        close()
 
 
 def options_with_output_points(options: SolverOptions, n: int) -> SolverOptions:

@@ -3,21 +3,72 @@
 The level follows the latest event of the streaming state:
 * 'error' while no solver could be built;
 * 'warn' while starting (no shape yet), when the newest input was rejected or its solve failed (the last
-  good shape stays published), or when the published equilibrium is unstable;
+  good shape stays published), when the published equilibrium is unstable, or when the solver's model
+  misses its error tolerance (``solver.model: auto``: estimated_error_m > tolerance_m, or "tolerance not
+  met" in its reasons);
 * 'ok' otherwise.
-Counters and the last error (with its kind, see validation.KINDS) stay in the values.
+Counters and the last error (with its kind, see validation.KINDS) stay in the values, and so do the
+current model (``ShapeResult.model`` of the newest solve, keys ``model.*``) and its last change.
 """
 from __future__ import annotations
 
 import collections
 import threading
 import time
-from typing import Callable
+from typing import Callable, Mapping, Sequence
 
 from ..solver.result import ShapeResult
 from .validation import KINDS
 
 RATE_WINDOW_S = 2.0
+#: ShapeResult.model entries shown in the diagnostics as ``model.<key>`` (in this order).
+MODEL_KEYS = ("auto", "planar", "twist", "stretch", "gravity", "order", "obstacles", "variables",
+              "estimated_error_m", "tolerance_m")
+
+
+def model_text(model: Mapping | None) -> str:
+    """One line for a ShapeResult.model: 'auto: planar, twist, gravity, order 12, 15 unknowns, 1 obstacle(s),
+    estimated error 4.3e-05 m (tolerance 0.001 m)'; '' for an empty model."""
+    if not model:
+        return ""
+    parts = ["planar" if model.get("planar") else "3D"]
+    parts += [name for name in ("twist", "stretch", "gravity") if model.get(name)]
+    if model.get("order") is not None:
+        parts.append(f"order {model['order']}")
+    if model.get("variables") is not None:
+        parts.append(f"{model['variables']} unknowns")
+    if model.get("obstacles") is not None:
+        parts.append(f"{model['obstacles']} obstacle(s)")
+    est, tol = model.get("estimated_error_m"), model.get("tolerance_m")
+    if isinstance(est, (int, float)):
+        parts.append(f"estimated error {est:.2g} m" + (f" (tolerance {tol:.2g} m)" if isinstance(tol, (int, float)) else ""))
+    elif isinstance(tol, (int, float)):
+        parts.append(f"error not estimated yet (tolerance {tol:.2g} m)")
+    return ("auto: " if model.get("auto") else "") + ", ".join(parts)
+
+
+def new_model_changes(model: Mapping, seen: int) -> tuple[list[str], int]:
+    """The model changes to report for one solve, and the new ``seen``.
+
+    ``model``: its ShapeResult.model; ``seen``: how many entries of ``model['changes']`` (the solver's
+    whole history of changes) were already reported (0 after a new solver was built).  The changes are
+    ``model['changed']`` (made during the solve), after any change the solver made between solves (e.g.
+    in set_problem after a parameter change), which only shows as a new entry of ``changes``.
+    """
+    changed = [str(r) for r in model.get("changed") or ()]
+    history = model.get("changes")
+    if not isinstance(history, (list, tuple)):
+        return changed, seen
+    if len(history) < seen:  # not the solver seen before
+        seen = 0
+    during = collections.Counter(changed)
+    between = []
+    for reason in history[seen:]:  # the history's new entries that 'changed' does not report
+        if during[str(reason)] > 0:
+            during[str(reason)] -= 1
+        else:
+            between.append(str(reason))
+    return between + changed, len(history)
 
 
 class Health:
@@ -44,6 +95,12 @@ class Health:
         self.targets_received = self.targets_coalesced = 0
         self._update_times: collections.deque[float] = collections.deque()
         self._warned: dict[str, float] = {}
+        self.model: dict = {}                      # ShapeResult.model of the newest streaming solve
+        self.model_changes = 0                     # model changes seen since start
+        self.last_model_change = ""                # the reasons of the newest solve that changed the model
+        self.last_model_change_time: float | None = None      # clock() when the node saw it
+        self.last_model_change_stamp_ns: int | None = None    # ROS time of the solve that made it
+        self.last_model_change_update: int | None = None      # that solve's update number (recording)
 
     # ---- events -----------------------------------------------------------------------------------------
     def set_state(self, state: str) -> None:
@@ -65,6 +122,38 @@ class Health:
             self._update_times.append(now)
             while self._update_times and now - self._update_times[0] > RATE_WINDOW_S:
                 self._update_times.popleft()
+
+    def set_model(self, model: Mapping | None, changes: Sequence[str] = (), *, stamp_ns: int | None = None,
+                  update: int | None = None) -> None:
+        """The model of the newest streaming solve (ok or failed; ``ShapeResult.model``) and the model
+        changes it made (reasons, oldest first), stamped with the solve's ROS time and update number."""
+        now = self._clock()
+        with self._lock:
+            if model:
+                self.model = dict(model)
+            if changes:
+                self.model_changes += len(changes)
+                self.last_model_change = "; ".join(str(c) for c in changes)  # one solve may make several
+                self.last_model_change_time = now
+                self.last_model_change_stamp_ns = stamp_ns
+                self.last_model_change_update = update
+
+    def tolerance_problem(self) -> str:
+        """'' when the model meets its error tolerance (or says nothing about it); else why not."""
+        with self._lock:
+            return self._tolerance_problem()
+
+    def _tolerance_problem(self) -> str:  # lock held
+        m = self.model
+        est, tol = m.get("estimated_error_m"), m.get("tolerance_m")
+        not_met = [str(r) for r in m.get("reasons") or () if "tolerance not met" in str(r)]
+        over = isinstance(est, (int, float)) and isinstance(tol, (int, float)) and est > tol
+        if not (over or not_met):
+            return ""
+        text = "model: " + (not_met[0] if not_met else "tolerance not met")
+        if isinstance(est, (int, float)) and isinstance(tol, (int, float)):
+            text += f"; estimated error {est:.3g} m vs tolerance {tol:.3g} m"
+        return text
 
     def error(self, kind: str, message: str, *, rejected: bool) -> bool:
         """A rejected input (rejected=True) or a failed solve; returns whether to log a warning now
@@ -129,6 +218,9 @@ class Health:
                 return "warn", f"{what}: {self.last_message}; the last good shape stays published"
             if r.stable is False:
                 return "warn", f"published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g})"
+            tolerance = self._tolerance_problem()
+            if tolerance:
+                return "warn", tolerance
             return "ok", f"shape up to date ({r.solve_time_ms:.1f} ms, {r.iterations} iterations)"
 
     def values(self) -> dict[str, object]:
@@ -169,4 +261,17 @@ class Health:
             }
             for kind, n in self.errors.items():
                 out[f"errors.{kind}"] = n
+            m = self.model
+            for key in MODEL_KEYS:
+                out[f"model.{key}"] = m.get(key)
+            if m:
+                out["model.auto"] = bool(m.get("auto"))  # a fixed model (ShapeSolver) does not say
+            out["model.reasons"] = "; ".join(str(r) for r in m.get("reasons") or ())
+            out["model.changes"] = self.model_changes
+            out["model.last change"] = self.last_model_change
+            out["model.last change time"] = (None if self.last_model_change_stamp_ns is None
+                                             else f"{self.last_model_change_stamp_ns / 1e9:.3f}")
+            out["model.last change update"] = self.last_model_change_update
+            out["model.last change age s"] = (None if self.last_model_change_time is None
+                                              else now - self.last_model_change_time)
         return out

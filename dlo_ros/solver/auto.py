@@ -16,20 +16,30 @@ fails.  Reductions and their checks:
 * obstacles — an obstacle is in the NLP only if the string can reach it: within max(s_g, L − s_g) + L/4
   of every grip g (the L/4 margin adds it a move before it can touch).  A move that brings a new one
   within that range rebuilds the NLP with it, keeping the warm start.
-* order — the lowest of 8, 12, 16, 24, 32 whose centreline moves by less than δ/2 when the order is
-  raised to the next one (the a-posteriori estimate, reported as estimated_error_m), re-checked every
-  ``recheck_every`` updates with a warm shadow solver; over δ/2 → next order.  At the highest order the
+* order — starts at 12; the lowest of 8, 12, 16, 24, 32 whose centreline moves by less than δ/2 when
+  the order is raised to the next one (the a-posteriori estimate, reported as estimated_error_m),
+  re-checked every ``recheck_every`` updates with a warm shadow solver; over δ/2 → next order.  Once
+  per model the next lower order is tried: if it is within δ/4 of the current one, it is used.  At the highest order the
   last estimate stays (with "tolerance not met" in reasons).  Known limit: with a neutral mode (no
   gravity, clamps along one axis) the shadow can drift along it and inflate the estimate.
 
 Switching models maps the previous solution into the new one (ShapeSolver.adopt_warm_start), so a
 stream keeps its warm start.  Every change is kept in ``changes`` (time, reason) and reported in
-ShapeResult.model.
+ShapeResult.model (``changed``: the changes made during that solve).
+
+Checks run synchronously inside ``solve`` (``checks='sync'``: the CLI) or on a worker thread from a
+snapshot of the solve (``checks='background'``: the node), so that a stream never waits for a build:
+the worker builds the order shadow and the 3D checker into a pool of models, and a verdict to
+escalate is applied at the next ``solve`` by switching to the pooled model the check already built.
+The 3D model of a planar choice is pooled from the first check on, so targets leaving the plane switch
+without a build; an obstacle within L/2 of reach is built ahead, and enters the NLP at L/4.  The model
+never de-escalates during a run (a scene change re-chooses).
 """
 from __future__ import annotations
 
 import threading
 import time
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -44,6 +54,7 @@ from .result import ShapeResult
 from .shape_solver import ShapeSolver, is_stable, with_checked_poses
 
 ORDERS = (8, 12, 16, 24, 32)
+START_ORDER = 12  # the first answer is within 1e-3·L for typical scenes; checks go up, or down to 8
 
 
 @dataclass
@@ -79,6 +90,23 @@ def reachable_obstacles(problem: Problem, margin: float) -> tuple[int, ...]:
     return tuple(keep)
 
 
+def clear_of_plane(ob: Obstacle, origin: np.ndarray, normal: np.ndarray, margin: float) -> bool:
+    """Is the obstacle more than ``margin`` from the plane through ``origin`` with unit ``normal``?  A
+    string lying in the plane cannot touch it, so the planar equilibrium is an equilibrium of the 3D
+    problem with that obstacle inactive (the planar model leaves it out; its 3D stability is checked
+    with it)."""
+    prm, n = ob.params, normal
+    if ob.type == "sphere":
+        return abs(np.dot(prm[0:3] - origin, n)) - prm[3] > margin
+    if ob.type == "capsule":
+        da, db = np.dot(prm[0:3] - origin, n), np.dot(prm[3:6] - origin, n)
+        return da * db > 0 and min(abs(da), abs(db)) - prm[6] > margin
+    if ob.type == "box":
+        return abs(np.dot(prm[0:3] - origin, n)) - np.linalg.norm(prm[12:15]) > margin
+    # half-space: parallel to the plane, with the plane outside it
+    return abs(abs(np.dot(prm[3:6], n)) - 1.0) < 1e-12 and ob.h(origin) < -margin
+
+
 def imposes_twist(problem: Problem, r0: np.ndarray) -> bool:
     """Do the clamps' orientations differ by a rotation about the tangent (ψ targets not all equal)?"""
     if problem.string.twist_stiffness.is_zero:
@@ -87,45 +115,115 @@ def imposes_twist(problem: Problem, r0: np.ndarray) -> bool:
     return any(abs(np.angle(np.exp(1j * (p - psis[0])))) > 1e-9 for p in psis[1:])
 
 
-class AutoShapeSolver:
-    """The ShapeSolver interface (solve, reset, set_problem, problem, options) with model selection."""
+@dataclass
+class _Snapshot:
+    """What a check needs of one committed solve (taken on the streaming thread)."""
 
-    def __init__(self, problem: Problem, options: SolverOptions | None = None, compile: str = "background"):
+    inner: ShapeSolver
+    state: object
+    choice: ModelChoice
+    problem: Problem
+    poses: dict
+    points: np.ndarray
+    max_grip_force: float
+
+
+@dataclass
+class _Verdict:
+    """A check's outcome: escalate to ``choice`` (with ``reason``), or keep with ``estimate``."""
+
+    snapshot: _Snapshot
+    choice: ModelChoice | None = None
+    reason: str = ""
+    estimate: float = float("nan")
+
+
+class AutoShapeSolver:
+    """The ShapeSolver interface (solve, reset, set_problem, problem, options) with model selection.
+
+    checks: 'sync' runs the a-posteriori checks inside ``solve`` (a one-shot solve is checked before it
+    is returned: the CLI); 'background' runs them on a worker thread from a snapshot of the solve, so a
+    stream never waits for them (the node): their verdict is applied at the next ``solve`` — an
+    escalation switches to the model the check has already built and warmed, so the switch costs no
+    build.  Until the first check of a model has finished, ``model['checked']`` is false and
+    ``estimated_error_m`` is None.
+    """
+
+    POOL_SIZE = 6
+
+    def __init__(self, problem: Problem, options: SolverOptions | None = None, compile: str = "background",
+                 checks: str = "sync"):
         options = options or SolverOptions()
         if options.model != "auto":
             raise ValueError("AutoShapeSolver needs solver.model 'auto'")
+        if checks not in ("sync", "background"):
+            raise ValueError(f"checks: must be 'sync' or 'background', got {checks!r}")
         problem.validate()
         options.validate()
         self.options = options
         self.compile = compile
+        self.checks = checks
         self.problem = problem
         self.tolerance = options.error_tolerance or 1e-3 * problem.string.length
         self.changes: list[tuple[float, str]] = []
         self._lock = threading.RLock()
-        self._updates = 0
-        self._shadow: ShapeSolver | None = None
-        self._checker: ShapeSolver | None = None
+        self._pool: dict[tuple, ShapeSolver] = {}  # built models by (tag,) + ModelChoice.key(), newest last
+        self._pool_lock = threading.Lock()  # guards the dict only (builds run outside it)
+        self._job_keys: frozenset = frozenset()  # pool keys the running job may use
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix="dlo-auto-check") if checks == "background" else None
+        self._job: Future | None = None
+        self._since_check = 0
+        self._unchecked = True
+        self._lower_tried: set[tuple] = set()  # model keys already tried as a lower order
         self.choice = self._initial_choice(problem)
-        self.inner = self._make_inner(self.choice)
+        self.inner = self._solver_for(self.choice, problem, stream=True)
+        if self._worker is not None:  # build ahead: the 3D model a stream leaving the plane switches to, first,
+            # then the order shadows the first check needs
+            i = ORDERS.index(self.choice.order)
+            ahead = [self._full_choice(self.choice, problem)] if self.choice.planar else []
+            ahead += [replace(self.choice, order=o) for o in ORDERS[i + 1:i + 2] + ORDERS[max(i - 1, 0):i]]
+            self._submit(self._prebuild, {("",) + c.key() for c in ahead}, ahead, problem)
 
     # ---- choosing ----------------------------------------------------------------------------------
     def _initial_choice(self, problem: Problem) -> ModelChoice:
         L, tol = problem.string.length, self.tolerance
         reasons = []
-        planar = False
-        if self.options.frame == "auto":
-            r0 = choose_reference_frame(problem, "auto")
-            why = planarity_violation(problem, r0[:, 2]) or ("the clamps impose twist" if imposes_twist(problem, r0) else "")
-            planar = not why
-            reasons.append("planar: scene lies in one plane" if planar else f"3D: {why}")
-        sag = problem.string.weight_per_length.maximum * L**4 / (8 * problem.string.bend_stiffness.minimum)
-        gravity = sag >= tol / 10
-        reasons.append(f"gravity {'kept' if gravity else 'dropped'}: sag bound {sag:.3g} m vs {tol / 10:.3g} m")
         obstacles = reachable_obstacles(problem, L / 4)
         if len(obstacles) < len(problem.obstacles):
             reasons.append(f"{len(problem.obstacles) - len(obstacles)} obstacle(s) out of reach")
-        order = self.options.order if self.options.order in ORDERS else ORDERS[0]
-        return ModelChoice(planar, False, False, gravity, ORDERS[0], obstacles, reasons=reasons)
+        planar = False
+        if self.options.frame == "auto":
+            r0 = choose_reference_frame(problem, "auto")
+            in_plane = self._in_plane_obstacles(problem, obstacles, r0)
+            why = self._not_planar(problem, in_plane, r0)
+            planar = not why
+            reasons.append("planar: scene lies in one plane" if planar else f"3D: {why}")
+            if planar and len(in_plane) < len(obstacles):
+                reasons.append(f"{len(obstacles) - len(in_plane)} obstacle(s) clear of the plane")
+                obstacles = in_plane
+        sag = problem.string.weight_per_length.maximum * L**4 / (8 * problem.string.bend_stiffness.minimum)
+        gravity = sag >= tol / 10
+        reasons.append(f"gravity {'kept' if gravity else 'dropped'}: sag bound {sag:.3g} m vs {tol / 10:.3g} m")
+        return ModelChoice(planar, False, False, gravity, START_ORDER, obstacles, reasons=reasons)
+
+    @staticmethod
+    def _in_plane_obstacles(problem: Problem, obstacles, r0: np.ndarray) -> tuple[int, ...]:
+        """The ``obstacles`` (indices) a string in the plane of ``r0`` could touch."""
+        origin, margin = problem.grips[0].pose.position, problem.string.radius + 1e-3 * problem.string.length
+        return tuple(i for i in obstacles if not clear_of_plane(problem.obstacles[i], origin, r0[:, 2], margin))
+
+    def _full_choice(self, choice: ModelChoice, problem: Problem) -> ModelChoice:
+        """The 3D model of ``choice``: every obstacle within reach is in it."""
+        reach = set(reachable_obstacles(problem, problem.string.length / 4)) | set(choice.obstacles)
+        return replace(choice, planar=False, obstacles=tuple(sorted(reach)), reasons=list(choice.reasons))
+
+    @staticmethod
+    def _not_planar(problem: Problem, obstacles, r0: np.ndarray, tolerance: float | None = None) -> str:
+        """Why the scene (with only the ``obstacles`` indices in it) is not planar in the plane of
+        reference frame ``r0`` (normal r0[:, 2]); '' if it is."""
+        scene = replace(problem, obstacles=tuple(problem.obstacles[i] for i in sorted(obstacles)))
+        kw = {} if tolerance is None else {"tolerance": tolerance}
+        return planarity_violation(scene, r0[:, 2], **kw) or ("the clamps impose twist" if imposes_twist(scene, r0) else "")
 
     def _reduced(self, choice: ModelChoice, problem: Problem) -> tuple[Problem, SolverOptions]:
         st = problem.string
@@ -138,22 +236,57 @@ class AutoShapeSolver:
                        quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8))
         return reduced, opts
 
-    def _make_inner(self, choice: ModelChoice, previous: ShapeSolver | None = None, helper: bool = False) -> ShapeSolver:
-        """A ShapeSolver of ``choice``; helpers (order shadow, 3D checker) never start a compile."""
-        reduced, opts = self._reduced(choice, self.problem)
-        mode = ("off" if self.compile == "off" else "cached") if helper else self.compile
-        inner = ShapeSolver(reduced, opts, compile=mode)
-        choice.twist = inner.model.layout.twist
-        if previous is not None:
-            inner.adopt_warm_start(previous)
-        return inner
+    def _solver_for(self, choice: ModelChoice, problem: Problem, *, stream: bool, source: ShapeSolver | None = None,
+                    state=None, tag: str = "") -> ShapeSolver:
+        """The pooled ShapeSolver of ``choice`` set to ``problem`` (built if new), warm-started from
+        ``source`` (its ``state`` snapshot if given).  Helpers (order shadow, 3D checker) never start a
+        compile and create IPOPT lazily; a solver that streams compiles as ``compile`` says.  ``tag``
+        keeps a separate copy (the 3D checker, so that a switch to 3D never waits for a check)."""
+        reduced, opts = self._reduced(choice, problem)
+        key = (tag,) + choice.key()
+        with self._pool_lock:
+            solver = self._pool.pop(key, None)
+        if solver is None:
+            solver = ShapeSolver(reduced, opts, compile=self.compile if stream else
+                                 ("off" if self.compile == "off" else "cached"), lazy_ipopt=not stream)
+        else:
+            solver.set_problem(reduced)
+        with self._pool_lock:
+            self._pool[key] = solver
+            busy = set(self._job_keys) | {key}
+            while len(self._pool) > self.POOL_SIZE:  # drop the least recently used that is idle
+                old = next((k for k, s in self._pool.items() if s is not getattr(self, "inner", None) and k not in busy), None)
+                if old is None:
+                    break
+                del self._pool[old]
+        if stream:
+            solver.start_compile(self.compile)
+        choice.twist = solver.model.layout.twist
+        if source is not None and not solver.adopt_warm_start(source, state):
+            solver.reset()  # nothing to map: never keep an older, unrelated warm start
+        return solver
+
+    def _submit(self, fn, keys: set, *args) -> None:
+        """Run ``fn(*args)`` on the worker; ``keys``: the pooled models it may use meanwhile."""
+        self._job_keys = frozenset(keys)
+        self._job = self._worker.submit(fn, *args)
+
+    def _pooled(self, choice: ModelChoice, tag: str = "") -> ShapeSolver | None:
+        with self._pool_lock:
+            return self._pool.get((tag,) + choice.key())
 
     def _switch(self, choice: ModelChoice, reason: str) -> None:
-        """Change model, mapping the warm start; the estimate carries over until re-measured."""
+        """Stream on ``choice`` from now on, mapping the warm start; unchecked until its first check.
+        Waits for a running background job only if that job may be using the model switched to."""
+        job = self._job
+        if job is not None and not job.done() and ("",) + choice.key() in self._job_keys:
+            wait([job])
         self.changes.append((time.time(), reason))
+        self.inner = self._solver_for(choice, self.problem, stream=True, source=self.inner)
+        # the reasons say why this model: drop the planar one when leaving the plane, add this change
+        choice.reasons = [r for r in choice.reasons if choice.planar or not r.startswith("planar:")] + [reason]
         self.choice = choice
-        self.inner = self._make_inner(choice, self.inner)
-        self._shadow = self._checker = None
+        self._unchecked = True
 
     # ---- public API ---------------------------------------------------------------------------------
     @property
@@ -165,123 +298,214 @@ class AutoShapeSolver:
         return self.inner.kkt_compiled
 
     def reset(self) -> None:
+        """Forget every warm start (the streaming model's and the pooled ones'): the next solve is cold.
+        A background verdict still pending is dropped (it describes a shape that is gone)."""
         with self._lock:
-            self.inner.reset()
-            self._shadow = None
+            self._wait_for_check()
+            self._job = None
+            with self._pool_lock:
+                pooled = list(self._pool.values())
+            for solver in pooled + [self.inner]:
+                solver.reset()
+            self._unchecked = True
+
+    def close(self) -> None:
+        """Stop the check worker (waits for a running check)."""
+        if self._worker is not None:
+            self._worker.shutdown(wait=True, cancel_futures=True)
 
     def set_problem(self, problem: Problem) -> None:
         problem.validate()
         with self._lock:
+            self._wait_for_check()
             self.problem = problem
             self.tolerance = self.options.error_tolerance or 1e-3 * problem.string.length
+            self._lower_tried.clear()
             choice = self._initial_choice(problem)
             choice.order, choice.stretch = self.choice.order, self.choice.stretch
             if choice.key() != self.choice.key():
                 self._switch(choice, "scene changed")
             else:
                 self.inner.set_problem(self._reduced(self.choice, problem)[0])
+                self._unchecked = True
 
     def solve(self, poses: dict | None = None, *, warm: bool = True, commit: bool = True) -> ShapeResult:
         with self._lock:
             t0 = time.perf_counter()
             try:
-                problem = self._with_poses(poses)
+                problem = with_checked_poses(self.problem, poses)
             except (ValueError, KeyError) as exc:
                 return self._finish(ShapeResult(status="invalid", message=str(exc).strip("'\"")), t0, [])
             notes: list[str] = []
-            if self.choice.planar:  # new targets may leave the plane (or twist a clamp): 3D before solving
-                why = planarity_violation(problem, self.inner.nlp.r0[:, 2], tolerance=1e-7) or (
-                    "the clamps impose twist" if imposes_twist(problem, self.inner.nlp.r0) else "")
-                if why:
-                    if not commit:  # a query must not change the streaming model: answer with a full model
-                        full = ShapeSolver(self._reduced(replace(self.choice, planar=False), problem)[0],
-                                           self._reduced(replace(self.choice, planar=False), problem)[1], compile="cached")
-                        full.adopt_warm_start(self.inner)
-                        return self._finish(full.solve({g.name: g.pose for g in problem.grips}, commit=False), t0, [])
-                    self.problem = problem
-                    self._switch(replace(self.choice, planar=False), f"targets left the plane ({why}): full model")
-                    notes.append(self.changes[-1][1])
-            reach = reachable_obstacles(problem, problem.string.length / 4)
-            if set(reach) - set(self.choice.obstacles) and commit:
-                new = replace(self.choice, obstacles=tuple(sorted(set(reach) | set(self.choice.obstacles))))
-                self._switch(new, f"obstacle(s) {sorted(set(reach) - set(self.choice.obstacles))} came within reach")
+            if commit:
+                self._apply_check(notes)
+            L = problem.string.length
+            reach = reachable_obstacles(problem, L / 4)
+            if self.choice.planar:
+                reach = self._in_plane_obstacles(problem, reach, self.inner.nlp.r0)
+            entering = set(reach) - set(self.choice.obstacles)
+            obstacles = tuple(sorted(entering | set(self.choice.obstacles)))
+            why = self._not_planar(problem, obstacles, self.inner.nlp.r0, tolerance=1e-7) if self.choice.planar else ""
+            if why or entering:  # targets left the plane, or an obstacle came within reach: a richer model
+                richer = self._full_choice(self.choice, problem) if why else replace(self.choice, obstacles=obstacles)
+                if not commit:  # a query must not change the streaming model: answer with the richer one
+                    self._wait_for_check()
+                    other = self._solver_for(richer, problem, stream=False, source=self.inner)
+                    return self._finish(other.solve({g.name: g.pose for g in problem.grips}, commit=False), t0, [])
+                reasons = ([f"targets left the plane ({why}): full model"] if why else []) + (
+                    [f"obstacle(s) {sorted(entering)} came within reach"] if entering else [])
+                self.problem = problem
+                self._switch(richer, "; ".join(reasons))
                 notes.append(self.changes[-1][1])
+            elif self._worker is not None and commit and self._job is None:  # build an approaching obstacle's model ahead
+                near = set(reachable_obstacles(problem, L / 2))
+                if self.choice.planar:
+                    near = set(self._in_plane_obstacles(problem, tuple(near), self.inner.nlp.r0))
+                near -= set(self.choice.obstacles)
+                if near:
+                    ahead = replace(self.choice, obstacles=tuple(sorted(near | set(self.choice.obstacles))))
+                    if self._pooled(ahead) is None:
+                        self._submit(self._prebuild, {("",) + ahead.key()}, [ahead], problem)
             reduced = self._reduced(self.choice, problem)[0]
             inner_poses = {g.name: g.pose for g in reduced.grips}
             result = self.inner.solve(inner_poses, warm=warm, commit=commit)
-            if not result.ok:
+            if not result.ok or not commit:
                 return self._finish(result, t0, notes)
-            if not commit:
-                return self._finish(result, t0, notes)
-            self.problem = problem  # the checks build models of the current targets
-            self._updates += 1
-            first = not np.isfinite(self.choice.estimated_error_m)
-            if first or self._updates % self.options.recheck_every == 0:
-                result = self._check(problem, result, inner_poses, notes)
+            self.problem = problem
+            self._since_check += 1
+            if self._unchecked or self._since_check >= self.options.recheck_every:
+                snap = _Snapshot(self.inner, self.inner.snapshot(), replace(self.choice, reasons=list(self.choice.reasons)),
+                                 problem, inner_poses, result.points.copy(),
+                                 max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0))
+                if self._worker is None:
+                    result = self._check_now(snap, result, notes)
+                elif self._job is None:
+                    i = ORDERS.index(snap.choice.order)
+                    keys = {("",) + replace(snap.choice, order=o).key() for o in ORDERS[max(i - 1, 0):i + 2]}
+                    keys.add(("checker",) + self._full_choice(snap.choice, problem).key())
+                    self._submit(self._evaluate, keys, snap, True)
             return self._finish(result, t0, notes)
 
     # ---- checks -------------------------------------------------------------------------------------
-    def _check(self, problem: Problem, result: ShapeResult, poses: dict, notes: list[str]) -> ShapeResult:
-        """A-posteriori checks; escalate (and re-solve) while one fails."""
-        tol = self.tolerance
-        for _ in range(8):
-            reason = ""
-            if self.choice.planar:
-                eig = self._planar_3d_eigenvalue(problem)  # None when stable (or neutral)
-                if eig is not None:
-                    reason = f"planar shape unstable in 3D (eigenvalue {eig:.3g}): full model"
-                    new = replace(self.choice, planar=False)
-            if not reason and problem.string.stretch_stiffness is not None and not self.choice.stretch:
-                force = max(np.linalg.norm(w.force) for w in result.grips.values())
-                elongation = force * problem.string.length / problem.string.stretch_stiffness.minimum
-                if elongation > tol / 2:
-                    reason = f"elongation bound {elongation:.3g} m > {tol / 2:.3g} m: extensible model"
-                    new = replace(self.choice, stretch=True)
-            if not reason:
-                if self.choice.order >= ORDERS[-1]:  # nothing higher to compare with: keep the last estimate
-                    if self.choice.estimated_error_m > tol / 2 and not any("not met" in r for r in self.choice.reasons):
-                        self.choice.reasons.append(f"tolerance not met: highest order {ORDERS[-1]} reached")
-                    return result
-                error = self._order_error(poses, result)
-                self.choice.estimated_error_m = error
-                if error > tol / 2:
-                    nxt = ORDERS[ORDERS.index(self.choice.order) + 1]
-                    reason = f"order {self.choice.order} error estimate {error:.3g} m > {tol / 2:.3g} m: order {nxt}"
-                    new = replace(self.choice, order=nxt)
-            if not reason:
+    def _check_now(self, snap: _Snapshot, result: ShapeResult, notes: list[str]) -> ShapeResult:
+        """Synchronous checks: escalate and re-solve while one fails."""
+        for _ in range(2 * len(ORDERS) + 2):
+            verdict = self._evaluate(snap, False)
+            if verdict.choice is None:
+                self._keep(verdict)
                 return result
-            self._switch(new, reason)
-            notes.append(reason)
-            result = self.inner.solve(poses)
+            self._switch(verdict.choice, verdict.reason)
+            notes.append(verdict.reason)
+            result = self.inner.solve(snap.poses)
             if not result.ok:
                 return result
+            snap = replace(snap, inner=self.inner, state=self.inner.snapshot(), choice=replace(self.choice),
+                           points=result.points.copy(),
+                           max_grip_force=max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0))
         return result
 
-    def _order_error(self, poses: dict, result: ShapeResult) -> float:
-        """max |x_n(s) − x_{n+}(s)| over the output points: the change when the order is raised."""
-        higher = replace(self.choice, order=ORDERS[ORDERS.index(self.choice.order) + 1])
-        if self._shadow is None or self._shadow.options.order != higher.order:
-            self._shadow = self._make_inner(higher, self.inner, helper=True)
-        else:  # start from the current shape, not the shadow's own (older) one: same branch
-            self._shadow.set_problem(self._reduced(higher, self.problem)[0])
-            self._shadow.adopt_warm_start(self.inner)
-        shadow = self._shadow.solve(poses)
-        if not shadow.ok:
-            self._shadow = None
-            return float("inf")
-        return float(np.max(np.linalg.norm(shadow.points - result.points, axis=1)))
+    def _keep(self, verdict: _Verdict) -> None:
+        self.choice.estimated_error_m = verdict.estimate
+        for r in verdict.snapshot.choice.reasons:  # e.g. "tolerance not met"
+            if r not in self.choice.reasons:
+                self.choice.reasons.append(r)
+        self._unchecked = False
+        self._since_check = 0
 
-    def _planar_3d_eigenvalue(self, problem: Problem) -> float | None:
-        """Smallest reduced-Hessian eigenvalue of the full 3D model at the embedded planar solution.
-
-        The 3D checker is built once and refreshed with the current targets and shape."""
-        choice = replace(self.choice, planar=False)
-        full = self._checker
-        if full is None or full.options.order != choice.order or len(full.problem.obstacles) != len(choice.obstacles):
-            full = self._checker = self._make_inner(choice, self.inner, helper=True)
+    def _apply_check(self, notes: list[str]) -> None:
+        """Apply a finished background check (streaming thread)."""
+        job = self._job
+        if job is None or not job.done():
+            return
+        self._job = None
+        try:
+            verdict = job.result()
+        except Exception as exc:  # a check that raised is reported, never fatal to the stream
+            notes.append(f"model check failed: {type(exc).__name__}: {exc}")
+            return
+        if verdict is None or verdict.snapshot.inner is not self.inner:  # a prebuild, or stale
+            return
+        if verdict.choice is None:
+            self._keep(verdict)
         else:
-            full.set_problem(self._reduced(choice, self.problem)[0])
-            full.adopt_warm_start(self.inner)
+            self._switch(verdict.choice, verdict.reason)  # maps the latest committed shape, not the snapshot's
+            notes.append(verdict.reason)
+
+    def _wait_for_check(self) -> None:
+        """Let a running background job finish first: it owns the pooled helper solvers meanwhile (its
+        verdict is applied, or found stale, at the next solve)."""
+        if self._job is not None:
+            wait([self._job])
+
+    def _prebuild(self, choices: list[ModelChoice], problem: Problem) -> None:
+        """Build (worker thread) the models a coming check or switch will need; the 3D model and
+        obstacle models get their IPOPT solvers too (a switch to them streams at once)."""
+        for choice in choices:
+            solver = self._solver_for(choice, problem, stream=False)
+            if not choice.planar or choice.obstacles != self.choice.obstacles:
+                solver.prepare()
+
+    def _evaluate(self, snap: _Snapshot, prepare: bool) -> _Verdict:
+        """One pass of the a-posteriori checks on a snapshot; the first that fails decides.
+
+        prepare: also create the IPOPT solvers of the model it escalates to (background checks, so the
+        streaming thread's switch builds nothing)."""
+        tol, choice, problem = self.tolerance, snap.choice, snap.problem
+        verdict = _Verdict(snap, estimate=choice.estimated_error_m)
+        if choice.planar:
+            eig = self._planar_3d_eigenvalue(snap)  # None when stable (or neutral)
+            if eig is not None:
+                verdict.choice = replace(self._full_choice(choice, problem), estimated_error_m=float("nan"))
+                verdict.reason = f"planar shape unstable in 3D (eigenvalue {eig:.3g}): full model"
+        if verdict.choice is None and problem.string.stretch_stiffness is not None and not choice.stretch:
+            elongation = snap.max_grip_force * problem.string.length / problem.string.stretch_stiffness.minimum
+            if elongation > tol / 2:
+                verdict.choice = replace(choice, stretch=True, estimated_error_m=float("nan"), reasons=list(choice.reasons))
+                verdict.reason = f"elongation bound {elongation:.3g} m > {tol / 2:.3g} m: extensible model"
+        if verdict.choice is None:
+            i = ORDERS.index(choice.order)
+            if i + 1 < len(ORDERS):
+                error = self._shadow_error(snap, ORDERS[i + 1])
+                verdict.estimate = error
+                if error > tol / 2:
+                    verdict.choice = replace(choice, order=ORDERS[i + 1], estimated_error_m=error, reasons=list(choice.reasons))
+                    verdict.reason = f"order {choice.order} error estimate {error:.3g} m > {tol / 2:.3g} m: order {ORDERS[i + 1]}"
+            elif not np.isfinite(verdict.estimate) or verdict.estimate > tol / 2:  # the highest: keep the last estimate
+                note = f"tolerance not met: highest order {ORDERS[-1]} reached"
+                if note not in choice.reasons:
+                    choice.reasons.append(note)
+            lower_key = replace(choice, order=ORDERS[i - 1]).key() if i > 0 else None
+            if verdict.choice is None and lower_key is not None and lower_key not in self._lower_tried:
+                # the lowest order that meets the tolerance: try the next lower one once per model
+                # (tol/4, not tol/2: a margin against switching back and forth)
+                self._lower_tried.add(lower_key)
+                error = self._shadow_error(snap, ORDERS[i - 1])
+                if error <= tol / 4:
+                    verdict.choice = replace(choice, order=ORDERS[i - 1], estimated_error_m=error, reasons=list(choice.reasons))
+                    verdict.reason = f"order {ORDERS[i - 1]} error estimate {error:.3g} m ≤ {tol / 4:.3g} m: order {ORDERS[i - 1]}"
+        if verdict.choice is not None and prepare:
+            self._pool_solver(verdict.choice, problem).prepare()
+        return verdict
+
+    def _pool_solver(self, choice: ModelChoice, problem: Problem) -> ShapeSolver:
+        return self._pooled(choice) or self._solver_for(choice, problem, stream=False)
+
+    def _shadow_error(self, snap: _Snapshot, order: int) -> float:
+        """max |x_n(s) − x_m(s)| over the output points between the checked shape (order n) and the same
+        model at order m, solved from the checked shape (same branch): the a-posteriori estimate of
+        the lower of the two orders."""
+        shadow = self._solver_for(replace(snap.choice, order=order), snap.problem, stream=False, source=snap.inner,
+                                  state=snap.state)
+        result = shadow.solve(snap.poses)
+        if not result.ok:
+            return float("inf")
+        return float(np.max(np.linalg.norm(result.points - snap.points, axis=1)))
+
+    def _planar_3d_eigenvalue(self, snap: _Snapshot) -> float | None:
+        """Smallest reduced-Hessian eigenvalue of the full 3D model at the embedded planar solution;
+        None when that is stable.  The 3D model is pooled: it is also the model a switch to 3D uses."""
+        full = self._solver_for(self._full_choice(snap.choice, snap.problem), snap.problem, stream=False,
+                                source=snap.inner, state=snap.state, tag="checker")
         state = full._state
         if state is None:
             return None
@@ -289,15 +513,15 @@ class AutoShapeSolver:
         return None if eig is None or is_stable(eig, state.hessian) else eig
 
     # ---- plumbing -----------------------------------------------------------------------------------
-    def _with_poses(self, poses: dict | None) -> Problem:
-        return with_checked_poses(self.problem, poses)
-
     def model_summary(self) -> dict:
         c = self.choice
+        checked = not self._unchecked
         return {
             "planar": c.planar, "twist": c.twist, "stretch": c.stretch, "gravity": c.gravity, "order": c.order,
-            "obstacles": len(c.obstacles), "estimated_error_m": None if not np.isfinite(c.estimated_error_m) else c.estimated_error_m,
+            "obstacles": len(c.obstacles),
+            "estimated_error_m": c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None,
             "tolerance_m": self.tolerance, "variables": self.inner.model.layout.size, "auto": True,
+            "checked": checked, "checks": self.checks,
             "reasons": list(c.reasons), "changes": [r for _, r in self.changes],
         }
 
@@ -310,9 +534,11 @@ class AutoShapeSolver:
         return result
 
 
-def make_solver(problem: Problem, options: SolverOptions | None = None, compile: str = "background"):
-    """AutoShapeSolver for solver.model 'auto' (the default), else a ShapeSolver of that model."""
+def make_solver(problem: Problem, options: SolverOptions | None = None, compile: str = "background",
+                checks: str = "sync"):
+    """AutoShapeSolver for solver.model 'auto' (the default; ``checks`` as there), else a ShapeSolver of
+    that model."""
     options = options or SolverOptions()
     if options.model == "auto":
-        return AutoShapeSolver(problem, options, compile=compile)
+        return AutoShapeSolver(problem, options, compile=compile, checks=checks)
     return ShapeSolver(problem, options, compile=compile)

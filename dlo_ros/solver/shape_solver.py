@@ -10,7 +10,12 @@ Contract:
   turned by several revolutions in small steps is tracked continuously.
 * Every call returns a ShapeResult; bad input gives status 'invalid', grips farther apart than the
   string reaches 'unreachable' — never an exception.
-* One lock serialises every entry: CasADi's IPOPT must never run in two threads at once.
+* One lock serialises every entry: CasADi's IPOPT must never run in two threads at once.  MUMPS (IPOPT's
+  linear solver) is not thread-safe across instances either, so every IPOPT call in the process also
+  holds the module-wide ``IPOPT_LOCK`` (Newton updates and derivative evaluations do not).
+* With ``lazy_ipopt`` the IPOPT solvers are created on first use (``prepare()`` creates them ahead):
+  building them is about half of a build, and a helper used only for Newton updates or stability
+  checks never needs them.
 """
 from __future__ import annotations
 
@@ -31,6 +36,7 @@ from .options import SolverOptions
 from .result import GripWrench, ShapeResult
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+IPOPT_LOCK = threading.Lock()  # MUMPS is not thread-safe across IPOPT instances (coin-or/Ipopt#733)
 COMPILE_MODES = ("background", "blocking", "cached", "off")
 
 
@@ -67,15 +73,19 @@ def structure_key(problem: Problem, options: SolverOptions) -> tuple:
 class ShapeSolver:
     """Solve the string's static shape for changing grip targets (see module docstring)."""
 
-    def __init__(self, problem: Problem, options: SolverOptions | None = None, compile: str = "background"):
+    def __init__(self, problem: Problem, options: SolverOptions | None = None, compile: str = "background",
+                 lazy_ipopt: bool = False):
         """compile: 'background' (solve at once with interpreted derivatives, compile them to C in a
         background thread and switch when ready; cached per machine), 'blocking' (compile or load
         now), 'cached' (use a library compiled earlier, never compile), or 'off'.
-        $DLO_NO_COMPILE forces 'off'."""
+        $DLO_NO_COMPILE forces 'off'.  lazy_ipopt: create the IPOPT solvers on first use (helpers that
+        may only take Newton steps); otherwise now, so that a stream's first IPOPT fallback does not
+        pay for them."""
         if compile not in COMPILE_MODES:
             raise ValueError(f"compile: must be one of {COMPILE_MODES}, got {compile!r}")
         self.options = options or SolverOptions()
         self.compile_mode = compile
+        self.lazy_ipopt = lazy_ipopt
         self._lock = threading.Lock()
         self._compile_thread: threading.Thread | None = None
         self._build(problem)
@@ -84,8 +94,9 @@ class ShapeSolver:
         t0 = time.perf_counter()
         self.nlp = StringNLP(problem, self.options)
         self._check_moments(problem)
-        self._cold = self.nlp.make_solver(warm=False)
-        self._warm = self.nlp.make_solver(warm=True)
+        self._ipopt: dict[bool, object] = {}  # warm? → IPOPT nlpsol
+        if not self.lazy_ipopt:
+            self._ipopt_solver(False), self._ipopt_solver(True)
         self._kkt = InterpretedFunction(self.nlp.kkt_fn)
         self.kkt_compiled = False
         self.compile_time_s = 0.0
@@ -94,6 +105,33 @@ class ShapeSolver:
         self._key = structure_key(problem, self.options)
         self._state: _State | None = None
         self.build_time_s = time.perf_counter() - t0
+
+    @property
+    def _cold(self):
+        return self._ipopt_solver(False)
+
+    @property
+    def _warm(self):
+        return self._ipopt_solver(True)
+
+    def _ipopt_solver(self, warm: bool):
+        if warm not in self._ipopt:
+            self._ipopt[warm] = self.nlp.make_solver(warm=warm)
+        return self._ipopt[warm]
+
+    def prepare(self) -> None:
+        """Create the IPOPT solvers now (they are otherwise created on first use)."""
+        with self._lock:
+            self._ipopt_solver(False), self._ipopt_solver(True)
+
+    def start_compile(self, mode: str) -> None:
+        """Switch the compile mode (e.g. a helper solver promoted to stream) and start compiling if
+        that mode asks for it and nothing is compiled or compiling yet."""
+        if mode not in COMPILE_MODES:
+            raise ValueError(f"compile: must be one of {COMPILE_MODES}, got {mode!r}")
+        self.compile_mode = mode
+        if not self.kkt_compiled and self._compile_thread is None:
+            self._start_compile()
 
     def _start_compile(self) -> None:
         mode = "off" if os.environ.get("DLO_NO_COMPILE") else self.compile_mode
@@ -136,7 +174,13 @@ class ShapeSolver:
     def has_warm_start(self) -> bool:
         return self._state is not None
 
-    def adopt_warm_start(self, other: "ShapeSolver") -> bool:
+    def snapshot(self) -> "_State | None":
+        """A copy of the committed equilibrium (for adopt_warm_start from another thread, later)."""
+        with self._lock:
+            s = self._state
+            return None if s is None else _State(s.z.copy(), s.lam_g.copy(), s.lam_x.copy(), s.p.copy())
+
+    def adopt_warm_start(self, other: "ShapeSolver", state: "_State | None" = None) -> bool:
         """Take ``other``'s committed equilibrium as this solver's warm start, across models.
 
         Fields are re-expanded in this model's basis from their values at this model's quadrature nodes
@@ -144,9 +188,10 @@ class ShapeSolver:
         ε ≡ 0); multipliers are matched by constraint-row identity (grip, name, component) and are
         zero for rows the other model did not have.  A different reference frame is handled by
         re-extracting the Euler angles of the material frames in this model's frame (unwrapped along s).
+        ``state``: an earlier ``other.snapshot()`` to adopt instead of other's current equilibrium.
         """
         with other._lock:
-            src = other._state
+            src = other._state if state is None else state
             if src is None:
                 return False
             nodes = self.model.quad.nodes
@@ -390,8 +435,9 @@ class ShapeSolver:
         if lam_g0 is not None:
             args["lam_g0"] = lam_g0
             args["lam_x0"] = lam_x0
-        sol = solver(**args)
-        stats = solver.stats()
+        with IPOPT_LOCK:
+            sol = solver(**args)
+            stats = solver.stats()
         z = np.asarray(sol["x"]).ravel()
         lam_g = np.asarray(sol["lam_g"]).ravel()
         lam_x = np.asarray(sol["lam_x"]).ravel()
@@ -513,25 +559,37 @@ class ShapeSolver:
             result.stable = None
         return result, state if ok else None
 
-    def _escape_saddle(self, problem: Problem, result: ShapeResult, state: _State) -> tuple[ShapeResult, _State]:
+    def _escape_saddle(self, problem: Problem, result: ShapeResult, state: _State, depth: int = 3) -> tuple[ShapeResult, _State]:
         """A stationary point with negative reduced curvature is not a shape a string rests in.
 
-        Step along the unstable eigenvector (both signs, 0.2 rad at most in any coefficient) and
-        re-solve; keep the first stable result of lower energy.  Symmetric starts (a planar guess for a
+        Step along the unstable eigenvector (both signs, 0.2 then 0.6 rad at most in any coefficient) and
+        re-solve; keep the first stable result of lower energy.  A lower but still unstable stationary
+        point is left the same way, up to ``depth`` saddles deep (a compressed twist-free strip falls
+        from the planar buckle through a half-twisted saddle).  Symmetric starts (a planar guess for a
         scene whose minimum is twisted, paper Fig. 2) land on such saddles.
         """
         if result.stable is not False or state.unstable_direction is None:
             return result, state
         d = state.unstable_direction / np.max(np.abs(state.unstable_direction))
-        for sign in (1.0, -1.0):
-            ok, trial, status, it, viol = self._call(self._cold, state.z + sign * 0.2 * d, state.p)
-            result.iterations += it
-            if not ok:
-                continue
-            candidate = self._result(problem, trial, status, result.iterations, viol, result.warm_started,
-                                     result.continuation_steps)
-            if candidate.stable and candidate.energy["total"] < result.energy["total"]:
-                candidate.message += "; left an unstable equilibrium along its negative-curvature mode"
+        lower: tuple[ShapeResult, _State] | None = None
+        for step in (0.2, 0.6):  # a larger step when IPOPT falls back onto the saddle from the small one
+            for sign in (1.0, -1.0):
+                ok, trial, status, it, viol = self._call(self._cold, state.z + sign * step * d, state.p)
+                result.iterations += it
+                if not ok:
+                    continue
+                candidate = self._result(problem, trial, status, result.iterations, viol, result.warm_started,
+                                         result.continuation_steps)
+                if candidate.energy["total"] >= result.energy["total"] - 1e-12 * abs(result.energy["total"]):
+                    continue
+                if candidate.stable:
+                    candidate.message += "; left an unstable equilibrium along its negative-curvature mode"
+                    return candidate, trial
+                if lower is None:
+                    lower = (candidate, trial)
+        if lower is not None and depth > 1:
+            candidate, trial = self._escape_saddle(problem, lower[0], lower[1], depth - 1)
+            if candidate.stable:
                 return candidate, trial
         result.message += "; unstable equilibrium (no stable one found nearby)"
         return result, state

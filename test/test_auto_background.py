@@ -1,0 +1,123 @@
+"""solver.model: auto with checks on a worker thread (what the node streams with): the stream never
+builds a model on its own thread once the checks have run, the background verdicts reach the same model
+as the synchronous checks, and a switch keeps the warm start (Newton steps, not a cold solve)."""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from dlo_ros.solver import AutoShapeSolver, ShapeSolver, SolverOptions, make_solver
+from dlo_ros.solver import shape_solver as shape_solver_module
+from conftest import clamped_pair
+
+
+def hanging(**kw):
+    args = dict(left=(0, 0, 0.4), right=(0.6, 0, 0.4), bend=0.02, twist=0.015, weight=0.5)
+    return clamped_pair(**{**args, **kw})
+
+
+@pytest.fixture
+def builds(monkeypatch):
+    """Names of the threads on which ShapeSolvers were built, in order."""
+    names: list[str] = []
+    original = ShapeSolver.__init__
+
+    def recording_init(self, *args, **kwargs):
+        names.append(threading.current_thread().name)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(shape_solver_module.ShapeSolver, "__init__", recording_init)
+    return names
+
+
+def stream_until_checked(solver, problem, steps=400, dx=0.0005):
+    """Stream small moves in the plane (y = 0) until the current model's check has run."""
+    q = problem.grip("right").pose.orientation
+    x0 = problem.grip("right").pose.position
+    r = None
+    for i in range(steps):
+        r = solver.solve({"right": (x0 + np.array([0.0, 0.0, dx * np.sin(i / 10)]), q)})
+        assert r.ok, r.message
+        if r.model["checked"] and not solver._job:
+            return r
+        time.sleep(0.01)
+    raise AssertionError(f"checks did not finish in {steps} updates: {r.model}")
+
+
+def test_background_checks_reach_the_synchronous_choice_without_building_on_the_stream(builds):
+    problem = hanging()
+    options = SolverOptions(output_points=51, error_tolerance=0.01)  # loose: the checks move the order down
+    sync = make_solver(problem, options, compile="off")
+    r_sync = sync.solve()
+    assert r_sync.model["order"] == 8, r_sync.model
+    n_sync = len(builds)
+    solver = make_solver(problem, options, compile="off", checks="background")
+    try:
+        first = solver.solve()
+        assert first.ok and first.model["checks"] == "background"
+        assert not first.model["checked"] and first.model["estimated_error_m"] is None
+        r = stream_until_checked(solver, problem)
+        for _ in range(3):  # the escalations settle: a further check keeps the model
+            r = stream_until_checked(solver, problem) if not r.model["checked"] else r
+        assert (r.model["planar"], r.model["order"]) == (r_sync.model["planar"], r_sync.model["order"])
+        assert r.model["estimated_error_m"] <= 0.01 / 4
+        assert any("order 8" in c for c in r.model["changes"]), r.model["changes"]
+        stream_builds = builds[n_sync + 1:]  # after its first model, built on this thread
+        assert stream_builds and all(name.startswith("dlo-auto-check") for name in stream_builds), builds
+    finally:
+        solver.close()
+
+
+def test_targets_leaving_the_plane_switch_to_the_prebuilt_3d_model(builds):
+    problem = hanging()
+    solver = make_solver(problem, SolverOptions(output_points=51), compile="off", checks="background")
+    try:
+        solver.solve()
+        r = stream_until_checked(solver, problem)
+        assert r.model["planar"]
+        main = threading.current_thread().name
+        before = builds.count(main)
+        q = problem.grip("right").pose.orientation
+        moved = solver.solve({"right": (np.array([0.6, 0.02, 0.4]), q)})
+        assert moved.ok and not moved.model["planar"]
+        assert any("left the plane" in c for c in moved.model["changed"]), moved.model
+        assert builds.count(main) == before, "the 3D model was built on the streaming thread"
+        assert moved.warm_started and moved.iterations <= 10, (moved.message, moved.iterations)
+        full = ShapeSolver(problem, SolverOptions(model="full", order=24, output_points=51), compile="off")
+        ref = full.solve({"right": (np.array([0.6, 0.02, 0.4]), q)})
+        assert np.max(np.linalg.norm(moved.points - ref.points, axis=1)) < 1e-3
+    finally:
+        solver.close()
+
+
+def test_background_checks_keep_ipopt_calls_serialised():
+    """The worker's IPOPT calls and the stream's hold one process-wide lock (MUMPS is not thread-safe)."""
+    assert isinstance(shape_solver_module.IPOPT_LOCK, type(threading.Lock()))
+    problem = hanging()
+    solver = make_solver(problem, SolverOptions(output_points=51), compile="off", checks="background")
+    assert isinstance(solver, AutoShapeSolver)
+    try:
+        for i in range(30):  # cold solves take IPOPT on the stream while the worker checks
+            r = solver.solve({"right": (np.array([0.6 - 0.005 * i, 0.0, 0.4]), problem.grip("right").pose.orientation)},
+                             warm=(i % 3 != 0))
+            assert r.ok, r.message
+    finally:
+        solver.close()
+
+
+def test_reset_makes_the_next_solve_cold_in_every_pooled_model():
+    """After reset, a pending switch must not bring back an older warm start from the pool."""
+    problem = hanging()
+    solver = make_solver(problem, SolverOptions(output_points=51), compile="off", checks="background")
+    try:
+        solver.solve()
+        stream_until_checked(solver, problem)
+        solver.reset()
+        q = problem.grip("right").pose.orientation
+        r = solver.solve({"right": (np.array([0.6, 0.02, 0.4]), q)})  # leaves the plane: a pooled 3D model
+        assert r.ok and not r.model["planar"] and not r.warm_started, (r.message, r.model)
+    finally:
+        solver.close()

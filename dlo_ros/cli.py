@@ -166,7 +166,8 @@ def format_summary(scene, result) -> str:
         lines.append(
             f"model   {'auto' if m.get('auto') else 'fixed'}: {', '.join(kinds) or 'bend only'}; order {m.get('order')}, "
             f"{m.get('obstacles')} obstacle(s) in the NLP, {m.get('variables')} unknowns"
-            + (f", estimated error {err:.2g} m (tolerance {m.get('tolerance_m'):.2g} m)" if err is not None else "")
+            + (f", estimated error {err:.2g} m (tolerance {m.get('tolerance_m'):.2g} m"
+               + ("" if m.get("tolerance_met", True) else ": NOT met, even at the highest order") + ")" if err is not None else "")
         )
         for change in m.get("changes", []):
             lines.append(f"        model change: {change}")

@@ -166,3 +166,19 @@ def test_planar_model_rejects_out_of_plane_targets():
     assert solver.solve().ok
     r = solver.solve({"right": ([0.5, 0.05, 0.45], [0, 0, 0, 1])})
     assert r.status == "invalid" and "grips[1].position" in r.message
+
+
+def test_a_query_that_needs_a_richer_model_answers_with_it_and_leaves_the_stream_alone():
+    """A planar stream with an obstacle clear of its plane; a query moves a grip toward it: the answer
+    comes from the 3D model with that obstacle (its model object says so), the stream keeps its model."""
+    beside = Obstacle.from_dict({"type": "sphere", "center": [0.3, 0.12, 0.25], "radius": 0.1})
+    table = Obstacle.from_dict({"type": "halfspace", "point": [0, 0, 0], "normal": [0, 0, 1]})
+    prob = replace(hanging(), obstacles=(table, beside))
+    solver, r = auto(prob)
+    assert r.model["planar"] and r.model["obstacles"] == 1
+    query = solver.solve({"right": ([0.6, 0.1, 0.4], [0, 0, 0, 1])}, commit=False)
+    assert query.ok and not query.model["planar"] and query.model["obstacles"] == 2, query.model
+    assert set(query.contact_forces) <= {0, 1}
+    after = solver.solve()
+    assert after.ok and after.model["planar"] and after.model["obstacles"] == 1
+    np.testing.assert_allclose(after.points, r.points, atol=1e-9)

@@ -23,7 +23,7 @@ from .validation import KINDS
 RATE_WINDOW_S = 2.0
 #: ShapeResult.model entries shown in the diagnostics as ``model.<key>`` (in this order).
 MODEL_KEYS = ("auto", "planar", "twist", "stretch", "gravity", "order", "obstacles", "variables",
-              "estimated_error_m", "tolerance_m")
+              "estimated_error_m", "tolerance_m", "tolerance_met", "checked")
 
 
 def model_text(model: Mapping | None) -> str:
@@ -146,11 +146,10 @@ class Health:
     def _tolerance_problem(self) -> str:  # lock held
         m = self.model
         est, tol = m.get("estimated_error_m"), m.get("tolerance_m")
-        not_met = [str(r) for r in m.get("reasons") or () if "tolerance not met" in str(r)]
         over = isinstance(est, (int, float)) and isinstance(tol, (int, float)) and est > tol
-        if not (over or not_met):
+        if not (over or m.get("tolerance_met") is False):
             return ""
-        text = "model: " + (not_met[0] if not_met else "tolerance not met")
+        text = "model: tolerance not met" + (f" at order {m['order']}" if m.get("order") is not None else "")
         if isinstance(est, (int, float)) and isinstance(tol, (int, float)):
             text += f"; estimated error {est:.3g} m vs tolerance {tol:.3g} m"
         return text

@@ -31,9 +31,10 @@ Checks run synchronously inside ``solve`` (``checks='sync'``: the CLI) or on a w
 snapshot of the solve (``checks='background'``: the node), so that a stream never waits for a build:
 the worker builds the order shadow and the 3D checker into a pool of models, and a verdict to
 escalate is applied at the next ``solve`` by switching to the pooled model the check already built.
-The 3D model of a planar choice is pooled from the first check on, so targets leaving the plane switch
-without a build; an obstacle within L/2 of reach is built ahead, and enters the NLP at L/4.  The model
-never de-escalates during a run (a scene change re-chooses).
+The 3D model of a planar choice is built ahead (at start, and again after any change), so targets
+leaving the plane switch without a build; an obstacle within L/2 of reach is built ahead, and enters
+the NLP at L/4.  Only the basis order goes down during a run (tried once per model); a 3D model never
+returns to planar, and an obstacle, once in, stays (a scene change re-chooses).
 """
 from __future__ import annotations
 
@@ -51,7 +52,7 @@ from ..model.rotations import TANGENT_X, euler_from_frame, quat_to_matrix
 from .nlp import choose_reference_frame, planarity_violation, twist_is_held
 from .options import SolverOptions
 from .result import ShapeResult
-from .shape_solver import ShapeSolver, is_stable, with_checked_poses
+from .shape_solver import IPOPT_LOCK, ShapeSolver, is_stable, with_checked_poses
 
 ORDERS = (8, 12, 16, 24, 32)
 START_ORDER = 12  # the first answer is within 1e-3·L for typical scenes; checks go up, or down to 8
@@ -126,6 +127,7 @@ class _Snapshot:
     poses: dict
     points: np.ndarray
     max_grip_force: float
+    generation: int = 0
 
 
 @dataclass
@@ -175,12 +177,15 @@ class AutoShapeSolver:
         self._since_check = 0
         self._unchecked = True
         self._lower_tried: set[tuple] = set()  # model keys already tried as a lower order
+        self._generation = 0  # bumped by every switch, reset and scene change: older verdicts are stale
+        self._full_key: tuple = ()  # pool key of the 3D model a planar stream switches to (kept built)
         self.choice = self._initial_choice(problem)
         self.inner = self._solver_for(self.choice, problem, stream=True)
         if self._worker is not None:  # build ahead: the 3D model a stream leaving the plane switches to, first,
             # then the order shadows the first check needs
             i = ORDERS.index(self.choice.order)
             ahead = [self._full_choice(self.choice, problem)] if self.choice.planar else []
+            self._full_key = ("",) + ahead[0].key() if ahead else ()
             ahead += [replace(self.choice, order=o) for o in ORDERS[i + 1:i + 2] + ORDERS[max(i - 1, 0):i]]
             self._submit(self._prebuild, {("",) + c.key() for c in ahead}, ahead, problem)
 
@@ -251,14 +256,17 @@ class AutoShapeSolver:
                                  ("off" if self.compile == "off" else "cached"), lazy_ipopt=not stream)
         else:
             solver.set_problem(reduced)
+        evicted = []
         with self._pool_lock:
             self._pool[key] = solver
-            busy = set(self._job_keys) | {key}
+            keep = set(self._job_keys) | {key, self._full_key} | set(list(self._pool)[-2:])
             while len(self._pool) > self.POOL_SIZE:  # drop the least recently used that is idle
-                old = next((k for k, s in self._pool.items() if s is not getattr(self, "inner", None) and k not in busy), None)
+                old = next((k for k, s in self._pool.items() if s is not getattr(self, "inner", None) and k not in keep), None)
                 if old is None:
                     break
-                del self._pool[old]
+                evicted.append(self._pool.pop(old))
+        with IPOPT_LOCK:  # freeing IPOPT/MUMPS instances must not overlap a solve in the other thread
+            evicted.clear()
         if stream:
             solver.start_compile(self.compile)
         choice.twist = solver.model.layout.twist
@@ -282,11 +290,15 @@ class AutoShapeSolver:
         if job is not None and not job.done() and ("",) + choice.key() in self._job_keys:
             wait([job])
         self.changes.append((time.time(), reason))
+        del self.changes[:-50]  # the newest 50 (all are in the log and the recording)
+        if choice.order > self.choice.order and choice.planar == self.choice.planar:
+            self._lower_tried.add(replace(choice, order=self.choice.order).key())  # just found too coarse
         self.inner = self._solver_for(choice, self.problem, stream=True, source=self.inner)
         # the reasons say why this model: drop the planar one when leaving the plane, add this change
         choice.reasons = [r for r in choice.reasons if choice.planar or not r.startswith("planar:")] + [reason]
         self.choice = choice
         self._unchecked = True
+        self._generation += 1
 
     # ---- public API ---------------------------------------------------------------------------------
     @property
@@ -308,6 +320,7 @@ class AutoShapeSolver:
             for solver in pooled + [self.inner]:
                 solver.reset()
             self._unchecked = True
+            self._generation += 1
 
     def close(self) -> None:
         """Stop the check worker (waits for a running check)."""
@@ -318,6 +331,8 @@ class AutoShapeSolver:
         problem.validate()
         with self._lock:
             self._wait_for_check()
+            self._job = None  # its verdict is about the old scene
+            self._generation += 1
             self.problem = problem
             self.tolerance = self.options.error_tolerance or 1e-3 * problem.string.length
             self._lower_tried.clear()
@@ -351,12 +366,17 @@ class AutoShapeSolver:
                 if not commit:  # a query must not change the streaming model: answer with the richer one
                     self._wait_for_check()
                     other = self._solver_for(richer, problem, stream=False, source=self.inner)
-                    return self._finish(other.solve({g.name: g.pose for g in problem.grips}, commit=False), t0, [])
+                    answer = other.solve({g.name: g.pose for g in problem.grips}, commit=False)
+                    return self._finish(answer, t0, [], choice=richer, solver=other)
                 reasons = ([f"targets left the plane ({why}): full model"] if why else []) + (
                     [f"obstacle(s) {sorted(entering)} came within reach"] if entering else [])
                 self.problem = problem
                 self._switch(richer, "; ".join(reasons))
                 notes.append(self.changes[-1][1])
+            elif self._worker is not None and commit and self._job is None and self.choice.planar and \
+                    self._pooled(full := self._full_choice(self.choice, problem)) is None:
+                self._full_key = ("",) + full.key()  # the 3D model leaving the plane switches to: build it ahead
+                self._submit(self._prebuild, {self._full_key}, [full], problem)
             elif self._worker is not None and commit and self._job is None:  # build an approaching obstacle's model ahead
                 near = set(reachable_obstacles(problem, L / 2))
                 if self.choice.planar:
@@ -376,7 +396,8 @@ class AutoShapeSolver:
             if self._unchecked or self._since_check >= self.options.recheck_every:
                 snap = _Snapshot(self.inner, self.inner.snapshot(), replace(self.choice, reasons=list(self.choice.reasons)),
                                  problem, inner_poses, result.points.copy(),
-                                 max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0))
+                                 max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
+                                 self._generation)
                 if self._worker is None:
                     result = self._check_now(snap, result, notes)
                 elif self._job is None:
@@ -396,19 +417,18 @@ class AutoShapeSolver:
                 return result
             self._switch(verdict.choice, verdict.reason)
             notes.append(verdict.reason)
-            result = self.inner.solve(snap.poses)
-            if not result.ok:
-                return result
-            snap = replace(snap, inner=self.inner, state=self.inner.snapshot(), choice=replace(self.choice),
+            previous, result = result, self.inner.solve(snap.poses)
+            if not result.ok:  # keep the answer we had, and say so
+                previous.message += f"; the richer model failed to solve ({result.message}): answer of the previous model"
+                return previous
+            snap = replace(snap, inner=self.inner, state=self.inner.snapshot(),
+                           choice=replace(self.choice, reasons=list(self.choice.reasons)), generation=self._generation,
                            points=result.points.copy(),
                            max_grip_force=max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0))
         return result
 
     def _keep(self, verdict: _Verdict) -> None:
         self.choice.estimated_error_m = verdict.estimate
-        for r in verdict.snapshot.choice.reasons:  # e.g. "tolerance not met"
-            if r not in self.choice.reasons:
-                self.choice.reasons.append(r)
         self._unchecked = False
         self._since_check = 0
 
@@ -422,8 +442,9 @@ class AutoShapeSolver:
             verdict = job.result()
         except Exception as exc:  # a check that raised is reported, never fatal to the stream
             notes.append(f"model check failed: {type(exc).__name__}: {exc}")
+            self._unchecked, self._since_check = False, 0  # retry after recheck_every updates, not at once
             return
-        if verdict is None or verdict.snapshot.inner is not self.inner:  # a prebuild, or stale
+        if verdict is None or verdict.snapshot.generation != self._generation:  # a prebuild, or stale
             return
         if verdict.choice is None:
             self._keep(verdict)
@@ -466,29 +487,30 @@ class AutoShapeSolver:
             i = ORDERS.index(choice.order)
             if i + 1 < len(ORDERS):
                 error = self._shadow_error(snap, ORDERS[i + 1])
-                verdict.estimate = error
-                if error > tol / 2:
+                if np.isfinite(error):  # a shadow that failed to solve is inconclusive: the next check retries
+                    verdict.estimate = error
+                if error > tol / 2 and np.isfinite(error):
                     verdict.choice = replace(choice, order=ORDERS[i + 1], estimated_error_m=error, reasons=list(choice.reasons))
                     verdict.reason = f"order {choice.order} error estimate {error:.3g} m > {tol / 2:.3g} m: order {ORDERS[i + 1]}"
-            elif not np.isfinite(verdict.estimate) or verdict.estimate > tol / 2:  # the highest: keep the last estimate
-                note = f"tolerance not met: highest order {ORDERS[-1]} reached"
-                if note not in choice.reasons:
-                    choice.reasons.append(note)
+            # at the highest order the estimate stays the one that led there (order 24 against 32): the
+            # best available, and conservative; model['tolerance_met'] compares it with the tolerance
             lower_key = replace(choice, order=ORDERS[i - 1]).key() if i > 0 else None
             if verdict.choice is None and lower_key is not None and lower_key not in self._lower_tried:
                 # the lowest order that meets the tolerance: try the next lower one once per model
                 # (tol/4, not tol/2: a margin against switching back and forth)
                 self._lower_tried.add(lower_key)
                 error = self._shadow_error(snap, ORDERS[i - 1])
-                if error <= tol / 4:
+                if error <= tol / 4:  # (inf when the lower order failed to solve: stay)
                     verdict.choice = replace(choice, order=ORDERS[i - 1], estimated_error_m=error, reasons=list(choice.reasons))
                     verdict.reason = f"order {ORDERS[i - 1]} error estimate {error:.3g} m ≤ {tol / 4:.3g} m: order {ORDERS[i - 1]}"
-        if verdict.choice is not None and prepare:
-            self._pool_solver(verdict.choice, problem).prepare()
+        target = self._pool_solver(verdict.choice, problem) if verdict.choice is not None and prepare else None
+        if target is not None:
+            target.prepare()
         return verdict
 
-    def _pool_solver(self, choice: ModelChoice, problem: Problem) -> ShapeSolver:
-        return self._pooled(choice) or self._solver_for(choice, problem, stream=False)
+    def _pool_solver(self, choice: ModelChoice, problem: Problem) -> ShapeSolver | None:
+        """The pooled model of ``choice``, never built here (the stream may be switching to it)."""
+        return self._pooled(choice)
 
     def _shadow_error(self, snap: _Snapshot, order: int) -> float:
         """max |x_n(s) − x_m(s)| over the output points between the checked shape (order n) and the same
@@ -513,24 +535,36 @@ class AutoShapeSolver:
         return None if eig is None or is_stable(eig, state.hessian) else eig
 
     # ---- plumbing -----------------------------------------------------------------------------------
-    def model_summary(self) -> dict:
-        c = self.choice
-        checked = not self._unchecked
+    def model_summary(self, choice: ModelChoice | None = None, solver: ShapeSolver | None = None) -> dict:
+        """The ``model`` object of a result: the streaming model, or ``choice``/``solver`` (a query's).
+
+        estimated_error_m: the basis-order estimate of the last check of this model (the change of the
+        centreline when the order is raised; at the highest order, the estimate that led there), None
+        until the first check has finished.  It does not include the a-priori bounds of the dropped
+        gravity (≤ δ/10) and stretch (≤ δ/2).  In background mode it describes a solve up to
+        recheck_every updates earlier."""
+        streaming = choice is None
+        c, s = (self.choice, self.inner) if streaming else (choice, solver)
+        checked = streaming and not self._unchecked
+        est = c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None
         return {
             "planar": c.planar, "twist": c.twist, "stretch": c.stretch, "gravity": c.gravity, "order": c.order,
-            "obstacles": len(c.obstacles),
-            "estimated_error_m": c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None,
-            "tolerance_m": self.tolerance, "variables": self.inner.model.layout.size, "auto": True,
-            "checked": checked, "checks": self.checks,
+            "obstacles": len(c.obstacles), "estimated_error_m": est, "tolerance_m": self.tolerance,
+            "tolerance_met": None if est is None else bool(est <= self.tolerance),
+            "variables": s.model.layout.size, "auto": True, "checked": checked, "checks": self.checks,
             "reasons": list(c.reasons), "changes": [r for _, r in self.changes],
         }
 
-    def _finish(self, result: ShapeResult, t0: float, notes: list[str]) -> ShapeResult:
-        result.model = self.model_summary()
+    def _finish(self, result: ShapeResult, t0: float, notes: list[str], choice: ModelChoice | None = None,
+                solver: ShapeSolver | None = None) -> ShapeResult:
+        """Attach the model (the streaming one, or the query's ``choice``/``solver``) and the time; give
+        contact forces the scene's obstacle indices."""
+        c = choice or self.choice
+        result.model = self.model_summary(choice, solver)
         result.model["changed"] = notes
         result.solve_time_ms = (time.perf_counter() - t0) * 1e3
-        if result.ok and result.contact_forces and len(self.choice.obstacles) != len(self.problem.obstacles):
-            result.contact_forces = {self.choice.obstacles[i]: f for i, f in result.contact_forces.items()}
+        if result.ok and result.contact_forces and len(c.obstacles) != len(self.problem.obstacles):
+            result.contact_forces = {c.obstacles[i]: f for i, f in result.contact_forces.items() if i < len(c.obstacles)}
         return result
 
 

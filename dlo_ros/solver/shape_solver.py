@@ -94,6 +94,9 @@ class ShapeSolver:
         t0 = time.perf_counter()
         self.nlp = StringNLP(problem, self.options)
         self._check_moments(problem)
+        old = getattr(self, "_ipopt", {})
+        with IPOPT_LOCK:  # freeing an IPOPT/MUMPS instance must not overlap a solve in another thread
+            old.clear()
         self._ipopt: dict[bool, object] = {}  # warm? → IPOPT nlpsol
         if not self.lazy_ipopt:
             self._ipopt_solver(False), self._ipopt_solver(True)
@@ -145,18 +148,18 @@ class ShapeSolver:
         if mode == "cached":
             return
 
-        def work() -> None:
+        def work(locked: bool) -> None:
             t0 = time.perf_counter()
             native, ok = compiled(fn, nice=10 if mode == "background" else 0)
-            with self._lock:
+            with (threading.Lock() if locked else self._lock):  # blocking: the caller may hold self._lock
                 if ok and self.nlp is nlp:  # the scene may have been rebuilt meanwhile
                     self._kkt, self.kkt_compiled = native, True
                     self.compile_time_s = time.perf_counter() - t0
 
         if mode == "blocking":
-            work()
+            work(locked=True)
         else:
-            self._compile_thread = threading.Thread(target=work, name="dlo-compile", daemon=True)
+            self._compile_thread = threading.Thread(target=work, args=(False,), name="dlo-compile", daemon=True)
             self._compile_thread.start()
 
     def wait_for_compile(self, timeout: float | None = None) -> bool:

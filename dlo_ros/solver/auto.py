@@ -465,6 +465,7 @@ class AutoShapeSolver:
             solver = self._solver_for(choice, problem, stream=False)
             if not choice.planar or choice.obstacles != self.choice.obstacles:
                 solver.prepare()
+            self._job_keys = self._job_keys - {("",) + choice.key()}  # built: a switch to it need not wait
 
     def _evaluate(self, snap: _Snapshot, prepare: bool) -> _Verdict:
         """One pass of the a-posteriori checks on a snapshot; the first that fails decides.

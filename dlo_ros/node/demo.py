@@ -105,9 +105,12 @@ def _model_summary(values: dict) -> str:
     against the tolerance, and how many times it changed."""
     if not values.get("model.order"):
         return "not reported"
-    kind = "planar" if values.get("model.planar") == "True" else "3D"
-    fields = [f for f in ("twist", "stretch", "gravity") if values.get(f"model.{f}") == "True"]
-    text = (("auto: " if values.get("model.auto") == "True" else "") + ", ".join([kind, *fields])
+    def yes(key: str) -> bool:
+        return str(values.get(key)).lower() == "true"
+
+    kind = "planar" if yes("model.planar") else "3D"
+    fields = [f for f in ("twist", "stretch", "gravity") if yes(f"model.{f}")]
+    text = (("auto: " if yes("model.auto") else "") + ", ".join([kind, *fields])
             + f", order {values['model.order']}, {values.get('model.variables', '?')} unknowns, "
               f"{values.get('model.obstacles', '?')} obstacle(s) in the NLP")
     est, tol = values.get("model.estimated_error_m"), values.get("model.tolerance_m")

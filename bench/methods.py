@@ -326,7 +326,7 @@ class RotatedRunner(_Runner):
 
 
 ORDERS = (4, 6, 8, 10, 12, 14, 16)
-SEGMENTS = (10, 20, 40, 80, 160)
+SEGMENTS = (10, 20, 40, 80, 160, 200)
 
 
 def make_runner(method: str, setting, case: Case, **kw) -> _Runner:

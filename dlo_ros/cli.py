@@ -161,10 +161,10 @@ def format_summary(scene, result) -> str:
     )
     m = result.model
     if m:
-        kinds = [k for k in ("planar", "twist", "stretch", "gravity") if m.get(k)]
+        kinds = ["planar" if m.get("planar") else "3D"] + [k for k in ("twist", "stretch", "gravity") if m.get(k)]
         err = m.get("estimated_error_m")
         lines.append(
-            f"model   {'auto' if m.get('auto') else 'fixed'}: {', '.join(kinds) or 'bend only'}; order {m.get('order')}, "
+            f"model   {'auto' if m.get('auto') else 'fixed'}: {', '.join(kinds)}; order {m.get('order')}, "
             f"{m.get('obstacles')} obstacle(s) in the NLP, {m.get('variables')} unknowns"
             + (f", estimated error {err:.2g} m (tolerance {m.get('tolerance_m'):.2g} m"
                + ("" if m.get("tolerance_met", True) else ": NOT met, even at the highest order") + ")" if err is not None else "")

@@ -121,3 +121,12 @@ def test_reset_makes_the_next_solve_cold_in_every_pooled_model():
         assert r.ok and not r.model["planar"] and not r.warm_started, (r.message, r.model)
     finally:
         solver.close()
+
+
+def test_after_close_the_solver_keeps_answering_with_inline_checks():
+    problem = hanging()
+    solver = make_solver(problem, SolverOptions(output_points=51), compile="off", checks="background")
+    solver.solve()
+    solver.close()
+    r = solver.solve({"right": (np.array([0.58, 0.0, 0.4]), problem.grip("right").pose.orientation)})
+    assert r.ok and r.model["checks"] == "sync" and r.model["checked"], r.model

@@ -323,9 +323,11 @@ class AutoShapeSolver:
             self._generation += 1
 
     def close(self) -> None:
-        """Stop the check worker (waits for a running check)."""
-        if self._worker is not None:
-            self._worker.shutdown(wait=True, cancel_futures=True)
+        """Stop the check worker (waits for a running check); later solves check inline ('sync')."""
+        with self._lock:
+            if self._worker is not None:
+                self._worker.shutdown(wait=True, cancel_futures=True)
+                self._worker, self._job, self.checks = None, None, "sync"
 
     def set_problem(self, problem: Problem) -> None:
         problem.validate()

@@ -286,14 +286,20 @@ class AutoShapeSolver:
     def _switch(self, choice: ModelChoice, reason: str) -> None:
         """Stream on ``choice`` from now on, mapping the warm start; unchecked until its first check.
         Waits for a running background job only if that job may be using the model switched to."""
-        job = self._job
-        if job is not None and not job.done() and ("",) + choice.key() in self._job_keys:
-            wait([job])
+        job, key = self._job, ("",) + choice.key()
+        t0 = time.perf_counter()
+        while job is not None and not job.done() and key in self._job_keys:  # until that model is built
+            wait([job], timeout=0.005)
+        t1 = time.perf_counter()
         self.changes.append((time.time(), reason))
         del self.changes[:-50]  # the newest 50 (all are in the log and the recording)
         if choice.order > self.choice.order and choice.planar == self.choice.planar:
             self._lower_tried.add(replace(choice, order=self.choice.order).key())  # just found too coarse
         self.inner = self._solver_for(choice, self.problem, stream=True, source=self.inner)
+        waited, built = t1 - t0, time.perf_counter() - t1
+        if waited > 0.05 or built > 0.2:  # visible in the change's reason: the stream stalled this long
+            self.changes[-1] = (self.changes[-1][0], f"{reason} [waited {waited:.2f} s for the worker's build, "
+                                                     f"{built:.2f} s to set it up]")
         # the reasons say why this model: drop the planar one when leaving the plane, add this change
         choice.reasons = [r for r in choice.reasons if choice.planar or not r.startswith("planar:")] + [reason]
         self.choice = choice
@@ -418,7 +424,7 @@ class AutoShapeSolver:
                 self._keep(verdict)
                 return result
             self._switch(verdict.choice, verdict.reason)
-            notes.append(verdict.reason)
+            notes.append(self.changes[-1][1])
             previous, result = result, self.inner.solve(snap.poses)
             if not result.ok:  # keep the answer we had, and say so
                 previous.message += f"; the richer model failed to solve ({result.message}): answer of the previous model"
@@ -452,7 +458,7 @@ class AutoShapeSolver:
             self._keep(verdict)
         else:
             self._switch(verdict.choice, verdict.reason)  # maps the latest committed shape, not the snapshot's
-            notes.append(verdict.reason)
+            notes.append(self.changes[-1][1])
 
     def _wait_for_check(self) -> None:
         """Let a running background job finish first: it owns the pooled helper solvers meanwhile (its
@@ -465,7 +471,7 @@ class AutoShapeSolver:
         obstacle models get their IPOPT solvers too (a switch to them streams at once)."""
         for choice in choices:
             solver = self._solver_for(choice, problem, stream=False)
-            if not choice.planar or choice.obstacles != self.choice.obstacles:
+            if ("",) + choice.key() == self._full_key or choice.obstacles != self.choice.obstacles:
                 solver.prepare()
             self._job_keys = self._job_keys - {("",) + choice.key()}  # built: a switch to it need not wait
 

@@ -291,6 +291,7 @@ class AutoShapeSolver:
         while job is not None and not job.done() and key in self._job_keys:  # until that model is built
             wait([job], timeout=0.005)
         t1 = time.perf_counter()
+        pooled = self._pooled(choice) is not None
         self.changes.append((time.time(), reason))
         del self.changes[:-50]  # the newest 50 (all are in the log and the recording)
         if choice.order > self.choice.order and choice.planar == self.choice.planar:
@@ -299,7 +300,8 @@ class AutoShapeSolver:
         waited, built = t1 - t0, time.perf_counter() - t1
         if waited > 0.05 or built > 0.2:  # visible in the change's reason: the stream stalled this long
             self.changes[-1] = (self.changes[-1][0], f"{reason} [waited {waited:.2f} s for the worker's build, "
-                                                     f"{built:.2f} s to set it up]")
+                                                     f"{built:.2f} s to set up the "
+                                                     f"{'pooled' if pooled else 'missing, so built here,'} model]")
         # the reasons say why this model: drop the planar one when leaving the plane, add this change
         choice.reasons = [r for r in choice.reasons if choice.planar or not r.startswith("planar:")] + [reason]
         self.choice = choice

@@ -128,13 +128,11 @@ class PlanarRunner(_Runner):
         return out
 
 
-class Rod3DRunner(_Runner):
+class Rod3DRunner(PlanarRunner):
+    """Method 4 on the 3D case: the quaternion rod; a cold solve turns the end in TWIST_STEPS steps."""
+
     def __init__(self, case: Case, segments: int):
-        self.case = case
-        self.model = Rod3D(case.problem, segments)
-        self.build_time_s = self.model.build_time_s
-        self.state = None
-        self.weight_scale = 1.0
+        super().__init__(case, Rod3D(case.problem, segments))
 
     def cold(self, problem) -> Outcome:
         if self.case.tau == 0.0:
@@ -152,14 +150,6 @@ class Rod3DRunner(_Runner):
             total += out.time_s
         self.state = sol if out.ok else None
         out.time_s, out.iterations = total, iters  # IPOPT time summed over the continuation
-        return out
-
-    def warm(self, problem) -> Outcome:
-        if self.state is None:
-            return self.cold(problem)
-        out, sol = self.model.warm(problem, self.state, self.weight_scale)
-        if out.ok:
-            self.state = sol
         return out
 
 

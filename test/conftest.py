@@ -1,6 +1,10 @@
 """Shared helpers for the tests: small scenes built from the model classes (no YAML, no ROS)."""
 from __future__ import annotations
 
+from contextlib import contextmanager
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -48,3 +52,28 @@ def _no_background_compile(monkeypatch):
     """Tests use interpreted CasADi derivatives (compiling a scene takes gcc ~1 min); the compiled path
     has its own test that opts back in."""
     monkeypatch.setenv("DLO_NO_COMPILE", "1")
+
+
+@contextmanager
+def clean_node(*node_args: str, log_path: Path):
+    """``running_node`` (the node in its own process and domain, a client); afterwards the node must
+    have exited with code 0 and logged no traceback (its log is the assertion message)."""
+    from dlo_ros.node.client import running_node
+
+    with running_node(*node_args, log_path=log_path) as (proc, client):
+        yield proc, client
+    text = Path(log_path).read_text()
+    assert proc.returncode == 0, text
+    assert "Traceback" not in text, text
+
+
+@pytest.fixture(scope="module")
+def node_scene():
+    """(the node tests' scene with their solver.model, the node's solver factory): what the node under
+    test solves, to compare with in this process (interpreted: the autouse fixture above)."""
+    from dlo_ros.node.client import TEST_MODEL, TEST_SCENE
+    from dlo_ros.node.engine import build_solver
+    from dlo_ros.scene import load_scene
+
+    scene = load_scene(TEST_SCENE)
+    return replace(scene, options=replace(scene.options, model=TEST_MODEL)), build_solver

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, DloClient, running_node
+from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, DloClient
+from conftest import clean_node
 
 NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
              "-p", "compile:=off",
@@ -22,12 +23,8 @@ NAN, INF = float("nan"), float("inf")
 
 @pytest.fixture
 def node(tmp_path):
-    log = tmp_path / "node.log"
-    with running_node(*NODE_ARGS, log_path=log) as (proc, client):
-        yield proc, client
-    text = log.read_text()
-    assert proc.returncode == 0, text
-    assert "Traceback" not in text, text
+    with clean_node(*NODE_ARGS, log_path=tmp_path / "node.log") as proc_client:
+        yield proc_client
 
 
 # (kind reported, words in the report, how to send it)

@@ -12,7 +12,8 @@ import time
 import numpy as np
 import pytest
 
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, running_node
+from dlo_ros.node.client import TEST_MODEL, TEST_SCENE
+from conftest import clean_node
 
 NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
              "-p", "compile:=off",
@@ -27,12 +28,8 @@ MIB = 1024 * 1024
 
 @pytest.fixture
 def node(tmp_path):
-    log = tmp_path / "node.log"
-    with running_node(*NODE_ARGS, log_path=log) as (proc, client):
-        yield proc, client
-    text = log.read_text()
-    assert proc.returncode == 0, text
-    assert "Traceback" not in text, text
+    with clean_node(*NODE_ARGS, log_path=tmp_path / "node.log") as proc_client:
+        yield proc_client
 
 
 def burst(cl, k: int):

@@ -11,7 +11,6 @@
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import replace
 
@@ -19,7 +18,8 @@ import numpy as np
 import pytest
 
 from dlo_ros.model import Profile
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, running_node
+from dlo_ros.node.client import TEST_MODEL, TEST_SCENE
+from conftest import clean_node
 
 NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
              "-p", "compile:=off",
@@ -35,29 +35,8 @@ def qz(angle: float):
 
 @pytest.fixture
 def node(tmp_path):
-    log = tmp_path / "node.log"
-    with running_node(*NODE_ARGS, log_path=log) as (proc, client):
-        yield proc, client
-    text = log.read_text()
-    assert proc.returncode == 0, text
-    assert "Traceback" not in text, text
-
-
-@pytest.fixture(scope="module")
-def scene_and_solver():
-    from dlo_ros.scene import load_scene
-    from dlo_ros.node.engine import build_solver as ShapeSolver  # = the node's factory
-
-    old = os.environ.get("DLO_NO_COMPILE")
-    os.environ["DLO_NO_COMPILE"] = "1"
-    try:
-        scene = load_scene(TEST_SCENE)
-        yield replace(scene, options=replace(scene.options, model=TEST_MODEL)), ShapeSolver
-    finally:
-        if old is None:
-            os.environ.pop("DLO_NO_COMPILE", None)
-        else:
-            os.environ["DLO_NO_COMPILE"] = old
+    with clean_node(*NODE_ARGS, log_path=tmp_path / "node.log") as proc_client:
+        yield proc_client
 
 
 def stream(cl, poses, timeout=15.0):
@@ -67,9 +46,9 @@ def stream(cl, poses, timeout=15.0):
     return ev
 
 
-def test_query_matches_stream_and_keeps_the_warm_start(node, scene_and_solver):
+def test_query_matches_stream_and_keeps_the_warm_start(node, node_scene):
     proc, cl = node
-    scene, ShapeSolver = scene_and_solver
+    scene, ShapeSolver = node_scene
     t1 = ((0.5, 0.05, 0.45), qz(0.2))
     t2 = ((0.48, 0.06, 0.46), qz(0.25))
     ev1 = stream(cl, [LEFT, t1])
@@ -121,9 +100,9 @@ def test_query_matches_stream_and_keeps_the_warm_start(node, scene_and_solver):
     assert proc.alive()
 
 
-def test_parameters(node, scene_and_solver):
+def test_parameters(node, node_scene):
     proc, cl = node
-    scene, ShapeSolver = scene_and_solver
+    scene, ShapeSolver = node_scene
     got = cl.get_parameters(["scene", "grip_names", "string.bend_stiffness", "output_points", "frame_id"])
     assert got["scene"] == TEST_SCENE and got["grip_names"] == ["left", "right"]
     assert got["string.bend_stiffness"] == 0.02 and got["output_points"] == 51

@@ -7,13 +7,12 @@
 from __future__ import annotations
 
 import math
-import os
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, DloClient, running_node
+from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, DloClient
+from conftest import clean_node
 
 NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
              "-p", "compile:=off",
@@ -33,35 +32,20 @@ def same_rotation(q1, q2, atol=1e-6) -> bool:
 
 @pytest.fixture
 def node(tmp_path):
-    log = tmp_path / "node.log"
-    with running_node(*NODE_ARGS, log_path=log) as (proc, client):
-        yield proc, client
-    text = log.read_text()
-    assert proc.returncode == 0, text
-    assert "Traceback" not in text, text
+    with clean_node(*NODE_ARGS, log_path=tmp_path / "node.log") as proc_client:
+        yield proc_client
 
 
-@pytest.fixture(scope="module")
-def reference():
-    """A ShapeSolver on the default scene in this process (interpreted, like the node under test)."""
-    from dlo_ros.scene import load_scene
-    from dlo_ros.node.engine import build_solver as ShapeSolver  # = the node's factory
+@pytest.fixture
+def reference(node_scene):
+    """A fresh solver of the node's model on its scene, in this process, after a first solve."""
+    scene, build_solver = node_scene
 
-    old = os.environ.get("DLO_NO_COMPILE")
-    os.environ["DLO_NO_COMPILE"] = "1"
-    try:
-        scene = load_scene(TEST_SCENE)
-
-        def make():
-            solver = ShapeSolver(scene.problem, replace(scene.options, model=TEST_MODEL))
-            assert solver.solve().ok
-            return solver
-        yield make
-    finally:
-        if old is None:
-            os.environ.pop("DLO_NO_COMPILE", None)
-        else:
-            os.environ["DLO_NO_COMPILE"] = old
+    def make():
+        solver = build_solver(scene.problem, scene.options)
+        assert solver.solve().ok
+        return solver
+    return make
 
 
 def test_target_gives_centreline_and_wrenches(node, reference):

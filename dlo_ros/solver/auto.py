@@ -404,10 +404,7 @@ class AutoShapeSolver:
             self.problem = problem
             self._since_check += 1
             if self._unchecked or self._since_check >= self.options.recheck_every:
-                snap = _Snapshot(self.inner, self.inner.snapshot(), replace(self.choice, reasons=list(self.choice.reasons)),
-                                 problem, inner_poses, result.points.copy(),
-                                 max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
-                                 self._generation)
+                snap = self._snapshot(problem, inner_poses, result)
                 if self._worker is None:
                     result = self._check_now(snap, result, notes)
                 elif self._job is None:
@@ -431,11 +428,15 @@ class AutoShapeSolver:
             if not result.ok:  # keep the answer we had, and say so
                 previous.message += f"; the richer model failed to solve ({result.message}): answer of the previous model"
                 return previous
-            snap = replace(snap, inner=self.inner, state=self.inner.snapshot(),
-                           choice=replace(self.choice, reasons=list(self.choice.reasons)), generation=self._generation,
-                           points=result.points.copy(),
-                           max_grip_force=max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0))
+            snap = self._snapshot(snap.problem, snap.poses, result)
         return result
+
+    def _snapshot(self, problem: Problem, poses: dict, result: ShapeResult) -> _Snapshot:
+        """What a check needs of the streaming model's committed ``result`` (a copy, for another thread)."""
+        return _Snapshot(self.inner, self.inner.snapshot(), replace(self.choice, reasons=list(self.choice.reasons)),
+                         problem, poses, result.points.copy(),
+                         max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
+                         self._generation)
 
     def _keep(self, verdict: _Verdict) -> None:
         self.choice.estimated_error_m = verdict.estimate
@@ -514,14 +515,11 @@ class AutoShapeSolver:
                 if error <= tol / 4:  # (inf when the lower order failed to solve: stay)
                     verdict.choice = replace(choice, order=ORDERS[i - 1], estimated_error_m=error, reasons=list(choice.reasons))
                     verdict.reason = f"order {ORDERS[i - 1]} error estimate {error:.3g} m ≤ {tol / 4:.3g} m: order {ORDERS[i - 1]}"
-        target = self._pool_solver(verdict.choice, problem) if verdict.choice is not None and prepare else None
+        # prepare only a pooled model: never build one here, the stream may be switching to it
+        target = self._pooled(verdict.choice) if verdict.choice is not None and prepare else None
         if target is not None:
             target.prepare()
         return verdict
-
-    def _pool_solver(self, choice: ModelChoice, problem: Problem) -> ShapeSolver | None:
-        """The pooled model of ``choice``, never built here (the stream may be switching to it)."""
-        return self._pooled(choice)
 
     def _shadow_error(self, snap: _Snapshot, order: int) -> float:
         """max |x_n(s) − x_m(s)| over the output points between the checked shape (order n) and the same

@@ -1,0 +1,72 @@
+"""The compiled-derivative cache: its key tells NLPs apart without generating C, and a cached library
+is found and used without generating C (generating it costs seconds for a 3D scene, and a model
+switch in a streaming node must not pay that; issue 6's stalls)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from dlo_ros.solver import ShapeSolver, compiled
+from dlo_ros.solver.nlp import StringNLP
+from dlo_ros.solver.options import SolverOptions
+
+from conftest import clamped_pair
+
+PLANAR = SolverOptions(model="planar", order=6, quadrature_nodes=20)
+
+
+def _key(problem, options=PLANAR) -> str:
+    return compiled.fingerprint(StringNLP(problem, options).kkt_fn)
+
+
+def test_the_key_is_stable_and_tells_apart_every_baked_in_constant():
+    base = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1)
+    assert _key(base) == _key(clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1))  # a fresh NLP, same scene
+    # the reference frame R0 follows the chord at build time; σ = L / max Rf scales the objective
+    assert _key(clamped_pair(right=(0.6, 0.0, 0.1), weight=0.1)) != _key(base)
+    assert _key(clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1, bend=2.0)) != _key(base)
+    assert _key(base, replace(PLANAR, order=7)) != _key(base)
+    assert _key(base, replace(PLANAR, model="full")) != _key(base)
+    # parameters (here the grip target along the chord) are inputs, not constants: same key
+    assert _key(clamped_pair(right=(0.7, 0.0, 0.0), weight=0.1)) == _key(base)
+
+
+def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monkeypatch):
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.delenv("DLO_NO_COMPILE")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    problem = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1)
+    first = ShapeSolver(problem, PLANAR, compile="blocking")
+    assert first.kkt_compiled and len(list(tmp_path.glob("dlo_kkt_*.so"))) == 1
+
+    def no_codegen(*_):
+        raise AssertionError("C was generated for a cached function")
+
+    monkeypatch.setattr(compiled, "_generate", no_codegen)
+    again = ShapeSolver(problem, PLANAR, compile="cached")  # a fresh NLP finds the library by its key
+    assert again.kkt_compiled
+    interpreted = ShapeSolver(problem, PLANAR, compile="off")
+    z = np.linspace(-0.3, 0.4, again.model.layout.size)
+    p = interpreted.pack_parameters(problem, z)
+    lam = np.linspace(0.1, 1.0, interpreted.nlp.lbg.size)
+    for native, exact in zip(again._kkt(z, p, lam), interpreted._kkt(z, p, lam)):
+        np.testing.assert_allclose(native, exact, rtol=1e-12, atol=1e-12)
+    target = {"right": ((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))}
+    a, b = again.solve(target), interpreted.solve(target)
+    assert a.ok and b.ok
+    np.testing.assert_allclose(a.points, b.points, atol=1e-9)
+
+
+def test_without_a_compiler_the_interpreted_function_is_used(monkeypatch, tmp_path):
+    monkeypatch.delenv("DLO_NO_COMPILE")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled, "compiler", lambda: None)
+    fn = ca.Function("f", [x := ca.SX.sym("x", 2)], [ca.sin(x)])
+    assert compiled.cached_library(fn) is None
+    native, ok = compiled.compiled(fn)
+    assert not ok and isinstance(native, compiled.InterpretedFunction)
+    assert not list(tmp_path.iterdir())  # nothing generated, nothing cached

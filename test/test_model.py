@@ -6,7 +6,8 @@ import pytest
 
 from dlo_ros.model import ChebyshevQuadrature, FourierBasis, Obstacle, Profile, make_basis
 from dlo_ros.model.rotations import (
-    TANGENT_X, check_quaternion, euler_from_frame, material_frames, matrix_to_quat, quat_to_matrix, reference_frame,
+    TANGENT_X, check_quaternion, euler_from_frame, material_frames, matrix_to_quat, pose_quaternions, quat_to_matrix,
+    reference_frame,
 )
 from conftest import clamped_pair
 
@@ -62,6 +63,19 @@ def test_reference_frame_puts_straight_chord_at_theta_half_pi():
     assert np.allclose(r0.T @ r0, np.eye(3)) and np.isclose(np.linalg.det(r0), 1)
     q = material_frames(r0, np.array([0.0]), np.array([np.pi / 2]), np.array([0.0]))[0]
     assert np.allclose(q[:, 2], chord / np.linalg.norm(chord))
+
+
+def test_pose_quaternions_from_euler_angles_are_the_rotation_matrices_quaternions():
+    """The solver's fast path (quaternion products) against rotation matrices built one by one."""
+    rng = np.random.default_rng(3)
+    for chord in ([1.0, 0.2, 0.0], [0.0, 0.0, 1.0], [-0.3, 0.5, 0.8]):
+        r0 = reference_frame(np.array(chord), np.array([0.0, 0.0, 1.0]))
+        phi, theta, psi = rng.uniform(-7, 7, (3, 40))
+        q = pose_quaternions(r0, phi, theta, psi)
+        assert np.all(q[:, 3] >= 0) and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-14)
+        for k in range(len(phi)):
+            r = r0 @ material_frames(np.eye(3), phi[k:k + 1], theta[k:k + 1], psi[k:k + 1])[0] @ TANGENT_X
+            assert np.allclose(quat_to_matrix(q[k]), r, atol=1e-13)
 
 
 def test_quaternions():

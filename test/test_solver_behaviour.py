@@ -34,6 +34,29 @@ def test_query_does_not_touch_the_warm_start():
     assert np.allclose(again.points, before.points, atol=1e-9)
 
 
+def test_new_values_of_the_same_structure_reach_the_next_solve():
+    """set_problem with the same structure keeps the NLP (parameters are cached between updates): a
+    heavier, stiffer string and a moved obstacle must still give a fresh solver's shape."""
+    from dataclasses import replace
+
+    from dlo_ros.model import Obstacle, Profile
+
+    table = Obstacle("halfspace", np.array([0.0, 0.0, -0.5, 0.0, 0.0, 1.0]), "table")
+    s = ShapeSolver(clamped_pair(right=(0.85, 0, 0.3), weight=0.5, obstacles=(table,)), SolverOptions(model="full"),
+                    compile="off")
+    first = s.solve()
+    heavier = replace(s.problem, string=replace(s.problem.string, weight_per_length=Profile.constant(2.0),
+                                                bend_stiffness=Profile.constant(1.5)),
+                      obstacles=(Obstacle("halfspace", np.array([0.0, 0.0, -0.1, 0.0, 0.0, 1.0]), "table"),))
+    s.set_problem(heavier)
+    warm = s.solve({"right": ([0.85, 0.0, 0.3], Q)})
+    cold = ShapeSolver(heavier, s.options, compile="off").solve(warm=False)
+    assert first.ok and warm.ok and cold.ok
+    assert np.max(np.abs(warm.points - first.points)) > 1e-3  # the new values changed the shape
+    mirrored = cold.points * np.array([1.0, -1.0, 1.0])  # the scene is symmetric about y = 0: either branch
+    assert min(np.max(np.abs(warm.points - cold.points)), np.max(np.abs(warm.points - mirrored))) < 1e-8
+
+
 def test_large_jump_converges():
     s = solver()
     r = s.solve({"right": ([0.15, 0.2, 0.3], Q)})

@@ -151,14 +151,14 @@ class RitzModel:
         return ca.mtimes(ca.DM(self.basis.values(np.array([s]))), c)
 
     # ---- numerical evaluation of a solution -------------------------------------------------------
-    def fields(self, z: np.ndarray, s: np.ndarray) -> dict[str, np.ndarray]:
-        """φ, θ, ψ, ε and their s-derivatives at arc lengths s.
+    def fields(self, z: np.ndarray, s: np.ndarray, names: tuple[str, ...] = ("phi", "theta", "psi", "eps")) -> dict[str, np.ndarray]:
+        """φ, θ, ψ, ε (or only ``names``) and their s-derivatives at arc lengths s.
 
         Fields that are not unknowns are constants: θ = π/2 in a planar model, ψ = ε = 0.
         """
         B, dB, _ = self.matrices(s)
         out = {}
-        for name in ("phi", "theta", "psi", "eps"):
+        for name in names:
             c = self.coefficients(z, name)
             constant = np.pi / 2 if name == "theta" else 0.0
             out[name] = B @ c if c is not None else np.full(len(s), constant)
@@ -166,7 +166,7 @@ class RitzModel:
         return out
 
     def node_tangents(self, z: np.ndarray) -> np.ndarray:
-        f = self.fields(z, self.quad.nodes)
+        f = self.fields(z, self.quad.nodes, ("phi", "theta", "eps"))
         eps = f["eps"] if self.layout.stretch else None
         return self.tangents(f["phi"], f["theta"], eps, lib=np)
 
@@ -177,7 +177,7 @@ class RitzModel:
 
     def zero_twist_psi(self, z: np.ndarray, s: np.ndarray, s_anchor: float, psi_anchor: float) -> np.ndarray:
         """ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles to."""
-        f = self.fields(z, self.quad.nodes)
+        f = self.fields(z, self.quad.nodes, ("phi", "theta"))
         g = -f["dphi"] * np.cos(f["theta"])
         W = self.position_matrix(np.append(np.asarray(s, dtype=float), s_anchor))
         integral = W @ g

@@ -12,6 +12,8 @@ P e_y = e_x, P e_z = e_y, i.e. (x_out, y_out, z_out) = (ζ, ξ, η).
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 #: Q_out = Q @ TANGENT_X, maps material axes (ξ, η, ζ) to ROS pose axes (x = ζ, y = ξ, z = η).
@@ -35,6 +37,40 @@ def rot_y(a: np.ndarray) -> np.ndarray:
 def material_frames(r0: np.ndarray, phi: np.ndarray, theta: np.ndarray, psi: np.ndarray) -> np.ndarray:
     """Q = R0 Rz(−φ) Ry(−θ) Rz(−ψ) for arrays of angles → (N, 3, 3), columns (ξ, η, ζ)."""
     return r0 @ rot_z(-np.asarray(phi)) @ rot_y(-np.asarray(theta)) @ rot_z(-np.asarray(psi))
+
+
+def quat_multiply_matrices(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(L, R) with a ⊗ q = L q and q ⊗ b = R q for quaternions (x, y, z, w): a = ``left``, b = ``right``."""
+    x, y, z, w = left
+    lm = np.array([[w, -z, y, x], [z, w, -x, y], [-y, x, w, z], [-x, -y, -z, w]])
+    x, y, z, w = right
+    rm = np.array([[w, z, -y, x], [-z, w, x, y], [y, -x, w, z], [-x, -y, -z, w]])
+    return lm, rm
+
+
+def pose_quaternions(r0: np.ndarray, phi: np.ndarray, theta: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    """Quaternions (N, 4), (x, y, z, w) with w ≥ 0, of the pose frames Q·TANGENT_X, Q = R0 Rz(−φ) Ry(−θ) Rz(−ψ).
+
+    The same rotations as ``matrix_to_quat(material_frames(r0, φ, θ, ψ) @ TANGENT_X)`` without building
+    matrices: with a = −φ, b = −θ, c = −ψ the z-y-z product is
+        q_zyz = (−sin(b/2) sin((a−c)/2), sin(b/2) cos((a−c)/2), cos(b/2) sin((a+c)/2), cos(b/2) cos((a+c)/2)),
+    and the constant rotations R0 (left) and TANGENT_X (right) are one 4×4 matrix on it.
+    """
+    half_b = -0.5 * np.asarray(theta, dtype=float)
+    diff = 0.5 * (np.asarray(psi, dtype=float) - np.asarray(phi, dtype=float))  # (a − c)/2
+    summ = -0.5 * (np.asarray(phi, dtype=float) + np.asarray(psi, dtype=float))  # (a + c)/2
+    sb, cb = np.sin(half_b), np.cos(half_b)
+    q = np.stack([-sb * np.sin(diff), sb * np.cos(diff), cb * np.sin(summ), cb * np.cos(summ)], axis=-1)
+    q = q @ _frame_map(np.asarray(r0, dtype=float).tobytes())
+    q[q[:, 3] < 0] *= -1.0
+    return q
+
+
+@lru_cache(maxsize=64)
+def _frame_map(r0_bytes: bytes) -> np.ndarray:
+    """(L(q_R0) R(q_TANGENT_X))ᵀ: right-multiplying row quaternions by it applies R0 · (…) · TANGENT_X."""
+    lm, rm = quat_multiply_matrices(matrix_to_quat(np.frombuffer(r0_bytes).reshape(3, 3)), matrix_to_quat(TANGENT_X))
+    return (lm @ rm).T
 
 
 def euler_from_frame(r0: np.ndarray, q: np.ndarray) -> tuple[float, float, float]:

@@ -19,17 +19,17 @@ Contract:
 """
 from __future__ import annotations
 
+import math
 import os
 import threading
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import null_space
 from scipy.special import j0
 
 from ..model.problem import GripPose, Problem
-from ..model.rotations import TANGENT_X, euler_from_frame, material_frames, matrix_to_quat, quat_to_matrix, rot_y, rot_z
+from ..model.rotations import TANGENT_X, euler_from_frame, material_frames, pose_quaternions, quat_to_matrix, rot_y, rot_z
 from .compiled import InterpretedFunction, NativeFunction, cached_library, compiled
 from .nlp import StringNLP
 from .options import SolverOptions
@@ -327,26 +327,41 @@ class ShapeSolver:
 
     # ---- parameters -------------------------------------------------------------------------------
     def _reference_angles(self, z: np.ndarray, s: float) -> tuple[float, float, float]:
-        f = self.model.fields(z, np.array([s]))
+        f = self.model.fields(z, np.array([s]), ("phi", "theta", "psi"))
         return float(f["phi"][0]), float(f["theta"][0]), float(f["psi"][0])
 
     def grip_angles(self, pose: GripPose, reference: tuple[float, float, float]) -> np.ndarray:
         """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
         q = quat_to_matrix(pose.orientation) @ TANGENT_X.T
         phi, theta, psi = euler_from_frame(self.nlp.r0, q)
-        best, best_d = None, np.inf
-        two_pi = 2.0 * np.pi
-        for ph, th, ps in ((phi, theta, psi), (phi + np.pi, -theta, psi + np.pi)):
-            th = th + two_pi * np.round((reference[1] - th) / two_pi)
-            ph = ph + two_pi * np.round((reference[0] - ph) / two_pi)
-            ps = ps + two_pi * np.round((reference[2] - ps) / two_pi)
+        best, best_d = None, math.inf
+        two_pi = 2.0 * math.pi
+        for ph, th, ps in ((phi, theta, psi), (phi + math.pi, -theta, psi + math.pi)):
+            th = th + two_pi * round((reference[1] - th) / two_pi)
+            ph = ph + two_pi * round((reference[0] - ph) / two_pi)
+            ps = ps + two_pi * round((reference[2] - ps) / two_pi)
             d = (ph - reference[0]) ** 2 + (th - reference[1]) ** 2 + (ps - reference[2]) ** 2
             if d < best_d:
-                best, best_d = np.array([ph, th, ps]), d
-        return best
+                best, best_d = (ph, th, ps), d
+        return np.array(best)
 
     def pack_parameters(self, problem: Problem, z_reference: np.ndarray) -> np.ndarray:
         """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
+        nlp, lay = self.nlp, self.nlp.params
+        p = self._scene_parameters(problem).copy()
+        for g in problem.grips:
+            p[lay[f"grip:{g.name}:position"]] = g.pose.position
+            p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, self._reference_angles(z_reference, g.s))
+        return p
+
+    def _scene_parameters(self, problem: Problem) -> np.ndarray:
+        """The parameter vector without grip targets (zeros there), cached while the string, gravity, loads,
+        relative positions and obstacles are the same objects (a stream only changes grip poses)."""
+        key = (problem.string, problem.loads, problem.relative_positions, problem.obstacles)
+        cached = getattr(self, "_scene_p", None)
+        if cached is not None and cached[0] is self.nlp and all(a is b for a, b in zip(cached[1], key)) \
+                and np.array_equal(cached[2], problem.gravity):
+            return cached[3]
         nlp, lay = self.nlp, self.nlp.params
         nodes = nlp.model.quad.nodes
         st = problem.string
@@ -357,9 +372,6 @@ class ShapeSolver:
         p[lay["D"]] = st.weight_per_length(nodes)
         p[lay["gravity"]] = problem.gravity_unit
         p[lay["radius"]] = st.radius
-        for g in problem.grips:
-            p[lay[f"grip:{g.name}:position"]] = g.pose.position
-            p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, self._reference_angles(z_reference, g.s))
         n = nlp.r0[:, 2]
         for i, ld in enumerate(problem.loads):
             p[lay[f"load:{i}:force"]] = ld.force
@@ -368,6 +380,8 @@ class ShapeSolver:
             p[lay[f"relative:{i}"]] = rel.offset
         for i, ob in enumerate(problem.obstacles):
             p[lay[f"obstacle:{i}"]] = ob.params
+        p.flags.writeable = False
+        self._scene_p = (nlp, key, np.array(problem.gravity, dtype=float), p)
         return p
 
     # ---- initial guess ----------------------------------------------------------------------------
@@ -617,7 +631,8 @@ class ShapeSolver:
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         s_out = np.linspace(0.0, nlp.length, self.options.output_points)
         points = m.positions(z, s_out)
-        quats = matrix_to_quat(self.frames(z, s_out, p) @ TANGENT_X)
+        f = m.fields(z, s_out, ("phi", "theta", "psi"))
+        quats = pose_quaternions(nlp.r0, f["phi"], f["theta"], f["psi"] if m.layout.twist else self.frames_psi(z, s_out, p))
         min_eig = self._min_reduced_eigenvalue(state)  # also fills state.energies
         bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
         energy = {"bend": bend, "twist": twist, "stretch": stretch, "gravity": grav, "external_work": work,
@@ -625,7 +640,8 @@ class ShapeSolver:
         grips = {g.name: self._wrench(g, z, lam_si) for g in problem.grips}
         contacts = {}
         if nlp.obstacle_rows:
-            sample_x = m.positions(z, nlp.obstacle_s)
+            touching = any(np.any(lam_si[rows] > 0) for rows in nlp.obstacle_rows)
+            sample_x = m.positions(z, nlp.obstacle_s) if touching else None
             for i, rows in enumerate(nlp.obstacle_rows):
                 ob = problem.obstacles[i]
                 lam = lam_si[rows]
@@ -712,7 +728,7 @@ class ShapeSolver:
             equality = nlp.lbg == nlp.ubg
             active = equality | (np.abs(state.lam_g) > 1e-9) | (g > nlp.ubg - 1e-9)
             jac = state.jacobian[active]
-            basis = null_space(jac) if jac.size else np.eye(h.shape[0])
+            basis = _null_space(jac) if jac.size else np.eye(h.shape[0])
         else:
             basis = np.eye(h.shape[0])
         if basis.shape[1] == 0:
@@ -735,6 +751,14 @@ def with_checked_poses(problem: Problem, poses: dict | None) -> Problem:
         pos, quat = (pose.position, pose.orientation) if isinstance(pose, GripPose) else pose
         checked[name] = GripPose.checked(pos, quat, f"grips.{name}")
     return problem.with_grip_poses(checked)
+
+
+def _null_space(a: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of {v : a v = 0}; rank as scipy.linalg.null_space counts it
+    (singular values above max(a.shape)·eps·σ_max)."""
+    _, sv, vh = np.linalg.svd(a, full_matrices=True)
+    rank = int(np.sum(sv > max(a.shape) * np.finfo(float).eps * (sv[0] if sv.size else 0.0)))
+    return vh[rank:].T.conj()
 
 
 def is_stable(min_eigenvalue: float, hessian: np.ndarray) -> bool:

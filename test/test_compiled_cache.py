@@ -9,6 +9,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from dlo_ros.model import Obstacle
 from dlo_ros.solver import ShapeSolver, compiled
 from dlo_ros.solver.nlp import StringNLP
 from dlo_ros.solver.options import SolverOptions
@@ -39,9 +40,11 @@ def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monke
         pytest.skip("no C compiler")
     monkeypatch.delenv("DLO_NO_COMPILE")
     monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
-    problem = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1)
+    table = Obstacle("halfspace", np.array([0.0, 0.0, -0.5, 0.0, 0.0, 1.0]), "table")
+    problem = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1, obstacles=(table,))
     first = ShapeSolver(problem, PLANAR, compile="blocking")
-    assert first.kkt_compiled and len(list(tmp_path.glob("dlo_kkt_*.so"))) == 1
+    # two functions: with the obstacle rows' derivatives, and without them (used while nothing touches)
+    assert first.kkt_compiled and len(list(tmp_path.glob("dlo_kkt_*.so"))) == 2
 
     def no_codegen(*_):
         raise AssertionError("C was generated for a cached function")
@@ -53,8 +56,9 @@ def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monke
     z = np.linspace(-0.3, 0.4, again.model.layout.size)
     p = interpreted.pack_parameters(problem, z)
     lam = np.linspace(0.1, 1.0, interpreted.nlp.lbg.size)
-    for native, exact in zip(again._kkt(z, p, lam), interpreted._kkt(z, p, lam)):
-        np.testing.assert_allclose(native, exact, rtol=1e-12, atol=1e-12)
+    for contact in (True, False):
+        for native, exact in zip(again._derivatives(z, p, lam, contact), interpreted._derivatives(z, p, lam, contact)):
+            np.testing.assert_allclose(native, exact, rtol=1e-12, atol=1e-12)
     target = {"right": ((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))}
     a, b = again.solve(target), interpreted.solve(target)
     assert a.ok and b.ok

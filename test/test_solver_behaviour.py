@@ -117,3 +117,51 @@ def test_paper_frame_with_the_chord_on_its_pole_solves_and_gives_finite_torques(
             assert np.all(np.isfinite(t_paper))
             assert abs(np.linalg.norm(t_paper) - np.linalg.norm(t_rot)) < 2e-2 * np.linalg.norm(t_rot), (name, t_paper, t_rot)
             assert abs(t_paper[2]) < 1e-6 * np.linalg.norm(t_rot)  # planar buckle: no torque about the chord
+
+
+def test_contact_free_derivatives_are_the_full_ones_without_obstacle_rows():
+    """The Newton path evaluates a function without the obstacle rows' Jacobian and Hessian while none is
+    active: with λ = 0 on those rows it must equal the full KKT function everywhere else."""
+    from dlo_ros.model import Obstacle
+
+    table = Obstacle("halfspace", np.array([0.0, 0.0, -0.5, 0.0, 0.0, 1.0]), "table")
+    s = ShapeSolver(clamped_pair(right=(0.8, 0.1, 0.2), weight=0.5, obstacles=(table,)), SolverOptions(model="full"),
+                    compile="off")
+    nlp = s.nlp
+    assert nlp.kkt_free_fn is not None and nlp.n_free_rows < nlp.lbg.size
+    rng = np.random.default_rng(4)
+    z = rng.uniform(-0.5, 0.5, s.model.layout.size)
+    p = s.pack_parameters(s.problem, z)
+    lam = rng.uniform(-1, 1, nlp.lbg.size)
+    lam[nlp.n_free_rows:] = 0.0
+    free, full = s._derivatives(z, p, lam, contact=False), s._kkt(z, p, lam)
+    for k in (0, 1, 3, 4):  # ∇f, g (every row, obstacle values included), ∇²L, energies
+        np.testing.assert_allclose(free[k], full[k], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(free[2][: nlp.n_free_rows], full[2][: nlp.n_free_rows], rtol=1e-12, atol=1e-12)
+    assert np.all(free[2][nlp.n_free_rows:] == 0.0) and np.any(full[2][nlp.n_free_rows:] != 0.0)
+
+
+def test_resting_on_a_post_warm_updates_balance_forces_and_match_cold_solves():
+    """A heavy string resting on a sphere, its right end moved in small steps: the warm updates (Newton
+    steps with the contact rows active) equal cold solves, and forces balance: the grips' forces plus
+    the contact force carry the weight D·L (a conservation check independent of the discretisation)."""
+    from dlo_ros.model import Obstacle
+
+    weight = 0.8
+    post = Obstacle("sphere", np.array([0.25, 0.0, -0.1, 0.08]), "post")  # 5 cm above the free sag
+    problem = clamped_pair(left=(0.0, 0.0, 0.3), right=(0.5, 0.0, 0.3), weight=weight, obstacles=(post,))
+    s = ShapeSolver(problem, SolverOptions(model="full", order=16), compile="off")
+    first = s.solve()
+    assert first.ok and np.linalg.norm(first.contact_forces[0]) > 0.05 * weight  # it rests on the post
+    newton = 0
+    for k in range(1, 6):
+        right = (0.5 + 0.01 * k, 0.0, 0.3 - 0.005 * k)
+        warm = s.solve({"right": (right, Q)})
+        assert warm.ok and warm.warm_started, warm.message
+        newton += warm.ipopt_status == "Newton"
+        total = sum(w.force for w in warm.grips.values()) + warm.contact_forces[0]
+        np.testing.assert_allclose(total, [0.0, 0.0, weight * 1.0], atol=1e-6 * weight)
+    cold = ShapeSolver(s.problem, s.options, compile="off").solve(warm=False)
+    mirrored = cold.points * np.array([1.0, -1.0, 1.0])  # it rests against one side of the post: either side
+    assert cold.ok and min(np.max(np.abs(warm.points - cold.points)), np.max(np.abs(warm.points - mirrored))) < 1e-7
+    assert newton >= 3  # the contact stays active: these were Newton updates, not IPOPT fallbacks

@@ -101,6 +101,7 @@ class ShapeSolver:
         if not self.lazy_ipopt:
             self._ipopt_solver(False), self._ipopt_solver(True)
         self._kkt = InterpretedFunction(self.nlp.kkt_fn)
+        self._kkt_free = InterpretedFunction(self.nlp.kkt_free_fn) if self.nlp.kkt_free_fn is not None else None
         self.kkt_compiled = False
         self.compile_time_s = 0.0
         self._start_compile()
@@ -140,20 +141,29 @@ class ShapeSolver:
         mode = "off" if os.environ.get("DLO_NO_COMPILE") else self.compile_mode
         if mode == "off":
             return
-        fn, nlp = self.nlp.kkt_fn, self.nlp
-        lib = cached_library(fn)
-        if lib is not None:  # compiled on an earlier start: load now, no waiting
-            self._kkt, self.kkt_compiled = NativeFunction(lib, fn), True
-            return
-        if mode == "cached":
+        nlp = self.nlp
+        # the contact-free function first: it is the one a stream uses while nothing touches
+        todo = [(name, fn) for name, fn in (("_kkt_free", nlp.kkt_free_fn), ("_kkt", nlp.kkt_fn)) if fn is not None]
+        for name, fn in list(todo):
+            lib = cached_library(fn)
+            if lib is not None:  # compiled on an earlier start: load now, no waiting
+                setattr(self, name, NativeFunction(lib, fn))
+                todo.remove((name, fn))
+        self.kkt_compiled = not todo
+        if not todo or mode == "cached":
             return
 
         def work(locked: bool) -> None:
             t0 = time.perf_counter()
-            native, ok = compiled(fn, nice=10 if mode == "background" else 0)
-            with (threading.Lock() if locked else self._lock):  # blocking: the caller may hold self._lock
-                if ok and self.nlp is nlp:  # the scene may have been rebuilt meanwhile
-                    self._kkt, self.kkt_compiled = native, True
+            for name, fn in todo:
+                native, ok = compiled(fn, nice=10 if mode == "background" else 0)
+                with (threading.Lock() if locked else self._lock):  # blocking: the caller may hold self._lock
+                    if not ok or self.nlp is not nlp:  # no compiler, or the scene was rebuilt meanwhile
+                        return
+                    setattr(self, name, native)
+            with (threading.Lock() if locked else self._lock):
+                if self.nlp is nlp:
+                    self.kkt_compiled = True
                     self.compile_time_s = time.perf_counter() - t0
 
         if mode == "blocking":
@@ -483,6 +493,7 @@ class ShapeSolver:
         active = equality | ((start.lam_g > 1e-8) & (start.g > nlp.ubg - 1e-7))
         lam[active] = start.lam_g[active]
         idx = np.flatnonzero(active)
+        contact = bool(np.any(active[nlp.n_free_rows:]))
         bound = nlp.ubg[idx]
         n = z.size
         # Only grip targets changed → they enter g linearly (row = (x − target)/scale), so ∇f, J and H
@@ -496,7 +507,7 @@ class ShapeSolver:
                 grad, jac, hess, energies = start.gradient, start.jacobian, start.hessian, None
                 g = start.g + nlp.target_shift(start.p, p)
             else:
-                grad, g, jac, hess, energies = self._kkt(z, p, lam)
+                grad, g, jac, hess, energies = self._derivatives(z, p, lam, contact)
                 grad, g = grad.ravel(), g.ravel()
             ja = jac[idx]
             r_dual = grad + ja.T @ lam[idx]
@@ -525,6 +536,17 @@ class ShapeSolver:
             z += step[:n]
             lam[idx] += step[n:]
         return False, start, max_steps, np.inf
+
+    def _derivatives(self, z: np.ndarray, p: np.ndarray, lam: np.ndarray, contact: bool) -> list[np.ndarray]:
+        """[∇f, g, ∂g/∂z, ∇²L, energies] at (z, p, λ).  Without ``contact`` (no obstacle row active, so λ is
+        zero on them) the obstacle rows' Jacobian rows are returned as zeros and left out of ∇²L, which
+        is exact for every use here: only active rows' Jacobians are used, and inactive rows have λ = 0."""
+        if contact or self._kkt_free is None:
+            return self._kkt(z, p, lam)
+        grad, g, jac_free, hess, energies = self._kkt_free(z, p, lam)
+        jac = np.zeros((g.size, jac_free.shape[1]))
+        jac[: jac_free.shape[0]] = jac_free
+        return [grad, g, jac, hess, energies]
 
     def _violation_from_g(self, g: np.ndarray) -> float:
         nlp = self.nlp
@@ -719,14 +741,17 @@ class ShapeSolver:
 
     def _min_reduced_eigenvalue(self, state: _State) -> float | None:
         nlp = self.nlp
-        if state.hessian is None:
-            gradient, _, state.jacobian, state.hessian, state.energies = self._kkt(state.z, state.p, state.lam_g)
-            state.gradient = gradient.ravel()
-        h = state.hessian
         if nlp.lbg.size:
             g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
             equality = nlp.lbg == nlp.ubg
             active = equality | (np.abs(state.lam_g) > 1e-9) | (g > nlp.ubg - 1e-9)
+        if state.hessian is None:
+            contact = nlp.lbg.size > 0 and bool(np.any(active[nlp.n_free_rows:]))
+            gradient, _, state.jacobian, state.hessian, state.energies = self._derivatives(state.z, state.p, state.lam_g,
+                                                                                          contact)
+            state.gradient = gradient.ravel()
+        h = state.hessian
+        if nlp.lbg.size:
             jac = state.jacobian[active]
             basis = _null_space(jac) if jac.size else np.eye(h.shape[0])
         else:

@@ -116,6 +116,22 @@ def test_obstacle_sign_convention(spec, inside, outside):
     assert ob.h(np.array(inside, float)) > 0 > ob.h(np.array(outside, float))
 
 
+@pytest.mark.parametrize("spec", [
+    {"type": "halfspace", "point": [0.1, 0.2, 0.3], "normal": [0.3, -1, 2]},
+    {"type": "sphere", "center": [1, 0, 0], "radius": 0.5},
+    {"type": "capsule", "a": [0, 0, 0], "b": [1, 0.5, 0], "radius": 0.1},
+])
+def test_numeric_h_is_the_nlps_h(spec):
+    """Obstacle.h (numpy, used every update to find obstacles within reach) against the CasADi
+    expression the NLP constrains, at points on every side (the capsule beyond both ends too)."""
+    from dlo_ros.model.obstacles import OBSTACLE_TYPES, _numeric_h
+
+    ob = Obstacle.from_dict(spec)
+    assert ob.type in OBSTACLE_TYPES
+    for x in np.random.default_rng(5).uniform(-1.5, 2.5, (50, 3)):
+        assert np.isclose(ob.h(x), float(_numeric_h(ob.type)(x, ob.params)), rtol=1e-13, atol=1e-14)
+
+
 def test_signed_distance_values():
     assert np.isclose(Obstacle.from_dict({"type": "halfspace", "normal": [0, 0, 1]}).h(np.array([0, 0, 0.3])), -0.3)
     assert np.isclose(Obstacle.from_dict({"type": "sphere", "center": [0, 0, 0], "radius": 1}).h(np.array([2.0, 0, 0])), -1)

@@ -123,7 +123,17 @@ class Obstacle:
         return Obstacle(kind, OBSTACLE_TYPES[kind].parse(d, where), str(d.get("name", "")))
 
     def h(self, x: np.ndarray) -> float:
-        """Numerical h(x) [m] (positive inside)."""
+        """Numerical h(x) [m] (positive inside): the same formulas as the NLP's, in numpy for the
+        half-space, sphere and capsule (a streaming solver asks every update), CasADi for the box."""
+        x, p = np.asarray(x, dtype=float), self.params
+        if self.type == "halfspace":
+            return float(-np.dot(p[3:6], x - p[0:3]))
+        if self.type == "sphere":
+            return float(p[3] - np.linalg.norm(x - p[0:3]))
+        if self.type == "capsule":
+            a, ab = p[0:3], p[3:6] - p[0:3]
+            t = min(1.0, max(0.0, float(np.dot(x - a, ab) / np.dot(ab, ab))))
+            return float(p[6] - np.linalg.norm(x - (a + t * ab)))
         return float(_numeric_h(self.type)(x, self.params))
 
 

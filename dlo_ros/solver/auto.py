@@ -231,12 +231,22 @@ class AutoShapeSolver:
         return planarity_violation(scene, r0[:, 2], **kw) or ("the clamps impose twist" if imposes_twist(scene, r0) else "")
 
     def _reduced(self, choice: ModelChoice, problem: Problem) -> tuple[Problem, SolverOptions]:
-        st = problem.string
-        if not choice.gravity:
-            st = replace(st, weight_per_length=Profile.constant(0.0))
-        if not choice.stretch:
-            st = replace(st, stretch_stiffness=None)
-        reduced = replace(problem, string=st, obstacles=tuple(problem.obstacles[i] for i in choice.obstacles))
+        """``problem`` as ``choice`` models it (the options of that model too).  The reduced string and
+        obstacle tuple are reused while the scene's are the same objects, so that a stream of new grip
+        poses keeps the inner solver's cached parameters."""
+        key = (choice.gravity, choice.stretch, choice.obstacles)
+        hit = getattr(self, "_reduced_cache", None)
+        if hit is not None and hit[0] == key and hit[1] is problem.string and hit[2] is problem.obstacles:
+            st, obstacles = hit[3], hit[4]
+        else:
+            st = problem.string
+            if not choice.gravity:
+                st = replace(st, weight_per_length=Profile.constant(0.0))
+            if not choice.stretch:
+                st = replace(st, stretch_stiffness=None)
+            obstacles = tuple(problem.obstacles[i] for i in choice.obstacles)
+            self._reduced_cache = (key, problem.string, problem.obstacles, st, obstacles)
+        reduced = replace(problem, string=st, obstacles=obstacles)
         opts = replace(self.options, model="planar" if choice.planar else "full", order=choice.order,
                        quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8))
         return reduced, opts

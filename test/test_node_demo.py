@@ -30,6 +30,18 @@ def test_demo_scene(tmp_path):
     assert scene.problem.obstacles[-1].name == "post"
 
 
+def test_settled_means_checked_and_met_or_the_richest_order():
+    from dlo_ros.node.demo import _settled
+    from dlo_ros.solver.auto import ORDERS
+
+    auto = {"model.auto": "True", "model.checked": "True", "model.tolerance_met": "True", "model.order": "16"}
+    assert _settled(auto)
+    assert not _settled({**auto, "model.checked": "False"})  # the estimate describes an earlier model
+    assert not _settled({**auto, "model.tolerance_met": "False"})  # a richer order is coming
+    assert _settled({**auto, "model.tolerance_met": "False", "model.order": str(ORDERS[-1])})  # nothing richer
+    assert _settled({"model.auto": "False", "model.order": "16"})  # a fixed model has nothing to settle
+
+
 def test_run_demo_job(capsys):
     code = run_demo_job(["--speed", "2"])
     out = capsys.readouterr().out
@@ -40,6 +52,11 @@ def test_run_demo_job(capsys):
     m = re.search(r"stable shapes\s+(\d+) of (\d+)", out)
     assert m and int(m.group(2)) > 10 and int(m.group(1)) == int(m.group(2)), out
     assert "resting on the post" in out, out
+    # after the manoeuvre the job holds the last target until auto has checked the final shape's model
+    settling = re.search(r"settling\s+(checked|NOT checked within \d+ s): held the last target", out)
+    assert settling, out
+    if settling.group(1) == "checked":
+        assert re.search(r"model\s+auto: .*estimated error [0-9.e-]+ m \(tolerance 0.001 m: (met|NOT met)\)", out), out
     assert "exit code 0)" in out
     pid = int(re.search(r"node pid (\d+)", out).group(1))
     assert not os.path.exists(f"/proc/{pid}"), "the node process is still there"

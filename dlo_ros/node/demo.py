@@ -123,6 +123,41 @@ def _model_summary(values: dict) -> str:
     return text
 
 
+def _settled(values: dict) -> bool:
+    """auto's checks describe the current model, and it meets the tolerance or is the richest order (a
+    fixed model: always)."""
+    from ..solver.auto import ORDERS
+
+    if str(values.get("model.auto")).lower() != "true":
+        return True
+    checked = str(values.get("model.checked")).lower() == "true"
+    met = str(values.get("model.tolerance_met")).lower() == "true"
+    return checked and (met or str(values.get("model.order")) == str(ORDERS[-1]))
+
+
+def _settle(client, values: dict, timeout: float):
+    """Hold the last target (republished at 5 Hz: each solve applies the background checks' verdicts)
+    until ``_settled`` or ``timeout`` s.  Returns (diagnostic values, last centreline, seconds, solves)
+    or None when there was nothing to wait for."""
+    if _settled(values) or timeout <= 0:
+        return None
+    t0, held, final = time.monotonic(), 0, None
+    target = targets_at(duration())
+    base = int(values.get("targets received") or 0)
+    while time.monotonic() - t0 < timeout:
+        stamp = client.publish_targets(target)
+        held += 1
+        final = client.wait_for_path(5.0, where=lambda ev, s=stamp: ev.stamp_ns == s) or final
+        expected = base + held
+        diag = client.wait_for_diagnostics(lambda v, st: int(v.get("targets received") or 0) >= expected, 2.0)
+        if diag:
+            values = diag[0]
+            if _settled(values):
+                break
+        time.sleep(0.2)
+    return values, final, time.monotonic() - t0, held
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="dlo demo", description=__doc__.split("\n\n")[0])
     ap.add_argument("--rate", type=float, default=50.0, help="target publication rate [Hz] (default 50)")
@@ -135,6 +170,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
                          "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "
                          "own setting)")
+    ap.add_argument("--settle", type=float, default=30.0, metavar="S",
+                    help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final shape "
+                         "are done and meet the tolerance, at most S seconds (default 30; 0: do not wait)")
     ap.add_argument("--startup-timeout", type=float, default=60.0,
                     help="seconds to wait for the node's first centreline (default 60)")
     ap.add_argument("--log", metavar="FILE", help="keep the node's output in FILE")
@@ -208,8 +246,11 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
         diag = client.wait_for_diagnostics(
             lambda v, st: v.get("targets received") == str(len(published)), 5.0)
         values = diag[0] if diag else client.diagnostic_values()
-
         events = [ev for ev in client.paths if ev.stamp_ns in published]
+        settled = _settle(client, values, args.settle) if final is not None else None
+        if settled is not None:
+            values, final, settle_s, held = settled
+
         latencies = [(ev.received_ns - ev.stamp_ns) / 1e6 for ev in events]
         p50, p99, pmax = _percentiles(latencies)
         updates = int(values.get("updates", "0") or 0)
@@ -227,6 +268,10 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
               + (f" (last: {values.get('last error')})" if failures + rejected else ""))
         print(f"  stable shapes           {stable} of {updates}")
         print(f"  model                   {_model_summary(values)}")
+        if settled is not None:
+            done = _settled(values)
+            print(f"  settling                {'checked' if done else f'NOT checked within {args.settle:g} s'}: held the "
+                  f"last target {settle_s:.1f} s ({held} more solves) for auto's checks of the final shape (model above)")
         print(f"  recording               {rrd if rrd is not None else 'off'}"
               + (" (complete when the node has stopped; `dlo replay FILE` opens it)" if rrd is not None else ""))
         if final is not None:

@@ -9,7 +9,7 @@ from dlo_ros.model.rotations import (
     TANGENT_X, check_quaternion, euler_from_frame, material_frames, matrix_to_quat, pose_quaternions, quat_to_matrix,
     reference_frame,
 )
-from conftest import clamped_pair
+from conftest import clamped_pair, quat_about
 
 
 @pytest.mark.parametrize("name", ["chebyshev", "fourier"])
@@ -76,6 +76,33 @@ def test_pose_quaternions_from_euler_angles_are_the_rotation_matrices_quaternion
         for k in range(len(phi)):
             r = r0 @ material_frames(np.eye(3), phi[k:k + 1], theta[k:k + 1], psi[k:k + 1])[0] @ TANGENT_X
             assert np.allclose(quat_to_matrix(q[k]), r, atol=1e-13)
+
+
+def test_pole_geometry():
+    from dlo_ros.model.rotations import farthest_pole, frame_with_pole, pole_angle_deg
+
+    s = np.linspace(0, 2 * np.pi, 50)
+    in_plane = np.stack([np.cos(s), np.sin(s), 0 * s], axis=1)  # tangents around a circle in z = 0
+    assert np.isclose(pole_angle_deg(in_plane, [0, 0, 1]), 90.0)
+    assert pole_angle_deg(in_plane, [1, 0, 0]) < 1e-6
+    normal, angle = farthest_pole(in_plane)
+    assert abs(normal[2]) > 0.999 and angle > 87.0  # the grid's resolution is about 2°
+    r0 = frame_with_pole(np.array([0.3, -0.4, 0.8]), np.array([1.0, 0.0, 0.0]))
+    assert np.allclose(r0.T @ r0, np.eye(3)) and np.isclose(np.linalg.det(r0), 1.0)
+    assert np.allclose(r0[:, 2], np.array([0.3, -0.4, 0.8]) / np.linalg.norm([0.3, -0.4, 0.8]))
+
+
+def test_the_first_frame_avoids_held_tangents_on_its_pole():
+    """Grippers holding the string across the chord (tangents along y = chord × up): the chord-and-gravity
+    frame has them on its pole, so the pole is turned away; along the chord, it is not."""
+    from dlo_ros.model.rotations import pole_angle_deg
+    from dlo_ros.solver.nlp import choose_reference_frame
+
+    along = choose_reference_frame(clamped_pair(right=(0.6, 0, 0)), "auto")
+    assert np.allclose(np.abs(along[:, 2]), [0, 1, 0])  # the chord-and-gravity plane's normal
+    q = quat_about("z", np.pi / 2)
+    across = choose_reference_frame(clamped_pair(right=(0.6, 0, 0), q_left=q, q_right=q), "auto")
+    assert pole_angle_deg(np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]), across[:, 2]) > 40.0
 
 
 def test_quaternions():

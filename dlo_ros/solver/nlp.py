@@ -55,11 +55,24 @@ def twist_is_held(problem: Problem) -> bool:
     return clamps >= 2 and not problem.string.twist_stiffness.is_zero
 
 
+def has_point_moments(problem: Problem) -> bool:
+    """Point moments are modelled about the working-plane normal only (their work −m·φ is exact about
+    n), so a scene with one keeps that normal as its pole."""
+    return any(np.any(np.asarray(ld.moment, dtype=float) != 0.0) for ld in problem.loads)
+
+
+#: a held grip tangent closer than this to the pole of the chord-and-gravity frame turns the pole [deg]
+GRIP_POLE_MIN_DEG = 30.0
+
+
 def choose_reference_frame(problem: Problem, frame: str) -> np.ndarray:
     """R0 for the Euler angles: identity for 'paper'; for 'auto' the working plane's frame.
 
     The working plane holds the chord between the first two grips (or the first grip's tangent) and
     gravity; its normal becomes the singular axis n = R0 e_z, which planar and near-planar shapes avoid.
+    When a held grip tangent lies within GRIP_POLE_MIN_DEG of that normal (grippers holding the string
+    across the chord), n is instead the direction farthest from the held tangents and the chord —
+    unless point moments are applied (they are modelled about the working-plane normal).
     """
     if frame == "paper":
         return np.eye(3)
@@ -71,13 +84,20 @@ def choose_reference_frame(problem: Problem, frame: str) -> np.ndarray:
 
         chord = quat_to_matrix(grips[0].pose.orientation)[:, 0]
     up = -problem.gravity_unit
+    from ..model.rotations import farthest_pole, frame_with_pole, pole_angle_deg, quat_to_matrix
+
     if abs(np.dot(chord / np.linalg.norm(chord), up)) > 0.999:
         # chord along gravity: take the plane of the chord and the first grip's tangent or normal
-        from ..model.rotations import quat_to_matrix
-
         r = quat_to_matrix(grips[0].pose.orientation)
         up = r[:, 0] if abs(np.dot(r[:, 0], up)) < 0.999 else r[:, 1]
-    return reference_frame(chord, up)
+    r0 = reference_frame(chord, up)
+    # a held tangent on (or near) the pole makes the grip's Euler angles singular: then turn the pole to
+    # the direction farthest from the held tangents and the chord (planar scenes never need this)
+    held = [quat_to_matrix(g.pose.orientation)[:, 0] for g in grips if g.mode != "pin"]
+    if held and not has_point_moments(problem) and pole_angle_deg(np.array(held), r0[:, 2]) < GRIP_POLE_MIN_DEG:
+        normal, _ = farthest_pole(np.array(held + [chord / np.linalg.norm(chord)]))
+        r0 = frame_with_pole(normal, -chord)
+    return r0
 
 
 def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float = 1e-9) -> str:
@@ -120,7 +140,9 @@ def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float =
 class StringNLP:
     """CasADi functions of one scene structure: the NLP, reactions, energies and the Lagrangian Hessian."""
 
-    def __init__(self, problem: Problem, options: SolverOptions):
+    def __init__(self, problem: Problem, options: SolverOptions, reference_frame: np.ndarray | None = None):
+        """reference_frame: R0 to use instead of ``choose_reference_frame`` (3D models only: a planar
+        model's R0 is fixed by its plane)."""
         problem.validate()
         options.validate()
         self.problem = problem
@@ -131,7 +153,10 @@ class StringNLP:
         self.planar = options.model == "planar"
         self.twist = twist_is_held(problem) and not self.planar
         self.stretch = problem.string.stretch_stiffness is not None
-        self.r0 = choose_reference_frame(problem, options.frame)
+        if reference_frame is not None and self.planar:
+            raise ValueError("a planar model's reference frame is fixed by its plane")
+        self.r0 = np.asarray(reference_frame, dtype=float) if reference_frame is not None else \
+            choose_reference_frame(problem, options.frame)
         if self.planar:
             reason = planarity_violation(problem, self.r0[:, 2])
             if reason:

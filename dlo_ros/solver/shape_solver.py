@@ -74,25 +74,27 @@ class ShapeSolver:
     """Solve the string's static shape for changing grip targets (see module docstring)."""
 
     def __init__(self, problem: Problem, options: SolverOptions | None = None, compile: str = "background",
-                 lazy_ipopt: bool = False):
+                 lazy_ipopt: bool = False, reference_frame: np.ndarray | None = None):
         """compile: 'background' (solve at once with interpreted derivatives, compile them to C in a
         background thread and switch when ready; cached per machine), 'blocking' (compile or load
         now), 'cached' (use a library compiled earlier, never compile), or 'off'.
         $DLO_NO_COMPILE forces 'off'.  lazy_ipopt: create the IPOPT solvers on first use (helpers that
         may only take Newton steps); otherwise now, so that a stream's first IPOPT fallback does not
-        pay for them."""
+        pay for them.  reference_frame: a fixed R0 for the Euler angles (3D models; default: chosen from
+        the scene, ``choose_reference_frame``)."""
         if compile not in COMPILE_MODES:
             raise ValueError(f"compile: must be one of {COMPILE_MODES}, got {compile!r}")
         self.options = options or SolverOptions()
         self.compile_mode = compile
         self.lazy_ipopt = lazy_ipopt
+        self.reference_frame = None if reference_frame is None else np.array(reference_frame, dtype=float)
         self._lock = threading.Lock()
         self._compile_thread: threading.Thread | None = None
         self._build(problem)
 
     def _build(self, problem: Problem) -> None:
         t0 = time.perf_counter()
-        self.nlp = StringNLP(problem, self.options)
+        self.nlp = StringNLP(problem, self.options, self.reference_frame)
         self._check_moments(problem)
         old = getattr(self, "_ipopt", {})
         with IPOPT_LOCK:  # freeing an IPOPT/MUMPS instance must not overlap a solve in another thread

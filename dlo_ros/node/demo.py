@@ -170,9 +170,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
                          "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "
                          "own setting)")
-    ap.add_argument("--settle", type=float, default=30.0, metavar="S",
+    ap.add_argument("--settle", type=float, default=60.0, metavar="S",
                     help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final shape "
-                         "are done and meet the tolerance, at most S seconds (default 30; 0: do not wait)")
+                         "are done and meet the tolerance, at most S seconds (default 60; 0: do not wait)")
     ap.add_argument("--startup-timeout", type=float, default=60.0,
                     help="seconds to wait for the node's first centreline (default 60)")
     ap.add_argument("--log", metavar="FILE", help="keep the node's output in FILE")

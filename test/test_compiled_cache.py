@@ -56,8 +56,9 @@ def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monke
     z = np.linspace(-0.3, 0.4, again.model.layout.size)
     p = interpreted.pack_parameters(problem, z)
     lam = np.linspace(0.1, 1.0, interpreted.nlp.lbg.size)
-    for contact in (True, False):
-        for native, exact in zip(again._derivatives(z, p, lam, contact), interpreted._derivatives(z, p, lam, contact)):
+    for contact in (True, False):  # every row active (the full function), or none (the contact-free one)
+        active = np.full(lam.size, contact)
+        for native, exact in zip(again._derivatives(z, p, lam, active), interpreted._derivatives(z, p, lam, active)):
             np.testing.assert_allclose(native, exact, rtol=1e-12, atol=1e-12)
     target = {"right": ((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))}
     a, b = again.solve(target), interpreted.solve(target)

@@ -134,7 +134,8 @@ def test_contact_free_derivatives_are_the_full_ones_without_obstacle_rows():
     p = s.pack_parameters(s.problem, z)
     lam = rng.uniform(-1, 1, nlp.lbg.size)
     lam[nlp.n_free_rows:] = 0.0
-    free, full = s._derivatives(z, p, lam, contact=False), s._kkt(z, p, lam)
+    no_contact = np.arange(nlp.lbg.size) < nlp.n_free_rows  # every row but the obstacle rows active
+    free, full = s._derivatives(z, p, lam, no_contact), s._kkt(z, p, lam)
     for k in (0, 1, 3, 4):  # ∇f, g (every row, obstacle values included), ∇²L, energies
         np.testing.assert_allclose(free[k], full[k], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(free[2][: nlp.n_free_rows], full[2][: nlp.n_free_rows], rtol=1e-12, atol=1e-12)

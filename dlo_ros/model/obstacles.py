@@ -8,6 +8,7 @@ the string's radius be added as a clearance: h(x) + radius ≤ 0.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Callable
 
 import casadi as ca
@@ -23,22 +24,26 @@ def _vec(value: object, n: int, where: str) -> np.ndarray:
     return arr
 
 
-def _halfspace(x: ca.SX, p: ca.SX) -> ca.SX:
+#: numpy stand-ins for the CasADi functions the h below use (``lib=NUMPY``: plain arrays, no CasADi call)
+NUMPY = SimpleNamespace(dot=np.dot, norm_2=np.linalg.norm, fmin=min, fmax=max)
+
+
+def _halfspace(x: ca.SX, p: ca.SX, lib=ca) -> ca.SX:
     """p = [point(3), unit outward normal(3)];  h = −n·(x − point) (inside = behind the surface)."""
-    return -ca.dot(p[3:6], x - p[0:3])
+    return -lib.dot(p[3:6], x - p[0:3])
 
 
-def _sphere(x: ca.SX, p: ca.SX) -> ca.SX:
+def _sphere(x: ca.SX, p: ca.SX, lib=ca) -> ca.SX:
     """p = [centre(3), radius];  h = radius − |x − centre|."""
-    return p[3] - ca.norm_2(x - p[0:3])
+    return p[3] - lib.norm_2(x - p[0:3])
 
 
-def _capsule(x: ca.SX, p: ca.SX) -> ca.SX:
+def _capsule(x: ca.SX, p: ca.SX, lib=ca) -> ca.SX:
     """p = [a(3), b(3), radius];  h = radius − distance(x, segment ab)."""
     a, b, r = p[0:3], p[3:6], p[6]
     ab = b - a
-    t = ca.fmin(1, ca.fmax(0, ca.dot(x - a, ab) / ca.dot(ab, ab)))
-    return r - ca.norm_2(x - (a + t * ab))
+    t = lib.fmin(1, lib.fmax(0, lib.dot(x - a, ab) / lib.dot(ab, ab)))
+    return r - lib.norm_2(x - (a + t * ab))
 
 
 BOX_EXPONENT = 8
@@ -60,7 +65,7 @@ def _box(x: ca.SX, p: ca.SX) -> ca.SX:
 @dataclass(frozen=True)
 class ObstacleType:
     size: int
-    h: Callable[[ca.SX, ca.SX], ca.SX]
+    h: Callable[..., ca.SX]  # h(x, p) in CasADi; half-space, sphere, capsule also h(x, p, NUMPY)
     parse: Callable[[dict, str], np.ndarray]
 
 
@@ -123,18 +128,11 @@ class Obstacle:
         return Obstacle(kind, OBSTACLE_TYPES[kind].parse(d, where), str(d.get("name", "")))
 
     def h(self, x: np.ndarray) -> float:
-        """Numerical h(x) [m] (positive inside): the same formulas as the NLP's, in numpy for the
-        half-space, sphere and capsule (a streaming solver asks every update), CasADi for the box."""
-        x, p = np.asarray(x, dtype=float), self.params
-        if self.type == "halfspace":
-            return float(-np.dot(p[3:6], x - p[0:3]))
-        if self.type == "sphere":
-            return float(p[3] - np.linalg.norm(x - p[0:3]))
-        if self.type == "capsule":
-            a, ab = p[0:3], p[3:6] - p[0:3]
-            t = min(1.0, max(0.0, float(np.dot(x - a, ab) / np.dot(ab, ab))))
-            return float(p[6] - np.linalg.norm(x - (a + t * ab)))
-        return float(_numeric_h(self.type)(x, self.params))
+        """Numerical h(x) [m] (positive inside): the NLP's formulas evaluated in numpy for the
+        half-space, sphere and capsule (a streaming solver asks every update), through CasADi for the box."""
+        if self.type == "box":
+            return float(_numeric_h(self.type)(x, self.params))
+        return float(OBSTACLE_TYPES[self.type].h(np.asarray(x, dtype=float), self.params, NUMPY))
 
 
 _NUMERIC_H: dict[str, ca.Function] = {}

@@ -22,6 +22,9 @@ fails.  Reductions and their checks:
   per model the next lower order is tried: if it is within δ/4 of the current one, it is used.  At the highest order the
   last estimate stays (with "tolerance not met" in reasons).  Known limit: with a neutral mode (no
   gravity, clamps along one axis) the shadow can drift along it and inflate the estimate.
+* reference frame (3D) — when a tangent of the checked shape comes within POLE_MIN_DEG of the Euler
+  angles' pole n = R0 e_z, the same model with n turned to the direction farthest from every tangent
+  (near the pole the basis order stops converging).
 
 Switching models maps the previous solution into the new one (ShapeSolver.adopt_warm_start), so a
 stream keeps its warm start.  Every change is kept in ``changes`` (time, reason) and reported in

@@ -89,12 +89,17 @@ class InterpretedFunction:
         return [np.asarray(o) for o in out]
 
 
+def library_path(fn: ca.Function, flags: tuple[str, ...] = ("-O1",)) -> Path:
+    """Where the compiled library of ``fn`` is (or will be) cached: ``<cache>/<name>_<fingerprint>.so``."""
+    return cache_dir() / f"{fn.name()}_{fingerprint(fn, flags)}.so"
+
+
 def cached_library(fn: ca.Function, flags: tuple[str, ...] = ("-O1",)) -> Path | None:
     """Path of the compiled library of ``fn`` if it is already in the cache, else None (no compiling,
     no C generated: milliseconds)."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
-    lib = cache_dir() / f"{fn.name()}_{fingerprint(fn, flags)}.so"
+    lib = library_path(fn, flags)
     return lib if lib.exists() else None
 
 
@@ -143,8 +148,10 @@ def _generate(fn: ca.Function, tmp: str) -> bytes:
     return Path(tmp, f"{fn.name()}.c").read_bytes()
 
 
-def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0) -> tuple[NativeFunction | InterpretedFunction, bool]:
-    """(callable, compiled?).  Safe to call concurrently from several processes.
+def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
+             lib: Path | None = None) -> tuple[NativeFunction | InterpretedFunction, bool]:
+    """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
+    ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``).
 
     The KKT function of a scene is large straight-line code (≈ 5·10⁵ operations with obstacles);
     gcc -O1 takes about a minute on it, -O2 longer for little gain — hence -O1, run niced in the
@@ -154,11 +161,10 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0) 
     if cc is None or os.environ.get("DLO_NO_COMPILE"):
         return InterpretedFunction(fn), False
     name = fn.name()
-    target_dir = cache_dir()
-    target_dir.mkdir(parents=True, exist_ok=True)
-    lib = target_dir / f"{name}_{fingerprint(fn, flags)}.so"
-    with tempfile.TemporaryDirectory() as tmp:
-        if not lib.exists():
+    lib = lib or library_path(fn, flags)
+    if not lib.exists():
+        lib.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory() as tmp:
             _generate(fn, tmp)
             tmp_lib = Path(tmp, lib.name)
             cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(Path(tmp, f"{name}.c")), "-lm"]

@@ -26,7 +26,7 @@ import numpy as np
 from ..model.obstacles import OBSTACLE_TYPES
 from ..model.problem import Problem
 from ..model.ritz import RitzModel
-from ..model.rotations import reference_frame
+from ..model.rotations import farthest_pole, frame_with_pole, pole_angle_deg, quat_to_matrix, reference_frame
 from .options import SolverOptions
 
 
@@ -80,12 +80,8 @@ def choose_reference_frame(problem: Problem, frame: str) -> np.ndarray:
     if len(grips) >= 2 and np.linalg.norm(grips[-1].pose.position - grips[0].pose.position) > 1e-9 * problem.string.length:
         chord = grips[-1].pose.position - grips[0].pose.position
     else:
-        from ..model.rotations import quat_to_matrix
-
         chord = quat_to_matrix(grips[0].pose.orientation)[:, 0]
     up = -problem.gravity_unit
-    from ..model.rotations import farthest_pole, frame_with_pole, pole_angle_deg, quat_to_matrix
-
     if abs(np.dot(chord / np.linalg.norm(chord), up)) > 0.999:
         # chord along gravity: take the plane of the chord and the first grip's tangent or normal
         r = quat_to_matrix(grips[0].pose.orientation)
@@ -107,8 +103,6 @@ def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float =
     forces and relative offsets lie in it; moments are along the normal; obstacles are half-spaces
     whose normals lie in the plane, or spheres/capsules/boxes centred on it (symmetric about it).
     """
-    from ..model.rotations import quat_to_matrix
-
     n = normal / np.linalg.norm(normal)
     L = problem.string.length
     origin = problem.grips[0].pose.position
@@ -280,16 +274,15 @@ class StringNLP:
         grad_f = ca.densify(ca.gradient(objective, z))
         energies = ca.densify(ca.vertcat(bend, twist, stretch, grav, work))
         nf = self.n_free_rows
+        # ∇²L is built on its own, not as hess_free + ∇²(λ_obs·g_obs): that sum has 8 % more instructions
+        hess = ca.hessian(objective + ca.dot(lam, g), z)[0]
         if nf < g.shape[0]:
-            g_free, g_obs = g[:nf], g[nf:]
-            hess_free = ca.hessian(objective + ca.dot(lam[:nf], g_free), z)[0]
-            hess = ca.hessian(objective + ca.dot(lam, g), z)[0]  # (a sum of the two Hessians: 8 % more instructions)
-            jac_free = ca.jacobian(g_free, z)
-            jac = ca.vertcat(jac_free, ca.jacobian(g_obs, z))
+            hess_free = ca.hessian(objective + ca.dot(lam[:nf], g[:nf]), z)[0]
+            jac_free = ca.jacobian(g[:nf], z)
+            jac = ca.vertcat(jac_free, ca.jacobian(g[nf:], z))
             self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam],
                                            [grad_f, ca.densify(g), ca.densify(jac_free), ca.densify(hess_free), energies])
         else:
-            hess = ca.hessian(objective + ca.dot(lam, g), z)[0]
             jac = ca.jacobian(g, z)
             self.kkt_free_fn = None
         self.hessian_fn = ca.Function("lagrangian_hessian", [z, p, lam], [hess])

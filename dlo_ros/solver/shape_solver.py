@@ -30,7 +30,7 @@ from scipy.special import j0
 
 from ..model.problem import GripPose, Problem
 from ..model.rotations import TANGENT_X, euler_from_frame, material_frames, pose_quaternions, quat_to_matrix, rot_y, rot_z
-from .compiled import InterpretedFunction, NativeFunction, cached_library, compiled
+from .compiled import InterpretedFunction, NativeFunction, compiled, compiler, library_path
 from .nlp import StringNLP
 from .options import SolverOptions
 from .result import GripWrench, ShapeResult
@@ -143,22 +143,27 @@ class ShapeSolver:
         mode = "off" if os.environ.get("DLO_NO_COMPILE") else self.compile_mode
         if mode == "off":
             return
+        if compiler() is None:
+            return
         nlp = self.nlp
         # the contact-free function first: it is the one a stream uses while nothing touches
-        todo = [(name, fn) for name, fn in (("_kkt_free", nlp.kkt_free_fn), ("_kkt", nlp.kkt_fn)) if fn is not None]
-        for name, fn in list(todo):
-            lib = cached_library(fn)
-            if lib is not None:  # compiled on an earlier start: load now, no waiting
+        todo = []
+        for name, fn in (("_kkt_free", nlp.kkt_free_fn), ("_kkt", nlp.kkt_fn)):
+            if fn is None:
+                continue
+            lib = library_path(fn)
+            if lib.exists():  # compiled on an earlier start: load now, no waiting
                 setattr(self, name, NativeFunction(lib, fn))
-                todo.remove((name, fn))
+            else:
+                todo.append((name, fn, lib))
         self.kkt_compiled = not todo
         if not todo or mode == "cached":
             return
 
         def work(locked: bool) -> None:
             t0 = time.perf_counter()
-            for name, fn in todo:
-                native, ok = compiled(fn, nice=10 if mode == "background" else 0)
+            for name, fn, lib in todo:
+                native, ok = compiled(fn, nice=10 if mode == "background" else 0, lib=lib)
                 with (threading.Lock() if locked else self._lock):  # blocking: the caller may hold self._lock
                     if not ok or self.nlp is not nlp:  # no compiler, or the scene was rebuilt meanwhile
                         return
@@ -495,7 +500,6 @@ class ShapeSolver:
         active = equality | ((start.lam_g > 1e-8) & (start.g > nlp.ubg - 1e-7))
         lam[active] = start.lam_g[active]
         idx = np.flatnonzero(active)
-        contact = bool(np.any(active[nlp.n_free_rows:]))
         bound = nlp.ubg[idx]
         n = z.size
         # Only grip targets changed → they enter g linearly (row = (x − target)/scale), so ∇f, J and H
@@ -509,7 +513,7 @@ class ShapeSolver:
                 grad, jac, hess, energies = start.gradient, start.jacobian, start.hessian, None
                 g = start.g + nlp.target_shift(start.p, p)
             else:
-                grad, g, jac, hess, energies = self._derivatives(z, p, lam, contact)
+                grad, g, jac, hess, energies = self._derivatives(z, p, lam, active)
                 grad, g = grad.ravel(), g.ravel()
             ja = jac[idx]
             r_dual = grad + ja.T @ lam[idx]
@@ -539,11 +543,11 @@ class ShapeSolver:
             lam[idx] += step[n:]
         return False, start, max_steps, np.inf
 
-    def _derivatives(self, z: np.ndarray, p: np.ndarray, lam: np.ndarray, contact: bool) -> list[np.ndarray]:
-        """[∇f, g, ∂g/∂z, ∇²L, energies] at (z, p, λ).  Without ``contact`` (no obstacle row active, so λ is
-        zero on them) the obstacle rows' Jacobian rows are returned as zeros and left out of ∇²L, which
-        is exact for every use here: only active rows' Jacobians are used, and inactive rows have λ = 0."""
-        if contact or self._kkt_free is None:
+    def _derivatives(self, z: np.ndarray, p: np.ndarray, lam: np.ndarray, active: np.ndarray) -> list[np.ndarray]:
+        """[∇f, g, ∂g/∂z, ∇²L, energies] at (z, p, λ).  When no obstacle row is ``active`` (so λ is zero on
+        them) the obstacle rows' Jacobian rows are returned as zeros and left out of ∇²L, which is exact
+        for every use here: only active rows' Jacobians are used, and inactive rows have λ = 0."""
+        if self._kkt_free is None or np.any(active[self.nlp.n_free_rows:]):
             return self._kkt(z, p, lam)
         grad, g, jac_free, hess, energies = self._kkt_free(z, p, lam)
         jac = np.zeros((g.size, jac_free.shape[1]))
@@ -655,8 +659,8 @@ class ShapeSolver:
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         s_out = np.linspace(0.0, nlp.length, self.options.output_points)
         points = m.positions(z, s_out)
-        f = m.fields(z, s_out, ("phi", "theta", "psi"))
-        quats = pose_quaternions(nlp.r0, f["phi"], f["theta"], f["psi"] if m.layout.twist else self.frames_psi(z, s_out, p))
+        f = m.fields(z, s_out, ("phi", "theta"))
+        quats = pose_quaternions(nlp.r0, f["phi"], f["theta"], self.frames_psi(z, s_out, p))
         min_eig = self._min_reduced_eigenvalue(state)  # also fills state.energies
         bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
         energy = {"bend": bend, "twist": twist, "stretch": stretch, "gravity": grav, "external_work": work,
@@ -664,7 +668,7 @@ class ShapeSolver:
         grips = {g.name: self._wrench(g, z, lam_si) for g in problem.grips}
         contacts = {}
         if nlp.obstacle_rows:
-            touching = any(np.any(lam_si[rows] > 0) for rows in nlp.obstacle_rows)
+            touching = np.any(lam_si[nlp.n_free_rows:] > 0)  # obstacle rows come last
             sample_x = m.positions(z, nlp.obstacle_s) if touching else None
             for i, rows in enumerate(nlp.obstacle_rows):
                 ob = problem.obstacles[i]
@@ -743,21 +747,18 @@ class ShapeSolver:
 
     def _min_reduced_eigenvalue(self, state: _State) -> float | None:
         nlp = self.nlp
+        active = np.zeros(0, dtype=bool)
         if nlp.lbg.size:
             g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
             equality = nlp.lbg == nlp.ubg
             active = equality | (np.abs(state.lam_g) > 1e-9) | (g > nlp.ubg - 1e-9)
         if state.hessian is None:
-            contact = nlp.lbg.size > 0 and bool(np.any(active[nlp.n_free_rows:]))
             gradient, _, state.jacobian, state.hessian, state.energies = self._derivatives(state.z, state.p, state.lam_g,
-                                                                                          contact)
+                                                                                          active)
             state.gradient = gradient.ravel()
         h = state.hessian
-        if nlp.lbg.size:
-            jac = state.jacobian[active]
-            basis = _null_space(jac) if jac.size else np.eye(h.shape[0])
-        else:
-            basis = np.eye(h.shape[0])
+        jac = state.jacobian[active]
+        basis = _null_space(jac) if jac.size else np.eye(h.shape[0])
         if basis.shape[1] == 0:
             return None
         values, vectors = np.linalg.eigh(basis.T @ h @ basis)

@@ -10,6 +10,7 @@ strain ε(s) in a basis of n functions.  On M Chebyshev–Lobatto nodes s_j:
     U_twist   = Σ_j w_j ½ Rt_j (φ'_j cosθ_j + ψ'_j)²                   ½ Rt ω²
     U_stretch = Σ_j w_j ½ Re_j ε_j²
     U_grav    = Σ_j w_j D_j (−ĝ · x(s_j))                              D × height
+(the terms quadratic in the coefficients are assembled once per material as matrices: ``material_terms``)
     W         = Σ_k F_k · x(s_k) − m_k φ(s_k)                          eq. 5, m_k = M_k · n
 
 with Clenshaw–Curtis weights w and the cumulative integration matrix W (see quadrature.py).  The
@@ -84,15 +85,22 @@ class RitzModel:
             return None
 
     def tangents(self, phi, theta, eps=None, lib=ca):
-        """(1 + ε) ζ at the nodes: a 3×M expression (lib = casadi) or array (lib = numpy)."""
-        st = lib.sin(theta)
-        local = [-st * lib.cos(phi), st * lib.sin(phi), lib.cos(theta)]
+        """(1 + ε) ζ at the nodes: a 3×M expression (lib = casadi) or array (lib = numpy).
+
+        A planar model has θ ≡ π/2 exactly: ζ = R0 [−cos φ, sin φ, 0], two columns of R0 (a third fewer
+        operations in every position and its derivatives than the general formula with sin θ = 1).
+        """
+        if self.layout.planar:
+            local, r0 = [-lib.cos(phi), lib.sin(phi)], self.r0[:, :2]
+        else:
+            st = lib.sin(theta)
+            local, r0 = [-st * lib.cos(phi), st * lib.sin(phi), lib.cos(theta)], self.r0
         if lib is ca:
-            t = ca.mtimes(ca.DM(self.r0), ca.vertcat(*[ca.reshape(c, 1, -1) for c in local]))
+            t = ca.mtimes(ca.DM(r0), ca.vertcat(*[ca.reshape(c, 1, -1) for c in local]))
             if eps is not None:
                 t = t * ca.repmat(ca.reshape(1 + eps, 1, -1), 3, 1)
             return t
-        t = self.r0 @ np.stack(local)
+        t = r0 @ np.stack(local)
         return t if eps is None else t * (1 + eps)[None, :]
 
     def matrices(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -112,30 +120,73 @@ class RitzModel:
         return self.matrices(s)[2]
 
     # ---- symbolic energy ----------------------------------------------------------------------------
+    #: the parameter-only parts of the energy (see ``material_terms``), by name: their sizes
+    def material_sizes(self) -> dict[str, int]:
+        n, M = self.layout.order, self.quad.count
+        sizes = {"K_bend": n * n}
+        if self.layout.twist:
+            sizes["K_twist"] = n * n
+        if self.layout.stretch:
+            sizes["K_stretch"] = n * n
+        sizes["weight_moments"] = M
+        sizes["weight_total"] = 1
+        return sizes
+
+    def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The parts of the energy that depend on the material alone, assembled once per string (numpy):
+
+            K_bend    = B'ᵀ diag(w Rf) B'     ½ ∫ Rf θ'² ds = ½ c_θᵀ K_bend c_θ   (planar: ½ c_φᵀ K_bend c_φ)
+            K_twist   = B'ᵀ diag(w Rt) B'     the ψ'² part of ½ ∫ Rt ω² ds
+            K_stretch = Bᵀ diag(w Re) B       ½ ∫ Re ε² ds
+            m         = W(s_nodes)ᵀ (w ∘ D)   Σ_j w_j D_j x(s_j) = x0 Σ_j w_j D_j + Σ_k m_k t_k
+            ΣwD                                the weight [N]
+
+        Each is the same quadrature as the symbolic sum it replaces (so the energy is unchanged to
+        rounding), but its Hessian costs nothing per evaluation instead of M·n² operations.
+        """
+        w = self.quad.weights
+        out = {"K_bend": self.dB.T @ ((w * profiles["Rf"])[:, None] * self.dB)}
+        if self.layout.twist:
+            out["K_twist"] = self.dB.T @ ((w * profiles["Rt"])[:, None] * self.dB)
+        if self.layout.stretch:
+            out["K_stretch"] = self.B.T @ ((w * profiles["Re"])[:, None] * self.B)
+        wd = w * profiles["D"]
+        out["weight_moments"] = self.position_matrix(self.quad.nodes).T @ wd
+        out["weight_total"] = np.array([wd.sum()])
+        return out
+
     def energy_terms(self, z: ca.SX, profiles: dict[str, ca.SX], gravity: ca.SX):
-        """Return (bend, twist, stretch, gravity) energies [J] and the node tangents, as CasADi SX."""
-        B, dB, w = ca.DM(self.B), ca.DM(self.dB), ca.DM(self.quad.weights)
+        """Return (bend, twist, stretch, gravity) energies [J] and the node tangents, as CasADi SX.
+
+        ``profiles``: Rf, Rt (3D) at the nodes and the ``material_terms`` (K_* as n·n column-major
+        vectors), all NLP parameters.
+        """
+        n = self.layout.order
+        dB, w = ca.DM(self.dB), ca.DM(self.quad.weights)
         cphi, cth = self.coefficients(z, "phi"), self.coefficients(z, "theta")
         cpsi, ceps = self.coefficients(z, "psi"), self.coefficients(z, "eps")
-        phi, dphi = ca.mtimes(B, cphi), ca.mtimes(dB, cphi)
-        if cth is None:  # planar: θ ≡ π/2
-            th, dth = ca.DM.ones(self.quad.count) * (np.pi / 2), ca.DM.zeros(self.quad.count)
+
+        def quadratic(name: str, c: ca.SX) -> ca.SX:
+            return 0.5 * ca.dot(c, ca.mtimes(ca.reshape(profiles[name], n, n), c))
+
+        phi, dphi = ca.mtimes(ca.DM(self.B), cphi), ca.mtimes(dB, cphi)
+        if cth is None:  # planar: θ ≡ π/2, so κ² = φ'²
+            th = ca.DM.ones(self.quad.count) * (np.pi / 2)
+            bend = quadratic("K_bend", cphi)
         else:
-            th, dth = ca.mtimes(B, cth), ca.mtimes(dB, cth)
-        eps = ca.mtimes(B, ceps) if ceps is not None else None
-        st = ca.sin(th)
-        bend = 0.5 * ca.dot(w, profiles["Rf"] * (dth**2 + st**2 * dphi**2))
-        if cpsi is not None:
-            omega = dphi * ca.cos(th) + ca.mtimes(dB, cpsi)
-            twist = 0.5 * ca.dot(w, profiles["Rt"] * omega**2)
+            th = ca.mtimes(ca.DM(self.B), cth)
+            st = ca.sin(th)
+            bend = quadratic("K_bend", cth) + 0.5 * ca.dot(w, profiles["Rf"] * st**2 * dphi**2)
+        if cpsi is not None:  # ½ Rt (φ' cosθ + ψ')² = ½ Rt (φ' cosθ)² + Rt φ' cosθ ψ' + ½ Rt ψ'²
+            a = dphi * ca.cos(th)
+            twist = ca.dot(w, profiles["Rt"] * a * (0.5 * a + ca.mtimes(dB, cpsi))) + quadratic("K_twist", cpsi)
         else:
             twist = ca.SX(0)
-        stretch = 0.5 * ca.dot(w, profiles["Re"] * eps**2) if eps is not None else ca.SX(0)
+        eps = ca.mtimes(ca.DM(self.B), ceps) if ceps is not None else None
+        stretch = quadratic("K_stretch", ceps) if ceps is not None else ca.SX(0)
         t = self.tangents(phi, th, eps)
-        # Σ_j w_j D_j x(s_j) = x0 Σ w D + t · (W_nodesᵀ (w∘D))
-        wd = w * profiles["D"]
         x0 = z[0:3] * self.length
-        moment_of_weight = x0 * ca.sum1(wd) + ca.mtimes(t, ca.mtimes(ca.DM(self.position_matrix(self.quad.nodes)).T, wd))
+        moment_of_weight = x0 * profiles["weight_total"] + ca.mtimes(t, profiles["weight_moments"])
         grav = -ca.dot(gravity, moment_of_weight)
         return bend, twist, stretch, grav, t
 

@@ -167,6 +167,8 @@ class StringNLP:
         lay = ParameterLayout()
         for name in ("Rf", "Rt", "Re", "D"):
             lay.add(name, M)
+        for name, size in m.material_sizes().items():  # filled by material_parameters
+            lay.add(name, size)
         lay.add("gravity", 3)
         lay.add("radius", 1)
         for g in P.grips:
@@ -183,7 +185,7 @@ class StringNLP:
 
         z = ca.SX.sym("z", m.layout.size)
         p = ca.SX.sym("p", lay.size)
-        profiles = {k: p[lay[k]] for k in ("Rf", "Rt", "Re", "D")}
+        profiles = {k: p[lay[k]] for k in ("Rf", "Rt", "Re", "D", *m.material_sizes())}
         bend, twist, stretch, grav, t = m.energy_terms(z, profiles, p[lay["gravity"]])
 
         # every arc length where a position is needed, evaluated with one matrix product
@@ -260,6 +262,7 @@ class StringNLP:
         objective = self.sigma * (bend + twist + stretch + grav - work)
         g = ca.vertcat(*g_rows) if g_rows else ca.SX(0, 1)
         self.lbg, self.ubg = np.array(lbg), np.array(ubg)
+        self.equality = self.lbg == self.ubg
         self.row_scale = np.array(self.row_scale)
         self.nlp = {"x": z, "p": p, "f": objective, "g": g}
         self.z_sym, self.p_sym, self.g_sym = z, p, g
@@ -280,11 +283,15 @@ class StringNLP:
             hess_free = ca.hessian(objective + ca.dot(lam[:nf], g[:nf]), z)[0]
             jac_free = ca.jacobian(g[:nf], z)
             jac = ca.vertcat(jac_free, ca.jacobian(g[nf:], z))
+            # g of the free rows only: the obstacle rows' values (x at every obstacle sample, about a
+            # quarter of a planar model's instructions) are needed once per update, not per Newton step
             self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam],
-                                           [grad_f, ca.densify(g), ca.densify(jac_free), ca.densify(hess_free), energies])
+                                           [grad_f, ca.densify(g[:nf]), ca.densify(jac_free), ca.densify(hess_free),
+                                            energies])
+            self.obstacle_g_fn = ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g[nf:])])
         else:
             jac = ca.jacobian(g, z)
-            self.kkt_free_fn = None
+            self.kkt_free_fn = self.obstacle_g_fn = None
         self.hessian_fn = ca.Function("lagrangian_hessian", [z, p, lam], [hess])
         self.jac_g_fn = ca.Function("constraint_jacobian", [z, p], [jac])
         # everything one Newton step on the KKT conditions needs, in one call (compiled to C later)
@@ -306,6 +313,13 @@ class StringNLP:
         # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale)
         self._target_jacobian = np.asarray(ca.Function("dg_dp", [z, p], [ca.jacobian(g, p)])(np.zeros(z.shape[0]), np.zeros(lay.size)))
         self._target_jacobian[:, ~grip_only] = 0.0
+
+    def material_parameters(self, p: np.ndarray) -> None:
+        """Fill p's material terms (stiffness matrices, weight moments) from its Rf, Rt, Re, D slices."""
+        lay = self.params
+        profiles = {k: p[lay[k]] for k in ("Rf", "Rt", "Re", "D")}
+        for name, value in self.model.material_terms(profiles).items():
+            p[lay[name]] = value.ravel(order="F")
 
     def target_shift(self, p_old: np.ndarray, p_new: np.ndarray) -> np.ndarray:
         """g(z, p_new) − g(z, p_old) when only grip targets differ (exact: they enter g linearly)."""

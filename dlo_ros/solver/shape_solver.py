@@ -26,6 +26,7 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.linalg.lapack import dgesv as _gesv
 from scipy.special import j0
 
 from ..model.problem import GripPose, Problem
@@ -104,6 +105,7 @@ class ShapeSolver:
             self._ipopt_solver(False), self._ipopt_solver(True)
         self._kkt = InterpretedFunction(self.nlp.kkt_fn)
         self._kkt_free = InterpretedFunction(self.nlp.kkt_free_fn) if self.nlp.kkt_free_fn is not None else None
+        self._obstacle_g = InterpretedFunction(self.nlp.obstacle_g_fn) if self.nlp.obstacle_g_fn is not None else None
         self.kkt_compiled = False
         self.compile_time_s = 0.0
         self._start_compile()
@@ -387,6 +389,7 @@ class ShapeSolver:
         p[lay["Rt"]] = st.twist_stiffness(nodes)
         p[lay["Re"]] = st.stretch_stiffness(nodes) if st.stretch_stiffness is not None else 0.0
         p[lay["D"]] = st.weight_per_length(nodes)
+        nlp.material_parameters(p)
         p[lay["gravity"]] = problem.gravity_unit
         p[lay["radius"]] = st.radius
         n = nlp.r0[:, 2]
@@ -492,7 +495,7 @@ class ShapeSolver:
         """
         nlp = self.nlp
         z, lam = start.z.copy(), np.zeros_like(start.lam_g)
-        equality = nlp.lbg == nlp.ubg
+        equality = nlp.equality
         # active = at its bound with a positive multiplier (IPOPT leaves ~1e-10 barrier multipliers
         # on rows far from their bound; those are inactive)
         if start.g is None:  # a warm start adopted from another model
@@ -501,25 +504,29 @@ class ShapeSolver:
         lam[active] = start.lam_g[active]
         idx = np.flatnonzero(active)
         bound = nlp.ubg[idx]
-        n = z.size
+        n, m = z.size, idx.size
+        kkt, rhs = np.zeros((n + m, n + m)), np.empty(n + m)
         # Only grip targets changed → they enter g linearly (row = (x − target)/scale), so ∇f, J and H
         # stored at the start stay exact and g shifts by a known amount: the first step needs no evaluation.
+        keep = ~nlp.grip_parameter_mask
         reuse = (
             start.hessian is not None and start.g is not None and start.gradient is not None
-            and np.array_equal(start.p[~nlp.grip_parameter_mask], p[~nlp.grip_parameter_mask])
+            and np.array_equal(start.p[keep], p[keep])
         )
         for it in range(max_steps + 1):
             if it == 0 and reuse:
                 grad, jac, hess, energies = start.gradient, start.jacobian, start.hessian, None
                 g = start.g + nlp.target_shift(start.p, p)
             else:
-                grad, g, jac, hess, energies = self._derivatives(z, p, lam, active)
+                grad, g, jac, hess, energies = self._derivatives(z, p, lam, active, obstacle_g=False)
                 grad, g = grad.ravel(), g.ravel()
             ja = jac[idx]
-            r_dual = grad + ja.T @ lam[idx]
+            r_dual = grad + lam[idx] @ ja
             r_prim = g[idx] - bound
-            converged = np.max(np.abs(r_dual), initial=0.0) < 1e-9 and np.max(np.abs(r_prim), initial=0.0) < 1e-11
+            converged = np.abs(r_dual).max(initial=0.0) < 1e-9 and np.abs(r_prim).max(initial=0.0) < 1e-11
             if converged and energies is not None:
+                if np.isnan(g[nlp.n_free_rows:]).any():  # obstacle rows not evaluated in the steps
+                    g[nlp.n_free_rows:] = self._obstacle_g(z, p)[0].ravel()
                 inactive_ok = np.all(g[~active] <= nlp.ubg[~active] + 1e-9)
                 signs_ok = np.all(lam[active & ~equality] >= -1e-12)
                 if not (inactive_ok and signs_ok):
@@ -529,30 +536,36 @@ class ShapeSolver:
                 return True, state, it, violation
             if it == max_steps:
                 break
-            kkt = np.zeros((n + idx.size, n + idx.size))
             kkt[:n, :n] = hess
             kkt[:n, n:] = ja.T
             kkt[n:, :n] = ja
-            try:
-                step = np.linalg.solve(kkt, -np.concatenate([r_dual, r_prim]))
-            except np.linalg.LinAlgError:
-                return False, start, it, np.inf
-            if not np.all(np.isfinite(step)) or np.max(np.abs(step[:n])) > 0.5:
+            rhs[:n] = -r_dual
+            rhs[n:] = -r_prim
+            # LAPACK's gesv directly: numpy.linalg.solve's checks cost more than the solve at this size
+            _, _, step, info = _gesv(kkt, rhs)
+            if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > 0.5:
                 return False, start, it, np.inf
             z += step[:n]
             lam[idx] += step[n:]
         return False, start, max_steps, np.inf
 
-    def _derivatives(self, z: np.ndarray, p: np.ndarray, lam: np.ndarray, active: np.ndarray) -> list[np.ndarray]:
+    def _derivatives(self, z: np.ndarray, p: np.ndarray, lam: np.ndarray, active: np.ndarray,
+                     obstacle_g: bool = True) -> list[np.ndarray]:
         """[∇f, g, ∂g/∂z, ∇²L, energies] at (z, p, λ).  When no obstacle row is ``active`` (so λ is zero on
         them) the obstacle rows' Jacobian rows are returned as zeros and left out of ∇²L, which is exact
-        for every use here: only active rows' Jacobians are used, and inactive rows have λ = 0."""
+        for every use here: only active rows' Jacobians are used, and inactive rows have λ = 0.  Then,
+        with ``obstacle_g=False``, the obstacle rows of g are NaN (not evaluated; a Newton step does not
+        use them, only its convergence check does)."""
         if self._kkt_free is None or np.any(active[self.nlp.n_free_rows:]):
             return self._kkt(z, p, lam)
-        grad, g, jac_free, hess, energies = self._kkt_free(z, p, lam)
-        jac = np.zeros((g.size, jac_free.shape[1]))
-        jac[: jac_free.shape[0]] = jac_free
-        return [grad, g, jac, hess, energies]
+        grad, g_free, jac_free, hess, energies = self._kkt_free(z, p, lam)
+        nf, rows = self.nlp.n_free_rows, self.nlp.lbg.size
+        g = np.empty(rows)
+        g[:nf] = g_free.ravel()
+        g[nf:] = self._obstacle_g(z, p)[0].ravel() if obstacle_g else np.nan
+        jac = np.zeros((rows, jac_free.shape[1]))
+        jac[:nf] = jac_free
+        return [grad, g[:, None], jac, hess, energies]  # g as a column, like the full function's
 
     def _violation_from_g(self, g: np.ndarray) -> float:
         nlp = self.nlp
@@ -750,8 +763,7 @@ class ShapeSolver:
         active = np.zeros(0, dtype=bool)
         if nlp.lbg.size:
             g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
-            equality = nlp.lbg == nlp.ubg
-            active = equality | (np.abs(state.lam_g) > 1e-9) | (g > nlp.ubg - 1e-9)
+            active = nlp.equality | (np.abs(state.lam_g) > 1e-9) | (g > nlp.ubg - 1e-9)
         if state.hessian is None:
             gradient, _, state.jacobian, state.hessian, state.energies = self._derivatives(state.z, state.p, state.lam_g,
                                                                                           active)

@@ -417,16 +417,18 @@ class AutoShapeSolver:
                         self._submit(self._prebuild, {("",) + ahead.key()}, [ahead], problem)
             reduced = self._reduced(self.choice, problem)[0]
             inner_poses = {g.name: g.pose for g in reduced.grips}
-            result = self.inner.solve(inner_poses, warm=warm, commit=commit)
+            # the poses are checked and the plane too (above): the inner solver need not check them again
+            result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
             if not result.ok or not commit:
                 return self._finish(result, t0, notes)
             self.problem = problem
             self._since_check += 1
-            if self._unchecked or self._since_check >= self.options.recheck_every:
+            due = self._unchecked or self._since_check >= self.options.recheck_every
+            if due and (self._worker is None or self._job is None):  # a running check: snapshot later
                 snap = self._snapshot(problem, inner_poses, result)
                 if self._worker is None:
                     result = self._check_now(snap, result, notes)
-                elif self._job is None:
+                else:
                     i = ORDERS.index(snap.choice.order)
                     keys = {("",) + replace(snap.choice, order=o).key() for o in ORDERS[max(i - 1, 0):i + 2]}
                     keys.add(("checker",) + self._full_choice(snap.choice, problem).key())

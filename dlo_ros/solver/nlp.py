@@ -12,9 +12,10 @@
 Structure (which grips, their s and modes, loads' s, obstacle types, twist and stretch fields) is fixed
 per NLP; parameter values (grip targets, profiles, gravity, load values, obstacle poses) are not.
 
-Obstacle rows come last in g.  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``: the
-same outputs without the obstacle rows' Jacobian and Hessian, for Newton updates while no obstacle row
-is active (with a table in reach that is 79 % of a planar model's KKT instructions and 62 % of a 3D one's).
+Obstacle rows come last in g.  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``, for
+Newton updates while no obstacle row is active: the Newton matrix and residual of the other rows (all
+equalities) without the obstacle rows' Jacobian, Hessian or values (with a table in reach, half of a
+planar model's KKT instructions and a third of a 3D one's go to those).
 """
 from __future__ import annotations
 
@@ -269,29 +270,35 @@ class StringNLP:
 
         self.energy_fn = ca.Function("energy", [z, p], [bend, twist, stretch, grav, work])
         lam = ca.SX.sym("lam", g.shape[0])
-        # Obstacle rows come last.  Without them (g_free) the KKT function is what a Newton update needs
-        # while no obstacle row is active: most of the KKT work is x(s_j) at the obstacle samples
-        # differentiated twice (planar order 12 with a table: 138k → 29k instructions).  Each Hessian
-        # is built once (building them is most of an NLP's build time).
-        self.n_free_rows = self.obstacle_rows[0][0] if self.obstacle_rows and self.obstacle_rows[0] else g.shape[0]
+        # Obstacle rows come last.  Without them the KKT function is what a Newton update needs while no
+        # obstacle row is active: most of the KKT work is x(s_j) at the obstacle samples, differentiated
+        # twice.  Each Hessian is built once (building them is most of an NLP's build time).
+        self.n_free_rows = nf = self.obstacle_rows[0][0] if self.obstacle_rows and self.obstacle_rows[0] else g.shape[0]
+        # the rows before the obstacle rows are equalities with bound 0 (grips, relative positions)
+        assert np.all(self.lbg[:nf] == 0.0) and np.all(self.ubg[:nf] == 0.0)
         grad_f = ca.densify(ca.gradient(objective, z))
         energies = ca.densify(ca.vertcat(bend, twist, stretch, grav, work))
-        nf = self.n_free_rows
         # ∇²L is built on its own, not as hess_free + ∇²(λ_obs·g_obs): that sum has 8 % more instructions
         hess = ca.hessian(objective + ca.dot(lam, g), z)[0]
+        lam_free = ca.SX.sym("lam_free", nf)
+        jac_free = ca.jacobian(g[:nf], z)
+        if nf == g.shape[0]:
+            hess_free = ca.substitute(hess, lam, lam_free)
+        else:
+            hess_free = ca.hessian(objective + ca.dot(lam_free, g[:nf]), z)[0]
+        # The Newton system of the free rows itself: K = [∇²L J_freeᵀ; J_free 0] and
+        # r = [∇f + J_freeᵀ λ_free; g_free], so that a contact-free Newton step is one call and one solve
+        kkt_matrix = ca.blockcat([[hess_free, jac_free.T], [jac_free, ca.SX(nf, nf)]])
+        residual = ca.vertcat(grad_f + ca.mtimes(jac_free.T, lam_free), g[:nf])
+        self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam_free],
+                                       [ca.densify(kkt_matrix), ca.densify(residual), grad_f, energies])
         if nf < g.shape[0]:
-            hess_free = ca.hessian(objective + ca.dot(lam[:nf], g[:nf]), z)[0]
-            jac_free = ca.jacobian(g[:nf], z)
             jac = ca.vertcat(jac_free, ca.jacobian(g[nf:], z))
-            # g of the free rows only: the obstacle rows' values (x at every obstacle sample, about a
-            # quarter of a planar model's instructions) are needed once per update, not per Newton step
-            self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam],
-                                           [grad_f, ca.densify(g[:nf]), ca.densify(jac_free), ca.densify(hess_free),
-                                            energies])
+            # the obstacle rows' values: once per update (the convergence check), not per Newton step
             self.obstacle_g_fn = ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g[nf:])])
         else:
-            jac = ca.jacobian(g, z)
-            self.kkt_free_fn = self.obstacle_g_fn = None
+            jac = jac_free
+            self.obstacle_g_fn = None
         self.hessian_fn = ca.Function("lagrangian_hessian", [z, p, lam], [hess])
         self.jac_g_fn = ca.Function("constraint_jacobian", [z, p], [jac])
         # everything one Newton step on the KKT conditions needs, in one call (compiled to C later)

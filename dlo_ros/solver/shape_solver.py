@@ -58,6 +58,8 @@ class _State:
     gradient: np.ndarray | None = None  # ∇f at z
     g: np.ndarray | None = None  # constraint values (scaled rows) at z
     unstable_direction: np.ndarray | None = None  # eigenvector of the most negative reduced curvature
+    kkt: np.ndarray | None = None       # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
+    residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
 
 
 def structure_key(problem: Problem, options: SolverOptions) -> tuple:
@@ -153,7 +155,7 @@ class ShapeSolver:
         nlp = self.nlp
         # the contact-free function first: it is the one a stream uses while nothing touches
         todo = []
-        for name, fn in (("_kkt_free", nlp.kkt_free_fn), ("_kkt", nlp.kkt_fn)):
+        for name, fn in (("_kkt_free", nlp.kkt_free_fn), ("_obstacle_g", nlp.obstacle_g_fn), ("_kkt", nlp.kkt_fn)):
             if fn is None:
                 continue
             lib = library_path(fn)
@@ -259,10 +261,13 @@ class ShapeSolver:
         if m.layout.twist:
             return m.fields(z, s)["psi"]
         anchor = next((g for g in sorted(self.problem.grips, key=lambda g: g.s) if g.mode != "pin"), None)
-        if anchor is None:
-            return m.zero_twist_psi(z, s, 0.0, 0.0)
-        pp = p if p is not None else self.pack_parameters(self.problem, z)
-        return m.zero_twist_psi(z, s, anchor.s, float(pp[self.nlp.params[f"grip:{anchor.name}:angles"]][2]))
+        psi_anchor = 0.0
+        if anchor is not None:
+            pp = p if p is not None else self.pack_parameters(self.problem, z)
+            psi_anchor = float(pp[self.nlp.params[f"grip:{anchor.name}:angles"]][2])
+        if m.layout.planar:  # θ ≡ π/2: ψ' = −φ' cosθ = 0, so ψ is the anchor's everywhere
+            return np.full(np.shape(s), psi_anchor)
+        return m.zero_twist_psi(z, s, anchor.s if anchor is not None else 0.0, psi_anchor)
 
     def reset(self) -> None:
         """Forget the warm start: the next solve starts cold."""
@@ -376,10 +381,23 @@ class ShapeSolver:
         """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
         nlp, lay = self.nlp, self.nlp.params
         p = self._scene_parameters(problem).copy()
-        for g in problem.grips:
+        references = self._grip_reference_angles(problem, z_reference)
+        for g, reference in zip(problem.grips, references):
             p[lay[f"grip:{g.name}:position"]] = g.pose.position
-            p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, self._reference_angles(z_reference, g.s))
+            p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, reference)
         return p
+
+    def _grip_reference_angles(self, problem: Problem, z: np.ndarray) -> list[list[float]]:
+        """(φ, θ, ψ) of shape z at every grip's s, in one product B(s_grips) [c_φ c_θ c_ψ] (θ ≡ π/2 and
+        ψ ≡ 0 where they are not unknowns, as ``RitzModel.fields``)."""
+        m = self.model
+        s_grips = np.array([g.s for g in problem.grips])
+        b = m.matrices(s_grips)[0]
+        out = np.empty((len(s_grips), 3))
+        for k, (name, constant) in enumerate((("phi", 0.0), ("theta", np.pi / 2), ("psi", 0.0))):
+            c = m.coefficients(z, name)
+            out[:, k] = b @ c if c is not None else constant
+        return out.tolist()
 
     def _scene_parameters(self, problem: Problem) -> np.ndarray:
         """The parameter vector without grip targets (zeros there), cached while the string, gravity, loads,
@@ -509,6 +527,8 @@ class ShapeSolver:
         if start.g is None:  # a warm start adopted from another model
             start.g = np.asarray(nlp.g_fn(start.z, start.p)).ravel()
         active = equality | ((start.lam_g > 1e-8) & (start.g > nlp.ubg - 1e-7))
+        if not np.any(active[nlp.n_free_rows:]):
+            return self._newton_free(start, p, max_steps)
         lam[active] = start.lam_g[active]
         idx = np.flatnonzero(active)
         bound = nlp.ubg[idx]
@@ -526,15 +546,13 @@ class ShapeSolver:
                 grad, jac, hess, energies = start.gradient, start.jacobian, start.hessian, None
                 g = start.g + nlp.target_shift(start.p, p)
             else:
-                grad, g, jac, hess, energies = self._derivatives(z, p, lam, active, obstacle_g=False)
+                grad, g, jac, hess, energies = self._kkt(z, p, lam)
                 grad, g = grad.ravel(), g.ravel()
             ja = jac[idx]
             r_dual = grad + lam[idx] @ ja
             r_prim = g[idx] - bound
             converged = np.abs(r_dual).max(initial=0.0) < 1e-9 and np.abs(r_prim).max(initial=0.0) < 1e-11
             if converged and energies is not None:
-                if np.isnan(g[nlp.n_free_rows:]).any():  # obstacle rows not evaluated in the steps
-                    g[nlp.n_free_rows:] = self._obstacle_g(z, p)[0].ravel()
                 inactive_ok = np.all(g[~active] <= nlp.ubg[~active] + 1e-9)
                 signs_ok = np.all(lam[active & ~equality] >= -1e-12)
                 if not (inactive_ok and signs_ok):
@@ -557,23 +575,64 @@ class ShapeSolver:
             lam[idx] += step[n:]
         return False, start, max_steps, np.inf
 
-    def _derivatives(self, z: np.ndarray, p: np.ndarray, lam: np.ndarray, active: np.ndarray,
-                     obstacle_g: bool = True) -> list[np.ndarray]:
+    def _newton_free(self, start: _State, p: np.ndarray, max_steps: int) -> tuple[bool, _State, int, float]:
+        """``_newton`` while no obstacle row is active: the active rows are the free rows (all equalities),
+        and the contact-free function returns the Newton matrix K and residual r themselves, so a step is
+        one call and one solve, K [Δz; Δλ] = −r.  The obstacle rows' values are evaluated once, at the
+        end, to check that none is violated (else the caller falls back to IPOPT)."""
+        nlp = self.nlp
+        nf, n, rows = nlp.n_free_rows, start.z.size, nlp.lbg.size
+        unknowns = np.concatenate([start.z, start.lam_g[:nf]])
+        z, lam_free = unknowns[:n], unknowns[n:]  # views: a step updates both
+        keep = ~nlp.grip_parameter_mask
+        reuse = start.kkt is not None and np.array_equal(start.p[keep], p[keep])
+        for it in range(max_steps + 1):
+            if it == 0 and reuse:  # targets enter g linearly: K and ∇f are the start's, g shifts
+                kkt, residual, energies = start.kkt, start.residual.copy(), None
+                residual[n:] += nlp.target_shift(start.p, p)[:nf]
+            else:
+                kkt, residual, grad, energies = self._kkt_free(z, p, lam_free)
+                residual = residual[:, 0]
+            converged = np.abs(residual[:n]).max() < 1e-9 and np.abs(residual[n:]).max(initial=0.0) < 1e-11
+            if converged and energies is not None:
+                g = np.empty(rows)
+                g[:nf] = residual[n:]
+                if nf < rows:
+                    g[nf:] = self._obstacle_g(z, p)[0].ravel()
+                    if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared: the active set changed
+                        return False, start, it, np.inf
+                lam = np.zeros(rows)
+                lam[:nf] = lam_free
+                jac = np.zeros((rows, n))
+                jac[:nf] = kkt[n:, :n]
+                state = _State(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
+                               energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual)
+                return True, state, it, self._violation_from_g(g)
+            if it == max_steps:
+                break
+            _, _, step, info = _gesv(kkt, residual)
+            if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > 0.5:
+                return False, start, it, np.inf
+            unknowns -= step
+        return False, start, max_steps, np.inf
+
+    def _derivatives(self, z: np.ndarray, p: np.ndarray, lam: np.ndarray, active: np.ndarray) -> list[np.ndarray]:
         """[∇f, g, ∂g/∂z, ∇²L, energies] at (z, p, λ).  When no obstacle row is ``active`` (so λ is zero on
-        them) the obstacle rows' Jacobian rows are returned as zeros and left out of ∇²L, which is exact
-        for every use here: only active rows' Jacobians are used, and inactive rows have λ = 0.  Then,
-        with ``obstacle_g=False``, the obstacle rows of g are NaN (not evaluated; a Newton step does not
-        use them, only its convergence check does)."""
-        if self._kkt_free is None or np.any(active[self.nlp.n_free_rows:]):
+        them) the contact-free function is used: the obstacle rows' Jacobian rows are returned as zeros
+        and left out of ∇²L, which is exact for every use here (only active rows' Jacobians are used, and
+        inactive rows have λ = 0)."""
+        nf = self.nlp.n_free_rows
+        if np.any(active[nf:]):
             return self._kkt(z, p, lam)
-        grad, g_free, jac_free, hess, energies = self._kkt_free(z, p, lam)
-        nf, rows = self.nlp.n_free_rows, self.nlp.lbg.size
+        kkt, residual, grad, energies = self._kkt_free(z, p, lam[:nf])
+        n, rows = z.size, self.nlp.lbg.size
         g = np.empty(rows)
-        g[:nf] = g_free.ravel()
-        g[nf:] = self._obstacle_g(z, p)[0].ravel() if obstacle_g else np.nan
-        jac = np.zeros((rows, jac_free.shape[1]))
-        jac[:nf] = jac_free
-        return [grad, g[:, None], jac, hess, energies]  # g as a column, like the full function's
+        g[:nf] = residual[n:, 0]
+        if nf < rows:
+            g[nf:] = self._obstacle_g(z, p)[0].ravel()
+        jac = np.zeros((rows, n))
+        jac[:nf] = kkt[n:, :n]
+        return [grad, g[:, None], jac, kkt[:n, :n], energies]  # g as a column, like the full function's
 
     def _violation_from_g(self, g: np.ndarray) -> float:
         nlp = self.nlp

@@ -77,6 +77,30 @@ def twisted_stream():
     return "twisted_3d (right clamp turned 1.5 rad, 0.1 m out of plane)", scene, circle(p)
 
 
+class Timed:
+    """A solver's derivative function with the seconds spent in it added up."""
+
+    def __init__(self, fn):
+        self.fn, self.seconds = fn, 0.0
+
+    def __call__(self, *args):
+        t0 = time.perf_counter()
+        out = self.fn(*args)
+        self.seconds += time.perf_counter() - t0
+        return out
+
+
+def instrument(solver) -> list[Timed]:
+    """Time ``solver``'s derivative evaluations (its compile must be finished or off)."""
+    timers = []
+    for name in ("_kkt_free", "_kkt", "_obstacle_g"):
+        fn = getattr(solver, name, None)
+        if fn is not None:
+            timers.append(Timed(fn))
+            setattr(solver, name, timers[-1])
+    return timers
+
+
 def stream(solver, targets):
     """Solve every target at 50 Hz; (solve times [ms], last result, model changes with update index;
     index -1: the first, cold solve)."""
@@ -99,14 +123,15 @@ def main() -> None:
     ap.add_argument("--compile", action="store_true", help="compiled KKT functions (blocking compile, cached)")
     ap.add_argument("--out", default="bench/results/auto_vs_full.md")
     ap.add_argument("--compiled-planar", action="store_true",
-                    help="add the planar stream with compiled derivatives for planar 12, full 12 and full 16 "
+                    help="the planner's loop also with compiled derivatives for planar 12, full 12 and full 16 "
                          "(gcc: about a minute per model the first time, cached after)")
+    ap.add_argument("--loop-only", action="store_true", help="only the planner's-loop table (printed, not written)")
     args = ap.parse_args()
     mode = "blocking" if args.compile else "off"
     if not args.compile:
         os.environ["DLO_NO_COMPILE"] = "1"
     rows, notes = [], []
-    for label, scene, targets in (demo_stream(), planar_stream(), twisted_stream()):
+    for label, scene, targets in (() if args.loop_only else (demo_stream(), planar_stream(), twisted_stream())):
         prob, opts = scene.problem, scene.options
         print(f"{label}: auto …", flush=True)
         auto = make_solver(prob, replace(opts, model="auto"), compile=mode, checks="background")
@@ -146,16 +171,38 @@ def main() -> None:
                          nf=full16.model.layout.size, ns=same.model.layout.size, order=order))
         notes.append((label, changes))
 
-    compiled_rows = []
-    if args.compiled_planar:
-        os.environ.pop("DLO_NO_COMPILE", None)
-        label, scene, targets = planar_stream()
-        for model, order in (("planar", 12), ("full", 12), ("full", 16)):
-            print(f"compiled {model} {order} …", flush=True)
-            solver = ShapeSolver(scene.problem, replace(scene.options, model=model, order=order), compile="blocking")
-            assert solver.kkt_compiled
-            t, _, _ = stream(solver, targets)
-            compiled_rows.append((f"{model}, order {order}", solver.model.layout.size, t))
+    # The planner's loop: the same planar targets solved back to back (no pacing), the three fixed models
+    # interleaved target by target so that they share the machine's state; the time spent evaluating
+    # derivatives (the model-dependent part) is measured inside each update.
+    loop_rows = []
+    label, scene, targets = planar_stream()
+    modes = ["off"] + (["blocking"] if args.compiled_planar else [])
+    for mode in modes:
+        if mode == "blocking":
+            os.environ.pop("DLO_NO_COMPILE", None)
+        print(f"planner loop ({'compiled' if mode == 'blocking' else 'interpreted'}) …", flush=True)
+        solvers = {f"{model}, order {order}": ShapeSolver(scene.problem, replace(scene.options, model=model, order=order),
+                                                          compile=mode)
+                   for model, order in (("planar", 12), ("full", 12), ("full", 16))}
+        timers = {name: instrument(solver) for name, solver in solvers.items()}
+        total = {name: [] for name in solvers}
+        deriv = {name: [] for name in solvers}
+        for _ in range(3):
+            for solver in solvers.values():
+                solver.reset()
+                assert solver.solve().ok
+            for poses in targets:
+                for name, solver in solvers.items():
+                    d0 = sum(t.seconds for t in timers[name])
+                    t0 = time.perf_counter()
+                    r = solver.solve(poses)
+                    total[name].append((time.perf_counter() - t0) * 1e3)
+                    deriv[name].append((sum(t.seconds for t in timers[name]) - d0) * 1e3)
+                    assert r.ok, r.message
+        for name, solver in solvers.items():
+            loop_rows.append(dict(mode="compiled (gcc -O1)" if solver.kkt_compiled else "interpreted", name=name,
+                                  n=solver.model.layout.size, instr=solver.nlp.kkt_free_fn.n_instructions(),
+                                  total=np.array(total[name]), deriv=np.array(deriv[name])))
 
     def stats(t):
         return f"{np.median(t):.2f} / {np.percentile(t, 99):.1f} / {t.max():.0f}"
@@ -181,18 +228,28 @@ def main() -> None:
             f"| {r['label']} | {kind} | {m['variables']} / {r['nf']} / {r['ns']} | {stats(r['ta'])} | {stats(r['tf'])} | "
             f"{stats(r['ts'])} | {np.median(r['tf']) / np.median(r['ta']):.2f} | {np.median(r['ts']) / np.median(r['ta']):.2f} | "
             f"{r['ea']:.1e} / {r['ef']:.1e} / {r['es']:.1e} | {'—' if est is None else f'{est:.1e}'} |")
-    if args.compiled_planar:
-        lines += ["", "## Compiled derivatives, planar stream", "",
-                  "What a node reaches once its background compile is done (gcc -O1, cached per structure): the "
-                  "same planar stream with fixed models, so that only the model differs.", "",
-                  "| model | unknowns | median / p99 / max ms | full 16 / this (median) |", "|---|---|---|---|"]
-        for name, n, t in compiled_rows:
-            lines.append(f"| {name} | {n} | {stats(t)} | {np.median(compiled_rows[-1][2]) / np.median(t):.2f} |")
+    lines += ["", "## The planner's loop: the planar stream back to back", "",
+              "The same 150 in-plane targets solved one after another without pacing (a planner evaluating "
+              "candidates), fixed models interleaved target by target, 3 passes. *Derivatives* is the time "
+              "spent in the KKT and obstacle-value functions inside each update (what the model costs); "
+              "*rest* is the per-update work common to every model (pose checks, parameters, the Newton "
+              "solves, output sampling, the stability eigenvalue, grip wrenches). Medians in ms.", "",
+              "| derivatives | model | unknowns | KKT instructions (contact-free) | update | derivatives | rest "
+              "| full 16 / this (update) | full 16 / this (derivatives) |", "|---|---|---|---|---|---|---|---|---|"]
+    for mode in dict.fromkeys(r["mode"] for r in loop_rows):
+        rows_m = [r for r in loop_rows if r["mode"] == mode]
+        ref = rows_m[-1]
+        for r in rows_m:
+            lines.append(
+                f"| {mode} | {r['name']} | {r['n']} | {r['instr']} | {np.median(r['total']):.3f} | "
+                f"{np.median(r['deriv']):.3f} | {np.median(r['total'] - r['deriv']):.3f} | "
+                f"{np.median(ref['total']) / np.median(r['total']):.2f} | {np.median(ref['deriv']) / np.median(r['deriv']):.2f} |")
     lines += ["", "Model changes auto made while streaming (update index: reason; "
               f"{len(rows[0]['ta'])} = after the stream, while the last checks finished):", ""]
     for label, changes in notes:
         lines.append(f"* {label}: " + ("; ".join(f"{i}: {c}" for i, c in changes) if changes else "none"))
-    lines += ["", f"Command: `bash scripts/dlo-env run python bench/auto_vs_full.py{' --compile' if args.compile else ''}`", ""]
+    flags = (" --compile" if args.compile else "") + (" --compiled-planar" if args.compiled_planar else "")
+    lines += ["", f"Command: `bash scripts/dlo-env run python bench/auto_vs_full.py{flags}`", ""]
     Path(args.out).write_text("\n".join(lines))
     print("\n".join(lines))
 

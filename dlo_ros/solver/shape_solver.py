@@ -35,7 +35,7 @@ from scipy.special import j0
 from ..model.problem import GripPose, Problem
 from ..model.rotations import TANGENT_X, euler_from_frame, material_frames, pose_quaternions, quat_to_matrix
 from .compiled import InterpretedFunction, NativeFunction, compiled, compiler, library_path
-from .nlp import StringNLP
+from .nlp import NEWTON_STEPS, StringNLP
 from .options import SolverOptions
 from .result import GripWrench, ShapeResult
 
@@ -109,7 +109,11 @@ class ShapeSolver:
         if not self.lazy_ipopt:
             self._ipopt_solver(False), self._ipopt_solver(True)
         self._kkt = InterpretedFunction(self.nlp.kkt_fn)
-        self._kkt_free = InterpretedFunction(self.nlp.kkt_free_fn) if self.nlp.kkt_free_fn is not None else None
+        self._kkt_free = InterpretedFunction(self.nlp.kkt_free_fn)
+        self._newton_step = InterpretedFunction(self.nlp.newton_fn)
+        # the first Newton steps in one call of newton_fn: while the derivatives are interpreted (with
+        # compiled ones the step-by-step loop is faster, and newton_fn has no C: see StringNLP)
+        self.fused_newton = True
         self._obstacle_g = InterpretedFunction(self.nlp.obstacle_g_fn) if self.nlp.obstacle_g_fn is not None else None
         self.kkt_compiled = False
         self.compile_time_s = 0.0
@@ -155,12 +159,14 @@ class ShapeSolver:
         nlp = self.nlp
         # the contact-free function first: it is the one a stream uses while nothing touches
         todo = []
-        for name, fn in (("_kkt_free", nlp.kkt_free_fn), ("_obstacle_g", nlp.obstacle_g_fn), ("_kkt", nlp.kkt_fn)):
+        for name, fn in (("_kkt_free", nlp.kkt_free_fn), ("_obstacle_g", nlp.obstacle_g_fn),
+                         ("_kkt", nlp.kkt_fn)):
             if fn is None:
                 continue
             lib = library_path(fn)
             if lib.exists():  # compiled on an earlier start: load now, no waiting
                 setattr(self, name, NativeFunction(lib, fn))
+                self.fused_newton = self.fused_newton and name != "_kkt_free"
             else:
                 todo.append((name, fn, lib))
         self.kkt_compiled = not todo
@@ -175,6 +181,7 @@ class ShapeSolver:
                     if not ok or self.nlp is not nlp:  # no compiler, or the scene was rebuilt meanwhile
                         return
                     setattr(self, name, native)
+                    self.fused_newton = self.fused_newton and name != "_kkt_free"
             with (threading.Lock() if locked else self._lock):
                 if self.nlp is nlp:
                     self.kkt_compiled = True
@@ -577,24 +584,32 @@ class ShapeSolver:
 
     def _newton_free(self, start: _State, p: np.ndarray, max_steps: int) -> tuple[bool, _State, int, float]:
         """``_newton`` while no obstacle row is active: the active rows are the free rows (all equalities),
-        and the contact-free function returns the Newton matrix K and residual r themselves, so a step is
-        one call and one solve, K [Δz; Δλ] = −r.  The obstacle rows' values are evaluated once, at the
-        end, to check that none is violated (else the caller falls back to IPOPT)."""
+        and the contact-free function returns the Newton matrix K and residual r themselves.  Steps
+        K [Δz; Δλ] = −r start from the start's own K with r shifted by the new targets, when only targets
+        changed.  With interpreted derivatives the first NEWTON_STEPS steps are one call of
+        ``StringNLP.newton_fn``; then (or with compiled derivatives from the start) each step is one
+        evaluation and one LAPACK solve.  The obstacle rows' values are evaluated
+        once, at the end, to check that none is violated (else the caller falls back to IPOPT)."""
         nlp = self.nlp
         nf, n, rows = nlp.n_free_rows, start.z.size, nlp.lbg.size
         unknowns = np.concatenate([start.z, start.lam_g[:nf]])
-        z, lam_free = unknowns[:n], unknowns[n:]  # views: a step updates both
         keep = ~nlp.grip_parameter_mask
-        reuse = start.kkt is not None and np.array_equal(start.p[keep], p[keep])
-        for it in range(max_steps + 1):
-            if it == 0 and reuse:  # targets enter g linearly: K and ∇f are the start's, g shifts
-                kkt, residual, energies = start.kkt, start.residual.copy(), None
-                residual[n:] += nlp.target_shift(start.p, p)[:nf]
-            else:
-                kkt, residual, grad, energies = self._kkt_free(z, p, lam_free)
-                residual = residual[:, 0]
-            converged = np.abs(residual[:n]).max() < 1e-9 and np.abs(residual[n:]).max(initial=0.0) < 1e-11
-            if converged and energies is not None:
+        if start.kkt is not None and np.array_equal(start.p[keep], p[keep]):  # targets enter g linearly
+            kkt, residual, energies = start.kkt, start.residual.copy(), None
+            residual[n:] += nlp.target_shift(start.p, p)[:nf]
+        else:
+            kkt, residual, grad, energies = self._kkt_free(unknowns[:n], p, unknowns[n:])
+            residual = residual[:, 0]
+        first = 0
+        if self.fused_newton:
+            u, kkt, residual, grad, energies, largest = self._newton_step(unknowns, p, kkt, residual)
+            if not (np.isfinite(u).all() and largest[0, 0] <= 0.5):
+                return False, start, NEWTON_STEPS, np.inf
+            unknowns, residual, first = u[:, 0], residual[:, 0], NEWTON_STEPS
+        for it in range(first, max_steps + 1):
+            z, lam_free = unknowns[:n], unknowns[n:]
+            if energies is not None and np.abs(residual[:n]).max() < 1e-9 and \
+                    np.abs(residual[n:]).max(initial=0.0) < 1e-11:
                 g = np.empty(rows)
                 g[:nf] = residual[n:]
                 if nf < rows:
@@ -613,7 +628,9 @@ class ShapeSolver:
             _, _, step, info = _gesv(kkt, residual)
             if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > 0.5:
                 return False, start, it, np.inf
-            unknowns -= step
+            unknowns = unknowns - step
+            kkt, residual, grad, energies = self._kkt_free(unknowns[:n], p, unknowns[n:])
+            residual = residual[:, 0]
         return False, start, max_steps, np.inf
 
     def _derivatives(self, z: np.ndarray, p: np.ndarray, lam: np.ndarray, active: np.ndarray) -> list[np.ndarray]:

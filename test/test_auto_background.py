@@ -130,3 +130,26 @@ def test_after_close_the_solver_keeps_answering_with_inline_checks():
     solver.close()
     r = solver.solve({"right": (np.array([0.58, 0.0, 0.4]), problem.grip("right").pose.orientation)})
     assert r.ok and r.model["checks"] == "sync" and r.model["checked"], r.model
+
+
+def test_background_checks_lower_the_gil_switch_interval_and_never_raise_it():
+    """The stream thread waits for the GIL while the check worker runs Python, up to the switch interval:
+    background checks lower it (5 ms by default) to SWITCH_INTERVAL_S; sync checks leave it alone, and a
+    lower interval set by the application is kept."""
+    import sys
+
+    from dlo_ros.solver.auto import SWITCH_INTERVAL_S
+
+    before = sys.getswitchinterval()
+    try:
+        sys.setswitchinterval(0.005)
+        make_solver(hanging(), SolverOptions(), compile="off", checks="sync")
+        assert sys.getswitchinterval() == pytest.approx(0.005)
+        solver = make_solver(hanging(), SolverOptions(), compile="off", checks="background")
+        assert sys.getswitchinterval() == pytest.approx(SWITCH_INTERVAL_S)
+        solver.close()
+        sys.setswitchinterval(SWITCH_INTERVAL_S / 2)
+        make_solver(hanging(), SolverOptions(), compile="off", checks="background").close()
+        assert sys.getswitchinterval() == pytest.approx(SWITCH_INTERVAL_S / 2)
+    finally:
+        sys.setswitchinterval(before)

@@ -371,8 +371,7 @@ class ShapeSolver:
 
     def grip_angles(self, pose: GripPose, reference: tuple[float, float, float]) -> np.ndarray:
         """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
-        q = quat_to_matrix(pose.orientation) @ TANGENT_X.T
-        phi, theta, psi = euler_from_frame(self.nlp.r0, q)
+        phi, theta, psi = self._pose_euler(pose)
         best, best_d = None, math.inf
         two_pi = 2.0 * math.pi
         for ph, th, ps in ((phi, theta, psi), (phi + math.pi, -theta, psi + math.pi)):
@@ -383,6 +382,19 @@ class ShapeSolver:
             if d < best_d:
                 best, best_d = (ph, th, ps), d
         return np.array(best)
+
+    def _pose_euler(self, pose: GripPose) -> tuple[float, float, float]:
+        """``euler_from_frame`` of a grip pose in this NLP's frame, remembered for the pose objects of the
+        last few calls (a stream moves one grip; the others keep their GripPose objects)."""
+        cache = self.__dict__.setdefault("_euler_cache", {})
+        hit = cache.get(id(pose))
+        if hit is not None and hit[0] is pose and hit[1] is self.nlp:
+            return hit[2]
+        if len(cache) > 16:
+            cache.clear()
+        angles = euler_from_frame(self.nlp.r0, quat_to_matrix(pose.orientation) @ TANGENT_X.T)
+        cache[id(pose)] = (pose, self.nlp, angles)
+        return angles
 
     def pack_parameters(self, problem: Problem, z_reference: np.ndarray) -> np.ndarray:
         """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
@@ -750,6 +762,18 @@ class ShapeSolver:
             "obstacles": len(self.problem.obstacles), "estimated_error_m": None, "variables": lay.size,
         }
 
+    def _sample(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centreline points (N, 3) and φ, θ at the published arc lengths: ``RitzModel.positions`` and
+        ``fields`` with the output matrices looked up once and each field's coefficients multiplied once."""
+        m, s_out = self.model, self._output_s()
+        b_out, _, w_out = m.matrices(s_out)
+        cphi, cth, ceps = (m.coefficients(z, name) for name in ("phi", "theta", "eps"))
+        theta_nodes = m.B @ cth if cth is not None else np.full(m.quad.count, np.pi / 2)
+        t = m.tangents(m.B @ cphi, theta_nodes, m.B @ ceps if ceps is not None else None, lib=np)
+        points = (z[0:3] * m.length)[None, :] + w_out @ t.T
+        theta = b_out @ cth if cth is not None else np.full(len(s_out), np.pi / 2)
+        return points, b_out @ cphi, theta
+
     def _output_s(self) -> np.ndarray:
         """The published arc lengths: ``output_points`` evenly spaced over [0, L] (computed once)."""
         key = (self.nlp.length, self.options.output_points)
@@ -762,9 +786,8 @@ class ShapeSolver:
         z, p = state.z, state.p
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         s_out = self._output_s().copy()
-        points = m.positions(z, s_out)
-        f = m.fields(z, s_out, ("phi", "theta"))
-        quats = pose_quaternions(nlp.r0, f["phi"], f["theta"], self.frames_psi(z, s_out, p))
+        points, phi, theta = self._sample(z)
+        quats = pose_quaternions(nlp.r0, phi, theta, self.frames_psi(z, s_out, p))
         min_eig = self._min_reduced_eigenvalue(state)  # also fills state.energies
         bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
         energy = {"bend": bend, "twist": twist, "stretch": stretch, "gravity": grav, "external_work": work,

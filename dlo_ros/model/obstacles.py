@@ -135,6 +135,15 @@ class Obstacle:
         return float(OBSTACLE_TYPES[self.type].h(np.asarray(x, dtype=float), self.params, NUMPY))
 
 
+    def h_many(self, points: np.ndarray) -> np.ndarray:
+        """h at many points (N, 3) [m] (positive inside), in one CasADi call."""
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if points.shape[0] == 0:
+            return np.zeros(0)
+        fn = _numeric_h(self.type).map(points.shape[0])
+        return np.asarray(fn(points.T, self.params)).ravel()
+
+
 _NUMERIC_H: dict[str, ca.Function] = {}
 
 

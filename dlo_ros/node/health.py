@@ -22,7 +22,7 @@ from .validation import KINDS
 
 RATE_WINDOW_S = 2.0
 #: ShapeResult.model entries shown in the diagnostics as ``model.<key>`` (in this order).
-MODEL_KEYS = ("auto", "planar", "twist", "stretch", "gravity", "order", "obstacles", "variables",
+MODEL_KEYS = ("auto", "planar", "twist", "stretch", "gravity", "order", "obstacles", "obstacle_samples", "variables",
               "estimated_error_m", "tolerance_m", "tolerance_met", "checked")
 
 

@@ -25,6 +25,11 @@ fails.  Reductions and their checks:
 * reference frame (3D) — when a tangent of the checked shape comes within POLE_MIN_DEG of the Euler
   angles' pole n = R0 e_z, the same model with n turned to the direction farthest from every tangent
   (near the pole the basis order stops converging).
+* obstacle samples — obstacles are enforced at ``obstacle_samples`` points (41); between them the
+  string can cut into an obstacle (a chord of spacing h cuts a sphere of radius R by about h²/8R), an
+  error the order shadows cannot see (they share the samples).  Each check measures the deepest cut
+  over 8× as many points; it is added to estimated_error_m, and over δ/2 the samples go to 2n − 1
+  (81, 161, 321: the old samples stay), the new model built on the worker like any other.
 
 Switching models maps the previous solution into the new one (ShapeSolver.adopt_warm_start), so a
 stream keeps its warm start.  Every change is kept in ``changes`` (time, reason) and reported in
@@ -65,6 +70,11 @@ POLE_MIN_DEG = 40.0  # a 3D model turns its Euler-angle pole away when a tangent
 #: (never raises it): on the in-plane stream at 50 Hz the max update fell from 20.5 to 5.3 ms, the median
 #: from 2.22 to 2.01 ms (bench/auto_vs_full.py's planar stream, interpreted).
 SWITCH_INTERVAL_S = 1e-4
+#: obstacle samples auto may go up to (each step 2n − 1: the old samples stay, one between each pair)
+MAX_SAMPLES = 321
+#: the penetration check looks at this many times the samples (between them the sampled constraints let
+#: the string cut into an obstacle: a chord of spacing h cuts a sphere of radius R by about h²/8R)
+PENETRATION_OVERSAMPLING = 8
 START_ORDER = 12  # the first answer is within 1e-3·L for typical scenes; checks go up, or down to 8
 
 
@@ -81,9 +91,11 @@ class ModelChoice:
     estimated_error_m: float = float("nan")
     reasons: list[str] = field(default_factory=list)
     frame: tuple | None = None  # R0 (row-major 9) of a 3D model turned away from its Euler-angle pole
+    samples: int = 41  # obstacle_samples: points along s where the obstacles are enforced
+    order_error_m: float = float("nan")  # the basis-order part of estimated_error_m (the rest: sampling)
 
     def key(self) -> tuple:
-        return (self.planar, self.stretch, self.gravity, self.order, self.obstacles, self.frame)
+        return (self.planar, self.stretch, self.gravity, self.order, self.obstacles, self.frame, self.samples)
 
     def reference_frame(self) -> np.ndarray | None:
         return None if self.frame is None else np.array(self.frame, dtype=float).reshape(3, 3)
@@ -152,6 +164,7 @@ class _Verdict:
     choice: ModelChoice | None = None
     reason: str = ""
     estimate: float = float("nan")
+    order_error: float = float("nan")
 
 
 class AutoShapeSolver:
@@ -226,7 +239,8 @@ class AutoShapeSolver:
         sag = problem.string.weight_per_length.maximum * L**4 / (8 * problem.string.bend_stiffness.minimum)
         gravity = sag >= tol / 10
         reasons.append(f"gravity {'kept' if gravity else 'dropped'}: sag bound {sag:.3g} m vs {tol / 10:.3g} m")
-        return ModelChoice(planar, False, False, gravity, START_ORDER, obstacles, reasons=reasons)
+        return ModelChoice(planar, False, False, gravity, START_ORDER, obstacles, reasons=reasons,
+                           samples=self.options.obstacle_samples)
 
     @staticmethod
     def _in_plane_obstacles(problem: Problem, obstacles, r0: np.ndarray) -> tuple[int, ...]:
@@ -265,7 +279,8 @@ class AutoShapeSolver:
             self._reduced_cache = (key, problem.string, problem.obstacles, st, obstacles)
         reduced = replace(problem, string=st, obstacles=obstacles)
         opts = replace(self.options, model="planar" if choice.planar else "full", order=choice.order,
-                       quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8))
+                       quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
+                       obstacle_samples=choice.samples)
         return reduced, opts
 
     def _solver_for(self, choice: ModelChoice, problem: Problem, *, stream: bool, source: ShapeSolver | None = None,
@@ -470,6 +485,7 @@ class AutoShapeSolver:
 
     def _keep(self, verdict: _Verdict) -> None:
         self.choice.estimated_error_m = verdict.estimate
+        self.choice.order_error_m = verdict.order_error
         self._unchecked = False
         self._since_check = 0
 
@@ -515,15 +531,18 @@ class AutoShapeSolver:
         streaming thread's switch builds nothing)."""
         tol, choice, problem = self.tolerance, snap.choice, snap.problem
         verdict = _Verdict(snap, estimate=choice.estimated_error_m)
+        order_error = choice.order_error_m
         if choice.planar:
             eig = self._planar_3d_eigenvalue(snap)  # None when stable (or neutral)
             if eig is not None:
-                verdict.choice = replace(self._full_choice(choice, problem), estimated_error_m=float("nan"))
+                verdict.choice = replace(self._full_choice(choice, problem), estimated_error_m=float("nan"),
+                                         order_error_m=float("nan"))
                 verdict.reason = f"planar shape unstable in 3D (eigenvalue {eig:.3g}): full model"
         if verdict.choice is None and problem.string.stretch_stiffness is not None and not choice.stretch:
             elongation = snap.max_grip_force * problem.string.length / problem.string.stretch_stiffness.minimum
             if elongation > tol / 2:
-                verdict.choice = replace(choice, stretch=True, estimated_error_m=float("nan"), reasons=list(choice.reasons))
+                verdict.choice = replace(choice, stretch=True, estimated_error_m=float("nan"), order_error_m=float("nan"),
+                                         reasons=list(choice.reasons))
                 verdict.reason = f"elongation bound {elongation:.3g} m > {tol / 2:.3g} m: extensible model"
         if verdict.choice is None and not choice.planar:
             turned = self._turned_frame(snap)
@@ -534,9 +553,10 @@ class AutoShapeSolver:
             if i + 1 < len(ORDERS):
                 error = self._shadow_error(snap, ORDERS[i + 1])
                 if np.isfinite(error):  # a shadow that failed to solve is inconclusive: the next check retries
-                    verdict.estimate = error
+                    order_error = error
                 if error > tol / 2 and np.isfinite(error):
-                    verdict.choice = replace(choice, order=ORDERS[i + 1], estimated_error_m=error, reasons=list(choice.reasons))
+                    verdict.choice = replace(choice, order=ORDERS[i + 1], estimated_error_m=error, order_error_m=error,
+                                             reasons=list(choice.reasons))
                     verdict.reason = f"order {choice.order} error estimate {error:.3g} m > {tol / 2:.3g} m: order {ORDERS[i + 1]}"
             # at the highest order the estimate stays the one that led there (order 24 against 32): the
             # best available, and conservative; model['tolerance_met'] compares it with the tolerance
@@ -547,8 +567,23 @@ class AutoShapeSolver:
                 self._lower_tried.add(lower_key)
                 error = self._shadow_error(snap, ORDERS[i - 1])
                 if error <= tol / 4:  # (inf when the lower order failed to solve: stay)
-                    verdict.choice = replace(choice, order=ORDERS[i - 1], estimated_error_m=error, reasons=list(choice.reasons))
+                    verdict.choice = replace(choice, order=ORDERS[i - 1], estimated_error_m=error, order_error_m=error,
+                                             reasons=list(choice.reasons))
                     verdict.reason = f"order {ORDERS[i - 1]} error estimate {error:.3g} m ≤ {tol / 4:.3g} m: order {ORDERS[i - 1]}"
+        depth, name = self._penetration(snap) if choice.obstacles else (0.0, "")
+        verdict.order_error = order_error
+        if np.isfinite(order_error):
+            verdict.estimate = order_error + depth  # the sampling error adds to the basis order's
+        if choice.obstacles:
+            if verdict.choice is None and depth > tol / 2 and choice.samples < MAX_SAMPLES:
+                samples = min(2 * choice.samples - 1, MAX_SAMPLES)
+                # the order's estimate carries over (same basis); the sampling part is measured again
+                verdict.choice = replace(choice, samples=samples, estimated_error_m=float("nan"), order_error_m=order_error,
+                                         reasons=list(choice.reasons))
+                verdict.reason = (f"the string cuts into obstacle {name!r} by {depth:.3g} m > {tol / 2:.3g} m between "
+                                  f"its {choice.samples} samples: {samples} samples")
+                # built and warm-started here (worker thread in the node), so the switch builds nothing
+                self._solver_for(verdict.choice, problem, stream=False, source=snap.inner, state=snap.state)
         # prepare only a pooled model: never build one here, the stream may be switching to it
         target = self._pooled(verdict.choice) if verdict.choice is not None and prepare else None
         if target is not None:
@@ -573,10 +608,25 @@ class AutoShapeSolver:
             return None
         r0 = frame_with_pole(normal, inner.nlp.r0[:, 0])
         choice = replace(snap.choice, frame=tuple(np.round(r0.ravel(), 12)), estimated_error_m=float("nan"),
-                         reasons=list(snap.choice.reasons))
+                         order_error_m=float("nan"), reasons=list(snap.choice.reasons))
         self._solver_for(choice, snap.problem, stream=False, source=inner, state=state)
         return choice, (f"Euler-angle pole {angle:.0f}° from the tangent: reference frame turned "
                         f"(pole {np.round(normal, 3).tolist()}, {best:.0f}° from every tangent)")
+
+    def _penetration(self, snap: _Snapshot) -> tuple[float, str]:
+        """(depth [m], obstacle name): how far the checked shape enters its obstacles between the samples
+        where they are enforced, over PENETRATION_OVERSAMPLING × as many points (the string's radius
+        included).  The sampled constraints cannot see it, the order shadows neither (they share the
+        samples); it is the sampling part of the error estimate."""
+        inner, state = snap.inner, snap.state
+        if state is None or not inner.problem.obstacles:
+            return 0.0, ""
+        s = np.linspace(0.0, inner.nlp.length, PENETRATION_OVERSAMPLING * (snap.choice.samples - 1) + 1)
+        x = inner.model.positions(state.z, s)
+        radius = inner.problem.string.radius
+        depths = [(float(np.max(ob.h_many(x))) + radius, ob.name) for ob in inner.problem.obstacles]
+        depth, name = max(depths)
+        return max(depth, 0.0), name
 
     def _shadow_error(self, snap: _Snapshot, order: int) -> float:
         """max |x_n(s) − x_m(s)| over the output points between the checked shape (order n) and the same
@@ -605,8 +655,8 @@ class AutoShapeSolver:
         """The ``model`` object of a result: the streaming model, or ``choice``/``solver`` (a query's).
 
         estimated_error_m: the basis-order estimate of the last check of this model (the change of the
-        centreline when the order is raised; at the highest order, the estimate that led there), None
-        until the first check has finished.  It does not include the a-priori bounds of the dropped
+        centreline when the order is raised; at the highest order, the estimate that led there) plus the
+        deepest cut into an obstacle between its samples, None until the first check has finished.  It does not include the a-priori bounds of the dropped
         gravity (≤ δ/10) and stretch (≤ δ/2).  In background mode it describes a solve up to
         recheck_every updates earlier."""
         streaming = choice is None
@@ -615,7 +665,8 @@ class AutoShapeSolver:
         est = c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None
         return {
             "planar": c.planar, "twist": c.twist, "stretch": c.stretch, "gravity": c.gravity, "order": c.order,
-            "obstacles": len(c.obstacles), "estimated_error_m": est, "tolerance_m": self.tolerance,
+            "obstacles": len(c.obstacles), "obstacle_samples": c.samples, "estimated_error_m": est,
+            "tolerance_m": self.tolerance,
             "tolerance_met": None if est is None else bool(est <= self.tolerance),
             "variables": s.model.layout.size, "auto": True, "checked": checked, "checks": self.checks,
             "reasons": list(c.reasons), "changes": [r for _, r in self.changes],

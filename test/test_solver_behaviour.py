@@ -192,3 +192,21 @@ def test_fused_and_step_by_step_newton_updates_agree():
     assert cold.ok and cold.ipopt_status != "Newton"
     np.testing.assert_allclose(a.points, cold.points, atol=1e-8)
     assert abs(a.energy["total"] - cold.energy["total"]) < 1e-9 * max(1.0, abs(cold.energy["total"]))
+
+
+def test_a_failing_fused_newton_call_falls_back_to_ipopt():
+    """CasADi's LAPACK LU raises on a singular Newton matrix (where gesv would report it): the update must
+    then fall back to warm-started IPOPT, not fail."""
+    from dlo_ros.model.problem import GripPose
+
+    problem = clamped_pair(right=(0.7, 0.1, 0.05), weight=0.8)
+    solver = ShapeSolver(problem, SolverOptions(model="full", order=10), compile="off")
+    assert solver.solve().ok and solver.fused_newton
+
+    def singular(*args):
+        raise RuntimeError("LapackLu::prepare: 0-th row (zero-based) is exactly zero")
+
+    solver._newton_step = singular
+    right = problem.grip("right").pose
+    r = solver.solve({"right": GripPose(right.position + np.array([-0.01, 0.0, 0.01]), right.orientation)})
+    assert r.ok and r.ipopt_status != "Newton", r.ipopt_status

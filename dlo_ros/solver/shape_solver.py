@@ -614,7 +614,10 @@ class ShapeSolver:
             residual = residual[:, 0]
         first = 0
         if self.fused_newton:
-            u, kkt, residual, grad, energies, largest = self._newton_step(unknowns, p, kkt, residual)
+            try:
+                u, kkt, residual, grad, energies, largest = self._newton_step(unknowns, p, kkt, residual)
+            except RuntimeError:  # CasADi's LAPACK LU raises on a singular Newton matrix (gesv says info > 0)
+                return False, start, 0, np.inf
             if not (np.isfinite(u).all() and largest[0, 0] <= 0.5):
                 return False, start, NEWTON_STEPS, np.inf
             unknowns, residual, first = u[:, 0], residual[:, 0], NEWTON_STEPS

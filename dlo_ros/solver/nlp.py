@@ -326,7 +326,12 @@ class StringNLP:
         self._target_jacobian = np.asarray(ca.Function("dg_dp", [z, p], [ca.jacobian(g, p)])(np.zeros(z.shape[0]), np.zeros(lay.size)))
         self._target_jacobian[:, ~grip_only] = 0.0
 
-    def _newton_function(self, n: int, nf: int, n_p: int) -> ca.Function:
+    def newton_function(self, kkt_free: ca.Function | None = None) -> ca.Function:
+        """``newton_fn`` around another contact-free function with the same inputs and outputs (the
+        compiled one, loaded with ``casadi.external``: its steps then run without Python in between)."""
+        return self._newton_function(self.z_sym.shape[0], self.n_free_rows, self.p_sym.shape[0], kkt_free)
+
+    def _newton_function(self, n: int, nf: int, n_p: int, kkt_free: ca.Function | None = None) -> ca.Function:
         """A contact-free warm update in one call (an MX function around ``kkt_free_fn``).
 
         Inputs u = [z; λ_free], p, and the Newton system (K0, r0) at u for the new targets.  It takes
@@ -334,9 +339,10 @@ class StringNLP:
         and a shifted r, so it costs no evaluation; then one evaluation per step) and evaluates the
         system once more at the end.  Outputs: u, K, r, ∇f and the energies at that u, and
         max |Δz| over the steps (the caller rejects a step > 0.5 and checks r for convergence).
-        The steps use LAPACK's LU ('lapacklu'), which CasADi cannot generate C for: this function is for
-        interpreted derivatives.  With compiled ones the Python loop (compiled K, r and LAPACK gesv) is
-        faster than generated C with CasADi's own QR (3 × 0.2 ms for a 51 × 51 system).
+        The steps use LAPACK's LU ('lapacklu'), which CasADi cannot generate C for, so this function
+        stays interpreted (a thin MX layer); with compiled derivatives it calls the compiled
+        contact-free function (``newton_function``).  Generated C with CasADi's own QR would cost
+        3 × 0.2 ms for a 51 × 51 system.
         """
         u0, pp = ca.MX.sym("u", n + nf), ca.MX.sym("p", n_p)
         k0, r0 = ca.MX.sym("K0", n + nf, n + nf), ca.MX.sym("r0", n + nf)
@@ -345,7 +351,7 @@ class StringNLP:
             step = ca.solve(kkt, residual, "lapacklu")
             largest = ca.fmax(largest, ca.norm_inf(step[:n]))
             u = u - step
-            kkt, residual, grad, energies = self.kkt_free_fn(u[:n], pp, u[n:])
+            kkt, residual, grad, energies = (kkt_free or self.kkt_free_fn)(u[:n], pp, u[n:])
         return ca.Function("dlo_newton", [u0, pp, k0, r0], [u, kkt, residual, grad, energies, largest])
 
     def material_parameters(self, p: np.ndarray) -> None:

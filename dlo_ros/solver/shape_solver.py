@@ -25,6 +25,7 @@ import threading
 import time
 from dataclasses import dataclass, replace
 
+import casadi as ca
 import numpy as np
 from scipy.linalg.lapack import dgeqp3 as _geqp3
 from scipy.linalg.lapack import dgesv as _gesv
@@ -111,8 +112,8 @@ class ShapeSolver:
         self._kkt = InterpretedFunction(self.nlp.kkt_fn)
         self._kkt_free = InterpretedFunction(self.nlp.kkt_free_fn)
         self._newton_step = InterpretedFunction(self.nlp.newton_fn)
-        # the first Newton steps in one call of newton_fn: while the derivatives are interpreted (with
-        # compiled ones the step-by-step loop is faster, and newton_fn has no C: see StringNLP)
+        # the first Newton steps in one call of newton_fn (around the compiled contact-free function once
+        # that is loaded); False: one evaluation and one LAPACK solve per step from Python
         self.fused_newton = True
         self._obstacle_g = InterpretedFunction(self.nlp.obstacle_g_fn) if self.nlp.obstacle_g_fn is not None else None
         self.kkt_compiled = False
@@ -166,7 +167,8 @@ class ShapeSolver:
             lib = library_path(fn)
             if lib.exists():  # compiled on an earlier start: load now, no waiting
                 setattr(self, name, NativeFunction(lib, fn))
-                self.fused_newton = self.fused_newton and name != "_kkt_free"
+                if name == "_kkt_free":
+                    self._newton_step = self._compiled_newton_step(nlp, fn, lib)
             else:
                 todo.append((name, fn, lib))
         self.kkt_compiled = not todo
@@ -181,7 +183,8 @@ class ShapeSolver:
                     if not ok or self.nlp is not nlp:  # no compiler, or the scene was rebuilt meanwhile
                         return
                     setattr(self, name, native)
-                    self.fused_newton = self.fused_newton and name != "_kkt_free"
+                    if name == "_kkt_free":
+                        self._newton_step = self._compiled_newton_step(nlp, fn, lib)
             with (threading.Lock() if locked else self._lock):
                 if self.nlp is nlp:
                     self.kkt_compiled = True
@@ -192,6 +195,14 @@ class ShapeSolver:
         else:
             self._compile_thread = threading.Thread(target=work, args=(False,), name="dlo-compile", daemon=True)
             self._compile_thread.start()
+
+    def _compiled_newton_step(self, nlp: StringNLP, fn, lib) -> "InterpretedFunction":
+        """``newton_fn`` calling the compiled contact-free library (``casadi.external``); the interpreted
+        one if it cannot be loaded (then the steps are still right, only slower)."""
+        try:
+            return InterpretedFunction(nlp.newton_function(ca.external(fn.name(), str(lib))))
+        except RuntimeError:
+            return self._newton_step
 
     def wait_for_compile(self, timeout: float | None = None) -> bool:
         """Block until a background compile has finished; True if compiled derivatives are in use."""
@@ -598,10 +609,10 @@ class ShapeSolver:
         """``_newton`` while no obstacle row is active: the active rows are the free rows (all equalities),
         and the contact-free function returns the Newton matrix K and residual r themselves.  Steps
         K [Δz; Δλ] = −r start from the start's own K with r shifted by the new targets, when only targets
-        changed.  With interpreted derivatives the first NEWTON_STEPS steps are one call of
-        ``StringNLP.newton_fn``; then (or with compiled derivatives from the start) each step is one
-        evaluation and one LAPACK solve.  The obstacle rows' values are evaluated
-        once, at the end, to check that none is violated (else the caller falls back to IPOPT)."""
+        changed.  The first NEWTON_STEPS steps are one call of ``StringNLP.newton_fn`` (around the
+        compiled contact-free function once it is loaded); if r is not yet converged, each further step
+        is one evaluation and one LAPACK solve.  The obstacle rows' values are evaluated once, at the
+        end, to check that none is violated (else the caller falls back to IPOPT)."""
         nlp = self.nlp
         nf, n, rows = nlp.n_free_rows, start.z.size, nlp.lbg.size
         unknowns = np.concatenate([start.z, start.lam_g[:nf]])

@@ -134,7 +134,6 @@ class Obstacle:
             return float(_numeric_h(self.type)(x, self.params))
         return float(OBSTACLE_TYPES[self.type].h(np.asarray(x, dtype=float), self.params, NUMPY))
 
-
     def h_many(self, points: np.ndarray) -> np.ndarray:
         """h at many points (N, 3) [m] (positive inside), in one CasADi call."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)

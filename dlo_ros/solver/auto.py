@@ -175,7 +175,8 @@ class AutoShapeSolver:
     stream never waits for them (the node): their verdict is applied at the next ``solve`` — an
     escalation switches to the model the check has already built and warmed, so the switch costs no
     build.  'background' lowers the process's ``sys.setswitchinterval`` to SWITCH_INTERVAL_S, so that
-    the worker's Python holds the stream thread up for at most that long.  Until the first check of a model has finished, ``model['checked']`` is false and
+    the worker's Python holds the stream thread up for at most that long.  Until the first check of a
+    model has finished, ``model['checked']`` is false and
     ``estimated_error_m`` is None.
     """
 
@@ -570,20 +571,19 @@ class AutoShapeSolver:
                     verdict.choice = replace(choice, order=ORDERS[i - 1], estimated_error_m=error, order_error_m=error,
                                              reasons=list(choice.reasons))
                     verdict.reason = f"order {ORDERS[i - 1]} error estimate {error:.3g} m ≤ {tol / 4:.3g} m: order {ORDERS[i - 1]}"
-        depth, name = self._penetration(snap) if choice.obstacles else (0.0, "")
+        depth, name = self._penetration(snap)  # (0, '') without obstacles
         verdict.order_error = order_error
         if np.isfinite(order_error):
             verdict.estimate = order_error + depth  # the sampling error adds to the basis order's
-        if choice.obstacles:
-            if verdict.choice is None and depth > tol / 2 and choice.samples < MAX_SAMPLES:
-                samples = min(2 * choice.samples - 1, MAX_SAMPLES)
-                # the order's estimate carries over (same basis); the sampling part is measured again
-                verdict.choice = replace(choice, samples=samples, estimated_error_m=float("nan"), order_error_m=order_error,
-                                         reasons=list(choice.reasons))
-                verdict.reason = (f"the string cuts into obstacle {name!r} by {depth:.3g} m > {tol / 2:.3g} m between "
-                                  f"its {choice.samples} samples: {samples} samples")
-                # built and warm-started here (worker thread in the node), so the switch builds nothing
-                self._solver_for(verdict.choice, problem, stream=False, source=snap.inner, state=snap.state)
+        if verdict.choice is None and depth > tol / 2 and choice.samples < MAX_SAMPLES:
+            samples = min(2 * choice.samples - 1, MAX_SAMPLES)
+            # the order's estimate carries over (same basis); the sampling part is measured again
+            verdict.choice = replace(choice, samples=samples, estimated_error_m=float("nan"), order_error_m=order_error,
+                                     reasons=list(choice.reasons))
+            verdict.reason = (f"the string cuts into obstacle {name!r} by {depth:.3g} m > {tol / 2:.3g} m between "
+                              f"its {choice.samples} samples: {samples} samples")
+            # built and warm-started here (worker thread in the node), so the switch builds nothing
+            self._solver_for(verdict.choice, problem, stream=False, source=snap.inner, state=snap.state)
         # prepare only a pooled model: never build one here, the stream may be switching to it
         target = self._pooled(verdict.choice) if verdict.choice is not None and prepare else None
         if target is not None:
@@ -656,9 +656,9 @@ class AutoShapeSolver:
 
         estimated_error_m: the basis-order estimate of the last check of this model (the change of the
         centreline when the order is raised; at the highest order, the estimate that led there) plus the
-        deepest cut into an obstacle between its samples, None until the first check has finished.  It does not include the a-priori bounds of the dropped
-        gravity (≤ δ/10) and stretch (≤ δ/2).  In background mode it describes a solve up to
-        recheck_every updates earlier."""
+        deepest cut into an obstacle between its samples, None until the first check has finished.  It
+        does not include the a-priori bounds of the dropped gravity (≤ δ/10) and stretch (≤ δ/2).  In
+        background mode it describes a solve up to recheck_every updates earlier."""
         streaming = choice is None
         c, s = (self.choice, self.inner) if streaming else (choice, solver)
         checked = streaming and not self._unchecked

@@ -296,7 +296,7 @@ class StringNLP:
         residual = ca.vertcat(grad_f + ca.mtimes(jac_free.T, lam_free), g[:nf])
         self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam_free],
                                        [ca.densify(kkt_matrix), ca.densify(residual), grad_f, energies])
-        self.newton_fn = self._newton_function(z.shape[0], nf, p.shape[0])
+        self.newton_fn = self.newton_function()
         if nf < g.shape[0]:
             jac = ca.vertcat(jac_free, ca.jacobian(g[nf:], z))
             # the obstacle rows' values: once per update (the convergence check), not per Newton step
@@ -327,12 +327,8 @@ class StringNLP:
         self._target_jacobian[:, ~grip_only] = 0.0
 
     def newton_function(self, kkt_free: ca.Function | None = None) -> ca.Function:
-        """``newton_fn`` around another contact-free function with the same inputs and outputs (the
-        compiled one, loaded with ``casadi.external``: its steps then run without Python in between)."""
-        return self._newton_function(self.z_sym.shape[0], self.n_free_rows, self.p_sym.shape[0], kkt_free)
-
-    def _newton_function(self, n: int, nf: int, n_p: int, kkt_free: ca.Function | None = None) -> ca.Function:
-        """A contact-free warm update in one call (an MX function around ``kkt_free_fn``).
+        """A contact-free warm update in one call: an MX function around ``kkt_free`` (default
+        ``kkt_free_fn``; the compiled one loaded with ``casadi.external`` has the same inputs and outputs).
 
         Inputs u = [z; λ_free], p, and the Newton system (K0, r0) at u for the new targets.  It takes
         NEWTON_STEPS steps u ← u − K⁻¹ r (the first with K0, r0: for new grip targets the start's own K
@@ -340,10 +336,11 @@ class StringNLP:
         system once more at the end.  Outputs: u, K, r, ∇f and the energies at that u, and
         max |Δz| over the steps (the caller rejects a step > 0.5 and checks r for convergence).
         The steps use LAPACK's LU ('lapacklu'), which CasADi cannot generate C for, so this function
-        stays interpreted (a thin MX layer); with compiled derivatives it calls the compiled
-        contact-free function (``newton_function``).  Generated C with CasADi's own QR would cost
-        3 × 0.2 ms for a 51 × 51 system.
+        stays interpreted (a thin MX layer).  Generated C with CasADi's own QR would cost 3 × 0.2 ms for
+        a 51 × 51 system.
         """
+        kkt_free = kkt_free or self.kkt_free_fn
+        n, nf, n_p = self.z_sym.shape[0], self.n_free_rows, self.p_sym.shape[0]
         u0, pp = ca.MX.sym("u", n + nf), ca.MX.sym("p", n_p)
         k0, r0 = ca.MX.sym("K0", n + nf, n + nf), ca.MX.sym("r0", n + nf)
         u, kkt, residual, largest = u0, k0, r0, ca.MX(0)
@@ -351,7 +348,7 @@ class StringNLP:
             step = ca.solve(kkt, residual, "lapacklu")
             largest = ca.fmax(largest, ca.norm_inf(step[:n]))
             u = u - step
-            kkt, residual, grad, energies = (kkt_free or self.kkt_free_fn)(u[:n], pp, u[n:])
+            kkt, residual, grad, energies = kkt_free(u[:n], pp, u[n:])
         return ca.Function("dlo_newton", [u0, pp, k0, r0], [u, kkt, residual, grad, energies, largest])
 
     def material_parameters(self, p: np.ndarray) -> None:

@@ -636,16 +636,11 @@ class ShapeSolver:
             z, lam_free = unknowns[:n], unknowns[n:]
             if energies is not None and np.abs(residual[:n]).max() < 1e-9 and \
                     np.abs(residual[n:]).max(initial=0.0) < 1e-11:
-                g = np.empty(rows)
-                g[:nf] = residual[n:]
-                if nf < rows:
-                    g[nf:] = self._obstacle_g(z, p)[0].ravel()
-                    if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared: the active set changed
-                        return False, start, it, np.inf
+                g, jac = self._all_rows(z, p, kkt, residual)
+                if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared: the active set changed
+                    return False, start, it, np.inf
                 lam = np.zeros(rows)
                 lam[:nf] = lam_free
-                jac = np.zeros((rows, n))
-                jac[:nf] = kkt[n:, :n]
                 state = _State(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
                                energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual)
                 return True, state, it, self._violation_from_g(g)
@@ -668,14 +663,22 @@ class ShapeSolver:
         if np.any(active[nf:]):
             return self._kkt(z, p, lam)
         kkt, residual, grad, energies = self._kkt_free(z, p, lam[:nf])
-        n, rows = z.size, self.nlp.lbg.size
+        g, jac = self._all_rows(z, p, kkt, residual[:, 0])
+        return [grad, g[:, None], jac, kkt[: z.size, : z.size], energies]  # g as a column, as kkt_fn gives it
+
+    def _all_rows(self, z: np.ndarray, p: np.ndarray, kkt: np.ndarray,
+                  residual: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(g, ∂g/∂z) over every row from the contact-free system (K, r) at z: the free rows' values are r's
+        last rows and their Jacobian K's lower-left block; the obstacle rows' values are evaluated, their
+        Jacobian rows are zeros (unused while they are inactive)."""
+        n, nf, rows = z.size, self.nlp.n_free_rows, self.nlp.lbg.size
         g = np.empty(rows)
-        g[:nf] = residual[n:, 0]
+        g[:nf] = residual[n:]
         if nf < rows:
             g[nf:] = self._obstacle_g(z, p)[0].ravel()
         jac = np.zeros((rows, n))
         jac[:nf] = kkt[n:, :n]
-        return [grad, g[:, None], jac, kkt[:n, :n], energies]  # g as a column, like the full function's
+        return g, jac
 
     def _violation_from_g(self, g: np.ndarray) -> float:
         nlp = self.nlp

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from ..model.director import DirectorModel
+from ..model.elements import ElementMesh
 from ..model.obstacles import OBSTACLE_TYPES
 from ..model.problem import Problem
 from ..model.ritz import RitzModel
@@ -54,6 +56,30 @@ def twist_is_held(problem: Problem) -> bool:
     """
     clamps = sum(1 for g in problem.grips if g.mode == "clamp")
     return clamps >= 2 and not problem.string.twist_stiffness.is_zero
+
+
+def breakpoints(problem: Problem) -> list[float]:
+    """Arc lengths where the solution may have a kink: every grip strictly inside the string (a jump of
+    the internal force and moment), every point load and every knot of a piecewise-linear material
+    profile (a jump of the curvature's derivative)."""
+    L = problem.string.length
+    out = [g.s for g in problem.grips] + [ld.s for ld in problem.loads]
+    st = problem.string
+    for prof in (st.bend_stiffness, st.twist_stiffness, st.weight_per_length, st.stretch_stiffness):
+        if prof is not None and len(prof.s) > 1:
+            out += list(prof.s)
+    return sorted(s for s in out if 0.0 < s < L)
+
+
+def models_twist(problem: Problem, options: SolverOptions) -> bool:
+    """Whether a 3D model carries the roll about the tangent (the frame model): when two clamps hold
+    it, and — for the director model — when a point moment acts and a clamp can react its twisting
+    part (Rt > 0)."""
+    if twist_is_held(problem):
+        return True
+    if options.rotation != "director" or problem.string.twist_stiffness.is_zero:
+        return False
+    return has_point_moments(problem) and any(g.mode == "clamp" for g in problem.grips)
 
 
 def has_point_moments(problem: Problem) -> bool:
@@ -150,7 +176,8 @@ class StringNLP:
         self.length = L
         # 'auto' is resolved by AutoShapeSolver (solver.make_solver); a plain ShapeSolver solves 'full'
         self.planar = options.model == "planar"
-        self.twist = twist_is_held(problem) and not self.planar
+        self.director = not self.planar and options.rotation == "director"
+        self.twist = models_twist(problem, options) and not self.planar
         self.stretch = problem.string.stretch_stiffness is not None
         if reference_frame is not None and self.planar:
             raise ValueError("a planar model's reference frame is fixed by its plane")
@@ -160,8 +187,12 @@ class StringNLP:
             reason = planarity_violation(problem, self.r0[:, 2])
             if reason:
                 raise ValueError(f"solver.model: 'planar' does not fit this scene: {reason}")
-        self.model = RitzModel(L, options.basis, options.order, options.quadrature_nodes, self.r0, self.twist,
-                               self.stretch, self.planar)
+        if self.director:
+            mesh = ElementMesh(L, breakpoints(problem), options.order, options.quadrature_nodes)
+            self.model = DirectorModel(L, mesh, self.twist, self.stretch)
+        else:
+            self.model = RitzModel(L, options.basis, options.order, options.quadrature_nodes, self.r0, self.twist,
+                                   self.stretch, self.planar)
         self.sigma = L / problem.string.bend_stiffness.maximum
         self._build()
 
@@ -178,10 +209,17 @@ class StringNLP:
         lay.add("radius", 1)
         for g in P.grips:
             lay.add(f"grip:{g.name}:position", 3)
-            lay.add(f"grip:{g.name}:angles", 3)
+            if self.director:
+                lay.add(f"grip:{g.name}:frame", 9)  # R_g column-major: t_g, d1_g, d2_g
+            else:
+                lay.add(f"grip:{g.name}:angles", 3)
         for i, _ in enumerate(P.loads):
             lay.add(f"load:{i}:force", 3)
-            lay.add(f"load:{i}:moment", 1)
+            if self.director:
+                lay.add(f"load:{i}:moment", 3)
+                lay.add(f"load:{i}:reference", 4)  # q_ref (or t_ref) of the moment's pseudo-potential
+            else:
+                lay.add(f"load:{i}:moment", 1)
         for i, _ in enumerate(P.relative_positions):
             lay.add(f"relative:{i}", 3)
         for i, ob in enumerate(P.obstacles):
@@ -213,7 +251,11 @@ class StringNLP:
         work = ca.SX(0)
         for i, _ in enumerate(P.loads):
             work += ca.dot(p[lay[f"load:{i}:force"]], load_x[:, i])
-            work -= p[lay[f"load:{i}:moment"]][0] * m.angle_sym(z, "phi", P.loads[i].s)
+            if self.director:
+                work += m.moment_work_sym(z, m.mesh.node_index(P.loads[i].s), p[lay[f"load:{i}:moment"]],
+                                          p[lay[f"load:{i}:reference"]])
+            else:
+                work -= p[lay[f"load:{i}:moment"]][0] * m.angle_sym(z, "phi", P.loads[i].s)
 
         g_rows: list[ca.SX] = []
         self.row_scale: list[float] = []
@@ -241,6 +283,10 @@ class StringNLP:
                 rows["position"].append(len(g_rows))
                 add(ca.dot(ca.DM(axis), grip_x[:, gi] - target), L, ("grip", g.name, "position", tuple(np.round(axis, 12))))
             self.grip_axes[g.name] = axes
+            if self.director:
+                rows["angles"] = self._director_grip_rows(z, p, g, add, len(g_rows))
+                self.grip_rows[g.name] = rows
+                continue
             angles = p[lay[f"grip:{g.name}:angles"]]
             held = ["phi"] if self.planar else ["phi", "theta"]
             names = {"clamp": held + ["psi"] if self.twist else held, "tangent": held, "pin": []}[g.mode]
@@ -252,6 +298,9 @@ class StringNLP:
             off = p[lay[f"relative:{i}"]]
             for k, axis in enumerate(in_plane if self.planar else np.eye(3)):
                 add(ca.dot(ca.DM(axis), rel_x[:, 2 * i + 1] - rel_x[:, 2 * i] - off), L, ("relative", i, k))
+        if self.director:
+            for i, expr in enumerate(m.norm_rows_sym(z)):
+                add(expr, 1.0, ("norm", i))
         self.obstacle_rows: list[list[int]] = []
         radius = p[lay["radius"]][0]
         for i, ob in enumerate(P.obstacles):
@@ -320,11 +369,29 @@ class StringNLP:
         grip_only = np.zeros(lay.size, dtype=bool)
         for grip in P.grips:
             grip_only[lay[f"grip:{grip.name}:position"]] = True
-            grip_only[lay[f"grip:{grip.name}:angles"]] = True
+            if not self.director:  # a director model's held frame R_g multiplies z in its rows
+                grip_only[lay[f"grip:{grip.name}:angles"]] = True
         self.grip_parameter_mask = grip_only
         # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale)
         self._target_jacobian = np.asarray(ca.Function("dg_dp", [z, p], [ca.jacobian(g, p)])(np.zeros(z.shape[0]), np.zeros(lay.size)))
         self._target_jacobian[:, ~grip_only] = 0.0
+
+    def _director_grip_rows(self, z: ca.SX, p: ca.SX, grip, add, first: int) -> list[int]:
+        """Orientation rows of a grip on a director model: t·R_g e_y = t·R_g e_z = 0 (clamp, tangent) and
+        d1·R_g e_z = 0 (clamp, twist modelled), at the grip's node.  Returns their row indices."""
+        m = self.model
+        node = m.mesh.node_index(grip.s)
+        t, d1 = m.node_columns_sym(z, node)
+        frame = ca.reshape(p[self.params[f"grip:{grip.name}:frame"]], 3, 3)
+        rows = []
+        if grip.mode in ("clamp", "tangent"):
+            add(ca.dot(t, frame[:, 1]), 1.0, ("grip", grip.name, "t.d1", 0))
+            add(ca.dot(t, frame[:, 2]), 1.0, ("grip", grip.name, "t.d2", 1))
+            rows += [first, first + 1]
+        if grip.mode == "clamp" and self.twist:
+            add(ca.dot(d1, frame[:, 2]), 1.0, ("grip", grip.name, "d1.d2", 2))
+            rows.append(first + len(rows))
+        return rows
 
     def newton_function(self, kkt_free: ca.Function | None = None) -> ca.Function:
         """A contact-free warm update in one call: an MX function around ``kkt_free`` (default

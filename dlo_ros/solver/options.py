@@ -5,6 +5,7 @@ from dataclasses import dataclass, fields
 
 FRAMES = ("auto", "paper")
 MODELS = ("auto", "full", "planar")
+ROTATIONS = ("director", "euler")
 
 
 @dataclass(frozen=True)
@@ -16,6 +17,11 @@ class SolverOptions:
     obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) ≤ 0 is
     imposed.  frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2
     (away from the singularity); 'paper' is the paper's frame (singular at the straight state).
+    rotation: how a 3D model represents the material frame: 'director' (default: nodal unit quaternions,
+    or unit tangents when the twist is not held, on spectral elements split at interior grips, point
+    loads and material kinks; no singular direction, see model/director.py) or 'euler' (the paper's
+    Euler angles in one Ritz basis over [0, L], with ``frame``; kept for the benchmark).  Planar models
+    always use the in-plane angle φ.
     model: 'auto' (default: the smallest model the scene needs, checked a posteriori against
     error_tolerance, see solver/auto.py), 'full' (3D: φ, θ and, when two clamps hold it, ψ) or 'planar'
     (φ only, θ ≡ π/2: the string stays in the working plane; requires a planar scene and frame 'auto').
@@ -36,6 +42,7 @@ class SolverOptions:
     max_continuation_steps: int = 8
     max_strain: float = 0.2
     model: str = "auto"
+    rotation: str = "director"
     error_tolerance: float = 0.0
     recheck_every: int = 10
 
@@ -60,6 +67,8 @@ class SolverOptions:
             raise ValueError("solver.max_continuation_steps: must be in [1, 1024]")
         if self.model not in MODELS:
             raise ValueError(f"solver.model: must be one of {MODELS}, got {self.model!r}")
+        if self.rotation not in ROTATIONS:
+            raise ValueError(f"solver.rotation: must be one of {ROTATIONS}, got {self.rotation!r}")
         if self.model == "planar" and self.frame != "auto":
             raise ValueError("solver.model: 'planar' needs solver.frame 'auto'")
         if not (self.error_tolerance >= 0 and self.error_tolerance < 1e3):

@@ -5,7 +5,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-STATUSES = ("ok", "unreachable", "infeasible", "failed", "invalid")
+#: 'unverified': the solver converged but the shape fails the equilibrium check (equilibrium_residual_m
+#: over the tolerance); it carries the shape for inspection, never a stability verdict
+STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
 
 
 @dataclass
@@ -28,6 +30,8 @@ class ShapeResult:
     min_eigenvalue: smallest eigenvalue of the Hessian of the Lagrangian reduced to the null space of
     the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable.
     constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
+    equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as an
+    equivalent centreline error (solver/residual.py); NaN when there is no shape.
     """
 
     status: str
@@ -49,6 +53,7 @@ class ShapeResult:
     order: int = 0
     ipopt_status: str = ""
     model: dict = field(default_factory=dict)
+    equilibrium_residual_m: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -78,6 +83,7 @@ class ShapeResult:
                 "basis": self.basis,
                 "order": self.order,
                 "constraint_violation": self.constraint_violation,
+                "equilibrium_residual_m": self.equilibrium_residual_m,
                 "warm_started": self.warm_started,
                 "continuation_steps": self.continuation_steps,
                 "ipopt_status": self.ipopt_status,

@@ -33,16 +33,23 @@ from scipy.linalg.lapack import dorgqr as _orgqr
 from scipy.linalg.lapack import dsyevr as _syevr
 from scipy.special import j0
 
+from ..model.director import _transport, frame_to_quat
 from ..model.problem import GripPose, Problem
 from ..model.rotations import TANGENT_X, euler_from_frame, material_frames, pose_quaternions, quat_to_matrix
 from .compiled import InterpretedFunction, NativeFunction, compiled, compiler, library_path
 from .nlp import NEWTON_STEPS, StringNLP
 from .options import SolverOptions
+from .residual import EquilibriumResidual, PointAction, equilibrium_residual, evaluation_grid
 from .result import GripWrench, ShapeResult
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 IPOPT_LOCK = threading.Lock()  # MUMPS is not thread-safe across IPOPT instances (coin-or/Ipopt#733)
 COMPILE_MODES = ("background", "blocking", "cached", "off")
+#: point moments (director models): re-centre their pseudo-potential until the rotation at each load is
+#: this close to its centre [rad] (the moment's work is then M·δθ to relative 1e-9/2), in at most this
+#: many warm updates
+MOMENT_RECENTRE_RAD = 1e-9
+MOMENT_RECENTRE_ROUNDS = 30
 
 
 @dataclass
@@ -239,22 +246,30 @@ class ShapeSolver:
             src = other._state if state is None else state
             if src is None:
                 return False
-            nodes = self.model.quad.nodes
-            f = other.model.fields(src.z, nodes)
-            if not np.allclose(other.nlp.r0, self.nlp.r0):
-                frames = other.frames(src.z, nodes, src.p)
-                angles = np.array([euler_from_frame(self.nlp.r0, q) for q in frames])
-                f["phi"], f["theta"], f["psi"] = np.unwrap(angles[:, 0]), angles[:, 1], np.unwrap(angles[:, 2])
-            elif not other.model.layout.twist and self.model.layout.twist:
-                f["psi"] = other.frames_psi(src.z, nodes, src.p)
+            if self.nlp.director:
+                nodes = self.model.mesh.nodes
+                frames = other.pose_frames(src.z, nodes)
+                eps = other.strain(src.z, nodes) if self.model.layout.stretch else None
+            else:
+                nodes = self.model.quad.nodes
+                f = other.model.fields(src.z, nodes) if not other.nlp.director else {"eps": other.strain(src.z, nodes)}
+                if other.nlp.director or not np.allclose(other.nlp.r0, self.nlp.r0):
+                    frames = other.frames(src.z, nodes, src.p)
+                    angles = np.array([euler_from_frame(self.nlp.r0, q) for q in frames])
+                    f["phi"], f["theta"], f["psi"] = np.unwrap(angles[:, 0]), angles[:, 1], np.unwrap(angles[:, 2])
+                elif not other.model.layout.twist and self.model.layout.twist:
+                    f["psi"] = other.frames_psi(src.z, nodes, src.p)
             src_rows = {kind: i for i, kind in enumerate(other.nlp.row_kind)}
             lam_src = src.lam_g / (other.nlp.row_scale * other.nlp.sigma) if src.lam_g.size else src.lam_g
         lay = self.model.layout
-        z = np.zeros(lay.size)
-        z[0:3] = src.z[0:3] * other.model.length / self.model.length
-        for name in ("phi", "theta", "psi", "eps"):
-            if self.model.coefficients(z, name) is not None:
-                z[lay.slice(name)] = np.linalg.lstsq(self.model.B, f[name], rcond=None)[0]
+        if self.nlp.director:
+            z = self.model.z_from_frames(src.z[0:3] * other.model.length, frames, eps)
+        else:
+            z = np.zeros(lay.size)
+            z[0:3] = src.z[0:3] * other.model.length / self.model.length
+            for name in ("phi", "theta", "psi", "eps"):
+                if self.model.coefficients(z, name) is not None:
+                    z[lay.slice(name)] = np.linalg.lstsq(self.model.B, f[name], rcond=None)[0]
         # grip position rows: carry the reaction force vector, whatever axes each model's rows use
         forces = {}
         for name, rows in other.nlp.grip_rows.items():
@@ -272,6 +287,15 @@ class ShapeSolver:
         with self._lock:
             self._state = _State(z, lam, np.zeros(lay.size), p)
         return True
+
+    def strain(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """ε(s) of solution z (zeros when inextensible)."""
+        m = self.model
+        if not m.layout.stretch:
+            return np.zeros(np.shape(s))
+        if self.nlp.director:
+            return m.mesh.interpolation(s)[0] @ m.strain_nodes(z)
+        return m.fields(z, np.asarray(s), ("eps",))["eps"]
 
     def frames_psi(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
         """ψ(s) as published: the solved field, or the zero-twist ψ anchored at the first held grip."""
@@ -346,6 +370,8 @@ class ShapeSolver:
         return with_checked_poses(self.problem, poses)
 
     def _check_moments(self, problem: Problem) -> None:
+        if self.nlp.director:  # moments about any axis (model/director.py)
+            return
         n = self.nlp.r0[:, 2]
         for i, ld in enumerate(problem.loads):
             m = np.asarray(ld.moment, dtype=float)
@@ -411,11 +437,46 @@ class ShapeSolver:
         """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
         nlp, lay = self.nlp, self.nlp.params
         p = self._scene_parameters(problem).copy()
+        if nlp.director:
+            for g in problem.grips:
+                p[lay[f"grip:{g.name}:position"]] = g.pose.position
+                p[lay[f"grip:{g.name}:frame"]] = quat_to_matrix(g.pose.orientation).ravel(order="F")
+            self._moment_references(problem, z_reference, p)
+            return p
         references = self._grip_reference_angles(problem, z_reference)
         for g, reference in zip(problem.grips, references):
             p[lay[f"grip:{g.name}:position"]] = g.pose.position
             p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, reference)
         return p
+
+    def _moment_references(self, problem: Problem, z: np.ndarray, p: np.ndarray) -> None:
+        """Centre each point moment's pseudo-potential on the rotation of shape z at the load."""
+        m, lay = self.model, self.nlp.params
+        values = m.node_values(z)
+        for i, ld in enumerate(problem.loads):
+            ref = np.zeros(4)
+            v = values[m.mesh.node_index(ld.s)]
+            ref[: v.size] = v / np.linalg.norm(v)
+            p[lay[f"load:{i}:reference"]] = ref
+
+    def moment_mismatch(self, state: "_State") -> float:
+        """Largest angle [rad] between a load's rotation in ``state`` and the reference its moment's
+        pseudo-potential was centred on (0 without point moments): where it is 0 the moment's work is
+        exactly M·δθ."""
+        nlp = self.nlp
+        if not (nlp.director and self.problem.loads):
+            return 0.0
+        m, lay, worst = self.model, nlp.params, 0.0
+        values = m.node_values(state.z)
+        for i, ld in enumerate(self.problem.loads):
+            if not np.any(np.asarray(ld.moment) != 0.0):
+                continue
+            v = values[m.mesh.node_index(ld.s)]
+            v = v / np.linalg.norm(v)
+            ref = state.p[lay[f"load:{i}:reference"]][: v.size]
+            worst = max(worst, 2.0 * math.acos(min(1.0, abs(float(np.dot(v, ref))))) if v.size == 4 else
+                        math.acos(min(1.0, float(np.dot(v, ref)))))
+        return worst
 
     def _grip_reference_angles(self, problem: Problem, z: np.ndarray) -> list[list[float]]:
         """(φ, θ, ψ) of shape z at every grip's s, in one product B(s_grips) [c_φ c_θ c_ψ] (θ ≡ π/2 and
@@ -451,7 +512,7 @@ class ShapeSolver:
         n = nlp.r0[:, 2]
         for i, ld in enumerate(problem.loads):
             p[lay[f"load:{i}:force"]] = ld.force
-            p[lay[f"load:{i}:moment"]] = float(np.dot(ld.moment, n))
+            p[lay[f"load:{i}:moment"]] = ld.moment if nlp.director else float(np.dot(ld.moment, n))
         for i, rel in enumerate(problem.relative_positions):
             p[lay[f"relative:{i}"]] = rel.offset
         for i, ob in enumerate(problem.obstacles):
@@ -468,6 +529,8 @@ class ShapeSolver:
         buckle bends toward gravity (a hanging cable's sag).  A single grip gives a straight string
         along its tangent.  x0 is chosen so the first grip sits on its target.
         """
+        if self.nlp.director:
+            return self._director_guess(problem)
         m, lay = self.model, self.model.layout
         nodes = m.quad.nodes
         grips = sorted(problem.grips, key=lambda g: g.s)
@@ -519,6 +582,72 @@ class ShapeSolver:
             z[lay.slice(name)] = fit(fields[name] + np.interp(nodes, [g.s for g in holders], residual))
         x_a = m.positions(z, np.array([a.s]))[0]
         z[0:3] = (a.pose.position - x_a) / m.length
+        return z
+
+    def _director_guess(self, problem: Problem) -> np.ndarray:
+        """The buckled guess of ``initial_guess`` for a director model, as nodal frames: tangent
+        t(s) = cos β d + sin β e with β = α sin 2πu (d the chord, e toward gravity), bent to meet every
+        held tangent (the piecewise-linear interpolant of the misfits at the grips is added), frames
+        carried along without twist from the first clamp and turned about t by the interpolated roll
+        misfit at the other clamps."""
+        m, r0 = self.model, self.nlp.r0
+        nodes = m.mesh.nodes
+        grips = sorted(problem.grips, key=lambda g: g.s)
+        a, b = grips[0], grips[-1]
+        if len(grips) >= 2 and np.linalg.norm(b.pose.position - a.pose.position) > 1e-9:
+            chord = b.pose.position - a.pose.position
+            span = b.s - a.s
+            alpha = _inverse_j0(min(1.0, np.linalg.norm(chord) / span))
+            d = chord / np.linalg.norm(chord)
+        else:
+            d = quat_to_matrix(a.pose.orientation)[:, 0]
+            alpha, span = 0.0, 1.0
+        g = problem.gravity_unit
+        e = g - np.dot(g, d) * d
+        if np.linalg.norm(e) < 1e-6:
+            e = np.cross(r0[:, 2], d)
+        if np.linalg.norm(e) < 1e-6:  # chord along gravity and the frame's normal: any perpendicular
+            e = np.cross(np.eye(3)[int(np.argmin(np.abs(d)))], d)
+        e /= np.linalg.norm(e)
+        u = np.clip((nodes - a.s) / span, 0.0, 1.0)
+        beta = alpha * np.sin(2 * np.pi * u)
+        t = np.cos(beta)[:, None] * d[None, :] + np.sin(beta)[:, None] * e[None, :]
+        holders = [gr for gr in grips if gr.mode != "pin"]
+        if holders:
+            idx = [m.mesh.node_index(gr.s) for gr in holders]
+            misfit = np.array([quat_to_matrix(gr.pose.orientation)[:, 0] - t[i] for gr, i in zip(holders, idx)])
+            s_h = [gr.s for gr in holders]
+            t = t + np.stack([np.interp(nodes, s_h, misfit[:, k]) for k in range(3)], axis=1)
+            t /= np.linalg.norm(t, axis=1)[:, None]
+        clamps = [gr for gr in grips if gr.mode == "clamp"]
+        first = quat_to_matrix(clamps[0].pose.orientation) if clamps else None
+        anchor_s = clamps[0].s if clamps else nodes[0]
+        k0 = int(np.argmin(np.abs(nodes - anchor_s)))
+        if first is not None:
+            d1 = first[:, 1] - np.dot(first[:, 1], t[k0]) * t[k0]
+        else:
+            hint = r0[:, 2] if abs(np.dot(r0[:, 2], t[k0])) < 0.9 else r0[:, 0]
+            d1 = hint - np.dot(hint, t[k0]) * t[k0]
+        d1s = np.empty_like(t)
+        d1s[k0] = d1 / np.linalg.norm(d1)
+        for rng in (range(k0 + 1, len(nodes)), range(k0 - 1, -1, -1)):
+            prev = k0
+            for k in rng:
+                d1s[k] = _transport(d1s[prev], t[prev], t[k])
+                d1s[k] /= np.linalg.norm(d1s[k])
+                prev = k
+        if m.layout.frame and len(clamps) > 1:
+            rolls = []
+            for gr in clamps:
+                i = m.mesh.node_index(gr.s)
+                target = quat_to_matrix(gr.pose.orientation)[:, 1]
+                rolls.append(math.atan2(float(np.dot(np.cross(d1s[i], target), t[i])), float(np.dot(d1s[i], target))))
+            gamma = np.interp(nodes, [gr.s for gr in clamps], rolls)
+            d2s = np.cross(t, d1s)
+            d1s = np.cos(gamma)[:, None] * d1s + np.sin(gamma)[:, None] * d2s
+        frames = np.stack([t, d1s, np.cross(t, d1s)], axis=-1)
+        z = m.z_from_frames(np.zeros(3), frames)
+        z[0:3] = (a.pose.position - m.positions(z, np.array([a.s]))[0]) / m.length
         return z
 
     # ---- solving ----------------------------------------------------------------------------------
@@ -687,6 +816,39 @@ class ShapeSolver:
         return float(np.max(np.maximum(np.maximum(nlp.lbg - g, 0.0), np.maximum(g - nlp.ubg, 0.0)) * nlp.row_scale))
 
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, _State | None]:
+        result, state = self._solve_once(problem, warm)
+        if result.status in ("ok", "unverified") and state is not None and self.nlp.director and problem.loads:
+            return self._recentre_moments(problem, result, state)
+        return result, state
+
+    def _recentre_moments(self, problem: Problem, result: ShapeResult, state: _State) -> tuple[ShapeResult, _State | None]:
+        """Re-centre the point moments' pseudo-potentials on the solution until the rotation at every
+        load is within MOMENT_RECENTRE_RAD = α of its reference (the pseudo-potential's gradient is then
+        M·(I + α/2 [n]×)·δθ, so the moment is applied to relative α/2); each round is a warm update
+        with the new references."""
+        for _ in range(MOMENT_RECENTRE_ROUNDS):
+            if self.moment_mismatch(state) <= MOMENT_RECENTRE_RAD:
+                return result, state
+            p = self.pack_parameters(problem, state.z)
+            ok, new, it, viol = self._newton(state, p)
+            status = "Newton"
+            if not ok:
+                ok, new, status, it, viol = self._call(self._warm, state.z, p, state.lam_g, state.lam_x)
+            if not ok:
+                break
+            state = new
+            result = self._result(problem, state, status, result.iterations + it, viol, result.warm_started,
+                                  result.continuation_steps)
+            if result.status not in ("ok", "unverified"):
+                return result, None
+        if self.moment_mismatch(state) <= MOMENT_RECENTRE_RAD:
+            return result, state
+        result.status, result.stable = "failed", None
+        result.message = (f"point moments: the rotation at a load is still {self.moment_mismatch(state):.2g} rad from "
+                          f"the pseudo-potential's centre after {MOMENT_RECENTRE_ROUNDS} re-centring rounds")
+        return result, None
+
+    def _solve_once(self, problem: Problem, warm: bool) -> tuple[ShapeResult, _State | None]:
         iterations, steps, last_status = 0, 0, ""
         if warm:
             start = self._state
@@ -773,11 +935,18 @@ class ShapeSolver:
     def model_summary(self) -> dict:
         """What this solver models (the ``model`` object of a result)."""
         lay = self.model.layout
-        return {
+        summary = {
             "planar": lay.planar, "twist": lay.twist, "stretch": lay.stretch,
             "gravity": not self.problem.string.weight_per_length.is_zero, "order": lay.order,
             "obstacles": len(self.problem.obstacles), "estimated_error_m": None, "variables": lay.size,
         }
+        if self.nlp.director:
+            summary["rotation"] = "quaternion" if lay.frame else "tangent"
+            summary["elements"] = lay.elements
+            summary["breakpoints"] = [float(b) for b in self.model.mesh.breakpoints]
+        else:
+            summary["rotation"] = "planar" if lay.planar else "euler"
+        return summary
 
     def _sample(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centreline points (N, 3) and φ, θ at the published arc lengths: ``RitzModel.positions`` and
@@ -803,14 +972,19 @@ class ShapeSolver:
         z, p = state.z, state.p
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         s_out = self._output_s().copy()
-        points, phi, theta = self._sample(z)
-        quats = pose_quaternions(nlp.r0, phi, theta, self.frames_psi(z, s_out, p))
+        if nlp.director:
+            points = m.positions(z, s_out)
+            quats = frame_to_quat(self.pose_frames(z, s_out))
+        else:
+            points, phi, theta = self._sample(z)
+            quats = pose_quaternions(nlp.r0, phi, theta, self.frames_psi(z, s_out, p))
         min_eig = self._min_reduced_eigenvalue(state)  # also fills state.energies
         bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
         energy = {"bend": bend, "twist": twist, "stretch": stretch, "gravity": grav, "external_work": work,
                   "total": bend + twist + stretch + grav - work}
         grips = {g.name: self._wrench(g, z, lam_si) for g in problem.grips}
         contacts = {}
+        actions = []  # point actions on the string, for the equilibrium residual
         if nlp.obstacle_rows:
             touching = np.any(lam_si[nlp.n_free_rows:] > 0)  # obstacle rows come last
             sample_x = m.positions(z, nlp.obstacle_s) if touching else None
@@ -821,18 +995,102 @@ class ShapeSolver:
                 for j in np.flatnonzero(lam > 0):
                     grad = np.asarray(nlp.obstacle_gradient[ob.type](sample_x[j], ob.params)).ravel()
                     force -= lam[j] * grad
+                    actions.append(PointAction(float(nlp.obstacle_s[j]), sample_x[j], -lam[j] * grad, np.zeros(3)))
                 contacts[i] = force
+        residual = self.equilibrium(problem, z, grips, actions)
         stable = None if min_eig is None else is_stable(min_eig, state.hessian)
+        status, message = "ok", "converged" + (f" after {steps} continuation steps" if steps else "")
+        flipped = self._flipped_grips(problem, z) if nlp.director else ""
+        tolerance = self.options.error_tolerance or 1e-3 * problem.string.length
+        if flipped:
+            status, message, stable = "failed", f"landed on a flipped branch: {flipped}", None
+        elif not residual.metres <= tolerance:
+            status, stable = "unverified", None
+            message = (f"not a verified equilibrium: the equilibrium residual is {residual.metres:.3g} m, over the "
+                       f"tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)")
         return ShapeResult(
-            model=self.model_summary(), status="ok", message="converged" + (f" after {steps} continuation steps" if steps else ""),
+            model=self.model_summary(), status=status, message=message,
             s=s_out, points=points, orientations=quats, energy=energy, grips=grips, contact_forces=contacts,
             stable=stable, min_eigenvalue=min_eig, iterations=iterations, constraint_violation=violation,
             warm_started=warm, continuation_steps=steps, basis=self.options.basis, order=self.options.order,
-            ipopt_status=ipopt_status,
+            ipopt_status=ipopt_status, equilibrium_residual_m=residual.metres,
         )
+
+    def equilibrium(self, problem: Problem, z: np.ndarray, grips: dict[str, GripWrench],
+                    contacts: list[PointAction] = ()) -> EquilibriumResidual:
+        """The strong-form equilibrium residual of shape z under the grip reactions ``grips`` and the
+        obstacle ``contacts`` (solver/residual.py)."""
+        m, st, L = self.model, problem.string, problem.string.length
+        grip_s = {g.name: g.s for g in problem.grips}
+        events = list(grip_s.values()) + [ld.s for ld in problem.loads] + [a.s for a in contacts]
+        if self.nlp.director:
+            events += list(m.mesh.breakpoints)
+        s = evaluation_grid(L, events)
+        x = m.positions(z, s)
+        rf = st.bend_stiffness(s)
+        if self.nlp.director and m.layout.frame:
+            frames = m.pose_frames(z, s)
+            c = np.stack([st.twist_stiffness(s), rf, rf], axis=1)
+            moment_c = np.einsum("kij,kj->ki", frames, c * m.curvature(z, s))
+        elif self.nlp.director:
+            moment_c = rf[:, None] * m.world_curvature(z, s)
+        else:
+            moment_c = self._euler_moments(z, s, rf, st.twist_stiffness(s))
+        nodes = m.quad.nodes
+        d_nodes = st.weight_per_length(nodes)
+        w = m.position_matrix(s)
+        x_nodes = m.positions(z, nodes)
+        point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads])
+        point_x = m.positions(z, point_s) if point_s.size else np.zeros((0, 3))
+        actions = [PointAction(grip_s[name], point_x[k], wr.force, wr.torque) for k, (name, wr) in enumerate(grips.items())]
+        for k, ld in enumerate(problem.loads):
+            moment = np.asarray(ld.moment, dtype=float)
+            if not self.nlp.director:  # the Euler models apply the moment's component along n only
+                n = self.nlp.r0[:, 2]
+                moment = np.dot(moment, n) * n
+            actions.append(PointAction(ld.s, point_x[len(grips) + k], np.asarray(ld.force, dtype=float), moment))
+        total = float(m.quad.weights @ d_nodes) if hasattr(m.quad, "weights") else float(w[-1] @ d_nodes)
+        return equilibrium_residual(s, x, moment_c, w @ d_nodes, w @ (d_nodes[:, None] * x_nodes), actions + list(contacts),
+                                    problem.gravity_unit, total, L, st.bend_stiffness.minimum, rf)
+
+    def _euler_moments(self, z: np.ndarray, s: np.ndarray, rf: np.ndarray, rt: np.ndarray) -> np.ndarray:
+        """m = Q diag(Rf, Rf, Rt) ω with ω = axial(Qᵀ Q') by central differences of the Euler frames
+        (Rt = 0 where the twist is not modelled: the frames then carry no twist moment)."""
+        h = 1e-6 * self.problem.string.length
+        q0, qm, qp = self.frames(z, s), self.frames(z, s - h), self.frames(z, s + h)
+        skew = np.einsum("kji,kjl->kil", q0, (qp - qm) / (2 * h))
+        omega = 0.5 * np.stack([skew[:, 2, 1] - skew[:, 1, 2], skew[:, 0, 2] - skew[:, 2, 0],
+                                skew[:, 1, 0] - skew[:, 0, 1]], axis=1)
+        c = np.stack([rf, rf, rt if self.model.layout.twist else np.zeros_like(rf)], axis=1)
+        return np.einsum("kij,kj->ki", q0, c * omega)
+
+    def _flipped_grips(self, problem: Problem, z: np.ndarray) -> str:
+        """Grips whose orientation rows hold on the wrong sheet (t = −t_g, or d1 = −d1_g for a clamp
+        with twist): the rows t·R_g e_y = t·R_g e_z = 0 allow it, the grip does not."""
+        m, bad = self.model, []
+        for g in problem.grips:
+            if g.mode == "pin":
+                continue
+            frame = self.pose_frames(z, np.array([g.s]))[0]
+            target = quat_to_matrix(g.pose.orientation)
+            if np.dot(frame[:, 0], target[:, 0]) < 0 or (g.mode == "clamp" and m.layout.frame
+                                                          and np.dot(frame[:, 1], target[:, 1]) < 0):
+                bad.append(g.name)
+        return ", ".join(bad)
+
+    def pose_frames(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Frames (len(s), 3, 3) in the pose convention (columns: tangent, y, z) of solution z.  A
+        director model without twist carries its frames without twist from the first held grip."""
+        if not self.nlp.director:
+            return self.frames(z, s) @ TANGENT_X
+        anchor = next((g for g in sorted(self.problem.grips, key=lambda g: g.s) if g.mode != "pin"), None)
+        return self.model.pose_frames(z, s, None if anchor is None else
+                                      (anchor.s, quat_to_matrix(anchor.pose.orientation)))
 
     def frames(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
         """Material frames Q(s) (columns ξ, η, ζ) of solution z; ψ from the zero-twist rule if not solved."""
+        if self.nlp.director:
+            return self.pose_frames(z, s) @ TANGENT_X.T
         f = self.model.fields(z, s)
         return material_frames(self.nlp.r0, f["phi"], f["theta"], self.frames_psi(z, s, p))
 
@@ -842,7 +1100,19 @@ class ShapeSolver:
         rows = self.nlp.grip_rows[grip.name]
         force = -self.nlp.grip_axes[grip.name].T @ lam_si[rows["position"]]
         torque = np.zeros(3)
-        if rows["angles"] and self.nlp.planar:
+        if rows["angles"] and self.nlp.director:
+            # T = ∂U/∂θ = −Σ_r λ_r ∂g_r/∂θ with ∂(t·a)/∂θ = t × a and ∂(d1·b)/∂θ = d1 × b
+            v = self.model.node_values(z)[self.model.mesh.node_index(grip.s)]
+            if self.model.layout.frame:
+                t, d1 = quat_to_matrix(v / np.linalg.norm(v))[:, 0], quat_to_matrix(v / np.linalg.norm(v))[:, 1]
+            else:
+                t, d1 = v / np.linalg.norm(v), None
+            target = quat_to_matrix(grip.pose.orientation)
+            lam = lam_si[rows["angles"]]
+            torque = -(lam[0] * np.cross(t, target[:, 1]) + lam[1] * np.cross(t, target[:, 2]))
+            if len(lam) == 3:
+                torque -= lam[2] * np.cross(d1, target[:, 2])
+        elif rows["angles"] and self.nlp.planar:
             # only φ is held: the reaction torque is along the plane normal, n·T = μ_φ
             torque = lam_si[rows["angles"][0]] * self.nlp.r0[:, 2]
         elif rows["angles"]:

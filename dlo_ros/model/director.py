@@ -1,0 +1,359 @@
+"""The 3D string without a pole: nodal unit quaternions (or unit tangents) on spectral elements.
+
+Unknowns z = [x0/L (3), nodal values of the rotation field (4 N or 3 N), ε at the nodes (N, if
+extensible)] on the ``ElementMesh`` (N global nodes, breakpoints at every interior grip, point load
+and material kink).  Two kinds of rotation field:
+
+* frame (twist modelled): q(s) = Σ_i ℓ_i(s) q_i, a polynomial through unit quaternions q_i (x, y, z, w)
+  with |q_i|² = 1 imposed at every node.  Between nodes the rotation is that of q/|q| (any non-zero q
+  is a rotation, so no direction is singular).  Body curvature and twist (R' = R [Ω]×, R = [t d1 d2]):
+
+      Ω = 2 vec(q* ⊗ q') / |q|²  =  2 (w q'_v − w' q_v − q_v × q'_v) / |q|²,
+      U_bend = ∫ ½ Rf (Ω_2² + Ω_3²) ds,   U_twist = ∫ ½ Rt Ω_1² ds.
+
+* tangent (twist not held: at most one clamp or Rt = 0, so the string untwists to Ω_1 ≡ 0):
+  t(s) = Σ_i ℓ_i(s) t_i with |t_i|² = 1 at the nodes, unit tangent t/|t| and
+      κ² = |(t/|t|)'|² = (|t'|² − (t·t')²/|t|²) / |t|²,   U_bend = ∫ ½ Rf κ² ds.
+
+Both: x(s) = x0 + ∫_0^s (1 + ε) t̂ ds,  U_stretch = ∫ ½ Re ε²,  U_grav = −∫ D ĝ·x ds, every integral
+by the mesh's quadrature.  Grip orientations are held by rows that are linear in the node's rotation
+(t_g · R_g e_y = t_g · R_g e_z = 0, and for a clamp with twist d1_g · R_g e_z = 0), whose parameters
+are R_g itself: no angle is unwrapped and no pole exists.
+
+Point moments M at s_k are dead loads; their work M·δθ is not the variation of any function of the
+rotation, so it enters as the pseudo-potential W_M = M · θ_k with θ_k = 2 vec(q_k ⊗ q_ref*) (frame) or
+t_ref × t_k (tangent: the part of M normal to the tangent), whose gradient equals M·δθ exactly at
+q_k = q_ref.  The solver re-centres q_ref on the solution until the two agree (``moment_mismatch``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import casadi as ca
+import numpy as np
+
+from .elements import ElementMesh
+
+
+@dataclass(frozen=True)
+class DirectorLayout:
+    """Where the unknowns sit in z."""
+
+    nodes: int
+    frame: bool
+    stretch: bool
+    order: int
+    elements: int
+
+    planar = False
+
+    @property
+    def twist(self) -> bool:
+        return self.frame
+
+    @property
+    def width(self) -> int:
+        """Components of the rotation field per node: 4 (quaternion) or 3 (tangent)."""
+        return 4 if self.frame else 3
+
+    @property
+    def size(self) -> int:
+        return 3 + self.nodes * (self.width + int(self.stretch))
+
+    @property
+    def rotation(self) -> slice:
+        return slice(3, 3 + self.width * self.nodes)
+
+    @property
+    def eps(self) -> slice:
+        start = 3 + self.width * self.nodes
+        return slice(start, start + self.nodes)
+
+
+def quat_to_frame(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (…, 3, 3) of quaternions (…, 4) (x, y, z, w), any non-zero norm."""
+    x, y, z, w = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
+    n2 = x * x + y * y + z * z + w * w
+    r = np.stack([
+        np.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
+    ], -2)
+    return r / n2[..., None, None]
+
+
+def frame_to_quat(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3) (Shepperd's method)."""
+    r = np.asarray(r, dtype=float)
+    flat = r.reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4))
+    for k, m in enumerate(flat):
+        tr = np.trace(m)
+        cands = [tr, m[0, 0], m[1, 1], m[2, 2]]
+        i = int(np.argmax(cands))
+        if i == 0:
+            w = 0.5 * np.sqrt(1 + tr)
+            out[k] = [(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w), w]
+        else:
+            a = i - 1
+            b, c = (a + 1) % 3, (a + 2) % 3
+            v = 0.5 * np.sqrt(max(1 + m[a, a] - m[b, b] - m[c, c], 0.0))
+            q = np.empty(4)
+            q[a] = v
+            q[b] = (m[a, b] + m[b, a]) / (4 * v)
+            q[c] = (m[a, c] + m[c, a]) / (4 * v)
+            q[3] = (m[c, b] - m[b, c]) / (4 * v)
+            out[k] = q
+    return out.reshape(r.shape[:-2] + (4,))
+
+
+def continuous_signs(q: np.ndarray) -> np.ndarray:
+    """Quaternions along s with signs flipped so that neighbours have a positive dot product."""
+    q = np.array(q, dtype=float)
+    for i in range(1, len(q)):
+        if np.dot(q[i], q[i - 1]) < 0:
+            q[i] = -q[i]
+    return q
+
+
+def _columns(q, lib):
+    """(t, d1, d2) of quaternion components (x, y, z, w) divided by |q|² (lib: casadi or numpy)."""
+    x, y, z, w = q
+    n2 = x * x + y * y + z * z + w * w
+    t = [(w * w + x * x - y * y - z * z) / n2, 2 * (x * y + w * z) / n2, 2 * (x * z - w * y) / n2]
+    d1 = [2 * (x * y - w * z) / n2, (w * w - x * x + y * y - z * z) / n2, 2 * (y * z + w * x) / n2]
+    d2 = [2 * (x * z + w * y) / n2, 2 * (y * z - w * x) / n2, (w * w - x * x - y * y + z * z) / n2]
+    return t, d1, d2
+
+
+class DirectorModel:
+    """Maps z to fields, positions and energy terms (see module docstring)."""
+
+    kind = "director"
+
+    def __init__(self, length: float, mesh: ElementMesh, frame: bool, stretch: bool):
+        self.length = float(length)
+        self.mesh = mesh
+        self.layout = DirectorLayout(mesh.count, frame, stretch, mesh.order, mesh.element_count)
+        self.B, self.dB = mesh.B, mesh.dB
+        # the composite quadrature, under the names RitzModel's single-interval one has
+        self.quad = SimpleNamespace(nodes=mesh.quad_nodes, weights=mesh.weights, count=mesh.quad_count)
+        self._cache: dict[bytes, np.ndarray] = {}
+
+    # ---- numpy -----------------------------------------------------------------------------------
+    def node_values(self, z: np.ndarray) -> np.ndarray:
+        """(N, 4) nodal quaternions or (N, 3) nodal tangents."""
+        return np.asarray(z[self.layout.rotation]).reshape(self.layout.nodes, self.layout.width)
+
+    def strain_nodes(self, z: np.ndarray) -> np.ndarray | None:
+        return np.asarray(z[self.layout.eps]) if self.layout.stretch else None
+
+    def _memo(self, kind: str, s: np.ndarray, make):
+        """``make(s)`` remembered per (kind, s): a running solver asks for the same arc lengths again."""
+        s = np.ascontiguousarray(s, dtype=float).ravel()
+        key = kind.encode() + s.tobytes()
+        hit = self._cache.get(key)
+        if hit is None:
+            if len(self._cache) > 256:
+                self._cache.clear()
+            hit = self._cache[key] = make(s)
+        return hit
+
+    def position_matrix(self, s: np.ndarray) -> np.ndarray:
+        """W(s) with x(s) = x0 + W(s) · (1+ε)t̂ at the quadrature nodes."""
+        return self._memo("W", s, self.mesh.integration_matrix)
+
+    def interpolation(self, s: np.ndarray, side: str = "left") -> tuple[np.ndarray, np.ndarray]:
+        """``ElementMesh.interpolation``, remembered."""
+        return self._memo("B" + side, s, lambda x: self.mesh.interpolation(x, side))
+
+    def quad_tangents(self, z: np.ndarray) -> np.ndarray:
+        """(1 + ε) t̂ at the quadrature nodes, (3, M)."""
+        v = self.B @ self.node_values(z)
+        if self.layout.frame:
+            t = np.array(_columns(v.T, np)[0])
+        else:
+            t = (v / np.linalg.norm(v, axis=1)[:, None]).T
+        eps = self.strain_nodes(z)
+        return t if eps is None else t * (1 + self.B @ eps)[None, :]
+
+    def positions(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """(len(s), 3) centreline positions [m]."""
+        return (np.asarray(z[0:3]) * self.length)[None, :] + self.position_matrix(s) @ self.quad_tangents(z).T
+
+    def tangents_at(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Unit tangents (len(s), 3)."""
+        v = self.interpolation(s)[0] @ self.node_values(z)
+        if self.layout.frame:
+            return np.array(_columns(v.T, np)[0]).T
+        return v / np.linalg.norm(v, axis=1)[:, None]
+
+    def pose_frames(self, z: np.ndarray, s: np.ndarray, anchor: tuple[float, np.ndarray] | None = None) -> np.ndarray:
+        """Frames (len(s), 3, 3) with columns (t, d1, d2) — the pose convention, x along the tangent.
+
+        The tangent model has no roll: its frames are transported without twist (d1' = −(t'·d1) t)
+        from ``anchor`` = (s_a, R_a) (default: d1 ⊥ t closest to the world z-axis at s = 0), on a grid
+        four times finer than s.
+        """
+        s = np.asarray(s, dtype=float)
+        if self.layout.frame:
+            return quat_to_frame(self.interpolation(s)[0] @ self.node_values(z))
+        s_anchor, r_anchor = anchor if anchor is not None else (0.0, None)
+        fine = np.unique(np.concatenate([np.linspace(0.0, self.length, 4 * max(len(s), 16) + 1), s, [s_anchor]]))
+        t = self.tangents_at(z, fine)
+        k0 = int(np.argmin(np.abs(fine - s_anchor)))
+        if r_anchor is None:
+            hint = np.array([0.0, 0.0, 1.0]) if abs(t[k0, 2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+            d1 = hint - np.dot(hint, t[k0]) * t[k0]
+        else:
+            d1 = r_anchor[:, 1] - np.dot(r_anchor[:, 1], t[k0]) * t[k0]
+        d1 /= np.linalg.norm(d1)
+        d1s = np.empty_like(t)
+        d1s[k0] = d1
+        for rng in (range(k0 + 1, len(fine)), range(k0 - 1, -1, -1)):
+            prev = k0
+            for k in rng:
+                d1s[k] = _transport(d1s[prev], t[prev], t[k])
+                prev = k
+        idx = np.searchsorted(fine, s)
+        t_s, d1_s = t[idx], d1s[idx]
+        d1_s = d1_s - np.sum(d1_s * t_s, axis=1)[:, None] * t_s
+        d1_s /= np.linalg.norm(d1_s, axis=1)[:, None]
+        return np.stack([t_s, d1_s, np.cross(t_s, d1_s)], axis=-1)
+
+    def curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
+        """Body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3).  The tangent model's
+        Ω has no twist and its bending part is t̂ × t̂' expressed in the transported frame's axes is not
+        needed: it returns (0, |κ|, 0)-free world curvature instead, see ``world_curvature``."""
+        if not self.layout.frame:
+            raise ValueError("the tangent model has no body frame; use world_curvature")
+        b, db = self.interpolation(s, side)
+        v, dv = b @ self.node_values(z), db @ self.node_values(z)
+        qv, w, dqv, dw = v[:, :3], v[:, 3:], dv[:, :3], dv[:, 3:]
+        n2 = np.sum(v * v, axis=1)[:, None]
+        return 2 * (w * dqv - dw * qv - np.cross(qv, dqv)) / n2
+
+    def world_curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
+        """World-frame Darboux vector: R Ω (frame model) or t̂ × t̂' (tangent model, no twist), (len(s), 3)."""
+        if self.layout.frame:
+            b = self.interpolation(s, side)[0]
+            return np.einsum("kij,kj->ki", quat_to_frame(b @ self.node_values(z)), self.curvature(z, s, side))
+        b, db = self.interpolation(s, side)
+        v, dv = b @ self.node_values(z), db @ self.node_values(z)
+        n = np.linalg.norm(v, axis=1)[:, None]
+        t = v / n
+        dt = (dv - np.sum(t * dv, axis=1)[:, None] * t) / n
+        return np.cross(t, dt)
+
+    # ---- CasADi ----------------------------------------------------------------------------------
+    def material_sizes(self) -> dict[str, int]:
+        return {"weight_moments": self.mesh.quad_count, "weight_total": 1}
+
+    def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Σ_j w_j D_j x(σ_j) = x0 ΣwD + Σ_k m_k (1+ε_k) t_k with m = W(σ)ᵀ (w ∘ D), assembled once."""
+        wd = self.mesh.weights * profiles["D"]
+        return {"weight_moments": self.position_matrix(self.mesh.quad_nodes).T @ wd,
+                "weight_total": np.array([wd.sum()])}
+
+    def quad_nodes(self) -> np.ndarray:
+        return self.mesh.quad_nodes
+
+    def _fields_sym(self, z: ca.SX):
+        lay = self.layout
+        V = ca.reshape(z[lay.rotation], lay.width, lay.nodes)  # column i = node i
+        return V, ca.mtimes(V, ca.DM(self.B.T)), ca.mtimes(V, ca.DM(self.dB.T))
+
+    def energy_terms(self, z: ca.SX, profiles: dict[str, ca.SX], gravity: ca.SX):
+        """(bend, twist, stretch, gravity) energies [J] and the quadrature-node tangents (1+ε)t̂ (3×M)."""
+        lay, w = self.layout, ca.DM(self.mesh.weights)
+        _, v, dv = self._fields_sym(z)
+        rows = [v[k, :].T for k in range(lay.width)]
+        drows = [dv[k, :].T for k in range(lay.width)]
+        if lay.frame:
+            x, y, zq, wq = rows
+            dx, dy, dz, dw = drows
+            n2 = x * x + y * y + zq * zq + wq * wq
+            # Ω = 2 (w q'_v − w' q_v − q_v × q'_v) / |q|²
+            o1 = 2 * (wq * dx - dw * x - (y * dz - zq * dy)) / n2
+            o2 = 2 * (wq * dy - dw * y - (zq * dx - x * dz)) / n2
+            o3 = 2 * (wq * dz - dw * zq - (x * dy - y * dx)) / n2
+            bend = 0.5 * ca.dot(w, profiles["Rf"] * (o2 * o2 + o3 * o3))
+            twist = 0.5 * ca.dot(w, profiles["Rt"] * o1 * o1)
+            t = ca.horzcat(*_columns(rows, ca)[0]).T
+        else:
+            n2 = rows[0] ** 2 + rows[1] ** 2 + rows[2] ** 2
+            tdt = rows[0] * drows[0] + rows[1] * drows[1] + rows[2] * drows[2]
+            dd = drows[0] ** 2 + drows[1] ** 2 + drows[2] ** 2
+            kappa2 = (dd - tdt * tdt / n2) / n2
+            bend = 0.5 * ca.dot(w, profiles["Rf"] * kappa2)
+            twist = ca.SX(0)
+            inv = 1 / ca.sqrt(n2)
+            t = ca.horzcat(rows[0] * inv, rows[1] * inv, rows[2] * inv).T
+        if lay.stretch:
+            eps = ca.mtimes(ca.DM(self.B), z[lay.eps])
+            stretch = 0.5 * ca.dot(w, profiles["Re"] * eps * eps)
+            t = t * ca.repmat(ca.reshape(1 + eps, 1, -1), 3, 1)
+        else:
+            stretch = ca.SX(0)
+        x0 = z[0:3] * self.length
+        moment_of_weight = x0 * profiles["weight_total"] + ca.mtimes(t, profiles["weight_moments"])
+        grav = -ca.dot(gravity, moment_of_weight)
+        return bend, twist, stretch, grav, t
+
+    def positions_sym(self, z: ca.SX, t: ca.SX, s: np.ndarray) -> ca.SX:
+        W = ca.DM(self.position_matrix(s))
+        return ca.repmat(z[0:3] * self.length, 1, len(s)) + ca.mtimes(t, W.T)
+
+    def node_sym(self, z: ca.SX, i: int) -> ca.SX:
+        lay = self.layout
+        return z[lay.rotation][lay.width * i: lay.width * (i + 1)]
+
+    def node_columns_sym(self, z: ca.SX, i: int) -> tuple[ca.SX, ca.SX | None]:
+        """(t, d1) at node i (d1 None for the tangent model)."""
+        v = self.node_sym(z, i)
+        if self.layout.frame:
+            t, d1, _ = _columns([v[0], v[1], v[2], v[3]], ca)
+            return ca.vertcat(*t), ca.vertcat(*d1)
+        return v / ca.norm_2(v), None
+
+    def norm_rows_sym(self, z: ca.SX) -> list[ca.SX]:
+        """|v_i|² − 1 at every node."""
+        V = ca.reshape(z[self.layout.rotation], self.layout.width, self.layout.nodes)
+        return [ca.sumsqr(V[:, i]) - 1.0 for i in range(self.layout.nodes)]
+
+    def moment_work_sym(self, z: ca.SX, i: int, moment: ca.SX, reference: ca.SX) -> ca.SX:
+        """Pseudo-potential of a point moment at node i (module docstring); ``reference`` is q_ref (4)
+        for the frame model, t_ref (3, in the first 3 of 4 entries) for the tangent model."""
+        v = self.node_sym(z, i)
+        if self.layout.frame:
+            # vec(q ⊗ q_ref*) = −q_w r_v ... for p = q, r* = (−r_v, r_w): vec = p_w(−r_v) + r_w p_v + p_v × (−r_v)
+            pv, pw, rv, rw = v[0:3], v[3], reference[0:3], reference[3]
+            theta = 2 * (rw * pv - pw * rv - ca.cross(pv, rv))
+            return ca.dot(moment, theta)
+        t = v / ca.norm_2(v)
+        return ca.dot(moment, ca.cross(reference[0:3], t))
+
+    # ---- guesses and transfers -------------------------------------------------------------------
+    def z_from_frames(self, x0: np.ndarray, frames: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
+        """z from the position of s = 0 and pose frames (N, 3, 3) (columns t, d1, d2) at the nodes."""
+        z = np.zeros(self.layout.size)
+        z[0:3] = np.asarray(x0, dtype=float) / self.length
+        if self.layout.frame:
+            vals = continuous_signs(frame_to_quat(frames))
+        else:
+            vals = frames[:, :, 0]
+        z[self.layout.rotation] = vals.ravel()
+        if self.layout.stretch:
+            z[self.layout.eps] = 0.0 if eps is None else eps
+        return z
+
+
+def _transport(d1: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+    """d1 carried from tangent t0 to t1 by the smallest rotation taking t0 to t1."""
+    c = float(np.dot(t0, t1))
+    axis = np.cross(t0, t1)
+    if c < -0.999999:
+        return d1
+    # Rodrigues with k = axis/|axis|, |axis| = sin a: R v = v c + (axis × v) + axis (axis·v) / (1 + c)
+    return d1 * c + np.cross(axis, d1) + axis * np.dot(axis, d1) / (1.0 + c)

@@ -198,7 +198,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         try:
-            solver = make_solver(scene.problem, options, compile=_compile_mode(args.compile))
+            solver = make_solver(scene.problem, options, compile=_compile_mode(args.compile), checks="sync")
         except ValueError as exc:  # the solver's own checks (e.g. loads[i].moment); they name the field
             raise UsageError(str(exc)) from None
         recorder = _recorder(args)
@@ -293,7 +293,7 @@ def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str]
         log(f"building the solver for {scene.name} (compiling C code: up to a minute the first time)")
     t0 = time.perf_counter()
     try:
-        solver = make_solver(scene.problem, scene.options, compile=compile)
+        solver = make_solver(scene.problem, scene.options, compile=compile, checks="sync")
     except ValueError as exc:  # the solver's own checks name the field
         raise SceneError(str(exc), source=scene.source) from None
     build_s = time.perf_counter() - t0

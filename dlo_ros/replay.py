@@ -225,8 +225,8 @@ def _make_solver(kind: str, scene, compile: str):
     if kind == "ShapeSolver" or not hasattr(S, "make_solver"):
         return S.ShapeSolver(scene.problem, scene.options, compile=compile)
     if kind == "AutoShapeSolver" and hasattr(S, "AutoShapeSolver"):
-        return S.AutoShapeSolver(scene.problem, scene.options, compile=compile)
-    return S.make_solver(scene.problem, scene.options, compile=compile)
+        return S.AutoShapeSolver(scene.problem, scene.options, compile=compile, checks="sync")
+    return S.make_solver(scene.problem, scene.options, compile=compile, checks="sync")
 
 
 def deviation(recorded: RecordedResult, result: Any) -> float:

@@ -50,7 +50,7 @@ def stream_until_checked(solver, problem, steps=400, dx=0.0005):
 def test_background_checks_reach_the_synchronous_choice_without_building_on_the_stream(builds):
     problem = hanging()
     options = SolverOptions(output_points=51, error_tolerance=0.01)  # loose: the checks move the order down
-    sync = make_solver(problem, options, compile="off")
+    sync = make_solver(problem, options, compile="off", checks="sync")
     r_sync = sync.solve()
     assert r_sync.model["order"] == 8, r_sync.model
     n_sync = len(builds)

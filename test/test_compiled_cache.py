@@ -16,7 +16,8 @@ from dlo_ros.solver.options import SolverOptions
 
 from conftest import clamped_pair
 
-PLANAR = SolverOptions(model="planar", order=6, quadrature_nodes=20)
+# order 6 is far from the 1 mm tolerance: these tests compare compiled and interpreted paths, not accuracy
+PLANAR = SolverOptions(model="planar", order=6, quadrature_nodes=20, error_tolerance=1.0)
 
 
 def _key(problem, options=PLANAR) -> str:

@@ -126,15 +126,21 @@ def test_required_scenes_are_shipped():
 
 @pytest.mark.parametrize("name", available_scenes())
 def test_shipped_scene_loads_and_solves(name):
-    from dlo_ros.solver import ShapeSolver
+    from dlo_ros.solver import make_solver
 
     scene = load_scene(name)
     assert isinstance(scene, Scene)
     assert scene.name == name
     assert scene.description, "every shipped scene says what it reproduces"
     assert scene.source.endswith(f"{name}.yaml")
-    result = ShapeSolver(scene.problem, scene.options).solve()
-    assert result.status == "ok", result.message
+    result = make_solver(scene.problem, scene.options, checks="sync").solve()  # as `dlo solve` does
+    if name == "bench_fig3_floor":
+        # a heavy strip lying on the floor along an interval: 41 point samples of the floor leave the
+        # planar order-16 shape centimetres from equilibrium, and the equilibrium residual says so
+        assert result.status == "unverified" and result.stable is None, result.message
+        assert result.equilibrium_residual_m > 1e-2
+    else:
+        assert result.status == "ok", result.message
     assert result.points.shape == (scene.options.output_points, 3)
     assert np.all(np.isfinite(result.points))
     for g in scene.problem.grips:  # the string goes through every grip

@@ -51,7 +51,7 @@ def test_full_3d_model_reproduces_the_planar_elastica(chord):
 
 
 def test_pose_x_axis_is_the_tangent_toward_increasing_s():
-    r = ShapeSolver(clamped_pair(right=(0.6, 0, 0.1)), SolverOptions(output_points=401)).solve()
+    r = ShapeSolver(clamped_pair(right=(0.6, 0, 0.1)), SolverOptions(output_points=801)).solve()
     fd = np.gradient(r.points, r.s, axis=0)
     x_axes = np.array([quat_to_matrix(q)[:, 0] for q in r.orientations])
     assert np.max(np.linalg.norm(fd - x_axes, axis=1)[2:-2]) < 1e-4
@@ -85,14 +85,16 @@ def test_convergence_on_an_asymmetric_case():
     """Clamping angles +0.6 and −0.25 rad, ends at (0, 0) and (0.55, 0.1): no symmetry to lean on."""
     theta0, theta1, end = 0.6, -0.25, (0.55, 0.1)
     prob = clamped_pair(right=(end[0], 0, end[1]), q_left=quat_about("y", -theta0), q_right=quat_about("y", -theta1))
-    rough = ShapeSolver(prob, SolverOptions(model="planar", order=8, output_points=401)).solve()
+    rough = ShapeSolver(prob, SolverOptions(model="planar", order=8, output_points=801)).solve()
     ref = _asymmetric_bvp(theta0, theta1, end, rough.points[:, [0, 2]])
     errors = []
     for order in (6, 9, 12, 16, 20):
         r = ShapeSolver(prob, SolverOptions(model="planar", order=order, output_points=201)).solve()
-        assert r.ok, r.message
+        assert r.status in ("ok", "unverified"), r.message
         exact = ref.sol(r.s)
         errors.append(np.max(np.hypot(r.points[:, 0] - exact[0], r.points[:, 2] - exact[1])))
+        # 'unverified' (equilibrium residual over 1e-3 L) only where the shape really is that far off
+        assert r.ok or errors[-1] > 2e-4, (order, errors[-1], r.message)
     assert all(b < a for a, b in zip(errors, errors[1:])), errors
     assert errors[0] > 1e-3 and errors[-1] < 2e-6, errors
 
@@ -118,7 +120,9 @@ def test_statics_forces_and_moments_balance_in_3d(rotation):
     prob = clamped_pair(right=(0.55, 0.25, 0.1), q_right=quat_about("z", 0.8), weight=2.0, twist=0.7, loads=(load,))
     residuals = []
     for order in (12, 16, 24):
-        r = ShapeSolver(prob, SolverOptions(order=order, output_points=801, model="full", rotation=rotation)).solve()
+        # the Euler model at order 12 is 6 mm off (its residual says so): this test is about the balance
+        r = ShapeSolver(prob, SolverOptions(order=order, output_points=801, model="full", rotation=rotation,
+                                            error_tolerance=1.0)).solve()
         assert r.ok and r.stable, r.message
         total_force = sum(w.force for w in r.grips.values()) + load.force + 2.0 * prob.gravity_unit
         assert np.linalg.norm(total_force) < 1e-8 * max(np.linalg.norm(w.force) for w in r.grips.values())

@@ -15,6 +15,11 @@ and material kink).  Two kinds of rotation field:
   t(s) = Σ_i ℓ_i(s) t_i with |t_i|² = 1 at the nodes, unit tangent t/|t| and
       κ² = |(t/|t|)'|² = (|t'|² − (t·t')²/|t|²) / |t|²,   U_bend = ∫ ½ Rf κ² ds.
 
+Both bend energies carry the gauge term ½ c Rf ((ln|v|)')² (v = q with a factor 2, or t; c = GAUGE_WEIGHT): it vanishes where
+the interpolant keeps unit norm between nodes and is of the order of the interpolation error squared
+when resolved, but it forbids a field that dips toward zero between quadrature nodes, where the
+normalised rotation would jump unseen by the quadrature (a fold that costs no energy).
+
 Both: x(s) = x0 + ∫_0^s (1 + ε) t̂ ds,  U_stretch = ∫ ½ Re ε²,  U_grav = −∫ D ĝ·x ds, every integral
 by the mesh's quadrature.  Grip orientations are held by rows that are linear in the node's rotation
 (t_g · R_g e_y = t_g · R_g e_z = 0, and for a clamp with twist d1_g · R_g e_z = 0), whose parameters
@@ -34,6 +39,11 @@ import casadi as ca
 import numpy as np
 
 from .elements import ElementMesh
+
+
+#: weight of the gauge term ½ c Rf ((ln|v|)')² relative to the bend energy: large enough to forbid a fold
+#: hidden between quadrature nodes, small enough to leave the spectral accuracy
+GAUGE_WEIGHT = 1e-2
 
 
 @dataclass(frozen=True)
@@ -262,7 +272,8 @@ class DirectorModel:
     def _fields_sym(self, z: ca.SX):
         lay = self.layout
         V = ca.reshape(z[lay.rotation], lay.width, lay.nodes)  # column i = node i
-        return V, ca.mtimes(V, ca.DM(self.B.T)), ca.mtimes(V, ca.DM(self.dB.T))
+        # sparse: B selects nodes, B' is block-diagonal by element
+        return V, ca.mtimes(V, ca.sparsify(ca.DM(self.B.T))), ca.mtimes(V, ca.sparsify(ca.DM(self.dB.T)))
 
     def energy_terms(self, z: ca.SX, profiles: dict[str, ca.SX], gravity: ca.SX):
         """(bend, twist, stretch, gravity) energies [J] and the quadrature-node tangents (1+ε)t̂ (3×M)."""
@@ -278,20 +289,26 @@ class DirectorModel:
             o1 = 2 * (wq * dx - dw * x - (y * dz - zq * dy)) / n2
             o2 = 2 * (wq * dy - dw * y - (zq * dx - x * dz)) / n2
             o3 = 2 * (wq * dz - dw * zq - (x * dy - y * dx)) / n2
-            bend = 0.5 * ca.dot(w, profiles["Rf"] * (o2 * o2 + o3 * o3))
+            # + the gauge term ½ Rf (2 (ln|q|)')² = ½ Rf (2 q·q' / |q|²)²: zero where |q| is constant, it keeps
+            # the interpolant from dipping toward q = 0 between quadrature nodes (a rotation jump that
+            # the quadrature would not see)
+            o0 = 2 * (x * dx + y * dy + zq * dz + wq * dw) / n2
+            bend = 0.5 * ca.dot(w, profiles["Rf"] * (o2 * o2 + o3 * o3 + GAUGE_WEIGHT * o0 * o0))
             twist = 0.5 * ca.dot(w, profiles["Rt"] * o1 * o1)
             t = ca.horzcat(*_columns(rows, ca)[0]).T
         else:
             n2 = rows[0] ** 2 + rows[1] ** 2 + rows[2] ** 2
             tdt = rows[0] * drows[0] + rows[1] * drows[1] + rows[2] * drows[2]
             dd = drows[0] ** 2 + drows[1] ** 2 + drows[2] ** 2
-            kappa2 = (dd - tdt * tdt / n2) / n2
+            # |t'|²/|t|² = κ² + ((ln|t|)')²: the gauge term keeps the interpolant from dipping toward t = 0
+            # between quadrature nodes (a tangent reversal the quadrature would not see)
+            kappa2 = (dd - (1 - GAUGE_WEIGHT) * tdt * tdt / n2) / n2
             bend = 0.5 * ca.dot(w, profiles["Rf"] * kappa2)
             twist = ca.SX(0)
             inv = 1 / ca.sqrt(n2)
             t = ca.horzcat(rows[0] * inv, rows[1] * inv, rows[2] * inv).T
         if lay.stretch:
-            eps = ca.mtimes(ca.DM(self.B), z[lay.eps])
+            eps = ca.mtimes(ca.sparsify(ca.DM(self.B)), z[lay.eps])
             stretch = 0.5 * ca.dot(w, profiles["Re"] * eps * eps)
             t = t * ca.repmat(ca.reshape(1 + eps, 1, -1), 3, 1)
         else:
@@ -321,6 +338,16 @@ class DirectorModel:
         """|v_i|² − 1 at every node."""
         V = ca.reshape(z[self.layout.rotation], self.layout.width, self.layout.nodes)
         return [ca.sumsqr(V[:, i]) - 1.0 for i in range(self.layout.nodes)]
+
+    def fold_rows_sym(self, z: ca.SX) -> list[ca.SX]:
+        """c − v_i · v_{i+1} ≤ 0 for neighbouring nodes: neighbouring tangents within 90° (c = 0), neighbouring
+        quaternions within a 120° rotation and of one sign (c = cos 60°).  Inactive on any resolved
+        shape; they forbid a fold between two nodes, which the normalised field would hide from the
+        quadrature (its energy is not seen between quadrature nodes)."""
+        lay = self.layout
+        V = ca.reshape(z[lay.rotation], lay.width, lay.nodes)
+        c = 0.5 if lay.frame else 0.0
+        return [c - ca.dot(V[:, i], V[:, i + 1]) for i in range(lay.nodes - 1)]
 
     def moment_work_sym(self, z: ca.SX, i: int, moment: ca.SX, reference: ca.SX) -> ca.SX:
         """Pseudo-potential of a point moment at node i (module docstring); ``reference`` is q_ref (4)

@@ -1,43 +1,53 @@
 """Spectral elements along the arc length: breakpoints, nodal interpolation and quadrature.
 
 The string [0, L] is split at breakpoints 0 = b_0 < b_1 < … < b_E = L.  On element e = [b_e, b_{e+1}]
-a field is the polynomial of degree n − 1 through its values at n Chebyshev–Lobatto nodes; the end
-nodes of neighbouring elements are the same node, so every field is continuous across a breakpoint
-while its derivative may jump there (a kink at a grip, a point load or a jump of the material).
-The unknowns of a field are its N = E (n − 1) + 1 nodal values.
+a field is the polynomial of degree n − 1 through its values at the n Legendre–Gauss–Lobatto (LGL)
+nodes of the element; the end nodes of neighbouring elements are the same node, so every field is
+continuous across a breakpoint while its derivative may jump there (a kink at a grip, a point load or
+a jump of the material).  The unknowns of a field are its N = E (n − 1) + 1 nodal values.
 
-Integrals use Clenshaw–Curtis quadrature on m Lobatto nodes per element (the breakpoints appear
-once per element that ends there): for samples f_k at the quadrature nodes σ_k
+Integrals are taken by the LGL rule on the same nodes (the spectral element method's collocated
+quadrature, exact for polynomials of degree ≤ 2n − 3 on every element): for samples f_k at the
+quadrature nodes σ_k (each element's n nodes, so a breakpoint appears once per element it ends)
 
     ∫_0^L f ds ≈ Σ_k w_k f_k,        ∫_0^s f ds ≈ Σ_k W_k(s) f_k,
 
-exact for polynomials of degree ≤ m − 1 on every element and spectrally convergent for fields that are
-smooth on each element.
+W integrating each element's interpolant exactly.  Collocation makes a field's value at σ_k a nodal
+unknown itself and its derivative one row of the element's differentiation matrix, so the energy's
+Hessian costs O(E n³) instead of O(E n² m) for m separate quadrature nodes.
 """
 from __future__ import annotations
 
 import numpy as np
 from numpy.polynomial import chebyshev as C
+from numpy.polynomial import legendre as Leg
 
 from .quadrature import ChebyshevQuadrature
 
 
-def lobatto(count: int) -> np.ndarray:
-    """Chebyshev–Lobatto points on [−1, 1], ascending."""
-    return -np.cos(np.pi * np.arange(count) / (count - 1))
+def lgl_nodes(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Legendre–Gauss–Lobatto nodes on [−1, 1] (ascending) and their quadrature weights."""
+    if count < 2:
+        raise ValueError("at least 2 nodes per element")
+    p = Leg.Legendre.basis(count - 1)
+    x = np.concatenate([[-1.0], np.sort(p.deriv().roots().real), [1.0]]) if count > 2 else np.array([-1.0, 1.0])
+    w = 2.0 / (count * (count - 1) * p(x) ** 2)
+    return x, w
 
 
-class LagrangeElement:
-    """Interpolation through n Lobatto nodes of [0, h]: P(τ) f_nodes and its s-derivative."""
+class NodalElement:
+    """The polynomial through n LGL nodes of [0, h]: values, s-derivatives and integrals at any s."""
 
     def __init__(self, count: int, size: float) -> None:
         self.count, self.size = int(count), float(size)
-        self._vinv = np.linalg.inv(C.chebvander(lobatto(count), count - 1))
-        self._der = np.zeros((count, count))
-        for k in range(count):
-            coef = np.zeros(count)
-            coef[k] = 1.0
-            self._der[: count - 1, k] = C.chebder(coef) if count > 1 else 0.0
+        self.tau, weights = lgl_nodes(count)
+        self.nodes = 0.5 * self.size * (self.tau + 1.0)
+        self.weights = 0.5 * self.size * weights
+        self._vinv = np.linalg.inv(C.chebvander(self.tau, count - 1))  # nodal values → Chebyshev coefficients
+        eye = np.eye(count)
+        self._der = np.stack([np.concatenate([C.chebder(eye[k]), [0.0]]) for k in range(count)], axis=1)
+        self._int = np.stack([C.chebint(eye[k], lbnd=-1.0) for k in range(count)], axis=1)  # (count+1, count)
+        self.D = self.matrices(self.nodes)[1]  # differentiation matrix at the element's own nodes
 
     def matrices(self, local_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(B, B') with f(s) = B f_nodes and f'(s) = B' f_nodes for local arc lengths in [0, h]."""
@@ -45,14 +55,18 @@ class LagrangeElement:
         v = C.chebvander(tau, self.count - 1)
         return v @ self._vinv, (v @ self._der) @ self._vinv * (2.0 / self.size)
 
+    def integral(self, local_s: np.ndarray) -> np.ndarray:
+        """I with ∫_0^s f = I f_nodes for local arc lengths in [0, h] (the interpolant, exactly)."""
+        tau = 2.0 * np.asarray(local_s, dtype=float) / self.size - 1.0
+        return 0.5 * self.size * (C.chebvander(tau, self.count) @ self._int) @ self._vinv
+
 
 class ElementMesh:
-    """Breakpoints, global interpolation nodes and the composite quadrature of one string.
+    """Breakpoints, global nodes and the composite quadrature of one string, with ``order`` LGL nodes
+    per element; ``quadrature`` > 0: that many Clenshaw–Curtis nodes per element instead of the
+    collocated LGL rule."""
 
-    ``order`` interpolation nodes and ``quadrature`` quadrature nodes per element.
-    """
-
-    def __init__(self, length: float, breakpoints, order: int, quadrature: int) -> None:
+    def __init__(self, length: float, breakpoints, order: int, quadrature: int = 0) -> None:
         self.length = float(length)
         b = np.unique(np.concatenate([[0.0, self.length], np.asarray(breakpoints, dtype=float).ravel()]))
         b = b[(b >= 0.0) & (b <= self.length)]
@@ -60,19 +74,32 @@ class ElementMesh:
         keep = np.concatenate([[True], np.diff(b) > 1e-9 * self.length])
         self.breakpoints = b[keep]
         self.breakpoints[-1] = self.length
-        if order < 2:
-            raise ValueError("solver.order must be at least 2")
-        self.order, self.quadrature = int(order), int(quadrature)
-        self.elements = [LagrangeElement(order, hi - lo) for lo, hi in zip(self.breakpoints[:-1], self.breakpoints[1:])]
-        self.quads = [ChebyshevQuadrature(quadrature, hi - lo) for lo, hi in zip(self.breakpoints[:-1], self.breakpoints[1:])]
+        if order < 3:
+            raise ValueError("solver.order must be at least 3")
+        self.order = int(order)
+        self.elements = [NodalElement(order, hi - lo) for lo, hi in zip(self.breakpoints[:-1], self.breakpoints[1:])]
         n = order - 1
-        self.count = len(self.elements) * n + 1  # global interpolation nodes
-        self.nodes = np.concatenate([lo + el.size * (lobatto(order)[:-1] + 1) / 2
-                                     for lo, el in zip(self.breakpoints[:-1], self.elements)] + [[self.length]])
-        self.quad_nodes = np.concatenate([lo + q.nodes for lo, q in zip(self.breakpoints[:-1], self.quads)])
-        self.weights = np.concatenate([q.weights for q in self.quads])
+        self.count = len(self.elements) * n + 1  # global nodes
+        starts = self.breakpoints[:-1]
+        self.nodes = np.concatenate([lo + el.nodes[:-1] for lo, el in zip(starts, self.elements)] + [[self.length]])
+        self.quads = [ChebyshevQuadrature(quadrature, el.size) for el in self.elements] if quadrature else None
+        m = self.per_element = quadrature or order
+        if self.quads is None:
+            self.quad_nodes = np.concatenate([lo + el.nodes for lo, el in zip(starts, self.elements)])
+            self.weights = np.concatenate([el.weights for el in self.elements])
+        else:
+            self.quad_nodes = np.concatenate([lo + q.nodes for lo, q in zip(starts, self.quads)])
+            self.weights = np.concatenate([q.weights for q in self.quads])
         self.quad_count = self.quad_nodes.size
-        self.B, self.dB = self._quad_matrices()
+        # B: global nodal values → values at the quadrature nodes (a selection when collocated); dB: derivatives
+        self.B = np.zeros((self.quad_count, self.count))
+        self.dB = np.zeros((self.quad_count, self.count))
+        for e, el in enumerate(self.elements):
+            rows, cols = slice(e * m, (e + 1) * m), slice(e * n, e * n + order)
+            if self.quads is None:
+                self.B[rows, cols], self.dB[rows, cols] = np.eye(order), el.D
+            else:
+                self.B[rows, cols], self.dB[rows, cols] = el.matrices(self.quads[e].nodes)
 
     @property
     def element_count(self) -> int:
@@ -85,9 +112,8 @@ class ElementMesh:
 
     def element_of(self, s: np.ndarray, side: str = "left") -> np.ndarray:
         """Element index of each s; at a breakpoint the element on ``side`` ('left' or 'right')."""
-        s = np.asarray(s, dtype=float)
         inner = self.breakpoints[1:-1]
-        idx = np.searchsorted(inner, s, side="left" if side == "left" else "right")
+        idx = np.searchsorted(inner, np.asarray(s, dtype=float), side="left" if side == "left" else "right")
         return np.clip(idx, 0, self.element_count - 1)
 
     def interpolation(self, s, side: str = "left") -> tuple[np.ndarray, np.ndarray]:
@@ -96,32 +122,27 @@ class ElementMesh:
         s = np.atleast_1d(np.asarray(s, dtype=float))
         B, dB = np.zeros((s.size, self.count)), np.zeros((s.size, self.count))
         n = self.order - 1
-        for e in np.unique(self.element_of(s, side)):
-            rows = np.flatnonzero(self.element_of(s, side) == e)
+        which = self.element_of(s, side)
+        for e in np.unique(which):
+            rows = np.flatnonzero(which == e)
             b, db = self.elements[e].matrices(s[rows] - self.breakpoints[e])
-            B[np.ix_(rows, range(e * n, e * n + self.order))] = b
-            dB[np.ix_(rows, range(e * n, e * n + self.order))] = db
-        return B, dB
-
-    def _quad_matrices(self) -> tuple[np.ndarray, np.ndarray]:
-        B, dB = np.zeros((self.quad_count, self.count)), np.zeros((self.quad_count, self.count))
-        n, m = self.order - 1, self.quadrature
-        for e, (el, q) in enumerate(zip(self.elements, self.quads)):
-            b, db = el.matrices(q.nodes)
-            B[e * m:(e + 1) * m, e * n:e * n + self.order] = b
-            dB[e * m:(e + 1) * m, e * n:e * n + self.order] = db
+            cols = np.arange(e * n, e * n + self.order)
+            B[np.ix_(rows, cols)] = b
+            dB[np.ix_(rows, cols)] = db
         return B, dB
 
     def integration_matrix(self, s) -> np.ndarray:
         """W of shape (len(s), quad_count) with ∫_0^s f ≈ W f_quad."""
         s = np.atleast_1d(np.asarray(s, dtype=float))
         W = np.zeros((s.size, self.quad_count))
-        m = self.quadrature
-        for e, q in enumerate(self.quads):
+        m = self.per_element
+        for e, el in enumerate(self.elements):
             lo, hi = self.breakpoints[e], self.breakpoints[e + 1]
+            cols = np.arange(e * m, (e + 1) * m)
             full = s >= hi
-            W[np.ix_(full, range(e * m, (e + 1) * m))] = q.weights
+            W[np.ix_(full, cols)] = el.weights if self.quads is None else self.quads[e].weights
             part = (s > lo) & (s < hi)
             if np.any(part):
-                W[np.ix_(part, range(e * m, (e + 1) * m))] = q.integration_matrix(s[part] - lo)
+                W[np.ix_(part, cols)] = el.integral(s[part] - lo) if self.quads is None else \
+                    self.quads[e].integration_matrix(s[part] - lo)
         return W

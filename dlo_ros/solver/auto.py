@@ -154,6 +154,7 @@ class _Snapshot:
     points: np.ndarray
     max_grip_force: float
     generation: int = 0
+    residual_m: float = 0.0  # the strong-form equilibrium residual of the checked result (solver/residual.py)
 
 
 @dataclass
@@ -183,7 +184,7 @@ class AutoShapeSolver:
     POOL_SIZE = 6
 
     def __init__(self, problem: Problem, options: SolverOptions | None = None, compile: str = "background",
-                 checks: str = "sync"):
+                 checks: str = "background"):
         options = options or SolverOptions()
         if options.model != "auto":
             raise ValueError("AutoShapeSolver needs solver.model 'auto'")
@@ -444,7 +445,9 @@ class AutoShapeSolver:
             inner_poses = {g.name: g.pose for g in reduced.grips}
             # the poses are checked and the plane too (above): the inner solver need not check them again
             result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
-            if not result.ok or not commit:
+            # an unverified result (residual over the tolerance) is committed as the warm start and checked:
+            # the check escalates the order
+            if result.status not in ("ok", "unverified") or not commit:
                 return self._finish(result, t0, notes)
             self.problem = problem
             self._since_check += 1
@@ -471,7 +474,7 @@ class AutoShapeSolver:
             self._switch(verdict.choice, verdict.reason)
             notes.append(self.changes[-1][1])
             previous, result = result, self.inner.solve(snap.poses)
-            if not result.ok:  # keep the answer we had, and say so
+            if result.status not in ("ok", "unverified"):  # keep the answer we had, and say so
                 previous.message += f"; the richer model failed to solve ({result.message}): answer of the previous model"
                 return previous
             snap = self._snapshot(snap.problem, snap.poses, result)
@@ -482,7 +485,7 @@ class AutoShapeSolver:
         return _Snapshot(self.inner, self.inner.snapshot(), replace(self.choice, reasons=list(self.choice.reasons)),
                          problem, poses, result.points.copy(),
                          max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
-                         self._generation)
+                         self._generation, float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)))
 
     def _keep(self, verdict: _Verdict) -> None:
         self.choice.estimated_error_m = verdict.estimate
@@ -555,6 +558,10 @@ class AutoShapeSolver:
                 error = self._shadow_error(snap, ORDERS[i + 1])
                 if np.isfinite(error):  # a shadow that failed to solve is inconclusive: the next check retries
                     order_error = error
+                # the equilibrium residual is an error estimate of its own: the larger of the two counts
+                error = max(error, snap.residual_m) if np.isfinite(error) else snap.residual_m
+                if np.isfinite(snap.residual_m):
+                    order_error = max(order_error, snap.residual_m) if np.isfinite(order_error) else snap.residual_m
                 if error > tol / 2 and np.isfinite(error):
                     verdict.choice = replace(choice, order=ORDERS[i + 1], estimated_error_m=error, order_error_m=error,
                                              reasons=list(choice.reasons))
@@ -597,6 +604,8 @@ class AutoShapeSolver:
         shapes differed by 1–2 cm with the pole 28° from a tangent, by 0.6 mm/0.03 mm with it 46° away).
         The new model is built and warm-started here (worker thread), so the switch builds nothing."""
         inner, state = snap.inner, snap.state
+        if inner.nlp.director:  # no pole
+            return None
         if state is None or has_point_moments(snap.problem):  # moments are modelled about the pole
             return None
         tangents = inner.model.node_tangents(state.z).T
@@ -663,6 +672,7 @@ class AutoShapeSolver:
         c, s = (self.choice, self.inner) if streaming else (choice, solver)
         checked = streaming and not self._unchecked
         est = c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None
+        inner = s.model_summary()
         return {
             "planar": c.planar, "twist": c.twist, "stretch": c.stretch, "gravity": c.gravity, "order": c.order,
             "obstacles": len(c.obstacles), "obstacle_samples": c.samples, "estimated_error_m": est,
@@ -670,6 +680,7 @@ class AutoShapeSolver:
             "tolerance_met": None if est is None else bool(est <= self.tolerance),
             "variables": s.model.layout.size, "auto": True, "checked": checked, "checks": self.checks,
             "reasons": list(c.reasons), "changes": [r for _, r in self.changes],
+            **{k: inner[k] for k in ("rotation", "elements", "breakpoints") if k in inner},
         }
 
     def _finish(self, result: ShapeResult, t0: float, notes: list[str], choice: ModelChoice | None = None,
@@ -686,9 +697,10 @@ class AutoShapeSolver:
 
 
 def make_solver(problem: Problem, options: SolverOptions | None = None, compile: str = "background",
-                checks: str = "sync"):
-    """AutoShapeSolver for solver.model 'auto' (the default; ``checks`` as there), else a ShapeSolver of
-    that model."""
+                checks: str = "background"):
+    """AutoShapeSolver for solver.model 'auto' (the default; ``checks`` as there: 'background' by default,
+    so that a stream never builds or switches a model on the caller's thread; 'sync' for one-shot
+    answers that must be checked before they return, as the CLI's), else a ShapeSolver of that model."""
     options = options or SolverOptions()
     if options.model == "auto":
         return AutoShapeSolver(problem, options, compile=compile, checks=checks)

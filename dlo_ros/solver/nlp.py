@@ -12,7 +12,8 @@
 Structure (which grips, their s and modes, loads' s, obstacle types, twist and stretch fields) is fixed
 per NLP; parameter values (grip targets, profiles, gravity, load values, obstacle poses) are not.
 
-Obstacle rows come last in g.  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``, for
+Every equality row (grips, relative positions, and for the director model the unit-norm rows) comes
+before every inequality row (the director model's fold rows, then the obstacle rows).  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``, for
 Newton updates while no obstacle row is active: the Newton matrix and residual of the other rows (all
 equalities) without the obstacle rows' Jacobian, Hessian or values (with a table in reach, half of a
 planar model's KKT instructions and a third of a 3D one's go to those).
@@ -188,7 +189,9 @@ class StringNLP:
             if reason:
                 raise ValueError(f"solver.model: 'planar' does not fit this scene: {reason}")
         if self.director:
-            mesh = ElementMesh(L, breakpoints(problem), options.order, options.quadrature_nodes)
+            # Clenshaw–Curtis quadrature per element: order + 8 nodes resolve the normalised fields to the
+            # accuracy of the basis (bench/results/director_convergence.md); collocated LGL does not
+            mesh = ElementMesh(L, breakpoints(problem), options.order, min(options.quadrature_nodes, options.order + 8))
             self.model = DirectorModel(L, mesh, self.twist, self.stretch)
         else:
             self.model = RitzModel(L, options.basis, options.order, options.quadrature_nodes, self.r0, self.twist,
@@ -301,6 +304,9 @@ class StringNLP:
         if self.director:
             for i, expr in enumerate(m.norm_rows_sym(z)):
                 add(expr, 1.0, ("norm", i))
+            # inequality rows (folds, then obstacles) come after every equality row
+            for i, expr in enumerate(m.fold_rows_sym(z)):
+                add(expr, 1.0, ("fold", i), -ca.inf, 0.0)
         self.obstacle_rows: list[list[int]] = []
         radius = p[lay["radius"]][0]
         for i, ob in enumerate(P.obstacles):
@@ -323,10 +329,11 @@ class StringNLP:
 
         self.energy_fn = ca.Function("energy", [z, p], [bend, twist, stretch, grav, work])
         lam = ca.SX.sym("lam", g.shape[0])
-        # Obstacle rows come last.  Without them the KKT function is what a Newton update needs while no
+        # Inequality rows come last.  Without them the KKT function is what a Newton update needs while no
         # obstacle row is active: most of the KKT work is x(s_j) at the obstacle samples, differentiated
         # twice.  Each Hessian is built once (building them is most of an NLP's build time).
-        self.n_free_rows = nf = self.obstacle_rows[0][0] if self.obstacle_rows and self.obstacle_rows[0] else g.shape[0]
+        inequalities = np.flatnonzero(self.lbg != self.ubg)
+        self.n_free_rows = nf = int(inequalities[0]) if inequalities.size else g.shape[0]
         # the rows before the obstacle rows are equalities with bound 0 (grips, relative positions)
         assert np.all(self.lbg[:nf] == 0.0) and np.all(self.ubg[:nf] == 0.0)
         grad_f = ca.densify(ca.gradient(objective, z))

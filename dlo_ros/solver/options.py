@@ -13,7 +13,9 @@ class SolverOptions:
     """How the Ritz NLP is built and solved.
 
     basis/order: Ritz basis ('chebyshev' default, or the paper's 'fourier') and number of functions
-    per field.  quadrature_nodes: Chebyshev–Lobatto nodes for the energy integrals and the centreline.
+    per field (for 'director': Legendre–Gauss–Lobatto nodes per element).  quadrature_nodes:
+    Chebyshev–Lobatto nodes for the energy integrals and the centreline (for 'director': per element,
+    at most order + 8).
     obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) ≤ 0 is
     imposed.  frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2
     (away from the singularity); 'paper' is the paper's frame (singular at the straight state).

@@ -263,6 +263,8 @@ class ShapeSolver:
             lam_src = src.lam_g / (other.nlp.row_scale * other.nlp.sigma) if src.lam_g.size else src.lam_g
         lay = self.model.layout
         if self.nlp.director:
+            if lay.frame:
+                frames = self._match_clamp_rolls(frames)
             z = self.model.z_from_frames(src.z[0:3] * other.model.length, frames, eps)
         else:
             z = np.zeros(lay.size)
@@ -287,6 +289,25 @@ class ShapeSolver:
         with self._lock:
             self._state = _State(z, lam, np.zeros(lay.size), p)
         return True
+
+    def _match_clamp_rolls(self, frames: np.ndarray) -> np.ndarray:
+        """Node frames turned about their tangents by the piecewise-linear interpolant of the roll misfit
+        at the clamps (each in (−π, π]): a shape from a model without twist (or a target turned while
+        the plane was held) then meets the clamps' rolls, so Newton does not settle on the flipped sheet
+        d1 = −d1_g that the clamp rows also admit."""
+        clamps = sorted((g for g in self.problem.grips if g.mode == "clamp"), key=lambda g: g.s)
+        if not clamps:
+            return frames
+        mesh = self.model.mesh
+        rolls = []
+        for g in clamps:
+            f = frames[mesh.node_index(g.s)]
+            target = quat_to_matrix(g.pose.orientation)[:, 1]
+            rolls.append(math.atan2(float(np.dot(np.cross(f[:, 1], target), f[:, 0])), float(np.dot(f[:, 1], target))))
+        gamma = np.interp(mesh.nodes, [g.s for g in clamps], rolls)
+        t, d1, d2 = frames[:, :, 0], frames[:, :, 1], frames[:, :, 2]
+        d1n = np.cos(gamma)[:, None] * d1 + np.sin(gamma)[:, None] * d2
+        return np.stack([t, d1n, np.cross(t, d1n)], axis=-1)
 
     def strain(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """ε(s) of solution z (zeros when inextensible)."""
@@ -360,7 +381,8 @@ class ShapeSolver:
                 return self._failure("unreachable", reason, t0)
             result, state = self._solve_locked(problem, warm and self._state is not None)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
-            if commit and result.ok:
+            # an unverified result is a converged stationary point of the discrete problem: a good warm start
+            if commit and result.status in ("ok", "unverified") and state is not None:
                 self._state = state
                 self.problem = problem
             return result

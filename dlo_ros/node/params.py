@@ -230,8 +230,6 @@ def check_live(name: str, value: Any, problem: Problem) -> str:
 #: Parameters rclpy declares on every node (accepted in params files and -p without a warning).
 ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")
 ROS_PARAMETER_PREFIXES = ("qos_overrides.",)
-#: Longest params file read (the shipped one is ~3 KB); the scene loader's other YAML limits apply too.
-PARAMS_FILE_BYTES = 1 << 20
 #: Longest ``scene`` / ``record.*`` value (a path).
 PATH_CHARS = 4096
 #: ROS arguments (inside --ros-args) that take a value: the value is skipped when looking for parameters.
@@ -394,10 +392,9 @@ def read_params_file(path: str, node_name: str = "dlo") -> dict[str, tuple[Any, 
     """
     import yaml
 
-    from ..scene import LIMITS, SceneError, _compose, _key_lines, _LimitError, _read_text
+    from ..scene import SceneError, _compose, _key_lines, _LimitError, _read_text  # LIMITS apply (1 MiB, ...)
 
     shown = safe_text(path)
-    assert LIMITS["file_bytes"] == PARAMS_FILE_BYTES  # the scene reader's size limit applies
     try:
         text = _read_text(path, shown)
     except SceneError as exc:

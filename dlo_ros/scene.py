@@ -712,7 +712,7 @@ def load_scene(path_or_name: str | Path) -> Scene:
     except OSError:
         exists_as_other = False
     path = given if exists_as_other else scene_path(path_or_name)
-    source = safe_text(str(path))
+    source = safe_text(str(path), 4096)  # control characters escaped; a path is never cut (PATH_MAX)
     text = _read_text(path, source)
     try:
         data, root = _compose(text)

@@ -238,3 +238,13 @@ def test_limits_are_documented():
     for name, value in LIMITS.items():
         assert re.search(rf"`{name}`[^\n]*\b{value:,}\b".replace(",", "[, ]?"), section) or \
             re.search(rf"`{name}`[^\n]*\b{value}\b", section), f"LIMITS[{name!r}] = {value} is not in scene_format.md"
+
+
+def test_long_paths_are_not_cut(tmp_path):
+    """Paths are escaped for messages, never truncated: the scene's default name comes from the file's stem."""
+    deep = tmp_path / ("a" * 200) / ("b" * 40)
+    deep.mkdir(parents=True)
+    f = deep / "my_scene.yaml"
+    f.write_text(GOOD_HEAD + GOOD_TAIL)
+    scene = load_scene(f)
+    assert scene.name == "my_scene" and scene.source == str(f)

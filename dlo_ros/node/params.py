@@ -394,7 +394,7 @@ def read_params_file(path: str, node_name: str = "dlo") -> dict[str, tuple[Any, 
 
     from ..scene import SceneError, _compose, _key_lines, _LimitError, _read_text  # LIMITS apply (1 MiB, ...)
 
-    shown = safe_text(path)
+    shown = safe_text(path, 4096)
     try:
         text = _read_text(path, shown)
     except SceneError as exc:

@@ -412,8 +412,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # SUBCOMMAND REGISTRY — add new subcommands here (or call register_subcommand() from your module).
 #   name -> (help, add_arguments(parser) -> None, handler(args) -> exit code)
 # The handler may raise SceneError / FileNotFoundError / UsageError: main() prints them as
-# "dlo: error: ..." and returns exit code 2.  Planned: "node" (run the ROS node).  "replay": dlo_ros/replay.py.
+# "dlo: error: ..." and returns exit code 2.  "node": main() hands its arguments to the node unparsed (dlo_ros/node/params.py
+# checks them).  "replay": dlo_ros/replay.py.
 # =====================================================================================================
+def _node_handler(args: argparse.Namespace) -> int:
+    """The built-in ``node`` subcommand (``main`` passes its arguments to :func:`_run_node` unparsed)."""
+    return _run_node(args.node_args)
+
+
 Subcommand = tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]
 
 SUBCOMMANDS: dict[str, Subcommand] = {
@@ -421,15 +427,29 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "scenes": ("list the shipped scenes", _add_scenes_arguments, cmd_scenes),
     "demo": ("the main job: the ROS node + a dual-arm driver over DDS, with a summary (--solver-only: no ROS)",
              _add_demo_arguments, cmd_demo),
-    "node": ("run the ROS 2 node (arguments as for `ros2 run dlo_ros dlo_node`, e.g. --params-file F, --ros-args …)",
-             lambda p: p.add_argument("node_args", nargs=argparse.REMAINDER), lambda a: _run_node(a.node_args)),
+    "node": ("run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--check] [--ros-args ...] "
+             "(`dlo node --help`)",
+             lambda p: p.add_argument("node_args", nargs=argparse.REMAINDER), _node_handler),
 }
 
 
 def _run_node(argv: list[str]) -> int:
-    from .node import main as node_main
+    """``dlo node ARGS``: the node's own command line (``--params-file``, ``--scene``, ``--check``,
+    ``--ros-args ...``), parsed and checked by dlo_ros.node.params.prepare_node_args; ``main`` hands
+    everything after ``node`` here untouched (argparse cannot pass ``--scene`` through a subparser)."""
+    from .node.params import node_argument_parser
 
-    result = node_main(argv)
+    if any(a in ("-h", "--help") for a in argv[: argv.index("--ros-args") if "--ros-args" in argv else None]):
+        node_argument_parser("dlo node").print_help()  # without importing rclpy
+        return EXIT_OK
+    try:
+        from .node.dlo_node import main as node_main
+    except KeyboardInterrupt:  # Ctrl-C while importing rclpy / CasADi
+        return 0
+    try:
+        result = node_main(argv, prog="dlo node")
+    except SystemExit as exc:  # argparse: an unknown option of the node's own (usage printed)
+        return int(exc.code) if isinstance(exc.code, int) else EXIT_USAGE
     return int(result or 0)
 
 
@@ -472,6 +492,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     from .scene import SceneError
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    node = SUBCOMMANDS.get("node")
+    if argv[:1] == ["node"] and node is not None and node[2] is _node_handler:
+        # everything after `node` is the node's (and rclpy's): argparse would refuse `--scene` here
+        return _run_node(argv[1:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -490,6 +515,12 @@ def main(argv: list[str] | None = None) -> int:
         with contextlib.suppress(OSError):
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silence the flush at exit
         return EXIT_OK
+    except OSError as exc:  # a file the command was given cannot be read or written: its name and why
+        from .node.validation import safe_text
+
+        name = f"{safe_text(exc.filename)}: " if exc.filename is not None else ""
+        _err(f"{name}{exc.strerror or type(exc).__name__}")
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

@@ -8,13 +8,23 @@ pose whose x-axis is the string's tangent, pointing toward increasing s.
 Every malformed input raises :class:`SceneError` whose message starts with the offending key path
 (``grips[1].orientation: quaternion norm is 1.3, not 1 ...``).  Errors found while loading a file add
 where the key is, `` (in path/to/scene.yaml:12)``; YAML syntax errors start with ``file:line:column``.
+Messages never quote the file beyond the scene format's own keys and short values: a file that is not
+a scene (``scene:=/etc/passwd``) is named, not echoed.
+
+What a scene may cost is bounded before anything is built (:data:`LIMITS`, msg_docs/scene_format.md
+"Limits"): the file's size and kind are checked before it is read, the YAML composer counts aliases,
+nesting depth, scalar sizes and the nodes the document would have with every alias expanded while it
+composes (no alias is ever expanded to count it), and the sections' list lengths are checked before
+their items are parsed.
 
 No ROS here: only the model and solver layers are imported.
 """
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -26,12 +36,13 @@ from .model.obstacles import OBSTACLE_TYPES, Obstacle
 from .model.problem import GRIP_MODES, Grip, GripPose, Load, Problem, RelativePosition, StringProperties
 from .model.profile import Profile
 from .model.rotations import check_quaternion, matrix_to_quat
+from .node.validation import safe_text  # pure (numpy + model): the one escaping/capping helper
 from .paths import scene_path
 from .solver.options import SolverOptions
 
 __all__ = [
     "DEFAULT_SCENE", "Scene", "SceneError", "scene_from_dict", "load_scene", "scene_to_dict",
-    "TOP_LEVEL_KEYS", "STRING_KEYS", "GRIP_KEYS", "LOAD_KEYS", "RELATIVE_KEYS", "OBSTACLE_KEYS",
+    "TOP_LEVEL_KEYS", "STRING_KEYS", "GRIP_KEYS", "LOAD_KEYS", "RELATIVE_KEYS", "OBSTACLE_KEYS", "LIMITS",
 ]
 
 DEFAULT_SCENE = "default_cable"
@@ -56,6 +67,26 @@ OBSTACLE_KEYS: dict[str, dict[str, bool]] = {
     "box": {"center": True, "orientation": False, "half_extents": True},
 }
 assert set(OBSTACLE_KEYS) == set(OBSTACLE_TYPES), "scene.OBSTACLE_KEYS is out of date with model.obstacles"
+
+#: What a scene may cost (documented in msg_docs/scene_format.md, "Limits").  File and YAML limits are
+#: checked while reading and composing, before any alias is expanded or any object is constructed; list
+#: and string limits before the items are parsed (for dicts too).
+LIMITS: dict[str, int] = {
+    "file_bytes": 1 << 20,          # size of a scene file (1 MiB; the shipped ones are < 3 KB)
+    "depth": 16,                    # nesting of mappings and lists (a valid scene needs 4)
+    "aliases": 64,                  # YAML aliases (*name) in one file
+    "nodes": 100_000,               # YAML nodes, counting an aliased subtree at every alias
+    "scalar_chars": 10_000,         # characters of one YAML scalar (key or value)
+    "integer_digits": 30,           # digits of an integer in the file (larger ones are no physical value)
+    "grips": 16,
+    "loads": 100,                   # 100 loads: solver built in 2.6 s, 0.26 GB; 1000: 14 s, 0.54 GB
+    "obstacles": 32,                # each adds obstacle_samples constraints: 32 built in 7 s, 0.7 GB here
+    "relative_positions": 32,
+    "profile_rows": 1000,           # rows of a string.* profile table
+    "name_chars": 128,              # name, grips[].name, obstacles[].name
+    "frame_id_chars": 256,          # = dlo_ros.node.validation.FRAME_ID_LIMIT
+    "description_chars": 10_000,
+}
 
 
 class SceneError(ValueError):
@@ -90,8 +121,30 @@ class Scene:
 
 # ---- primitive readers (each names its key path) -----------------------------------------------------
 def _describe(value: object) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+    """A short, safe description of a value for an error message: numbers and short one-line strings
+    as they are; longer strings and containers by their size only (never their content)."""
+    if isinstance(value, str):
+        if len(value) <= 40 and value.isprintable():
+            return repr(value)
+        return f"of {len(value)} characters"
+    if isinstance(value, (list, tuple)):
+        return f"of {len(value)} items"
+    if isinstance(value, dict):
+        return f"of {len(value)} keys"
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10 ** 15:
+        return f"with {len(str(abs(value)))} digits"
+    return safe_text(repr(value), 60)
+
+
+def _key_text(k: object) -> str:
+    """A key for a key path: itself when it looks like a scene key, else a placeholder (an unknown key of
+    a file that is not a scene must not be echoed)."""
+    if isinstance(k, str) and _KEY_TEXT_RE.fullmatch(k):
+        return k
+    return "<unknown key>"
+
+
+_KEY_TEXT_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,39}")
 
 
 def _mapping(value: object, key: str) -> dict:
@@ -106,20 +159,26 @@ def _mapping(value: object, key: str) -> dict:
 def _no_unknown(d: dict, allowed: tuple[str, ...] | list[str], key: str) -> None:
     for k in d:
         if k not in allowed:
-            prefix = f"{key}.{k}" if key else k
+            prefix = f"{key}.{_key_text(k)}" if key else _key_text(k)
             raise _fail(prefix, f"unknown key (allowed: {', '.join(allowed)})")
 
 
-def _list(value: object, key: str) -> list:
+def _list(value: object, key: str, limit: str | None = None) -> list:
+    """A list; ``limit`` names the entry of :data:`LIMITS` bounding its length (checked first)."""
     if not isinstance(value, (list, tuple)):
         raise _fail(key, f"expected a list, got {type(value).__name__} {_describe(value)}")
+    if limit is not None and len(value) > LIMITS[limit]:
+        raise _fail(key, f"{len(value)} items, at most {LIMITS[limit]} are allowed")
     return list(value)
 
 
 def _number(value: object, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise _fail(key, f"expected a number, got {type(value).__name__} {_describe(value)}")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an int beyond 1.8e308
+        raise _fail(key, f"out of range: an integer {_describe(value)}") from None
     if not math.isfinite(v):
         raise _fail(key, f"must be finite, got {v}")
     return v
@@ -132,9 +191,15 @@ def _vector(value: object, n: int, key: str) -> np.ndarray:
     return np.array([_number(v, f"{key}[{i}]") for i, v in enumerate(items)], dtype=float)
 
 
-def _string(value: object, key: str, allow_empty: bool = True) -> str:
+def _string(value: object, key: str, allow_empty: bool = True, limit: str = "name_chars") -> str:
+    """A string of at most ``LIMITS[limit]`` characters, without control characters unless it is the
+    description."""
     if not isinstance(value, str):
         raise _fail(key, f"expected a string, got {type(value).__name__} {_describe(value)}")
+    if len(value) > LIMITS[limit]:
+        raise _fail(key, f"{len(value)} characters, at most {LIMITS[limit]} are allowed")
+    if limit != "description_chars" and not value.isprintable():
+        raise _fail(key, f"must be printable text without control characters, got {_describe(value)}")
     if not allow_empty and not value.strip():
         raise _fail(key, "must not be empty")
     return value
@@ -167,7 +232,7 @@ def _profile(value: object, key: str, length: float, minimum: float, strict: boo
         _no_unknown(value, ("table",), key)
         if "table" not in value:
             raise _fail(key, "a profile mapping needs 'table: [[s, value], ...]'")
-        rows = _list(value["table"], f"{key}.table")
+        rows = _list(value["table"], f"{key}.table", "profile_rows")
         if not rows:
             raise _fail(f"{key}.table", "needs at least one [s, value] row")
         table = []
@@ -231,7 +296,7 @@ def _parse_gravity(value: object) -> np.ndarray:
 def _parse_grips(value: object, length: float) -> tuple[Grip, ...]:
     if value is None:
         raise _fail("grips", "required: at least one grip must hold the string")
-    items = _list(value, "grips")
+    items = _list(value, "grips", "grips")
     if not items:
         raise _fail("grips", "at least one grip is needed to hold the string")
     grips: list[Grip] = []
@@ -266,7 +331,7 @@ def _parse_loads(value: object, length: float) -> tuple[Load, ...]:
     if value is None:
         return ()
     loads = []
-    for i, item in enumerate(_list(value, "loads")):
+    for i, item in enumerate(_list(value, "loads", "loads")):
         key = f"loads[{i}]"
         d = _mapping(item, key)
         _no_unknown(d, LOAD_KEYS, key)
@@ -284,7 +349,7 @@ def _parse_obstacles(value: object) -> tuple[Obstacle, ...]:
         return ()
     obstacles = []
     names: dict[str, int] = {}
-    for i, item in enumerate(_list(value, "obstacles")):
+    for i, item in enumerate(_list(value, "obstacles", "obstacles")):
         key = f"obstacles[{i}]"
         d = _mapping(item, key)
         if "type" not in d:
@@ -324,7 +389,7 @@ def _parse_relative(value: object, length: float) -> tuple[RelativePosition, ...
     if value is None:
         return ()
     rels = []
-    for i, item in enumerate(_list(value, "relative_positions")):
+    for i, item in enumerate(_list(value, "relative_positions", "relative_positions")):
         key = f"relative_positions[{i}]"
         d = _mapping(item, key)
         _no_unknown(d, RELATIVE_KEYS, key)
@@ -353,6 +418,8 @@ def _parse_solver(value: object) -> SolverOptions:
                 _string(v, f"solver.{k}")
             elif isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise _fail(f"solver.{k}", f"expected a {type(default).__name__}, got {type(v).__name__} {_describe(v)}")
+            elif isinstance(v, int) and abs(v) >= 10 ** 15:
+                raise _fail(f"solver.{k}", f"out of range: an integer {_describe(v)}")
         try:
             options = SolverOptions.from_dict(dict(d))
         except ValueError as exc:
@@ -404,9 +471,12 @@ def scene_from_dict(d: dict, source: str = "<dict>") -> Scene:
     d = _mapping(d, "<scene>")
     _no_unknown(d, TOP_LEVEL_KEYS, "")
     default_name = Path(source).stem if source and not source.startswith("<") else "scene"
+    if not (default_name.isprintable() and 0 < len(default_name) <= LIMITS["name_chars"]):
+        default_name = "scene"
     name = _string(d.get("name", default_name), "name", allow_empty=False)
-    description = "" if d.get("description") is None else _string(d["description"], "description")
-    frame_id = _string(d.get("frame_id", "world"), "frame_id", allow_empty=False)
+    description = "" if d.get("description") is None else _string(d["description"], "description",
+                                                                     limit="description_chars")
+    frame_id = _string(d.get("frame_id", "world"), "frame_id", allow_empty=False, limit="frame_id_chars")
     if "string" not in d:
         raise _fail("string", "required (length, bend_stiffness, ...)")
     string = _parse_string(d["string"])
@@ -427,8 +497,71 @@ def scene_from_dict(d: dict, source: str = "<dict>") -> Scene:
                  description=description.strip())
 
 
+class _LimitError(yaml.composer.ComposerError):
+    """A scene file exceeds one of :data:`LIMITS` (raised while composing, before anything is expanded)."""
+
+    def __init__(self, key: str, problem: str, mark):
+        super().__init__(problem=problem, problem_mark=mark)
+        self.key = key
+
+
 class _SceneLoader(yaml.SafeLoader):
-    """SafeLoader that reads YAML 1.2 floats (``1e-3`` is a number, not a string) and rejects duplicate keys."""
+    """SafeLoader that reads YAML 1.2 floats (``1e-3`` is a number, not a string), rejects duplicate keys,
+    and bounds what the document may cost while composing it (:data:`LIMITS`): nesting depth, aliases,
+    scalar sizes, and the number of nodes with every alias expanded — computed from the node counts of
+    the anchored subtrees, so a "billion laughs" file is rejected without expanding anything."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._paths: list[str] = []          # key path of every node being composed (innermost last)
+        self._weights: dict[int, int] = {}   # id(node) -> nodes in its subtree, aliases expanded
+        self.node_paths: dict[int, str] = {}  # id(node) -> its key path (first occurrence)
+        self._aliases = 0
+
+    def _limit(self, problem: str, mark) -> _LimitError:
+        key = self._paths[-1] if self._paths else ""
+        return _LimitError(key or "<scene>", problem, mark)
+
+    def compose_node(self, parent, index):  # noqa: D401 - yaml.composer.Composer API
+        where = self._paths[-1] if self._paths else ""
+        if isinstance(index, yaml.ScalarNode):  # the value of a key
+            part = _key_text(index.value)
+            where = f"{where}.{part}" if where else part
+        elif isinstance(index, int):
+            where = f"{where}[{index}]"
+        self._paths.append(where)
+        try:
+            event = self.peek_event()
+            if len(self._paths) > LIMITS["depth"]:
+                raise self._limit(f"nested more than {LIMITS['depth']} levels deep", event.start_mark)
+            if isinstance(event, yaml.AliasEvent):
+                self._aliases += 1
+                if self._aliases > LIMITS["aliases"]:
+                    raise self._limit(f"more than {LIMITS['aliases']} YAML aliases", event.start_mark)
+            node = super().compose_node(parent, index)
+            if isinstance(event, yaml.AliasEvent):
+                weight = self._weights.get(id(node))
+                if weight is None:
+                    raise self._limit("an alias refers to a node that contains it (a recursive structure)",
+                                      event.start_mark)
+            else:
+                if isinstance(node, yaml.ScalarNode):
+                    if len(node.value) > LIMITS["scalar_chars"]:
+                        raise self._limit(f"a value of {len(node.value)} characters (at most "
+                                          f"{LIMITS['scalar_chars']})", node.start_mark)
+                    weight = 1
+                elif isinstance(node, yaml.SequenceNode):
+                    weight = 1 + sum(self._weights[id(item)] for item in node.value)
+                else:
+                    weight = 1 + sum(self._weights[id(k)] + self._weights[id(v)] for k, v in node.value)
+                self._weights[id(node)] = weight
+                self.node_paths[id(node)] = where
+            # the whole document so far, aliases expanded: the root's weight bounds every subtree's
+            if weight > LIMITS["nodes"]:
+                raise self._limit(f"more than {LIMITS['nodes']} YAML nodes with aliases expanded", event.start_mark)
+            return node
+        finally:
+            self._paths.pop()
 
 
 _SceneLoader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
@@ -466,6 +599,19 @@ def _construct_mapping(loader: _SceneLoader, node: yaml.MappingNode, deep: bool 
 _SceneLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 
 
+def _construct_int(loader: _SceneLoader, node: yaml.ScalarNode) -> int:
+    """SafeLoader's int, refusing more than LIMITS['integer_digits'] digits (int() of a 5000-digit string
+    raises a ValueError outside YAML's errors, and no physical value of a scene needs 30 digits)."""
+    digits = sum(c.isalnum() for c in node.value)
+    if digits > LIMITS["integer_digits"]:
+        raise _LimitError(loader.node_paths.get(id(node)) or "<scene>",
+                          f"an integer with {digits} digits (at most {LIMITS['integer_digits']})", node.start_mark)
+    return yaml.SafeLoader.construct_yaml_int(loader, node)
+
+
+_SceneLoader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+
+
 def _key_lines(node: yaml.Node | None, path: str = "", out: dict[str, int] | None = None) -> dict[str, int]:
     """Map every key path of a composed YAML document ("grips[1].orientation") to its 1-based line."""
     out = {} if out is None else out
@@ -496,23 +642,87 @@ def _line_of(key: str, lines: dict[str, int]) -> int | None:
     return lines.get(key) if key else None
 
 
+def _read_text(path: Path, source: str) -> str:
+    """The scene file's text: a regular file of at most LIMITS['file_bytes'] bytes, UTF-8.
+
+    Opened without blocking (a FIFO without a writer would hang a plain open) and checked with fstat on
+    the open descriptor before a byte is read, so a directory, a FIFO or a device (/dev/zero) is refused
+    by kind, and a huge file by size, whatever happens to the path meanwhile.
+    """
+    limit = LIMITS["file_bytes"]
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise SceneError(f"{source}: cannot open the scene file: {exc.strerror or type(exc).__name__}",
+                         source=source) from None
+    try:
+        info = os.fstat(fd)
+        if stat.S_ISDIR(info.st_mode):
+            raise SceneError(f"{source}: is a directory, not a scene file", source=source)
+        if not stat.S_ISREG(info.st_mode):
+            raise SceneError(f"{source}: not a regular file (a FIFO, socket or device); a scene must be a "
+                             "YAML file", source=source)
+        if info.st_size > limit:
+            raise SceneError(f"{source}: the file has {info.st_size} bytes, a scene file at most {limit} "
+                             "(msg_docs/scene_format.md, Limits)", source=source)
+        chunks, size = [], 0
+        while size <= limit:
+            chunk = os.read(fd, min(1 << 16, limit + 1 - size))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+        if size > limit:  # it grew after fstat
+            raise SceneError(f"{source}: the file has more than {limit} bytes, a scene file at most {limit} "
+                             "(msg_docs/scene_format.md, Limits)", source=source)
+    except OSError as exc:
+        raise SceneError(f"{source}: cannot read the scene file: {exc.strerror or type(exc).__name__}",
+                         source=source) from None
+    finally:
+        os.close(fd)
+    try:
+        return b"".join(chunks).decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{source}: not a UTF-8 text file ({exc.reason} at byte {exc.start})", source=source) from None
+
+
+def _compose(text: str) -> tuple[object, yaml.Node | None]:
+    """(the constructed document, its node tree) with one pass of the bounded composer."""
+    loader = _SceneLoader(text)
+    try:
+        node = loader.get_single_node()
+        data = None if node is None else loader.construct_document(node)
+        return data, node
+    finally:
+        loader.dispose()
+
+
 def load_scene(path_or_name: str | Path) -> Scene:
     """Load a scene from a file path or the name of a shipped scene (``config/scenes/<name>.yaml``).
 
     Raises:
         FileNotFoundError: neither a file nor a shipped scene (the message lists the shipped scenes).
-        SceneError: malformed YAML (message ``<file>:<line>:<column>: ...``) or a malformed scene
-            (message ``<key path>: ... (in <file>:<line>)``).
+        SceneError: a path that is not a readable regular file, or one over the size limit; malformed YAML
+            (message ``<file>:<line>:<column>: ...``); a file over one of :data:`LIMITS` (``<key path>: ...
+            (in <file>:<line>)``); or a malformed scene (message ``<key path>: ... (in <file>:<line>)``).
     """
-    path = scene_path(path_or_name)
-    source = str(path)
+    given = Path(path_or_name)
     try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise SceneError(f"{source}: not a UTF-8 text file ({exc.reason} at byte {exc.start})", source=source) from None
+        exists_as_other = given.exists() and not given.is_file()  # a directory, FIFO, device, ...
+    except OSError:
+        exists_as_other = False
+    path = given if exists_as_other else scene_path(path_or_name)
+    source = safe_text(str(path), 4096)  # control characters escaped; a path is never cut (PATH_MAX)
+    text = _read_text(path, source)
     try:
-        data = yaml.load(text, Loader=_SceneLoader)  # noqa: S506 - _SceneLoader is a SafeLoader
-        lines = _key_lines(yaml.compose(text, Loader=_SceneLoader))
+        data, root = _compose(text)
+        lines = _key_lines(root)
+    except _LimitError as exc:
+        mark = exc.problem_mark
+        line = mark.line + 1 if mark else None
+        where = f"{source}:{line}" if line else source
+        raise SceneError(f"{exc.key}: over a limit: {exc.problem} (in {where}; msg_docs/scene_format.md, "
+                         "Limits)", key=exc.key, source=source, line=line) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark else None
@@ -521,15 +731,22 @@ def load_scene(path_or_name: str | Path) -> Scene:
         cm = exc.context_mark
         if context and cm is not None and mark is not None and cm.line != mark.line:
             context += f" (started at line {cm.line + 1}, column {cm.column + 1})"
-        detail = ": ".join(p for p in (context, exc.problem) if p)
+        # context and problem only: str(exc) would quote the offending line of the file
+        detail = safe_text(": ".join(p for p in (context, exc.problem) if p))
         raise SceneError(f"{where}: YAML syntax error: {detail}", source=source, line=line) from None
-    except yaml.YAMLError as exc:
-        raise SceneError(f"{source}: YAML error: {exc}", source=source) from None
+    except yaml.YAMLError as exc:  # e.g. ReaderError: a control character in the file
+        reason = getattr(exc, "reason", "") or type(exc).__name__
+        position = getattr(exc, "position", None)
+        at = f" at character {position}" if isinstance(position, int) else ""
+        raise SceneError(f"{source}: YAML error: {safe_text(reason)}{at}", source=source) from None
     if data is None:
         raise SceneError(f"{source}: the scene file is empty", source=source)
     if not isinstance(data, dict):
         raise SceneError(f"{source}: a scene file must be a mapping of keys, got a {type(data).__name__}",
                          source=source, line=1)
+    if not any(isinstance(k, str) and k in TOP_LEVEL_KEYS for k in data):
+        raise SceneError(f"{source}: not a scene file: none of its top-level keys is a scene key "
+                         f"({', '.join(TOP_LEVEL_KEYS)})", source=source, line=1)
     try:
         return scene_from_dict(data, source=source)
     except SceneError as exc:

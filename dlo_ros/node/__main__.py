@@ -1,4 +1,4 @@
-"""``python -m dlo_ros.node [--params-file FILE] [--scene NAME] [--ros-args ...]``"""
+"""``python -m dlo_ros.node [--params-file FILE] [--scene NAME] [--check] [--ros-args ...]`` (also ``dlo node ...``)"""
 import sys
 
 from . import main

@@ -46,7 +46,7 @@ from . import conversions as conv
 from . import params as P
 from .engine import ShapeEngine, Update, build_solver, options_with_output_points
 from .health import Health, model_text, new_model_changes
-from .validation import TargetError, check_count, check_pose, normalise_frame
+from .validation import TEXT_LIMIT, TargetError, check_count, check_frame_size, check_pose, normalise_frame, safe_text
 
 try:  # optional: not on PyPI; present in a full ROS installation
     import tf2_ros  # type: ignore
@@ -95,12 +95,19 @@ class DloNode(Node):
         self._declare(P.STATIC[:-1])
         scene = self._load_scene(self.get_parameter("scene").value)
         self.scene = scene
-        self.frame_id = normalise_frame(self.get_parameter("frame_id").value or scene.frame_id or "world")
+        frame_param = self.get_parameter("frame_id").value
+        reason = P.check_value("frame_id", frame_param)  # also checked before rclpy (params.prepare_node_args)
+        if reason:
+            raise StartupError(f"parameter frame_id: {reason}")
+        self.frame_id = normalise_frame(frame_param or scene.frame_id or "world")
+        if not self.frame_id.strip("/") or P.check_value("frame_id", self.frame_id):
+            raise StartupError(f"scene frame_id '{safe_text(scene.frame_id, 60)}' ({safe_text(scene.source)}) is not a "
+                               "usable frame id; set the parameter frame_id")
         self.grip_names = [g.name for g in scene.problem.grips]
         for name in self.grip_names:
             if not _TOKEN.match(name):
-                raise StartupError(f"grip name {name!r} cannot be used in a topic name (letters, digits, '_'; "
-                                   "not starting with a digit)")
+                raise StartupError(f"grip name '{safe_text(name, 60)}' cannot be used in a topic name (letters, "
+                                   "digits, '_'; not starting with a digit)")
 
         defaults = P.scene_values(scene.problem, scene.options.output_points)
         self.declare_parameter("grip_names", defaults["grip_names"], _descriptor(P.SPECS["grip_names"]),
@@ -117,7 +124,8 @@ class DloNode(Node):
         self._model_changes_seen = 0  # len(ShapeResult.model['changes']) of the current solver, seen so far
         self._tolerance_warned = False
 
-        self.health = Health(scene=scene.name, frame_id=self.frame_id, grips=tuple(self.grip_names),
+        self.health = Health(scene=safe_text(scene.name), frame_id=safe_text(self.frame_id),
+                             grips=tuple(safe_text(n) for n in self.grip_names),
                              throttle_s=self.get_parameter("warn_throttle").value)
         self._diag_lock = threading.Lock()
         self._last_immediate_diag = 0.0
@@ -165,8 +173,8 @@ class DloNode(Node):
         self.engine = ShapeEngine(problem, options, make_solver=self._make_solver, on_update=self._on_update,
                                   on_failure=self._on_failure, on_state=self._on_state)
         self.get_logger().info(
-            f"scene '{scene.name}' ({scene.source}): grips {self.grip_names}, {len(problem.obstacles)} obstacle(s), "
-            f"frame '{self.frame_id}'; building the solver"
+            f"scene '{safe_text(scene.name)}' ({safe_text(scene.source)}): grips {self.grip_names}, "
+            f"{len(problem.obstacles)} obstacle(s), frame '{safe_text(self.frame_id)}'; building the solver"
         )
         self._t_start = time.monotonic()
         self.engine.start()
@@ -177,7 +185,7 @@ class DloNode(Node):
             try:
                 self.declare_parameter(spec.name, spec.default, _descriptor(spec))
             except ParameterException as exc:  # wrong type or out of range in the params file / -p
-                raise StartupError(f"parameter {spec.name}: {exc}") from None
+                raise StartupError(f"parameter {spec.name}: {safe_text(exc, 500)}") from None
 
     def _start_recorder(self):
         from ..recording import Recorder, RecordingUnavailable
@@ -187,7 +195,8 @@ class DloNode(Node):
         try:
             recorder = Recorder(rrd=rrd, connect=connect)
         except (RecordingUnavailable, ValueError, RuntimeError, OSError) as exc:
-            raise StartupError(f"parameters record.rrd={rrd or ''!r} / record.connect={connect or ''!r}: {exc}") from None
+            raise StartupError(f"parameters record.rrd='{safe_text(rrd or '')}' / record.connect='{safe_text(connect or '')}': "
+                               f"{safe_text(exc, 500)}") from None
         if recorder.enabled:
             try:
                 recorder.log_scene(self._record_scene, frame_id=self.frame_id)
@@ -195,7 +204,7 @@ class DloNode(Node):
                 recorder.close()
                 raise
             where = " and ".join(x for x in (str(recorder.rrd) if recorder.rrd else "", recorder.url or "") if x)
-            self.get_logger().info(f"recording to {where}")
+            self.get_logger().info(f"recording to {safe_text(where)}")
         return recorder
 
     def _load_scene(self, name: str):
@@ -204,7 +213,7 @@ class DloNode(Node):
         try:
             return load_scene(name)
         except (SceneError, FileNotFoundError, OSError) as exc:
-            raise StartupError(f"parameter scene={name!r}: {exc}") from None
+            raise StartupError(f"parameter scene='{safe_text(name)}': {safe_text(exc, 1000)}") from None
 
     def _initial_problem(self, scene):
         values = {name: self.get_parameter(name).value for name in P.STRING_FIELDS}
@@ -220,7 +229,7 @@ class DloNode(Node):
                 options = replace(options, model=model)
             options.validate()
         except ValueError as exc:
-            raise StartupError(f"parameters: {exc}") from None
+            raise StartupError(f"parameters: {safe_text(exc, 500)}") from None
         return problem, options
 
     def _make_solver(self, problem, options):
@@ -239,6 +248,7 @@ class DloNode(Node):
         return (tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w)
 
     def _checked(self, pose_msg, frame_id: str, where: str) -> GripPose:
+        check_frame_size(frame_id, where)  # a 10 MB frame_id goes no further (logs, diagnostics, tf2)
         position, orientation = conv.pose_to_arrays(pose_msg)
         pose = check_pose(position, orientation, where)  # before any transform: NaN etc. named as sent
         position, orientation = conv.in_frame(frame_id, self.frame_id, pose.position, pose.orientation, where,
@@ -272,10 +282,11 @@ class DloNode(Node):
         self.engine.submit_targets(poses, stamp, received)
 
     def _reject(self, exc: TargetError, stamp_ns: int = 0) -> None:
-        self.recorder.log_rejected(f"{exc.kind}: {exc}", update=self._record_n,
+        text = safe_text(exc)  # it may quote a frame_id or a transform error: escaped and capped
+        self.recorder.log_rejected(f"{exc.kind}: {text}", update=self._record_n,
                                    ros_time_ns=stamp_ns or self.get_clock().now().nanoseconds)
-        if self.health.error(exc.kind, str(exc), rejected=True):
-            self.get_logger().warning(f"rejected target ({exc.kind}): {exc}; the last good shape stays published")
+        if self.health.error(exc.kind, text, rejected=True):
+            self.get_logger().warning(f"rejected target ({exc.kind}): {text}; the last good shape stays published")
         self._publish_diagnostics(immediate=True)
 
     # ---- services (coroutines: they await the solver thread without blocking the executor) ----------------
@@ -317,8 +328,11 @@ class DloNode(Node):
         return response
 
     def _query_failed(self, response, reason: str):
+        reason = safe_text(reason)
         self.health.query(False, reason)
-        self.get_logger().warning(f"query_shape: empty plan: {reason}")
+        # throttled per call site by rclpy (a client can call the service in a loop); counted in the diagnostics
+        self.get_logger().warning(f"query_shape: empty plan: {reason}",
+                                  throttle_duration_sec=max(float(self.health.throttle_s), 1e-9))
         return response
 
     async def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -336,7 +350,7 @@ class DloNode(Node):
             response.success = result.ok
             response.message = (f"warm start cleared; cold solve: {result.status}: {result.message}"
                                 + ("" if result.ok else " (the last good shape stays published)"))
-        self.get_logger().info(f"reset: {response.message}")
+        self.get_logger().info(f"reset: {safe_text(response.message)}")
         return response
 
     # ---- parameters -----------------------------------------------------------------------------------------
@@ -403,11 +417,12 @@ class DloNode(Node):
                 return
             exc = future.exception()
             if exc is not None:
-                self.get_logger().error(f"applying {what} failed: {type(exc).__name__}: {exc}")
+                self.get_logger().error(f"applying {what} failed: {type(exc).__name__}: {safe_text(exc)}")
         return done
 
     # ---- outputs (worker thread) --------------------------------------------------------------------------------
     def _on_state(self, state: str) -> None:
+        state = safe_text(state)
         self.health.set_state(state)
         if state.startswith("failed"):
             self.get_logger().error(f"solver: {state}")
@@ -482,10 +497,10 @@ class DloNode(Node):
         if u is not None:
             self._record_update(u, u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds)
         self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
-        first_line = message.splitlines()[0] if message else kind
+        first_line = safe_text(message.splitlines()[0] if message else kind)
         if self.health.error(kind, first_line, rejected=False):
-            if kind == "internal":
-                self.get_logger().error(f"solver error: {message}")
+            if kind == "internal":  # with its traceback, escaped into one line (a bug report, not a log line)
+                self.get_logger().error(f"solver error: {safe_text(message, 20 * TEXT_LIMIT)}")
             else:
                 self.get_logger().warning(f"no equilibrium ({kind}): {first_line}; the last good shape stays published")
         self._publish_diagnostics(immediate=True)
@@ -514,8 +529,12 @@ class DloNode(Node):
             if hasattr(self, "engine"):
                 self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
             level, message = self.health.level_and_message()
-            status = conv.diagnostic_status(f"{self.get_fully_qualified_name()}: shape", level, message,
-                                            self.scene.name, self.health.values())
+            # every text value escaped and capped (user-controlled pieces were capped to TEXT_LIMIT where
+            # they entered; the model's own reasons may be longer, hence the larger cap here)
+            values = {k: safe_text(v, 5 * TEXT_LIMIT) if isinstance(v, str) else v
+                      for k, v in self.health.values().items()}
+            status = conv.diagnostic_status(f"{self.get_fully_qualified_name()}: shape", level, safe_text(message),
+                                            safe_text(self.scene.name), values)
             msg = DiagnosticArray(header=conv.header("", self.get_clock().now().nanoseconds), status=[status])
             try:
                 self._diag_pub.publish(msg)
@@ -538,15 +557,7 @@ class DloNode(Node):
 
 # ---- entry point --------------------------------------------------------------------------------------------------
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
-        prog="python -m dlo_ros.node",
-        description="Run the dlo node (static cable shape for grip targets). ROS arguments go after --ros-args, "
-                    "e.g. --ros-args -r __ns:=/left_cell -p scene:=my_scene.",
-    )
-    ap.add_argument("--params-file", metavar="FILE",
-                    help="ROS parameters YAML (default: the shipped config/dlo_node.yaml when it exists)")
-    ap.add_argument("--scene", metavar="NAME_OR_PATH", help="shorthand for --ros-args -p scene:=NAME_OR_PATH")
-    return ap
+    return P.node_argument_parser("python -m dlo_ros.node")
 
 
 def _default_params_file() -> str | None:
@@ -590,35 +601,45 @@ def _terminate_children() -> None:
             pass
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") -> int:
     """Run the node until Ctrl-C / SIGINT / SIGTERM / shutdown; returns the exit code.
 
     argv: command-line arguments without the program name (default: sys.argv[1:]); ROS arguments
-    (--ros-args ...) are passed through to rclpy.
+    (--ros-args ...) are passed through to rclpy after :func:`params.prepare_node_args` checked them
+    (exit code 2 and one line naming the file / parameter when they are unusable).  ``--check`` stops
+    after those checks and loading the scene.  ``prog``: the name in usage messages.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
-    from rclpy.utilities import remove_ros_args
-
-    own = remove_ros_args(["dlo_node"] + argv)[1:]
-    args = _parser().parse_args(own)
-    params_file = args.params_file or _default_params_file()
-    if args.params_file and not os.path.isfile(args.params_file):
-        print(f"dlo_node: error: --params-file {args.params_file}: no such file", file=sys.stderr)
+    # Every params file and -p value is checked here, in Python, before rcl reads them: rcl reports a
+    # broken file only as "Failed to parse global arguments", ignores misspelt names and accepts any frame.
+    try:
+        prepared = P.prepare_node_args(argv, _default_params_file(), prog=prog)
+    except P.ParamsError as exc:
+        print(f"dlo_node: error: {safe_text(exc, 1000)}", file=sys.stderr)
         return 2
-    ros_args = ["dlo_node"]
-    if params_file or args.scene:
-        ros_args.append("--ros-args")
-        if params_file:
-            ros_args += ["--params-file", params_file]
-        if args.scene:
-            ros_args += ["-p", f"scene:={args.scene}"]
-        ros_args.append("--")
-    ros_args += argv  # rcl takes the --ros-args sections (later ones win) and ignores the rest
+    if prepared.check:
+        from ..scene import SceneError, load_scene
+
+        try:
+            scene = load_scene(prepared.scene)
+        except (SceneError, FileNotFoundError) as exc:
+            print(f"dlo_node: error: parameter scene={safe_text(prepared.scene)!r}: {safe_text(exc, 1000)}",
+                  file=sys.stderr)
+            return 2
+        files = ", ".join(safe_text(f) for f in prepared.params_files) or "none"
+        print(f"dlo_node: ok: params files {files}; scene '{safe_text(scene.name)}' ({safe_text(scene.source)}), "
+              f"grips {[safe_text(g.name) for g in scene.problem.grips]}; the node would start")
+        return 0
 
     node = executor = None
     code = 0
     try:
-        rclpy.init(args=ros_args)
+        try:
+            rclpy.init(args=prepared.ros_args)
+        except Exception as exc:  # noqa: BLE001 - rcl refused the ROS arguments (the files were checked above)
+            print(f"dlo_node: error: ROS arguments {safe_text(' '.join(argv), 300)!r}: {safe_text(exc)}",
+                  file=sys.stderr)
+            return 2
         node = DloNode()
         # One thread: it only converts and checks messages (the solver has its own thread, and the
         # services await it as coroutines).  rclpy's MultiThreadedExecutor measured several ms slower
@@ -629,7 +650,7 @@ def main(argv: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as exc:
-        print(f"dlo_node: error: {exc}", file=sys.stderr)
+        print(f"dlo_node: error: {safe_text(exc, 1000)}", file=sys.stderr)
         code = 2
     except Exception:
         if rclpy.ok():

@@ -7,11 +7,17 @@ names the offending input (``grips/left/target: quaternion norm is 1.2, not 1 (t
 from __future__ import annotations
 
 import math
+import unicodedata
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
 from ..model.problem import GripPose, Problem
+
+#: Longest text (characters, after escaping) that :func:`safe_text` lets into a log line or a diagnostic value.
+TEXT_LIMIT = 200
+#: Longest ``header.frame_id`` of a target (or ``frame_id`` parameter) the node accepts; tf2 frame ids are short.
+FRAME_ID_LIMIT = 256
 
 #: |‖q‖ − 1| up to this is normalised silently; beyond it the target is rejected.
 QUATERNION_TOLERANCE = 1e-3
@@ -30,6 +36,36 @@ KINDS = (
 )
 
 
+# Unicode categories escaped by safe_text: control (incl. ESC, CR, LF, TAB), format (bidi overrides,
+# zero-width), line/paragraph separators, surrogates, private use, unassigned.
+_UNSAFE_CATEGORIES = frozenset(("Cc", "Cf", "Zl", "Zp", "Cs", "Co", "Cn"))
+
+
+def safe_text(value: object, limit: int = TEXT_LIMIT) -> str:
+    """``value`` as one printable line of at most ``limit`` characters, for logs and diagnostics.
+
+    Every character a terminal or a log parser could act on (ANSI escape sequences start with ESC,
+    newlines, carriage returns, other control and format characters) is written as a Python escape
+    (``\\x1b``, ``\\n``, ``\\u202e``), so user-controlled text (frame ids, grip names, messages that
+    quote them, file names) cannot forge log lines or recolour a terminal.  Longer text is cut and ends
+    with ``…``; only the first ``limit`` characters of ``value`` are ever looked at, so a 10 MB string
+    costs as little as a short one.
+    """
+    text = value if isinstance(value, str) else str(value)
+    out: list[str] = []
+    size = 0
+    for ch in text[: limit + 1]:
+        piece = ch.encode("unicode_escape").decode("ascii") if unicodedata.category(ch) in _UNSAFE_CATEGORIES else ch
+        out.append(piece)
+        size += len(piece)
+        if size > limit:
+            break
+    joined = "".join(out)
+    if size > limit or len(text) > limit:
+        return joined[: max(0, limit - 1)] + "…"
+    return joined
+
+
 class TargetError(ValueError):
     """A rejected target; ``kind`` is one of :data:`KINDS`."""
 
@@ -43,14 +79,23 @@ def normalise_frame(frame_id: str) -> str:
     return frame_id[1:] if frame_id.startswith("/") else frame_id
 
 
+def check_frame_size(frame_id: str, where: str) -> None:
+    """TargetError('frame') for a ``header.frame_id`` longer than :data:`FRAME_ID_LIMIT` characters (checked
+    before anything compares, transforms, logs or records it)."""
+    if len(frame_id) > FRAME_ID_LIMIT:
+        raise TargetError("frame", f"{where}: header.frame_id has {len(frame_id)} characters (at most "
+                                   f"{FRAME_ID_LIMIT}): '{safe_text(frame_id, 40)}'")
+
+
 def check_frame(frame_id: str, expected: str, where: str) -> None:
     """TargetError('frame') unless ``frame_id`` names ``expected`` (an empty frame_id is rejected too)."""
     if not frame_id:
         raise TargetError("frame", f"{where}: header.frame_id is empty; targets must be given in '{expected}'")
+    check_frame_size(frame_id, where)
     if normalise_frame(frame_id) != normalise_frame(expected):
         raise TargetError(
             "frame",
-            f"{where}: header.frame_id is '{frame_id}', not '{expected}' (no transform available: "
+            f"{where}: header.frame_id is '{safe_text(frame_id, 80)}', not '{expected}' (no transform available: "
             "send targets in the node's frame_id or make tf2 available)",
         )
 

@@ -516,7 +516,7 @@ def main(argv: list[str] | None = None) -> int:
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silence the flush at exit
         return EXIT_OK
     except OSError as exc:  # a file the command was given cannot be read or written: its name and why
-        from .node.validation import safe_text
+        from .text import safe_text
 
         name = f"{safe_text(exc.filename)}: " if exc.filename is not None else ""
         _err(f"{name}{exc.strerror or type(exc).__name__}")

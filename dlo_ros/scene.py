@@ -36,7 +36,7 @@ from .model.obstacles import OBSTACLE_TYPES, Obstacle
 from .model.problem import GRIP_MODES, Grip, GripPose, Load, Problem, RelativePosition, StringProperties
 from .model.profile import Profile
 from .model.rotations import check_quaternion, matrix_to_quat
-from .node.validation import safe_text  # pure (numpy + model): the one escaping/capping helper
+from .text import safe_text
 from .paths import scene_path
 from .solver.options import SolverOptions
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import re
-import resource
 import subprocess
 import sys
 import time
@@ -24,14 +23,19 @@ MB = 1 << 20
 
 def run_solve(path: os.PathLike | str, *extra: str, timeout: float = 60.0):
     """``python -m dlo_ros.cli solve PATH``: (return code, stderr, wall s, peak RSS of the child in MB)."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    # a wrapper process whose only child is the CLI measures that child's peak RSS (this process's
+    # RUSAGE_CHILDREN is the largest of every child the test session ever waited for)
+    wrapper = ("import resource, subprocess, sys\n"
+               "p = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n"
+               "sys.stderr.write(p.stderr)\n"
+               "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+               "sys.exit(p.returncode)\n")
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "dlo_ros.cli", "solve", str(path), *extra], cwd=ROOT,
-                          capture_output=True, text=True, timeout=timeout,
+    proc = subprocess.run([sys.executable, "-c", wrapper, sys.executable, "-m", "dlo_ros.cli", "solve", str(path),
+                           *extra], cwd=ROOT, capture_output=True, text=True, timeout=timeout,
                           env={**os.environ, "DLO_NO_COMPILE": "1"})
     wall = time.perf_counter() - t0
-    # ru_maxrss of children is the largest of any child so far: only meaningful when it grew
-    peak = max(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, before) / 1024
+    peak = int(proc.stdout.strip().splitlines()[-1]) / 1024
     return proc.returncode, proc.stderr, wall, peak
 
 

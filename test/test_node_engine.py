@@ -252,7 +252,9 @@ def test_a_real_query_leaves_the_warm_start_alone(monkeypatch):
     from dlo_ros.node.engine import build_solver as ShapeSolver  # = the node's factory
 
     extra = {"model": "full"} if "model" in SolverOptions.__dataclass_fields__ else {}  # the plain ShapeSolver
-    problem, options = make_problem(), SolverOptions(order=8, quadrature_nodes=20, output_points=11, **extra)
+    # order 8 (fast) is centimetres from equilibrium: a tolerance it meets, since this is about warm starts
+    problem, options = make_problem(), SolverOptions(order=8, quadrature_nodes=20, output_points=11,
+                                                     error_tolerance=1.0, **extra)
     runs = {}
     for with_query in (False, True):
         rec = Recorder()

@@ -1,10 +1,12 @@
 """Spectral elements along the arc length: breakpoints, nodal interpolation and quadrature.
 
 The string [0, L] is split at breakpoints 0 = b_0 < b_1 < … < b_E = L.  On element e = [b_e, b_{e+1}]
-a field is the polynomial of degree n − 1 through its values at the n Legendre–Gauss–Lobatto (LGL)
+a field is the polynomial of degree n_e − 1 through its values at the n_e Legendre–Gauss–Lobatto (LGL)
 nodes of the element; the end nodes of neighbouring elements are the same node, so every field is
 continuous across a breakpoint while its derivative may jump there (a kink at a grip, a point load or
-a jump of the material).  The unknowns of a field are its N = E (n − 1) + 1 nodal values.
+a jump of the material).  ``order`` nodes are shared out by length, n_e = max(MIN_NODES,
+⌈order · h_e / L⌉ + 1), so the unknowns of a field, N = Σ (n_e − 1) + 1, stay close to ``order``
+however many elements there are (each element's field is smooth, so it needs fewer).
 
 Integrals are taken by the LGL rule on the same nodes (the spectral element method's collocated
 quadrature, exact for polynomials of degree ≤ 2n − 3 on every element): for samples f_k at the
@@ -61,12 +63,16 @@ class NodalElement:
         return 0.5 * self.size * (C.chebvander(tau, self.count) @ self._int) @ self._vinv
 
 
-class ElementMesh:
-    """Breakpoints, global nodes and the composite quadrature of one string, with ``order`` LGL nodes
-    per element; ``quadrature`` > 0: that many Clenshaw–Curtis nodes per element instead of the
-    collocated LGL rule."""
+#: fewest LGL nodes of one element (a cubic-and-more polynomial per piece)
+MIN_NODES = 6
 
-    def __init__(self, length: float, breakpoints, order: int, quadrature: int = 0) -> None:
+
+class ElementMesh:
+    """Breakpoints, global nodes and the composite quadrature of one string: ``order`` LGL nodes shared
+    out by element length; ``extra`` > 0: n_e + ``extra`` Clenshaw–Curtis quadrature nodes per element
+    instead of the collocated LGL rule."""
+
+    def __init__(self, length: float, breakpoints, order: int, extra: int = 0) -> None:
         self.length = float(length)
         b = np.unique(np.concatenate([[0.0, self.length], np.asarray(breakpoints, dtype=float).ravel()]))
         b = b[(b >= 0.0) & (b <= self.length)]
@@ -77,13 +83,18 @@ class ElementMesh:
         if order < 3:
             raise ValueError("solver.order must be at least 3")
         self.order = int(order)
-        self.elements = [NodalElement(order, hi - lo) for lo, hi in zip(self.breakpoints[:-1], self.breakpoints[1:])]
-        n = order - 1
-        self.count = len(self.elements) * n + 1  # global nodes
+        sizes = np.diff(self.breakpoints)
+        self.counts = [order] if len(sizes) == 1 else \
+            [max(MIN_NODES, int(np.ceil(order * h / self.length)) + 1) for h in sizes]
+        self.elements = [NodalElement(n, h) for n, h in zip(self.counts, sizes)]
+        # first global node of each element (its last node is the next element's first)
+        self.first = np.concatenate([[0], np.cumsum([n - 1 for n in self.counts])]).astype(int)
+        self.count = int(self.first[-1]) + 1  # global nodes
         starts = self.breakpoints[:-1]
         self.nodes = np.concatenate([lo + el.nodes[:-1] for lo, el in zip(starts, self.elements)] + [[self.length]])
-        self.quads = [ChebyshevQuadrature(quadrature, el.size) for el in self.elements] if quadrature else None
-        m = self.per_element = quadrature or order
+        self.quads = [ChebyshevQuadrature(el.count + extra, el.size) for el in self.elements] if extra else None
+        per = [el.count + extra for el in self.elements]
+        self.quad_first = np.concatenate([[0], np.cumsum(per)]).astype(int)
         if self.quads is None:
             self.quad_nodes = np.concatenate([lo + el.nodes for lo, el in zip(starts, self.elements)])
             self.weights = np.concatenate([el.weights for el in self.elements])
@@ -95,7 +106,8 @@ class ElementMesh:
         self.B = np.zeros((self.quad_count, self.count))
         self.dB = np.zeros((self.quad_count, self.count))
         for e, el in enumerate(self.elements):
-            rows, cols = slice(e * m, (e + 1) * m), slice(e * n, e * n + order)
+            rows = slice(self.quad_first[e], self.quad_first[e + 1])
+            cols = slice(self.first[e], self.first[e] + el.count)
             if self.quads is None:
                 self.B[rows, cols], self.dB[rows, cols] = np.eye(order), el.D
             else:
@@ -121,12 +133,11 @@ class ElementMesh:
         At a breakpoint the derivative is the one-sided derivative of the element on ``side``."""
         s = np.atleast_1d(np.asarray(s, dtype=float))
         B, dB = np.zeros((s.size, self.count)), np.zeros((s.size, self.count))
-        n = self.order - 1
         which = self.element_of(s, side)
         for e in np.unique(which):
             rows = np.flatnonzero(which == e)
             b, db = self.elements[e].matrices(s[rows] - self.breakpoints[e])
-            cols = np.arange(e * n, e * n + self.order)
+            cols = np.arange(self.first[e], self.first[e] + self.elements[e].count)
             B[np.ix_(rows, cols)] = b
             dB[np.ix_(rows, cols)] = db
         return B, dB
@@ -135,10 +146,9 @@ class ElementMesh:
         """W of shape (len(s), quad_count) with ∫_0^s f ≈ W f_quad."""
         s = np.atleast_1d(np.asarray(s, dtype=float))
         W = np.zeros((s.size, self.quad_count))
-        m = self.per_element
         for e, el in enumerate(self.elements):
             lo, hi = self.breakpoints[e], self.breakpoints[e + 1]
-            cols = np.arange(e * m, (e + 1) * m)
+            cols = np.arange(self.quad_first[e], self.quad_first[e + 1])
             full = s >= hi
             W[np.ix_(full, cols)] = el.weights if self.quads is None else self.quads[e].weights
             part = (s > lo) & (s < hi)

@@ -137,10 +137,13 @@ def _settled(values: dict) -> bool:
 
 def _settle(client, values: dict, timeout: float):
     """Hold the last target (republished at 5 Hz: each solve applies the background checks' verdicts)
-    until ``_settled`` or ``timeout`` s.  Returns (diagnostic values, last centreline, seconds, solves)
-    or None when there was nothing to wait for."""
-    if _settled(values) or timeout <= 0:
+    until ``_settled`` or ``timeout`` s.  Returns (diagnostic values, last centreline or None, seconds,
+    solves), with 0 s and 0 solves when the final shape's checks were already done, or None when
+    settling is off (timeout 0)."""
+    if timeout <= 0:
         return None
+    if _settled(values):
+        return values, None, 0.0, 0
     t0, held, final = time.monotonic(), 0, None
     target = targets_at(duration())
     base = int(values.get("targets received") or 0)
@@ -249,7 +252,8 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
         events = [ev for ev in client.paths if ev.stamp_ns in published]
         settled = _settle(client, values, args.settle) if final is not None else None
         if settled is not None:
-            values, final, settle_s, held = settled
+            values, held_final, settle_s, held = settled
+            final = held_final or final
 
         latencies = [(ev.received_ns - ev.stamp_ns) / 1e6 for ev in events]
         p50, p99, pmax = _percentiles(latencies)
@@ -266,7 +270,9 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
               f"{values.get('iterations', '?')} iterations")
         print(f"  failures                {failures} failed solves, {rejected} rejected inputs"
               + (f" (last: {values.get('last error')})" if failures + rejected else ""))
-        print(f"  stable shapes           {stable} of {updates}")
+        unverified = int(values.get("unverified updates", "0") or 0)
+        print(f"  stable shapes           {stable} of {updates}"
+              + (f" ({unverified} published unverified: equilibrium residual over the tolerance)" if unverified else ""))
         print(f"  model                   {_model_summary(values)}")
         if settled is not None:
             done = _settled(values)

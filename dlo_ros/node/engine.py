@@ -213,12 +213,13 @@ class ShapeEngine:
         update = None
         try:
             result = solver.solve(targets, warm=True, commit=True)
-            problem = solver.problem if result.ok else solver.problem.with_grip_poses(targets)
+            shaped = result.ok or result.status == "unverified"  # unverified: a shape, published with a warning
+            problem = solver.problem if shaped else solver.problem.with_grip_poses(targets)
             update = Update(result, problem, trigger, stamp_ns, received_ns, merged, time.monotonic_ns())
             miss = _miss(result, problem, targets)
             if miss:
                 self._on_failure("internal", miss, update)
-            elif result.ok:
+            elif shaped:
                 self._on_update(update)
             else:
                 self._on_failure(result.status, result.message, update)
@@ -272,7 +273,7 @@ class ShapeEngine:
 
 def _miss(result: ShapeResult, problem: Problem, targets: dict[str, GripPose]) -> str:
     """validation.grip_miss for a converged result (tolerance 1e-5 L); '' otherwise."""
-    if not result.ok or len(result.points) == 0:
+    if result.status not in ("ok", "unverified") or len(result.points) == 0:
         return ""
     return grip_miss(result.points, result.s,
                      [(g.name, g.s, targets[g.name].position) for g in problem.grips if g.name in targets],

@@ -85,7 +85,7 @@ class Health:
         self.last_status = ""                      # status of the newest streaming event
         self.last_message = ""
         self.newest_is_error = False
-        self.updates = self.stable_updates = self.unstable_updates = 0
+        self.updates = self.stable_updates = self.unstable_updates = self.unverified_updates = 0
         self.failures = self.rejected = 0
         self.errors = {k: 0 for k in KINDS}
         self.last_error = self.last_error_kind = ""
@@ -117,8 +117,10 @@ class Health:
             self.updates += 1
             if result.stable is False:
                 self.unstable_updates += 1
-            else:
+            elif result.stable:
                 self.stable_updates += 1
+            if result.status == "unverified":
+                self.unverified_updates += 1
             self._update_times.append(now)
             while self._update_times and now - self._update_times[0] > RATE_WINDOW_S:
                 self._update_times.popleft()
@@ -214,7 +216,11 @@ class Health:
                 return "warn", f"no shape yet ({self.state})"
             if self.newest_is_error:
                 what = "input rejected" if self.last_status == "rejected" else f"solve failed ({self.last_status})"
-                return "warn", f"{what}: {self.last_message}; the last good shape stays published"
+                return "warn", f"{what}, the last good shape stays published: {self.last_message}"
+            if r.status == "unverified":
+                tolerance = self._tolerance_problem()
+                return "warn", (f"{tolerance}; " if tolerance else "") + \
+                    f"published shape is not a verified equilibrium: {r.message}"
             if r.stable is False:
                 return "warn", f"published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g})"
             tolerance = self._tolerance_problem()
@@ -236,6 +242,8 @@ class Health:
                 "message": self.last_message,
                 "stable": None if r is None else r.stable,
                 "min eigenvalue": None if r is None else r.min_eigenvalue,
+                "equilibrium residual m": None if r is None else r.equilibrium_residual_m,
+                "unverified updates": self.unverified_updates,
                 "solve time ms": None if r is None else r.solve_time_ms,
                 "iterations": None if r is None else r.iterations,
                 "warm started": None if r is None else r.warm_started,

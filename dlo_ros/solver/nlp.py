@@ -189,9 +189,9 @@ class StringNLP:
             if reason:
                 raise ValueError(f"solver.model: 'planar' does not fit this scene: {reason}")
         if self.director:
-            # Clenshaw–Curtis quadrature per element: order + 8 nodes resolve the normalised fields to the
+            # Clenshaw–Curtis quadrature per element: n_e + 8 nodes resolve the normalised fields to the
             # accuracy of the basis (bench/results/director_convergence.md); collocated LGL does not
-            mesh = ElementMesh(L, breakpoints(problem), options.order, min(options.quadrature_nodes, options.order + 8))
+            mesh = ElementMesh(L, breakpoints(problem), options.order, max(2, min(8, options.quadrature_nodes - options.order)))
             self.model = DirectorModel(L, mesh, self.twist, self.stretch)
         else:
             self.model = RitzModel(L, options.basis, options.order, options.quadrature_nodes, self.r0, self.twist,

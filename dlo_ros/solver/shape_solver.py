@@ -846,11 +846,16 @@ class ShapeSolver:
     def _recentre_moments(self, problem: Problem, result: ShapeResult, state: _State) -> tuple[ShapeResult, _State | None]:
         """Re-centre the point moments' pseudo-potentials on the solution until the rotation at every
         load is within MOMENT_RECENTRE_RAD = α of its reference (the pseudo-potential's gradient is then
-        M·(I + α/2 [n]×)·δθ, so the moment is applied to relative α/2); each round is a warm update
-        with the new references."""
+        M·(I + α/2 [n]×)·δθ, so the moment is applied to relative α/2), or until the mismatch stops
+        halving below 1000 α (the precision of the solves themselves); each round is a warm update with
+        the new references.  Fails when 30 rounds leave it above 1000 α."""
+        previous = np.inf
         for _ in range(MOMENT_RECENTRE_ROUNDS):
-            if self.moment_mismatch(state) <= MOMENT_RECENTRE_RAD:
+            mismatch = self.moment_mismatch(state)
+            # converged, or stalled at the precision of the solves themselves (then α/2 ≤ 5e-8 relative)
+            if mismatch <= MOMENT_RECENTRE_RAD or (mismatch <= 1e3 * MOMENT_RECENTRE_RAD and mismatch > 0.5 * previous):
                 return result, state
+            previous = mismatch
             p = self.pack_parameters(problem, state.z)
             ok, new, it, viol = self._newton(state, p)
             status = "Newton"
@@ -863,12 +868,13 @@ class ShapeSolver:
                                   result.continuation_steps)
             if result.status not in ("ok", "unverified"):
                 return result, None
-        if self.moment_mismatch(state) <= MOMENT_RECENTRE_RAD:
+        if self.moment_mismatch(state) <= 1e3 * MOMENT_RECENTRE_RAD:
             return result, state
-        result.status, result.stable = "failed", None
-        result.message = (f"point moments: the rotation at a load is still {self.moment_mismatch(state):.2g} rad from "
-                          f"the pseudo-potential's centre after {MOMENT_RECENTRE_ROUNDS} re-centring rounds")
-        return result, None
+        return ShapeResult(status="failed", message=(
+            f"point moments: the rotation at a load is still {self.moment_mismatch(state):.2g} rad from the "
+            f"pseudo-potential's centre after {MOMENT_RECENTRE_ROUNDS} re-centring rounds"),
+            iterations=result.iterations, basis=self.options.basis, order=self.options.order,
+            model=self.model_summary()), None
 
     def _solve_once(self, problem: Problem, warm: bool) -> tuple[ShapeResult, _State | None]:
         iterations, steps, last_status = 0, 0, ""
@@ -879,7 +885,7 @@ class ShapeSolver:
             iterations += it
             if ok:
                 result = self._result(problem, state, "Newton", iterations, viol, True, 0)
-                if result.stable is not False:
+                if result.stable is not False and result.status != "failed":  # (failed: a flipped branch)
                     return result, state
                 ok = False
             ok, state, last_status, it, viol = self._call(self._warm, start.z, p1, start.lam_g, start.lam_x)
@@ -897,22 +903,40 @@ class ShapeSolver:
                 k *= 2
             if ok:
                 result = self._result(problem, state, last_status, iterations, viol, True, steps)
-                return self._escape_saddle(problem, result, state)
+                if result.status != "failed":
+                    return self._escape_saddle(problem, result, state)
         z0 = self.initial_guess(problem)
         p = self.pack_parameters(problem, z0)
         ok, state, last_status, it, viol = self._call(self._cold, z0, p)
         iterations += it
-        result = self._result(problem, state, last_status, iterations, viol, False, 0)
         if ok:
-            return self._escape_saddle(problem, result, state)
-        if not ok:
-            status = "infeasible" if last_status == "Infeasible_Problem_Detected" else "failed"
-            result.status = status
-            result.message = f"IPOPT: {last_status} (constraint violation {viol:.3g})" + (
-                "; warm start and continuation also failed" if warm else ""
-            )
-            result.stable = None
-        return result, state if ok else None
+            result = self._result(problem, state, last_status, iterations, viol, False, 0)
+            if result.status != "failed":
+                return self._escape_saddle(problem, result, state)
+            last_status = result.message
+        status = "infeasible" if last_status == "Infeasible_Problem_Detected" else "failed"
+        message = f"IPOPT: {last_status} (constraint violation {viol:.3g}{self._witness(state.g)})" + (
+            "; warm start and continuation also failed" if warm else "")
+        # a failed result carries no shape, energy, wrench or eigenvalue that could be mistaken for one
+        return ShapeResult(status=status, message=message, iterations=iterations, constraint_violation=viol,
+                           warm_started=warm, basis=self.options.basis, order=self.options.order,
+                           ipopt_status=last_status, model=self.model_summary()), None
+
+    def _witness(self, g: np.ndarray | None) -> str:
+        """', most violated: <row> by <amount>' at the best point IPOPT found (the witness of an
+        'infeasible' or 'failed' verdict), '' when nothing is violated."""
+        nlp = self.nlp
+        if g is None or not g.size:
+            return ""
+        excess = np.maximum(np.maximum(nlp.lbg - g, 0.0), np.maximum(g - nlp.ubg, 0.0)) * nlp.row_scale
+        i = int(np.argmax(excess))
+        if not excess[i] > 0:
+            return ""
+        kind = nlp.row_kind[i]
+        names = {"grip": lambda k: f"grip {k[1]!r} {k[2]}", "obstacle": lambda k: f"obstacle {k[1]} at s = "
+                 f"{nlp.obstacle_s[k[2]]:.4g} m", "relative": lambda k: f"relative position {k[1]}",
+                 "norm": lambda k: f"unit norm at node {k[1]}", "fold": lambda k: f"fold guard at node {k[1]}"}
+        return f", most violated: {names.get(kind[0], str)(kind)} by {excess[i]:.3g}"
 
     def _escape_saddle(self, problem: Problem, result: ShapeResult, state: _State, depth: int = 3) -> tuple[ShapeResult, _State]:
         """A stationary point with negative reduced curvature is not a shape a string rests in.
@@ -935,6 +959,8 @@ class ShapeSolver:
                     continue
                 candidate = self._result(problem, trial, status, result.iterations, viol, result.warm_started,
                                          result.continuation_steps)
+                if candidate.status == "failed":
+                    continue
                 if candidate.energy["total"] >= result.energy["total"] - 1e-12 * abs(result.energy["total"]):
                     continue
                 if candidate.stable:
@@ -1024,9 +1050,11 @@ class ShapeSolver:
         status, message = "ok", "converged" + (f" after {steps} continuation steps" if steps else "")
         flipped = self._flipped_grips(problem, z) if nlp.director else ""
         tolerance = self.options.error_tolerance or 1e-3 * problem.string.length
-        if flipped:
-            status, message, stable = "failed", f"landed on a flipped branch: {flipped}", None
-        elif not residual.metres <= tolerance:
+        if flipped:  # not the grip's pose at all: no shape
+            return ShapeResult(status="failed", message=f"landed on a flipped branch: {flipped}", iterations=iterations,
+                               constraint_violation=violation, warm_started=warm, basis=self.options.basis,
+                               order=self.options.order, ipopt_status=ipopt_status, model=self.model_summary())
+        if not residual.metres <= tolerance:
             status, stable = "unverified", None
             message = (f"not a verified equilibrium: the equilibrium residual is {residual.metres:.3g} m, over the "
                        f"tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)")

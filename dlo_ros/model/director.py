@@ -38,6 +38,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 
+from .centreline import positions_sym, weight_energy_sym
 from .elements import ElementMesh
 
 
@@ -313,14 +314,11 @@ class DirectorModel:
             t = t * ca.repmat(ca.reshape(1 + eps, 1, -1), 3, 1)
         else:
             stretch = ca.SX(0)
-        x0 = z[0:3] * self.length
-        moment_of_weight = x0 * profiles["weight_total"] + ca.mtimes(t, profiles["weight_moments"])
-        grav = -ca.dot(gravity, moment_of_weight)
+        grav = weight_energy_sym(z[0:3] * self.length, t, profiles["weight_total"], profiles["weight_moments"], gravity)
         return bend, twist, stretch, grav, t
 
     def positions_sym(self, z: ca.SX, t: ca.SX, s: np.ndarray) -> ca.SX:
-        W = ca.DM(self.position_matrix(s))
-        return ca.repmat(z[0:3] * self.length, 1, len(s)) + ca.mtimes(t, W.T)
+        return positions_sym(z[0:3] * self.length, t, self.position_matrix(s))
 
     def node_sym(self, z: ca.SX, i: int) -> ca.SX:
         lay = self.layout

@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 
 from .basis import Basis, make_basis
+from .centreline import positions_sym, weight_energy_sym
 from .quadrature import ChebyshevQuadrature
 
 
@@ -186,15 +187,12 @@ class RitzModel:
         eps = ca.mtimes(ca.DM(self.B), ceps) if ceps is not None else None
         stretch = quadratic("K_stretch", ceps) if ceps is not None else ca.SX(0)
         t = self.tangents(phi, th, eps)
-        x0 = z[0:3] * self.length
-        moment_of_weight = x0 * profiles["weight_total"] + ca.mtimes(t, profiles["weight_moments"])
-        grav = -ca.dot(gravity, moment_of_weight)
+        grav = weight_energy_sym(z[0:3] * self.length, t, profiles["weight_total"], profiles["weight_moments"], gravity)
         return bend, twist, stretch, grav, t
 
     def positions_sym(self, z: ca.SX, t: ca.SX, s: np.ndarray) -> ca.SX:
         """Centreline positions at arc lengths s as a 3×len(s) SX expression."""
-        W = ca.DM(self.position_matrix(s))
-        return ca.repmat(z[0:3] * self.length, 1, len(s)) + ca.mtimes(t, W.T)
+        return positions_sym(z[0:3] * self.length, t, self.position_matrix(s))
 
     def angle_sym(self, z: ca.SX, name: str, s: float) -> ca.SX:
         c = self.coefficients(z, name)

@@ -22,9 +22,13 @@ fails.  Reductions and their checks:
   per model the next lower order is tried: if it is within δ/4 of the current one, it is used.  At the highest order the
   last estimate stays (with "tolerance not met" in reasons).  Known limit: with a neutral mode (no
   gravity, clamps along one axis) the shadow can drift along it and inflate the estimate.
-* reference frame (3D) — when a tangent of the checked shape comes within POLE_MIN_DEG of the Euler
-  angles' pole n = R0 e_z, the same model with n turned to the direction farthest from every tangent
-  (near the pole the basis order stops converging).
+* reference frame (3D with ``rotation: euler`` only) — when a tangent of the checked shape comes within
+  POLE_MIN_DEG of the Euler angles' pole n = R0 e_z, the same model with n turned to the direction
+  farthest from every tangent (near the pole the basis order stops converging).  The default 3D model
+  (``rotation: director``) has no pole and never turns.
+* equilibrium residual — every check also takes the checked result's strong-form residual
+  (ShapeResult.equilibrium_residual_m) as an error estimate: the order's estimate is the larger of the
+  shadow's centreline change and the residual, so a shape that is not an equilibrium raises the order.
 * obstacle samples — obstacles are enforced at ``obstacle_samples`` points (41); between them the
   string can cut into an obstacle (a chord of spacing h cuts a sphere of radius R by about h²/8R), an
   error the order shadows cannot see (they share the samples).  Each check measures the deepest cut
@@ -35,8 +39,9 @@ Switching models maps the previous solution into the new one (ShapeSolver.adopt_
 stream keeps its warm start.  Every change is kept in ``changes`` (time, reason) and reported in
 ShapeResult.model (``changed``: the changes made during that solve).
 
-Checks run synchronously inside ``solve`` (``checks='sync'``: the CLI) or on a worker thread from a
-snapshot of the solve (``checks='background'``: the node), so that a stream never waits for a build:
+Checks run on a worker thread from a snapshot of the solve (``checks='background'``, the default: the
+library and the node) or synchronously inside ``solve`` (``checks='sync'``: the CLI's one-shot
+answers), so that a stream never waits for a build:
 the worker builds the order shadow and the 3D checker into a pool of models, and a verdict to
 escalate is applied at the next ``solve`` by switching to the pooled model the check already built.
 The 3D model of a planar choice is built ahead (at start, and again after any change), so targets

@@ -1117,16 +1117,23 @@ class ShapeSolver:
     def _flipped_grips(self, problem: Problem, z: np.ndarray) -> str:
         """Grips whose orientation rows hold on the wrong sheet (t = −t_g, or d1 = −d1_g for a clamp
         with twist): the rows t·R_g e_y = t·R_g e_z = 0 allow it, the grip does not."""
-        m, bad = self.model, []
+        bad = []
         for g in problem.grips:
             if g.mode == "pin":
                 continue
-            frame = self.pose_frames(z, np.array([g.s]))[0]
+            t, d1 = self._node_frame(z, g.s)
             target = quat_to_matrix(g.pose.orientation)
-            if np.dot(frame[:, 0], target[:, 0]) < 0 or (g.mode == "clamp" and m.layout.frame
-                                                          and np.dot(frame[:, 1], target[:, 1]) < 0):
+            if np.dot(t, target[:, 0]) < 0 or (g.mode == "clamp" and d1 is not None and np.dot(d1, target[:, 1]) < 0):
                 bad.append(g.name)
         return ", ".join(bad)
+
+    def _node_frame(self, z: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """(t, d1) of a director model at the node at arc length s (d1 None for the tangent model)."""
+        v = self.model.node_values(z)[self.model.mesh.node_index(s)]
+        if self.model.layout.frame:
+            r = quat_to_matrix(v / np.linalg.norm(v))
+            return r[:, 0], r[:, 1]
+        return v / np.linalg.norm(v), None
 
     def pose_frames(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Frames (len(s), 3, 3) in the pose convention (columns: tangent, y, z) of solution z.  A
@@ -1152,11 +1159,7 @@ class ShapeSolver:
         torque = np.zeros(3)
         if rows["angles"] and self.nlp.director:
             # T = ∂U/∂θ = −Σ_r λ_r ∂g_r/∂θ with ∂(t·a)/∂θ = t × a and ∂(d1·b)/∂θ = d1 × b
-            v = self.model.node_values(z)[self.model.mesh.node_index(grip.s)]
-            if self.model.layout.frame:
-                t, d1 = quat_to_matrix(v / np.linalg.norm(v))[:, 0], quat_to_matrix(v / np.linalg.norm(v))[:, 1]
-            else:
-                t, d1 = v / np.linalg.norm(v), None
+            t, d1 = self._node_frame(z, grip.s)
             target = quat_to_matrix(grip.pose.orientation)
             lam = lam_si[rows["angles"]]
             torque = -(lam[0] * np.cross(t, target[:, 1]) + lam[1] * np.cross(t, target[:, 2]))

@@ -155,6 +155,8 @@ def format_summary(scene, result) -> str:
                 lines.append(f"contact obstacles[{i}] {ob.name or ob.type}: total force {_vec(f)} N")
         sag = max_sag(result.points, [g.pose.position for g in scene.problem.grips], scene.problem.gravity)
         lines.append(f"sag     {sag:.4g} m  (lowest point below the lowest grip, along gravity)")
+    if result.status in ("ok", "unverified"):
+        lines.append(f"check   equilibrium residual {result.equilibrium_residual_m:.3g} m (equivalent centreline error)")
     lines.append(
         f"solver  {result.iterations} iterations, {result.solve_time_ms:.1f} ms, "
         f"{result.basis} order {result.order}" + (f", IPOPT {result.ipopt_status}" if result.ipopt_status else "")

@@ -69,6 +69,8 @@ def main() -> None:
         events = [e for e in list(cl.paths)[-(cl.path_count - c0):] if e.stamp_ns in stamps]
         final = cl.diagnostic_values()
     lat = np.array([(e.received_ns - e.stamp_ns) / 1e6 for e in events])
+    t_event = np.array([(e.stamp_ns - events[0].stamp_ns) / 1e9 for e in events])
+    worst = np.argsort(lat)[::-1][:5]
     rss = np.array([s[1] for s in samples])
     after = rss[[i for i, s in enumerate(samples) if s[0] >= 60.0]]
     info = machine()
@@ -78,7 +80,8 @@ def main() -> None:
              f"{k} targets in {elapsed:.0f} s ({k / elapsed:.0f}/s), {len(events)} centrelines ({len(events) / elapsed:.1f}/s); "
              f"latency target → centreline p50 {np.percentile(lat, 50):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
              f"max {lat.max():.0f} ms; failures {final.get('failures')}, unverified shapes {final.get('unverified updates')}, "
-             f"rejected {final.get('rejected inputs')}.",
+             f"rejected {final.get('rejected inputs')}.  Largest latencies: "
+             + ", ".join(f"{lat[i]:.0f} ms at t = {t_event[i]:.1f} s" for i in worst) + ".",
              f"Model at the end: planar {final.get('model.planar')}, order {final.get('model.order')}, "
              f"rotation {final.get('model.rotation', '?')}, estimated error {final.get('model.estimated_error_m')} m "
              f"(tolerance met: {final.get('model.tolerance_met')}), {final.get('model.changes')} model changes.",

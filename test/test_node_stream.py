@@ -87,6 +87,9 @@ def test_target_gives_centreline_and_wrenches(node, reference):
     values, status = cl.wait_for_diagnostics(lambda v, st: v.get("updates") == "3", 5.0)
     assert status.level == b"\x00" and values["stable"] == "true" and values["warm started"] == "true"
     assert values["status"] == "ok" and values["errors.internal"] == "0"
+    # the node's own memory, as the OS counts it (VmRSS), is in the diagnostics
+    assert abs(float(values["rss MB"]) - proc.rss_bytes() / 2**20) < 0.2 * proc.rss_bytes() / 2**20
+    assert float(values["equilibrium residual m"]) < 1e-3
 
 
 def test_late_subscriber_gets_the_current_centreline(node):

@@ -20,6 +20,18 @@ from typing import Callable, Mapping, Sequence
 from ..solver.result import ShapeResult
 from .validation import KINDS
 
+
+def resident_mb() -> float | None:
+    """This process's resident set size [MiB] (VmRSS from /proc; None where there is no /proc)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return round(int(line.split()[1]) / 1024, 1)
+    except OSError:
+        pass
+    return None
+
 RATE_WINDOW_S = 2.0
 #: ShapeResult.model entries shown in the diagnostics as ``model.<key>`` (in this order).
 MODEL_KEYS = ("auto", "planar", "twist", "stretch", "gravity", "order", "obstacles", "obstacle_samples", "variables",
@@ -235,6 +247,7 @@ class Health:
             r = self.last
             out: dict[str, object] = {
                 "state": self.state,
+                "rss MB": resident_mb(),
                 "scene": self.scene,
                 "frame_id": self.frame_id,
                 "grips": ",".join(self.grips),

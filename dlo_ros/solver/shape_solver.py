@@ -286,6 +286,15 @@ class ShapeSolver:
                 continue
             lam[i] = value * self.nlp.row_scale[i] * self.nlp.sigma
         p = self.pack_parameters(self.problem, z)
+        if self.nlp.director:
+            # rows the other model had no twin for (unit norms, folds, the frame rows): least-squares
+            # multipliers of the equality rows at z, ∇f + J_freeᵀ λ ≈ 0 (zero ones would make the first
+            # Newton update fail and fall back to IPOPT)
+            nf = self.nlp.n_free_rows
+            _, _, grad, _ = self._kkt_free(z, p, lam[:nf])
+            jac = np.asarray(self.nlp.jac_g_fn(z, p))
+            rest = np.asarray(grad).ravel() + jac[nf:].T @ lam[nf:]  # contacts keep their matched multipliers
+            lam[:nf] = np.linalg.lstsq(jac[:nf].T, -rest, rcond=None)[0]
         with self._lock:
             self._state = _State(z, lam, np.zeros(lay.size), p)
         return True

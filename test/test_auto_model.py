@@ -240,3 +240,29 @@ def test_obstacle_samples_stay_when_nothing_is_cut():
     _, r = auto(prob, error_tolerance=0.002)
     assert r.model["obstacle_samples"] == 41
     assert not any("samples" in c for c in r.model["changes"]), r.model["changes"]
+
+
+def _stretchy(chord: float):
+    p = clamped_pair(right=(chord, 0, 0), weight=1.0, bend=0.05)
+    return replace(p, string=replace(p.string, stretch_stiffness=Profile.constant(200.0)))
+
+
+def test_extensible_string_beyond_its_length_gets_the_stretch_field():
+    """Grips 1.1 L apart on an extensible string: unreachable for the inextensible first model, so auto
+    starts extensible (cold) or switches when a stream carries the grips past L; it then agrees with the
+    full extensible model at order 24 within the tolerance."""
+    ref = ShapeSolver(_stretchy(1.1), SolverOptions(model="full", order=24, output_points=51), compile="off").solve()
+    assert ref.ok, ref.message
+    _, r = auto(_stretchy(1.1))
+    assert r.model["stretch"] and any("extensible" in reason for reason in r.model["reasons"])
+    assert np.max(np.linalg.norm(r.points - ref.points, axis=1)) <= TOL
+    solver = make_solver(_stretchy(0.9), SolverOptions(output_points=51), compile="off")
+    try:
+        assert solver.solve().ok
+        for c in np.linspace(0.94, 1.1, 5):
+            r = solver.solve({"right": ((c, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))})
+            assert r.ok, (c, r.message)
+        assert r.model["stretch"] and any("extensible" in change for change in r.model["changes"])
+        assert np.max(np.linalg.norm(r.points - ref.points, axis=1)) <= TOL
+    finally:
+        solver.close()

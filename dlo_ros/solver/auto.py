@@ -11,6 +11,8 @@ fails.  Reductions and their checks:
   plane); unstable → full model.
 * twist — ψ is an unknown only when two clamps and Rt > 0 can hold it (otherwise ω ≡ 0 exactly).
 * stretch — inextensible first; the elongation bound max|F_grip|·L / min Re > δ/2 → extensible model.
+  Grips farther apart than the inextensible string between them reaches (an extensible scene) choose
+  the extensible model at once, or switch to it when a stream carries them there.
 * gravity — dropped when D_max L⁴ / (8 Rf_min) (a cantilever's tip deflection, the largest a string
   held at ≥ 1 point sags under its weight at small deflection) is below δ/10.
 * obstacles — an obstacle is in the NLP only if the string can reach it: within max(s_g, L − s_g) + L/4
@@ -251,7 +253,10 @@ class AutoShapeSolver:
         sag = problem.string.weight_per_length.maximum * L**4 / (8 * problem.string.bend_stiffness.minimum)
         gravity = sag >= tol / 10
         reasons.append(f"gravity {'kept' if gravity else 'dropped'}: sag bound {sag:.3g} m vs {tol / 10:.3g} m")
-        return ModelChoice(planar, False, False, gravity, START_ORDER, obstacles, reasons=reasons,
+        stretch = bool(stretch_needed(problem))
+        if stretch:
+            reasons.append(stretch_needed(problem))
+        return ModelChoice(planar, False, stretch, gravity, START_ORDER, obstacles, reasons=reasons,
                            samples=self.options.obstacle_samples)
 
     @staticmethod
@@ -402,7 +407,7 @@ class AutoShapeSolver:
             self.tolerance = self.options.error_tolerance or 1e-3 * problem.string.length
             self._lower_tried.clear()
             choice = self._initial_choice(problem)
-            choice.order, choice.stretch = self.choice.order, self.choice.stretch
+            choice.order, choice.stretch = self.choice.order, self.choice.stretch or choice.stretch
             if choice.key() != self.choice.key():
                 self._switch(choice, "scene changed")
             else:
@@ -426,15 +431,19 @@ class AutoShapeSolver:
             entering = set(reach) - set(self.choice.obstacles)
             obstacles = tuple(sorted(entering | set(self.choice.obstacles)))
             why = self._not_planar(problem, obstacles, self.inner.nlp.r0, tolerance=1e-7) if self.choice.planar else ""
-            if why or entering:  # targets left the plane, or an obstacle came within reach: a richer model
+            stretch_why = "" if self.choice.stretch else stretch_needed(problem)
+            if why or entering or stretch_why:  # out of the plane, an obstacle in reach, or beyond L: a richer model
                 richer = self._full_choice(self.choice, problem) if why else replace(self.choice, obstacles=obstacles)
+                if stretch_why:
+                    richer = replace(richer, stretch=True, reasons=list(richer.reasons))
                 if not commit:  # a query must not change the streaming model: answer with the richer one
                     self._wait_for_check()
                     other = self._solver_for(richer, problem, stream=False, source=self.inner)
                     answer = other.solve({g.name: g.pose for g in problem.grips}, commit=False)
                     return self._finish(answer, t0, [], choice=richer, solver=other)
                 reasons = ([f"targets left the plane ({why}): full model"] if why else []) + (
-                    [f"obstacle(s) {sorted(entering)} came within reach"] if entering else [])
+                    [f"obstacle(s) {sorted(entering)} came within reach"] if entering else []) + (
+                    [stretch_why] if stretch_why else [])
                 self.problem = problem
                 self._switch(richer, "; ".join(reasons))
                 notes.append(self.changes[-1][1])
@@ -704,6 +713,21 @@ class AutoShapeSolver:
         if result.ok and result.contact_forces and len(c.obstacles) != len(self.problem.obstacles):
             result.contact_forces = {c.obstacles[i]: f for i, f in result.contact_forces.items() if i < len(c.obstacles)}
         return result
+
+
+def stretch_needed(problem: Problem) -> str:
+    """Why an extensible scene needs its stretch field from the start: two grips farther apart than the
+    inextensible string between them reaches ('' when none are, or when the string is inextensible)."""
+    if problem.string.stretch_stiffness is None:
+        return ""
+    grips = problem.grips
+    for i, a in enumerate(grips):
+        for b in grips[i + 1:]:
+            dist, span = float(np.linalg.norm(a.pose.position - b.pose.position)), abs(a.s - b.s)
+            if dist > span * (1 + 1e-9):
+                return (f"extensible: grips {a.name!r} and {b.name!r} are {dist:.4g} m apart, beyond the "
+                        f"{span:.4g} m the inextensible string reaches")
+    return ""
 
 
 def make_solver(problem: Problem, options: SolverOptions | None = None, compile: str = "background",

@@ -159,6 +159,16 @@ class Problem:
         g = np.asarray(self.gravity, dtype=float)
         return g / np.linalg.norm(g)
 
+    def farthest_apart(self, reach: float = 1.0) -> tuple[Grip, Grip, float, float] | None:
+        """The first pair of grips farther apart than ``reach`` times the string between them, as
+        (a, b, distance [m], reach × span [m]); None when every pair is within reach."""
+        for i, a in enumerate(self.grips):
+            for b in self.grips[i + 1:]:
+                dist, span = float(np.linalg.norm(a.pose.position - b.pose.position)), abs(a.s - b.s) * reach
+                if dist > span + 1e-12:
+                    return a, b, dist, span
+        return None
+
     def grip(self, name: str) -> Grip:
         for g in self.grips:
             if g.name == name:

@@ -718,16 +718,11 @@ class AutoShapeSolver:
 def stretch_needed(problem: Problem) -> str:
     """Why an extensible scene needs its stretch field from the start: two grips farther apart than the
     inextensible string between them reaches ('' when none are, or when the string is inextensible)."""
-    if problem.string.stretch_stiffness is None:
+    pair = problem.farthest_apart() if problem.string.stretch_stiffness is not None else None
+    if pair is None:
         return ""
-    grips = problem.grips
-    for i, a in enumerate(grips):
-        for b in grips[i + 1:]:
-            dist, span = float(np.linalg.norm(a.pose.position - b.pose.position)), abs(a.s - b.s)
-            if dist > span * (1 + 1e-9):
-                return (f"extensible: grips {a.name!r} and {b.name!r} are {dist:.4g} m apart, beyond the "
-                        f"{span:.4g} m the inextensible string reaches")
-    return ""
+    a, b, dist, span = pair
+    return f"extensible: grips {a.name!r} and {b.name!r} are {dist:.4g} m apart, beyond the {span:.4g} m the inextensible string reaches"
 
 
 def make_solver(problem: Problem, options: SolverOptions | None = None, compile: str = "background",

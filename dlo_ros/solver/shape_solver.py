@@ -415,17 +415,10 @@ class ShapeSolver:
     def unreachable_reason(self, problem: Problem) -> str:
         """Why the position constraints cannot all hold (empty string if they can)."""
         reach = 1.0 + (self.options.max_strain if problem.string.stretch_stiffness is not None else 0.0)
-        grips = problem.grips
-        for i in range(len(grips)):
-            for j in range(i + 1, len(grips)):
-                a, b = grips[i], grips[j]
-                dist = float(np.linalg.norm(a.pose.position - b.pose.position))
-                span = abs(a.s - b.s) * reach
-                if dist > span + 1e-12:
-                    return (
-                        f"grips {a.name!r} and {b.name!r} are {dist:.4g} m apart but the string between them "
-                        f"reaches at most {span:.4g} m"
-                    )
+        pair = problem.farthest_apart(reach)
+        if pair is not None:
+            a, b, dist, span = pair
+            return f"grips {a.name!r} and {b.name!r} are {dist:.4g} m apart but the string between them reaches at most {span:.4g} m"
         for k, rel in enumerate(problem.relative_positions):
             dist = float(np.linalg.norm(rel.offset))
             if dist > abs(rel.s_b - rel.s_a) * reach + 1e-12:
@@ -1108,7 +1101,7 @@ class ShapeSolver:
                 n = self.nlp.r0[:, 2]
                 moment = np.dot(moment, n) * n
             actions.append(PointAction(ld.s, point_x[len(grips) + k], np.asarray(ld.force, dtype=float), moment))
-        total = float(m.quad.weights @ d_nodes) if hasattr(m.quad, "weights") else float(w[-1] @ d_nodes)
+        total = float(m.quad.weights @ d_nodes)
         return equilibrium_residual(s, x, moment_c, w @ d_nodes, w @ (d_nodes[:, None] * x_nodes), actions + list(contacts),
                                     problem.gravity_unit, total, L, st.bend_stiffness.minimum, rf)
 

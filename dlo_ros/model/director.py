@@ -216,27 +216,13 @@ class DirectorModel:
         k0 = int(np.argmin(np.abs(fine - s_anchor)))
         if r_anchor is None:
             hint = np.array([0.0, 0.0, 1.0]) if abs(t[k0, 2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-            d1 = hint - np.dot(hint, t[k0]) * t[k0]
         else:
-            d1 = r_anchor[:, 1] - np.dot(r_anchor[:, 1], t[k0]) * t[k0]
-        d1 /= np.linalg.norm(d1)
-        d1s = np.empty_like(t)
-        d1s[k0] = d1
-        for rng in (range(k0 + 1, len(fine)), range(k0 - 1, -1, -1)):
-            prev = k0
-            for k in rng:
-                d1s[k] = _transport(d1s[prev], t[prev], t[k])
-                prev = k
-        idx = np.searchsorted(fine, s)
-        t_s, d1_s = t[idx], d1s[idx]
-        d1_s = d1_s - np.sum(d1_s * t_s, axis=1)[:, None] * t_s
-        d1_s /= np.linalg.norm(d1_s, axis=1)[:, None]
-        return np.stack([t_s, d1_s, np.cross(t_s, d1_s)], axis=-1)
+            hint = r_anchor[:, 1]
+        return transported_frames(t, k0, hint)[np.searchsorted(fine, s)]
 
     def curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
-        """Body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3).  The tangent model's
-        Ω has no twist and its bending part is t̂ × t̂' expressed in the transported frame's axes is not
-        needed: it returns (0, |κ|, 0)-free world curvature instead, see ``world_curvature``."""
+        """Body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3), of the frame model (the
+        tangent model has no body frame: ``world_curvature``)."""
         if not self.layout.frame:
             raise ValueError("the tangent model has no body frame; use world_curvature")
         b, db = self.interpolation(s, side)
@@ -372,6 +358,22 @@ class DirectorModel:
         if self.layout.stretch:
             z[self.layout.eps] = 0.0 if eps is None else eps
         return z
+
+
+def transported_frames(t: np.ndarray, k0: int, hint: np.ndarray) -> np.ndarray:
+    """Frames (K, 3, 3) (columns t, d1, d2) along unit tangents t (K, 3) without twist: d1 at k0 is
+    ``hint`` made perpendicular to t[k0], and is carried to its neighbours, both ways, by the smallest
+    rotation between consecutive tangents (a discrete d1' = −(t'·d1) t)."""
+    d1s = np.empty_like(t)
+    d1 = hint - np.dot(hint, t[k0]) * t[k0]
+    d1s[k0] = d1 / np.linalg.norm(d1)
+    for rng in (range(k0 + 1, len(t)), range(k0 - 1, -1, -1)):
+        prev = k0
+        for k in rng:
+            d1s[k] = _transport(d1s[prev], t[prev], t[k])
+            d1s[k] /= np.linalg.norm(d1s[k])
+            prev = k
+    return np.stack([t, d1s, np.cross(t, d1s)], axis=-1)
 
 
 def _transport(d1: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:

@@ -33,7 +33,7 @@ from scipy.linalg.lapack import dorgqr as _orgqr
 from scipy.linalg.lapack import dsyevr as _syevr
 from scipy.special import j0
 
-from ..model.director import _transport, frame_to_quat
+from ..model.director import frame_to_quat, transported_frames
 from ..model.problem import GripPose, Problem
 from ..model.rotations import TANGENT_X, euler_from_frame, material_frames, pose_quaternions, quat_to_matrix
 from .compiled import InterpretedFunction, NativeFunction, compiled, compiler, library_path
@@ -264,7 +264,7 @@ class ShapeSolver:
         lay = self.model.layout
         if self.nlp.director:
             if lay.frame:
-                frames = self._match_clamp_rolls(frames)
+                frames = self._match_clamp_rolls(frames, self.problem)
             z = self.model.z_from_frames(src.z[0:3] * other.model.length, frames, eps)
         else:
             z = np.zeros(lay.size)
@@ -299,12 +299,12 @@ class ShapeSolver:
             self._state = _State(z, lam, np.zeros(lay.size), p)
         return True
 
-    def _match_clamp_rolls(self, frames: np.ndarray) -> np.ndarray:
+    def _match_clamp_rolls(self, frames: np.ndarray, problem: Problem) -> np.ndarray:
         """Node frames turned about their tangents by the piecewise-linear interpolant of the roll misfit
         at the clamps (each in (−π, π]): a shape from a model without twist (or a target turned while
         the plane was held) then meets the clamps' rolls, so Newton does not settle on the flipped sheet
         d1 = −d1_g that the clamp rows also admit."""
-        clamps = sorted((g for g in self.problem.grips if g.mode == "clamp"), key=lambda g: g.s)
+        clamps = sorted((g for g in problem.grips if g.mode == "clamp"), key=lambda g: g.s)
         if not clamps:
             return frames
         mesh = self.model.mesh
@@ -644,32 +644,14 @@ class ShapeSolver:
             t = t + np.stack([np.interp(nodes, s_h, misfit[:, k]) for k in range(3)], axis=1)
             t /= np.linalg.norm(t, axis=1)[:, None]
         clamps = [gr for gr in grips if gr.mode == "clamp"]
-        first = quat_to_matrix(clamps[0].pose.orientation) if clamps else None
-        anchor_s = clamps[0].s if clamps else nodes[0]
-        k0 = int(np.argmin(np.abs(nodes - anchor_s)))
-        if first is not None:
-            d1 = first[:, 1] - np.dot(first[:, 1], t[k0]) * t[k0]
+        k0 = int(np.argmin(np.abs(nodes - (clamps[0].s if clamps else nodes[0]))))
+        if clamps:
+            hint = quat_to_matrix(clamps[0].pose.orientation)[:, 1]
         else:
             hint = r0[:, 2] if abs(np.dot(r0[:, 2], t[k0])) < 0.9 else r0[:, 0]
-            d1 = hint - np.dot(hint, t[k0]) * t[k0]
-        d1s = np.empty_like(t)
-        d1s[k0] = d1 / np.linalg.norm(d1)
-        for rng in (range(k0 + 1, len(nodes)), range(k0 - 1, -1, -1)):
-            prev = k0
-            for k in rng:
-                d1s[k] = _transport(d1s[prev], t[prev], t[k])
-                d1s[k] /= np.linalg.norm(d1s[k])
-                prev = k
-        if m.layout.frame and len(clamps) > 1:
-            rolls = []
-            for gr in clamps:
-                i = m.mesh.node_index(gr.s)
-                target = quat_to_matrix(gr.pose.orientation)[:, 1]
-                rolls.append(math.atan2(float(np.dot(np.cross(d1s[i], target), t[i])), float(np.dot(d1s[i], target))))
-            gamma = np.interp(nodes, [gr.s for gr in clamps], rolls)
-            d2s = np.cross(t, d1s)
-            d1s = np.cos(gamma)[:, None] * d1s + np.sin(gamma)[:, None] * d2s
-        frames = np.stack([t, d1s, np.cross(t, d1s)], axis=-1)
+        frames = transported_frames(t, k0, hint)
+        if m.layout.frame:
+            frames = self._match_clamp_rolls(frames, problem)
         z = m.z_from_frames(np.zeros(3), frames)
         z[0:3] = (a.pose.position - m.positions(z, np.array([a.s]))[0]) / m.length
         return z

@@ -38,12 +38,14 @@ class FakeSolver:
     def __init__(self, problem: Problem, options: SolverOptions, delay: float = 0.0):
         self.problem, self.options, self.delay = problem, options, delay
         self.calls: list[tuple[dict, bool, bool]] = []
+        self.checked_now: list[bool] = []  # check_now of every solve, in call order
         self.committed: dict | None = None
         self.active = 0
         self.max_active = 0
         self.lock = threading.Lock()
 
-    def solve(self, poses, *, warm=True, commit=True):
+    def solve(self, poses, *, warm=True, commit=True, check_now=False):
+        self.checked_now.append(check_now)
         with self.lock:
             self.active += 1
             self.max_active = max(self.max_active, self.active)
@@ -214,6 +216,41 @@ def test_reset_problem_and_options_jobs(engine_factory):
     assert built[-1].problem.string.bend_stiffness.values == (0.05,)  # the rebuilt solver keeps the problem
     assert rec.updates[-1].trigger == "rebuild"
     assert eng.change_options(lambda o: o).result(5.0).ok and len(built) == 2  # unchanged: no rebuild
+    # the re-solves after a live change are checked before they are published; streamed targets are not
+    assert built[0].checked_now == [False, False, True]  # initial, reset, parameters
+    assert built[1].checked_now == [True, True]  # rebuild, unchanged options
+    eng.submit_targets({"right": pose(0.45)}, stamp_ns=7)
+    rec.wait(lambda: rec.updates[-1].stamp_ns == 7)
+    assert built[1].checked_now[-1] is False
+
+
+def test_a_live_parameter_change_publishes_a_checked_shape(monkeypatch):
+    """solver.model 'auto' with background checks (the node's solver): the shape published after a change
+    of the bend stiffness carries a finished check (model.checked, an error estimate against the tolerance),
+    and its stability verdict; it is never the unchecked re-solve of the old model."""
+    monkeypatch.setenv("DLO_NO_COMPILE", "1")
+    from dlo_ros.node.engine import build_solver
+
+    rec = Recorder()
+    eng = ShapeEngine(make_problem(), SolverOptions(model="auto", output_points=11),
+                      make_solver=lambda p, o: build_solver(p, o, compile="off"),
+                      on_update=rec.on_update, on_failure=rec.on_failure)
+    eng.start()
+    try:
+        rec.wait(lambda: rec.updates, timeout=120)
+        assert rec.updates[0].result.model["checks"] == "background"
+        for bend in (0.04, 0.01):
+            edit = lambda p, b=bend: replace(p, string=replace(p.string, bend_stiffness=Profile.constant(b)))  # noqa: E731
+            result = eng.change_problem(edit).result(120)
+            update = rec.updates[-1]
+            assert update.trigger == "parameters" and update.result is result
+            assert result.ok and result.stable is True, result.message
+            assert result.model["checked"] is True and result.model["estimated_error_m"] is not None
+            assert result.model["tolerance_met"] is True
+            assert update.problem.string.bend_stiffness.values == (bend,)
+        assert not rec.failures
+    finally:
+        assert eng.stop(30)
 
 
 def test_build_failure_is_reported_and_jobs_fail(engine_factory):

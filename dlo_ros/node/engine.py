@@ -7,6 +7,8 @@
 * Control jobs (query, reset, parameter changes, a rebuild for a new output resolution) are queued
   and run before the next streaming solve; callers get a ``concurrent.futures.Future``.
 * A query solves with ``commit=False``: it never touches the streaming state or its warm start.
+* The re-solve after a parameter change or a rebuild is checked before it is published
+  (``solve(..., check_now=True)``); streamed targets are checked in the background.
 * A failed solve (or an exception) is reported through ``on_failure``; the last good shape stays.
 
 Callbacks run in the worker thread.  All CasADi/IPOPT calls happen in that one thread.
@@ -25,6 +27,9 @@ from ..model.problem import GripPose, Problem
 from ..solver.options import SolverOptions
 from ..solver.result import ShapeResult
 from .validation import grip_miss
+
+
+CHECKED_TRIGGERS = ("parameters", "rebuild")  # re-solves whose answer is checked before it is published
 
 
 @dataclass
@@ -212,7 +217,9 @@ class ShapeEngine:
         solver = self._solver
         update = None
         try:
-            result = solver.solve(targets, warm=True, commit=True)
+            # after a live change of values or options the answer is checked before it is published: the
+            # shape latched until the next target must not be one the changed scene makes unstable
+            result = solver.solve(targets, warm=True, commit=True, check_now=trigger in CHECKED_TRIGGERS)
             shaped = result.ok or result.status == "unverified"  # unverified: a shape, published with a warning
             problem = solver.problem if shaped else solver.problem.with_grip_poses(targets)
             update = Update(result, problem, trigger, stamp_ns, received_ns, merged, time.monotonic_ns())

@@ -414,7 +414,14 @@ class AutoShapeSolver:
                 self.inner.set_problem(self._reduced(self.choice, problem)[0])
                 self._unchecked = True
 
-    def solve(self, poses: dict | None = None, *, warm: bool = True, commit: bool = True) -> ShapeResult:
+    def solve(self, poses: dict | None = None, *, warm: bool = True, commit: bool = True,
+              check_now: bool = False) -> ShapeResult:
+        """Equilibrium with the given grip poses (missing grips keep their current target).
+
+        check_now: run the a-posteriori checks on this (committed) result before returning it, even in
+        background mode, escalating and re-solving while one fails — for a re-solve after a change of the
+        scene's values, whose answer must not be published before it is checked.  A running background
+        check is waited for first (its verdict is about an earlier solve and is dropped)."""
         with self._lock:
             t0 = time.perf_counter()
             try:
@@ -470,6 +477,10 @@ class AutoShapeSolver:
                 return self._finish(result, t0, notes)
             self.problem = problem
             self._since_check += 1
+            if check_now:
+                self._wait_for_check()
+                self._job = None
+                return self._finish(self._check_now(self._snapshot(problem, inner_poses, result), result, notes), t0, notes)
             due = self._unchecked or self._since_check >= self.options.recheck_every
             if due and (self._worker is None or self._job is None):  # a running check: snapshot later
                 snap = self._snapshot(problem, inner_poses, result)

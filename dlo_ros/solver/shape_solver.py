@@ -367,11 +367,14 @@ class ShapeSolver:
         warm: bool = True,
         commit: bool = True,
         checked: bool = False,
+        check_now: bool = False,
     ) -> ShapeResult:
         """Equilibrium with the given grip poses (missing grips keep their current target).
 
         checked: the poses are GripPose objects already validated (``with_checked_poses``) and, for a
         planar model, already found in its plane (AutoShapeSolver checks both before calling).
+        check_now: accepted for the interface AutoShapeSolver shares; a fixed model's checks (the
+        equilibrium residual and the stability eigenvalue) always run inside every solve.
         """
         with self._lock:
             t0 = time.perf_counter()

@@ -563,6 +563,7 @@ class ShapeSolver:
         grips = sorted(problem.grips, key=lambda g: g.s)
         a, b = grips[0], grips[-1]
         r0 = self.nlp.r0
+        ring = False
         if len(grips) >= 2 and np.linalg.norm(b.pose.position - a.pose.position) > 1e-9:
             chord = b.pose.position - a.pose.position
             span = b.s - a.s
@@ -571,12 +572,13 @@ class ShapeSolver:
             d = chord / np.linalg.norm(chord)
         else:
             d = quat_to_matrix(a.pose.orientation)[:, 0]
-            alpha, span = 0.0, 1.0
+            alpha, span = 0.0, (b.s - a.s if len(grips) >= 2 else 1.0)
+            ring = len(grips) >= 2  # the outer grips at one point: a ring through it (as _director_guess)
         local = r0.T @ d
         theta0 = float(np.arccos(np.clip(local[2], -1, 1)))
         phi0 = float(np.arctan2(local[1], -local[0])) if np.hypot(local[0], local[1]) > 1e-12 else 0.0
         u = np.clip((nodes - a.s) / span, 0.0, 1.0)
-        wave = alpha * np.sin(2 * np.pi * u)
+        wave = 2 * np.pi * u if ring else alpha * np.sin(2 * np.pi * u)
         # bend toward gravity, within the plane of the chord and gravity; a planar model bends in φ
         g = problem.gravity_unit
         down_perp = g - np.dot(g, d) * d
@@ -616,11 +618,12 @@ class ShapeSolver:
         t(s) = cos β d + sin β e with β = α sin 2πu (d the chord, e toward gravity), bent to meet every
         held tangent (the piecewise-linear interpolant of the misfits at the grips is added), frames
         carried along without twist from the first clamp and turned about t by the interpolated roll
-        misfit at the other clamps."""
+        misfit at the other clamps.  Outer grips at one point get a ring, β = 2πu, instead."""
         m, r0 = self.model, self.nlp.r0
         nodes = m.mesh.nodes
         grips = sorted(problem.grips, key=lambda g: g.s)
         a, b = grips[0], grips[-1]
+        ring = False
         if len(grips) >= 2 and np.linalg.norm(b.pose.position - a.pose.position) > 1e-9:
             chord = b.pose.position - a.pose.position
             span = b.s - a.s
@@ -628,7 +631,10 @@ class ShapeSolver:
             d = chord / np.linalg.norm(chord)
         else:
             d = quat_to_matrix(a.pose.orientation)[:, 0]
-            alpha, span = 0.0, 1.0
+            alpha, span = 0.0, (b.s - a.s if len(grips) >= 2 else 1.0)
+            # the outer grips at one point: a ring through it (β = 2πu), which closes and does not cross
+            # itself; the straight guess misses the second grip by the whole span
+            ring = len(grips) >= 2
         g = problem.gravity_unit
         e = g - np.dot(g, d) * d
         if np.linalg.norm(e) < 1e-6:
@@ -637,7 +643,7 @@ class ShapeSolver:
             e = np.cross(np.eye(3)[int(np.argmin(np.abs(d)))], d)
         e /= np.linalg.norm(e)
         u = np.clip((nodes - a.s) / span, 0.0, 1.0)
-        beta = alpha * np.sin(2 * np.pi * u)
+        beta = 2 * np.pi * u if ring else alpha * np.sin(2 * np.pi * u)
         t = np.cos(beta)[:, None] * d[None, :] + np.sin(beta)[:, None] * e[None, :]
         holders = [gr for gr in grips if gr.mode != "pin"]
         if holders:

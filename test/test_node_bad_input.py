@@ -29,6 +29,7 @@ def node(tmp_path):
 
 # (kind reported, words in the report, how to send it)
 CASES = [
+    ("size", "bytes is over the limit", lambda cl: cl.publish_oversized_targets(1_000_000)),
     ("non_finite", "position", lambda cl: cl.publish_targets([((NAN, 0.0, 0.4), Q), RIGHT])),
     ("non_finite", "orientation", lambda cl: cl.publish_grip("right", RIGHT[0], (0.0, 0.0, INF, 1.0))),
     ("quaternion", "zero quaternion", lambda cl: cl.publish_grip("left", LEFT[0], (0.0, 0.0, 0.0, 0.0))),
@@ -62,7 +63,7 @@ def test_bad_inputs_keep_the_last_good_shape(node):
         assert proc.alive(), proc.output()
         assert cl.path_count == n_paths, f"{kind}: a centreline was published for a bad input"
     values = cl.diagnostic_values()
-    assert values["rejected inputs"] == "8" and values["failures"] == "2" and values["updates"] == "2"
+    assert values["rejected inputs"] == "9" and values["failures"] == "2" and values["updates"] == "2"
     assert values["errors.internal"] == "0"
 
     # the last good shape is what a newcomer gets

@@ -372,6 +372,21 @@ class DloClient:
         self._targets_pub.publish(msg)
         return stamp
 
+    def publish_oversized_targets(self, n_poses: int) -> int:
+        """Publish a PoseArray of ``n_poses`` zero poses, serialised here without building them in Python
+        (one pose, its count patched, zeros appended); returns its size in bytes."""
+        from rclpy.serialization import serialize_message
+
+        from .conversions import header
+
+        msg = self._msgs["PoseArray"](header=header(self.frame_id, self._now_ns()))
+        msg.poses = [self._pose((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))]
+        one = serialize_message(msg)
+        count_at = len(one) - 56 - 4  # the sequence length precedes the single 56-byte pose
+        data = one[:count_at] + int(n_poses).to_bytes(4, "little") + bytes(56 * n_poses)
+        self._targets_pub.publish(data)
+        return len(data)
+
     def publish_grip(self, grip: str, position, orientation, *, frame_id: str | None = None,
                      stamp_ns: int | None = None) -> int:
         from .conversions import header

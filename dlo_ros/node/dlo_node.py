@@ -36,6 +36,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future as RclpyFuture
 from std_srvs.srv import Trigger
@@ -46,7 +47,8 @@ from . import conversions as conv
 from . import params as P
 from .engine import ShapeEngine, Update, build_solver, options_with_output_points
 from .health import Health, model_text, new_model_changes
-from .validation import TEXT_LIMIT, TargetError, check_count, check_frame_size, check_pose, normalise_frame, safe_text
+from .validation import (TEXT_LIMIT, TargetError, check_count, check_frame_size, check_message_size, check_pose,
+                         normalise_frame, safe_text)
 
 try:  # optional: not on PyPI; present in a full ROS installation
     import tf2_ros  # type: ignore
@@ -151,12 +153,15 @@ class DloNode(Node):
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self._wrench_pubs = {n: self.create_publisher(WrenchStamped, f"~/grips/{n}/wrench", WRENCH_QOS)
                              for n in self.grip_names}
+        # raw (serialised) targets: a message is refused by its size before rclpy builds Python objects
+        # from it (a 1,000,000-pose PoseArray took seconds and ~100 MB to deserialise)
         self._target_subs = [
             self.create_subscription(PoseStamped, f"~/grips/{n}/target",
-                                     lambda msg, n=n: self._on_grip_target(n, msg), TARGET_QOS)
+                                     lambda data, n=n: self._on_grip_target(n, data), TARGET_QOS, raw=True)
             for n in self.grip_names
         ]
-        self._targets_sub = self.create_subscription(PoseArray, "~/grips/targets", self._on_targets, TARGET_QOS)
+        self._targets_sub = self.create_subscription(PoseArray, "~/grips/targets", self._on_targets, TARGET_QOS,
+                                                     raw=True)
         # The services are coroutines that await the solver thread.  They get their own callback group:
         # a pending coroutine keeps its group busy, and the default (mutually exclusive) group must stay
         # free for the subscriptions, timers and parameter services meanwhile.
@@ -255,27 +260,39 @@ class DloNode(Node):
                                               self._tf_lookup if self._tf_buffer is not None else None)
         return GripPose(position, orientation)
 
-    def _on_grip_target(self, name: str, msg: PoseStamped) -> None:
+    def _read(self, data: bytes, kind: type, where: str):
+        """The message of type ``kind`` serialised in ``data``, once its size is within the limit."""
+        check_message_size(len(data), where)
+        try:
+            return deserialize_message(data, kind)
+        except Exception as exc:  # noqa: BLE001 - a malformed buffer is bad input, not a bug
+            raise TargetError("invalid", f"{where}: not a readable {kind.__name__} ({type(exc).__name__})") from None
+
+    def _on_grip_target(self, name: str, data: bytes) -> None:
         received = time.monotonic_ns()
         where = f"grips/{name}/target"
+        msg = None
         try:
+            msg = self._read(data, PoseStamped, where)
             pose = self._checked(msg.pose, msg.header.frame_id, where)
         except TargetError as exc:
-            self._reject(exc, conv.time_to_ns(msg.header.stamp))
+            self._reject(exc, conv.time_to_ns(msg.header.stamp) if msg is not None else 0)
             return
         stamp = conv.time_to_ns(msg.header.stamp) or None
         self.recorder.log_targets({name: pose}, update=self._record_n, ros_time_ns=stamp)
         self.engine.submit_targets({name: pose}, stamp, received)
 
-    def _on_targets(self, msg: PoseArray) -> None:
+    def _on_targets(self, data: bytes) -> None:
         received = time.monotonic_ns()
         where = "grips/targets"
+        msg = None
         try:
+            msg = self._read(data, PoseArray, where)
             check_count(len(msg.poses), self.grip_names, where)
             poses = {n: self._checked(p, msg.header.frame_id, f"{where}[{i}] ({n})")
                      for i, (n, p) in enumerate(zip(self.grip_names, msg.poses))}
         except TargetError as exc:
-            self._reject(exc, conv.time_to_ns(msg.header.stamp))
+            self._reject(exc, conv.time_to_ns(msg.header.stamp) if msg is not None else 0)
             return
         stamp = conv.time_to_ns(msg.header.stamp) or None
         self.recorder.log_targets(poses, update=self._record_n, ros_time_ns=stamp)

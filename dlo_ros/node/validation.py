@@ -17,11 +17,17 @@ from ..text import TEXT_LIMIT, safe_text  # noqa: F401  (re-exported: the node's
 #: Longest ``header.frame_id`` of a target (or ``frame_id`` parameter) the node accepts; tf2 frame ids are short.
 FRAME_ID_LIMIT = 256
 
+#: Largest serialised target message (PoseStamped or PoseArray, CDR bytes) the node deserialises: room
+#: for a 256-character frame_id and 64 poses (a scene has at most 16 grips), so a miscounted array is
+#: still named by its count, and a huge one is refused by its size before any work.
+TARGET_BYTES_LIMIT = 4096
+
 #: |‖q‖ − 1| up to this is normalised silently; beyond it the target is rejected.
 QUATERNION_TOLERANCE = 1e-3
 
 #: The kinds of bad input and failures the node reports (diagnostics keys ``errors.<kind>``).
 KINDS = (
+    "size",          # a serialised target message over TARGET_BYTES_LIMIT bytes
     "non_finite",    # NaN or infinity in a position or quaternion
     "quaternion",    # zero or not unit within QUATERNION_TOLERANCE
     "frame",         # header.frame_id is not the node's frame (and no transform is available)
@@ -46,6 +52,14 @@ class TargetError(ValueError):
 def normalise_frame(frame_id: str) -> str:
     """tf2 frame ids carry no leading slash; ``/world`` and ``world`` are the same frame."""
     return frame_id[1:] if frame_id.startswith("/") else frame_id
+
+
+def check_message_size(n_bytes: int, where: str) -> None:
+    """TargetError('size') for a serialised message over :data:`TARGET_BYTES_LIMIT` bytes (checked before it
+    is deserialised)."""
+    if n_bytes > TARGET_BYTES_LIMIT:
+        raise TargetError("size", f"{where}: message of {n_bytes} bytes is over the limit of {TARGET_BYTES_LIMIT} "
+                                  "bytes; it was not read")
 
 
 def check_frame_size(frame_id: str, where: str) -> None:

@@ -28,8 +28,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'dlo = dlo_ros.cli:main',
-            'dlo_node = dlo_ros.node:main',
+            'dlo = dlo_ros.console:dlo',
+            'dlo_node = dlo_ros.console:dlo_node',
         ],
     },
 )

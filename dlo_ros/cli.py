@@ -439,15 +439,16 @@ def _run_node(argv: list[str]) -> int:
     """``dlo node ARGS``: the node's own command line (``--params-file``, ``--scene``, ``--check``,
     ``--ros-args ...``), parsed and checked by dlo_ros.node.params.prepare_node_args; ``main`` hands
     everything after ``node`` here untouched (argparse cannot pass ``--scene`` through a subparser)."""
+    from .node.signals import stop_on_first_signal
+
+    stop_on_first_signal()  # before the node's imports (CasADi, rclpy): SIGTERM then stops it with 0, not −15
     from .node.params import node_argument_parser
 
     if any(a in ("-h", "--help") for a in argv[: argv.index("--ros-args") if "--ros-args" in argv else None]):
         node_argument_parser("dlo node").print_help()  # without importing rclpy
         return EXIT_OK
-    try:
-        from .node.dlo_node import main as node_main
-    except KeyboardInterrupt:  # Ctrl-C while importing rclpy / CasADi
-        return 0
+    from .node import main as node_main
+
     try:
         result = node_main(argv, prog="dlo node")
     except SystemExit as exc:  # argparse: an unknown option of the node's own (usage printed)
@@ -492,13 +493,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .scene import SceneError
-
     argv = list(sys.argv[1:] if argv is None else argv)
     node = SUBCOMMANDS.get("node")
     if argv[:1] == ["node"] and node is not None and node[2] is _node_handler:
         # everything after `node` is the node's (and rclpy's): argparse would refuse `--scene` here
         return _run_node(argv[1:])
+    from .scene import SceneError
+
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

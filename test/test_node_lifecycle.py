@@ -163,3 +163,59 @@ def test_remapped_name_namespace_and_a_params_file(tmp_path):
         stamp = client.publish_targets([((0.0, 0.0, 0.4), q), ((0.5, 0.0, 0.4), q)])
         assert client.wait_for_path(15.0, where=lambda e: e.stamp_ns == stamp) is not None
     assert proc.returncode == 0
+
+
+def _signalled(cmd: list[str], domain_id: int, signals: list[tuple[float, int]], timeout: float = 30.0):
+    """Run ``cmd``, send each (delay after the previous one [s], signal), and return (exit code, output)."""
+    env = dict(ros_env(domain_id))
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        for delay, sig in signals:
+            time.sleep(delay)
+            proc.send_signal(sig)
+        out, _ = proc.communicate(timeout=timeout)
+        return proc.returncode, out
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+ENTRY_POINTS = {"module": [sys.executable, "-m", "dlo_ros.node"],
+                "dlo node": [str(Path(sys.executable).parent / "dlo"), "node"]}
+
+
+@pytest.mark.parametrize("entry", list(ENTRY_POINTS))
+@pytest.mark.parametrize("delay", [0.15, 0.4])
+def test_sigterm_while_python_imports_exits_0(entry, delay):
+    """SIGTERM while Python still imports CasADi and rclpy (#13 measured −15 in the first 0.3 s)."""
+    cmd = ENTRY_POINTS[entry]
+    if not Path(cmd[0]).exists():
+        pytest.skip(f"{cmd[0]} not installed")
+    with allocate_domain_id() as lease:
+        code, out = _signalled([*cmd, *NODE_ARGS], lease.domain_id, [(delay, signal.SIGTERM)])
+    assert code == 0, out
+    assert "Traceback" not in out, out
+
+
+@pytest.mark.parametrize("when", ["importing", "running"])
+def test_a_second_sigint_while_stopping_exits_0(when):
+    """Ctrl-C twice (#13 measured −2): the second one, while the node stops or Python finalises, still
+    leaves with 0 and without a traceback."""
+    with allocate_domain_id() as lease:
+        if when == "importing":
+            signals = [(0.2, signal.SIGINT), (0.01, signal.SIGINT)]
+            code, out = _signalled([sys.executable, "-m", "dlo_ros.node", *NODE_ARGS], lease.domain_id, signals)
+        else:
+            proc = NodeProcess(list(NODE_ARGS), lease.domain_id)
+            try:
+                assert wait_until(lambda: "first shape published" in proc.output() or not proc.alive(), 60.0)
+                for gap in (0.0, 0.2):
+                    time.sleep(gap)
+                    proc.send_signal(signal.SIGINT)
+                code, out = proc.wait(20.0), proc.output()
+            finally:
+                proc.stop()
+    assert code == 0, out
+    assert "Traceback" not in out, out

@@ -11,13 +11,20 @@ package does not.
 from __future__ import annotations
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the node (``dlo_node`` console script); see dlo_ros.node.dlo_node.main."""
+def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") -> int:
+    """Entry point of the node (``dlo_node`` console script); see dlo_ros.node.dlo_node.main.  SIGINT and
+    SIGTERM stop it with exit code 0 from the first moment (see :mod:`dlo_ros.node.signals`)."""
+    from .signals import ignore_signals_at_exit, stop_on_first_signal
+
+    stop_on_first_signal()
     try:
         from .dlo_node import main as _main
-    except KeyboardInterrupt:  # Ctrl-C while importing rclpy / CasADi
+
+        return _main(argv, prog=prog)
+    except KeyboardInterrupt:  # Ctrl-C / SIGTERM while importing rclpy / CasADi
         return 0
-    return _main(argv)
+    finally:
+        ignore_signals_at_exit()
 
 
 __all__ = ["main"]

@@ -46,6 +46,7 @@ from ..model.problem import GripPose
 from . import conversions as conv
 from . import params as P
 from .engine import ShapeEngine, Update, build_solver, options_with_output_points
+from .signals import exit_on_second_signal, terminate_children
 from .health import Health, model_text, new_model_changes
 from .validation import (TEXT_LIMIT, TargetError, check_count, check_frame_size, check_message_size, check_pose,
                          normalise_frame, safe_text)
@@ -587,37 +588,6 @@ def _default_params_file() -> str | None:
     return str(path) if path.is_file() else None
 
 
-def _terminate_children() -> None:
-    """SIGTERM every descendant of this process (e.g. gcc and its cc1), deepest first (Linux /proc; best
-    effort, silent elsewhere)."""
-    import signal
-
-    parents: dict[int, int] = {}
-    try:
-        entries = os.listdir("/proc")
-    except OSError:
-        return
-    for entry in entries:
-        if not entry.isdigit():
-            continue
-        try:
-            with open(f"/proc/{entry}/stat") as f:
-                stat = f.read()
-            parents[int(entry)] = int(stat[stat.rindex(")") + 2:].split()[1])
-        except (OSError, ValueError, IndexError):
-            continue
-    found, frontier = [], [os.getpid()]
-    while frontier:
-        children = [pid for pid, ppid in parents.items() if ppid in frontier]
-        found.extend(children)
-        frontier = children
-    for pid in reversed(found):
-        try:
-            os.kill(pid, signal.SIGTERM)
-        except OSError:
-            pass
-
-
 def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") -> int:
     """Run the node until Ctrl-C / SIGINT / SIGTERM / shutdown; returns the exit code.
 
@@ -674,6 +644,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
             raise
         # SIGINT/SIGTERM during start-up shut the context down under the node's constructor: a clean stop
     finally:
+        exit_on_second_signal(code)  # a second Ctrl-C while stopping: leave at once
         stuck = False
         try:
             if node is not None:
@@ -691,7 +662,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
             # Interpreter finalisation with a thread still inside CasADi/IPOPT (C++) can abort the process
             # ("terminate called without an active exception"); leave without it, and take our own
             # children (a gcc compiling the solver's derivatives) along.
-            _terminate_children()
+            terminate_children()
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(code)

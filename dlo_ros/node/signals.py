@@ -1,0 +1,87 @@
+"""How the node process answers SIGINT and SIGTERM (no ROS here, so it can run before rclpy is imported).
+
+Contract (msg_docs/node.md, "Exit codes"): the first SIGINT or SIGTERM at any time — while Python
+imports rclpy and CasADi, while the node starts, or while it runs — stops the node cleanly with exit
+code 0.  A second one while it is stopping ends the process at once, also with 0, after terminating
+the process's children (a gcc compiling the solver); the recording may then be cut short.  Once the
+node has stopped, the process ignores both while Python finalises.  (A signal in the first few
+milliseconds, before Python runs the entry point, still has the default action.)
+
+rclpy installs its own handlers in ``rclpy.init`` (they shut the context down, which ends the spin);
+before that, :func:`stop_on_first_signal` makes SIGTERM behave like Ctrl-C (a ``KeyboardInterrupt``)
+instead of Python's default, which kills the process with −15.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_exit_code: int | None = None  # set once the process is stopping: the next signal leaves with it
+
+
+def _interrupt(signum, frame) -> None:
+    if _exit_code is not None:  # rclpy restores this handler at its shutdown; the process is stopping
+        _leave(signum, frame)
+    exit_on_second_signal(0)  # whatever catches this interrupt, a second signal leaves at once
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _leave(signum, frame) -> None:
+    terminate_children()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(_exit_code or 0)
+
+
+def stop_on_first_signal() -> None:
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (until rclpy installs its handlers)."""
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, _interrupt)
+
+
+def exit_on_second_signal(code: int) -> None:
+    """From now on (the process is stopping), SIGINT or SIGTERM terminates the children and exits with
+    ``code`` at once, without unwinding (a thread may be inside CasADi/IPOPT)."""
+    global _exit_code
+    _exit_code = code
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, _leave)
+
+
+def ignore_signals_at_exit() -> None:
+    """The process is about to exit: SIGINT and SIGTERM are ignored from now on.  CPython's finalisation
+    resets every signal with a Python handler to its default action, and a Ctrl-C during it (it can
+    take a second: DDS and CasADi teardown) killed the process with −2."""
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+
+
+def terminate_children() -> None:
+    """SIGTERM every descendant of this process (e.g. gcc and its cc1), deepest first (Linux /proc; best
+    effort, silent elsewhere)."""
+    parents: dict[int, int] = {}
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return
+    for entry in entries:
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                stat = f.read()
+            parents[int(entry)] = int(stat[stat.rindex(")") + 2:].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+    found, frontier = [], [os.getpid()]
+    while frontier:
+        children = [pid for pid, ppid in parents.items() if ppid in frontier]
+        found.extend(children)
+        frontier = children
+    for pid in reversed(found):
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except OSError:
+            pass

@@ -219,3 +219,31 @@ def test_a_second_sigint_while_stopping_exits_0(when):
                 proc.stop()
     assert code == 0, out
     assert "Traceback" not in out, out
+
+
+def test_a_clean_stop_ends_a_background_compile(tmp_path):
+    """compile: background with a cold cache: the node streams interpreted while gcc builds the compiled
+    derivatives; a SIGINT then stops the node cleanly (0, within the stop timeout) and no gcc outlives
+    it (#13: compiler processes kept running after a clean stop)."""
+    import shutil
+
+    if shutil.which("gcc") is None and shutil.which("cc") is None:
+        pytest.skip("no C compiler")
+    log = tmp_path / "node.log"
+    env = dict(os.environ, DLO_CACHE_DIR=str(tmp_path / "cache"))
+    env.pop("DLO_NO_COMPILE", None)
+    with allocate_domain_id() as lease:
+        proc = NodeProcess(["--scene", TEST_SCENE, "--ros-args", "-p", "compile:=background"], lease.domain_id,
+                           log_path=log, env=env)
+        try:
+            compiling = lambda: any(p.split()[1] in ("gcc", "cc", "cc1") for p in group_processes(proc.pid))  # noqa: E731
+            assert wait_until(lambda: compiling() or not proc.alive(), 60.0), proc.output()
+            assert proc.alive(), proc.output()
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(20.0) == 0, proc.output()
+            # at once: an orphaned gcc ends by itself a little later (it finishes or loses its pipe)
+            assert wait_until(lambda: not group_processes(proc.pid), 0.3), f"left running: {group_processes(proc.pid)}"
+        finally:
+            proc.stop()
+    text = log.read_text()
+    assert "Traceback" not in text and "terminate called" not in text, text

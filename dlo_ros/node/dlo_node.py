@@ -658,6 +658,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
             rclpy.try_shutdown()
         except KeyboardInterrupt:  # a second Ctrl-C while shutting down
             pass
+        terminate_children()  # e.g. a background compile's gcc: nothing the node started outlives it
         if stuck:
             # Interpreter finalisation with a thread still inside CasADi/IPOPT (C++) can abort the process
             # ("terminate called without an active exception"); leave without it, and take our own

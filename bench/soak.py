@@ -1,19 +1,26 @@
-"""Node soak: targets at 100 Hz on a gentle 3D path for minutes, over real DDS; RSS, latency, model.
+"""Node soak: targets at 100 Hz on a gentle 3D path for minutes, with live parameter changes and
+concurrent shape queries, over real DDS; RSS, latency, failures, stamp/shape agreement, model.
 
-    bash scripts/dlo-env run python bench/soak.py [--seconds 300] [--rate 100] [--out bench/results/soak.md]
+    bash scripts/dlo-env run python bench/soak.py [--seconds 600] [--rate 100] [--param-every 60]
+        [--query-clients 2] [--query-rate 2] [--out bench/results/soak.md]
 
 The node runs the default scene with ``solver.model: auto`` (interpreted derivatives) in its own process
 and ROS domain; this process publishes the right grip's targets along a closed 3D path (±5 cm,
-±0.2 rad of yaw, ±0.6 rad of twist, one loop per 20 s) and receives the centrelines.  Every 10 s it
-samples the node's RSS and its diagnostics (model, order, estimated error, failures).  Reported: RSS
-over time, its change after the first minute, latency target → centreline p50/p99/max, centrelines per
-second, failures and unverified shapes, and the model the node ends on.
+±0.2 rad of yaw, ±0.6 rad of twist, one loop per 20 s) and receives the centrelines.  Every
+``--param-every`` s it changes ``string.bend_stiffness`` (0.02 ↔ 0.025 N·m²) through the parameter
+service; ``--query-clients`` clients (each its own DDS participant) call ``~/query_shape`` at
+``--query-rate`` Hz each with the right grip 2–4 cm from the current target.  Every 10 s it samples the
+node's RSS and its diagnostics.  Reported: RSS over time, its change after the first minute, latency
+target → centreline p50/p99/max, centrelines per second, failures and unverified shapes, query latency
+and answers, and every centreline whose stamp and shape disagree (its right end not at the target
+published with that stamp by more than 1e-6 m).
 """
 from __future__ import annotations
 
 import argparse
 import math
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -24,7 +31,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from common import machine  # noqa: E402
 
-from dlo_ros.node.client import running_node  # noqa: E402
+from dlo_ros.node.client import DloClient, running_node  # noqa: E402
 
 Q0 = (0.0, 0.0, 0.0, 1.0)
 LEFT = ((0.0, 0.0, 0.4), Q0)
@@ -44,19 +51,64 @@ def target(t: float):
     return [LEFT, (pos, q)]
 
 
+class Queries(threading.Thread):
+    """One query client: ~/query_shape at ``rate`` Hz around the stream's current target, until stopped."""
+
+    def __init__(self, domain_id: int, index: int, rate: float, now):
+        super().__init__(name=f"soak-query-{index}", daemon=True)
+        self.domain_id, self.index, self.rate, self.now = domain_id, index, rate, now
+        self.latency_ms: list[float] = []
+        self.answered = self.empty = self.errors = 0
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        rng = np.random.default_rng(self.index)
+        with DloClient(self.domain_id, client_name=f"soak_query_{self.index}") as cl:
+            while not self.stop.wait(1.0 / self.rate):
+                left, (pos, q) = target(self.now())
+                offset = rng.normal(size=3)
+                goal = (tuple(np.asarray(pos) + 0.02 * (1 + rng.random()) * offset / np.linalg.norm(offset)), q)
+                t0 = time.monotonic()
+                try:
+                    points, _ = cl.query(left, goal, timeout=30.0)
+                except Exception:  # noqa: BLE001 - counted: a timeout or a service error
+                    self.errors += 1
+                    continue
+                self.latency_ms.append((time.monotonic() - t0) * 1e3)
+                if len(points):
+                    self.answered += 1
+                else:
+                    self.empty += 1
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seconds", type=float, default=300.0)
+    ap.add_argument("--seconds", type=float, default=600.0)
     ap.add_argument("--rate", type=float, default=100.0)
+    ap.add_argument("--param-every", type=float, default=60.0, help="seconds between parameter changes (0: none)")
+    ap.add_argument("--query-clients", type=int, default=2)
+    ap.add_argument("--query-rate", type=float, default=2.0, help="queries per second per client")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "soak.md"))
     args = ap.parse_args()
-    samples, stamps = [], set()
+    samples, sent, changes = [], {}, []
     with running_node("--ros-args", "-p", "compile:=off", startup_timeout=300.0, client_name="soak") as (proc, cl):
         c0, start = cl.path_count, time.monotonic()
+        clock = lambda: time.monotonic() - start  # noqa: E731
+        queries = [Queries(proc.domain_id, i, args.query_rate, clock) for i in range(args.query_clients)]
+        for q in queries:
+            q.start()
         k, next_sample = 0, 0.0
-        while (now := time.monotonic() - start) < args.seconds:
-            stamps.add(cl.publish_targets(target(now)))
+        next_change = args.param_every if args.param_every > 0 else math.inf
+        while (now := clock()) < args.seconds:
+            poses = target(now)
+            sent[cl.publish_targets(poses)] = np.asarray(poses[1][0])
             k += 1
+            if now >= next_change:
+                bend = 0.025 if len(changes) % 2 == 0 else 0.02
+                t0 = time.monotonic()
+                ok, reason = cl.set_parameters({"string.bend_stiffness": bend})[0]
+                changes.append((now, bend, ok, reason, (time.monotonic() - t0) * 1e3))
+                next_change += args.param_every
             if now >= next_sample:
                 v = cl.diagnostic_values()
                 samples.append((now, proc.rss_bytes() / 2**20, cl.path_count - c0, v.get("model.order", ""),
@@ -64,31 +116,55 @@ def main() -> None:
                                 v.get("failures", ""), v.get("unverified updates", "")))
                 next_sample += 10.0
             time.sleep(max(0.0, start + k / args.rate - time.monotonic()))
-        elapsed = time.monotonic() - start
+        elapsed = clock()
+        for q in queries:
+            q.stop.set()
+        for q in queries:
+            q.join(60.0)
         time.sleep(1.0)
-        events = [e for e in list(cl.paths)[-(cl.path_count - c0):] if e.stamp_ns in stamps]
+        events = [e for e in list(cl.paths)[-(cl.path_count - c0):] if e.stamp_ns in sent]
         final = cl.diagnostic_values()
+    miss = np.array([np.linalg.norm(e.points[-1] - sent[e.stamp_ns]) for e in events])
+    mismatch = [(e, m) for e, m in zip(events, miss) if m > 1e-6]
     lat = np.array([(e.received_ns - e.stamp_ns) / 1e6 for e in events])
     t_event = np.array([(e.stamp_ns - events[0].stamp_ns) / 1e9 for e in events])
     worst = np.argsort(lat)[::-1][:5]
     rss = np.array([s[1] for s in samples])
     after = rss[[i for i, s in enumerate(samples) if s[0] >= 60.0]]
+    qlat = np.concatenate([q.latency_ms for q in queries]) if queries else np.array([])
     info = machine()
     lines = ["# Node soak", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, Python {info.get('python')}; git {info.get('git', '?')}.",
-             f"Command: `bash scripts/dlo-env run python bench/soak.py --seconds {args.seconds:g} --rate {args.rate:g}`", "",
+             f"Command: `bash scripts/dlo-env run python bench/soak.py --seconds {args.seconds:g} --rate {args.rate:g} "
+             f"--param-every {args.param_every:g} --query-clients {args.query_clients} --query-rate {args.query_rate:g}`", "",
              f"{k} targets in {elapsed:.0f} s ({k / elapsed:.0f}/s), {len(events)} centrelines ({len(events) / elapsed:.1f}/s); "
              f"latency target → centreline p50 {np.percentile(lat, 50):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
              f"max {lat.max():.0f} ms; failures {final.get('failures')}, unverified shapes {final.get('unverified updates')}, "
              f"rejected {final.get('rejected inputs')}.  Largest latencies: "
              + ", ".join(f"{lat[i]:.0f} ms at t = {t_event[i]:.1f} s" for i in worst) + ".",
+             f"Centrelines whose right end is not at the target sent with their stamp (> 1e-6 m): {len(mismatch)}"
+             + (": " + ", ".join(f"{m * 1e3:.3g} mm at t = {(e.stamp_ns - events[0].stamp_ns) / 1e9:.1f} s"
+                                 for e, m in mismatch[:10]) if mismatch else "") + ".",
              f"Model at the end: planar {final.get('model.planar')}, order {final.get('model.order')}, "
              f"rotation {final.get('model.rotation', '?')}, estimated error {final.get('model.estimated_error_m')} m "
              f"(tolerance met: {final.get('model.tolerance_met')}), {final.get('model.changes')} model changes.",
              f"RSS: {rss[0]:.0f} MB at start, {rss.max():.0f} MB peak; after the first minute "
-             f"{after.min():.0f}–{after.max():.0f} MB ({(after.max() - after.min()) / after.mean() * 100:.1f} % spread).", "",
-             "| t s | RSS MB | centrelines | order | planar | estimated error m | failures | unverified |",
-             "|---|---|---|---|---|---|---|---|"]
+             f"{after.min():.0f}–{after.max():.0f} MB ({(after.max() - after.min()) / after.mean() * 100:.1f} % spread)."
+             if len(after) else f"RSS: {rss[0]:.0f} MB at start, {rss.max():.0f} MB peak (run shorter than a minute)."]
+    if queries:
+        n_q = sum(q.answered + q.empty + q.errors for q in queries)
+        lines.append(f"Queries: {n_q} from {len(queries)} clients; {sum(q.answered for q in queries)} answered with a "
+                     f"shape, {sum(q.empty for q in queries)} refused (no stable equilibrium), "
+                     f"{sum(q.errors for q in queries)} errors or timeouts; latency p50 "
+                     f"{np.percentile(qlat, 50) if len(qlat) else float('nan'):.0f} ms, p99 "
+                     f"{np.percentile(qlat, 99) if len(qlat) else float('nan'):.0f} ms, max "
+                     f"{qlat.max() if len(qlat) else float('nan'):.0f} ms.")
+    if changes:
+        lines.append("Parameter changes (string.bend_stiffness): " + "; ".join(
+            f"t = {t:.0f} s → {b:g} ({'accepted' if ok else 'refused: ' + reason}, {ms:.0f} ms)"
+            for t, b, ok, reason, ms in changes) + ".")
+    lines += ["", "| t s | RSS MB | centrelines | order | planar | estimated error m | failures | unverified |",
+              "|---|---|---|---|---|---|---|---|"]
     lines += [f"| {s[0]:.0f} | {s[1]:.0f} | {s[2]} | {s[3]} | {s[4]} | {s[5]} | {s[6]} | {s[7]} |" for s in samples]
     Path(args.out).write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

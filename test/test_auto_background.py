@@ -153,3 +153,46 @@ def test_background_checks_lower_the_gil_switch_interval_and_never_raise_it():
         assert sys.getswitchinterval() == pytest.approx(SWITCH_INTERVAL_S / 2)
     finally:
         sys.setswitchinterval(before)
+
+
+def test_the_models_kept_are_capped_and_the_evicted_ones_freed(monkeypatch):
+    """Memory (#13): auto keeps at most POOL_SIZE built models, whatever a long session goes through, and
+    the ones it drops are freed (no reference left anywhere).  Counted by instrumentation: weak
+    references to every ShapeSolver built, alive after a garbage collection."""
+    import gc
+    import weakref
+    from dataclasses import replace
+
+    from dlo_ros.model import Obstacle, Profile
+
+    built: list[weakref.ref] = []
+    original = ShapeSolver.__init__
+
+    def recording_init(self, *args, **kwargs):
+        built.append(weakref.ref(self))
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(shape_solver_module.ShapeSolver, "__init__", recording_init)
+    base = hanging()
+    table = Obstacle("halfspace", np.array([0.0, 0.0, 0.25, 0.0, 0.0, 1.0]), "table")  # within reach of the sag
+    variants = [base, replace(base, string=replace(base.string, weight_per_length=Profile.constant(0.0))),
+                replace(base, obstacles=(table,))]
+    solver = make_solver(base, SolverOptions(output_points=21), compile="off", checks="background")
+    try:
+        q = base.grip("right").pose.orientation
+        for round_ in range(3):
+            for problem in variants:
+                solver.set_problem(problem)
+                for y in (0.0, 0.03, 0.0):  # in the plane, out of it (3D), and back
+                    r = solver.solve({"right": (np.array([0.55, y, 0.4]), q)})
+                    # order 12 on the table is just over the tolerance (unverified, honest) until a check
+                    # raises it; a warm IPOPT answer on a folded field (residual of metres) was seen here
+                    assert r.ok or r.status == "unverified" and r.equilibrium_residual_m < 0.01, r.message
+                stream_until_checked(solver, problem, steps=3000)  # 3D checks with an obstacle take seconds
+        gc.collect()
+        alive = [w for w in built if w() is not None]
+        assert len(built) > AutoShapeSolver.POOL_SIZE, "the session did not build enough models to test the cap"
+        print("MODELS", len(alive), len(built))
+        assert len(alive) <= AutoShapeSolver.POOL_SIZE, (len(alive), len(built))
+    finally:
+        solver.close()

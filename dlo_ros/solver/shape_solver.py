@@ -871,6 +871,7 @@ class ShapeSolver:
 
     def _solve_once(self, problem: Problem, warm: bool) -> tuple[ShapeResult, _State | None]:
         iterations, steps, last_status = 0, 0, ""
+        unverified: tuple[ShapeResult, _State] | None = None  # IPOPT's warm answer, over the residual tolerance
         if warm:
             start = self._state
             p1 = self.pack_parameters(problem, start.z)
@@ -896,17 +897,29 @@ class ShapeSolver:
                 k *= 2
             if ok:
                 result = self._result(problem, state, last_status, iterations, viol, True, steps)
-                if result.status != "failed":
+                if result.status == "ok":
                     return self._escape_saddle(problem, result, state)
+                if result.status == "unverified":
+                    # IPOPT from the warm start can end on a spurious stationary point of the discrete
+                    # problem (a folded field, residual of metres); the cold guess decides, the smaller
+                    # residual wins
+                    unverified = (result, state)
         z0 = self.initial_guess(problem)
         p = self.pack_parameters(problem, z0)
         ok, state, last_status, it, viol = self._call(self._cold, z0, p)
         iterations += it
         if ok:
             result = self._result(problem, state, last_status, iterations, viol, False, 0)
+            if unverified is not None and not (result.status == "ok" or result.status == "unverified" and
+                                               result.equilibrium_residual_m < unverified[0].equilibrium_residual_m):
+                result, state = unverified
+                result.iterations = iterations
             if result.status != "failed":
                 return self._escape_saddle(problem, result, state)
             last_status = result.message
+        elif unverified is not None:
+            unverified[0].iterations = iterations
+            return self._escape_saddle(problem, *unverified)
         status = "infeasible" if last_status == "Infeasible_Problem_Detected" else "failed"
         message = f"IPOPT: {last_status} (constraint violation {viol:.3g}{self._witness(state.g)})" + (
             "; warm start and continuation also failed" if warm else "")

@@ -397,6 +397,13 @@ class AutoShapeSolver:
                 self._worker.shutdown(wait=True, cancel_futures=True)
                 self._worker, self._job, self.checks = None, None, "sync"
 
+    def query_many(self, targets, executor=None) -> list[ShapeResult]:
+        """Answers to many independent queries in worker processes (see ShapeSolver.query_many); each
+        worker runs its own auto solver of this scene, with inline checks."""
+        from .batch import query_many
+
+        return query_many(self.problem, self.options, targets, executor)
+
     def set_problem(self, problem: Problem) -> None:
         problem.validate()
         with self._lock:

@@ -399,6 +399,14 @@ class ShapeSolver:
                 self.problem = problem
             return result
 
+    def query_many(self, targets, executor=None) -> list[ShapeResult]:
+        """Answers to many independent queries (``{grip: pose}`` each) in worker processes, in order, with
+        this solver's scene and options; this solver and its warm start are untouched
+        (dlo_ros.solver.batch.query_many: ``executor`` defaults to a process pool on every core)."""
+        from .batch import query_many
+
+        return query_many(self.problem, self.options, targets, executor)
+
     # ---- input handling -----------------------------------------------------------------------------
     def _with_poses(self, poses: dict | None) -> Problem:
         return with_checked_poses(self.problem, poses)

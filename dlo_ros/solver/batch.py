@@ -1,0 +1,119 @@
+"""Many independent shape queries at once, on every core (or a cluster).
+
+``query_many(problem, options, targets)`` answers each entry of ``targets`` (grip poses, as for
+``solve``) as a solver of ``problem``/``options`` holding the shape at ``problem``'s grip poses answers
+``solve(poses, commit=False)``, but in worker processes: the targets are cut into one contiguous
+chunk per worker; each worker solves the held shape once (cold, from the scene's poses) and starts
+every query of the chunk from it, so an answer does not depend on which worker gave it or on the
+other queries.  The caller's solver and its warm start are never touched.  (The caller's own held
+shape came from its stream; where a scene has several equilibria at the held poses, the worker's
+cold one can be another branch.)
+
+Workers keep their solvers between calls (``_WORKER_SOLVERS``, keyed by the scene's structure, at most
+``WORKER_SOLVERS`` per process), so only the first call pays for the build.  Workers never start a C
+compiler: they use compiled derivatives only when the cache already has them (``compile='cached'``).
+
+``executor``: any ``concurrent.futures.Executor`` whose workers can import dlo_ros — by default a
+process pool of ``os.cpu_count()`` spawned workers kept for the life of the process
+(:func:`default_executor`); a Dask ``distributed`` client's ``client.get_executor()`` runs the same
+call on a cluster.  Threads would not help: an interpreted CasADi call holds the GIL.
+"""
+from __future__ import annotations
+
+import atexit
+import collections
+import multiprocessing
+import os
+import pickle
+import threading
+from concurrent.futures import Executor, ProcessPoolExecutor
+from typing import Mapping, Sequence
+
+from ..model.problem import Problem
+from .options import SolverOptions
+from .result import ShapeResult
+
+#: Solvers a worker process keeps (least recently used dropped first).
+WORKER_SOLVERS = 2
+
+_WORKER_SOLVERS: "collections.OrderedDict[bytes, tuple[bytes, object]]" = collections.OrderedDict()
+_default: ProcessPoolExecutor | None = None
+_default_lock = threading.Lock()
+_worker_lock = threading.Lock()  # a thread executor's workers share this process's solvers: one at a time
+
+
+def default_executor() -> ProcessPoolExecutor:
+    """The process pool ``query_many`` uses when given none: ``os.cpu_count()`` workers started with
+    'spawn' (a fork of a process with CasADi and DDS threads is unsafe), shut down at exit."""
+    global _default
+    with _default_lock:
+        if _default is None:
+            _default = ProcessPoolExecutor(max_workers=os.cpu_count() or 1,
+                                           mp_context=multiprocessing.get_context("spawn"))
+            atexit.register(_default.shutdown, wait=False, cancel_futures=True)
+        return _default
+
+
+def query_many(problem: Problem, options: SolverOptions | None, targets: Sequence[Mapping],
+               executor: Executor | None = None, *, chunks: int | None = None,
+               compile: str = "cached") -> list[ShapeResult]:
+    """One ShapeResult per entry of ``targets`` (each a ``{grip name: pose}`` mapping, as for
+    ``solve``), in order.  ``chunks``: how many pieces the targets are cut into (default: the
+    executor's worker count, or ``os.cpu_count()``).  A query that fails answers with its status and
+    message, as ``solve`` does; the others are unaffected."""
+    options = options or SolverOptions()
+    problem.validate()
+    options.validate()
+    targets = [dict(t) for t in targets]
+    if not targets:
+        return []
+    executor = executor or default_executor()
+    n = chunks or getattr(executor, "_max_workers", None) or os.cpu_count() or 1
+    n = max(1, min(int(n), len(targets)))
+    bounds = [round(i * len(targets) / n) for i in range(n + 1)]
+    payload = pickle.dumps((problem, options), protocol=pickle.HIGHEST_PROTOCOL)
+    futures = [executor.submit(solve_chunk, payload, targets[a:b], compile)
+               for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+    return [result for future in futures for result in future.result()]
+
+
+def solve_chunk(scene: bytes, targets: list[dict], compile: str = "cached") -> list[ShapeResult]:
+    """(worker) Solve ``targets`` with this process's solver of the pickled (problem, options)
+    ``scene``, each from the held shape at the scene's poses (``commit=False``); the solver is kept
+    for the next call."""
+    problem, options = pickle.loads(scene)
+    results = []
+    with _worker_lock:  # one CasADi/IPOPT solver must never be called from two threads at once
+        solver = _worker_solver(scene, problem, options, compile)
+        for poses in targets:
+            try:
+                result = solver.solve(poses, warm=True, commit=False)
+            except Exception as exc:  # noqa: BLE001 - one bad query must not lose the chunk's other answers
+                result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
+            results.append(result)
+    return results
+
+
+def _worker_solver(scene: bytes, problem: Problem, options: SolverOptions, compile: str):
+    """This process's solver for the scene's structure, built once, holding the shape at the scene's
+    values and poses (re-solved from its previous shape when they change)."""
+    from .auto import make_solver
+    from .shape_solver import structure_key
+
+    key = pickle.dumps((structure_key(problem, options), options), protocol=pickle.HIGHEST_PROTOCOL)
+    entry = _WORKER_SOLVERS.pop(key, None)
+    if entry is None:
+        solver = make_solver(problem, options, compile=compile, checks="sync")
+        solver.solve()  # the held shape: every query starts from it
+    else:
+        values, solver = entry
+        if values != scene:
+            solver.set_problem(problem)
+            solver.solve()
+    _WORKER_SOLVERS[key] = (scene, solver)
+    while len(_WORKER_SOLVERS) > WORKER_SOLVERS:
+        _, (_, old) = _WORKER_SOLVERS.popitem(last=False)
+        close = getattr(old, "close", None)
+        if close is not None:
+            close()
+    return solver

@@ -1,0 +1,91 @@
+"""Many queries at once (dlo_ros.solver.batch, #14): the batch answers equal the single answers
+(``solve(poses, commit=False)``), in order, with any executor; the caller's stream is untouched; a bad
+query answers with its status without losing the others."""
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from dlo_ros.scene import load_scene
+from dlo_ros.solver import make_solver
+from dlo_ros.solver.batch import query_many
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("default_cable")
+
+
+def random_targets(problem, n, radius=0.1, seed=0):
+    rng = np.random.default_rng(seed)
+    right = problem.grip("right").pose
+    out = []
+    for _ in range(n):
+        d = rng.normal(size=3)
+        out.append({"right": (right.position + d * rng.random() * radius / np.linalg.norm(d), right.orientation)})
+    return out
+
+
+def assert_same_answers(batch, single):
+    assert [r.status for r in batch] == [r.status for r in single]
+    for a, b in zip(batch, single):
+        if a.ok:
+            np.testing.assert_allclose(a.points, b.points, atol=1e-9)
+            assert a.stable == b.stable
+
+
+@pytest.mark.parametrize("model", ["auto", "full"])
+def test_batch_answers_equal_single_answers_and_leave_the_stream_alone(scene, model, monkeypatch):
+    monkeypatch.setenv("DLO_NO_COMPILE", "1")  # inherited by the spawned workers
+    from dataclasses import replace
+
+    options = replace(scene.options, model=model)
+    solver = make_solver(scene.problem, options, compile="off", checks="sync")
+    assert solver.solve().ok
+    targets = random_targets(scene.problem, 8)
+    single = [solver.solve(t, commit=False) for t in targets]
+    assert all(r.ok for r in single)
+    step = {"right": (scene.problem.grip("right").pose.position + [0.01, 0.0, 0.0],
+                      scene.problem.grip("right").pose.orientation)}
+    reference = make_solver(scene.problem, options, compile="off", checks="sync")
+    reference.solve()
+    expected = reference.solve(step)  # the stream's next update without any query in between
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        batch = solver.query_many(targets, executor=pool)
+    assert_same_answers(batch, single)
+    after = solver.solve(step)
+    assert after.iterations == expected.iterations
+    np.testing.assert_allclose(after.points, expected.points, atol=1e-12)
+
+
+def test_any_executor_order_kept_and_bad_queries_answered(scene, monkeypatch):
+    monkeypatch.setenv("DLO_NO_COMPILE", "1")
+    targets = random_targets(scene.problem, 5, seed=1)
+    far = {"right": ((5.0, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))}  # beyond the string's reach
+    unknown = {"middle": ((0.3, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))}
+    queries = [targets[0], far, targets[1], unknown, *targets[2:]]
+    solver = make_solver(scene.problem, scene.options, compile="off", checks="sync")
+    solver.solve()
+    single = [solver.solve(t, commit=False) for t in queries]
+    assert single[1].status == "unreachable" and single[3].status == "invalid"
+    with ThreadPoolExecutor(2) as threads:  # in-process: the workers share one solver, one at a time
+        batch = query_many(scene.problem, scene.options, queries, threads, chunks=3)
+    assert_same_answers(batch, single)
+    assert "middle" in batch[3].message
+
+
+def test_a_dask_cluster_runs_the_same_call(scene, monkeypatch):
+    """Optional extra: a local Dask cluster's executor (``client.get_executor()``)."""
+    distributed = pytest.importorskip("distributed")
+    monkeypatch.setenv("DLO_NO_COMPILE", "1")
+    targets = random_targets(scene.problem, 4, seed=2)
+    solver = make_solver(scene.problem, scene.options, compile="off", checks="sync")
+    solver.solve()
+    single = [solver.solve(t, commit=False) for t in targets]
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster, \
+            distributed.Client(cluster) as client:
+        batch = solver.query_many(targets, executor=client.get_executor())
+    assert_same_answers(batch, single)

@@ -244,12 +244,18 @@ LEFT, RIGHT = ((0.0, 0.0, 0.4), Q), ((0.5, 0.0, 0.42), Q)
 
 def test_node_strings_are_escaped_capped_and_throttled(tmp_path):
     with clean_node(*NODE_ARGS, log_path=tmp_path / "node.log") as (proc, cl):
-        # a 1 MB frame_id (the reported 10 MB one went into /diagnostics every second)
+        # a 1 MB frame_id (the reported 10 MB one went into /diagnostics every second): refused by the
+        # message's size before it is read
         cl.publish_grip("right", *RIGHT, frame_id="m" * 1_000_000)
+        got = cl.wait_for_diagnostics(lambda v, st: v.get("errors.size") == "1", 20.0)
+        assert got is not None, proc.output()
+        assert "message of 1000076 bytes is over the limit of 4096 bytes" in got[0]["last error"], got[0]["last error"]
+        # a frame_id within the message limit but over 256 characters
+        cl.publish_grip("right", *RIGHT, frame_id="m" * 1000)
         got = cl.wait_for_diagnostics(lambda v, st: v.get("errors.frame") == "1", 20.0)
         assert got is not None, proc.output()
         values, status = got
-        assert "header.frame_id has 1000000 characters (at most 256)" in values["last error"], values["last error"]
+        assert "header.frame_id has 1000 characters (at most 256)" in values["last error"], values["last error"]
         assert all(len(v) <= 5 * TEXT_LIMIT for v in values.values()), max(map(len, values.values()))
         assert len(status.message) <= TEXT_LIMIT
 

@@ -33,9 +33,10 @@ def qz(angle: float):
     return (0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2))
 
 
-@pytest.fixture
-def node(tmp_path):
-    with clean_node(*NODE_ARGS, log_path=tmp_path / "node.log") as proc_client:
+@pytest.fixture(params=[1, 0], ids=["query_workers=1", "query_workers=0"])
+def node(tmp_path, request):
+    """The node, its queries answered by a worker process (the default) or in the solver thread."""
+    with clean_node(*NODE_ARGS, "-p", f"query_workers:={request.param}", log_path=tmp_path / "node.log") as proc_client:
         yield proc_client
 
 
@@ -136,3 +137,49 @@ def test_parameters(node, node_scene):
     assert ev is not None
     np.testing.assert_allclose(ev.points[[0, -1]], r.points[[0, -1]], atol=1e-7)
     assert proc.alive()
+
+
+def test_concurrent_queries_beside_the_stream(tmp_path):
+    """query_workers (default 1): queries are answered by a worker process while the stream goes on;
+    several clients at once each get a plan through their goal, or at once an empty one ('busy') when
+    more than QUERIES_PER_WORKER are pending; the stream keeps publishing meanwhile."""
+    import threading
+
+    from dlo_ros.node.client import DloClient
+
+    with clean_node(*NODE_ARGS, "-p", "query_workers:=1", log_path=tmp_path / "node.log") as (proc, cl):
+        stream(cl, [LEFT, ((0.5, 0.0, 0.42), Q)])
+        goals = [((0.45 + 0.02 * i, 0.03 * (i % 3 - 1), 0.42), qz(0.1 * i)) for i in range(6)]
+        answers: dict[int, tuple] = {}
+        errors: list[BaseException] = []
+
+        def ask(i: int) -> None:
+            try:
+                with DloClient(proc.domain_id, client_name=f"query_client_{i}") as qc:
+                    answers[i] = qc.query(LEFT, goals[i], timeout=60.0)
+            except BaseException as exc:  # noqa: BLE001 - reported below
+                errors.append(exc)
+
+        n0 = cl.path_count
+        threads = [threading.Thread(target=ask, args=(i,)) for i in range(len(goals))]
+        for t in threads:
+            t.start()
+        k = 0
+        while any(t.is_alive() for t in threads) and k < 3000:  # the stream goes on at ~50 Hz meanwhile
+            cl.publish_targets([LEFT, ((0.5, 0.0, 0.42 + 0.005 * math.sin(k / 20)), Q)])
+            k += 1
+            time.sleep(0.02)
+        for t in threads:
+            t.join(60.0)
+        assert not errors, (errors, cl.diagnostic_values().get("queries"), cl.diagnostic_values().get("queries failed"))
+        shaped = [i for i, (pts, _) in answers.items() if len(pts)]
+        assert len(answers) == len(goals) and shaped, answers
+        for i in shaped:
+            np.testing.assert_allclose(answers[i][0][-1], goals[i][0], atol=1e-6)
+        assert cl.path_count > n0, "no centreline while the queries were answered"
+        refused = len(goals) - len(shaped)
+        got = cl.wait_for_diagnostics(lambda v, s: v.get("queries") == str(len(goals)), 5.0)
+        assert got is not None and int(got[0]["queries failed"]) == refused, cl.diagnostic_values()
+        if refused:
+            assert "busy" in proc.output()
+        assert proc.alive()

@@ -177,6 +177,9 @@ class NodeProcess:
         self.close()
 
 
+SERVICE_SETTLE_S = 0.5  # wait after a service is first discovered, before the first call
+
+
 @dataclass
 class PathEvent:
     """A centreline as received: arrival (ROS time and monotonic, ns), header stamp, arrays."""
@@ -247,6 +250,7 @@ class DloClient:
         self._msgs = {"PoseArray": PoseArray, "PoseStamped": PoseStamped, "GetPlan": GetPlan, "Trigger": Trigger,
                       "SetParameters": SetParameters, "GetParameters": GetParameters}
         self._stopping = False
+        self._settled: set = set()  # service clients past their first call (see _call)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(n)
         self._thread = threading.Thread(target=self._spin, name="dlo-client", daemon=True)
@@ -400,6 +404,12 @@ class DloClient:
     def _call(self, client, request, timeout: float):
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f"service {client.srv_name} not available")
+        if client not in self._settled:
+            # the service is discovered before its response writer has matched this client's reader, and
+            # Fast DDS drops a response it cannot deliver within 100 ms (ros2/rclpy#1181, ros2/rmw_fastrtps#467):
+            # a quick answer to a first call could be lost
+            time.sleep(SERVICE_SETTLE_S)
+            self._settled.add(client)
         future = client.call_async(request)
         done = threading.Event()
         future.add_done_callback(lambda _f: done.set())

@@ -32,7 +32,7 @@ from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -45,7 +45,7 @@ from visualization_msgs.msg import MarkerArray
 from ..model.problem import GripPose
 from . import conversions as conv
 from . import params as P
-from .engine import ShapeEngine, Update, build_solver, options_with_output_points
+from .engine import ShapeEngine, Update, build_solver, target_miss, options_with_output_points
 from .signals import exit_on_second_signal, terminate_children
 from .health import Health, model_text, new_model_changes
 from .validation import (TEXT_LIMIT, TargetError, check_count, check_frame_size, check_message_size, check_pose,
@@ -67,6 +67,7 @@ DIAGNOSTICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliabil
                              durability=DurabilityPolicy.VOLATILE)
 MARKER_PERIOD_S = 0.1
 STOP_TIMEOUT_S = 5.0  # how long shutdown waits for the solve in progress
+QUERIES_PER_WORKER = 2  # ~/query_shape calls pending per query worker before new ones are refused ("busy")
 IMMEDIATE_DIAGNOSTICS_MIN_S = 0.1
 _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _KINDS = {"string": ParameterType.PARAMETER_STRING, "bool": ParameterType.PARAMETER_BOOL,
@@ -167,7 +168,10 @@ class DloNode(Node):
         # a pending coroutine keeps its group busy, and the default (mutually exclusive) group must stay
         # free for the subscriptions, timers and parameter services meanwhile.
         services = MutuallyExclusiveCallbackGroup()
-        self._query_srv = self.create_service(GetPlan, "~/query_shape", self._on_query, callback_group=services)
+        # queries answered by worker processes may be pending side by side (up to QUERIES_PER_WORKER each)
+        self._query_workers = int(self.get_parameter("query_workers").value)
+        queries = ReentrantCallbackGroup() if self._query_workers else services
+        self._query_srv = self.create_service(GetPlan, "~/query_shape", self._on_query, callback_group=queries)
         self._reset_srv = self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
         self._diag_timer = self.create_timer(self.get_parameter("diagnostics_period").value,
                                              lambda: self._publish_diagnostics())
@@ -178,6 +182,14 @@ class DloNode(Node):
         self.recorder = self._start_recorder()  # last start-up check: nothing can fail after it
         self.engine = ShapeEngine(problem, options, make_solver=self._make_solver, on_update=self._on_update,
                                   on_failure=self._on_failure, on_state=self._on_state)
+        self._queries_pending = 0
+        self._query_pool = None
+        if self._query_workers:
+            from ..solver.batch import process_pool, scene_payload, solve_chunk
+
+            self._query_pool = process_pool(self._query_workers)
+            for _ in range(self._query_workers):  # each worker builds its solver and the held shape now
+                self._query_pool.submit(solve_chunk, scene_payload(problem, options), [], self._worker_compile)
         self.get_logger().info(
             f"scene '{safe_text(scene.name)}' ({safe_text(scene.source)}): grips {self.grip_names}, "
             f"{len(problem.obstacles)} obstacle(s), frame '{safe_text(self.frame_id)}'; building the solver"
@@ -332,10 +344,16 @@ class DloNode(Node):
             return self._query_failed(response, f"{exc}")
         if not self.engine.ready:
             return self._query_failed(response, f"the solver is not ready ({self.engine.state})")
+        if self._queries_pending >= QUERIES_PER_WORKER * max(self._query_workers, 1):
+            return self._query_failed(response, f"busy: {self._queries_pending} queries are being answered; "
+                                                "try again")  # bounded: a flood never builds a queue
+        self._queries_pending += 1
         try:
-            result = await self._await_job(self.engine.query(poses))
+            result = await self._await_job(self._query_job(poses))
         except Exception as exc:  # noqa: BLE001 - cancelled at shutdown, or a solver exception
             return self._query_failed(response, f"{type(exc).__name__}: {exc}")
+        finally:
+            self._queries_pending -= 1
         if not result.ok:
             return self._query_failed(response, f"no equilibrium ({result.status}): {result.message}")
         if result.stable is False:
@@ -344,6 +362,36 @@ class DloNode(Node):
         response.plan = conv.result_to_path(result, self.frame_id, now)
         self.health.query(True)
         return response
+
+    def _query_job(self, poses: dict[str, GripPose]) -> Future:
+        """The query's ShapeResult as a Future: from a worker process (query_workers > 0; the scene is
+        the solver's at the current targets), else from the solver thread."""
+        if self._query_pool is None:
+            return self.engine.query(poses)
+        from ..solver.batch import scene_payload, solve_chunk
+
+        problem, options = self.engine.query_scene()
+        job = self._query_pool.submit(solve_chunk, scene_payload(problem, options), [poses], self._worker_compile)
+        answer: Future = Future()
+
+        def done(f: Future) -> None:
+            try:
+                result = f.result()[0]
+            except BaseException as exc:  # noqa: BLE001 - handed to the service coroutine
+                answer.set_exception(exc)
+                return
+            miss = target_miss(result, problem, {**{g.name: g.pose for g in problem.grips}, **poses})
+            if miss:
+                result.status, result.message = "failed", miss
+            answer.set_result(result)
+
+        job.add_done_callback(done)
+        return answer
+
+    @property
+    def _worker_compile(self) -> str:
+        """Query workers never start gcc: compiled derivatives only from the cache (or none when 'off')."""
+        return "off" if self.compile_mode == "off" else "cached"
 
     def _query_failed(self, response, reason: str):
         reason = safe_text(reason)
@@ -563,6 +611,9 @@ class DloNode(Node):
     def close(self, timeout: float = 10.0) -> bool:
         """Stop the worker (after the solve in progress); True if it ended within ``timeout``."""
         self._closing = True
+        pool = getattr(self, "_query_pool", None)
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
         stopped = self.engine.stop(timeout) if hasattr(self, "engine") else True
         recorder = getattr(self, "recorder", None)
         if recorder is not None:

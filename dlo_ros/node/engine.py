@@ -128,6 +128,16 @@ class ShapeEngine:
             self._received_ns = received_ns if received_ns is not None else time.monotonic_ns()
             self._cond.notify_all()
 
+    def query_scene(self) -> tuple[Problem, SolverOptions] | None:
+        """The scene a query is answered in, for a solver outside this engine: the solver's problem (its
+        current values) at the current targets, and its options; None until the solver is built."""
+        solver = self._solver
+        if solver is None:
+            return None
+        with self._cond:
+            targets = dict(self._targets)
+        return solver.problem.with_grip_poses(targets), solver.options
+
     def query(self, poses: dict[str, GripPose]) -> Future:
         """Future of the ShapeResult for the current targets updated by ``poses`` (commit=False)."""
         return self._submit("query", dict(poses))
@@ -223,7 +233,7 @@ class ShapeEngine:
             shaped = result.ok or result.status == "unverified"  # unverified: a shape, published with a warning
             problem = solver.problem if shaped else solver.problem.with_grip_poses(targets)
             update = Update(result, problem, trigger, stamp_ns, received_ns, merged, time.monotonic_ns())
-            miss = _miss(result, problem, targets)
+            miss = target_miss(result, problem, targets)
             if miss:
                 self._on_failure("internal", miss, update)
             elif shaped:
@@ -251,7 +261,7 @@ class ShapeEngine:
                     targets = dict(self._targets)
                 targets.update(job.payload)
                 result = solver.solve(targets, warm=True, commit=False)
-                miss = _miss(result, solver.problem, targets)
+                miss = target_miss(result, solver.problem, targets)
                 if miss:
                     result.status, result.message = "failed", miss
                 job.future.set_result(result)
@@ -278,7 +288,7 @@ class ShapeEngine:
             job.future.set_exception(exc)
 
 
-def _miss(result: ShapeResult, problem: Problem, targets: dict[str, GripPose]) -> str:
+def target_miss(result: ShapeResult, problem: Problem, targets: dict[str, GripPose]) -> str:
     """validation.grip_miss for a converged result (tolerance 1e-5 L); '' otherwise."""
     if result.status not in ("ok", "unverified") or len(result.points) == 0:
         return ""

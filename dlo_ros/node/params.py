@@ -72,6 +72,10 @@ STATIC = (
     ParamSpec("record.connect", "string", "",
               "Stream the rerun recording to a running viewer at HOST[:PORT] or a rerun+http://HOST:PORT/proxy "
               "URL; empty: no streaming.", read_only=True),
+    ParamSpec("query_workers", "integer", 1,
+              "Worker processes that answer ~/query_shape beside the stream, each with its own solver of the "
+              "scene (they take the other cores); 0: queries are solved in the solver thread between stream "
+              "updates.", read_only=True, low=0, high=16),
     ParamSpec("grip_names", "string_array", [],
               "Informational: the scene's grips in configuration order (the order of ~/grips/targets poses).",
               read_only=True, from_scene=True),

@@ -42,16 +42,33 @@ _default_lock = threading.Lock()
 _worker_lock = threading.Lock()  # a thread executor's workers share this process's solvers: one at a time
 
 
+def process_pool(workers: int | None = None) -> ProcessPoolExecutor:
+    """A process pool for :func:`solve_chunk`: ``workers`` (default ``os.cpu_count()``) processes started
+    with 'spawn' (a fork of a process with CasADi and DDS threads is unsafe) that ignore SIGINT (a
+    Ctrl-C reaches the whole process group; the parent decides how to stop)."""
+    return ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1,
+                               mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_sigint)
+
+
+def _ignore_sigint() -> None:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def default_executor() -> ProcessPoolExecutor:
-    """The process pool ``query_many`` uses when given none: ``os.cpu_count()`` workers started with
-    'spawn' (a fork of a process with CasADi and DDS threads is unsafe), shut down at exit."""
+    """The process pool ``query_many`` uses when given none (:func:`process_pool`), shut down at exit."""
     global _default
     with _default_lock:
         if _default is None:
-            _default = ProcessPoolExecutor(max_workers=os.cpu_count() or 1,
-                                           mp_context=multiprocessing.get_context("spawn"))
+            _default = process_pool()
             atexit.register(_default.shutdown, wait=False, cancel_futures=True)
         return _default
+
+
+def scene_payload(problem: Problem, options: SolverOptions) -> bytes:
+    """The pickled (problem, options) :func:`solve_chunk` takes."""
+    return pickle.dumps((problem, options), protocol=pickle.HIGHEST_PROTOCOL)
 
 
 def query_many(problem: Problem, options: SolverOptions | None, targets: Sequence[Mapping],
@@ -71,7 +88,7 @@ def query_many(problem: Problem, options: SolverOptions | None, targets: Sequenc
     n = chunks or getattr(executor, "_max_workers", None) or os.cpu_count() or 1
     n = max(1, min(int(n), len(targets)))
     bounds = [round(i * len(targets) / n) for i in range(n + 1)]
-    payload = pickle.dumps((problem, options), protocol=pickle.HIGHEST_PROTOCOL)
+    payload = scene_payload(problem, options)
     futures = [executor.submit(solve_chunk, payload, targets[a:b], compile)
                for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
     return [result for future in futures for result in future.result()]

@@ -193,3 +193,22 @@ def test_in_frame_with_and_without_a_transform_lookup():
     assert err.value.kind == "frame"
     with pytest.raises(TargetError, match="frame_id is empty"):
         conv.in_frame("", "world", p, q, "t", lookup)
+
+
+@pytest.mark.parametrize("frame", ["world", "w", "abc", "abcd", "a_longer_frame_7"])
+@pytest.mark.parametrize("n", [0, 1, 2, 51])
+def test_the_serialised_centreline_reads_back_as_the_message(frame, n):
+    """The node publishes the Path as CDR bytes built from the arrays (#14's lean path): deserialised,
+    they are the message result_to_path builds (every alignment case of the frame id's length)."""
+    from nav_msgs.msg import Path
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    rng = np.random.default_rng(n)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None] if n else 1.0
+    result = ShapeResult(status="ok", message="", points=rng.normal(size=(n, 3)), orientations=q)
+    stamp = 1_796_154_177_018_047_479
+    data = conv.result_path_cdr(result, frame, stamp)
+    expected = conv.result_to_path(result, frame, stamp)
+    assert deserialize_message(data, Path) == expected
+    assert len(data) == len(serialize_message(expected))

@@ -116,6 +116,37 @@ def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
     return Path(header=h, poses=poses)
 
 
+def _cdr_header(stamp_ns: int, frame: bytes, offset: int) -> bytes:
+    """A std_msgs/Header in CDR at ``offset`` (a multiple of 4 after the encapsulation): stamp (int32 sec,
+    uint32 nanosec), frame_id (uint32 length with the NUL, the bytes, the NUL)."""
+    ns = int(stamp_ns)
+    return (np.array([ns // 1_000_000_000], "<i4").tobytes() + np.array([ns % 1_000_000_000], "<u4").tobytes()
+            + np.array([len(frame) + 1], "<u4").tobytes() + frame + b"\0")
+
+
+def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_ns: int) -> bytes:
+    """A nav_msgs/Path of these poses (every pose with the path's header), serialised as little-endian
+    CDR for ``Publisher.publish(bytes)``: no per-pose Python message objects.  Alignment follows CDR:
+    4-byte integers on 4, doubles on 8, offsets counted after the 4-byte encapsulation header."""
+    frame = frame_id.encode()
+    out = bytearray(b"\x00\x01\x00\x00")  # CDR, little endian
+    out += _cdr_header(stamp_ns, frame, 0)
+    out += b"\0" * (-(len(out) - 4) % 4)
+    out += np.array([len(points)], "<u4").tobytes()
+    rows = np.ascontiguousarray(np.concatenate([points, orientations], axis=1), dtype="<f8")
+    for row in rows:
+        out += b"\0" * (-(len(out) - 4) % 4)
+        out += _cdr_header(stamp_ns, frame, len(out) - 4)
+        out += b"\0" * (-(len(out) - 4) % 8)
+        out += row.tobytes()
+    return bytes(out)
+
+
+def result_path_cdr(result: ShapeResult, frame_id: str, stamp_ns: int) -> bytes:
+    """``result_to_path`` serialised directly (:func:`path_cdr`)."""
+    return path_cdr(result.points, result.orientations, frame_id, stamp_ns)
+
+
 def path_to_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(points (N, 3), quaternions (N, 4)) of a nav_msgs/Path."""
     if not path.poses:

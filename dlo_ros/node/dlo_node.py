@@ -500,7 +500,7 @@ class DloNode(Node):
         r = u.result
         stamp = u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds
         model_changed = self._record_update(u, stamp)
-        self._path_pub.publish(conv.result_to_path(r, self.frame_id, stamp))
+        self._path_pub.publish(conv.result_path_cdr(r, self.frame_id, stamp))  # pre-serialised: no per-pose objects
         for name, wrench in r.grips.items():
             pub = self._wrench_pubs.get(name)
             if pub is not None:

@@ -185,11 +185,9 @@ class DloNode(Node):
         self._queries_pending = 0
         self._query_pool = None
         if self._query_workers:
-            from ..solver.batch import process_pool, scene_payload, solve_chunk
+            from ..solver.batch import process_pool
 
             self._query_pool = process_pool(self._query_workers)
-            for _ in range(self._query_workers):  # each worker builds its solver and the held shape now
-                self._query_pool.submit(solve_chunk, scene_payload(problem, options), [], self._worker_compile)
         self.get_logger().info(
             f"scene '{safe_text(scene.name)}' ({safe_text(scene.source)}): grips {self.grip_names}, "
             f"{len(problem.obstacles)} obstacle(s), frame '{safe_text(self.frame_id)}'; building the solver"
@@ -388,6 +386,17 @@ class DloNode(Node):
         job.add_done_callback(done)
         return answer
 
+    def _warm_query_workers(self) -> None:
+        """Each query worker builds its solver and the held shape now, after the node's own first shape
+        (so that they do not compete with the node's start-up for the cores)."""
+        if self._query_pool is None:
+            return
+        from ..solver.batch import scene_payload, solve_chunk
+
+        problem, options = self.engine.query_scene()
+        for _ in range(self._query_workers):
+            self._query_pool.submit(solve_chunk, scene_payload(problem, options), [], self._worker_compile)
+
     @property
     def _worker_compile(self) -> str:
         """Query workers never start gcc: compiled derivatives only from the cache (or none when 'off')."""
@@ -515,6 +524,7 @@ class DloNode(Node):
         if self.health.updates == 1:
             self.get_logger().info(f"first shape published {time.monotonic() - self._t_start:.1f} s after start "
                                    f"({r.status}, stable={r.stable}; model {model_text(r.model) or 'not reported'})")
+            self._warm_query_workers()
         if r.stable is False and self.health.should_warn("unstable"):
             self.get_logger().warning(f"the published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g}): "
                                       "the cable would not stay in this shape")

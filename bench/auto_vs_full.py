@@ -93,11 +93,11 @@ class Timed:
 def instrument(solver) -> list[Timed]:
     """Time ``solver``'s derivative evaluations (its compile must be finished or off)."""
     timers = []
-    for name in ("_newton_step", "_kkt_free", "_kkt", "_obstacle_g"):
-        fn = getattr(solver, name, None)
+    for name in ("newton_step", "kkt_free", "kkt", "obstacle_g"):
+        fn = getattr(solver.functions, name, None)
         if fn is not None:
             timers.append(Timed(fn))
-            setattr(solver, name, timers[-1])
+            setattr(solver.functions, name, timers[-1])
     return timers
 
 
@@ -158,7 +158,7 @@ def main() -> None:
             shape, with the Euler-angle pole turned to the direction farthest from that shape's tangents
             (near the pole the order does not converge: on the post, order 32 in the scene's first frame
             is 56 mm off).  Each method gets its own reference: the post has mirror-image branches."""
-            tangents = solver.model.node_tangents(solver._state.z).T
+            tangents = solver.model.node_tangents(solver.snapshot().z).T
             frame = frame_with_pole(farthest_pole(tangents)[0], solver.nlp.r0[:, 0])
             ref_solver = ShapeSolver(prob, replace(opts, model="full", order=32, quadrature_nodes=80), compile="off",
                                      reference_frame=frame)

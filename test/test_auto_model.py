@@ -209,7 +209,7 @@ def _peg_on_the_free_path(offset: float):
     free = clamped_pair(right=(0.6, 0.0, 0.0), weight=1.0, bend=0.05, twist=0.04)
     f = ShapeSolver(free, SolverOptions(model="planar", order=16), compile="off")
     assert f.solve().ok
-    centre = f.model.positions(f._state.z, np.array([0.51]))[0] - np.array([0.0, 0.0, offset])
+    centre = f.model.positions(f.snapshot().z, np.array([0.51]))[0] - np.array([0.0, 0.0, offset])
     peg = Obstacle("sphere", np.array([*centre, 0.006]), "peg")
     return clamped_pair(right=(0.6, 0.0, 0.0), weight=1.0, bend=0.05, twist=0.04, obstacles=(peg,)), peg
 
@@ -224,14 +224,14 @@ def test_obstacle_samples_go_up_when_the_string_cuts_into_an_obstacle_between_th
     reasons = " ".join(r.model["changes"])
     assert "cuts into obstacle 'peg'" in reasons and "41 samples: 81 samples" in reasons, reasons
     assert r.model["obstacle_samples"] >= 81
-    x = solver.inner.model.positions(solver.inner._state.z, np.linspace(0.0, 1.0, 4001))
+    x = solver.inner.model.positions(solver.inner.snapshot().z, np.linspace(0.0, 1.0, 4001))
     depth = float(np.max(peg.h_many(x)))
     assert depth <= 0.001, depth
     assert r.model["estimated_error_m"] >= depth and r.model["tolerance_met"]
     # the sampled 41-point model alone passes straight through the peg
     sampled = ShapeSolver(prob, SolverOptions(model="planar", order=12), compile="off")
     assert sampled.solve().ok
-    assert float(np.max(peg.h_many(sampled.model.positions(sampled._state.z, np.linspace(0.0, 1.0, 4001))))) > 0.005
+    assert float(np.max(peg.h_many(sampled.model.positions(sampled.snapshot().z, np.linspace(0.0, 1.0, 4001))))) > 0.005
 
 
 def test_obstacle_samples_stay_when_nothing_is_cut():

@@ -68,7 +68,7 @@ from ..model.rotations import TANGENT_X, euler_from_frame, farthest_pole, frame_
 from .nlp import choose_reference_frame, has_point_moments, planarity_violation, twist_is_held
 from .options import SolverOptions
 from .result import ShapeResult
-from .shape_solver import IPOPT_LOCK, ShapeSolver, is_stable, with_checked_poses
+from .shape_solver import IPOPT_LOCK, ShapeSolver, with_checked_poses
 
 ORDERS = (8, 12, 16, 24, 32)
 POLE_MIN_DEG = 40.0  # a 3D model turns its Euler-angle pole away when a tangent comes closer (degrees)
@@ -672,11 +672,7 @@ class AutoShapeSolver:
         None when that is stable.  The 3D model is pooled: it is also the model a switch to 3D uses."""
         full = self._solver_for(self._full_choice(snap.choice, snap.problem), snap.problem, stream=False,
                                 source=snap.inner, state=snap.state, tag="checker")
-        state = full._state
-        if state is None:
-            return None
-        eig = full._min_reduced_eigenvalue(state)
-        return None if eig is None or is_stable(eig, state.hessian) else eig
+        return full.unstable_eigenvalue()
 
     # ---- plumbing -----------------------------------------------------------------------------------
     def model_summary(self, choice: ModelChoice | None = None, solver: ShapeSolver | None = None) -> dict:

@@ -192,6 +192,17 @@ class ShapeSolver:
             self._state = new
         return True
 
+    def unstable_eigenvalue(self) -> float | None:
+        """The smallest eigenvalue of the reduced Hessian at the committed equilibrium when that is
+        unstable (``stability.is_stable``); None when it is stable or neutral, when the active rows leave
+        no freedom, or when nothing is committed."""
+        with self._lock:
+            state = self._state
+            if state is None:
+                return None
+            eig = min_reduced_eigenvalue(self.nlp, self.functions, state)
+            return None if eig is None or is_stable(eig, state.hessian) else eig
+
     def reset(self) -> None:
         """Forget the warm start: the next solve starts cold."""
         with self._lock:
@@ -429,5 +440,3 @@ class ShapeSolver:
         return self._outputs.result(problem, self.problem, state, ipopt_status, iterations, violation, warm, steps,
                                     self.model_summary())
 
-    def _min_reduced_eigenvalue(self, state: SolverState) -> float | None:
-        return min_reduced_eigenvalue(self.nlp, self.functions, state)

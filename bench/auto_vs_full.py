@@ -106,14 +106,14 @@ def stream(solver, targets):
     index -1: the first, cold solve)."""
     r = solver.solve()
     assert r.ok, r.message
-    times, changes = [], [(-1, c) for c in (r.model or {}).get("changed", [])]
+    times, changes = [], [(-1, c) for c in r.model.changed or ()]
     for i, poses in enumerate(targets):
         t0 = time.perf_counter()
         r = solver.solve(poses)
         dt = time.perf_counter() - t0
         assert r.ok, f"update {i}: {r.message}"
         times.append(dt * 1e3)
-        changes += [(i, c) for c in (r.model or {}).get("changed", [])]
+        changes += [(i, c) for c in r.model.changed or ()]
         time.sleep(max(0.0, PERIOD - dt))
     return np.array(times), r, changes
 
@@ -142,10 +142,10 @@ def main() -> None:
         for _ in range(6):
             auto._wait_for_check()
             ra = auto.solve(targets[-1])
-            changes += [(len(targets), c) for c in ra.model["changed"]]
-            if ra.model["checked"] and auto._job is None:
+            changes += [(len(targets), c) for c in ra.model.changed]
+            if ra.model.checked and auto._job is None:
                 break
-        m = ra.model
+        m = ra.model.as_dict()
         auto.close()
         order = m["order"]
         print(f"{label}: full 16, full {order} …", flush=True)

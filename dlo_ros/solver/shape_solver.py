@@ -43,6 +43,7 @@ from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, ShapeResult
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
+from .summary import ModelSummary
 from .warm_start import sample_source, warm_state
 from .wrenches import equilibrium
 
@@ -419,21 +420,16 @@ class ShapeSolver:
         return no_shape(self.options, self.model_summary(), status, message,
                         solve_time_ms=(time.perf_counter() - t0) * 1e3)
 
-    def model_summary(self) -> dict:
-        """What this solver models (the ``model`` object of a result)."""
+    def model_summary(self) -> ModelSummary:
+        """What this solver models (the ``model`` of a result)."""
         lay = self.model.layout
-        summary = {
-            "planar": lay.planar, "twist": lay.twist, "stretch": lay.stretch,
-            "gravity": not self.problem.string.weight_per_length.is_zero, "order": lay.order,
-            "obstacles": len(self.problem.obstacles), "estimated_error_m": None, "variables": lay.size,
-        }
+        common = dict(planar=lay.planar, twist=lay.twist, stretch=lay.stretch,
+                      gravity=not self.problem.string.weight_per_length.is_zero, order=lay.order,
+                      obstacles=len(self.problem.obstacles), variables=lay.size)
         if self.nlp.director:
-            summary["rotation"] = "quaternion" if lay.frame else "tangent"
-            summary["elements"] = lay.elements
-            summary["breakpoints"] = [float(b) for b in self.model.mesh.breakpoints]
-        else:
-            summary["rotation"] = "planar" if lay.planar else "euler"
-        return summary
+            return ModelSummary(**common, rotation="quaternion" if lay.frame else "tangent", elements=lay.elements,
+                                breakpoints=tuple(float(b) for b in self.model.mesh.breakpoints))
+        return ModelSummary(**common, rotation="planar" if lay.planar else "euler")
 
     def _result(self, problem: Problem, state: SolverState, ipopt_status: str, iterations: int, violation: float,
                 warm: bool, steps: int) -> ShapeResult:

@@ -67,6 +67,7 @@ from ..model.profile import Profile
 from ..model.rotations import TANGENT_X, euler_from_frame, farthest_pole, frame_with_pole, pole_angle_deg, quat_to_matrix
 from .nlp import choose_reference_frame, has_point_moments, planarity_violation, twist_is_held
 from .options import SolverOptions
+from .protocol import Solver
 from .result import ShapeResult
 from .shape_solver import IPOPT_LOCK, ShapeSolver, with_checked_poses
 from .summary import ModelSummary
@@ -177,7 +178,7 @@ class _Verdict:
 
 
 class AutoShapeSolver:
-    """The ShapeSolver interface (solve, reset, set_problem, problem, options) with model selection.
+    """The Solver protocol (solver/protocol.py) with model selection.
 
     checks: 'sync' runs the a-posteriori checks inside ``solve`` (a one-shot solve is checked before it
     is returned: the CLI); 'background' runs them on a worker thread from a snapshot of the solve, so a
@@ -721,7 +722,7 @@ def stretch_needed(problem: Problem) -> str:
 
 
 def make_solver(problem: Problem, options: SolverOptions | None = None, compile: str = "background",
-                checks: str = "background"):
+                checks: str = "background") -> Solver:
     """AutoShapeSolver for solver.model 'auto' (the default; ``checks`` as there: 'background' by default,
     so that a stream never builds or switches a model on the caller's thread; 'sync' for one-shot
     answers that must be checked before they return, as the CLI's), else a ShapeSolver of that model."""

@@ -26,7 +26,7 @@ from .residual import PointAction
 from .result import ShapeResult
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
-from .wrenches import equilibrium, wrench
+from .wrenches import FramesOf, equilibrium, wrench
 
 
 def output_s(nlp: StringNLP, options: SolverOptions) -> np.ndarray:
@@ -61,7 +61,7 @@ class ShapeOutputs:
         self.nlp, self.fns, self.parameters, self.options = nlp, fns, parameters, options
         self.s_out = output_s(nlp, options)
 
-    def frames_of(self, current: Problem):
+    def frames_of(self, current: Problem) -> FramesOf:
         """Material frames Q(z, s) with the twist-free frames anchored at ``current``'s grips."""
         return lambda z, s: F.frames(self.nlp, self.parameters, current, z, s)
 

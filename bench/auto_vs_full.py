@@ -93,11 +93,11 @@ class Timed:
 def instrument(solver) -> list[Timed]:
     """Time ``solver``'s derivative evaluations (its compile must be finished or off)."""
     timers = []
-    for name in ("_newton_step", "_kkt_free", "_kkt", "_obstacle_g"):
-        fn = getattr(solver, name, None)
+    for name in ("newton_step", "kkt_free", "kkt", "obstacle_g"):
+        fn = getattr(solver.functions, name, None)
         if fn is not None:
             timers.append(Timed(fn))
-            setattr(solver, name, timers[-1])
+            setattr(solver.functions, name, timers[-1])
     return timers
 
 
@@ -106,14 +106,14 @@ def stream(solver, targets):
     index -1: the first, cold solve)."""
     r = solver.solve()
     assert r.ok, r.message
-    times, changes = [], [(-1, c) for c in (r.model or {}).get("changed", [])]
+    times, changes = [], [(-1, c) for c in r.model.changed or ()]
     for i, poses in enumerate(targets):
         t0 = time.perf_counter()
         r = solver.solve(poses)
         dt = time.perf_counter() - t0
         assert r.ok, f"update {i}: {r.message}"
         times.append(dt * 1e3)
-        changes += [(i, c) for c in (r.model or {}).get("changed", [])]
+        changes += [(i, c) for c in r.model.changed or ()]
         time.sleep(max(0.0, PERIOD - dt))
     return np.array(times), r, changes
 
@@ -142,10 +142,10 @@ def main() -> None:
         for _ in range(6):
             auto._wait_for_check()
             ra = auto.solve(targets[-1])
-            changes += [(len(targets), c) for c in ra.model["changed"]]
-            if ra.model["checked"] and auto._job is None:
+            changes += [(len(targets), c) for c in ra.model.changed]
+            if ra.model.checked and auto._job is None:
                 break
-        m = ra.model
+        m = ra.model.as_dict()
         auto.close()
         order = m["order"]
         print(f"{label}: full 16, full {order} …", flush=True)
@@ -158,7 +158,7 @@ def main() -> None:
             shape, with the Euler-angle pole turned to the direction farthest from that shape's tangents
             (near the pole the order does not converge: on the post, order 32 in the scene's first frame
             is 56 mm off).  Each method gets its own reference: the post has mirror-image branches."""
-            tangents = solver.model.node_tangents(solver._state.z).T
+            tangents = solver.model.node_tangents(solver.snapshot().z).T
             frame = frame_with_pole(farthest_pole(tangents)[0], solver.nlp.r0[:, 0])
             ref_solver = ShapeSolver(prob, replace(opts, model="full", order=32, quadrature_nodes=80), compile="off",
                                      reference_frame=frame)

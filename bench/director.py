@@ -147,11 +147,11 @@ def streams(lines):
             r = solver.solve({"right": path(k, start)})
             times.append((time.perf_counter() - t0) * 1e3)
             bad += not r.ok
-        cold = ShapeSolver(sc.problem, replace(opts or sc.options, model="full", order=r.model["order"]),
+        cold = ShapeSolver(sc.problem, replace(opts or sc.options, model="full", order=r.model.order),
                            compile="off").solve()
         end = float(np.max(np.linalg.norm(r.points - cold.points, axis=1))) if cold.ok else float("nan")
         t = np.array(times)
-        model = f"{'3D' if not r.model.get('planar') else 'planar'} order {r.model.get('order')} ({r.model.get('rotation')})"
+        model = f"{'3D' if not r.model.planar else 'planar'} order {r.model.order} ({r.model.rotation})"
         lines.append(f"| {name} | {model} | {np.median(t):.2f} | {np.percentile(t, 99):.2f} | {t.max():.1f} | {bad} | {end:.1e} |")
         if hasattr(solver, "close"):
             solver.close()

@@ -20,12 +20,12 @@ import time
 
 import casadi as ca
 import numpy as np
-from scipy.special import j0
 
 from dlo_ros.model.basis import make_basis
 from dlo_ros.model.problem import Problem
 from dlo_ros.model.quadrature import ChebyshevQuadrature
 from dlo_ros.model.rotations import quat_to_matrix
+from dlo_ros.solver.initial_guess import inverse_j0
 
 from .common import S_OUT, Outcome, interp_points
 from .nlp_tools import CasadiNLP, NLPSolution, augmented_lagrangian_nm
@@ -34,16 +34,6 @@ from .nlp_tools import CasadiNLP, NLPSolution, augmented_lagrangian_nm
 def tangent_angle(q: np.ndarray) -> float:
     t = quat_to_matrix(q)[:, 0]
     return float(np.arctan2(t[2], t[0]))
-
-
-def inverse_j0(ratio: float) -> float:
-    lo, hi = 0.0, 2.404825557695773
-    if ratio >= 1.0:
-        return 0.0
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if j0(mid) > ratio else (lo, mid)
-    return 0.5 * (lo + hi)
 
 
 def default_sag(problem: Problem) -> float:

@@ -162,16 +162,16 @@ def format_summary(scene, result) -> str:
         f"{result.basis} order {result.order}" + (f", IPOPT {result.ipopt_status}" if result.ipopt_status else "")
     )
     m = result.model
-    if m:
-        kinds = ["planar" if m.get("planar") else "3D"] + [k for k in ("twist", "stretch", "gravity") if m.get(k)]
-        err = m.get("estimated_error_m")
+    if m is not None:
+        kinds = ["planar" if m.planar else "3D"] + [k for k in ("twist", "stretch", "gravity") if getattr(m, k)]
+        err = m.estimated_error_m
         lines.append(
-            f"model   {'auto' if m.get('auto') else 'fixed'}: {', '.join(kinds)}; order {m.get('order')}, "
-            f"{m.get('obstacles')} obstacle(s) in the NLP, {m.get('variables')} unknowns"
-            + (f", estimated error {err:.2g} m (tolerance {m.get('tolerance_m'):.2g} m"
-               + ("" if m.get("tolerance_met", True) else ": NOT met, even at the highest order") + ")" if err is not None else "")
+            f"model   {'auto' if m.auto else 'fixed'}: {', '.join(kinds)}; order {m.order}, "
+            f"{m.obstacles} obstacle(s) in the NLP, {m.variables} unknowns"
+            + (f", estimated error {err:.2g} m (tolerance {m.tolerance_m:.2g} m"
+               + ("" if m.tolerance_met else ": NOT met, even at the highest order") + ")" if err is not None else "")
         )
-        for change in m.get("changes", []):
+        for change in m.changes:
             lines.append(f"        model change: {change}")
     return "\n".join(lines)
 

@@ -336,7 +336,7 @@ def _encode_result(result: Any, update: int, ros_time_ns: int, bend_stiffness: A
         np.asarray(result.orientations, dtype=float).tobytes(),
         None if bend_stiffness is None else np.asarray(bend_stiffness, dtype=float).tobytes(),
         None if targets is None else (tuple(str(n) for n in targets), b"".join(_pose_bytes(p) for p in targets.values())),
-        dict(getattr(result, "model", None) or {}),
+        result.model_dict(),
     )
 
 

@@ -24,13 +24,16 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
 
 from .jsonio import json_safe, stdout_to_stderr
 
 from . import recording as R
+
+if TYPE_CHECKING:
+    from .solver import Solver
 
 HELP = "open a rerun recording (.rrd) in the viewer, or re-solve it and compare the shapes (--resolve)"
 DEFAULT_TOLERANCE = 1e-6
@@ -219,7 +222,7 @@ def _scene_from_yaml(text: str, where: str):
     return scene_from_dict(yaml.safe_load(text), source=where)
 
 
-def _make_solver(kind: str, scene, compile: str):
+def _make_solver(kind: str, scene, compile: str) -> Solver:
     from . import solver as S
 
     if kind == "ShapeSolver" or not hasattr(S, "make_solver"):
@@ -266,7 +269,7 @@ def resolve(rec: Recording, tolerance: float = DEFAULT_TOLERANCE, compile: str =
     for recorded in sorted(rec.results, key=lambda r: r.update):
         while ci < len(changes) and changes[ci][0] <= recorded.update:
             new = _scene_from_yaml(changes[ci][1], f"{rec.path}#{R.E_SCENE_CHANGES}@{changes[ci][0]}")
-            if new.options == scene.options and hasattr(solver, "set_problem"):
+            if new.options == scene.options:
                 solver.set_problem(new.problem)
             else:
                 solver = _make_solver(rec.solver_kind, new, compile)

@@ -41,7 +41,7 @@ def stream_until_checked(solver, problem, steps=400, dx=0.0005):
     for i in range(steps):
         r = solver.solve({"right": (x0 + np.array([0.0, 0.0, dx * np.sin(i / 10)]), q)})
         assert r.ok, r.message
-        if r.model["checked"] and not solver._job:
+        if r.model.checked and not solver._job:
             return r
         time.sleep(0.01)
     raise AssertionError(f"checks did not finish in {steps} updates: {r.model}")
@@ -52,19 +52,19 @@ def test_background_checks_reach_the_synchronous_choice_without_building_on_the_
     options = SolverOptions(output_points=51, error_tolerance=0.01)  # loose: the checks move the order down
     sync = make_solver(problem, options, compile="off", checks="sync")
     r_sync = sync.solve()
-    assert r_sync.model["order"] == 8, r_sync.model
+    assert r_sync.model.order == 8, r_sync.model
     n_sync = len(builds)
     solver = make_solver(problem, options, compile="off", checks="background")
     try:
         first = solver.solve()
-        assert first.ok and first.model["checks"] == "background"
-        assert not first.model["checked"] and first.model["estimated_error_m"] is None
+        assert first.ok and first.model.checks == "background"
+        assert not first.model.checked and first.model.estimated_error_m is None
         r = stream_until_checked(solver, problem)
         for _ in range(3):  # the escalations settle: a further check keeps the model
-            r = stream_until_checked(solver, problem) if not r.model["checked"] else r
-        assert (r.model["planar"], r.model["order"]) == (r_sync.model["planar"], r_sync.model["order"])
-        assert r.model["estimated_error_m"] <= 0.01 / 4
-        assert any("order 8" in c for c in r.model["changes"]), r.model["changes"]
+            r = stream_until_checked(solver, problem) if not r.model.checked else r
+        assert (r.model.planar, r.model.order) == (r_sync.model.planar, r_sync.model.order)
+        assert r.model.estimated_error_m <= 0.01 / 4
+        assert any("order 8" in c for c in r.model.changes), r.model.changes
         stream_builds = builds[n_sync + 1:]  # after its first model, built on this thread
         assert stream_builds and all(name.startswith("dlo-auto-check") for name in stream_builds), builds
     finally:
@@ -77,13 +77,13 @@ def test_targets_leaving_the_plane_switch_to_the_prebuilt_3d_model(builds):
     try:
         solver.solve()
         r = stream_until_checked(solver, problem)
-        assert r.model["planar"]
+        assert r.model.planar
         main = threading.current_thread().name
         before = builds.count(main)
         q = problem.grip("right").pose.orientation
         moved = solver.solve({"right": (np.array([0.6, 0.02, 0.4]), q)})
-        assert moved.ok and not moved.model["planar"]
-        assert any("left the plane" in c for c in moved.model["changed"]), moved.model
+        assert moved.ok and not moved.model.planar
+        assert any("left the plane" in c for c in moved.model.changed), moved.model
         assert builds.count(main) == before, "the 3D model was built on the streaming thread"
         assert moved.warm_started and moved.iterations <= 10, (moved.message, moved.iterations)
         full = ShapeSolver(problem, SolverOptions(model="full", order=24, output_points=51), compile="off")
@@ -118,7 +118,7 @@ def test_reset_makes_the_next_solve_cold_in_every_pooled_model():
         solver.reset()
         q = problem.grip("right").pose.orientation
         r = solver.solve({"right": (np.array([0.6, 0.02, 0.4]), q)})  # leaves the plane: a pooled 3D model
-        assert r.ok and not r.model["planar"] and not r.warm_started, (r.message, r.model)
+        assert r.ok and not r.model.planar and not r.warm_started, (r.message, r.model)
     finally:
         solver.close()
 
@@ -129,7 +129,7 @@ def test_after_close_the_solver_keeps_answering_with_inline_checks():
     solver.solve()
     solver.close()
     r = solver.solve({"right": (np.array([0.58, 0.0, 0.4]), problem.grip("right").pose.orientation)})
-    assert r.ok and r.model["checks"] == "sync" and r.model["checked"], r.model
+    assert r.ok and r.model.checks == "sync" and r.model.checked, r.model
 
 
 def test_background_checks_lower_the_gil_switch_interval_and_never_raise_it():

@@ -32,7 +32,7 @@ def assert_close_to_full(r, problem):
     ref = full_reference(problem)
     dev = np.max(np.linalg.norm(r.points - ref.points, axis=1))
     assert dev <= TOL, (dev, r.model)
-    assert r.model["estimated_error_m"] is not None and r.model["estimated_error_m"] <= TOL
+    assert r.model.estimated_error_m is not None and r.model.estimated_error_m <= TOL
 
 
 def hanging(**kw):
@@ -43,27 +43,27 @@ def hanging(**kw):
 def test_planar_scene_gets_the_planar_model():
     prob = hanging()
     _, r = auto(prob)
-    assert r.model["planar"] and not r.model["twist"] and r.model["gravity"]
+    assert r.model.planar and not r.model.twist and r.model.gravity
     assert_close_to_full(r, prob)
 
 
 def test_small_out_of_plane_offset_makes_it_3d():
     prob = hanging(right=(0.6, 0.01, 0.4))
     _, r = auto(prob)
-    assert not r.model["planar"]
-    assert any(reason.startswith("3D:") for reason in r.model["reasons"]), r.model["reasons"]
+    assert not r.model.planar
+    assert any(reason.startswith("3D:") for reason in r.model.reasons), r.model.reasons
     assert_close_to_full(r, prob)
 
 
 def test_twist_free_scene_drops_twist_and_clamped_twist_keeps_it():
     free = clamped_pair(right=(0.6, 0.1, 0.05), modes=("tangent", "tangent"), twist=0.5, weight=0.2)
     _, r = auto(free)
-    assert not r.model["twist"]
+    assert not r.model.twist
     assert_close_to_full(r, free)
     twisted = clamped_pair(right=(0.6, 0.0, 0.0), q_right=quat_about("x", 1.5), twist=0.5, weight=0.2)
     _, r = auto(twisted)
-    assert r.model["twist"] and not r.model["planar"]
-    assert any("twist" in reason for reason in r.model["reasons"])
+    assert r.model.twist and not r.model.planar
+    assert any("twist" in reason for reason in r.model.reasons)
     assert_close_to_full(r, twisted)
 
 
@@ -71,7 +71,7 @@ def test_planar_but_unstable_in_3d_escalates_to_full():
     """A compressed strip with little twist stiffness leaves its plane (paper Fig. 2's regime)."""
     prob = clamped_pair(right=(0.3, 0, 0), twist=0.0, weight=0.0)
     _, r = auto(prob)
-    assert not r.model["planar"] and any("unstable in 3D" in c for c in r.model["changes"])
+    assert not r.model.planar and any("unstable in 3D" in c for c in r.model.changes)
     assert r.stable
 
 
@@ -79,11 +79,11 @@ def test_stretch_only_when_it_matters():
     stiff = replace(hanging().string, stretch_stiffness=Profile.constant(1e7))
     prob = replace(hanging(), string=stiff)
     _, r = auto(prob)
-    assert not r.model["stretch"]
+    assert not r.model.stretch
     soft = replace(hanging().string, stretch_stiffness=Profile.constant(20.0))
     prob = replace(hanging(), string=soft)
     _, r = auto(prob)
-    assert r.model["stretch"] and any("elongation" in c for c in r.model["changes"])
+    assert r.model.stretch and any("elongation" in c for c in r.model.changes)
     ref = ShapeSolver(prob, SolverOptions(model="full", order=24, output_points=51)).solve()
     assert np.max(np.linalg.norm(r.points - ref.points, axis=1)) <= TOL
 
@@ -91,10 +91,10 @@ def test_stretch_only_when_it_matters():
 def test_negligible_gravity_is_dropped():
     prob = clamped_pair(right=(0.6, 0, 0), weight=1e-7)
     _, r = auto(prob)
-    assert not r.model["gravity"]
+    assert not r.model.gravity
     assert_close_to_full(r, prob)
     _, r = auto(hanging())
-    assert r.model["gravity"]
+    assert r.model.gravity
 
 
 def test_an_obstacle_clear_of_the_plane_keeps_the_planar_model_and_one_across_it_does_not():
@@ -104,29 +104,29 @@ def test_an_obstacle_clear_of_the_plane_keeps_the_planar_model_and_one_across_it
     beside = Obstacle.from_dict({"type": "sphere", "center": [0.3, 0.3, 0.2], "radius": 0.1})
     prob = replace(hanging(), obstacles=(beside,))
     solver, r = auto(prob)
-    assert r.model["planar"] and r.model["obstacles"] == 0, r.model
-    assert any("clear of the plane" in c for c in r.model["reasons"]), r.model["reasons"]
+    assert r.model.planar and r.model.obstacles == 0, r.model
+    assert any("clear of the plane" in c for c in r.model.reasons), r.model.reasons
     assert_close_to_full(r, prob)
     across = Obstacle.from_dict({"type": "sphere", "center": [0.3, 0.05, 0.2], "radius": 0.1})
     _, r = auto(replace(hanging(), obstacles=(across,)))
-    assert not r.model["planar"] and r.model["obstacles"] == 1, r.model
+    assert not r.model.planar and r.model.obstacles == 1, r.model
     # moving one grip sideways toward the sphere: 3D, with the sphere in the model
     r = solver.solve({"right": ([0.6, 0.05, 0.4], [0, 0, 0, 1])})
-    assert r.ok and not r.model["planar"] and r.model["obstacles"] == 1, r.model
+    assert r.ok and not r.model.planar and r.model.obstacles == 1, r.model
 
 
 def test_obstacles_enter_the_nlp_only_within_reach_and_keep_the_warm_start():
     far = Obstacle.from_dict({"type": "sphere", "center": [0.3, 0, -3.0], "radius": 0.2})
     prob = replace(hanging(), obstacles=(far,))
     solver, r = auto(prob)
-    assert r.model["obstacles"] == 0
+    assert r.model.obstacles == 0
     # carry both grips down toward the sphere: it comes within reach and is added, warm start kept
     q = [0, 0, 0, 1]
     for z in np.linspace(0.3, -1.9, 12):
         r = solver.solve({"left": ([0, 0, z], q), "right": ([0.6, 0, z], q)})
         assert r.ok, r.message
-    assert r.model["obstacles"] == 1
-    assert any("came within reach" in c for c in r.model["changes"])
+    assert r.model.obstacles == 1
+    assert any("came within reach" in c for c in r.model.changes)
     assert r.warm_started
 
 
@@ -134,29 +134,29 @@ def test_order_is_the_lowest_meeting_the_tolerance():
     prob = clamped_pair(right=(0.5, 0, 0.05), q_left=quat_about("y", -0.5), twist=0.5)
     _, r = auto(prob)
     coarse, rc = auto(prob, error_tolerance=0.02)
-    assert r.model["order"] > 8 and rc.model["order"] == 8, (r.model, rc.model)  # up for 1 mm, down for 2 cm
-    assert any(c.startswith("order 8 error estimate") for c in rc.model["changes"]), rc.model["changes"]
+    assert r.model.order > 8 and rc.model.order == 8, (r.model, rc.model)  # up for 1 mm, down for 2 cm
+    assert any(c.startswith("order 8 error estimate") for c in rc.model.changes), rc.model.changes
     assert_close_to_full(r, prob)
     ref = full_reference(prob)  # the coarse model's estimate bounds its true error within a factor 2
     true = np.max(np.linalg.norm(rc.points - ref.points, axis=1))
-    assert true <= 0.02 and true <= 2 * rc.model["estimated_error_m"], (true, rc.model)
+    assert true <= 0.02 and true <= 2 * rc.model.estimated_error_m, (true, rc.model)
 
 
 def test_explicit_model_overrides_auto():
     solver = make_solver(hanging(), SolverOptions(model="full"), compile="off", checks="sync")
     assert isinstance(solver, ShapeSolver)
-    assert not solver.solve().model["planar"]
+    assert not solver.solve().model.planar
 
 
 def test_targets_leaving_the_plane_switch_to_3d_with_the_warm_start():
     """A scene built planar must follow a target that leaves its plane (never project it)."""
     prob = hanging()
     solver, r = auto(prob)
-    assert r.model["planar"]
+    assert r.model.planar
     q = [0, 0, 0, 1]
     r = solver.solve({"right": ([0.5, 0.05, 0.45], q)})
     assert r.ok, r.message
-    assert not r.model["planar"] and any("left the plane" in c for c in r.model["changes"])
+    assert not r.model.planar and any("left the plane" in c for c in r.model.changes)
     assert np.allclose(r.points[-1], [0.5, 0.05, 0.45], atol=1e-8)
     assert r.warm_started
 
@@ -175,12 +175,12 @@ def test_a_query_that_needs_a_richer_model_answers_with_it_and_leaves_the_stream
     table = Obstacle.from_dict({"type": "halfspace", "point": [0, 0, 0], "normal": [0, 0, 1]})
     prob = replace(hanging(), obstacles=(table, beside))
     solver, r = auto(prob)
-    assert r.model["planar"] and r.model["obstacles"] == 1
+    assert r.model.planar and r.model.obstacles == 1
     query = solver.solve({"right": ([0.6, 0.1, 0.4], [0, 0, 0, 1])}, commit=False)
-    assert query.ok and not query.model["planar"] and query.model["obstacles"] == 2, query.model
+    assert query.ok and not query.model.planar and query.model.obstacles == 2, query.model
     assert set(query.contact_forces) <= {0, 1}
     after = solver.solve()
-    assert after.ok and after.model["planar"] and after.model["obstacles"] == 1
+    assert after.ok and after.model.planar and after.model.obstacles == 1
     np.testing.assert_allclose(after.points, r.points, atol=1e-9)
 
 
@@ -191,9 +191,9 @@ def test_tangents_across_the_chord_need_no_frame_turn_and_the_order_converges():
     q = quat_about("z", np.pi / 2)
     problem = clamped_pair(left=(0, 0, 0), right=(0.3, 0, 0), q_left=q, q_right=q, weight=0.5, twist=0.7)
     solver, r = auto(problem)
-    assert r.model["rotation"] == "quaternion"
-    assert not any("frame" in reason for reason in r.model["reasons"] + r.model["changes"]), r.model
-    assert r.model["estimated_error_m"] is not None and r.model["estimated_error_m"] <= TOL
+    assert r.model.rotation == "quaternion"
+    assert not any("frame" in reason for reason in r.model.reasons + r.model.changes), r.model
+    assert r.model.estimated_error_m is not None and r.model.estimated_error_m <= TOL
     assert r.equilibrium_residual_m <= TOL
     fine = ShapeSolver(problem, SolverOptions(model="full", order=32, output_points=51), compile="off")
     fine.adopt_warm_start(solver.inner)
@@ -209,7 +209,7 @@ def _peg_on_the_free_path(offset: float):
     free = clamped_pair(right=(0.6, 0.0, 0.0), weight=1.0, bend=0.05, twist=0.04)
     f = ShapeSolver(free, SolverOptions(model="planar", order=16), compile="off")
     assert f.solve().ok
-    centre = f.model.positions(f._state.z, np.array([0.51]))[0] - np.array([0.0, 0.0, offset])
+    centre = f.model.positions(f.snapshot().z, np.array([0.51]))[0] - np.array([0.0, 0.0, offset])
     peg = Obstacle("sphere", np.array([*centre, 0.006]), "peg")
     return clamped_pair(right=(0.6, 0.0, 0.0), weight=1.0, bend=0.05, twist=0.04, obstacles=(peg,)), peg
 
@@ -221,25 +221,25 @@ def test_obstacle_samples_go_up_when_the_string_cuts_into_an_obstacle_between_th
     points (measured here independently), and the estimate includes the cut."""
     prob, peg = _peg_on_the_free_path(0.0)
     solver, r = auto(prob, error_tolerance=0.002)
-    reasons = " ".join(r.model["changes"])
+    reasons = " ".join(r.model.changes)
     assert "cuts into obstacle 'peg'" in reasons and "41 samples: 81 samples" in reasons, reasons
-    assert r.model["obstacle_samples"] >= 81
-    x = solver.inner.model.positions(solver.inner._state.z, np.linspace(0.0, 1.0, 4001))
+    assert r.model.obstacle_samples >= 81
+    x = solver.inner.model.positions(solver.inner.snapshot().z, np.linspace(0.0, 1.0, 4001))
     depth = float(np.max(peg.h_many(x)))
     assert depth <= 0.001, depth
-    assert r.model["estimated_error_m"] >= depth and r.model["tolerance_met"]
+    assert r.model.estimated_error_m >= depth and r.model.tolerance_met
     # the sampled 41-point model alone passes straight through the peg
     sampled = ShapeSolver(prob, SolverOptions(model="planar", order=12), compile="off")
     assert sampled.solve().ok
-    assert float(np.max(peg.h_many(sampled.model.positions(sampled._state.z, np.linspace(0.0, 1.0, 4001))))) > 0.005
+    assert float(np.max(peg.h_many(sampled.model.positions(sampled.snapshot().z, np.linspace(0.0, 1.0, 4001))))) > 0.005
 
 
 def test_obstacle_samples_stay_when_nothing_is_cut():
     """The same peg 2 cm below the free path: nothing is cut, the 41 samples stay, no change."""
     prob, _ = _peg_on_the_free_path(0.02)
     _, r = auto(prob, error_tolerance=0.002)
-    assert r.model["obstacle_samples"] == 41
-    assert not any("samples" in c for c in r.model["changes"]), r.model["changes"]
+    assert r.model.obstacle_samples == 41
+    assert not any("samples" in c for c in r.model.changes), r.model.changes
 
 
 def _stretchy(chord: float):
@@ -254,7 +254,7 @@ def test_extensible_string_beyond_its_length_gets_the_stretch_field():
     ref = ShapeSolver(_stretchy(1.1), SolverOptions(model="full", order=24, output_points=51), compile="off").solve()
     assert ref.ok, ref.message
     _, r = auto(_stretchy(1.1))
-    assert r.model["stretch"] and any("extensible" in reason for reason in r.model["reasons"])
+    assert r.model.stretch and any("extensible" in reason for reason in r.model.reasons)
     assert np.max(np.linalg.norm(r.points - ref.points, axis=1)) <= TOL
     solver = make_solver(_stretchy(0.9), SolverOptions(output_points=51), compile="off")
     try:
@@ -262,7 +262,7 @@ def test_extensible_string_beyond_its_length_gets_the_stretch_field():
         for c in np.linspace(0.94, 1.1, 5):
             r = solver.solve({"right": ((c, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))})
             assert r.ok, (c, r.message)
-        assert r.model["stretch"] and any("extensible" in change for change in r.model["changes"])
+        assert r.model.stretch and any("extensible" in change for change in r.model.changes)
         assert np.max(np.linalg.norm(r.points - ref.points, axis=1)) <= TOL
     finally:
         solver.close()

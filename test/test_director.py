@@ -58,7 +58,7 @@ def test_point_moment_at_mid_length_gives_two_exact_arcs(how):
         assert solver.solve().ok
         r = stream(solver, [cantilever(loads(k)) for k in np.linspace(0.1, 1.0, 10)])
     assert r.ok and r.stable, r.message
-    assert r.model["breakpoints"] == [0.0, 0.5, 1.0]
+    assert r.model.breakpoints == (0.0, 0.5, 1.0)
     kappa = m / 1.0
     exact = arc(np.minimum(r.s, 0.5), kappa)
     end_tangent = np.array([np.cos(kappa * 0.5), np.sin(kappa * 0.5), 0.0])
@@ -84,7 +84,7 @@ def test_twisting_moment_twists_a_straight_cantilever(how):
         assert solver.solve().ok
         r = stream(solver, [cantilever(loads(k), twist=rt) for k in np.linspace(0.2, 1.0, 5)])
     assert r.ok and r.stable, r.message
-    assert r.model["rotation"] == "quaternion"
+    assert r.model.rotation == "quaternion"
     np.testing.assert_allclose(r.points[:, 1:], 0.0, atol=1e-9)
     angle = mt * 0.5 / rt
     np.testing.assert_allclose(r.orientations[-1], quat_about("x", angle), atol=1e-8)
@@ -119,7 +119,7 @@ def test_mid_string_clamp_and_tip_moment(how):
         assert solver.solve().ok
         r = stream(solver, [prob(k) for k in np.linspace(0.2, 1.0, 5)])
     assert r.ok and r.stable, r.message
-    assert r.model["breakpoints"] == [0.0, 0.5, 1.0]
+    assert r.model.breakpoints == (0.0, 0.5, 1.0)
     exact = np.where((r.s < 0.5)[:, None], np.stack([r.s - 0.5, 0 * r.s, 0 * r.s], axis=1),
                      arc(np.maximum(r.s - 0.5, 0.0), m))
     assert np.abs(r.points - exact).max() < 1e-6

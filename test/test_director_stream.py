@@ -80,6 +80,6 @@ def test_closed_3d_path_auto_builds_nothing_on_the_callers_thread(monkeypatch):
             assert r.status in ("ok", "unverified"), (k, r.message)
             assert r.ok or r.stable is None
         assert caller not in builds, builds
-        assert not r.model["planar"] and r.model["rotation"] == "quaternion"
+        assert not r.model.planar and r.model.rotation == "quaternion"
     finally:
         solver.close()

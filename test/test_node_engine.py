@@ -238,15 +238,15 @@ def test_a_live_parameter_change_publishes_a_checked_shape(monkeypatch):
     eng.start()
     try:
         rec.wait(lambda: rec.updates, timeout=120)
-        assert rec.updates[0].result.model["checks"] == "background"
+        assert rec.updates[0].result.model.checks == "background"
         for bend in (0.04, 0.01):
             edit = lambda p, b=bend: replace(p, string=replace(p.string, bend_stiffness=Profile.constant(b)))  # noqa: E731
             result = eng.change_problem(edit).result(120)
             update = rec.updates[-1]
             assert update.trigger == "parameters" and update.result is result
             assert result.ok and result.stable is True, result.message
-            assert result.model["checked"] is True and result.model["estimated_error_m"] is not None
-            assert result.model["tolerance_met"] is True
+            assert result.model.checked is True and result.model.estimated_error_m is not None
+            assert result.model.tolerance_met is True
             assert update.problem.string.bend_stiffness.values == (bend,)
         assert not rec.failures
     finally:

@@ -62,5 +62,5 @@ def test_random_scene_auto(seed):
     r = solver.solve()
     assert r.status not in FALSE_VERDICTS, r.message
     if r.ok:
-        assert r.model["tolerance_met"] in (True, None)
-        assert r.equilibrium_residual_m <= r.model["tolerance_m"]
+        assert r.model.tolerance_met in (True, None)
+        assert r.equilibrium_residual_m <= r.model.tolerance_m

@@ -27,6 +27,7 @@ from dlo_ros.replay import read_recording, resolve  # noqa: E402
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver import ShapeSolver  # noqa: E402
 from dlo_ros.solver.result import ShapeResult  # noqa: E402
+from dlo_ros.solver.summary import ModelSummary  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 RERUN = str(Path(sys.executable).parent / "rerun")
@@ -143,11 +144,11 @@ def test_recording_holds_every_update_and_the_shapes(recorded):
     assert statuses == [(R.E_STATUS, 0, "ok: converged")]  # logged only when the status changes
     # the (fixed) model on the timeline: order, size, planar; a ShapeSolver estimates no error
     steps = list(range(UPDATES + 1))
-    assert rec.model_series["order"] == [(k, float(results[0].model["order"])) for k in steps]
-    assert rec.model_series["variables"] == [(k, float(results[0].model["variables"])) for k in steps]
+    assert rec.model_series["order"] == [(k, float(results[0].model.order)) for k in steps]
+    assert rec.model_series["variables"] == [(k, float(results[0].model.variables)) for k in steps]
     assert rec.model_series["planar"] == [(k, 0.0) for k in steps]
     assert "estimated_error_m" not in rec.model_series and "tolerance_m" not in rec.model_series
-    assert rec.results[0].model["order"] == results[0].model["order"]
+    assert rec.results[0].model["order"] == results[0].model.order  # recorded: the JSON form
 
 
 def test_resolve_reproduces_the_recording(recorded):
@@ -202,15 +203,15 @@ def test_an_auto_model_is_on_the_timeline(tmp_path, scene, solver):
     model events in events/model at their update; an auto scene gets the error-vs-tolerance plot."""
     solver.reset()
     q = scene.problem.grip("right").pose.orientation
-    base = {"planar": True, "twist": False, "stretch": False, "gravity": True, "order": 12, "obstacles": 1,
-            "estimated_error_m": 4.3e-5, "tolerance_m": 1e-3, "variables": 15, "auto": True,
-            "reasons": ["planar: scene lies in one plane"], "changes": [], "changed": []}
+    base = ModelSummary(planar=True, twist=False, stretch=False, gravity=True, order=12, obstacles=1, variables=15,
+                        rotation="planar", estimated_error_m=4.3e-5, auto=True, obstacle_samples=41, tolerance_m=1e-3,
+                        tolerance_met=True, checked=True, checks="background",
+                        reasons=("planar: scene lies in one plane",), changes=(), changed=())
     left_plane = "targets left the plane (grips[1].position is 0.05 m out of the plane): full model"
+    full = replace(base, planar=False, twist=True, order=16, variables=51, rotation="quaternion", changes=(left_plane,))
     models = [base, base,
-              {**base, "planar": False, "twist": True, "order": 16, "variables": 51, "estimated_error_m": None,
-               "changes": [left_plane], "changed": [left_plane]},
-              {**base, "planar": False, "twist": True, "order": 16, "variables": 51, "estimated_error_m": 6.1e-5,
-               "changes": [left_plane]}]
+              replace(full, estimated_error_m=None, tolerance_met=None, checked=False, changed=(left_plane,)),
+              replace(full, estimated_error_m=6.1e-5)]
     auto_scene = replace(scene, options=replace(scene.options, model="auto"))
     path = tmp_path / "auto.rrd"
     with R.Recorder(rrd=path) as rec:
@@ -218,7 +219,7 @@ def test_an_auto_model_is_on_the_timeline(tmp_path, scene, solver):
         for k, model in enumerate(models):
             r = solver.solve({"right": ([0.6 - 0.02 * k, 0.0, 0.4], q)}, warm=True)
             r.model = model
-            for reason in model["changed"]:
+            for reason in model.changed:
                 rec.log_model_change(f"model change: {reason}", update=k, ros_time_ns=1_000 + k)
             rec.log_update(r, update=k, problem=solver.problem, ros_time_ns=1_000 + k, warm=k > 0)
         failed = ShapeResult(status="unreachable", message="too far", model=models[-1])

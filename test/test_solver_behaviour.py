@@ -6,6 +6,7 @@ import threading
 import numpy as np
 
 from dlo_ros.solver import ShapeSolver, SolverOptions
+from dlo_ros.solver.newton import derivatives
 from conftest import clamped_pair
 
 Q = [0.0, 0.0, 0.0, 1.0]
@@ -135,7 +136,7 @@ def test_contact_free_derivatives_are_the_full_ones_without_obstacle_rows():
     lam = rng.uniform(-1, 1, nlp.lbg.size)
     lam[nlp.n_free_rows:] = 0.0
     no_contact = np.arange(nlp.lbg.size) < nlp.n_free_rows  # every row but the obstacle rows active
-    free, full = s._derivatives(z, p, lam, no_contact), s._kkt(z, p, lam)
+    free, full = derivatives(nlp, s.functions, z, p, lam, no_contact), s.functions.kkt(z, p, lam)
     for k in (0, 1, 3, 4):  # ∇f, g (every row, obstacle values included), ∇²L, energies
         np.testing.assert_allclose(free[k], full[k], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(free[2][: nlp.n_free_rows], full[2][: nlp.n_free_rows], rtol=1e-12, atol=1e-12)
@@ -187,7 +188,7 @@ def test_fused_and_step_by_step_newton_updates_agree():
         assert a.ok and b.ok and a.ipopt_status == b.ipopt_status == "Newton"
         assert a.iterations == b.iterations
         np.testing.assert_allclose(a.points, b.points, atol=1e-12)
-        np.testing.assert_allclose(fused._state.lam_g, stepwise._state.lam_g, rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(fused.snapshot().lam_g, stepwise.snapshot().lam_g, rtol=1e-8, atol=1e-10)
     cold = fused.solve(pose, warm=False, commit=False)  # same NLP (same frame), IPOPT from the start guess
     assert cold.ok and cold.ipopt_status != "Newton"
     np.testing.assert_allclose(a.points, cold.points, atol=1e-8)
@@ -206,7 +207,7 @@ def test_a_failing_fused_newton_call_falls_back_to_ipopt():
     def singular(*args):
         raise RuntimeError("LapackLu::prepare: 0-th row (zero-based) is exactly zero")
 
-    solver._newton_step = singular
+    solver.functions.newton_step = singular
     right = problem.grip("right").pose
     r = solver.solve({"right": GripPose(right.position + np.array([-0.01, 0.0, 0.01]), right.orientation)})
     assert r.ok and r.ipopt_status != "Newton", r.ipopt_status

@@ -125,7 +125,7 @@ class DloNode(Node):
         self._record_n = 0  # update counter of the recording: one per streaming solve (ok or failed)
         self._record_last: Update | None = None
         self.recorder = None
-        self._model_changes_seen = 0  # len(ShapeResult.model['changes']) of the current solver, seen so far
+        self._model_changes_seen = 0  # len(ShapeResult.model.changes) of the current solver, seen so far
         self._tolerance_warned = False
 
         self.health = Health(scene=safe_text(scene.name), frame_id=safe_text(self.frame_id),
@@ -523,7 +523,7 @@ class DloNode(Node):
             self._markers_dirty = True
         if self.health.updates == 1:
             self.get_logger().info(f"first shape published {time.monotonic() - self._t_start:.1f} s after start "
-                                   f"({r.status}, stable={r.stable}; model {model_text(r.model) or 'not reported'})")
+                                   f"({r.status}, stable={r.stable}; model {model_text(r.model_dict()) or 'not reported'})")
             self._warm_query_workers()
         if r.stable is False and self.health.should_warn("unstable"):
             self.get_logger().warning(f"the published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g}): "
@@ -546,7 +546,7 @@ class DloNode(Node):
     def _observe_model(self, result, stamp_ns: int) -> list[str]:
         """The model of a streaming solve (ok or failed) into the diagnostics; each change of model it made
         is logged (INFO) and recorded in events/model at this update, with its reason."""
-        model = dict(getattr(result, "model", None) or {})
+        model = result.model_dict()
         changes = []
         if model:
             changes, self._model_changes_seen = new_model_changes(model, self._model_changes_seen)

@@ -8,7 +8,8 @@ The level follows the latest event of the streaming state:
   met" in its reasons);
 * 'ok' otherwise.
 Counters and the last error (with its kind, see validation.KINDS) stay in the values, and so do the
-current model (``ShapeResult.model`` of the newest solve, keys ``model.*``) and its last change.
+current model (``ShapeResult.model.as_dict()`` of the newest solve, keys ``model.*``) and its last change.
+The model arrives here in that JSON form (solver/summary.py), as in the recording.
 """
 from __future__ import annotations
 
@@ -33,13 +34,13 @@ def resident_mb() -> float | None:
     return None
 
 RATE_WINDOW_S = 2.0
-#: ShapeResult.model entries shown in the diagnostics as ``model.<key>`` (in this order).
+#: ShapeResult.model.as_dict() entries shown in the diagnostics as ``model.<key>`` (in this order).
 MODEL_KEYS = ("auto", "planar", "twist", "stretch", "gravity", "order", "obstacles", "obstacle_samples", "variables",
               "estimated_error_m", "tolerance_m", "tolerance_met", "checked")
 
 
 def model_text(model: Mapping | None) -> str:
-    """One line for a ShapeResult.model: 'auto: planar, twist, gravity, order 12, 15 unknowns, 1 obstacle(s),
+    """One line for a ShapeResult.model.as_dict(): 'auto: planar, twist, gravity, order 12, 15 unknowns, 1 obstacle(s),
     estimated error 4.3e-05 m (tolerance 0.001 m)'; '' for an empty model."""
     if not model:
         return ""
@@ -62,7 +63,7 @@ def model_text(model: Mapping | None) -> str:
 def new_model_changes(model: Mapping, seen: int) -> tuple[list[str], int]:
     """The model changes to report for one solve, and the new ``seen``.
 
-    ``model``: its ShapeResult.model; ``seen``: how many entries of ``model['changes']`` (the solver's
+    ``model``: its ShapeResult.model.as_dict(); ``seen``: how many entries of ``model['changes']`` (the solver's
     whole history of changes) were already reported (0 after a new solver was built).  The changes are
     ``model['changed']`` (made during the solve), after any change the solver made between solves (e.g.
     in set_problem after a parameter change), which only shows as a new entry of ``changes``.
@@ -139,7 +140,7 @@ class Health:
 
     def set_model(self, model: Mapping | None, changes: Sequence[str] = (), *, stamp_ns: int | None = None,
                   update: int | None = None) -> None:
-        """The model of the newest streaming solve (ok or failed; ``ShapeResult.model``) and the model
+        """The model of the newest streaming solve (ok or failed; ``ShapeResult.model.as_dict()``) and the model
         changes it made (reasons, oldest first), stamped with the solve's ROS time and update number."""
         now = self._clock()
         with self._lock:

@@ -67,8 +67,10 @@ from ..model.profile import Profile
 from ..model.rotations import TANGENT_X, euler_from_frame, farthest_pole, frame_with_pole, pole_angle_deg, quat_to_matrix
 from .nlp import choose_reference_frame, has_point_moments, planarity_violation, twist_is_held
 from .options import SolverOptions
+from .protocol import Solver
 from .result import ShapeResult
-from .shape_solver import IPOPT_LOCK, ShapeSolver, is_stable, with_checked_poses
+from .shape_solver import IPOPT_LOCK, ShapeSolver, with_checked_poses
+from .summary import ModelSummary
 
 ORDERS = (8, 12, 16, 24, 32)
 POLE_MIN_DEG = 40.0  # a 3D model turns its Euler-angle pole away when a tangent comes closer (degrees)
@@ -176,7 +178,7 @@ class _Verdict:
 
 
 class AutoShapeSolver:
-    """The ShapeSolver interface (solve, reset, set_problem, problem, options) with model selection.
+    """The Solver protocol (solver/protocol.py) with model selection.
 
     checks: 'sync' runs the a-posteriori checks inside ``solve`` (a one-shot solve is checked before it
     is returned: the CLI); 'background' runs them on a worker thread from a snapshot of the solve, so a
@@ -184,7 +186,7 @@ class AutoShapeSolver:
     escalation switches to the model the check has already built and warmed, so the switch costs no
     build.  'background' lowers the process's ``sys.setswitchinterval`` to SWITCH_INTERVAL_S, so that
     the worker's Python holds the stream thread up for at most that long.  Until the first check of a
-    model has finished, ``model['checked']`` is false and
+    model has finished, ``model.checked`` is false and
     ``estimated_error_m`` is None.
     """
 
@@ -604,7 +606,7 @@ class AutoShapeSolver:
                                              reasons=list(choice.reasons))
                     verdict.reason = f"order {choice.order} error estimate {error:.3g} m > {tol / 2:.3g} m: order {ORDERS[i + 1]}"
             # at the highest order the estimate stays the one that led there (order 24 against 32): the
-            # best available, and conservative; model['tolerance_met'] compares it with the tolerance
+            # best available, and conservative; model.tolerance_met compares it with the tolerance
             lower_key = replace(choice, order=ORDERS[i - 1]).key() if i > 0 else None
             if verdict.choice is None and lower_key is not None and lower_key not in self._lower_tried:
                 # the lowest order that meets the tolerance: try the next lower one once per model
@@ -690,14 +692,10 @@ class AutoShapeSolver:
         None when that is stable.  The 3D model is pooled: it is also the model a switch to 3D uses."""
         full = self._solver_for(self._full_choice(snap.choice, snap.problem), snap.problem, stream=False,
                                 source=snap.inner, state=snap.state, tag="checker")
-        state = full._state
-        if state is None:
-            return None
-        eig = full._min_reduced_eigenvalue(state)
-        return None if eig is None or is_stable(eig, state.hessian) else eig
+        return full.unstable_eigenvalue()
 
     # ---- plumbing -----------------------------------------------------------------------------------
-    def model_summary(self, choice: ModelChoice | None = None, solver: ShapeSolver | None = None) -> dict:
+    def model_summary(self, choice: ModelChoice | None = None, solver: ShapeSolver | None = None) -> ModelSummary:
         """The ``model`` object of a result: the streaming model, or ``choice``/``solver`` (a query's).
 
         estimated_error_m: the basis-order estimate of the last check of this model (the change of the
@@ -710,23 +708,21 @@ class AutoShapeSolver:
         checked = streaming and not self._unchecked
         est = c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None
         inner = s.model_summary()
-        return {
-            "planar": c.planar, "twist": c.twist, "stretch": c.stretch, "gravity": c.gravity, "order": c.order,
-            "obstacles": len(c.obstacles), "obstacle_samples": c.samples, "estimated_error_m": est,
-            "tolerance_m": self.tolerance,
-            "tolerance_met": None if est is None else bool(est <= self.tolerance),
-            "variables": s.model.layout.size, "auto": True, "checked": checked, "checks": self.checks,
-            "reasons": list(c.reasons), "changes": [r for _, r in self.changes],
-            **{k: inner[k] for k in ("rotation", "elements", "breakpoints") if k in inner},
-        }
+        return ModelSummary(
+            planar=c.planar, twist=c.twist, stretch=c.stretch, gravity=c.gravity, order=c.order,
+            obstacles=len(c.obstacles), obstacle_samples=c.samples, estimated_error_m=est,
+            tolerance_m=self.tolerance, tolerance_met=None if est is None else bool(est <= self.tolerance),
+            variables=s.model.layout.size, auto=True, checked=checked, checks=self.checks,
+            reasons=tuple(c.reasons), changes=tuple(r for _, r in self.changes),
+            rotation=inner.rotation, elements=inner.elements, breakpoints=inner.breakpoints,
+        )
 
     def _finish(self, result: ShapeResult, t0: float, notes: list[str], choice: ModelChoice | None = None,
                 solver: ShapeSolver | None = None) -> ShapeResult:
         """Attach the model (the streaming one, or the query's ``choice``/``solver``) and the time; give
         contact forces the scene's obstacle indices."""
         c = choice or self.choice
-        result.model = self.model_summary(choice, solver)
-        result.model["changed"] = notes
+        result.model = replace(self.model_summary(choice, solver), changed=tuple(notes))
         result.solve_time_ms = (time.perf_counter() - t0) * 1e3
         if result.ok and result.contact_forces and len(c.obstacles) != len(self.problem.obstacles):
             result.contact_forces = {c.obstacles[i]: f for i, f in result.contact_forces.items() if i < len(c.obstacles)}
@@ -744,7 +740,7 @@ def stretch_needed(problem: Problem) -> str:
 
 
 def make_solver(problem: Problem, options: SolverOptions | None = None, compile: str = "background",
-                checks: str = "background"):
+                checks: str = "background") -> Solver:
     """AutoShapeSolver for solver.model 'auto' (the default; ``checks`` as there: 'background' by default,
     so that a stream never builds or switches a model on the caller's thread; 'sync' for one-shot
     answers that must be checked before they return, as the CLI's), else a ShapeSolver of that model."""

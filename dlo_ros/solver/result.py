@@ -5,6 +5,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .summary import ModelSummary
+
 #: 'unverified': the solver converged but the shape fails the equilibrium check (equilibrium_residual_m
 #: over the tolerance); it carries the shape for inspection, never a stability verdict
 STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
@@ -52,12 +54,16 @@ class ShapeResult:
     basis: str = ""
     order: int = 0
     ipopt_status: str = ""
-    model: dict = field(default_factory=dict)
+    model: ModelSummary | None = None  # the model solved (or attempted) with
     equilibrium_residual_m: float = float("nan")
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    def model_dict(self) -> dict:
+        """The model's JSON form (``ModelSummary.as_dict``; {} when the result has none)."""
+        return self.model.as_dict() if self.model is not None else {}
 
     def to_dict(self) -> dict:
         """JSON-ready dictionary (the schema of ``dlo solve --json``, documented in msg_docs/)."""
@@ -76,7 +82,7 @@ class ShapeResult:
             "energy": {k: float(v) for k, v in self.energy.items()},
             "grips": {name: {"force": arr(w.force), "torque": arr(w.torque)} for name, w in self.grips.items()},
             "contact_forces": {str(i): arr(f) for i, f in self.contact_forces.items()},
-            "model": dict(self.model),
+            "model": self.model_dict(),
             "solver": {
                 "iterations": self.iterations,
                 "time_ms": self.solve_time_ms,

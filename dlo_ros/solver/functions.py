@@ -1,0 +1,104 @@
+"""The CasADi functions a solve evaluates, interpreted at first and swapped for compiled C when it is ready.
+
+One ``NlpFunctions`` per ``StringNLP``:
+
+* ``kkt(z, p, λ)`` → [∇f, g, ∂g/∂z, ∇²L, energies] over every row (``StringNLP.kkt_fn``);
+* ``kkt_free(z, p, λ_free)`` → [K, r, ∇f, energies], the Newton matrix K = [∇²L Jᵀ; J 0] and residual
+  r = [∇f + Jᵀλ; g] of the rows other than the obstacle rows (``kkt_free_fn``);
+* ``newton_step(u, p, K, r)`` → the first ``NEWTON_STEPS`` Newton steps in one call (``newton_fn``);
+* ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles).
+
+Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
+background thread and swap each in when it is ready; libraries are cached per machine), 'blocking'
+(compile or load now), 'cached' (load a library compiled earlier, never compile) and 'off'.
+$DLO_NO_COMPILE forces 'off'.  A swap happens under the solver's lock, so a solve never sees one midway.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import casadi as ca
+
+from .compiled import InterpretedFunction, NativeFunction, compiled, compiler, library_path
+from .nlp import StringNLP
+
+COMPILE_MODES = ("background", "blocking", "cached", "off")
+
+
+def check_compile_mode(mode: str) -> None:
+    if mode not in COMPILE_MODES:
+        raise ValueError(f"compile: must be one of {COMPILE_MODES}, got {mode!r}")
+
+
+class NlpFunctions:
+    """The evaluators of one NLP's functions (see the module docstring)."""
+
+    def __init__(self, nlp: StringNLP):
+        self.nlp = nlp
+        self.kkt = InterpretedFunction(nlp.kkt_fn)
+        self.kkt_free = InterpretedFunction(nlp.kkt_free_fn)
+        self.newton_step = InterpretedFunction(nlp.newton_fn)
+        self.obstacle_g = InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
+        self.compiled = False        # every function runs compiled C
+        self.compile_time_s = 0.0    # wall time of the compile that finished them [s]
+        self.retired = False         # the solver was rebuilt: a running compile stops at its next swap
+
+    def retire(self) -> None:
+        """The solver no longer uses these functions: a background compile stops before its next swap."""
+        self.retired = True
+
+    def start_compile(self, mode: str, lock: threading.Lock) -> threading.Thread | None:
+        """Load the libraries compiled earlier and compile the others as ``mode`` says; the background
+        thread if one was started.  ``lock``: the solver's lock, held for every swap."""
+        if os.environ.get("DLO_NO_COMPILE"):
+            mode = "off"
+        if mode == "off" or compiler() is None:
+            return None
+        nlp = self.nlp
+        # the contact-free function first: it is the one a stream uses while nothing touches
+        todo = []
+        for name, fn in (("kkt_free", nlp.kkt_free_fn), ("obstacle_g", nlp.obstacle_g_fn), ("kkt", nlp.kkt_fn)):
+            if fn is None:
+                continue
+            lib = library_path(fn)
+            if lib.exists():  # compiled on an earlier start: load now, no waiting
+                setattr(self, name, NativeFunction(lib, fn))
+                if name == "kkt_free":
+                    self.newton_step = self._compiled_newton_step(fn, lib)
+            else:
+                todo.append((name, fn, lib))
+        self.compiled = not todo
+        if not todo or mode == "cached":
+            return None
+
+        def work(locked: bool) -> None:
+            t0 = time.perf_counter()
+            for name, fn, lib in todo:
+                native, ok = compiled(fn, nice=10 if mode == "background" else 0, lib=lib)
+                with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
+                    if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile
+                        return
+                    setattr(self, name, native)
+                    if name == "kkt_free":
+                        self.newton_step = self._compiled_newton_step(fn, lib)
+            with (threading.Lock() if locked else lock):
+                if not self.retired:
+                    self.compiled = True
+                    self.compile_time_s = time.perf_counter() - t0
+
+        if mode == "blocking":
+            work(locked=True)
+            return None
+        thread = threading.Thread(target=work, args=(False,), name="dlo-compile", daemon=True)
+        thread.start()
+        return thread
+
+    def _compiled_newton_step(self, fn: ca.Function, lib) -> InterpretedFunction:
+        """``newton_fn`` calling the compiled contact-free library (``casadi.external``); the current one
+        if it cannot be loaded (then the steps are still right, only slower)."""
+        try:
+            return InterpretedFunction(self.nlp.newton_function(ca.external(fn.name(), str(lib))))
+        except RuntimeError:
+            return self.newton_step

@@ -1,0 +1,129 @@
+"""What a solve returns: the ShapeResult of a converged state, in SI units.
+
+* the centreline x(s) [m] and pose quaternions at ``output_points`` arc lengths evenly spaced over [0, L];
+* the energy terms [J] (bend, twist, stretch, gravity, external work; total = U − W);
+* each grip's reaction wrench and each obstacle's contact force (−Σ λ ∇h over its touching samples) [N];
+* the stability verdict from the reduced Hessian (``stability.py``);
+* the equilibrium residual (``wrenches.equilibrium``).  A shape whose residual exceeds the tolerance
+  (``error_tolerance``, default 1e-3 L) is 'unverified' and carries no stability verdict; a director
+  model's shape whose orientation rows hold on the flipped sheet is 'failed' and carries no shape.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..model.director import frame_to_quat
+from ..model.problem import Problem
+from ..model.rotations import pose_quaternions
+from . import frames as F
+from .functions import NlpFunctions
+from .nlp import StringNLP
+from .options import SolverOptions
+from .parameters import ProblemParameters
+from .residual import PointAction
+from .result import ShapeResult
+from .stability import is_stable, min_reduced_eigenvalue
+from .state import SolverState
+from .wrenches import FramesOf, equilibrium, wrench
+
+
+def output_s(nlp: StringNLP, options: SolverOptions) -> np.ndarray:
+    """The published arc lengths [m]: ``output_points`` evenly spaced over [0, L]."""
+    return np.linspace(0.0, nlp.length, options.output_points)
+
+
+def no_shape(options: SolverOptions, summary: Any, status: str, message: str, **fields: Any) -> ShapeResult:
+    """A result without a shape (invalid input, unreachable, infeasible, failed): nothing in it could be
+    mistaken for a shape, an energy, a wrench or an eigenvalue."""
+    return ShapeResult(status=status, message=message, basis=options.basis, order=options.order, model=summary,
+                       **fields)
+
+
+def sample(nlp: StringNLP, z: np.ndarray, s_out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centreline points (N, 3) and φ, θ of an Euler model at ``s_out``: ``RitzModel.positions`` and
+    ``fields`` with the output matrices looked up once and each field's coefficients multiplied once."""
+    m = nlp.model
+    b_out, _, w_out = m.matrices(s_out)
+    cphi, cth, ceps = (m.coefficients(z, name) for name in ("phi", "theta", "eps"))
+    theta_nodes = m.B @ cth if cth is not None else np.full(m.quad.count, np.pi / 2)
+    t = m.tangents(m.B @ cphi, theta_nodes, m.B @ ceps if ceps is not None else None, lib=np)
+    points = (z[0:3] * m.length)[None, :] + w_out @ t.T
+    theta = b_out @ cth if cth is not None else np.full(len(s_out), np.pi / 2)
+    return points, b_out @ cphi, theta
+
+
+class ShapeOutputs:
+    """Builds the ShapeResult of a solved state of one NLP (see the module docstring)."""
+
+    def __init__(self, nlp: StringNLP, fns: NlpFunctions, parameters: ProblemParameters, options: SolverOptions):
+        self.nlp, self.fns, self.parameters, self.options = nlp, fns, parameters, options
+        self.s_out = output_s(nlp, options)
+
+    def frames_of(self, current: Problem) -> FramesOf:
+        """Material frames Q(z, s) with the twist-free frames anchored at ``current``'s grips."""
+        return lambda z, s: F.frames(self.nlp, self.parameters, current, z, s)
+
+    def result(self, problem: Problem, current: Problem, state: SolverState, ipopt_status: str, iterations: int,
+               violation: float, warm: bool, steps: int, summary: Any) -> ShapeResult:
+        """The result of ``state`` solving ``problem``; ``current``: the solver's committed scene, whose grips
+        anchor the published twist-free frames and the wrenches' frames; ``summary``: the result's model."""
+        nlp, m, options = self.nlp, self.nlp.model, self.options
+        z, p = state.z, state.p
+        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        s_out = self.s_out.copy()
+        if nlp.director:
+            points = m.positions(z, s_out)
+            quats = frame_to_quat(F.pose_frames(nlp, self.parameters, current, z, s_out))
+        else:
+            points, phi, theta = sample(nlp, z, self.s_out)
+            quats = pose_quaternions(nlp.r0, phi, theta, F.frames_psi(nlp, self.parameters, current, z, s_out, p))
+        min_eig = min_reduced_eigenvalue(nlp, self.fns, state)  # also fills state.energies
+        bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
+        energy = {"bend": bend, "twist": twist, "stretch": stretch, "gravity": grav, "external_work": work,
+                  "total": bend + twist + stretch + grav - work}
+        frames_of = self.frames_of(current)
+        grips = {g.name: wrench(nlp, current.string, frames_of, g, z, lam_si) for g in problem.grips}
+        contacts, actions = self._contacts(problem, z, lam_si)
+        residual = equilibrium(nlp, problem, frames_of, z, grips, actions)
+        stable = None if min_eig is None else is_stable(min_eig, state.hessian)
+        status, message = "ok", "converged" + (f" after {steps} continuation steps" if steps else "")
+        flipped = F.flipped_grips(nlp, problem, z) if nlp.director else ""
+        tolerance = options.error_tolerance or 1e-3 * problem.string.length
+        if flipped:  # not the grip's pose at all: no shape
+            return no_shape(options, summary, "failed", f"landed on a flipped branch: {flipped}", iterations=iterations,
+                            constraint_violation=violation, warm_started=warm, ipopt_status=ipopt_status)
+        if not residual.metres <= tolerance:
+            status, stable = "unverified", None
+            message = (f"not a verified equilibrium: the equilibrium residual is {residual.metres:.3g} m, over the "
+                       f"tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)")
+        return ShapeResult(
+            model=summary, status=status, message=message,
+            s=s_out, points=points, orientations=quats, energy=energy, grips=grips, contact_forces=contacts,
+            stable=stable, min_eigenvalue=min_eig, iterations=iterations, constraint_violation=violation,
+            warm_started=warm, continuation_steps=steps, basis=options.basis, order=options.order,
+            ipopt_status=ipopt_status, equilibrium_residual_m=residual.metres,
+        )
+
+    def _contacts(self, problem: Problem, z: np.ndarray,
+                  lam_si: np.ndarray) -> tuple[dict[int, np.ndarray], list[PointAction]]:
+        """Each obstacle's total contact force [N] (−Σ_j λ_j ∇h(x_j) over its samples), and every touching
+        sample's force as a point action on the string (for the equilibrium residual)."""
+        nlp = self.nlp
+        contacts: dict[int, np.ndarray] = {}
+        actions: list[PointAction] = []
+        if not nlp.obstacle_rows:
+            return contacts, actions
+        touching = np.any(lam_si[nlp.n_free_rows:] > 0)  # obstacle rows come last
+        sample_x = nlp.model.positions(z, nlp.obstacle_s) if touching else None
+        for i, rows in enumerate(nlp.obstacle_rows):
+            ob = problem.obstacles[i]
+            lam = lam_si[rows]
+            force = np.zeros(3)
+            for j in np.flatnonzero(lam > 0):
+                grad = np.asarray(nlp.obstacle_gradient[ob.type](sample_x[j], ob.params)).ravel()
+                force -= lam[j] * grad
+                actions.append(PointAction(float(nlp.obstacle_s[j]), sample_x[j], -lam[j] * grad, np.zeros(3)))
+            contacts[i] = force
+        return contacts, actions

@@ -1,0 +1,34 @@
+"""A committed equilibrium of one NLP: the KKT point (z, λ) a solve ended on and what it already knows there.
+
+The next solve warm-starts from it: Newton steps reuse the stored Newton matrix and residual when only
+the grip targets changed (they enter the constraints linearly), IPOPT restarts from z and its
+multipliers, the stability check reuses the stored Hessian and Jacobian.  Everything is in the NLP's
+scaled units (z: ``StringNLP`` unknowns, λ: IPOPT's multipliers, λ_SI = λ / (row_scale · σ)).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class SolverState:
+    """A committed equilibrium: the warm start of the next solve."""
+
+    z: np.ndarray
+    lam_g: np.ndarray
+    lam_x: np.ndarray
+    p: np.ndarray
+    hessian: np.ndarray | None = None   # ∇²L at z, when the solve already has it
+    jacobian: np.ndarray | None = None  # ∂g/∂z at z
+    energies: np.ndarray | None = None  # bend, twist, stretch, gravity, work at z
+    gradient: np.ndarray | None = None  # ∇f at z
+    g: np.ndarray | None = None  # constraint values (scaled rows) at z
+    unstable_direction: np.ndarray | None = None  # eigenvector of the most negative reduced curvature
+    kkt: np.ndarray | None = None       # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
+    residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
+
+    def copy(self) -> SolverState:
+        """z, λ and p copied (what another thread may adopt later); the derivative caches are left out."""
+        return SolverState(self.z.copy(), self.lam_g.copy(), self.lam_x.copy(), self.p.copy())

@@ -281,3 +281,14 @@ def test_node_strings_are_escaped_capped_and_throttled(tmp_path):
     assert max(len(line) for line in log.splitlines()) < 2000
     assert log.count("query_shape: empty plan") == 1, log
     assert log.count("rejected target (frame)") == 1, log  # warn_throttle 30 s: the second one is throttled
+
+
+def test_readme_python_examples_run():
+    """Every ```python block of the README runs as written (interpreted derivatives), in a fresh interpreter."""
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
+    assert blocks, "no python example in the README"
+    env = dict(os.environ, DLO_NO_COMPILE="1")
+    for code in blocks:
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env,
+                              cwd=ROOT)
+        assert done.returncode == 0, f"{code}\n{done.stderr[-3000:]}"

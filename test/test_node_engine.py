@@ -342,3 +342,26 @@ def test_a_converged_shape_that_misses_its_targets_is_never_published(monkeypatc
         assert not query.ok or np.allclose(query.points[-1], [0.5, -0.05, 0.45], atol=1e-6)
     finally:
         eng.stop(10)
+
+
+def test_every_update_carries_the_stamp_of_the_targets_it_solved(engine_factory):
+    """A burst from another thread while the worker solves: every published update's stamp belongs to
+    the targets its shape ends at (#14: ~1 centreline in 3,000 carried the next target's shape under the
+    previous target's stamp; the targets were read apart from their stamp)."""
+    eng, rec, solvers = engine_factory(delay=0.0002)
+    rec.wait(lambda: rec.updates)
+    n = 5000
+
+    def burst():
+        for i in range(n):
+            eng.submit_targets({"right": pose(0.3 + i * 1e-5)}, stamp_ns=10_000 + i)
+
+    t = threading.Thread(target=burst)
+    t.start()
+    t.join()
+    rec.wait(lambda: rec.updates[-1].stamp_ns == 10_000 + n - 1, timeout=30)
+    streamed = [u for u in rec.updates if u.stamp_ns is not None]
+    assert len(streamed) > 10
+    for u in streamed:
+        assert u.result.points[-1][0] == pytest.approx(0.3 + (u.stamp_ns - 10_000) * 1e-5, abs=1e-12), u.stamp_ns
+        assert u.problem.grip("right").pose.position[0] == pytest.approx(u.result.points[-1][0], abs=1e-12)

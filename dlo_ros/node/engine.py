@@ -192,8 +192,8 @@ class ShapeEngine:
         with self._cond:
             if self._stop:
                 return
-            stamp, received, merged = self._take_slot()
-        self._stream("initial", stamp, received, merged)
+            slot = self._take_slot()
+        self._stream("initial", *slot)
         while True:
             with self._cond:
                 while not (self._stop or self._jobs or self._dirty):
@@ -202,18 +202,20 @@ class ShapeEngine:
                     return
                 job = self._jobs.popleft() if self._jobs else None
                 if job is None:
-                    stamp, received, merged = self._take_slot()
+                    slot = self._take_slot()
             if job is None:
-                self._stream("targets", stamp, received, merged)
+                self._stream("targets", *slot)
             else:
                 self._run_job(job)
 
-    def _take_slot(self) -> tuple[int | None, int | None, int]:
-        """Empty the pending slot (caller holds the lock): (newest stamp, its arrival, messages merged)."""
+    def _take_slot(self) -> tuple[dict[str, GripPose], int | None, int | None, int]:
+        """Empty the pending slot (caller holds the lock): (the targets, newest stamp, its arrival,
+        messages merged).  The targets are taken with their stamp, under the same lock: a target arriving
+        between the two would otherwise be solved under the previous one's stamp."""
         stamp, received, merged = self._stamp_ns, self._received_ns, self._merged
         self.targets_coalesced += max(0, merged - 1)
         self._dirty, self._stamp_ns, self._received_ns, self._merged = False, None, None, 0
-        return stamp, received, merged
+        return dict(self._targets), stamp, received, merged
 
     def _fail_jobs(self, exc: Exception) -> None:
         with self._cond:
@@ -221,9 +223,8 @@ class ShapeEngine:
         for job in jobs:
             job.future.set_exception(exc)
 
-    def _stream(self, trigger: str, stamp_ns: int | None, received_ns: int | None, merged: int) -> ShapeResult | None:
-        with self._cond:
-            targets = dict(self._targets)
+    def _stream(self, trigger: str, targets: dict[str, GripPose], stamp_ns: int | None, received_ns: int | None,
+                merged: int) -> ShapeResult | None:
         solver = self._solver
         update = None
         try:
@@ -248,8 +249,8 @@ class ShapeEngine:
     def _stream_now(self, trigger: str) -> ShapeResult | None:
         """Re-solve the targets after a control job, folding in whatever is pending."""
         with self._cond:
-            stamp, received, merged = self._take_slot()
-        return self._stream(trigger, stamp, received, merged)
+            slot = self._take_slot()
+        return self._stream(trigger, *slot)
 
     def _run_job(self, job: _Job) -> None:
         if not job.future.set_running_or_notify_cancel():

@@ -89,3 +89,39 @@ def test_without_a_compiler_the_interpreted_function_is_used(monkeypatch, tmp_pa
     native, ok = compiled.compiled(fn)
     assert not ok and isinstance(native, compiled.InterpretedFunction)
     assert not list(tmp_path.iterdir())  # nothing generated, nothing cached
+
+
+def test_never_two_compilers_at_once_in_one_process(tmp_path, monkeypatch):
+    """Several threads needing new libraries run the compiler one at a time (#14: six gcc at once,
+    1.1 GB).  The compiler is replaced by a recorder that fails after a moment (so the callers fall back
+    to interpreted functions): at most one runs at any time."""
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)
+    running, peak, lock = [0], [0], threading.Lock()
+
+    def fake_run(cmd, **kwargs):
+        with lock:
+            running[0] += 1
+            peak[0] = max(peak[0], running[0])
+        time.sleep(0.2)
+        with lock:
+            running[0] -= 1
+        return SimpleNamespace(returncode=1, stdout="", stderr="")
+
+    monkeypatch.setattr(compiled.subprocess, "run", fake_run)
+    x = ca.SX.sym("x")
+    fns = [ca.Function(f"f{i}", [x], [ca.sin(x) * (i + 1)]) for i in range(4)]
+    results = []
+    threads = [threading.Thread(target=lambda f=f: results.append(compiled.compiled(f))) for f in fns]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    assert len(results) == 4 and not any(ok for _, ok in results)
+    assert peak[0] == 1

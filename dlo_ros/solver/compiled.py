@@ -14,6 +14,7 @@ import hashlib
 import os
 import shutil
 import subprocess
+import threading
 import tempfile
 from pathlib import Path
 
@@ -165,6 +166,10 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = ("-O1",)) -> str:
     return h.hexdigest()[:16]
 
 
+#: Held while a compiler runs: never more than one per process (issue #14 saw 6 gcc at once, 1.1 GB).
+COMPILER_LOCK = threading.Lock()
+
+
 def _generate(fn: ca.Function, tmp: str) -> bytes:
     gen = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
     gen.add(fn)
@@ -187,6 +192,14 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
     name = fn.name()
     lib = lib or library_path(fn, flags)
     if not lib.exists():
+        with COMPILER_LOCK:  # one compiler at a time in this process (six at once took 1.1 GB)
+            return _compile_locked(fn, cc, flags, nice, lib, name)
+    return NativeFunction(lib, fn), True
+
+
+def _compile_locked(fn: ca.Function, cc: str, flags: tuple[str, ...], nice: int, lib: Path,
+                    name: str) -> tuple[NativeFunction | InterpretedFunction, bool]:
+    if not lib.exists():  # another thread may have built it while this one waited
         lib.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory() as tmp:
             _generate(fn, tmp)

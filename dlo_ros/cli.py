@@ -22,7 +22,7 @@ import os
 import sys
 import time
 from dataclasses import replace
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import numpy as np
 

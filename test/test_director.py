@@ -229,3 +229,21 @@ def test_residual_flags_a_shape_off_its_equilibrium(monkeypatch):
     assert probe.status == "unverified" and probe.stable is None, probe.message
     assert probe.equilibrium_residual_m > 100 * new.equilibrium_residual_m
     assert new.energy["total"] < probe.energy["total"]
+
+
+def test_tangent_model_frames_follow_the_clamp_being_solved_for():
+    """Twist-free strings (unit tangents, no roll unknown) publish frames carried from the first clamp's
+    roll: cold and on every streamed update, the frame at s = 0 is that clamp's orientation (it lagged
+    one update: the committed scene anchored them)."""
+    from dlo_ros.model.rotations import quat_to_matrix
+
+    p = clamped_pair(left=(0, 0, 0.4), right=(0.6, 0, 0.4), bend=0.02, twist=0.0, weight=0.5)
+    solver = ShapeSolver(p, SolverOptions(model="full", order=16, output_points=11), compile="off")
+    r = solver.solve()
+    assert r.ok and r.model.rotation == "tangent", r.message
+    for roll in (0.3, 0.6, -0.2):
+        q = quat_about("x", roll)
+        for warm in (True, False):
+            r = solver.solve({"left": ((0, 0, 0.4), q)}, warm=warm)
+            assert r.ok, r.message
+            np.testing.assert_allclose(quat_to_matrix(r.orientations[0]), quat_to_matrix(np.asarray(q)), atol=1e-9)

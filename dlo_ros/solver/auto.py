@@ -65,7 +65,7 @@ from ..model.obstacles import Obstacle
 from ..model.problem import Problem
 from ..model.profile import Profile
 from ..model.rotations import TANGENT_X, euler_from_frame, farthest_pole, frame_with_pole, pole_angle_deg, quat_to_matrix
-from .nlp import choose_reference_frame, has_point_moments, planarity_violation, twist_is_held
+from .nlp import choose_reference_frame, has_point_moments, planarity_violation
 from .options import SolverOptions
 from .protocol import Solver
 from .result import ShapeResult

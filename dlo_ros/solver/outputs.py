@@ -67,15 +67,16 @@ class ShapeOutputs:
 
     def result(self, problem: Problem, current: Problem, state: SolverState, ipopt_status: str, iterations: int,
                violation: float, warm: bool, steps: int, summary: Any) -> ShapeResult:
-        """The result of ``state`` solving ``problem``; ``current``: the solver's committed scene, whose grips
-        anchor the published twist-free frames and the wrenches' frames; ``summary``: the result's model."""
+        """The result of ``state`` solving ``problem``; its grips anchor the published twist-free frames
+        (the tangent model's roll follows the first held grip being solved for).  ``current``: the
+        solver's committed scene, whose grips anchor the wrenches' frames; ``summary``: the result's model."""
         nlp, m, options = self.nlp, self.nlp.model, self.options
         z, p = state.z, state.p
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         s_out = self.s_out.copy()
         if nlp.director:
             points = m.positions(z, s_out)
-            quats = frame_to_quat(F.pose_frames(nlp, self.parameters, current, z, s_out))
+            quats = frame_to_quat(F.pose_frames(nlp, self.parameters, problem, z, s_out))
         else:
             points, phi, theta = sample(nlp, z, self.s_out)
             quats = pose_quaternions(nlp.r0, phi, theta, F.frames_psi(nlp, self.parameters, current, z, s_out, p))

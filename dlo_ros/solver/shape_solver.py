@@ -109,8 +109,9 @@ class ShapeSolver:
 
     def _build(self, problem: Problem) -> None:
         t0 = time.perf_counter()
-        self.nlp = StringNLP(problem, self.options, self.reference_frame)
-        check_moments(self.nlp, problem)
+        nlp = StringNLP(problem, self.options, self.reference_frame)
+        check_moments(nlp, problem)  # before anything is replaced: a refused scene leaves the solver as it was
+        self.nlp = nlp
         if hasattr(self, "_ipopt"):
             self._ipopt.free()
         self._ipopt = IpoptSolvers(self.nlp)
@@ -124,6 +125,7 @@ class ShapeSolver:
         self.fused_newton = True
         self.parameters = ProblemParameters(self.nlp)
         self._outputs = ShapeOutputs(self.nlp, self.functions, self.parameters, self.options)
+        self._compile_thread = None  # the old NLP's compile (retired above) must not block a new one
         self._start_compile()
         self.problem = problem
         self._key = structure_key(problem, self.options)
@@ -188,9 +190,8 @@ class ShapeSolver:
             if src is None:
                 return False
             source = sample_source(other, src, self.nlp)
-        new = warm_state(self.nlp, self.functions, self.parameters, self.problem, source)
-        with self._lock:
-            self._state = new
+        with self._lock:  # warm_state evaluates this solver's functions: never beside a solve of it
+            self._state = warm_state(self.nlp, self.functions, self.parameters, self.problem, source)
         return True
 
     def unstable_eigenvalue(self) -> float | None:

@@ -38,6 +38,13 @@ def random_curve(rng: np.random.Generator, length: float, count: int = 400):
 
 
 def random_scene(seed: int) -> Problem:
+    return scene_and_curve(seed)[0]
+
+
+def scene_and_curve(seed: int) -> tuple[Problem, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The scene of ``seed`` and the curve it is built around (arc lengths, positions, frames): a
+    feasible shape of the scene up to its discretisation (bench/random_scenes.py uses it as the witness
+    that a scene is reachable and clear of its obstacles)."""
     rng = np.random.default_rng(seed)
     length = float(rng.uniform(0.2, 3.0))
     s, x, frames = random_curve(rng, length)
@@ -71,4 +78,4 @@ def random_scene(seed: int) -> Problem:
         centre = x[len(x) // 2] + frames[len(x) // 2][:, 1] * 0.3 * length
         obstacles = (Obstacle("sphere", np.array([*centre, 0.1 * length]), "ball"),)
     gravity = np.array([0.0, 0.0, -1.0])
-    return Problem(string, tuple(grips), gravity=gravity, loads=loads, obstacles=obstacles)
+    return Problem(string, tuple(grips), gravity=gravity, loads=loads, obstacles=obstacles), (s, x, frames)

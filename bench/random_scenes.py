@@ -152,7 +152,7 @@ def solve(problem, model: str):
 
 
 def run_of(model: str, result, ms: float, tolerance: float) -> Run:
-    order = int(result.model.get("order") or result.order)
+    order = int(result.model.order if result.model is not None else result.order)
     return Run(model, result.status, result.message, order, float(result.equilibrium_residual_m),
                result.min_eigenvalue, result.stable, ms, result.solve_time_ms, tolerance)
 

@@ -21,22 +21,14 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT / "test"))
 
 from common import machine  # noqa: E402
+from random_scenes import targets_near  # noqa: E402
 
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver import make_solver  # noqa: E402
 from dlo_ros.solver.batch import process_pool, query_many  # noqa: E402
-
-
-def targets(problem, n: int, radius: float = 0.15, seed: int = 0) -> list[dict]:
-    rng = np.random.default_rng(seed)
-    right = problem.grip("right").pose
-    out = []
-    for _ in range(n):
-        d = rng.normal(size=3)
-        out.append({"right": (right.position + d * rng.random() * radius / np.linalg.norm(d), right.orientation)})
-    return out
 
 
 def main() -> None:
@@ -50,7 +42,7 @@ def main() -> None:
     scene = load_scene("default_cable")
     solver = make_solver(scene.problem, scene.options, compile=args.compile, checks="sync")
     solver.solve()
-    qs = targets(scene.problem, args.queries)
+    qs = targets_near(scene.problem, args.queries)
     t0 = time.perf_counter()
     single = [solver.solve(q, commit=False) for q in qs]
     t_single = time.perf_counter() - t0

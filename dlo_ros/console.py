@@ -8,15 +8,22 @@ import sys
 
 def dlo() -> int:
     """``dlo ...``: dlo_ros.cli.main."""
-    if sys.argv[1:2] == ["node"]:
+    node = sys.argv[1:2] == ["node"]
+    if node:
         from .node.signals import stop_on_first_signal
 
         stop_on_first_signal()
     try:
         from .cli import main
-    except KeyboardInterrupt:  # Ctrl-C while importing (only `dlo node` turns SIGTERM into this)
-        return 130 if sys.argv[1:2] != ["node"] else 0
-    return main()
+
+        return main()
+    except KeyboardInterrupt:  # Ctrl-C (for `dlo node` also SIGTERM) while importing or starting: a clean stop
+        if not node:
+            return 130
+        from .node.signals import ignore_signals_at_exit
+
+        ignore_signals_at_exit()
+        return 0
 
 
 def dlo_node() -> int:

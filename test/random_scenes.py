@@ -79,3 +79,15 @@ def scene_and_curve(seed: int) -> tuple[Problem, tuple[np.ndarray, np.ndarray, n
         obstacles = (Obstacle("sphere", np.array([*centre, 0.1 * length]), "ball"),)
     gravity = np.array([0.0, 0.0, -1.0])
     return Problem(string, tuple(grips), gravity=gravity, loads=loads, obstacles=obstacles), (s, x, frames)
+
+
+def targets_near(problem: Problem, n: int, grip: str = "right", radius: float = 0.15, seed: int = 0) -> list[dict]:
+    """``n`` seeded query targets: ``grip`` moved to a random point within ``radius`` [m] of its pose,
+    its orientation kept (what a planner asks about around the held shape)."""
+    rng = np.random.default_rng(seed)
+    pose = problem.grip(grip).pose
+    out = []
+    for _ in range(n):
+        d = rng.normal(size=3)
+        out.append({grip: (pose.position + d * rng.random() * radius / np.linalg.norm(d), pose.orientation)})
+    return out

@@ -12,21 +12,12 @@ import pytest
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
 from dlo_ros.solver.batch import query_many
+from random_scenes import targets_near
 
 
 @pytest.fixture(scope="module")
 def scene():
     return load_scene("default_cable")
-
-
-def random_targets(problem, n, radius=0.1, seed=0):
-    rng = np.random.default_rng(seed)
-    right = problem.grip("right").pose
-    out = []
-    for _ in range(n):
-        d = rng.normal(size=3)
-        out.append({"right": (right.position + d * rng.random() * radius / np.linalg.norm(d), right.orientation)})
-    return out
 
 
 def assert_same_answers(batch, single):
@@ -45,7 +36,7 @@ def test_batch_answers_equal_single_answers_and_leave_the_stream_alone(scene, mo
     options = replace(scene.options, model=model)
     solver = make_solver(scene.problem, options, compile="off", checks="sync")
     assert solver.solve().ok
-    targets = random_targets(scene.problem, 8)
+    targets = targets_near(scene.problem, 8, radius=0.1)
     single = [solver.solve(t, commit=False) for t in targets]
     assert all(r.ok for r in single)
     step = {"right": (scene.problem.grip("right").pose.position + [0.01, 0.0, 0.0],
@@ -63,7 +54,7 @@ def test_batch_answers_equal_single_answers_and_leave_the_stream_alone(scene, mo
 
 def test_any_executor_order_kept_and_bad_queries_answered(scene, monkeypatch):
     monkeypatch.setenv("DLO_NO_COMPILE", "1")
-    targets = random_targets(scene.problem, 5, seed=1)
+    targets = targets_near(scene.problem, 5, radius=0.1, seed=1)
     far = {"right": ((5.0, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))}  # beyond the string's reach
     unknown = {"middle": ((0.3, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))}
     queries = [targets[0], far, targets[1], unknown, *targets[2:]]
@@ -81,7 +72,7 @@ def test_a_dask_cluster_runs_the_same_call(scene, monkeypatch):
     """Optional extra: a local Dask cluster's executor (``client.get_executor()``)."""
     distributed = pytest.importorskip("distributed")
     monkeypatch.setenv("DLO_NO_COMPILE", "1")
-    targets = random_targets(scene.problem, 4, seed=2)
+    targets = targets_near(scene.problem, 4, radius=0.1, seed=2)
     solver = make_solver(scene.problem, scene.options, compile="off", checks="sync")
     solver.solve()
     single = [solver.solve(t, commit=False) for t in targets]

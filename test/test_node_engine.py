@@ -101,6 +101,20 @@ class Recorder:
                 self.event.wait(left)
 
 
+def auto_engine(monkeypatch) -> tuple[ShapeEngine, "Recorder"]:
+    """A started engine around the node's own solver (solver.model 'auto', background checks,
+    interpreted derivatives) on make_problem()."""
+    monkeypatch.setenv("DLO_NO_COMPILE", "1")
+    from dlo_ros.node.engine import build_solver
+
+    rec = Recorder()
+    eng = ShapeEngine(make_problem(), SolverOptions(model="auto", output_points=11),
+                      make_solver=lambda p, o: build_solver(p, o, compile="off"),
+                      on_update=rec.on_update, on_failure=rec.on_failure)
+    eng.start()
+    return eng, rec
+
+
 @pytest.fixture
 def engine_factory():
     engines = []
@@ -228,14 +242,7 @@ def test_a_live_parameter_change_publishes_a_checked_shape(monkeypatch):
     """solver.model 'auto' with background checks (the node's solver): the shape published after a change
     of the bend stiffness carries a finished check (model.checked, an error estimate against the tolerance),
     and its stability verdict; it is never the unchecked re-solve of the old model."""
-    monkeypatch.setenv("DLO_NO_COMPILE", "1")
-    from dlo_ros.node.engine import build_solver
-
-    rec = Recorder()
-    eng = ShapeEngine(make_problem(), SolverOptions(model="auto", output_points=11),
-                      make_solver=lambda p, o: build_solver(p, o, compile="off"),
-                      on_update=rec.on_update, on_failure=rec.on_failure)
-    eng.start()
+    eng, rec = auto_engine(monkeypatch)
     try:
         rec.wait(lambda: rec.updates, timeout=120)
         assert rec.updates[0].result.model.checks == "background"
@@ -317,16 +324,7 @@ def test_a_converged_shape_that_misses_its_targets_is_never_published(monkeypatc
     """solver.model 'auto' on an in-plane scene, then a target out of that plane: the engine either
     publishes a shape through the target or reports the miss as an 'internal' failure (seen with the
     AutoShapeSolver of 2044625, which kept solving the planar model and dropped the target's y)."""
-    monkeypatch.setenv("DLO_NO_COMPILE", "1")
-    from dlo_ros.node.engine import build_solver
-
-    if "model" not in SolverOptions.__dataclass_fields__:
-        pytest.skip("this solver has no model option")
-    rec = Recorder()
-    eng = ShapeEngine(make_problem(), SolverOptions(model="auto", output_points=11),
-                      make_solver=lambda p, o: build_solver(p, o, compile="off"),
-                      on_update=rec.on_update, on_failure=rec.on_failure)
-    eng.start()
+    eng, rec = auto_engine(monkeypatch)
     try:
         rec.wait(lambda: rec.updates, timeout=120)
         target = pose(0.5, 0.05, 0.45)

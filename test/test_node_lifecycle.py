@@ -117,19 +117,23 @@ def test_package_exports_main_and_files_exist():
     assert namespace["generate_launch_description"]() is not None
 
 
-def test_sigint_while_gcc_compiles_the_solver(tmp_path):
-    """A solver thread that cannot stop in time (gcc compiling, cold cache) does not hang or abort the
-    node: it exits with 0 after STOP_TIMEOUT_S and takes its gcc along."""
+def compiling_node(tmp_path, mode: str, domain_id: int, log) -> NodeProcess:
+    """A node with ``compile:=mode`` and an empty compiled-code cache (so gcc runs); skips without a C compiler."""
     import shutil
 
     if shutil.which("gcc") is None and shutil.which("cc") is None:
         pytest.skip("no C compiler")
-    log = tmp_path / "node.log"
     env = dict(os.environ, DLO_CACHE_DIR=str(tmp_path / "cache"))
     env.pop("DLO_NO_COMPILE", None)
+    return NodeProcess(["--scene", TEST_SCENE, "--ros-args", "-p", f"compile:={mode}"], domain_id, log_path=log, env=env)
+
+
+def test_sigint_while_gcc_compiles_the_solver(tmp_path):
+    """A solver thread that cannot stop in time (gcc compiling, cold cache) does not hang or abort the
+    node: it exits with 0 after STOP_TIMEOUT_S and takes its gcc along."""
+    log = tmp_path / "node.log"
     with allocate_domain_id() as lease:
-        proc = NodeProcess(["--scene", TEST_SCENE, "--ros-args", "-p", "compile:=blocking"], lease.domain_id,
-                           log_path=log, env=env)
+        proc = compiling_node(tmp_path, "blocking", lease.domain_id, log)
         try:
             assert wait_until(lambda: "building the solver" in proc.output() or not proc.alive(), 30.0)
             time.sleep(1.0)  # gcc is running now (the C code generation takes a moment)
@@ -225,16 +229,9 @@ def test_a_clean_stop_ends_a_background_compile(tmp_path):
     """compile: background with a cold cache: the node streams interpreted while gcc builds the compiled
     derivatives; a SIGINT then stops the node cleanly (0, within the stop timeout) and no gcc outlives
     it (#13: compiler processes kept running after a clean stop)."""
-    import shutil
-
-    if shutil.which("gcc") is None and shutil.which("cc") is None:
-        pytest.skip("no C compiler")
     log = tmp_path / "node.log"
-    env = dict(os.environ, DLO_CACHE_DIR=str(tmp_path / "cache"))
-    env.pop("DLO_NO_COMPILE", None)
     with allocate_domain_id() as lease:
-        proc = NodeProcess(["--scene", TEST_SCENE, "--ros-args", "-p", "compile:=background"], lease.domain_id,
-                           log_path=log, env=env)
+        proc = compiling_node(tmp_path, "background", lease.domain_id, log)
         try:
             compiling = lambda: any(p.split()[1] in ("gcc", "cc", "cc1") for p in group_processes(proc.pid))  # noqa: E731
             assert wait_until(lambda: compiling() or not proc.alive(), 60.0), proc.output()

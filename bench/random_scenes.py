@@ -61,6 +61,7 @@ from dlo_ros.solver.shape_solver import ShapeSolver  # noqa: E402
 MODELS = ("auto", "full")
 FALSE_VERDICTS = ("unreachable", "invalid", "infeasible")
 FINE_ORDERS = (24, 32, 40)  # the second order: the first of these above the answer's
+REFERENCE_SECONDS = 60.0  # the shooting reference of a failed cantilever gives up after this long
 
 
 # ---- the independent feasibility witness -------------------------------------------------------------
@@ -247,12 +248,17 @@ def verify(run: Run, other: Run, problem, wit: Witness, fine: Fine, cold24, refe
 def cantilever_reference(problem):
     """A Kirchhoff equilibrium of a cantilever scene (one clamp at s = 0, dead weight and point loads with
     their moments), independent of the solver: shooting (test/reference) with the loads raised from 0
-    in 20 steps, each solve started from the previous; None when it does not converge."""
+    in 20 steps, each solve started from the previous; None when it does not converge within
+    REFERENCE_SECONDS."""
     grip = problem.grips[0]
     st = problem.string
     loads = [(ld.s, ld.force, ld.moment) for ld in problem.loads]
 
+    deadline = time.perf_counter() + REFERENCE_SECONDS
+
     def solve_at(fraction, guess):
+        if time.perf_counter() > deadline:
+            raise RuntimeError("out of time")
         return solve_clamped(st.length, st.bend_stiffness.maximum, st.twist_stiffness.maximum, grip.pose.position,
                              quat_to_matrix(grip.pose.orientation), mode_end="free",
                              D=fraction * st.weight_per_length.maximum, g=problem.gravity,
@@ -404,6 +410,8 @@ def main() -> None:
         line = "  ".join(f"{m} {r.status} {r.order} res {fmt(r.residual)} eig {fmt(r.eig, '.3g')} "
                          f"{'; '.join(r.problems) or r.verification[:100]}" for m, r in runs.items())
         print(f"seed {seed:3d} ({time.perf_counter() - t1:5.1f} s) {describe(problem)}: {line}", flush=True)
+        if args.out is not None and len(rows) % 10 == 0:  # a run cut short still leaves its rows
+            args.out.write_text(report(rows, args, info, time.perf_counter() - t0, os.getloadavg()))
     text = report(rows, args, info, time.perf_counter() - t0, os.getloadavg())
     if args.out is None:
         print(text)

@@ -28,7 +28,7 @@ def assert_same_answers(batch, single):
             assert a.stable == b.stable
 
 
-@pytest.mark.parametrize("model", ["auto", "full"])
+@pytest.mark.parametrize("model", ["full"])  # auto: test_any_executor_order_kept_and_bad_queries_answered
 def test_batch_answers_equal_single_answers_and_leave_the_stream_alone(scene, model, monkeypatch):
     monkeypatch.setenv("DLO_NO_COMPILE", "1")  # inherited by the spawned workers
     from dataclasses import replace

@@ -33,10 +33,11 @@ def qz(angle: float):
     return (0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2))
 
 
-@pytest.fixture(params=[1, 0], ids=["query_workers=1", "query_workers=0"])
-def node(tmp_path, request):
-    """The node, its queries answered by a worker process (the default) or in the solver thread."""
-    with clean_node(*NODE_ARGS, "-p", f"query_workers:={request.param}", log_path=tmp_path / "node.log") as proc_client:
+@pytest.fixture
+def node(tmp_path):
+    """The node with its defaults: queries answered by a worker process (the solver thread's query path,
+    query_workers:=0, is ShapeEngine.query: test_node_engine)."""
+    with clean_node(*NODE_ARGS, log_path=tmp_path / "node.log") as proc_client:
         yield proc_client
 
 

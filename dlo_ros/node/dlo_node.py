@@ -46,7 +46,7 @@ from ..model.problem import GripPose
 from . import conversions as conv
 from . import params as P
 from .engine import ShapeEngine, Update, build_solver, target_miss, options_with_output_points
-from .signals import exit_on_second_signal, terminate_children
+from .signals import exit_on_second_signal, node_starting, terminate_children
 from .health import Health, model_text, new_model_changes
 from .validation import (TEXT_LIMIT, TargetError, check_count, check_frame_size, check_message_size, check_pose,
                          normalise_frame, safe_text)
@@ -682,6 +682,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
     node = executor = None
     code = 0
     try:
+        node_starting()
         try:
             rclpy.init(args=prepared.ros_args)
         except Exception as exc:  # noqa: BLE001 - rcl refused the ROS arguments (the files were checked above)

@@ -7,9 +7,11 @@ the process's children (a gcc compiling the solver); the recording may then be c
 node has stopped, the process ignores both while Python finalises.  (A signal in the first few
 milliseconds, before Python runs the entry point, still has the default action.)
 
-rclpy installs its own handlers in ``rclpy.init`` (they shut the context down, which ends the spin);
-before that, :func:`stop_on_first_signal` makes SIGTERM behave like Ctrl-C (a ``KeyboardInterrupt``)
-instead of Python's default, which kills the process with −15.
+rclpy installs its own handlers in ``rclpy.init`` (they shut the context down, which ends the spin).
+Before that, :func:`stop_on_first_signal` replaces Python's defaults (SIGTERM killed the process with
+−15): while the modules are still imported a first signal leaves at once with 0 (nothing is open yet,
+and unwinding an import could escape as an uncaught interrupt, −2); from :func:`node_starting` on it
+raises ``KeyboardInterrupt``, so that the node closes its solver and recording.
 """
 from __future__ import annotations
 
@@ -21,8 +23,21 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _exit_code: int | None = None  # set once the process is stopping: the next signal leaves with it
 
 
+_node_started = False  # set just before rclpy.init: from then on a stop unwinds (the node closes its recording)
+
+
+def node_starting() -> None:
+    """The node is about to start (rclpy.init): a first signal now unwinds through KeyboardInterrupt, so
+    that the node stops cleanly; before, there is nothing to close and the process leaves at once."""
+    global _node_started
+    _node_started = True
+
+
 def _interrupt(signum, frame) -> None:
     if _exit_code is not None:  # rclpy restores this handler at its shutdown; the process is stopping
+        _leave(signum, frame)
+    if not _node_started:  # still importing: unwinding an import can escape as an uncaught interrupt (−2)
+        exit_on_second_signal(0)
         _leave(signum, frame)
     exit_on_second_signal(0)  # whatever catches this interrupt, a second signal leaves at once
     raise KeyboardInterrupt(signal.Signals(signum).name)

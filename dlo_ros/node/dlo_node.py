@@ -42,7 +42,7 @@ from rclpy.task import Future as RclpyFuture
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from ..model.problem import GripPose
+from ..model.problem import GripPose, Problem
 from . import conversions as conv
 from . import params as P
 from .engine import ShapeEngine, Update, build_solver, target_miss, options_with_output_points
@@ -366,10 +366,7 @@ class DloNode(Node):
         the solver's at the current targets), else from the solver thread."""
         if self._query_pool is None:
             return self.engine.query(poses)
-        from ..solver.batch import scene_payload, solve_chunk
-
-        problem, options = self.engine.query_scene()
-        job = self._query_pool.submit(solve_chunk, scene_payload(problem, options), [poses], self._worker_compile)
+        problem, job = self._to_query_worker([poses])
         answer: Future = Future()
 
         def done(f: Future) -> None:
@@ -391,11 +388,17 @@ class DloNode(Node):
         (so that they do not compete with the node's start-up for the cores)."""
         if self._query_pool is None:
             return
+        for _ in range(self._query_workers):
+            self._to_query_worker([])
+
+    def _to_query_worker(self, queries: list[dict[str, GripPose]]) -> tuple[Problem, Future]:
+        """Submit ``queries`` to the query workers in the engine's current scene: (that scene's problem, the
+        Future of their ShapeResults)."""
         from ..solver.batch import scene_payload, solve_chunk
 
         problem, options = self.engine.query_scene()
-        for _ in range(self._query_workers):
-            self._query_pool.submit(solve_chunk, scene_payload(problem, options), [], self._worker_compile)
+        return problem, self._query_pool.submit(solve_chunk, scene_payload(problem, options), queries,
+                                                self._worker_compile)
 
     @property
     def _worker_compile(self) -> str:

@@ -28,7 +28,8 @@ are R_g itself: no angle is unwrapped and no pole exists.
 Point moments M at s_k are dead loads; their work M·δθ is not the variation of any function of the
 rotation, so it enters as the pseudo-potential W_M = M · θ_k with θ_k = 2 vec(q_k ⊗ q_ref*) (frame) or
 t_ref × t_k (tangent: the part of M normal to the tangent), whose gradient equals M·δθ exactly at
-q_k = q_ref.  The solver re-centres q_ref on the solution until the two agree (``moment_mismatch``).
+q_k = q_ref.  The solver substitutes q_ref = q_k/|q_k| after differentiating
+(``StringNLP.exact_moment_kkt_fn``), which gives the exact equilibrium equations, and solves those.
 """
 from __future__ import annotations
 

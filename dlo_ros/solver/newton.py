@@ -32,9 +32,12 @@ def violation(nlp: StringNLP, g: np.ndarray) -> float:
 
 
 def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray, max_steps: int = 10,
-           fused: bool = True) -> tuple[bool, SolverState, int, float]:
+           fused: bool = True, kkt_fn=None) -> tuple[bool, SolverState, int, float]:
     """Warm update from ``start`` to the parameters ``p`` (see the module docstring).  While no obstacle
-    row is active this is ``newton_free``; ``fused``: its first steps in one call of ``newton_step``."""
+    row is active this is ``newton_free``; ``fused``: its first steps in one call of ``newton_step``.
+    ``kkt_fn``: another system of the same form as ``fns.kkt`` (z, p, λ) → [∇f, g, ∂g/∂z, K, energies]
+    (``StringNLP.exact_moment_kkt_fn``: K need not be symmetric); the returned state then carries that
+    function's derivatives, not ∇²L."""
     z, lam = start.z.copy(), np.zeros_like(start.lam_g)
     equality = nlp.equality
     # active = at its bound with a positive multiplier (IPOPT leaves ~1e-10 barrier multipliers
@@ -42,8 +45,9 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     if start.g is None:  # a warm start adopted from another model
         start.g = np.asarray(nlp.g_fn(start.z, start.p)).ravel()
     active = equality | ((start.lam_g > 1e-8) & (start.g > nlp.ubg - 1e-7))
-    if not np.any(active[nlp.n_free_rows:]):
+    if kkt_fn is None and not np.any(active[nlp.n_free_rows:]):
         return newton_free(nlp, fns, start, p, max_steps, fused)
+    kkt_fn = kkt_fn or fns.kkt
     lam[active] = start.lam_g[active]
     idx = np.flatnonzero(active)
     bound = nlp.ubg[idx]
@@ -53,7 +57,7 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     # stored at the start stay exact and g shifts by a known amount: the first step needs no evaluation.
     keep = ~nlp.grip_parameter_mask
     reuse = (
-        start.hessian is not None and start.g is not None and start.gradient is not None
+        kkt_fn is fns.kkt and start.hessian is not None and start.g is not None and start.gradient is not None
         and np.array_equal(start.p[keep], p[keep])
     )
     for it in range(max_steps + 1):
@@ -61,7 +65,7 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
             grad, jac, hess, energies = start.gradient, start.jacobian, start.hessian, None
             g = start.g + nlp.target_shift(start.p, p)
         else:
-            grad, g, jac, hess, energies = fns.kkt(z, p, lam)
+            grad, g, jac, hess, energies = kkt_fn(z, p, lam)
             grad, g = grad.ravel(), g.ravel()
         ja = jac[idx]
         r_dual = grad + lam[idx] @ ja

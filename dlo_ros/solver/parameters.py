@@ -23,7 +23,6 @@ import numpy as np
 from ..model.problem import GripPose, Problem
 from ..model.rotations import TANGENT_X, euler_from_frame, quat_to_matrix
 from .nlp import StringNLP
-from .state import SolverState
 
 
 def check_moments(nlp: StringNLP, problem: Problem) -> None:
@@ -143,22 +142,3 @@ class ProblemParameters:
             v = values[m.mesh.node_index(ld.s)]
             ref[: v.size] = v / np.linalg.norm(v)
             p[lay[f"load:{i}:reference"]] = ref
-
-    def moment_mismatch(self, problem: Problem, state: SolverState) -> float:
-        """Largest angle [rad] between a load's rotation in ``state`` and the reference its moment's
-        pseudo-potential was centred on (0 without point moments): where it is 0 the moment's work is
-        exactly M·δθ."""
-        nlp = self.nlp
-        if not (nlp.director and problem.loads):
-            return 0.0
-        m, lay, worst = nlp.model, nlp.params, 0.0
-        values = m.node_values(state.z)
-        for i, ld in enumerate(problem.loads):
-            if not np.any(np.asarray(ld.moment) != 0.0):
-                continue
-            v = values[m.mesh.node_index(ld.s)]
-            v = v / np.linalg.norm(v)
-            ref = state.p[lay[f"load:{i}:reference"]][: v.size]
-            worst = max(worst, 2.0 * math.acos(min(1.0, abs(float(np.dot(v, ref))))) if v.size == 4 else
-                        math.acos(min(1.0, float(np.dot(v, ref)))))
-        return worst

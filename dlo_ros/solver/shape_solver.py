@@ -35,7 +35,7 @@ from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .initial_guess import initial_guess
 from .ipopt import IPOPT_LOCK, SUCCESS, Attempt, IpoptSolvers, call, escape_saddle, witness
 from .newton import newton
-from .nlp import StringNLP
+from .nlp import StringNLP, has_point_moments
 from .options import SolverOptions
 from .outputs import ShapeOutputs, no_shape
 from .parameters import ProblemParameters, check_moments
@@ -47,14 +47,13 @@ from .summary import ModelSummary
 from .warm_start import sample_source, warm_state
 from .wrenches import equilibrium
 
-__all__ = ["COMPILE_MODES", "IPOPT_LOCK", "MOMENT_RECENTRE_RAD", "MOMENT_RECENTRE_ROUNDS", "SUCCESS", "ShapeSolver",
+__all__ = ["COMPILE_MODES", "IPOPT_LOCK", "MOMENT_CONTINUATION_SOLVES", "MOMENT_NEWTON_STEPS", "SUCCESS", "ShapeSolver",
            "SolverState", "is_stable", "structure_key", "with_checked_poses"]
 
-#: point moments (director models): re-centre their pseudo-potential until the rotation at each load is
-#: this close to its centre [rad] (the moment's work is then M·δθ to relative 1e-9/2), in at most this
-#: many warm updates
-MOMENT_RECENTRE_RAD = 1e-9
-MOMENT_RECENTRE_ROUNDS = 30
+#: point moments (director models): Newton steps per solve of the exact equilibrium equations, and
+#: Newton solves for raising the moments from zero when one solve does not get there
+MOMENT_NEWTON_STEPS = 25
+MOMENT_CONTINUATION_SOLVES = 40
 
 
 def structure_key(problem: Problem, options: SolverOptions) -> tuple:
@@ -296,11 +295,6 @@ class ShapeSolver:
         """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
         return self.parameters.grip_angles(pose, reference)
 
-    def moment_mismatch(self, state: SolverState) -> float:
-        """Largest angle [rad] between a load's rotation in ``state`` and the centre of its moment's
-        pseudo-potential (0 without point moments)."""
-        return self.parameters.moment_mismatch(self.problem, state)
-
     def initial_guess(self, problem: Problem) -> np.ndarray:
         """The buckled cold-start guess z for ``problem``."""
         return initial_guess(self.nlp, self.parameters, problem)
@@ -338,43 +332,100 @@ class ShapeSolver:
         return call(self.nlp, self._ipopt.get(warm), z0, p, start.lam_g, start.lam_x)
 
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
+        moments = self.nlp.director and has_point_moments(problem)
+        if moments and warm:  # a warm update under dead moments: Newton on the exact equations first
+            ok, state, it, viol = self._exact_newton(self._state, problem, self._state.p)
+            if ok:
+                result = self._exact_result(problem, state, it, viol, True, 0)
+                if result.status == "ok" and result.stable is not False:
+                    return result, state
         result, state = self._solve_once(problem, warm)
-        if result.status in ("ok", "unverified") and state is not None and self.nlp.director and problem.loads:
-            return self._recentre_moments(problem, result, state)
+        if moments and result.status in ("ok", "unverified") and state is not None:
+            return self._solve_moments(problem, result, state)
         return result, state
 
-    def _recentre_moments(self, problem: Problem, result: ShapeResult,
-                          state: SolverState) -> tuple[ShapeResult, SolverState | None]:
-        """Re-centre the point moments' pseudo-potentials on the solution until the rotation at every
-        load is within MOMENT_RECENTRE_RAD = α of its reference (the pseudo-potential's gradient is then
-        M·(I + α/2 [n]×)·δθ, so the moment is applied to relative α/2), or until the mismatch stops
-        halving below 1000 α (the precision of the solves themselves); each round is a warm update with
-        the new references.  Fails when 30 rounds leave it above 1000 α."""
-        previous = np.inf
-        for _ in range(MOMENT_RECENTRE_ROUNDS):
-            mismatch = self.moment_mismatch(state)
-            # converged, or stalled at the precision of the solves themselves (then α/2 ≤ 5e-8 relative)
-            if mismatch <= MOMENT_RECENTRE_RAD or (mismatch <= 1e3 * MOMENT_RECENTRE_RAD and mismatch > 0.5 * previous):
-                return result, state
-            previous = mismatch
-            p = self.pack_parameters(problem, state.z)
-            ok, new, it, viol = self._newton(state, p)
-            status = "Newton"
+    # ---- point moments (director models) ----------------------------------------------------------
+    def _exact_newton(self, start: SolverState, problem: Problem, p_moments: np.ndarray,
+                      fraction: float = 1.0) -> tuple[bool, SolverState, int, float]:
+        """Newton on the exact equilibrium equations (``StringNLP.exact_moment_kkt_fn``) from ``start``
+        to ``problem`` with its point moments scaled by ``fraction``; ``p_moments`` is unused by the exact
+        equations (their pseudo-potential is centred on the solution itself) but fixes p's other entries."""
+        p = self.pack_parameters(problem, start.z)
+        if fraction != 1.0:
+            for i, _ in enumerate(problem.loads):
+                p[self.nlp.params[f"load:{i}:moment"]] *= fraction
+        return newton(self.nlp, self.functions, start, p, max_steps=MOMENT_NEWTON_STEPS,
+                      kkt_fn=self.functions.exact_moment_kkt())
+
+    def _exact_result(self, problem: Problem, state: SolverState, iterations: int, violation: float, warm: bool,
+                      steps: int) -> ShapeResult:
+        """The result of an exact-moment Newton solution: the pseudo-potential re-centred on it (its
+        gradient is then M·δθ exactly), derivatives re-evaluated there for the stability verdict."""
+        state.p = self.pack_parameters(problem, state.z)
+        state.hessian = state.jacobian = state.gradient = state.energies = state.kkt = state.residual = None
+        state.g = None
+        return self._result(problem, state, "Newton (exact moments)", iterations, violation, warm, steps)
+
+    def _solve_moments(self, problem: Problem, result: ShapeResult,
+                       state: SolverState) -> tuple[ShapeResult, SolverState | None]:
+        """Dead point moments: the answer of ``_solve_once`` applied them through a pseudo-potential
+        centred on its start, so it is polished by Newton on the exact equilibrium equations.  Where the
+        moment turned the string too far for that, the moments are raised from zero along the exact
+        equations (steps of a fraction of the moment, halved on a failed step, at most
+        MOMENT_CONTINUATION_SOLVES Newton solves), starting from the scene without its moments (a true
+        potential, solved by the usual warm update)."""
+        iterations = result.iterations
+        ok, new, it, viol = self._exact_newton(state, problem, state.p)
+        iterations += it
+        if ok:
+            return self._escape_saddle_moments(problem, self._exact_result(problem, new, iterations, viol,
+                                                                           result.warm_started, 0), new)
+        p0 = self.pack_parameters(problem, state.z)
+        for i, _ in enumerate(problem.loads):
+            p0[self.nlp.params[f"load:{i}:moment"]] = 0.0
+        ok, base, it, viol = self._newton(state, p0)
+        iterations += it
+        if not ok:
+            ok, base, _, it, viol = self._ipopt_call(True, state.z, p0, state)
+            iterations += it
+        if not ok:
+            return self._moment_failure(result, iterations, "the scene without its moments did not solve from the "
+                                                            "pseudo-potential's answer")
+        fraction, step, solves = 0.0, 0.25, 0
+        while fraction < 1.0 and solves < MOMENT_CONTINUATION_SOLVES:
+            target = min(1.0, fraction + step)
+            ok, new, it, viol = self._exact_newton(base, problem, base.p, target)
+            iterations += it
+            solves += 1
+            if ok:
+                base, fraction, step = new, target, min(0.5, 2.0 * step)
+            else:
+                step *= 0.5
+        if fraction < 1.0:
+            return self._moment_failure(result, iterations, (
+                f"raising the moments from zero along the exact equilibrium equations stopped at {fraction:.3g} of "
+                f"them after {solves} Newton solves (a limit point: the moment may snap the string through)"))
+        return self._escape_saddle_moments(problem, self._exact_result(problem, base, iterations, viol,
+                                                                       result.warm_started, solves), base)
+
+    def _escape_saddle_moments(self, problem: Problem, result: ShapeResult,
+                               state: SolverState) -> tuple[ShapeResult, SolverState]:
+        """``_escape_saddle`` where every re-solve is polished on the exact equilibrium equations."""
+        def attempt(z0: np.ndarray, p: np.ndarray) -> Attempt:
+            ok, trial, status, it, viol = self._ipopt_call(False, z0, p)
             if not ok:
-                ok, new, status, it, viol = self._ipopt_call(True, state.z, p, state)
-            if not ok:
-                break
-            state = new
-            result = self._result(problem, state, status, result.iterations + it, viol, result.warm_started,
-                                  result.continuation_steps)
-            if result.status not in ("ok", "unverified"):
-                return result, None
-        if self.moment_mismatch(state) <= 1e3 * MOMENT_RECENTRE_RAD:
-            return result, state
-        return no_shape(self.options, self.model_summary(), "failed", (
-            f"point moments: the rotation at a load is still {self.moment_mismatch(state):.2g} rad from the "
-            f"pseudo-potential's centre after {MOMENT_RECENTRE_ROUNDS} re-centring rounds"),
-            iterations=result.iterations), None
+                return ok, trial, status, it, viol
+            ok, polished, it2, viol = self._exact_newton(trial, problem, p)
+            return ok, polished, status, it + it2, viol
+
+        def build(trial: SolverState, status: str, iterations: int, viol: float, warm: bool, steps: int) -> ShapeResult:
+            return self._exact_result(problem, trial, iterations, viol, warm, steps)
+
+        return escape_saddle(result, state, attempt, build)
+
+    def _moment_failure(self, result: ShapeResult, iterations: int, why: str) -> tuple[ShapeResult, None]:
+        return no_shape(self.options, self.model_summary(), "failed", f"point moments: {why}",
+                        iterations=iterations), None
 
     def _solve_once(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
         iterations, steps, last_status = 0, 0, ""

@@ -17,6 +17,7 @@ import numpy as np
 from .newton import violation
 from .nlp import StringNLP
 from .result import ShapeResult
+from .stability import is_stable
 from .state import SolverState
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -94,7 +95,9 @@ def witness(nlp: StringNLP, g: np.ndarray | None) -> str:
 
 def escape_saddle(result: ShapeResult, state: SolverState, attempt: Callable[[np.ndarray, np.ndarray], Attempt],
                   build: Callable[..., ShapeResult], depth: int = 3) -> tuple[ShapeResult, SolverState]:
-    """A stationary point with negative reduced curvature is not a shape a string rests in.
+    """A stationary point with negative reduced curvature is not a shape a string rests in: an unstable
+    result, or an unverified one (its residual over the tolerance) whose reduced Hessian has a negative
+    eigenvalue.
 
     Step along the unstable eigenvector (both signs, 0.2 then 0.6 rad at most in any coefficient) and
     re-solve cold (``attempt(z0, p)``); keep the first stable result of lower energy.  A lower but still
@@ -104,7 +107,9 @@ def escape_saddle(result: ShapeResult, state: SolverState, attempt: Callable[[np
     ``build(state, ipopt_status, iterations, violation, warm_started, continuation_steps)`` makes the
     result of a re-solved state.
     """
-    if result.stable is not False or state.unstable_direction is None:
+    if state.unstable_direction is None or not (
+            result.stable is False or result.status == "unverified" and result.min_eigenvalue is not None
+            and not is_stable(result.min_eigenvalue, state.hessian)):
         return result, state
     d = state.unstable_direction / np.max(np.abs(state.unstable_direction))
     lower: tuple[ShapeResult, SolverState] | None = None
@@ -128,5 +133,6 @@ def escape_saddle(result: ShapeResult, state: SolverState, attempt: Callable[[np
         candidate, trial = escape_saddle(lower[0], lower[1], attempt, build, depth - 1)
         if candidate.stable:
             return candidate, trial
-    result.message += "; unstable equilibrium (no stable one found nearby)"
+    result.message += ("; unstable equilibrium (no stable one found nearby)" if result.stable is False else
+                       "; a direction of negative curvature (no stable equilibrium found nearby)")
     return result, state

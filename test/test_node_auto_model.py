@@ -230,6 +230,7 @@ def test_a_tolerance_that_cannot_be_met_is_a_warning(tmp_path):
     scene = yaml.safe_load(scene_path("default_cable").read_text())
     scene["name"] = "default_cable_tight"
     scene["solver"] = {**scene.get("solver", {}), "error_tolerance": 1e-9}
+    scene["obstacles"] = []  # the table is far below the cable; without its rows order 32 builds faster
     path = tmp_path / "tight.yaml"
     path.write_text(yaml.safe_dump(scene))
     log = tmp_path / "node.log"

@@ -29,7 +29,7 @@ Point moments M at s_k are dead loads; their work M·δθ is not the variation o
 rotation, so it enters as the pseudo-potential W_M = M · θ_k with θ_k = 2 vec(q_k ⊗ q_ref*) (frame) or
 t_ref × t_k (tangent: the part of M normal to the tangent), whose gradient equals M·δθ exactly at
 q_k = q_ref.  The solver substitutes q_ref = q_k/|q_k| after differentiating
-(``StringNLP.exact_moment_kkt_fn``), which gives the exact equilibrium equations, and solves those.
+(``solver/moments.py``), which gives the exact equilibrium equations, and solves those.
 """
 from __future__ import annotations
 
@@ -337,7 +337,10 @@ class DirectorModel:
     def moment_work_sym(self, z: ca.SX, i: int, moment: ca.SX, reference: ca.SX) -> ca.SX:
         """Pseudo-potential of a point moment at node i (module docstring); ``reference`` is q_ref (4)
         for the frame model, t_ref (3, in the first 3 of 4 entries) for the tangent model."""
-        v = self.node_sym(z, i)
+        return self.moment_work_node_sym(self.node_sym(z, i), moment, reference)
+
+    def moment_work_node_sym(self, v: ca.SX, moment: ca.SX, reference: ca.SX) -> ca.SX:
+        """``moment_work_sym`` of the node value v (4 or 3)."""
         if self.layout.frame:
             # vec(q ⊗ q_ref*) = −q_w r_v ... for p = q, r* = (−r_v, r_w): vec = p_w(−r_v) + r_w p_v + p_v × (−r_v)
             pv, pw, rv, rw = v[0:3], v[3], reference[0:3], reference[3]

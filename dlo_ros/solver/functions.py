@@ -44,13 +44,6 @@ class NlpFunctions:
         self.compiled = False        # every function runs compiled C
         self.compile_time_s = 0.0    # wall time of the compile that finished them [s]
         self.retired = False         # the solver was rebuilt: a running compile stops at its next swap
-        self._exact_moment_kkt: InterpretedFunction | None = None
-
-    def exact_moment_kkt(self) -> InterpretedFunction:
-        """``StringNLP.exact_moment_kkt_fn``, interpreted (used by scenes with point moments only)."""
-        if self._exact_moment_kkt is None:
-            self._exact_moment_kkt = InterpretedFunction(self.nlp.exact_moment_kkt_fn())
-        return self._exact_moment_kkt
 
     def retire(self) -> None:
         """The solver no longer uses these functions: a background compile stops before its next swap."""

@@ -36,7 +36,7 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     """Warm update from ``start`` to the parameters ``p`` (see the module docstring).  While no obstacle
     row is active this is ``newton_free``; ``fused``: its first steps in one call of ``newton_step``.
     ``kkt_fn``: another system of the same form as ``fns.kkt`` (z, p, λ) → [∇f, g, ∂g/∂z, K, energies]
-    (``StringNLP.exact_moment_kkt_fn``: K need not be symmetric); the returned state then carries that
+    (``moments.ExactMomentKKT``: K need not be symmetric); the returned state then carries that
     function's derivatives, not ∇²L."""
     z, lam = start.z.copy(), np.zeros_like(start.lam_g)
     equality = nlp.equality

@@ -197,7 +197,7 @@ class StringNLP:
             self.model = RitzModel(L, options.basis, options.order, options.quadrature_nodes, self.r0, self.twist,
                                    self.stretch, self.planar)
         self.sigma = L / problem.string.bend_stiffness.maximum
-        self._exact_moment_kkt: ca.Function | None = None
+        self._moment_stiffness: ca.Function | None = None
         self._build()
 
     # ------------------------------------------------------------------------------------------------
@@ -426,32 +426,27 @@ class StringNLP:
             kkt, residual, grad, energies = kkt_free(u[:n], pp, u[n:])
         return ca.Function("dlo_newton", [u0, pp, k0, r0], [u, kkt, residual, grad, energies, largest])
 
-    def exact_moment_kkt_fn(self) -> ca.Function:
-        """``kkt_fn`` with each point moment's exact virtual work (director models): [∇f, g, ∂g/∂z, K, energies]
-        where the pseudo-potential's centre q_ref is replaced by the load's own normalised rotation q_k/|q_k|
-        after differentiation, so ∇f carries M·δθ at every z (not only where q_k = q_ref), and
-        K = ∂(∇f + Jᵀλ)/∂z is its (non-symmetric) Jacobian.  Newton on these equations solves for the
-        equilibrium under dead moments directly (``newton.newton`` with ``kkt_fn``), where re-centring the
-        pseudo-potential is a fixed point that need not converge.  Built on first use."""
-        if self._exact_moment_kkt is None:
-            z, p, m, lay = self.z_sym, self.p_sym, self.model, self.params
-            lam = ca.SX.sym("lam", self.g_sym.shape[0])
-            grad_fn = ca.Function("grad_f", [z, p], [ca.gradient(self.nlp["f"], z)])
-            centred = ca.SX(p)
-            for i, ld in enumerate(self.problem.loads):
-                v = m.node_sym(z, m.mesh.node_index(ld.s))
-                ref = v / ca.norm_2(v)
-                rows = range(*lay[f"load:{i}:reference"].indices(lay.size))
-                for k, row in enumerate(rows):
-                    centred[row] = ref[k] if k < v.shape[0] else 0.0
-            grad = ca.densify(grad_fn(z, centred))
-            jac = ca.jacobian(self.g_sym, z)
-            kkt = ca.jacobian(grad + ca.mtimes(jac.T, lam), z)
-            energies = self.energy_fn(z, p)
-            self._exact_moment_kkt = ca.Function(
-                "dlo_exact_moment_kkt", [z, p, lam],
-                [grad, ca.densify(self.g_sym), ca.densify(jac), ca.densify(kkt), ca.densify(ca.vertcat(*energies))])
-        return self._exact_moment_kkt
+    def moment_stiffness_fn(self) -> ca.Function:
+        """The part of the exact equations' Jacobian that the pseudo-potential's Hessian lacks, at one load
+        (director models).  The exact equations are ∇f and ∂g/∂z at p with every moment's centre q_ref set
+        to its load's own normalised rotation N(v) = v/|v| (``ProblemParameters.centre_moments``): there
+        ∇_v W_M = M·δθ exactly.  Their Jacobian is ∇²L (q_ref held) plus, at each load's node values v,
+
+            C = −σ ∂(∇_v W_M)/∂q_ref · ∂N/∂v        (width × width),
+
+        a function of v and M only: (v, M) → C.  Newton on these equations (``newton.newton`` with
+        ``ExactMomentKKT``) solves for the equilibrium under dead moments directly, where re-centring
+        the pseudo-potential between solves is a fixed point that need not converge.  Built on first use."""
+        if self._moment_stiffness is None:
+            m = self.model
+            width = m.layout.width
+            v, moment, ref = ca.SX.sym("v", width), ca.SX.sym("M", 3), ca.SX.sym("r", 4)
+            grad = -self.sigma * ca.gradient(m.moment_work_node_sym(v, moment, ref), v)
+            normalised = ca.vertcat(v / ca.norm_2(v), ca.SX.zeros(4 - width))
+            dgrad_dref = ca.substitute(ca.jacobian(grad, ref), ref, normalised)
+            stiffness = ca.mtimes(dgrad_dref, ca.jacobian(normalised, v))
+            self._moment_stiffness = ca.Function("dlo_moment_stiffness", [v, moment], [ca.densify(stiffness)])
+        return self._moment_stiffness
 
     def material_parameters(self, p: np.ndarray) -> None:
         """Fill p's material terms (stiffness matrices, weight moments) from its Rf, Rt, Re, D slices."""

@@ -56,7 +56,7 @@ class ProblemParameters:
             for g in problem.grips:
                 p[lay[f"grip:{g.name}:position"]] = g.pose.position
                 p[lay[f"grip:{g.name}:frame"]] = quat_to_matrix(g.pose.orientation).ravel(order="F")
-            self._moment_references(problem, z_reference, p)
+            self.centre_moments(problem, z_reference, p)
             return p
         references = self._grip_reference_angles(problem, z_reference)
         for g, reference in zip(problem.grips, references):
@@ -133,8 +133,8 @@ class ProblemParameters:
             out[:, k] = b @ c if c is not None else constant
         return out.tolist()
 
-    def _moment_references(self, problem: Problem, z: np.ndarray, p: np.ndarray) -> None:
-        """Centre each point moment's pseudo-potential on the rotation of shape z at the load."""
+    def centre_moments(self, problem: Problem, z: np.ndarray, p: np.ndarray) -> None:
+        """Centre each point moment's pseudo-potential (in p, in place) on the rotation of shape z at its load."""
         m, lay = self.nlp.model, self.nlp.params
         values = m.node_values(z)
         for i, ld in enumerate(problem.loads):

@@ -34,6 +34,7 @@ from . import frames as F
 from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .initial_guess import initial_guess
 from .ipopt import IPOPT_LOCK, SUCCESS, Attempt, IpoptSolvers, call, escape_saddle, witness
+from .moments import ExactMomentKKT
 from .newton import newton
 from .nlp import StringNLP, has_point_moments
 from .options import SolverOptions
@@ -347,7 +348,7 @@ class ShapeSolver:
     # ---- point moments (director models) ----------------------------------------------------------
     def _exact_newton(self, start: SolverState, problem: Problem, p_moments: np.ndarray,
                       fraction: float = 1.0) -> tuple[bool, SolverState, int, float]:
-        """Newton on the exact equilibrium equations (``StringNLP.exact_moment_kkt_fn``) from ``start``
+        """Newton on the exact equilibrium equations (``moments.ExactMomentKKT``) from ``start``
         to ``problem`` with its point moments scaled by ``fraction``; ``p_moments`` is unused by the exact
         equations (their pseudo-potential is centred on the solution itself) but fixes p's other entries."""
         p = self.pack_parameters(problem, start.z)
@@ -355,7 +356,7 @@ class ShapeSolver:
             for i, _ in enumerate(problem.loads):
                 p[self.nlp.params[f"load:{i}:moment"]] *= fraction
         return newton(self.nlp, self.functions, start, p, max_steps=MOMENT_NEWTON_STEPS,
-                      kkt_fn=self.functions.exact_moment_kkt())
+                      kkt_fn=ExactMomentKKT(self.nlp, self.functions, self.parameters, problem))
 
     def _exact_result(self, problem: Problem, state: SolverState, iterations: int, violation: float, warm: bool,
                       steps: int) -> ShapeResult:

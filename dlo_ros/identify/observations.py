@@ -108,7 +108,8 @@ def _mapping(value: object, key: str) -> dict:
 def _only(d: dict, allowed: tuple[str, ...], key: str) -> None:
     unknown = sorted(str(k) for k in d if k not in allowed)
     if unknown:
-        raise ObservationError(f"{key}.{unknown[0]}: unknown key (known: {', '.join(allowed)})")
+        where = f"{key}.{unknown[0]}" if key else unknown[0]
+        raise ObservationError(f"{where}: unknown key (known: {', '.join(allowed)})")
 
 
 def _points(value: object, key: str) -> np.ndarray:
@@ -187,7 +188,9 @@ def _observation(value: object, key: str, sigma: float | None, base: Path) -> Ob
 
 def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | None = None) -> ObservationSet:
     """Parse the observation file's content (module docstring of ``msg_docs/fitting.md``)."""
-    d = _mapping(d, source)
+    if not isinstance(d, dict):
+        raise ObservationError(f"expected a mapping of keys (scene, parameters, sigma, total_mass, observations), "
+                               f"got {type(d).__name__}")
     _only(d, ("scene", "parameters", "sigma", "total_mass", "observations"), "")
     base = base or Path(".")
     sigma = _positive(d["sigma"], "sigma") if "sigma" in d else None
@@ -220,8 +223,8 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
 
 
 def load_observations(path: str | Path) -> ObservationSet:
-    """Read an observation file (YAML or JSON).  Raises ObservationError (malformed content, with the key
-    path) or FileNotFoundError."""
+    """Read an observation file (YAML or JSON).  Raises ObservationError (``<file>: <key path>: ...`` or
+    ``<file>:<line>:<column>: YAML/JSON syntax error ...``) or FileNotFoundError."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such observation file")
@@ -233,4 +236,7 @@ def load_observations(path: str | Path) -> ObservationSet:
         raise ObservationError(f"{where}: YAML/JSON syntax error: {getattr(exc, 'problem', '') or exc}") from None
     except UnicodeDecodeError:
         raise ObservationError(f"{path}: not a UTF-8 text file") from None
-    return observation_set_from_dict(data, str(path), path.parent)
+    try:
+        return observation_set_from_dict(data, str(path), path.parent)
+    except ObservationError as exc:
+        raise ObservationError(f"{path}: {exc}") from None

@@ -154,7 +154,7 @@ def profile_mean(profile: Profile, length: float) -> float:
     if len(profile.s) == 1:
         return float(profile.values[0])
     s = np.linspace(0.0, length, 2001)
-    return float(np.trapezoid(profile(s), s) / length) if hasattr(np, "trapezoid") else float(np.trapz(profile(s), s) / length)
+    return float(np.trapezoid(profile(s), s) / length)
 
 
 def scaled_string(string: StringProperties, names: tuple[str, ...], theta: np.ndarray) -> StringProperties:

@@ -88,13 +88,18 @@ def analyse(names: tuple[str, ...], normal: np.ndarray, tolerance: float = RANK_
             continue
         partners = [o for o in names if o != name and np.linalg.norm(null.T @ (e - _unit(names, o))) <= ORTHOGONAL]
         if partners:
-            ratios = ", ".join(f"{name}/{o}" for o in partners)
+            ratios = ", ".join(f"{a}/{b}" for a, b in (sorted((name, o), key=_ratio_order) for o in partners))
             why[name] = (f"the data determine only ratios ({ratios}): from shapes alone the equilibrium depends on "
                          "D/Rf, Rt/Rf and Re/Rf; an absolute value needs a measured grip force (force) or the known "
                          "total mass (total_mass)")
         else:
             why[name] = "the data determine it only in a combination with other parameters (see the ratios)"
     return Identifiability(tuple(names), eig, vec, null, why)
+
+
+def _ratio_order(name: str) -> int:
+    """Ratios are written with Rf (then Rt, Re) in the denominator: D/Rf, Rt/Rf, Re/Rf."""
+    return {"D": 0, "Re": 1, "Rt": 2, "Rf": 3}[name]
 
 
 def _unit(names: tuple[str, ...], name: str) -> np.ndarray:

@@ -4,7 +4,7 @@
     dlo scenes
     dlo demo [--scene NAME] [--steps N] [--json] [--compile] [--rrd FILE] [--spawn] [--connect [ADDR]]
     dlo replay FILE.rrd [--resolve [--tolerance M] [--json]] [--web] [--screenshot PNG]
-    dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE]
+    dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE] [--rrd FILE]
 
 SCENE is a scene file path or the name of a shipped scene (config/scenes/<name>.yaml).
 Exit codes: 0 success (solve: status ok), 1 the solve (or a demo step) did not reach status ok,

@@ -184,14 +184,20 @@ def write_case(tmp_path, reference, **extra) -> str:
 
 def test_cli_fit_json_and_write_scene(tmp_path, reference, capsys):
     path = write_case(tmp_path, reference, total_mass={"value": D * L / 9.80665, "sigma": 1e-4})
-    out_scene = tmp_path / "fitted.yaml"
-    assert cli.main(["fit", path, "--json", "--write-scene", str(out_scene)]) == 0
+    out_scene, rrd = tmp_path / "fitted.yaml", tmp_path / "fit.rrd"
+    assert cli.main(["fit", path, "--json", "--write-scene", str(out_scene), "--rrd", str(rrd)]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["status"] == "ok" and doc["not_identifiable"] == {}
     assert relative_error(doc["parameters"]["D"]["value"], D) < 0.03
     fitted = load_scene(out_scene).problem.string
     assert fitted.weight_per_length.values[0] == pytest.approx(doc["parameters"]["D"]["value"])
     assert fitted.bend_stiffness.values[0] == pytest.approx(doc["parameters"]["Rf"]["value"])
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(rrd)
+    entities = {c.entity_path for c in reader.stream(store=reader.recordings()[0])}
+    assert {"/world/fit/0_hang/observed", "/world/fit/0_hang/fitted", "/world/fit/0_hang/residuals",
+            "/fit/summary"} <= entities
 
 
 @pytest.mark.parametrize("change, key", [

@@ -1,4 +1,4 @@
-"""``dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE]`` (msg_docs/cli.md, fitting.md).
+"""``dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE] [--rrd FILE]`` (msg_docs/cli.md, fitting.md).
 
 Exit codes as every ``dlo`` subcommand: 0 the fit converged, 1 it ran but did not converge or an
 equilibrium failed, 2 malformed observation file or scene, or bad usage (one line on stderr naming the
@@ -24,6 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="scene name or file (default: the file's `scene`, relative to the file)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object (FitResult.to_dict())")
     p.add_argument("--write-scene", default=None, metavar="FILE", help="write the scene with the fitted values")
+    p.add_argument("--rrd", default=None, metavar="FILE",
+                   help="save a rerun drawing: observed points, fitted centrelines, residuals (.rrd)")
 
 
 def _scene_argument(args: argparse.Namespace, data) -> str:
@@ -76,10 +78,18 @@ def cmd_fit(args: argparse.Namespace) -> int:
                          description=(scene.description + "\n" if scene.description else "") +
                          f"String fitted by `dlo fit {Path(args.observations).name}` ({result.status}).")
         Path(args.write_scene).write_text(yaml.safe_dump(scene_to_dict(fitted), sort_keys=False), encoding="utf-8")
+    summary = format_fit(result)
+    if args.rrd:
+        from .drawing import save_fit
+
+        try:
+            save_fit(args.rrd, result, data, summary)
+        except RuntimeError as exc:
+            raise ObservationError(f"--rrd: {exc}") from None
     if args.json:
         print(json.dumps(json_safe(result.to_dict()), allow_nan=False))
     else:
-        print(format_fit(result))
+        print(summary)
     return EXIT_OK if result.ok else EXIT_NOT_OK
 
 

@@ -83,6 +83,9 @@ class ObservationFit:
     max_m: float
     downweighted: int
     force_residual_n: float | None = None
+    #: the fitted centreline (S, 3) [m] and each observed point's nearest point on it (N, 3) [m], for drawing
+    shape: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    feet: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "points": self.points, "rms_m": self.rms_m, "median_m": self.median_m,
@@ -248,7 +251,8 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
                 force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
             d = cr.distances
             fits.append(ObservationFit(o.obs.name, len(d), float(np.sqrt(np.mean(d * d))), float(np.median(d)),
-                                       float(d.max()), int(np.sum(u > settings.huber)), force_res))
+                                       float(d.max()), int(np.sum(u > settings.huber)), force_res,
+                                       sens.points, o.obs.points - cr.residuals))
         if data.total_mass is not None:
             weight, sigma_w = data.total_mass.weight
             predicted = profile_mean(string.weight_per_length, base.length) * base.length

@@ -200,6 +200,26 @@ def test_cli_fit_json_and_write_scene(tmp_path, reference, capsys):
             "/fit/summary"} <= entities
 
 
+def test_cli_reads_ply_points_like_npy(tmp_path, reference, capsys):
+    """The same cloud as binary little-endian .ply (with an extra property) and as .npy: the same fit."""
+    path = write_case(tmp_path, reference)
+    pts = np.load(tmp_path / "hang.npy")
+    rec = np.zeros(len(pts), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
+    rec["x"], rec["y"], rec["z"] = pts.T
+    header = (f"ply\nformat binary_little_endian 1.0\ncomment synthetic\nelement vertex {len(pts)}\n"
+              "property float x\nproperty float y\nproperty float z\nproperty float intensity\nend_header\n")
+    (tmp_path / "hang.ply").write_bytes(header.encode() + rec.tobytes())
+    np.save(tmp_path / "hang.npy", pts.astype(np.float32).astype(float))  # the .ply holds float32
+    assert cli.main(["fit", path, "--json"]) == 0
+    from_npy = json.loads(capsys.readouterr().out)
+    doc = yaml.safe_load(open(path))
+    doc["observations"][0]["points_file"] = "hang.ply"
+    open(path, "w").write(yaml.safe_dump(doc))
+    assert cli.main(["fit", path, "--json"]) == 0
+    from_ply = json.loads(capsys.readouterr().out)
+    assert from_ply["ratios"]["D/Rf"]["value"] == pytest.approx(from_npy["ratios"]["D/Rf"]["value"], rel=1e-9)
+
+
 @pytest.mark.parametrize("change, key", [
     ({"sigma": None}, "observations[0].sigma: missing"),
     ({"parameters": ["Rf", "Q"]}, "parameters[1]: unknown parameter"),

@@ -15,6 +15,7 @@ import yaml
 
 from ..model.problem import GripPose, Problem, finite_vector
 from ..model.rotations import check_quaternion
+from .pointfiles import read_points
 
 #: parameters that can be fitted: bend, twist and stretch stiffness and weight per length
 PARAMETERS = ("Rf", "Rt", "D", "Re")
@@ -131,12 +132,10 @@ def _points(value: object, key: str) -> np.ndarray:
 
 def _points_file(value: object, key: str, base: Path) -> np.ndarray:
     if not isinstance(value, str) or not value:
-        raise ObservationError(f"{key}: expected a file name (.npy)")
+        raise ObservationError(f"{key}: expected a file name (.npy or .ply)")
     path = Path(value) if Path(value).is_absolute() else base / value
-    if path.suffix.lower() != ".npy":
-        raise ObservationError(f"{key}: only .npy point files are read, got {path.suffix or 'no suffix'!r}")
     try:
-        arr = np.load(path, allow_pickle=False)
+        arr = read_points(path)
     except FileNotFoundError:
         raise ObservationError(f"{key}: no such file: {path}") from None
     except (OSError, ValueError) as exc:

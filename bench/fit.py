@@ -39,7 +39,7 @@ from reference.kirchhoff import continuation, solve_clamped  # noqa: E402
 
 from dlo_ros.identify import ForceObservation, Observation, ObservationSet, fit  # noqa: E402
 from dlo_ros.identify.curve import point_to_curve  # noqa: E402
-from dlo_ros.identify.fit import scaled_string  # noqa: E402
+from dlo_ros.identify.parameters import Parameterisation  # noqa: E402
 from dlo_ros.model import Grip, GripPose, Problem, Profile, StringProperties  # noqa: E402
 from dlo_ros.model.rotations import matrix_to_quat  # noqa: E402
 from dlo_ros.solver import ShapeSolver, SolverOptions  # noqa: E402
@@ -131,10 +131,11 @@ class Objective:
         self.start, self.pts, self.force = start, pts, force
         self.solver = ShapeSolver(start, SolverOptions(model="planar"), compile="off")
         self.s = np.linspace(0.0, L, 401)
+        self.parameters = Parameterisation(start.string, ("Rf", "D"), {})
         self.solves = 0
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
-        self.solver.set_problem(replace(self.start, string=scaled_string(self.start.string, ("Rf", "D"), theta)))
+        self.solver.set_problem(replace(self.start, string=self.parameters.string(theta)))
         self.solves += 1
         if not self.solver.solve().ok:
             return np.full(3 * len(self.pts) + 3, 1e3)

@@ -13,6 +13,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import yaml
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
 
 from conftest import clamped_pair
 from reference.kirchhoff import continuation, rot_x, solve_clamped
@@ -21,6 +23,7 @@ from dlo_ros import cli
 from dlo_ros.identify import (ForceObservation, MassObservation, Observation, ObservationError, ObservationSet, fit,
                               observation_set_from_dict)
 from dlo_ros.identify.curve import point_to_curve
+from dlo_ros.identify.observations import ProfileFit
 from dlo_ros.model import Grip, GripPose, Problem, Profile, StringProperties
 from dlo_ros.model.rotations import matrix_to_quat
 from dlo_ros.scene import load_scene
@@ -223,6 +226,8 @@ def test_cli_reads_ply_points_like_npy(tmp_path, reference, capsys):
 @pytest.mark.parametrize("change, key", [
     ({"sigma": None}, "observations[0].sigma: missing"),
     ({"parameters": ["Rf", "Q"]}, "parameters[1]: unknown parameter"),
+    ({"profiles": {"Rf": {"knots": 1}}}, "profiles.Rf.knots: expected an integer in [2, 50]"),
+    ({"profiles": {"Rt": {"knots": 4}}}, "profiles.Rt: 'Rt' is not in parameters"),
     ({"observations": [{"name": "a", "points": [[0, 0, 0], [1, float("nan"), 0], [0, 0, 1]]}]},
      "observations[0].points[1]: contains NaN"),
     ({"observations": [{"name": "a", "points": [[0, 0], [1, 0], [0, 1]]}]}, "observations[0].points: expected N rows"),
@@ -281,3 +286,47 @@ def test_three_poses_with_a_twisted_clamp_give_rt_over_rf():
     assert result.ok, result.message
     assert relative_error(result.ratios["Rt/Rf"].value, RT / RF) < 0.10
     assert set(result.not_identifiable) == {"Rf", "Rt", "D"}  # shapes alone: ratios only
+
+
+def planar_cantilever(bend, weight: float, length: float, beta0: float):
+    """An independent planar reference with a bend stiffness varying along s: shooting on
+    x' = cos β, z' = sin β, β' = m / Rf(s), m' = D (L − s) cos β (m the bending moment; the rest of the
+    string hangs from s, so the internal force is its weight) from the clamp (β(0) = β0) to m(L) = 0.
+    Returns the centreline s → (len(s), 3) in the x–z plane."""
+    def rhs(s, y):
+        return [np.cos(y[2]), np.sin(y[2]), y[3] / bend(s), weight * (length - s) * np.cos(y[2])]
+
+    def run(m0):
+        return solve_ivp(rhs, (0.0, length), [0.0, 0.0, beta0, m0], rtol=1e-12, atol=1e-14, dense_output=True)
+
+    m0 = brentq(lambda m: run(m).y[3, -1], -weight * length ** 2, 0.0, xtol=1e-15)
+    sol = run(m0)
+    return lambda s: np.stack([sol.sol(s)[0], 0 * np.asarray(s), sol.sol(s)[1]], axis=1)
+
+
+def test_bend_stiffness_profile_along_s(reference):
+    """Rf(s) falling linearly from 0.03 to 0.012 N·m² (planar shooting reference, checked against the
+    Kirchhoff solver for a constant Rf), fitted as 5 knots (smoothing 10) with the clamp's force: the
+    knots where the bending moment is large (s ≤ L/2) within 10 %, every knot within 3 stated σ, D within 3 %."""
+    constant = planar_cantilever(lambda s: RF, D, L, TILT)
+    s = np.linspace(0.0, L, 41)
+    assert np.abs(constant(s) - reference.position(s)).max() < 1e-8
+    truth = lambda s: 0.03 - 0.018 * s / L  # noqa: E731
+    shape = planar_cantilever(truth, D, L, TILT)
+    rng = np.random.default_rng(11)
+    s = rng.uniform(0.0, L, 400)
+    s = s[(s < 0.3 * L) | (s > 0.6 * L)]
+    pts = shape(s) + rng.normal(0.0, SIGMA, (len(s), 3))
+    force = ForceObservation("hand", np.array([0.0, 0.0, D * L]) + rng.normal(0.0, 2e-3, 3), 2e-3)
+    data = ObservationSet((Observation("hang", {}, pts[rng.permutation(len(pts))], SIGMA, force),), ("Rf", "D"),
+                          profiles={"Rf": ProfileFit(5, 10.0)})
+    result = fit(scene_problem(), SolverOptions(), data)
+    assert result.ok, result.message
+    knots = [result.parameters[f"Rf[{k}]"] for k in range(5)]
+    assert [k.s for k in knots] == pytest.approx(np.linspace(0.0, L, 5).tolist())
+    for k in knots:
+        assert abs(k.value - truth(k.s)) < 3 * k.std, k
+        if k.s <= L / 2:
+            assert relative_error(k.value, truth(k.s)) < 0.10, k
+    assert relative_error(result.parameters["D"].value, D) < 0.03
+    assert result.string.bend_stiffness.s == pytest.approx(tuple(np.linspace(0.0, L, 5)))

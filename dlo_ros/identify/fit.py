@@ -1,7 +1,8 @@
 """Identify Rf, Rt, D, Re from observed shapes: a bilevel Levenberg–Marquardt over log-parameters.
 
-Unknowns θ_k = log c_k, each material profile k scaled uniformly from the scene's (P_k(s) → c_k P_k(s):
-a table keeps its shape).  Inner level: every observation's equilibrium, one ``ShapeSolver`` per
+Unknowns θ (``parameters.py``): for each fitted material the log of a uniform scale of the scene's
+profile, or (``ObservationSet.profiles``) the logs of a piecewise-linear table's knot values with a
+smoothness regulariser ½|Rθ|² added to Φ.  Inner level: every observation's equilibrium, one ``ShapeSolver`` per
 observation, warm-started from its previous θ (Newton on the KKT conditions; IPOPT only as its fallback).
 Outer level: minimise
 
@@ -33,9 +34,9 @@ from ..solver.sensitivity import shape_sensitivity
 from .curve import point_to_curve
 from .identifiability import Identifiability, analyse
 from .observations import Observation, ObservationError, ObservationSet
+from .parameters import PROFILE, Parameterisation, profile_mean
 
 UNITS = {"Rf": "N·m²", "Rt": "N·m²", "D": "N/m", "Re": "N"}
-PROFILE = {"Rf": "bend_stiffness", "Rt": "twist_stiffness", "D": "weight_per_length", "Re": "stretch_stiffness"}
 #: held at the scene's value first when a direction is undetermined
 ANCHOR_ORDER = ("Rf", "Rt", "Re", "D")
 #: ratios reported (numerator, denominator, unit)
@@ -65,10 +66,14 @@ class Estimate:
     value: float
     std: float
     unit: str
+    s: float | None = None  # the knot's arc length [m] of a piecewise-linear profile's value
 
     def as_dict(self) -> dict:
-        return {"value": self.value, "std": self.std, "relative_std": self.std / abs(self.value) if self.value else None,
-                "unit": self.unit}
+        out = {"value": self.value, "std": self.std, "relative_std": self.std / abs(self.value) if self.value else None,
+               "unit": self.unit}
+        if self.s is not None:
+            out["s"] = self.s
+        return out
 
 
 @dataclass
@@ -152,24 +157,13 @@ class _Evaluation:
     rows: int
 
 
-def profile_mean(profile: Profile, length: float) -> float:
-    """(1/L) ∫ P ds [unit of P] (the value of a constant profile)."""
-    if len(profile.s) == 1:
-        return float(profile.values[0])
-    s = np.linspace(0.0, length, 2001)
-    return float(np.trapezoid(profile(s), s) / length)
-
-
-def scaled_string(string: StringProperties, names: tuple[str, ...], theta: np.ndarray) -> StringProperties:
-    """``string`` with profile k scaled by exp(θ_k)."""
-    changes = {PROFILE[n]: getattr(string, PROFILE[n]).scaled(float(np.exp(t))) for n, t in zip(names, theta)}
-    return replace(string, **changes)
-
-
 def check_request(problem: Problem, data: ObservationSet) -> None:
     """Raise ObservationError for a request that cannot be fitted from this scene."""
     data.check(problem)
     st = problem.string
+    for name in data.profiles:
+        if name not in data.parameters:
+            raise ObservationError(f"profiles.{name}: {name!r} is not in parameters")
     for i, name in enumerate(data.parameters):
         prof = getattr(st, PROFILE[name])
         if prof is None:
@@ -209,17 +203,21 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
     ObservationError for a request the scene cannot support; solver failures give status 'failed'."""
     t0 = time.perf_counter()
     check_request(problem, data)
-    names = tuple(data.parameters)
-    base = problem.string
+    fitted = tuple(data.parameters)
+    par = Parameterisation(problem.string, fitted, data.profiles)
+    names, base = par.labels, par.base
     fixed = {n: profile_mean(getattr(base, PROFILE[n]), base.length) for n in ("Rf", "Rt", "D", "Re")
-             if n not in names and getattr(base, PROFILE[n]) is not None}
-    observed = [_Observed(problem, obs, options, settings.compile) for obs in data.observations]
+             if n not in fitted and getattr(base, PROFILE[n]) is not None}
+    # the scene with the knot tables from the start: a director model splits its elements at their knots
+    observed = [_Observed(replace(problem, string=base), obs, options, settings.compile) for obs in data.observations]
+    reg = par.regulariser()
     s_grid = np.linspace(0.0, base.length, settings.samples)
     solves = 0
 
     def evaluate(theta: np.ndarray) -> _Evaluation | str:
         nonlocal solves
-        string = scaled_string(base, names, theta)
+        string = par.string(theta)
+        directions = par.directions(string)
         k = len(names)
         normal, gradient, cost, chi2, rows, fits = np.zeros((k, k)), np.zeros(k), 0.0, 0.0, 0, []
         for o in observed:
@@ -227,7 +225,7 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
             solves += 1
             if result.status != "ok":
                 return f"observation {o.obs.name!r}: the equilibrium is {result.status}: {result.message}"
-            sens = shape_sensitivity(o.solver, names, s_grid)
+            sens = shape_sensitivity(o.solver, directions, s_grid)
             cr = point_to_curve(o.obs.points, sens.s, sens.points, sens.d_points)
             sigma = o.obs.sigma
             u = cr.distances / sigma
@@ -257,14 +255,16 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
             weight, sigma_w = data.total_mass.weight
             predicted = profile_mean(string.weight_per_length, base.length) * base.length
             r = (weight - predicted) / sigma_w
-            j = np.zeros(k)
-            if "D" in names:
-                j[names.index("D")] = -predicted / sigma_w
+            j = -par.weight_gradient(string) / sigma_w
             cost += 0.5 * r * r
             chi2 += r * r
             rows += 1
             normal += np.outer(j, j)
             gradient += j * r
+        if reg.size:
+            cost += 0.5 * float(np.sum((reg @ theta) ** 2))
+            normal += reg.T @ reg
+            gradient += reg.T @ (reg @ theta)
         return _Evaluation(theta, cost, normal, gradient, fits, chi2, rows)
 
     def failed(message: str, iterations: int) -> FitResult:
@@ -302,37 +302,52 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
             status, message = "ok", f"converged in {iterations} iterations"
             break
     ident = analyse(names, current.normal)
-    theta = _anchored(current.theta, names, ident)
+    theta = _anchored(current.theta, par, ident)
     cov = _pseudo_inverse(current.normal, ident)
-    string = scaled_string(base, names, theta)
+    string = par.string(theta)
     parameters, ratios = {}, {}
-    for k, n in enumerate(names):
-        if n in ident.why:
+    for k, comp in enumerate(par.components):
+        if comp.label in ident.why:
             continue
-        value = profile_mean(getattr(string, PROFILE[n]), base.length)
-        parameters[n] = Estimate(n, value, value * float(np.sqrt(max(cov[k, k], 0.0))), UNITS[n])
-    for a, b, unit in RATIOS:
-        if a in names and b in names and ident.ratio_determined(a, b):
-            c = np.zeros(len(names))
-            c[names.index(a)], c[names.index(b)] = 1.0, -1.0
-            value = profile_mean(getattr(string, PROFILE[a]), base.length) / profile_mean(getattr(string, PROFILE[b]), base.length)
-            ratios[f"{a}/{b}"] = Estimate(f"{a}/{b}", value, value * float(np.sqrt(max(c @ cov @ c, 0.0))), unit)
-        elif a in names and b not in names and a in parameters and b in fixed:
-            value = parameters[a].value / fixed[b]
-            ratios[f"{a}/{b}"] = Estimate(f"{a}/{b}", value, parameters[a].std / fixed[b], unit)
+        value = par.value(string, k)
+        parameters[comp.label] = Estimate(comp.label, value, value * float(np.sqrt(max(cov[k, k], 0.0))),
+                                          UNITS[comp.material], comp.s)
+    for a_name, b_name, unit in RATIOS:
+        for a in par.indices(a_name):
+            for b in par.indices(b_name):
+                label = f"{names[a]}/{names[b]}"
+                c = np.zeros(len(names))
+                c[a], c[b] = 1.0, -1.0
+                if ident.determines(c):
+                    value = par.value(string, a) / par.value(string, b)
+                    ratios[label] = Estimate(label, value, value * float(np.sqrt(max(c @ cov @ c, 0.0))), unit,
+                                             par.components[b].s if par.components[b].s is not None else par.components[a].s)
+            if not par.indices(b_name) and names[a] in parameters and b_name in fixed:
+                est = parameters[names[a]]
+                ratios[f"{names[a]}/{b_name}"] = Estimate(f"{names[a]}/{b_name}", est.value / fixed[b_name],
+                                                          est.std / fixed[b_name], unit, est.s)
     dof = max(current.rows - ident.rank, 1)
     return FitResult(status, message, parameters, ratios, dict(ident.why), fixed, current.fits, iterations, solves,
                      time.perf_counter() - t0, current.chi2 / dof, names, cov, string, ident)
 
 
-def _anchored(theta: np.ndarray, names: tuple[str, ...], ident: Identifiability) -> np.ndarray:
+def _anchored(theta: np.ndarray, par: Parameterisation, ident: Identifiability) -> np.ndarray:
     """θ moved along the undetermined directions (which leave every residual unchanged) so that the
-    undetermined parameters first in ANCHOR_ORDER keep the scene's values."""
+    undetermined materials first in ANCHOR_ORDER keep the scene's values (a table: its mean log factor)."""
     null = ident.null
     if null.shape[1] == 0:
         return theta
-    anchors = [names.index(n) for n in ANCHOR_ORDER if n in ident.why][: null.shape[1]]
-    a = np.linalg.lstsq(null[anchors], -theta[anchors], rcond=None)[0]
+    rows = []
+    for material in ANCHOR_ORDER:
+        idx = [i for i in par.indices(material) if par.components[i].label in ident.why]
+        if idx:
+            row = np.zeros(len(theta))
+            row[idx] = 1.0 / len(idx)
+            rows.append(row)
+    g = np.array(rows[: null.shape[1]])
+    if g.size == 0:
+        return theta
+    a = np.linalg.lstsq(g @ null, -g @ theta, rcond=None)[0]
     return theta + null @ a
 
 

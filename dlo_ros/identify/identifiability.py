@@ -84,7 +84,7 @@ def analyse(names: tuple[str, ...], normal: np.ndarray, tolerance: float = RANK_
         if np.linalg.norm(null.T @ e) <= ORTHOGONAL:
             continue
         if top <= 0 or columns[k] <= np.sqrt(tolerance * top):  # a zero column: enters no solved model
-            why[name] = WHY[name]
+            why[name] = WHY[name.split("[")[0]]
             continue
         partners = [o for o in names if o != name and np.linalg.norm(null.T @ (e - _unit(names, o))) <= ORTHOGONAL]
         if partners:
@@ -99,7 +99,7 @@ def analyse(names: tuple[str, ...], normal: np.ndarray, tolerance: float = RANK_
 
 def _ratio_order(name: str) -> int:
     """Ratios are written with Rf (then Rt, Re) in the denominator: D/Rf, Rt/Rf, Re/Rf."""
-    return {"D": 0, "Re": 1, "Rt": 2, "Rf": 3}[name]
+    return {"D": 0, "Re": 1, "Rt": 2, "Rf": 3}[name.split("[")[0]]
 
 
 def _unit(names: tuple[str, ...], name: str) -> np.ndarray:

@@ -23,6 +23,8 @@ PARAMETERS = ("Rf", "Rt", "D", "Re")
 STANDARD_GRAVITY = 9.80665
 #: the largest point cloud read per observation
 MAX_POINTS = 200_000
+#: the most knots of a piecewise-linear profile fit
+MAX_KNOTS = 50
 
 
 class ObservationError(ValueError):
@@ -65,6 +67,15 @@ class MassObservation:
 
 
 @dataclass(frozen=True)
+class ProfileFit:
+    """Fit a material as a piecewise-linear table of ``knots`` values evenly spaced over [0, L], with the
+    smoothness regulariser of weight ``smoothing`` (``parameters.py``)."""
+
+    knots: int
+    smoothing: float = 1.0
+
+
+@dataclass(frozen=True)
 class ObservationSet:
     """What a fit is given: the observations, the parameters to identify, the scene (name or path,
     '' when the caller supplies it) and the known total mass."""
@@ -74,6 +85,7 @@ class ObservationSet:
     scene: str = ""
     total_mass: MassObservation | None = None
     source: str = field(default="<dict>", compare=False)
+    profiles: dict[str, ProfileFit] = field(default_factory=dict)
 
     def check(self, problem: Problem) -> None:
         """Raise ObservationError when the observations do not fit ``problem`` (unknown grips)."""
@@ -190,7 +202,7 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
     if not isinstance(d, dict):
         raise ObservationError(f"expected a mapping of keys (scene, parameters, sigma, total_mass, observations), "
                                f"got {type(d).__name__}")
-    _only(d, ("scene", "parameters", "sigma", "total_mass", "observations"), "")
+    _only(d, ("scene", "parameters", "sigma", "total_mass", "profiles", "observations"), "")
     base = base or Path(".")
     sigma = _positive(d["sigma"], "sigma") if "sigma" in d else None
     params = d.get("parameters", ["Rf", "D"])
@@ -209,6 +221,20 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
             raise ObservationError("total_mass.value: missing")
         value = _positive(md["value"], "total_mass.value")
         mass = MassObservation(value, _positive(md.get("sigma", 1e-3 * value), "total_mass.sigma"))
+    profiles = {}
+    for name, spec in _mapping(d.get("profiles") or {}, "profiles").items():
+        where = f"profiles.{name}"
+        if name not in params:
+            raise ObservationError(f"{where}: {name!r} is not in parameters")
+        spec = _mapping(spec, where)
+        _only(spec, ("knots", "smoothing"), where)
+        knots = spec.get("knots")
+        if isinstance(knots, bool) or not isinstance(knots, int) or not 2 <= knots <= MAX_KNOTS:
+            raise ObservationError(f"{where}.knots: expected an integer in [2, {MAX_KNOTS}], got {knots!r}")
+        smoothing = spec.get("smoothing", 1.0)
+        if isinstance(smoothing, bool) or not isinstance(smoothing, (int, float)) or not 0 <= smoothing < 1e12:
+            raise ObservationError(f"{where}.smoothing: expected a number >= 0, got {smoothing!r}")
+        profiles[str(name)] = ProfileFit(knots, float(smoothing))
     if "observations" not in d:
         raise ObservationError("observations: missing")
     items = d["observations"]
@@ -218,7 +244,7 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
     scene = d.get("scene", "")
     if not isinstance(scene, str):
         raise ObservationError("scene: expected a scene name or file")
-    return ObservationSet(obs, tuple(params), scene, mass, source)
+    return ObservationSet(obs, tuple(params), scene, mass, source, profiles)
 
 
 def load_observations(path: str | Path) -> ObservationSet:

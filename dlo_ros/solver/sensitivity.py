@@ -1,6 +1,8 @@
 """Sensitivities of an equilibrium to the material: dx(s)/dθ and d(grip force)/dθ by the implicit-function theorem.
 
-θ_k = log c_k, where the material profile k ∈ {Rf, Rt, Re, D} is scaled uniformly, P_k(s) → c_k P_k(s).
+θ_k = log c_k, where the material profile k ∈ {Rf, Rt, Re, D} is scaled uniformly, P_k(s) → c_k P_k(s);
+or, for a ``MaterialDirection`` with a ``change`` profile, any parameter θ with dP/dθ (s) = change(s) (e.g.
+θ = log of one knot's value of a piecewise-linear table: change = the table with every other value zero).
 At a converged state (z, λ) of the NLP the KKT residual over the active rows a,
 
     F(z, λ_a; p) = [∇f(z; p) + J_a(z; p)ᵀ λ_a ;  g_a(z; p) − g_bound] = 0,
@@ -10,8 +12,8 @@ holds for every θ near the solution, so
     K [dz/dθ_k; dλ_a/dθ_k] = −∂F/∂p · dp/dθ_k,        K = [∇²L  J_aᵀ; J_a  0],
 
 (the Newton matrix of ``newton.py``).  p is linear in the profiles' values at the quadrature nodes (the
-assembled material terms are linear in them too), so dp/dθ_k is p's material part packed from profile
-k alone at its current values.  ∂F/∂p · v is one forward derivative of a CasADi function (``jtimes``).
+assembled material terms are linear in them too), so dp/dθ_k is p's material part packed from dP/dθ_k
+alone (for a uniform scale: profile k at its current values).  ∂F/∂p · v is one forward derivative of a CasADi function (``jtimes``).
 
 The centreline is x(s) = L z[0:3] + W(s) T(z) (T: the tangents at the quadrature nodes, W the model's
 integration matrix), so dx(s)/dθ = L dz[0:3]/dθ + W(s) (∂T/∂z) dz/dθ, exact.  A grip's force is
@@ -26,6 +28,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ..model.profile import Profile
 from .nlp import StringNLP
 from .shape_solver import ShapeSolver
 
@@ -34,6 +37,16 @@ MATERIALS = ("Rf", "Rt", "Re", "D")
 
 #: an inequality row counts as active when its multiplier exceeds this and it sits at its bound
 ACTIVE_MULTIPLIER = 1e-8
+
+
+@dataclass(frozen=True)
+class MaterialDirection:
+    """θ of one column: ``material`` ∈ MATERIALS, and dP/dθ (s) as a Profile in SI units (``change``), or
+    None for θ = log of a uniform scale (dP/dθ = the current profile)."""
+
+    name: str
+    material: str
+    change: Profile | None = None
 
 
 @dataclass
@@ -79,21 +92,26 @@ def _functions(nlp: StringNLP) -> _Functions:
     return fns
 
 
-def material_direction(nlp: StringNLP, p: np.ndarray, name: str) -> np.ndarray:
-    """dp/dθ for θ = log of a uniform scale on profile ``name``: p's material part packed from that
-    profile alone (its current values), zero elsewhere (p is linear in the profile values)."""
+def material_direction(nlp: StringNLP, p: np.ndarray, direction: MaterialDirection | str) -> np.ndarray:
+    """dp/dθ: p's material part packed from dP/dθ alone (the current profile for a uniform log scale, or
+    ``direction.change`` at the quadrature nodes), zero elsewhere (p is linear in the profile values)."""
+    if isinstance(direction, str):
+        direction = MaterialDirection(direction, direction)
+    name = direction.material
     if name not in MATERIALS:
         raise ValueError(f"material {name!r}: must be one of {MATERIALS}")
     lay = nlp.params
     v = np.zeros_like(p)
-    v[lay[name]] = p[lay[name]]
+    v[lay[name]] = p[lay[name]] if direction.change is None else direction.change(nlp.model.quad.nodes)
     nlp.material_parameters(v)
     return v
 
 
-def shape_sensitivity(solver: ShapeSolver, names: tuple[str, ...], s: np.ndarray) -> ShapeSensitivity:
+def shape_sensitivity(solver: ShapeSolver, names: tuple[MaterialDirection | str, ...],
+                      s: np.ndarray) -> ShapeSensitivity:
     """Centreline at ``s`` [m] and its θ-derivatives at ``solver``'s committed equilibrium (module
-    docstring).  Raises ValueError when nothing is committed or the Newton matrix is singular."""
+    docstring); ``names``: one θ per entry, a material name (uniform log scale) or a MaterialDirection.
+    Raises ValueError when nothing is committed or the Newton matrix is singular."""
     state = solver.snapshot()
     if state is None:
         raise ValueError("sensitivity: the solver has no committed equilibrium (solve first)")
@@ -138,4 +156,5 @@ def shape_sensitivity(solver: ShapeSolver, names: tuple[str, ...], s: np.ndarray
         axes = nlp.grip_axes[grip.name]
         forces[grip.name] = -axes.T @ (lam[rows] / scale[rows])
         d_forces[grip.name] = -axes.T @ (dlam[rows] / scale[rows][:, None])
-    return ShapeSensitivity(tuple(names), s, points, d_points, forces, d_forces)
+    labels = tuple(n if isinstance(n, str) else n.name for n in names)
+    return ShapeSensitivity(labels, s, points, d_points, forces, d_forces)

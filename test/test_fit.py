@@ -330,3 +330,21 @@ def test_bend_stiffness_profile_along_s(reference):
             assert relative_error(k.value, truth(k.s)) < 0.10, k
     assert relative_error(result.parameters["D"].value, D) < 0.03
     assert result.string.bend_stiffness.s == pytest.approx(tuple(np.linspace(0.0, L, 5)))
+
+
+def test_cli_exit_1_when_an_equilibrium_fails(tmp_path, capsys):
+    """An observation whose grips are farther apart than the string reaches: status 'failed' naming the
+    observation, exit 1, still one JSON object."""
+    scene = {"name": "pair", "string": {"length": 1.0, "bend_stiffness": 0.02, "twist_stiffness": 0.015,
+                                        "weight_per_length": 0.5},
+             "grips": [{"name": "left", "s": 0.0, "mode": "clamp", "position": [0, 0, 0], "orientation": [0, 0, 0, 1]},
+                       {"name": "right", "s": 1.0, "mode": "clamp", "position": [0.6, 0, 0], "orientation": [0, 0, 0, 1]}]}
+    (tmp_path / "pair.yaml").write_text(yaml.safe_dump(scene))
+    obs = {"scene": "pair.yaml", "sigma": 0.001, "observations": [
+        {"name": "stretched", "grips": {"right": {"position": [1.5, 0, 0], "orientation": [0, 0, 0, 1]}},
+         "points": [[0, 0, 0], [0.5, 0, 0], [1.0, 0, 0]]}]}
+    (tmp_path / "obs.yaml").write_text(yaml.safe_dump(obs))
+    assert cli.main(["fit", str(tmp_path / "obs.yaml"), "--json"]) == 1
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["status"] == "failed" and "stretched" in doc["message"] and "unreachable" in doc["message"]
+    assert doc["parameters"] == {} and doc["ratios"] == {}

@@ -17,8 +17,11 @@ directions the data determine (``identifiability.py``), and clipped to ``max_ste
 
 Covariance of θ: A⁺ (the pseudo-inverse on the determined directions) at the solution, with the stated
 σ; a parameter's standard deviation is value × sqrt(A⁺_kk) (first order).  Undetermined parameters get
-no number: they stay at the scene's value (or move only as a determined ratio forces, with Rf, then
-Rt, Re, D held first), are listed with the reason, and the determined ratios are reported instead.
+no number; they are listed with the reason, and the determined ratios are reported instead.  The fitted
+string reproduces the fitted shapes: along the common scale of all materials (which shapes alone do not
+see) it is shifted so that the first fitted of Rf, Rt, Re, D keeps the scene's value; otherwise an
+undetermined parameter stays where the steps left it (the scene's value unless an early step, when the
+data still seemed to determine it, moved it).  The search is bounded to a factor 1000 either way.
 """
 from __future__ import annotations
 
@@ -28,7 +31,7 @@ import numpy as np
 
 from ..model.problem import Problem
 from ..solver import SolverOptions
-from .identifiability import Identifiability, analyse
+from .identifiability import NEITHER, ORTHOGONAL, RANK_TOLERANCE, Identifiability, analyse
 from .objective import FitSettings, Objective
 from .observations import ObservationError, ObservationSet
 from .parameters import PROFILE, Parameterisation, profile_mean
@@ -39,6 +42,11 @@ __all__ = ["Estimate", "FitResult", "FitSettings", "ObservationFit", "check_requ
 UNITS = {"Rf": "N·m²", "Rt": "N·m²", "D": "N/m", "Re": "N"}
 #: held at the scene's value first when a direction is undetermined
 ANCHOR_ORDER = ("Rf", "Rt", "Re", "D")
+#: the search is bounded to a factor e^BOUND (1000) either way of the scene's values: data that do not
+#: determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
+BOUND = float(np.log(1e3))
+AT_BOUND = ("the data drive it to the bound of the search (a factor 1000 from the scene's value): they do not "
+            "determine it; the other estimates are conditional on it being there")
 #: ratios reported (numerator, denominator, unit)
 RATIOS = (("D", "Rf", "1/m³"), ("Rt", "Rf", "1"), ("Re", "Rf", "1/m²"))
 
@@ -95,6 +103,7 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
             largest = float(np.abs(step).max())
             if largest > settings.max_step:
                 step *= settings.max_step / largest
+            step = np.clip(current.theta + step, -BOUND, BOUND) - current.theta
             trial = evaluate(current.theta + step)
             if not isinstance(trial, str) and trial.cost <= current.cost * (1 + 1e-12):
                 accepted = trial
@@ -109,9 +118,16 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
             status, message = "ok", f"converged in {iterations} iterations"
             break
     ident = analyse(names, current.normal)
-    theta = _anchored(current.theta, par, ident)
+    for k in np.flatnonzero(np.abs(current.theta) >= BOUND * (1 - 1e-9)):
+        ident.why[names[k]] = AT_BOUND
+        message += f"; {names[k]} is at the bound of the search (the other estimates are conditional on it)"
+    theta = _anchored(current.theta, par, ident, current.normal)
     cov = _pseudo_inverse(current.normal, ident)
     string = par.string(theta)
+    for k, comp in enumerate(par.components):
+        if ident.why.get(comp.label) == NEITHER and abs(theta[k]) > 1e-6:
+            message += (f"; {comp.label} is not determined and the fit left it at {par.value(string, k):.4g} "
+                        f"{UNITS[comp.material]}: the other estimates are conditional on that value")
     parameters, ratios = {}, {}
     for k, comp in enumerate(par.components):
         if comp.label in ident.why:
@@ -125,7 +141,7 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
                 label = f"{names[a]}/{names[b]}"
                 c = np.zeros(len(names))
                 c[a], c[b] = 1.0, -1.0
-                if ident.determines(c):
+                if ident.determines(c) and AT_BOUND not in (ident.why.get(names[a]), ident.why.get(names[b])):
                     value = par.value(string, a) / par.value(string, b)
                     ratios[label] = Estimate(label, value, value * float(np.sqrt(max(c @ cov @ c, 0.0))), unit,
                                              par.components[b].s if par.components[b].s is not None else par.components[a].s)
@@ -138,24 +154,21 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
                      time.perf_counter() - t0, current.chi2 / dof, names, cov, string, ident)
 
 
-def _anchored(theta: np.ndarray, par: Parameterisation, ident: Identifiability) -> np.ndarray:
-    """θ moved along the undetermined directions (which leave every residual unchanged) so that the
-    undetermined materials first in ANCHOR_ORDER keep the scene's values (a table: its mean log factor)."""
+def _anchored(theta: np.ndarray, par: Parameterisation, ident: Identifiability, normal: np.ndarray) -> np.ndarray:
+    """θ shifted along the common scale u of the fitted materials that enter the solved models (u_k = 1, or
+    0 for a parameter no residual depends on, e.g. Rt of planar shapes), when the data do not see it
+    (shapes alone: the energy's minimiser does not change), so that the first fitted material in
+    ANCHOR_ORDER keeps the scene's value (a table: its mean log factor).  Only this exact symmetry is
+    used: moving along a merely weak direction would change the fitted shapes."""
+    diagonal = np.diag(normal)
+    u = (diagonal > RANK_TOLERANCE * max(float(diagonal.max(initial=0.0)), 0.0)).astype(float)
     null = ident.null
-    if null.shape[1] == 0:
+    if not u.any():
         return theta
-    rows = []
-    for material in ANCHOR_ORDER:
-        idx = [i for i in par.indices(material) if par.components[i].label in ident.why]
-        if idx:
-            row = np.zeros(len(theta))
-            row[idx] = 1.0 / len(idx)
-            rows.append(row)
-    g = np.array(rows[: null.shape[1]])
-    if g.size == 0:
+    if null.shape[1] == 0 or np.linalg.norm(null.T @ u) < (1.0 - ORTHOGONAL) * np.linalg.norm(u):
         return theta
-    a = np.linalg.lstsq(g @ null, -g @ theta, rcond=None)[0]
-    return theta + null @ a
+    anchor = next(m for m in ANCHOR_ORDER if any(u[i] for i in par.indices(m)))
+    return theta - float(np.mean(theta[par.indices(anchor)])) * u
 
 
 def _pseudo_inverse(normal: np.ndarray, ident: Identifiability) -> np.ndarray:

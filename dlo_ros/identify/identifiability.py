@@ -17,8 +17,10 @@ import numpy as np
 
 #: an eigenvalue of A below this times the largest spans an undetermined direction
 RANK_TOLERANCE = 1e-10
-#: |V0ᵀ c| / |c| below this: the combination c is determined
-ORTHOGONAL = 1e-4
+#: |V0ᵀ c| / |c| below this: the combination c is determined.  The null space of a nearly degenerate A is
+#: known only approximately (a weak direction's eigenvector mixes with its neighbours), so a combination
+#: with a 1 % component along it still counts as orthogonal to it
+ORTHOGONAL = 1e-2
 
 WHY = {
     "Rt": ("no observation twists the string: Rt changes none of the predicted shapes (a shape held by two "
@@ -27,6 +29,10 @@ WHY = {
     "D": "the weight changes none of the predicted shapes",
     "Rf": "Rf changes none of the predicted shapes",
 }
+
+
+NEITHER = ("neither its value nor its ratio to another fitted parameter is determined by these data (an "
+           "undetermined direction of the normal matrix involves it)")
 
 
 @dataclass
@@ -93,7 +99,7 @@ def analyse(names: tuple[str, ...], normal: np.ndarray, tolerance: float = RANK_
                          "D/Rf, Rt/Rf and Re/Rf; an absolute value needs a measured grip force (force) or the known "
                          "total mass (total_mass)")
         else:
-            why[name] = "the data determine it only in a combination with other parameters (see the ratios)"
+            why[name] = NEITHER
     return Identifiability(tuple(names), eig, vec, null, why)
 
 

@@ -1,7 +1,8 @@
 """Identification benchmark (issue 16): σ coverage, the paper's copy-paper sheet, and the cost against
 derivative-free fits on the same data.
 
-    bash scripts/dlo-env run python bench/fit.py [--trials 100] [--baseline-seeds 3] [--out bench/results/fit.md]
+    bash scripts/dlo-env run python bench/fit.py [--trials 100] [--sheet-seeds 5] [--twist-trials 10] [--baseline-seeds 3]
+        [--out bench/results/fit.md]
 
 Synthetic observations come from the independent Kirchhoff shooting solver (test/reference/kirchhoff.py):
 random arc lengths, 30 % of the length occluded at a random place, Gaussian noise per coordinate, shuffled.
@@ -13,7 +14,10 @@ random arc lengths, 30 % of the length occluded at a random place, Gaussian nois
 2. The paper's copy-paper sheet (sec. 5: L = 200 mm, Rf = 1e4 gw·mm², D = 2e-3 gw/mm, both ends clamped
    horizontally, the sagging branch) at chords 180, 140 and 70 mm, 0.5 and 0.1 mm noise: ρ = D L³/Rf
    (true 1.6) from the three shapes.
-3. Cost: the same cantilever-with-force data fitted by (a) this package (IFT Jacobian, LM), (b) scipy
+3. Twist: three poses of a string held by two clamps 0.3 m apart (5 cm sideways), the right clamp turned
+   by 0, 1.5 and 3 rad about the tangent, 1.5 mm noise; Rf, Rt, D fitted from Rt 50 % low: Rt/Rf (true
+   0.75) per seed, with its stated σ.
+4. Cost: the same cantilever-with-force data fitted by (a) this package (IFT Jacobian, LM), (b) scipy
    ``least_squares`` with 2-point finite differences on the same robust residuals (loss 'huber'), (c) a
    particle swarm of 50 particles × 20 iterations (DLO_planning_2's size) on the same cost.  Each uses the
    package's warm-started equilibrium solver; an "equilibrium solve" is one ``ShapeSolver.solve`` call.
@@ -35,7 +39,7 @@ sys.path.insert(0, str(ROOT / "test"))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from common import machine  # noqa: E402
-from reference.kirchhoff import continuation, solve_clamped  # noqa: E402
+from reference.kirchhoff import continuation, rot_x, solve_clamped  # noqa: E402
 
 from dlo_ros.identify import ForceObservation, Observation, ObservationSet, fit  # noqa: E402
 from dlo_ros.identify.curve import point_to_curve  # noqa: E402
@@ -123,7 +127,32 @@ def paper_sheet(seeds: int) -> dict:
     return {"rho_true": weight * length ** 3 / bend, "runs": out, "sag_mm": [float(-ref.x[:, 2].min() * 1e3) for _, ref in path]}
 
 
-# ---- 3. cost against derivative-free fits -------------------------------------------------------------------
+# ---- 3. twist ----------------------------------------------------------------------------------------------
+def twist(trials: int) -> dict:
+    offset = np.array([0.3, 0.05, 0.0])
+
+    def at(psi, guess):
+        return solve_clamped(L, RF, RT, np.zeros(3), np.eye(3), offset, rot_x(psi), D=D, guess=guess, fallback=False)
+
+    path = continuation(at, [0.0, 1.5, 3.0], guess=(np.array([0.2, 0.0, -D * L / 2]), np.array([0.0, 0.01, 0.0])))
+    ident = np.array([0.0, 0.0, 0.0, 1.0])
+    string = StringProperties(L, Profile.constant(RF), Profile.constant(0.5 * RT), Profile.constant(0.3))
+    problem = Problem(string, (Grip("left", 0.0, "clamp", GripPose(np.zeros(3), ident)),
+                               Grip("right", L, "clamp", GripPose(offset, ident))))
+    runs = []
+    for seed in range(trials):
+        rng = np.random.default_rng(500 + seed)
+        obs = tuple(Observation(f"psi={psi}", {"right": GripPose(offset, matrix_to_quat(rot_x(psi)))},
+                                cloud(ref, L, SIGMA, rng), SIGMA) for psi, ref in path)
+        res = fit(problem, SolverOptions(), ObservationSet(obs, ("Rf", "Rt", "D")))
+        est = res.ratios.get("Rt/Rf")
+        runs.append({"seed": seed, "status": res.status, "value": est.value if est else np.nan,
+                     "std": est.std if est else np.nan, "solves": res.equilibrium_solves, "time": res.time_s,
+                     "d_rf": res.ratios["D/Rf"].value if "D/Rf" in res.ratios else np.nan})
+    return {"truth": RT / RF, "runs": runs}
+
+
+# ---- 4. cost against derivative-free fits -------------------------------------------------------------------
 class Objective:
     """Robust residuals of the cantilever data at θ = (log Rf, log D), each evaluation one equilibrium solve."""
 
@@ -204,14 +233,14 @@ def baselines(seeds: int) -> list[dict]:
 
 
 # ---- report --------------------------------------------------------------------------------------------------
-def report(cov: dict, sheet: dict, base: list[dict], args: argparse.Namespace, total: float) -> str:
+def report(cov: dict, sheet: dict, base: list[dict], tw: dict, args: argparse.Namespace, total: float) -> str:
     info = machine()
     lines = ["# Identification: σ coverage, the paper's sheet, cost against derivative-free fits (issue 16)", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} CPUs, Python {info.get('python')}, "
              f"{info.get('platform')}; load average at start {tuple(round(x, 2) for x in info.get('load_average', ()))}; "
              f"git {info.get('git', '?')}; generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC; "
              f"total {total:.0f} s. Command: `bash scripts/dlo-env run python bench/fit.py --trials {args.trials} "
-             f"--baseline-seeds {args.baseline_seeds}`. Times are wall-clock on a shared machine: compare them as "
+             f"--sheet-seeds {args.sheet_seeds} --baseline-seeds {args.baseline_seeds} --twist-trials {args.twist_trials}`. Times are wall-clock on a shared machine: compare them as "
              "ratios within this run.", "",
              "Data: the independent Kirchhoff shooting solver (test/reference/kirchhoff.py), points at random arc "
              "lengths, 30 % of the length occluded, Gaussian noise, shuffled. Fits start 40 % off (module docstring).", "",
@@ -237,7 +266,16 @@ def report(cov: dict, sheet: dict, base: list[dict], args: argparse.Namespace, t
         err = r["rho"] - sheet["rho_true"]
         lines.append(f"| {r['noise'] * 1e3:.1f} | {r['seed']} | {r['status']} | {r['rho']:.4f} | {r['std']:.4f} | {err / sheet['rho_true'] * 100:+.2f} % | "
                      f"{err / r['std']:+.2f} | {r['solves']} | {r['time']:.2f} | {r['chi2']:.3f} |")
-    lines += ["", "## 3. Cost against derivative-free fits on the same data", "",
+    lines += ["", f"## 3. Rt/Rf from three poses with a twisted clamp ({len(tw['runs'])} seeds)", "",
+              "Two clamps 0.3 m apart and 5 cm sideways, L = 0.5 m, the right clamp turned by 0, 1.5, 3 rad about the "
+              f"tangent; 1.5 mm noise; Rf, Rt, D fitted from Rt 50 % low. True Rt/Rf = {tw['truth']:.3f}, D/Rf = {D / RF:.1f}.", "",
+              "| seed | status | Rt/Rf | stated σ | error | error / σ | D/Rf | solves | time [s] |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for r in tw["runs"]:
+        err = r["value"] - tw["truth"]
+        lines.append(f"| {r['seed']} | {r['status']} | {r['value']:.4f} | {r['std']:.4f} | {err / tw['truth'] * 100:+.2f} % | "
+                     f"{err / r['std']:+.2f} | {r['d_rf']:.2f} | {r['solves']} | {r['time']:.2f} |")
+    lines += ["", "## 4. Cost against derivative-free fits on the same data", "",
               "Cantilever with the clamp's force, fitting Rf and D (both determined). Every method calls the same "
               "warm-started `ShapeSolver`; solves = calls of `solve`.", "",
               "Robust cost: Σ Huber(|r_j|/σ) + ½ Σ (force residual/σ_F)² at each method's answer, evaluated the "
@@ -267,6 +305,7 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--sheet-seeds", type=int, default=5)
     ap.add_argument("--baseline-seeds", type=int, default=3)
+    ap.add_argument("--twist-trials", type=int, default=10)
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "fit.md"))
     args = ap.parse_args()
     t0 = time.perf_counter()
@@ -274,8 +313,10 @@ def main() -> None:
     print("baselines done", time.perf_counter() - t0, flush=True)
     sheet = paper_sheet(args.sheet_seeds)
     print("sheet done", time.perf_counter() - t0, flush=True)
+    tw = twist(args.twist_trials)
+    print("twist done", time.perf_counter() - t0, flush=True)
     cov = coverage(args.trials)
-    text = report(cov, sheet, base, args, time.perf_counter() - t0)
+    text = report(cov, sheet, base, tw, args, time.perf_counter() - t0)
     Path(args.out).write_text(text, encoding="utf-8")
     print(text)
 

@@ -4,6 +4,7 @@
     dlo scenes
     dlo demo [--scene NAME] [--steps N] [--json] [--compile] [--rrd FILE] [--spawn] [--connect [ADDR]]
     dlo replay FILE.rrd [--resolve [--tolerance M] [--json]] [--web] [--screenshot PNG]
+    dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE] [--rrd FILE]
 
 SCENE is a scene file path or the name of a shipped scene (config/scenes/<name>.yaml).
 Exit codes: 0 success (solve: status ok), 1 the solve (or a demo step) did not reach status ok,
@@ -476,6 +477,26 @@ def _register_replay() -> None:
 
 
 _register_replay()
+
+
+def _register_fit() -> None:
+    """``dlo fit`` lives in dlo_ros/identify/command.py (imported when it runs)."""
+    from .identify import command
+
+    def handler(args: argparse.Namespace) -> int:
+        try:
+            return command.cmd_fit(args)
+        except ValueError as exc:  # ObservationError (a ValueError; SceneError is caught by main first)
+            from .scene import SceneError
+
+            if isinstance(exc, SceneError):
+                raise
+            raise UsageError(str(exc)) from None
+
+    register_subcommand("fit", command.HELP, command.add_arguments, handler)
+
+
+_register_fit()
 
 
 def build_parser() -> argparse.ArgumentParser:

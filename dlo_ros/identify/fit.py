@@ -1,0 +1,177 @@
+"""Identify Rf, Rt, D, Re from observed shapes: a bilevel Levenberg–Marquardt over log-parameters.
+
+Unknowns θ (``parameters.py``): for each fitted material the log of a uniform scale of the scene's
+profile, or (``ObservationSet.profiles``) the logs of a piecewise-linear table's knot values with a
+smoothness regulariser ½|Rθ|² added to Φ.  Inner level: every observation's equilibrium, one ``ShapeSolver`` per
+observation, warm-started from its previous θ (Newton on the KKT conditions; IPOPT only as its fallback).
+Outer level: minimise
+
+    Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ ((W_known − ∫D ds) / σ_W)²
+
+with r_j the point-to-curve residual of point j (``curve.py``), ρ Huber's loss (quadratic up to
+``huber`` σ, linear beyond: outliers count less), the optional measured grip force and known weight.
+The Jacobian comes from the implicit-function theorem on the KKT system (``solver/sensitivity.py``):
+one linear solve per observation and iteration, no finite differences.  Steps are Gauss–Newton steps
+with iteratively reweighted (Huber) normal matrix A = Jᵀ W J / σ², Levenberg-damped, restricted to the
+directions the data determine (``identifiability.py``), and clipped to ``max_step`` in log units.
+
+Covariance of θ: A⁺ (the pseudo-inverse on the determined directions) at the solution, with the stated
+σ; a parameter's standard deviation is value × sqrt(A⁺_kk) (first order).  Undetermined parameters get
+no number; they are listed with the reason, and the determined ratios are reported instead.  The fitted
+string reproduces the fitted shapes: along the common scale of all materials (which shapes alone do not
+see) it is shifted so that the first fitted of Rf, Rt, Re, D keeps the scene's value; otherwise an
+undetermined parameter stays where the steps left it (the scene's value unless an early step, when the
+data still seemed to determine it, moved it).  The search is bounded to a factor 1000 either way.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..model.problem import Problem
+from ..solver import SolverOptions
+from .identifiability import NEITHER, ORTHOGONAL, RANK_TOLERANCE, Identifiability, analyse
+from .objective import FitSettings, Objective
+from .observations import ObservationError, ObservationSet
+from .parameters import PROFILE, Parameterisation, profile_mean
+from .results import Estimate, FitResult, ObservationFit
+
+__all__ = ["Estimate", "FitResult", "FitSettings", "ObservationFit", "check_request", "fit"]
+
+UNITS = {"Rf": "N·m²", "Rt": "N·m²", "D": "N/m", "Re": "N"}
+#: held at the scene's value first when a direction is undetermined
+ANCHOR_ORDER = ("Rf", "Rt", "Re", "D")
+#: the search is bounded to a factor e^BOUND (1000) either way of the scene's values: data that do not
+#: determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
+BOUND = float(np.log(1e3))
+AT_BOUND = ("the data drive it to the bound of the search (a factor 1000 from the scene's value): they do not "
+            "determine it; the other estimates are conditional on it being there")
+#: ratios reported (numerator, denominator, unit)
+RATIOS = (("D", "Rf", "1/m³"), ("Rt", "Rf", "1"), ("Re", "Rf", "1/m²"))
+
+
+def check_request(problem: Problem, data: ObservationSet) -> None:
+    """Raise ObservationError for a request that cannot be fitted from this scene."""
+    data.check(problem)
+    st = problem.string
+    for name in data.profiles:
+        if name not in data.parameters:
+            raise ObservationError(f"profiles.{name}: {name!r} is not in parameters")
+    for i, name in enumerate(data.parameters):
+        prof = getattr(st, PROFILE[name])
+        if prof is None:
+            raise ObservationError(f"parameters[{i}]: Re cannot be fitted: the scene's string is inextensible "
+                                   "(string.stretch_stiffness null); give a starting value")
+        if prof.minimum <= 0:
+            raise ObservationError(f"parameters[{i}]: {name} cannot be fitted from a start of 0 (the scene's "
+                                   f"string.{PROFILE[name]}); give a positive starting value")
+
+
+def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
+        settings: FitSettings = FitSettings()) -> FitResult:
+    """Fit ``data.parameters`` of ``problem``'s string to ``data`` (module docstring).  Raises
+    ObservationError for a request the scene cannot support; solver failures give status 'failed'."""
+    t0 = time.perf_counter()
+    check_request(problem, data)
+    fitted = tuple(data.parameters)
+    par = Parameterisation(problem.string, fitted, data.profiles)
+    names, base = par.labels, par.base
+    fixed = {n: profile_mean(getattr(base, PROFILE[n]), base.length) for n in ("Rf", "Rt", "D", "Re")
+             if n not in fitted and getattr(base, PROFILE[n]) is not None}
+    objective = Objective(problem, options, data, par, settings)
+    evaluate = objective.evaluate
+
+    def failed(message: str, iterations: int) -> FitResult:
+        return FitResult("failed", message, fixed=fixed, iterations=iterations, equilibrium_solves=objective.solves,
+                         time_s=time.perf_counter() - t0, names=names)
+
+    current = evaluate(np.zeros(len(names)))
+    if isinstance(current, str):
+        return failed(f"at the scene's values: {current}", 0)
+    status, message, mu, iterations = "not_converged", f"no convergence in {settings.max_iterations} iterations", 0.0, 0
+    for iterations in range(1, settings.max_iterations + 1):
+        ident = analyse(names, current.normal)
+        vec, lam = ident.directions
+        if vec.shape[1] == 0:
+            status, message = "ok", "nothing the data determine"
+            break
+        g1 = vec.T @ current.gradient
+        accepted = None
+        for _ in range(10):
+            step = -vec @ (g1 / (lam + mu))
+            largest = float(np.abs(step).max())
+            if largest > settings.max_step:
+                step *= settings.max_step / largest
+            step = np.clip(current.theta + step, -BOUND, BOUND) - current.theta
+            trial = evaluate(current.theta + step)
+            if not isinstance(trial, str) and trial.cost <= current.cost * (1 + 1e-12):
+                accepted = trial
+                mu = 0.0 if mu < 1e-6 * lam.max() else mu / 4
+                break
+            mu = max(4 * mu, 1e-3 * float(lam.max()))
+        if accepted is None:
+            status, message = "not_converged", "no step decreased the cost (a local minimum or a kink of the loss)"
+            break
+        current = accepted
+        if float(np.abs(step).max()) < settings.step_tolerance:
+            status, message = "ok", f"converged in {iterations} iterations"
+            break
+    ident = analyse(names, current.normal)
+    for k in np.flatnonzero(np.abs(current.theta) >= BOUND * (1 - 1e-9)):
+        ident.why[names[k]] = AT_BOUND
+        message += f"; {names[k]} is at the bound of the search (the other estimates are conditional on it)"
+    theta = _anchored(current.theta, par, ident, current.normal)
+    cov = _pseudo_inverse(current.normal, ident)
+    string = par.string(theta)
+    for k, comp in enumerate(par.components):
+        if ident.why.get(comp.label) == NEITHER and abs(theta[k]) > 1e-6:
+            message += (f"; {comp.label} is not determined and the fit left it at {par.value(string, k):.4g} "
+                        f"{UNITS[comp.material]}: the other estimates are conditional on that value")
+    parameters, ratios = {}, {}
+    for k, comp in enumerate(par.components):
+        if comp.label in ident.why:
+            continue
+        value = par.value(string, k)
+        parameters[comp.label] = Estimate(comp.label, value, value * float(np.sqrt(max(cov[k, k], 0.0))),
+                                          UNITS[comp.material], comp.s)
+    for a_name, b_name, unit in RATIOS:
+        for a in par.indices(a_name):
+            for b in par.indices(b_name):
+                label = f"{names[a]}/{names[b]}"
+                c = np.zeros(len(names))
+                c[a], c[b] = 1.0, -1.0
+                if ident.determines(c) and AT_BOUND not in (ident.why.get(names[a]), ident.why.get(names[b])):
+                    value = par.value(string, a) / par.value(string, b)
+                    ratios[label] = Estimate(label, value, value * float(np.sqrt(max(c @ cov @ c, 0.0))), unit,
+                                             par.components[b].s if par.components[b].s is not None else par.components[a].s)
+            if not par.indices(b_name) and names[a] in parameters and b_name in fixed:
+                est = parameters[names[a]]
+                ratios[f"{names[a]}/{b_name}"] = Estimate(f"{names[a]}/{b_name}", est.value / fixed[b_name],
+                                                          est.std / fixed[b_name], unit, est.s)
+    dof = max(current.rows - ident.rank, 1)
+    return FitResult(status, message, parameters, ratios, dict(ident.why), fixed, current.fits, iterations, objective.solves,
+                     time.perf_counter() - t0, current.chi2 / dof, names, cov, string, ident)
+
+
+def _anchored(theta: np.ndarray, par: Parameterisation, ident: Identifiability, normal: np.ndarray) -> np.ndarray:
+    """θ shifted along the common scale u of the fitted materials that enter the solved models (u_k = 1, or
+    0 for a parameter no residual depends on, e.g. Rt of planar shapes), when the data do not see it
+    (shapes alone: the energy's minimiser does not change), so that the first fitted material in
+    ANCHOR_ORDER keeps the scene's value (a table: its mean log factor).  Only this exact symmetry is
+    used: moving along a merely weak direction would change the fitted shapes."""
+    diagonal = np.diag(normal)
+    u = (diagonal > RANK_TOLERANCE * max(float(diagonal.max(initial=0.0)), 0.0)).astype(float)
+    null = ident.null
+    if not u.any():
+        return theta
+    if null.shape[1] == 0 or np.linalg.norm(null.T @ u) < (1.0 - ORTHOGONAL) * np.linalg.norm(u):
+        return theta
+    anchor = next(m for m in ANCHOR_ORDER if any(u[i] for i in par.indices(m)))
+    return theta - float(np.mean(theta[par.indices(anchor)])) * u
+
+
+def _pseudo_inverse(normal: np.ndarray, ident: Identifiability) -> np.ndarray:
+    """A⁺ on the determined directions (the covariance of θ with the stated σ)."""
+    vec, lam = ident.directions
+    return (vec / lam) @ vec.T if lam.size else np.zeros_like(normal)

@@ -1,0 +1,144 @@
+"""The outer objective of a fit at θ: every observation's equilibrium, residuals, Jacobian and normal matrix.
+
+    Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ ((W_known − ∫D ds) / σ_W)² + ½ |Rθ|²
+
+r_j: point-to-curve residuals (``curve.py``); ρ: Huber's loss; F: a measured grip force; W: the known
+weight; R: the profile regulariser (``parameters.py``).  Each evaluation solves each observation's
+equilibrium once (its own warm-started ``ShapeSolver``) and takes dr/dθ from the KKT system
+(``solver/sensitivity.py``).  The Gauss–Newton normal matrix and gradient use Huber's IRLS weights
+w_j = min(1, huber / u_j), u_j = |r_j| / σ.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..model.problem import Problem, StringProperties
+from ..solver import ShapeResult, ShapeSolver, SolverOptions
+from ..solver.sensitivity import shape_sensitivity
+from .curve import point_to_curve
+from .observations import Observation, ObservationSet
+from .parameters import Parameterisation, profile_mean
+from .results import ObservationFit
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """max_iterations: outer LM iterations; huber: the loss's threshold in σ; samples: centreline samples
+    the points are projected on; step_tolerance: converged when the largest accepted step in θ is below
+    this; max_step: the largest step in θ (log units); compile: the equilibrium solvers' compile mode."""
+
+    max_iterations: int = 30
+    huber: float = 2.5
+    samples: int = 401
+    step_tolerance: float = 1e-6
+    max_step: float = 0.7
+    compile: str = "off"
+
+
+@dataclass
+class Evaluation:
+    """Φ at one θ (``cost``), the normal matrix A and gradient Jᵀ W r of the Gauss–Newton step, the residual
+    statistics per observation, Σ (r/σ)² (``chi2``) and the number of residual rows."""
+
+    theta: np.ndarray
+    cost: float
+    normal: np.ndarray
+    gradient: np.ndarray
+    fits: list[ObservationFit]
+    chi2: float
+    rows: int
+
+
+class ObservedShape:
+    """One observation's solver and data."""
+
+    def __init__(self, base: Problem, obs: Observation, options: SolverOptions, compile: str):
+        self.obs = obs
+        self.problem = base.with_grip_poses(obs.poses)
+        self.solver = _solver_for(self.problem, options, compile)
+
+    def solve(self, string: StringProperties) -> ShapeResult:
+        """The equilibrium of this observation's poses with ``string``, warm-started from the last one."""
+        self.solver.set_problem(replace(self.problem, string=string))
+        return self.solver.solve()
+
+
+def _solver_for(problem: Problem, options: SolverOptions, compile: str) -> ShapeSolver:
+    """A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is planar."""
+    if options.model == "auto":
+        try:
+            return ShapeSolver(problem, replace(options, model="planar"), compile=compile)
+        except ValueError:  # not a planar scene
+            return ShapeSolver(problem, replace(options, model="full"), compile=compile)
+    return ShapeSolver(problem, options, compile=compile)
+
+
+class Objective:
+    """Φ and its Gauss–Newton model at any θ (module docstring); ``solves`` counts equilibrium solves."""
+
+    def __init__(self, problem: Problem, options: SolverOptions, data: ObservationSet, par: Parameterisation,
+                 settings: FitSettings):
+        self.data, self.par, self.settings = data, par, settings
+        # the scene with the knot tables from the start: a director model splits its elements at their knots
+        scene = replace(problem, string=par.base)
+        self.observed = [ObservedShape(scene, obs, options, settings.compile) for obs in data.observations]
+        self.regulariser = par.regulariser()
+        self.s = np.linspace(0.0, par.length, settings.samples)
+        self.solves = 0
+
+    def evaluate(self, theta: np.ndarray) -> Evaluation | str:
+        """Φ at θ, or why an equilibrium could not be solved."""
+        par, settings, data, base = self.par, self.settings, self.data, self.par.base
+        names, reg, s_grid = par.labels, self.regulariser, self.s
+        string = par.string(theta)
+        directions = par.directions(string)
+        k = len(names)
+        normal, gradient, cost, chi2, rows, fits = np.zeros((k, k)), np.zeros(k), 0.0, 0.0, 0, []
+        for o in self.observed:
+            result = o.solve(string)
+            self.solves += 1
+            if result.status != "ok":
+                return f"observation {o.obs.name!r}: the equilibrium is {result.status}: {result.message}"
+            sens = shape_sensitivity(o.solver, directions, s_grid)
+            cr = point_to_curve(o.obs.points, sens.s, sens.points, sens.d_points)
+            sigma = o.obs.sigma
+            u = cr.distances / sigma
+            w = np.where(u <= settings.huber, 1.0, settings.huber / np.maximum(u, 1e-300))
+            cost += float(np.sum(np.where(u <= settings.huber, 0.5 * u * u, settings.huber * u - 0.5 * settings.huber ** 2)))
+            chi2 += float(np.sum(u * u))
+            rows += 2 * len(u)
+            jw = cr.jacobian / sigma
+            normal += np.einsum("n,nik,nil->kl", w, jw, jw)
+            gradient += np.einsum("n,nik,ni->k", w, jw, cr.residuals / sigma)
+            force_res = None
+            if o.obs.force is not None:
+                f = o.obs.force
+                r = (f.force - sens.grip_forces[f.grip]) / f.sigma
+                jf = -sens.d_grip_forces[f.grip] / f.sigma
+                cost += 0.5 * float(r @ r)
+                chi2 += float(r @ r)
+                rows += 3
+                normal += jf.T @ jf
+                gradient += jf.T @ r
+                force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
+            d = cr.distances
+            fits.append(ObservationFit(o.obs.name, len(d), float(np.sqrt(np.mean(d * d))), float(np.median(d)),
+                                       float(d.max()), int(np.sum(u > settings.huber)), force_res,
+                                       sens.points, o.obs.points - cr.residuals))
+        if data.total_mass is not None:
+            weight, sigma_w = data.total_mass.weight
+            predicted = profile_mean(string.weight_per_length, base.length) * base.length
+            r = (weight - predicted) / sigma_w
+            j = -par.weight_gradient(string) / sigma_w
+            cost += 0.5 * r * r
+            chi2 += r * r
+            rows += 1
+            normal += np.outer(j, j)
+            gradient += j * r
+        if reg.size:
+            cost += 0.5 * float(np.sum((reg @ theta) ** 2))
+            normal += reg.T @ reg
+            gradient += reg.T @ (reg @ theta)
+        return Evaluation(theta, cost, normal, gradient, fits, chi2, rows)

@@ -1,0 +1,97 @@
+"""What a fit returns: determined values with standard deviations, ratios, what is not determined, and the
+residuals per observation (``FitResult.to_dict()`` is the JSON of ``dlo fit --json``, msg_docs/fitting.md)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..model.problem import StringProperties
+from .identifiability import Identifiability
+
+
+@dataclass
+class Estimate:
+    """A determined quantity: value, standard deviation (same unit) and unit.  For a table profile the
+    value is its mean over s (the fit scales the table)."""
+
+    name: str
+    value: float
+    std: float
+    unit: str
+    s: float | None = None  # the knot's arc length [m] of a piecewise-linear profile's value
+
+    def as_dict(self) -> dict:
+        out = {"value": self.value, "std": self.std, "relative_std": self.std / abs(self.value) if self.value else None,
+               "unit": self.unit}
+        if self.s is not None:
+            out["s"] = self.s
+        return out
+
+
+@dataclass
+class ObservationFit:
+    """Residuals of one observation at the fit: |r| statistics over its points [m], how many points the
+    robust loss down-weighted (|r| > huber σ), and the grip-force residual |F_meas − F| [N] if measured."""
+
+    name: str
+    points: int
+    rms_m: float
+    median_m: float
+    max_m: float
+    downweighted: int
+    force_residual_n: float | None = None
+    #: the fitted centreline (S, 3) [m] and each observed point's nearest point on it (N, 3) [m], for drawing
+    shape: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    feet: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "points": self.points, "rms_m": self.rms_m, "median_m": self.median_m,
+                "max_m": self.max_m, "downweighted": self.downweighted, "force_residual_n": self.force_residual_n}
+
+
+@dataclass
+class FitResult:
+    """status: 'ok' (converged), 'not_converged' (iteration limit or no descent) or 'failed' (an
+    equilibrium could not be solved: message).  parameters: the determined ones; ratios: the determined
+    ratios (D/Rf, Rt/Rf, Re/Rf); not_identifiable[name]: why the data cannot determine it; fixed: the
+    scene's values of parameters not fitted (the estimates are conditional on them); string: the scene's
+    string with the fitted values; chi2_reduced: Σ(r/σ)² / (2 N_points + force rows − rank)."""
+
+    status: str
+    message: str
+    parameters: dict[str, Estimate] = field(default_factory=dict)
+    ratios: dict[str, Estimate] = field(default_factory=dict)
+    not_identifiable: dict[str, str] = field(default_factory=dict)
+    fixed: dict[str, float] = field(default_factory=dict)
+    observations: list[ObservationFit] = field(default_factory=list)
+    iterations: int = 0
+    equilibrium_solves: int = 0
+    time_s: float = 0.0
+    chi2_reduced: float = float("nan")
+    names: tuple[str, ...] = ()
+    covariance_log: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    string: StringProperties | None = None
+    identifiability: Identifiability | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def to_dict(self) -> dict:
+        """JSON-ready (``dlo fit --json``, msg_docs/fitting.md)."""
+        ident = self.identifiability
+        return {
+            "status": self.status, "message": self.message,
+            "parameters": {k: v.as_dict() for k, v in self.parameters.items()},
+            "ratios": {k: v.as_dict() for k, v in self.ratios.items()},
+            "not_identifiable": dict(self.not_identifiable),
+            "fixed": dict(self.fixed),
+            "observations": [o.as_dict() for o in self.observations],
+            "chi2_reduced": self.chi2_reduced,
+            "iterations": self.iterations, "equilibrium_solves": self.equilibrium_solves, "time_s": self.time_s,
+            "fitted": list(self.names),
+            "covariance_log": self.covariance_log.tolist(),
+            "rank": None if ident is None else ident.rank,
+            "condition": None if ident is None else ident.condition,
+        }

@@ -41,6 +41,7 @@ from .outputs import ShapeOutputs, no_shape
 from .parameters import ProblemParameters, check_moments
 from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, ShapeResult
+from . import self_contact as SC
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
 from .summary import ModelSummary
@@ -129,6 +130,7 @@ class ShapeSolver:
         self.problem = problem
         self._key = structure_key(problem, self.options)
         self._state: SolverState | None = None
+        self._contact: SC.ContactSlots | None = None  # the self-contact pairs of the solve under way
         self.build_time_s = time.perf_counter() - t0
 
     # ---- compiled derivatives and IPOPT instances ----------------------------------------------------
@@ -289,7 +291,10 @@ class ShapeSolver:
     # ---- the solution's parameters, start and fields (parameters.py, initial_guess.py, frames.py) ------
     def pack_parameters(self, problem: Problem, z_reference: np.ndarray) -> np.ndarray:
         """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
-        return self.parameters.pack(problem, z_reference)
+        p = self.parameters.pack(problem, z_reference)
+        if self._contact is not None:
+            SC.fill(p, self._contact, self.nlp, problem.string.length)
+        return p
 
     def grip_angles(self, pose: GripPose, reference: tuple[float, float, float]) -> np.ndarray:
         """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
@@ -332,6 +337,70 @@ class ShapeSolver:
         return call(self.nlp, self._ipopt.get(warm), z0, p, start.lam_g, start.lam_x)
 
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
+        if self.nlp.self_contact_slots:
+            return self._solve_self_contact(problem, warm)
+        return self._solve_pairs_fixed(problem, warm)
+
+    # ---- self-contact (solver/self_contact.py) ----------------------------------------------------------
+    def _solve_self_contact(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
+        """Solve with the self-contact slots filled from the start's shape (the committed equilibrium, or
+        the cold guess); a pair the answer penetrates is added and the solve repeated from the same start
+        (at most ``CONTACT_ROUNDS`` times).  On a warm update a crossing sign that flipped since the
+        committed shape means the string passed through itself: 'failed'."""
+        st = problem.string
+        geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples)
+        capacity = self.nlp.self_contact_slots
+        start = self._state if warm else None
+        previous = start.contact if start is not None and start.contact is not None else None
+        if previous is not None and previous.geometry.key != geometry.key:
+            # another radius: the slots' indices mean other samples, and the start's multipliers on them
+            # belong to the old pairs: start cold
+            start, previous, warm = None, None, False
+        slots = previous.pairs if previous is not None else [None] * capacity
+        keep: set[int] = set()
+        if start is not None and previous is not None:
+            keep = {k for k, row in enumerate(self.nlp.self_contact_rows) if start.lam_g[row] > 1e-10}
+        z0 = start.z if start is not None else self.initial_guess(problem)
+        points = self.model.positions(z0, geometry.s)
+        slots, _ = SC.assign(slots, [pair for pair, _ in SC.candidate_pairs(points, geometry)], keep, capacity)
+        slack = 1e-7 * st.length
+        iterations = 0
+        for _ in range(SC.CONTACT_ROUNDS):
+            self._contact = SC.ContactSlots(geometry, slots)
+            self._outputs.contact_slots = self._contact
+            try:
+                result, state = self._solve_pairs_fixed(problem, warm)
+            finally:
+                self._contact = None
+            iterations += result.iterations
+            if state is None:
+                return result, None
+            points = self.model.positions(state.z, geometry.s)
+            candidates = SC.candidate_pairs(points, geometry)
+            missing = [pair for pair in SC.penetrations(candidates, geometry, slack) if pair not in slots]
+            if not missing:
+                result.iterations = iterations
+                result.min_self_distance = SC.closest_distance(points, geometry)
+                tangents = self.model.tangents_at(state.z, geometry.s)
+                signs = SC.crossing_signs(points, tangents, geometry)
+                flips = SC.crossing_flips(previous.signs, signs) if previous is not None else []
+                if flips:
+                    a, b = flips[0]
+                    return no_shape(self.options, self.model_summary(), "failed", (
+                        f"self-contact: the string passed through itself between the last shape and this one "
+                        f"(the crossing at s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m changed sides)"),
+                        iterations=iterations, warm_started=warm), None
+                state.contact = SC.ContactSlots(geometry, list(slots), signs)
+                return result, state
+            keep = {k for k, row in enumerate(self.nlp.self_contact_rows) if state.lam_g[row] > 1e-10}
+            slots, left = SC.assign(slots, missing + [pair for pair, _ in candidates], keep, capacity)
+            if any(pair in left for pair in missing):
+                break
+        return no_shape(self.options, self.model_summary(), "failed", (
+            f"self-contact: the shape still penetrates itself after {SC.CONTACT_ROUNDS} rounds of adding pairs "
+            f"(capacity solver.self_contact_pairs = {capacity})"), iterations=iterations, warm_started=warm), None
+
+    def _solve_pairs_fixed(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
         moments = self.nlp.director and has_point_moments(problem)
         if moments and warm:  # a warm update under dead moments: Newton on the exact equations first
             ok, state, it, viol = self._exact_newton(self._state, problem, self._state.p)
@@ -504,7 +573,8 @@ class ShapeSolver:
                       obstacles=len(self.problem.obstacles), variables=lay.size)
         if self.nlp.director:
             return ModelSummary(**common, rotation="quaternion" if lay.frame else "tangent", elements=lay.elements,
-                                breakpoints=tuple(float(b) for b in self.model.mesh.breakpoints))
+                                breakpoints=tuple(float(b) for b in self.model.mesh.breakpoints),
+                                self_contact_pairs=self.nlp.self_contact_slots)
         return ModelSummary(**common, rotation="planar" if lay.planar else "euler")
 
     def _result(self, problem: Problem, state: SolverState, ipopt_status: str, iterations: int, violation: float,

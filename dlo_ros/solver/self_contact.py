@@ -1,0 +1,209 @@
+"""Self-contact: non-adjacent parts of the string stay at least two radii apart (issue #15).
+
+Formulation (director 3D models, ``solver.self_contact_pairs`` > 0).  The centreline is sampled at
+σ_j = j h, j = 0 … N−1, h = L/(N−1) (N = ``solver.self_contact_samples``, or from the radius: h = r,
+clipped to [L/400, L/100]).  For a pair of samples further apart along s than the exclusion arc S,
+
+    |x(σ_a) − x(σ_b)|² ≥ D²,   D² = (2r)² + h²/2,   S = max(π D / 2, 2 h),
+
+is an inequality row of the NLP.  The NLP has a fixed number K of pair slots (``StringNLP``): slot k's
+parameters are q_k = W(σ_a) − W(σ_b) (rows of the centreline's integration matrix, so that
+x(σ_a) − x(σ_b) = T q_k with T the quadrature-node tangents) and its bound b_k = D²; an empty slot has
+q_k = 0, b_k = −L² and reads −1 ≤ 0 for any shape.  Pairs are parameters, so the active set changes
+during a stream without rebuilding the NLP.
+
+Error bound between samples.  Near their closest points two strands are straight to O(κ h²), so each
+sample pair's offset from the closest points is a u − b v with |a|, |b| ≤ h/2 (u, v the unit tangents);
+choosing the signs of a and b so that a b (u·v) ≥ 0 gives |a u − b v|² ≤ h²/2 whatever the angle.
+Hence d_true² ≥ d_sample² − h²/2 ≥ (2r)²: the true centreline distance is at least 2r − κ_max h²/4 (κ_max
+the largest curvature of the two strands near contact; each strand leaves its tangent line by at most
+κ (h/2)²/2 within half a spacing).  The price is a separation of at most √((2r)² + h²/2) for parallel
+strands whose samples line up (D instead of 2r: 6 % of the diameter at h = r).
+
+Radius zero ("may touch, may not cross"): D = h/√2.  Two polyline chords of length h that cross have an
+end pair no further apart than h/√2, so a shape whose sample pairs all keep D does not cross itself at
+the sample polyline's resolution; the centreline deviates from that polyline by at most κ h²/8.
+
+The exclusion arc S: on a circle of radius ρ the chord over an arc S is 2ρ sin(S/2ρ) ≥ D for every
+ρ ≥ D/2 when S = πD/2, so the rows never act on a bend gentler than radius D/2 ≈ r (a tube cannot bend
+tighter than its radius); pairs closer along s than that are neighbours on one strand, not a contact.
+
+Candidate pairs come from the current shape: a k-d tree over the N samples (scipy's cKDTree) gives the
+pairs within the reach D + max(4 h, 0.03 L) (O(N log N), nothing quadratic); of those, the pairs whose
+distance is a local minimum along either strand (the closest partner of each sample on the other
+strand) fill the slots, nearest first.  A pair in a slot that carries a force keeps its slot.  After a
+solve the same query on the answer finds every penetration (``penetrations``); a penetrating pair not in
+a slot is added and the solve repeated from the same start (``ShapeSolver``).
+
+Topology (``crossing_flips``): for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the
+sign of (x_b − x_a)·(t_a × t_b) says which strand lies on top.  Along a warm stream it cannot change
+while the strands stay within reach of each other unless one passed through the other between two
+updates; a change is reported as a failure.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+#: how many times a solve is repeated with the pairs it penetrated added to the slots
+CONTACT_ROUNDS = 4
+
+#: |t_a × t_b| below this: the strands are too close to parallel for the crossing sign to mean anything
+CROSSING_SINE = 0.3
+
+
+@dataclass(frozen=True)
+class ContactGeometry:
+    """The sampling of the self-contact rows (module docstring): sample arc lengths s [m], spacing h [m],
+    the sample-pair distance D [m] the rows keep, the exclusion arc S [m], and the candidate reach [m]."""
+
+    s: np.ndarray
+    spacing: float
+    distance: float
+    exclusion: float
+    reach: float
+    radius: float
+
+    @property
+    def key(self) -> tuple:
+        return (len(self.s), self.distance)
+
+    def tolerance(self, curvature: float) -> float:
+        """How far below 2r the true centreline distance may come between samples [m] (module docstring)."""
+        return curvature * self.spacing ** 2 / 4
+
+
+def contact_geometry(length: float, radius: float, samples: int = 0) -> ContactGeometry:
+    """The sampling for a string of ``length`` and ``radius`` [m]; ``samples`` 0 picks h = r within
+    [L/400, L/100]."""
+    if samples:
+        n = samples
+    else:
+        h = min(max(radius, length / 400), length / 100)
+        n = int(np.ceil(length / h - 1e-9)) + 1
+    h = length / (n - 1)
+    distance = float(np.sqrt(4 * radius ** 2 + h ** 2 / 2))
+    exclusion = max(np.pi * distance / 2, 2 * h)
+    reach = distance + max(4 * h, 0.03 * length)
+    return ContactGeometry(np.linspace(0.0, length, n), h, distance, exclusion, reach, radius)
+
+
+@dataclass
+class ContactSlots:
+    """The pair held by each slot ((a, b) sample indices, a < b, or None) with the geometry they index,
+    and the crossing signs of the shape they were last checked on."""
+
+    geometry: ContactGeometry
+    pairs: list[tuple[int, int] | None]
+    signs: dict[tuple[int, int], float] = field(default_factory=dict)
+
+    def copy(self) -> ContactSlots:
+        return ContactSlots(self.geometry, list(self.pairs), dict(self.signs))
+
+
+def _far_pairs(points: np.ndarray, geometry: ContactGeometry, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample pairs (P, 2), a < b, within ``radius`` of each other and at least the exclusion arc apart,
+    and their distances."""
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    if pairs.size == 0:
+        return np.zeros((0, 2), dtype=int), np.zeros(0)
+    pairs = np.sort(pairs, axis=1)
+    far = (pairs[:, 1] - pairs[:, 0]) * geometry.spacing >= geometry.exclusion - 1e-12
+    pairs = pairs[far]
+    return pairs, np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
+
+
+def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple[tuple[int, int], float]]:
+    """Pairs within reach whose distance is a local minimum along one strand, with their distances [m],
+    nearest first.  A neighbour closer along s than the exclusion arc is a step along the same strand: a
+    pair next to one is a minimum only when it is already closer than D (a bend tighter than D/2)."""
+    pairs, dist = _far_pairs(points, geometry, geometry.reach)
+    if not len(pairs):
+        return []
+    table = {(int(a), int(b)): d for (a, b), d in zip(pairs, dist)}
+    n, near = len(geometry.s), geometry.exclusion - 1e-12
+
+    def neighbour(a: int, b: int, d: float) -> bool:
+        """Whether the pair (a, b) next to one at distance d leaves d a minimum on its side."""
+        if a < 0 or b >= n:
+            return True
+        if (b - a) * geometry.spacing < near:
+            return d < geometry.distance
+        return d <= table.get((a, b), np.inf)
+
+    out = []
+    for (a, b), d in zip(pairs.tolist(), dist):
+        along_b = neighbour(a, b - 1, d) and neighbour(a, b + 1, d)
+        along_a = neighbour(a - 1, b, d) and neighbour(a + 1, b, d)
+        if along_a or along_b:
+            out.append((d, (a, b)))
+    return [(pair, float(d)) for d, pair in sorted(out)]
+
+
+def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:
+    """The smallest distance [m] between samples the exclusion arc apart (inf when none is within reach)."""
+    _, dist = _far_pairs(points, geometry, geometry.reach)
+    return float(dist.min()) if dist.size else float("inf")
+
+
+def penetrations(candidates: list[tuple[tuple[int, int], float]], geometry: ContactGeometry,
+                 slack: float) -> list[tuple[int, int]]:
+    """The candidate pairs (``candidate_pairs``) closer than D − slack [m], nearest first.  When none is,
+    no sample pair the exclusion arc apart is: from any pair closer than D, stepping along one strand
+    while the distance falls ends on a candidate closer still."""
+    return [pair for pair, d in candidates if d < geometry.distance - slack]
+
+
+def assign(slots: list[tuple[int, int] | None], wanted: list[tuple[int, int]], keep: set[int],
+           capacity: int) -> tuple[list[tuple[int, int] | None], list[tuple[int, int]]]:
+    """New slot contents: the slots in ``keep`` (carrying a force) stay; the other slots take the
+    ``wanted`` pairs in order (a pair already in a slot keeps that slot).  Returns the slots and the
+    wanted pairs that found no slot."""
+    slots = list(slots) + [None] * (capacity - len(slots))
+    wanted_set = set(wanted)
+    new: list[tuple[int, int] | None] = [slots[k] if (k in keep or slots[k] in wanted_set) else None
+                                         for k in range(capacity)]
+    held = {pair for pair in new if pair is not None}
+    free = [k for k in range(capacity) if new[k] is None]
+    left = []
+    for pair in wanted:
+        if pair in held:
+            continue
+        if free:
+            new[free.pop(0)] = pair
+            held.add(pair)
+        else:
+            left.append(pair)
+    return new, left
+
+
+def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
+    """p with every slot's q_k and b_k set (module docstring)."""
+    lay, w = nlp.params, nlp.model.position_matrix(slots.geometry.s)
+    d2 = slots.geometry.distance ** 2
+    for k, pair in enumerate(slots.pairs):
+        sl = lay[f"self:{k}"]
+        if pair is None:
+            p[sl] = 0.0
+            p[sl.stop - 1] = -length ** 2
+        else:
+            p[sl.start:sl.stop - 1] = w[pair[0]] - w[pair[1]]
+            p[sl.stop - 1] = d2
+    return p
+
+
+def crossing_signs(points: np.ndarray, tangents: np.ndarray, geometry: ContactGeometry) -> dict[tuple[int, int], float]:
+    """Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair whose tangents cross (module docstring)."""
+    out = {}
+    for (a, b), _ in candidate_pairs(points, geometry):
+        normal = np.cross(tangents[a], tangents[b])
+        if np.linalg.norm(normal) >= CROSSING_SINE:
+            out[(a, b)] = float(np.sign(np.dot(points[b] - points[a], normal)))
+    return out
+
+
+def crossing_flips(before: dict[tuple[int, int], float], after: dict[tuple[int, int], float]) -> list[tuple[int, int]]:
+    """Pairs whose crossing sign changed between two shapes of a stream (both within reach)."""
+    return [pair for pair, sign in after.items() if pair in before and before[pair] * sign < 0]

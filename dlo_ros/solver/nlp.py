@@ -6,7 +6,7 @@
                ψ(s_g) − ψ_g = 0                          clamp grips, when twist is modelled
                (x(s_b) − x(s_a) − l)/L = 0               relative positions    (eq. 6)
                (h_i(x(σ_j)) + r)/L ≤ 0                   obstacles × samples   (eq. 8)
-               (b_k − |T q_k|²)/L² ≤ 0                   self-contact slots (solver/self_contact.py)
+               (b_k − |T q_k|²)/L ≤ 0                    self-contact slots (solver/self_contact.py)
 
 σ = L / max Rf makes the objective dimensionless and O(1); constraint rows are scaled as shown.
 ``row_scale`` converts IPOPT's multipliers back to SI: λ_SI = λ_ipopt / (row_scale · σ).
@@ -15,8 +15,8 @@ per NLP; parameter values (grip targets, profiles, gravity, load values, obstacl
 
 Every equality row (grips, relative positions, and for the director model the unit-norm rows) comes
 before every inequality row (the director model's fold rows, then the obstacle rows, then the
-self-contact slots: slot k's parameters are q_k = W(s_a) − W(s_b), so that T q_k = x(s_a) − x(s_b) with T
-the quadrature-node tangents, and b_k = D² when the slot holds a pair, −L² when it is empty).  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``, for
+self-contact slots: slot k's parameters are q_k = (W(s_a) − W(s_b))/√(2D), so that T q_k is x(s_a) − x(s_b)
+scaled (T the quadrature-node tangents), and b_k = D/2 when the slot holds a pair, −L when it is empty).  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``, for
 Newton updates while no obstacle row is active: the Newton matrix and residual of the other rows (all
 equalities) without the obstacle rows' Jacobian, Hessian or values (with a table in reach, half of a
 planar model's KKT instructions and a third of a 3D one's go to those).
@@ -330,7 +330,7 @@ class StringNLP:
             prm = p[lay[f"self:{k}"]]
             gap = ca.mtimes(t, prm[:M])
             self.self_contact_rows.append(len(g_rows))
-            add(prm[M] - ca.dot(gap, gap), L * L, ("self", k), -ca.inf, 0.0)
+            add(prm[M] - ca.dot(gap, gap), L, ("self", k), -ca.inf, 0.0)
 
         self.n_grip_equalities = sum(len(r["position"]) + len(r["angles"]) for r in self.grip_rows.values())
         objective = self.sigma * (bend + twist + stretch + grav - work)

@@ -24,6 +24,7 @@ from .options import SolverOptions
 from .parameters import ProblemParameters
 from .residual import PointAction
 from .result import SelfContact, ShapeResult
+from .self_contact import slot_multiplier
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
 from .wrenches import FramesOf, equilibrium, wrench
@@ -111,7 +112,8 @@ class ShapeOutputs:
             stable=stable, min_eigenvalue=min_eig, iterations=iterations, constraint_violation=violation,
             warm_started=warm, continuation_steps=steps, basis=options.basis, order=options.order,
             ipopt_status=ipopt_status, equilibrium_residual_m=residual.metres,
-            self_contacts=[c for c in self_contacts if c.gap <= self.contact_slots.geometry.distance + 1e-9 * nlp.length],
+            # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier complementarity)
+            self_contacts=[c for c in self_contacts if c.gap <= self.contact_slots.geometry.distance + 1e-7 * nlp.length],
         )
 
     def _self_contacts(self, z: np.ndarray, lam_si: np.ndarray) -> list[SelfContact]:
@@ -127,7 +129,8 @@ class ShapeOutputs:
             if pair is None or not lam_si[row] > 0:
                 continue
             xa, xb = nlp.model.positions(z, np.array([s[pair[0]], s[pair[1]]]))
-            out.append(SelfContact(float(s[pair[0]]), float(s[pair[1]]), xa, xb, 2.0 * lam_si[row] * (xa - xb),
+            lam = slot_multiplier(lam_si[row], slots.geometry)
+            out.append(SelfContact(float(s[pair[0]]), float(s[pair[1]]), xa, xb, 2.0 * lam * (xa - xb),
                                    float(np.linalg.norm(xa - xb))))
         return out
 

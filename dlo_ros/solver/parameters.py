@@ -90,8 +90,8 @@ class ProblemParameters:
             p[lay[f"relative:{i}"]] = rel.offset
         for i, ob in enumerate(problem.obstacles):
             p[lay[f"obstacle:{i}"]] = ob.params
-        for k in range(nlp.self_contact_slots):  # empty slots: b = −L², the row reads −1 ≤ 0 for any shape
-            p[lay[f"self:{k}"].stop - 1] = -st.length ** 2
+        for k in range(nlp.self_contact_slots):  # empty slots: b = −L, the row reads −1 ≤ 0 for any shape
+            p[lay[f"self:{k}"].stop - 1] = -st.length
         p.flags.writeable = False
         self._scene_p = (key, np.array(problem.gravity, dtype=float), p)
         return p

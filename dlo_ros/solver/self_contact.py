@@ -8,8 +8,9 @@ clipped to [L/400, L/100]).  For a pair of samples further apart along s than th
 
 is an inequality row of the NLP.  The NLP has a fixed number K of pair slots (``StringNLP``): slot k's
 parameters are q_k = W(σ_a) − W(σ_b) (rows of the centreline's integration matrix, so that
-x(σ_a) − x(σ_b) = T q_k with T the quadrature-node tangents) and its bound b_k = D²; an empty slot has
-q_k = 0, b_k = −L² and reads −1 ≤ 0 for any shape.  Pairs are parameters, so the active set changes
+x(σ_a) − x(σ_b) = T q_k with T the quadrature-node tangents) and its bound b_k = D², both scaled by 1/(2D)
+so that the row reads a distance (``fill``); an empty slot has q_k = 0, b_k = −L and reads −1 ≤ 0 for
+any shape.  Pairs are parameters, so the active set changes
 during a stream without rebuilding the NLP.
 
 Error bound between samples.  Near their closest points two strands are straight to O(κ h²), so each
@@ -180,18 +181,28 @@ def assign(slots: list[tuple[int, int] | None], wanted: list[tuple[int, int]], k
 
 
 def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
-    """p with every slot's q_k and b_k set (module docstring)."""
+    """p with every slot's q_k and b_k set (module docstring), scaled so that the row reads a distance:
+    q_k = (W(σ_a) − W(σ_b)) / √(2D) and b_k = D/2, so that the NLP row (b_k − |T q_k|²)/L equals
+    (D² − |x_a − x_b|²)/(2 D L) ≈ (D − |x_a − x_b|)/L near contact, whatever the radius (a row in D² would
+    hold the distance only to 1e-10 L²/D).  An empty slot: q_k = 0, b_k = −L (the row reads −1)."""
     lay, w = nlp.params, nlp.model.position_matrix(slots.geometry.s)
-    d2 = slots.geometry.distance ** 2
+    d = slots.geometry.distance
+    scale = 1.0 / np.sqrt(2.0 * d)
     for k, pair in enumerate(slots.pairs):
         sl = lay[f"self:{k}"]
         if pair is None:
             p[sl] = 0.0
-            p[sl.stop - 1] = -length ** 2
+            p[sl.stop - 1] = -length
         else:
-            p[sl.start:sl.stop - 1] = w[pair[0]] - w[pair[1]]
-            p[sl.stop - 1] = d2
+            p[sl.start:sl.stop - 1] = scale * (w[pair[0]] - w[pair[1]])
+            p[sl.stop - 1] = d / 2
     return p
+
+
+def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
+    """The SI multiplier λ [N/m] of D² − |x_a − x_b|² ≤ 0 from a slot row's λ / (row_scale σ) [N] (``fill``:
+    the row is that constraint divided by 2D)."""
+    return lam_row_si / (2.0 * geometry.distance)
 
 
 def crossing_signs(points: np.ndarray, tangents: np.ndarray, geometry: ContactGeometry) -> dict[tuple[int, int], float]:

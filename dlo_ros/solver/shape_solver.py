@@ -365,13 +365,17 @@ class ShapeSolver:
         slots, _ = SC.assign(slots, [pair for pair, _ in SC.candidate_pairs(points, geometry)], keep, capacity)
         slack = 1e-7 * st.length
         iterations = 0
+        committed, round_start = self._state, start
         for _ in range(SC.CONTACT_ROUNDS):
             self._contact = SC.ContactSlots(geometry, slots)
             self._outputs.contact_slots = self._contact
+            # a warm update repeats from its (non-penetrating) start; a cold solve from the previous
+            # round's answer, whose strands already pass each other on the side they will touch on
+            self._state = round_start
             try:
-                result, state = self._solve_pairs_fixed(problem, warm)
+                result, state = self._solve_pairs_fixed(problem, round_start is not None)
             finally:
-                self._contact = None
+                self._contact, self._state = None, committed
             iterations += result.iterations
             if state is None:
                 return result, None
@@ -379,7 +383,7 @@ class ShapeSolver:
             candidates = SC.candidate_pairs(points, geometry)
             missing = [pair for pair in SC.penetrations(candidates, geometry, slack) if pair not in slots]
             if not missing:
-                result.iterations = iterations
+                result.iterations, result.warm_started = iterations, warm
                 result.min_self_distance = SC.closest_distance(points, geometry)
                 tangents = self.model.tangents_at(state.z, geometry.s)
                 signs = SC.crossing_signs(points, tangents, geometry)
@@ -393,6 +397,8 @@ class ShapeSolver:
                 state.contact = SC.ContactSlots(geometry, list(slots), signs)
                 return result, state
             keep = {k for k, row in enumerate(self.nlp.self_contact_rows) if state.lam_g[row] > 1e-10}
+            if start is None:
+                round_start = state
             slots, left = SC.assign(slots, missing + [pair for pair, _ in candidates], keep, capacity)
             if any(pair in left for pair in missing):
                 break

@@ -20,7 +20,7 @@ from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
 
 L, RF, RT, R = 1.0, 1.0, 0.01, 0.01 * 1.0
-ORDER, PAIRS = 16, 32
+ORDER, PAIRS = 16, 16
 STRAIGHT = (0.0, 0.0, 0.0, 1.0)
 
 
@@ -169,6 +169,25 @@ def test_far_from_itself_is_unchanged():
             assert a.ipopt_status == b.ipopt_status == "Newton"
 
 
+def test_auto_models_self_contact_once_within_reach():
+    """``solver.model: auto`` (sync checks; a loose tolerance keeps the order at 16): no self-contact while
+    the loop is open, the full model with self-contact from the update that brings the shape within reach
+    of itself, and no published shape closer to itself than 2r (measured on its own output points)."""
+    from dlo_ros.solver.auto import AutoShapeSolver
+
+    sol = AutoShapeSolver(fig2(0.33, R), SolverOptions(error_tolerance=0.01 * L), compile="off", checks="sync")
+    r = sol.solve()
+    assert r.ok and r.model.self_contact_pairs == 0
+    for c in (0.32, 0.31, 0.30, 0.29):
+        r = sol.solve({"right": ((c, 0.0, 0.0), STRAIGHT)})
+        assert r.ok and r.stable, (c, r.message)
+        d, _, _ = closest_self_approach(r.s, r.points, 0.05 * L)
+        assert d >= 2 * R - 1e-4 * L, (c, d, r.model.self_contact_pairs)
+    assert r.model.self_contact_pairs > 0 and r.self_contacts
+    assert any(reason.startswith("self-contact:") for reason in r.model.reasons)
+    assert r.to_dict()["model"]["self_contact_pairs"] == r.model.self_contact_pairs
+
+
 # ---- pair selection and topology, on synthetic curves ------------------------------------------------
 def random_curve(seed: int, n: int) -> np.ndarray:
     """A smooth random closed-ish curve of length ≈ 1 sampled at n points (sum of a few harmonics)."""
@@ -219,7 +238,9 @@ def test_crossing_flip_is_detected():
 
 
 def test_assign_keeps_loaded_slots():
+    """Loaded slots stay; the rest of the capacity goes to the wanted pairs in order, a chosen pair keeping
+    its slot; a nearer wanted pair displaces an unloaded farther one."""
     slots, left = SC.assign([(1, 9), (2, 8), None], [(3, 7), (2, 8)], keep={0}, capacity=3)
-    assert slots[0] == (1, 9) and slots[1] == (2, 8) and slots[2] == (3, 7) and not left
-    slots, left = SC.assign(slots, [(4, 6), (5, 9)], keep={0, 1}, capacity=3)
-    assert slots[:2] == [(1, 9), (2, 8)] and slots[2] == (4, 6) and left == [(5, 9)]
+    assert slots == [(1, 9), (2, 8), (3, 7)] and not left
+    slots, left = SC.assign(slots, [(4, 6), (5, 9), (3, 7)], keep={0}, capacity=3)
+    assert slots[0] == (1, 9) and set(slots[1:]) == {(4, 6), (5, 9)} and left == [(3, 7)]

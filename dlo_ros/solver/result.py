@@ -51,8 +51,9 @@ class ShapeResult:
     equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as an
     equivalent centreline error (solver/residual.py); NaN when there is no shape.
     self_contacts: the pairs of points pressed together (empty when self-contact is not modelled or
-    nothing touches); min_self_distance [m]: the smallest centreline distance between self-contact
-    samples the exclusion arc apart (NaN when self-contact is not modelled).
+    nothing touches); min_self_distance [m]: the closest approach of two strands at the self-contact
+    samples (inf when no two strands are within the candidate reach, NaN when self-contact is not
+    modelled; JSON null for both).
     """
 
     status: str
@@ -105,7 +106,7 @@ class ShapeResult:
             "contact_forces": {str(i): arr(f) for i, f in self.contact_forces.items()},
             "self_contacts": [{"s_a": c.s_a, "s_b": c.s_b, "point_a": arr(c.point_a), "point_b": arr(c.point_b),
                                "force": arr(c.force), "gap": c.gap} for c in self.self_contacts],
-            "min_self_distance": None if np.isnan(self.min_self_distance) else self.min_self_distance,
+            "min_self_distance": self.min_self_distance if np.isfinite(self.min_self_distance) else None,
             "model": self.model_dict(),
             "solver": {
                 "iterations": self.iterations,

@@ -144,9 +144,10 @@ def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple
 
 
 def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:
-    """The smallest distance [m] between samples the exclusion arc apart (inf when none is within reach)."""
-    _, dist = _far_pairs(points, geometry, geometry.reach)
-    return float(dist.min()) if dist.size else float("inf")
+    """The closest approach [m] of two strands: the smallest candidate pair's distance (``candidate_pairs``:
+    not a pair of neighbours on one strand), inf when no two strands are within reach."""
+    candidates = candidate_pairs(points, geometry)
+    return min((d for _, d in candidates), default=float("inf"))
 
 
 def penetrations(candidates: list[tuple[tuple[int, int], float]], geometry: ContactGeometry,
@@ -159,24 +160,25 @@ def penetrations(candidates: list[tuple[tuple[int, int], float]], geometry: Cont
 
 def assign(slots: list[tuple[int, int] | None], wanted: list[tuple[int, int]], keep: set[int],
            capacity: int) -> tuple[list[tuple[int, int] | None], list[tuple[int, int]]]:
-    """New slot contents: the slots in ``keep`` (carrying a force) stay; the other slots take the
-    ``wanted`` pairs in order (a pair already in a slot keeps that slot).  Returns the slots and the
-    wanted pairs that found no slot."""
+    """New slot contents: the slots in ``keep`` (carrying a force) stay; the rest of the capacity goes to
+    the ``wanted`` pairs in their order (a chosen pair already in a slot keeps that slot, so its
+    multiplier stays with it).  Returns the slots and the wanted pairs that found no slot."""
     slots = list(slots) + [None] * (capacity - len(slots))
-    wanted_set = set(wanted)
-    new: list[tuple[int, int] | None] = [slots[k] if (k in keep or slots[k] in wanted_set) else None
+    kept = {slots[k] for k in keep if slots[k] is not None}
+    chosen: list[tuple[int, int]] = []
+    left: list[tuple[int, int]] = []
+    for pair in dict.fromkeys(wanted):  # in order, without repeats
+        if pair in kept:
+            continue
+        (chosen if len(chosen) < capacity - len(kept) else left).append(pair)
+    chosen_set = set(chosen)
+    new: list[tuple[int, int] | None] = [slots[k] if (k in keep or slots[k] in chosen_set) else None
                                          for k in range(capacity)]
     held = {pair for pair in new if pair is not None}
     free = [k for k in range(capacity) if new[k] is None]
-    left = []
-    for pair in wanted:
-        if pair in held:
-            continue
-        if free:
+    for pair in chosen:
+        if pair not in held:
             new[free.pop(0)] = pair
-            held.add(pair)
-        else:
-            left.append(pair)
     return new, left
 
 

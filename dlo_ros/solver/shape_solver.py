@@ -357,9 +357,7 @@ class ShapeSolver:
             # belong to the old pairs: start cold
             start, previous, warm = None, None, False
         slots = previous.pairs if previous is not None else [None] * capacity
-        keep: set[int] = set()
-        if start is not None and previous is not None:
-            keep = {k for k, row in enumerate(self.nlp.self_contact_rows) if start.lam_g[row] > 1e-10}
+        keep = self._loaded_slots(start) if start is not None and previous is not None else set()
         z0 = start.z if start is not None else self.initial_guess(problem)
         points = self.model.positions(z0, geometry.s)
         slots, _ = SC.assign(slots, [pair for pair, _ in SC.candidate_pairs(points, geometry)], keep, capacity)
@@ -384,7 +382,7 @@ class ShapeSolver:
             missing = [pair for pair in SC.penetrations(candidates, geometry, slack) if pair not in slots]
             if not missing:
                 result.iterations, result.warm_started = iterations, warm
-                result.min_self_distance = SC.closest_distance(points, geometry)
+                result.min_self_distance = min((d for _, d in candidates), default=float("inf"))
                 tangents = self.model.tangents_at(state.z, geometry.s)
                 signs = SC.crossing_signs(points, tangents, geometry)
                 flips = SC.crossing_flips(previous.signs, signs) if previous is not None else []
@@ -396,15 +394,23 @@ class ShapeSolver:
                         iterations=iterations, warm_started=warm), None
                 state.contact = SC.ContactSlots(geometry, list(slots), signs)
                 return result, state
-            keep = {k for k, row in enumerate(self.nlp.self_contact_rows) if state.lam_g[row] > 1e-10}
             if start is None:
                 round_start = state
+            # the next round starts from round_start: its loaded slots keep their pairs (Newton uses λ there)
+            keep = self._loaded_slots(round_start)
             slots, left = SC.assign(slots, missing + [pair for pair, _ in candidates], keep, capacity)
             if any(pair in left for pair in missing):
                 break
         return no_shape(self.options, self.model_summary(), "failed", (
             f"self-contact: the shape still penetrates itself after {SC.CONTACT_ROUNDS} rounds of adding pairs "
             f"(capacity solver.self_contact_pairs = {capacity})"), iterations=iterations, warm_started=warm), None
+
+    def _loaded_slots(self, state: SolverState) -> set[int]:
+        """Slots whose row is active in ``state`` as Newton counts it (at its bound with λ > 1e-8: IPOPT
+        leaves ~1e-10 barrier multipliers on rows far from their bound)."""
+        g = state.g if state.g is not None else np.asarray(self.nlp.g_fn(state.z, state.p)).ravel()
+        return {k for k, row in enumerate(self.nlp.self_contact_rows)
+                if state.lam_g[row] > 1e-8 and g[row] > self.nlp.ubg[row] - 1e-7}
 
     def _solve_pairs_fixed(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
         moments = self.nlp.director and has_point_moments(problem)

@@ -532,7 +532,8 @@ class AutoShapeSolver:
         if self.choice.self_contact or self.options.rotation != "director" or not self.inner.has_warm_start:
             return ""
         st = problem.string
-        geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples)
+        geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
+                                       tuple(g.s for g in problem.grips))
         z = self.inner.snapshot().z
         d = SC.closest_distance(self.inner.model.positions(z, geometry.s), geometry)
         if not d < geometry.reach:

@@ -28,6 +28,8 @@ the sample polyline's resolution; the centreline deviates from that polyline by 
 The exclusion arc S: on a circle of radius ρ the chord over an arc S is 2ρ sin(S/2ρ) ≥ D for every
 ρ ≥ D/2 when S = πD/2, so the rows never act on a bend gentler than radius D/2 ≈ r (a tube cannot bend
 tighter than its radius); pairs closer along s than that are neighbours on one strand, not a contact.
+Pairs of samples within S of two different grips are not checked either: the scene places those grips
+(both ends of a closed loop held at one point, or two grips closer than 2r).
 
 Candidate pairs come from the current shape: a k-d tree over the N samples (scipy's cKDTree) gives the
 pairs within the reach D + max(4 h, 0.03 L) (O(N log N), nothing quadratic); of those, the pairs whose
@@ -66,6 +68,7 @@ class ContactGeometry:
     exclusion: float
     reach: float
     radius: float
+    held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # per sample: grip index within S, or −1
 
     @property
     def key(self) -> tuple:
@@ -76,9 +79,11 @@ class ContactGeometry:
         return curvature * self.spacing ** 2 / 4
 
 
-def contact_geometry(length: float, radius: float, samples: int = 0) -> ContactGeometry:
+def contact_geometry(length: float, radius: float, samples: int = 0, grip_s: tuple[float, ...] = ()) -> ContactGeometry:
     """The sampling for a string of ``length`` and ``radius`` [m]; ``samples`` 0 picks h = r within
-    [L/400, L/100]."""
+    [L/400, L/100].  ``grip_s``: the grips' arc lengths [m] (pairs of samples within the exclusion arc of
+    two different grips are never checked: the scene places those grips, e.g. both ends of a closed loop
+    at one point)."""
     if samples:
         n = samples
     else:
@@ -88,7 +93,11 @@ def contact_geometry(length: float, radius: float, samples: int = 0) -> ContactG
     distance = float(np.sqrt(4 * radius ** 2 + h ** 2 / 2))
     exclusion = max(np.pi * distance / 2, 2 * h)
     reach = distance + max(4 * h, 0.03 * length)
-    return ContactGeometry(np.linspace(0.0, length, n), h, distance, exclusion, reach, radius)
+    s = np.linspace(0.0, length, n)
+    held = np.full(n, -1, dtype=int)
+    for i, sg in enumerate(grip_s):
+        held[np.abs(s - sg) <= exclusion] = i
+    return ContactGeometry(s, h, distance, exclusion, reach, radius, held)
 
 
 @dataclass
@@ -112,6 +121,9 @@ def _far_pairs(points: np.ndarray, geometry: ContactGeometry, radius: float) -> 
         return np.zeros((0, 2), dtype=int), np.zeros(0)
     pairs = np.sort(pairs, axis=1)
     far = (pairs[:, 1] - pairs[:, 0]) * geometry.spacing >= geometry.exclusion - 1e-12
+    if geometry.held.size:
+        ga, gb = geometry.held[pairs[:, 0]], geometry.held[pairs[:, 1]]
+        far &= ~((ga >= 0) & (gb >= 0) & (ga != gb))
     pairs = pairs[far]
     return pairs, np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
 
@@ -132,6 +144,8 @@ def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple
             return True
         if (b - a) * geometry.spacing < near:
             return d < geometry.distance
+        if geometry.held.size and geometry.held[a] >= 0 and geometry.held[b] >= 0 and geometry.held[a] != geometry.held[b]:
+            return True  # a pair the grips place: not checked, so no neighbour
         return d <= table.get((a, b), np.inf)
 
     out = []

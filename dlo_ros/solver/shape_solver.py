@@ -348,7 +348,8 @@ class ShapeSolver:
         (at most ``CONTACT_ROUNDS`` times).  On a warm update a crossing sign that flipped since the
         committed shape means the string passed through itself: 'failed'."""
         st = problem.string
-        geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples)
+        geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
+                                       tuple(g.s for g in problem.grips))
         capacity = self.nlp.self_contact_slots
         start = self._state if warm else None
         previous = start.contact if start is not None and start.contact is not None else None

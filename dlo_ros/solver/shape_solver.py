@@ -192,7 +192,13 @@ class ShapeSolver:
                 return False
             source = sample_source(other, src, self.nlp)
         with self._lock:  # warm_state evaluates this solver's functions: never beside a solve of it
-            self._state = warm_state(self.nlp, self.functions, self.parameters, self.problem, source)
+            state = warm_state(self.nlp, self.functions, self.parameters, self.problem, source)
+            contact = getattr(src, "contact", None)
+            if contact is not None and len(contact.pairs) == self.nlp.self_contact_slots:
+                # the same pairs in the same slots: the multipliers warm_state matched row by row belong to them
+                state.contact = contact.copy()
+                SC.fill(state.p, state.contact, self.nlp, self.problem.string.length)
+            self._state = state
         return True
 
     def unstable_eigenvalue(self) -> float | None:

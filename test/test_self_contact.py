@@ -252,7 +252,8 @@ def test_crossing_flip_is_detected():
         tangents[~first] = [0.0, 1.0, 0.0]
         return pts, tangents
 
-    above, below, higher = (SC.crossing_signs(*shape(z), geometry) for z in (0.05, -0.05, 0.06))
+    above, below, higher = (SC.crossing_signs(*shape(z), SC.candidate_pairs(shape(z)[0], geometry))
+                            for z in (0.05, -0.05, 0.06))
     assert above and SC.crossing_flips(above, below) and not SC.crossing_flips(above, higher)
 
 

@@ -45,6 +45,7 @@ updates; a change is reported as a failure.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -79,6 +80,7 @@ class ContactGeometry:
         return curvature * self.spacing ** 2 / 4
 
 
+@functools.lru_cache(maxsize=16)
 def contact_geometry(length: float, radius: float, samples: int = 0, grip_s: tuple[float, ...] = ()) -> ContactGeometry:
     """The sampling for a string of ``length`` and ``radius`` [m]; ``samples`` 0 picks h = r within
     [L/400, L/100].  ``grip_s``: the grips' arc lengths [m] (pairs of samples within the exclusion arc of
@@ -108,9 +110,11 @@ class ContactSlots:
     geometry: ContactGeometry
     pairs: list[tuple[int, int] | None]
     signs: dict[tuple[int, int], float] = field(default_factory=dict)
+    #: ``candidate_pairs`` of that shape (the next warm update selects its pairs from them)
+    candidates: list[tuple[tuple[int, int], float]] | None = None
 
     def copy(self) -> ContactSlots:
-        return ContactSlots(self.geometry, list(self.pairs), dict(self.signs))
+        return ContactSlots(self.geometry, list(self.pairs), dict(self.signs), self.candidates)
 
 
 def _far_pairs(points: np.ndarray, geometry: ContactGeometry, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -131,30 +135,36 @@ def _far_pairs(points: np.ndarray, geometry: ContactGeometry, radius: float) -> 
 def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple[tuple[int, int], float]]:
     """Pairs within reach whose distance is a local minimum along one strand, with their distances [m],
     nearest first.  A neighbour closer along s than the exclusion arc is a step along the same strand: a
-    pair next to one is a minimum only when it is already closer than D (a bend tighter than D/2)."""
+    pair next to one is a minimum only when it is already closer than D (a bend tighter than D/2).
+    Vectorised over the pairs the tree returned (neighbours looked up in their sorted keys)."""
     pairs, dist = _far_pairs(points, geometry, geometry.reach)
     if not len(pairs):
         return []
-    table = {(int(a), int(b)): d for (a, b), d in zip(pairs, dist)}
-    n, near = len(geometry.s), geometry.exclusion - 1e-12
+    n = len(geometry.s)
+    keys = pairs[:, 0] * n + pairs[:, 1]
+    order = np.argsort(keys)
+    keys, table = keys[order], dist[order]
+    near = geometry.exclusion - 1e-12
 
-    def neighbour(a: int, b: int, d: float) -> bool:
-        """Whether the pair (a, b) next to one at distance d leaves d a minimum on its side."""
-        if a < 0 or b >= n:
-            return True
-        if (b - a) * geometry.spacing < near:
-            return d < geometry.distance
-        if geometry.held.size and geometry.held[a] >= 0 and geometry.held[b] >= 0 and geometry.held[a] != geometry.held[b]:
-            return True  # a pair the grips place: not checked, so no neighbour
-        return d <= table.get((a, b), np.inf)
+    def leaves_minimum(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether each neighbour pair (a, b) leaves its pair's distance a minimum on its side."""
+        outside = (a < 0) | (b >= n)
+        a_, b_ = np.clip(a, 0, n - 1), np.clip(b, 0, n - 1)
+        idx = np.minimum(np.searchsorted(keys, a_ * n + b_), len(keys) - 1)
+        other = np.where(keys[idx] == a_ * n + b_, table[idx], np.inf)
+        same_strand = (b - a) * geometry.spacing < near
+        placed = np.zeros(len(a), dtype=bool)
+        if geometry.held.size:
+            ga, gb = geometry.held[a_], geometry.held[b_]
+            placed = (ga >= 0) & (gb >= 0) & (ga != gb)
+        return outside | placed | np.where(same_strand, dist < geometry.distance, dist <= other)
 
-    out = []
-    for (a, b), d in zip(pairs.tolist(), dist):
-        along_b = neighbour(a, b - 1, d) and neighbour(a, b + 1, d)
-        along_a = neighbour(a - 1, b, d) and neighbour(a + 1, b, d)
-        if along_a or along_b:
-            out.append((d, (a, b)))
-    return [(pair, float(d)) for d, pair in sorted(out)]
+    a, b = pairs[:, 0], pairs[:, 1]
+    along_b = leaves_minimum(a, b - 1) & leaves_minimum(a, b + 1)
+    along_a = leaves_minimum(a - 1, b) & leaves_minimum(a + 1, b)
+    chosen = np.flatnonzero(along_a | along_b)
+    chosen = chosen[np.argsort(dist[chosen], kind="stable")]
+    return [((int(a[i]), int(b[i])), float(dist[i])) for i in chosen]
 
 
 def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:
@@ -221,10 +231,12 @@ def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
     return lam_row_si / (2.0 * geometry.distance)
 
 
-def crossing_signs(points: np.ndarray, tangents: np.ndarray, geometry: ContactGeometry) -> dict[tuple[int, int], float]:
-    """Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair whose tangents cross (module docstring)."""
+def crossing_signs(points: np.ndarray, tangents: np.ndarray,
+                   candidates: list[tuple[tuple[int, int], float]]) -> dict[tuple[int, int], float]:
+    """Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair (``candidate_pairs``) whose tangents cross
+    (module docstring)."""
     out = {}
-    for (a, b), _ in candidate_pairs(points, geometry):
+    for (a, b), _ in candidates:
         normal = np.cross(tangents[a], tangents[b])
         if np.linalg.norm(normal) >= CROSSING_SINE:
             out[(a, b)] = float(np.sign(np.dot(points[b] - points[a], normal)))

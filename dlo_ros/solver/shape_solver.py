@@ -365,9 +365,12 @@ class ShapeSolver:
             start, previous, warm = None, None, False
         slots = previous.pairs if previous is not None else [None] * capacity
         keep = self._loaded_slots(start) if start is not None and previous is not None else set()
-        z0 = start.z if start is not None else self.initial_guess(problem)
-        points = self.model.positions(z0, geometry.s)
-        slots, _ = SC.assign(slots, [pair for pair, _ in SC.candidate_pairs(points, geometry)], keep, capacity)
+        if previous is not None and previous.candidates is not None:  # the committed shape's, found when committed
+            candidates = previous.candidates
+        else:
+            z0 = start.z if start is not None else self.initial_guess(problem)
+            candidates = SC.candidate_pairs(self.model.positions(z0, geometry.s), geometry)
+        slots, _ = SC.assign(slots, [pair for pair, _ in candidates], keep, capacity)
         slack = 1e-7 * st.length
         iterations = 0
         committed, round_start = self._state, start
@@ -390,8 +393,8 @@ class ShapeSolver:
             if not missing:
                 result.iterations, result.warm_started = iterations, warm
                 result.min_self_distance = min((d for _, d in candidates), default=float("inf"))
-                tangents = self.model.tangents_at(state.z, geometry.s)
-                signs = SC.crossing_signs(points, tangents, geometry)
+                signs = SC.crossing_signs(points, self.model.tangents_at(state.z, geometry.s), candidates) \
+                    if candidates else {}
                 flips = SC.crossing_flips(previous.signs, signs) if previous is not None else []
                 if flips:
                     a, b = flips[0]
@@ -399,7 +402,7 @@ class ShapeSolver:
                         f"self-contact: the string passed through itself between the last shape and this one "
                         f"(the crossing at s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m changed sides)"),
                         iterations=iterations, warm_started=warm), None
-                state.contact = SC.ContactSlots(geometry, list(slots), signs)
+                state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
                 return result, state
             if start is None:
                 round_start = state

@@ -143,6 +143,24 @@ def test_fig2_loop_against_discrete_rod(loop):
     assert distance_modulo_chord_rotation(sol.model.positions(z, ref.s), ref.points) < 5e-3 * L
 
 
+def test_contact_forces_are_the_energy_sensitivity():
+    """Statics by virtual work: raising the contact distance D by dD costs the energy Σ|f_i| dD (the
+    contact forces do that work).  With the samples fixed (h = L/100), D = √((2r)² + h²/2), so
+    dE/dr = Σ|f_i| · 4r/D: a central difference in r against the reported forces."""
+    opts = SolverOptions(model="full", order=ORDER, self_contact_pairs=PAIRS, self_contact_samples=101)
+    delta = 1e-4 * L
+    energies = {}
+    for r in (R - delta, R + delta, R):
+        result = ShapeSolver(fig2(0.3, r), opts, compile="off").solve()
+        assert result.ok and result.stable and result.self_contacts, (r, result.message)
+        energies[r] = result.energy["total"]
+    h = L / 100
+    d = np.sqrt(4 * R**2 + h**2 / 2)
+    force = sum(np.linalg.norm(c.force) for c in result.self_contacts)
+    slope = (energies[R + delta] - energies[R - delta]) / (2 * delta)
+    assert slope == pytest.approx(force * 4 * R / d, rel=5e-4), (slope, force)
+
+
 def test_fig2_radius_zero_may_touch_not_cross(free_energy):
     """Radius 0: the strands touch at the sample-pair distance D = h/√2 (no crossing of the sampled
     polyline) and the energy stays at the unconstrained one's (the clearance is tiny)."""

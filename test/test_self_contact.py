@@ -275,6 +275,27 @@ def test_crossing_flip_is_detected():
     assert above and SC.crossing_flips(above, below) and not SC.crossing_flips(above, higher)
 
 
+def test_swept_crossing():
+    """A strand moved straight through another is caught; moved away from it, or slid along it at
+    contact distance, it is not."""
+    geometry = SC.contact_geometry(L, 0.01)
+    s = geometry.s
+    first = s <= 0.5
+
+    def shape(offset: float, slide: float = 0.0) -> np.ndarray:
+        pts = np.zeros((len(s), 3))
+        pts[first, 0] = s[first] - 0.25
+        pts[~first, 0] = slide
+        pts[~first, 1] = s[~first] - 0.75
+        pts[~first, 2] = offset
+        return pts
+
+    d = geometry.distance
+    assert SC.swept_crossing(shape(d), shape(-d), geometry) is not None
+    assert SC.swept_crossing(shape(d), shape(3 * d), geometry) is None
+    assert SC.swept_crossing(shape(d), shape(d, slide=0.05), geometry) is None
+
+
 def test_assign_keeps_loaded_slots():
     """Loaded slots stay; the rest of the capacity goes to the wanted pairs in order, a chosen pair keeping
     its slot; a nearer wanted pair displaces an unloaded farther one."""

@@ -38,10 +38,13 @@ strand) fill the slots, nearest first.  A pair in a slot that carries a force ke
 solve the same query on the answer finds every penetration (``penetrations``); a penetrating pair not in
 a slot is added and the solve repeated from the same start (``ShapeSolver``).
 
-Topology (``crossing_flips``): for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the
-sign of (x_b − x_a)·(t_a × t_b) says which strand lies on top.  Along a warm stream it cannot change
-while the strands stay within reach of each other unless one passed through the other between two
-updates; a change is reported as a failure.
+Topology, along a warm stream (both reported as a failure, the shape not published):
+* ``crossing_flips``: for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the sign of
+  (x_b − x_a)·(t_a × t_b) says which strand lies on top; it cannot change while the strands stay within
+  reach of each other unless one passed through the other between two updates.
+* ``swept_crossing``: a jump (IPOPT may land far from the start, e.g. a twisted rod releasing its twist)
+  is checked by moving every sample straight from the old shape to the new one: if no two samples meet
+  on the way, the shapes are isotopic; if two do, the string may have passed through itself.
 """
 from __future__ import annotations
 
@@ -246,3 +249,28 @@ def crossing_signs(points: np.ndarray, tangents: np.ndarray,
 def crossing_flips(before: dict[tuple[int, int], float], after: dict[tuple[int, int], float]) -> list[tuple[int, int]]:
     """Pairs whose crossing sign changed between two shapes of a stream (both within reach)."""
     return [pair for pair, sign in after.items() if pair in before and before[pair] * sign < 0]
+
+
+def swept_crossing(before: np.ndarray, after: np.ndarray, geometry: ContactGeometry) -> tuple[int, int] | None:
+    """A pair of samples (exclusion arc apart) that meet when every sample moves straight from ``before``
+    to ``after`` (N, 3): its distance min_τ |Δ0 + τ (Δ1 − Δ0)| falls below half of min(D, h/√2), the
+    resolution at which the sample polyline can tell two centrelines apart; None when no pair does.
+    If the straight motion keeps every pair apart, the two shapes are isotopic (the string did not pass
+    through itself); if it does not, it may have.  Only pairs that can meet are tested: a k-d tree over
+    ``before`` with the radius D plus twice the largest displacement."""
+    move = float(np.max(np.linalg.norm(after - before, axis=1), initial=0.0))
+    pairs, _ = _far_pairs(before, geometry, geometry.distance + 2 * move)
+    if not len(pairs):
+        return None
+    a, b = pairs[:, 0], pairs[:, 1]
+    d0, d1 = before[a] - before[b], after[a] - after[b]
+    e = d1 - d0
+    ee = np.sum(e * e, axis=1)
+    tau = np.clip(-np.sum(d0 * e, axis=1) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+    closest = np.linalg.norm(d0 + tau[:, None] * e, axis=1)
+    limit = 0.5 * min(geometry.distance, geometry.spacing / np.sqrt(2.0))
+    hit = np.flatnonzero(closest < limit)
+    if not hit.size:
+        return None
+    i = hit[np.argmin(closest[hit])]
+    return int(a[i]), int(b[i])

@@ -402,6 +402,15 @@ class ShapeSolver:
                         f"self-contact: the string passed through itself between the last shape and this one "
                         f"(the crossing at s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m changed sides)"),
                         iterations=iterations, warm_started=warm), None
+                swept = SC.swept_crossing(self.model.positions(start.z, geometry.s), points, geometry) \
+                    if start is not None else None
+                if swept is not None:
+                    a, b = swept
+                    return no_shape(self.options, self.model_summary(), "failed", (
+                        f"self-contact: this shape is not reached from the last one without the string passing "
+                        f"through itself (moved straight, s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
+                        f"meet on the way); a jump of the solver, not published"),
+                        iterations=iterations, warm_started=warm), None
                 state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
                 return result, state
             if start is None:

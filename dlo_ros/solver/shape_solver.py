@@ -352,7 +352,8 @@ class ShapeSolver:
         """Solve with the self-contact slots filled from the start's shape (the committed equilibrium, or
         the cold guess); a pair the answer penetrates is added and the solve repeated from the same start
         (at most ``CONTACT_ROUNDS`` times).  On a warm update a crossing sign that flipped since the
-        committed shape means the string passed through itself: 'failed'."""
+        committed shape, or two samples that meet when the shape is moved straight from the committed one
+        to the answer, mean the string (may have) passed through itself: 'failed', not committed."""
         st = problem.string
         geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
                                        tuple(g.s for g in problem.grips))

@@ -154,6 +154,9 @@ def format_summary(scene, result) -> str:
             if np.linalg.norm(f) > 0:
                 ob = scene.problem.obstacles[i]
                 lines.append(f"contact obstacles[{i}] {ob.name or ob.type}: total force {_vec(f)} N")
+        for c in result.self_contacts:
+            lines.append(f"self    s = {c.s_a:.4g} m and {c.s_b:.4g} m pressed together: force {_vec(c.force)} N "
+                         f"(on s = {c.s_a:.4g} m; gap {c.gap:.4g} m)")
         sag = max_sag(result.points, [g.pose.position for g in scene.problem.grips], scene.problem.gravity)
         lines.append(f"sag     {sag:.4g} m  (lowest point below the lowest grip, along gravity)")
     if result.status in ("ok", "unverified"):

@@ -269,6 +269,8 @@ class _ResultSnap:
     bend_stiffness: Any
     targets: dict | None = None
     model: dict = field(default_factory=dict)
+    # one row per self-contact: s_a, s_b [m], point_a, point_b [m], force on s_a [N] (its opposite acts on s_b)
+    self_contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 11)))
 
 
 @dataclass
@@ -337,6 +339,8 @@ def _encode_result(result: Any, update: int, ros_time_ns: int, bend_stiffness: A
         None if bend_stiffness is None else np.asarray(bend_stiffness, dtype=float).tobytes(),
         None if targets is None else (tuple(str(n) for n in targets), b"".join(_pose_bytes(p) for p in targets.values())),
         result.model_dict(),
+        b"".join(np.concatenate([[c.s_a, c.s_b], c.point_a, c.point_b, c.force]).astype(float).tobytes()
+                 for c in getattr(result, "self_contacts", ())),
     )
 
 
@@ -348,7 +352,7 @@ def _decode(message: Any) -> _Item:
         _, update, t, names, data = message
         return _Item("targets", update, t, _decode_poses(names, data))
     (_, update, t, status, text, stable, eig, iterations, ms, warm, e_names, e_data, g_names, g_data,
-     s, points, orientations, rf, targets, model) = message
+     s, points, orientations, rf, targets, model, contacts) = message
     f = np.frombuffer(g_data, dtype=float).reshape(len(g_names), 3)
     bend = None if rf is None else np.frombuffer(rf, dtype=float)
     snap = _ResultSnap(
@@ -359,6 +363,7 @@ def _decode(message: Any) -> _Item:
         forces={n: f[i] for i, n in enumerate(g_names)},
         bend_stiffness=None if bend is None else (float(bend[0]) if bend.size == 1 else bend),
         targets=None if targets is None else _decode_poses(*targets), model=model,
+        self_contacts=np.frombuffer(contacts, dtype=float).reshape(-1, 11),
     )
     return _Item("result", update, t, snap)
 
@@ -664,6 +669,8 @@ class _Writer:
                             grip_forces=np.concatenate(list(r.forces.values())) if r.forces else np.zeros(0))
                 if r.stable is not None:
                     data["stable"] = bool(r.stable)
+                if len(r.self_contacts):  # rows of s_a, s_b, point_a, point_b, force on s_a (flattened)
+                    data["self_contacts"] = r.self_contacts.ravel()
             if r.model:  # also for a failed solve: the model it was attempted with
                 data["model"] = _json(r.model)
             self._row(E_DATA_RESULT, "AnyValues", it, **data)

@@ -273,14 +273,16 @@ def test_closed_hanging_loop_both_clamps_at_one_point():
     it cold: its straight first guess missed the second clamp by L): auto answers it cold, a ring hanging
     from the clamps, within the tolerance of the full model at order 24, stable and verified; streamed
     away from the closed pose and back, it returns to that answer.  (Streamed in from an open U, the
-    tangent's winding is kept and the U closes into a self-crossing teardrop instead: self-contact, #15.)"""
+    tangent's winding is kept and the U closes into a self-crossing teardrop instead: self-contact, #15.)
+    The stream moves the right clamp against its tangent: along it (+x), the string's end would have to pass
+    through the left clamp's point, and self-contact (#15) makes it bend round it instead."""
     closed = hanging(right=(0, 0, 0.4))
     ref = full_reference(closed)
     assert np.ptp(ref.points[:, 2]) > 0.3  # a ring of circumference L is 1/π across: not a folded line
     solver, r = auto(closed)
     assert r.stable is True and r.equilibrium_residual_m <= TOL
     assert np.max(np.linalg.norm(r.points - ref.points, axis=1)) <= TOL
-    for x in [0.05, 0.1, 0.15, 0.1, 0.05, 0.0]:
+    for x in [-0.05, -0.1, -0.15, -0.1, -0.05, 0.0]:
         r = solver.solve({"right": ((x, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))})
         assert r.ok, (x, r.message)
     assert r.stable is True

@@ -230,8 +230,9 @@ def _point(p: Sequence[float]) -> Point:
 GRIP_COLOURS = {"clamp": (0.9, 0.5, 0.1), "pin": (0.6, 0.2, 0.9), "tangent": (0.2, 0.7, 0.9)}
 OBSTACLE_RGBA = (0.55, 0.55, 0.6, 0.5)
 FORCE_RGB = (0.9, 0.1, 0.6)
+SELF_CONTACT_RGB = (1.0, 0.55, 0.0)
 HALFSPACE_SIZE = 2.0  # [m] edge of the plate drawn for a half-space
-MARKER_NAMESPACES = ("string", "grips", "obstacles", "forces")
+MARKER_NAMESPACES = ("string", "grips", "obstacles", "forces", "self_contacts")
 
 
 def _marker(h: Header, ns: str, mid: int, kind: int) -> Marker:
@@ -291,7 +292,8 @@ def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0
 
 def result_markers(result: ShapeResult, problem: Problem, frame_id: str, stamp_ns: int, *,
                    force_scale: float = 0.1, energy_scale: float = 0.0) -> MarkerArray:
-    """The string (line strip coloured by bending energy density), the grips, the obstacles, the grip forces.
+    """The string (line strip coloured by bending energy density), the grips, the obstacles, the grip forces,
+    and each self-contact's force on both strands (namespace 'self_contacts').
 
     energy_scale [J/m]: density shown in full red (0: the shape's maximum).  Starts with DELETEALL so a
     consumer never keeps markers of an earlier, larger scene.
@@ -328,6 +330,17 @@ def result_markers(result: ShapeResult, problem: Problem, frame_id: str, stamp_n
             f.color = _rgba(FORCE_RGB)
             f.text = f"{g.name}: {np.linalg.norm(wrench.force):.3g} N on the string"
             markers.append(f)
+
+    # self-contacts: the force on each strand at its contact point (equal and opposite)
+    for k, c in enumerate(result.self_contacts):
+        for side, (point, force) in enumerate(((c.point_a, c.force), (c.point_b, -c.force))):
+            m = _marker(h, "self_contacts", 2 * k + side, Marker.ARROW)
+            start = np.asarray(point, dtype=float)
+            m.points = [_point(start), _point(start + force_scale * np.asarray(force, dtype=float))]
+            m.scale = Vector3(x=0.004, y=0.008, z=0.0)
+            m.color = _rgba(SELF_CONTACT_RGB)
+            m.text = f"self-contact s = {c.s_a if side == 0 else c.s_b:.4g} m: {np.linalg.norm(c.force):.3g} N"
+            markers.append(m)
 
     markers.extend(obstacle_markers(problem.obstacles, h))
     return MarkerArray(markers=markers)

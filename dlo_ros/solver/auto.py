@@ -36,6 +36,12 @@ fails.  Reductions and their checks:
   error the order shadows cannot see (they share the samples).  Each check measures the deepest cut
   over 8× as many points; it is added to estimated_error_m, and over δ/2 the samples go to 2n − 1
   (81, 161, 321: the old samples stay), the new model built on the worker like any other.
+* self-contact — modelled only once a committed shape comes within reach of itself (two samples the
+  exclusion arc apart closer than the candidate reach D + max(4h, 0.03 L), solver/self_contact.py): then
+  the 3D director model with ``self_contact_pairs`` slots (the option's value, or AUTO_SELF_CONTACT_PAIRS
+  when it is 0) replaces the current one and the update is solved again on it, so no shape that passes
+  through itself is published; it says so in ``reasons`` ("self-contact: …").  Not with
+  ``rotation: euler`` (self-contact needs the director model).  Once in, it stays.
 
 Switching models maps the previous solution into the new one (ShapeSolver.adopt_warm_start), so a
 stream keeps its warm start.  Every change is kept in ``changes`` (time, reason) and reported in
@@ -68,6 +74,7 @@ from ..model.rotations import TANGENT_X, euler_from_frame, farthest_pole, frame_
 from .nlp import choose_reference_frame, has_point_moments, planarity_violation
 from .options import SolverOptions
 from .protocol import Solver
+from . import self_contact as SC
 from .result import ShapeResult
 from .shape_solver import IPOPT_LOCK, ShapeSolver, with_checked_poses
 from .summary import ModelSummary
@@ -84,6 +91,9 @@ MAX_SAMPLES = 321
 #: the penetration check looks at this many times the samples (between them the sampled constraints let
 #: the string cut into an obstacle: a chord of spacing h cuts a sphere of radius R by about h²/8R)
 PENETRATION_OVERSAMPLING = 8
+#: self-contact slots of the model auto switches to when a shape comes within reach of itself
+#: (``solver.self_contact_pairs`` when set)
+AUTO_SELF_CONTACT_PAIRS = 16
 START_ORDER = 12  # the first answer is within 1e-3·L for typical scenes; checks go up, or down to 8
 
 
@@ -101,10 +111,12 @@ class ModelChoice:
     reasons: list[str] = field(default_factory=list)
     frame: tuple | None = None  # R0 (row-major 9) of a 3D model turned away from its Euler-angle pole
     samples: int = 41  # obstacle_samples: points along s where the obstacles are enforced
+    self_contact: bool = False  # self-contact rows in the NLP (3D director models only)
     order_error_m: float = float("nan")  # the basis-order part of estimated_error_m (the rest: sampling)
 
     def key(self) -> tuple:
-        return (self.planar, self.stretch, self.gravity, self.order, self.obstacles, self.frame, self.samples)
+        return (self.planar, self.stretch, self.gravity, self.order, self.obstacles, self.frame, self.samples,
+                self.self_contact)
 
     def reference_frame(self) -> np.ndarray | None:
         return None if self.frame is None else np.array(self.frame, dtype=float).reshape(3, 3)
@@ -299,7 +311,9 @@ class AutoShapeSolver:
         reduced = replace(problem, string=st, obstacles=obstacles)
         opts = replace(self.options, model="planar" if choice.planar else "full", order=choice.order,
                        quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
-                       obstacle_samples=choice.samples)
+                       obstacle_samples=choice.samples,
+                       self_contact_pairs=(self.options.self_contact_pairs or AUTO_SELF_CONTACT_PAIRS)
+                       if choice.self_contact else 0)
         return reduced, opts
 
     def _solver_for(self, choice: ModelChoice, problem: Problem, *, stream: bool, source: ShapeSolver | None = None,
@@ -484,6 +498,16 @@ class AutoShapeSolver:
             # the check escalates the order
             if result.status not in ("ok", "unverified") or not commit:
                 return self._finish(result, t0, notes)
+            approach = self._self_approach(problem)
+            if approach:  # the shape came within reach of itself: solve this update again with self-contact
+                self.problem = problem
+                self._switch(replace(self._full_choice(self.choice, problem), self_contact=True), approach)
+                notes.append(self.changes[-1][1])
+                reduced = self._reduced(self.choice, problem)[0]
+                inner_poses = {g.name: g.pose for g in reduced.grips}
+                result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
+                if result.status not in ("ok", "unverified"):
+                    return self._finish(result, t0, notes)
             self.problem = problem
             self._since_check += 1
             if check_now:
@@ -501,6 +525,21 @@ class AutoShapeSolver:
                     keys.add(("checker",) + self._full_choice(snap.choice, problem).key())
                     self._submit(self._evaluate, keys, snap, True)
             return self._finish(result, t0, notes)
+
+    def _self_approach(self, problem: Problem) -> str:
+        """Why self-contact must be modelled now ('' if not): the committed shape of a model without it has
+        two samples the exclusion arc apart within the candidate reach of each other (k-d tree query)."""
+        if self.choice.self_contact or self.options.rotation != "director" or not self.inner.has_warm_start:
+            return ""
+        st = problem.string
+        geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
+                                       tuple(g.s for g in problem.grips))
+        z = self.inner.snapshot().z
+        d = SC.closest_distance(self.inner.model.positions(z, geometry.s), geometry)
+        if not d < geometry.reach:
+            return ""
+        return (f"self-contact: the shape comes within {d:.3g} m of itself (reach {geometry.reach:.3g} m, "
+                f"2·radius {2 * st.radius:.3g} m): full model with self-contact")
 
     # ---- checks -------------------------------------------------------------------------------------
     def _check_now(self, snap: _Snapshot, result: ShapeResult, notes: list[str]) -> ShapeResult:
@@ -715,6 +754,7 @@ class AutoShapeSolver:
             variables=s.model.layout.size, auto=True, checked=checked, checks=self.checks,
             reasons=tuple(c.reasons), changes=tuple(r for _, r in self.changes),
             rotation=inner.rotation, elements=inner.elements, breakpoints=inner.breakpoints,
+            self_contact_pairs=inner.self_contact_pairs,
         )
 
     def _finish(self, result: ShapeResult, t0: float, notes: list[str], choice: ModelChoice | None = None,

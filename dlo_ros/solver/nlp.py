@@ -6,6 +6,7 @@
                ψ(s_g) − ψ_g = 0                          clamp grips, when twist is modelled
                (x(s_b) − x(s_a) − l)/L = 0               relative positions    (eq. 6)
                (h_i(x(σ_j)) + r)/L ≤ 0                   obstacles × samples   (eq. 8)
+               (b_k − |T q_k|²)/L ≤ 0                    self-contact slots (solver/self_contact.py)
 
 σ = L / max Rf makes the objective dimensionless and O(1); constraint rows are scaled as shown.
 ``row_scale`` converts IPOPT's multipliers back to SI: λ_SI = λ_ipopt / (row_scale · σ).
@@ -13,7 +14,9 @@ Structure (which grips, their s and modes, loads' s, obstacle types, twist and s
 per NLP; parameter values (grip targets, profiles, gravity, load values, obstacle poses) are not.
 
 Every equality row (grips, relative positions, and for the director model the unit-norm rows) comes
-before every inequality row (the director model's fold rows, then the obstacle rows).  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``, for
+before every inequality row (the director model's fold rows, then the obstacle rows, then the
+self-contact slots: slot k's parameters are q_k = (W(s_a) − W(s_b))/√(2D), so that T q_k is x(s_a) − x(s_b)
+scaled (T the quadrature-node tangents), and b_k = D/2 when the slot holds a pair, −L when it is empty).  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``, for
 Newton updates while no obstacle row is active: the Newton matrix and residual of the other rows (all
 equalities) without the obstacle rows' Jacobian, Hessian or values (with a table in reach, half of a
 planar model's KKT instructions and a third of a 3D one's go to those).
@@ -228,6 +231,9 @@ class StringNLP:
             lay.add(f"relative:{i}", 3)
         for i, ob in enumerate(P.obstacles):
             lay.add(f"obstacle:{i}", OBSTACLE_TYPES[ob.type].size)
+        self.self_contact_slots = self.options.self_contact_pairs if self.director else 0
+        for k in range(self.self_contact_slots):
+            lay.add(f"self:{k}", M + 1)
         self.params = lay
 
         z = ca.SX.sym("z", m.layout.size)
@@ -318,6 +324,13 @@ class StringNLP:
                 expr = h(obs_x[:, j], p[lay[f"obstacle:{i}"]])
                 add(expr + radius, L, ("obstacle", i, j), -ca.inf, 0.0)
             self.obstacle_rows.append(rows)
+        # self-contact slots: x(s_a) − x(s_b) = T q_k is linear in the tangents, whatever the pair
+        self.self_contact_rows: list[int] = []
+        for k in range(self.self_contact_slots):
+            prm = p[lay[f"self:{k}"]]
+            gap = ca.mtimes(t, prm[:M])
+            self.self_contact_rows.append(len(g_rows))
+            add(prm[M] - ca.dot(gap, gap), L, ("self", k), -ca.inf, 0.0)
 
         self.n_grip_equalities = sum(len(r["position"]) + len(r["angles"]) for r in self.grip_rows.values())
         objective = self.sigma * (bend + twist + stretch + grav - work)

@@ -31,6 +31,11 @@ class SolverOptions:
     recheck_every: 'auto' repeats its a-posteriori checks every this many streamed updates.
     output_points: centreline samples in a result.  tolerance: IPOPT's (scaled) convergence tolerance.
     max_continuation_steps: the largest number of equal steps a failed warm update is split into.
+    self_contact_pairs: capacity of the self-contact pair list (director 3D models only; 0: self-contact
+    is not modelled).  Each slot is one inequality row |x(s_a) − x(s_b)|² ≥ D² whose pair of arc lengths is
+    a parameter, refreshed from the current shape before every solve (solver/self_contact.py).
+    self_contact_samples: points along s where self-contact is checked (0: from the radius, see
+    ``self_contact.contact_geometry``).
     """
 
     basis: str = "chebyshev"
@@ -47,6 +52,8 @@ class SolverOptions:
     rotation: str = "director"
     error_tolerance: float = 0.0
     recheck_every: int = 10
+    self_contact_pairs: int = 0
+    self_contact_samples: int = 0
 
     def validate(self) -> None:
         if self.basis not in ("chebyshev", "fourier"):
@@ -77,6 +84,13 @@ class SolverOptions:
             raise ValueError(f"solver.error_tolerance: must be >= 0 m (0 = 1e-3·L), got {self.error_tolerance}")
         if not (1 <= self.recheck_every <= 100000):
             raise ValueError(f"solver.recheck_every: must be in [1, 100000], got {self.recheck_every}")
+        if not (0 <= self.self_contact_pairs <= 400):
+            raise ValueError(f"solver.self_contact_pairs: must be in [0, 400], got {self.self_contact_pairs}")
+        if self.self_contact_samples != 0 and not (3 <= self.self_contact_samples <= 4000):
+            raise ValueError(f"solver.self_contact_samples: must be 0 (auto) or in [3, 4000], got {self.self_contact_samples}")
+        if self.self_contact_pairs and (self.model == "planar" or self.rotation != "director"):
+            raise ValueError("solver.self_contact_pairs: self-contact needs the 3D director model "
+                             "(solver.model 'full' or 'auto', solver.rotation 'director')")
         if not (0 < self.max_strain < 10):
             raise ValueError("solver.max_strain: must be in (0, 10)")
 

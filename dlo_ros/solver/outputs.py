@@ -23,7 +23,8 @@ from .nlp import StringNLP
 from .options import SolverOptions
 from .parameters import ProblemParameters
 from .residual import PointAction
-from .result import ShapeResult
+from .result import SelfContact, ShapeResult
+from .self_contact import slot_multiplier
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
 from .wrenches import FramesOf, equilibrium, wrench
@@ -60,6 +61,8 @@ class ShapeOutputs:
     def __init__(self, nlp: StringNLP, fns: NlpFunctions, parameters: ProblemParameters, options: SolverOptions):
         self.nlp, self.fns, self.parameters, self.options = nlp, fns, parameters, options
         self.s_out = output_s(nlp, options)
+        #: the self-contact slots p holds in the solve under way (set by ShapeSolver; None: not modelled)
+        self.contact_slots = None
 
     def frames_of(self, current: Problem) -> FramesOf:
         """Material frames Q(z, s) with the twist-free frames anchored at ``current``'s grips."""
@@ -87,6 +90,10 @@ class ShapeOutputs:
         frames_of = self.frames_of(current)
         grips = {g.name: wrench(nlp, current.string, frames_of, g, z, lam_si) for g in problem.grips}
         contacts, actions = self._contacts(problem, z, lam_si)
+        self_contacts = self._self_contacts(z, lam_si)
+        for c in self_contacts:  # equal and opposite on the two strands
+            actions += [PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
+                        PointAction(c.s_b, c.point_b, -c.force, np.zeros(3))]
         residual = equilibrium(nlp, problem, frames_of, z, grips, actions)
         stable = None if min_eig is None else is_stable(min_eig, state.hessian)
         status, message = "ok", "converged" + (f" after {steps} continuation steps" if steps else "")
@@ -105,7 +112,27 @@ class ShapeOutputs:
             stable=stable, min_eigenvalue=min_eig, iterations=iterations, constraint_violation=violation,
             warm_started=warm, continuation_steps=steps, basis=options.basis, order=options.order,
             ipopt_status=ipopt_status, equilibrium_residual_m=residual.metres,
+            # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier complementarity)
+            self_contacts=[c for c in self_contacts if c.gap <= self.contact_slots.geometry.distance + 1e-7 * nlp.length],
         )
+
+    def _self_contacts(self, z: np.ndarray, lam_si: np.ndarray) -> list[SelfContact]:
+        """Each slot with a positive multiplier λ [N/m] of its row D² − |x_a − x_b|² ≤ 0: the force
+        2 λ (x_a − x_b) on the string at s_a (−∂(λ g)/∂x_a) and its opposite at s_b."""
+        slots, nlp = self.contact_slots, self.nlp
+        if slots is None or not nlp.self_contact_rows:
+            return []
+        out = []
+        s = slots.geometry.s
+        for k, row in enumerate(nlp.self_contact_rows):
+            pair = slots.pairs[k] if k < len(slots.pairs) else None
+            if pair is None or not lam_si[row] > 0:
+                continue
+            xa, xb = nlp.model.positions(z, np.array([s[pair[0]], s[pair[1]]]))
+            lam = slot_multiplier(lam_si[row], slots.geometry)
+            out.append(SelfContact(float(s[pair[0]]), float(s[pair[1]]), xa, xb, 2.0 * lam * (xa - xb),
+                                   float(np.linalg.norm(xa - xb))))
+        return out
 
     def _contacts(self, problem: Problem, z: np.ndarray,
                   lam_si: np.ndarray) -> tuple[dict[int, np.ndarray], list[PointAction]]:

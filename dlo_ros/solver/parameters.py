@@ -3,7 +3,7 @@
 p holds, at the quadrature nodes, the bending, twisting and stretching stiffnesses Rf, Rt, Re [N·m², N·m²,
 N] and the weight per length D [N/m]; the unit gravity direction; the string's radius [m]; each load's
 force [N] and moment [N·m]; each relative position's offset [m]; each obstacle's parameters; and each
-grip's target:
+grip's target; and each self-contact slot's pair (empty here: ``self_contact.fill`` sets the pairs):
 
 * director models: the position [m] and the orientation matrix R_g (column-major), and for each point
   load the unit rotation its moment's pseudo-potential is centred on (``model/director.py``);
@@ -90,6 +90,8 @@ class ProblemParameters:
             p[lay[f"relative:{i}"]] = rel.offset
         for i, ob in enumerate(problem.obstacles):
             p[lay[f"obstacle:{i}"]] = ob.params
+        for k in range(nlp.self_contact_slots):  # empty slots: b = −L, the row reads −1 ≤ 0 for any shape
+            p[lay[f"self:{k}"].stop - 1] = -st.length
         p.flags.writeable = False
         self._scene_p = (key, np.array(problem.gravity, dtype=float), p)
         return p

@@ -24,6 +24,22 @@ class GripWrench:
 
 
 @dataclass
+class SelfContact:
+    """A pair of points of the string pressed against each other (solver/self_contact.py).
+
+    s_a < s_b [m] and their centreline points [m]; force [N] acts on the string at s_a, −force at s_b
+    (along x(s_a) − x(s_b)); gap [m] is their centreline distance.
+    """
+
+    s_a: float
+    s_b: float
+    point_a: np.ndarray
+    point_b: np.ndarray
+    force: np.ndarray
+    gap: float
+
+
+@dataclass
 class ShapeResult:
     """One equilibrium (or the reason there is none).
 
@@ -34,6 +50,10 @@ class ShapeResult:
     constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
     equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as an
     equivalent centreline error (solver/residual.py); NaN when there is no shape.
+    self_contacts: the pairs of points pressed together (empty when self-contact is not modelled or
+    nothing touches); min_self_distance [m]: the closest approach of two strands at the self-contact
+    samples (inf when no two strands are within the candidate reach, NaN when self-contact is not
+    modelled; JSON null for both).
     """
 
     status: str
@@ -56,6 +76,8 @@ class ShapeResult:
     ipopt_status: str = ""
     model: ModelSummary | None = None  # the model solved (or attempted) with
     equilibrium_residual_m: float = float("nan")
+    self_contacts: list[SelfContact] = field(default_factory=list)
+    min_self_distance: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -82,6 +104,9 @@ class ShapeResult:
             "energy": {k: float(v) for k, v in self.energy.items()},
             "grips": {name: {"force": arr(w.force), "torque": arr(w.torque)} for name, w in self.grips.items()},
             "contact_forces": {str(i): arr(f) for i, f in self.contact_forces.items()},
+            "self_contacts": [{"s_a": c.s_a, "s_b": c.s_b, "point_a": arr(c.point_a), "point_b": arr(c.point_b),
+                               "force": arr(c.force), "gap": c.gap} for c in self.self_contacts],
+            "min_self_distance": self.min_self_distance if np.isfinite(self.min_self_distance) else None,
             "model": self.model_dict(),
             "solver": {
                 "iterations": self.iterations,

@@ -42,6 +42,7 @@ from .outputs import ShapeOutputs, no_shape
 from .parameters import ProblemParameters, check_moments
 from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, ShapeResult
+from . import self_contact as SC
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
 from .summary import ModelSummary
@@ -130,6 +131,7 @@ class ShapeSolver:
         self.problem = problem
         self._key = structure_key(problem, self.options)
         self._state: SolverState | None = None
+        self._contact: SC.ContactSlots | None = None  # the self-contact pairs of the solve under way
         self.build_time_s = time.perf_counter() - t0
 
     # ---- compiled derivatives and IPOPT instances ----------------------------------------------------
@@ -191,7 +193,13 @@ class ShapeSolver:
                 return False
             source = sample_source(other, src, self.nlp)
         with self._lock:  # warm_state evaluates this solver's functions: never beside a solve of it
-            self._state = warm_state(self.nlp, self.functions, self.parameters, self.problem, source)
+            state = warm_state(self.nlp, self.functions, self.parameters, self.problem, source)
+            contact = getattr(src, "contact", None)
+            if contact is not None and len(contact.pairs) == self.nlp.self_contact_slots:
+                # the same pairs in the same slots: the multipliers warm_state matched row by row belong to them
+                state.contact = contact.copy()
+                SC.fill(state.p, state.contact, self.nlp, self.problem.string.length)
+            self._state = state
         return True
 
     def unstable_eigenvalue(self) -> float | None:
@@ -290,7 +298,10 @@ class ShapeSolver:
     # ---- the solution's parameters, start and fields (parameters.py, initial_guess.py, frames.py) ------
     def pack_parameters(self, problem: Problem, z_reference: np.ndarray) -> np.ndarray:
         """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
-        return self.parameters.pack(problem, z_reference)
+        p = self.parameters.pack(problem, z_reference)
+        if self._contact is not None:
+            SC.fill(p, self._contact, self.nlp, problem.string.length)
+        return p
 
     def grip_angles(self, pose: GripPose, reference: tuple[float, float, float]) -> np.ndarray:
         """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
@@ -333,6 +344,96 @@ class ShapeSolver:
         return call(self.nlp, self._ipopt.get(warm), z0, p, start.lam_g, start.lam_x)
 
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
+        if self.nlp.self_contact_slots:
+            return self._solve_self_contact(problem, warm)
+        return self._solve_pairs_fixed(problem, warm)
+
+    # ---- self-contact (solver/self_contact.py) ----------------------------------------------------------
+    def _solve_self_contact(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
+        """Solve with the self-contact slots filled from the start's shape (the committed equilibrium, or
+        the cold guess); a pair the answer penetrates is added and the solve repeated from the same start
+        (at most ``CONTACT_ROUNDS`` times).  On a warm update a crossing sign that flipped since the
+        committed shape, or two samples that meet when the shape is moved straight from the committed one
+        to the answer, mean the string (may have) passed through itself: 'failed', not committed."""
+        st = problem.string
+        geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
+                                       tuple(g.s for g in problem.grips))
+        capacity = self.nlp.self_contact_slots
+        start = self._state if warm else None
+        previous = start.contact if start is not None and start.contact is not None else None
+        if previous is not None and previous.geometry.key != geometry.key:
+            # another radius: the slots' indices mean other samples, and the start's multipliers on them
+            # belong to the old pairs: start cold
+            start, previous, warm = None, None, False
+        slots = previous.pairs if previous is not None else [None] * capacity
+        keep = self._loaded_slots(start) if start is not None and previous is not None else set()
+        if previous is not None and previous.candidates is not None:  # the committed shape's, found when committed
+            candidates = previous.candidates
+        else:
+            z0 = start.z if start is not None else self.initial_guess(problem)
+            candidates = SC.candidate_pairs(self.model.positions(z0, geometry.s), geometry)
+        slots, _ = SC.assign(slots, [pair for pair, _ in candidates], keep, capacity)
+        slack = 1e-7 * st.length
+        iterations = 0
+        committed, round_start = self._state, start
+        for _ in range(SC.CONTACT_ROUNDS):
+            self._contact = SC.ContactSlots(geometry, slots)
+            self._outputs.contact_slots = self._contact
+            # a warm update repeats from its (non-penetrating) start; a cold solve from the previous
+            # round's answer, whose strands already pass each other on the side they will touch on
+            self._state = round_start
+            try:
+                result, state = self._solve_pairs_fixed(problem, round_start is not None)
+            finally:
+                self._contact, self._state = None, committed
+            iterations += result.iterations
+            if state is None:
+                return result, None
+            points = self.model.positions(state.z, geometry.s)
+            candidates = SC.candidate_pairs(points, geometry)
+            missing = [pair for pair in SC.penetrations(candidates, geometry, slack) if pair not in slots]
+            if not missing:
+                result.iterations, result.warm_started = iterations, warm
+                result.min_self_distance = min((d for _, d in candidates), default=float("inf"))
+                signs = SC.crossing_signs(points, self.model.tangents_at(state.z, geometry.s), candidates) \
+                    if candidates else {}
+                flips = SC.crossing_flips(previous.signs, signs) if previous is not None else []
+                if flips:
+                    a, b = flips[0]
+                    return no_shape(self.options, self.model_summary(), "failed", (
+                        f"self-contact: the string passed through itself between the last shape and this one "
+                        f"(the crossing at s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m changed sides)"),
+                        iterations=iterations, warm_started=warm), None
+                swept = SC.swept_crossing(self.model.positions(start.z, geometry.s), points, geometry) \
+                    if start is not None else None
+                if swept is not None:
+                    a, b = swept
+                    return no_shape(self.options, self.model_summary(), "failed", (
+                        f"self-contact: this shape is not reached from the last one without the string passing "
+                        f"through itself (moved straight, s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
+                        f"meet on the way); a jump of the solver, not published"),
+                        iterations=iterations, warm_started=warm), None
+                state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
+                return result, state
+            if start is None:
+                round_start = state
+            # the next round starts from round_start: its loaded slots keep their pairs (Newton uses λ there)
+            keep = self._loaded_slots(round_start)
+            slots, left = SC.assign(slots, missing + [pair for pair, _ in candidates], keep, capacity)
+            if any(pair in left for pair in missing):
+                break
+        return no_shape(self.options, self.model_summary(), "failed", (
+            f"self-contact: the shape still penetrates itself after {SC.CONTACT_ROUNDS} rounds of adding pairs "
+            f"(capacity solver.self_contact_pairs = {capacity})"), iterations=iterations, warm_started=warm), None
+
+    def _loaded_slots(self, state: SolverState) -> set[int]:
+        """Slots whose row is active in ``state`` as Newton counts it (at its bound with λ > 1e-8: IPOPT
+        leaves ~1e-10 barrier multipliers on rows far from their bound)."""
+        g = state.g if state.g is not None else np.asarray(self.nlp.g_fn(state.z, state.p)).ravel()
+        return {k for k, row in enumerate(self.nlp.self_contact_rows)
+                if state.lam_g[row] > 1e-8 and g[row] > self.nlp.ubg[row] - 1e-7}
+
+    def _solve_pairs_fixed(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
         moments = self.nlp.director and has_point_moments(problem)
         if moments and warm:  # a warm update under dead moments: Newton on the exact equations first
             ok, state, it, viol = self._exact_newton(self._state, problem, self._state.p)
@@ -505,7 +606,8 @@ class ShapeSolver:
                       obstacles=len(self.problem.obstacles), variables=lay.size)
         if self.nlp.director:
             return ModelSummary(**common, rotation="quaternion" if lay.frame else "tangent", elements=lay.elements,
-                                breakpoints=tuple(float(b) for b in self.model.mesh.breakpoints))
+                                breakpoints=tuple(float(b) for b in self.model.mesh.breakpoints),
+                                self_contact_pairs=self.nlp.self_contact_slots)
         return ModelSummary(**common, rotation="planar" if lay.planar else "euler")
 
     def _result(self, problem: Problem, state: SolverState, ipopt_status: str, iterations: int, violation: float,

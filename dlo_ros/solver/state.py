@@ -28,7 +28,9 @@ class SolverState:
     unstable_direction: np.ndarray | None = None  # eigenvector of the most negative reduced curvature
     kkt: np.ndarray | None = None       # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
     residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
+    contact: object | None = None  # self_contact.ContactSlots whose pairs p holds (self-contact models)
 
     def copy(self) -> SolverState:
         """z, λ and p copied (what another thread may adopt later); the derivative caches are left out."""
-        return SolverState(self.z.copy(), self.lam_g.copy(), self.lam_x.copy(), self.p.copy())
+        return SolverState(self.z.copy(), self.lam_g.copy(), self.lam_x.copy(), self.p.copy(),
+                           contact=None if self.contact is None else self.contact.copy())

@@ -6,7 +6,8 @@ diagnostics, the recording's ``model/<key>`` series and ``data/result`` JSON; ke
 * every solver: planar, twist, stretch, gravity (which fields and loads the NLP has), order (basis
   order), obstacles (obstacles in the NLP), estimated_error_m [m] (None for a fixed model), variables
   (unknowns), rotation ('planar', 'euler', 'quaternion' or 'tangent'), and for the director models
-  elements and breakpoints [m] (the element layout);
+  elements and breakpoints [m] (the element layout); self_contact_pairs (the capacity of the
+  self-contact pair list, solver/self_contact.py; only when self-contact is modelled);
 * ``solver.model: auto`` adds obstacle_samples, tolerance_m [m], tolerance_met, auto, checked, checks
   ('sync' or 'background'), reasons (why this model), changes (every change so far) and changed (the
   changes made during the solve that returned it).
@@ -32,6 +33,7 @@ class ModelSummary:
     estimated_error_m: float | None = None
     elements: int | None = None                   # director models
     breakpoints: tuple[float, ...] | None = None  # director models: element ends [m]
+    self_contact_pairs: int = 0                   # self-contact slots in the NLP (0: not modelled)
     # solver.model 'auto' only
     auto: bool = False
     obstacle_samples: int | None = None
@@ -59,6 +61,8 @@ class ModelSummary:
             out["elements"] = self.elements
         if self.breakpoints is not None:
             out["breakpoints"] = list(self.breakpoints)
+        if self.self_contact_pairs:
+            out["self_contact_pairs"] = self.self_contact_pairs
         if self.changed is not None:
             out["changed"] = list(self.changed)
         return out

@@ -1,0 +1,276 @@
+"""Self-contact: non-adjacent parts of the string stay at least two radii apart (issue #15).
+
+Formulation (director 3D models, ``solver.self_contact_pairs`` > 0).  The centreline is sampled at
+σ_j = j h, j = 0 … N−1, h = L/(N−1) (N = ``solver.self_contact_samples``, or from the radius: h = r,
+clipped to [L/400, L/100]).  For a pair of samples further apart along s than the exclusion arc S,
+
+    |x(σ_a) − x(σ_b)|² ≥ D²,   D² = (2r)² + h²/2,   S = max(π D / 2, 2 h),
+
+is an inequality row of the NLP.  The NLP has a fixed number K of pair slots (``StringNLP``): slot k's
+parameters are q_k = W(σ_a) − W(σ_b) (rows of the centreline's integration matrix, so that
+x(σ_a) − x(σ_b) = T q_k with T the quadrature-node tangents) and its bound b_k = D², both scaled by 1/(2D)
+so that the row reads a distance (``fill``); an empty slot has q_k = 0, b_k = −L and reads −1 ≤ 0 for
+any shape.  Pairs are parameters, so the active set changes
+during a stream without rebuilding the NLP.
+
+Error bound between samples.  Near their closest points two strands are straight to O(κ h²), so each
+sample pair's offset from the closest points is a u − b v with |a|, |b| ≤ h/2 (u, v the unit tangents);
+choosing the signs of a and b so that a b (u·v) ≥ 0 gives |a u − b v|² ≤ h²/2 whatever the angle.
+Hence d_true² ≥ d_sample² − h²/2 ≥ (2r)²: the true centreline distance is at least 2r − κ_max h²/4 (κ_max
+the largest curvature of the two strands near contact; each strand leaves its tangent line by at most
+κ (h/2)²/2 within half a spacing).  The price is a separation of at most √((2r)² + h²/2) for parallel
+strands whose samples line up (D instead of 2r: 6 % of the diameter at h = r).
+
+Radius zero ("may touch, may not cross"): D = h/√2.  Two polyline chords of length h that cross have an
+end pair no further apart than h/√2, so a shape whose sample pairs all keep D does not cross itself at
+the sample polyline's resolution; the centreline deviates from that polyline by at most κ h²/8.
+
+The exclusion arc S: on a circle of radius ρ the chord over an arc S is 2ρ sin(S/2ρ) ≥ D for every
+ρ ≥ D/2 when S = πD/2, so the rows never act on a bend gentler than radius D/2 ≈ r (a tube cannot bend
+tighter than its radius); pairs closer along s than that are neighbours on one strand, not a contact.
+Pairs of samples within S of two different grips are not checked either: the scene places those grips
+(both ends of a closed loop held at one point, or two grips closer than 2r).
+
+Candidate pairs come from the current shape: a k-d tree over the N samples (scipy's cKDTree) gives the
+pairs within the reach D + max(4 h, 0.03 L) (O(N log N), nothing quadratic); of those, the pairs whose
+distance is a local minimum along either strand (the closest partner of each sample on the other
+strand) fill the slots, nearest first.  A pair in a slot that carries a force keeps its slot.  After a
+solve the same query on the answer finds every penetration (``penetrations``); a penetrating pair not in
+a slot is added and the solve repeated from the same start (``ShapeSolver``).
+
+Topology, along a warm stream (both reported as a failure, the shape not published):
+* ``crossing_flips``: for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the sign of
+  (x_b − x_a)·(t_a × t_b) says which strand lies on top; it cannot change while the strands stay within
+  reach of each other unless one passed through the other between two updates.
+* ``swept_crossing``: a jump (IPOPT may land far from the start, e.g. a twisted rod releasing its twist)
+  is checked by moving every sample straight from the old shape to the new one: if no two samples meet
+  on the way, the shapes are isotopic; if two do, the string may have passed through itself.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+#: how many times a solve is repeated with the pairs it penetrated added to the slots
+CONTACT_ROUNDS = 4
+
+#: |t_a × t_b| below this: the strands are too close to parallel for the crossing sign to mean anything
+CROSSING_SINE = 0.3
+
+
+@dataclass(frozen=True)
+class ContactGeometry:
+    """The sampling of the self-contact rows (module docstring): sample arc lengths s [m], spacing h [m],
+    the sample-pair distance D [m] the rows keep, the exclusion arc S [m], and the candidate reach [m]."""
+
+    s: np.ndarray
+    spacing: float
+    distance: float
+    exclusion: float
+    reach: float
+    radius: float
+    held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # per sample: grip index within S, or −1
+
+    @property
+    def key(self) -> tuple:
+        return (len(self.s), self.distance)
+
+    def tolerance(self, curvature: float) -> float:
+        """How far below 2r the true centreline distance may come between samples [m] (module docstring)."""
+        return curvature * self.spacing ** 2 / 4
+
+
+@functools.lru_cache(maxsize=16)
+def contact_geometry(length: float, radius: float, samples: int = 0, grip_s: tuple[float, ...] = ()) -> ContactGeometry:
+    """The sampling for a string of ``length`` and ``radius`` [m]; ``samples`` 0 picks h = r within
+    [L/400, L/100].  ``grip_s``: the grips' arc lengths [m] (pairs of samples within the exclusion arc of
+    two different grips are never checked: the scene places those grips, e.g. both ends of a closed loop
+    at one point)."""
+    if samples:
+        n = samples
+    else:
+        h = min(max(radius, length / 400), length / 100)
+        n = int(np.ceil(length / h - 1e-9)) + 1
+    h = length / (n - 1)
+    distance = float(np.sqrt(4 * radius ** 2 + h ** 2 / 2))
+    exclusion = max(np.pi * distance / 2, 2 * h)
+    reach = distance + max(4 * h, 0.03 * length)
+    s = np.linspace(0.0, length, n)
+    held = np.full(n, -1, dtype=int)
+    for i, sg in enumerate(grip_s):
+        held[np.abs(s - sg) <= exclusion] = i
+    return ContactGeometry(s, h, distance, exclusion, reach, radius, held)
+
+
+@dataclass
+class ContactSlots:
+    """The pair held by each slot ((a, b) sample indices, a < b, or None) with the geometry they index,
+    and the crossing signs of the shape they were last checked on."""
+
+    geometry: ContactGeometry
+    pairs: list[tuple[int, int] | None]
+    signs: dict[tuple[int, int], float] = field(default_factory=dict)
+    #: ``candidate_pairs`` of that shape (the next warm update selects its pairs from them)
+    candidates: list[tuple[tuple[int, int], float]] | None = None
+
+    def copy(self) -> ContactSlots:
+        return ContactSlots(self.geometry, list(self.pairs), dict(self.signs), self.candidates)
+
+
+def _far_pairs(points: np.ndarray, geometry: ContactGeometry, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample pairs (P, 2), a < b, within ``radius`` of each other and at least the exclusion arc apart,
+    and their distances."""
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    if pairs.size == 0:
+        return np.zeros((0, 2), dtype=int), np.zeros(0)
+    pairs = np.sort(pairs, axis=1)
+    far = (pairs[:, 1] - pairs[:, 0]) * geometry.spacing >= geometry.exclusion - 1e-12
+    if geometry.held.size:
+        ga, gb = geometry.held[pairs[:, 0]], geometry.held[pairs[:, 1]]
+        far &= ~((ga >= 0) & (gb >= 0) & (ga != gb))
+    pairs = pairs[far]
+    return pairs, np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
+
+
+def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple[tuple[int, int], float]]:
+    """Pairs within reach whose distance is a local minimum along one strand, with their distances [m],
+    nearest first.  A neighbour closer along s than the exclusion arc is a step along the same strand: a
+    pair next to one is a minimum only when it is already closer than D (a bend tighter than D/2).
+    Vectorised over the pairs the tree returned (neighbours looked up in their sorted keys)."""
+    pairs, dist = _far_pairs(points, geometry, geometry.reach)
+    if not len(pairs):
+        return []
+    n = len(geometry.s)
+    keys = pairs[:, 0] * n + pairs[:, 1]
+    order = np.argsort(keys)
+    keys, table = keys[order], dist[order]
+    near = geometry.exclusion - 1e-12
+
+    def leaves_minimum(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether each neighbour pair (a, b) leaves its pair's distance a minimum on its side."""
+        outside = (a < 0) | (b >= n)
+        a_, b_ = np.clip(a, 0, n - 1), np.clip(b, 0, n - 1)
+        idx = np.minimum(np.searchsorted(keys, a_ * n + b_), len(keys) - 1)
+        other = np.where(keys[idx] == a_ * n + b_, table[idx], np.inf)
+        same_strand = (b - a) * geometry.spacing < near
+        placed = np.zeros(len(a), dtype=bool)
+        if geometry.held.size:
+            ga, gb = geometry.held[a_], geometry.held[b_]
+            placed = (ga >= 0) & (gb >= 0) & (ga != gb)
+        return outside | placed | np.where(same_strand, dist < geometry.distance, dist <= other)
+
+    a, b = pairs[:, 0], pairs[:, 1]
+    along_b = leaves_minimum(a, b - 1) & leaves_minimum(a, b + 1)
+    along_a = leaves_minimum(a - 1, b) & leaves_minimum(a + 1, b)
+    chosen = np.flatnonzero(along_a | along_b)
+    chosen = chosen[np.argsort(dist[chosen], kind="stable")]
+    return [((int(a[i]), int(b[i])), float(dist[i])) for i in chosen]
+
+
+def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:
+    """The closest approach [m] of two strands: the smallest candidate pair's distance (``candidate_pairs``:
+    not a pair of neighbours on one strand), inf when no two strands are within reach."""
+    candidates = candidate_pairs(points, geometry)
+    return min((d for _, d in candidates), default=float("inf"))
+
+
+def penetrations(candidates: list[tuple[tuple[int, int], float]], geometry: ContactGeometry,
+                 slack: float) -> list[tuple[int, int]]:
+    """The candidate pairs (``candidate_pairs``) closer than D − slack [m], nearest first.  When none is,
+    no sample pair the exclusion arc apart is: from any pair closer than D, stepping along one strand
+    while the distance falls ends on a candidate closer still."""
+    return [pair for pair, d in candidates if d < geometry.distance - slack]
+
+
+def assign(slots: list[tuple[int, int] | None], wanted: list[tuple[int, int]], keep: set[int],
+           capacity: int) -> tuple[list[tuple[int, int] | None], list[tuple[int, int]]]:
+    """New slot contents: the slots in ``keep`` (carrying a force) stay; the rest of the capacity goes to
+    the ``wanted`` pairs in their order (a chosen pair already in a slot keeps that slot, so its
+    multiplier stays with it).  Returns the slots and the wanted pairs that found no slot."""
+    slots = list(slots) + [None] * (capacity - len(slots))
+    kept = {slots[k] for k in keep if slots[k] is not None}
+    chosen: list[tuple[int, int]] = []
+    left: list[tuple[int, int]] = []
+    for pair in dict.fromkeys(wanted):  # in order, without repeats
+        if pair in kept:
+            continue
+        (chosen if len(chosen) < capacity - len(kept) else left).append(pair)
+    chosen_set = set(chosen)
+    new: list[tuple[int, int] | None] = [slots[k] if (k in keep or slots[k] in chosen_set) else None
+                                         for k in range(capacity)]
+    held = {pair for pair in new if pair is not None}
+    free = [k for k in range(capacity) if new[k] is None]
+    for pair in chosen:
+        if pair not in held:
+            new[free.pop(0)] = pair
+    return new, left
+
+
+def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
+    """p with every slot's q_k and b_k set (module docstring), scaled so that the row reads a distance:
+    q_k = (W(σ_a) − W(σ_b)) / √(2D) and b_k = D/2, so that the NLP row (b_k − |T q_k|²)/L equals
+    (D² − |x_a − x_b|²)/(2 D L) ≈ (D − |x_a − x_b|)/L near contact, whatever the radius (a row in D² would
+    hold the distance only to 1e-10 L²/D).  An empty slot: q_k = 0, b_k = −L (the row reads −1)."""
+    lay, w = nlp.params, nlp.model.position_matrix(slots.geometry.s)
+    d = slots.geometry.distance
+    scale = 1.0 / np.sqrt(2.0 * d)
+    for k, pair in enumerate(slots.pairs):
+        sl = lay[f"self:{k}"]
+        if pair is None:
+            p[sl] = 0.0
+            p[sl.stop - 1] = -length
+        else:
+            p[sl.start:sl.stop - 1] = scale * (w[pair[0]] - w[pair[1]])
+            p[sl.stop - 1] = d / 2
+    return p
+
+
+def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
+    """The SI multiplier λ [N/m] of D² − |x_a − x_b|² ≤ 0 from a slot row's λ / (row_scale σ) [N] (``fill``:
+    the row is that constraint divided by 2D)."""
+    return lam_row_si / (2.0 * geometry.distance)
+
+
+def crossing_signs(points: np.ndarray, tangents: np.ndarray,
+                   candidates: list[tuple[tuple[int, int], float]]) -> dict[tuple[int, int], float]:
+    """Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair (``candidate_pairs``) whose tangents cross
+    (module docstring)."""
+    out = {}
+    for (a, b), _ in candidates:
+        normal = np.cross(tangents[a], tangents[b])
+        if np.linalg.norm(normal) >= CROSSING_SINE:
+            out[(a, b)] = float(np.sign(np.dot(points[b] - points[a], normal)))
+    return out
+
+
+def crossing_flips(before: dict[tuple[int, int], float], after: dict[tuple[int, int], float]) -> list[tuple[int, int]]:
+    """Pairs whose crossing sign changed between two shapes of a stream (both within reach)."""
+    return [pair for pair, sign in after.items() if pair in before and before[pair] * sign < 0]
+
+
+def swept_crossing(before: np.ndarray, after: np.ndarray, geometry: ContactGeometry) -> tuple[int, int] | None:
+    """A pair of samples (exclusion arc apart) that meet when every sample moves straight from ``before``
+    to ``after`` (N, 3): its distance min_τ |Δ0 + τ (Δ1 − Δ0)| falls below half of min(D, h/√2), the
+    resolution at which the sample polyline can tell two centrelines apart; None when no pair does.
+    If the straight motion keeps every pair apart, the two shapes are isotopic (the string did not pass
+    through itself); if it does not, it may have.  Only pairs that can meet are tested: a k-d tree over
+    ``before`` with the radius D plus twice the largest displacement."""
+    move = float(np.max(np.linalg.norm(after - before, axis=1), initial=0.0))
+    pairs, _ = _far_pairs(before, geometry, geometry.distance + 2 * move)
+    if not len(pairs):
+        return None
+    a, b = pairs[:, 0], pairs[:, 1]
+    d0, d1 = before[a] - before[b], after[a] - after[b]
+    e = d1 - d0
+    ee = np.sum(e * e, axis=1)
+    tau = np.clip(-np.sum(d0 * e, axis=1) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+    closest = np.linalg.norm(d0 + tau[:, None] * e, axis=1)
+    limit = 0.5 * min(geometry.distance, geometry.spacing / np.sqrt(2.0))
+    hit = np.flatnonzero(closest < limit)
+    if not hit.size:
+        return None
+    i = hit[np.argmin(closest[hit])]
+    return int(a[i]), int(b[i])

@@ -436,7 +436,7 @@ class ShapeSolver:
     def _solve_pairs_fixed(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
         moments = self.nlp.director and has_point_moments(problem)
         if moments and warm:  # a warm update under dead moments: Newton on the exact equations first
-            ok, state, it, viol = self._exact_newton(self._state, problem, self._state.p)
+            ok, state, it, viol = self._exact_newton(self._state, problem)
             if ok:
                 result = self._exact_result(problem, state, it, viol, True, 0)
                 if result.status == "ok" and result.stable is not False:
@@ -447,11 +447,10 @@ class ShapeSolver:
         return result, state
 
     # ---- point moments (director models) ----------------------------------------------------------
-    def _exact_newton(self, start: SolverState, problem: Problem, p_moments: np.ndarray,
+    def _exact_newton(self, start: SolverState, problem: Problem,
                       fraction: float = 1.0) -> tuple[bool, SolverState, int, float]:
-        """Newton on the exact equilibrium equations (``moments.ExactMomentKKT``) from ``start``
-        to ``problem`` with its point moments scaled by ``fraction``; ``p_moments`` is unused by the exact
-        equations (their pseudo-potential is centred on the solution itself) but fixes p's other entries."""
+        """Newton on the exact equilibrium equations (``moments.ExactMomentKKT``) from ``start`` to
+        ``problem`` with its point moments scaled by ``fraction``."""
         p = self.pack_parameters(problem, start.z)
         if fraction != 1.0:
             for i, _ in enumerate(problem.loads):
@@ -477,7 +476,7 @@ class ShapeSolver:
         MOMENT_CONTINUATION_SOLVES Newton solves), starting from the scene without its moments (a true
         potential, solved by the usual warm update)."""
         iterations = result.iterations
-        ok, new, it, viol = self._exact_newton(state, problem, state.p)
+        ok, new, it, viol = self._exact_newton(state, problem)
         iterations += it
         if ok:
             return self._escape_saddle_moments(problem, self._exact_result(problem, new, iterations, viol,
@@ -496,7 +495,7 @@ class ShapeSolver:
         fraction, step, solves = 0.0, 0.25, 0
         while fraction < 1.0 and solves < MOMENT_CONTINUATION_SOLVES:
             target = min(1.0, fraction + step)
-            ok, new, it, viol = self._exact_newton(base, problem, base.p, target)
+            ok, new, it, viol = self._exact_newton(base, problem, target)
             iterations += it
             solves += 1
             if ok:
@@ -517,7 +516,7 @@ class ShapeSolver:
             ok, trial, status, it, viol = self._ipopt_call(False, z0, p)
             if not ok:
                 return ok, trial, status, it, viol
-            ok, polished, it2, viol = self._exact_newton(trial, problem, p)
+            ok, polished, it2, viol = self._exact_newton(trial, problem)
             return ok, polished, status, it + it2, viol
 
         def build(trial: SolverState, status: str, iterations: int, viol: float, warm: bool, steps: int) -> ShapeResult:

@@ -626,7 +626,9 @@ class DloNode(Node):
         self._closing = True
         pool = getattr(self, "_query_pool", None)
         if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+            from ..solver.batch import stop_pool
+
+            stop_pool(pool, timeout)
         stopped = self.engine.stop(timeout) if hasattr(self, "engine") else True
         recorder = getattr(self, "recorder", None)
         if recorder is not None:

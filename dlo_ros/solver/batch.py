@@ -50,6 +50,26 @@ def process_pool(workers: int | None = None) -> ProcessPoolExecutor:
                                mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_sigint)
 
 
+def stop_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> bool:
+    """Stop ``pool`` now: pending work is cancelled, work in flight is abandoned (its workers are
+    terminated), and the pool's manager thread is joined, at most ``timeout`` s; True if it ended.
+
+    Joining matters: CPython 3.11's exit hook wakes every live manager thread through a pipe that
+    the thread closes as it ends, so a ``shutdown(wait=False)`` followed by interpreter exit can
+    race the two and print an ``OSError: Bad file descriptor`` traceback."""
+    # private attributes, read before shutdown() drops them; absent on other executors
+    manager = getattr(pool, "_executor_manager_thread", None)
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in workers:
+        if process.is_alive():
+            process.terminate()
+    if manager is None:
+        return True
+    manager.join(timeout)
+    return not manager.is_alive()
+
+
 def _ignore_sigint() -> None:
     import signal
 

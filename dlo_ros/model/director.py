@@ -139,6 +139,32 @@ def _columns(q, lib):
     return t, d1, d2
 
 
+def integrands(rows, drows, frame: bool):
+    """(b, τ, t̂) of the rotation field's values ``rows`` and s-derivatives ``drows`` (4 quaternion or 3
+    tangent components; CasADi scalars or row vectors, element-wise): U_bend = ∫ ½ Rf b ds,
+    U_twist = ∫ ½ Rt τ ds (τ = 0 for the tangent model), t̂ the unit tangent (3 components).
+
+    frame:   b = Ω_2² + Ω_3² + c Ω_0²,  τ = Ω_1²,  Ω = 2 (w q'_v − w' q_v − q_v × q'_v) / |q|²,
+             Ω_0 = 2 q·q' / |q|² (the gauge term, c = GAUGE_WEIGHT: zero where |q| is constant, it keeps
+             the interpolant from dipping toward q = 0 between quadrature nodes, a rotation jump the
+             quadrature would not see);
+    tangent: b = (|t'|² − (1 − c)(t·t')²/|t|²) / |t|²  = κ² + c ((ln|t|)')²  (the same gauge term)."""
+    if frame:
+        x, y, zq, wq = rows
+        dx, dy, dz, dw = drows
+        n2 = x * x + y * y + zq * zq + wq * wq
+        o1 = 2 * (wq * dx - dw * x - (y * dz - zq * dy)) / n2
+        o2 = 2 * (wq * dy - dw * y - (zq * dx - x * dz)) / n2
+        o3 = 2 * (wq * dz - dw * zq - (x * dy - y * dx)) / n2
+        o0 = 2 * (x * dx + y * dy + zq * dz + wq * dw) / n2
+        return o2 * o2 + o3 * o3 + GAUGE_WEIGHT * o0 * o0, o1 * o1, _columns(rows, ca)[0]
+    n2 = rows[0] ** 2 + rows[1] ** 2 + rows[2] ** 2
+    tdt = rows[0] * drows[0] + rows[1] * drows[1] + rows[2] * drows[2]
+    dd = drows[0] ** 2 + drows[1] ** 2 + drows[2] ** 2
+    inv = 1 / ca.sqrt(n2)
+    return (dd - (1 - GAUGE_WEIGHT) * tdt * tdt / n2) / n2, 0, [rows[0] * inv, rows[1] * inv, rows[2] * inv]
+
+
 class DirectorModel:
     """Maps z to fields, positions and energy terms (see module docstring)."""
 
@@ -269,32 +295,10 @@ class DirectorModel:
         _, v, dv = self._fields_sym(z)
         rows = [v[k, :].T for k in range(lay.width)]
         drows = [dv[k, :].T for k in range(lay.width)]
-        if lay.frame:
-            x, y, zq, wq = rows
-            dx, dy, dz, dw = drows
-            n2 = x * x + y * y + zq * zq + wq * wq
-            # Ω = 2 (w q'_v − w' q_v − q_v × q'_v) / |q|²
-            o1 = 2 * (wq * dx - dw * x - (y * dz - zq * dy)) / n2
-            o2 = 2 * (wq * dy - dw * y - (zq * dx - x * dz)) / n2
-            o3 = 2 * (wq * dz - dw * zq - (x * dy - y * dx)) / n2
-            # + the gauge term ½ Rf (2 (ln|q|)')² = ½ Rf (2 q·q' / |q|²)²: zero where |q| is constant, it keeps
-            # the interpolant from dipping toward q = 0 between quadrature nodes (a rotation jump that
-            # the quadrature would not see)
-            o0 = 2 * (x * dx + y * dy + zq * dz + wq * dw) / n2
-            bend = 0.5 * ca.dot(w, profiles["Rf"] * (o2 * o2 + o3 * o3 + GAUGE_WEIGHT * o0 * o0))
-            twist = 0.5 * ca.dot(w, profiles["Rt"] * o1 * o1)
-            t = ca.horzcat(*_columns(rows, ca)[0]).T
-        else:
-            n2 = rows[0] ** 2 + rows[1] ** 2 + rows[2] ** 2
-            tdt = rows[0] * drows[0] + rows[1] * drows[1] + rows[2] * drows[2]
-            dd = drows[0] ** 2 + drows[1] ** 2 + drows[2] ** 2
-            # |t'|²/|t|² = κ² + ((ln|t|)')²: the gauge term keeps the interpolant from dipping toward t = 0
-            # between quadrature nodes (a tangent reversal the quadrature would not see)
-            kappa2 = (dd - (1 - GAUGE_WEIGHT) * tdt * tdt / n2) / n2
-            bend = 0.5 * ca.dot(w, profiles["Rf"] * kappa2)
-            twist = ca.SX(0)
-            inv = 1 / ca.sqrt(n2)
-            t = ca.horzcat(rows[0] * inv, rows[1] * inv, rows[2] * inv).T
+        b, tw, tangent = integrands(rows, drows, lay.frame)
+        bend = 0.5 * ca.dot(w, profiles["Rf"] * b)
+        twist = 0.5 * ca.dot(w, profiles["Rt"] * tw) if lay.frame else ca.SX(0)
+        t = ca.horzcat(*tangent).T
         if lay.stretch:
             eps = ca.mtimes(ca.sparsify(ca.DM(self.B)), z[lay.eps])
             stretch = 0.5 * ca.dot(w, profiles["Re"] * eps * eps)

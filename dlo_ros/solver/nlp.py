@@ -34,6 +34,7 @@ from ..model.obstacles import OBSTACLE_TYPES
 from ..model.problem import Problem
 from ..model.ritz import RitzModel
 from ..model.rotations import farthest_pole, frame_with_pole, pole_angle_deg, quat_to_matrix, reference_frame
+from .assembled import AssembledKKT
 from .options import SolverOptions
 
 
@@ -354,18 +355,23 @@ class StringNLP:
         energies = ca.densify(ca.vertcat(bend, twist, stretch, grav, work))
         # ∇²L is built on its own, not as hess_free + ∇²(λ_obs·g_obs): that sum has 8 % more instructions
         hess = ca.hessian(objective + ca.dot(lam, g), z)[0]
-        lam_free = ca.SX.sym("lam_free", nf)
         jac_free = ca.jacobian(g[:nf], z)
-        if nf == g.shape[0]:
-            hess_free = ca.substitute(hess, lam, lam_free)
+        if self.director:
+            # the same function assembled from per-quadrature-node derivatives: compact code (seconds of
+            # gcc instead of minutes) and a faster interpreted call (solver/assembled.py)
+            self.kkt_free_fn = AssembledKKT(self).kkt_free()
         else:
-            hess_free = ca.hessian(objective + ca.dot(lam_free, g[:nf]), z)[0]
-        # The Newton system of the free rows itself: K = [∇²L J_freeᵀ; J_free 0] and
-        # r = [∇f + J_freeᵀ λ_free; g_free], so that a contact-free Newton step is one call and one solve
-        kkt_matrix = ca.blockcat([[hess_free, jac_free.T], [jac_free, ca.SX(nf, nf)]])
-        residual = ca.vertcat(grad_f + ca.mtimes(jac_free.T, lam_free), g[:nf])
-        self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam_free],
-                                       [ca.densify(kkt_matrix), ca.densify(residual), grad_f, energies])
+            lam_free = ca.SX.sym("lam_free", nf)
+            if nf == g.shape[0]:
+                hess_free = ca.substitute(hess, lam, lam_free)
+            else:
+                hess_free = ca.hessian(objective + ca.dot(lam_free, g[:nf]), z)[0]
+            # The Newton system of the free rows itself: K = [∇²L J_freeᵀ; J_free 0] and
+            # r = [∇f + J_freeᵀ λ_free; g_free], so that a contact-free Newton step is one call and one solve
+            kkt_matrix = ca.blockcat([[hess_free, jac_free.T], [jac_free, ca.SX(nf, nf)]])
+            residual = ca.vertcat(grad_f + ca.mtimes(jac_free.T, lam_free), g[:nf])
+            self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam_free],
+                                           [ca.densify(kkt_matrix), ca.densify(residual), grad_f, energies])
         self.newton_fn = self.newton_function()
         if nf < g.shape[0]:
             jac = ca.vertcat(jac_free, ca.jacobian(g[nf:], z))

@@ -1,13 +1,16 @@
-"""The assembled contact-free KKT function (dlo_ros.solver.assembled, #14) equals the KKT system
-differentiated from the whole flattened Lagrangian (CasADi SX AD of ``StringNLP``'s objective and
-rows: ``hessian_fn``, ``jac_g_fn``, ``g_fn``, ``energy_fn``), and its compiled C equals it too."""
+"""The assembled KKT functions of director models (dlo_ros.solver.assembled, #14) equal the KKT
+system differentiated here from the whole flattened NLP (CasADi SX AD of ``StringNLP.nlp``'s objective
+and rows, with ``energy_fn``), for the contact-free rows and for every row (obstacles of each type,
+self-contact slots); and their compiled C equals them too."""
 from __future__ import annotations
 
 import dataclasses
 
+import casadi as ca
 import numpy as np
 import pytest
 
+from dlo_ros.model.obstacles import Obstacle
 from dlo_ros.model.problem import Load, RelativePosition
 from dlo_ros.model.profile import Profile
 from dlo_ros.scene import load_scene
@@ -17,19 +20,24 @@ from dlo_ros.solver.options import SolverOptions
 from random_scenes import random_scene
 
 
+def flattened(nlp: StringNLP) -> ca.Function:
+    """(z, p, λ) → [∇f, g, ∂g/∂z, ∇²L] by SX AD of the NLP's whole objective and rows."""
+    x, p, f, g = (nlp.nlp[k] for k in ("x", "p", "f", "g"))
+    lam = ca.SX.sym("lam", g.shape[0])
+    return ca.Function("flat", [x, p, lam], [ca.gradient(f, x), g, ca.jacobian(g, x),
+                                             ca.hessian(f + ca.dot(lam, g), x)[0]])
+
+
 def reference_kkt(nlp: StringNLP, z, p, lam_free):
-    """[K, r, ∇f, energies] from the flattened functions (obstacle and other inequality rows' λ = 0)."""
-    nf, n = nlp.n_free_rows, z.size
+    """[K, r, ∇f, energies] of the contact-free rows (the inequality rows' λ = 0)."""
+    nf = nlp.n_free_rows
     lam = np.zeros(nlp.g_sym.shape[0])
     lam[:nf] = lam_free
-    hess = np.asarray(nlp.hessian_fn(z, p, lam))
-    jac = np.asarray(nlp.jac_g_fn(z, p))[:nf]
-    g = np.asarray(nlp.g_fn(z, p)).ravel()[:nf]
-    grad_f = np.asarray(nlp.kkt_fn(z, p, lam)[0]).ravel()
+    grad_f, g, jac, hess = (np.asarray(a, dtype=float) for a in flattened(nlp)(z, p, lam))
+    grad_f, g, jac = grad_f.ravel(), g.ravel()[:nf], jac[:nf]
     kkt = np.block([[hess, jac.T], [jac, np.zeros((nf, nf))]])
     residual = np.concatenate([grad_f + jac.T @ lam_free, g])
     energies = np.asarray(nlp.energy_fn(z, p), dtype=float).ravel()
-    assert n == hess.shape[0]
     return [kkt, residual, grad_f, energies]
 
 
@@ -70,6 +78,40 @@ def test_the_assembled_system_equals_the_flattened_one(case):
     nlp = StringNLP(problem, options)
     assert nlp.director
     assert_equal_systems(nlp.kkt_free_fn, nlp)
+
+
+def obstacle_scene():
+    """default_cable (its table) plus a turned box and a capsule."""
+    scene = load_scene("default_cable")
+    extra = (Obstacle.from_dict({"type": "box", "center": [0.2, 0.1, 0.3], "half_extents": [0.1, 0.2, 0.3],
+                                 "orientation": [0.1, 0.2, 0.3, 0.927]}),
+             Obstacle.from_dict({"type": "capsule", "a": [0.0, 0.1, 0.2], "b": [0.3, 0.1, 0.2], "radius": 0.05}))
+    return dataclasses.replace(scene.problem, obstacles=scene.problem.obstacles + extra)
+
+
+@pytest.mark.parametrize("case", ["obstacles of every type, 3 self-contact slots", "seed 24 (sphere)",
+                                  "stretched 7, 2 slots"])
+def test_the_assembled_system_of_every_row_equals_the_flattened_one(case):
+    if case.startswith("obstacles"):
+        problem, options = obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=3)
+    elif case.startswith("seed"):
+        problem, options = random_scene(24), SolverOptions(model="full")
+    else:
+        problem, options = stretched_scene(7), SolverOptions(model="full", self_contact_pairs=2)
+    nlp = StringNLP(problem, options)
+    assert nlp.director and nlp.obstacle_g_fn is not None
+    reference = flattened(nlp)
+    rng = np.random.default_rng(11)
+    rows = nlp.g_sym.shape[0]
+    for _ in range(2):
+        z, p, lam = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0]), rng.normal(size=rows)
+        got = nlp.kkt_fn(z, p, lam)
+        want = reference(z, p, lam)
+        for name, a, b in zip(["grad f", "g", "jacobian", "hessian"], got, want):
+            a, b = ca.DM(a).full(), ca.DM(ca.densify(b)).full()
+            assert np.max(np.abs(a - b)) <= 1e-12 * (1.0 + np.max(np.abs(b))), name
+        energies = ca.DM(got[4]).full().ravel()
+        np.testing.assert_allclose(energies, np.asarray(nlp.energy_fn(z, p), dtype=float).ravel(), rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.skipif(compiler() is None, reason="no C compiler")

@@ -67,15 +67,14 @@ class AssembledKKT:
         return E
 
     def _rows(self) -> None:
-        """Split the free rows into position rows (c_r, W_r, κ_r, target) and node-local rows."""
+        """Sort the rows: position rows (c_r, W_r, κ_r, target), node-local rows, and (left to
+        ``_nonlinear_rows``) obstacle rows and self-contact slots."""
         nlp, P, model = self.nlp, self.nlp.problem, self.model
         grips = {g.name: g for g in P.grips}
-        nf = nlp.n_free_rows
         pos, local = [], []
         C, Om, kappa = [], [], []
         target = np.zeros((0, nlp.params.size))
-        for r in range(nf):
-            kind = nlp.row_kind[r]
+        for r, kind in enumerate(nlp.row_kind):
             row_target = np.zeros(nlp.params.size)
             if kind[0] == "grip" and kind[2] == "position":
                 axis = np.array(kind[3], dtype=float)
@@ -92,6 +91,8 @@ class AssembledKKT:
                 Om.append(W[1] - W[0])
                 kappa.append(0.0)
                 row_target[nlp.params[f"relative:{kind[1]}"]] = axis
+            elif kind[0] in ("obstacle", "self"):  # nonlinear in the positions: _nonlinear_rows
+                continue
             else:
                 local.append(r)
                 continue
@@ -128,12 +129,12 @@ class AssembledKKT:
         return ca.Function("dlo_node_density", [u, c],
                            [bend, twist, stretch, t, grad, ca.densify(hess), ca.densify(ca.jacobian(t, u))])
 
-    def local_function(self) -> ca.Function:
-        """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_moments]: the node-local rows and the
-        point moments' pseudo-potential Σ W_M (Λ = λ·g_local − σ Σ W_M)."""
+    def local_function(self, rows: np.ndarray) -> ca.Function:
+        """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_moments]: the node-local ``rows`` (unit
+        norm, grip orientation, folds) and the point moments' pseudo-potential Σ W_M (Λ = λ·g_local − σ Σ W_M)."""
         nlp, model, P = self.nlp, self.model, self.nlp.problem
         z, p = nlp.z_sym, nlp.p_sym
-        g_local = nlp.g_sym[self.local_rows.tolist()] if self.local_rows.size else ca.SX(0, 1)
+        g_local = nlp.g_sym[rows.tolist()] if rows.size else ca.SX(0, 1)
         moments = ca.SX(0)
         for i, ld in enumerate(P.loads):
             moments += model.moment_work_sym(z, model.mesh.node_index(ld.s), p[nlp.params[f"load:{i}:moment"]],
@@ -144,13 +145,120 @@ class AssembledKKT:
         return ca.Function("dlo_local_rows", [z, p, lam],
                            [g_local, ca.jacobian(g_local, z), grad, hess, moments])
 
-    # ---- the KKT function --------------------------------------------------------------------------
+    # ---- the nonlinear position rows: obstacles and self-contact slots ------------------------------
+    def tangent_function(self) -> ca.Function:
+        """u_k → T_k = (1 + ε) t̂ (the first pass, for rows nonlinear in the positions)."""
+        w = self.width
+        u = ca.SX.sym("u", self.d)
+        t = ca.vertcat(*integrands([u[a] for a in range(w)], [u[w + a] for a in range(w)], self.frame)[2])
+        return ca.Function("dlo_node_tangent", [u], [t * (1 + u[2 * w]) if self.stretch else t])
+
+    @staticmethod
+    def obstacle_function(kind: str) -> tuple[ca.Function, bool]:
+        """((x, parameters) → [h, ∇h, ∇²h] of one obstacle type at one point, whether ∇²h is not zero)."""
+        from ..model.obstacles import OBSTACLE_TYPES
+
+        x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[kind].size)
+        h = OBSTACLE_TYPES[kind].h(x, po)
+        hess, grad = ca.hessian(h, x)
+        return ca.Function(f"dlo_h_{kind}", [x, po], [h, grad, ca.densify(hess)]), hess.nnz() > 0
+
+    def _nonlinear_rows(self, z, p, lam, T):
+        """The obstacle rows and self-contact slots: rows ψ_j(X_j)/L of X_j = κ x0 + Σ_k ω_jk T_k.
+        Returns (rows, their g, their part of a (3×M) and of ∂L/∂x0, and per group of rows sharing
+        their X: (ω (S×M, constant or MX), κ, [∇ψ/L (3×S) per block of rows], Σ λ∇²ψ/L (3×3S) or None))."""
+        nlp, M, L = self.nlp, self.M, self.nlp.length
+        lay, P = nlp.params, nlp.problem
+        rows_all, g_all, a, dx0, groups = [], [], ca.MX.zeros(3, M), ca.MX.zeros(3, 1), []
+        radius = p[lay["radius"]][0]
+        if P.obstacles:
+            omega = self.model.position_matrix(nlp.obstacle_s)  # S × M
+            S = omega.shape[0]
+            X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)
+            spread3 = _sparse(np.kron(np.eye(S), np.ones((1, 3))))  # λ_j → column 3j + c
+            weighted, grads = None, []
+            for i, ob in enumerate(P.obstacles):
+                rows = nlp.obstacle_rows[i]
+                fn, curved = self.obstacle_function(ob.type)
+                h, dh, d2h = fn.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S))
+                li = lam[rows] / L  # S
+                rows_all += rows
+                g_all.append((h.T + radius) / L)
+                a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), ca.DM(omega))
+                dx0 += L * ca.mtimes(dh, li)
+                if curved:  # a half-space's h is linear: no curvature term
+                    term = d2h * ca.repmat(ca.mtimes(li.T, spread3), 3, 1)
+                    weighted = term if weighted is None else weighted + term
+                grads.append(dh / L)
+            groups.append((omega, 1.0, grads, weighted))
+        slots = nlp.self_contact_slots
+        if slots:
+            rows = list(nlp.self_contact_rows)
+            Q = ca.horzcat(*[p[lay[f"self:{k}"]][:M] for k in range(slots)]).T  # K × M
+            b = ca.vertcat(*[p[lay[f"self:{k}"]][M] for k in range(slots)])
+            X = ca.mtimes(T, Q.T)  # 3 × K
+            lk = lam[rows] / L
+            rows_all += rows
+            g_all.append((b - ca.sum1(X * X).T) / L)
+            a += ca.mtimes(-2 * X * ca.repmat(lk.T, 3, 1), Q)
+            # ∇²ψ = −2 I: the weighted blocks are −2 λ_k/L I
+            weighted = ca.repmat(ca.DM(np.eye(3)), 1, slots) * ca.repmat(
+                ca.mtimes(-2 * lk.T, _sparse(np.kron(np.eye(slots), np.ones((1, 3))))), 3, 1)
+            groups.append((Q, 0.0, [-2 * X / L], weighted))
+        return rows_all, g_all, a, dx0, groups
+
+    def _spread(self, omega, rows_per_sample: int):
+        """ω (S × M) → the (r S × dM) matrix whose row r j + c holds ω_jk at columns d k … d k + d − 1."""
+        S, d = omega.shape[0], self.d
+        if isinstance(omega, np.ndarray):
+            return ca.DM(np.repeat(np.repeat(omega, d, axis=1), rows_per_sample, axis=0))
+        repeat = _sparse(np.kron(np.eye(self.M), np.ones((1, d))))  # M × dM
+        return ca.mtimes(_sparse(np.kron(np.eye(S), np.ones((rows_per_sample, 1)))), ca.mtimes(omega, repeat))
+
+    def _group_jacobian(self, grads, jt, E, omega, kappa: float, n: int):
+        """Rows ∇ψ_jᵀ ∂X_j/∂z / L for ``grads`` = ∇ψ/L (3 × S): Σ_k ω_jk (∇ψ_jᵀ ∂T/∂u)_k E_k + κ L ∇ψ_jᵀ (x0)."""
+        jac = ca.mtimes(ca.mtimes(grads.T, jt) * self._spread(omega, 1), E)
+        if kappa:
+            jac += ca.horzcat(kappa * self.nlp.length * grads.T, ca.MX(grads.shape[1], n - 3))
+        return jac
+
+    def _position_derivatives(self, jt, E, omega, kappa: float, n: int):
+        """D = ∂X/∂z (3S × n, row 3j + c) for X_j = κ x0 + Σ_k ω_jk T_k; ``omega`` constant or MX (S × M)."""
+        S, L = omega.shape[0], self.nlp.length
+        D = ca.mtimes(self._spread(omega, 3) * ca.repmat(jt, S, 1), E)
+        if kappa:
+            D += _sparse(np.kron(np.ones((S, 1)), np.hstack([kappa * L * np.eye(3), np.zeros((3, n - 3))])))
+        return D
+
+    @staticmethod
+    def _block_diagonal(blocks: ca.MX) -> ca.MX:
+        """(3 × 3S) → the 3S × 3S block-diagonal matrix of its 3 × 3 blocks."""
+        S = blocks.shape[1] // 3
+        return ca.sparsity_cast(blocks, ca.diagcat(*[ca.Sparsity.dense(3, 3)] * S))
+
+    # ---- the KKT functions -------------------------------------------------------------------------
     def kkt_free(self) -> ca.Function:
-        """``dlo_kkt_free``: (z, p, λ_free) → [K, r, ∇f, energies] as ``StringNLP.kkt_free_fn``."""
+        """``dlo_kkt_free``: (z, p, λ_free) → [K, r, ∇f, energies] as the flattened one of ``StringNLP``:
+        K = [∇²L Jᵀ; J 0] and r = [∇f + Jᵀλ; g] over the rows before the first inequality row."""
+        nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
+        z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
+        grad, hess, g, jac, grad_f, energies = self._system(z, p, lam, nf)
+        kkt = ca.blockcat([[hess, jac.T], [jac, ca.MX(nf, nf)]])
+        return ca.Function("dlo_kkt_free", [z, p, lam], [ca.densify(kkt), ca.densify(ca.vertcat(grad, g)),
+                                                         ca.densify(grad_f), ca.densify(energies)])
+
+    def kkt(self) -> ca.Function:
+        """``dlo_kkt``: (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every row, as ``StringNLP.kkt_fn``."""
+        nlp, n, rows = self.nlp, self.n, self.nlp.g_sym.shape[0]
+        z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam", rows)
+        _, hess, g, jac, grad_f, energies = self._system(z, p, lam, rows)
+        return ca.Function("dlo_kkt", [z, p, lam], [ca.densify(grad_f), ca.densify(g), ca.densify(jac),
+                                                    ca.densify(hess), ca.densify(energies)])
+
+    def _system(self, z, p, lam, rows: int):
+        """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their multipliers)."""
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         lay, sigma = nlp.params, nlp.sigma
-        nf = nlp.n_free_rows
-        z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", lay.size), ca.MX.sym("lam_free", nf)
         E = _sparse(self.E)
         u = ca.reshape(ca.mtimes(E, z), d, M)
         x0 = z[0:3] * L
@@ -162,45 +270,61 @@ class AssembledKKT:
         F = ca.horzcat(*forces) if forces else None
         if F is not None:
             a -= sigma * ca.mtimes(F, ca.DM(self.loads_W))
-        lam_pos = lam[self.pos_rows.tolist()] if self.pos_rows.size else ca.MX(0, 1)
-        if self.pos_rows.size:
+        pos_rows = self.pos_rows[self.pos_rows < rows]
+        local_rows = self.local_rows[self.local_rows < rows]
+        lam_pos = lam[pos_rows.tolist()] if pos_rows.size else ca.MX(0, 1)
+        if pos_rows.size:
             a += ca.mtimes(ca.DM(self.C).T, ca.mtimes(ca.diag(lam_pos / L), ca.DM(self.Omega)))
-        coef = ca.vertcat(weights * p[lay["Rf"]].T, weights * p[lay["Rt"]].T, weights * p[lay["Re"]].T, a)
-        bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function().map(M, "serial")(u, coef)
-
-        # gradient of L: per-node part, the x0 part, the node-local part
-        grad = ca.mtimes(E.T, ca.vec(grad_k))
         dx0 = -sigma * L * gravity * p[lay["weight_total"]]
         if F is not None:
             dx0 -= sigma * L * ca.sum2(F)
-        if self.pos_rows.size:
+        if pos_rows.size:
             dx0 += ca.mtimes(ca.DM(self.C * self.kappa[:, None]).T, lam_pos)
-        grad += ca.vertcat(dx0, ca.MX(n - 3, 1))
-        lam_local = lam[self.local_rows.tolist()] if self.local_rows.size else ca.MX(0, 1)
-        g_loc, j_loc, grad_loc, hess_loc, moments = self.local_function()(z, p, lam_local)
-        grad += grad_loc
+        # rows nonlinear in the positions need T first (their gradient enters a_k)
+        nonlinear = ([], [], None, None, [])
+        if rows > nlp.n_free_rows:
+            T0 = self.tangent_function().map(M, "serial")(u)
+            nonlinear = self._nonlinear_rows(z, p, lam, T0)
+            a += nonlinear[2]
+            dx0 += nonlinear[3]
+        coef = ca.vertcat(weights * p[lay["Rf"]].T, weights * p[lay["Rt"]].T, weights * p[lay["Re"]].T, a)
+        bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function().map(M, "serial")(u, coef)
 
-        # ∇²L = Eᵀ diag(∇²φ_k) E + ∇²Λ
+        # ∇L: per-node part, the x0 part, the node-local part
+        grad = ca.mtimes(E.T, ca.vec(grad_k)) + ca.vertcat(dx0, ca.MX(n - 3, 1))
+        lam_local = lam[local_rows.tolist()] if local_rows.size else ca.MX(0, 1)
+        g_loc, j_loc, grad_loc, hess_loc, moments = self.local_function(local_rows)(z, p, lam_local)
+        grad += grad_loc
+        # ∇²L = Eᵀ diag(∇²φ_k) E + ∇²Λ (+ Dᵀ diag(λ ∇²ψ) D for rows nonlinear in the positions)
         blocks = ca.sparsity_cast(hess_k, ca.diagcat(*[ca.Sparsity.dense(d, d)] * M))
         hess = ca.mtimes(E.T, ca.mtimes(blocks, E)) + hess_loc
 
-        # the position rows: values and Jacobian
-        rows_g = [None] * nf
-        jac_parts = []
-        if self.pos_rows.size:
+        parts = []  # (rows, g, ∂g/∂z)
+        if pos_rows.size:
             X = ca.mtimes(T, ca.DM(self.Omega).T)  # 3 × rows: Σ_k W_rk T_k
             g_pos = (ca.DM(self.kappa) * ca.mtimes(ca.DM(self.C), x0) + ca.sum1(ca.DM(self.C).T * X).T
                      - ca.mtimes(ca.DM(self.target), p)) / L
             omega_rep = np.repeat(self.Omega, d, axis=1)  # W_rk at column j + d k
             j_pos = ca.mtimes(ca.mtimes(ca.DM(self.C), jt_k) * ca.DM(omega_rep), E) / L
             j_pos += ca.DM(_x0_columns(self.C * self.kappa[:, None], n))
-            jac_parts.append((self.pos_rows, g_pos, j_pos))
-        if self.local_rows.size:
-            jac_parts.append((self.local_rows, g_loc, j_loc))
-        order = np.concatenate([rows for rows, _, _ in jac_parts]) if jac_parts else np.zeros(0, dtype=int)
+            parts.append((pos_rows, g_pos, j_pos))
+        if local_rows.size:
+            parts.append((local_rows, g_loc, j_loc))
+        rows_nl, g_nl, _, _, groups = nonlinear
+        if rows_nl:
+            jac_nl = []
+            for omega, kappa, grads, weighted in groups:
+                jac_nl += [self._group_jacobian(gr, jt_k, E, omega, kappa, n) for gr in grads]
+                if weighted is not None:
+                    D = self._position_derivatives(jt_k, E, omega, kappa, n)
+                    hess += ca.mtimes(D.T, ca.mtimes(self._block_diagonal(weighted), D))
+            parts.append((np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl)))
+        order = np.concatenate([r for r, _, _ in parts]) if parts else np.zeros(0, dtype=int)
+        if sorted(order.tolist()) != list(range(rows)):
+            raise ValueError("assembled KKT: rows not covered exactly once")
         inverse = np.argsort(order).tolist()
-        g = ca.vertcat(*[gp for _, gp, _ in jac_parts])[inverse] if jac_parts else ca.MX(0, 1)
-        jac = ca.vertcat(*[jp for _, _, jp in jac_parts])[inverse, :] if jac_parts else ca.MX(0, n)
+        g = ca.vertcat(*[gp for _, gp, _ in parts])[inverse] if parts else ca.MX(0, 1)
+        jac = ca.vertcat(*[jp for _, _, jp in parts])[inverse, :] if parts else ca.MX(0, n)
 
         grad_f = grad - ca.mtimes(jac.T, lam)
         bend, twist, stretch = ca.sum2(bend_k), ca.sum2(twist_k), ca.sum2(stretch_k)
@@ -209,10 +333,7 @@ class AssembledKKT:
         for i, force in enumerate(forces):
             work += ca.dot(force, x0 + ca.mtimes(T, ca.DM(self.loads_W[i])))
         energies = ca.vertcat(bend, twist, stretch, grav, work)
-        kkt = ca.blockcat([[hess, jac.T], [jac, ca.MX(nf, nf)]])
-        residual = ca.vertcat(grad, g)
-        return ca.Function("dlo_kkt_free", [z, p, lam],
-                           [ca.densify(kkt), ca.densify(residual), ca.densify(grad_f), ca.densify(energies)])
+        return grad, hess, g, jac, grad_f, energies
 
 
 def _x0_columns(coefficients: np.ndarray, n: int) -> np.ndarray:

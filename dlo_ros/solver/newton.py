@@ -17,11 +17,26 @@ import numpy as np
 from scipy.linalg.lapack import dgesv as _gesv
 
 from .functions import NlpFunctions
-from .nlp import NEWTON_STEPS, StringNLP
+from .nlp import NEWTON_REGULARISATION, NEWTON_STEPS, StringNLP
 from .state import SolverState
 
 #: a Newton step larger than this in any scaled unknown leaves the start's basin: IPOPT takes over
 MAX_STEP = 0.5
+
+def regularised(kkt: np.ndarray, n: int) -> np.ndarray:
+    """K + diag(δ I_n, −δ I_m), δ = NEWTON_REGULARISATION · max|K|, as a new array.
+
+    A scene with a continuous symmetry (both end tangents along the chord and no twist held: the shape
+    may turn about the chord) has an exactly singular K at every equilibrium; LU then turns the
+    residual's rounding noise into an arbitrary step along the symmetry.  The shift bounds that step
+    (≈ |r| / δ) and changes a step elsewhere by a factor 1 + O(δ / σ) for K's other singular values σ:
+    convergence stays quadratic until the residual reaches its floor."""
+    out = np.array(kkt, dtype=float, copy=True)
+    delta = NEWTON_REGULARISATION * max(float(np.abs(out).max(initial=0.0)), 1.0)
+    idx = np.arange(out.shape[0])
+    out[idx[:n], idx[:n]] += delta
+    out[idx[n:], idx[n:]] -= delta
+    return out
 
 
 def violation(nlp: StringNLP, g: np.ndarray) -> float:
@@ -87,7 +102,7 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
         rhs[:n] = -r_dual
         rhs[n:] = -r_prim
         # LAPACK's gesv directly: numpy.linalg.solve's checks cost more than the solve at this size
-        _, _, step, info = _gesv(kkt, rhs)
+        _, _, step, info = _gesv(regularised(kkt, n), rhs)
         if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > MAX_STEP:
             return False, start, it, np.inf
         z += step[:n]
@@ -136,7 +151,7 @@ def newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nda
             return True, state, it, violation(nlp, g)
         if it == max_steps:
             break
-        _, _, step, info = _gesv(kkt, residual)
+        _, _, step, info = _gesv(regularised(kkt, n), residual)
         if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > MAX_STEP:
             return False, start, it, np.inf
         unknowns = unknowns - step

@@ -97,6 +97,9 @@ def has_point_moments(problem: Problem) -> bool:
 #: own system as the first, a grip move of 1 % of L converges to |r| ~ 1e-14 in three
 NEWTON_STEPS = 3
 
+#: δ / max|K| of the regularised Newton matrix K + diag(δ I, −δ I) of every warm update (newton.regularised)
+NEWTON_REGULARISATION = 1e-10
+
 #: a held grip tangent closer than this to the pole of the chord-and-gravity frame turns the pole [deg]
 GRIP_POLE_MIN_DEG = 30.0
 
@@ -351,40 +354,24 @@ class StringNLP:
         self.n_free_rows = nf = int(inequalities[0]) if inequalities.size else g.shape[0]
         # the rows before the obstacle rows are equalities with bound 0 (grips, relative positions)
         assert np.all(self.lbg[:nf] == 0.0) and np.all(self.ubg[:nf] == 0.0)
-        grad_f = ca.densify(ca.gradient(objective, z))
-        energies = ca.densify(ca.vertcat(bend, twist, stretch, grav, work))
-        # ∇²L is built on its own, not as hess_free + ∇²(λ_obs·g_obs): that sum has 8 % more instructions
-        hess = ca.hessian(objective + ca.dot(lam, g), z)[0]
-        jac_free = ca.jacobian(g[:nf], z)
-        if self.director:
-            # the same function assembled from per-quadrature-node derivatives: compact code (seconds of
-            # gcc instead of minutes) and a faster interpreted call (solver/assembled.py)
-            self.kkt_free_fn = AssembledKKT(self).kkt_free()
-        else:
-            lam_free = ca.SX.sym("lam_free", nf)
-            if nf == g.shape[0]:
-                hess_free = ca.substitute(hess, lam, lam_free)
-            else:
-                hess_free = ca.hessian(objective + ca.dot(lam_free, g[:nf]), z)[0]
-            # The Newton system of the free rows itself: K = [∇²L J_freeᵀ; J_free 0] and
-            # r = [∇f + J_freeᵀ λ_free; g_free], so that a contact-free Newton step is one call and one solve
-            kkt_matrix = ca.blockcat([[hess_free, jac_free.T], [jac_free, ca.SX(nf, nf)]])
-            residual = ca.vertcat(grad_f + ca.mtimes(jac_free.T, lam_free), g[:nf])
-            self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam_free],
-                                           [ca.densify(kkt_matrix), ca.densify(residual), grad_f, energies])
-        self.newton_fn = self.newton_function()
         if nf < g.shape[0]:
-            jac = ca.vertcat(jac_free, ca.jacobian(g[nf:], z))
-            # the obstacle rows' values: once per update (the convergence check), not per Newton step
+            # the inequality rows' values: once per update (the convergence check), not per Newton step
             self.obstacle_g_fn = ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g[nf:])])
         else:
-            jac = jac_free
             self.obstacle_g_fn = None
-        self.hessian_fn = ca.Function("lagrangian_hessian", [z, p, lam], [hess])
-        self.jac_g_fn = ca.Function("constraint_jacobian", [z, p], [jac])
-        # everything one Newton step on the KKT conditions needs, in one call (compiled to C later)
-        self.kkt_fn = ca.Function("dlo_kkt", [z, p, lam],
-                                  [grad_f, ca.densify(g), ca.densify(jac), ca.densify(hess), energies])
+        if self.director:
+            # assembled from per-quadrature-node derivatives (solver/assembled.py): compact code (seconds
+            # of gcc instead of minutes), a faster interpreted call, and no flattened Hessian to build
+            assembled = AssembledKKT(self)
+            self.kkt_free_fn = assembled.kkt_free()
+            self.kkt_fn = assembled.kkt()
+            zm, pm, lm = ca.MX.sym("z", z.shape[0]), ca.MX.sym("p", lay.size), ca.MX.sym("lam", g.shape[0])
+            self.hessian_fn = ca.Function("lagrangian_hessian", [zm, pm, lm], [self.kkt_fn(zm, pm, lm)[3]])
+            self.jac_g_fn = ca.Function("constraint_jacobian", [zm, pm],
+                                        [self.kkt_fn(zm, pm, ca.MX.zeros(g.shape[0]))[2]])
+        else:
+            self._flattened_kkt(objective, g, z, p, lam, nf, ca.densify(ca.vertcat(bend, twist, stretch, grav, work)))
+        self.newton_fn = self.newton_function()
         self.g_fn = ca.Function("g", [z, p], [g])
         # ∂h/∂x of each obstacle type, evaluated only where a contact is active (for contact forces)
         self.obstacle_gradient = {}
@@ -402,6 +389,32 @@ class StringNLP:
         # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale)
         self._target_jacobian = np.asarray(ca.Function("dg_dp", [z, p], [ca.jacobian(g, p)])(np.zeros(z.shape[0]), np.zeros(lay.size)))
         self._target_jacobian[:, ~grip_only] = 0.0
+
+    def _flattened_kkt(self, objective: ca.SX, g: ca.SX, z: ca.SX, p: ca.SX, lam: ca.SX, nf: int,
+                       energies: ca.SX) -> None:
+        """``kkt_free_fn``, ``kkt_fn``, ``hessian_fn`` and ``jac_g_fn`` by differentiating the whole
+        flattened Lagrangian (the Euler-angle models; small enough for it)."""
+        grad_f = ca.densify(ca.gradient(objective, z))
+        # ∇²L is built on its own, not as hess_free + ∇²(λ_obs·g_obs): that sum has 8 % more instructions
+        hess = ca.hessian(objective + ca.dot(lam, g), z)[0]
+        jac_free = ca.jacobian(g[:nf], z)
+        lam_free = ca.SX.sym("lam_free", nf)
+        if nf == g.shape[0]:
+            hess_free = ca.substitute(hess, lam, lam_free)
+        else:
+            hess_free = ca.hessian(objective + ca.dot(lam_free, g[:nf]), z)[0]
+        # The Newton system of the free rows itself: K = [∇²L J_freeᵀ; J_free 0] and
+        # r = [∇f + J_freeᵀ λ_free; g_free], so that a contact-free Newton step is one call and one solve
+        kkt_matrix = ca.blockcat([[hess_free, jac_free.T], [jac_free, ca.SX(nf, nf)]])
+        residual = ca.vertcat(grad_f + ca.mtimes(jac_free.T, lam_free), g[:nf])
+        self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam_free],
+                                       [ca.densify(kkt_matrix), ca.densify(residual), grad_f, energies])
+        jac = ca.vertcat(jac_free, ca.jacobian(g[nf:], z)) if nf < g.shape[0] else jac_free
+        self.hessian_fn = ca.Function("lagrangian_hessian", [z, p, lam], [hess])
+        self.jac_g_fn = ca.Function("constraint_jacobian", [z, p], [jac])
+        # everything one Newton step on the KKT conditions needs, in one call (compiled to C later)
+        self.kkt_fn = ca.Function("dlo_kkt", [z, p, lam],
+                                  [grad_f, ca.densify(g), ca.densify(jac), ca.densify(hess), energies])
 
     def _director_grip_rows(self, z: ca.SX, p: ca.SX, grip, add, first: int) -> list[int]:
         """Orientation rows of a grip on a director model: t·R_g e_y = t·R_g e_z = 0 (clamp, tangent) and
@@ -438,8 +451,11 @@ class StringNLP:
         u0, pp = ca.MX.sym("u", n + nf), ca.MX.sym("p", n_p)
         k0, r0 = ca.MX.sym("K0", n + nf, n + nf), ca.MX.sym("r0", n + nf)
         u, kkt, residual, largest = u0, k0, r0, ca.MX(0)
+        # newton.regularised: K + diag(δ I, −δ I) bounds the step along a symmetry of the scene
+        sign = ca.DM(np.concatenate([np.ones(n), -np.ones(nf)]))
         for _ in range(NEWTON_STEPS):
-            step = ca.solve(kkt, residual, "lapacklu")
+            delta = NEWTON_REGULARISATION * ca.fmax(ca.mmax(ca.fabs(kkt)), 1.0)
+            step = ca.solve(kkt + ca.diag(delta * sign), residual, "lapacklu")
             largest = ca.fmax(largest, ca.norm_inf(step[:n]))
             u = u - step
             kkt, residual, grad, energies = kkt_free(u[:n], pp, u[n:])

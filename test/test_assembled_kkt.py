@@ -128,3 +128,14 @@ def test_the_compiled_assembled_system_equals_the_interpreted_one(tmp_path, monk
     for got, want in zip(native(*args), nlp.kkt_free_fn(*args)):
         want = np.asarray(want)
         assert np.max(np.abs(got - want)) <= 1e-10 * (1.0 + np.max(np.abs(want)))
+
+
+@pytest.mark.parametrize("slots", [0, 3])
+def test_the_assembled_inequality_rows_equal_the_flattened_ones(slots):
+    nlp = StringNLP(obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=slots))
+    values = ca.Function("g", [nlp.z_sym, nlp.p_sym], [nlp.g_sym[nlp.n_free_rows:]])
+    rng = np.random.default_rng(5)
+    for _ in range(2):
+        z, p = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0])
+        got, want = ca.DM(nlp.obstacle_g_fn(z, p)).full(), ca.DM(values(z, p)).full()
+        assert np.max(np.abs(got - want)) <= 1e-12 * (1.0 + np.max(np.abs(want)))

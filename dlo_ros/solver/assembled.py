@@ -255,6 +255,40 @@ class AssembledKKT:
         return ca.Function("dlo_kkt", [z, p, lam], [ca.densify(grad_f), ca.densify(g), ca.densify(jac),
                                                     ca.densify(hess), ca.densify(energies)])
 
+    def inequality_g(self) -> ca.Function:
+        """``dlo_obstacle_g``: (z, p) → the values of the rows after the free rows (folds, obstacles,
+        self-contact slots), as ``g[n_free_rows:]`` of the NLP."""
+        nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
+        lay, P, nf = nlp.params, nlp.problem, nlp.n_free_rows
+        z, p = ca.MX.sym("z", n), ca.MX.sym("p", lay.size)
+        T = self.tangent_function().map(M, "serial")(ca.reshape(ca.mtimes(_sparse(self.E), z), d, M))
+        parts = []
+        local = self.local_rows[self.local_rows >= nf]
+        if local.size:
+            parts.append((local, self.local_function(local)(z, p, ca.MX(local.size, 1))[0]))
+        if P.obstacles:
+            from ..model.obstacles import OBSTACLE_TYPES
+
+            omega = self.model.position_matrix(nlp.obstacle_s)
+            S = omega.shape[0]
+            X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)
+            for i, ob in enumerate(P.obstacles):
+                x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
+                h = ca.Function(f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)])
+                values = h.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S))
+                parts.append((np.array(nlp.obstacle_rows[i]), (values.T + p[lay["radius"]][0]) / L))
+        if nlp.self_contact_slots:
+            K = nlp.self_contact_slots
+            Q = ca.horzcat(*[p[lay[f"self:{k}"]][:M] for k in range(K)]).T
+            b = ca.vertcat(*[p[lay[f"self:{k}"]][M] for k in range(K)])
+            X = ca.mtimes(T, Q.T)
+            parts.append((np.array(nlp.self_contact_rows), (b - ca.sum1(X * X).T) / L))
+        order = np.concatenate([r for r, _ in parts]) - nf
+        if sorted(order.tolist()) != list(range(nlp.g_sym.shape[0] - nf)):
+            raise ValueError("assembled inequality rows: rows not covered exactly once")
+        g = ca.vertcat(*[v for _, v in parts])[np.argsort(order).tolist()]
+        return ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g)])
+
     def _system(self, z, p, lam, rows: int):
         """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their multipliers)."""
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length

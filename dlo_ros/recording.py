@@ -33,6 +33,10 @@ Entity tree (world frame, right-handed, z up, metres; timelines ``update`` (sequ
 ``events/rejected``            every rejected input with its reason (WARN)
 ``events/model``               model events (INFO): changes of the model with their reasons, scene changes
 ``events/recorder``            the recorder's own warnings (dropped items)
+``world/fit/observed``         the node's fits (``log_fit``): observed points, red beyond the robust
+``world/fit/fitted``           loss's threshold; the fitted centreline; one segment per point to its
+``world/fit/residuals``        nearest point on it (dlo_ros.identify.drawing), at the fit's update
+``events/fit``                 each fit's summary line and what it applied (INFO; WARN if not ok)
 ``scene/yaml``                 the scene file (scene_to_dict as YAML), static; ``scene/changes`` later ones
 ``scene/legend``               colour and arrow scales (static)
 ``data/result``                exact float64 copy of each result (for ``dlo replay --resolve``)

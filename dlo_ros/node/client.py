@@ -246,12 +246,8 @@ class DloClient:
                                   lambda msg, g=g: self._on_wrench(g, msg), WRENCH_QOS)
         self._query = n.create_client(GetPlan, f"{base}/query_shape")
         self._reset = n.create_client(Trigger, f"{base}/reset")
-        self._fit = n.create_client(Trigger, f"{base}/fit")
-        from sensor_msgs.msg import PointCloud2
-
-        from .dlo_node import CLOUD_QOS
-
-        self._cloud_pub = n.create_publisher(PointCloud2, f"{base}/observed", CLOUD_QOS)
+        self._fit_client = self._cloud_publisher = None  # ~/fit, ~/observed: made on first use (fewer DDS
+        # entities to discover for the clients that never fit)
         self._set_params = n.create_client(SetParameters, f"{base}/set_parameters")
         self._get_params = n.create_client(GetParameters, f"{base}/get_parameters")
         self._msgs = {"PoseArray": PoseArray, "PoseStamped": PoseStamped, "GetPlan": GetPlan, "Trigger": Trigger,
@@ -448,6 +444,22 @@ class DloClient:
         req.goal = pose_stamped(goal[0], goal[1], frame, 0)
         resp = self._call(self._query, req, timeout)
         return self._path_to_arrays(resp.plan)
+
+    @property
+    def _cloud_pub(self):
+        if self._cloud_publisher is None:
+            from sensor_msgs.msg import PointCloud2
+
+            from .dlo_node import CLOUD_QOS
+
+            self._cloud_publisher = self.node.create_publisher(PointCloud2, f"{self.node_name}/observed", CLOUD_QOS)
+        return self._cloud_publisher
+
+    @property
+    def _fit(self):
+        if self._fit_client is None:
+            self._fit_client = self.node.create_client(self._msgs["Trigger"], f"{self.node_name}/fit")
+        return self._fit_client
 
     def publish_cloud(self, points, *, frame_id: str | None = None, stamp_ns: int | None = None) -> int:
         """Publish ``points`` (N, 3) [m] as a float32 x, y, z PointCloud2 on ~/observed; returns the stamp [ns]."""

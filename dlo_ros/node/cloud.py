@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .validation import TargetError, check_frame, safe_text
+from .validation import TargetError, check_frame_size, normalise_frame, safe_text
 
 #: sensor_msgs/PointField datatypes read as coordinates: FLOAT32 = 7, FLOAT64 = 8
 FLOAT_TYPES = {7: "f4", 8: "f8"}
@@ -33,7 +33,11 @@ def cloud_bytes_limit(max_points: int) -> int:
 def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -> np.ndarray:
     """The (N, 3) float64 points [m] of the PointCloud2 ``msg``, which must be in ``frame_id``; TargetError
     (kind 'frame', 'count', 'invalid' or 'non_finite') naming the field otherwise (module docstring)."""
-    check_frame(msg.header.frame_id, frame_id, where)
+    cloud_frame = msg.header.frame_id
+    check_frame_size(cloud_frame, where)
+    if normalise_frame(cloud_frame) != normalise_frame(frame_id) or not cloud_frame:
+        raise TargetError("frame", f"{where}: header.frame_id is '{safe_text(cloud_frame, 80)}', not the node's frame "
+                                   f"'{frame_id}' (clouds are not transformed: publish them in '{frame_id}')")
     width, height, step, row_step = int(msg.width), int(msg.height), int(msg.point_step), int(msg.row_step)
     n = width * height
     if n < MIN_POINTS:

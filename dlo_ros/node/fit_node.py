@@ -13,8 +13,8 @@ reason when one is already running, no cloud has arrived or the solver is not bu
 from __future__ import annotations
 
 import threading
-import time
 from concurrent.futures import Future
+from concurrent.futures.process import BrokenProcessPool
 
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -124,7 +124,13 @@ class NodeFitter:
             return False, f"the solver is not ready ({self.node.engine.state})"
         problem, options = scene
         config = self.config()
-        job = self._pool.submit(run_fit, fit_payload(problem, options, snapshot, config))
+        payload = fit_payload(problem, options, snapshot, config)
+        try:
+            job = self._pool.submit(run_fit, payload)
+        except BrokenProcessPool:  # the worker died while idle (e.g. killed): a new one
+            self.node.get_logger().warning("the fit worker process had died; starting a new one")
+            self._new_pool()
+            job = self._pool.submit(run_fit, payload)
         self._running, self._last_fitted = snapshot, snapshot.number
         self.health.started()
         job.add_done_callback(lambda f: self._finished(f, snapshot, config))
@@ -158,6 +164,9 @@ class NodeFitter:
             result, error = job.result(timeout=0), ""
         except Exception as exc:  # noqa: BLE001 - ObservationError (a request the scene cannot fit) or a worker crash
             result, error = None, safe_text(f"{type(exc).__name__}: {exc}")
+            if isinstance(exc, BrokenProcessPool):  # e.g. a crash inside IPOPT: the next fit gets a new worker
+                error += " (the fit worker process died; the next fit starts a new one)"
+                self._new_pool()
         application = None
         if result is not None:
             current = {n: float(node.get_parameter(n).value) for n in P.STRING_FIELDS}
@@ -211,6 +220,12 @@ class NodeFitter:
     def warm(self) -> None:
         """Start the worker process and its imports now (after the node's first shape)."""
         self._pool.submit(_warm_fit_worker)
+
+    def _new_pool(self) -> None:
+        from ..solver.batch import process_pool, stop_pool
+
+        stop_pool(self._pool, 1.0)
+        self._pool = process_pool(1)
 
     def close(self, timeout: float) -> None:
         from ..solver.batch import stop_pool

@@ -9,7 +9,6 @@ the node holds until targets arrive), 1.5 mm noise, 30 % occluded, shuffled.
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import Future
+from dataclasses import replace
 from concurrent.futures.process import BrokenProcessPool
 
 from rclpy.parameter import Parameter
@@ -123,6 +124,9 @@ class NodeFitter:
         if scene is None:
             return False, f"the solver is not ready ({self.node.engine.state})"
         problem, options = scene
+        # the string as the node's parameters hold it now (the solver thread may not have applied a change
+        # made just before): the fit starts there, and plan_application compares with the same values
+        problem = replace(problem, string=self.node._check_problem.string)
         config = self.config()
         payload = fit_payload(problem, options, snapshot, config)
         try:

@@ -397,8 +397,8 @@ class DloNode(Node):
         return answer
 
     def _warm_query_workers(self) -> None:
-        """Each query worker builds its solver and the held shape now, after the node's own first shape
-        (so that they do not compete with the node's start-up for the cores)."""
+        """Each query worker builds its solver and the held shape now, and the fit worker imports the fit,
+        after the node's own first shape (so that they do not compete with the node's start-up for the cores)."""
         if self._fitter is not None:
             self._fitter.warm()
         if self._query_pool is None:

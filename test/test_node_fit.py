@@ -99,6 +99,24 @@ def test_cloud_points_reads_any_layout_and_names_bad_fields():
         cloud_points(_Cloud(0, 1, [], 12, 0, b""), "world", 100)
 
 
+def test_fit_parameters_are_in_the_table_the_docs_and_the_shipped_file():
+    from dlo_ros.node import params as P
+
+    docs = (ROOT / "msg_docs" / "node.md").read_text()
+    shipped = P.read_params_file(str(ROOT / "config" / "dlo_node.yaml"))  # checked against the table
+    for spec in P.FIT:
+        assert P.SPECS[spec.name] is spec and f"| `{spec.name}` |" in docs, spec.name
+        assert shipped[spec.name][0] == spec.default, spec.name
+        assert P.check_value(spec.name, spec.default) == ""
+    assert [s.name for s in P.FIT if s.read_only] == ["fit.enabled", "fit.period_s", "fit.max_points"]
+    problem = None  # check_live never needs the problem for fit.*
+    assert P.check_live("fit.parameters", ["D", "Rf"], problem) == ""
+    assert "names a parameter twice" in P.check_live("fit.parameters", ["D", "D"], problem)
+    assert "at least one" in P.check_live("fit.parameters", [], problem)
+    assert "must be >= 1e-06" in P.check_live("fit.point_sigma", 0.0, problem)
+    assert "read-only" in P.check_live("fit.period_s", 1.0, problem)
+
+
 # ---- when an estimate is applied --------------------------------------------------------------------------
 def _fit_result(status="ok", **kw):
     from dlo_ros.identify.fit import Estimate, FitResult

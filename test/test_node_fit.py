@@ -149,6 +149,39 @@ def test_plan_application():
     assert not same.applied and "equals the current values" in same.reason
 
 
+def test_worker_fits_reuse_their_solvers_with_the_same_result():
+    """run_fit keeps its solvers (SolverCache): a later fit, also of a shape in another plane (a kept planar
+    solver is not reused there), gives what a fit with new solvers gives."""
+    from dlo_ros.identify.fit import fit
+    from dlo_ros.identify.objective import FitSettings
+    from dlo_ros.model.problem import GripPose
+    from dlo_ros.node.fitting import CloudSnapshot, FitConfig, fit_payload, observation_set, run_fit
+    from dlo_ros.scene import load_scene
+
+    scene = load_scene("default_cable")
+    problem, options = scene.problem, scene.options  # solver.model auto: a planar solver per plane
+    points = np.load(POINTS)
+    c, s = math.cos(0.6), math.sin(0.6)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    q = (0.0, 0.0, math.sin(0.3), math.cos(0.3))
+    turned = {"left": GripPose(np.array([0.0, 0.0, 0.4]), np.array(q)),
+              "right": GripPose(turn @ np.array([0.6, 0.0, 0.0]) + [0.0, 0.0, 0.4], np.array(q))}
+    config = FitConfig(point_sigma=SIGMA)
+    hanging = CloudSnapshot(points, {g.name: g.pose for g in problem.grips}, 0, 1)
+    other_plane = CloudSnapshot(points @ turn.T, turned, 0, 2)
+    new_solvers = {1: fit(problem, options, observation_set(hanging, config), FitSettings()),
+                   2: fit(problem, options, observation_set(other_plane, config), FitSettings())}
+    for snap in (hanging, hanging, other_plane):  # built, reused, another plane
+        kept = run_fit(fit_payload(problem, options, snap, config))
+        new = new_solvers[snap.number]
+        assert kept.ok and new.ok
+        assert kept.ratios["D/Rf"].value == pytest.approx(new.ratios["D/Rf"].value, rel=1e-9)
+        assert kept.ratios["D/Rf"].std == pytest.approx(new.ratios["D/Rf"].std, rel=1e-9)
+        assert kept.equilibrium_solves == new.equilibrium_solves
+    within({"estimate.D/Rf": kept.ratios["D/Rf"].value, "estimate.D/Rf.sigma": kept.ratios["D/Rf"].std}, "D/Rf",
+           D / RF)
+
+
 # ---- the node over DDS --------------------------------------------------------------------------------------
 def within(values: dict, name: str, truth: float, k: float = 3.0) -> tuple[float, float]:
     value, std = float(values[f"estimate.{name}"]), float(values[f"estimate.{name}.sigma"])

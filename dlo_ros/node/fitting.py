@@ -5,7 +5,8 @@ estimate is applied (pure: no ROS; msg_docs/node.md "Fitting").
   grip poses the node held when the cloud arrived.
 * :func:`fit_payload` / :func:`run_fit`: the fit of one snapshot, pickled into and run in a worker
   process (its own equilibrium solvers: a CasADi/IPOPT solver object is never shared between threads,
-  and an interpreted CasADi call holds the GIL, so a thread would slow the stream).
+  and an interpreted CasADi call holds the GIL, so a thread would slow the stream).  The worker keeps
+  its solvers from one fit to the next: the first fit of a structure pays for building them.
 * :func:`plan_application`: which ``string.*`` parameters an estimate changes, and whether every value it
   changes is determined with a relative standard deviation within ``fit.apply_max_rel_sigma``.
 * :class:`FitHealth`: the counters and the last estimate for the diagnostics status ``<node>: fit``.
@@ -28,6 +29,9 @@ PARAMETER_OF = {"Rf": "string.bend_stiffness", "Rt": "string.twist_stiffness", "
                 "Re": "string.stretch_stiffness"}
 #: relative σ of a known total mass (the observation file's default)
 MASS_RELATIVE_SIGMA = 1e-3
+#: (fit worker process) the equilibrium solvers of earlier fits: building one takes seconds, a fit of a
+#: kept one a few solves (dlo_ros.identify.objective.SolverCache; one fit at a time per worker)
+_SOLVERS = None
 
 
 @dataclass(frozen=True)
@@ -79,10 +83,14 @@ def fit_payload(problem: Problem, options, snapshot: CloudSnapshot, config: FitC
 def run_fit(payload: bytes):
     """(worker process) The ``FitResult`` of a :func:`fit_payload` request.  Raises ObservationError for a
     request the scene cannot support (e.g. Re of an inextensible string)."""
+    global _SOLVERS
     from ..identify.fit import fit
+    from ..identify.objective import SolverCache
 
+    if _SOLVERS is None:
+        _SOLVERS = SolverCache()
     problem, options, data, settings = pickle.loads(payload)  # noqa: S301 - from our own node
-    return fit(problem, options, data, settings)
+    return fit(problem, options, data, settings, _SOLVERS)
 
 
 # ---- applying an estimate ---------------------------------------------------------------------------------

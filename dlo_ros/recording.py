@@ -33,6 +33,10 @@ Entity tree (world frame, right-handed, z up, metres; timelines ``update`` (sequ
 ``events/rejected``            every rejected input with its reason (WARN)
 ``events/model``               model events (INFO): changes of the model with their reasons, scene changes
 ``events/recorder``            the recorder's own warnings (dropped items)
+``world/fit/observed``         the node's fits (``log_fit``): observed points, red beyond the robust
+``world/fit/fitted``           loss's threshold; the fitted centreline; one segment per point to its
+``world/fit/residuals``        nearest point on it (dlo_ros.identify.drawing), at the fit's update
+``events/fit``                 each fit's summary line and what it applied (INFO; WARN if not ok)
 ``scene/yaml``                 the scene file (scene_to_dict as YAML), static; ``scene/changes`` later ones
 ``scene/legend``               colour and arrow scales (static)
 ``data/result``                exact float64 copy of each result (for ``dlo replay --resolve``)
@@ -90,6 +94,8 @@ E_STATUS = "events/status"
 E_REJECTED = "events/rejected"
 E_MODEL = "events/model"
 E_RECORDER = "events/recorder"
+E_FIT = "world/fit"  # world/fit/{observed,fitted,residuals}: the node's newest fit (dlo_ros.identify.drawing)
+E_FIT_EVENTS = "events/fit"  # each fit's summary and what it applied (INFO) or why not (WARN)
 E_SCENE = "scene/yaml"
 E_SCENE_CHANGES = "scene/changes"
 E_LEGEND = "scene/legend"
@@ -271,6 +277,20 @@ class _ResultSnap:
     model: dict = field(default_factory=dict)
     # one row per self-contact: s_a, s_b [m], point_a, point_b [m], force on s_a [N] (its opposite acts on s_b)
     self_contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 11)))
+
+
+@dataclass
+class _FitSnap:
+    """A fit as the node recorded it: observed points, fitted centreline and each point's nearest point on
+    it (m), the stated σ [m] and the robust loss's threshold [σ], the summary text, whether it was ok."""
+
+    points: np.ndarray
+    shape: np.ndarray
+    feet: np.ndarray
+    sigma: float
+    huber: float
+    text: str
+    ok: bool
 
 
 @dataclass
@@ -789,6 +809,17 @@ class _Writer:
     def _handle_model(self, item: _Item) -> None:
         self._row(E_MODEL, "TextLog", item, text=[item.payload], level=["INFO"])
 
+    def _handle_fit(self, item: _Item) -> None:
+        from .identify.drawing import draw_observation  # imported only by a recording that has a fit
+
+        fit: _FitSnap = item.payload
+        self.send_batches()  # keep the rows of earlier updates before this one
+        self.rec.set_time(TIMELINE_UPDATE, sequence=int(item.update))
+        self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
+        draw_observation(self.rec, E_FIT, fit.points, fit.shape, fit.feet, fit.sigma, fit.huber, static=False)
+        level = self._rr.TextLogLevel.INFO if fit.ok else self._rr.TextLogLevel.WARN
+        self.rec.log(E_FIT_EVENTS, self._rr.TextLog(fit.text, level=level))
+
 
 # ---- backends: where the writer runs -------------------------------------------------------------------
 def _drop_oldest(queue: collections.deque, limit: int) -> int:
@@ -1288,6 +1319,18 @@ class Recorder:
         self._put(_Item("model", int(update), t, str(text)), keep=True)
         if scene is not None:
             self.log_scene(scene, update=update, ros_time_ns=t)
+
+    def log_fit(self, points: np.ndarray, shape: np.ndarray, feet: np.ndarray, *, sigma: float, huber: float,
+                text: str, ok: bool, update: int, ros_time_ns: int | None = None) -> None:
+        """A fit of observed points at ``update``: ``points`` (N, 3), the fitted centreline ``shape`` (S, 3) and
+        each point's nearest point on it ``feet`` (N, 3) [m] (empty when the fit failed), drawn under
+        ``world/fit`` by ``dlo_ros.identify.drawing``; ``text`` (its summary and what it applied) goes to
+        ``events/fit`` (WARN unless ``ok``).  Never dropped."""
+        if not self.enabled:
+            return
+        snap = _FitSnap(np.array(points, dtype=float), np.array(shape, dtype=float).reshape(-1, 3),
+                        np.array(feet, dtype=float).reshape(-1, 3), float(sigma), float(huber), str(text), bool(ok))
+        self._put(_Item("fit", int(update), self._now(ros_time_ns), snap), keep=True)
 
     def flush(self, timeout: float = 10.0) -> bool:
         """Wait until everything logged so far is in rerun's sinks (False on timeout or a dead writer)."""

@@ -30,6 +30,24 @@ def entity_name(index: int, name: str) -> str:
     return f"{index}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}"
 
 
+def draw_observation(rec, base: str, points: np.ndarray, shape: np.ndarray, feet: np.ndarray, sigma: float,
+                     huber: float, *, static: bool = True) -> None:
+    """Log one observation's drawing under ``base`` into the rerun RecordingStream ``rec``: ``observed``
+    (``points`` (N, 3) [m], red beyond ``huber`` σ of the centreline), ``fitted`` (``shape`` (S, 3) [m]) and
+    ``residuals`` (point → its nearest point ``feet`` (N, 3) on the centreline; empty arrays skip a part).
+    ``static``: timeless (``dlo fit --rrd``), or at the stream's current time (the node's recording)."""
+    import rerun as rr
+
+    distance = np.linalg.norm(points - feet, axis=1) if len(feet) else np.zeros(len(points))
+    colours = np.where((distance > huber * sigma)[:, None], RED, GREY).astype(np.uint8)
+    rec.log(f"{base}/observed", rr.Points3D(points, colors=colours, radii=sigma), static=static)
+    if len(shape):
+        rec.log(f"{base}/fitted", rr.LineStrips3D([shape], colors=[BLUE]), static=static)
+    if len(feet):
+        rec.log(f"{base}/residuals", rr.LineStrips3D(np.stack([points, feet], axis=1), colors=[ORANGE]),
+                static=static)
+
+
 def save_fit(path: str | Path, result: FitResult, data: ObservationSet, summary: str,
              settings: FitSettings = FitSettings()) -> None:
     """Write the drawing of ``result`` (fitted to ``data``) to the .rrd file ``path``.  Raises
@@ -43,15 +61,8 @@ def save_fit(path: str | Path, result: FitResult, data: ObservationSet, summary:
     rec.save(str(path))
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     for i, (fitted, obs) in enumerate(zip(result.observations, data.observations)):
-        base = f"world/fit/{entity_name(i, obs.name)}"
-        distance = np.linalg.norm(obs.points - fitted.feet, axis=1) if len(fitted.feet) else np.zeros(len(obs.points))
-        colours = np.where((distance > settings.huber * obs.sigma)[:, None], RED, GREY).astype(np.uint8)
-        rec.log(f"{base}/observed", rr.Points3D(obs.points, colors=colours, radii=obs.sigma), static=True)
-        if len(fitted.shape):
-            rec.log(f"{base}/fitted", rr.LineStrips3D([fitted.shape], colors=[BLUE]), static=True)
-        if len(fitted.feet):
-            segments = np.stack([obs.points, fitted.feet], axis=1)
-            rec.log(f"{base}/residuals", rr.LineStrips3D(segments, colors=[ORANGE]), static=True)
+        draw_observation(rec, f"world/fit/{entity_name(i, obs.name)}", obs.points, fitted.shape, fitted.feet,
+                         obs.sigma, settings.huber)
     rec.log("fit/summary", rr.TextDocument(summary), static=True)
     rec.flush()
     rec.disconnect()

@@ -32,7 +32,7 @@ import numpy as np
 from ..model.problem import Problem
 from ..solver import SolverOptions
 from .identifiability import NEITHER, ORTHOGONAL, RANK_TOLERANCE, Identifiability, analyse
-from .objective import FitSettings, Objective
+from .objective import FitSettings, Objective, SolverCache
 from .observations import ObservationError, ObservationSet
 from .parameters import PROFILE, Parameterisation, profile_mean
 from .results import Estimate, FitResult, ObservationFit
@@ -69,9 +69,11 @@ def check_request(problem: Problem, data: ObservationSet) -> None:
 
 
 def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
-        settings: FitSettings = FitSettings()) -> FitResult:
+        settings: FitSettings = FitSettings(), cache: SolverCache | None = None) -> FitResult:
     """Fit ``data.parameters`` of ``problem``'s string to ``data`` (module docstring).  Raises
-    ObservationError for a request the scene cannot support; solver failures give status 'failed'."""
+    ObservationError for a request the scene cannot support; solver failures give status 'failed'.
+    ``cache``: equilibrium solvers to take instead of building new ones, and to keep them in afterwards
+    (a process that fits repeatedly; ``objective.SolverCache``)."""
     t0 = time.perf_counter()
     check_request(problem, data)
     fitted = tuple(data.parameters)
@@ -79,7 +81,19 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
     names, base = par.labels, par.base
     fixed = {n: profile_mean(getattr(base, PROFILE[n]), base.length) for n in ("Rf", "Rt", "D", "Re")
              if n not in fitted and getattr(base, PROFILE[n]) is not None}
-    objective = Objective(problem, options, data, par, settings)
+    objective = Objective(problem, options, data, par, settings, cache)
+    try:
+        return _fit(objective, par, fixed, settings, t0)
+    finally:
+        if cache is not None:
+            for o in objective.observed:
+                cache.give(o.solver, settings.compile)
+
+
+def _fit(objective: Objective, par: Parameterisation, fixed: dict[str, float], settings: FitSettings,
+         t0: float) -> FitResult:
+    """The Levenberg–Marquardt iterations of :func:`fit` and its result."""
+    names = par.labels
     evaluate = objective.evaluate
 
     def failed(message: str, iterations: int) -> FitResult:

@@ -10,6 +10,8 @@ w_j = min(1, huber / u_j), u_j = |r_j| / σ.
 """
 from __future__ import annotations
 
+import collections
+import pickle
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -51,13 +53,61 @@ class Evaluation:
     rows: int
 
 
+class SolverCache:
+    """Equilibrium solvers kept from one fit to the next, for a process that fits again and again (the
+    node's fit worker): building a solver takes seconds (interpreted CasADi), a solve tens of ms.
+
+    ``take`` hands out a kept solver of the same structure (``structure_key``, model and compile mode)
+    with the new problem set and its warm start forgotten, so that its first solve is cold as a new
+    solver's; a planar solver only when the new problem lies in its plane (the check its NLP makes when
+    it is built).  ``give`` keeps a solver (the least recently given beyond ``size`` are dropped).  Not
+    thread-safe: one fit at a time per cache."""
+
+    def __init__(self, size: int = 4):
+        self.size = size
+        self._solvers: collections.OrderedDict[bytes, list[ShapeSolver]] = collections.OrderedDict()
+
+    @staticmethod
+    def _key(problem: Problem, options: SolverOptions, compile: str) -> bytes:
+        from ..solver.shape_solver import structure_key
+
+        return pickle.dumps((structure_key(problem, options), compile), protocol=pickle.HIGHEST_PROTOCOL)
+
+    def take(self, problem: Problem, options: SolverOptions, compile: str) -> ShapeSolver | None:
+        from ..solver.nlp import planarity_violation
+
+        kept = self._solvers.get(self._key(problem, options, compile))
+        while kept:
+            solver = kept.pop()
+            if solver.nlp.planar and planarity_violation(problem, solver.nlp.r0[:, 2]):
+                continue  # another plane: a planar solver of this problem is built anew
+            try:
+                solver.set_problem(problem)
+            except ValueError:
+                continue
+            solver.reset()
+            return solver
+        return None
+
+    def give(self, solver: ShapeSolver, compile: str) -> None:
+        key = self._key(solver.problem, solver.options, compile)
+        self._solvers.setdefault(key, []).append(solver)
+        self._solvers.move_to_end(key)
+        while sum(len(v) for v in self._solvers.values()) > self.size:
+            oldest = next(iter(self._solvers))
+            self._solvers[oldest].pop(0)
+            if not self._solvers[oldest]:
+                del self._solvers[oldest]
+
+
 class ObservedShape:
     """One observation's solver and data."""
 
-    def __init__(self, base: Problem, obs: Observation, options: SolverOptions, compile: str):
+    def __init__(self, base: Problem, obs: Observation, options: SolverOptions, compile: str,
+                 cache: SolverCache | None = None):
         self.obs = obs
         self.problem = base.with_grip_poses(obs.poses)
-        self.solver = _solver_for(self.problem, options, compile)
+        self.solver = _solver_for(self.problem, options, compile, cache)
 
     def solve(self, string: StringProperties) -> ShapeResult:
         """The equilibrium of this observation's poses with ``string``, warm-started from the last one."""
@@ -65,25 +115,31 @@ class ObservedShape:
         return self.solver.solve()
 
 
-def _solver_for(problem: Problem, options: SolverOptions, compile: str) -> ShapeSolver:
-    """A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is planar."""
+def _solver_for(problem: Problem, options: SolverOptions, compile: str,
+                cache: SolverCache | None = None) -> ShapeSolver:
+    """A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is planar;
+    from ``cache`` when it keeps one."""
+    def build(opts: SolverOptions) -> ShapeSolver:
+        kept = cache.take(problem, opts, compile) if cache is not None else None
+        return kept if kept is not None else ShapeSolver(problem, opts, compile=compile)
+
     if options.model == "auto":
         try:
-            return ShapeSolver(problem, replace(options, model="planar"), compile=compile)
+            return build(replace(options, model="planar"))
         except ValueError:  # not a planar scene
-            return ShapeSolver(problem, replace(options, model="full"), compile=compile)
-    return ShapeSolver(problem, options, compile=compile)
+            return build(replace(options, model="full"))
+    return build(options)
 
 
 class Objective:
     """Φ and its Gauss–Newton model at any θ (module docstring); ``solves`` counts equilibrium solves."""
 
     def __init__(self, problem: Problem, options: SolverOptions, data: ObservationSet, par: Parameterisation,
-                 settings: FitSettings):
+                 settings: FitSettings, cache: SolverCache | None = None):
         self.data, self.par, self.settings = data, par, settings
         # the scene with the knot tables from the start: a director model splits its elements at their knots
         scene = replace(problem, string=par.base)
-        self.observed = [ObservedShape(scene, obs, options, settings.compile) for obs in data.observations]
+        self.observed = [ObservedShape(scene, obs, options, settings.compile, cache) for obs in data.observations]
         self.regulariser = par.regulariser()
         self.s = np.linspace(0.0, par.length, settings.samples)
         self.solves = 0

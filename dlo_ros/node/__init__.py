@@ -4,9 +4,11 @@ Modules: ``dlo_node`` (the Node and ``main``), ``engine`` (the single solver wor
 "latest pending targets" slot), ``conversions`` (messages <-> numpy), ``validation`` (target checks),
 ``params`` (parameter table and checks), ``health`` (diagnostics content and warning throttling),
 ``client`` (node subprocess, domain-id leases and a small client, used by the demo, the benchmark and
-the tests), ``demo`` (the dual-arm demo job, ``run_demo_job``).  Interfaces: msg_docs/node.md.
-Only ``dlo_node``, ``conversions``, ``client`` and ``demo`` import rclpy or messages; importing this
-package does not.
+the tests), ``demo`` (the dual-arm demo job, ``run_demo_job``), and for identification (``fit.enabled``)
+``cloud`` (PointCloud2 → points), ``fitting`` (what is fitted and when it is applied) and ``fit_node``
+(``~/observed``, ``~/fit``).  Interfaces: msg_docs/node.md.
+Only ``dlo_node``, ``fit_node``, ``conversions``, ``client`` and ``demo`` import rclpy or messages
+(``cloud.points_to_cloud`` on call); importing this package does not.
 """
 from __future__ import annotations
 

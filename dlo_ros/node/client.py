@@ -225,7 +225,8 @@ class DloClient:
         self._cond = threading.Condition()
         self.paths: collections.deque[PathEvent] = collections.deque(maxlen=keep_paths)
         self.path_count = 0
-        self.diagnostics = None        # latest DiagnosticStatus of the node
+        self.diagnostics = None        # latest DiagnosticStatus '<node>: shape' of the node
+        self.other_diagnostics: dict[str, object] = {}  # the node's other statuses by name (e.g. '<node>: fit')
         self.diagnostics_count = 0
         self.wrenches: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
         self.markers = None
@@ -245,6 +246,8 @@ class DloClient:
                                   lambda msg, g=g: self._on_wrench(g, msg), WRENCH_QOS)
         self._query = n.create_client(GetPlan, f"{base}/query_shape")
         self._reset = n.create_client(Trigger, f"{base}/reset")
+        self._fit_client = self._cloud_publisher = None  # ~/fit, ~/observed: made on first use (fewer DDS
+        # entities to discover for the clients that never fit)
         self._set_params = n.create_client(SetParameters, f"{base}/set_parameters")
         self._get_params = n.create_client(GetParameters, f"{base}/get_parameters")
         self._msgs = {"PoseArray": PoseArray, "PoseStamped": PoseStamped, "GetPlan": GetPlan, "Trigger": Trigger,
@@ -285,8 +288,11 @@ class DloClient:
         for st in msg.status:
             if st.name.startswith(f"{self.node_name}:"):
                 with self._cond:
-                    self.diagnostics = st
-                    self.diagnostics_count += 1
+                    if st.name == f"{self.node_name}: shape":
+                        self.diagnostics = st
+                        self.diagnostics_count += 1
+                    else:
+                        self.other_diagnostics[st.name] = st
                     self._cond.notify_all()
 
     def _on_wrench(self, grip: str, msg) -> None:
@@ -338,6 +344,16 @@ class DloClient:
         """The first diagnostics status (values dict, status) for which ``where(values, status)`` holds."""
         def ready():
             st = self.diagnostics
+            if st is None:
+                return None
+            values = {kv.key: kv.value for kv in st.values}
+            return (values, st) if where(values, st) else None
+        return self.wait_for(ready, timeout)
+
+    def wait_for_fit_diagnostics(self, where: Callable[[dict[str, str], object], bool], timeout: float):
+        """As :meth:`wait_for_diagnostics`, for the status '<node>: fit' (fit.enabled)."""
+        def ready():
+            st = self.other_diagnostics.get(f"{self.node_name}: fit")
             if st is None:
                 return None
             values = {kv.key: kv.value for kv in st.values}
@@ -428,6 +444,49 @@ class DloClient:
         req.goal = pose_stamped(goal[0], goal[1], frame, 0)
         resp = self._call(self._query, req, timeout)
         return self._path_to_arrays(resp.plan)
+
+    @property
+    def _cloud_pub(self):
+        if self._cloud_publisher is None:
+            from sensor_msgs.msg import PointCloud2
+
+            from .dlo_node import CLOUD_QOS
+
+            self._cloud_publisher = self.node.create_publisher(PointCloud2, f"{self.node_name}/observed", CLOUD_QOS)
+        return self._cloud_publisher
+
+    @property
+    def _fit(self):
+        if self._fit_client is None:
+            self._fit_client = self.node.create_client(self._msgs["Trigger"], f"{self.node_name}/fit")
+        return self._fit_client
+
+    def publish_cloud(self, points, *, frame_id: str | None = None, stamp_ns: int | None = None) -> int:
+        """Publish ``points`` (N, 3) [m] as a float32 x, y, z PointCloud2 on ~/observed; returns the stamp [ns]."""
+        from .cloud import points_to_cloud
+
+        stamp = self._now_ns() if stamp_ns is None else stamp_ns
+        self._cloud_pub.publish(points_to_cloud(points, self.frame_id if frame_id is None else frame_id, stamp))
+        return stamp
+
+    def publish_cloud_msg(self, msg) -> None:
+        """Publish any PointCloud2 (or its serialised bytes) on ~/observed."""
+        self._cloud_pub.publish(msg)
+
+    def wait_for_cloud_subscriber(self, timeout: float = 10.0, settle: float = 0.5) -> bool:
+        """Wait until the node's ~/observed reader matched (then ``settle`` s more, see wait_for_subscribers)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self._cloud_pub.get_subscription_count() > 0:
+                time.sleep(settle)
+                return True
+            time.sleep(0.02)
+        return False
+
+    def fit(self, timeout: float = 30.0) -> tuple[bool, str]:
+        """Call ~/fit (it answers at once: whether a fit started, and why not)."""
+        resp = self._call(self._fit, self._msgs["Trigger"].Request(), timeout)
+        return resp.success, resp.message
 
     def reset(self, timeout: float = 30.0):
         resp = self._call(self._reset, self._msgs["Trigger"].Request(), timeout)

@@ -3,17 +3,20 @@
 Interfaces (all documented in msg_docs/node.md):
   subscribes  ~/grips/<grip>/target  geometry_msgs/PoseStamped   one grip's target
               ~/grips/targets        geometry_msgs/PoseArray     all grips at once, configuration order
+              ~/observed             sensor_msgs/PointCloud2     observed cable points (fit.enabled only)
   publishes   ~/centerline           nav_msgs/Path               reliable, transient local
               ~/markers              visualization_msgs/MarkerArray
               ~/grips/<grip>/wrench  geometry_msgs/WrenchStamped
               /diagnostics           diagnostic_msgs/DiagnosticArray
   services    ~/query_shape          nav_msgs/srv/GetPlan        what-if query, never touches the stream
               ~/reset                std_srvs/srv/Trigger        forget the warm start, re-solve cold
+              ~/fit                  std_srvs/srv/Trigger        identify the string from the newest cloud
+                                                                 (fit.enabled only; fit_node.py)
 
 Threads: a single-threaded executor (subscriptions, timers, parameters, and the services as
 coroutines) only checks inputs and hands them to the ShapeEngine's single worker thread, which runs
 every solve and publishes the centreline and wrenches.  Markers are published by a 10 Hz timer from
-the latest shape.
+the latest shape.  Fits (``fit.enabled``) run in their own worker process (fit_node.py).
 """
 from __future__ import annotations
 
@@ -65,6 +68,10 @@ WRENCH_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=R
                         durability=DurabilityPolicy.VOLATILE)
 DIAGNOSTICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.VOLATILE)
+#: ~/observed: sensors publish clouds best effort (rclpy's qos_profile_sensor_data); a best-effort reader
+#: matches both best-effort and reliable writers.  Only the newest cloud matters.
+CLOUD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       durability=DurabilityPolicy.VOLATILE)
 MARKER_PERIOD_S = 0.1
 STOP_TIMEOUT_S = 5.0  # how long shutdown waits for the solve in progress
 QUERIES_PER_WORKER = 2  # ~/query_shape calls pending per query worker before new ones are refused ("busy")
@@ -97,6 +104,7 @@ class DloNode(Node):
         super().__init__(node_name, **kwargs)
         self._closing = False
         self._declare(P.STATIC[:-1])
+        self._declare(P.FIT)
         scene = self._load_scene(self.get_parameter("scene").value)
         self.scene = scene
         frame_param = self.get_parameter("frame_id").value
@@ -178,6 +186,11 @@ class DloNode(Node):
         self._marker_timer = self.create_timer(MARKER_PERIOD_S, self._publish_markers)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
+        self._fitter = None
+        if self.get_parameter("fit.enabled").value:
+            from .fit_node import NodeFitter
+
+            self._fitter = NodeFitter(self)
 
         self.recorder = self._start_recorder()  # last start-up check: nothing can fail after it
         self.engine = ShapeEngine(problem, options, make_solver=self._make_solver, on_update=self._on_update,
@@ -384,8 +397,10 @@ class DloNode(Node):
         return answer
 
     def _warm_query_workers(self) -> None:
-        """Each query worker builds its solver and the held shape now, after the node's own first shape
-        (so that they do not compete with the node's start-up for the cores)."""
+        """Each query worker builds its solver and the held shape now, and the fit worker imports the fit,
+        after the node's own first shape (so that they do not compete with the node's start-up for the cores)."""
+        if self._fitter is not None:
+            self._fitter.warm()
         if self._query_pool is None:
             return
         for _ in range(self._query_workers):
@@ -614,7 +629,10 @@ class DloNode(Node):
                       for k, v in self.health.values().items()}
             status = conv.diagnostic_status(f"{self.get_fully_qualified_name()}: shape", level, safe_text(message),
                                             safe_text(self.scene.name), values)
-            msg = DiagnosticArray(header=conv.header("", self.get_clock().now().nanoseconds), status=[status])
+            statuses = [status]
+            if getattr(self, "_fitter", None) is not None:
+                statuses.append(self._fitter.status(safe_text(self.scene.name)))
+            msg = DiagnosticArray(header=conv.header("", self.get_clock().now().nanoseconds), status=statuses)
             try:
                 self._diag_pub.publish(msg)
             except Exception:  # noqa: BLE001 - the context may be shutting down
@@ -629,6 +647,9 @@ class DloNode(Node):
             from ..solver.batch import stop_pool
 
             stop_pool(pool, timeout)
+        fitter = getattr(self, "_fitter", None)
+        if fitter is not None:
+            fitter.close(timeout)
         stopped = self.engine.stop(timeout) if hasattr(self, "engine") else True
         recorder = getattr(self, "recorder", None)
         if recorder is not None:

@@ -117,7 +117,48 @@ LIVE = (
               low=0.0, high=3600.0),
 )
 
-SPECS = {p.name: p for p in STATIC + LIVE}
+#: Identification from an observed point cloud (~/observed, ~/fit; msg_docs/node.md "Fitting").
+FIT_PARAMETERS = ("Rf", "Rt", "D", "Re")  # = dlo_ros.identify.observations.PARAMETERS (kept light here)
+FIT = (
+    ParamSpec("fit.enabled", "bool", False,
+              "Subscribe to ~/observed (sensor_msgs/PointCloud2) and serve ~/fit: identify the string's properties "
+              "from the observed shape in a worker process beside the stream.", read_only=True),
+    ParamSpec("fit.period_s", "double", 0.0,
+              "Fit continuously: every period_s [s], when a cloud arrived since the last fit; 0 = only on ~/fit.",
+              read_only=True, low=0.0, high=3600.0),
+    ParamSpec("fit.max_points", "integer", 20000,
+              "Largest ~/observed cloud [points] accepted; a larger one is refused by its size before it is read.",
+              read_only=True, low=3, high=200000),
+    ParamSpec("fit.parameters", "string_array", ["Rf", "D"],
+              "What to identify, among Rf, Rt, D, Re (shapes alone determine only ratios such as D/Rf; "
+              "fit.total_mass makes them absolute).", constraints="a non-empty subset of Rf, Rt, D, Re"),
+    ParamSpec("fit.point_sigma", "double", 0.002,
+              "Noise of the observed points [m], standard deviation per coordinate (the stated sigma).",
+              low=1.0e-6, high=1.0),
+    ParamSpec("fit.total_mass", "double", 0.0,
+              "Known total mass of the string [kg] (sigma 0.1 %); 0 = unknown.", low=0.0, high=1.0e6),
+    ParamSpec("fit.apply_max_rel_sigma", "double", 0.1,
+              "Apply an estimate to the string.* parameters only when the relative standard deviation of every "
+              "value it changes is at most this; 0 = never apply (report only).", low=0.0, high=10.0),
+    ParamSpec("fit.max_iterations", "integer", 30, "Outer Levenberg-Marquardt iterations of one fit.",
+              low=1, high=200),
+)
+
+SPECS = {p.name: p for p in STATIC + LIVE + FIT}
+
+
+def fit_parameters_reason(value: Any) -> str:
+    """Why ``value`` cannot be ``fit.parameters`` ('' if it can)."""
+    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+        return f"expected a list of strings, got {_kind(value)}"
+    if not value:
+        return f"must name at least one of {', '.join(FIT_PARAMETERS)}"
+    for v in value:
+        if v not in FIT_PARAMETERS:
+            return f"'{safe_text(v, 40)}' is not one of {', '.join(FIT_PARAMETERS)}"
+    if len(set(value)) != len(value):
+        return "names a parameter twice"
+    return ""
 
 #: Values of the ``compile`` parameter (= dlo_ros.solver.shape_solver.COMPILE_MODES).
 COMPILE_MODES = ("background", "blocking", "cached", "off")
@@ -222,6 +263,9 @@ def check_live(name: str, value: Any, problem: Problem) -> str:
         return f"{name}: must be >= {spec.low}, got {value}"
     if spec.high is not None and value > spec.high:
         return f"{name}: must be <= {spec.high}, got {value}"
+    if name == "fit.parameters":
+        reason = fit_parameters_reason(value)
+        return f"{name}: {reason}" if reason else ""
     if name in STRING_FIELDS:
         try:
             replace(problem, string=apply_string(problem.string, {name: value})).validate()
@@ -335,6 +379,8 @@ def check_value(name: str, value: Any) -> str:
     if spec.kind == "bool":
         return "" if isinstance(value, bool) else f"expected true or false, got {_kind(value)}"
     if spec.kind == "string_array":
+        if name == "fit.parameters":
+            return fit_parameters_reason(value)
         ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
         return "" if ok else f"expected a list of strings, got {_kind(value)}"
     if isinstance(value, bool) or not isinstance(value, (int, float)):

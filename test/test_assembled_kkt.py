@@ -139,3 +139,12 @@ def test_the_assembled_inequality_rows_equal_the_flattened_ones(slots):
         z, p = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0])
         got, want = ca.DM(nlp.obstacle_g_fn(z, p)).full(), ca.DM(values(z, p)).full()
         assert np.max(np.abs(got - want)) <= 1e-12 * (1.0 + np.max(np.abs(want)))
+
+
+def test_the_assembled_constraint_jacobian_equals_the_flattened_one():
+    nlp = StringNLP(obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=2))
+    reference = ca.Function("flat_jacobian", [nlp.z_sym, nlp.p_sym], [ca.jacobian(nlp.g_sym, nlp.z_sym)])
+    rng = np.random.default_rng(9)
+    z, p = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0])
+    got, want = ca.DM(nlp.jac_g_fn(z, p)).full(), ca.DM(ca.densify(reference(z, p))).full()
+    assert np.max(np.abs(got - want)) <= 1e-12 * (1.0 + np.max(np.abs(want)))

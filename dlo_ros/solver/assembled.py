@@ -289,6 +289,55 @@ class AssembledKKT:
         g = ca.vertcat(*[v for _, v in parts])[np.argsort(order).tolist()]
         return ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g)])
 
+    def _position_rows(self, T, jt, x0, p, E):
+        """(g, ∂g/∂z) of the position rows: c_r · (κ_r x0 + Σ_k W_rk T_k − target_r) / L."""
+        L, d, n = self.nlp.length, self.d, self.n
+        X = ca.mtimes(T, ca.DM(self.Omega).T)  # 3 × rows: Σ_k W_rk T_k
+        g = (ca.DM(self.kappa) * ca.mtimes(ca.DM(self.C), x0) + ca.sum1(ca.DM(self.C).T * X).T
+             - ca.mtimes(ca.DM(self.target), p)) / L
+        omega_rep = np.repeat(self.Omega, d, axis=1)  # W_rk at column j + d k
+        jac = ca.mtimes(ca.mtimes(ca.DM(self.C), jt) * ca.DM(omega_rep), E) / L
+        return g, jac + ca.DM(_x0_columns(self.C * self.kappa[:, None], n))
+
+    @staticmethod
+    def _in_row_order(parts, rows: int):
+        """(g, ∂g/∂z) in the NLP's row order from [(rows, g, ∂g/∂z)] that cover rows 0 … rows − 1 once."""
+        order = np.concatenate([r for r, _, _ in parts]) if parts else np.zeros(0, dtype=int)
+        if sorted(order.tolist()) != list(range(rows)):
+            raise ValueError("assembled KKT: rows not covered exactly once")
+        inverse = np.argsort(order).tolist()
+        if not parts:
+            return ca.MX(0, 1), None
+        return ca.vertcat(*[gp for _, gp, _ in parts])[inverse], ca.vertcat(*[jp for _, _, jp in parts])[inverse, :]
+
+    def jacobian(self) -> ca.Function:
+        """``constraint_jacobian``: (z, p) → ∂g/∂z over every row, without the Hessian's work."""
+        nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
+        rows = nlp.g_sym.shape[0]
+        z, p = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size)
+        E = _sparse(self.E)
+        u = ca.reshape(ca.mtimes(E, z), d, M)
+        t = self.tangent_function()
+        uu = ca.SX.sym("u", d)
+        node = ca.Function("dlo_node_tangent_jacobian", [uu], [t(uu), ca.densify(ca.jacobian(t(uu), uu))])
+        T, jt = node.map(M, "serial")(u)
+        parts = []
+        if self.pos_rows.size:
+            parts.append((self.pos_rows, *self._position_rows(T, jt, z[0:3] * L, p, E)))
+        if self.local_rows.size:
+            zs, ps = nlp.z_sym, nlp.p_sym
+            g_local = nlp.g_sym[self.local_rows.tolist()]
+            local = ca.Function("dlo_local_jacobian", [zs, ps], [g_local, ca.jacobian(g_local, zs)])
+            parts.append((self.local_rows, *local(z, p)))
+        if rows > nlp.n_free_rows:
+            rows_nl, g_nl, _, _, groups = self._nonlinear_rows(z, p, ca.MX(rows, 1), T)
+            if rows_nl:
+                jac_nl = [self._group_jacobian(gr, jt, E, omega, kappa, n)
+                          for omega, kappa, grads, _ in groups for gr in grads]
+                parts.append((np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl)))
+        _, jac = self._in_row_order(parts, rows)
+        return ca.Function("constraint_jacobian", [z, p], [ca.densify(jac) if jac is not None else ca.MX(0, n)])
+
     def _system(self, z, p, lam, rows: int):
         """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their multipliers)."""
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
@@ -335,13 +384,7 @@ class AssembledKKT:
 
         parts = []  # (rows, g, ∂g/∂z)
         if pos_rows.size:
-            X = ca.mtimes(T, ca.DM(self.Omega).T)  # 3 × rows: Σ_k W_rk T_k
-            g_pos = (ca.DM(self.kappa) * ca.mtimes(ca.DM(self.C), x0) + ca.sum1(ca.DM(self.C).T * X).T
-                     - ca.mtimes(ca.DM(self.target), p)) / L
-            omega_rep = np.repeat(self.Omega, d, axis=1)  # W_rk at column j + d k
-            j_pos = ca.mtimes(ca.mtimes(ca.DM(self.C), jt_k) * ca.DM(omega_rep), E) / L
-            j_pos += ca.DM(_x0_columns(self.C * self.kappa[:, None], n))
-            parts.append((pos_rows, g_pos, j_pos))
+            parts.append((pos_rows, *self._position_rows(T, jt_k, x0, p, E)))
         if local_rows.size:
             parts.append((local_rows, g_loc, j_loc))
         rows_nl, g_nl, _, _, groups = nonlinear
@@ -353,12 +396,7 @@ class AssembledKKT:
                     D = self._position_derivatives(jt_k, E, omega, kappa, n)
                     hess += ca.mtimes(D.T, ca.mtimes(self._block_diagonal(weighted), D))
             parts.append((np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl)))
-        order = np.concatenate([r for r, _, _ in parts]) if parts else np.zeros(0, dtype=int)
-        if sorted(order.tolist()) != list(range(rows)):
-            raise ValueError("assembled KKT: rows not covered exactly once")
-        inverse = np.argsort(order).tolist()
-        g = ca.vertcat(*[gp for _, gp, _ in parts])[inverse] if parts else ca.MX(0, 1)
-        jac = ca.vertcat(*[jp for _, _, jp in parts])[inverse, :] if parts else ca.MX(0, n)
+        g, jac = self._in_row_order(parts, rows)
 
         grad_f = grad - ca.mtimes(jac.T, lam)
         bend, twist, stretch = ca.sum2(bend_k), ca.sum2(twist_k), ca.sum2(stretch_k)

@@ -366,8 +366,7 @@ class StringNLP:
                 self.obstacle_g_fn = assembled.inequality_g()
             zm, pm, lm = ca.MX.sym("z", z.shape[0]), ca.MX.sym("p", lay.size), ca.MX.sym("lam", g.shape[0])
             self.hessian_fn = ca.Function("lagrangian_hessian", [zm, pm, lm], [self.kkt_fn(zm, pm, lm)[3]])
-            self.jac_g_fn = ca.Function("constraint_jacobian", [zm, pm],
-                                        [self.kkt_fn(zm, pm, ca.MX.zeros(g.shape[0]))[2]])
+            self.jac_g_fn = assembled.jacobian()
         else:
             self._flattened_kkt(objective, g, z, p, lam, nf, ca.densify(ca.vertcat(bend, twist, stretch, grav, work)))
         self.newton_fn = self.newton_function()

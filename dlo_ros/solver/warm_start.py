@@ -94,8 +94,7 @@ def warm_state(nlp: StringNLP, fns: NlpFunctions, parameters: ProblemParameters,
     if nlp.director:
         # rows the source had no twin for (unit norms, folds, the frame rows): least-squares multipliers
         nf = nlp.n_free_rows
-        _, _, grad, _ = fns.kkt_free(z, p, lam[:nf])
-        jac = np.asarray(nlp.jac_g_fn(z, p))
+        grad, _, jac, _, _ = fns.kkt(z, p, lam)  # ∇f does not depend on λ; one call gives ∇f and ∂g/∂z
         rest = np.asarray(grad).ravel() + jac[nf:].T @ lam[nf:]  # contacts keep their matched multipliers
         lam[:nf] = np.linalg.lstsq(jac[:nf].T, -rest, rcond=None)[0]
     return SolverState(z, lam, np.zeros(lay.size), p)

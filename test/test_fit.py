@@ -69,31 +69,49 @@ def relative_error(value: float, truth: float) -> float:
     return abs(value / truth - 1.0)
 
 
-def test_sensitivity_matches_re_solving():
-    """dx/dθ and dF/dθ from the KKT system against central differences of cold re-solves (3D, twisted
-    clamp, so that Rt, Rf and D all move the shape)."""
-    problem = clamped_pair(right=(0.6, 0.1, 0.2), q_right=[np.sin(0.5), 0.0, 0.0, np.cos(0.5)], weight=0.5)
-    options = SolverOptions(model="full", order=12)
+@pytest.mark.parametrize("model", ["full", "planar"])
+def test_sensitivity_matches_re_solving(model):
+    """dx/dθ, dF/dθ and dT/dθ (grip torques) from the KKT system against central differences of re-solves
+    (h = 1e-5 in log units).  'full': the 3D director model with a twisted clamp, so that Rt, Rf and D all
+    move the shape and both clamps carry all three torque rows; 'planar': a sagging in-plane pair (T = μ_φ n).
+    The torques are compared with the solver's own published reactions (``ShapeResult.grips``)."""
+    if model == "full":
+        problem = clamped_pair(right=(0.6, 0.1, 0.2), q_right=[np.sin(0.5), 0.0, 0.0, np.cos(0.5)], weight=0.5)
+        names = ("Rf", "Rt", "D")
+    else:
+        problem = clamped_pair(right=(0.6, 0.0, 0.1), q_right=[0.0, np.sin(-0.4), 0.0, np.cos(-0.4)], weight=5.0)
+        names = ("Rf", "D")
+    options = SolverOptions(model=model, order=12)
     solver = ShapeSolver(problem, options, compile="off")
-    assert solver.solve().ok
+    result = solver.solve()
+    assert result.ok
     s = np.linspace(0.0, 1.0, 9)
-    sens = shape_sensitivity(solver, ("Rf", "Rt", "D"), s)
+    sens = shape_sensitivity(solver, names, s)
+    for grip in ("left", "right"):  # the torque the sensitivity differentiates is the published one
+        assert np.allclose(sens.grip_torques[grip], result.grips[grip].torque, rtol=0, atol=1e-12), grip
     h = 1e-5
     other = ShapeSolver(problem, options, compile="off")  # re-solved from its own warm start each time
     assert other.solve().ok
     for k, name in enumerate(sens.names):
         field = {"Rf": "bend_stiffness", "Rt": "twist_stiffness", "D": "weight_per_length"}[name]
-        sides = []
+        sides, torques = [], []
         for sign in (1.0, -1.0):
             st = problem.string
             other.set_problem(replace(problem, string=replace(st, **{field: getattr(st, field).scaled(np.exp(sign * h))})))
-            assert other.solve().ok
+            res = other.solve()
+            assert res.ok
             sides.append(shape_sensitivity(other, (), s))
+            torques.append({g: res.grips[g].torque for g in ("left", "right")})
         fd_points = (sides[0].points - sides[1].points) / (2 * h)
         fd_force = (sides[0].grip_forces["right"] - sides[1].grip_forces["right"]) / (2 * h)
         assert np.abs(fd_points).max() > 1e-3, name  # the parameter does move the shape
         assert np.allclose(sens.d_points[:, :, k], fd_points, atol=1e-8), name
         assert np.allclose(sens.d_grip_forces["right"][:, k], fd_force, atol=1e-6 * np.abs(fd_force).max()), name
+        for grip in ("left", "right"):
+            fd_torque = (torques[0][grip] - torques[1][grip]) / (2 * h)
+            assert np.abs(fd_torque).max() > 1e-3, (name, grip)  # the torque does depend on it
+            error = np.abs(sens.d_grip_torques[grip][:, k] - fd_torque).max() / np.abs(fd_torque).max()
+            assert error < 1e-7, (name, grip, error)
 
 
 def test_point_to_curve_is_normal_distance():

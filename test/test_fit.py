@@ -181,14 +181,17 @@ def test_measured_torque_gives_absolute_values(reference, model):
     assert 0.7 < result.chi2_reduced < 1.4
 
 
-def test_torque_at_a_pin_is_refused(reference):
-    """A pin exerts no torque: a torque measured there is an error naming the field."""
+def test_torque_at_a_pin_or_with_euler_angles_is_refused(reference):
+    """A pin exerts no torque, and the 3D Euler-angle model does not differentiate its torques: either is
+    an error naming the field."""
     problem = scene_problem()
     pinned = replace(problem, grips=(replace(problem.grips[0], mode="pin"),))
     torque = TorqueObservation("hand", np.zeros(3), 1e-3)
     data = ObservationSet((Observation("hang", {}, cloud(reference, 2), SIGMA, torque=torque),), ("Rf", "D"))
     with pytest.raises(ObservationError, match=r"observations\[0\]\.torque\.grip: grip 'hand' is a pin"):
         fit(pinned, SolverOptions(), data)
+    with pytest.raises(ObservationError, match=r"observations\[0\]\.torque: a measured torque needs the director"):
+        fit(problem, SolverOptions(model="full", rotation="euler"), data)
 
 
 def test_known_mass_gives_absolute_values(reference):

@@ -44,9 +44,9 @@ class ForceObservation:
 
 @dataclass(frozen=True)
 class TorqueObservation:
-    """The torque [N·m] one grip exerts ON the string about the grip point (world frame; a sensor on the
-    gripper reads −torque, about its own origin: move it to the grip point first), with its standard
-    deviation σ [N·m] per component.  The grip must hold an orientation (a pin exerts no torque)."""
+    """The torque [N·m] one grip exerts ON the string about the grip point (world frame), with its standard
+    deviation σ [N·m] per component.  A sensor on the gripper with origin o reading (F_s, T_s) gives
+    torque = −(T_s − r × F_s), r = x_grip − o.  The grip must hold an orientation (a pin exerts no torque)."""
 
     grip: str
     torque: np.ndarray

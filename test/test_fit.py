@@ -21,8 +21,8 @@ from conftest import clamped_pair
 from reference.kirchhoff import continuation, rot_x, solve_clamped
 
 from dlo_ros import cli
-from dlo_ros.identify import (ForceObservation, MassObservation, Observation, ObservationError, ObservationSet, fit,
-                              observation_set_from_dict)
+from dlo_ros.identify import (ForceObservation, MassObservation, Observation, ObservationError, ObservationSet,
+                              TorqueObservation, fit, observation_set_from_dict)
 from dlo_ros.identify.curve import point_to_curve
 from dlo_ros.identify.observations import ProfileFit
 from dlo_ros.model import Grip, GripPose, Problem, Profile, StringProperties
@@ -69,31 +69,49 @@ def relative_error(value: float, truth: float) -> float:
     return abs(value / truth - 1.0)
 
 
-def test_sensitivity_matches_re_solving():
-    """dx/dθ and dF/dθ from the KKT system against central differences of cold re-solves (3D, twisted
-    clamp, so that Rt, Rf and D all move the shape)."""
-    problem = clamped_pair(right=(0.6, 0.1, 0.2), q_right=[np.sin(0.5), 0.0, 0.0, np.cos(0.5)], weight=0.5)
-    options = SolverOptions(model="full", order=12)
+@pytest.mark.parametrize("model", ["full", "planar"])
+def test_sensitivity_matches_re_solving(model):
+    """dx/dθ, dF/dθ and dT/dθ (grip torques) from the KKT system against central differences of re-solves
+    (h = 1e-5 in log units).  'full': the 3D director model with a twisted clamp, so that Rt, Rf and D all
+    move the shape and both clamps carry all three torque rows; 'planar': a sagging in-plane pair (T = μ_φ n).
+    The torques are compared with the solver's own published reactions (``ShapeResult.grips``)."""
+    if model == "full":
+        problem = clamped_pair(right=(0.6, 0.1, 0.2), q_right=[np.sin(0.5), 0.0, 0.0, np.cos(0.5)], weight=0.5)
+        names = ("Rf", "Rt", "D")
+    else:
+        problem = clamped_pair(right=(0.6, 0.0, 0.1), q_right=[0.0, np.sin(-0.4), 0.0, np.cos(-0.4)], weight=5.0)
+        names = ("Rf", "D")
+    options = SolverOptions(model=model, order=12)
     solver = ShapeSolver(problem, options, compile="off")
-    assert solver.solve().ok
+    result = solver.solve()
+    assert result.ok
     s = np.linspace(0.0, 1.0, 9)
-    sens = shape_sensitivity(solver, ("Rf", "Rt", "D"), s)
+    sens = shape_sensitivity(solver, names, s)
+    for grip in ("left", "right"):  # the torque the sensitivity differentiates is the published one
+        assert np.allclose(sens.grip_torques[grip], result.grips[grip].torque, rtol=0, atol=1e-12), grip
     h = 1e-5
     other = ShapeSolver(problem, options, compile="off")  # re-solved from its own warm start each time
     assert other.solve().ok
     for k, name in enumerate(sens.names):
         field = {"Rf": "bend_stiffness", "Rt": "twist_stiffness", "D": "weight_per_length"}[name]
-        sides = []
+        sides, torques = [], []
         for sign in (1.0, -1.0):
             st = problem.string
             other.set_problem(replace(problem, string=replace(st, **{field: getattr(st, field).scaled(np.exp(sign * h))})))
-            assert other.solve().ok
+            res = other.solve()
+            assert res.ok
             sides.append(shape_sensitivity(other, (), s))
+            torques.append({g: res.grips[g].torque for g in ("left", "right")})
         fd_points = (sides[0].points - sides[1].points) / (2 * h)
         fd_force = (sides[0].grip_forces["right"] - sides[1].grip_forces["right"]) / (2 * h)
         assert np.abs(fd_points).max() > 1e-3, name  # the parameter does move the shape
         assert np.allclose(sens.d_points[:, :, k], fd_points, atol=1e-8), name
         assert np.allclose(sens.d_grip_forces["right"][:, k], fd_force, atol=1e-6 * np.abs(fd_force).max()), name
+        for grip in ("left", "right"):
+            fd_torque = (torques[0][grip] - torques[1][grip]) / (2 * h)
+            assert np.abs(fd_torque).max() > 1e-3, (name, grip)  # the torque does depend on it
+            error = np.abs(sens.d_grip_torques[grip][:, k] - fd_torque).max() / np.abs(fd_torque).max()
+            assert error < 1e-7, (name, grip, error)
 
 
 def test_point_to_curve_is_normal_distance():
@@ -139,6 +157,41 @@ def test_measured_force_gives_absolute_values(reference):
     assert relative_error(result.parameters["D"].value, D) < 0.03
     assert result.not_identifiable == {}
     assert result.observations[0].force_residual_n < 1e-2
+
+
+@pytest.mark.parametrize("model", ["auto", "full"])
+def test_measured_torque_gives_absolute_values(reference, model):
+    """With the clamp's torque alone (no force, no mass; the reference's moment about the clamp point,
+    |T| = 52.7 mN·m, with 0.5 mN·m noise per component, about 1 %): absolute Rf and D within 3 % and
+    within 3 stated σ, D/Rf within 3 %, from Rf 40 % off.  'auto' solves the planar model, 'full' the 3D
+    director model (whose dT/dθ comes from the node frame's derivative)."""
+    rng = np.random.default_rng(8)
+    torque = TorqueObservation("hand", reference.moment0 + rng.normal(0.0, 5e-4, 3), 5e-4)
+    data = ObservationSet((Observation("hang", {}, cloud(reference, 2), SIGMA, torque=torque),), ("Rf", "D"))
+    result = fit(scene_problem(bend=0.6 * RF), SolverOptions(model=model), data)
+    assert result.ok, result.message
+    assert result.not_identifiable == {}
+    for name, truth in (("Rf", RF), ("D", D)):
+        est = result.parameters[name]
+        assert relative_error(est.value, truth) < 0.03, (name, est)
+        assert abs(est.value - truth) < 3 * est.std, (name, est)
+    assert relative_error(result.ratios["D/Rf"].value, D / RF) < 0.03
+    assert result.observations[0].force_residual_n is None
+    assert result.observations[0].torque_residual_nm < 3e-3
+    assert 0.7 < result.chi2_reduced < 1.4
+
+
+def test_torque_at_a_pin_or_with_euler_angles_is_refused(reference):
+    """A pin exerts no torque, and the 3D Euler-angle model does not differentiate its torques: either is
+    an error naming the field."""
+    problem = scene_problem()
+    pinned = replace(problem, grips=(replace(problem.grips[0], mode="pin"),))
+    torque = TorqueObservation("hand", np.zeros(3), 1e-3)
+    data = ObservationSet((Observation("hang", {}, cloud(reference, 2), SIGMA, torque=torque),), ("Rf", "D"))
+    with pytest.raises(ObservationError, match=r"observations\[0\]\.torque\.grip: grip 'hand' is a pin"):
+        fit(pinned, SolverOptions(), data)
+    with pytest.raises(ObservationError, match=r"observations\[0\]\.torque: a measured torque needs the director"):
+        fit(problem, SolverOptions(model="full", rotation="euler"), data)
 
 
 def test_known_mass_gives_absolute_values(reference):
@@ -204,6 +257,25 @@ def test_cli_fit_json_and_write_scene(tmp_path, reference, capsys):
             "/fit/summary"} <= entities
 
 
+def test_cli_fit_with_a_measured_torque(tmp_path, reference, capsys):
+    """`observations[i].torque` in the file: the JSON has the same keys as before plus each observation's
+    torque_residual_nm; Rf and D come out absolute (noise-free torque, σ 0.5 mN·m); the text summary
+    reports the torque residual."""
+    path = write_case(tmp_path, reference)
+    doc = yaml.safe_load(open(path))
+    doc["observations"][0]["torque"] = {"grip": "hand", "torque": reference.moment0.tolist(), "sigma": 5e-4}
+    open(path, "w").write(yaml.safe_dump(doc))
+    assert cli.main(["fit", path, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out["observations"][0]) == {"name", "points", "rms_m", "median_m", "max_m", "downweighted",
+                                          "force_residual_n", "torque_residual_nm"}
+    assert out["observations"][0]["force_residual_n"] is None and out["observations"][0]["torque_residual_nm"] < 2e-3
+    assert relative_error(out["parameters"]["Rf"]["value"], RF) < 0.03
+    assert relative_error(out["parameters"]["D"]["value"], D) < 0.03
+    assert cli.main(["fit", path]) == 0
+    assert "torque residual" in capsys.readouterr().out
+
+
 def test_shipped_example_recovers_the_cable_it_was_made_from(capsys):
     """config/observations/default_cable_hanging.yaml (bench/example_observation.py: the Kirchhoff shooting
     solver's shape of a cable with Rf = 0.03, D = 0.7 in default_cable's clamps, 1.5 mm noise, 30 %
@@ -249,6 +321,20 @@ def test_cli_reads_ply_points_like_npy(tmp_path, reference, capsys):
      "observations[0].grips.foot: no such grip"),
     ({"observations": [{"name": "a", "points_file": "hang.npy",
                         "force": {"grip": "hand", "force": [0, 0]}}]}, "observations[0].force.sigma: missing"),
+    ({"observations": [{"name": "a", "points_file": "hang.npy",
+                        "torque": {"grip": "hand", "torque": [0, 0], "sigma": 1e-3}}]},
+     "observations[0].torque.torque: expected 3 numbers"),
+    ({"observations": [{"name": "a", "points_file": "hang.npy",
+                        "torque": {"grip": "hand", "torque": [0, 0.05, 0]}}]}, "observations[0].torque.sigma: missing"),
+    ({"observations": [{"name": "a", "points_file": "hang.npy",
+                        "torque": {"grip": "hand", "torque": [0, 0.05, 0], "sigma": -1}}]},
+     "observations[0].torque.sigma: expected a finite number > 0"),
+    ({"observations": [{"name": "a", "points_file": "hang.npy",
+                        "torque": {"grip": "foot", "torque": [0, 0.05, 0], "sigma": 1e-3}}]},
+     "observations[0].torque.grip: no grip 'foot'"),
+    ({"observations": [{"name": "a", "points_file": "hang.npy",
+                        "torque": {"grip": "hand", "moment": [0, 0.05, 0], "sigma": 1e-3}}]},
+     "observations[0].torque.moment: unknown key"),
 ])
 def test_cli_bad_input_names_the_field(tmp_path, reference, capsys, change, key):
     path = write_case(tmp_path, reference)

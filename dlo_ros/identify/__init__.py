@@ -2,8 +2,8 @@
 identifiability and the bilevel Levenberg–Marquardt fit (msg_docs/fitting.md)."""
 from .fit import Estimate, FitResult, FitSettings, ObservationFit, fit
 from .observations import (ForceObservation, MassObservation, Observation, ObservationError, ObservationSet,
-                           ProfileFit, load_observations, observation_set_from_dict)
+                           ProfileFit, TorqueObservation, load_observations, observation_set_from_dict)
 
 __all__ = ["Estimate", "FitResult", "FitSettings", "ForceObservation", "MassObservation", "Observation",
-           "ObservationError", "ObservationFit", "ObservationSet", "ProfileFit", "fit", "load_observations",
+           "ObservationError", "ObservationFit", "ObservationSet", "ProfileFit", "TorqueObservation", "fit", "load_observations",
            "observation_set_from_dict"]

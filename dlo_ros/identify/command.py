@@ -54,6 +54,8 @@ def format_fit(result) -> str:
         lines.append(f"{name:6s}: not identifiable (kept at the scene's value): {why}")
     for o in result.observations:
         force = "" if o.force_residual_n is None else f", force residual {o.force_residual_n:.3g} N"
+        if o.torque_residual_nm is not None:
+            force += f", torque residual {o.torque_residual_nm:.3g} N·m"
         lines.append(f"observation {o.name}: {o.points} points, rms {o.rms_m * 1e3:.3g} mm, median "
                      f"{o.median_m * 1e3:.3g} mm, max {o.max_m * 1e3:.3g} mm, {o.downweighted} down-weighted{force}")
     return "\n".join(lines)

@@ -6,10 +6,12 @@ smoothness regulariser ½|Rθ|² added to Φ.  Inner level: every observation's 
 observation, warm-started from its previous θ (Newton on the KKT conditions; IPOPT only as its fallback).
 Outer level: minimise
 
-    Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ ((W_known − ∫D ds) / σ_W)²
+    Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ Σ ((T_meas − T(θ)) / σ_T)²
+           + ½ ((W_known − ∫D ds) / σ_W)²
 
 with r_j the point-to-curve residual of point j (``curve.py``), ρ Huber's loss (quadratic up to
-``huber`` σ, linear beyond: outliers count less), the optional measured grip force and known weight.
+``huber`` σ, linear beyond: outliers count less), the optional measured grip force, grip torque (about the
+grip point) and known weight.
 The Jacobian comes from the implicit-function theorem on the KKT system (``solver/sensitivity.py``):
 one linear solve per observation and iteration, no finite differences.  Steps are Gauss–Newton steps
 with iteratively reweighted (Huber) normal matrix A = Jᵀ W J / σ², Levenberg-damped, restricted to the

@@ -5,8 +5,8 @@
 determined iff c is orthogonal to that null space: θ_k alone (c = e_k) gives an absolute value,
 θ_a − θ_b (c = e_a − e_b) the ratio a/b.  From shapes alone the equilibrium depends on D/Rf, Rt/Rf and
 Re/Rf only (scaling every material by one factor scales the energy, not its minimiser), so (1, …, 1) is
-in the null space of every shape-only fit that frees Rf with the others; a grip force or the total
-weight removes it.  A parameter that enters no solved model (Rt of a planar shape, which no clamp
+in the null space of every shape-only fit that frees Rf with the others; a grip force, a grip torque or
+the total weight removes it (each scales with the materials while the shape does not).  A parameter that enters no solved model (Rt of a planar shape, which no clamp
 twists) has a zero column.
 """
 from __future__ import annotations
@@ -96,8 +96,8 @@ def analyse(names: tuple[str, ...], normal: np.ndarray, tolerance: float = RANK_
         if partners:
             ratios = ", ".join(f"{a}/{b}" for a, b in (sorted((name, o), key=_ratio_order) for o in partners))
             why[name] = (f"the data determine only ratios ({ratios}): from shapes alone the equilibrium depends on "
-                         "D/Rf, Rt/Rf and Re/Rf; an absolute value needs a measured grip force (force) or the known "
-                         "total mass (total_mass)")
+                         "D/Rf, Rt/Rf and Re/Rf; an absolute value needs a measured grip force (force), a measured "
+                         "grip torque (torque) or the known total mass (total_mass)")
         else:
             why[name] = NEITHER
     return Identifiability(tuple(names), eig, vec, null, why)

@@ -1,9 +1,11 @@
 """The outer objective of a fit at θ: every observation's equilibrium, residuals, Jacobian and normal matrix.
 
-    Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ ((W_known − ∫D ds) / σ_W)² + ½ |Rθ|²
+    Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ Σ ((T_meas − T(θ)) / σ_T)²
+           + ½ ((W_known − ∫D ds) / σ_W)² + ½ |Rθ|²
 
-r_j: point-to-curve residuals (``curve.py``); ρ: Huber's loss; F: a measured grip force; W: the known
-weight; R: the profile regulariser (``parameters.py``).  Each evaluation solves each observation's
+r_j: point-to-curve residuals (``curve.py``); ρ: Huber's loss; F: a measured grip force; T: a measured grip
+torque (about the grip point; dT/dθ for the director and planar models only); W: the known weight; R: the
+profile regulariser (``parameters.py``).  Each evaluation solves each observation's
 equilibrium once (its own warm-started ``ShapeSolver``) and takes dr/dθ from the KKT system
 (``solver/sensitivity.py``).  The Gauss–Newton normal matrix and gradient use Huber's IRLS weights
 w_j = min(1, huber / u_j), u_j = |r_j| / σ.
@@ -20,7 +22,7 @@ from ..model.problem import Problem, StringProperties
 from ..solver import ShapeResult, ShapeSolver, SolverOptions
 from ..solver.sensitivity import shape_sensitivity
 from .curve import point_to_curve
-from .observations import Observation, ObservationSet
+from .observations import Observation, ObservationError, ObservationSet
 from .parameters import Parameterisation, profile_mean
 from .results import ObservationFit
 
@@ -140,6 +142,11 @@ class Objective:
         # the scene with the knot tables from the start: a director model splits its elements at their knots
         scene = replace(problem, string=par.base)
         self.observed = [ObservedShape(scene, obs, options, settings.compile, cache) for obs in data.observations]
+        for i, o in enumerate(self.observed):
+            if o.obs.torque is not None and not (o.solver.nlp.director or o.solver.nlp.planar):
+                raise ObservationError(f"observations[{i}].torque: a measured torque needs the director or planar "
+                                       "model (solver.rotation 'director'); the scene's 3D Euler model does not "
+                                       "differentiate its grip torques")
         self.regulariser = par.regulariser()
         self.s = np.linspace(0.0, par.length, settings.samples)
         self.solves = 0
@@ -168,21 +175,28 @@ class Objective:
             jw = cr.jacobian / sigma
             normal += np.einsum("n,nik,nil->kl", w, jw, jw)
             gradient += np.einsum("n,nik,ni->k", w, jw, cr.residuals / sigma)
-            force_res = None
+            force_res = torque_res = None
+            measured = []  # (measured, predicted, d predicted/dθ, σ) of the grip force and torque
             if o.obs.force is not None:
                 f = o.obs.force
-                r = (f.force - sens.grip_forces[f.grip]) / f.sigma
-                jf = -sens.d_grip_forces[f.grip] / f.sigma
+                measured.append((f.force, sens.grip_forces[f.grip], sens.d_grip_forces[f.grip], f.sigma))
+                force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
+            if o.obs.torque is not None:
+                t = o.obs.torque
+                measured.append((t.torque, sens.grip_torques[t.grip], sens.d_grip_torques[t.grip], t.sigma))
+                torque_res = float(np.linalg.norm(t.torque - sens.grip_torques[t.grip]))
+            for value, predicted, d_predicted, sigma_v in measured:
+                r = (value - predicted) / sigma_v
+                jv = -d_predicted / sigma_v
                 cost += 0.5 * float(r @ r)
                 chi2 += float(r @ r)
                 rows += 3
-                normal += jf.T @ jf
-                gradient += jf.T @ r
-                force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
+                normal += jv.T @ jv
+                gradient += jv.T @ r
             d = cr.distances
             fits.append(ObservationFit(o.obs.name, len(d), float(np.sqrt(np.mean(d * d))), float(np.median(d)),
                                        float(d.max()), int(np.sum(u > settings.huber)), force_res,
-                                       sens.points, o.obs.points - cr.residuals))
+                                       sens.points, o.obs.points - cr.residuals, torque_res))
         if data.total_mass is not None:
             weight, sigma_w = data.total_mass.weight
             predicted = profile_mean(string.weight_per_length, base.length) * base.length

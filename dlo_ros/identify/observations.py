@@ -1,7 +1,8 @@
 """Observations of a string's shape, and the observation file (``msg_docs/fitting.md``).
 
 An observation is one static shape: the grip poses it was held at and observed centreline points
-(unordered, noisy with a stated σ, possibly partial), optionally the force measured at one grip.  An
+(unordered, noisy with a stated σ, possibly partial), optionally the force and the torque measured at a
+grip (each at one grip, not necessarily the same).  An
 observation set adds what is fitted, the scene it refers to and, optionally, the known total mass.
 Every reader raises ``ObservationError`` (a ValueError) whose message starts with the offending key path.
 """
@@ -42,15 +43,28 @@ class ForceObservation:
 
 
 @dataclass(frozen=True)
+class TorqueObservation:
+    """The torque [N·m] one grip exerts ON the string about the grip point (world frame), with its standard
+    deviation σ [N·m] per component.  A sensor on the gripper with origin o reading (F_s, T_s) gives
+    torque = −(T_s − r × F_s), r = x_grip − o.  The grip must hold an orientation (a pin exerts no torque)."""
+
+    grip: str
+    torque: np.ndarray
+    sigma: float
+
+
+@dataclass(frozen=True)
 class Observation:
     """One static shape: grip poses (grips not named keep the scene's poses), observed points (N, 3) [m]
-    in any order, their noise σ [m] (standard deviation per coordinate), an optional grip force."""
+    in any order, their noise σ [m] (standard deviation per coordinate), an optional grip force and an
+    optional grip torque."""
 
     name: str
     poses: dict[str, GripPose]
     points: np.ndarray
     sigma: float
     force: ForceObservation | None = None
+    torque: TorqueObservation | None = None
 
 
 @dataclass(frozen=True)
@@ -88,8 +102,10 @@ class ObservationSet:
     profiles: dict[str, ProfileFit] = field(default_factory=dict)
 
     def check(self, problem: Problem) -> None:
-        """Raise ObservationError when the observations do not fit ``problem`` (unknown grips)."""
+        """Raise ObservationError when the observations do not fit ``problem`` (unknown grips, a torque at a
+        pin)."""
         names = {g.name for g in problem.grips}
+        modes = {g.name: g.mode for g in problem.grips}
         for i, obs in enumerate(self.observations):
             for grip in obs.poses:
                 if grip not in names:
@@ -97,6 +113,11 @@ class ObservationSet:
                                            f"(grips: {sorted(names)})")
             if obs.force is not None and obs.force.grip not in names:
                 raise ObservationError(f"observations[{i}].force.grip: no grip {obs.force.grip!r} in the scene")
+            if obs.torque is not None and obs.torque.grip not in names:
+                raise ObservationError(f"observations[{i}].torque.grip: no grip {obs.torque.grip!r} in the scene")
+            if obs.torque is not None and modes[obs.torque.grip] == "pin":
+                raise ObservationError(f"observations[{i}].torque.grip: grip {obs.torque.grip!r} is a pin: it exerts "
+                                       "no torque (measure it at a clamp or tangent grip)")
 
 
 # ---- readers ----------------------------------------------------------------------------------------
@@ -155,24 +176,33 @@ def _points_file(value: object, key: str, base: Path) -> np.ndarray:
     return _points(arr, key)
 
 
-def _force(value: object, key: str) -> ForceObservation:
+def _grip_vector(value: object, key: str, field: str) -> tuple[str, np.ndarray, float]:
+    """(grip, 3-vector, σ) of a measured force or torque mapping {grip, <field>, sigma}."""
     d = _mapping(value, key)
-    _only(d, ("grip", "force", "sigma"), key)
-    for name in ("grip", "force", "sigma"):
+    _only(d, ("grip", field, "sigma"), key)
+    for name in ("grip", field, "sigma"):
         if name not in d:
             raise ObservationError(f"{key}.{name}: missing")
     if not isinstance(d["grip"], str):
         raise ObservationError(f"{key}.grip: expected a grip name")
     try:
-        force = finite_vector(d["force"], 3, f"{key}.force")
+        vector = finite_vector(d[field], 3, f"{key}.{field}")
     except (TypeError, ValueError) as exc:
         raise ObservationError(str(exc)) from None
-    return ForceObservation(d["grip"], force, _positive(d["sigma"], f"{key}.sigma"))
+    return d["grip"], vector, _positive(d["sigma"], f"{key}.sigma")
+
+
+def _force(value: object, key: str) -> ForceObservation:
+    return ForceObservation(*_grip_vector(value, key, "force"))
+
+
+def _torque(value: object, key: str) -> TorqueObservation:
+    return TorqueObservation(*_grip_vector(value, key, "torque"))
 
 
 def _observation(value: object, key: str, sigma: float | None, base: Path) -> Observation:
     d = _mapping(value, key)
-    _only(d, ("name", "grips", "points", "points_file", "sigma", "force"), key)
+    _only(d, ("name", "grips", "points", "points_file", "sigma", "force", "torque"), key)
     if ("points" in d) == ("points_file" in d):
         raise ObservationError(f"{key}.points: give exactly one of points or points_file")
     points = _points(d["points"], f"{key}.points") if "points" in d else \
@@ -194,7 +224,8 @@ def _observation(value: object, key: str, sigma: float | None, base: Path) -> Ob
         except (TypeError, ValueError) as exc:
             raise ObservationError(str(exc)) from None
     force = _force(d["force"], f"{key}.force") if d.get("force") is not None else None
-    return Observation(str(d.get("name", key)), poses, points, s, force)
+    torque = _torque(d["torque"], f"{key}.torque") if d.get("torque") is not None else None
+    return Observation(str(d.get("name", key)), poses, points, s, force, torque)
 
 
 def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | None = None) -> ObservationSet:

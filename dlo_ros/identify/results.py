@@ -32,7 +32,8 @@ class Estimate:
 @dataclass
 class ObservationFit:
     """Residuals of one observation at the fit: |r| statistics over its points [m], how many points the
-    robust loss down-weighted (|r| > huber σ), and the grip-force residual |F_meas − F| [N] if measured."""
+    robust loss down-weighted (|r| > huber σ), the grip-force residual |F_meas − F| [N] and the grip-torque
+    residual |T_meas − T| [N·m] where measured."""
 
     name: str
     points: int
@@ -44,10 +45,12 @@ class ObservationFit:
     #: the fitted centreline (S, 3) [m] and each observed point's nearest point on it (N, 3) [m], for drawing
     shape: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
     feet: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    torque_residual_nm: float | None = None
 
     def as_dict(self) -> dict:
         return {"name": self.name, "points": self.points, "rms_m": self.rms_m, "median_m": self.median_m,
-                "max_m": self.max_m, "downweighted": self.downweighted, "force_residual_n": self.force_residual_n}
+                "max_m": self.max_m, "downweighted": self.downweighted, "force_residual_n": self.force_residual_n,
+                "torque_residual_nm": self.torque_residual_nm}
 
 
 @dataclass
@@ -56,7 +59,7 @@ class FitResult:
     equilibrium could not be solved: message).  parameters: the determined ones; ratios: the determined
     ratios (D/Rf, Rt/Rf, Re/Rf); not_identifiable[name]: why the data cannot determine it; fixed: the
     scene's values of parameters not fitted (the estimates are conditional on them); string: the scene's
-    string with the fitted values; chi2_reduced: Σ(r/σ)² / (2 N_points + force rows − rank)."""
+    string with the fitted values; chi2_reduced: Σ(r/σ)² / (2 N_points + force, torque and mass rows − rank)."""
 
     status: str
     message: str

@@ -18,19 +18,29 @@ alone (for a uniform scale: profile k at its current values).  ∂F/∂p · v is
 The centreline is x(s) = L z[0:3] + W(s) T(z) (T: the tangents at the quadrature nodes, W the model's
 integration matrix), so dx(s)/dθ = L dz[0:3]/dθ + W(s) (∂T/∂z) dz/dθ, exact.  A grip's force is
 F = −Aᵀ λ_SI on its position rows (``wrenches.wrench``), λ_SI = λ/(row_scale σ), so dF/dθ follows from
-dλ/dθ.  Only shape and force are differentiated (not grip torques).
+dλ/dθ.  A grip's torque (about the grip point) on a director model is T = −(λ0 t×a1 + λ1 t×a2 [+ λ2 d1×a2])
+from its orientation rows' multipliers, the grip node's frame (t, d1) and the target frame [a0 a1 a2]
+(``wrenches.director_torque``); it is bilinear in ((t, d1), λ), so
+
+    dT/dθ = T((∂t/∂z) dz/dθ, (∂d1/∂z) dz/dθ; λ) + T(t, d1; dλ/dθ),
+
+with ∂(t, d1)/∂z exact (a CasADi function of the node's values, the expressions of the NLP's rows).  The
+planar model holds φ only: T = μ_φ n, dT/dθ = (dμ_φ/dθ) n.  The 3D Euler models' torques are not
+differentiated (they are absent from ``grip_torques``).
 """
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
 from ..model.profile import Profile
+from ..model.rotations import quat_to_matrix
 from .nlp import StringNLP
 from .shape_solver import ShapeSolver
+from .wrenches import director_torque
 
 #: material profiles a sensitivity can be taken with respect to, in the order of the NLP's parameters
 MATERIALS = ("Rf", "Rt", "Re", "D")
@@ -54,8 +64,11 @@ class ShapeSensitivity:
     """The committed equilibrium of a solver and its derivatives with respect to θ = log(material scale).
 
     s (S,) [m]; points (S, 3) [m]; d_points (S, 3, k) [m] = dx(s)/dθ_k; grip_forces[name] (3,) [N], the
-    force each grip exerts on the string, and d_grip_forces[name] (3, k) [N]; names: the θ_k.  A column
-    of zeros means the parameter does not enter the solved model (e.g. Rt of a planar model).
+    force each grip exerts on the string, and d_grip_forces[name] (3, k) [N]; grip_torques[name] (3,)
+    [N·m], the torque each grip exerts on the string about the grip point, and d_grip_torques[name]
+    (3, k) [N·m] (director and planar models only: empty for the 3D Euler models; a pin's are zero);
+    names: the θ_k.  A column of zeros means the parameter does not enter the solved model (e.g. Rt of a
+    planar model).
     """
 
     names: tuple[str, ...]
@@ -64,6 +77,8 @@ class ShapeSensitivity:
     d_points: np.ndarray
     grip_forces: dict[str, np.ndarray]
     d_grip_forces: dict[str, np.ndarray]
+    grip_torques: dict[str, np.ndarray] = field(default_factory=dict)
+    d_grip_torques: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 class _Functions:
@@ -80,6 +95,19 @@ class _Functions:
         tangents = m.energy_terms(z, profiles, p[lay["gravity"]])[-1]
         flat = ca.vec(tangents)  # column-major: (3, M) → 3M
         self.tangents = ca.Function("dlo_tangents", [z, p], [ca.densify(tangents), ca.densify(ca.jacobian(flat, z))])
+        self._z, self._model, self._frames = z, m, {}
+
+    def node_frame(self, node: int) -> ca.Function:
+        """z → (t, d1, ∂t/∂z, ∂d1/∂z) at a director model's node (d1 outputs zero for the tangent model):
+        the expressions of the grip rows (``model.node_columns_sym``)."""
+        fn = self._frames.get(node)
+        if fn is None:
+            z = self._z
+            t, d1 = self._model.node_columns_sym(z, node)
+            d1 = ca.SX.zeros(3) if d1 is None else d1
+            fn = self._frames[node] = ca.Function(f"dlo_node_frame_{node}", [z], [ca.densify(e) for e in (
+                t, d1, ca.jacobian(t, z), ca.jacobian(d1, z))])
+        return fn
 
 
 _FUNCTIONS: "weakref.WeakKeyDictionary[StringNLP, _Functions]" = weakref.WeakKeyDictionary()
@@ -156,5 +184,34 @@ def shape_sensitivity(solver: ShapeSolver, names: tuple[MaterialDirection | str,
         axes = nlp.grip_axes[grip.name]
         forces[grip.name] = -axes.T @ (lam[rows] / scale[rows])
         d_forces[grip.name] = -axes.T @ (dlam[rows] / scale[rows][:, None])
+    torques, d_torques = _grip_torques(solver, fns, z, lam / scale, dz, dlam / scale[:, None])
     labels = tuple(n if isinstance(n, str) else n.name for n in names)
-    return ShapeSensitivity(labels, s, points, d_points, forces, d_forces)
+    return ShapeSensitivity(labels, s, points, d_points, forces, d_forces, torques, d_torques)
+
+
+def _grip_torques(solver: ShapeSolver, fns: _Functions, z: np.ndarray, lam_si: np.ndarray, dz: np.ndarray,
+                  dlam_si: np.ndarray) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Each grip's torque T and dT/dθ (module docstring) from the SI multipliers and their derivatives;
+    empty for a 3D Euler model."""
+    nlp = solver.nlp
+    torques, d_torques = {}, {}
+    if not (nlp.director or nlp.planar):
+        return torques, d_torques
+    k = dz.shape[1]
+    for grip in solver.problem.grips:
+        rows = nlp.grip_rows[grip.name]["angles"]
+        torque, d_torque = np.zeros(3), np.zeros((3, k))
+        if rows and nlp.planar:
+            normal = nlp.r0[:, 2]
+            torque, d_torque = lam_si[rows[0]] * normal, np.outer(normal, dlam_si[rows[0]])
+        elif rows:
+            t, d1, dt, dd1 = (np.asarray(a) for a in fns.node_frame(nlp.model.mesh.node_index(grip.s))(z))
+            t, d1 = t.ravel(), (d1.ravel() if len(rows) == 3 else None)
+            target = quat_to_matrix(grip.pose.orientation)
+            torque = director_torque(t, d1, target, lam_si[rows])
+            dt, dd1 = dt @ dz, dd1 @ dz  # (3, k)
+            for j in range(k):
+                d_torque[:, j] = (director_torque(dt[:, j], None if d1 is None else dd1[:, j], target, lam_si[rows])
+                                  + director_torque(t, d1, target, dlam_si[rows, j]))
+        torques[grip.name], d_torques[grip.name] = torque, d_torque
+    return torques, d_torques

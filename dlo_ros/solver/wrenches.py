@@ -38,11 +38,7 @@ def wrench(nlp: StringNLP, string: StringProperties, frames_of: FramesOf, grip: 
     if rows["angles"] and nlp.director:
         # T = ∂U/∂θ = −Σ_r λ_r ∂g_r/∂θ with ∂(t·a)/∂θ = t × a and ∂(d1·b)/∂θ = d1 × b
         t, d1 = node_frame(nlp, z, grip.s)
-        target = quat_to_matrix(grip.pose.orientation)
-        lam = lam_si[rows["angles"]]
-        torque = -(lam[0] * np.cross(t, target[:, 1]) + lam[1] * np.cross(t, target[:, 2]))
-        if len(lam) == 3:
-            torque -= lam[2] * np.cross(d1, target[:, 2])
+        torque = director_torque(t, d1, quat_to_matrix(grip.pose.orientation), lam_si[rows["angles"]])
     elif rows["angles"] and nlp.planar:
         # only φ is held: the reaction torque is along the plane normal, n·T = μ_φ
         torque = lam_si[rows["angles"][0]] * nlp.r0[:, 2]
@@ -71,6 +67,18 @@ def wrench(nlp: StringNLP, string: StringProperties, frames_of: FramesOf, grip: 
         elif torque is None:
             torque = np.linalg.lstsq(a, np.array(rhs), rcond=None)[0]
     return GripWrench(force=force, torque=torque)
+
+
+def director_torque(t: np.ndarray, d1: np.ndarray | None, target: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """T = −(λ0 t × a1 + λ1 t × a2 [+ λ2 d1 × a2]) [N·m]: the torque of a director model's grip from its
+    orientation rows' SI multipliers ``lam`` (2 or 3), the node's frame (t, d1) and the grip's target
+    frame ``target`` = [a0 a1 a2] (columns).  Bilinear in ((t, d1), λ), so its derivative is
+    ``director_torque(dt, dd1, target, λ) + director_torque(t, d1, target, dλ)`` (``sensitivity.py``)."""
+    a1, a2 = target[:, 1], target[:, 2]
+    torque = -(lam[0] * np.cross(t, a1) + lam[1] * np.cross(t, a2))
+    if len(lam) == 3:
+        torque -= lam[2] * np.cross(d1, a2)
+    return torque
 
 
 def end_moment(nlp: StringNLP, string: StringProperties, frames_of: FramesOf, z: np.ndarray,

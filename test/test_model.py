@@ -113,7 +113,7 @@ def test_quaternions():
         q = q if q[3] >= 0 else -q
         assert np.allclose(matrix_to_quat(quat_to_matrix(q)), q, atol=1e-12)
     assert np.allclose(TANGENT_X @ np.array([1.0, 0, 0]), [0, 0, 1])  # Q_out e_x = Q e_z: pose x-axis = ζ
-    with pytest.raises(ValueError, match="orientation: quaternion is zero"):
+    with pytest.raises(ValueError, match="orientation: zero quaternion"):
         check_quaternion([0, 0, 0, 0], "orientation")
     with pytest.raises(ValueError, match="norm is 2"):
         check_quaternion([0, 0, 0, 2], "q")

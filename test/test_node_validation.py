@@ -18,8 +18,6 @@ from dlo_ros.node.validation import (
     check_frame,
     check_pose,
     normalise_frame,
-    problem_reach,
-    reach_reason,
 )
 from dlo_ros.solver.result import ShapeResult
 
@@ -67,8 +65,8 @@ def test_quaternion_within_tolerance_is_normalised():
         ([0, 0, 0], [0, 0, 0, 0], "quaternion", "zero quaternion"),
         ([0, 0, 0], [0, 0, 0, 1 + 2 * QUATERNION_TOLERANCE], "quaternion", "norm"),
         ([0, 0, 0], [0, 0, 0.5, 0.5], "quaternion", "norm"),
-        ([0, 0], Q, "invalid", "position needs 3"),
-        ([0, 0, 0], [0, 0, 1], "invalid", "orientation needs 4"),
+        ([0, 0], Q, "invalid", "position: needs 3"),
+        ([0, 0, 0], [0, 0, 1], "invalid", "orientation: needs 4"),
     ],
 )
 def test_bad_poses_are_rejected_with_their_kind(position, orientation, kind, words):
@@ -100,14 +98,16 @@ def test_pose_array_count():
 
 
 def test_reach():
-    grips = [("left", 0.0), ("right", 1.0), ("mid", 0.5)]
-    ok = {"left": np.zeros(3), "right": np.array([0.6, 0, 0]), "mid": np.array([0.3, 0.3, 0])}
-    assert reach_reason(grips, ok) == ""
-    far = dict(ok, mid=np.array([0.3, 0.45, 0.0]))  # 0.541 m from either end, 0.5 m of string
-    assert "'left' and 'mid'" in reach_reason(grips, far)
-    assert reach_reason(grips, far, reach=1.25) == ""
-    assert problem_reach(make_problem(), 0.2) == 1.0
-    assert problem_reach(make_problem(stretch=100.0), 0.2) == pytest.approx(1.2)
+    """The one reach check (``Problem.farthest_apart``, which ``ShapeSolver.unreachable_reason`` and so
+    the node's 'unreachable' rejection use)."""
+    base = make_problem()
+    mid = Grip("mid", 0.5, "pin", GripPose(np.array([0.3, 0.3, 0.4]), np.array(Q)))
+    ok = replace(base, grips=base.grips + (mid,))
+    assert ok.farthest_apart() is None
+    far = replace(ok, grips=base.grips + (replace(mid, pose=GripPose(np.array([0.3, 0.45, 0.4]), np.array(Q))),))
+    a, b, dist, span = far.farthest_apart()  # 0.541 m from either end, 0.5 m of string
+    assert (a.name, b.name) == ("left", "mid") and dist == pytest.approx(0.5408, abs=1e-4) and span == 0.5
+    assert far.farthest_apart(reach=1.25) is None
 
 
 # ---- parameters ------------------------------------------------------------------------------------------

@@ -15,7 +15,6 @@ import numpy as np
 import yaml
 
 from ..model.problem import GripPose, Problem, finite_vector
-from ..model.rotations import check_quaternion
 from .pointfiles import read_points
 
 #: parameters that can be fitted: bend, twist and stretch stiffness and weight per length
@@ -219,8 +218,7 @@ def _observation(value: object, key: str, sigma: float | None, base: Path) -> Ob
             if name not in pd:
                 raise ObservationError(f"{where}.{name}: missing")
         try:
-            poses[str(grip)] = GripPose(finite_vector(pd["position"], 3, f"{where}.position"),
-                                        check_quaternion(pd["orientation"], f"{where}.orientation", 1e-3))
+            poses[str(grip)] = GripPose.checked(pd["position"], pd["orientation"], where)
         except (TypeError, ValueError) as exc:
             raise ObservationError(str(exc)) from None
     force = _force(d["force"], f"{key}.force") if d.get("force") is not None else None

@@ -110,13 +110,73 @@ OBSTACLE_TYPES: dict[str, ObstacleType] = {
 }
 
 
+#: where each named field of an obstacle type sits in its parameter vector (the NLP's layout)
+OBSTACLE_FIELDS: dict[str, dict[str, slice | int]] = {
+    "halfspace": {"point": slice(0, 3), "normal": slice(3, 6)},
+    "sphere": {"centre": slice(0, 3), "radius": 3},
+    "capsule": {"a": slice(0, 3), "b": slice(3, 6), "radius": 6},
+    "box": {"centre": slice(0, 3), "rotation_transposed": slice(3, 12), "half_extents": slice(12, 15)},
+}
+
+
 @dataclass(frozen=True)
 class Obstacle:
-    """A rigid obstacle the string must stay outside of, with its parameter vector (pose and size)."""
+    """A rigid obstacle the string must stay outside of, with its parameter vector (pose and size).
+
+    Read its geometry through the named accessors (``point``, ``normal``, ``centre``, ``radius``, ``a``,
+    ``b``, ``rotation``, ``half_extents``; each exists for the types ``OBSTACLE_FIELDS`` lists): only
+    this module knows the parameter vector's layout."""
 
     type: str
     params: np.ndarray = field(compare=False)
     name: str = ""
+
+    def _field(self, name: str):
+        where = OBSTACLE_FIELDS[self.type].get(name)
+        if where is None:
+            raise AttributeError(f"a {self.type} obstacle has no {name}")
+        value = np.asarray(self.params, dtype=float)[where]
+        return float(value) if isinstance(where, int) else value.copy()
+
+    @property
+    def point(self) -> np.ndarray:
+        """A point on a half-space's surface [m]."""
+        return self._field("point")
+
+    @property
+    def normal(self) -> np.ndarray:
+        """A half-space's unit outward normal."""
+        return self._field("normal")
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Centre of a sphere or box [m]."""
+        return self._field("centre")
+
+    @property
+    def radius(self) -> float:
+        """Radius of a sphere or capsule [m]."""
+        return self._field("radius")
+
+    @property
+    def a(self) -> np.ndarray:
+        """First end of a capsule's segment [m]."""
+        return self._field("a")
+
+    @property
+    def b(self) -> np.ndarray:
+        """Second end of a capsule's segment [m]."""
+        return self._field("b")
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """A box's orientation R (3×3, box frame → world)."""
+        return self._field("rotation_transposed").reshape(3, 3).T
+
+    @property
+    def half_extents(self) -> np.ndarray:
+        """A box's half extents along its own axes [m]."""
+        return self._field("half_extents")
 
     @staticmethod
     def from_dict(d: dict, where: str = "obstacles[0]") -> "Obstacle":

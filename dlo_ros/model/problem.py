@@ -12,7 +12,7 @@ import numpy as np
 
 from .obstacles import Obstacle
 from .profile import Profile
-from .rotations import check_quaternion
+from .rotations import PoseError, check_position, check_quaternion  # noqa: F401 - PoseError re-exported
 
 GRIP_MODES = ("clamp", "pin", "tangent")
 
@@ -73,8 +73,10 @@ class GripPose:
 
     @staticmethod
     def checked(position: object, orientation: object, where: str, quat_tolerance: float = 1e-3) -> "GripPose":
+        """The one validation of a grip pose (scene files, targets, queries, observations): the quaternion
+        normalised, or PoseError (a ValueError with a ``kind``) naming ``where``.position/.orientation."""
         return GripPose(
-            finite_vector(position, 3, f"{where}.position"),
+            check_position(position, f"{where}.position"),
             check_quaternion(orientation, f"{where}.orientation", quat_tolerance),
         )
 

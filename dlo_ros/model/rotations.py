@@ -116,21 +116,45 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     return q.reshape(m.shape[:-2] + (4,))
 
 
+class PoseError(ValueError):
+    """A position or quaternion that cannot be used; ``kind``: 'invalid' (not numbers, wrong count),
+    'non_finite' (NaN or infinity) or 'quaternion' (zero, or not unit within the tolerance)."""
+
+    def __init__(self, kind: str, message: str):
+        super().__init__(message)
+        self.kind = kind
+
+
+def _numbers(value: object, n: int, field: str, what: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise PoseError("invalid", f"{field}: expected {n} numbers{what}, got {value!r}") from None
+    if arr.size != n:
+        raise PoseError("invalid", f"{field}: needs {n} numbers{what}, got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        shown = ", ".join("nan" if np.isnan(v) else f"{v:.6g}" for v in arr)
+        raise PoseError("non_finite", f"{field}: [{shown}] contains NaN or infinity")
+    return arr
+
+
+def check_position(p: object, field: str) -> np.ndarray:
+    """Validate a position (x, y, z) [m]: three finite numbers; PoseError naming ``field`` otherwise."""
+    return _numbers(p, 3, field, "")
+
+
 def check_quaternion(q: object, field: str, tolerance: float = 1e-3) -> np.ndarray:
     """Validate a quaternion (x, y, z, w): finite, non-zero, unit within ``tolerance``; return it normalised.
 
-    Raises ValueError naming ``field`` otherwise.
+    The one check of an orientation (scene files, grip targets, observations): PoseError (a ValueError)
+    naming ``field`` otherwise.
     """
-    arr = np.asarray(q, dtype=float).ravel()
-    if arr.size != 4:
-        raise ValueError(f"{field}: a quaternion needs 4 numbers (x, y, z, w), got {arr.size}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{field}: quaternion has a NaN or infinite component")
+    arr = _numbers(q, 4, field, " (x, y, z, w)")
     norm = float(np.linalg.norm(arr))
     if norm < 1e-9:
-        raise ValueError(f"{field}: quaternion is zero")
+        raise PoseError("quaternion", f"{field}: zero quaternion (no rotation)")
     if abs(norm - 1.0) > tolerance:
-        raise ValueError(f"{field}: quaternion norm is {norm:.6g}, not 1 (tolerance {tolerance:g})")
+        raise PoseError("quaternion", f"{field}: quaternion norm is {norm:.6g}, not 1 (tolerance {tolerance:g})")
     return arr / norm
 
 

@@ -249,19 +249,19 @@ def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0
     mid = start_id
     rgba = _rgba(OBSTACLE_RGBA[:3], OBSTACLE_RGBA[3])
     for ob in obstacles:
-        p = np.asarray(ob.params, dtype=float)
         if ob.type == "sphere":
             m = _marker(h, "obstacles", mid, Marker.SPHERE)
-            m.pose.position = _point(p[0:3])
-            m.scale = Vector3(x=2 * p[3], y=2 * p[3], z=2 * p[3])
+            m.pose.position = _point(ob.centre)
+            m.scale = Vector3(x=2 * ob.radius, y=2 * ob.radius, z=2 * ob.radius)
             parts = [m]
         elif ob.type == "box":
             m = _marker(h, "obstacles", mid, Marker.CUBE)
-            m.pose = arrays_to_pose(p[0:3], matrix_to_quat(p[3:12].reshape(3, 3).T))
-            m.scale = Vector3(x=2 * p[12], y=2 * p[13], z=2 * p[14])
+            e = ob.half_extents
+            m.pose = arrays_to_pose(ob.centre, matrix_to_quat(ob.rotation))
+            m.scale = Vector3(x=2 * e[0], y=2 * e[1], z=2 * e[2])
             parts = [m]
         elif ob.type == "capsule":
-            a, b, r = p[0:3], p[3:6], p[6]
+            a, b, r = ob.a, ob.b, ob.radius
             axis = b - a
             length = float(np.linalg.norm(axis))
             m = _marker(h, "obstacles", mid, Marker.CYLINDER)
@@ -274,7 +274,7 @@ def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0
                 e.scale = Vector3(x=2 * r, y=2 * r, z=2 * r)
                 parts.append(e)
         elif ob.type == "halfspace":
-            point, normal = p[0:3], p[3:6]
+            point, normal = ob.point, ob.normal
             thick = 0.01
             m = _marker(h, "obstacles", mid, Marker.CUBE)
             m.pose = arrays_to_pose(point - normal * thick / 2, quat_z_to(normal))

@@ -7,11 +7,11 @@ names the offending input (``grips/left/target: quaternion norm is 1.2, not 1 (t
 from __future__ import annotations
 
 import math
-from typing import Iterable, Mapping, Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..model.problem import GripPose, Problem
+from ..model.problem import GripPose, PoseError
 from ..text import TEXT_LIMIT, safe_text  # noqa: F401  (re-exported: the node's modules import it from here)
 
 #: Longest ``header.frame_id`` of a target (or ``frame_id`` parameter) the node accepts; tf2 frame ids are short.
@@ -85,28 +85,15 @@ def check_frame(frame_id: str, expected: str, where: str) -> None:
 
 def check_pose(position: Sequence[float], orientation: Sequence[float], where: str,
                tolerance: float = QUATERNION_TOLERANCE) -> GripPose:
-    """A GripPose with the quaternion normalised, or TargetError naming the problem.
+    """A GripPose with the quaternion normalised (``GripPose.checked``, the one pose validation), or
+    TargetError of the same kind naming the problem.
 
     position: (x, y, z) [m]; orientation: (x, y, z, w).
     """
-    p = np.asarray(position, dtype=float).ravel()
-    q = np.asarray(orientation, dtype=float).ravel()
-    if p.size != 3:
-        raise TargetError("invalid", f"{where}: position needs 3 numbers, got {p.size}")
-    if q.size != 4:
-        raise TargetError("invalid", f"{where}: orientation needs 4 numbers (x, y, z, w), got {q.size}")
-    if not np.all(np.isfinite(p)):
-        raise TargetError("non_finite", f"{where}: position {_fmt(p)} contains NaN or infinity")
-    if not np.all(np.isfinite(q)):
-        raise TargetError("non_finite", f"{where}: orientation {_fmt(q)} contains NaN or infinity")
-    norm = float(np.linalg.norm(q))
-    if norm < 1e-9:
-        raise TargetError("quaternion", f"{where}: orientation is the zero quaternion")
-    if abs(norm - 1.0) > tolerance:
-        raise TargetError(
-            "quaternion", f"{where}: quaternion norm is {norm:.6g}, not 1 (tolerance {tolerance:g})"
-        )
-    return GripPose(p.copy(), q / norm)
+    try:
+        return GripPose.checked(position, orientation, where, tolerance)
+    except PoseError as exc:
+        raise TargetError(exc.kind, str(exc)) from None
 
 
 def check_count(count: int, grip_names: Sequence[str], where: str) -> None:
@@ -117,26 +104,6 @@ def check_count(count: int, grip_names: Sequence[str], where: str) -> None:
             f"{where}: {count} poses for {len(grip_names)} grips; send one pose per grip in the "
             f"order {list(grip_names)}",
         )
-
-
-def reach_reason(grips: Iterable[tuple[str, float]], positions: Mapping[str, np.ndarray],
-                 reach: float = 1.0) -> str:
-    """Why the grip positions cannot all be held by the string ('' if they can).
-
-    grips: (name, s) of every grip; positions: name -> position [m]; reach: the largest stretch
-    factor (1 for an inextensible string, 1 + max_strain otherwise).  The same condition as
-    ``ShapeSolver.unreachable_reason``, cheap enough for a subscription callback.
-    """
-    items = [(n, s) for n, s in grips if n in positions]
-    for i in range(len(items)):
-        for j in range(i + 1, len(items)):
-            (na, sa), (nb, sb) = items[i], items[j]
-            dist = float(np.linalg.norm(np.asarray(positions[na]) - np.asarray(positions[nb])))
-            span = abs(sa - sb) * reach
-            if dist > span + 1e-12:
-                return (f"grips '{na}' and '{nb}' are {dist:.4g} m apart but the string between them "
-                        f"reaches at most {span:.4g} m")
-    return ""
 
 
 def grip_miss(points: np.ndarray, s: np.ndarray, grips: Iterable[tuple[str, float, np.ndarray]],
@@ -158,11 +125,6 @@ def grip_miss(points: np.ndarray, s: np.ndarray, grips: Iterable[tuple[str, floa
             return (f"the solver reported an equilibrium that misses grip '{name}' by {miss:.3g} m "
                     f"(at {_fmt(points[k])}, target {_fmt(np.asarray(target, dtype=float))})")
     return ""
-
-
-def problem_reach(problem: Problem, max_strain: float) -> float:
-    """The stretch factor the solver allows for ``problem`` (see ``ShapeSolver.unreachable_reason``)."""
-    return 1.0 + (max_strain if problem.string.stretch_stiffness is not None else 0.0)
 
 
 def _fmt(a: np.ndarray) -> str:

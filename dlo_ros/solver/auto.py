@@ -125,7 +125,7 @@ class ModelChoice:
 def obstacle_distance(ob: Obstacle, x: np.ndarray) -> float:
     """A lower bound of the distance [m] from x to the obstacle (≤ 0 inside)."""
     if ob.type == "box":  # the solver's box is inscribed in the box; bound with the circumscribed sphere
-        return float(np.linalg.norm(x - ob.params[0:3]) - np.linalg.norm(ob.params[12:15]))
+        return float(np.linalg.norm(x - ob.centre) - np.linalg.norm(ob.half_extents))
     return -ob.h(np.asarray(x, dtype=float))
 
 
@@ -143,16 +143,16 @@ def clear_of_plane(ob: Obstacle, origin: np.ndarray, normal: np.ndarray, margin:
     string lying in the plane cannot touch it, so the planar equilibrium is an equilibrium of the 3D
     problem with that obstacle inactive (the planar model leaves it out; its 3D stability is checked
     with it)."""
-    prm, n = ob.params, normal
+    n = normal
     if ob.type == "sphere":
-        return abs(np.dot(prm[0:3] - origin, n)) - prm[3] > margin
+        return abs(np.dot(ob.centre - origin, n)) - ob.radius > margin
     if ob.type == "capsule":
-        da, db = np.dot(prm[0:3] - origin, n), np.dot(prm[3:6] - origin, n)
-        return da * db > 0 and min(abs(da), abs(db)) - prm[6] > margin
+        da, db = np.dot(ob.a - origin, n), np.dot(ob.b - origin, n)
+        return da * db > 0 and min(abs(da), abs(db)) - ob.radius > margin
     if ob.type == "box":
-        return abs(np.dot(prm[0:3] - origin, n)) - np.linalg.norm(prm[12:15]) > margin
+        return abs(np.dot(ob.centre - origin, n)) - np.linalg.norm(ob.half_extents) > margin
     # half-space: parallel to the plane, with the plane outside it
-    return abs(abs(np.dot(prm[3:6], n)) - 1.0) < 1e-12 and ob.h(origin) < -margin
+    return abs(abs(np.dot(ob.normal, n)) - 1.0) < 1e-12 and ob.h(origin) < -margin
 
 
 def imposes_twist(problem: Problem, r0: np.ndarray) -> bool:

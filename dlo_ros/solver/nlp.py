@@ -160,12 +160,11 @@ def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float =
         if abs(np.dot(rel.offset, n)) > tolerance * L:
             return f"relative_positions[{i}].offset is not in the plane"
     for i, ob in enumerate(problem.obstacles):
-        prm = ob.params
-        if ob.type == "halfspace" and abs(np.dot(prm[3:6], n)) > tolerance:
+        if ob.type == "halfspace" and abs(np.dot(ob.normal, n)) > tolerance:
             return f"obstacles[{i}]: the half-space's normal is not in the plane"
-        if ob.type in ("sphere", "box") and abs(np.dot(prm[0:3] - origin, n)) > tolerance * L:
+        if ob.type in ("sphere", "box") and abs(np.dot(ob.centre - origin, n)) > tolerance * L:
             return f"obstacles[{i}]: not centred on the plane"
-        if ob.type == "capsule" and max(abs(np.dot(prm[0:3] - origin, n)), abs(np.dot(prm[3:6] - origin, n))) > tolerance * L:
+        if ob.type == "capsule" and max(abs(np.dot(ob.a - origin, n)), abs(np.dot(ob.b - origin, n))) > tolerance * L:
             return f"obstacles[{i}]: not centred on the plane"
     return ""
 

@@ -79,8 +79,8 @@ LIMITS: dict[str, int] = {
     "scalar_chars": 10_000,         # characters of one YAML scalar (key or value)
     "integer_digits": 30,           # digits of an integer in the file (larger ones are no physical value)
     "grips": 16,
-    "loads": 100,                   # 100 loads: solver built in 2.6 s, 0.26 GB; 1000: 14 s, 0.54 GB
-    "obstacles": 32,                # each adds obstacle_samples constraints: 32 built in 7 s, 0.7 GB here
+    "loads": 100,                   # each load adds a breakpoint (an element) and parameters: bounds the build
+    "obstacles": 32,                # each adds obstacle_samples constraints: bounds the build's time and memory
     "relative_positions": 32,
     "profile_rows": 1000,           # rows of a string.* profile table
     "name_chars": 128,              # name, grips[].name, obstacles[].name

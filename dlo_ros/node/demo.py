@@ -168,7 +168,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="manoeuvre speed factor (default 1: the manoeuvre takes %.0f s)" % duration())
     ap.add_argument("--compile", default="off", choices=("background", "blocking", "cached", "off"),
                     help="the node's compile mode (default off: interpreted derivatives, no gcc; 'blocking' "
-                         "compiles before the first solve, minutes the first time for this scene)")
+                         "compiles before the first solve, seconds the first time for this scene)")
     ap.add_argument("--model", default="auto", choices=("auto", "full", "planar", "scene"),
                     help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
                          "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "

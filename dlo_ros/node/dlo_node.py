@@ -717,8 +717,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
             return 2
         node = DloNode()
         # One thread: it only converts and checks messages (the solver has its own thread, and the
-        # services await it as coroutines).  rclpy's MultiThreadedExecutor measured several ms slower
-        # per message here, with >100 ms outliers when it competes with the solver thread for the GIL.
+        # services await it as coroutines).  rclpy's MultiThreadedExecutor is slower per message here and
+        # competes with the solver thread for the GIL.
         # rclpy.experimental.EventsExecutor (rclpy 7.1.6 here) cannot serve this node: its raw target
         # subscriptions delivered nothing under it, and coroutine services do not run (ros2/rclpy#1473).
         executor = SingleThreadedExecutor()

@@ -53,7 +53,7 @@ STATIC = (
               read_only=True),
     ParamSpec("compile", "string", "background",
               "How the solver gets compiled (C) derivatives, cached per machine in ~/.cache/dlo_ros: 'background' "
-              "(solve at once, interpreted, switch to C when gcc is done: minutes for a new scene structure or "
+              "(solve at once, interpreted, switch to C when gcc is done: seconds for a new scene structure or "
               "after a solver change), 'blocking' (compile before the first solve), 'cached' (only a library "
               "compiled earlier), 'off' (interpreted only; also false, as `-p compile:=off` reads as one).",
               read_only=True, constraints="one of: background, blocking, cached, off (or false)", dynamic=True),

@@ -1,7 +1,7 @@
 """The contact-free KKT function of a director model, assembled from per-quadrature-node derivatives.
 
 ``StringNLP.kkt_free_fn`` differentiates one flattened expression of the whole Lagrangian: its C is
-straight-line code of ~6·10⁵ operations (full model, order 16) that gcc needs minutes for.  This
+straight-line code (a dense Hessian expanded at every quadrature node) that gcc needs minutes for.  This
 module builds the same function (same inputs, outputs and row order) from the Lagrangian's structure,
 so that its code is a loop over quadrature nodes plus a few sparse matrix products:
 

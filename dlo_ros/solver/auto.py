@@ -83,8 +83,7 @@ ORDERS = (8, 12, 16, 24, 32)
 POLE_MIN_DEG = 40.0  # a 3D model turns its Euler-angle pole away when a tangent comes closer (degrees)
 #: With background checks the stream thread waits for the GIL whenever the worker runs Python, up to the
 #: interpreter's switch interval (5 ms by default).  AutoShapeSolver lowers it to this for the process
-#: (never raises it): on the in-plane stream at 50 Hz the max update fell from 20.5 to 5.3 ms, the median
-#: from 2.22 to 2.01 ms (bench/auto_vs_full.py's planar stream, interpreted).
+#: (never raises it), which bounds that wait (bench/auto_vs_full.py measures the stream with checks).
 SWITCH_INTERVAL_S = 1e-4
 #: obstacle samples auto may go up to (each step 2n − 1: the old samples stay, one between each pair)
 MAX_SAMPLES = 321
@@ -242,7 +241,7 @@ class AutoShapeSolver:
             ahead += [replace(self.choice, order=o) for o in ORDERS[i + 1:i + 2] + ORDERS[max(i - 1, 0):i]]
             self._submit(self._prebuild, {("",) + c.key() for c in ahead}, ahead, problem)
             # the constructor returns once the 3D model is built, so that a stream leaving the plane at
-            # its first update never waits for it (measured: 1.9 s on default_cable, interpreted)
+            # its first update never waits for the build
             job = self._job
             while self._full_key and job is not None and not job.done() and self._full_key in self._job_keys:
                 time.sleep(0.002)

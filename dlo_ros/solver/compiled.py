@@ -5,8 +5,8 @@ generated for ``fn`` and compiled (gcc -O1).  The cache lives in $DLO_CACHE_DIR,
 $XDG_CACHE_HOME/dlo_ros, else ~/.cache/dlo_ros.  Without a C compiler the original (interpreted)
 function is returned, so everything still works, only slower.
 
-The fingerprint (see ``fingerprint``) identifies the function without generating its C: generating
-C for a 3D scene's KKT function takes 1.7–11 s (orders 12–32), which a cache look-up must not cost.
+The fingerprint (see ``fingerprint``) identifies the function without generating its C, so a cache
+look-up costs an evaluation, never a code generation (bench/results/compile_cost.md has the costs).
 """
 from __future__ import annotations
 
@@ -38,8 +38,8 @@ def compiler() -> str | None:
 class NativeFunction:
     """Calls a CasADi-generated C function through ctypes with preallocated numpy buffers.
 
-    Every output is returned dense (column-major reshaped to its shape) as a fresh array.  About
-    10 µs of call overhead instead of ~100 µs for casadi.Function.__call__ with DM conversion.
+    Every output is returned dense (column-major reshaped to its shape) as a fresh array; no DM is
+    created or converted (``casadi.Function.__call__`` would).  ctypes releases the GIL during the call.
     Not re-entrant: callers serialise calls (ShapeSolver holds a lock).
     """
 
@@ -82,8 +82,8 @@ class InterpretedFunction:
     """Same interface as NativeFunction, on casadi.Function (used when no C compiler is present).
 
     Evaluates through ``Function.buffer()`` on preallocated numpy arrays: no DM is created or
-    converted, which costs about 1 µs per call instead of 40–100 µs for ``fn(*args)`` with five
-    outputs.  Not re-entrant (one work buffer): callers serialise calls, as for NativeFunction.
+    converted (``fn(*args)`` would, for every input and output).  Not re-entrant (one work buffer):
+    callers serialise calls, as for NativeFunction.
     """
 
     def __init__(self, fn: ca.Function):
@@ -151,8 +151,7 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = ("-O1",)) -> str:
     function's name, input/output shapes and instruction count, and its outputs at two fixed
     pseudo-random inputs in [0.5, 1.5].  Constants baked into the expressions (the reference frame
     R0, the objective scale σ, the basis and quadrature matrices) change those outputs, so two NLPs
-    that differ in any of them get different keys; one interpreted evaluation costs 3–13 ms for a 3D
-    scene (orders 12–32), against 1.7–11 s for generating the C.
+    that differ in any of them get different keys.
     """
     h = hashlib.sha256()
     h.update(ca.__version__.encode() + " ".join(flags).encode() + _source_digest() + fn.name().encode())
@@ -182,9 +181,8 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
     """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
     ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``).
 
-    The KKT function of a scene is large straight-line code (≈ 5·10⁵ operations with obstacles);
-    gcc -O1 takes about a minute on it, -O2 longer for little gain — hence -O1, run niced in the
-    background by ShapeSolver, and cached so each scene structure is compiled once per machine.
+    -O1: higher levels compile longer for little gain on this code (bench/results/compile_cost.md).
+    ShapeSolver runs it niced in the background; the cache makes it once per scene structure and machine.
     """
     cc = compiler()
     if cc is None or os.environ.get("DLO_NO_COMPILE"):

@@ -440,8 +440,8 @@ class StringNLP:
         system once more at the end.  Outputs: u, K, r, ∇f and the energies at that u, and
         max |Δz| over the steps (the caller rejects a step > 0.5 and checks r for convergence).
         The steps use LAPACK's LU ('lapacklu'), which CasADi cannot generate C for, so this function
-        stays interpreted (a thin MX layer).  Generated C with CasADi's own QR would cost 3 × 0.2 ms for
-        a 51 × 51 system.
+        stays interpreted (a thin MX layer); CasADi's own QR, which it can generate, costs more per
+        solve than the LU.
         """
         kkt_free = kkt_free or self.kkt_free_fn
         n, nf, n_p = self.z_sym.shape[0], self.n_free_rows, self.p_sym.shape[0]

@@ -84,7 +84,7 @@ POLE_MIN_DEG = 40.0  # a 3D model turns its Euler-angle pole away when a tangent
 #: With background checks the stream thread waits for the GIL whenever the worker runs Python, up to the
 #: interpreter's switch interval (5 ms by default).  AutoShapeSolver lowers it to this for the process
 #: (never raises it): on the in-plane stream at 50 Hz the max update fell from 20.5 to 5.3 ms, the median
-#: from 2.22 to 2.01 ms (bench/auto_vs_full.py's planar stream, interpreted).
+#: from 2.22 to 2.01 ms (bench/perf/auto_vs_full.py's planar stream, interpreted).
 SWITCH_INTERVAL_S = 1e-4
 #: obstacle samples auto may go up to (each step 2n − 1: the old samples stay, one between each pair)
 MAX_SAMPLES = 321

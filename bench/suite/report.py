@@ -1,11 +1,11 @@
-"""Charts (PNG, matplotlib) and markdown tables for bench/run_all.py."""
+"""Charts (PNG, matplotlib) and markdown tables for bench/suite/run_all.py."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
-from .methods import METHOD_LABELS
+from bench.methods.runners import METHOD_LABELS
 
 COLORS = {"paper": "#000000", "fourier": "#1f77b4", "fourier-3d": "#17becf", "fourier-3d-z": "#bcbd22", "default": "#d62728", "default-planar": "#ff7f0e",
           "rod": "#2ca02c", "pyelastica": "#9467bd", "mujoco": "#8c564b"}

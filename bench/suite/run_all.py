@@ -151,6 +151,15 @@ def run_paper(quick: bool, bar, log) -> dict:
     return out
 
 
+def _save(plt, fig, name: str, title: str | None = None) -> None:
+    """Title (if any), lay out, write ``OUT / name`` and close one of the paper's figures."""
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(OUT / name, dpi=110)
+    plt.close(fig)
+
+
 def charts_paper(out: dict) -> None:
     plt = _plt()
     f2 = out["fig2"]
@@ -172,10 +181,8 @@ def charts_paper(out: dict) -> None:
             if j == 0:
                 ax.set_ylabel(vname, fontsize=8)
     axes[0, 0].legend(fontsize=6)
-    fig.suptitle("Paper Fig. 2: ends brought together (s=0 clamped; s=L tangent held, twist free; Rf/Rt = 100)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(OUT / "paper_fig2.png", dpi=110)
-    plt.close(fig)
+    _save(plt, fig, "paper_fig2.png",
+          "Paper Fig. 2: ends brought together (s=0 clamped; s=L tangent held, twist free; Rf/Rt = 100)")
 
     f3 = out["fig3"]
     floors = f3["floors"]
@@ -191,11 +198,8 @@ def charts_paper(out: dict) -> None:
         ax.set_aspect("equal", "datalim")
         ax.tick_params(labelsize=7)
     axes[0].legend(fontsize=6)
-    fig.suptitle("Paper Fig. 3: lowest stable shape at chord 0.7L, horizontal clamps, for ρ = 0 … 5000 (planar rod N=200)",
-                 fontsize=9)
-    fig.tight_layout()
-    fig.savefig(OUT / "paper_fig3.png", dpi=110)
-    plt.close(fig)
+    _save(plt, fig, "paper_fig3.png",
+          "Paper Fig. 3: lowest stable shape at chord 0.7L, horizontal clamps, for ρ = 0 … 5000 (planar rod N=200)")
 
     f5 = out["fig5"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
@@ -213,11 +217,8 @@ def charts_paper(out: dict) -> None:
     for ax in axes:
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    fig.suptitle("Paper Fig. 5: when does the right end leave the finger? (pinned ends 0.8L apart on a floor, load at s = 0.5L)",
-                 fontsize=9)
-    fig.tight_layout()
-    fig.savefig(OUT / "paper_fig5.png", dpi=110)
-    plt.close(fig)
+    _save(plt, fig, "paper_fig5.png",
+          "Paper Fig. 5: when does the right end leave the finger? (pinned ends 0.8L apart on a floor, load at s = 0.5L)")
 
     sh = out["sheets"]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
@@ -234,9 +235,7 @@ def charts_paper(out: dict) -> None:
         ax.set_ylabel("z [mm]")
         ax.legend(fontsize=6)
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(OUT / "paper_sheets.png", dpi=110)
-    plt.close(fig)
+    _save(plt, fig, "paper_sheets.png")
 
 
 def write_paper(out, info, quick, started):

@@ -11,12 +11,16 @@ import platform
 import subprocess
 import time
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
 from dlo_ros.model.obstacles import Obstacle
 from dlo_ros.model.problem import Grip, GripPose, Load, Problem, StringProperties
 from dlo_ros.model.profile import Profile
+
+ROOT = Path(__file__).resolve().parent.parent  # the repository
+RESULTS = ROOT / "bench" / "results"  # every result file of every bench script
 
 S_OUT = np.linspace(0.0, 1.0, 101)  # where every method's centreline is compared [m] (L = 1)
 

@@ -43,7 +43,7 @@ def random_scene(seed: int) -> Problem:
 
 def scene_and_curve(seed: int) -> tuple[Problem, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """The scene of ``seed`` and the curve it is built around (arc lengths, positions, frames): a
-    feasible shape of the scene up to its discretisation (bench/random_scenes.py uses it as the witness
+    feasible shape of the scene up to its discretisation (bench/suite/random_scenes.py uses it as the witness
     that a scene is reachable and clear of its obstacles)."""
     rng = np.random.default_rng(seed)
     length = float(rng.uniform(0.2, 3.0))

@@ -14,12 +14,12 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.common import S_OUT, elastica_case, max_error, rotation_about_x, twist_case  # noqa: E402
-from bench.methods import twisted_problem  # noqa: E402
-from bench.nlp_tools import augmented_lagrangian_nm  # noqa: E402
-from bench.peers import initial_polyline  # noqa: E402
-from bench.planar import PlanarRitz, PlanarRod  # noqa: E402
-from bench.references import elastica_points  # noqa: E402
-from bench.rod3d import Rod3D  # noqa: E402
+from bench.methods.nlp_tools import augmented_lagrangian_nm  # noqa: E402
+from bench.methods.peers import initial_polyline  # noqa: E402
+from bench.methods.planar import PlanarRitz, PlanarRod  # noqa: E402
+from bench.methods.rod3d import Rod3D  # noqa: E402
+from bench.methods.runners import twisted_problem  # noqa: E402
+from bench.suite.references import elastica_points  # noqa: E402
 
 
 def test_planar_rod_reproduces_the_elastica_to_second_order():
@@ -99,7 +99,7 @@ def test_initial_polyline_is_feasible():
 
 def test_mujoco_cable_settles_near_the_elastica():
     pytest.importorskip("mujoco")
-    from bench.peers import MuJoCoRunner
+    from bench.methods.peers import MuJoCoRunner
 
     case = elastica_case(0.6)
     out = MuJoCoRunner(case, 20, settle=1e-4, max_time=30).cold(case.problem)
@@ -109,7 +109,7 @@ def test_mujoco_cable_settles_near_the_elastica():
 
 def test_pyelastica_settles_near_the_elastica():
     pytest.importorskip("elastica")
-    from bench.peers import PyElasticaRunner
+    from bench.methods.peers import PyElasticaRunner
 
     case = elastica_case(0.6)
     out = PyElasticaRunner(case, 20, settle=1e-4, max_time=60).cold(case.problem)

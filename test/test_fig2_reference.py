@@ -1,6 +1,6 @@
 """The paper's Fig. 2 set-up against an independent Kirchhoff rod (test/reference, shooting on the rod
 equations with scipy) and the closed-form elastica, cold and streamed, from chord 0.8 L down to 0.3 L
-(below 0.5 L on the branch the reference follows down from 0.5 L: bench/fig2_knots.py has the numbers).
+(below 0.5 L on the branch the reference follows down from 0.5 L: bench/suite/fig2_knots.py has the numbers).
 
 Clamp at s = 0 (pose identity at the origin), the end s = L held by its tangent (+x, twist free) at
 (c, 0, 0), Rf/Rt = 100, no weight.  The twist is free at the far end, so the rod carries no twisting

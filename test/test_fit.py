@@ -277,7 +277,7 @@ def test_cli_fit_with_a_measured_torque(tmp_path, reference, capsys):
 
 
 def test_shipped_example_recovers_the_cable_it_was_made_from(capsys):
-    """config/observations/default_cable_hanging.yaml (bench/example_observation.py: the Kirchhoff shooting
+    """config/observations/default_cable_hanging.yaml (bench/suite/example_observation.py: the Kirchhoff shooting
     solver's shape of a cable with Rf = 0.03, D = 0.7 in default_cable's clamps, 1.5 mm noise, 30 %
     occluded, and the left grip's force): `dlo fit` on it, as the README shows, finds both within 3 σ."""
     example = Path(__file__).resolve().parents[1] / "config" / "observations" / "default_cable_hanging.yaml"

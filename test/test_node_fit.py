@@ -2,7 +2,7 @@
 estimate through the node's parameters, and the recording (msg_docs/node.md "Fitting").
 
 The observed shape is config/observations/default_cable_hanging.npy: an independent Kirchhoff shooting
-reference (test/reference/kirchhoff.py via bench/example_observation.py) of a cable with Rf = 0.03 N·m²,
+reference (test/reference/kirchhoff.py via bench/suite/example_observation.py) of a cable with Rf = 0.03 N·m²,
 D = 0.7 N/m (the scene says 0.02 and 0.5) held by default_cable's two clamps at the scene's poses (which
 the node holds until targets arrive), 1.5 mm noise, 30 % occluded, shuffled.
 """
@@ -23,7 +23,7 @@ from conftest import clean_node
 
 ROOT = Path(__file__).resolve().parents[1]
 POINTS = ROOT / "config" / "observations" / "default_cable_hanging.npy"
-RF, D, SIGMA = 0.03, 0.7, 0.0015  # the reference cable and its noise (bench/example_observation.py)
+RF, D, SIGMA = 0.03, 0.7, 0.0015  # the reference cable and its noise (bench/suite/example_observation.py)
 Q = (0.0, 0.0, 0.0, 1.0)
 LEFT = ((0.0, 0.0, 0.4), Q)
 

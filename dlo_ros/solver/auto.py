@@ -83,7 +83,7 @@ ORDERS = (8, 12, 16, 24, 32)
 POLE_MIN_DEG = 40.0  # a 3D model turns its Euler-angle pole away when a tangent comes closer (degrees)
 #: With background checks the stream thread waits for the GIL whenever the worker runs Python, up to the
 #: interpreter's switch interval (5 ms by default).  AutoShapeSolver lowers it to this for the process
-#: (never raises it), which bounds that wait (bench/auto_vs_full.py measures the stream with checks).
+#: (never raises it), which bounds that wait (bench/perf/auto_vs_full.py measures the stream with checks).
 SWITCH_INTERVAL_S = 1e-4
 #: obstacle samples auto may go up to (each step 2n − 1: the old samples stay, one between each pair)
 MAX_SAMPLES = 321

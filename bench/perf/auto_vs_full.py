@@ -19,7 +19,7 @@ reduction alone).  Error: max centreline deviation at the last target from a ful
 warm-started from that method's own answer (same branch), with its Euler-angle pole turned to the
 direction farthest from that shape's tangents.  Times are ratios within one run.
 
-    bash scripts/dlo-env run python bench/auto_vs_full.py [--compile]
+    bash scripts/dlo-env run python bench/perf/auto_vs_full.py [--compile]
 """
 from __future__ import annotations
 
@@ -248,7 +248,7 @@ def main() -> None:
     for label, changes in notes:
         lines.append(f"* {label}: " + ("; ".join(f"{i}: {c}" for i, c in changes) if changes else "none"))
     flags = (" --compile" if args.compile else "") + (" --compiled-planar" if args.compiled_planar else "")
-    lines += ["", f"Command: `bash scripts/dlo-env run python bench/auto_vs_full.py{flags}`", ""]
+    lines += ["", f"Command: `bash scripts/dlo-env run python bench/perf/auto_vs_full.py{flags}`", ""]
     if args.loop_only:
         print("\n".join(lines))
         return

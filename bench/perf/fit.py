@@ -1,7 +1,7 @@
 """Identification benchmark (issue 16): σ coverage, the paper's copy-paper sheet, and the cost against
 derivative-free fits on the same data.
 
-    bash scripts/dlo-env run python bench/fit.py [--trials 100] [--sheet-seeds 5] [--twist-trials 10] [--baseline-seeds 3]
+    bash scripts/dlo-env run python bench/perf/fit.py [--trials 100] [--sheet-seeds 5] [--twist-trials 10] [--baseline-seeds 3]
         [--out bench/results/fit.md]
 
 Synthetic observations come from the independent Kirchhoff shooting solver (test/reference/kirchhoff.py):
@@ -34,11 +34,11 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
-sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
-from common import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 from reference.kirchhoff import continuation, rot_x, solve_clamped  # noqa: E402
 
 from dlo_ros.identify import ForceObservation, Observation, ObservationSet, fit  # noqa: E402
@@ -245,7 +245,7 @@ def report(cov: dict, sheet: dict, base: list[dict], tw: dict, args: argparse.Na
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} CPUs, Python {info.get('python')}, "
              f"{info.get('platform')}; load average at start {tuple(round(x, 2) for x in info.get('load_average', ()))}; "
              f"git {info.get('git', '?')}; generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC; "
-             f"total {total:.0f} s. Command: `bash scripts/dlo-env run python bench/fit.py --trials {args.trials} "
+             f"total {total:.0f} s. Command: `bash scripts/dlo-env run python bench/perf/fit.py --trials {args.trials} "
              f"--sheet-seeds {args.sheet_seeds} --baseline-seeds {args.baseline_seeds} --twist-trials {args.twist_trials}`. Times are wall-clock on a shared machine: compare them as "
              "ratios within this run.", "",
              "Data: the independent Kirchhoff shooting solver (test/reference/kirchhoff.py), points at random arc "

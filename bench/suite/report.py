@@ -1,11 +1,11 @@
-"""Charts (PNG, matplotlib) and markdown tables for bench/run_all.py."""
+"""Charts (PNG, matplotlib) and markdown tables for bench/suite/run_all.py."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
-from .methods import METHOD_LABELS
+from bench.methods.runners import METHOD_LABELS
 
 COLORS = {"paper": "#000000", "fourier": "#1f77b4", "fourier-3d": "#17becf", "fourier-3d-z": "#bcbd22", "default": "#d62728", "default-planar": "#ff7f0e",
           "rod": "#2ca02c", "pyelastica": "#9467bd", "mujoco": "#8c564b"}
@@ -114,6 +114,15 @@ def pareto_table(result: dict, marks=None) -> str:
 CAT_TEXT = {3.0: "✓", 2.0: "✓u", 1.25: "↓", 1.0: "✗", 0.5: "✗u", 0.0: "F"}
 
 
+def sweep_labels(res: dict, pi_digits: int, weight_prefix: str = "") -> list[str]:
+    """The labels of a sweep's values: turns in π, weights ρ, chords and jumps in L."""
+    if res["sweep"] == "rotation":
+        return [f"{v / np.pi:.{pi_digits}g}π" for v in res["values"]]
+    if res["sweep"] == "weight":
+        return [f"{weight_prefix}{v:g}" for v in res["values"]]
+    return [f"{v:g}L" for v in res["values"]]
+
+
 def stability_chart(results: list[dict], path: Path, marks=None) -> None:
     plt = _plt()
     from matplotlib.colors import BoundaryNorm, ListedColormap
@@ -133,14 +142,8 @@ def stability_chart(results: list[dict], path: Path, marks=None) -> None:
                 ax.text(j, i, txt, ha="center", va="center", fontsize=6)
         ax.set_yticks(range(len(keys)))
         ax.set_yticklabels([k + mark(marks, k.split()[0], "short", "\n") for k in keys], fontsize=7)
-        vals = res["values"]
-        if res["sweep"] == "rotation":
-            labels = [f"{v / np.pi:.2g}π" for v in vals]
-        elif res["sweep"] == "weight":
-            labels = [f"{v:g}" for v in vals]
-        else:
-            labels = [f"{v:g}L" for v in vals]
-        ax.set_xticks(range(len(vals)))
+        labels = sweep_labels(res, pi_digits=2)
+        ax.set_xticks(range(len(labels)))
         ax.set_xticklabels(labels, fontsize=7)
         ax.set_title({"compression": "compression: chord (cold solves)", "rotation": "end rotation τ at chord 0.6L (continuation)",
                       "weight": "weight ρ = D L³/Rf, table at −0.25L (cold solves)",
@@ -155,12 +158,7 @@ def stability_chart(results: list[dict], path: Path, marks=None) -> None:
 
 def stability_table(res: dict, marks=None) -> str:
     vals = res["values"]
-    if res["sweep"] == "rotation":
-        head = [f"{v / np.pi:.3g}π" for v in vals]
-    elif res["sweep"] == "weight":
-        head = [f"ρ={v:g}" for v in vals]
-    else:
-        head = [f"{v:g}L" for v in vals]
+    head = sweep_labels(res, pi_digits=3, weight_prefix="ρ=")
     lines = [f"### {res['sweep']}", "", "| method | " + " | ".join(head) + " |", "|---" * (len(vals) + 1) + "|"]
     for k, cells in res["cells"].items():
         entries = []

@@ -1,7 +1,7 @@
 """Seeded random scenes, the long version (issue #12, "Random scenes"): every verdict checked.
 
-    bash scripts/dlo-env run python bench/random_scenes.py              # 200 seeds → bench/results/random_scenes.md
-    bash scripts/dlo-env run python bench/random_scenes.py --seeds 20   # a quick look (writes the same file)
+    bash scripts/dlo-env run python bench/suite/random_scenes.py              # 200 seeds → bench/results/random_scenes.md
+    bash scripts/dlo-env run python bench/suite/random_scenes.py --seeds 20   # a quick look (writes the same file)
 
 Scenes from test/random_scenes.py (seeds 0 … N−1), each solved cold twice: ``model: auto`` with the
 library defaults (``make_solver(problem)``: background checks; derivatives interpreted, ``compile='off'``,
@@ -25,7 +25,7 @@ Checks, each against something other than the answer itself:
   shooting reference (test/reference, loads raised from zero by continuation): if it finds an
   equilibrium clear of the obstacles, the scene was solvable.
 
-    bash scripts/dlo-env run python bench/random_scenes.py --only 98 141   # reproduce some seeds (prints)
+    bash scripts/dlo-env run python bench/suite/random_scenes.py --only 98 141   # reproduce some seeds (prints)
 """
 from __future__ import annotations
 
@@ -39,11 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
-sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
-from common import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 from reference.kirchhoff import blas_threads, continuation, solve_clamped  # noqa: E402
 
 # test/random_scenes.py shares this script's name: load it by its path
@@ -314,13 +314,13 @@ def report(rows, args, info, wall_s: float, load_end) -> str:
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores (shared with other engineers' jobs; load "
              f"average {', '.join(f'{v:.2f}' for v in info.get('load_average', ()))} at the start, "
              f"{', '.join(f'{v:.2f}' for v in load_end)} at the end), Python {info.get('python')}; git {info.get('git', '?')}.",
-             f"Command: `bash scripts/dlo-env run python bench/random_scenes.py "
+             f"Command: `bash scripts/dlo-env run python bench/suite/random_scenes.py "
              f"{'--only ' + ' '.join(map(str, args.only)) if args.only else '--seeds ' + str(args.seeds)}` "
              f"({len(rows)} seeds; wall time {wall_s / 60:.1f} min).", "",
              "Each scene (test/random_scenes.py) solved cold by `model: auto` (library defaults: `make_solver(problem)`,"
              " background checks) and by the fixed full 3D model (`model: full`, order 16, director).  Derivatives"
              " interpreted (`compile='off'`).  Tolerance 1e-3·L.  Checks and their independent means: see the"
-             " module docstring of bench/random_scenes.py.", ""]
+             " module docstring of bench/suite/random_scenes.py.", ""]
     lines += ["## Status counts", "", "| model | " + " | ".join(STATUSES) + " | total |",
               "|---|" + "---|" * (len(STATUSES) + 1)]
     for model in MODELS:

@@ -1,7 +1,7 @@
 """The cost of self-contact (issue #15).
 
-    bash scripts/dlo-env run python bench/self_contact.py      # writes bench/results/self_contact.md
-    bash scripts/dlo-env run python bench/self_contact.py --far-only   # part 1 only, printed
+    bash scripts/dlo-env run python bench/perf/self_contact.py      # writes bench/results/self_contact.md
+    bash scripts/dlo-env run python bench/perf/self_contact.py --far-only   # part 1 only, printed
 
 1. A stream that never comes near itself: the paper's Fig. 2 set-up (test/test_fig2_reference.py, radius
    0.01 L) from chord 0.9 L down to 0.6 L in steps of 0.005 L (planar, stable, the loop open), ``model:
@@ -14,6 +14,7 @@ Derivatives interpreted (compile 'off') in both, so the ratio compares like with
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from dataclasses import replace
@@ -21,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
-sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
-from common import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 from conftest import clamped_pair  # noqa: E402
 
 from dlo_ros.solver.auto import AutoShapeSolver  # noqa: E402
@@ -99,9 +100,12 @@ def loop_stream() -> list[str]:
 
 
 def main() -> None:
-    lines = ["# Self-contact: cost (bench/self_contact.py)", "", f"Machine: {machine()}", ""]
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--far-only", action="store_true", help="part 1 only, printed (nothing written)")
+    args = ap.parse_args()
+    lines = ["# Self-contact: cost (bench/perf/self_contact.py)", "", f"Machine: {machine()}", ""]
     lines += far_stream()
-    if "--far-only" in sys.argv:
+    if args.far_only:
         print("\n".join(lines))
         return
     lines += loop_stream()

@@ -16,10 +16,10 @@ import numpy as np
 from dlo_ros.model.elastica import clamped_clamped_elastica
 from dlo_ros.solver import ShapeSolver, SolverOptions
 
-from .common import S_OUT, Case, interp_points
-from .methods import twisted_problem
-from .planar import PlanarRitz, PlanarRod
-from .rod3d import Rod3D
+from bench.common import S_OUT, Case, interp_points
+from bench.methods.planar import PlanarRitz, PlanarRod
+from bench.methods.rod3d import Rod3D
+from bench.methods.runners import twisted_problem
 
 RITZ_FAMILY = ("paper", "fourier", "default", "default-planar")
 

@@ -6,14 +6,14 @@ one-segment bending frequency), damping ratio ``zeta`` (ν = ζ·2ω₁ for PyEl
 joints' damping for MuJoCo), the rod radius (PyElastica: EA/EI = 4/r², the stretch error and the axial
 wave speed), and the rest tolerance ``settle``.  Reported: time to rest, simulated time, steps, error.
 The fastest setting that keeps the error at the discretisation floor (≈ 2.5e-2 L at N = 20, first order
-in L/N because both clamp a whole end segment) is what bench/peers.py uses.
+in L/N because both clamp a whole end segment) is what bench/methods/peers.py uses.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .common import elastica_case, max_error
-from .references import elastica_points
+from bench.common import elastica_case, max_error
+from bench.suite.references import elastica_points
 
 KNOBS = {
     "pyelastica": {"cfl": [0.25, 0.5, 0.9, 1.5, 3.0], "zeta": [0.25, 0.5, 1.0, 2.0, 4.0],

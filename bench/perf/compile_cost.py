@@ -1,6 +1,6 @@
 """What compiling a scene's Newton system costs and what it buys (issue #14, "compile time in seconds").
 
-    bash scripts/dlo-env run python bench/compile_cost.py [--models planar:8 full:8 full:16 full:32]
+    bash scripts/dlo-env run python bench/perf/compile_cost.py [--models planar:8 full:8 full:16 full:32]
         [--out bench/results/compile_cost.md]
 
 For ``default_cable`` with each fixed model, every function a solve evaluates — the contact-free KKT
@@ -31,10 +31,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
+ROOT = Path(__file__).resolve().parents[2]  # the repository
+sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
-from common import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver.compiled import InterpretedFunction, NativeFunction  # noqa: E402
@@ -152,7 +152,7 @@ def main() -> None:
         f"Machine: {info.get('cpu')}, {info.get('cpus')} cores (shared; load average "
         f"{', '.join(f'{v:.2f}' for v in info.get('load_average', ()))} at the end), Python {info['python']}; "
         f"git {info.get('git')}.",
-        f"Command: `bash scripts/dlo-env run python bench/compile_cost.py --models {' '.join(args.models)} "
+        f"Command: `bash scripts/dlo-env run python bench/perf/compile_cost.py --models {' '.join(args.models)} "
         f"--flattened-up-to {args.flattened_up_to}` "
         f"({(time.time() - t0) / 60:.1f} min).",
         "",

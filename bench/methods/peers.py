@@ -7,7 +7,7 @@ damped dynamics until the largest node speed falls below ``settle`` · L · ω�
 clamped beam's first bending frequency; near rest the distance to equilibrium is about speed/ω₁) or
 ``max_time`` runs out.
 
-Settings (chosen by bench/peer_tuning.py, results in bench/results/peers_tuning.md): PyElastica
+Settings (chosen by bench/suite/peer_tuning.py, results in bench/results/peers_tuning.md): PyElastica
 cfl 0.5 (0.9 blows up), ζ = 2, radius 5 mm (stretch error ≈ P r²/(4 Rf) ≈ 1e-4 L, below the first-order
 discretisation error; a thinner rod only shrinks dt); MuJoCo cfl 0.5 (≥ 1.5 never settles), ζ = 1;
 settle 1e-4 for both (1e-5 costs 50 % more time and changes nothing at N ≤ 80).
@@ -30,8 +30,8 @@ import numpy as np
 
 from dlo_ros.model.rotations import quat_to_matrix
 
-from .common import S_OUT, Case, Outcome, interp_points, quat_twisted
-from .planar import guess_angles, tangent_angle
+from bench.common import S_OUT, Case, Outcome, interp_points, quat_twisted
+from bench.methods.planar import guess_angles, tangent_angle
 
 OMEGA1 = 22.37  # (4.730)² : first clamped–clamped bending mode, ω₁ = 22.37 √(EI/m') / L²
 

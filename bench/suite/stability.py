@@ -27,11 +27,11 @@ import numpy as np
 
 from dlo_ros.model.problem import GripPose
 
-from .common import Case, elastica_case, heavy_case, make_problem, max_error, table, twist_case
-from .methods import make_runner, twisted_problem
-from .planar import PlanarRod
-from .references import elastica_points
-from .rod3d import Rod3D
+from bench.common import Case, elastica_case, heavy_case, make_problem, max_error, table, twist_case
+from bench.methods.planar import PlanarRod
+from bench.methods.rod3d import Rod3D
+from bench.methods.runners import make_runner, twisted_problem
+from bench.suite.references import elastica_points
 
 TOL = 0.05
 

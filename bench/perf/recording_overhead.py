@@ -16,7 +16,7 @@ seconds (single runs scatter by ±30 %):
 
 Ratios are of the medians of the pooled samples; requirement: interleaved ratio <= 1.10.
 
-    bash scripts/dlo-env run python bench/recording_overhead.py [--updates 200] [--repeats 30] \
+    bash scripts/dlo-env run python bench/perf/recording_overhead.py [--updates 200] [--repeats 30] \
         [--out bench/results/recording_overhead.md]
 """
 from __future__ import annotations
@@ -172,7 +172,7 @@ def main() -> None:
         f"Recorder: dropped {sum(r['dropped'] for r in all_on)}, errors {sum(r['errors'] for r in all_on)}; "
         f"close() (drain + flush) at most {max(r['drain_s'] for r in all_on):.2f} s.",
         "",
-        "Command: `bash scripts/dlo-env run python bench/recording_overhead.py`",
+        "Command: `bash scripts/dlo-env run python bench/perf/recording_overhead.py`",
         "",
     ]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

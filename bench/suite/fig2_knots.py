@@ -1,7 +1,7 @@
 """The paper's Fig. 2 set-up at chords 0.4 L and 0.3 L against the Kirchhoff reference on the same branch
 (issue #12, "Paper's Fig. 2 configuration, chords 0.8 L to 0.3 L").
 
-    bash scripts/dlo-env run python bench/fig2_knots.py          # writes bench/results/fig2_knots.md
+    bash scripts/dlo-env run python bench/suite/fig2_knots.py          # writes bench/results/fig2_knots.md
 
 Clamp at s = 0, the end s = L held by its tangent (twist free) at (c, 0, 0), Rf/Rt = 100, no weight
 (test/test_fig2_reference.py).  Reference: test/reference shooting on the Kirchhoff rod equations, the
@@ -20,17 +20,18 @@ the reference's branch is identified as another equilibrium or as none.
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
-sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
-from common import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 from reference.kirchhoff import blas_threads, discrete_stability, solve_clamped  # noqa: E402
 from test_fig2_reference import (L, RF, RT, branch_references, closest_self_approach,  # noqa: E402
                                  distance_modulo_chord_rotation, fig2)
@@ -94,12 +95,13 @@ def row(name: str, c: float, result, ms: float, ref) -> str:
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     info = machine()
     t_all = time.perf_counter()
     lines = ["# Fig. 2 at chords 0.4 L and 0.3 L against the reference on the same branch", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores (shared; load average "
              f"{', '.join(f'{v:.2f}' for v in info.get('load_average', ()))}), Python {info.get('python')}; git {info.get('git', '?')}.",
-             "Command: `bash scripts/dlo-env run python bench/fig2_knots.py`.  Set-up and method: the module docstring.", ""]
+             "Command: `bash scripts/dlo-env run python bench/suite/fig2_knots.py`.  Set-up and method: the module docstring.", ""]
     t0 = time.perf_counter()
     refs = branch_references(CHORDS)
     t_ref = time.perf_counter() - t0

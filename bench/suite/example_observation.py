@@ -1,6 +1,6 @@
 """Writes the shipped example for ``dlo fit``: config/observations/default_cable_hanging.yaml (+ .npy).
 
-    bash scripts/dlo-env run python bench/example_observation.py
+    bash scripts/dlo-env run python bench/suite/example_observation.py
 
 A cable like ``default_cable`` but heavier and stiffer than the scene says (Rf = 0.03 N·m², D = 0.7 N/m
 instead of 0.02 and 0.5) hangs between the scene's two clamps.  Its shape comes from the independent
@@ -11,13 +11,14 @@ the points in random order.  A force/torque sensor on the left gripper reads its
 """
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
 
 from reference.kirchhoff import continuation, solve_clamped  # noqa: E402
@@ -28,6 +29,7 @@ OUT = ROOT / "config" / "observations"
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     rng = np.random.default_rng(7)
     left, right = np.array([0.0, 0.0, 0.4]), np.array([0.6, 0.0, 0.4])
 
@@ -56,7 +58,7 @@ def main() -> None:
                           "force": {"grip": "left", "force": [round(float(f), 5) for f in force],
                                     "sigma": FORCE_SIGMA}}],
     }
-    header = ("# Example for `dlo fit` (msg_docs/fitting.md), written by bench/example_observation.py: default_cable's\n"
+    header = ("# Example for `dlo fit` (msg_docs/fitting.md), written by bench/suite/example_observation.py: default_cable's\n"
               f"# clamps holding a cable with Rf = {RF} N m^2 and D = {D} N/m (the scene says 0.02 and 0.5), shape from\n"
               "# the independent Kirchhoff shooting solver, 1.5 mm noise, 30 % occluded, shuffled; left grip force\n"
               "# with 0.01 N noise.\n")

@@ -20,9 +20,9 @@ from dlo_ros.model.problem import GripPose, Load
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver, SolverOptions
 
-from .common import interp_points, make_problem, quat_planar, table
-from .planar import PlanarRod
-from .rod3d import Rod3D
+from bench.common import interp_points, make_problem, quat_planar, table
+from bench.methods.planar import PlanarRod
+from bench.methods.rod3d import Rod3D
 
 
 def _crossings(p2: np.ndarray) -> int:

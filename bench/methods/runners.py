@@ -7,10 +7,10 @@
 3. ``default``  the project's ShapeSolver defaults (Chebyshev, rotated frame, full 3D model), orders 4 … 16;
    ``default-planar`` the same with ``model: planar`` (planar cases only).
 4. ``rod``      a discretised rod, N segments + IPOPT (planar: angles; 3D: unit quaternions).
-5. ``pyelastica`` / ``mujoco``: the dynamic peers (bench/peers.py).
+5. ``pyelastica`` / ``mujoco``: the dynamic peers (bench/methods/peers.py).
 
 Planar cases: methods 1–2 use the planar Euler-angle model (φ ≡ π, θ = π/2 − β; the paper's examples
-2–3 are planar) from bench/planar.py.  3D cases: methods 1–2 use dlo_ros's StringNLP / ShapeSolver with
+2–3 are planar) from bench/methods/planar.py.  3D cases: methods 1–2 use dlo_ros's StringNLP / ShapeSolver with
 ``frame: paper``.  Twist cases: a "cold" solve is a continuation from the untwisted state in
 ``TWIST_STEPS`` equal turns (an Euler-angle target cannot carry a turn count; every method gets the same
 path), a "warm" solve is one more step of the grip.
@@ -24,10 +24,10 @@ import numpy as np
 from dlo_ros.model.problem import GripPose
 from dlo_ros.solver import ShapeSolver, SolverOptions
 
-from .common import S_OUT, Case, Outcome, interp_points, quat_twisted
-from .nlp_tools import augmented_lagrangian_nm
-from .planar import PlanarRitz, PlanarRod
-from .rod3d import Rod3D
+from bench.common import S_OUT, Case, Outcome, interp_points, quat_twisted
+from bench.methods.nlp_tools import augmented_lagrangian_nm
+from bench.methods.planar import PlanarRitz, PlanarRod
+from bench.methods.rod3d import Rod3D
 
 TWIST_STEPS = 8
 NM_TIME_LIMIT = 60.0

@@ -1,7 +1,7 @@
 """Shape-query throughput in-process: one solver answering ``solve(poses, commit=False)`` one after the
 other, against ``query_many`` on a process pool of 1 and 2 workers, on the same random targets.
 
-    bash scripts/dlo-env run python bench/queries.py [--queries 400] [--compile off|cached]
+    bash scripts/dlo-env run python bench/perf/queries.py [--queries 400] [--compile off|cached]
         [--out bench/results/queries.md]
 
 ``default_cable`` (``solver.model: auto``), random right-grip targets within 15 cm of the held pose.
@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
+ROOT = Path(__file__).resolve().parents[2]  # the repository
+sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 sys.path.insert(0, str(ROOT / "test"))
 
-from common import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 from random_scenes import targets_near  # noqa: E402
 
 from dlo_ros.scene import load_scene  # noqa: E402
@@ -63,7 +63,7 @@ def main() -> None:
     ok = sum(r.ok for r in single)
     lines = ["# Shape queries in-process", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, Python {info.get('python')}; git {info.get('git', '?')}.",
-             f"Command: `bash scripts/dlo-env run python bench/queries.py --queries {args.queries} --compile {args.compile}`",
+             f"Command: `bash scripts/dlo-env run python bench/perf/queries.py --queries {args.queries} --compile {args.compile}`",
              "", f"`default_cable`, solver.model auto, {args.queries} random right-grip targets within 15 cm "
              f"({ok} answered ok); derivatives {'interpreted' if args.compile == 'off' else 'compiled when cached'}.", "",
              "| way | cores used | queries/s | vs one solver | warm-up s | answers equal the single ones |",

@@ -6,7 +6,7 @@ per update along a smooth closed path (x, z) — ≥ 100 updates, median and p90
 (NLP + IPOPT set-up), the one-off compile time of the KKT function and the time to load it from the
 cache on a later start, for the interpreted and the compiled derivatives side by side (same run).
 
-    bash scripts/dlo-env run python bench/solver_speed.py [--updates 200] [--out bench/results/solver_speed.md]
+    bash scripts/dlo-env run python bench/perf/solver_speed.py [--updates 200] [--out bench/results/solver_speed.md]
 """
 from __future__ import annotations
 
@@ -102,7 +102,7 @@ def main() -> None:
             f"| {r['mode']} | {r['build_s']:.2f} | {r['compile_s']:.1f} | {r['cold_ms']:.1f} | {r['warm_median_ms']:.2f} | "
             f"{r['warm_p90_ms']:.2f} | {r['warm_median_ms'] / base:.2f} | {r['iterations_median']:.0f} | {r['newton_fraction']:.0%} |"
         )
-    lines += ["", "Command: `bash scripts/dlo-env run python bench/solver_speed.py`", ""]
+    lines += ["", "Command: `bash scripts/dlo-env run python bench/perf/solver_speed.py`", ""]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines))
     print("\n".join(lines))

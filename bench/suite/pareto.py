@@ -9,9 +9,9 @@ import numpy as np
 
 from dlo_ros.model.problem import GripPose
 
-from .common import Case, asym_case, elastica_case, heavy_case, loads_case, max_error, twist_case
-from .methods import METHOD_LABELS, ORDERS, SEGMENTS, make_runner
-from .references import reference, reference_for
+from bench.common import Case, asym_case, elastica_case, heavy_case, loads_case, max_error, twist_case
+from bench.methods.runners import METHOD_LABELS, ORDERS, SEGMENTS, make_runner
+from bench.suite.references import reference, reference_for
 
 
 def cases(quick: bool, methods=None) -> list[Case]:

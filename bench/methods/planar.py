@@ -27,8 +27,8 @@ from dlo_ros.model.quadrature import ChebyshevQuadrature
 from dlo_ros.model.rotations import quat_to_matrix
 from dlo_ros.solver.initial_guess import inverse_j0
 
-from .common import S_OUT, Outcome, interp_points
-from .nlp_tools import CasadiNLP, NLPSolution, augmented_lagrangian_nm
+from bench.common import S_OUT, Outcome, interp_points
+from bench.methods.nlp_tools import CasadiNLP, NLPSolution, augmented_lagrangian_nm
 
 
 def tangent_angle(q: np.ndarray) -> float:

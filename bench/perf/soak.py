@@ -1,7 +1,7 @@
 """Node soak: targets at 100 Hz on a gentle 3D path for minutes, with live parameter changes and
 concurrent shape queries, over real DDS; RSS, latency, failures, stamp/shape agreement, model.
 
-    bash scripts/dlo-env run python bench/soak.py [--seconds 600] [--rate 100] [--param-every 60]
+    bash scripts/dlo-env run python bench/perf/soak.py [--seconds 600] [--rate 100] [--param-every 60]
         [--query-clients 2] [--query-rate 2] [--out bench/results/soak.md]
 
 The node runs the default scene with ``solver.model: auto`` (interpreted derivatives) in its own process
@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
+ROOT = Path(__file__).resolve().parents[2]  # the repository
+sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
-from common import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 
 from dlo_ros.node.client import DloClient, running_node  # noqa: E402
 
@@ -135,7 +135,7 @@ def main() -> None:
     info = machine()
     lines = ["# Node soak", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, Python {info.get('python')}; git {info.get('git', '?')}.",
-             f"Command: `bash scripts/dlo-env run python bench/soak.py --seconds {args.seconds:g} --rate {args.rate:g} "
+             f"Command: `bash scripts/dlo-env run python bench/perf/soak.py --seconds {args.seconds:g} --rate {args.rate:g} "
              f"--param-every {args.param_every:g} --query-clients {args.query_clients} --query-rate {args.query_rate:g}`", "",
              f"{k} targets in {elapsed:.0f} s ({k / elapsed:.0f}/s), {len(events)} centrelines ({len(events) / elapsed:.1f}/s); "
              f"latency target → centreline p50 {np.percentile(lat, 50):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "

@@ -23,9 +23,9 @@ import numpy as np
 from dlo_ros.model.problem import Problem
 from dlo_ros.model.rotations import quat_to_matrix
 
-from .common import S_OUT, Outcome, interp_points, quat_twisted
-from .nlp_tools import CasadiNLP, NLPSolution
-from .planar import guess_angles, tangent_angle
+from bench.common import S_OUT, Outcome, interp_points, quat_twisted
+from bench.methods.nlp_tools import CasadiNLP, NLPSolution
+from bench.methods.planar import guess_angles, tangent_angle
 
 
 def qmul(a, b):

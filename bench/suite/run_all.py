@@ -1,8 +1,8 @@
 """Issue 5: the speed-vs-accuracy benchmark, the stability map and the paper's examples, in one command.
 
     bash scripts/dlo-env run pip install -r requirements-bench.txt      # once: matplotlib, tqdm, pyelastica, mujoco
-    bash scripts/dlo-env run python bench/run_all.py [--quick] [--only pareto,stability,paper]
-    bash scripts/dlo-env run python bench/run_all.py --methods fourier-3d-z   # re-run some rows, merge into raw.json
+    bash scripts/dlo-env run python bench/suite/run_all.py [--quick] [--only pareto,stability,paper]
+    bash scripts/dlo-env run python bench/suite/run_all.py --methods fourier-3d-z   # re-run some rows, merge into raw.json
 
 Writes PNG charts and markdown tables into bench/results/ (see bench/README.md for what each shows).
 Timings are wall-clock on this machine while others may share it: compare them only as ratios within
@@ -19,19 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
-if __package__ in (None, ""):  # run as a script: make `bench` importable
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-    __package__ = "bench"
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # run as a script: make `bench` importable
 
-from bench import pareto, stability  # noqa: E402
-from bench import paper_examples as paper  # noqa: E402
-from bench import peer_tuning  # noqa: E402
-from bench.common import machine  # noqa: E402
-from bench.methods import METHOD_LABELS  # noqa: E402
-from bench.report import (_plt, fmt, footnotes, mark, pareto_chart, pareto_table, stability_chart,  # noqa: E402
-                          stability_table)
-
-OUT = Path(__file__).resolve().parent / "results"
+from bench.common import RESULTS as OUT, ROOT, machine  # noqa: E402
+from bench.methods.runners import METHOD_LABELS  # noqa: E402
+from bench.suite import paper_examples as paper  # noqa: E402
+from bench.suite import pareto, peer_tuning, stability  # noqa: E402
+from bench.suite.report import (_plt, fmt, footnotes, mark, pareto_chart, pareto_table, stability_chart,  # noqa: E402
+                                stability_table)
 
 
 def _bar(total):
@@ -136,7 +131,7 @@ def write_stability(results, info, quick, started, marks=None):
             "Cells: ✓ right equilibrium (max error to the reference < 0.05 L) with a stable verdict (or none: the "
             "peers), ✓u right but the method called it unstable, ✗ a different equilibrium, ✗u a different and "
             "unstable one, F no convergence; then the error/L and iterations (Nelder–Mead: function evaluations; "
-            "peers: time steps).  How each sweep runs and what its reference is: bench/stability.py.", ""]
+            "peers: time steps).  How each sweep runs and what its reference is: bench/suite/stability.py.", ""]
     for res in results:
         text.append(stability_table(res, marks))
         if res["sweep"] == "weight":
@@ -154,6 +149,15 @@ def run_paper(quick: bool, bar, log) -> dict:
         bar.update(1)
     charts_paper(out)
     return out
+
+
+def _save(plt, fig, name: str, title: str | None = None) -> None:
+    """Title (if any), lay out, write ``OUT / name`` and close one of the paper's figures."""
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(OUT / name, dpi=110)
+    plt.close(fig)
 
 
 def charts_paper(out: dict) -> None:
@@ -177,10 +181,8 @@ def charts_paper(out: dict) -> None:
             if j == 0:
                 ax.set_ylabel(vname, fontsize=8)
     axes[0, 0].legend(fontsize=6)
-    fig.suptitle("Paper Fig. 2: ends brought together (s=0 clamped; s=L tangent held, twist free; Rf/Rt = 100)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(OUT / "paper_fig2.png", dpi=110)
-    plt.close(fig)
+    _save(plt, fig, "paper_fig2.png",
+          "Paper Fig. 2: ends brought together (s=0 clamped; s=L tangent held, twist free; Rf/Rt = 100)")
 
     f3 = out["fig3"]
     floors = f3["floors"]
@@ -196,11 +198,8 @@ def charts_paper(out: dict) -> None:
         ax.set_aspect("equal", "datalim")
         ax.tick_params(labelsize=7)
     axes[0].legend(fontsize=6)
-    fig.suptitle("Paper Fig. 3: lowest stable shape at chord 0.7L, horizontal clamps, for ρ = 0 … 5000 (planar rod N=200)",
-                 fontsize=9)
-    fig.tight_layout()
-    fig.savefig(OUT / "paper_fig3.png", dpi=110)
-    plt.close(fig)
+    _save(plt, fig, "paper_fig3.png",
+          "Paper Fig. 3: lowest stable shape at chord 0.7L, horizontal clamps, for ρ = 0 … 5000 (planar rod N=200)")
 
     f5 = out["fig5"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
@@ -218,11 +217,8 @@ def charts_paper(out: dict) -> None:
     for ax in axes:
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    fig.suptitle("Paper Fig. 5: when does the right end leave the finger? (pinned ends 0.8L apart on a floor, load at s = 0.5L)",
-                 fontsize=9)
-    fig.tight_layout()
-    fig.savefig(OUT / "paper_fig5.png", dpi=110)
-    plt.close(fig)
+    _save(plt, fig, "paper_fig5.png",
+          "Paper Fig. 5: when does the right end leave the finger? (pinned ends 0.8L apart on a floor, load at s = 0.5L)")
 
     sh = out["sheets"]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
@@ -239,9 +235,7 @@ def charts_paper(out: dict) -> None:
         ax.set_ylabel("z [mm]")
         ax.legend(fontsize=6)
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(OUT / "paper_sheets.png", dpi=110)
-    plt.close(fig)
+    _save(plt, fig, "paper_sheets.png")
 
 
 def write_paper(out, info, quick, started):
@@ -333,7 +327,7 @@ def rerun(methods: set, parts: set, quick: bool, note: str) -> int:
         sys.exit(f"--methods: {path.name} does not come from a {'--quick' if quick else 'full'} run")
     started, info = time.time(), machine()
     dirty = subprocess.run(["git", "status", "--porcelain", "--", "dlo_ros"], capture_output=True, text=True,
-                           cwd=OUT.parent.parent).stdout.strip()
+                           cwd=ROOT).stdout.strip()
     log_file = (OUT / "run_all.log").open("a")  # the earlier run's tracebacks stay: its rows stay too
     log_file.write(f"\n=== --methods {','.join(sorted(methods))}, {time.strftime('%Y-%m-%d %H:%M')} ===\n")
 
@@ -376,7 +370,7 @@ def rerun(methods: set, parts: set, quick: bool, note: str) -> int:
     raw.setdefault("method_runs", {}).update({m: run for m in sorted(methods)})
     path.write_text(json.dumps(raw, default=_json_default, indent=1))
     render(json.loads(path.read_text()))
-    print(f"bench/run_all.py --methods: done in {elapsed / 60:.1f} min; merged into {path}")
+    print(f"bench/suite/run_all.py --methods: done in {elapsed / 60:.1f} min; merged into {path}")
     log(f"elapsed {elapsed:.1f} s")
     return 0
 
@@ -441,7 +435,7 @@ def main(argv=None) -> int:
     raw["elapsed_s"] = elapsed
     name = "raw_quick.json" if args.quick else "raw.json"
     (OUT / name).write_text(json.dumps(raw, default=_json_default, indent=1))
-    print(f"bench/run_all.py: done in {elapsed / 60:.1f} min; results in {OUT}")
+    print(f"bench/suite/run_all.py: done in {elapsed / 60:.1f} min; results in {OUT}")
     log(f"elapsed {elapsed:.1f} s")
     return 0
 

@@ -1,6 +1,6 @@
 """The 3D model without a pole against the Euler-angle model: error against unknowns, and streams.
 
-    bash scripts/dlo-env run python bench/director.py            # writes bench/results/director.md
+    bash scripts/dlo-env run python bench/suite/director.py            # writes bench/results/director.md
 
 1. Convergence: centreline error (and energy error) against the number of unknowns, director and the
    rotated Euler frame, on exact or independent references: the clamped elastica (closed form), a
@@ -15,6 +15,7 @@ All times from one run on this machine, interpreted derivatives (compile off).
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from dataclasses import replace
@@ -22,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
-sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
-from common import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 from conftest import clamped_pair  # noqa: E402
 from reference.kirchhoff import blas_threads, relaxed_guess, solve_clamped  # noqa: E402
 from reference.test_kirchhoff_reference import planar_buckling_guess  # noqa: E402
@@ -159,10 +160,11 @@ def streams(lines):
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     info = machine()
     lines = ["# The 3D model without a pole (director) against the Euler frame", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, Python {info.get('python')}; git {info.get('git', '?')}.",
-             "Command: `bash scripts/dlo-env run python bench/director.py`", ""]
+             "Command: `bash scripts/dlo-env run python bench/suite/director.py`", ""]
     convergence(lines)
     streams(lines)
     out = ROOT / "bench" / "results" / "director.md"

@@ -13,7 +13,7 @@ Three measurements:
 For reference the same closed-loop target sequence is also solved in this process by a ShapeSolver,
 which separates the solver's time from the node's overhead (DDS, messages, threads).
 
-    scripts/dlo-env run python bench/node_latency.py [--mode interpreted|native|both] [--model full|auto|...]
+    scripts/dlo-env run python bench/perf/node_latency.py [--mode interpreted|native|both] [--model full|auto|...]
                                                      [--n 300] [--rate 100] [--seconds 5] [--out FILE]
 
 Writes a Markdown report (default bench/results/node_latency.md).
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]  # the repository
 Q0 = (0.0, 0.0, 0.0, 1.0)
 LEFT = ((0.0, 0.0, 0.4), Q0)
 
@@ -194,7 +194,7 @@ def main() -> int:
         f"other work (load average {os.getloadavg()[0]:.1f} at the start), Python {platform.python_version()}, "
         "ROS 2 Jazzy PyPI wheels, Fast DDS, discovery on localhost.",
         "",
-        f"Command: `scripts/dlo-env run python bench/node_latency.py --mode {args.mode} --model {args.model} "
+        f"Command: `scripts/dlo-env run python bench/perf/node_latency.py --mode {args.mode} --model {args.model} "
         f"--n {args.n} --rate {args.rate:g} --seconds {args.seconds:g}`",
         "",
         "The node runs in a subprocess on scene `default_cable` (1 m cable, two clamps, table half-space, "

@@ -158,7 +158,7 @@ class PyElasticaRunner(PeerRunner):
                             if 0 <= j < N:
                                 system.external_torques[:, j] += 0.5 * system.director_collection[:, :, j] @ ld.moment
                 for ob in obstacles:
-                    pt, n = ob.params[0:3], ob.params[3:6]
+                    pt, n = ob.point, ob.normal
                     depth = -((system.position_collection.T - pt) @ n)  # > 0 inside
                     inside = depth > 0
                     if inside.any():
@@ -244,7 +244,7 @@ class MuJoCoRunner(PeerRunner):
         # so the explicit plugin forces are stable at the bending time step
         plane = ""
         for ob in problem.obstacles:
-            pt, n = ob.params[0:3], ob.params[3:6]
+            pt, n = ob.point, ob.normal
             plane += (f'<geom type="plane" size="5 5 0.1" pos="{pt[0]} {pt[1]} {pt[2] - r}" zaxis="{n[0]} {n[1]} {n[2]}" '
                       'contype="0" conaffinity="2" condim="1" solref="0.002 1"/>')
         modes = {gg.name: gg.mode for gg in problem.grips}

@@ -104,7 +104,7 @@ class _PlanarBase:
         for ob in self.problem.obstacles:
             if ob.type != "halfspace":
                 raise ValueError("planar bench models support half-space obstacles only")
-            pt, n = ob.params[0:3], ob.params[3:6]
+            pt, n = ob.point, ob.normal
             for j in range(obstacle_x.shape[1]):
                 h = -(n[0] * (obstacle_x[0, j] - pt[0]) + n[2] * (obstacle_x[1, j] - pt[2]))
                 rows.append(h + r); lb.append(-np.inf); ub.append(0.0)

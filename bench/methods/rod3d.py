@@ -117,7 +117,7 @@ class Rod3D:
         for ob in problem.obstacles:
             if ob.type != "halfspace":
                 raise ValueError("Rod3D supports half-space obstacles only")
-            pt, n = ob.params[0:3], ob.params[3:6]
+            pt, n = ob.point, ob.normal
             for i in range(1, N):  # interior nodes: the ends are held by the grips
                 rows.append(-ca.dot(ca.DM(n), X[:, i] - ca.DM(pt)) + r)
                 lb.append(-np.inf); ub.append(0.0)

@@ -288,7 +288,7 @@ def rotate_problem(problem, R=R_X_TO_Z, q=Q_X_TO_Z):
     for ob in problem.obstacles:
         if ob.type != "halfspace":
             raise ValueError("rotate_problem: half-spaces only")
-        obstacles.append(Obstacle("halfspace", np.concatenate([R @ ob.params[0:3], R @ ob.params[3:6]]), ob.name))
+        obstacles.append(Obstacle("halfspace", np.concatenate([R @ ob.point, R @ ob.normal]), ob.name))
     return replace(problem, grips=grips, loads=loads, obstacles=tuple(obstacles), gravity=R @ problem.gravity_unit)
 
 

@@ -69,9 +69,9 @@ def signed_distance(ob, x: np.ndarray) -> np.ndarray:
     """Distance [m] of points x (K, 3) outside the obstacle (negative inside), written out here (not the
     solver's h) for the two kinds the generator makes."""
     if ob.type == "halfspace":
-        return (x - ob.params[0:3]) @ ob.params[3:6]
+        return (x - ob.point) @ ob.normal
     if ob.type == "sphere":
-        return np.linalg.norm(x - ob.params[0:3], axis=1) - ob.params[3]
+        return np.linalg.norm(x - ob.centre, axis=1) - ob.radius
     raise NotImplementedError(ob.type)
 
 

@@ -183,3 +183,18 @@ def test_obstacle_parse_errors_name_the_field():
         Obstacle.from_dict({"type": "sphere", "center": [0, 0, 0], "radius": -1}, "obstacles[2]")
     with pytest.raises(ValueError, match=r"obstacles\[0\]\.type"):
         Obstacle.from_dict({"type": "cone"}, "obstacles[0]")
+
+
+def test_frame_to_quat_inverts_quat_to_frame_for_every_branch():
+    """Shepperd's method picks its pivot from 1 + trace and the diagonal: random rotations plus the
+    half turns about each axis (where the trace pivot would divide by zero) all come back."""
+    from scipy.spatial.transform import Rotation
+
+    from dlo_ros.model.director import frame_to_quat, quat_to_frame
+
+    q = np.vstack([Rotation.random(500, random_state=3).as_quat(), np.eye(4), [[0.6, 0.8, 0.0, 0.0]]])
+    frames = quat_to_frame(q)
+    back = frame_to_quat(frames)
+    np.testing.assert_allclose(quat_to_frame(back), frames, atol=1e-14)
+    np.testing.assert_allclose(np.abs(np.sum(back * q, axis=1)), 1.0, atol=1e-14)
+    assert frame_to_quat(frames[0]).shape == (4,)

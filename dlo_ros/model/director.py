@@ -96,27 +96,33 @@ def quat_to_frame(q: np.ndarray) -> np.ndarray:
 
 
 def frame_to_quat(r: np.ndarray) -> np.ndarray:
-    """Unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3) (Shepperd's method)."""
+    """Unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3) (Shepperd's method: each row
+    from the largest of 1 + trace and the diagonal, so no division by a small number)."""
     r = np.asarray(r, dtype=float)
-    flat = r.reshape(-1, 3, 3)
-    out = np.empty((flat.shape[0], 4))
-    for k, m in enumerate(flat):
-        tr = np.trace(m)
-        cands = [tr, m[0, 0], m[1, 1], m[2, 2]]
-        i = int(np.argmax(cands))
-        if i == 0:
-            w = 0.5 * np.sqrt(1 + tr)
-            out[k] = [(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w), w]
-        else:
-            a = i - 1
-            b, c = (a + 1) % 3, (a + 2) % 3
-            v = 0.5 * np.sqrt(max(1 + m[a, a] - m[b, b] - m[c, c], 0.0))
-            q = np.empty(4)
-            q[a] = v
-            q[b] = (m[a, b] + m[b, a]) / (4 * v)
-            q[c] = (m[a, c] + m[c, a]) / (4 * v)
-            q[3] = (m[c, b] - m[b, c]) / (4 * v)
-            out[k] = q
+    m = r.reshape(-1, 3, 3)
+    d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
+    tr = d0 + d1 + d2
+    which = np.argmax(np.stack([tr, d0, d1, d2], axis=1), axis=1)
+    out = np.empty((m.shape[0], 4))
+    k = which == 0
+    if np.any(k):
+        w = 0.5 * np.sqrt(1.0 + tr[k])
+        mk = m[k]
+        out[k] = np.stack([(mk[:, 2, 1] - mk[:, 1, 2]) / (4 * w), (mk[:, 0, 2] - mk[:, 2, 0]) / (4 * w),
+                           (mk[:, 1, 0] - mk[:, 0, 1]) / (4 * w), w], axis=1)
+    for a in range(3):  # the largest diagonal entry is a: q_a first
+        k = which == a + 1
+        if not np.any(k):
+            continue
+        b, c = (a + 1) % 3, (a + 2) % 3
+        mk = m[k]
+        v = 0.5 * np.sqrt(np.maximum(1.0 + mk[:, a, a] - mk[:, b, b] - mk[:, c, c], 0.0))
+        q = np.empty((mk.shape[0], 4))
+        q[:, a] = v
+        q[:, b] = (mk[:, a, b] + mk[:, b, a]) / (4 * v)
+        q[:, c] = (mk[:, a, c] + mk[:, c, a]) / (4 * v)
+        q[:, 3] = (mk[:, c, b] - mk[:, b, c]) / (4 * v)
+        out[k] = q
     return out.reshape(r.shape[:-2] + (4,))
 
 

@@ -77,7 +77,8 @@ def test_solve_json_arrays_and_units(default_json):
     assert fz == pytest.approx(0.5, rel=1e-6)
     assert set(out["contact_forces"]) == {"0"}
     assert {"iterations", "time_ms", "basis", "order", "constraint_violation", "warm_started",
-            "continuation_steps", "ipopt_status"} <= set(out["solver"])
+            "continuation_steps", "ipopt_status", "derivatives"} <= set(out["solver"])
+    assert out["solver"]["derivatives"] in ("compiled", "interpreted")
     from dlo_ros.solver import SolverOptions
 
     assert out["solver"]["basis"] == "chebyshev" and SolverOptions().model == "auto"

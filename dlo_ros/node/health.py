@@ -261,6 +261,7 @@ class Health:
                 "solve time ms": None if r is None else r.solve_time_ms,
                 "iterations": None if r is None else r.iterations,
                 "warm started": None if r is None else r.warm_started,
+                "derivatives": None if r is None else r.derivatives,
                 "continuation steps": None if r is None else r.continuation_steps,
                 "energy total J": None if r is None else r.energy.get("total"),
                 "trigger": self.last_trigger,

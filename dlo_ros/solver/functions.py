@@ -6,6 +6,8 @@ One ``NlpFunctions`` per ``StringNLP``:
 * ``kkt_free(z, p, λ_free)`` → [K, r, ∇f, energies], the Newton matrix K = [∇²L Jᵀ; J 0] and residual
   r = [∇f + Jᵀλ; g] of the rows other than the obstacle rows (``kkt_free_fn``);
 * ``newton_step(u, p, K, r)`` → the first ``NEWTON_STEPS`` Newton steps in one call (``newton_fn``);
+* ``newton_native``: once the contact-free function is compiled, the whole Newton loop as one compiled
+  call (``native_newton.NativeNewton``; None until then, and for the Euler-angle models);
 * ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles).
 
 Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
@@ -21,6 +23,7 @@ import time
 
 import casadi as ca
 
+from . import native_newton
 from .compiled import InterpretedFunction, NativeFunction, compiled, compiler, library_path
 from .nlp import StringNLP
 
@@ -41,6 +44,7 @@ class NlpFunctions:
         self.kkt_free = InterpretedFunction(nlp.kkt_free_fn)
         self.newton_step = InterpretedFunction(nlp.newton_fn)
         self.obstacle_g = InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
+        self.newton_native = None
         self.compiled = False        # every function runs compiled C
         self.compile_time_s = 0.0    # wall time of the compile that finished them [s]
         self.retired = False         # the solver was rebuilt: a running compile stops at its next swap
@@ -63,10 +67,13 @@ class NlpFunctions:
             if fn is None:
                 continue
             lib = library_path(fn)
-            if lib.exists():  # compiled on an earlier start: load now, no waiting
+            native = native_newton.cached(fn, *self._sizes()) if name == "kkt_free" and nlp.director else None
+            if lib.exists() and (native is not None or name != "kkt_free" or not nlp.director):
+                # compiled on an earlier start: load now, no waiting
                 setattr(self, name, NativeFunction(lib, fn))
                 if name == "kkt_free":
                     self.newton_step = self._compiled_newton_step(fn, lib)
+                    self.newton_native = native
             else:
                 todo.append((name, fn, lib))
         self.compiled = not todo
@@ -76,13 +83,17 @@ class NlpFunctions:
         def work(locked: bool) -> None:
             t0 = time.perf_counter()
             for name, fn, lib in todo:
-                native, ok = compiled(fn, nice=10 if mode == "background" else 0, lib=lib)
+                nice = 10 if mode == "background" else 0
+                native, ok = compiled(fn, nice=nice, lib=lib)
+                loop = native_newton.build(fn, *self._sizes(), nice=nice) if ok and name == "kkt_free" \
+                    and nlp.director else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile
                         return
                     setattr(self, name, native)
                     if name == "kkt_free":
                         self.newton_step = self._compiled_newton_step(fn, lib)
+                        self.newton_native = loop
             with (threading.Lock() if locked else lock):
                 if not self.retired:
                     self.compiled = True
@@ -94,6 +105,10 @@ class NlpFunctions:
         thread = threading.Thread(target=work, args=(False,), name="dlo-compile", daemon=True)
         thread.start()
         return thread
+
+    def _sizes(self) -> tuple[int, int, int]:
+        nlp = self.nlp
+        return nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0]
 
     def _compiled_newton_step(self, fn: ca.Function, lib) -> InterpretedFunction:
         """``newton_fn`` calling the compiled contact-free library (``casadi.external``); the current one

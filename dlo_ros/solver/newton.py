@@ -17,11 +17,11 @@ import numpy as np
 from scipy.linalg.lapack import dgesv as _gesv
 
 from .functions import NlpFunctions
-from .nlp import NEWTON_REGULARISATION, NEWTON_STEPS, StringNLP
+from .native_newton import CONVERGED
+from .nlp import (NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION,
+                  NEWTON_STEPS, StringNLP)
 from .state import SolverState
 
-#: a Newton step larger than this in any scaled unknown leaves the start's basin: IPOPT takes over
-MAX_STEP = 0.5
 
 def regularised(kkt: np.ndarray, n: int) -> np.ndarray:
     """K + diag(δ I_n, −δ I_m), δ = NEWTON_REGULARISATION · max|K|, as a new array.
@@ -85,7 +85,8 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
         ja = jac[idx]
         r_dual = grad + lam[idx] @ ja
         r_prim = g[idx] - bound
-        converged = np.abs(r_dual).max(initial=0.0) < 1e-9 and np.abs(r_prim).max(initial=0.0) < 1e-11
+        converged = np.abs(r_dual).max(initial=0.0) < NEWTON_DUAL_TOLERANCE and \
+            np.abs(r_prim).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE
         if converged and energies is not None:
             inactive_ok = np.all(g[~active] <= nlp.ubg[~active] + 1e-9)
             signs_ok = np.all(lam[active & ~equality] >= -1e-12)
@@ -103,7 +104,7 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
         rhs[n:] = -r_prim
         # LAPACK's gesv directly: numpy.linalg.solve's checks cost more than the solve at this size
         _, _, step, info = _gesv(regularised(kkt, n), rhs)
-        if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > MAX_STEP:
+        if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
             return False, start, it, np.inf
         z += step[:n]
         lam[idx] += step[n:]
@@ -129,18 +130,25 @@ def newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nda
         kkt, residual, grad, energies = fns.kkt_free(unknowns[:n], p, unknowns[n:])
         residual = residual[:, 0]
     first = 0
-    if fused:
+    native = fns.newton_native if fused else None
+    if native is not None:  # the whole loop in one compiled call (native_newton.py), the GIL released
+        out = native(unknowns, p, kkt, residual, max_steps)
+        if out.code != CONVERGED:
+            return False, start, out.steps, np.inf
+        unknowns, kkt, residual, grad, energies = out.u, out.kkt, out.residual, out.gradient, out.energies
+        first = out.steps
+    elif fused:
         try:
             u, kkt, residual, grad, energies, largest = fns.newton_step(unknowns, p, kkt, residual)
         except RuntimeError:  # CasADi's LAPACK LU raises on a singular Newton matrix (gesv says info > 0)
             return False, start, 0, np.inf
-        if not (np.isfinite(u).all() and largest[0, 0] <= MAX_STEP):
+        if not (np.isfinite(u).all() and largest[0, 0] <= NEWTON_MAX_STEP):
             return False, start, NEWTON_STEPS, np.inf
         unknowns, residual, first = u[:, 0], residual[:, 0], NEWTON_STEPS
     for it in range(first, max_steps + 1):
         z, lam_free = unknowns[:n], unknowns[n:]
-        if energies is not None and np.abs(residual[:n]).max() < 1e-9 and \
-                np.abs(residual[n:]).max(initial=0.0) < 1e-11:
+        if energies is not None and np.abs(residual[:n]).max() < NEWTON_DUAL_TOLERANCE and \
+                np.abs(residual[n:]).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE:
             g, jac = all_rows(nlp, fns, z, p, kkt, residual)
             if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared: the active set changed
                 return False, start, it, np.inf
@@ -152,7 +160,7 @@ def newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nda
         if it == max_steps:
             break
         _, _, step, info = _gesv(regularised(kkt, n), residual)
-        if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > MAX_STEP:
+        if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
             return False, start, it, np.inf
         unknowns = unknowns - step
         kkt, residual, grad, energies = fns.kkt_free(unknowns[:n], p, unknowns[n:])

@@ -97,6 +97,11 @@ def has_point_moments(problem: Problem) -> bool:
 #: own system as the first, a grip move of 1 % of L converges to |r| ~ 1e-14 in three
 NEWTON_STEPS = 3
 
+#: a Newton step larger than this in any scaled unknown leaves the start's basin: IPOPT takes over
+NEWTON_MAX_STEP = 0.5
+#: a warm update has converged when ‖∇f + Jᵀλ‖∞ and ‖g − bound‖∞ (scaled units) are below these
+NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE = 1e-9, 1e-11
+
 #: δ / max|K| of the regularised Newton matrix K + diag(δ I, −δ I) of every warm update (newton.regularised)
 NEWTON_REGULARISATION = 1e-10
 

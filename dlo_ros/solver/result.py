@@ -70,6 +70,8 @@ class ShapeResult:
     solve_time_ms: float = 0.0
     constraint_violation: float = float("nan")
     warm_started: bool = False
+    #: 'compiled' (the KKT functions as compiled C, warm updates one compiled Newton call) or 'interpreted'
+    derivatives: str = ""
     continuation_steps: int = 0
     basis: str = ""
     order: int = 0
@@ -116,6 +118,7 @@ class ShapeResult:
                 "constraint_violation": self.constraint_violation,
                 "equilibrium_residual_m": self.equilibrium_residual_m,
                 "warm_started": self.warm_started,
+                "derivatives": self.derivatives,
                 "continuation_steps": self.continuation_steps,
                 "ipopt_status": self.ipopt_status,
             },

@@ -268,6 +268,7 @@ class ShapeSolver:
                 return self._failure("unreachable", reason, t0)
             result, state = self._solve_locked(problem, warm and self._state is not None)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
+            result.derivatives = "compiled" if self.functions.compiled else "interpreted"
             # an unverified result is a converged stationary point of the discrete problem: a good warm start
             if commit and result.status in ("ok", "unverified") and state is not None:
                 self._state = state

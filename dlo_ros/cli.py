@@ -20,9 +20,11 @@ import contextlib
 import json
 import math
 import os
+import subprocess
 import sys
 import time
 from dataclasses import replace
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -419,7 +421,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 #   name -> (help, add_arguments(parser) -> None, handler(args) -> exit code)
 # The handler may raise SceneError / FileNotFoundError / UsageError: main() prints them as
 # "dlo: error: ..." and returns exit code 2.  "node": main() hands its arguments to the node unparsed (dlo_ros/node/params.py
-# checks them).  "replay": dlo_ros/replay.py.
+# checks them).
 # =====================================================================================================
 def _node_handler(args: argparse.Namespace) -> int:
     """The built-in ``node`` subcommand (``main`` passes its arguments to :func:`_run_node` unparsed)."""
@@ -466,20 +468,81 @@ def register_subcommand(name: str, help: str, add_arguments: Callable[[argparse.
     SUBCOMMANDS[name] = (help, add_arguments, handler)
 
 
-def _register_replay() -> None:
-    """``dlo replay`` lives in dlo_ros/replay.py; registered here so that ``dlo --help`` lists it."""
-    from . import replay
+# ---- replay (reading and re-solving: dlo_ros/recording/replay.py; viewing: dlo_ros/recording/viewer.py) --
+REPLAY_HELP = "open a rerun recording (.rrd) in the viewer, or re-solve it and compare the shapes (--resolve)"
 
-    def handler(args: argparse.Namespace) -> int:
+
+def _add_replay_arguments(p: argparse.ArgumentParser) -> None:
+    from .recording.replay import DEFAULT_TOLERANCE
+
+    p.add_argument("file", metavar="FILE.rrd", help="a recording made with --rrd (dlo solve / dlo demo / the node)")
+    p.add_argument("--resolve", action="store_true",
+                   help="re-run the solver on the recorded targets and report how far today's shapes are from the "
+                        "recorded ones (exit 1 if any update exceeds --tolerance)")
+    p.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE, metavar="M",
+                   help=f"with --resolve: largest allowed centreline deviation [m] (default {DEFAULT_TOLERANCE:g})")
+    p.add_argument("--json", action="store_true", help="with --resolve: print the report as one JSON object")
+    p.add_argument("--compile", action="store_true",
+                   help="with --resolve: compile the solver's derivatives to C first (slow first build)")
+    p.add_argument("--web", action="store_true", help="serve the recording to a browser (rerun --web-viewer)")
+    p.add_argument("--screenshot", metavar="PNG", help="render the recording headlessly into PNG and exit")
+    p.add_argument("--update", type=int, metavar="N", help="with --screenshot: show update N (default: the last)")
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from .recording import replay, viewer
+
+    path = Path(args.file)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    if args.resolve:
+        if not (args.tolerance >= 0 and math.isfinite(args.tolerance)):
+            raise UsageError(f"--tolerance: must be a finite number >= 0, got {args.tolerance}")
         try:
-            return replay.cmd_replay(args)
-        except replay.ReplayError as exc:
+            rec = replay.read_recording(path)
+            with stdout_to_stderr():  # IPOPT's banner must not mix with the report
+                report = replay.resolve(rec, args.tolerance, compile="blocking" if args.compile else "cached")
+        except UsageError:
+            raise
+        except ValueError as exc:
             raise UsageError(str(exc)) from None
+        print(json.dumps(json_safe(report)) if args.json else replay.format_resolve(report))
+        return EXIT_OK if report["ok"] else EXIT_NOT_OK
+    try:
+        replay.read_recording(path)  # a clear error for a file that is not a recording, before starting a viewer
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.screenshot:
+        try:
+            out = viewer.screenshot(path, args.screenshot, update=args.update)
+        except Exception as exc:  # noqa: BLE001 - the viewer's reasons are varied (no GPU, port, ...)
+            print(f"dlo replay: could not render {path} headlessly: {type(exc).__name__}: {exc}\n"
+                  "  the headless viewer needs a Vulkan adapter; a software one is Debian's mesa-vulkan-drivers "
+                  "(lavapipe)", file=sys.stderr)
+            return EXIT_NOT_OK
+        print(f"dlo replay: screenshot saved to {out}")
+        return EXIT_OK
+    if args.web:
+        return _run_viewer([*viewer.rerun_command(), "--web-viewer", str(path)])
+    if not viewer.has_display():
+        print(viewer.no_display_message(path))
+        return EXIT_OK
+    return _run_viewer([*viewer.rerun_command(), str(path)])
 
-    register_subcommand("replay", replay.HELP, replay.add_arguments, handler)
+
+def _run_viewer(cmd: list[str]) -> int:
+    try:
+        code = subprocess.call(cmd)
+    except OSError as exc:
+        print(f"dlo replay: could not start the rerun viewer ({' '.join(cmd)}): {exc}", file=sys.stderr)
+        return EXIT_NOT_OK
+    if code not in (0, -2, 130):  # Ctrl-C in the viewer is a normal way out
+        print(f"dlo replay: the rerun viewer exited with code {code} ({' '.join(cmd)})", file=sys.stderr)
+        return EXIT_NOT_OK
+    return EXIT_OK
 
 
-_register_replay()
+register_subcommand("replay", REPLAY_HELP, _add_replay_arguments, cmd_replay)
 
 
 def _register_fit() -> None:

@@ -1,11 +1,8 @@
-"""The public front end of a recording: :class:`Recorder` (off, a cheap no-op, unless asked to record).
+"""The public front end of a recording: :class:`Recorder`, plus the viewer address and display checks.
 
-Off the critical path: ``log_targets`` / ``log_result`` / ``log_update`` copy their arguments into a
-flat tuple of bytes, pickle it and write it into a non-blocking pipe (tens of µs); a child process
-(``backend="process"``, niced) makes every rerun call, in column batches.  If the pipe and the bounded
-backlog behind it are full, the oldest waiting message is dropped and counted (:attr:`Recorder.dropped`);
-the scene (``log_scene``) and model changes are never dropped.  Every ``log_*`` is thread-safe and keeps
-the order of one thread's calls.  ``backend="thread"`` runs the writer in a thread instead.
+A Recorder snapshots what it is given (dlo_ros.recording.codec) and hands it to a backend
+(dlo_ros.recording.transport) without waiting; how it stays off the critical path is described in the
+package's docstring (dlo_ros.recording).
 """
 from __future__ import annotations
 

@@ -70,7 +70,8 @@ class _Writer:
 
     Static data is logged at once; time-stamped rows are buffered per (entity, archetype) and sent with
     ``send_columns`` at most every BATCH_SECONDS (or BATCH_ROWS rows, or on flush/close): one rerun call
-    per entity per batch instead of one per row, which makes a recorded update cost ~10× less CPU.
+    per entity per batch instead of one per row, because the per-row Python cost is what the CPU pays
+    (the bench's recording-overhead script measures it).
     """
 
     def __init__(self, cfg: _Config) -> None:
@@ -150,13 +151,8 @@ class _Writer:
         if results:
             self._send_results(results)
         rows, self._rows, self._n_rows, self._oldest = self._rows, {}, 0, None
-        rr = self._rr
         for (entity, arch), entries in rows.items():
             try:
-                indexes = [
-                    rr.TimeColumn(TIMELINE_UPDATE, sequence=[u for u, _, _ in entries]),
-                    rr.TimeColumn(TIMELINE_ROS, timestamp=np.array([t for _, t, _ in entries], dtype="datetime64[ns]")),
-                ]
                 names = list(dict.fromkeys(k for _, _, f in entries for k in f))
                 groups: dict[tuple, dict] = {}
                 for name in names:
@@ -165,10 +161,7 @@ class _Writer:
                     if arch == "AnyValues":  # as an Arrow array: rerun's generic path boxes every number
                         data = pa.array(data)
                     groups.setdefault(tuple(len(v) for v in values), {})[name] = data
-                columns: list[Any] = []
-                for lengths, fields in groups.items():
-                    columns.extend(getattr(rr, arch).columns(**fields).partition(list(lengths)))
-                self.rec.send_columns(entity, indexes=indexes, columns=columns)
+                self._send_columns(entity, arch, [u for u, _, _ in entries], [t for _, t, _ in entries], groups)
             except Exception as exc:  # noqa: BLE001
                 self._error(f"sending {entity}", exc)
 
@@ -248,20 +241,26 @@ class _Writer:
     # -- batched, vectorised over the rows of a batch (the per-row Python cost is what the CPU pays)
     def _send(self, entity: str, arch: str, items: list[_Item], **fields: tuple[Any, list[int]]) -> None:
         """send_columns of ``arch`` rows for ``items``; fields: name → (concatenated data, instances per row)."""
-        rr = self._rr
         try:
-            indexes = [rr.TimeColumn(TIMELINE_UPDATE, sequence=[int(it.update) for it in items]),
-                       rr.TimeColumn(TIMELINE_ROS, timestamp=np.array([int(it.ros_time_ns) for it in items],
-                                                                      dtype="datetime64[ns]"))]
             groups: dict[tuple, dict] = {}
             for name, (data, lengths) in fields.items():
                 groups.setdefault(tuple(int(n) for n in lengths), {})[name] = data
-            columns: list[Any] = []
-            for lengths, group in groups.items():
-                columns.extend(getattr(rr, arch).columns(**group).partition(list(lengths)))
-            self.rec.send_columns(entity, indexes=indexes, columns=columns)
+            self._send_columns(entity, arch, [int(it.update) for it in items], [int(it.ros_time_ns) for it in items],
+                               groups)
         except Exception as exc:  # noqa: BLE001
             self._error(f"sending {entity}", exc)
+
+    def _send_columns(self, entity: str, arch: str, updates: list[int], stamps: list[int],
+                      groups: dict[tuple, dict]) -> None:
+        """One send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns]; ``groups``: instances per
+        row → {field: concatenated data} (fields with the same instance counts share a partition)."""
+        rr = self._rr
+        indexes = [rr.TimeColumn(TIMELINE_UPDATE, sequence=updates),
+                   rr.TimeColumn(TIMELINE_ROS, timestamp=np.array(stamps, dtype="datetime64[ns]"))]
+        columns: list[Any] = []
+        for lengths, fields in groups.items():
+            columns.extend(getattr(rr, arch).columns(**fields).partition(list(lengths)))
+        self.rec.send_columns(entity, indexes=indexes, columns=columns)
 
     def _send_targets(self, items: list[_Item]) -> None:
         L = self.scene.length if self.scene else 1.0

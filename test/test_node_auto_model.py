@@ -158,7 +158,7 @@ def send(proc, cl, right, timeout: float = 40.0):
 
 def test_leaving_the_plane_is_shown_in_diagnostics_log_and_recording(tmp_path):
     pytest.importorskip("rerun", reason="rerun-sdk needs Python >= 3.11")
-    from dlo_ros.replay import read_recording
+    from dlo_ros.recording.replay import read_recording
 
     rrd, log = tmp_path / "auto.rrd", tmp_path / "node.log"
     with running_node(*node_args("default_cable", "-p", f"record.rrd:={rrd}"), log_path=log,

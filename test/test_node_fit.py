@@ -191,7 +191,8 @@ def within(values: dict, name: str, truth: float, k: float = 3.0) -> tuple[float
 
 @pytest.mark.skipif(TEST_SCENE != "default_cable", reason="the observation is of default_cable's poses")
 def test_fit_over_dds(tmp_path):
-    from dlo_ros.replay import R, _table
+    from dlo_ros.recording import paths as R
+    from dlo_ros.recording.replay import _table
 
     rrd = tmp_path / "fit.rrd"
     args = ("--scene", TEST_SCENE, "--ros-args", "-p", "compile:=off", "-p", f"solver.model:={TEST_MODEL}",

@@ -23,7 +23,7 @@ pytest.importorskip("rerun", reason="rerun-sdk needs Python >= 3.11")
 from dlo_ros import recording as R  # noqa: E402
 from dlo_ros.model.rotations import quat_to_matrix  # noqa: E402
 from dlo_ros.model.obstacles import Obstacle  # noqa: E402
-from dlo_ros.replay import read_recording, resolve  # noqa: E402
+from dlo_ros.recording.replay import read_recording, resolve  # noqa: E402
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver import ShapeSolver  # noqa: E402
 from dlo_ros.solver.result import ShapeResult  # noqa: E402

@@ -121,7 +121,7 @@ def test_self_contacts_in_markers_and_recording(loop):
     """Every self-contact reaches the node's markers (two arrows, equal and opposite, from the contact
     points) and the recording's result message (exact float64 rows)."""
     conv = pytest.importorskip("dlo_ros.node.conversions")
-    from dlo_ros.recording import _decode, _encode_result
+    from dlo_ros.recording.codec import _decode, _encode_result
 
     sol, r, _ = loop
     arrows = [m for m in conv.result_markers(r, sol.problem, "world", 1, force_scale=0.1).markers

@@ -95,5 +95,5 @@ def cmd_fit(args: argparse.Namespace) -> int:
     return EXIT_OK if result.ok else EXIT_NOT_OK
 
 
-#: exit codes of ``dlo`` (dlo_ros/cli.py)
+#: exit codes of ``dlo`` (dlo_ros/cli/common.py)
 EXIT_OK, EXIT_NOT_OK = 0, 1

@@ -11,6 +11,9 @@ from typing import Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from ..model.rotations import quat_z_to
+from ..shading import colour_map, energy_density
+from ..shading import frame_curvature as curvature
+from ..shading import frame_tangents as tangents  # noqa: F401 - part of this module's API
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, WrenchStamped
@@ -170,51 +173,13 @@ def wrench_to_arrays(msg: WrenchStamped) -> tuple[np.ndarray, np.ndarray]:
     return np.array([f.x, f.y, f.z]), np.array([t.x, t.y, t.z])
 
 
-# ---- bending energy density -------------------------------------------------------------------------
-
-
-def tangents(orientations: np.ndarray) -> np.ndarray:
-    """Unit tangents (the x-axes) of quaternions (N, 4) x, y, z, w."""
-    q = np.asarray(orientations, dtype=float)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    x, y, z, w = q.T
-    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)], axis=1)
-
-
-def curvature(s: np.ndarray, orientations: np.ndarray) -> np.ndarray:
-    """κ(s) [1/m] ≈ (angle between neighbouring tangents) / Δs: central differences inside, one-sided
-    at the ends.  Exact for a circular arc sampled uniformly."""
-    s = np.asarray(s, dtype=float)
-    n = s.size
-    if n < 2:
-        return np.zeros(n)
-    t = tangents(orientations)
-    lo = np.r_[0, np.arange(n - 2), n - 2]
-    hi = np.r_[1, np.arange(2, n), n - 1]
-    dots = np.clip(np.einsum("ij,ij->i", t[lo], t[hi]), -1.0, 1.0)
-    cross = np.linalg.norm(np.cross(t[lo], t[hi]), axis=1)
-    angle = np.arctan2(cross, dots)
-    ds = s[hi] - s[lo]
-    return np.where(ds > 0, angle / np.where(ds > 0, ds, 1.0), 0.0)
+# ---- bending energy density (dlo_ros.shading, shared with the recording) ------------------------------
 
 
 def bending_energy_density(s: np.ndarray, orientations: np.ndarray, bend_stiffness) -> np.ndarray:
-    """½ Rf(s) κ(s)² [J/m]; ``bend_stiffness`` is a Profile (callable on s) or a number."""
-    kappa = curvature(s, orientations)
+    """½ Rf(s) κ(s)² [J/m] per sample; ``bend_stiffness`` is a Profile (callable on s) or a number."""
     rf = bend_stiffness(np.asarray(s, dtype=float)) if callable(bend_stiffness) else float(bend_stiffness)
-    return 0.5 * rf * kappa**2
-
-
-# Colour map: blue (low) -> cyan -> green -> yellow -> red (high).
-_STOPS = np.array([[0.0, 0.2, 1.0], [0.0, 0.9, 1.0], [0.1, 0.9, 0.1], [1.0, 0.9, 0.0], [1.0, 0.1, 0.0]])
-
-
-def colour_map(values: np.ndarray) -> np.ndarray:
-    """RGB (N, 3) for values in [0, 1] (clipped)."""
-    v = np.clip(np.asarray(values, dtype=float), 0.0, 1.0) * (len(_STOPS) - 1)
-    i = np.minimum(v.astype(int), len(_STOPS) - 2)
-    f = (v - i)[:, None]
-    return _STOPS[i] * (1 - f) + _STOPS[i + 1] * f
+    return energy_density(curvature(s, orientations), rf)
 
 
 def _rgba(rgb: Sequence[float], a: float = 1.0) -> ColorRGBA:

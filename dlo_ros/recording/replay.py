@@ -1,50 +1,25 @@
-"""``dlo replay FILE.rrd``: open a recording in the rerun viewer, render it, or re-solve it as a regression case.
+"""Reading a recording back (:func:`read_recording`) and re-solving it as a regression case (:func:`resolve`).
 
-    dlo replay FILE.rrd                      open it in the native viewer (needs a display; else says what to do)
-    dlo replay FILE.rrd --web                serve it to a browser (rerun --web-viewer; no display needed)
-    dlo replay FILE.rrd --screenshot PNG     render it headlessly to a PNG (needs a Vulkan driver, e.g. lavapipe)
-    dlo replay FILE.rrd --resolve [--tolerance M] [--json]
-                                             re-run today's solver on the recorded targets and compare shapes
-
-Exit codes: 0 ok (``--resolve``: every update within the tolerance); 1 a deviation above the tolerance
-(or a status that changed), or the viewer / the renderer failed; 2 unreadable file or bad usage.
-The recording format is documented in msg_docs/recording.md; the writer is dlo_ros/recording.py.
+The reader of what :class:`dlo_ros.recording.Recorder` writes (entity paths in
+:mod:`dlo_ros.recording.paths`; the format is documented in msg_docs/recording.md).  ``dlo replay``
+(dlo_ros.cli.replay) is its command line.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import os
-import shutil
-import socket
-import subprocess
-import sys
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from .jsonio import json_safe, stdout_to_stderr
-
-from . import recording as R
+from . import paths as P
 
 if TYPE_CHECKING:
-    from .solver import Solver
+    from ..solver import Solver
 
-HELP = "open a rerun recording (.rrd) in the viewer, or re-solve it and compare the shapes (--resolve)"
 DEFAULT_TOLERANCE = 1e-6
-EXIT_OK, EXIT_NOT_OK = 0, 1
-
-
-class ReplayError(ValueError):
-    """Bad input for ``dlo replay`` (unreadable recording, bad option): ``dlo: error: ...``, exit code 2.
-
-    (dlo_ros.cli turns it into its UsageError; replay does not import the cli module, which may be
-    running as ``__main__``.)
-    """
 
 
 # ---- reading a recording back ------------------------------------------------------------------------
@@ -102,7 +77,7 @@ def _table(chunks: list[Any]) -> list[dict[str, Any]]:
             cols[name] = col.to_pylist()
         for i in range(rb.num_rows):
             rows.append({name: values[i] for name, values in cols.items()})
-    rows.sort(key=lambda r: (r.get(R.TIMELINE_UPDATE) if r.get(R.TIMELINE_UPDATE) is not None else -1,
+    rows.sort(key=lambda r: (r.get(P.TIMELINE_UPDATE) if r.get(P.TIMELINE_UPDATE) is not None else -1,
                              r.get("rerun.controls.RowId") or b""))
     return rows
 
@@ -159,23 +134,23 @@ def read_recording(path: str | Path) -> Recording:
         return _table(by_entity.get(entity, []))
 
     scene_yaml, scene_name, solver_kind = "", "", ""
-    for row in rows(R.E_SCENE):
+    for row in rows(P.E_SCENE):
         scene_yaml = _first(row.get("TextDocument:text")) or scene_yaml
         scene_name = _first(row.get("scene_name")) or scene_name
         solver_kind = _first(row.get("solver")) or solver_kind
     if scene_yaml.startswith("# scene not recorded"):
         scene_yaml = ""
-    changes = [(int(r[R.TIMELINE_UPDATE]), _first(r.get("TextDocument:text")) or "")
-               for r in rows(R.E_SCENE_CHANGES) if r.get(R.TIMELINE_UPDATE) is not None]
+    changes = [(int(r[P.TIMELINE_UPDATE]), _first(r.get("TextDocument:text")) or "")
+               for r in rows(P.E_SCENE_CHANGES) if r.get(P.TIMELINE_UPDATE) is not None]
 
     results = []
-    for row in rows(R.E_DATA_RESULT):
+    for row in rows(P.E_DATA_RESULT):
         status = _first(row.get("status")) or ""
         pts = row.get("points")
         s = row.get("s")
         energy_terms, energy = row.get("energy_terms") or [], row.get("energy") or []
         results.append(RecordedResult(
-            update=int(row[R.TIMELINE_UPDATE]), ros_time_ns=row.get(R.TIMELINE_ROS), status=status,
+            update=int(row[P.TIMELINE_UPDATE]), ros_time_ns=row.get(P.TIMELINE_ROS), status=status,
             message=_first(row.get("message")) or "", warm_started=bool(_first(row.get("warm_started"))),
             warm_call=_first(row.get("warm")),
             s=np.asarray(s if s is not None else [], dtype=float),
@@ -185,24 +160,24 @@ def read_recording(path: str | Path) -> Recording:
             model=_model(_first(row.get("model"))),
         ))
     targets = []
-    for row in rows(R.E_DATA_TARGETS):
+    for row in rows(P.E_DATA_TARGETS):
         poses = _poses(row.get("grip_names"), row.get("poses"))
         if poses is not None:
-            targets.append((int(row[R.TIMELINE_UPDATE]), poses))
-    rejected = [(int(r[R.TIMELINE_UPDATE]), _first(r.get("TextLog:text")) or "") for r in rows(R.E_REJECTED)]
-    events = [(entity, r.get(R.TIMELINE_UPDATE), _first(r.get("TextLog:text")) or "")
-              for entity in (R.E_STATUS, R.E_MODEL, R.E_RECORDER) for r in rows(entity)]
+            targets.append((int(row[P.TIMELINE_UPDATE]), poses))
+    rejected = [(int(r[P.TIMELINE_UPDATE]), _first(r.get("TextLog:text")) or "") for r in rows(P.E_REJECTED)]
+    events = [(entity, r.get(P.TIMELINE_UPDATE), _first(r.get("TextLog:text")) or "")
+              for entity in (P.E_STATUS, P.E_MODEL, P.E_RECORDER) for r in rows(entity)]
     centrelines = {}
-    for row in rows(R.E_CABLE):
+    for row in rows(P.E_CABLE):
         strips = row.get("LineStrips3D:strips")
-        if strips and row.get(R.TIMELINE_UPDATE) is not None:
-            centrelines[int(row[R.TIMELINE_UPDATE])] = np.array([seg[0] for seg in strips] + [strips[-1][-1]], dtype=float)
+        if strips and row.get(P.TIMELINE_UPDATE) is not None:
+            centrelines[int(row[P.TIMELINE_UPDATE])] = np.array([seg[0] for seg in strips] + [strips[-1][-1]], dtype=float)
     model_series: dict[str, list[tuple[int, float]]] = {}
-    for key in R.MODEL_SCALARS:
-        for row in rows(f"{R.E_MODEL_SERIES}/{key}"):
+    for key in P.MODEL_SCALARS:
+        for row in rows(f"{P.E_MODEL_SERIES}/{key}"):
             value = _first(row.get("Scalars:scalars"))
-            if value is not None and row.get(R.TIMELINE_UPDATE) is not None:
-                model_series.setdefault(key, []).append((int(row[R.TIMELINE_UPDATE]), float(value)))
+            if value is not None and row.get(P.TIMELINE_UPDATE) is not None:
+                model_series.setdefault(key, []).append((int(row[P.TIMELINE_UPDATE]), float(value)))
     store = stores[0]
     return Recording(
         path=path, application_id=store.application_id, recording_id=store.recording_id,
@@ -216,13 +191,13 @@ def read_recording(path: str | Path) -> Recording:
 def _scene_from_yaml(text: str, where: str):
     import yaml
 
-    from .scene import scene_from_dict
+    from ..scene import scene_from_dict
 
     return scene_from_dict(yaml.safe_load(text), source=where)
 
 
 def _make_solver(kind: str, scene, compile: str) -> Solver:
-    from . import solver as S
+    from .. import solver as S
 
     if kind == "ShapeSolver" or not hasattr(S, "make_solver"):
         return S.ShapeSolver(scene.problem, scene.options, compile=compile)
@@ -255,10 +230,10 @@ def resolve(rec: Recording, tolerance: float = DEFAULT_TOLERANCE, compile: str =
     Returns the report dict printed by ``dlo replay --resolve --json``.
     """
     if not rec.scene_yaml:
-        raise ValueError(f"{rec.path}: the recording has no scene ({R.E_SCENE}); it cannot be re-solved")
+        raise ValueError(f"{rec.path}: the recording has no scene ({P.E_SCENE}); it cannot be re-solved")
     if not rec.results:
-        raise ValueError(f"{rec.path}: the recording has no results ({R.E_DATA_RESULT}); nothing to re-solve")
-    scene = _scene_from_yaml(rec.scene_yaml, f"{rec.path}#{R.E_SCENE}")
+        raise ValueError(f"{rec.path}: the recording has no results ({P.E_DATA_RESULT}); nothing to re-solve")
+    scene = _scene_from_yaml(rec.scene_yaml, f"{rec.path}#{P.E_SCENE}")
     solver = _make_solver(rec.solver_kind, scene, compile)
     changes = sorted(rec.scene_changes)
     current = {g.name: (g.pose.position, g.pose.orientation) for g in scene.problem.grips}
@@ -267,7 +242,7 @@ def resolve(rec: Recording, tolerance: float = DEFAULT_TOLERANCE, compile: str =
     rows = []
     for recorded in sorted(rec.results, key=lambda r: r.update):
         while ci < len(changes) and changes[ci][0] <= recorded.update:
-            new = _scene_from_yaml(changes[ci][1], f"{rec.path}#{R.E_SCENE_CHANGES}@{changes[ci][0]}")
+            new = _scene_from_yaml(changes[ci][1], f"{rec.path}#{P.E_SCENE_CHANGES}@{changes[ci][0]}")
             if new.options == scene.options:
                 solver.set_problem(new.problem)
             else:
@@ -315,138 +290,3 @@ def format_resolve(report: dict) -> str:
                  f"(update {report['worst_update']}), mean {'n/a' if mean is None else f'{mean:.3g}'} m; "
                  f"{len(report['exceeding'])} above the tolerance {report['tolerance_m']:.3g} m -> {verdict}")
     return "\n".join(lines)
-
-
-# ---- viewing ---------------------------------------------------------------------------------------------
-has_display = R.has_display
-
-
-def rerun_command() -> list[str]:
-    """The rerun viewer executable: $DLO_RERUN_EXE, the venv's ``rerun``, ``rerun`` on PATH, or
-    ``python -m rerun``."""
-    if os.environ.get("DLO_RERUN_EXE"):
-        return [os.environ["DLO_RERUN_EXE"]]
-    beside = Path(sys.executable).parent / "rerun"
-    if beside.exists():
-        return [str(beside)]
-    found = shutil.which("rerun")
-    return [found] if found else [sys.executable, "-m", "rerun"]
-
-
-def no_display_message(path: Path) -> str:
-    return "\n".join([
-        f"dlo replay: no display here ($DISPLAY and $WAYLAND_DISPLAY are unset), so the rerun viewer cannot "
-        f"open a window for {path}.",
-        "Instead:",
-        f"  * on a machine with a display: `dlo replay {path}` or `rerun {path}` (rerun-sdk 0.41: "
-        "`pip install rerun-sdk==0.41.0`)",
-        f"  * in a browser, no display needed: `dlo replay {path} --web` (serves http://localhost:9090;"
-        " forward the ports 9090 and 9876 over ssh: `ssh -L 9090:localhost:9090 -L 9876:localhost:9876 HOST`)",
-        f"  * as an image: `dlo replay {path} --screenshot out.png` (headless; needs a Vulkan driver, "
-        "e.g. Debian's mesa-vulkan-drivers)",
-        f"  * as a regression check: `dlo replay {path} --resolve`",
-    ])
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-def screenshot(path: str | Path, png: str | Path, *, update: int | None = None, wait: float = 6.0) -> Path:
-    """Render a recording with a headless rerun viewer (its default blueprint, 1920×1080) into ``png``.
-
-    ``update``: the update to show (default: the last).  Raises RuntimeError with the viewer's reason
-    when it cannot start (e.g. no Vulkan adapter: install a software one, Debian's mesa-vulkan-drivers).
-    """
-    from rerun.experimental import ViewerClient
-
-    path, png = Path(path).resolve(), Path(png).resolve()
-    viewer = ViewerClient.spawn(headless=True, port=_free_port(), hide_welcome_screen=True)
-    try:
-        viewer.open(str(path))
-        deadline = time.monotonic() + 60
-        while viewer.get_state().loading and time.monotonic() < deadline:
-            time.sleep(0.2)
-        if update is not None:
-            viewer.set_time(R.TIMELINE_UPDATE, sequence=int(update), play_state="paused")
-        time.sleep(wait)  # let the software renderer paint and the start-up notifications fade
-        data = viewer.take_screenshot()
-        if not data:
-            raise RuntimeError("the viewer returned an empty screenshot")
-        png.parent.mkdir(parents=True, exist_ok=True)
-        png.write_bytes(data)
-    finally:
-        try:
-            viewer.quit()
-        except Exception:  # noqa: BLE001 - best effort
-            pass
-    return png
-
-
-# ---- the subcommand ------------------------------------------------------------------------------------
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", metavar="FILE.rrd", help="a recording made with --rrd (dlo solve / dlo demo / the node)")
-    p.add_argument("--resolve", action="store_true",
-                   help="re-run the solver on the recorded targets and report how far today's shapes are from the "
-                        "recorded ones (exit 1 if any update exceeds --tolerance)")
-    p.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE, metavar="M",
-                   help=f"with --resolve: largest allowed centreline deviation [m] (default {DEFAULT_TOLERANCE:g})")
-    p.add_argument("--json", action="store_true", help="with --resolve: print the report as one JSON object")
-    p.add_argument("--compile", action="store_true",
-                   help="with --resolve: compile the solver's derivatives to C first (slow first build)")
-    p.add_argument("--web", action="store_true", help="serve the recording to a browser (rerun --web-viewer)")
-    p.add_argument("--screenshot", metavar="PNG", help="render the recording headlessly into PNG and exit")
-    p.add_argument("--update", type=int, metavar="N", help="with --screenshot: show update N (default: the last)")
-
-
-def cmd_replay(args: argparse.Namespace) -> int:
-    path = Path(args.file)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    if args.resolve:
-        if not (args.tolerance >= 0 and math.isfinite(args.tolerance)):
-            raise ReplayError(f"--tolerance: must be a finite number >= 0, got {args.tolerance}")
-        try:
-            rec = read_recording(path)
-            with stdout_to_stderr():  # IPOPT's banner must not mix with the report
-                report = resolve(rec, args.tolerance, compile="blocking" if args.compile else "cached")
-        except ReplayError:
-            raise
-        except ValueError as exc:
-            raise ReplayError(str(exc)) from None
-        print(json.dumps(json_safe(report)) if args.json else format_resolve(report))
-        return EXIT_OK if report["ok"] else EXIT_NOT_OK
-    try:
-        read_recording(path)  # a clear error for a file that is not a recording, before starting a viewer
-    except ValueError as exc:
-        raise ReplayError(str(exc)) from None
-    if args.screenshot:
-        try:
-            out = screenshot(path, args.screenshot, update=args.update)
-        except Exception as exc:  # noqa: BLE001 - the viewer's reasons are varied (no GPU, port, ...)
-            print(f"dlo replay: could not render {path} headlessly: {type(exc).__name__}: {exc}\n"
-                  "  the headless viewer needs a Vulkan adapter; a software one is Debian's mesa-vulkan-drivers "
-                  "(lavapipe)", file=sys.stderr)
-            return EXIT_NOT_OK
-        print(f"dlo replay: screenshot saved to {out}")
-        return EXIT_OK
-    if args.web:
-        return _run([*rerun_command(), "--web-viewer", str(path)])
-    if not has_display():
-        print(no_display_message(path))
-        return EXIT_OK
-    return _run([*rerun_command(), str(path)])
-
-
-def _run(cmd: list[str]) -> int:
-    try:
-        code = subprocess.call(cmd)
-    except OSError as exc:
-        print(f"dlo replay: could not start the rerun viewer ({' '.join(cmd)}): {exc}", file=sys.stderr)
-        return EXIT_NOT_OK
-    if code not in (0, -2, 130):  # Ctrl-C in the viewer is a normal way out
-        print(f"dlo replay: the rerun viewer exited with code {code} ({' '.join(cmd)})", file=sys.stderr)
-        return EXIT_NOT_OK
-    return EXIT_OK

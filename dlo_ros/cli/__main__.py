@@ -1,0 +1,6 @@
+"""``python -m dlo_ros.cli ...``: the ``dlo`` command."""
+import sys
+
+from . import main
+
+sys.exit(main())

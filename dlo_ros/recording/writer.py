@@ -1,0 +1,444 @@
+"""The writer: owns the rerun RecordingStream and turns queued items into rerun calls, in one thread.
+
+It runs in the recorder's child process or thread (dlo_ros.recording.transport); nothing here is
+called from the solver's thread.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..shading import segment_energy_density
+from .blueprint import default_blueprint
+from .codec import _decode, _FitSnap, _Item, _ResultSnap
+from .paths import (E_CABLE, E_DATA_RESULT, E_DATA_TARGETS, E_EIGEN, E_ENERGY, E_FIT, E_FIT_EVENTS, E_FRAMES,
+                    E_GRIPS, E_ITERATIONS, E_LEGEND, E_MODEL, E_MODEL_SERIES, E_OBSTACLES, E_RECORDER,
+                    E_REJECTED, E_SCENE, E_SCENE_CHANGES, E_SOLVE_TIME, E_STATUS, E_TARGETS, E_WORLD,
+                    ENERGY_TERMS, MODEL_SCALARS, TIMELINE_ROS, TIMELINE_UPDATE, _part)
+from .scene_info import _SceneInfo
+from .visuals import AXIS_COLORS, ENERGY_COLORS, quats_to_matrices, viridis
+
+log = logging.getLogger(__name__)
+
+
+class RecordingUnavailable(RuntimeError):
+    """Recording was asked for but rerun-sdk cannot be imported (it needs Python >= 3.11)."""
+
+
+@dataclass
+class _Config:
+    rrd: str | None
+    spawn: bool
+    spawn_port: int
+    urls: list
+    application_id: str
+    recording_id: str | None
+    frames: int
+
+
+BATCH_SECONDS = 0.1  # rows wait at most this long in the writer before they are sent (live viewers lag this much)
+BATCH_ROWS = 512  # ... or until this many rows are buffered
+
+
+def _instances(value: Any) -> Any:
+    """A field value as a batch of instances (leading axis = instances)."""
+    if isinstance(value, np.ndarray):
+        return value if value.ndim else value.reshape(1)
+    if isinstance(value, (list, tuple)):
+        return list(value)
+    return [value]
+
+
+def _concat(values: list) -> Any:
+    if all(isinstance(v, np.ndarray) for v in values):
+        return np.concatenate(values, axis=0)
+    out: list = []
+    for v in values:
+        out.extend(v.tolist() if isinstance(v, np.ndarray) else v)
+    return out
+
+
+class _Writer:
+    """Owns the rerun RecordingStream and turns items into rerun calls, in one thread.
+
+    Static data is logged at once; time-stamped rows are buffered per (entity, archetype) and sent with
+    ``send_columns`` at most every BATCH_SECONDS (or BATCH_ROWS rows, or on flush/close): one rerun call
+    per entity per batch instead of one per row, because the per-row Python cost is what the CPU pays
+    (the bench's recording-overhead script measures it).
+    """
+
+    def __init__(self, cfg: _Config) -> None:
+        try:
+            import rerun as rr
+        except ImportError as exc:  # Python 3.10, or a broken install
+            raise RecordingUnavailable(
+                f"recording needs rerun-sdk (Python >= 3.11; see requirements.txt): {exc}") from None
+        self._rr = rr
+        self.cfg = cfg
+        self.rec = rr.RecordingStream(cfg.application_id, recording_id=cfg.recording_id)
+        sinks: list[Any] = []
+        if cfg.rrd:
+            Path(cfg.rrd).parent.mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(str(cfg.rrd)))
+        if cfg.spawn:
+            # Starts the `rerun` viewer and waits until it listens; it needs a display for its window.
+            rr.spawn(port=cfg.spawn_port, connect=False, recording=self.rec)
+        for url in dict.fromkeys(cfg.urls):
+            sinks.append(rr.GrpcSink(url))
+        self.rec.set_sinks(*sinks)
+        self.recording_id = self.rec.get_recording_id()
+        self.n_frames = max(0, int(cfg.frames))
+        self.errors = 0
+        self.last_error = ""
+        self.scene: _SceneInfo | None = None
+        self.blueprint_sent = False
+        self.energy_scale: float | None = None
+        self.last_status: tuple | None = None
+        self.dropped_reported = 0
+        self._rows: dict[tuple[str, str], list[tuple[int, int, dict]]] = {}
+        self._pending_targets: list[_Item] = []
+        self._pending_results: list[_Item] = []
+        self._n_rows = 0
+        self._oldest: float | None = None
+
+    def stats(self) -> dict:
+        return {"errors": self.errors, "last_error": self.last_error}
+
+    def _error(self, what: str, exc: BaseException) -> None:
+        self.errors += 1
+        self.last_error = f"{what}: {type(exc).__name__}: {exc}"
+        if self.errors <= 3:
+            log.warning("recorder: %s", self.last_error)
+
+    def handle(self, message: Any, dropped_total: int = 0) -> None:
+        """Log one message (an _Item or an encoded tuple, see :func:`_decode`)."""
+        item = _Item("?", None, 0)
+        try:
+            item = _decode(message)
+            if dropped_total != self.dropped_reported:
+                self._report_drops(dropped_total, item)
+            if item.kind == "scene":
+                self._handle_scene(item)
+            else:
+                if not self.blueprint_sent:
+                    self._send_blueprint(None)
+                getattr(self, "_handle_" + item.kind)(item)
+        except Exception as exc:  # noqa: BLE001 - recording must never take the caller down
+            self._error(f"logging a {item.kind}", exc)
+        if self._n_rows >= BATCH_ROWS:
+            self.send_batches()
+
+    def due(self) -> float | None:
+        """Seconds until the buffered rows must be sent (None: nothing buffered)."""
+        if self._oldest is None:
+            return None
+        return max(0.0, self._oldest + BATCH_SECONDS - time.monotonic())
+
+    def send_batches(self) -> None:
+        import pyarrow as pa
+
+        targets, results = self._pending_targets, self._pending_results
+        self._pending_targets, self._pending_results = [], []
+        if targets:
+            self._send_targets(targets)
+        if results:
+            self._send_results(results)
+        rows, self._rows, self._n_rows, self._oldest = self._rows, {}, 0, None
+        for (entity, arch), entries in rows.items():
+            try:
+                names = list(dict.fromkeys(k for _, _, f in entries for k in f))
+                groups: dict[tuple, dict] = {}
+                for name in names:
+                    values = [_instances(f[name]) if name in f else [] for _, _, f in entries]
+                    data = _concat(values)
+                    if arch == "AnyValues":  # as an Arrow array: rerun's generic path boxes every number
+                        data = pa.array(data)
+                    groups.setdefault(tuple(len(v) for v in values), {})[name] = data
+                self._send_columns(entity, arch, [u for u, _, _ in entries], [t for _, t, _ in entries], groups)
+            except Exception as exc:  # noqa: BLE001
+                self._error(f"sending {entity}", exc)
+
+    def flush(self, timeout: float = 10.0) -> None:
+        self.send_batches()
+        self.rec.flush(timeout_sec=max(0.1, timeout))
+
+    def close(self, timeout: float = 10.0) -> None:
+        try:
+            self.send_batches()
+            self.rec.flush(timeout_sec=max(0.1, timeout))
+            self.rec.disconnect()
+        except Exception as exc:  # noqa: BLE001 - a dead viewer must not break shutdown
+            self._error("closing the sinks", exc)
+
+    # -- items
+    def _row(self, entity: str, arch: str, item: _Item, **fields: Any) -> None:
+        self._rows.setdefault((entity, arch), []).append((int(item.update), int(item.ros_time_ns), fields))
+        self._count_row()
+
+    def _count_row(self) -> None:
+        self._n_rows += 1
+        if self._oldest is None:
+            self._oldest = time.monotonic()
+
+    def _report_drops(self, dropped: int, item: _Item) -> None:
+        text = (f"recorder queue full: {dropped - self.dropped_reported} item(s) dropped before this one "
+                f"({dropped} in total)")
+        if item.update is not None:
+            self._row(E_RECORDER, "TextLog", item, text=text, level="WARN")
+        else:
+            self.rec.log(E_RECORDER, self._rr.TextLog(text, level=self._rr.TextLogLevel.WARN), static=True)
+        self.dropped_reported = dropped
+
+    def _handle_scene(self, item: _Item) -> None:
+        rr = self._rr
+        info: _SceneInfo = item.payload
+        first = self.scene is None
+        self.scene = info
+        static = item.update is None
+        if not static:
+            self.send_batches()  # rows of earlier updates are drawn with the earlier scene
+            self.rec.set_time(TIMELINE_UPDATE, sequence=int(item.update))
+            self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
+        if first or static:
+            self.rec.log(E_WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        for i, (kind, kwargs, label, ob_type) in enumerate(info.obstacles):
+            colour = [70, 72, 80] if ob_type == "halfspace" else [150, 150, 165]
+            arch = getattr(rr, kind)(**kwargs, colors=[colour], labels=[label], fill_mode=rr.components.FillMode.Solid)
+            self.rec.log(f"{E_OBSTACLES}/{i}_{_part(label)}", arch, static=static)
+        doc = rr.TextDocument(info.yaml_text or "# scene not recorded (a Problem was logged)", media_type="text/plain")
+        props = rr.AnyValues(scene_name=info.name, frame_id=info.frame_id, solver=info.solver_kind,
+                             grip_names=list(info.grip_order))
+        self.rec.log(E_SCENE if static else E_SCENE_CHANGES, doc, props, static=static)
+        if not self.blueprint_sent:
+            self._send_blueprint(info)
+
+    def _send_blueprint(self, info: _SceneInfo | None) -> None:
+        self.rec.send_blueprint(default_blueprint(info), make_active=True, make_default=True)
+        self.blueprint_sent = True
+
+    def _handle_targets(self, item: _Item) -> None:
+        self._pending_targets.append(item)
+        self._count_row()
+
+    def _handle_result(self, item: _Item) -> None:
+        r: _ResultSnap = item.payload
+        key = (r.status, r.stable)
+        if key != self.last_status:
+            text = f"{r.status}: {r.message}" + ("" if r.stable is not False else " (unstable)")
+            level = "INFO" if r.status == "ok" and r.stable is not False else "WARN"
+            self._row(E_STATUS, "TextLog", item, text=[text], level=[level])
+            self.last_status = key
+        self._pending_results.append(item)
+        self._count_row()
+
+    # -- batched, vectorised over the rows of a batch (the per-row Python cost is what the CPU pays)
+    def _send(self, entity: str, arch: str, items: list[_Item], **fields: tuple[Any, list[int]]) -> None:
+        """send_columns of ``arch`` rows for ``items``; fields: name → (concatenated data, instances per row)."""
+        try:
+            groups: dict[tuple, dict] = {}
+            for name, (data, lengths) in fields.items():
+                groups.setdefault(tuple(int(n) for n in lengths), {})[name] = data
+            self._send_columns(entity, arch, [int(it.update) for it in items], [int(it.ros_time_ns) for it in items],
+                               groups)
+        except Exception as exc:  # noqa: BLE001
+            self._error(f"sending {entity}", exc)
+
+    def _send_columns(self, entity: str, arch: str, updates: list[int], stamps: list[int],
+                      groups: dict[tuple, dict]) -> None:
+        """One send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns]; ``groups``: instances per
+        row → {field: concatenated data} (fields with the same instance counts share a partition)."""
+        rr = self._rr
+        indexes = [rr.TimeColumn(TIMELINE_UPDATE, sequence=updates),
+                   rr.TimeColumn(TIMELINE_ROS, timestamp=np.array(stamps, dtype="datetime64[ns]"))]
+        columns: list[Any] = []
+        for lengths, fields in groups.items():
+            columns.extend(getattr(rr, arch).columns(**fields).partition(list(lengths)))
+        self.rec.send_columns(entity, indexes=indexes, columns=columns)
+
+    def _send_targets(self, items: list[_Item]) -> None:
+        L = self.scene.length if self.scene else 1.0
+        by_grip: dict[str, list[tuple[_Item, np.ndarray, np.ndarray]]] = {}
+        for it in items:
+            names, flat = [], []
+            for name, (pos, quat) in it.payload.items():
+                by_grip.setdefault(name, []).append((it, pos, quat))
+                names.append(name)
+                flat.append(np.concatenate([pos, quat]))
+            self._row(E_DATA_TARGETS, "AnyValues", it, grip_names=names, poses=np.concatenate(flat) if flat else
+                      np.zeros(0))
+        orange = np.array([255, 150, 40], np.uint8)
+        for name, rows in by_grip.items():
+            m = len(rows)
+            its = [r[0] for r in rows]
+            pos = np.array([r[1] for r in rows], dtype=float)
+            x_axis = quats_to_matrices(np.array([r[2] for r in rows]))[:, :, 0]
+            ones = [1] * m
+            path = f"{E_TARGETS}/{_part(name)}"
+            self._send(path, "Points3D", its, positions=(pos, ones), radii=(np.full(m, 0.012 * L), ones),
+                       colors=(np.tile(orange, (m, 1)), ones), labels=([f"{name} target"] * m, ones))
+            self._send(path, "Arrows3D", its, origins=(pos, ones), vectors=(0.12 * L * x_axis, ones),
+                       colors=(np.tile(orange, (m, 1)), ones), radii=(np.full(m, 0.003 * L), ones))
+
+    def _send_results(self, items: list[_Item]) -> None:
+        snaps: list[_ResultSnap] = [it.payload for it in items]
+        ones = [1] * len(items)
+        self._send(E_SOLVE_TIME, "Scalars", items, scalars=(np.array([r.solve_time_ms for r in snaps]), ones))
+        self._send(E_ITERATIONS, "Scalars", items, scalars=(np.array([float(r.iterations) for r in snaps]), ones))
+        shapes: dict[int, list[int]] = {}
+        for i, (it, r) in enumerate(zip(items, snaps)):
+            data: dict[str, Any] = dict(status=r.status, message=r.message, warm_started=r.warm_started,
+                                        iterations=r.iterations)
+            if r.warm_call is not None:
+                data["warm"] = bool(r.warm_call)
+            if r.targets is not None:
+                data["target_names"] = list(r.targets)
+                data["target_poses"] = np.concatenate([np.concatenate(p) for p in r.targets.values()])
+            if r.status == "ok" and len(r.points) >= 2:
+                shapes.setdefault(len(r.points), []).append(i)
+                data.update(s=r.s, points=r.points.ravel(), orientations=r.orientations.ravel(),
+                            energy_terms=list(r.energy), energy=np.array(list(r.energy.values()), dtype=float),
+                            grip_names=list(r.forces),
+                            grip_forces=np.concatenate(list(r.forces.values())) if r.forces else np.zeros(0))
+                if r.stable is not None:
+                    data["stable"] = bool(r.stable)
+                if len(r.self_contacts):  # rows of s_a, s_b, point_a, point_b, force on s_a (flattened)
+                    data["self_contacts"] = r.self_contacts.ravel()
+            if r.model:  # also for a failed solve: the model it was attempted with
+                data["model"] = _json(r.model)
+            self._row(E_DATA_RESULT, "AnyValues", it, **data)
+        self._send_model_scalars(items, snaps)
+        for rows in shapes.values():
+            try:
+                self._send_shapes([items[i] for i in rows], [snaps[i] for i in rows])
+            except Exception as exc:  # noqa: BLE001
+                self._error("drawing shapes", exc)
+
+    def _send_model_scalars(self, items: list[_Item], snaps: list[_ResultSnap]) -> None:
+        """model/<key>: the numbers of ShapeResult.model (None and non-numbers are skipped)."""
+        for key in MODEL_SCALARS:
+            have, values = [], []
+            for i, r in enumerate(snaps):
+                v = r.model.get(key) if r.model else None
+                if isinstance(v, (bool, int, float)) and math.isfinite(float(v)):
+                    have.append(i)
+                    values.append(float(v))
+            if have:
+                self._send(f"{E_MODEL_SERIES}/{key}", "Scalars", [items[i] for i in have],
+                           scalars=(np.array(values), [1] * len(have)))
+
+    def _send_shapes(self, items: list[_Item], snaps: list[_ResultSnap]) -> None:
+        """Centrelines, frames, grips, forces, energies, eigenvalues of ok results with N samples each."""
+        sc = self.scene
+        m = len(snaps)
+        P = np.stack([r.points for r in snaps])  # (m, N, 3)
+        O = np.stack([r.orientations for r in snaps])  # (m, N, 4)
+        S = np.stack([r.s for r in snaps])  # (m, N)
+        n = P.shape[1]
+        L = sc.length if sc else (float(S[0, -1] - S[0, 0]) or 1.0)
+        rf = np.empty((m, n))
+        for i, r in enumerate(snaps):
+            if r.bend_stiffness is not None:
+                rf[i] = r.bend_stiffness
+            elif sc is not None:
+                rf[i] = sc.bend_stiffness(r.s)
+            else:
+                rf[i] = 1.0
+        density = segment_energy_density(P, rf)  # (m, N-1)
+        if self.energy_scale is None:
+            self.energy_scale = max(0.5 * float(np.max(rf[0])) * (2 * math.pi / L) ** 2,
+                                    1.25 * float(np.max(density[0])))
+            self._log_legend()
+        rows = [n - 1] * m
+        ones = [1] * m
+        radius = max(sc.radius if sc else 0.0, 0.004 * L)
+        segments = np.stack([P[:, :-1], P[:, 1:]], axis=2).reshape(-1, 2, 3)
+        self._send(E_CABLE, "LineStrips3D", items, strips=(segments, rows),
+                   colors=(viridis(density / self.energy_scale).reshape(-1, 3), rows),
+                   radii=(np.full(m, radius), ones))
+        axes = np.array(AXIS_COLORS, dtype=np.uint8)
+        if self.n_frames:  # material frames at a few samples
+            idx = np.unique(np.round(np.linspace(0, n - 1, self.n_frames)).astype(int))
+            k = len(idx)
+            rot = quats_to_matrices(O[:, idx].reshape(-1, 4)).reshape(m, k, 3, 3)
+            a = 0.05 * L
+            vectors = a * np.concatenate([rot[:, :, :, 0], rot[:, :, :, 1], rot[:, :, :, 2]], axis=1)
+            origins = np.concatenate([P[:, idx]] * 3, axis=1)
+            self._send(E_FRAMES, "Arrows3D", items, vectors=(vectors.reshape(-1, 3), [3 * k] * m),
+                       origins=(origins.reshape(-1, 3), [3 * k] * m),
+                       colors=(np.tile(np.repeat(axes, k, axis=0), (m, 1)), [3 * k] * m),
+                       radii=(np.full(m, 0.002 * L), ones))
+        if sc is not None:  # grips: pose on the solved shape (the s of the first row), and the reaction force
+            s0 = S[0]
+            b = 0.1 * L
+            for name, s_g in sc.grip_s.items():
+                j1 = int(np.clip(np.searchsorted(s0, s_g), 1, n - 1))
+                j0 = j1 - 1
+                w = (s_g - s0[j0]) / (s0[j1] - s0[j0]) if s0[j1] > s0[j0] else 0.0
+                pos = P[:, j0] * (1 - w) + P[:, j1] * w  # (m, 3)
+                rot = quats_to_matrices(O[:, int(np.argmin(np.abs(s0 - s_g)))])  # (m, 3, 3)
+                path = f"{E_GRIPS}/{_part(name)}"
+                self._send(path, "Arrows3D", items, vectors=((b * rot.transpose(0, 2, 1)).reshape(-1, 3), [3] * m),
+                           origins=(np.repeat(pos, 3, axis=0), [3] * m), colors=(np.tile(axes, (m, 1)), [3] * m),
+                           radii=(np.full(3 * m, 0.004 * L), [3] * m))
+                have = [i for i, r in enumerate(snaps) if name in r.forces]
+                if have:
+                    f = np.array([snaps[i].forces[name] for i in have])
+                    one = [1] * len(have)
+                    self._send(path + "/force", "Arrows3D", [items[i] for i in have],
+                               vectors=(sc.force_scale * f, one), origins=(pos[have], one),
+                               colors=(np.tile(np.array([230, 60, 230], np.uint8), (len(have), 1)), one),
+                               radii=(np.full(len(have), 0.005 * L), one),
+                               labels=([f"{x:.3g} N" for x in np.linalg.norm(f, axis=1)], one))
+        energy = np.array([[float(r.energy.get(t, 0.0)) for t in ENERGY_TERMS] for r in snaps])
+        self._send(E_ENERGY, "Scalars", items, scalars=(energy.ravel(), [len(ENERGY_TERMS)] * m))
+        eig = [i for i, r in enumerate(snaps) if r.min_eigenvalue is not None and math.isfinite(r.min_eigenvalue)]
+        if eig:
+            self._send(E_EIGEN, "Scalars", [items[i] for i in eig],
+                       scalars=(np.array([snaps[i].min_eigenvalue for i in eig]), [1] * len(eig)))
+
+    def _log_legend(self) -> None:
+        rr, sc = self._rr, self.scene
+        lines = [
+            "# Legend",
+            f"* centreline colour: bend energy density ½ Rf κ² from 0 J/m (dark purple) to "
+            f"{self.energy_scale:.4g} J/m and above (yellow); κ from consecutive tangents",
+            "* axes: x = tangent (red), y (green), z (blue): material frames and grip poses",
+        ]
+        if sc is not None:
+            lines.append(f"* magenta arrows: force each gripper exerts on the string, {sc.force_scale:.4g} m per N")
+        lines.append("* orange: grip targets as received (point and tangent)")
+        self.rec.log(E_LEGEND, rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
+        self.rec.log(E_ENERGY, rr.SeriesLines(names=list(ENERGY_TERMS), colors=ENERGY_COLORS), static=True)
+        self.rec.log(E_SOLVE_TIME, rr.SeriesLines(names=["solve time [ms]"], colors=[[255, 170, 60]]), static=True)
+        self.rec.log(E_ITERATIONS, rr.SeriesLines(names=["iterations"], colors=[[120, 180, 255]]), static=True)
+        self.rec.log(E_EIGEN, rr.SeriesLines(names=["min eigenvalue"], colors=[[120, 220, 120]]), static=True)
+        for key, name in MODEL_SCALARS.items():
+            self.rec.log(f"{E_MODEL_SERIES}/{key}", rr.SeriesLines(names=[name]), static=True)
+
+    def _handle_rejected(self, item: _Item) -> None:
+        self._row(E_REJECTED, "TextLog", item, text=[item.payload], level=["WARN"])
+
+    def _handle_model(self, item: _Item) -> None:
+        self._row(E_MODEL, "TextLog", item, text=[item.payload], level=["INFO"])
+
+    def _handle_fit(self, item: _Item) -> None:
+        from ..identify.drawing import draw_observation  # imported only by a recording that has a fit
+
+        fit: _FitSnap = item.payload
+        self.send_batches()  # keep the rows of earlier updates before this one
+        self.rec.set_time(TIMELINE_UPDATE, sequence=int(item.update))
+        self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
+        draw_observation(self.rec, E_FIT, fit.points, fit.shape, fit.feet, fit.sigma, fit.huber, static=False)
+        level = self._rr.TextLogLevel.INFO if fit.ok else self._rr.TextLogLevel.WARN
+        self.rec.log(E_FIT_EVENTS, self._rr.TextLog(fit.text, level=level))
+
+
+def _json(value: Any) -> str:
+    return json.dumps(value, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o), sort_keys=True)

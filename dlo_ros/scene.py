@@ -762,20 +762,18 @@ def _profile_to_yaml(p: Profile) -> float | dict:
 
 
 def _obstacle_to_dict(ob: Obstacle) -> dict:
-    p = np.asarray(ob.params, dtype=float)
     out: dict[str, Any] = {"type": ob.type}
     if ob.name:
         out["name"] = ob.name
     if ob.type == "halfspace":
-        out.update(point=p[0:3].tolist(), normal=p[3:6].tolist())
+        out.update(point=ob.point.tolist(), normal=ob.normal.tolist())
     elif ob.type == "sphere":
-        out.update(center=p[0:3].tolist(), radius=float(p[3]))
+        out.update(center=ob.centre.tolist(), radius=ob.radius)
     elif ob.type == "capsule":
-        out.update(a=p[0:3].tolist(), b=p[3:6].tolist(), radius=float(p[6]))
+        out.update(a=ob.a.tolist(), b=ob.b.tolist(), radius=ob.radius)
     elif ob.type == "box":
-        rotation = p[3:12].reshape(3, 3).T  # params hold Rᵀ row-major
-        out.update(center=p[0:3].tolist(), orientation=matrix_to_quat(rotation).tolist(),
-                   half_extents=p[12:15].tolist())
+        out.update(center=ob.centre.tolist(), orientation=matrix_to_quat(ob.rotation).tolist(),
+                   half_extents=ob.half_extents.tolist())
     else:  # pragma: no cover - guarded by the assert on OBSTACLE_KEYS
         raise ValueError(f"obstacle type {ob.type!r} has no scene-file form")
     return out

@@ -44,20 +44,19 @@ def obstacle_shape(ob: Any, centre: np.ndarray, extent: float) -> tuple[str, dic
     halfspace → a square slab of side 2·extent, 1 % of that thick, lying just behind the surface,
     centred on the projection of ``centre``; sphere → Ellipsoids3D; capsule → Capsules3D; box → Boxes3D.
     """
-    p = np.asarray(ob.params, dtype=float)
     if ob.type == "halfspace":
-        point, normal = p[0:3], p[3:6] / np.linalg.norm(p[3:6])
+        point, normal = ob.point, ob.normal / np.linalg.norm(ob.normal)
         foot = centre - np.dot(centre - point, normal) * normal
         thick = 0.01 * extent
         return "Boxes3D", dict(centers=[foot - 0.5 * thick * normal], half_sizes=[[extent, extent, 0.5 * thick]],
                                quaternions=[quat_z_to(normal)])
     if ob.type == "sphere":
-        return "Ellipsoids3D", dict(centers=[p[0:3]], half_sizes=[[p[3]] * 3])
+        return "Ellipsoids3D", dict(centers=[ob.centre], half_sizes=[[ob.radius] * 3])
     if ob.type == "capsule":
-        a, b = p[0:3], p[3:6]
-        return "Capsules3D", dict(translations=[a], lengths=[float(np.linalg.norm(b - a))], radii=[p[6]],
+        a, b = ob.a, ob.b
+        return "Capsules3D", dict(translations=[a], lengths=[float(np.linalg.norm(b - a))], radii=[ob.radius],
                                   quaternions=[quat_z_to(b - a)])
     if ob.type == "box":
-        rotation = p[3:12].reshape(3, 3).T  # params hold Rᵀ row-major
-        return "Boxes3D", dict(centers=[p[0:3]], half_sizes=[p[12:15]], quaternions=[matrix_to_quat(rotation)])
+        return "Boxes3D", dict(centers=[ob.centre], half_sizes=[ob.half_extents],
+                               quaternions=[matrix_to_quat(ob.rotation)])
     raise ValueError(f"obstacle type {ob.type!r} has no drawing")

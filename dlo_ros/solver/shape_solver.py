@@ -43,6 +43,7 @@ from .parameters import ProblemParameters, check_moments
 from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, ShapeResult
 from . import self_contact as SC
+from . import topology as TP
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
 from .summary import ModelSummary
@@ -354,7 +355,9 @@ class ShapeSolver:
         the cold guess); a pair the answer penetrates is added and the solve repeated from the same start
         (at most ``CONTACT_ROUNDS`` times).  On a warm update a crossing sign that flipped since the
         committed shape, or two samples that meet when the shape is moved straight from the committed one
-        to the answer, mean the string (may have) passed through itself: 'failed', not committed."""
+        to the answer, mean the string (may have) passed through itself: 'failed', not committed; so does
+        a change of the clamped span's linking number Tw + Wr that the clamps' own turns do not explain
+        (``_linking_jump``: whole turns of twist released without the centreline coming near itself)."""
         st = problem.string
         geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
                                        tuple(g.s for g in problem.grips))
@@ -413,6 +416,14 @@ class ShapeSolver:
                         f"through itself (moved straight, s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
                         f"meet on the way); a jump of the solver, not published"),
                         iterations=iterations, warm_started=warm), None
+                jump = self._linking_jump(problem, start, state) if start is not None else None
+                if jump is not None:
+                    return no_shape(self.options, self.model_summary(), "failed", (
+                        f"topology: the linking number of the clamped string changed by {jump.unexplained:+.2f} "
+                        f"turns in one update (twist {jump.twist:+.3f}, writhe {jump.writhe:+.3f} by {jump.method}, "
+                        f"clamps turned {jump.clamps:+.3f}): the solver jumped to another branch, releasing whole "
+                        f"turns of twist without the string passing through itself; not published"),
+                        iterations=iterations, warm_started=warm), None
                 state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
                 return result, state
             if start is None:
@@ -425,6 +436,19 @@ class ShapeSolver:
         return no_shape(self.options, self.model_summary(), "failed", (
             f"self-contact: the shape still penetrates itself after {SC.CONTACT_ROUNDS} rounds of adding pairs "
             f"(capacity solver.self_contact_pairs = {capacity})"), iterations=iterations, warm_started=warm), None
+
+    def _linking_jump(self, problem: Problem, start: SolverState, state: SolverState) -> TP.LinkChange | None:
+        """ΔLk (``topology.link_change``) of the span between the first and the last clamp from the
+        committed shape ``start`` to ``state``, when it is a jump (|ΔLk| > ``topology.JUMP``); None otherwise,
+        and when the twist is not modelled or fewer than two grips are clamps (Lk is then not conserved:
+        a free roll lets the twist out)."""
+        clamps = [g.s for g in problem.grips if g.mode == "clamp"]
+        if not self.model.layout.frame or len(clamps) < 2 or min(clamps) == max(clamps):
+            return None
+        s = np.linspace(min(clamps), max(clamps), TP.SAMPLES)
+        change = TP.link_change(self.model.positions(start.z, s), self.model.pose_frames(start.z, s),
+                                self.model.positions(state.z, s), self.model.pose_frames(state.z, s))
+        return change if change.jumped else None
 
     def _loaded_slots(self, state: SolverState) -> set[int]:
         """Slots whose row is active in ``state`` as Newton counts it (at its bound with λ > 1e-8: IPOPT

@@ -135,3 +135,25 @@ def test_a_cold_solve_is_another_branch(unchecked_stream):
     change = TP.link_change(streamed.points, quat_to_frame(streamed.orientations),
                             cold.points, quat_to_frame(cold.orientations))
     assert change.jumped and change.unexplained == pytest.approx(round(linking(cold)) - TURNS, abs=1e-2)
+
+
+def test_clamp_turns_summed_over_failed_updates():
+    """Chord 0.4 L, the clamp turned in 15° steps: the string twists and writhes up to 1.25 turns, where
+    it snaps (a jump the swept-crossing or linking checks refuse).  The committed shape then lags the
+    clamp; once the clamp is a whole turn further the committed shape itself fits the targets again, and
+    comparing only the clamp frames (equal) would call it unchanged.  The turns summed over every target,
+    failed ones too, see the lost turn: every published shape has Lk = the turns applied."""
+    p = clamped_pair(right=(0.4, 0.0, 0.0), bend=1.0, twist=0.7)
+    sol = ShapeSolver(replace(p, string=replace(p.string, radius=0.02)),
+                      SolverOptions(model="full", order=16, self_contact_pairs=16), compile="off")
+    assert sol.solve().ok
+    failed = 0
+    for k in range(1, 55):  # to 810° = 2.25 turns
+        r = sol.solve({"right": ((0.4, 0.0, 0.0), turned(np.radians(15 * k)))})
+        if r.ok:
+            assert linking(r) == pytest.approx(15 * k / 360, abs=1e-2), (15 * k, linking(r))
+        else:
+            failed += 1
+    assert failed and r.status == "failed" and "linking number" in r.message, r.message
+    assert TP.ClampTurns({"c": np.eye(3)}).advanced({"c": quat_to_frame(turned(np.radians(100)))}).turns["c"] \
+        == pytest.approx(np.radians(100))

@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from ..model.director import quat_to_frame
 from ..model.problem import GripPose, Problem
 from . import frames as F
 from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
@@ -133,6 +134,10 @@ class ShapeSolver:
         self._key = structure_key(problem, self.options)
         self._state: SolverState | None = None
         self._contact: SC.ContactSlots | None = None  # the self-contact pairs of the solve under way
+        # the clamps' turns over the targets since the committed shape (None: none asked for since), and
+        # those of the solve under way (topology.ClampTurns; the linking-number check)
+        self._clamp_turns: TP.ClampTurns | None = None
+        self._turns_now: TP.ClampTurns | None = None
         self.build_time_s = time.perf_counter() - t0
 
     # ---- compiled derivatives and IPOPT instances ----------------------------------------------------
@@ -201,6 +206,7 @@ class ShapeSolver:
                 state.contact = contact.copy()
                 SC.fill(state.p, state.contact, self.nlp, self.problem.string.length)
             self._state = state
+            self._clamp_turns = None
         return True
 
     def unstable_eigenvalue(self) -> float | None:
@@ -218,6 +224,7 @@ class ShapeSolver:
         """Forget the warm start: the next solve starts cold."""
         with self._lock:
             self._state = None
+            self._clamp_turns = None
 
     def close(self) -> None:
         """Nothing to stop (a background compile is a daemon thread); the Solver protocol's close."""
@@ -267,12 +274,16 @@ class ShapeSolver:
             reason = self.unreachable_reason(problem)
             if reason:
                 return self._failure("unreachable", reason, t0)
+            self._turns_now = self._advance_clamp_turns(problem)
             result, state = self._solve_locked(problem, warm and self._state is not None)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
+            if commit:  # every target of the stream counts, failed ones too (topology.ClampTurns)
+                self._clamp_turns = self._turns_now
             # an unverified result is a converged stationary point of the discrete problem: a good warm start
             if commit and result.status in ("ok", "unverified") and state is not None:
                 self._state = state
                 self.problem = problem
+                self._clamp_turns = None if self._turns_now is None else self._turns_now.committed()
             return result
 
     def query_many(self, targets, executor=None) -> list[ShapeResult]:
@@ -437,17 +448,43 @@ class ShapeSolver:
             f"self-contact: the shape still penetrates itself after {SC.CONTACT_ROUNDS} rounds of adding pairs "
             f"(capacity solver.self_contact_pairs = {capacity})"), iterations=iterations, warm_started=warm), None
 
+    def _linking_clamps(self, problem: Problem) -> list:
+        """The first and the last clamp (by s) when the linking number is conserved (twist modelled, two
+        clamps at different s); [] otherwise."""
+        clamps = sorted((g for g in problem.grips if g.mode == "clamp"), key=lambda g: g.s)
+        if not self.nlp.director or not self.model.layout.frame or len(clamps) < 2 or clamps[0].s == clamps[-1].s:
+            return []
+        return [clamps[0], clamps[-1]]
+
+    def _advance_clamp_turns(self, problem: Problem) -> TP.ClampTurns | None:
+        """The clamps' turns after this target (``topology.ClampTurns``), from the committed shape's own
+        clamp frames when nothing was asked for since it; None without a committed self-contact shape."""
+        if self._state is None or not self.nlp.self_contact_slots:
+            return None
+        clamps = self._linking_clamps(problem)
+        if not clamps:
+            return None
+        turns = self._clamp_turns
+        if turns is None or set(turns.frames) != {g.name for g in clamps}:
+            s = np.array([g.s for g in clamps])
+            turns = TP.ClampTurns({g.name: f for g, f in zip(clamps, self.model.pose_frames(self._state.z, s))})
+        return turns.advanced({g.name: quat_to_frame(g.pose.orientation) for g in clamps})
+
     def _linking_jump(self, problem: Problem, start: SolverState, state: SolverState) -> TP.LinkChange | None:
         """ΔLk (``topology.link_change``) of the span between the first and the last clamp from the
         committed shape ``start`` to ``state``, when it is a jump (|ΔLk| > ``topology.JUMP``); None otherwise,
         and when the twist is not modelled or fewer than two grips are clamps (Lk is then not conserved:
-        a free roll lets the twist out)."""
-        clamps = [g.s for g in problem.grips if g.mode == "clamp"]
-        if not self.model.layout.frame or len(clamps) < 2 or min(clamps) == max(clamps):
+        a free roll lets the twist out).  The clamps' turns are those summed over every target since the
+        committed shape (``_advance_clamp_turns``)."""
+        clamps = self._linking_clamps(problem)
+        if not clamps:
             return None
-        s = np.linspace(min(clamps), max(clamps), TP.SAMPLES)
+        s = np.linspace(clamps[0].s, clamps[-1].s, TP.SAMPLES)
+        turns = self._turns_now
+        known = turns is not None and start is self._state
         change = TP.link_change(self.model.positions(start.z, s), self.model.pose_frames(start.z, s),
-                                self.model.positions(state.z, s), self.model.pose_frames(state.z, s))
+                                self.model.positions(state.z, s), self.model.pose_frames(state.z, s),
+                                (turns.turns[clamps[0].name], turns.turns[clamps[-1].name]) if known else None)
         return change if change.jumped else None
 
     def _loaded_slots(self, state: SolverState) -> set[int]:

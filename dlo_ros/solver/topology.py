@@ -27,30 +27,36 @@ must stay near 0; a change near a whole number means a jump to another topologic
 
   the solid angle swept by the geodesic homotopy of the tangent indicatrix, computed exactly per sample
   interval as the signed area of the spherical quadrilateral (t₀,i, t₀,i+1, t₁,i+1, t₁,i).  It holds
-  (mod 2, Fuller 1978) while t₀(s) ≠ −t₁(s) everywhere: it does not see the centreline passing through
-  itself (the crossing checks of ``self_contact.py`` do), so ΔTw + ΔWr_Fuller is conserved through
-  anything but a jump of the discrete frame field.  On the rays the tangents do not turn, so the closure
+  while t₀(s) ≠ −t₁(s) everywhere, and only mod 2 (Fuller 1978): it misses ±2 whenever the curves of
+  the tangent homotopy pass through themselves — as they do in a large jump (measured: a twisted loop
+  whose tangents turned 166° somewhere lost two turns of Lk, Fuller read 0).  So it is used only for
+  small changes, every tangent turned less than 90° (``FULLER_ALIGNMENT``), where the homotopy stays
+  near both shapes; it does not see the centreline passing through itself (the crossing checks of
+  ``self_contact.py`` do), so ΔTw + ΔWr_Fuller is conserved through anything but a jump of the discrete
+  frame field.  On the rays the tangents do not turn, so the closure
   adds nothing when the clamps' tangents stay put; when they turn, the closure's part is of the order of
   the solid angle their tangents swept / 2π (the stream's small moves keep it far below ½).
-* Where the tangents came within ``ANTIPODAL`` of antipodal, Fuller's formula is not applicable and the
-  absolute Gauss writhe of each centreline extended by its clamps' tangent rays (length ``RAY_LENGTHS``
-  × the span, ``ray_writhe``; exact for polylines, Klenin & Langowski 2000) is used instead.  That
-  closure can be crossed by the string wrapping behind a clamp, which the Fuller path never sees.
+* For a larger change (a tangent turned 90° or more) the absolute Gauss writhe of each centreline extended by its clamps' tangent rays (length ``RAY_LENGTHS``
+  × the span, ``ray_writhe``; exact for polylines, Klenin & Langowski 2000) is used instead, no mod 2.
+  That closure can be crossed by the string wrapping behind a clamp (a false alarm of ±1: only a big
+  jump is judged this way, and a big jump is suspect anyway).
 * The clamps' turns α: the signed angle about the new tangent from the old d1, transported by the
   minimal rotation old tangent → new tangent, to the new d1, in (−π, π] (a stream turns a clamp in
-  steps smaller than half a turn).
+  steps smaller than half a turn).  A solver sums them over every target it was asked for since the
+  committed shape (``ClampTurns``), failed updates included: after a run of failures the committed
+  shape lags the clamps by more than half a turn, and one comparison would alias.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 #: |ΔLk| above this (turns) is a jump to another branch: a change from continuous deformation is near 0
 JUMP = 0.5
 
-#: 1 + t₀·t₁ below this somewhere (tangents within ~8° of antipodal): Fuller's formula is not used
-ANTIPODAL = 1e-2
+#: 1 + t₀·t₁ at or below this somewhere (a tangent turned 90° or more): Fuller's formula (mod 2) is not used
+FULLER_ALIGNMENT = 1.0
 
 #: samples along the clamped span at which a solver compares two shapes (Tw and Fuller's writhe are
 #: O(h²): a jump is a whole turn, the error at 401 samples a few 1e-4 turns on the twisted test streams)
@@ -97,7 +103,8 @@ def _spherical_triangle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarr
 def fuller_writhe_change(t0: np.ndarray, t1: np.ndarray) -> float:
     """Wr₁ − Wr₀ [turns] by Fuller's formula (module docstring) for unit tangents (n, 3) of two curves at
     the same samples along s: Σ_i of the signed area of the spherical quadrilateral t₀,i → t₀,i+1 → t₁,i+1
-    → t₁,i, over 2π.  Check ``min_alignment(t0, t1) > ANTIPODAL`` before trusting it."""
+    → t₁,i, over 2π; exact mod 2 while no t₁ = −t₀ (``link_change`` uses it only for small changes,
+    ``min_alignment(t0, t1) > FULLER_ALIGNMENT``)."""
     a, b, c, d = t0[:-1], t0[1:], t1[1:], t1[:-1]
     area = _spherical_triangle(a, b, c) + _spherical_triangle(a, c, d)
     return float(-np.sum(area) / (2 * np.pi))
@@ -180,14 +187,37 @@ def clamp_turn(frame0: np.ndarray, frame1: np.ndarray) -> float:
     return float(signed_angle(moved, frame1[:, 1], frame1[:, 0]))
 
 
-def link_change(points0: np.ndarray, frames0: np.ndarray, points1: np.ndarray, frames1: np.ndarray) -> LinkChange:
+@dataclass(frozen=True)
+class ClampTurns:
+    """How far [rad] each clamp (by grip name) has turned about its tangent over the targets requested since
+    the committed shape, and the last requested frame (3, 3) of each."""
+
+    frames: dict[str, np.ndarray]
+    turns: dict[str, float] = field(default_factory=dict)
+
+    def advanced(self, requested: dict[str, np.ndarray]) -> ClampTurns:
+        """Turns after one more target: each clamp's step from its last requested frame (``clamp_turn``)."""
+        turns = {name: self.turns.get(name, 0.0) + (clamp_turn(self.frames[name], frame) if name in self.frames else 0.0)
+                 for name, frame in requested.items()}
+        return ClampTurns(dict(requested), turns)
+
+    def committed(self) -> ClampTurns:
+        """The same frames as the new committed shape's: no turn since."""
+        return ClampTurns(self.frames)
+
+
+def link_change(points0: np.ndarray, frames0: np.ndarray, points1: np.ndarray, frames1: np.ndarray,
+                clamp_turns: tuple[float, float] | None = None) -> LinkChange:
     """ΔLk from shape 0 to shape 1 of the span between two clamps, sampled at the same arc lengths from
     the first clamp (row 0) to the last (row −1): points (n, 3) [m] and frames (n, 3, 3) (columns t, d1,
-    d2).  Writhe by Fuller's formula unless the tangents came near antipodal (``ANTIPODAL``), then by the
-    two shapes' ray-closed Gauss writhes."""
+    d2).  Writhe by Fuller's formula when every tangent turned less than 90° (``FULLER_ALIGNMENT``), else
+    by the two shapes' ray-closed Gauss writhes.  ``clamp_turns``: the first and the last clamp's turns [rad]
+    (``ClampTurns``); default: each end's ``clamp_turn`` between the two shapes."""
     t0, t1 = frames0[:, :, 0], frames1[:, :, 0]
     d_twist = twist(t1, frames1[:, :, 1]) - twist(t0, frames0[:, :, 1])
-    clamps = (clamp_turn(frames0[-1], frames1[-1]) - clamp_turn(frames0[0], frames1[0])) / (2 * np.pi)
-    if min_alignment(t0, t1) > ANTIPODAL:
+    if clamp_turns is None:
+        clamp_turns = (clamp_turn(frames0[0], frames1[0]), clamp_turn(frames0[-1], frames1[-1]))
+    clamps = (clamp_turns[1] - clamp_turns[0]) / (2 * np.pi)
+    if min_alignment(t0, t1) > FULLER_ALIGNMENT:
         return LinkChange(d_twist, fuller_writhe_change(t0, t1), clamps, "fuller")
     return LinkChange(d_twist, ray_writhe(points1, t1) - ray_writhe(points0, t0), clamps, "rays")

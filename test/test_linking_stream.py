@@ -157,3 +157,25 @@ def test_clamp_turns_summed_over_failed_updates():
     assert failed and r.status == "failed" and "linking number" in r.message, r.message
     assert TP.ClampTurns({"c": np.eye(3)}).advanced({"c": quat_to_frame(turned(np.radians(100)))}).turns["c"] \
         == pytest.approx(np.radians(100))
+
+
+def test_auto_does_not_publish_lost_turns():
+    """``model: auto`` (no self-contact: the string is never within reach of itself) at chord 0.9 L, the
+    clamp turned in 30° steps to 2 turns: at 1.58 turns the warm update fails and the cold fallback used
+    to publish a shape 2 turns short (Lk −0.42, energy 32.5 → 6.2 J).  Now every published shape has Lk =
+    the turns applied, and the refused updates name the linking number."""
+    from dlo_ros.solver.auto import AutoShapeSolver
+
+    p = clamped_pair(right=(START, 0.0, 0.0), bend=1.0, twist=0.7)
+    sol = AutoShapeSolver(replace(p, string=replace(p.string, radius=0.02)), SolverOptions(), compile="off",
+                          checks="sync")
+    assert sol.solve().ok
+    refused = 0
+    for k in range(1, 25):
+        r = sol.solve({"right": ((START, 0.0, 0.0), turned(np.radians(30 * k)))})
+        if r.ok:
+            assert linking(r) == pytest.approx(30 * k / 360, abs=1e-2), (30 * k, linking(r), r.ipopt_status)
+        else:
+            assert "linking number" in r.message, r.message
+            refused += 1
+    assert refused

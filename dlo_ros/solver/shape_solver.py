@@ -358,7 +358,29 @@ class ShapeSolver:
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
         if self.nlp.self_contact_slots:
             return self._solve_self_contact(problem, warm)
-        return self._solve_pairs_fixed(problem, warm)
+        start = self._state if warm else None
+        result, state = self._solve_pairs_fixed(problem, warm)
+        # without self-contact the linking number is checked where a warm update left the Newton path
+        # (IPOPT, continuation or the cold fallback can land a whole turn away; Newton converges from
+        # next to the committed shape), and where the clamps turned more than a quarter turn since the
+        # committed shape (after refused updates: Newton then follows the clamp frame, which cannot tell
+        # a turn from its opposite): a stream must not lose turns of twist to a cold start
+        turns = self._turns_now
+        lagging = turns is not None and any(abs(a) > np.pi / 2 for a in turns.turns.values())
+        if (start is not None and state is not None and result.status in ("ok", "unverified")
+                and (lagging or not result.ipopt_status.startswith("Newton"))):
+            jump = self._linking_jump(problem, start, state)
+            if jump is not None:
+                return self._linking_failure(jump, result.iterations, True), None
+        return result, state
+
+    def _linking_failure(self, jump: TP.LinkChange, iterations: int, warm: bool) -> ShapeResult:
+        """'failed': the update changed the clamped string's linking number (``_linking_jump``)."""
+        return no_shape(self.options, self.model_summary(), "failed", (
+            f"topology: the linking number of the clamped string changed by {jump.unexplained:+.2f} turns in one "
+            f"update (twist {jump.twist:+.3f}, writhe {jump.writhe:+.3f} by {jump.method}, clamps turned "
+            f"{jump.clamps:+.3f}): the solver jumped to another branch (whole turns of twist released, or the "
+            f"string passed through itself); not published"), iterations=iterations, warm_started=warm)
 
     # ---- self-contact (solver/self_contact.py) ----------------------------------------------------------
     def _solve_self_contact(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
@@ -429,12 +451,7 @@ class ShapeSolver:
                         iterations=iterations, warm_started=warm), None
                 jump = self._linking_jump(problem, start, state) if start is not None else None
                 if jump is not None:
-                    return no_shape(self.options, self.model_summary(), "failed", (
-                        f"topology: the linking number of the clamped string changed by {jump.unexplained:+.2f} "
-                        f"turns in one update (twist {jump.twist:+.3f}, writhe {jump.writhe:+.3f} by {jump.method}, "
-                        f"clamps turned {jump.clamps:+.3f}): the solver jumped to another branch, releasing whole "
-                        f"turns of twist without the string passing through itself; not published"),
-                        iterations=iterations, warm_started=warm), None
+                    return self._linking_failure(jump, iterations, warm), None
                 state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
                 return result, state
             if start is None:
@@ -458,8 +475,8 @@ class ShapeSolver:
 
     def _advance_clamp_turns(self, problem: Problem) -> TP.ClampTurns | None:
         """The clamps' turns after this target (``topology.ClampTurns``), from the committed shape's own
-        clamp frames when nothing was asked for since it; None without a committed self-contact shape."""
-        if self._state is None or not self.nlp.self_contact_slots:
+        clamp frames when nothing was asked for since it; None without a committed shape."""
+        if self._state is None:
             return None
         clamps = self._linking_clamps(problem)
         if not clamps:

@@ -81,7 +81,7 @@ def test_streamed_updates_keep_the_linking_number(unchecked_stream):
     (the next update from it is warm and on the same branch)."""
     sol = twisted_solver()
     twist_up(sol)
-    jumped_at = next(c for c, r in unchecked_stream if r.ok and abs(linking(r) - TURNS) > 0.5)
+    jumped_at = next((c for c, r in unchecked_stream if r.ok and abs(linking(r) - TURNS) > 0.5), None)
     last_ok = None
     for c, r in bring_ends_together(sol):
         if r.ok:
@@ -90,7 +90,7 @@ def test_streamed_updates_keep_the_linking_number(unchecked_stream):
         if c == jumped_at:
             assert r.status == "failed" and "linking number" in r.message, (c, r.status, r.message)
             break
-    assert last_ok is not None
+    assert last_ok is not None and jumped_at is not None  # (test_known_failure_reproduced says why not)
     c, before = last_ok
     again = sol.solve({"right": ((c, 0.0, 0.0), turned(2 * np.pi * TURNS))})
     assert again.ok and again.warm_started and linking(again) == pytest.approx(TURNS, abs=1e-2)
@@ -178,4 +178,4 @@ def test_auto_does_not_publish_lost_turns():
         else:
             assert "linking number" in r.message, r.message
             refused += 1
-    assert refused
+    assert refused, "the order-8 model followed the twist to 2 turns: the lost-turn case no longer arises here"

@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from ..model.director import quat_to_frame
 from ..model.problem import GripPose, Problem
 from . import frames as F
 from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
@@ -43,6 +44,7 @@ from .parameters import ProblemParameters, check_moments
 from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, ShapeResult
 from . import self_contact as SC
+from . import topology as TP
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
 from .summary import ModelSummary
@@ -132,6 +134,10 @@ class ShapeSolver:
         self._key = structure_key(problem, self.options)
         self._state: SolverState | None = None
         self._contact: SC.ContactSlots | None = None  # the self-contact pairs of the solve under way
+        # the clamps' turns over the targets since the committed shape (None: none asked for since), and
+        # those of the solve under way (topology.ClampTurns; the linking-number check)
+        self._clamp_turns: TP.ClampTurns | None = None
+        self._turns_now: TP.ClampTurns | None = None
         self.build_time_s = time.perf_counter() - t0
 
     # ---- compiled derivatives and IPOPT instances ----------------------------------------------------
@@ -200,6 +206,7 @@ class ShapeSolver:
                 state.contact = contact.copy()
                 SC.fill(state.p, state.contact, self.nlp, self.problem.string.length)
             self._state = state
+            self._clamp_turns = None
         return True
 
     def unstable_eigenvalue(self) -> float | None:
@@ -217,6 +224,7 @@ class ShapeSolver:
         """Forget the warm start: the next solve starts cold."""
         with self._lock:
             self._state = None
+            self._clamp_turns = None
 
     def close(self) -> None:
         """Nothing to stop (a background compile is a daemon thread); the Solver protocol's close."""
@@ -266,13 +274,17 @@ class ShapeSolver:
             reason = self.unreachable_reason(problem)
             if reason:
                 return self._failure("unreachable", reason, t0)
+            self._turns_now = self._advance_clamp_turns(problem)
             result, state = self._solve_locked(problem, warm and self._state is not None)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
             result.derivatives = "compiled" if self.functions.compiled else "interpreted"
+            if commit:  # every target of the stream counts, failed ones too (topology.ClampTurns)
+                self._clamp_turns = self._turns_now
             # an unverified result is a converged stationary point of the discrete problem: a good warm start
             if commit and result.status in ("ok", "unverified") and state is not None:
                 self._state = state
                 self.problem = problem
+                self._clamp_turns = None if self._turns_now is None else self._turns_now.committed()
             return result
 
     def query_many(self, targets, executor=None) -> list[ShapeResult]:
@@ -347,7 +359,29 @@ class ShapeSolver:
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
         if self.nlp.self_contact_slots:
             return self._solve_self_contact(problem, warm)
-        return self._solve_pairs_fixed(problem, warm)
+        start = self._state if warm else None
+        result, state = self._solve_pairs_fixed(problem, warm)
+        # without self-contact the linking number is checked where a warm update left the Newton path
+        # (IPOPT, continuation or the cold fallback can land a whole turn away; Newton converges from
+        # next to the committed shape), and where the clamps turned more than a quarter turn since the
+        # committed shape (after refused updates: Newton then follows the clamp frame, which cannot tell
+        # a turn from its opposite): a stream must not lose turns of twist to a cold start
+        turns = self._turns_now
+        lagging = turns is not None and any(abs(a) > np.pi / 2 for a in turns.turns.values())
+        if (start is not None and state is not None and result.status in ("ok", "unverified")
+                and (lagging or not result.ipopt_status.startswith("Newton"))):
+            jump = self._linking_jump(problem, start, state)
+            if jump is not None:
+                return self._linking_failure(jump, result.iterations, True), None
+        return result, state
+
+    def _linking_failure(self, jump: TP.LinkChange, iterations: int, warm: bool) -> ShapeResult:
+        """'failed': the update changed the clamped string's linking number (``_linking_jump``)."""
+        return no_shape(self.options, self.model_summary(), "failed", (
+            f"topology: the linking number of the clamped string changed by {jump.unexplained:+.2f} turns in one "
+            f"update (twist {jump.twist:+.3f}, writhe {jump.writhe:+.3f} by {jump.method}, clamps turned "
+            f"{jump.clamps:+.3f}): the solver jumped to another branch (whole turns of twist released, or the "
+            f"string passed through itself); not published"), iterations=iterations, warm_started=warm)
 
     # ---- self-contact (solver/self_contact.py) ----------------------------------------------------------
     def _solve_self_contact(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
@@ -355,7 +389,9 @@ class ShapeSolver:
         the cold guess); a pair the answer penetrates is added and the solve repeated from the same start
         (at most ``CONTACT_ROUNDS`` times).  On a warm update a crossing sign that flipped since the
         committed shape, or two samples that meet when the shape is moved straight from the committed one
-        to the answer, mean the string (may have) passed through itself: 'failed', not committed."""
+        to the answer, mean the string (may have) passed through itself: 'failed', not committed; so does
+        a change of the clamped span's linking number Tw + Wr that the clamps' own turns do not explain
+        (``_linking_jump``: whole turns of twist released without the centreline coming near itself)."""
         st = problem.string
         geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
                                        tuple(g.s for g in problem.grips))
@@ -414,6 +450,9 @@ class ShapeSolver:
                         f"through itself (moved straight, s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
                         f"meet on the way); a jump of the solver, not published"),
                         iterations=iterations, warm_started=warm), None
+                jump = self._linking_jump(problem, start, state) if start is not None else None
+                if jump is not None:
+                    return self._linking_failure(jump, iterations, warm), None
                 state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
                 return result, state
             if start is None:
@@ -426,6 +465,45 @@ class ShapeSolver:
         return no_shape(self.options, self.model_summary(), "failed", (
             f"self-contact: the shape still penetrates itself after {SC.CONTACT_ROUNDS} rounds of adding pairs "
             f"(capacity solver.self_contact_pairs = {capacity})"), iterations=iterations, warm_started=warm), None
+
+    def _linking_clamps(self, problem: Problem) -> list:
+        """The first and the last clamp (by s) when the linking number is conserved (twist modelled, two
+        clamps at different s); [] otherwise."""
+        clamps = sorted((g for g in problem.grips if g.mode == "clamp"), key=lambda g: g.s)
+        if not self.nlp.director or not self.model.layout.frame or len(clamps) < 2 or clamps[0].s == clamps[-1].s:
+            return []
+        return [clamps[0], clamps[-1]]
+
+    def _advance_clamp_turns(self, problem: Problem) -> TP.ClampTurns | None:
+        """The clamps' turns after this target (``topology.ClampTurns``), from the committed shape's own
+        clamp frames when nothing was asked for since it; None without a committed shape."""
+        if self._state is None:
+            return None
+        clamps = self._linking_clamps(problem)
+        if not clamps:
+            return None
+        turns = self._clamp_turns
+        if turns is None or set(turns.frames) != {g.name for g in clamps}:
+            s = np.array([g.s for g in clamps])
+            turns = TP.ClampTurns({g.name: f for g, f in zip(clamps, self.model.pose_frames(self._state.z, s))})
+        return turns.advanced({g.name: quat_to_frame(g.pose.orientation) for g in clamps})
+
+    def _linking_jump(self, problem: Problem, start: SolverState, state: SolverState) -> TP.LinkChange | None:
+        """ΔLk (``topology.link_change``) of the span between the first and the last clamp from the
+        committed shape ``start`` to ``state``, when it is a jump (|ΔLk| > ``topology.JUMP``); None otherwise,
+        and when the twist is not modelled or fewer than two grips are clamps (Lk is then not conserved:
+        a free roll lets the twist out).  The clamps' turns are those summed over every target since the
+        committed shape (``_advance_clamp_turns``)."""
+        clamps = self._linking_clamps(problem)
+        if not clamps:
+            return None
+        s = np.linspace(clamps[0].s, clamps[-1].s, TP.SAMPLES)
+        turns = self._turns_now
+        known = turns is not None and start is self._state
+        change = TP.link_change(self.model.positions(start.z, s), self.model.pose_frames(start.z, s),
+                                self.model.positions(state.z, s), self.model.pose_frames(state.z, s),
+                                (turns.turns[clamps[0].name], turns.turns[clamps[-1].name]) if known else None)
+        return change if change.jumped else None
 
     def _loaded_slots(self, state: SolverState) -> set[int]:
         """Slots whose row is active in ``state`` as Newton counts it (at its bound with λ > 1e-8: IPOPT

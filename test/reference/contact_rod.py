@@ -9,6 +9,9 @@ x = A T at the vertices and edge midpoints (A accumulates h t_j from the clamp a
 (a joint of length h between edges, of length h/2 at each held end: Rf θ²/(2 l) per joint with
 |Δt|² = θ² to leading order), the end position h Σ t_j = c as an equality, and for every pair of points
 more than ``gap`` apart along s and within ``window`` of each other at the start, |x_a − x_b|² ≥ (2r)².
+Dead point forces F_k at points k add −Σ F_k·x_k to E.  The contact forces are the multipliers μ of the
+active pairs, from the KKT conditions ∇E = J_eqᵀν + J_activeᵀμ at the minimiser (linear least squares):
+the force on point a is 2μ(x_a − x_b), its opposite acts on b.
 Twist is not modelled: with the roll free at one end and no point moments the twisting moment of an
 isotropic rod is zero everywhere (m·t is constant along the rod and vanishes at the free roll).
 Nothing here uses dlo_ros.
@@ -24,7 +27,8 @@ from scipy.optimize import minimize
 @dataclass
 class ContactRod:
     """The minimiser: tangents (N, 3), point arc lengths s and points (2N+1, 3), energy [J], the pairs
-    (a, b) at their bound (within ``active_tol`` of 2r) and the closest far pair's distance [m]."""
+    (a, b) at their bound (within ``active_tol`` of 2r), the closest far pair's distance [m], and the
+    contact force on the first point of each active pair [N]."""
 
     tangents: np.ndarray
     s: np.ndarray
@@ -34,6 +38,7 @@ class ContactRod:
     closest: float
     success: bool
     message: str
+    forces: np.ndarray  # (len(active), 3) [N]: the contact force on the first point of each active pair
 
 
 def accumulation(n: int, h: float) -> tuple[np.ndarray, np.ndarray]:
@@ -49,9 +54,10 @@ def accumulation(n: int, h: float) -> tuple[np.ndarray, np.ndarray]:
 
 def solve_contact_rod(tangents0: np.ndarray, length: float, rf: float, end: np.ndarray, e0: np.ndarray,
                       el: np.ndarray, radius: float, gap: float, window: float, active_tol: float = 1e-6,
-                      maxiter: int = 500) -> ContactRod:
+                      maxiter: int = 500, loads: tuple[tuple[int, np.ndarray], ...] = ()) -> ContactRod:
     """Minimise E from the tangents ``tangents0`` (N, 3), clamp at the origin with tangent e0, the end at
-    ``end`` with tangent el (module docstring)."""
+    ``end`` with tangent el, dead forces ``loads`` ((point index into ``s``, force [N]), …) (module
+    docstring)."""
     n = len(tangents0)
     h = length / n
     a, s = accumulation(n, h)
@@ -61,10 +67,13 @@ def solve_contact_rod(tangents0: np.ndarray, length: float, rf: float, end: np.n
     ia, ib = np.nonzero((s[None, :] - s[:, None] > gap) & (d0 < window))
     diff = a[ia] - a[ib]  # (P, n): x_a − x_b = diff @ T
     c = (2 * radius) ** 2
+    # −Σ F_k·x_k = −Σ_j (Σ_k a[k, j] F_k)·t_j: each tangent's share of the loads' work
+    work = sum((np.outer(a[k], f) for k, f in loads), np.zeros((n, 3)))
 
     def energy(v):
         t = v.reshape(n, 3)
-        return rf / h * (np.sum(1 - np.sum(t[:-1] * t[1:], axis=1)) + np.sum((t[0] - e0) ** 2) + np.sum((t[-1] - el) ** 2))
+        return rf / h * (np.sum(1 - np.sum(t[:-1] * t[1:], axis=1)) + np.sum((t[0] - e0) ** 2)
+                         + np.sum((t[-1] - el) ** 2)) - np.sum(work * t)
 
     def grad(v):
         t = v.reshape(n, 3)
@@ -73,7 +82,7 @@ def solve_contact_rod(tangents0: np.ndarray, length: float, rf: float, end: np.n
         g[1:] -= t[:-1]
         g[0] += 2 * (t[0] - e0)
         g[-1] += 2 * (t[-1] - el)
-        return (rf / h * g).ravel()
+        return (rf / h * g - work).ravel()
 
     def eq(v):
         t = v.reshape(n, 3)
@@ -106,5 +115,11 @@ def solve_contact_rod(tangents0: np.ndarray, length: float, rf: float, end: np.n
     d = np.linalg.norm(pts[:, None] - pts[None, :], axis=2)
     far = s[None, :] - s[:, None] > gap
     closest = float(np.min(np.where(far, d, np.inf)))
-    active = [(int(i), int(j)) for i, j in zip(ia, ib) if d[i, j] ** 2 - c < active_tol * length ** 2]
-    return ContactRod(t, s, pts, float(energy(res.x)), active, closest, bool(res.success), str(res.message))
+    on = np.array([d[i, j] ** 2 - c < active_tol * length ** 2 for i, j in zip(ia, ib)], dtype=bool)
+    active = [(int(i), int(j)) for i, j, k in zip(ia, ib, on) if k]
+    # KKT: ∇E = J_eqᵀ ν + J_activeᵀ μ (SLSQP's sign: g ≥ 0 rows); least squares for (ν, μ)
+    rows = np.vstack([eq_jac(res.x), ineq_jac(res.x)[on]]) if len(ia) else eq_jac(res.x)
+    mult = np.linalg.lstsq(rows.T, grad(res.x), rcond=None)[0][n + 3:]
+    forces = np.array([2 * m * (pts[i] - pts[j]) for m, (i, j) in zip(mult, active)]).reshape(-1, 3)
+    return ContactRod(t, s, pts, float(energy(res.x)), active, closest, bool(res.success), str(res.message),
+                      forces)

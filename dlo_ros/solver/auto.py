@@ -493,6 +493,8 @@ class AutoShapeSolver:
             inner_poses = {g.name: g.pose for g in reduced.grips}
             # the poses are checked and the plane too (above): the inner solver need not check them again
             result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
+            if commit and result.status == "failed" and result.message.startswith("topology:"):
+                result = self._richer_for_topology(problem, result, notes)
             # an unverified result (residual over the tolerance) is committed as the warm start and checked:
             # the check escalates the order
             if result.status not in ("ok", "unverified") or not commit:
@@ -539,6 +541,23 @@ class AutoShapeSolver:
             return ""
         return (f"self-contact: the shape comes within {d:.3g} m of itself (reach {geometry.reach:.3g} m, "
                 f"2·radius {2 * st.radius:.3g} m): full model with self-contact")
+
+    def _richer_for_topology(self, problem: Problem, result: ShapeResult, notes: list[str]) -> ShapeResult:
+        """A warm update refused because the clamped string's linking number changed (the model jumped to a
+        branch with whole turns released, ``topology.py``): too coarse a basis cannot hold the twist, so the
+        update is tried again on the next orders, each warm-started from the committed shape; the first
+        answer that is not refused for its topology is returned (the refusal if every order is)."""
+        for order in ORDERS:
+            if order <= self.choice.order:
+                continue
+            self._switch(replace(self.choice, order=order, reasons=list(self.choice.reasons)),
+                         f"order {order}: the order-{self.choice.order} model changed the linking number")
+            notes.append(self.changes[-1][1])
+            reduced = self._reduced(self.choice, problem)[0]
+            result = self.inner.solve({g.name: g.pose for g in reduced.grips}, warm=True, commit=True, checked=True)
+            if not (result.status == "failed" and result.message.startswith("topology:")):
+                return result
+        return result
 
     # ---- checks -------------------------------------------------------------------------------------
     def _check_now(self, snap: _Snapshot, result: ShapeResult, notes: list[str]) -> ShapeResult:

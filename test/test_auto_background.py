@@ -11,7 +11,7 @@ import pytest
 
 from dlo_ros.solver import AutoShapeSolver, ShapeSolver, SolverOptions, make_solver
 from dlo_ros.solver import shape_solver as shape_solver_module
-from conftest import clamped_pair
+from support.problems import clamped_pair
 
 
 def hanging(**kw):

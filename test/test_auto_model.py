@@ -9,7 +9,7 @@ import pytest
 
 from dlo_ros.model import Obstacle, Profile
 from dlo_ros.solver import AutoShapeSolver, ShapeSolver, SolverOptions, make_solver
-from conftest import clamped_pair, quat_about
+from support.problems import clamped_pair, quat_about
 
 TOL = 1e-3  # m, on a 1 m string (the default: 1e-3·L)
 

@@ -15,7 +15,7 @@ from dlo_ros.solver.newton import derivatives
 from dlo_ros.solver.nlp import StringNLP
 from dlo_ros.solver.options import SolverOptions
 
-from conftest import clamped_pair
+from support.problems import clamped_pair
 
 # order 6 is far from the 1 mm tolerance: these tests compare compiled and interpreted paths, not accuracy
 PLANAR = SolverOptions(model="planar", order=6, quadrature_nodes=20, error_tolerance=1.0)

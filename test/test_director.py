@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import clamped_pair, quat_about
+from support.problems import clamped_pair, quat_about
 
 from dlo_ros.model import Grip, GripPose, Load, Problem, Profile, StringProperties
 from dlo_ros.model.director import frame_to_quat, quat_to_frame

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize
-from conftest import clamped_pair
+from support.problems import clamped_pair
 from reference.kirchhoff import blas_threads, continuation, discrete_stability, relaxed_guess, solve_clamped
 from reference.test_kirchhoff_reference import planar_buckling_guess
 

@@ -17,7 +17,7 @@ import yaml
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from conftest import clamped_pair
+from support.problems import clamped_pair
 from reference.kirchhoff import continuation, rot_x, solve_clamped
 
 from dlo_ros import cli

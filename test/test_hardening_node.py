@@ -21,9 +21,9 @@ import pytest
 
 from dlo_ros import cli
 from dlo_ros.node import params as P
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, DloClient, allocate_domain_id, ros_env
+from dlo_ros.node.client import DloClient, allocate_domain_id, ros_env
 from dlo_ros.node.validation import FRAME_ID_LIMIT, TEXT_LIMIT, TargetError, check_frame, safe_text
-from conftest import clean_node
+from support.node import TEST_MODEL, TEST_SCENE, clean_node
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "msg_docs").glob("*.md"))]

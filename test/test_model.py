@@ -9,7 +9,7 @@ from dlo_ros.model.rotations import (
     TANGENT_X, check_quaternion, euler_from_frame, material_frames, matrix_to_quat, pose_quaternions, quat_to_matrix,
     reference_frame,
 )
-from conftest import clamped_pair, quat_about
+from support.problems import clamped_pair, quat_about
 
 
 @pytest.mark.parametrize("name", ["chebyshev", "fourier"])

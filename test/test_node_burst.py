@@ -12,8 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE
-from conftest import clean_node
+from support.node import TEST_MODEL, TEST_SCENE, clean_node
 
 NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
              "-p", "compile:=off",

@@ -5,8 +5,8 @@ from __future__ import annotations
 import os
 import re
 
-from dlo_ros.node.client import group_processes
 from dlo_ros.node.demo import KEYFRAMES, POST, run_demo_job, targets_at, write_demo_scene
+from support.node import group_processes
 
 
 def test_demo_targets_are_continuous_and_reachable():

@@ -15,11 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE
 from dlo_ros.node.cloud import cloud_points
 from dlo_ros.node.fitting import Application, plan_application
 from dlo_ros.node.validation import TargetError
-from conftest import clean_node
+from support.node import TEST_MODEL, TEST_SCENE, clean_node
 
 ROOT = Path(__file__).resolve().parents[1]
 POINTS = ROOT / "config" / "observations" / "default_cable_hanging.npy"

@@ -11,16 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from dlo_ros.node.client import (
-    TEST_MODEL,
-    TEST_SCENE,
-    NodeProcess,
-    allocate_domain_id,
-    group_processes,
-    ros_env,
-    running_node,
-    wait_until,
-)
+from dlo_ros.node.client import NodeProcess, allocate_domain_id, ros_env, running_node
+from support.node import TEST_MODEL, TEST_SCENE, group_processes, wait_until
 
 NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
              "-p", "compile:=off",

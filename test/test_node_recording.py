@@ -16,8 +16,9 @@ import pytest
 
 pytest.importorskip("rerun", reason="rerun-sdk needs Python >= 3.11")
 
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, running_node  # noqa: E402
+from dlo_ros.node.client import running_node  # noqa: E402
 from dlo_ros.replay import read_recording  # noqa: E402
+from support.node import TEST_MODEL, TEST_SCENE  # noqa: E402
 
 RERUN = str(Path(sys.executable).parent / "rerun")
 Q = (0.0, 0.0, 0.0, 1.0)

@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from dlo_ros.node.client import TEST_MODEL, TEST_SCENE, DloClient
-from conftest import clean_node
+from dlo_ros.node.client import DloClient
+from support.node import TEST_MODEL, TEST_SCENE, clean_node
 
 NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
              "-p", "compile:=off",

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import clamped_pair
+from support.problems import clamped_pair
 from reference.contact_rod import solve_contact_rod
 from reference.kirchhoff import blas_threads
 from test_fig2_reference import closest_self_approach, distance_modulo_chord_rotation

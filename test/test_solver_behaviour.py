@@ -7,7 +7,7 @@ import numpy as np
 
 from dlo_ros.solver import ShapeSolver, SolverOptions
 from dlo_ros.solver.newton import derivatives
-from conftest import clamped_pair
+from support.problems import clamped_pair
 
 Q = [0.0, 0.0, 0.0, 1.0]
 

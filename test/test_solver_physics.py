@@ -10,7 +10,7 @@ from dlo_ros.model import Load
 from dlo_ros.model.elastica import clamped_clamped_elastica
 from dlo_ros.model.rotations import quat_to_matrix
 from dlo_ros.solver import ShapeSolver, SolverOptions
-from conftest import clamped_pair, quat_about
+from support.problems import clamped_pair, quat_about
 
 CHORDS = (0.9, 0.7, 0.5, 0.3)
 

@@ -12,7 +12,7 @@ import pytest
 
 import dlo_ros
 from dlo_ros.solver import AutoShapeSolver, ModelSummary, ShapeSolver, Solver, SolverOptions, make_solver
-from conftest import clamped_pair
+from support.problems import clamped_pair
 
 PACKAGE = Path(dlo_ros.__file__).resolve().parent
 SOLVER_DIR = PACKAGE / "solver"

@@ -4,9 +4,19 @@ conftest import), so both halves import them the same way."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
+ROS_TESTS = Path(__file__).resolve().parent / "ros"
+
+
+@pytest.hookimpl(tryfirst=True)  # before -m deselects
+def pytest_collection_modifyitems(items):
+    """Every test under test/ros/ carries the ``ros`` marker (registered in pytest.ini)."""
+    for item in items:
+        if ROS_TESTS in Path(item.path).parents:
+            item.add_marker(pytest.mark.ros)
 
 
 @pytest.fixture(autouse=True)

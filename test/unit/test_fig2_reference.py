@@ -17,7 +17,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize
 from support.problems import clamped_pair
 from reference.kirchhoff import blas_threads, continuation, discrete_stability, relaxed_guess, solve_clamped
-from reference.test_kirchhoff_reference import planar_buckling_guess
+from test_kirchhoff_reference import planar_buckling_guess
 
 from dlo_ros.model.elastica import clamped_clamped_elastica
 from dlo_ros.solver.options import SolverOptions

@@ -22,7 +22,7 @@ from dlo_ros.scene import (
     scene_to_dict,
 )
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 GW = 9.80665e-3  # N per gram-weight
 REQUIRED_SCENES = {
     "default_cable", "paper_fig2_transition", "paper_fig3_gravity", "paper_fig5_force",

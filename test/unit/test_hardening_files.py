@@ -15,7 +15,7 @@ import pytest
 from dlo_ros import cli
 from dlo_ros.scene import LIMITS, SceneError, load_scene, scene_from_dict, scene_to_dict
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GOOD_TAIL = "grips:\n  - {name: a, s: 0.0, position: [0, 0, 0]}\n"
 GOOD_HEAD = "string: {length: 1.0, bend_stiffness: 0.02}\n"
 MB = 1 << 20

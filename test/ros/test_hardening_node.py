@@ -25,7 +25,7 @@ from dlo_ros.node.client import DloClient, allocate_domain_id, ros_env
 from dlo_ros.node.validation import FRAME_ID_LIMIT, TEXT_LIMIT, TargetError, check_frame, safe_text
 from support.node import TEST_MODEL, TEST_SCENE, clean_node
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "msg_docs").glob("*.md"))]
 SHIPPED_PARAMS = str(ROOT / "config" / "dlo_node.yaml")
 

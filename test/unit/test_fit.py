@@ -280,7 +280,7 @@ def test_shipped_example_recovers_the_cable_it_was_made_from(capsys):
     """config/observations/default_cable_hanging.yaml (bench/example_observation.py: the Kirchhoff shooting
     solver's shape of a cable with Rf = 0.03, D = 0.7 in default_cable's clamps, 1.5 mm noise, 30 %
     occluded, and the left grip's force): `dlo fit` on it, as the README shows, finds both within 3 σ."""
-    example = Path(__file__).resolve().parents[1] / "config" / "observations" / "default_cable_hanging.yaml"
+    example = Path(__file__).resolve().parents[2] / "config" / "observations" / "default_cable_hanging.yaml"
     assert cli.main(["fit", str(example), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     for name, truth in (("Rf", 0.03), ("D", 0.7)):

@@ -17,7 +17,7 @@ from support.node import TEST_MODEL, TEST_SCENE, group_processes, wait_until
 NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
              "-p", "compile:=off",
              "-p", f"solver.model:={TEST_MODEL}")
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])

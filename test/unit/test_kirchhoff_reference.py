@@ -1,7 +1,7 @@
 """Tests of the independent Kirchhoff-rod reference solver (test/reference/kirchhoff.py) against closed
 forms.  Nothing here imports dlo_ros.
 
-Run:  bash scripts/dlo-env run python -m pytest test/reference -q -p no:cacheprovider   (-s shows the
+Run:  bash scripts/dlo-env test test/unit/test_kirchhoff_reference.py   (-s shows the
 continuation table of the 3D test).
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from scipy.optimize import brentq, minimize_scalar
 from scipy.special import ellipe, ellipeinc, ellipj, ellipk, ellipkinc
 
-from .kirchhoff import (
+from reference.kirchhoff import (
     RodSolution,
     blas_threads,
     boundary_jacobian,

@@ -29,7 +29,7 @@ from dlo_ros.solver import ShapeSolver  # noqa: E402
 from dlo_ros.solver.result import ShapeResult  # noqa: E402
 from dlo_ros.solver.summary import ModelSummary  # noqa: E402
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 RERUN = str(Path(sys.executable).parent / "rerun")
 UPDATES = 8  # warm updates after the cold solve in the in-process recordings
 

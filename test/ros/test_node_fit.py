@@ -20,7 +20,7 @@ from dlo_ros.node.fitting import Application, plan_application
 from dlo_ros.node.validation import TargetError
 from support.node import TEST_MODEL, TEST_SCENE, clean_node
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 POINTS = ROOT / "config" / "observations" / "default_cable_hanging.npy"
 RF, D, SIGMA = 0.03, 0.7, 0.0015  # the reference cable and its noise (bench/example_observation.py)
 Q = (0.0, 0.0, 0.0, 1.0)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench.common import S_OUT, elastica_case, max_error, rotation_about_x, twist_case  # noqa: E402
 from bench.methods import twisted_problem  # noqa: E402

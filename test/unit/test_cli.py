@@ -13,7 +13,7 @@ import pytest
 from dlo_ros import cli
 from dlo_ros.paths import available_scenes
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 def run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:

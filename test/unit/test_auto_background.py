@@ -41,7 +41,7 @@ def stream_until_checked(solver, problem, steps=400, dx=0.0005):
     for i in range(steps):
         r = solver.solve({"right": (x0 + np.array([0.0, 0.0, dx * np.sin(i / 10)]), q)})
         assert r.ok, r.message
-        if r.model.checked and not solver._job:
+        if r.model.checked and not solver.checks_pending:
             return r
         time.sleep(0.01)
     raise AssertionError(f"checks did not finish in {steps} updates: {r.model}")

@@ -70,7 +70,7 @@ def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monke
     # small moves: Newton updates, whose steps run in one call around the compiled library
     # (casadi.external inside newton_fn) for the compiled solver, around the SX function for the other
     def kkt_classes(solver):
-        return {f.class_name() for f in solver.functions.newton_step._fn.find_functions() if f.name() == "dlo_kkt_free"}
+        return {f.class_name() for f in solver.functions.newton_step.function.find_functions() if f.name() == "dlo_kkt_free"}
 
     assert again.fused_newton and kkt_classes(again) == {"External"} and kkt_classes(interpreted) == {"SXFunction"}
     for k in range(1, 6):

@@ -151,12 +151,12 @@ def test_obstacle_sign_convention(spec, inside, outside):
 def test_numeric_h_is_the_nlps_h(spec):
     """Obstacle.h (numpy, used every update to find obstacles within reach) against the CasADi
     expression the NLP constrains, at points on every side (the capsule beyond both ends too)."""
-    from dlo_ros.model.obstacles import OBSTACLE_TYPES, _numeric_h
+    from dlo_ros.model.obstacles import OBSTACLE_TYPES
 
     ob = Obstacle.from_dict(spec)
     assert ob.type in OBSTACLE_TYPES
     for x in np.random.default_rng(5).uniform(-1.5, 2.5, (50, 3)):
-        assert np.isclose(ob.h(x), float(_numeric_h(ob.type)(x, ob.params)), rtol=1e-13, atol=1e-14)
+        assert np.isclose(ob.h(x), float(ob.h_many(x)[0]), rtol=1e-13, atol=1e-14)  # h_many: the CasADi h
 
 
 def test_signed_distance_values():

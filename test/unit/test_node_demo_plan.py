@@ -27,12 +27,12 @@ def test_demo_scene(tmp_path):
 
 
 def test_settled_means_checked_and_met_or_the_richest_order():
-    from dlo_ros.node.demo import _settled
+    from dlo_ros.node.demo import model_settled
     from dlo_ros.solver.auto import ORDERS
 
     auto = {"model.auto": "True", "model.checked": "True", "model.tolerance_met": "True", "model.order": "16"}
-    assert _settled(auto)
-    assert not _settled({**auto, "model.checked": "False"})  # the estimate describes an earlier model
-    assert not _settled({**auto, "model.tolerance_met": "False"})  # a richer order is coming
-    assert _settled({**auto, "model.tolerance_met": "False", "model.order": str(ORDERS[-1])})  # nothing richer
-    assert _settled({"model.auto": "False", "model.order": "16"})  # a fixed model has nothing to settle
+    assert model_settled(auto)
+    assert not model_settled({**auto, "model.checked": "False"})  # the estimate describes an earlier model
+    assert not model_settled({**auto, "model.tolerance_met": "False"})  # a richer order is coming
+    assert model_settled({**auto, "model.tolerance_met": "False", "model.order": str(ORDERS[-1])})  # nothing richer
+    assert model_settled({"model.auto": "False", "model.order": "16"})  # a fixed model has nothing to settle

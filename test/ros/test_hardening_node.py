@@ -23,7 +23,7 @@ from dlo_ros import cli
 from dlo_ros.node import params as P
 from dlo_ros.node.client import DloClient, allocate_domain_id, ros_env
 from dlo_ros.node.validation import FRAME_ID_LIMIT, TEXT_LIMIT, TargetError, check_frame, safe_text
-from support.node import TEST_MODEL, TEST_SCENE, clean_node
+from support.node import TEST_MODEL, clean_node, node_args
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "msg_docs").glob("*.md"))]
@@ -236,8 +236,7 @@ def test_scene_pointing_at_another_file_is_not_echoed(tmp_path):
 
 
 # ---- 6, 7. strings in logs and diagnostics; throttled query warnings; parameter '' ---------------------------
-NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args", "-p", "compile:=off", "-p", f"solver.model:={TEST_MODEL}",
-             "-p", "diagnostics_period:=0.2", "-p", "warn_throttle:=30.0")
+NODE_ARGS = node_args("diagnostics_period:=0.2", "warn_throttle:=30.0")
 Q = (0.0, 0.0, 0.0, 1.0)
 LEFT, RIGHT = ((0.0, 0.0, 0.4), Q), ((0.5, 0.0, 0.42), Q)
 

@@ -12,13 +12,9 @@ import time
 import numpy as np
 import pytest
 
-from support.node import TEST_MODEL, TEST_SCENE, clean_node
+from support.node import clean_node, node_args
 
-NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
-             "-p", "compile:=off",
-             "-p", f"solver.model:={TEST_MODEL}",
-             "-p", "diagnostics_period:=0.2",
-             "-p", "warn_throttle:=1.0")
+NODE_ARGS = node_args("diagnostics_period:=0.2", "warn_throttle:=1.0")
 Q = (0.0, 0.0, 0.0, 1.0)
 LEFT = ((0.0, 0.0, 0.4), Q)
 BURST = 1000

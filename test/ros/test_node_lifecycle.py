@@ -12,11 +12,9 @@ from pathlib import Path
 import pytest
 
 from dlo_ros.node.client import NodeProcess, allocate_domain_id, ros_env, running_node
-from support.node import TEST_MODEL, TEST_SCENE, group_processes, wait_until
+from support.node import TEST_MODEL, TEST_SCENE, group_processes, node_args, wait_until
 
-NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
-             "-p", "compile:=off",
-             "-p", f"solver.model:={TEST_MODEL}")
+NODE_ARGS = node_args()
 REPO = Path(__file__).resolve().parents[2]
 
 

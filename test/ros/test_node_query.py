@@ -18,18 +18,12 @@ import numpy as np
 import pytest
 
 from dlo_ros.model import Profile
-from support.node import TEST_MODEL, TEST_SCENE, clean_node
+from support.node import TEST_SCENE, clean_node, node_args
+from support.problems import quat_about
 
-NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
-             "-p", "compile:=off",
-             "-p", f"solver.model:={TEST_MODEL}",
-             "-p", "diagnostics_period:=0.2")
+NODE_ARGS = node_args("diagnostics_period:=0.2")
 Q = (0.0, 0.0, 0.0, 1.0)
 LEFT = ((0.0, 0.0, 0.4), Q)
-
-
-def qz(angle: float):
-    return (0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2))
 
 
 @pytest.fixture
@@ -50,15 +44,15 @@ def stream(cl, poses, timeout=15.0):
 def test_query_matches_stream_and_keeps_the_warm_start(node, node_scene):
     proc, cl = node
     scene, ShapeSolver = node_scene
-    t1 = ((0.5, 0.05, 0.45), qz(0.2))
-    t2 = ((0.48, 0.06, 0.46), qz(0.25))
+    t1 = ((0.5, 0.05, 0.45), quat_about("z", 0.2))
+    t2 = ((0.48, 0.06, 0.46), quat_about("z", 0.25))
     ev1 = stream(cl, [LEFT, t1])
 
     pts, qs = cl.query(LEFT, t1)
     np.testing.assert_allclose(pts, ev1.points, atol=1e-9)
     np.testing.assert_allclose(np.abs(np.sum(qs * ev1.orientations, axis=1)), 1.0, atol=1e-9)
     n = cl.path_count
-    what_if = ((0.3, 0.1, 0.3), qz(1.0))
+    what_if = ((0.3, 0.1, 0.3), quat_about("z", 1.0))
     pts2, _ = cl.query(LEFT, what_if)
     assert len(pts2) == 51 and np.allclose(pts2[-1], what_if[0], atol=1e-7)
     empty, _ = cl.query(LEFT, ((3.0, 0.0, 0.4), Q))  # farther than the string reaches
@@ -149,7 +143,7 @@ def test_concurrent_queries_beside_the_stream(tmp_path):
 
     with clean_node(*NODE_ARGS, "-p", "query_workers:=1", log_path=tmp_path / "node.log") as (proc, cl):
         stream(cl, [LEFT, ((0.5, 0.0, 0.42), Q)])
-        goals = [((0.45 + 0.02 * i, 0.03 * (i % 3 - 1), 0.42), qz(0.1 * i)) for i in range(6)]
+        goals = [((0.45 + 0.02 * i, 0.03 * (i % 3 - 1), 0.42), quat_about("z", 0.1 * i)) for i in range(6)]
         answers: dict[int, tuple] = {}
         errors: list[BaseException] = []
 

@@ -6,24 +6,17 @@
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
 
 from dlo_ros.node.client import DloClient
-from support.node import TEST_MODEL, TEST_SCENE, clean_node
+from support.node import clean_node, node_args
+from support.problems import quat_about
 
-NODE_ARGS = ("--scene", TEST_SCENE, "--ros-args",
-             "-p", "compile:=off",
-             "-p", f"solver.model:={TEST_MODEL}",
-             "-p", "diagnostics_period:=0.2")
+NODE_ARGS = node_args("diagnostics_period:=0.2")
 Q = (0.0, 0.0, 0.0, 1.0)
 LEFT = ((0.0, 0.0, 0.4), Q)
-
-
-def qz(angle: float):
-    return (0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2))
 
 
 def same_rotation(q1, q2, atol=1e-6) -> bool:
@@ -50,7 +43,7 @@ def reference(node_scene):
 
 def test_target_gives_centreline_and_wrenches(node, reference):
     proc, cl = node
-    right = ((0.5, 0.05, 0.45), qz(0.2))
+    right = ((0.5, 0.05, 0.45), quat_about("z", 0.2))
     stamp = cl.publish_targets([LEFT, right])
     ev = cl.wait_for_path(15.0, where=lambda e: e.stamp_ns == stamp)
     assert ev is not None, proc.output()
@@ -76,7 +69,7 @@ def test_target_gives_centreline_and_wrenches(node, reference):
     np.testing.assert_allclose(total, [0.0, 0.0, 0.5], atol=1e-6)
 
     # one grip's own topic: the other grip keeps its target
-    right2 = ((0.45, 0.05, 0.5), qz(0.3))
+    right2 = ((0.45, 0.05, 0.5), quat_about("z", 0.3))
     stamp2 = cl.publish_grip("right", *right2)
     ev2 = cl.wait_for_path(15.0, where=lambda e: e.stamp_ns == stamp2)
     assert ev2 is not None
@@ -94,7 +87,7 @@ def test_target_gives_centreline_and_wrenches(node, reference):
 
 def test_late_subscriber_gets_the_current_centreline(node):
     proc, cl = node
-    right = ((0.55, -0.05, 0.35), qz(-0.1))
+    right = ((0.55, -0.05, 0.35), quat_about("z", -0.1))
     stamp = cl.publish_targets([LEFT, right])
     ev = cl.wait_for_path(15.0, where=lambda e: e.stamp_ns == stamp)
     assert ev is not None

@@ -20,6 +20,15 @@ TEST_SCENE = os.environ.get("DLO_NODE_TEST_SCENE") or "default_cable"
 TEST_MODEL = os.environ.get("DLO_NODE_TEST_MODEL") or "full"
 
 
+def node_args(*params: str) -> tuple[str, ...]:
+    """The node's command line in the tests: TEST_SCENE, no compiling, TEST_MODEL, then ``-p`` with each
+    of ``params`` ('name:=value')."""
+    args = ["--scene", TEST_SCENE, "--ros-args", "-p", "compile:=off", "-p", f"solver.model:={TEST_MODEL}"]
+    for param in params:
+        args += ["-p", param]
+    return tuple(args)
+
+
 @contextmanager
 def clean_node(*node_args: str, log_path: Path):
     """``running_node`` (the node in its own process and domain, a client); afterwards the node must

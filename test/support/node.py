@@ -16,7 +16,7 @@ TEST_SCENE = os.environ.get("DLO_NODE_TEST_SCENE") or "default_cable"
 #: The solver.model the node tests run with, or $DLO_NODE_TEST_MODEL.  'full', not the shipped 'auto':
 #: these tests compare the node's shapes with an in-process solver to 1e-7 m, which needs both to solve
 #: the same model at the same moment, while auto's background checks change the model on their own
-#: timing.  test_node_auto_model.py runs the node with auto (model changes, diagnostics, recording).
+#: timing.  test/ros/test_node_auto_model.py runs the node with auto (model changes, diagnostics, recording).
 TEST_MODEL = os.environ.get("DLO_NODE_TEST_MODEL") or "full"
 
 
@@ -30,10 +30,10 @@ def node_args(*params: str) -> tuple[str, ...]:
 
 
 @contextmanager
-def clean_node(*node_args: str, log_path: Path):
+def clean_node(*args: str, log_path: Path):
     """``running_node`` (the node in its own process and domain, a client); afterwards the node must
     have exited with code 0 and logged no traceback (its log is the assertion message)."""
-    with running_node(*node_args, log_path=log_path) as (proc, client):
+    with running_node(*args, log_path=log_path) as (proc, client):
         yield proc, client
     text = Path(log_path).read_text()
     assert proc.returncode == 0, text

@@ -3,7 +3,7 @@
     bash scripts/dlo-env run python bench/perf/self_contact.py      # writes bench/results/self_contact.md
     bash scripts/dlo-env run python bench/perf/self_contact.py --far-only   # part 1 only, printed
 
-1. A stream that never comes near itself: the paper's Fig. 2 set-up (test/test_fig2_reference.py, radius
+1. A stream that never comes near itself: the paper's Fig. 2 set-up (test/unit/test_fig2_reference.py, radius
    0.01 L) from chord 0.9 L down to 0.6 L in steps of 0.005 L (planar, stable, the loop open), ``model:
    full`` order 16, with ``self_contact_pairs`` 16 and 0.  Per-update wall time (median and total over
    the warm updates of each update's fastest of 5 interleaved runs); the ratio is the cost of self-contact.
@@ -24,10 +24,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
+sys.path.insert(0, str(ROOT / "test" / "unit"))  # test modules the bench reuses (references, set-ups)
 sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
 from bench.common import machine  # noqa: E402
-from conftest import clamped_pair  # noqa: E402
+from support.problems import clamped_pair  # noqa: E402
 
 from dlo_ros.solver.auto import AutoShapeSolver  # noqa: E402
 from dlo_ros.solver.options import SolverOptions  # noqa: E402

@@ -8,7 +8,7 @@
    0.5 L (test/reference shooting solution, its stable non-planar branch) and a general 3D cable
    (default_cable with the right end moved and turned; test/reference shooting polished from the
    director's order-32 shape, so the reference is the shooting solution, not the director's).
-2. Streams: ``default_cable`` along the closed 3D path of test/test_director_stream.py (2,000 warm
+2. Streams: ``default_cable`` along the closed 3D path of test/unit/test_director_stream.py (2,000 warm
    updates, translation, yaw, pitch and ±1.2 rad of twist), ``auto`` (library defaults: background
    checks) against fixed models: median, p99 and max per update, and the end against a cold solve.
 All times from one run on this machine, interpreted derivatives (compile off).
@@ -25,12 +25,13 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
+sys.path.insert(0, str(ROOT / "test" / "unit"))  # test modules the bench reuses (references, set-ups)
 sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
 from bench.common import machine  # noqa: E402
-from conftest import clamped_pair  # noqa: E402
+from support.problems import clamped_pair  # noqa: E402
 from reference.kirchhoff import blas_threads, relaxed_guess, solve_clamped  # noqa: E402
-from reference.test_kirchhoff_reference import planar_buckling_guess  # noqa: E402
+from test_kirchhoff_reference import planar_buckling_guess  # noqa: E402
 from test_director_stream import UPDATES, path  # noqa: E402
 
 from dlo_ros.model import Grip, GripPose, Load, Problem, Profile, StringProperties  # noqa: E402

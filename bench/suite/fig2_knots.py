@@ -4,7 +4,7 @@
     bash scripts/dlo-env run python bench/suite/fig2_knots.py          # writes bench/results/fig2_knots.md
 
 Clamp at s = 0, the end s = L held by its tangent (twist free) at (c, 0, 0), Rf/Rt = 100, no weight
-(test/test_fig2_reference.py).  Reference: test/reference shooting on the Kirchhoff rod equations, the
+(test/unit/test_fig2_reference.py).  Reference: test/reference shooting on the Kirchhoff rod equations, the
 stable non-planar equilibrium of 0.5 L followed down in the chord in steps of 0.01 L, each solve
 started from the previous (``branch_references``); its stability from the discrete rod built around it
 (``discrete_stability``, 40 edges).  The code: ``model: full`` (default director rotation) at orders 16
@@ -29,6 +29,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
+sys.path.insert(0, str(ROOT / "test" / "unit"))  # test modules the bench reuses (references, set-ups)
 sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
 from bench.common import machine  # noqa: E402

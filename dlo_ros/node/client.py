@@ -1,12 +1,15 @@
 """Drive a running dlo node from another process: the demo, the benchmark and the tests use this.
 
 * :func:`allocate_domain_id` reserves a ROS_DOMAIN_ID no other process on this machine uses (lock files),
-  so tests and demos can run side by side.
+  so several nodes (demos, benchmarks, tests) can run side by side.
 * :class:`NodeProcess` starts ``python -m dlo_ros.node`` as a subprocess in its own process group and
   always stops it (SIGINT, then SIGTERM, then SIGKILL of the group).
 * :class:`DloClient` is an rclpy node in its own context (its own domain) with a spinning thread:
   it publishes targets, records every centreline with its arrival time, keeps the latest diagnostics
   and wrenches, and calls the services and the parameter service.
+* :func:`running_node` does all three: the node in its own domain, a client, the first centreline.
+
+The tests' own harness (which scene and model they run on, process-group checks) is in test/support/.
 """
 from __future__ import annotations
 
@@ -26,15 +29,6 @@ from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 import numpy as np
-
-#: The scene the node tests run on: default_cable, or $DLO_NODE_TEST_SCENE (a name or a path), e.g. to
-#: tell a node problem from a solver problem by running the tests on a scene with another solver.model.
-TEST_SCENE = os.environ.get("DLO_NODE_TEST_SCENE") or "default_cable"
-#: The solver.model the node tests run with, or $DLO_NODE_TEST_MODEL.  'full', not the shipped 'auto':
-#: these tests compare the node's shapes with an in-process solver to 1e-7 m, which needs both to solve
-#: the same model at the same moment, while auto's background checks change the model on their own
-#: timing.  test/test_node_auto_model.py runs the node with auto (model changes, diagnostics, recording).
-TEST_MODEL = os.environ.get("DLO_NODE_TEST_MODEL") or "full"
 
 #: Domain ids that keep Fast DDS's UDP ports valid (0 is left to interactive use).
 DOMAIN_IDS = tuple(range(1, 102)) + tuple(range(215, 233))
@@ -527,36 +521,6 @@ class DloClient:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-def group_processes(pgid: int) -> list[str]:
-    """'pid name' of the live (not zombie) processes in process group ``pgid`` (Linux /proc).
-
-    A NodeProcess runs in its own session, so its group id is its pid: after it stopped, this lists
-    anything it left behind.
-    """
-    out = []
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            with open(f"/proc/{entry}/stat") as f:
-                stat = f.read()
-        except OSError:
-            continue
-        fields = stat[stat.rindex(")") + 2:].split()
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            out.append(f"{entry} {stat[stat.index('(') + 1:stat.rindex(')')]}")
-    return out
-
-
-def wait_until(predicate: Callable[[], object], timeout: float, period: float = 0.05) -> object:
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value or time.monotonic() >= deadline:
-            return value
-        time.sleep(period)
 
 
 class NodeStartError(RuntimeError):

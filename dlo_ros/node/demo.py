@@ -123,7 +123,7 @@ def _model_summary(values: dict) -> str:
     return text
 
 
-def _settled(values: dict) -> bool:
+def model_settled(values: dict) -> bool:
     """auto's checks describe the current model, and it meets the tolerance or is the richest order (a
     fixed model: always)."""
     from ..solver.auto import ORDERS
@@ -137,12 +137,12 @@ def _settled(values: dict) -> bool:
 
 def _settle(client, values: dict, timeout: float):
     """Hold the last target (republished at 5 Hz: each solve applies the background checks' verdicts)
-    until ``_settled`` or ``timeout`` s.  Returns (diagnostic values, last centreline or None, seconds,
+    until ``model_settled`` or ``timeout`` s.  Returns (diagnostic values, last centreline or None, seconds,
     solves), with 0 s and 0 solves when the final shape's checks were already done, or None when
     settling is off (timeout 0)."""
     if timeout <= 0:
         return None
-    if _settled(values):
+    if model_settled(values):
         return values, None, 0.0, 0
     t0, held, final = time.monotonic(), 0, None
     target = targets_at(duration())
@@ -155,7 +155,7 @@ def _settle(client, values: dict, timeout: float):
         diag = client.wait_for_diagnostics(lambda v, st: int(v.get("targets received") or 0) >= expected, 2.0)
         if diag:
             values = diag[0]
-            if _settled(values):
+            if model_settled(values):
                 break
         time.sleep(0.2)
     return values, final, time.monotonic() - t0, held
@@ -275,7 +275,7 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
               + (f" ({unverified} published unverified: equilibrium residual over the tolerance)" if unverified else ""))
         print(f"  model                   {_model_summary(values)}")
         if settled is not None:
-            done = _settled(values)
+            done = model_settled(values)
             print(f"  settling                {'checked' if done else f'NOT checked within {args.settle:g} s'}: held the "
                   f"last target {settle_s:.1f} s ({held} more solves) for auto's checks of the final shape (model above)")
         print(f"  recording               {rrd if rrd is not None else 'off'}"

@@ -392,6 +392,12 @@ class AutoShapeSolver:
     def kkt_compiled(self) -> bool:
         return self.inner.kkt_compiled
 
+    @property
+    def checks_pending(self) -> bool:
+        """A background job (a model check or a build ahead) is running, or its verdict has not been
+        applied yet (a later solve applies it). Always False with ``checks="sync"``."""
+        return self._job is not None
+
     def reset(self) -> None:
         """Forget every warm start (the streaming model's and the pooled ones'): the next solve is cold.
         A background verdict still pending is dropped (it describes a shape that is gone)."""

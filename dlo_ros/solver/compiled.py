@@ -103,6 +103,11 @@ class InterpretedFunction:
         for i, a in enumerate(self._outputs):
             self._buffer.set_res(i, memoryview(a))
 
+    @property
+    def function(self) -> ca.Function:
+        """The casadi.Function this evaluates."""
+        return self._fn
+
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
         if not self._dense_out:
             out = self._fn(*args)

@@ -1,0 +1,127 @@
+"""The compiled-derivative cache: its key tells NLPs apart without generating C, and a cached library
+is found and used without generating C (generating it costs seconds for a 3D scene, and a model
+switch in a streaming node must not pay that; issue 6's stalls)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from dlo_ros.model import Obstacle
+from dlo_ros.solver import ShapeSolver, compiled
+from dlo_ros.solver.newton import derivatives
+from dlo_ros.solver.nlp import StringNLP
+from dlo_ros.solver.options import SolverOptions
+
+from support.problems import clamped_pair
+
+# order 6 is far from the 1 mm tolerance: these tests compare compiled and interpreted paths, not accuracy
+PLANAR = SolverOptions(model="planar", order=6, quadrature_nodes=20, error_tolerance=1.0)
+
+
+def _key(problem, options=PLANAR) -> str:
+    return compiled.fingerprint(StringNLP(problem, options).kkt_fn)
+
+
+def test_the_key_is_stable_and_tells_apart_every_baked_in_constant():
+    base = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1)
+    assert _key(base) == _key(clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1))  # a fresh NLP, same scene
+    # the reference frame R0 follows the chord at build time; σ = L / max Rf scales the objective
+    assert _key(clamped_pair(right=(0.6, 0.0, 0.1), weight=0.1)) != _key(base)
+    assert _key(clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1, bend=2.0)) != _key(base)
+    assert _key(base, replace(PLANAR, order=7)) != _key(base)
+    assert _key(base, replace(PLANAR, model="full")) != _key(base)
+    # parameters (here the grip target along the chord) are inputs, not constants: same key
+    assert _key(clamped_pair(right=(0.7, 0.0, 0.0), weight=0.1)) == _key(base)
+
+
+def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monkeypatch):
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.delenv("DLO_NO_COMPILE")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    table = Obstacle("halfspace", np.array([0.0, 0.0, -0.5, 0.0, 0.0, 1.0]), "table")
+    problem = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1, obstacles=(table,))
+    first = ShapeSolver(problem, PLANAR, compile="blocking")
+    # two functions: with the obstacle rows' derivatives, and without them (used while nothing touches)
+    assert first.kkt_compiled and len(list(tmp_path.glob("dlo_kkt_*.so"))) == 2
+
+    def no_codegen(*_):
+        raise AssertionError("C was generated for a cached function")
+
+    monkeypatch.setattr(compiled, "_generate", no_codegen)
+    again = ShapeSolver(problem, PLANAR, compile="cached")  # a fresh NLP finds the library by its key
+    assert again.kkt_compiled
+    interpreted = ShapeSolver(problem, PLANAR, compile="off")
+    z = np.linspace(-0.3, 0.4, again.model.layout.size)
+    p = interpreted.pack_parameters(problem, z)
+    lam = np.linspace(0.1, 1.0, interpreted.nlp.lbg.size)
+    for contact in (True, False):  # every row active (the full function), or none (the contact-free one)
+        active = np.full(lam.size, contact)
+        for native, exact in zip(derivatives(again.nlp, again.functions, z, p, lam, active),
+                                 derivatives(interpreted.nlp, interpreted.functions, z, p, lam, active)):
+            np.testing.assert_allclose(native, exact, rtol=1e-12, atol=1e-12)
+    target = {"right": ((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))}
+    a, b = again.solve(target), interpreted.solve(target)
+    assert a.ok and b.ok
+    np.testing.assert_allclose(a.points, b.points, atol=1e-9)
+    # small moves: Newton updates, whose steps run in one call around the compiled library
+    # (casadi.external inside newton_fn) for the compiled solver, around the SX function for the other
+    def kkt_classes(solver):
+        return {f.class_name() for f in solver.functions.newton_step.function.find_functions() if f.name() == "dlo_kkt_free"}
+
+    assert again.fused_newton and kkt_classes(again) == {"External"} and kkt_classes(interpreted) == {"SXFunction"}
+    for k in range(1, 6):
+        target = {"right": ((0.5 - 0.005 * k, 0.0, 0.1 + 0.003 * k), (0.0, 0.0, 0.0, 1.0))}
+        a, b = again.solve(target), interpreted.solve(target)
+        assert a.ok and b.ok and a.ipopt_status == b.ipopt_status == "Newton" and a.iterations == b.iterations
+        np.testing.assert_allclose(a.points, b.points, atol=1e-10)
+
+
+def test_without_a_compiler_the_interpreted_function_is_used(monkeypatch, tmp_path):
+    monkeypatch.delenv("DLO_NO_COMPILE")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled, "compiler", lambda: None)
+    fn = ca.Function("f", [x := ca.SX.sym("x", 2)], [ca.sin(x)])
+    assert compiled.cached_library(fn) is None
+    native, ok = compiled.compiled(fn)
+    assert not ok and isinstance(native, compiled.InterpretedFunction)
+    assert not list(tmp_path.iterdir())  # nothing generated, nothing cached
+
+
+def test_never_two_compilers_at_once_in_one_process(tmp_path, monkeypatch):
+    """Several threads needing new libraries run the compiler one at a time (#14: six gcc at once,
+    1.1 GB).  The compiler is replaced by a recorder that fails after a moment (so the callers fall back
+    to interpreted functions): at most one runs at any time."""
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)
+    running, peak, lock = [0], [0], threading.Lock()
+
+    def fake_run(cmd, **kwargs):
+        with lock:
+            running[0] += 1
+            peak[0] = max(peak[0], running[0])
+        time.sleep(0.2)
+        with lock:
+            running[0] -= 1
+        return SimpleNamespace(returncode=1, stdout="", stderr="")
+
+    monkeypatch.setattr(compiled.subprocess, "run", fake_run)
+    x = ca.SX.sym("x")
+    fns = [ca.Function(f"f{i}", [x], [ca.sin(x) * (i + 1)]) for i in range(4)]
+    results = []
+    threads = [threading.Thread(target=lambda f=f: results.append(compiled.compiled(f))) for f in fns]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    assert len(results) == 4 and not any(ok for _, ok in results)
+    assert peak[0] == 1

@@ -45,6 +45,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository
 sys.path.insert(0, str(ROOT / "test"))
+sys.path.insert(0, str(ROOT / "test" / "unit"))  # test modules the bench reuses (references, set-ups)
 sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 
 L, RF, RT = 1.0, 1.0, 0.01
@@ -61,7 +62,7 @@ PAPER = {0.8: "planar (in the x–z plane)", 0.7: "planar (in the x–z plane)",
 
 
 def fig2(c: float):
-    from conftest import clamped_pair
+    from support.problems import clamped_pair
     p = clamped_pair(right=(c, 0.0, 0.0), bend=RF, twist=RT, modes=("clamp", "tangent"))
     return replace(p, string=replace(p.string, radius=RADIUS))
 

@@ -164,7 +164,7 @@ class DloNode(Node):
         self._wrench_pubs = {n: self.create_publisher(WrenchStamped, f"~/grips/{n}/wrench", WRENCH_QOS)
                              for n in self.grip_names}
         # raw (serialised) targets: a message is refused by its size before rclpy builds Python objects
-        # from it (a 1,000,000-pose PoseArray took seconds and ~100 MB to deserialise)
+        # from it (a huge PoseArray costs seconds and memory to deserialise)
         self._target_subs = [
             self.create_subscription(PoseStamped, f"~/grips/{n}/target",
                                      lambda data, n=n: self._on_grip_target(n, data), TARGET_QOS, raw=True)

@@ -170,7 +170,7 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = ("-O1",)) -> str:
     return h.hexdigest()[:16]
 
 
-#: Held while a compiler runs: never more than one per process (issue #14 saw 6 gcc at once, 1.1 GB).
+#: Held while a compiler runs: never more than one per process (concurrent compiles multiply the memory).
 COMPILER_LOCK = threading.Lock()
 
 
@@ -195,7 +195,7 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
     name = fn.name()
     lib = lib or library_path(fn, flags)
     if not lib.exists():
-        with COMPILER_LOCK:  # one compiler at a time in this process (six at once took 1.1 GB)
+        with COMPILER_LOCK:  # one compiler at a time in this process
             return _compile_locked(fn, cc, flags, nice, lib, name)
     return NativeFunction(lib, fn), True
 

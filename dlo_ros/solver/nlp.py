@@ -397,7 +397,7 @@ class StringNLP:
         """``kkt_free_fn``, ``kkt_fn``, ``hessian_fn`` and ``jac_g_fn`` by differentiating the whole
         flattened Lagrangian (the Euler-angle models; small enough for it)."""
         grad_f = ca.densify(ca.gradient(objective, z))
-        # ∇²L is built on its own, not as hess_free + ∇²(λ_obs·g_obs): that sum has 8 % more instructions
+        # ∇²L is built on its own, not as hess_free + ∇²(λ_obs·g_obs): that sum has more instructions
         hess = ca.hessian(objective + ca.dot(lam, g), z)[0]
         jac_free = ca.jacobian(g[:nf], z)
         lam_free = ca.SX.sym("lam_free", nf)

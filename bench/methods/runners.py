@@ -280,7 +280,7 @@ def rotate_problem(problem, R=R_X_TO_Z, q=Q_X_TO_Z):
 
     from dlo_ros.model.obstacles import Obstacle
 
-    from .common import quat_mul
+    from bench.common import quat_mul
 
     grips = tuple(replace(g, pose=GripPose(R @ g.pose.position, quat_mul(q, g.pose.orientation))) for g in problem.grips)
     loads = tuple(replace(ld, force=R @ ld.force, moment=R @ ld.moment) for ld in problem.loads)

@@ -231,7 +231,7 @@ def fig5(quick: bool) -> dict:
 # ---------------------------------------------------------------------------------------------------
 def sheets(quick: bool) -> dict:
     """Both buckling directions (up, down) of each sheet; the default solver with the planar rod as a check."""
-    from .common import S_OUT
+    from bench.common import S_OUT
 
     out = {}
     for name, chords in (("paper_rect_paper", (0.18, 0.14, 0.07)), ("paper_trapezoid_paper", (0.16,))):

@@ -24,7 +24,7 @@ KNOBS = {
 
 
 def run(quick: bool, bar=None) -> list[dict]:
-    from .peers import make_peer
+    from bench.methods.peers import make_peer
 
     case = elastica_case(0.6)
     ref = elastica_points(0.6)

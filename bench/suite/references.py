@@ -69,7 +69,7 @@ def reference(case: Case, quick: bool = False) -> dict:
     # the two resolutions may sit at different angles of the neutral rotation about the chord: align first
     a, b = pts[n_pair[0]].points, pts[n_pair[1]].points
     if case.align_about_chord:
-        from .common import rotation_about_x
+        from bench.common import rotation_about_x
 
         za, zb = a[:, 1] + 1j * a[:, 2], b[:, 1] + 1j * b[:, 2]
         a = a @ rotation_about_x(float(np.angle(np.vdot(za, zb)))).T
@@ -81,7 +81,7 @@ def reference(case: Case, quick: bool = False) -> dict:
     for k in range(1, steps + 1):
         r = s.solve({"right": twisted_problem(case, case.tau * k / steps).grip("right").pose})
     ritz = interp_points(r.s, r.points)
-    from .common import max_error
+    from bench.common import max_error
 
     spread = max_error(ritz, rod, case.align_about_chord)
     return {"rod": rod, "ritz": ritz, "energy": pts[n_pair[1]].energy, "spread": spread,

@@ -4,7 +4,7 @@
 1. ``paper``    the paper's method: Euler angles in the paper's frame, its 10-function Fourier basis, the
                 multiplier (augmented Lagrangian) method with Nelder–Mead inner solves (scipy).
 2. ``fourier``  Euler angles (paper frame) + Fourier basis + IPOPT, orders 4 … 16.
-3. ``default``  the project's ShapeSolver defaults (Chebyshev, rotated frame, full 3D model), orders 4 … 16;
+3. ``default``  the project's ShapeSolver defaults (the 3D director model: quaternions on spectral elements), orders 4 … 16;
    ``default-planar`` the same with ``model: planar`` (planar cases only).
 4. ``rod``      a discretised rod, N segments + IPOPT (planar: angles; 3D: unit quaternions).
 5. ``pyelastica`` / ``mujoco``: the dynamic peers (bench/methods/peers.py).
@@ -351,7 +351,7 @@ METHOD_LABELS = {
     "fourier": "2 Euler (paper frame)+Fourier+IPOPT",
     "fourier-3d": "2' same, full 3D model on planar cases",
     "fourier-3d-z": "2'' same, scene turned so the chord is along z",
-    "default": "3 default: Chebyshev+rotated frame+IPOPT/Newton",
+    "default": "3 default: 3D director model (quaternions on spectral elements)+IPOPT/Newton",
     "default-planar": "3p default, model: planar",
     "rod": "4 discretised rod+IPOPT",
     "pyelastica": "5a PyElastica (damped Cosserat)",

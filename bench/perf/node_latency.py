@@ -173,6 +173,13 @@ def measure(native: bool, args) -> list[str]:
     ]
 
 
+def _git_head() -> str:
+    import subprocess
+
+    done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    return done.stdout.strip() or "unknown"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=300, help="closed-loop targets (default 300)")
@@ -192,7 +199,7 @@ def main() -> int:
         "",
         f"Measured {datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}: {cpu}, {os.cpu_count()} CPUs shared with "
         f"other work (load average {os.getloadavg()[0]:.1f} at the start), Python {platform.python_version()}, "
-        "ROS 2 Jazzy PyPI wheels, Fast DDS, discovery on localhost.",
+        f"ROS 2 Jazzy PyPI wheels, Fast DDS, discovery on localhost; git {_git_head()}.",
         "",
         f"Command: `scripts/dlo-env run python bench/perf/node_latency.py --mode {args.mode} --model {args.model} "
         f"--n {args.n} --rate {args.rate:g} --seconds {args.seconds:g}`",

@@ -1,7 +1,7 @@
 """The wire format between a Recorder and its writer: snapshots of what was logged, as flat tuples.
 
 A result or a target set is copied into a tuple of primitives and bytes (a few µs to build and to
-pickle); :func:`_decode` turns any queued message back into an :class:`_Item` for the writer.  Copies,
+pickle); :func:`decode` turns any queued message back into an :class:`_Item` for the writer.  Copies,
 never references into the caller's objects.
 """
 from __future__ import annotations
@@ -71,7 +71,7 @@ def _decode_poses(names: tuple, data: bytes) -> dict[str, tuple[np.ndarray, np.n
     return {n: (arr[i, 0:3], arr[i, 3:7]) for i, n in enumerate(names)}
 
 
-def _encode_result(result: Any, update: int, ros_time_ns: int, bend_stiffness: Any, targets: Any,
+def encode_result(result: Any, update: int, ros_time_ns: int, bend_stiffness: Any, targets: Any,
                    warm: bool | None) -> tuple:
     """log_result's message: the result copied into a flat tuple of primitives and bytes."""
     energy, grips = result.energy, result.grips
@@ -91,7 +91,7 @@ def _encode_result(result: Any, update: int, ros_time_ns: int, bend_stiffness: A
     )
 
 
-def _decode(message: Any) -> _Item:
+def decode(message: Any) -> _Item:
     """A queued message (an _Item, or an encoded result / targets tuple) → _Item."""
     if isinstance(message, _Item):
         return message

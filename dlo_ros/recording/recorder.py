@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .codec import _encode_result, _encode_targets, _FitSnap, _Item
+from .codec import encode_result, _encode_targets, _FitSnap, _Item
 from .scene_info import scene_info
 from .transport import _ProcessBackend, _ThreadBackend
 from .writer import _Config
@@ -135,7 +135,7 @@ class Recorder:
         unless the result says it was not warm-started)."""
         if not self.enabled:
             return
-        self._put(_encode_result(result, int(update), self._now(ros_time_ns), bend_stiffness, targets, warm))
+        self._put(encode_result(result, int(update), self._now(ros_time_ns), bend_stiffness, targets, warm))
 
     def log_update(self, result: Any, *, update: int, problem: Any = None, ros_time_ns: int | None = None,
                    warm: bool | None = None) -> None:

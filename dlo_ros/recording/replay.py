@@ -62,7 +62,7 @@ class Recording:
         return sorted({r.update for r in self.results})
 
 
-def _table(chunks: list[Any]) -> list[dict[str, Any]]:
+def rows_of(chunks: list[Any]) -> list[dict[str, Any]]:
     """Rows of one entity's chunks as dicts (index columns as int, components as Python lists), in
     logging order: by ``update`` then by row id."""
     import pyarrow as pa
@@ -131,7 +131,7 @@ def read_recording(path: str | Path) -> Recording:
         raise ValueError(f"{path}: not a readable rerun recording ({type(exc).__name__}: {exc})") from None
 
     def rows(entity: str) -> list[dict[str, Any]]:
-        return _table(by_entity.get(entity, []))
+        return rows_of(by_entity.get(entity, []))
 
     scene_yaml, scene_name, solver_kind = "", "", ""
     for row in rows(P.E_SCENE):

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..shading import segment_energy_density
 from .blueprint import default_blueprint
-from .codec import _decode, _FitSnap, _Item, _ResultSnap
+from .codec import decode, _FitSnap, _Item, _ResultSnap
 from .paths import (E_CABLE, E_DATA_RESULT, E_DATA_TARGETS, E_EIGEN, E_ENERGY, E_FIT, E_FIT_EVENTS, E_FRAMES,
                     E_GRIPS, E_ITERATIONS, E_LEGEND, E_MODEL, E_MODEL_SERIES, E_OBSTACLES, E_RECORDER,
                     E_REJECTED, E_SCENE, E_SCENE_CHANGES, E_SOLVE_TIME, E_STATUS, E_TARGETS, E_WORLD,
@@ -118,10 +118,10 @@ class _Writer:
             log.warning("recorder: %s", self.last_error)
 
     def handle(self, message: Any, dropped_total: int = 0) -> None:
-        """Log one message (an _Item or an encoded tuple, see :func:`_decode`)."""
+        """Log one message (an _Item or an encoded tuple, see :func:`decode`)."""
         item = _Item("?", None, 0)
         try:
-            item = _decode(message)
+            item = decode(message)
             if dropped_total != self.dropped_reported:
                 self._report_drops(dropped_total, item)
             if item.kind == "scene":

@@ -191,7 +191,7 @@ def within(values: dict, name: str, truth: float, k: float = 3.0) -> tuple[float
 @pytest.mark.skipif(TEST_SCENE != "default_cable", reason="the observation is of default_cable's poses")
 def test_fit_over_dds(tmp_path):
     from dlo_ros.recording import paths as R
-    from dlo_ros.recording.replay import _table
+    from dlo_ros.recording.replay import rows_of
 
     rrd = tmp_path / "fit.rrd"
     args = ("--scene", TEST_SCENE, "--ros-args", "-p", "compile:=off", "-p", f"solver.model:={TEST_MODEL}",
@@ -279,11 +279,11 @@ def test_fit_over_dds(tmp_path):
     for chunk in reader.stream(store=reader.recordings()[0]):
         chunks.setdefault(chunk.entity_path.lstrip("/"), []).append(chunk)
     assert {"world/fit/observed", "world/fit/fitted", "world/fit/residuals"} <= set(chunks)
-    fit_events = [r["TextLog:text"][0] for r in _table(chunks["events/fit"])]
+    fit_events = [r["TextLog:text"][0] for r in rows_of(chunks["events/fit"])]
     assert len(fit_events) == 3 and "not applied" in fit_events[0] and "applied: string.weight" in fit_events[1]
-    model_events = " ".join(r["TextLog:text"][0] for r in _table(chunks[R.E_MODEL]))
+    model_events = " ".join(r["TextLog:text"][0] for r in rows_of(chunks[R.E_MODEL]))
     assert "string.weight_per_length=" in model_events and "string.bend_stiffness=" in model_events
-    rejected = " ".join(r["TextLog:text"][0] for r in _table(chunks[R.E_REJECTED]))
+    rejected = " ".join(r["TextLog:text"][0] for r in rows_of(chunks[R.E_REJECTED]))
     assert "field 'z' is nan" in rejected
     print(f"fit over DDS: Rf = {rf:.5g} ± {rf_std:.2g}, D/Rf = {ratio:.4g} ± {std:.2g}, "
           f"time {fit_values['last fit time s']} s, {fit_values['last fit solves']} solves")

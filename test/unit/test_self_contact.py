@@ -121,7 +121,7 @@ def test_self_contacts_in_markers_and_recording(loop):
     """Every self-contact reaches the node's markers (two arrows, equal and opposite, from the contact
     points) and the recording's result message (exact float64 rows)."""
     conv = pytest.importorskip("dlo_ros.node.conversions")
-    from dlo_ros.recording.codec import _decode, _encode_result
+    from dlo_ros.recording.codec import decode, encode_result
 
     sol, r, _ = loop
     arrows = [m for m in conv.result_markers(r, sol.problem, "world", 1, force_scale=0.1).markers
@@ -131,7 +131,7 @@ def test_self_contacts_in_markers_and_recording(loop):
         for side, (point, force) in enumerate(((c.point_a, c.force), (c.point_b, -c.force))):
             a, b = (np.array([p.x, p.y, p.z]) for p in arrows[2 * k + side].points)
             assert np.allclose(a, point) and np.allclose(b - a, 0.1 * force)
-    snap = _decode(_encode_result(r, 1, 0, None, None, True)).payload
+    snap = decode(encode_result(r, 1, 0, None, None, True)).payload
     expected = [np.concatenate([[c.s_a, c.s_b], c.point_a, c.point_b, c.force]) for c in r.self_contacts]
     assert np.array_equal(snap.self_contacts, np.array(expected))
 

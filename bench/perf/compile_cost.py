@@ -1,6 +1,7 @@
 """What compiling a scene's Newton system costs and what it buys (issue #14, "compile time in seconds").
 
-    bash scripts/dlo-env run python bench/perf/compile_cost.py [--models planar:8 full:8 full:16 full:32]
+    bash scripts/dlo-env run python bench/perf/compile_cost.py [--models planar:8 full:8 full:12 full:16 full:32]
+        [--flattened-up-to 12]
         [--out bench/results/compile_cost.md]
 
 For ``default_cable`` with each fixed model, every function a solve evaluates — the contact-free KKT
@@ -131,8 +132,8 @@ def start_up(model: str, order: int) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--models", nargs="+", default=["planar:8", "full:8", "full:16", "full:32"])
-    ap.add_argument("--flattened-up-to", type=int, default=16,
+    ap.add_argument("--models", nargs="+", default=["planar:8", "full:8", "full:12", "full:16", "full:32"])
+    ap.add_argument("--flattened-up-to", type=int, default=12,
                     help="build the flattened functions only up to this order (gcc takes minutes beyond)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "compile_cost.md"))
     args = ap.parse_args()

@@ -200,20 +200,30 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
     return NativeFunction(lib, fn), True
 
 
+def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
+                  extra_source: str = "") -> bool:
+    """Generate C for ``fn`` (plus ``extra_source`` appended to it), compile it to the shared object
+    ``lib`` and put it in place atomically (concurrent processes never load a half-written file); False
+    if the compiler fails.  Callers hold COMPILER_LOCK."""
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        source = Path(tmp, f"{fn.name()}.c")
+        source.write_bytes(_generate(fn, tmp) + extra_source.encode())
+        tmp_lib = Path(tmp, lib.name)
+        cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(source), "-lm"]
+        if nice and shutil.which("nice"):
+            cmd = ["nice", "-n", str(nice), *cmd]
+        if subprocess.run(cmd, capture_output=True, text=True).returncode != 0:
+            return False
+        partial = lib.with_suffix(f".{os.getpid()}.tmp")
+        shutil.copyfile(tmp_lib, partial)
+        os.replace(partial, lib)
+    return True
+
+
 def _compile_locked(fn: ca.Function, cc: str, flags: tuple[str, ...], nice: int, lib: Path,
                     name: str) -> tuple[NativeFunction | InterpretedFunction, bool]:
-    if not lib.exists():  # another thread may have built it while this one waited
-        lib.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory() as tmp:
-            _generate(fn, tmp)
-            tmp_lib = Path(tmp, lib.name)
-            cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(Path(tmp, f"{name}.c")), "-lm"]
-            if nice and shutil.which("nice"):
-                cmd = ["nice", "-n", str(nice), *cmd]
-            done = subprocess.run(cmd, capture_output=True, text=True)
-            if done.returncode != 0:
-                return InterpretedFunction(fn), False
-            partial = lib.with_suffix(f".{os.getpid()}.tmp")
-            shutil.copyfile(tmp_lib, partial)
-            os.replace(partial, lib)  # atomic: concurrent processes never load a half-written file
+    # another thread may have built it while this one waited
+    if not lib.exists() and not build_library(fn, lib, cc, flags, nice):
+        return InterpretedFunction(fn), False
     return NativeFunction(lib, fn), True

@@ -21,16 +21,13 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
-import shutil
-import subprocess
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from .compiled import COMPILER_LOCK, cache_dir, compiler, fingerprint
+from .compiled import COMPILER_LOCK, build_library, cache_dir, compiler, fingerprint
 from .nlp import NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION, NEWTON_STEPS
 
 #: return codes of dlo_newton_run
@@ -183,21 +180,5 @@ def cached(fn: ca.Function, n: int, nf: int, n_p: int) -> NativeNewton | None:
 
 
 def _compile(fn: ca.Function, cc: str, lib: Path, nice: int) -> bool:
-    lib.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        gen = ca.CodeGenerator("dlo_newton.c", {"with_header": False})
-        gen.add(fn)
-        gen.generate(tmp + os.sep)
-        source = Path(tmp, "dlo_newton.c")
-        driver = DRIVER.replace("FUNCTION_work", f"{fn.name()}_work").replace("FUNCTION(", f"{fn.name()}(")
-        source.write_text(source.read_text() + driver)
-        out = Path(tmp, lib.name)
-        cmd = [cc, "-shared", "-fPIC", "-O1", "-o", str(out), str(source), "-lm"]
-        if nice and shutil.which("nice"):
-            cmd = ["nice", "-n", str(nice), *cmd]
-        if subprocess.run(cmd, capture_output=True, text=True).returncode != 0:
-            return False
-        partial = lib.with_suffix(f".{os.getpid()}.tmp")
-        shutil.copyfile(out, partial)
-        os.replace(partial, lib)  # atomic: concurrent processes never load a half-written file
-    return True
+    driver = DRIVER.replace("FUNCTION_work", f"{fn.name()}_work").replace("FUNCTION(", f"{fn.name()}(")
+    return build_library(fn, lib, cc, nice=nice, extra_source=driver)

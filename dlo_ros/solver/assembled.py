@@ -25,6 +25,8 @@ c_r·∂x/∂z = κ_r c_r ⊗ (∂x0/∂z) + Σ_k W_rk c_r·(∂T/∂u)_k E_k.  
 """
 from __future__ import annotations
 
+import functools
+
 import casadi as ca
 import numpy as np
 
@@ -108,6 +110,7 @@ class AssembledKKT:
         self.loads_W = model.position_matrix(np.array([ld.s for ld in P.loads])) if P.loads else np.zeros((0, self.M))
 
     # ---- the per-node function ---------------------------------------------------------------------
+    @functools.cached_property
     def node_function(self) -> ca.Function:
         """(u_k, c_k) → [bend_k, twist_k, stretch_k, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]; c_k = (w Rf, w Rt, w Re, a_k)."""
         w, d = self.width, self.d
@@ -146,6 +149,7 @@ class AssembledKKT:
                            [g_local, ca.jacobian(g_local, z), grad, hess, moments])
 
     # ---- the nonlinear position rows: obstacles and self-contact slots ------------------------------
+    @functools.cached_property
     def tangent_function(self) -> ca.Function:
         """u_k → T_k = (1 + ε) t̂ (the first pass, for rows nonlinear in the positions)."""
         w = self.width
@@ -261,7 +265,7 @@ class AssembledKKT:
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         lay, P, nf = nlp.params, nlp.problem, nlp.n_free_rows
         z, p = ca.MX.sym("z", n), ca.MX.sym("p", lay.size)
-        T = self.tangent_function().map(M, "serial")(ca.reshape(ca.mtimes(_sparse(self.E), z), d, M))
+        T = self.tangent_function.map(M, "serial")(ca.reshape(ca.mtimes(_sparse(self.E), z), d, M))
         parts = []
         local = self.local_rows[self.local_rows >= nf]
         if local.size:
@@ -317,7 +321,7 @@ class AssembledKKT:
         z, p = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size)
         E = _sparse(self.E)
         u = ca.reshape(ca.mtimes(E, z), d, M)
-        t = self.tangent_function()
+        t = self.tangent_function
         uu = ca.SX.sym("u", d)
         node = ca.Function("dlo_node_tangent_jacobian", [uu], [t(uu), ca.densify(ca.jacobian(t(uu), uu))])
         T, jt = node.map(M, "serial")(u)
@@ -366,12 +370,12 @@ class AssembledKKT:
         # rows nonlinear in the positions need T first (their gradient enters a_k)
         nonlinear = ([], [], None, None, [])
         if rows > nlp.n_free_rows:
-            T0 = self.tangent_function().map(M, "serial")(u)
+            T0 = self.tangent_function.map(M, "serial")(u)
             nonlinear = self._nonlinear_rows(z, p, lam, T0)
             a += nonlinear[2]
             dx0 += nonlinear[3]
         coef = ca.vertcat(weights * p[lay["Rf"]].T, weights * p[lay["Rt"]].T, weights * p[lay["Re"]].T, a)
-        bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function().map(M, "serial")(u, coef)
+        bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function.map(M, "serial")(u, coef)
 
         # ∇L: per-node part, the x0 part, the node-local part
         grad = ca.mtimes(E.T, ca.vec(grad_k)) + ca.vertcat(dx0, ca.MX(n - 3, 1))

@@ -359,19 +359,21 @@ class StringNLP:
         # the rows before the obstacle rows are equalities with bound 0 (grips, relative positions)
         assert np.all(self.lbg[:nf] == 0.0) and np.all(self.ubg[:nf] == 0.0)
         # the inequality rows' values: once per update (the convergence check), not per Newton step
-        self.obstacle_g_fn = ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g[nf:])]) if nf < g.shape[0] else None
+        self.obstacle_g_fn = None
         if self.director:
             # assembled from per-quadrature-node derivatives (solver/assembled.py): compact code (seconds
             # of gcc instead of minutes), a faster interpreted call, and no flattened Hessian to build
             assembled = AssembledKKT(self)
             self.kkt_free_fn = assembled.kkt_free()
             self.kkt_fn = assembled.kkt()
-            if self.obstacle_g_fn is not None:
+            if nf < g.shape[0]:
                 self.obstacle_g_fn = assembled.inequality_g()
             zm, pm, lm = ca.MX.sym("z", z.shape[0]), ca.MX.sym("p", lay.size), ca.MX.sym("lam", g.shape[0])
             self.hessian_fn = ca.Function("lagrangian_hessian", [zm, pm, lm], [self.kkt_fn(zm, pm, lm)[3]])
             self.jac_g_fn = assembled.jacobian()
         else:
+            if nf < g.shape[0]:
+                self.obstacle_g_fn = ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g[nf:])])
             self._flattened_kkt(objective, g, z, p, lam, nf, ca.densify(ca.vertcat(bend, twist, stretch, grav, work)))
         self.newton_fn = self.newton_function()
         self.g_fn = ca.Function("g", [z, p], [g])

@@ -37,6 +37,7 @@ from dlo_ros.model.rotations import farthest_pole, frame_with_pole
 from dlo_ros.node import demo
 from dlo_ros.scene import load_scene, scene_from_dict, scene_to_dict
 from dlo_ros.solver import ShapeSolver, make_solver
+from dlo_ros.solver.shape_solver import with_checked_poses
 
 PERIOD = 0.02  # s: 50 Hz, the demo driver's rate
 
@@ -103,18 +104,24 @@ def instrument(solver) -> list[Timed]:
 
 def stream(solver, targets):
     """Solve every target at 50 Hz; (solve times [ms], last result, model changes with update index;
-    index -1: the first, cold solve)."""
+    index -1: the first, cold solve).  An update may be 'unverified' (a converged equilibrium whose residual
+    is over the tolerance, published as such, which makes auto's check raise the order): it is counted
+    as a change '<n> unverified'; anything else but 'ok' stops the benchmark."""
     r = solver.solve()
     assert r.ok, r.message
     times, changes = [], [(-1, c) for c in r.model.changed or ()]
+    unverified = 0
     for i, poses in enumerate(targets):
         t0 = time.perf_counter()
         r = solver.solve(poses)
         dt = time.perf_counter() - t0
-        assert r.ok, f"update {i}: {r.message}"
+        assert r.status in ("ok", "unverified"), f"update {i}: {r.status}: {r.message}"
+        unverified += r.status == "unverified"
         times.append(dt * 1e3)
         changes += [(i, c) for c in r.model.changed or ()]
         time.sleep(max(0.0, PERIOD - dt))
+    if unverified:
+        changes.append((len(targets), f"{unverified} update(s) published unverified"))
     return np.array(times), r, changes
 
 
@@ -158,9 +165,14 @@ def main() -> None:
             shape, with the Euler-angle pole turned to the direction farthest from that shape's tangents
             (near the pole the order does not converge: on the post, order 32 in the scene's first frame
             is 56 mm off).  Each method gets its own reference: the post has mirror-image branches."""
-            tangents = solver.model.node_tangents(solver.snapshot().z).T
-            frame = frame_with_pole(farthest_pole(tangents)[0], solver.nlp.r0[:, 0])
-            ref_solver = ShapeSolver(prob, replace(opts, model="full", order=32, quadrature_nodes=80), compile="off",
+            frame = None
+            if not solver.nlp.director:  # an Euler-angle model: its reference gets the pole turned away
+                tangents = solver.model.node_tangents(solver.snapshot().z).T
+                frame = frame_with_pole(farthest_pole(tangents)[0], solver.nlp.r0[:, 0])
+            # the reference's scene is at the last target: adopt_warm_start maps a shape onto the adopting
+            # solver's own poses (and its topology check counts clamp turns from them)
+            ref_solver = ShapeSolver(with_checked_poses(prob, targets[-1]),
+                                     replace(opts, model="full", order=32, quadrature_nodes=80), compile="off",
                                      reference_frame=frame)
             ref_solver.adopt_warm_start(solver)
             ref = ref_solver.solve(targets[-1])
@@ -212,8 +224,8 @@ def main() -> None:
         f"{'compiled (gcc -O1)' if args.compile else 'interpreted CasADi'}; targets streamed at 50 Hz; "
         f"auto with background checks (as the node runs it). Run {time.strftime('%Y-%m-%d %H:%M')}.",
         "Times per update in ms: median / p99 / max. Error: max centreline deviation at the last target from a "
-        "full order-32 solve warm-started from that method's answer (same branch), its Euler-angle pole turned away "
-        "from the shape; the tolerance is 1 mm.", "",
+        "full order-32 solve at the last target warm-started from that method's answer (same branch; an Euler-angle model's with its pole turned away "
+        "from the shape); the tolerance is 1 mm.", "",
         "| stream | auto's final model | unknowns auto / full 16 / full same order | auto | full 16 | full, same order | "
         "full 16 / auto (median) | same order / auto (median) | error auto / full 16 / same order [m] | auto estimate [m] |",
         "|---|---|---|---|---|---|---|---|---|---|",

@@ -67,7 +67,7 @@ class NlpFunctions:
             if fn is None:
                 continue
             lib = library_path(fn)
-            native = native_newton.cached(fn, *self._sizes()) if name == "kkt_free" and nlp.director else None
+            native = native_newton.cached(fn, *self._sizes(), kkt_lib=lib) if name == "kkt_free" and nlp.director else None
             if lib.exists() and (native is not None or name != "kkt_free" or not nlp.director):
                 # compiled on an earlier start: load now, no waiting
                 setattr(self, name, NativeFunction(lib, fn))
@@ -85,7 +85,7 @@ class NlpFunctions:
             for name, fn, lib in todo:
                 nice = 10 if mode == "background" else 0
                 native, ok = compiled(fn, nice=nice, lib=lib)
-                loop = native_newton.build(fn, *self._sizes(), nice=nice) if ok and name == "kkt_free" \
+                loop = native_newton.build(fn, *self._sizes(), nice=nice, kkt_lib=lib) if ok and name == "kkt_free" \
                     and nlp.director else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile

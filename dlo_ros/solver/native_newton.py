@@ -102,10 +102,13 @@ def _dgesv_pointer() -> int:
     return int(get_pointer(capsule, get_name(capsule)))
 
 
-def library_path(fn: ca.Function) -> Path:
-    """Where the driver compiled with ``fn`` is (or will be) cached."""
+def library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
+    """Where the driver compiled with ``fn`` is (or will be) cached.  ``kkt_lib``: ``fn``'s own
+    ``compiled.library_path``, when the caller has it (its name carries the fingerprint, which otherwise
+    costs an evaluation of ``fn``)."""
     digest = hashlib.sha256(DRIVER.encode()).hexdigest()[:8]
-    return cache_dir() / f"dlo_newton_{fingerprint(fn)}_{digest}.so"
+    key = kkt_lib.stem.rsplit("_", 1)[1] if kkt_lib is not None else fingerprint(fn)
+    return cache_dir() / f"dlo_newton_{key}_{digest}.so"
 
 
 @dataclass
@@ -157,13 +160,14 @@ class NativeNewton:
                              largest.value)
 
 
-def build(fn: ca.Function, n: int, nf: int, n_p: int, nice: int = 0) -> NativeNewton | None:
+def build(fn: ca.Function, n: int, nf: int, n_p: int, nice: int = 0,
+          kkt_lib: Path | None = None) -> NativeNewton | None:
     """The driver compiled with ``fn`` (the contact-free KKT function), from the cache or built now (one
     compiler at a time per process); None without a C compiler or if compiling fails."""
     cc = compiler()
     if cc is None or os.environ.get("DLO_NO_COMPILE"):
         return None
-    lib = library_path(fn)
+    lib = library_path(fn, kkt_lib)
     if not lib.exists():
         with COMPILER_LOCK:
             if not lib.exists() and not _compile(fn, cc, lib, nice):
@@ -171,11 +175,11 @@ def build(fn: ca.Function, n: int, nf: int, n_p: int, nice: int = 0) -> NativeNe
     return NativeNewton(lib, n, nf, n_p)
 
 
-def cached(fn: ca.Function, n: int, nf: int, n_p: int) -> NativeNewton | None:
+def cached(fn: ca.Function, n: int, nf: int, n_p: int, kkt_lib: Path | None = None) -> NativeNewton | None:
     """The driver if the cache holds it (no compiling), else None."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
-    lib = library_path(fn)
+    lib = library_path(fn, kkt_lib)
     return NativeNewton(lib, n, nf, n_p) if lib.exists() else None
 
 

@@ -1,14 +1,19 @@
-"""Warm updates by Newton's method on the KKT conditions, with the active set of the start.
+"""Warm updates by Newton's method on the KKT conditions, with a primal-dual active set.
 
-For the equality rows and the inequality rows active at the start (at their bound with λ > 0):
+For the equality rows and the inequality rows in the active set A (at first: those at their bound with
+λ > 0 at the start):
 
-    [∇²L  J_aᵀ] [Δz]     [∇f + J_aᵀ λ_a]
-    [J_a    0 ] [Δλ] = − [g_a − g_bound ]
+    [∇²L  J_Aᵀ] [Δz]     [∇f + J_Aᵀ λ_A]
+    [J_A    0 ] [Δλ] = − [g_A − g_bound ]
 
-repeated until ‖∇f + J_aᵀλ_a‖∞ < 1e-9 and ‖g_a − g_bound‖∞ < 1e-11 (scaled units).  A step larger
-than 0.5 in any scaled unknown, a change of the active set (an inactive obstacle row violated, or an
-active inequality's λ turning negative) or no convergence in ``max_steps`` gives up: the caller then
-falls back to IPOPT.  Newton lands on the stationary point nearest the start, so the caller still
+repeated until ‖∇f + J_Aᵀλ_A‖∞ < 1e-9 and ‖g_A − g_bound‖∞ < 1e-11 (scaled units).  At that point the
+KKT conditions of the whole problem hold when every inactive row is within its bound and every active
+inequality's λ ≥ 0.  If not, the active set changes by one row, as in an active-set method: the most
+violated row joins A or, if none is violated, the active inequality with the most negative λ leaves it;
+Newton goes on from that point — at most ``NEWTON_ACTIVE_SET_CHANGES`` times (a grip move of 1 % of L
+shifts the sampled contact of a cable lying on a table by a sample or two).  A step larger than 0.5 in
+any scaled unknown, no convergence in ``max_steps`` for one active set, an active set seen before (a
+cycle) or too many changes gives up: the caller then falls back to IPOPT.  Newton lands on the stationary point nearest the start, so the caller still
 checks its stability.  Every function returns (ok, state, steps, constraint violation [m or rad]).
 """
 from __future__ import annotations
@@ -18,7 +23,7 @@ from scipy.linalg.lapack import dgesv as _gesv
 
 from .functions import NlpFunctions
 from .native_newton import CONVERGED
-from .nlp import (NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION,
+from .nlp import (NEWTON_ACTIVE_SET_CHANGES, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION,
                   NEWTON_STEPS, StringNLP)
 from .state import SolverState
 
@@ -53,17 +58,49 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     ``kkt_fn``: another system of the same form as ``fns.kkt`` (z, p, λ) → [∇f, g, ∂g/∂z, K, energies]
     (``moments.ExactMomentKKT``: K need not be symmetric); the returned state then carries that
     function's derivatives, not ∇²L."""
-    z, lam = start.z.copy(), np.zeros_like(start.lam_g)
     equality = nlp.equality
-    # active = at its bound with a positive multiplier (IPOPT leaves ~1e-10 barrier multipliers
-    # on rows far from their bound; those are inactive)
     if start.g is None:  # a warm start adopted from another model
         start.g = np.asarray(nlp.g_fn(start.z, start.p)).ravel()
+    # active = at its bound with a positive multiplier (IPOPT leaves ~1e-10 barrier multipliers
+    # on rows far from their bound; those are inactive)
     active = equality | ((start.lam_g > 1e-8) & (start.g > nlp.ubg - 1e-7))
+    steps = 0
+    z, lam = start.z.copy(), np.where(active, start.lam_g, 0.0)
+    reuse = kkt_fn is None and start.hessian is not None and start.g is not None and start.gradient is not None
     if kkt_fn is None and not np.any(active[nlp.n_free_rows:]):
-        return newton_free(nlp, fns, start, p, max_steps, fused)
+        ok, state, steps, viol, contact = _newton_free(nlp, fns, start, p, max_steps, fused)
+        if ok or contact is None:
+            return ok, state, steps, viol
+        # a contact appeared: go on from the contact-free answer with its most violated row active
+        violated = contact.g - nlp.ubg
+        violated[:nlp.n_free_rows] = 0.0
+        z, lam, reuse = contact.z, contact.lam_g, False
+        active = active.copy()
+        active[np.argmax(violated)] = True
     kkt_fn = kkt_fn or fns.kkt
-    lam[active] = start.lam_g[active]
+    seen = {active.tobytes()}
+    for _ in range(NEWTON_ACTIVE_SET_CHANGES + 1):
+        ok, state, it, changed = _newton_active(nlp, kkt_fn, start, z, lam, p, active, max_steps, reuse)
+        steps += it
+        if ok:
+            return True, state, steps, violation(nlp, state.g)
+        if changed is None or changed.tobytes() in seen:  # no convergence, or a cycle
+            break
+        seen.add(changed.tobytes())
+        z, lam, active, reuse = state.z, state.lam_g, changed, False
+    return False, start, steps, np.inf
+
+
+def _newton_active(nlp: StringNLP, kkt_fn, start: SolverState, z: np.ndarray, lam: np.ndarray, p: np.ndarray,
+                   active: np.ndarray, max_steps: int,
+                   reuse: bool) -> tuple[bool, SolverState | None, int, np.ndarray | None]:
+    """Newton steps from (z, λ) with the rows ``active`` held at their bound.  Returns (ok, state, steps,
+    the next active set): ok with the KKT point when it satisfies every row and sign; else, when Newton
+    converged but the active set is wrong, that point and the corrected set (violated rows in, negative
+    multipliers out); else (False, None, steps, None).  ``reuse``: (z, λ) is the start's own point and
+    only grip targets changed since, so its stored derivatives give the first step."""
+    equality = nlp.equality
+    z, lam = z.copy(), np.where(active, lam, 0.0)
     idx = np.flatnonzero(active)
     bound = nlp.ubg[idx]
     n, m = z.size, idx.size
@@ -71,10 +108,7 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     # Only grip targets changed → they enter g linearly (row = (x − target)/scale), so ∇f, J and H
     # stored at the start stay exact and g shifts by a known amount: the first step needs no evaluation.
     keep = ~nlp.grip_parameter_mask
-    reuse = (
-        kkt_fn is fns.kkt and start.hessian is not None and start.g is not None and start.gradient is not None
-        and np.array_equal(start.p[keep], p[keep])
-    )
+    reuse = reuse and np.array_equal(start.p[keep], p[keep])
     for it in range(max_steps + 1):
         if it == 0 and reuse:
             grad, jac, hess, energies = start.gradient, start.jacobian, start.hessian, None
@@ -88,13 +122,18 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
         converged = np.abs(r_dual).max(initial=0.0) < NEWTON_DUAL_TOLERANCE and \
             np.abs(r_prim).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE
         if converged and energies is not None:
-            inactive_ok = np.all(g[~active] <= nlp.ubg[~active] + 1e-9)
-            signs_ok = np.all(lam[active & ~equality] >= -1e-12)
-            if not (inactive_ok and signs_ok):
-                return False, start, it, np.inf
             state = SolverState(z, lam, start.lam_x, p, hessian=hess, jacobian=jac, energies=energies.ravel(), g=g,
                                 gradient=grad)
-            return True, state, it, violation(nlp, g)
+            excess = np.where(~active, g - nlp.ubg, 0.0)
+            negative = np.where(active & ~equality, lam, 0.0)
+            changed = active.copy()
+            if excess.max(initial=0.0) > 1e-9:  # the most violated row joins (one change at a time:
+                changed[np.argmax(excess)] = True  # several at once over-constrain the sampled contact)
+            elif negative.min(initial=0.0) < -1e-12:  # else the most negative multiplier leaves
+                changed[np.argmin(negative)] = False
+            else:
+                return True, state, it, None
+            return False, state, it, changed
         if it == max_steps:
             break
         kkt[:n, :n] = hess
@@ -105,21 +144,22 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
         # LAPACK's gesv directly: numpy.linalg.solve's checks cost more than the solve at this size
         _, _, step, info = _gesv(regularised(kkt, n), rhs)
         if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
-            return False, start, it, np.inf
+            return False, None, it, None
         z += step[:n]
         lam[idx] += step[n:]
-    return False, start, max_steps, np.inf
+    return False, None, max_steps, None
 
 
-def newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray, max_steps: int,
-                fused: bool = True) -> tuple[bool, SolverState, int, float]:
+def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray, max_steps: int,
+                fused: bool = True) -> tuple[bool, SolverState, int, float, SolverState | None]:
     """``newton`` while no obstacle row is active: the active rows are the free rows (all equalities),
     and the contact-free function returns the Newton matrix K and residual r themselves.  Steps
     K [Δz; Δλ] = −r start from the start's own K with r shifted by the new targets, when only targets
     changed.  With ``fused`` the first NEWTON_STEPS steps are one call of ``StringNLP.newton_fn`` (around
     the compiled contact-free function once it is loaded); if r is not yet converged, each further step
     is one evaluation and one LAPACK solve.  The obstacle rows' values are evaluated once, at the end,
-    to check that none is violated (else the caller falls back to IPOPT)."""
+    to check that none is violated; if one is, the last item returned is that converged contact-free point
+    (z, λ, g), from which ``newton`` goes on with the violated rows active."""
     nf, n, rows = nlp.n_free_rows, start.z.size, nlp.lbg.size
     unknowns = np.concatenate([start.z, start.lam_g[:nf]])
     keep = ~nlp.grip_parameter_mask
@@ -134,38 +174,38 @@ def newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nda
     if native is not None:  # the whole loop in one compiled call (native_newton.py), the GIL released
         out = native(unknowns, p, kkt, residual, max_steps)
         if out.code != CONVERGED:
-            return False, start, out.steps, np.inf
+            return False, start, out.steps, np.inf, None
         unknowns, kkt, residual, grad, energies = out.u, out.kkt, out.residual, out.gradient, out.energies
         first = out.steps
     elif fused:
         try:
             u, kkt, residual, grad, energies, largest = fns.newton_step(unknowns, p, kkt, residual)
         except RuntimeError:  # CasADi's LAPACK LU raises on a singular Newton matrix (gesv says info > 0)
-            return False, start, 0, np.inf
+            return False, start, 0, np.inf, None
         if not (np.isfinite(u).all() and largest[0, 0] <= NEWTON_MAX_STEP):
-            return False, start, NEWTON_STEPS, np.inf
+            return False, start, NEWTON_STEPS, np.inf, None
         unknowns, residual, first = u[:, 0], residual[:, 0], NEWTON_STEPS
     for it in range(first, max_steps + 1):
         z, lam_free = unknowns[:n], unknowns[n:]
         if energies is not None and np.abs(residual[:n]).max() < NEWTON_DUAL_TOLERANCE and \
                 np.abs(residual[n:]).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE:
             g, jac = all_rows(nlp, fns, z, p, kkt, residual)
-            if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared: the active set changed
-                return False, start, it, np.inf
             lam = np.zeros(rows)
             lam[:nf] = lam_free
+            if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared: the active set changed
+                return False, start, it, np.inf, SolverState(z.copy(), lam, start.lam_x, p, g=g)
             state = SolverState(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
                                 energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual)
-            return True, state, it, violation(nlp, g)
+            return True, state, it, violation(nlp, g), None
         if it == max_steps:
             break
         _, _, step, info = _gesv(regularised(kkt, n), residual)
         if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
-            return False, start, it, np.inf
+            return False, start, it, np.inf, None
         unknowns = unknowns - step
         kkt, residual, grad, energies = fns.kkt_free(unknowns[:n], p, unknowns[n:])
         residual = residual[:, 0]
-    return False, start, max_steps, np.inf
+    return False, start, max_steps, np.inf, None
 
 
 def derivatives(nlp: StringNLP, fns: NlpFunctions, z: np.ndarray, p: np.ndarray, lam: np.ndarray,

@@ -99,6 +99,8 @@ NEWTON_STEPS = 3
 
 #: a Newton step larger than this in any scaled unknown leaves the start's basin: IPOPT takes over
 NEWTON_MAX_STEP = 0.5
+#: active-set changes a warm Newton update may make before IPOPT takes over (newton.py)
+NEWTON_ACTIVE_SET_CHANGES = 6
 #: a warm update has converged when ‖∇f + Jᵀλ‖∞ and ‖g − bound‖∞ (scaled units) are below these
 NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE = 1e-9, 1e-11
 

@@ -11,8 +11,9 @@ Why this path and not "twist a straight clamped string, then bring its ends toge
 reaches a fold (chord 0.5 L at 2 turns) where the string must snap into a loop, and the warm update
 lands on a branch with whole turns released, which the topology checks rightly refuse (measured; see
 test_linking_stream.py).  The pin holds the tip of the hairpin away from the clamps, so the tip cannot
-pass around a clamp and unwind the legs (without it the free loop does, and the shape returns to
-itself after two turns: measured with the pin left out, grips 0.1 L apart).  Every update of this
+pass around a clamp and unwind the legs (without it, grips 0.1 L apart, the free loop never touched
+itself and the stream returned to its first shape after two turns: energy periodic in 720°, the
+belt trick).  Every update of this
 path is a small continuous step: no snap, no refusal.
 
 Checked: every streamed update ok, stable, warm and non-penetrating (its own minimum sample distance

@@ -41,7 +41,13 @@ a slot is added and the solve repeated from the same start (``ShapeSolver``).
 Topology, along a warm stream (both reported as a failure, the shape not published):
 * ``crossing_flips``: for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the sign of
   (x_b − x_a)·(t_a × t_b) says which strand lies on top; it cannot change while the strands stay within
-  reach of each other unless one passed through the other between two updates.
+  reach of each other unless one passed through the other between two updates.  (x_b − x_a)·n̂ (n̂ the
+  unit normal t_a × t_b) is the signed distance between the two tangent lines, so the sign is kept only
+  where that is at least half the pair's distance (``CROSSING_OVERLAP``): there the lines' closest points
+  lie near the samples and the strands do lie over one another.  Side by side in one plane (the legs of a
+  planar hairpin) the tangent lines meet far from the samples, the product is rounding noise, and a tiny
+  out-of-plane motion flipped it: a crossing the string never made (measured: a pinned hairpin at order
+  32, refused at its first 15° turn of a clamp).
 * ``swept_crossing``: a jump (IPOPT may land far from the start, e.g. a twisted rod releasing its twist)
   is checked by moving every sample straight from the old shape to the new one: if no two samples meet
   on the way, the shapes are isotopic; if two do, the string may have passed through itself.
@@ -59,6 +65,10 @@ CONTACT_ROUNDS = 4
 
 #: |t_a × t_b| below this: the strands are too close to parallel for the crossing sign to mean anything
 CROSSING_SINE = 0.3
+
+#: |(x_b − x_a)·n̂| below this fraction of |x_b − x_a|: the strands lie side by side, not over one another,
+#: and the crossing sign means nothing (module docstring)
+CROSSING_OVERLAP = 0.5
 
 
 @dataclass(frozen=True)
@@ -237,12 +247,16 @@ def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
 def crossing_signs(points: np.ndarray, tangents: np.ndarray,
                    candidates: list[tuple[tuple[int, int], float]]) -> dict[tuple[int, int], float]:
     """Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair (``candidate_pairs``) whose tangents cross
-    (module docstring)."""
+    and that lie over one another along the normal (module docstring)."""
     out = {}
     for (a, b), _ in candidates:
         normal = np.cross(tangents[a], tangents[b])
-        if np.linalg.norm(normal) >= CROSSING_SINE:
-            out[(a, b)] = float(np.sign(np.dot(points[b] - points[a], normal)))
+        size = np.linalg.norm(normal)
+        if size >= CROSSING_SINE:
+            gap = points[b] - points[a]
+            along = np.dot(gap, normal) / size
+            if abs(along) >= CROSSING_OVERLAP * np.linalg.norm(gap):
+                out[(a, b)] = float(np.sign(along))
     return out
 
 

@@ -477,3 +477,36 @@ def test_continuation_halves_failed_steps():
     assert 0.25 in calls and 0.5 in calls
     with pytest.raises(RuntimeError):
         continuation(fake_solve, [0.0, 1.0], max_halvings=1)
+
+
+# ---- test/reference/twisted_contact_rod.py (quaternion edges, bend and twist joints) -----------------
+def _twisted_rod_energy(n: int, end: np.ndarray, q_end: np.ndarray, start) -> float:
+    from reference.twisted_contact_rod import solve_twisted_contact_rod
+
+    q0 = np.array([start((j + 0.5) / n) for j in range(n)])
+    ref = solve_twisted_contact_rod(q0, 1.0, 1.0, 0.7, (np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])),
+                                    (end, q_end), 0.01, 0.1, 0.0)
+    assert ref.success, ref.message
+    return ref.energy, ref.twist_energy
+
+
+def _quat(axis: int, angle: float) -> np.ndarray:
+    q = np.array([0.0, 0.0, 0.0, np.cos(angle / 2)])
+    q[axis] = np.sin(angle / 2)
+    return q
+
+
+def test_twisted_contact_rod_closed_forms():
+    """Richardson in h² (N = 20, 40; the half joints at the clamps leave an h³ term) against closed forms: a straight rod with its end clamp turned 1.5π
+    about the tangent holds Rt α²/2L, all of it twist; a rod whose end clamp is turned π/2 about z, at the
+    end of the quarter circle, holds Rf φ²/2L with no twist."""
+    alpha = 1.5 * np.pi
+    e = {n: _twisted_rod_energy(n, np.array([1.0, 0.0, 0.0]), _quat(0, alpha), lambda u: _quat(0, alpha * u))
+         for n in (20, 40)}
+    limit = e[40][0] + (e[40][0] - e[20][0]) / 3
+    assert limit == pytest.approx(0.7 * alpha**2 / 2, rel=1e-4) and e[40][1] == pytest.approx(e[40][0], rel=1e-12)
+    phi = np.pi / 2
+    end = np.array([np.sin(phi), 1 - np.cos(phi), 0.0]) / phi
+    e = {n: _twisted_rod_energy(n, end, _quat(2, phi), lambda u: _quat(2, phi * u)) for n in (20, 40)}
+    limit = e[40][0] + (e[40][0] - e[20][0]) / 3
+    assert limit == pytest.approx(phi**2 / 2, rel=1e-4) and abs(e[40][1]) < 1e-12

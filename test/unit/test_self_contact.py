@@ -294,6 +294,30 @@ def test_crossing_flip_is_detected():
     assert above and SC.crossing_flips(above, below) and not SC.crossing_flips(above, higher)
 
 
+def test_side_by_side_strands_have_no_crossing_sign():
+    """The legs of a planar V (s ≤ L/2 up from (−0.02, 0, 0) leaning left, s > L/2 down to (0.02, 0, 0)
+    leaning right, 30° between them, within reach near the base) lie side by side, not over one another:
+    their tangent lines meet far from the samples, so no pair gets a crossing sign, and lifting one leg
+    1e-9 L above or below the plane flips nothing.  (Before: the sign of rounding noise, flipped by the
+    first small out-of-plane step of a planar pinned hairpin at order 32, which was refused as a crossing.)"""
+    geometry = SC.contact_geometry(L, 0.01)
+    s = geometry.s
+    phi = np.radians(15)
+
+    def shape(lift: float) -> tuple[np.ndarray, np.ndarray]:
+        first = s <= 0.5
+        u = np.where(first, s, L - s)  # arc length from the base along each leg
+        side = np.where(first, -1.0, 1.0)
+        pts = np.stack([side * (0.02 + u * np.sin(phi)), u * np.cos(phi), np.where(first, 0.0, lift)], axis=1)
+        tangents = np.stack([-np.sin(phi) + 0 * s, np.cos(phi) + 0 * s, 0 * s], axis=1)
+        tangents[~first] = [-np.sin(phi), -np.cos(phi), 0.0]
+        return pts, tangents
+
+    assert SC.candidate_pairs(shape(0.0)[0], geometry), "the legs are within reach near the base"
+    up, down = (SC.crossing_signs(*shape(z), SC.candidate_pairs(shape(z)[0], geometry)) for z in (1e-9, -1e-9))
+    assert not up and not down and not SC.crossing_flips(up, down)
+
+
 def test_swept_crossing():
     """A strand moved straight through another is caught; moved away from it, or slid along it at
     contact distance, it is not."""

@@ -290,6 +290,11 @@ def test_fig2_tight_loop_against_discrete_rod(loops, contact_rods, fine_tight_lo
         ref = total_force(contact_rods(n, 0.2).forces)
         assert ours[0] == pytest.approx(ref[0], rel=0.05) and ours[1] == pytest.approx(ref[1], rel=0.05), (n, ours, ref)
     check_against_rod(lambda s: model.positions(z_fine, s), fine.self_contacts, contact_rods(60, 0.2))
+    assert fine.energy["total"] >= free_energy_at(0.2)
+    s = np.linspace(0.0, L, 2001)
+    d, _, _ = closest_self_approach(s, model.positions(z_fine, s), 0.05 * L)
+    kappa = float(np.max(np.linalg.norm(np.gradient(model.tangents_at(z_fine, s), s, axis=0), axis=1)))
+    assert d >= 2 * R - SC.contact_geometry(L, R, 401).tolerance(kappa) - 1e-9 * L, d
     # the stream to it: every update ok, stable, warm, non-penetrating, balanced
     geometry = SC.contact_geometry(L, R, 401)
     for c, (res, _, _) in fine_tight_loop.items():

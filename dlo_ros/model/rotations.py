@@ -94,6 +94,21 @@ def unwrap_to(angle: float, reference: float) -> float:
     return float(angle + 2.0 * np.pi * np.round((reference - angle) / (2.0 * np.pi)))
 
 
+def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
+    """The unit quaternion (x, y, z, w) a fraction t ∈ [0, 1] of the shortest rotation from q0 to q1."""
+    q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+    q0, q1 = q0 / np.linalg.norm(q0), q1 / np.linalg.norm(q1)
+    dot = float(np.dot(q0, q1))
+    if dot < 0.0:  # q and −q are one rotation: take the shorter arc
+        q1, dot = -q1, -dot
+    angle = np.arccos(min(dot, 1.0))
+    if angle < 1e-9:
+        q = q0 + t * (q1 - q0)
+    else:
+        q = (np.sin((1.0 - t) * angle) * q0 + np.sin(t * angle) * q1) / np.sin(angle)
+    return q / np.linalg.norm(q)
+
+
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Unit quaternion (x, y, z, w) → rotation matrix."""
     x, y, z, w = np.asarray(q, dtype=float)

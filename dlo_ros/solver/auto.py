@@ -31,11 +31,17 @@ fails.  Reductions and their checks:
 * equilibrium residual — every check also takes the checked result's strong-form residual
   (ShapeResult.equilibrium_residual_m) as an error estimate: the order's estimate is the larger of the
   shadow's centreline change and the residual, so a shape that is not an equilibrium raises the order.
-* obstacle samples — obstacles are enforced at ``obstacle_samples`` points (41); between them the
-  string can cut into an obstacle (a chord of spacing h cuts a sphere of radius R by about h²/8R), an
-  error the order shadows cannot see (they share the samples).  Each check measures the deepest cut
-  over 8× as many points; it is added to estimated_error_m, and over δ/2 the samples go to 2n − 1
-  (81, 161, 321: the old samples stay), the new model built on the worker like any other.
+* obstacle samples — obstacles are enforced at ``obstacle_samples`` points (41), an error the order
+  shadows cannot see (they share the samples).  Two parts, the larger counts: between the samples the
+  string can cut into an obstacle (a chord of spacing h cuts a sphere of radius R by about h²/8R),
+  measured over 8× as many points; and, while the shape touches an obstacle, the samples shadow: the
+  same model with 2n − 1 samples solved from the checked shape, whose centreline change, doubled (the
+  sampled contact converges to first order in h: a string lying over a sphere can slide along it with
+  almost no change of energy, and each sample spacing leaves its own shallow well along that slide),
+  estimates the error of the n-sample answer.  The sampling part is added to estimated_error_m; over
+  δ/2 the samples go to 2n − 1 (81, 161, 321, 641: the old samples stay), the model the shadow already
+  built and warmed.  At MAX_SAMPLES the last shadow's change (undoubled: the error of the finer model)
+  stays the sampling estimate.
 * self-contact — modelled only once a committed shape comes within reach of itself (two samples the
   exclusion arc apart closer than the candidate reach D + max(4h, 0.03 L), solver/self_contact.py): then
   the 3D director model with ``self_contact_pairs`` slots (the option's value, or AUTO_SELF_CONTACT_PAIRS
@@ -86,7 +92,7 @@ POLE_MIN_DEG = 40.0  # a 3D model turns its Euler-angle pole away when a tangent
 #: (never raises it), which bounds that wait (bench/perf/auto_vs_full.py measures the stream with checks).
 SWITCH_INTERVAL_S = 1e-4
 #: obstacle samples auto may go up to (each step 2n − 1: the old samples stay, one between each pair)
-MAX_SAMPLES = 321
+MAX_SAMPLES = 641
 #: the penetration check looks at this many times the samples (between them the sampled constraints let
 #: the string cut into an obstacle: a chord of spacing h cuts a sphere of radius R by about h²/8R)
 PENETRATION_OVERSAMPLING = 8
@@ -112,6 +118,8 @@ class ModelChoice:
     samples: int = 41  # obstacle_samples: points along s where the obstacles are enforced
     self_contact: bool = False  # self-contact rows in the NLP (3D director models only)
     order_error_m: float = float("nan")  # the basis-order part of estimated_error_m (the rest: sampling)
+    #: the samples shadow's estimate of this model's sampling error (nan: not measured)
+    sampling_error_m: float = float("nan")
 
     def key(self) -> tuple:
         return (self.planar, self.stretch, self.gravity, self.order, self.obstacles, self.frame, self.samples,
@@ -126,6 +134,13 @@ def obstacle_distance(ob: Obstacle, x: np.ndarray) -> float:
     if ob.type == "box":  # the solver's box is inscribed in the box; bound with the circumscribed sphere
         return float(np.linalg.norm(x - ob.centre) - np.linalg.norm(ob.half_extents))
     return -ob.h(np.asarray(x, dtype=float))
+
+
+def touches_obstacle(result: ShapeResult) -> bool:
+    """Does the result press on an obstacle?  A contact force above 1e-6 of the largest grip force (an
+    interior-point answer leaves ~1e-10 N of barrier multipliers on samples that do not touch)."""
+    scale = max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0)
+    return any(float(np.linalg.norm(f)) > 1e-6 * max(scale, 1e-3) for f in result.contact_forces.values())
 
 
 def reachable_obstacles(problem: Problem, margin: float) -> tuple[int, ...]:
@@ -175,6 +190,7 @@ class _Snapshot:
     max_grip_force: float
     generation: int = 0
     residual_m: float = 0.0  # the strong-form equilibrium residual of the checked result (solver/residual.py)
+    touching: bool = False  # the checked result presses on an obstacle
 
 
 @dataclass
@@ -186,6 +202,7 @@ class _Verdict:
     reason: str = ""
     estimate: float = float("nan")
     order_error: float = float("nan")
+    sampling_error: float = float("nan")
 
 
 class AutoShapeSolver:
@@ -587,11 +604,14 @@ class AutoShapeSolver:
         return _Snapshot(self.inner, self.inner.snapshot(), replace(self.choice, reasons=list(self.choice.reasons)),
                          problem, poses, result.points.copy(),
                          max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
-                         self._generation, float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)))
+                         self._generation, float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)),
+                         touches_obstacle(result))
 
     def _keep(self, verdict: _Verdict) -> None:
         self.choice.estimated_error_m = verdict.estimate
         self.choice.order_error_m = verdict.order_error
+        if np.isfinite(verdict.sampling_error):
+            self.choice.sampling_error_m = verdict.sampling_error
         self._unchecked = False
         self._since_check = 0
 
@@ -681,16 +701,24 @@ class AutoShapeSolver:
                                              reasons=list(choice.reasons))
                     verdict.reason = f"order {ORDERS[i - 1]} error estimate {error:.3g} m ≤ {tol / 4:.3g} m: order {ORDERS[i - 1]}"
         depth, name = self._penetration(snap)  # (0, '') without obstacles
+        finer = replace(choice, samples=min(2 * choice.samples - 1, MAX_SAMPLES), estimated_error_m=float("nan"),
+                        order_error_m=order_error, reasons=list(choice.reasons))
+        change = self._samples_shadow_error(snap, finer) if snap.touching and choice.samples < MAX_SAMPLES else np.nan
+        verdict.sampling_error = (choice.sampling_error_m if snap.touching else np.nan) if choice.samples >= MAX_SAMPLES \
+            else 2.0 * change
+        sampling = max(depth, np.nan_to_num(verdict.sampling_error, nan=0.0))
         verdict.order_error = order_error
         if np.isfinite(order_error):
-            verdict.estimate = order_error + depth  # the sampling error adds to the basis order's
-        if verdict.choice is None and depth > tol / 2 and choice.samples < MAX_SAMPLES:
-            samples = min(2 * choice.samples - 1, MAX_SAMPLES)
-            # the order's estimate carries over (same basis); the sampling part is measured again
-            verdict.choice = replace(choice, samples=samples, estimated_error_m=float("nan"), order_error_m=order_error,
-                                     reasons=list(choice.reasons))
+            verdict.estimate = order_error + sampling  # the sampling error adds to the basis order's
+        if verdict.choice is None and sampling > tol / 2 and choice.samples < MAX_SAMPLES:
+            # the order's estimate carries over (same basis); the finer model's sampling error is about
+            # half this one's (first order in h) until its own check measures it
+            verdict.choice = replace(finer, sampling_error_m=change)
             verdict.reason = (f"the string cuts into obstacle {name!r} by {depth:.3g} m > {tol / 2:.3g} m between "
-                              f"its {choice.samples} samples: {samples} samples")
+                              f"its {choice.samples} samples: {finer.samples} samples" if depth >= sampling else
+                              f"the shape moves by {change:.3g} m when the obstacle samples go from {choice.samples} "
+                              f"to {finer.samples} (sampling error about {sampling:.3g} m > {tol / 2:.3g} m): "
+                              f"{finer.samples} samples")
             # built and warm-started here (worker thread in the node), so the switch builds nothing
             self._solver_for(verdict.choice, problem, stream=False, source=snap.inner, state=snap.state)
         # prepare only a pooled model: never build one here, the stream may be switching to it
@@ -738,6 +766,17 @@ class AutoShapeSolver:
         depths = [(float(np.max(ob.h_many(x))) + radius, ob.name) for ob in inner.problem.obstacles]
         depth, name = max(depths)
         return max(depth, 0.0), name
+
+    def _samples_shadow_error(self, snap: _Snapshot, finer: ModelChoice) -> float:
+        """max |x_n(s) − x_2n−1(s)| over the output points between the checked shape and the same model
+        with the finer obstacle samples of ``finer``, solved from the checked shape (nan when that solve
+        fails: inconclusive, the next check retries).  The finer model is pooled: it is the one an
+        escalation switches to."""
+        shadow = self._solver_for(finer, snap.problem, stream=False, source=snap.inner, state=snap.state)
+        result = shadow.solve(snap.poses)
+        if not result.ok:
+            return float("nan")
+        return float(np.max(np.linalg.norm(result.points - snap.points, axis=1)))
 
     def _shadow_error(self, snap: _Snapshot, order: int) -> float:
         """max |x_n(s) − x_m(s)| over the output points between the checked shape (order n) and the same

@@ -9,7 +9,9 @@ For the equality rows and the inequality rows in the active set A (at first: tho
 repeated until ‖∇f + J_Aᵀλ_A‖∞ < 1e-9 and ‖g_A − g_bound‖∞ < 1e-11 (scaled units).  At that point the
 KKT conditions of the whole problem hold when every inactive row is within its bound and every active
 inequality's λ ≥ 0.  If not, the active set changes by one row, as in an active-set method: the most
-violated row joins A or, if none is violated, the active inequality with the most negative λ leaves it;
+violated contact row (obstacle or self-contact, ``StringNLP.contact_row``; a violated fold guard is no
+equilibrium and gives up) joins A or, if none is violated, the active inequality with the most negative
+λ leaves it;
 Newton goes on from that point — at most ``NEWTON_ACTIVE_SET_CHANGES`` times (a grip move of 1 % of L
 shifts the sampled contact of a cable lying on a table by a sample or two).  A step larger than 0.5 in
 any scaled unknown, no convergence in ``max_steps`` for one active set, an active set seen before (a
@@ -127,6 +129,8 @@ def _newton_active(nlp: StringNLP, kkt_fn, start: SolverState, z: np.ndarray, la
             excess = np.where(~active, g - nlp.ubg, 0.0)
             negative = np.where(active & ~equality, lam, 0.0)
             changed = active.copy()
+            if np.any(excess[~nlp.contact_row] > 1e-9):  # a fold guard: no equilibrium, IPOPT takes over
+                return False, None, it, None
             if excess.max(initial=0.0) > 1e-9:  # the most violated row joins (one change at a time:
                 changed[np.argmax(excess)] = True  # several at once over-constrain the sampled contact)
             elif negative.min(initial=0.0) < -1e-12:  # else the most negative multiplier leaves
@@ -192,8 +196,9 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
             g, jac = all_rows(nlp, fns, z, p, kkt, residual)
             lam = np.zeros(rows)
             lam[:nf] = lam_free
-            if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared: the active set changed
-                return False, start, it, np.inf, SolverState(z.copy(), lam, start.lam_x, p, g=g)
+            if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared (or a fold guard: no equilibrium)
+                contact = np.all(g[nf:][~nlp.contact_row[nf:]] <= nlp.ubg[nf:][~nlp.contact_row[nf:]] + 1e-9)
+                return False, start, it, np.inf, SolverState(z.copy(), lam, start.lam_x, p, g=g) if contact else None
             state = SolverState(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
                                 energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual)
             return True, state, it, violation(nlp, g), None

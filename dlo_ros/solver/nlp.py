@@ -347,6 +347,9 @@ class StringNLP:
         g = ca.vertcat(*g_rows) if g_rows else ca.SX(0, 1)
         self.lbg, self.ubg = np.array(lbg), np.array(ubg)
         self.equality = self.lbg == self.ubg
+        #: inequality rows a warm Newton update may make active (obstacle and self-contact rows: physical
+        #: contacts; a fold guard at its bound is no equilibrium, so Newton leaves that to IPOPT)
+        self.contact_row = np.array([kind[0] in ("obstacle", "self") for kind in self.row_kind], dtype=bool)
         self.row_scale = np.array(self.row_scale)
         self.nlp = {"x": z, "p": p, "f": objective, "g": g}
         self.z_sym, self.p_sym, self.g_sym = z, p, g

@@ -30,6 +30,7 @@ import time
 import numpy as np
 
 from ..model.director import quat_to_frame
+from ..model.rotations import slerp
 from ..model.problem import GripPose, Problem
 from . import frames as F
 from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
@@ -58,6 +59,11 @@ __all__ = ["COMPILE_MODES", "IPOPT_LOCK", "MOMENT_CONTINUATION_SOLVES", "MOMENT_
 #: Newton solves for raising the moments from zero when one solve does not get there
 MOMENT_NEWTON_STEPS = 25
 MOMENT_CONTINUATION_SOLVES = 40
+#: the messages of a warm update refused as a jump of the solver (retried in substeps, ``_in_substeps``)
+JUMP_REFUSALS = ("self-contact: the string passed through itself", "self-contact: this shape is not reached",
+                 "topology:")
+#: substeps a refused warm update is retried in (each count tried in turn)
+SUBSTEPS = (2, 4)
 
 
 def structure_key(problem: Problem, options: SolverOptions) -> tuple:
@@ -275,7 +281,10 @@ class ShapeSolver:
             if reason:
                 return self._failure("unreachable", reason, t0)
             self._turns_now = self._advance_clamp_turns(problem)
-            result, state = self._solve_locked(problem, warm and self._state is not None)
+            warm = warm and self._state is not None
+            result, state = self._solve_locked(problem, warm)
+            if warm and result.status == "failed" and result.message.startswith(JUMP_REFUSALS):
+                result, state = self._in_substeps(problem, result)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
             result.derivatives = "compiled" if self.functions.compiled else "interpreted"
             if commit:  # every target of the stream counts, failed ones too (topology.ClampTurns)
@@ -286,6 +295,42 @@ class ShapeSolver:
                 self.problem = problem
                 self._clamp_turns = None if self._turns_now is None else self._turns_now.committed()
             return result
+
+    def _in_substeps(self, problem: Problem, refused: ShapeResult) -> tuple[ShapeResult, SolverState | None]:
+        """A warm update refused as a jump (the string passed through itself, or turns of twist were
+        released: ``JUMP_REFUSALS``) solved again as SUBSTEPS[k] warm updates along the way from the
+        committed poses to ``problem``'s (positions linear, orientations by slerp), each checked as any
+        update is: IPOPT's iterates need not keep the contact rows, and a smaller move keeps it on the
+        branch (Fig. 2 at radius 0).  Returns the last substep's (result, state), uncommitted; or
+        ``refused`` (with the substeps' outcome added) when a substep fails too.  The committed state is
+        restored either way: ``solve`` commits."""
+        committed = (self._state, self.problem, self._clamp_turns, self._turns_now)
+        start = {g.name: g.pose for g in self.problem.grips}
+        why = ""
+        try:
+            for k in SUBSTEPS:
+                self._state, self.problem, self._clamp_turns = committed[:3]
+                for i in range(1, k + 1):
+                    t = i / k
+                    step = problem.with_grip_poses({g.name: GripPose(
+                        (1.0 - t) * start[g.name].position + t * g.pose.position,
+                        slerp(start[g.name].orientation, g.pose.orientation, t)) for g in problem.grips}) \
+                        if i < k else problem
+                    self._turns_now = self._advance_clamp_turns(step)
+                    result, state = self._solve_locked(step, True)
+                    if result.status != "ok" or state is None:  # a rescue must be a verified equilibrium
+                        why = f"; in {k} substeps, substep {i} {result.status}: {result.message}"
+                        break
+                    if i == k:
+                        result.message += f"; solved in {k} substeps (one update was refused: {refused.message})"
+                        result.continuation_steps = k
+                        return result, state
+                    self._state, self.problem = state, step  # the next substep starts here
+                    self._clamp_turns = None if self._turns_now is None else self._turns_now.committed()
+        finally:
+            self._state, self.problem, self._clamp_turns, self._turns_now = committed
+        refused.message += why
+        return refused, None
 
     def query_many(self, targets, executor=None) -> list[ShapeResult]:
         """Answers to many independent queries (``{grip: pose}`` each) in worker processes, in order, with

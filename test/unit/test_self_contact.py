@@ -335,7 +335,7 @@ def test_contact_forces_are_the_energy_sensitivity():
 
 @pytest.fixture(scope="module")
 def streamed_radius_zero():
-    """r = 0 from 0.42 L in warm steps of 0.01 L (as far as it goes: see the xfail below)."""
+    """r = 0 from 0.42 L in warm steps of 0.01 L."""
     return stream(0.0)
 
 
@@ -343,8 +343,8 @@ def streamed_radius_zero():
 def test_fig2_radius_zero_may_touch_not_cross(c, streamed_radius_zero):
     """Radius 0: the strands touch at the sample-pair distance D = h/√2 (no crossing of the sampled
     polyline) and the energy stays at the unconstrained one's (the clearance is tiny: measured +3e-7 at
-    0.3 L, +6.6e-5 at 0.2 L); at 0.4 L the loop is open and the answer is the unconstrained one.  Cold, and
-    (to 0.3 L) streamed: the stream agrees with the cold solve."""
+    0.3 L, +6.6e-5 at 0.2 L); at 0.4 L the loop is open and the answer is the unconstrained one.  Cold and
+    streamed: the stream agrees with the cold solve."""
     sol = solver(c, 0.0)
     with blas_threads(1):
         r = sol.solve()
@@ -361,27 +361,27 @@ def test_fig2_radius_zero_may_touch_not_cross(c, streamed_radius_zero):
         assert distance_modulo_chord_rotation(r.points, free.points) < 1e-9 * L
     else:
         assert r.self_contacts
-    if c in streamed_radius_zero and streamed_radius_zero[c][0].ok:
-        warm = streamed_radius_zero[c][0]
-        assert warm.stable and warm.warm_started and warm.min_self_distance >= geometry.distance - 1e-8 * L
-        assert warm.energy["total"] == pytest.approx(r.energy["total"], rel=1e-8)
-        assert distance_modulo_chord_rotation(warm.points, r.points) < 1e-6 * L
-    else:
-        assert c < 0.3  # the stream reaches 0.3 L
+    warm = streamed_radius_zero[c][0]
+    assert warm.ok and warm.stable and warm.warm_started, warm.message
+    assert warm.min_self_distance >= geometry.distance - 1e-8 * L
+    assert warm.energy["total"] == pytest.approx(r.energy["total"], rel=1e-8)
+    assert distance_modulo_chord_rotation(warm.points, r.points) < 1e-6 * L
 
 
-@pytest.mark.xfail(strict=True, reason="r = 0: a warm update past 0.3 L lands the strands on the other side of "
-                                       "each other (refused: 'passed through itself'), in steps of 0.01 and 0.005 L")
-def test_fig2_radius_zero_streams_to_02(streamed_radius_zero):
-    """The r = 0 stream down to 0.2 L: every update ok, stable and warm.  Refused from 0.29 L on (from 0.235 L
-    in steps of 0.005 L, and with 32 or 64 slots too): at 0.3 → 0.29 L IPOPT's answer (warm, with the pair
-    in a slot) has the pair s = 0.1625 / 0.855 m 0.0097 → 0.0100 m apart (D = h/√2 = 0.0018 m) but on the
-    other side: IPOPT's iterates need not keep the rows, the rows of r = 0 are a wall 2D thick and the
-    update moves the strands 0.01 m, so it tunnels to the unconstrained side.  The crossing check catches
-    it and nothing is published; cold solves at 0.3 and 0.2 L are fine (test above)."""
+def test_fig2_radius_zero_streams_to_02_in_substeps(streamed_radius_zero):
+    """The r = 0 stream down to 0.2 L: every update ok, stable and warm.  Past 0.3 L a warm update of
+    0.01 L, solved in one go, lands the strands on the other side of each other (measured at 0.3 → 0.29 L:
+    the pair s = 0.1625 / 0.855 m ends 0.0097 → 0.0100 m apart on the other side; D = h/√2 = 0.0018 m):
+    IPOPT's iterates need not keep the rows, and the rows of r = 0 are a wall only 2D thick.  The crossing
+    check refuses that answer, and the solver solves the update again in substeps (ShapeSolver.SUBSTEPS),
+    each checked as an update is; the result says so."""
+    assert sorted(streamed_radius_zero) == sorted(STREAM)
     for c, (r, _, _) in streamed_radius_zero.items():
         assert r.ok and r.stable and r.warm_started, (c, r.message)
-    assert 0.2 in streamed_radius_zero
+    substeps = [c for c, (r, _, _) in streamed_radius_zero.items() if "substeps" in r.message]
+    assert substeps and all(c < 0.3 for c in substeps), substeps
+    refused = streamed_radius_zero[substeps[0]][0].message
+    assert "passed through itself" in refused or "not reached" in refused, refused
 
 
 def test_fig2_open_loop_is_the_unconstrained_solution(loops, streamed):

@@ -39,7 +39,11 @@ def _sparse(matrix: np.ndarray) -> ca.DM:
 
 
 class AssembledKKT:
-    """Builds ``kkt_free`` (see the module docstring) for a ``StringNLP`` whose model is a DirectorModel."""
+    """Builds the KKT functions (see the module docstring) for a ``StringNLP`` whose model is a DirectorModel.
+
+    The model-specific parts are ``_node_map``, ``_node_coefficients``, ``node_function``,
+    ``tangent_function`` and ``_direct_terms``; ``assembled_euler.AssembledEulerKKT`` overrides them for
+    the Euler-angle models (planar and 3D)."""
 
     def __init__(self, nlp) -> None:
         model = nlp.model
@@ -87,7 +91,7 @@ class AssembledKKT:
                 row_target[nlp.params[f"grip:{g.name}:position"]] = axis
             elif kind[0] == "relative":
                 rel = P.relative_positions[kind[1]]
-                axis = np.eye(3)[kind[2]]
+                axis = (nlp.r0[:, :2].T if nlp.planar else np.eye(3))[kind[2]]  # as StringNLP's rows
                 C.append(axis)
                 W = model.position_matrix(np.array([rel.s_a, rel.s_b]))
                 Om.append(W[1] - W[0])
@@ -110,6 +114,11 @@ class AssembledKKT:
         self.loads_W = model.position_matrix(np.array([ld.s for ld in P.loads])) if P.loads else np.zeros((0, self.M))
 
     # ---- the per-node function ---------------------------------------------------------------------
+    def _node_coefficients(self, p, a):
+        """c_k (a column per node) of ``node_function`` from the parameters and a_k (3 × M)."""
+        lay, weights = self.nlp.params, ca.DM(self.model.mesh.weights).T
+        return ca.vertcat(weights * p[lay["Rf"]].T, weights * p[lay["Rt"]].T, weights * p[lay["Re"]].T, a)
+
     @functools.cached_property
     def node_function(self) -> ca.Function:
         """(u_k, c_k) → [bend_k, twist_k, stretch_k, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]; c_k = (w Rf, w Rt, w Re, a_k)."""
@@ -132,21 +141,30 @@ class AssembledKKT:
         return ca.Function("dlo_node_density", [u, c],
                            [bend, twist, stretch, t, grad, ca.densify(hess), ca.densify(ca.jacobian(t, u))])
 
-    def local_function(self, rows: np.ndarray) -> ca.Function:
-        """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_moments]: the node-local ``rows`` (unit
-        norm, grip orientation, folds) and the point moments' pseudo-potential Σ W_M (Λ = λ·g_local − σ Σ W_M)."""
-        nlp, model, P = self.nlp, self.model, self.nlp.problem
-        z, p = nlp.z_sym, nlp.p_sym
-        g_local = nlp.g_sym[rows.tolist()] if rows.size else ca.SX(0, 1)
+    def _direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """(W_M, U_direct): the point moments' work (here their pseudo-potentials Σ W_M at their nodes)
+        and the (bend, twist, stretch) energy parts computed directly from z rather than per node
+        (none for a director model)."""
+        nlp, model = self.nlp, self.model
         moments = ca.SX(0)
-        for i, ld in enumerate(P.loads):
+        for i, ld in enumerate(nlp.problem.loads):
             moments += model.moment_work_sym(z, model.mesh.node_index(ld.s), p[nlp.params[f"load:{i}:moment"]],
                                              p[nlp.params[f"load:{i}:reference"]])
+        return moments, ca.SX.zeros(3, 1)
+
+    def local_function(self, rows: np.ndarray) -> ca.Function:
+        """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local ``rows``
+        (unit norm, grip orientation, folds; an Euler-angle model's angle rows) and ``_direct_terms``:
+        Λ = λ·g_local − σ W_M + σ Σ U_direct."""
+        nlp = self.nlp
+        z, p = nlp.z_sym, nlp.p_sym
+        g_local = nlp.g_sym[rows.tolist()] if rows.size else ca.SX(0, 1)
+        moments, direct = self._direct_terms(z, p)
         lam = ca.SX.sym("lam_local", g_local.shape[0])
-        lagrangian = ca.dot(lam, g_local) - nlp.sigma * moments
+        lagrangian = ca.dot(lam, g_local) - nlp.sigma * moments + nlp.sigma * ca.sum1(direct)
         hess, grad = ca.hessian(lagrangian, z)
         return ca.Function("dlo_local_rows", [z, p, lam],
-                           [g_local, ca.jacobian(g_local, z), grad, hess, moments])
+                           [g_local, ca.jacobian(g_local, z), grad, hess, moments, direct])
 
     # ---- the nonlinear position rows: obstacles and self-contact slots ------------------------------
     @functools.cached_property
@@ -349,7 +367,6 @@ class AssembledKKT:
         E = _sparse(self.E)
         u = ca.reshape(ca.mtimes(E, z), d, M)
         x0 = z[0:3] * L
-        weights = ca.DM(self.model.mesh.weights).T
         gravity, m = p[lay["gravity"]], p[lay["weight_moments"]]
         # a_k: the terms linear in the positions
         a = -sigma * ca.mtimes(gravity, m.T)
@@ -374,13 +391,13 @@ class AssembledKKT:
             nonlinear = self._nonlinear_rows(z, p, lam, T0)
             a += nonlinear[2]
             dx0 += nonlinear[3]
-        coef = ca.vertcat(weights * p[lay["Rf"]].T, weights * p[lay["Rt"]].T, weights * p[lay["Re"]].T, a)
-        bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function.map(M, "serial")(u, coef)
+        bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function.map(M, "serial")(
+            u, self._node_coefficients(p, a))
 
         # ∇L: per-node part, the x0 part, the node-local part
         grad = ca.mtimes(E.T, ca.vec(grad_k)) + ca.vertcat(dx0, ca.MX(n - 3, 1))
         lam_local = lam[local_rows.tolist()] if local_rows.size else ca.MX(0, 1)
-        g_loc, j_loc, grad_loc, hess_loc, moments = self.local_function(local_rows)(z, p, lam_local)
+        g_loc, j_loc, grad_loc, hess_loc, moments, direct = self.local_function(local_rows)(z, p, lam_local)
         grad += grad_loc
         # ∇²L = Eᵀ diag(∇²φ_k) E + ∇²Λ (+ Dᵀ diag(λ ∇²ψ) D for rows nonlinear in the positions)
         blocks = ca.sparsity_cast(hess_k, ca.diagcat(*[ca.Sparsity.dense(d, d)] * M))
@@ -403,7 +420,7 @@ class AssembledKKT:
         g, jac = self._in_row_order(parts, rows)
 
         grad_f = grad - ca.mtimes(jac.T, lam)
-        bend, twist, stretch = ca.sum2(bend_k), ca.sum2(twist_k), ca.sum2(stretch_k)
+        bend, twist, stretch = (ca.sum2(e) + direct[i] for i, e in enumerate((bend_k, twist_k, stretch_k)))
         grav = -ca.dot(gravity, x0 * p[lay["weight_total"]] + ca.mtimes(T, m))
         work = moments
         for i, force in enumerate(forces):

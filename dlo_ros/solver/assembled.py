@@ -144,13 +144,13 @@ class AssembledKKT:
     def _direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
         """(W_M, U_direct): the point moments' work (here their pseudo-potentials Σ W_M at their nodes)
         and the (bend, twist, stretch) energy parts computed directly from z rather than per node
-        (none for a director model)."""
+        (none for a director model: structurally zero)."""
         nlp, model = self.nlp, self.model
         moments = ca.SX(0)
         for i, ld in enumerate(nlp.problem.loads):
             moments += model.moment_work_sym(z, model.mesh.node_index(ld.s), p[nlp.params[f"load:{i}:moment"]],
                                              p[nlp.params[f"load:{i}:reference"]])
-        return moments, ca.SX.zeros(3, 1)
+        return moments, ca.SX(3, 1)
 
     def local_function(self, rows: np.ndarray) -> ca.Function:
         """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local ``rows``
@@ -316,10 +316,10 @@ class AssembledKKT:
         L, d, n = self.nlp.length, self.d, self.n
         X = ca.mtimes(T, ca.DM(self.Omega).T)  # 3 × rows: Σ_k W_rk T_k
         g = (ca.DM(self.kappa) * ca.mtimes(ca.DM(self.C), x0) + ca.sum1(ca.DM(self.C).T * X).T
-             - ca.mtimes(ca.DM(self.target), p)) / L
+             - ca.mtimes(_sparse(self.target), p)) / L
         omega_rep = np.repeat(self.Omega, d, axis=1)  # W_rk at column j + d k
         jac = ca.mtimes(ca.mtimes(ca.DM(self.C), jt) * ca.DM(omega_rep), E) / L
-        return g, jac + ca.DM(_x0_columns(self.C * self.kappa[:, None], n))
+        return g, jac + _sparse(_x0_columns(self.C * self.kappa[:, None], n))
 
     @staticmethod
     def _in_row_order(parts, rows: int):
@@ -420,7 +420,8 @@ class AssembledKKT:
         g, jac = self._in_row_order(parts, rows)
 
         grad_f = grad - ca.mtimes(jac.T, lam)
-        bend, twist, stretch = (ca.sum2(e) + direct[i] for i, e in enumerate((bend_k, twist_k, stretch_k)))
+        bend, twist, stretch = (ca.sum2(e) + direct[i] if direct.sparsity().has_nz(i, 0) else ca.sum2(e)
+                                for i, e in enumerate((bend_k, twist_k, stretch_k)))
         grav = -ca.dot(gravity, x0 * p[lay["weight_total"]] + ca.mtimes(T, m))
         work = moments
         for i, force in enumerate(forces):

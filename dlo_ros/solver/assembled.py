@@ -378,7 +378,7 @@ class AssembledKKT:
         local_rows = self.local_rows[self.local_rows < rows]
         lam_pos = lam[pos_rows.tolist()] if pos_rows.size else ca.MX(0, 1)
         if pos_rows.size:
-            a += ca.mtimes(ca.DM(self.C).T, ca.mtimes(ca.diag(lam_pos / L), ca.DM(self.Omega)))
+            a += ca.mtimes(ca.DM(self.C).T * ca.repmat((lam_pos / L).T, 3, 1), ca.DM(self.Omega))  # Σ_r c_r λ_r/L W_r
         dx0 = -sigma * L * gravity * p[lay["weight_total"]]
         if F is not None:
             dx0 -= sigma * L * ca.sum2(F)
@@ -400,8 +400,11 @@ class AssembledKKT:
         g_loc, j_loc, grad_loc, hess_loc, moments, direct = self.local_function(local_rows)(z, p, lam_local)
         grad += grad_loc
         # ∇²L = Eᵀ diag(∇²φ_k) E + ∇²Λ (+ Dᵀ diag(λ ∇²ψ) D for rows nonlinear in the positions)
-        blocks = ca.sparsity_cast(hess_k, ca.diagcat(*[ca.Sparsity.dense(d, d)] * M))
-        hess = ca.mtimes(E.T, ca.mtimes(blocks, E)) + hess_loc
+        if d == 1:  # diag(h) E is E with row k scaled by h_k: no matrix product
+            weighted_E = E * ca.repmat(hess_k.T, 1, n)
+        else:
+            weighted_E = ca.mtimes(ca.sparsity_cast(hess_k, ca.diagcat(*[ca.Sparsity.dense(d, d)] * M)), E)
+        hess = ca.mtimes(E.T, weighted_E) + hess_loc
 
         parts = []  # (rows, g, ∂g/∂z)
         if pos_rows.size:

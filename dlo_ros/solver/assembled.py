@@ -1,4 +1,5 @@
-"""The contact-free KKT function of a director model, assembled from per-quadrature-node derivatives.
+"""The KKT functions of a director model, assembled from per-quadrature-node derivatives (the planar and
+Euler-angle models reuse this with their own per-node parts: ``assembled_euler.py``).
 
 ``StringNLP.kkt_free_fn`` differentiates one flattened expression of the whole Lagrangian: its C is
 straight-line code (a dense Hessian expanded at every quadrature node) that gcc needs minutes for.  This

@@ -8,10 +8,10 @@ For ``default_cable`` with each fixed model, every function a solve evaluates �
 function of a warm update (``kkt_free``: Newton matrix and residual), the KKT function over every row
 (``kkt``) and the inequality rows' values (``obstacle_g``) — built two ways, side by side:
 
-* assembled: what the package builds for director (3D) models (``solver/assembled.py``: a loop over
-  quadrature nodes plus sparse products);
-* flattened: CasADi SX AD of the whole NLP expression (what the package built before, and still builds
-  for the planar model, whose "assembled" column is therefore the same function).
+* assembled: what the package builds (``solver/assembled.py`` for director models,
+  ``solver/assembled_euler.py`` for the planar and Euler-angle models: a loop over quadrature nodes plus
+  sparse products);
+* flattened: CasADi SX AD of the whole NLP expression (what the package built before).
 
 For each: CasADi instructions, size of the generated C, time to generate it and to compile it with gcc
 -O1 (as ``solver/compiled.py`` does), and the time per call interpreted (``InterpretedFunction``) and
@@ -102,12 +102,12 @@ def measure(model: str, order: int, flattened_up_to: int) -> list[dict]:
             "obstacle_g": [state.z, state.p]}
     built = {"kkt_free": nlp.kkt_free_fn, "kkt": nlp.kkt_fn, "obstacle_g": nlp.obstacle_g_fn}
     rows = []
-    flat = flattened(nlp) if nlp.director and order <= flattened_up_to else {}
+    flat = flattened(nlp) if order <= flattened_up_to else {}
     for name, fn in built.items():
         if fn is None:
             continue
-        for how, f in (("assembled" if nlp.director else "flattened (planar)", fn), ("flattened", flat.get(name))):
-            if how == "flattened" and (not nlp.director or f is None):
+        for how, f in (("assembled", fn), ("flattened", flat.get(name))):
+            if f is None:
                 continue
             rows.append({"model": f"{model} {order}", "unknowns": state.z.size, "function": name, "how": how,
                          **cost(f, args[name])})
@@ -159,8 +159,8 @@ def main() -> None:
         "",
         "`default_cable`, every function a solve evaluates, at the solved equilibrium: `kkt_free` (the Newton "
         "matrix and residual of a contact-free warm update), `kkt` (every row), `obstacle_g` (the inequality "
-        "rows' values). *assembled*: what the package builds for 3D models (`solver/assembled.py`); "
-        "*flattened*: SX AD of the whole NLP, what it built before (and still builds for the planar model). "
+        "rows' values). *assembled*: what the package builds (`solver/assembled.py`, `solver/assembled_euler.py`); "
+        "*flattened*: SX AD of the whole NLP, what it built before. "
         "gcc -O1 as `solver/compiled.py` runs it; times per call: mean of 200 calls; |compiled − interpreted| "
         "is the largest difference of any output.",
         "",

@@ -1,4 +1,5 @@
-"""The contact-free KKT function of a director model, assembled from per-quadrature-node derivatives.
+"""The KKT functions of a director model, assembled from per-quadrature-node derivatives (the planar and
+Euler-angle models reuse this with their own per-node parts: ``assembled_euler.py``).
 
 ``StringNLP.kkt_free_fn`` differentiates one flattened expression of the whole Lagrangian: its C is
 straight-line code (a dense Hessian expanded at every quadrature node) that gcc needs minutes for.  This
@@ -39,7 +40,11 @@ def _sparse(matrix: np.ndarray) -> ca.DM:
 
 
 class AssembledKKT:
-    """Builds ``kkt_free`` (see the module docstring) for a ``StringNLP`` whose model is a DirectorModel."""
+    """Builds the KKT functions (see the module docstring) for a ``StringNLP`` whose model is a DirectorModel.
+
+    The model-specific parts are ``_node_map``, ``_node_coefficients``, ``node_function``,
+    ``tangent_function`` and ``_direct_terms``; ``assembled_euler.AssembledEulerKKT`` overrides them for
+    the Euler-angle models (planar and 3D)."""
 
     def __init__(self, nlp) -> None:
         model = nlp.model
@@ -87,7 +92,7 @@ class AssembledKKT:
                 row_target[nlp.params[f"grip:{g.name}:position"]] = axis
             elif kind[0] == "relative":
                 rel = P.relative_positions[kind[1]]
-                axis = np.eye(3)[kind[2]]
+                axis = (nlp.r0[:, :2].T if nlp.planar else np.eye(3))[kind[2]]  # as StringNLP's rows
                 C.append(axis)
                 W = model.position_matrix(np.array([rel.s_a, rel.s_b]))
                 Om.append(W[1] - W[0])
@@ -110,6 +115,11 @@ class AssembledKKT:
         self.loads_W = model.position_matrix(np.array([ld.s for ld in P.loads])) if P.loads else np.zeros((0, self.M))
 
     # ---- the per-node function ---------------------------------------------------------------------
+    def _node_coefficients(self, p, a):
+        """c_k (a column per node) of ``node_function`` from the parameters and a_k (3 × M)."""
+        lay, weights = self.nlp.params, ca.DM(self.model.mesh.weights).T
+        return ca.vertcat(weights * p[lay["Rf"]].T, weights * p[lay["Rt"]].T, weights * p[lay["Re"]].T, a)
+
     @functools.cached_property
     def node_function(self) -> ca.Function:
         """(u_k, c_k) → [bend_k, twist_k, stretch_k, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]; c_k = (w Rf, w Rt, w Re, a_k)."""
@@ -132,21 +142,30 @@ class AssembledKKT:
         return ca.Function("dlo_node_density", [u, c],
                            [bend, twist, stretch, t, grad, ca.densify(hess), ca.densify(ca.jacobian(t, u))])
 
-    def local_function(self, rows: np.ndarray) -> ca.Function:
-        """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_moments]: the node-local ``rows`` (unit
-        norm, grip orientation, folds) and the point moments' pseudo-potential Σ W_M (Λ = λ·g_local − σ Σ W_M)."""
-        nlp, model, P = self.nlp, self.model, self.nlp.problem
-        z, p = nlp.z_sym, nlp.p_sym
-        g_local = nlp.g_sym[rows.tolist()] if rows.size else ca.SX(0, 1)
+    def _direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """(W_M, U_direct): the point moments' work (here their pseudo-potentials Σ W_M at their nodes)
+        and the (bend, twist, stretch) energy parts computed directly from z rather than per node
+        (none for a director model: structurally zero)."""
+        nlp, model = self.nlp, self.model
         moments = ca.SX(0)
-        for i, ld in enumerate(P.loads):
+        for i, ld in enumerate(nlp.problem.loads):
             moments += model.moment_work_sym(z, model.mesh.node_index(ld.s), p[nlp.params[f"load:{i}:moment"]],
                                              p[nlp.params[f"load:{i}:reference"]])
+        return moments, ca.SX(3, 1)
+
+    def local_function(self, rows: np.ndarray) -> ca.Function:
+        """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local ``rows``
+        (unit norm, grip orientation, folds; an Euler-angle model's angle rows) and ``_direct_terms``:
+        Λ = λ·g_local − σ W_M + σ Σ U_direct."""
+        nlp = self.nlp
+        z, p = nlp.z_sym, nlp.p_sym
+        g_local = nlp.g_sym[rows.tolist()] if rows.size else ca.SX(0, 1)
+        moments, direct = self._direct_terms(z, p)
         lam = ca.SX.sym("lam_local", g_local.shape[0])
-        lagrangian = ca.dot(lam, g_local) - nlp.sigma * moments
+        lagrangian = ca.dot(lam, g_local) - nlp.sigma * moments + nlp.sigma * ca.sum1(direct)
         hess, grad = ca.hessian(lagrangian, z)
         return ca.Function("dlo_local_rows", [z, p, lam],
-                           [g_local, ca.jacobian(g_local, z), grad, hess, moments])
+                           [g_local, ca.jacobian(g_local, z), grad, hess, moments, direct])
 
     # ---- the nonlinear position rows: obstacles and self-contact slots ------------------------------
     @functools.cached_property
@@ -298,10 +317,10 @@ class AssembledKKT:
         L, d, n = self.nlp.length, self.d, self.n
         X = ca.mtimes(T, ca.DM(self.Omega).T)  # 3 × rows: Σ_k W_rk T_k
         g = (ca.DM(self.kappa) * ca.mtimes(ca.DM(self.C), x0) + ca.sum1(ca.DM(self.C).T * X).T
-             - ca.mtimes(ca.DM(self.target), p)) / L
+             - ca.mtimes(_sparse(self.target), p)) / L
         omega_rep = np.repeat(self.Omega, d, axis=1)  # W_rk at column j + d k
         jac = ca.mtimes(ca.mtimes(ca.DM(self.C), jt) * ca.DM(omega_rep), E) / L
-        return g, jac + ca.DM(_x0_columns(self.C * self.kappa[:, None], n))
+        return g, jac + _sparse(_x0_columns(self.C * self.kappa[:, None], n))
 
     @staticmethod
     def _in_row_order(parts, rows: int):
@@ -349,7 +368,6 @@ class AssembledKKT:
         E = _sparse(self.E)
         u = ca.reshape(ca.mtimes(E, z), d, M)
         x0 = z[0:3] * L
-        weights = ca.DM(self.model.mesh.weights).T
         gravity, m = p[lay["gravity"]], p[lay["weight_moments"]]
         # a_k: the terms linear in the positions
         a = -sigma * ca.mtimes(gravity, m.T)
@@ -361,7 +379,7 @@ class AssembledKKT:
         local_rows = self.local_rows[self.local_rows < rows]
         lam_pos = lam[pos_rows.tolist()] if pos_rows.size else ca.MX(0, 1)
         if pos_rows.size:
-            a += ca.mtimes(ca.DM(self.C).T, ca.mtimes(ca.diag(lam_pos / L), ca.DM(self.Omega)))
+            a += ca.mtimes(ca.DM(self.C).T * ca.repmat((lam_pos / L).T, 3, 1), ca.DM(self.Omega))  # Σ_r c_r λ_r/L W_r
         dx0 = -sigma * L * gravity * p[lay["weight_total"]]
         if F is not None:
             dx0 -= sigma * L * ca.sum2(F)
@@ -374,17 +392,20 @@ class AssembledKKT:
             nonlinear = self._nonlinear_rows(z, p, lam, T0)
             a += nonlinear[2]
             dx0 += nonlinear[3]
-        coef = ca.vertcat(weights * p[lay["Rf"]].T, weights * p[lay["Rt"]].T, weights * p[lay["Re"]].T, a)
-        bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function.map(M, "serial")(u, coef)
+        bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function.map(M, "serial")(
+            u, self._node_coefficients(p, a))
 
         # ∇L: per-node part, the x0 part, the node-local part
         grad = ca.mtimes(E.T, ca.vec(grad_k)) + ca.vertcat(dx0, ca.MX(n - 3, 1))
         lam_local = lam[local_rows.tolist()] if local_rows.size else ca.MX(0, 1)
-        g_loc, j_loc, grad_loc, hess_loc, moments = self.local_function(local_rows)(z, p, lam_local)
+        g_loc, j_loc, grad_loc, hess_loc, moments, direct = self.local_function(local_rows)(z, p, lam_local)
         grad += grad_loc
         # ∇²L = Eᵀ diag(∇²φ_k) E + ∇²Λ (+ Dᵀ diag(λ ∇²ψ) D for rows nonlinear in the positions)
-        blocks = ca.sparsity_cast(hess_k, ca.diagcat(*[ca.Sparsity.dense(d, d)] * M))
-        hess = ca.mtimes(E.T, ca.mtimes(blocks, E)) + hess_loc
+        if d == 1:  # diag(h) E is E with row k scaled by h_k: no matrix product
+            weighted_E = E * ca.repmat(hess_k.T, 1, n)
+        else:
+            weighted_E = ca.mtimes(ca.sparsity_cast(hess_k, ca.diagcat(*[ca.Sparsity.dense(d, d)] * M)), E)
+        hess = ca.mtimes(E.T, weighted_E) + hess_loc
 
         parts = []  # (rows, g, ∂g/∂z)
         if pos_rows.size:
@@ -403,7 +424,8 @@ class AssembledKKT:
         g, jac = self._in_row_order(parts, rows)
 
         grad_f = grad - ca.mtimes(jac.T, lam)
-        bend, twist, stretch = ca.sum2(bend_k), ca.sum2(twist_k), ca.sum2(stretch_k)
+        bend, twist, stretch = (ca.sum2(e) + direct[i] if direct.sparsity().has_nz(i, 0) else ca.sum2(e)
+                                for i, e in enumerate((bend_k, twist_k, stretch_k)))
         grav = -ca.dot(gravity, x0 * p[lay["weight_total"]] + ca.mtimes(T, m))
         work = moments
         for i, force in enumerate(forces):

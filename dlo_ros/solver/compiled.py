@@ -137,11 +137,12 @@ _SOURCE_DIGEST: bytes | None = None
 
 
 def _source_digest() -> bytes:
-    """Hash of the dlo_ros sources that build NLPs (model/, solver/nlp.py, assembled.py, options.py)."""
+    """Hash of the dlo_ros sources that build NLPs (model/, solver/nlp.py, assembled*.py, options.py)."""
     global _SOURCE_DIGEST
     if _SOURCE_DIGEST is None:
         root = Path(__file__).resolve().parent.parent
-        files = sorted((root / "model").glob("*.py")) + [root / "solver" / n for n in ("nlp.py", "assembled.py", "options.py")]
+        files = sorted((root / "model").glob("*.py")) + [
+            root / "solver" / n for n in ("nlp.py", "assembled.py", "assembled_euler.py", "options.py")]
         h = hashlib.sha256()
         for f in files:
             h.update(f.name.encode() + f.read_bytes())

@@ -18,8 +18,9 @@ before every inequality row (the director model's fold rows, then the obstacle r
 self-contact slots: slot k's parameters are q_k = (W(s_a) − W(s_b))/√(2D), so that T q_k is x(s_a) − x(s_b)
 scaled (T the quadrature-node tangents), and b_k = D/2 when the slot holds a pair, −L when it is empty).  Besides the full KKT function (``kkt_fn``) there is ``kkt_free_fn``, for
 Newton updates while no obstacle row is active: the Newton matrix and residual of the other rows (all
-equalities) without the obstacle rows' Jacobian, Hessian or values (with a table in reach, half of a
-planar model's KKT instructions and a third of a 3D one's go to those).
+equalities) without the obstacle rows' Jacobian, Hessian or values.  Both are assembled from
+per-quadrature-node derivatives (``assembled.py`` for the director model, ``assembled_euler.py`` for the
+planar and Euler-angle models), not differentiated from the flattened expressions here.
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from ..model.problem import Problem
 from ..model.ritz import RitzModel
 from ..model.rotations import farthest_pole, frame_with_pole, pole_angle_deg, quat_to_matrix, reference_frame
 from .assembled import AssembledKKT
+from .assembled_euler import AssembledEulerKKT
 from .options import SolverOptions
 
 
@@ -355,31 +357,24 @@ class StringNLP:
         self.z_sym, self.p_sym, self.g_sym = z, p, g
 
         self.energy_fn = ca.Function("energy", [z, p], [bend, twist, stretch, grav, work])
-        lam = ca.SX.sym("lam", g.shape[0])
         # Inequality rows come last.  Without them the KKT function is what a Newton update needs while no
-        # obstacle row is active: most of the KKT work is x(s_j) at the obstacle samples, differentiated
-        # twice.  Each Hessian is built once (building them is most of an NLP's build time).
+        # obstacle row is active: most of the KKT work is x(s_j) at the obstacle samples.
         inequalities = np.flatnonzero(self.lbg != self.ubg)
         self.n_free_rows = nf = int(inequalities[0]) if inequalities.size else g.shape[0]
         # the rows before the obstacle rows are equalities with bound 0 (grips, relative positions)
         assert np.all(self.lbg[:nf] == 0.0) and np.all(self.ubg[:nf] == 0.0)
         # the inequality rows' values: once per update (the convergence check), not per Newton step
         self.obstacle_g_fn = None
-        if self.director:
-            # assembled from per-quadrature-node derivatives (solver/assembled.py): compact code (seconds
-            # of gcc instead of minutes), a faster interpreted call, and no flattened Hessian to build
-            assembled = AssembledKKT(self)
-            self.kkt_free_fn = assembled.kkt_free()
-            self.kkt_fn = assembled.kkt()
-            if nf < g.shape[0]:
-                self.obstacle_g_fn = assembled.inequality_g()
-            zm, pm, lm = ca.MX.sym("z", z.shape[0]), ca.MX.sym("p", lay.size), ca.MX.sym("lam", g.shape[0])
-            self.hessian_fn = ca.Function("lagrangian_hessian", [zm, pm, lm], [self.kkt_fn(zm, pm, lm)[3]])
-            self.jac_g_fn = assembled.jacobian()
-        else:
-            if nf < g.shape[0]:
-                self.obstacle_g_fn = ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g[nf:])])
-            self._flattened_kkt(objective, g, z, p, lam, nf, ca.densify(ca.vertcat(bend, twist, stretch, grav, work)))
+        # assembled from per-quadrature-node derivatives (solver/assembled.py, assembled_euler.py): compact
+        # code (seconds of gcc instead of minutes), a faster interpreted call, and no flattened Hessian to build
+        assembled = AssembledKKT(self) if self.director else AssembledEulerKKT(self)
+        self.kkt_free_fn = assembled.kkt_free()
+        self.kkt_fn = assembled.kkt()
+        if nf < g.shape[0]:
+            self.obstacle_g_fn = assembled.inequality_g()
+        zm, pm, lm = ca.MX.sym("z", z.shape[0]), ca.MX.sym("p", lay.size), ca.MX.sym("lam", g.shape[0])
+        self.hessian_fn = ca.Function("lagrangian_hessian", [zm, pm, lm], [self.kkt_fn(zm, pm, lm)[3]])
+        self.jac_g_fn = assembled.jacobian()
         self.newton_fn = self.newton_function()
         self.g_fn = ca.Function("g", [z, p], [g])
         # ∂h/∂x of each obstacle type, evaluated only where a contact is active (for contact forces)
@@ -398,32 +393,6 @@ class StringNLP:
         # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale)
         self._target_jacobian = np.asarray(ca.Function("dg_dp", [z, p], [ca.jacobian(g, p)])(np.zeros(z.shape[0]), np.zeros(lay.size)))
         self._target_jacobian[:, ~grip_only] = 0.0
-
-    def _flattened_kkt(self, objective: ca.SX, g: ca.SX, z: ca.SX, p: ca.SX, lam: ca.SX, nf: int,
-                       energies: ca.SX) -> None:
-        """``kkt_free_fn``, ``kkt_fn``, ``hessian_fn`` and ``jac_g_fn`` by differentiating the whole
-        flattened Lagrangian (the Euler-angle models; small enough for it)."""
-        grad_f = ca.densify(ca.gradient(objective, z))
-        # ∇²L is built on its own, not as hess_free + ∇²(λ_obs·g_obs): that sum has more instructions
-        hess = ca.hessian(objective + ca.dot(lam, g), z)[0]
-        jac_free = ca.jacobian(g[:nf], z)
-        lam_free = ca.SX.sym("lam_free", nf)
-        if nf == g.shape[0]:
-            hess_free = ca.substitute(hess, lam, lam_free)
-        else:
-            hess_free = ca.hessian(objective + ca.dot(lam_free, g[:nf]), z)[0]
-        # The Newton system of the free rows itself: K = [∇²L J_freeᵀ; J_free 0] and
-        # r = [∇f + J_freeᵀ λ_free; g_free], so that a contact-free Newton step is one call and one solve
-        kkt_matrix = ca.blockcat([[hess_free, jac_free.T], [jac_free, ca.SX(nf, nf)]])
-        residual = ca.vertcat(grad_f + ca.mtimes(jac_free.T, lam_free), g[:nf])
-        self.kkt_free_fn = ca.Function("dlo_kkt_free", [z, p, lam_free],
-                                       [ca.densify(kkt_matrix), ca.densify(residual), grad_f, energies])
-        jac = ca.vertcat(jac_free, ca.jacobian(g[nf:], z)) if nf < g.shape[0] else jac_free
-        self.hessian_fn = ca.Function("lagrangian_hessian", [z, p, lam], [hess])
-        self.jac_g_fn = ca.Function("constraint_jacobian", [z, p], [jac])
-        # everything one Newton step on the KKT conditions needs, in one call (compiled to C later)
-        self.kkt_fn = ca.Function("dlo_kkt", [z, p, lam],
-                                  [grad_f, ca.densify(g), ca.densify(jac), ca.densify(hess), energies])
 
     def _director_grip_rows(self, z: ca.SX, p: ca.SX, grip, add, first: int) -> list[int]:
         """Orientation rows of a grip on a director model: t·R_g e_y = t·R_g e_z = 0 (clamp, tangent) and

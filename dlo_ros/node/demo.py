@@ -123,16 +123,21 @@ def _model_summary(values: dict) -> str:
     return text
 
 
-def model_settled(values: dict) -> bool:
-    """auto's checks describe the current model, and it meets the tolerance or is the richest order (a
-    fixed model: always)."""
+def model_settled(values: dict, held: int = 0) -> bool:
+    """auto's checks describe the final shape — a solve of the last target: at most ``held`` updates ago
+    (``held`` the solves of the last target since the manoeuvre's end) — and its model meets the tolerance
+    or is the richest order (a fixed model: always)."""
     from ..solver.auto import ORDERS
 
     if str(values.get("model.auto")).lower() != "true":
         return True
     checked = str(values.get("model.checked")).lower() == "true"
+    try:
+        age = int(values.get("model.checked_updates_ago"))
+    except (TypeError, ValueError):
+        return False
     met = str(values.get("model.tolerance_met")).lower() == "true"
-    return checked and (met or str(values.get("model.order")) == str(ORDERS[-1]))
+    return checked and age <= held and (met or str(values.get("model.order")) == str(ORDERS[-1]))
 
 
 def _settle(client, values: dict, timeout: float):
@@ -155,7 +160,7 @@ def _settle(client, values: dict, timeout: float):
         diag = client.wait_for_diagnostics(lambda v, st: int(v.get("targets received") or 0) >= expected, 2.0)
         if diag:
             values = diag[0]
-            if model_settled(values):
+            if model_settled(values, held):
                 break
         time.sleep(0.2)
     return values, final, time.monotonic() - t0, held
@@ -173,9 +178,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
                          "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "
                          "own setting)")
-    ap.add_argument("--settle", type=float, default=60.0, metavar="S",
+    ap.add_argument("--settle", type=float, default=120.0, metavar="S",
                     help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final shape "
-                         "are done and meet the tolerance, at most S seconds (default 60; 0: do not wait)")
+                         "are done and meet the tolerance, at most S seconds (default 120; 0: do not wait)")
     ap.add_argument("--startup-timeout", type=float, default=60.0,
                     help="seconds to wait for the node's first centreline (default 60)")
     ap.add_argument("--log", metavar="FILE", help="keep the node's output in FILE")
@@ -275,7 +280,7 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
               + (f" ({unverified} published unverified: equilibrium residual over the tolerance)" if unverified else ""))
         print(f"  model                   {_model_summary(values)}")
         if settled is not None:
-            done = model_settled(values)
+            done = model_settled(values, held)
             print(f"  settling                {'checked' if done else f'NOT checked within {args.settle:g} s'}: held the "
                   f"last target {settle_s:.1f} s ({held} more solves) for auto's checks of the final shape (model above)")
         print(f"  recording               {rrd if rrd is not None else 'off'}"

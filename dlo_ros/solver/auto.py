@@ -191,6 +191,7 @@ class _Snapshot:
     generation: int = 0
     residual_m: float = 0.0  # the strong-form equilibrium residual of the checked result (solver/residual.py)
     touching: bool = False  # the checked result presses on an obstacle
+    update: int = 0  # AutoShapeSolver's streamed-update count when it was taken
 
 
 @dataclass
@@ -245,6 +246,8 @@ class AutoShapeSolver:
         self._job: Future | None = None
         self._since_check = 0
         self._unchecked = True
+        self._updates = 0  # streamed updates solved so far
+        self._checked_update = 0  # the update whose shape the last kept check described
         self._lower_tried: set[tuple] = set()  # model keys already tried as a lower order
         self._generation = 0  # bumped by every switch, reset and scene change: older verdicts are stale
         self._full_key: tuple = ()  # pool key of the 3D model a planar stream switches to (kept built)
@@ -534,6 +537,7 @@ class AutoShapeSolver:
                     return self._finish(result, t0, notes)
             self.problem = problem
             self._since_check += 1
+            self._updates += 1
             if check_now:
                 self._wait_for_check()
                 self._job = None
@@ -605,7 +609,7 @@ class AutoShapeSolver:
                          problem, poses, result.points.copy(),
                          max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
                          self._generation, float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)),
-                         touches_obstacle(result))
+                         touches_obstacle(result), self._updates)
 
     def _keep(self, verdict: _Verdict) -> None:
         self.choice.estimated_error_m = verdict.estimate
@@ -614,6 +618,7 @@ class AutoShapeSolver:
             self.choice.sampling_error_m = verdict.sampling_error
         self._unchecked = False
         self._since_check = 0
+        self._checked_update = verdict.snapshot.update
 
     def _apply_check(self, notes: list[str]) -> None:
         """Apply a finished background check (streaming thread)."""
@@ -804,7 +809,8 @@ class AutoShapeSolver:
         centreline when the order is raised; at the highest order, the estimate that led there) plus the
         deepest cut into an obstacle between its samples, None until the first check has finished.  It
         does not include the a-priori bounds of the dropped gravity (≤ δ/10) and stretch (≤ δ/2).  In
-        background mode it describes a solve up to recheck_every updates earlier."""
+        background mode it describes a solve up to recheck_every updates earlier: checked_updates_ago
+        says how many (0: this very shape)."""
         streaming = choice is None
         c, s = (self.choice, self.inner) if streaming else (choice, solver)
         checked = streaming and not self._unchecked
@@ -815,6 +821,7 @@ class AutoShapeSolver:
             obstacles=len(c.obstacles), obstacle_samples=c.samples, estimated_error_m=est,
             tolerance_m=self.tolerance, tolerance_met=None if est is None else bool(est <= self.tolerance),
             variables=s.model.layout.size, auto=True, checked=checked, checks=self.checks,
+            checked_updates_ago=self._updates - self._checked_update if checked else None,
             reasons=tuple(c.reasons), changes=tuple(r for _, r in self.changes),
             rotation=inner.rotation, elements=inner.elements, breakpoints=inner.breakpoints,
             self_contact_pairs=inner.self_contact_pairs,

@@ -8,8 +8,9 @@ diagnostics, the recording's ``model/<key>`` series and ``data/result`` JSON; ke
   (unknowns), rotation ('planar', 'euler', 'quaternion' or 'tangent'), and for the director models
   elements and breakpoints [m] (the element layout); self_contact_pairs (the capacity of the
   self-contact pair list, solver/self_contact.py; only when self-contact is modelled);
-* ``solver.model: auto`` adds obstacle_samples, tolerance_m [m], tolerance_met, auto, checked, checks
-  ('sync' or 'background'), reasons (why this model), changes (every change so far) and changed (the
+* ``solver.model: auto`` adds obstacle_samples, tolerance_m [m], tolerance_met, auto, checked,
+  checked_updates_ago (how many streamed updates before this one the shape the estimate describes was
+  solved: 0 when it is this very shape; background checks lag), checks ('sync' or 'background'), reasons (why this model), changes (every change so far) and changed (the
   changes made during the solve that returned it).
 """
 from __future__ import annotations
@@ -40,6 +41,7 @@ class ModelSummary:
     tolerance_m: float | None = None
     tolerance_met: bool | None = None
     checked: bool | None = None
+    checked_updates_ago: int | None = None
     checks: str | None = None
     reasons: tuple[str, ...] = ()
     changes: tuple[str, ...] = ()
@@ -52,7 +54,8 @@ class ModelSummary:
         if self.auto:
             out.update(obstacle_samples=self.obstacle_samples, estimated_error_m=self.estimated_error_m,
                        tolerance_m=self.tolerance_m, tolerance_met=self.tolerance_met, variables=self.variables,
-                       auto=True, checked=self.checked, checks=self.checks, reasons=list(self.reasons),
+                       auto=True, checked=self.checked, checked_updates_ago=self.checked_updates_ago,
+                       checks=self.checks, reasons=list(self.reasons),
                        changes=list(self.changes))
         else:
             out.update(estimated_error_m=self.estimated_error_m, variables=self.variables)

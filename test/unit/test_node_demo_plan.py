@@ -26,13 +26,19 @@ def test_demo_scene(tmp_path):
     assert scene.problem.obstacles[-1].name == "post"
 
 
-def test_settled_means_checked_and_met_or_the_richest_order():
+def test_settled_means_the_final_shape_checked_and_met_or_the_richest_order():
     from dlo_ros.node.demo import model_settled
     from dlo_ros.solver.auto import ORDERS
 
-    auto = {"model.auto": "True", "model.checked": "True", "model.tolerance_met": "True", "model.order": "16"}
+    auto = {"model.auto": "True", "model.checked": "True", "model.tolerance_met": "True", "model.order": "16",
+            "model.checked_updates_ago": "0"}
     assert model_settled(auto)
     assert not model_settled({**auto, "model.checked": "False"})  # the estimate describes an earlier model
+    # a check of a shape 3 updates before the final one: settled only after 3 solves of the last target
+    assert not model_settled({**auto, "model.checked_updates_ago": "3"})
+    assert not model_settled({**auto, "model.checked_updates_ago": "3"}, held=2)
+    assert model_settled({**auto, "model.checked_updates_ago": "3"}, held=3)
+    assert not model_settled({**auto, "model.checked_updates_ago": "None"}, held=5)
     assert not model_settled({**auto, "model.tolerance_met": "False"})  # a richer order is coming
     assert model_settled({**auto, "model.tolerance_met": "False", "model.order": str(ORDERS[-1])})  # nothing richer
     assert model_settled({"model.auto": "False", "model.order": "16"})  # a fixed model has nothing to settle

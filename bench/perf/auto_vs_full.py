@@ -229,7 +229,7 @@ def main() -> None:
         f"{'compiled (gcc -O1)' if args.compile else 'interpreted CasADi'}; targets streamed at 50 Hz; "
         f"auto with background checks (as the node runs it). Run {time.strftime('%Y-%m-%d %H:%M')}.",
         f"Times per update in ms: median / p99 / max. Error: max centreline deviation at the last target from a "
-        "full order-32 solve with {MAX_SAMPLES} obstacle samples at the last target, warm-started from that method's answer (same branch; an "
+        f"full order-32 solve with {MAX_SAMPLES} obstacle samples at the last target, warm-started from that method's answer (same branch; an "
         "Euler-angle model's with its pole turned away from the shape); the tolerance is 1 mm.", "",
         "| stream | auto's final model | unknowns auto / full 16 / full same order | auto | full 16 | full, same order | "
         "full 16 / auto (median) | same order / auto (median) | error auto / full 16 / same order [m] | auto estimate [m] |",

@@ -36,7 +36,7 @@ def resident_mb() -> float | None:
 RATE_WINDOW_S = 2.0
 #: ShapeResult.model.as_dict() entries shown in the diagnostics as ``model.<key>`` (in this order).
 MODEL_KEYS = ("auto", "planar", "twist", "stretch", "gravity", "order", "obstacles", "obstacle_samples", "variables",
-              "estimated_error_m", "tolerance_m", "tolerance_met", "checked", "checked_updates_ago")
+              "estimated_error_m", "tolerance_m", "tolerance_met", "checked", "checked_updates_ago", "rotation")
 
 
 def model_text(model: Mapping | None) -> str:

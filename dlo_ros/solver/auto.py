@@ -682,7 +682,7 @@ class AutoShapeSolver:
         if verdict.choice is None:
             i = ORDERS.index(choice.order)
             if i + 1 < len(ORDERS):
-                error = self._shadow_error(snap, ORDERS[i + 1])
+                error = self._shadow_error(snap, replace(choice, order=ORDERS[i + 1]))
                 if np.isfinite(error):  # a shadow that failed to solve is inconclusive: the next check retries
                     order_error = error
                 # the equilibrium residual is an error estimate of its own: the larger of the two counts
@@ -700,15 +700,15 @@ class AutoShapeSolver:
                 # the lowest order that meets the tolerance: try the next lower one once per model
                 # (tol/4, not tol/2: a margin against switching back and forth)
                 self._lower_tried.add(lower_key)
-                error = self._shadow_error(snap, ORDERS[i - 1])
-                if error <= tol / 4:  # (inf when the lower order failed to solve: stay)
+                error = self._shadow_error(snap, replace(choice, order=ORDERS[i - 1]))
+                if error <= tol / 4:  # (nan when the lower order failed to solve: stay)
                     verdict.choice = replace(choice, order=ORDERS[i - 1], estimated_error_m=error, order_error_m=error,
                                              reasons=list(choice.reasons))
                     verdict.reason = f"order {ORDERS[i - 1]} error estimate {error:.3g} m ≤ {tol / 4:.3g} m: order {ORDERS[i - 1]}"
         depth, name = self._penetration(snap)  # (0, '') without obstacles
         finer = replace(choice, samples=min(2 * choice.samples - 1, MAX_SAMPLES), estimated_error_m=float("nan"),
                         order_error_m=order_error, reasons=list(choice.reasons))
-        change = self._samples_shadow_error(snap, finer) if snap.touching and choice.samples < MAX_SAMPLES else np.nan
+        change = self._shadow_error(snap, finer) if snap.touching and choice.samples < MAX_SAMPLES else np.nan
         verdict.sampling_error = (choice.sampling_error_m if snap.touching else np.nan) if choice.samples >= MAX_SAMPLES \
             else 2.0 * change
         sampling = max(depth, np.nan_to_num(verdict.sampling_error, nan=0.0))
@@ -772,26 +772,16 @@ class AutoShapeSolver:
         depth, name = max(depths)
         return max(depth, 0.0), name
 
-    def _samples_shadow_error(self, snap: _Snapshot, finer: ModelChoice) -> float:
-        """max |x_n(s) − x_2n−1(s)| over the output points between the checked shape and the same model
-        with the finer obstacle samples of ``finer``, solved from the checked shape (nan when that solve
-        fails: inconclusive, the next check retries).  The finer model is pooled: it is the one an
-        escalation switches to."""
-        shadow = self._solver_for(finer, snap.problem, stream=False, source=snap.inner, state=snap.state)
+    def _shadow_error(self, snap: _Snapshot, choice: ModelChoice) -> float:
+        """max |x(s) − x'(s)| over the output points between the checked shape and the model ``choice``
+        (the next or the previous order, or 2n − 1 obstacle samples) solved from the checked shape (same
+        branch): the a-posteriori estimate of the coarser of the two; nan when that solve fails
+        (inconclusive: the next check retries).  The shadow is pooled: it is the model an escalation
+        switches to."""
+        shadow = self._solver_for(choice, snap.problem, stream=False, source=snap.inner, state=snap.state)
         result = shadow.solve(snap.poses)
         if not result.ok:
             return float("nan")
-        return float(np.max(np.linalg.norm(result.points - snap.points, axis=1)))
-
-    def _shadow_error(self, snap: _Snapshot, order: int) -> float:
-        """max |x_n(s) − x_m(s)| over the output points between the checked shape (order n) and the same
-        model at order m, solved from the checked shape (same branch): the a-posteriori estimate of
-        the lower of the two orders."""
-        shadow = self._solver_for(replace(snap.choice, order=order), snap.problem, stream=False, source=snap.inner,
-                                  state=snap.state)
-        result = shadow.solve(snap.poses)
-        if not result.ok:
-            return float("inf")
         return float(np.max(np.linalg.norm(result.points - snap.points, axis=1)))
 
     def _planar_3d_eigenvalue(self, snap: _Snapshot) -> float | None:

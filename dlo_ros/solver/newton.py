@@ -11,11 +11,11 @@ KKT conditions of the whole problem hold when every inactive row is within its b
 inequality's λ ≥ 0.  If not, the active set changes by one row, as in an active-set method: the most
 violated contact row (obstacle or self-contact, ``StringNLP.contact_row``; a violated fold guard is no
 equilibrium and gives up) joins A or, if none is violated, the active inequality with the most negative
-λ leaves it;
-Newton goes on from that point — at most ``NEWTON_ACTIVE_SET_CHANGES`` times (a grip move of 1 % of L
-shifts the sampled contact of a cable lying on a table by a sample or two).  A step larger than 0.5 in
-any scaled unknown, no convergence in ``max_steps`` for one active set, an active set seen before (a
-cycle) or too many changes gives up: the caller then falls back to IPOPT.  Newton lands on the stationary point nearest the start, so the caller still
+λ leaves it; Newton goes on from that point, at most ``NEWTON_ACTIVE_SET_CHANGES`` times (a grip move
+of 1 % of L shifts the sampled contact of a cable lying on a table by a sample or two).  A step larger
+than 0.5 in any scaled unknown, no convergence in ``max_steps`` for one active set, an active set seen
+before (a cycle) or too many changes gives up: the caller then falls back to IPOPT.  Newton lands on
+the stationary point nearest the start, so the caller still
 checks its stability.  Every function returns (ok, state, steps, constraint violation [m or rad]).
 """
 from __future__ import annotations
@@ -25,8 +25,8 @@ from scipy.linalg.lapack import dgesv as _gesv
 
 from .functions import NlpFunctions
 from .native_newton import CONVERGED
-from .nlp import (NEWTON_ACTIVE_SET_CHANGES, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION,
-                  NEWTON_STEPS, StringNLP)
+from .nlp import (NEWTON_ACTIVE_SET_CHANGES, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE,
+                  NEWTON_REGULARISATION, NEWTON_STEPS, StringNLP)
 from .state import SolverState
 
 

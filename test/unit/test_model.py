@@ -198,3 +198,20 @@ def test_frame_to_quat_inverts_quat_to_frame_for_every_branch():
     np.testing.assert_allclose(quat_to_frame(back), frames, atol=1e-14)
     np.testing.assert_allclose(np.abs(np.sum(back * q, axis=1)), 1.0, atol=1e-14)
     assert frame_to_quat(frames[0]).shape == (4,)
+
+
+def test_slerp_turns_a_fraction_of_the_shortest_rotation():
+    """slerp(q0, q1, t) against the closed form: about a fixed axis, q(θ) = (sin(θ/2) a, cos(θ/2)), so the
+    fraction t of the turn from θ0 to θ1 is q(θ0 + t (θ1 − θ0)); q1 given as −q1 (the same rotation) takes
+    the same, shorter arc."""
+    from dlo_ros.model.rotations import slerp
+
+    axis = np.array([1.0, 2.0, 2.0]) / 3.0
+
+    def q(theta):
+        return np.concatenate([np.sin(theta / 2) * axis, [np.cos(theta / 2)]])
+
+    for t in (0.0, 0.25, 0.5, 1.0):
+        assert np.allclose(slerp(q(0.3), q(2.1), t), q(0.3 + t * 1.8), atol=1e-12)
+        assert np.allclose(slerp(q(0.3), -q(2.1), t), q(0.3 + t * 1.8), atol=1e-12)
+    assert np.allclose(slerp(q(0.5), q(0.5), 0.7), q(0.5), atol=1e-12)

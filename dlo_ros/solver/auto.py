@@ -724,8 +724,10 @@ class AutoShapeSolver:
                               f"the shape moves by {change:.3g} m when the obstacle samples go from {choice.samples} "
                               f"to {finer.samples} (sampling error about {sampling:.3g} m > {tol / 2:.3g} m): "
                               f"{finer.samples} samples")
-            # built and warm-started here (worker thread in the node), so the switch builds nothing
-            self._solver_for(verdict.choice, problem, stream=False, source=snap.inner, state=snap.state)
+            # built and warm-started here (worker thread in the node), so the switch builds nothing; the
+            # samples shadow, when it ran, already did both (the same pooled model)
+            if not np.isfinite(change):
+                self._solver_for(verdict.choice, problem, stream=False, source=snap.inner, state=snap.state)
         # prepare only a pooled model: never build one here, the stream may be switching to it
         target = self._pooled(verdict.choice) if verdict.choice is not None and prepare else None
         if target is not None:

@@ -41,6 +41,7 @@ import numpy as np
 
 from .centreline import positions_sym, weight_energy_sym
 from .elements import ElementMesh
+from .rotations import cross3
 
 
 #: weight of the gauge term ½ c Rf ((ln|v|)')² relative to the bend energy: large enough to forbid a fold
@@ -262,7 +263,7 @@ class DirectorModel:
         v, dv = b @ self.node_values(z), db @ self.node_values(z)
         qv, w, dqv, dw = v[:, :3], v[:, 3:], dv[:, :3], dv[:, 3:]
         n2 = np.sum(v * v, axis=1)[:, None]
-        return 2 * (w * dqv - dw * qv - np.cross(qv, dqv)) / n2
+        return 2 * (w * dqv - dw * qv - cross3(qv, dqv)) / n2
 
     def world_curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
         """World-frame Darboux vector: R Ω (frame model) or t̂ × t̂' (tangent model, no twist), (len(s), 3)."""
@@ -274,7 +275,7 @@ class DirectorModel:
         n = np.linalg.norm(v, axis=1)[:, None]
         t = v / n
         dt = (dv - np.sum(t * dv, axis=1)[:, None] * t) / n
-        return np.cross(t, dt)
+        return cross3(t, dt)
 
     # ---- CasADi ----------------------------------------------------------------------------------
     def material_sizes(self) -> dict[str, int]:
@@ -387,14 +388,14 @@ def transported_frames(t: np.ndarray, k0: int, hint: np.ndarray) -> np.ndarray:
             d1s[k] = _transport(d1s[prev], t[prev], t[k])
             d1s[k] /= np.linalg.norm(d1s[k])
             prev = k
-    return np.stack([t, d1s, np.cross(t, d1s)], axis=-1)
+    return np.stack([t, d1s, cross3(t, d1s)], axis=-1)
 
 
 def _transport(d1: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
     """d1 carried from tangent t0 to t1 by the smallest rotation taking t0 to t1."""
     c = float(np.dot(t0, t1))
-    axis = np.cross(t0, t1)
+    axis = cross3(t0, t1)
     if c < -0.999999:
         return d1
     # Rodrigues with k = axis/|axis|, |axis| = sin a: R v = v c + (axis × v) + axis (axis·v) / (1 + c)
-    return d1 * c + np.cross(axis, d1) + axis * np.dot(axis, d1) / (1.0 + c)
+    return d1 * c + cross3(axis, d1) + axis * np.dot(axis, d1) / (1.0 + c)

@@ -20,6 +20,14 @@ import numpy as np
 TANGENT_X = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b over the last axis (3) with broadcasting: ``np.cross`` without its axis bookkeeping, which
+    costs more than the arithmetic at the sizes here."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def rot_z(a: np.ndarray) -> np.ndarray:
     """Rotation matrices about z by angles a (…) → (…, 3, 3)."""
     c, s = np.cos(a), np.sin(a)

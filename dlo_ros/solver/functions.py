@@ -7,7 +7,7 @@ One ``NlpFunctions`` per ``StringNLP``:
   r = [∇f + Jᵀλ; g] of the rows other than the obstacle rows (``kkt_free_fn``);
 * ``newton_step(u, p, K, r)`` → the first ``NEWTON_STEPS`` Newton steps in one call (``newton_fn``);
 * ``newton_native``: once the contact-free function is compiled, the whole Newton loop as one compiled
-  call (``native_newton.NativeNewton``; None until then, and for the Euler-angle models);
+  call (``native_newton.NativeNewton``; None until then);
 * ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles).
 
 Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
@@ -67,8 +67,8 @@ class NlpFunctions:
             if fn is None:
                 continue
             lib = library_path(fn)
-            native = native_newton.cached(fn, *self._sizes(), kkt_lib=lib) if name == "kkt_free" and nlp.director else None
-            if lib.exists() and (native is not None or name != "kkt_free" or not nlp.director):
+            native = native_newton.cached(fn, *self._sizes(), kkt_lib=lib) if name == "kkt_free" else None
+            if lib.exists() and (native is not None or name != "kkt_free"):
                 # compiled on an earlier start: load now, no waiting
                 setattr(self, name, NativeFunction(lib, fn))
                 if name == "kkt_free":
@@ -86,7 +86,7 @@ class NlpFunctions:
                 nice = 10 if mode == "background" else 0
                 native, ok = compiled(fn, nice=nice, lib=lib)
                 loop = native_newton.build(fn, *self._sizes(), nice=nice, kkt_lib=lib) if ok and name == "kkt_free" \
-                    and nlp.director else None
+                    else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile
                         return

@@ -148,10 +148,13 @@ class ShapeOutputs:
         for i, rows in enumerate(nlp.obstacle_rows):
             ob = problem.obstacles[i]
             lam = lam_si[rows]
-            force = np.zeros(3)
-            for j in np.flatnonzero(lam > 0):
-                grad = np.asarray(nlp.obstacle_gradient[ob.type](sample_x[j], ob.params)).ravel()
-                force -= lam[j] * grad
-                actions.append(PointAction(float(nlp.obstacle_s[j]), sample_x[j], -lam[j] * grad, np.zeros(3)))
-            contacts[i] = force
+            touch = np.flatnonzero(lam > 0)
+            if not touch.size:
+                contacts[i] = np.zeros(3)
+                continue
+            # one call for every touching sample (CasADi maps a function over the columns)
+            grads = np.asarray(nlp.obstacle_gradient[ob.type](sample_x[touch].T, ob.params)).reshape(3, -1).T
+            forces = -lam[touch, None] * grads
+            contacts[i] = forces.sum(axis=0)
+            actions += [PointAction(float(nlp.obstacle_s[j]), sample_x[j], f, np.zeros(3)) for j, f in zip(touch, forces)]
         return contacts, actions

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.rotations import cross3
+
 RESIDUAL_POINTS = 200
 
 
@@ -67,12 +69,21 @@ def equilibrium_residual(s: np.ndarray, x: np.ndarray, moment_c: np.ndarray, wei
     """
     g = np.asarray(gravity, dtype=float)
     # ∫_0^s (x(σ) − x(s)) × D ĝ dσ = (∫ D x) × ĝ − x(s) × ĝ ∫ D
-    m_bal = -(np.cross(weight_moment, g) - np.cross(x, g) * weight[:, None])
+    m_bal = -(cross3(weight_moment, g) - cross3(x, g) * weight[:, None])
     total = total_weight * g
-    for a in actions:
-        before = s > a.s
-        m_bal[before] -= np.cross(a.position[None, :] - x[before], a.force[None, :]) + a.moment[None, :]
-        total = total + a.force
+    if actions:
+        # Σ_{a: s_a < s} (x_a − x(s)) × F_a + T_a = C(s) − x(s) × F(s), with C and F running sums over the
+        # actions sorted by s (C_a = x_a × F_a + T_a): one pass instead of one masked product per action
+        order = sorted(range(len(actions)), key=lambda k: actions[k].s)
+        s_a = np.array([actions[k].s for k in order])
+        pos = np.array([actions[k].position for k in order], dtype=float)
+        force = np.array([actions[k].force for k in order], dtype=float)
+        moment = np.array([actions[k].moment for k in order], dtype=float)
+        c = np.vstack([np.zeros((1, 3)), np.cumsum(cross3(pos, force) + moment, axis=0)])
+        f = np.vstack([np.zeros((1, 3)), np.cumsum(force, axis=0)])
+        before = np.searchsorted(s_a, s, side="left")  # how many actions lie strictly before each s
+        m_bal -= c[before] - cross3(x, f[before])
+        total = total + f[-1]
     delta = moment_c - m_bal
     d_m = float(np.max(np.linalg.norm(delta, axis=1))) if len(s) else 0.0
     d_f = float(np.linalg.norm(total))
@@ -81,7 +92,7 @@ def equilibrium_residual(s: np.ndarray, x: np.ndarray, moment_c: np.ndarray, wei
     kappa = delta / (rf if rf is not None else np.full(len(s), rf_min))[:, None]
     tangent = np.gradient(x, s, axis=0)
     phi = _cumulative(kappa, s)
-    dx = _cumulative(np.cross(phi, tangent), s)
+    dx = _cumulative(cross3(phi, tangent), s)
     metres = float(np.max(np.linalg.norm(dx, axis=1))) + d_f * length**3 / (3 * rf_min)
     return EquilibriumResidual(d_m, d_f, metres)
 

@@ -20,7 +20,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..model.problem import Grip, Problem, StringProperties
-from ..model.rotations import quat_to_matrix
+from ..model.rotations import cross3, quat_to_matrix
 from .frames import euler_angles_at, node_frame
 from .nlp import StringNLP
 from .residual import EquilibriumResidual, PointAction, equilibrium_residual, evaluation_grid
@@ -75,9 +75,9 @@ def director_torque(t: np.ndarray, d1: np.ndarray | None, target: np.ndarray, la
     frame ``target`` = [a0 a1 a2] (columns).  Bilinear in ((t, d1), λ), so its derivative is
     ``director_torque(dt, dd1, target, λ) + director_torque(t, d1, target, dλ)`` (``sensitivity.py``)."""
     a1, a2 = target[:, 1], target[:, 2]
-    torque = -(lam[0] * np.cross(t, a1) + lam[1] * np.cross(t, a2))
+    torque = -(lam[0] * cross3(t, a1) + lam[1] * cross3(t, a2))
     if len(lam) == 3:
-        torque -= lam[2] * np.cross(d1, a2)
+        torque -= lam[2] * cross3(d1, a2)
     return torque
 
 
@@ -125,7 +125,12 @@ def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.nda
     if nlp.director:
         events += list(m.mesh.breakpoints)
     s = evaluation_grid(L, events)
-    x = m.positions(z, s)
+    nodes = m.quad.nodes
+    point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads])
+    # one evaluation of the shape for the grid, the quadrature nodes and the point actions
+    s_all = np.concatenate([s, nodes, point_s])
+    x_all = m.positions(z, s_all)
+    x, x_nodes, point_x = np.split(x_all, [len(s), len(s) + len(nodes)])
     rf = st.bend_stiffness(s)
     if nlp.director and m.layout.frame:
         frames = m.pose_frames(z, s)
@@ -135,12 +140,8 @@ def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.nda
         moment_c = rf[:, None] * m.world_curvature(z, s)
     else:
         moment_c = euler_moments(nlp, frames_of, L, z, s, rf, st.twist_stiffness(s))
-    nodes = m.quad.nodes
     d_nodes = st.weight_per_length(nodes)
-    w = m.position_matrix(s)
-    x_nodes = m.positions(z, nodes)
-    point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads])
-    point_x = m.positions(z, point_s) if point_s.size else np.zeros((0, 3))
+    w = m.position_matrix(s_all)[:len(s)]  # remembered by positions(z, s_all)
     actions = [PointAction(grip_s[name], point_x[k], wr.force, wr.torque) for k, (name, wr) in enumerate(grips.items())]
     for k, ld in enumerate(problem.loads):
         moment = np.asarray(ld.moment, dtype=float)

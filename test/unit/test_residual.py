@@ -1,0 +1,49 @@
+"""The equilibrium residual's balance moment against its definition evaluated point by point.
+
+m_bal(s) = −Σ_{a: s_a < s} [(x_a − x(s)) × F_a + T_a] − ∫_0^s (x(σ) − x(s)) × D ĝ dσ (solver/residual.py),
+written here as a plain double loop over grid points and actions, on random data.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dlo_ros.model.rotations import cross3
+from dlo_ros.solver.residual import PointAction, equilibrium_residual
+
+
+def _direct_delta(s, x, moment_c, weight, weight_moment, actions, g):
+    delta = np.zeros_like(moment_c)
+    for k in range(len(s)):
+        m_bal = -(np.cross(weight_moment[k], g) - np.cross(x[k], g) * weight[k])
+        for a in actions:
+            if a.s < s[k]:
+                m_bal -= np.cross(a.position - x[k], a.force) + a.moment
+        delta[k] = moment_c[k] - m_bal
+    return delta
+
+
+@pytest.mark.parametrize("n_actions", [0, 1, 7])
+def test_balance_moment_matches_its_definition(n_actions):
+    rng = np.random.default_rng(n_actions)
+    s = np.sort(rng.uniform(0.0, 1.0, 60))
+    x, moment_c, weight_moment = (rng.normal(size=(60, 3)) for _ in range(3))
+    weight = np.cumsum(rng.uniform(size=60))
+    g = np.array([0.0, 0.0, -1.0])
+    # actions in random order of s, one of them exactly on a grid point (not before it)
+    s_a = list(rng.uniform(0.0, 1.0, n_actions))
+    if n_actions:
+        s_a[-1] = s[30]
+    actions = [PointAction(float(sa), rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)) for sa in s_a]
+    delta = _direct_delta(s, x, moment_c, weight, weight_moment, actions, g)
+    r = equilibrium_residual(s, x, moment_c, weight, weight_moment, actions, g, 2.0, 1.0, 1.0)
+    assert r.moment == pytest.approx(np.max(np.linalg.norm(delta, axis=1)), rel=1e-12)
+    total = 2.0 * g + sum((a.force for a in actions), np.zeros(3))
+    assert r.force == pytest.approx(np.linalg.norm(total), rel=1e-12)
+
+
+def test_cross3_is_the_cross_product_with_broadcasting():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(5, 3)), rng.normal(size=3)
+    assert np.allclose(cross3(a, b), np.cross(a, b), rtol=0, atol=1e-15)
+    assert np.allclose(cross3(b, a), np.cross(b, a), rtol=0, atol=1e-15)

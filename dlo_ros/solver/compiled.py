@@ -182,10 +182,11 @@ def _generate(fn: ca.Function, tmp: str) -> bytes:
     return Path(tmp, f"{fn.name()}.c").read_bytes()
 
 
-def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
-             lib: Path | None = None) -> tuple[NativeFunction | InterpretedFunction, bool]:
+def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0, lib: Path | None = None,
+             extra_source: str = "") -> tuple[NativeFunction | InterpretedFunction, bool]:
     """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
-    ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``).
+    ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``);
+    ``extra_source``: C appended to ``fn``'s (then ``lib`` must be a path keyed by it too).
 
     -O1: higher levels compile longer for little gain on this code (bench/results/compile_cost.md).
     ShapeSolver runs it niced in the background; the cache makes it once per scene structure and machine.
@@ -197,7 +198,7 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
     lib = lib or library_path(fn, flags)
     if not lib.exists():
         with COMPILER_LOCK:  # one compiler at a time in this process
-            return _compile_locked(fn, cc, flags, nice, lib, name)
+            return _compile_locked(fn, cc, flags, nice, lib, name, extra_source)
     return NativeFunction(lib, fn), True
 
 
@@ -223,8 +224,8 @@ def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = 
 
 
 def _compile_locked(fn: ca.Function, cc: str, flags: tuple[str, ...], nice: int, lib: Path,
-                    name: str) -> tuple[NativeFunction | InterpretedFunction, bool]:
+                    name: str, extra_source: str = "") -> tuple[NativeFunction | InterpretedFunction, bool]:
     # another thread may have built it while this one waited
-    if not lib.exists() and not build_library(fn, lib, cc, flags, nice):
+    if not lib.exists() and not build_library(fn, lib, cc, flags, nice, extra_source):
         return InterpretedFunction(fn), False
     return NativeFunction(lib, fn), True

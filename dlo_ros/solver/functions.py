@@ -8,6 +8,8 @@ One ``NlpFunctions`` per ``StringNLP``:
 * ``newton_step(u, p, K, r)`` → the first ``NEWTON_STEPS`` Newton steps in one call (``newton_fn``);
 * ``newton_native``: once the contact-free function is compiled, the whole Newton loop as one compiled
   call (``native_newton.NativeNewton``; None until then);
+* ``newton_active``: once the full KKT function is compiled, Newton's steps with a fixed active set as
+  one compiled call (``native_newton.ActiveNewton``, in the KKT function's own library; None until then);
 * ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles).
 
 Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
@@ -45,6 +47,7 @@ class NlpFunctions:
         self.newton_step = InterpretedFunction(nlp.newton_fn)
         self.obstacle_g = InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
         self.newton_native = None
+        self.newton_active = None
         self.compiled = False        # every function runs compiled C
         self.compile_time_s = 0.0    # wall time of the compile that finished them [s]
         self.retired = False         # the solver was rebuilt: a running compile stops at its next swap
@@ -66,7 +69,8 @@ class NlpFunctions:
         for name, fn in (("kkt_free", nlp.kkt_free_fn), ("obstacle_g", nlp.obstacle_g_fn), ("kkt", nlp.kkt_fn)):
             if fn is None:
                 continue
-            lib = library_path(fn)
+            # the full KKT function's library also holds its active-set Newton loop
+            lib = native_newton.active_library_path(fn) if name == "kkt" else library_path(fn)
             native = native_newton.cached(fn, *self._sizes(), kkt_lib=lib) if name == "kkt_free" else None
             if lib.exists() and (native is not None or name != "kkt_free"):
                 # compiled on an earlier start: load now, no waiting
@@ -74,6 +78,8 @@ class NlpFunctions:
                 if name == "kkt_free":
                     self.newton_step = self._compiled_newton_step(fn, lib)
                     self.newton_native = native
+                if name == "kkt":
+                    self.newton_active = self._active_loop(lib)
             else:
                 todo.append((name, fn, lib))
         self.compiled = not todo
@@ -84,7 +90,8 @@ class NlpFunctions:
             t0 = time.perf_counter()
             for name, fn, lib in todo:
                 nice = 10 if mode == "background" else 0
-                native, ok = compiled(fn, nice=nice, lib=lib)
+                native, ok = compiled(fn, nice=nice, lib=lib,
+                                      extra_source=native_newton.active_source(fn) if name == "kkt" else "")
                 loop = native_newton.build(fn, *self._sizes(), nice=nice, kkt_lib=lib) if ok and name == "kkt_free" \
                     else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
@@ -94,6 +101,8 @@ class NlpFunctions:
                     if name == "kkt_free":
                         self.newton_step = self._compiled_newton_step(fn, lib)
                         self.newton_native = loop
+                    if name == "kkt":
+                        self.newton_active = self._active_loop(lib)
             with (threading.Lock() if locked else lock):
                 if not self.retired:
                     self.compiled = True
@@ -109,6 +118,13 @@ class NlpFunctions:
     def _sizes(self) -> tuple[int, int, int]:
         nlp = self.nlp
         return nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0]
+
+    def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
+        """The active-set Newton loop in the full KKT function's library (None if it cannot be loaded)."""
+        try:
+            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size))
+        except (OSError, AttributeError):
+            return None
 
     def _compiled_newton_step(self, fn: ca.Function, lib) -> InterpretedFunction:
         """``newton_fn`` calling the compiled contact-free library (``casadi.external``); the current one

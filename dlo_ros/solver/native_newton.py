@@ -186,3 +186,156 @@ def cached(fn: ca.Function, n: int, nf: int, n_p: int, kkt_lib: Path | None = No
 def _compile(fn: ca.Function, cc: str, lib: Path, nice: int) -> bool:
     driver = DRIVER.replace("FUNCTION_work", f"{fn.name()}_work").replace("FUNCTION(", f"{fn.name()}(")
     return build_library(fn, lib, cc, nice=nice, extra_source=driver)
+
+
+#: Newton with a fixed active set on the full KKT function (``StringNLP.kkt_fn``), appended to its
+#: generated code.  See ``ActiveNewton``.
+ACTIVE_DRIVER = r"""
+#include <math.h>
+#include <stdlib.h>
+
+typedef void (*dlo_dgesv_active_t)(int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb, int *info);
+
+/* Newton on [H J_A^T; J_A 0] for the rows idx (held at bound); see dlo_ros/solver/native_newton.py.
+   z (n), lam (rows): in at the start, out at the last iterate.  grad, g, jac (rows x n, column-major),
+   hess (n x n), energies: out at the last evaluation; with given = 1 they are in as well, the first
+   step's derivatives (not an evaluation: convergence needs one). */
+CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, int rows, int m, const int *idx,
+    int max_steps, int given, double max_step, double reg, double tol_dual, double tol_prim, double *z,
+    const double *p, double *lam, const double *bound, double *grad, double *g, double *jac, double *hess,
+    double *energies, int *steps) {
+  int N = n + m, one = 1, info = 0, code = 1;
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  FUNCTION_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
+  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 5 ? sz_res : 5));
+  casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
+  casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
+  double *A = malloc(sizeof(double) * N * N), *rhs = malloc(sizeof(double) * N);
+  int *ipiv = malloc(sizeof(int) * N);
+  *steps = 0;
+  for (int it = 0; ; ++it) {
+    int evaluated = !(it == 0 && given);
+    if (evaluated) {
+      arg[0] = z; arg[1] = p; arg[2] = lam;
+      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+      if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; *steps = it; break; }
+    }
+    int converged = 1;
+    for (int j = 0; j < n; ++j) {
+      double v = grad[j];
+      for (int k = 0; k < m; ++k) v += lam[idx[k]] * jac[idx[k] + (size_t)j * rows];
+      rhs[j] = -v;
+      if (!(fabs(v) < tol_dual)) converged = 0;
+    }
+    for (int k = 0; k < m; ++k) {
+      double v = g[idx[k]] - bound[k];
+      rhs[n + k] = -v;
+      if (!(fabs(v) < tol_prim)) converged = 0;
+    }
+    if (converged && evaluated) { code = 0; *steps = it; break; }
+    if (it == max_steps) { code = 1; *steps = it; break; }
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) A[i + (size_t)j * N] = hess[i + (size_t)j * n];
+    for (int k = 0; k < m; ++k) {
+      for (int j = 0; j < n; ++j) {
+        double a = jac[idx[k] + (size_t)j * rows];
+        A[(n + k) + (size_t)j * N] = a;
+        A[j + (size_t)(n + k) * N] = a;
+      }
+      for (int l = 0; l < m; ++l) A[(n + k) + (size_t)(n + l) * N] = 0.0;
+    }
+    double kmax = 1.0;
+    for (int i = 0; i < N * N; ++i) if (fabs(A[i]) > kmax) kmax = fabs(A[i]);
+    double delta = reg * kmax;
+    for (int i = 0; i < N; ++i) A[i * N + i] += (i < n ? delta : -delta);
+    dgesv(&N, &one, A, &N, ipiv, rhs, &N, &info);
+    if (info != 0) { code = 2; *steps = it; break; }
+    double big = 0.0;
+    int finite = 1;
+    for (int i = 0; i < N; ++i) {
+      if (!isfinite(rhs[i])) finite = 0;
+      if (i < n && fabs(rhs[i]) > big) big = fabs(rhs[i]);
+    }
+    if (!finite || big > max_step) { code = 3; *steps = it; break; }
+    for (int j = 0; j < n; ++j) z[j] += rhs[j];
+    for (int k = 0; k < m; ++k) lam[idx[k]] += rhs[n + k];
+  }
+  free(arg); free(res); free(iw); free(w); free(A); free(rhs); free(ipiv);
+  return code;
+}
+"""
+
+
+def active_source(fn: ca.Function) -> str:
+    """The active-set driver's C, bound to the generated function ``fn`` (``StringNLP.kkt_fn``)."""
+    return ACTIVE_DRIVER.replace("FUNCTION_work", f"{fn.name()}_work").replace("FUNCTION(", f"{fn.name()}(")
+
+
+def active_library_path(fn: ca.Function) -> Path:
+    """Where ``fn``'s library with the active-set driver appended is (or will be) cached."""
+    digest = hashlib.sha256(ACTIVE_DRIVER.encode()).hexdigest()[:8]
+    return cache_dir() / f"{fn.name()}_{fingerprint(fn)}_active_{digest}.so"
+
+
+@dataclass
+class ActiveOutcome:
+    """What one ``ActiveNewton`` call returns: ``code`` (CONVERGED, …), the last iterate (z, λ over every
+    row), the derivatives [∇f, g, ∂g/∂z, ∇²L, energies] evaluated there, and the steps taken."""
+
+    code: int
+    z: np.ndarray
+    lam: np.ndarray
+    gradient: np.ndarray
+    g: np.ndarray
+    jacobian: np.ndarray
+    hessian: np.ndarray
+    energies: np.ndarray
+    steps: int
+
+
+class ActiveNewton:
+    """Newton steps with a fixed active set in one compiled call: the inner loop of
+    ``newton._newton_active`` (the same regularised steps, convergence test, step limit and step count),
+    in C around the compiled full KKT function, whose library it shares.  The active-set changes stay in
+    Python.  Not re-entrant per instance: callers serialise calls (ShapeSolver holds a lock)."""
+
+    def __init__(self, lib_path: Path, n: int, rows: int):
+        self._lib = ctypes.CDLL(str(lib_path))
+        self._run = self._lib.dlo_newton_active_run
+        dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+        self._run.restype = ctypes.c_int
+        self._run.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int, ip, ctypes.c_int,
+                              ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
+                              dp, dp, dp, dp, dp, dp, dp, dp, dp, ip]
+        self._dgesv = _dgesv_pointer()
+        self.n, self.rows = n, rows
+
+    def __call__(self, z: np.ndarray, lam: np.ndarray, p: np.ndarray, idx: np.ndarray, bound: np.ndarray,
+                 max_steps: int, first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+                 ) -> ActiveOutcome:
+        """From (z, λ) with the rows ``idx`` held at ``bound``; ``first``: (∇f, g, ∂g/∂z, ∇²L) for the
+        first step instead of an evaluation."""
+        n, rows = self.n, self.rows
+        z = np.array(z, dtype=float, copy=True)
+        lam = np.array(lam, dtype=float, copy=True)
+        p = np.ascontiguousarray(p, dtype=float)
+        idx_c = np.ascontiguousarray(idx, dtype=np.intc)
+        bound = np.ascontiguousarray(bound, dtype=float)
+        grad, g = np.zeros(n), np.zeros(rows)
+        jac, hess, energies = np.zeros(rows * n), np.zeros(n * n), np.full(5, np.nan)
+        if first is not None:
+            grad[:] = np.ravel(first[0])
+            g[:] = np.ravel(first[1])
+            jac[:] = np.asarray(first[2], dtype=float).ravel(order="F")
+            hess[:] = np.asarray(first[3], dtype=float).ravel(order="F")
+        steps = ctypes.c_int(0)
+        dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+        code = self._run(self._dgesv, n, rows, idx_c.size, idx_c.ctypes.data_as(ip), int(max_steps),
+                         int(first is not None), NEWTON_MAX_STEP, NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE,
+                         NEWTON_PRIMAL_TOLERANCE, z.ctypes.data_as(dp), p.ctypes.data_as(dp), lam.ctypes.data_as(dp),
+                         bound.ctypes.data_as(dp), grad.ctypes.data_as(dp), g.ctypes.data_as(dp),
+                         jac.ctypes.data_as(dp), hess.ctypes.data_as(dp), energies.ctypes.data_as(dp),
+                         ctypes.byref(steps))
+        return ActiveOutcome(int(code), z, lam, grad, g, jac.reshape(rows, n, order="F"),
+                             hess.reshape(n, n, order="F"), energies, steps.value)

@@ -79,10 +79,12 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
         z, lam, reuse = contact.z, contact.lam_g, False
         active = active.copy()
         active[np.argmax(violated)] = True
+    # the compiled loop only for the compiled KKT function it was built with
+    native = fns.newton_active if kkt_fn is None and fused else None
     kkt_fn = kkt_fn or fns.kkt
     seen = {active.tobytes()}
     for _ in range(NEWTON_ACTIVE_SET_CHANGES + 1):
-        ok, state, it, changed = _newton_active(nlp, kkt_fn, start, z, lam, p, active, max_steps, reuse)
+        ok, state, it, changed = _newton_active(nlp, kkt_fn, start, z, lam, p, active, max_steps, reuse, native)
         steps += it
         if ok:
             return True, state, steps, violation(nlp, state.g)
@@ -94,50 +96,70 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
 
 
 def _newton_active(nlp: StringNLP, kkt_fn, start: SolverState, z: np.ndarray, lam: np.ndarray, p: np.ndarray,
-                   active: np.ndarray, max_steps: int,
-                   reuse: bool) -> tuple[bool, SolverState | None, int, np.ndarray | None]:
+                   active: np.ndarray, max_steps: int, reuse: bool,
+                   native=None) -> tuple[bool, SolverState | None, int, np.ndarray | None]:
     """Newton steps from (z, λ) with the rows ``active`` held at their bound.  Returns (ok, state, steps,
     the next active set): ok with the KKT point when it satisfies every row and sign; else, when Newton
     converged but the active set is wrong, that point and the corrected set (violated rows in, negative
     multipliers out); else (False, None, steps, None).  ``reuse``: (z, λ) is the start's own point and
-    only grip targets changed since, so its stored derivatives give the first step."""
+    only grip targets changed since, so its stored derivatives give the first step.  ``native``: the
+    compiled loop of ``kkt_fn`` (``native_newton.ActiveNewton``), or None for the numpy loop."""
     equality = nlp.equality
     z, lam = z.copy(), np.where(active, lam, 0.0)
     idx = np.flatnonzero(active)
     bound = nlp.ubg[idx]
-    n, m = z.size, idx.size
-    kkt, rhs = np.zeros((n + m, n + m)), np.empty(n + m)
     # Only grip targets changed → they enter g linearly (row = (x − target)/scale), so ∇f, J and H
     # stored at the start stay exact and g shifts by a known amount: the first step needs no evaluation.
     keep = ~nlp.grip_parameter_mask
     reuse = reuse and np.array_equal(start.p[keep], p[keep])
+    first = (start.gradient, start.g + nlp.target_shift(start.p, p), start.jacobian, start.hessian) if reuse else None
+    if native is not None:  # the loop of _active_steps in one compiled call (native_newton.ActiveNewton)
+        out = native(z, lam, p, idx, bound, max_steps, first)
+        if out.code != CONVERGED:
+            return False, None, out.steps, None
+        z, lam, it = out.z, out.lam, out.steps
+        grad, g, jac, hess, energies = out.gradient, out.g, out.jacobian, out.hessian, out.energies
+    else:
+        found = _active_steps(kkt_fn, z, lam, p, idx, bound, max_steps, first)
+        if found[0] is None:
+            return False, None, found[-1], None
+        z, lam, grad, g, jac, hess, energies, it = found
+    state = SolverState(z, lam, start.lam_x, p, hessian=hess, jacobian=jac, energies=energies.ravel(), g=g,
+                        gradient=grad)
+    excess = np.where(~active, g - nlp.ubg, 0.0)
+    negative = np.where(active & ~equality, lam, 0.0)
+    changed = active.copy()
+    if np.any(excess[~nlp.contact_row] > 1e-9):  # a fold guard: no equilibrium, IPOPT takes over
+        return False, None, it, None
+    if excess.max(initial=0.0) > 1e-9:  # the most violated row joins (one change at a time:
+        changed[np.argmax(excess)] = True  # several at once over-constrain the sampled contact)
+    elif negative.min(initial=0.0) < -1e-12:  # else the most negative multiplier leaves
+        changed[np.argmin(negative)] = False
+    else:
+        return True, state, it, None
+    return False, state, it, changed
+
+
+def _active_steps(kkt_fn, z: np.ndarray, lam: np.ndarray, p: np.ndarray, idx: np.ndarray, bound: np.ndarray,
+                  max_steps: int, first: tuple | None) -> tuple:
+    """Newton steps on [∇²L J_Aᵀ; J_A 0] for the rows ``idx`` held at ``bound``, from (z, λ) (changed in
+    place), until the residual converges at an evaluated point: (z, λ, ∇f, g, ∂g/∂z, ∇²L, energies, steps)
+    there, or (None, steps) on no convergence, a singular matrix or too large a step.  ``first``:
+    (∇f, g, ∂g/∂z, ∇²L) for the first step instead of an evaluation."""
+    n, m = z.size, idx.size
+    kkt, rhs = np.zeros((n + m, n + m)), np.empty(n + m)
     for it in range(max_steps + 1):
-        if it == 0 and reuse:
-            grad, jac, hess, energies = start.gradient, start.jacobian, start.hessian, None
-            g = start.g + nlp.target_shift(start.p, p)
+        if it == 0 and first is not None:
+            (grad, g, jac, hess), energies = first, None
         else:
             grad, g, jac, hess, energies = kkt_fn(z, p, lam)
             grad, g = grad.ravel(), g.ravel()
         ja = jac[idx]
         r_dual = grad + lam[idx] @ ja
         r_prim = g[idx] - bound
-        converged = np.abs(r_dual).max(initial=0.0) < NEWTON_DUAL_TOLERANCE and \
-            np.abs(r_prim).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE
-        if converged and energies is not None:
-            state = SolverState(z, lam, start.lam_x, p, hessian=hess, jacobian=jac, energies=energies.ravel(), g=g,
-                                gradient=grad)
-            excess = np.where(~active, g - nlp.ubg, 0.0)
-            negative = np.where(active & ~equality, lam, 0.0)
-            changed = active.copy()
-            if np.any(excess[~nlp.contact_row] > 1e-9):  # a fold guard: no equilibrium, IPOPT takes over
-                return False, None, it, None
-            if excess.max(initial=0.0) > 1e-9:  # the most violated row joins (one change at a time:
-                changed[np.argmax(excess)] = True  # several at once over-constrain the sampled contact)
-            elif negative.min(initial=0.0) < -1e-12:  # else the most negative multiplier leaves
-                changed[np.argmin(negative)] = False
-            else:
-                return True, state, it, None
-            return False, state, it, changed
+        if energies is not None and np.abs(r_dual).max(initial=0.0) < NEWTON_DUAL_TOLERANCE and \
+                np.abs(r_prim).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE:
+            return z, lam, grad, g, jac, hess, energies, it
         if it == max_steps:
             break
         kkt[:n, :n] = hess
@@ -148,10 +170,10 @@ def _newton_active(nlp: StringNLP, kkt_fn, start: SolverState, z: np.ndarray, la
         # LAPACK's gesv directly: numpy.linalg.solve's checks cost more than the solve at this size
         _, _, step, info = _gesv(regularised(kkt, n), rhs)
         if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
-            return False, None, it, None
+            return None, it
         z += step[:n]
         lam[idx] += step[n:]
-    return False, None, max_steps, None
+    return None, max_steps
 
 
 def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray, max_steps: int,
@@ -240,3 +262,78 @@ def all_rows(nlp: StringNLP, fns: NlpFunctions, z: np.ndarray, p: np.ndarray, kk
     jac = np.zeros((rows, n))
     jac[:nf] = kkt[n:, :n]
     return g, jac
+
+
+#: Leaving a saddle by shifted Newton steps: the first step's length (largest scaled unknown, as
+#: ``ipopt.escape_saddle``'s first step) and the most shifted steps taken before giving up.
+SADDLE_STEP, SADDLE_STEPS = 0.2, 40
+
+
+def leave_saddle(nlp: StringNLP, fns: NlpFunctions, saddle: SolverState, p: np.ndarray, min_eigenvalue: float,
+                 sign: float = 1.0) -> tuple[bool, SolverState, int, float]:
+    """From an unstable stationary point ``saddle`` (reduced Hessian eigenvalue ``min_eigenvalue`` < 0 along
+    ``saddle.unstable_direction``) downhill to a stationary point nearby, without IPOPT.
+
+    Plain Newton from a point beside the saddle returns to it: Newton finds the stationary point nearest
+    its start, whatever its curvature.  Here the saddle's active rows A are held and the steps solve
+
+        [∇²L + μ I  J_Aᵀ] [Δz]     [∇f + J_Aᵀ λ_A]
+        [J_A        0   ] [Δλ] = − [g_A − g_bound ]
+
+    with μ = 2 |λ_min| at first, so that the reduced Hessian is positive definite and the step goes
+    downhill on the constraint surface (no larger than ``SADDLE_STEP``).  A step that does not lower the
+    merit φ = f + ρ ‖g_A − bound‖₁ (ρ = 2 max|λ| + 1) is undone and μ grows fourfold; an accepted one
+    shrinks μ eightfold, to zero below 1e-8 · max|∇²L|, after which the steps are Newton's.  Once the
+    residual is small (1e-6 dual, 1e-8 primal, scaled) the point reached is polished by ``newton`` (which
+    also adapts the active set).  Returns ``newton``'s
+    (ok, state, steps, violation); the caller checks that the state is stable and lower than the saddle.
+    The first step goes ``sign`` × the unstable direction."""
+    fail = (False, saddle, 0, np.inf)
+    if saddle.unstable_direction is None or not min_eigenvalue < 0:
+        return fail
+    kkt_fn = fns.kkt
+    g0 = saddle.g if saddle.g is not None else np.asarray(nlp.g_fn(saddle.z, saddle.p)).ravel()
+    active = nlp.equality | ((saddle.lam_g > 1e-8) & (g0 > nlp.ubg - 1e-7))
+    idx = np.flatnonzero(active)
+    bound = nlp.ubg[idx]
+    d = saddle.unstable_direction / np.max(np.abs(saddle.unstable_direction))
+    z = saddle.z + sign * SADDLE_STEP * d
+    lam = np.where(active, saddle.lam_g, 0.0)
+    rho = 2.0 * float(np.abs(lam).max(initial=0.0)) + 1.0
+    n, m = z.size, idx.size
+    mu = 2.0 * abs(min_eigenvalue)
+    kkt, rhs = np.zeros((n + m, n + m)), np.empty(n + m)
+    previous: tuple | None = None  # (merit, z, λ) of the last accepted point
+    steps = 0
+    for steps in range(1, SADDLE_STEPS + 1):
+        grad, g, jac, hess, energies = kkt_fn(z, p, lam)
+        grad, g, energies = grad.ravel(), g.ravel(), np.ravel(energies)
+        r_prim = g[idx] - bound
+        merit = nlp.sigma * float(np.sum(energies[:4]) - energies[4]) + rho * float(np.abs(r_prim).sum())
+        if previous is not None and not merit < previous[0]:  # uphill: undo, shift more
+            z, lam, mu = previous[1].copy(), previous[2].copy(), 4.0 * max(mu, 1e-8 * np.abs(hess).max())
+            previous = None
+            continue
+        if previous is not None:
+            mu = mu / 8.0 if mu >= 1e-8 * np.abs(hess).max() else 0.0
+        ja = jac[idx]
+        r_dual = grad + lam[idx] @ ja
+        if np.abs(r_dual).max(initial=0.0) < 1e-6 and np.abs(r_prim).max(initial=0.0) < 1e-8:
+            break  # a stationary point whatever μ was (μ only shapes the steps): newton() polishes it
+        previous = (merit, z.copy(), lam.copy())
+        kkt[:n, :n] = hess + mu * np.eye(n)
+        kkt[:n, n:] = ja.T
+        kkt[n:, :n] = ja
+        kkt[n:, n:] = 0.0
+        rhs[:n] = -r_dual
+        rhs[n:] = -r_prim
+        _, _, step, info = _gesv(regularised(kkt, n), rhs)
+        if info != 0 or not np.isfinite(step).all():
+            return fail
+        scale = min(1.0, SADDLE_STEP / max(float(np.abs(step[:n]).max()), 1e-300))
+        z = z + scale * step[:n]
+        lam = lam.copy()
+        lam[idx] += scale * step[n:]
+    start = SolverState(z, lam, saddle.lam_x, p, g=np.asarray(nlp.g_fn(z, p)).ravel())
+    ok, state, it, viol = newton(nlp, fns, start, p)
+    return ok, state, steps + it, viol

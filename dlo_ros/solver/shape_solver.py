@@ -37,7 +37,7 @@ from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .initial_guess import initial_guess
 from .ipopt import IPOPT_LOCK, SUCCESS, Attempt, IpoptSolvers, call, escape_saddle, witness
 from .moments import ExactMomentKKT
-from .newton import newton
+from .newton import leave_saddle, newton
 from .nlp import StringNLP, has_point_moments
 from .options import SolverOptions
 from .outputs import ShapeOutputs, no_shape
@@ -664,6 +664,10 @@ class ShapeSolver:
                 result = self._result(problem, state, "Newton", iterations, viol, True, 0)
                 if result.stable is not False and result.status != "failed":  # (failed: a flipped branch)
                     return result, state
+                if result.stable is False:
+                    left = self._leave_saddle(problem, result, state, iterations)
+                    if left is not None:
+                        return left
                 ok = False
             ok, state, last_status, it, viol = self._ipopt_call(True, start.z, p1, start)
             iterations += it
@@ -709,6 +713,23 @@ class ShapeSolver:
         # a failed result carries no shape, energy, wrench or eigenvalue that could be mistaken for one
         return no_shape(self.options, self.model_summary(), status, message, iterations=iterations,
                         constraint_violation=viol, warm_started=warm, ipopt_status=last_status), None
+
+    def _leave_saddle(self, problem: Problem, saddle: ShapeResult, state: SolverState,
+                      iterations: int) -> tuple[ShapeResult, SolverState] | None:
+        """A warm Newton update that landed on an unstable equilibrium, continued downhill by shifted Newton
+        steps (``newton.leave_saddle``, either way along the unstable mode): the first stable, verified
+        result of lower energy, or None (then IPOPT and ``_escape_saddle`` take over)."""
+        for sign in (1.0, -1.0):
+            ok, new, it, viol = leave_saddle(self.nlp, self.functions, state, state.p, saddle.min_eigenvalue, sign)
+            iterations += it
+            if not ok:
+                continue
+            result = self._result(problem, new, "Newton", iterations, viol, True, 0)
+            total = saddle.energy["total"]
+            if result.status == "ok" and result.stable and result.energy["total"] < total - 1e-12 * abs(total):
+                result.message += "; left an unstable equilibrium along its negative-curvature mode"
+                return result, new
+        return None
 
     def _escape_saddle(self, problem: Problem, result: ShapeResult,
                        state: SolverState) -> tuple[ShapeResult, SolverState]:

@@ -104,3 +104,68 @@ def test_the_euler_angle_models_stream_with_the_compiled_loop(options, tmp_path,
         np.testing.assert_allclose(a.points, b.points, atol=1e-10)
         assert a.energy["total"] == pytest.approx(b.energy["total"], rel=1e-10)
     assert newton >= 12
+
+
+def lowered(drop: float, rot) -> dict:
+    """Both grips of the default cable lowered by ``drop`` [m] from 0.4 m (0.04 m and more: the sag
+    rests on the table), the right one 5 cm out of the vertical plane: in that plane the cable pressed
+    onto the table is a saddle, and which side it leaves to would be decided by rounding."""
+    return {"left": ((0.0, 0.0, 0.4 - drop), rot), "right": ((0.6, 0.05, 0.4 - drop), rot)}
+
+
+def test_contact_updates_with_the_compiled_active_set_loop_equal_the_numpy_loop(solvers):
+    """The director model lowered onto the table, slid along it and raised: the updates with obstacle rows
+    active run the C loop of ``native_newton.ActiveNewton`` and give the numpy loop's shapes to 1e-10."""
+    scene, native, interpreted = solvers
+    assert native.functions.newton_active is not None and interpreted.functions.newton_active is None
+    calls = []
+    loop = native.functions.newton_active
+    native.functions.newton_active = lambda *a: calls.append(1) or loop(*a)
+    try:
+        rot = scene.problem.grip("right").pose.orientation
+        native.reset(), interpreted.reset()
+        a, b = native.solve(lowered(0.03, rot)), interpreted.solve(lowered(0.03, rot))
+        drops = list(np.arange(0.035, 0.0651, 0.005)) + [0.065] * 6 + list(np.arange(0.06, 0.0299, -0.005))
+        touching = 0
+        for k, drop in enumerate(drops):
+            targets = lowered(float(drop), rot)
+            if k >= 7 and k < 13:  # slide the right grip along x while resting on the table
+                targets["right"] = ((0.6 - 0.01 * (k - 6), 0.05 + 0.01 * (k - 6), 0.4 - drop), rot)
+            a, b = native.solve(targets), interpreted.solve(targets)
+            assert a.status == b.status == "ok" and a.ipopt_status == b.ipopt_status, (drop, a.message)
+            np.testing.assert_allclose(a.points, b.points, atol=1e-10)
+            assert a.energy["total"] == pytest.approx(b.energy["total"], rel=1e-10)
+            force = sum(a.contact_forces.values(), np.zeros(3))
+            touching += bool(np.linalg.norm(force) > 1e-6) and a.ipopt_status == "Newton"
+        assert touching >= 8 and len(calls) >= 8, (touching, len(calls))
+    finally:
+        native.functions.newton_active = loop
+
+
+def test_one_active_call_takes_the_numpy_steps(solvers):
+    """From a state resting on the table, with its active rows held, the C loop's iterate, multipliers
+    and derivatives equal those of newton._active_steps on the interpreted function (to rounding)."""
+    from dlo_ros.solver.newton import _active_steps
+
+    scene, native, interpreted = solvers
+    rot = scene.problem.grip("right").pose.orientation
+    native.reset()
+    assert native.solve(lowered(0.06, rot)).ok
+    state, nlp = native.snapshot(), native.nlp
+    g0 = np.asarray(nlp.g_fn(state.z, state.p)).ravel()
+    active = nlp.equality | ((state.lam_g > 1e-8) & (g0 > nlp.ubg - 1e-7))
+    assert np.any(active[nlp.n_free_rows:])  # obstacle rows are held
+    idx = np.flatnonzero(active)
+    p = native.pack_parameters(scene.problem.with_grip_poses(
+        {"right": GripPose(np.array([0.58, 0.06, 0.34]), rot), "left": GripPose(np.array([0.0, 0.0, 0.34]), rot)}),
+        state.z)
+    lam = np.where(active, state.lam_g, 0.0)
+    out = native.functions.newton_active(state.z, lam, p, idx, nlp.ubg[idx], 10)
+    z, lam_ref, grad, g, jac, hess, energies, steps = _active_steps(
+        lambda *a: [np.asarray(v) for v in nlp.kkt_fn(*a)], state.z.copy(), lam.copy(), p, idx, nlp.ubg[idx], 10, None)
+    assert out.code == 0 and out.steps == steps >= 2
+    np.testing.assert_allclose(out.z, z, atol=1e-12)
+    np.testing.assert_allclose(out.lam, lam_ref, atol=1e-9 * np.abs(lam_ref).max())
+    np.testing.assert_allclose(out.hessian, hess, atol=1e-9 * np.abs(hess).max())
+    np.testing.assert_allclose(out.jacobian, jac, atol=1e-12)
+    np.testing.assert_allclose(out.energies, np.ravel(energies), rtol=1e-12)

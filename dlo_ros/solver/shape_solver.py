@@ -62,7 +62,7 @@ MOMENT_CONTINUATION_SOLVES = 40
 #: the messages of a warm update refused as a jump of the solver (retried in substeps, ``_in_substeps``)
 JUMP_REFUSALS = ("self-contact: the string passed through itself", "self-contact: this shape is not reached",
                  "topology:")
-#: substeps a refused warm update is retried in (each count tried in turn)
+#: substeps a refused warm update, or one Newton cannot take at once, is retried in (each count in turn)
 SUBSTEPS = (2, 4)
 
 
@@ -395,6 +395,21 @@ class ShapeSolver:
     def _newton(self, start: SolverState, p: np.ndarray) -> tuple[bool, SolverState, int, float]:
         return newton(self.nlp, self.functions, start, p, fused=self.fused_newton)
 
+    def _newton_in_substeps(self, start: SolverState, p1: np.ndarray) -> tuple[bool, SolverState, int, float]:
+        """Newton along the straight path from ``start.p`` to ``p1`` in SUBSTEPS equal parts, each
+        warm-started from the last (the continuation IPOPT would do next, at the cost of Newton steps)."""
+        iterations = 0
+        for parts in SUBSTEPS:
+            state, ok = start, True
+            for i in range(1, parts + 1):
+                ok, state, it, viol = self._newton(state, start.p + (p1 - start.p) * (i / parts))
+                iterations += it
+                if not ok:
+                    break
+            if ok:
+                return True, state, iterations, viol
+        return False, start, iterations, np.inf
+
     def _ipopt_call(self, warm: bool, z0: np.ndarray, p: np.ndarray, start: SolverState | None = None) -> Attempt:
         """One IPOPT solve from z0 (warm: with ``start``'s multipliers)."""
         if start is None:
@@ -660,6 +675,9 @@ class ShapeSolver:
             p1 = self.pack_parameters(problem, start.z)
             ok, state, it, viol = self._newton(start, p1)
             iterations += it
+            if not ok:
+                ok, state, it, viol = self._newton_in_substeps(start, p1)
+                iterations += it
             if ok:
                 result = self._result(problem, state, "Newton", iterations, viol, True, 0)
                 if result.stable is not False and result.status != "failed":  # (failed: a flipped branch)

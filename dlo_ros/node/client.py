@@ -2,8 +2,8 @@
 
 * :func:`allocate_domain_id` reserves a ROS_DOMAIN_ID no other process on this machine uses (lock files),
   so several nodes (demos, benchmarks, tests) can run side by side.
-* :class:`NodeProcess` starts ``python -m dlo_ros.node`` as a subprocess in its own process group and
-  always stops it (SIGINT, then SIGTERM, then SIGKILL of the group).
+* :class:`NodeProcess` starts ``python -m dlo_ros.node`` (or another module that stands in for it) as a
+  subprocess in its own process group and always stops it (SIGINT, then SIGTERM, then SIGKILL of the group).
 * :class:`DloClient` is an rclpy node in its own context (its own domain) with a spinning thread:
   it publishes targets, records every centreline with its arrival time, keeps the latest diagnostics
   and wrenches, and calls the services and the parameter service.
@@ -86,10 +86,11 @@ def ros_env(domain_id: int, base: dict | None = None) -> dict:
 
 
 class NodeProcess:
-    """``python -m dlo_ros.node <args>`` in a new process group; output goes to ``log_path``."""
+    """``python -m <module> <args>`` (default module ``dlo_ros.node``) in a new process group; output goes
+    to ``log_path``.  ``env``: the base environment (default this process's) that :func:`ros_env` completes."""
 
     def __init__(self, args: Sequence[str], domain_id: int, *, log_path: str | os.PathLike | None = None,
-                 env: dict | None = None):
+                 env: dict | None = None, module: str = "dlo_ros.node"):
         self.args = list(args)
         self.domain_id = domain_id
         if log_path is None:
@@ -101,7 +102,7 @@ class NodeProcess:
         self.log_path = Path(log_path)
         self._log = open(self.log_path, "wb")
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "dlo_ros.node", *self.args],
+            [sys.executable, "-m", module, *self.args],
             stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT,
             env=ros_env(domain_id, env), start_new_session=True,
         )
@@ -190,17 +191,18 @@ class DloClient:
     """A client of the node ``node_name`` (fully qualified, e.g. '/dlo') in its own rclpy context.
 
     Everything it receives is recorded by its own spinning thread; the methods are safe to call from
-    the caller's thread.  Use as a context manager or call ``close()``.
+    the caller's thread.  Use as a context manager or call ``close()``.  ``executor``: 'single' (rclpy's
+    SingleThreadedExecutor, default) or 'events' (rclpy.experimental.EventsExecutor) spins that thread.
     """
 
     def __init__(self, domain_id: int, *, node_name: str = "/dlo", grip_names: Sequence[str] = ("left", "right"),
-                 frame_id: str = "world", client_name: str = "dlo_client", keep_paths: int = 100_000):
+                 frame_id: str = "world", client_name: str = "dlo_client", keep_paths: int = 100_000,
+                 executor: str = "single"):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
         from nav_msgs.msg import Path as PathMsg
         from nav_msgs.srv import GetPlan
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
         from rcl_interfaces.srv import GetParameters, SetParameters
         from std_srvs.srv import Trigger
@@ -248,7 +250,7 @@ class DloClient:
                       "SetParameters": SetParameters, "GetParameters": GetParameters}
         self._stopping = False
         self._settled: set = set()  # service clients past their first call (see _call)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = make_executor(executor, self.context)
         self.executor.add_node(n)
         self._thread = threading.Thread(target=self._spin, name="dlo-client", daemon=True)
         self._thread.start()
@@ -523,23 +525,39 @@ class DloClient:
         self.close()
 
 
+def make_executor(kind: str, context=None):
+    """A new rclpy executor in ``context`` (default: the default context): 'single' (SingleThreadedExecutor, what
+    the node uses) or 'events' (rclpy.experimental.EventsExecutor)."""
+    if kind == "single":
+        from rclpy.executors import SingleThreadedExecutor
+
+        return SingleThreadedExecutor(context=context)
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    raise ValueError(f"executor {kind!r}: expected 'single' or 'events'")
+
+
 class NodeStartError(RuntimeError):
     """The node published no centreline in time; the message carries its output."""
 
 
 @contextlib.contextmanager
 def running_node(*node_args: str, startup_timeout: float = 60.0, log_path: str | os.PathLike | None = None,
-                 client_name: str = "dlo_test_client", stop_signal: int = signal.SIGINT, **client_kwargs):
+                 client_name: str = "dlo_test_client", stop_signal: int = signal.SIGINT,
+                 module: str = "dlo_ros.node", env: dict | None = None, **client_kwargs):
     """Start the node (own domain), a client, wait for the first centreline; yield (NodeProcess, DloClient).
 
     On exit the client is closed and the node stopped with ``stop_signal`` (then SIGTERM/SIGKILL of its
     process group); ``proc.returncode`` and ``proc.output()`` stay readable afterwards when ``log_path``
-    is given.
+    is given.  ``module`` and ``env`` go to :class:`NodeProcess` (a stand-in for the node, e.g. the
+    benchmark's echo, started the same way).
     """
     lease = allocate_domain_id()
     proc = client = None
     try:
-        proc = NodeProcess(list(node_args), lease.domain_id, log_path=log_path)
+        proc = NodeProcess(list(node_args), lease.domain_id, log_path=log_path, env=env, module=module)
         client = DloClient(lease.domain_id, client_name=client_name, **client_kwargs)
         deadline = time.monotonic() + startup_timeout
         first = None

@@ -251,7 +251,7 @@ def message_costs() -> dict[str, float]:
     from rclpy.serialization import deserialize_message, serialize_message
 
     from bench.perf.echo_node import straight_path
-    from dlo_ros.node.conversions import arrays_to_pose, header, path_cdr, path_to_arrays
+    from dlo_ros.node.conversions import arrays_to_pose, header, path_cdr, path_from_cdr, path_to_arrays
 
     stamp = time.time_ns()
     poses = target(1, 300)
@@ -270,9 +270,11 @@ def message_costs() -> dict[str, float]:
             median_ms(lambda: deserialize_message(target_bytes, PoseArray)),
         f"node: build the Path bytes (`conversions.path_cdr`, {OUTPUT_POINTS} poses, {len(path_bytes)} B)":
             median_ms(lambda: path_cdr(points, orientations, "world", stamp)),
-        "client: deserialise the Path (rclpy does in take)":
+        "client: read the Path's bytes into arrays (`conversions.path_from_cdr`, what `DloClient._on_path` does)":
+            median_ms(lambda: path_from_cdr(path_bytes)),
+        "a client that lets rclpy deserialise the Path instead (`deserialize_message`, as a non-raw subscription does)":
             median_ms(lambda: deserialize_message(path_bytes, PathMsg)),
-        "client: `path_to_arrays` of it (`DloClient._on_path`)": median_ms(lambda: path_to_arrays(path_msg)),
+        "that client, then `path_to_arrays` of the message": median_ms(lambda: path_to_arrays(path_msg)),
     }
 
 

@@ -208,7 +208,7 @@ class DloClient:
         from std_srvs.srv import Trigger
         from visualization_msgs.msg import MarkerArray
 
-        from .conversions import path_to_arrays, time_to_ns, wrench_to_arrays
+        from .conversions import path_from_cdr, path_to_arrays, time_to_ns, wrench_to_arrays
         from .dlo_node import LATCHED_QOS, TARGET_QOS, WRENCH_QOS
 
         self._rclpy = rclpy
@@ -221,6 +221,7 @@ class DloClient:
         self._cond = threading.Condition()
         self.paths: collections.deque[PathEvent] = collections.deque(maxlen=keep_paths)
         self.path_count = 0
+        self.malformed_paths = 0       # centreline messages that were not a readable Path (ignored)
         self.diagnostics = None        # latest DiagnosticStatus '<node>: shape' of the node
         self.other_diagnostics: dict[str, object] = {}  # the node's other statuses by name (e.g. '<node>: fit')
         self.diagnostics_count = 0
@@ -228,13 +229,15 @@ class DloClient:
         self.markers = None
         self.marker_count = 0
         self._path_to_arrays, self._time_to_ns, self._wrench_to_arrays = path_to_arrays, time_to_ns, wrench_to_arrays
+        self._path_from_cdr = path_from_cdr
 
         n = self.node
         base = self.node_name
         self._targets_pub = n.create_publisher(PoseArray, f"{base}/grips/targets", TARGET_QOS)
         self._grip_pubs = {g: n.create_publisher(PoseStamped, f"{base}/grips/{g}/target", TARGET_QOS)
                            for g in self.grip_names}
-        n.create_subscription(PathMsg, f"{base}/centerline", self._on_path, LATCHED_QOS)
+        # raw: the Path decoded from its bytes with numpy (conversions.path_from_cdr), not by rclpy
+        n.create_subscription(PathMsg, f"{base}/centerline", self._on_path, LATCHED_QOS, raw=True)
         n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
         n.create_subscription(MarkerArray, f"{base}/markers", self._on_markers, LATCHED_QOS)
         for g in self.grip_names:
@@ -271,10 +274,15 @@ class DloClient:
     def _now_ns(self) -> int:
         return self.node.get_clock().now().nanoseconds
 
-    def _on_path(self, msg) -> None:
+    def _on_path(self, data: bytes) -> None:
         now, mono = self._now_ns(), time.monotonic_ns()
-        pts, qs = self._path_to_arrays(msg)
-        ev = PathEvent(now, mono, self._time_to_ns(msg.header.stamp), pts, qs, msg.header.frame_id)
+        try:
+            stamp, frame, pts, qs = self._path_from_cdr(data)
+        except ValueError:  # conversions.CdrError: not a Path (another publisher on the topic); counted
+            with self._cond:
+                self.malformed_paths += 1
+            return
+        ev = PathEvent(now, mono, stamp, pts, qs, frame)
         with self._cond:
             self.paths.append(ev)
             self.path_count += 1

@@ -6,6 +6,7 @@ centreline pose's x-axis along the string's tangent, wrenches in the node's fram
 """
 from __future__ import annotations
 
+import struct
 from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
@@ -148,6 +149,45 @@ def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_
 def result_path_cdr(result: ShapeResult, frame_id: str, stamp_ns: int) -> bytes:
     """``result_to_path`` serialised directly (:func:`path_cdr`)."""
     return path_cdr(result.points, result.orientations, frame_id, stamp_ns)
+
+
+class CdrError(ValueError):
+    """Bytes that are not the little-endian CDR of the expected message."""
+
+
+def _cdr_header_at(data: bytes, offset: int) -> tuple[int, str, int]:
+    """(stamp [ns], frame_id, offset after it) of a std_msgs/Header at ``offset`` (aligned to 4)."""
+    sec, nanosec, length = struct.unpack_from("<iII", data, offset)
+    start = offset + 12
+    if length < 1 or start + length > len(data):
+        raise CdrError(f"frame_id of length {length} runs past the message")
+    return sec * 1_000_000_000 + nanosec, data[start:start + length - 1].decode(errors="replace"), start + length
+
+
+def path_from_cdr(data: bytes) -> tuple[int, str, np.ndarray, np.ndarray]:
+    """(stamp [ns], frame_id, points (N, 3), quaternions (N, 4)) of a serialised nav_msgs/Path (what a
+    raw subscription takes): the inverse of :func:`path_cdr` for any Path, whatever its poses' headers.
+    No per-pose Python message objects: rclpy's deserialisation of a 51-pose Path costs several times
+    more (bench/results/node_latency.md).  Raises CdrError on bytes that are not a little-endian Path."""
+    if len(data) < 8 or data[:2] != b"\x00\x01":
+        raise CdrError("not little-endian CDR")
+    try:
+        stamp, frame, offset = _cdr_header_at(data, 4)
+        pad = lambda o, a: o + (-(o - 4) % a)  # noqa: E731 - alignment counts from after the 4-byte prefix
+        offset = pad(offset, 4)
+        (count,) = struct.unpack_from("<I", data, offset)
+        offset += 4
+        if count > (len(data) - offset) // 64:  # a pose takes at least 64 bytes: never allocate for a lie
+            raise CdrError(f"{count} poses do not fit in {len(data)} bytes")
+        values = np.empty((count, 7))
+        for k in range(count):
+            _, _, offset = _cdr_header_at(data, pad(offset, 4))
+            offset = pad(offset, 8)
+            values[k] = struct.unpack_from("<7d", data, offset)
+            offset += 56
+    except struct.error as exc:
+        raise CdrError(f"truncated Path: {exc}") from None
+    return stamp, frame, values[:, :3], values[:, 3:]
 
 
 def path_to_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import Pose
+from geometry_msgs.msg import Pose, PoseStamped
 from visualization_msgs.msg import Marker
 
 from dlo_ros.model import Grip, GripPose, Obstacle, Problem, Profile, StringProperties
@@ -212,3 +212,45 @@ def test_the_serialised_centreline_reads_back_as_the_message(frame, n):
     expected = conv.result_to_path(result, frame, stamp)
     assert deserialize_message(data, Path) == expected
     assert len(data) == len(serialize_message(expected))
+
+
+@pytest.mark.parametrize("count", [0, 1, 51])
+def test_path_from_cdr_reads_what_rclpy_serialises(count):
+    """Any nav_msgs/Path, poses with headers of their own (frame_ids of different lengths, so every
+    alignment case occurs), read from rclpy's own serialisation."""
+    from nav_msgs.msg import Path
+    from rclpy.serialization import serialize_message
+
+    rng = np.random.default_rng(count)
+    msg = Path()
+    msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = 1_700_000_000, 123_456_789, "world"
+    for k in range(count):
+        ps = PoseStamped()
+        ps.header.frame_id = "f" * (k % 9)
+        ps.header.stamp.sec = k
+        p, q = rng.normal(size=3), rng.normal(size=4)
+        ps.pose = conv.arrays_to_pose(p, q / np.linalg.norm(q))
+        msg.poses.append(ps)
+    stamp, frame, points, quats = conv.path_from_cdr(serialize_message(msg))
+    assert stamp == 1_700_000_000_123_456_789 and frame == "world"
+    want_points, want_quats = conv.path_to_arrays(msg)
+    assert points.shape == (count, 3) and quats.shape == (count, 4)
+    np.testing.assert_array_equal(points, want_points.reshape(count, 3))
+    np.testing.assert_array_equal(quats, want_quats.reshape(count, 4))
+
+
+def test_path_from_cdr_inverts_path_cdr_and_refuses_bad_bytes():
+    rng = np.random.default_rng(0)
+    points, quats = rng.normal(size=(51, 3)), rng.normal(size=(51, 4))
+    data = conv.path_cdr(points, quats, "map", 5_000_000_007)
+    stamp, frame, p, q = conv.path_from_cdr(data)
+    assert (stamp, frame) == (5_000_000_007, "map")
+    np.testing.assert_array_equal(p, points)
+    np.testing.assert_array_equal(q, quats)
+    for bad in (data[:-8], data[:30], b"\x00\x00" + data[2:], b""):
+        with pytest.raises(conv.CdrError):
+            conv.path_from_cdr(bad)
+    lying = bytearray(data)
+    lying[4 + 12 + 4:4 + 12 + 4 + 4] = (10**6).to_bytes(4, "little")  # the pose count, after the header
+    with pytest.raises(conv.CdrError):
+        conv.path_from_cdr(bytes(lying))

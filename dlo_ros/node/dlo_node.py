@@ -72,7 +72,6 @@ DIAGNOSTICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliabil
 #: matches both best-effort and reliable writers.  Only the newest cloud matters.
 CLOUD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)
-MARKER_PERIOD_S = 0.1
 STOP_TIMEOUT_S = 5.0  # how long shutdown waits for the solve in progress
 QUERIES_PER_WORKER = 2  # ~/query_shape calls pending per query worker before new ones are refused ("busy")
 IMMEDIATE_DIAGNOSTICS_MIN_S = 0.1
@@ -183,7 +182,7 @@ class DloNode(Node):
         self._reset_srv = self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
         self._diag_timer = self.create_timer(self.get_parameter("diagnostics_period").value,
                                              lambda: self._publish_diagnostics())
-        self._marker_timer = self.create_timer(MARKER_PERIOD_S, self._publish_markers)
+        self._marker_timer = self.create_timer(self.get_parameter("markers_period").value, self._publish_markers)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
         self._fitter = None
@@ -526,12 +525,13 @@ class DloNode(Node):
             return
         r = u.result
         stamp = u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds
-        model_changed = self._record_update(u, stamp)
+        # the shape first: recording and bookkeeping need not delay it
         self._path_pub.publish(conv.result_path_cdr(r, self.frame_id, stamp))  # pre-serialised: no per-pose objects
         for name, wrench in r.grips.items():
             pub = self._wrench_pubs.get(name)
             if pub is not None:
                 pub.publish(conv.wrench_stamped(wrench, self.frame_id, stamp))
+        model_changed = self._record_update(u, stamp)
         latency = None if u.received_ns is None else (time.monotonic_ns() - u.received_ns) / 1e6
         self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
         was_error = self.health.newest_is_error or self.health.updates == 0

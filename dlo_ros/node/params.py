@@ -66,6 +66,9 @@ STATIC = (
               read_only=True),
     ParamSpec("diagnostics_period", "double", 1.0, "Period [s] of /diagnostics.", read_only=True,
               low=0.05, high=60.0),
+    ParamSpec("markers_period", "double", 0.1,
+              "Period [s] of ~/markers (the newest shape); building and publishing a MarkerArray in Python "
+              "holds the GIL the solver needs for about 2 ms.", read_only=True, low=0.02, high=60.0),
     ParamSpec("record.rrd", "string", "",
               "Save a rerun recording of every solve, target and rejected input to this .rrd file (dlo replay "
               "FILE opens it); empty: no file.", read_only=True),

@@ -102,3 +102,23 @@ def test_late_subscriber_gets_the_current_centreline(node):
         namespaces = {m.ns for m in markers.markers}
         assert {"string", "grips", "forces", "obstacles"} <= namespaces
     assert proc.alive()
+
+
+def test_markers_follow_markers_period(tmp_path):
+    """markers_period sets how often ~/markers is published while shapes stream in (never per update)."""
+    import time
+
+    with clean_node(*node_args("diagnostics_period:=0.2", "markers_period:=0.5"),
+                    log_path=tmp_path / "node.log") as (proc, cl):
+        assert cl.wait_for(lambda: cl.marker_count, 10.0)
+        before, paths = cl.marker_count, cl.path_count
+        t0 = time.monotonic()
+        k = 0
+        while time.monotonic() - t0 < 3.0:  # a 50 Hz stream of small moves
+            k += 1
+            cl.publish_targets([LEFT, ((0.55 + 0.02 * np.sin(0.2 * k), 0.0, 0.38), Q)])
+            time.sleep(0.02)
+        streamed = cl.path_count - paths
+        markers = cl.marker_count - before
+        assert streamed >= 30, streamed  # the stream did run
+        assert 3 <= markers <= 8, markers  # 3 s at 0.5 s, with the timer's phase

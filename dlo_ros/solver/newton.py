@@ -270,7 +270,7 @@ SADDLE_STEP, SADDLE_STEPS = 0.2, 40
 
 
 def leave_saddle(nlp: StringNLP, fns: NlpFunctions, saddle: SolverState, p: np.ndarray, min_eigenvalue: float,
-                 sign: float = 1.0) -> tuple[bool, SolverState, int, float]:
+                 sign: float = 1.0, fused: bool = True) -> tuple[bool, SolverState, int, float]:
     """From an unstable stationary point ``saddle`` (reduced Hessian eigenvalue ``min_eigenvalue`` < 0 along
     ``saddle.unstable_direction``) downhill to a stationary point nearby, without IPOPT.
 
@@ -287,7 +287,7 @@ def leave_saddle(nlp: StringNLP, fns: NlpFunctions, saddle: SolverState, p: np.n
     residual is small (1e-6 dual, 1e-8 primal, scaled) the point reached is polished by ``newton`` (which
     also adapts the active set).  Returns ``newton``'s
     (ok, state, steps, violation); the caller checks that the state is stable and lower than the saddle.
-    The first step goes ``sign`` × the unstable direction."""
+    The first step goes ``sign`` × the unstable direction; ``fused`` is passed to ``newton``."""
     fail = (False, saddle, 0, np.inf)
     if saddle.unstable_direction is None or not min_eigenvalue < 0:
         return fail
@@ -329,11 +329,11 @@ def leave_saddle(nlp: StringNLP, fns: NlpFunctions, saddle: SolverState, p: np.n
         rhs[n:] = -r_prim
         _, _, step, info = _gesv(regularised(kkt, n), rhs)
         if info != 0 or not np.isfinite(step).all():
-            return fail
+            return False, saddle, steps, np.inf
         scale = min(1.0, SADDLE_STEP / max(float(np.abs(step[:n]).max()), 1e-300))
         z = z + scale * step[:n]
         lam = lam.copy()
         lam[idx] += scale * step[n:]
     start = SolverState(z, lam, saddle.lam_x, p, g=np.asarray(nlp.g_fn(z, p)).ravel())
-    ok, state, it, viol = newton(nlp, fns, start, p)
+    ok, state, it, viol = newton(nlp, fns, start, p, fused=fused)
     return ok, state, steps + it, viol

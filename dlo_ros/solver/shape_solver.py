@@ -144,6 +144,8 @@ class ShapeSolver:
         # those of the solve under way (topology.ClampTurns; the linking-number check)
         self._clamp_turns: TP.ClampTurns | None = None
         self._turns_now: TP.ClampTurns | None = None
+        # the solve under way reached its Newton answer far from the committed shape (substeps, a saddle left)
+        self._newton_far = False
         self.build_time_s = time.perf_counter() - t0
 
     # ---- compiled derivatives and IPOPT instances ----------------------------------------------------
@@ -402,7 +404,7 @@ class ShapeSolver:
         for parts in SUBSTEPS:
             state, ok = start, True
             for i in range(1, parts + 1):
-                ok, state, it, viol = self._newton(state, start.p + (p1 - start.p) * (i / parts))
+                ok, state, it, viol = self._newton(state, p1 if i == parts else start.p + (p1 - start.p) * (i / parts))
                 iterations += it
                 if not ok:
                     break
@@ -420,16 +422,18 @@ class ShapeSolver:
         if self.nlp.self_contact_slots:
             return self._solve_self_contact(problem, warm)
         start = self._state if warm else None
+        self._newton_far = False
         result, state = self._solve_pairs_fixed(problem, warm)
         # without self-contact the linking number is checked where a warm update left the Newton path
         # (IPOPT, continuation or the cold fallback can land a whole turn away; Newton converges from
-        # next to the committed shape), and where the clamps turned more than a quarter turn since the
+        # next to the committed shape) or Newton went far from it (substeps, leaving a saddle:
+        # ``_newton_far``), and where the clamps turned more than a quarter turn since the
         # committed shape (after refused updates: Newton then follows the clamp frame, which cannot tell
         # a turn from its opposite): a stream must not lose turns of twist to a cold start
         turns = self._turns_now
         lagging = turns is not None and any(abs(a) > np.pi / 2 for a in turns.turns.values())
         if (start is not None and state is not None and result.status in ("ok", "unverified")
-                and (lagging or not result.ipopt_status.startswith("Newton"))):
+                and (lagging or self._newton_far or not result.ipopt_status.startswith("Newton"))):
             jump = self._linking_jump(problem, start, state)
             if jump is not None:
                 return self._linking_failure(jump, result.iterations, True), None
@@ -678,13 +682,15 @@ class ShapeSolver:
             if not ok:
                 ok, state, it, viol = self._newton_in_substeps(start, p1)
                 iterations += it
+                self._newton_far = ok
             if ok:
                 result = self._result(problem, state, "Newton", iterations, viol, True, 0)
                 if result.stable is not False and result.status != "failed":  # (failed: a flipped branch)
                     return result, state
                 if result.stable is False:
-                    left = self._leave_saddle(problem, result, state, iterations)
+                    left, iterations = self._leave_saddle(problem, result, state, iterations)
                     if left is not None:
+                        self._newton_far = True
                         return left
                 ok = False
             ok, state, last_status, it, viol = self._ipopt_call(True, start.z, p1, start)
@@ -733,12 +739,14 @@ class ShapeSolver:
                         constraint_violation=viol, warm_started=warm, ipopt_status=last_status), None
 
     def _leave_saddle(self, problem: Problem, saddle: ShapeResult, state: SolverState,
-                      iterations: int) -> tuple[ShapeResult, SolverState] | None:
+                      iterations: int) -> tuple[tuple[ShapeResult, SolverState] | None, int]:
         """A warm Newton update that landed on an unstable equilibrium, continued downhill by shifted Newton
-        steps (``newton.leave_saddle``, either way along the unstable mode): the first stable, verified
-        result of lower energy, or None (then IPOPT and ``_escape_saddle`` take over)."""
+        steps (``newton.leave_saddle``, either way along the unstable mode): (the first stable, verified
+        result of lower energy, or None: then IPOPT and ``_escape_saddle`` take over; the iterations
+        counted so far)."""
         for sign in (1.0, -1.0):
-            ok, new, it, viol = leave_saddle(self.nlp, self.functions, state, state.p, saddle.min_eigenvalue, sign)
+            ok, new, it, viol = leave_saddle(self.nlp, self.functions, state, state.p, saddle.min_eigenvalue, sign,
+                                             fused=self.fused_newton)
             iterations += it
             if not ok:
                 continue
@@ -746,8 +754,8 @@ class ShapeSolver:
             total = saddle.energy["total"]
             if result.status == "ok" and result.stable and result.energy["total"] < total - 1e-12 * abs(total):
                 result.message += "; left an unstable equilibrium along its negative-curvature mode"
-                return result, new
-        return None
+                return (result, new), iterations
+        return None, iterations
 
     def _escape_saddle(self, problem: Problem, result: ShapeResult,
                        state: SolverState) -> tuple[ShapeResult, SolverState]:

@@ -42,8 +42,12 @@ def test_a_warm_update_onto_the_saddle_leaves_it_on_the_newton_path(compile_mode
     calls = []
     original = shape_solver.leave_saddle
     monkeypatch.setattr(shape_solver, "leave_saddle", lambda *a, **k: calls.append(1) or original(*a, **k))
+    linking = []  # leaving a saddle is a jump: the linking number of the clamped span is checked
+    check = solver._linking_jump
+    monkeypatch.setattr(solver, "_linking_jump", lambda *a: linking.append(check(*a)) or linking[-1])
     warm = solver.solve(lowered(0.05))
     assert calls, "Newton did not land on the saddle: the scene no longer tests what it says"
+    assert linking == [None]
     assert warm.ok and warm.stable and warm.warm_started, warm.message
     assert warm.ipopt_status == "Newton" and "left an unstable equilibrium" in warm.message
     assert np.abs(warm.points[:, 1]).max() > 0.02  # out of the plane

@@ -46,8 +46,12 @@ def test_a_jump_newton_takes_in_substeps_equals_the_cold_solve(k, monkeypatch):
     calls = []
     original = solver._newton_in_substeps
     monkeypatch.setattr(solver, "_newton_in_substeps", lambda *a: calls.append(original(*a)) or calls[-1])
+    linking = []  # substeps go far from the committed shape: the linking number is checked
+    check = solver._linking_jump
+    monkeypatch.setattr(solver, "_linking_jump", lambda *a: linking.append(check(*a)) or linking[-1])
     warm = solver.solve({"right": (x, q)})
     assert calls and calls[0][0], "one Newton update took the jump: the case no longer tests substeps"
+    assert linking == [None]
     assert warm.ok and warm.stable and warm.warm_started and warm.ipopt_status == "Newton", warm.message
     cold = ShapeSolver(SCENE.problem, OPTIONS, compile="off").solve({"right": (x, q)})
     assert cold.ok and cold.ipopt_status != "Newton"

@@ -353,6 +353,8 @@ def test_every_update_carries_the_stamp_of_the_targets_it_solved(engine_factory)
     def burst():
         for i in range(n):
             eng.submit_targets({"right": pose(0.3 + i * 1e-5)}, stamp_ns=10_000 + i)
+            if i % 250 == 249:  # let the worker in now and then: the burst must interleave with solves even
+                time.sleep(0.002)  # when this thread would otherwise finish within one GIL slice (seen: 10 updates)
 
     t = threading.Thread(target=burst)
     t.start()

@@ -60,12 +60,9 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     ``kkt_fn``: another system of the same form as ``fns.kkt`` (z, p, λ) → [∇f, g, ∂g/∂z, K, energies]
     (``moments.ExactMomentKKT``: K need not be symmetric); the returned state then carries that
     function's derivatives, not ∇²L."""
-    equality = nlp.equality
     if start.g is None:  # a warm start adopted from another model
         start.g = np.asarray(nlp.g_fn(start.z, start.p)).ravel()
-    # active = at its bound with a positive multiplier (IPOPT leaves ~1e-10 barrier multipliers
-    # on rows far from their bound; those are inactive)
-    active = equality | ((start.lam_g > 1e-8) & (start.g > nlp.ubg - 1e-7))
+    active = active_rows(nlp, start.lam_g, start.g)
     steps = 0
     z, lam = start.z.copy(), np.where(active, start.lam_g, 0.0)
     reuse = kkt_fn is None and start.hessian is not None and start.g is not None and start.gradient is not None
@@ -93,6 +90,28 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
         seen.add(changed.tobytes())
         z, lam, active, reuse = state.z, state.lam_g, changed, False
     return False, start, steps, np.inf
+
+
+def active_rows(nlp: StringNLP, lam: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """The rows a KKT point holds: the equalities, and the inequalities at their bound with a positive
+    multiplier (IPOPT leaves ~1e-10 barrier multipliers on rows far from their bound; those are inactive)."""
+    return nlp.equality | ((lam > 1e-8) & (g > nlp.ubg - 1e-7))
+
+
+def kkt_step(hess: np.ndarray, ja: np.ndarray, r_dual: np.ndarray, r_prim: np.ndarray,
+             shift: float = 0.0) -> np.ndarray | None:
+    """[Δz; Δλ_A] solving [∇²L + shift·I, J_Aᵀ; J_A, 0] [Δz; Δλ_A] = −[r_dual; r_prim], the matrix
+    ``regularised``; None when LAPACK finds it singular or the step is not finite."""
+    n, m = hess.shape[0], ja.shape[0]
+    kkt = np.zeros((n + m, n + m))
+    kkt[:n, :n] = hess
+    if shift:
+        kkt[np.arange(n), np.arange(n)] += shift
+    kkt[:n, n:] = ja.T
+    kkt[n:, :n] = ja
+    # LAPACK's gesv directly: numpy.linalg.solve's checks cost more than the solve at this size
+    _, _, step, info = _gesv(regularised(kkt, n), -np.concatenate([r_dual, r_prim]))
+    return step if info == 0 and np.isfinite(step).all() else None
 
 
 def _newton_active(nlp: StringNLP, kkt_fn, start: SolverState, z: np.ndarray, lam: np.ndarray, p: np.ndarray,
@@ -146,8 +165,7 @@ def _active_steps(kkt_fn, z: np.ndarray, lam: np.ndarray, p: np.ndarray, idx: np
     place), until the residual converges at an evaluated point: (z, λ, ∇f, g, ∂g/∂z, ∇²L, energies, steps)
     there, or (None, steps) on no convergence, a singular matrix or too large a step.  ``first``:
     (∇f, g, ∂g/∂z, ∇²L) for the first step instead of an evaluation."""
-    n, m = z.size, idx.size
-    kkt, rhs = np.zeros((n + m, n + m)), np.empty(n + m)
+    n = z.size
     for it in range(max_steps + 1):
         if it == 0 and first is not None:
             (grad, g, jac, hess), energies = first, None
@@ -162,14 +180,8 @@ def _active_steps(kkt_fn, z: np.ndarray, lam: np.ndarray, p: np.ndarray, idx: np
             return z, lam, grad, g, jac, hess, energies, it
         if it == max_steps:
             break
-        kkt[:n, :n] = hess
-        kkt[:n, n:] = ja.T
-        kkt[n:, :n] = ja
-        rhs[:n] = -r_dual
-        rhs[n:] = -r_prim
-        # LAPACK's gesv directly: numpy.linalg.solve's checks cost more than the solve at this size
-        _, _, step, info = _gesv(regularised(kkt, n), rhs)
-        if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
+        step = kkt_step(hess, ja, r_dual, r_prim)
+        if step is None or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
             return None, it
         z += step[:n]
         lam[idx] += step[n:]
@@ -293,16 +305,15 @@ def leave_saddle(nlp: StringNLP, fns: NlpFunctions, saddle: SolverState, p: np.n
         return fail
     kkt_fn = fns.kkt
     g0 = saddle.g if saddle.g is not None else np.asarray(nlp.g_fn(saddle.z, saddle.p)).ravel()
-    active = nlp.equality | ((saddle.lam_g > 1e-8) & (g0 > nlp.ubg - 1e-7))
+    active = active_rows(nlp, saddle.lam_g, g0)
     idx = np.flatnonzero(active)
     bound = nlp.ubg[idx]
     d = saddle.unstable_direction / np.max(np.abs(saddle.unstable_direction))
     z = saddle.z + sign * SADDLE_STEP * d
     lam = np.where(active, saddle.lam_g, 0.0)
     rho = 2.0 * float(np.abs(lam).max(initial=0.0)) + 1.0
-    n, m = z.size, idx.size
+    n = z.size
     mu = 2.0 * abs(min_eigenvalue)
-    kkt, rhs = np.zeros((n + m, n + m)), np.empty(n + m)
     previous: tuple | None = None  # (merit, z, λ) of the last accepted point
     steps = 0
     for steps in range(1, SADDLE_STEPS + 1):
@@ -321,14 +332,8 @@ def leave_saddle(nlp: StringNLP, fns: NlpFunctions, saddle: SolverState, p: np.n
         if np.abs(r_dual).max(initial=0.0) < 1e-6 and np.abs(r_prim).max(initial=0.0) < 1e-8:
             break  # a stationary point whatever μ was (μ only shapes the steps): newton() polishes it
         previous = (merit, z.copy(), lam.copy())
-        kkt[:n, :n] = hess + mu * np.eye(n)
-        kkt[:n, n:] = ja.T
-        kkt[n:, :n] = ja
-        kkt[n:, n:] = 0.0
-        rhs[:n] = -r_dual
-        rhs[n:] = -r_prim
-        _, _, step, info = _gesv(regularised(kkt, n), rhs)
-        if info != 0 or not np.isfinite(step).all():
+        step = kkt_step(hess, ja, r_dual, r_prim, shift=mu)
+        if step is None:
             return False, saddle, steps, np.inf
         scale = min(1.0, SADDLE_STEP / max(float(np.abs(step[:n]).max()), 1e-300))
         z = z + scale * step[:n]

@@ -38,15 +38,13 @@ import numpy as np
 
 from ..model.profile import Profile
 from ..model.rotations import quat_to_matrix
+from .newton import active_rows
 from .nlp import StringNLP
 from .shape_solver import ShapeSolver
 from .wrenches import director_torque
 
 #: material profiles a sensitivity can be taken with respect to, in the order of the NLP's parameters
 MATERIALS = ("Rf", "Rt", "Re", "D")
-
-#: an inequality row counts as active when its multiplier exceeds this and it sits at its bound
-ACTIVE_MULTIPLIER = 1e-8
 
 
 @dataclass(frozen=True)
@@ -148,7 +146,7 @@ def shape_sensitivity(solver: ShapeSolver, names: tuple[MaterialDirection | str,
     z, lam, p = state.z, state.lam_g, state.p
     grad, g, jac, hess, _ = (np.asarray(a) for a in nlp.kkt_fn(z, p, lam))
     g = g.ravel()
-    active = nlp.equality | ((lam > ACTIVE_MULTIPLIER) & (g > nlp.ubg - 1e-7))
+    active = active_rows(nlp, lam, g)
     idx = np.flatnonzero(active)
     n, m = z.size, idx.size
     kkt = np.zeros((n + m, n + m))

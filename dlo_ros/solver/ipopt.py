@@ -94,6 +94,16 @@ def witness(nlp: StringNLP, g: np.ndarray | None) -> str:
     return f", most violated: {names.get(kind[0], str)(kind)} by {excess[i]:.3g}"
 
 
+#: appended to the message of a result that replaced an unstable equilibrium
+LEFT_SADDLE = "; left an unstable equilibrium along its negative-curvature mode"
+
+
+def lower_than(candidate: ShapeResult, saddle: ShapeResult) -> bool:
+    """``candidate``'s total energy is below ``saddle``'s (by more than 1e-12 relative): it went downhill."""
+    total = saddle.energy["total"]
+    return candidate.energy["total"] < total - 1e-12 * abs(total)
+
+
 def escape_saddle(result: ShapeResult, state: SolverState, attempt: Callable[[np.ndarray, np.ndarray], Attempt],
                   build: Callable[..., ShapeResult], depth: int = 3) -> tuple[ShapeResult, SolverState]:
     """A stationary point with negative reduced curvature is not a shape a string rests in: an unstable
@@ -123,10 +133,10 @@ def escape_saddle(result: ShapeResult, state: SolverState, attempt: Callable[[np
             candidate = build(trial, status, result.iterations, viol, result.warm_started, result.continuation_steps)
             if candidate.status == "failed":
                 continue
-            if candidate.energy["total"] >= result.energy["total"] - 1e-12 * abs(result.energy["total"]):
+            if not lower_than(candidate, result):
                 continue
             if candidate.stable:
-                candidate.message += "; left an unstable equilibrium along its negative-curvature mode"
+                candidate.message += LEFT_SADDLE
                 return candidate, trial
             if lower is None:
                 lower = (candidate, trial)

@@ -35,7 +35,8 @@ from ..model.problem import GripPose, Problem
 from . import frames as F
 from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .initial_guess import initial_guess
-from .ipopt import IPOPT_LOCK, SUCCESS, Attempt, IpoptSolvers, call, escape_saddle, witness
+from .ipopt import (IPOPT_LOCK, LEFT_SADDLE, SUCCESS, Attempt, IpoptSolvers, call, escape_saddle, lower_than,
+                    witness)
 from .moments import ExactMomentKKT
 from .newton import leave_saddle, newton
 from .nlp import StringNLP, has_point_moments
@@ -751,9 +752,8 @@ class ShapeSolver:
             if not ok:
                 continue
             result = self._result(problem, new, "Newton", iterations, viol, True, 0)
-            total = saddle.energy["total"]
-            if result.status == "ok" and result.stable and result.energy["total"] < total - 1e-12 * abs(total):
-                result.message += "; left an unstable equilibrium along its negative-curvature mode"
+            if result.status == "ok" and result.stable and lower_than(result, saddle):
+                result.message += LEFT_SADDLE
                 return (result, new), iterations
         return None, iterations
 

@@ -10,7 +10,9 @@ One ``NlpFunctions`` per ``StringNLP``:
   call (``native_newton.NativeNewton``; None until then);
 * ``newton_active``: once the full KKT function is compiled, Newton's steps with a fixed active set as
   one compiled call (``native_newton.ActiveNewton``, in the KKT function's own library; None until then);
-* ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles).
+* ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles);
+* ``outputs(z, p, λ, prof)``: a solution's published outputs in one call (``output_function.py``; None
+  for the models it does not cover, whose outputs numpy evaluates), compiled last.
 
 Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
 background thread and swap each in when it is ready; libraries are cached per machine), 'blocking'
@@ -24,10 +26,12 @@ import threading
 import time
 
 import casadi as ca
+import numpy as np
 
 from . import native_newton
 from .compiled import InterpretedFunction, NativeFunction, compiled, compiler, library_path
 from .nlp import StringNLP
+from .output_function import OutputFunction
 
 COMPILE_MODES = ("background", "blocking", "cached", "off")
 
@@ -48,6 +52,10 @@ class NlpFunctions:
         self.obstacle_g = InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
         self.newton_native = None
         self.newton_active = None
+        #: the outputs' function and its structure (grid, profiles), None where numpy builds the outputs
+        self.output_function = OutputFunction(nlp, nlp.problem, np.linspace(0.0, nlp.length, nlp.options.output_points)) \
+            if OutputFunction.applies(nlp) else None
+        self.outputs = InterpretedFunction(self.output_function.function) if self.output_function is not None else None
         self.compiled = False        # every function runs compiled C
         self.compile_time_s = 0.0    # wall time of the compile that finished them [s]
         self.retired = False         # the solver was rebuilt: a running compile stops at its next swap
@@ -66,7 +74,9 @@ class NlpFunctions:
         nlp = self.nlp
         # the contact-free function first: it is the one a stream uses while nothing touches
         todo = []
-        for name, fn in (("kkt_free", nlp.kkt_free_fn), ("obstacle_g", nlp.obstacle_g_fn), ("kkt", nlp.kkt_fn)):
+        outputs_fn = self.output_function.function if self.output_function is not None else None
+        for name, fn in (("kkt_free", nlp.kkt_free_fn), ("obstacle_g", nlp.obstacle_g_fn), ("kkt", nlp.kkt_fn),
+                         ("outputs", outputs_fn)):
             if fn is None:
                 continue
             # the full KKT function's library also holds its active-set Newton loop

@@ -22,8 +22,9 @@ from .functions import NlpFunctions
 from .nlp import StringNLP
 from .options import SolverOptions
 from .parameters import ProblemParameters
-from .residual import PointAction
-from .result import SelfContact, ShapeResult
+from .output_function import unit_quaternions
+from .residual import EquilibriumResidual, PointAction
+from .result import GripWrench, SelfContact, ShapeResult
 from .self_contact import slot_multiplier
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
@@ -77,16 +78,15 @@ class ShapeOutputs:
         z, p = state.z, state.p
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         s_out = self.s_out.copy()
+        if self.fns.outputs is not None and self.contact_slots is None:
+            return self._compiled_result(problem, state, lam_si, ipopt_status, iterations, violation, warm, steps,
+                                         summary)
         if nlp.director:
             points = m.positions(z, s_out)
             quats = frame_to_quat(F.pose_frames(nlp, self.parameters, problem, z, s_out))
         else:
             points, phi, theta = sample(nlp, z, self.s_out)
             quats = pose_quaternions(nlp.r0, phi, theta, F.frames_psi(nlp, self.parameters, current, z, s_out, p))
-        min_eig = min_reduced_eigenvalue(nlp, self.fns, state)  # also fills state.energies
-        bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
-        energy = {"bend": bend, "twist": twist, "stretch": stretch, "gravity": grav, "external_work": work,
-                  "total": bend + twist + stretch + grav - work}
         frames_of = self.frames_of(current)
         grips = {g.name: wrench(nlp, current.string, frames_of, g, z, lam_si) for g in problem.grips}
         contacts, actions = self._contacts(problem, z, lam_si)
@@ -95,9 +95,41 @@ class ShapeOutputs:
             actions += [PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
                         PointAction(c.s_b, c.point_b, -c.force, np.zeros(3))]
         residual = equilibrium(nlp, problem, frames_of, z, grips, actions)
+        flipped = F.flipped_grips(nlp, problem, z) if nlp.director else ""
+        # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier complementarity)
+        touching = [c for c in self_contacts if c.gap <= self.contact_slots.geometry.distance + 1e-7 * nlp.length]
+        return self._assemble(problem, state, summary, points, quats, grips, contacts, residual, flipped, touching,
+                              ipopt_status, iterations, violation, warm, steps)
+
+    def _compiled_result(self, problem: Problem, state: SolverState, lam_si: np.ndarray, ipopt_status: str,
+                         iterations: int, violation: float, warm: bool, steps: int, summary: Any) -> ShapeResult:
+        """``result`` from one call of the outputs' function (``output_function.py``): the same shape,
+        wrenches, contact forces, residual and flip test as the numpy path."""
+        plan = self.fns.output_function
+        points, v_out, forces, torques, contact, res, flip = self.fns.outputs(
+            state.z, state.p, lam_si, plan.profiles(problem.string))
+        grips = {name: GripWrench(force=forces[:, k], torque=torques[:, k]) for k, name in enumerate(plan.grip_names)}
+        contacts = {i: contact[:, i] for i in range(plan.n_obstacles)}
+        # frames.flipped_grips: t against the target's x axis, and d1 against its y axis for a clamp
+        flipped = ", ".join(g.name for k, g in enumerate(problem.grips)
+                            if g.mode != "pin" and (flip[0, k] < 0 or (g.mode == "clamp" and flip[1, k] < 0)))
+        residual = EquilibriumResidual(float(res[0, 0]), float(res[1, 0]), float(res[2, 0]))
+        return self._assemble(problem, state, summary, points.T, unit_quaternions(v_out.T), grips, contacts, residual,
+                              flipped, [], ipopt_status, iterations, violation, warm, steps)
+
+    def _assemble(self, problem: Problem, state: SolverState, summary: Any, points: np.ndarray, quats: np.ndarray,
+                  grips: dict[str, GripWrench], contacts: dict[int, np.ndarray], residual: EquilibriumResidual,
+                  flipped: str, self_contacts: list[SelfContact], ipopt_status: str, iterations: int,
+                  violation: float, warm: bool, steps: int) -> ShapeResult:
+        """The ShapeResult of the evaluated outputs: the energies and the stability verdict from the
+        reduced Hessian; 'failed' on a flipped branch, 'unverified' over the residual's tolerance."""
+        options = self.options
+        min_eig = min_reduced_eigenvalue(self.nlp, self.fns, state)  # also fills state.energies
+        bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
+        energy = {"bend": bend, "twist": twist, "stretch": stretch, "gravity": grav, "external_work": work,
+                  "total": bend + twist + stretch + grav - work}
         stable = None if min_eig is None else is_stable(min_eig, state.hessian)
         status, message = "ok", "converged" + (f" after {steps} continuation steps" if steps else "")
-        flipped = F.flipped_grips(nlp, problem, z) if nlp.director else ""
         tolerance = options.error_tolerance or 1e-3 * problem.string.length
         if flipped:  # not the grip's pose at all: no shape
             return no_shape(options, summary, "failed", f"landed on a flipped branch: {flipped}", iterations=iterations,
@@ -108,12 +140,10 @@ class ShapeOutputs:
                        f"tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)")
         return ShapeResult(
             model=summary, status=status, message=message,
-            s=s_out, points=points, orientations=quats, energy=energy, grips=grips, contact_forces=contacts,
+            s=self.s_out.copy(), points=points, orientations=quats, energy=energy, grips=grips, contact_forces=contacts,
             stable=stable, min_eigenvalue=min_eig, iterations=iterations, constraint_violation=violation,
             warm_started=warm, continuation_steps=steps, basis=options.basis, order=options.order,
-            ipopt_status=ipopt_status, equilibrium_residual_m=residual.metres,
-            # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier complementarity)
-            self_contacts=[c for c in self_contacts if c.gap <= self.contact_slots.geometry.distance + 1e-7 * nlp.length],
+            ipopt_status=ipopt_status, equilibrium_residual_m=residual.metres, self_contacts=self_contacts,
         )
 
     def _self_contacts(self, z: np.ndarray, lam_si: np.ndarray) -> list[SelfContact]:

@@ -115,16 +115,23 @@ def solve_unit_rows(a: np.ndarray, rhs: list[float]) -> np.ndarray | None:
     return np.array([(b0 * c0[k] + b1 * c1[k] + b2 * c2[k]) / det for k in range(3)])
 
 
+def static_events(nlp: StringNLP, problem: Problem) -> list[float]:
+    """The arc lengths [m] the residual's grid is refined at, whatever touches: grips, point loads, every
+    obstacle sample and (director models) the mesh breakpoints.  Fixed by the NLP's structure, so that
+    the grid is too (``output_function.py`` evaluates on it)."""
+    events = [g.s for g in problem.grips] + [ld.s for ld in problem.loads] + list(nlp.obstacle_s)
+    if nlp.director:
+        events += list(nlp.model.mesh.breakpoints)
+    return events
+
+
 def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.ndarray, grips: dict[str, GripWrench],
                 contacts: Sequence[PointAction] = ()) -> EquilibriumResidual:
     """The strong-form equilibrium residual of shape z under the grip reactions ``grips`` and the
     obstacle ``contacts`` (solver/residual.py)."""
     m, st, L = nlp.model, problem.string, problem.string.length
     grip_s = {g.name: g.s for g in problem.grips}
-    events = list(grip_s.values()) + [ld.s for ld in problem.loads] + [a.s for a in contacts]
-    if nlp.director:
-        events += list(m.mesh.breakpoints)
-    s = evaluation_grid(L, events)
+    s = evaluation_grid(L, static_events(nlp, problem) + [a.s for a in contacts])
     nodes = m.quad.nodes
     point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads])
     # one evaluation of the shape for the grid, the quadrature nodes and the point actions

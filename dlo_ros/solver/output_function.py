@@ -1,0 +1,200 @@
+"""A returned shape's outputs as one CasADi function (frame director models, no self-contact slots).
+
+``ShapeOutputs`` builds a result from many small numpy evaluations: the centreline and frames at the
+output points, each grip's reaction, each obstacle's contact force and the equilibrium residual
+(``wrenches.py``, ``residual.py``).  For a director model with frames (the default 3D model) every
+one of them is a fixed composition of matrix products with the structure's constant interpolation
+matrices, so this module writes them as one function
+
+    outputs(z, p, λ, prof) → (x(s_out), v(s_out), F_grips, T_grips, F_obstacles, residual, flip)
+
+evaluated in one call (compiled C when the solver's derivatives are compiled, CasADi's virtual
+machine until then).  ``λ``: every row's SI multiplier; ``prof`` = (Rf, Rt) at the residual's grid and
+Rf_min, from the string (``OutputFunction.profiles``); ``v``: the interpolated nodal quaternions
+(``unit_quaternions`` turns them into the published orientations); ``flip``: per grip t·R_g e_x and
+d1·R_g e_y at its node (negative: the flipped sheet, ``frames.flipped_grips``).
+
+The arithmetic is the numpy path's, term for term (``wrenches.wrench``, ``wrenches.equilibrium``,
+``residual.equilibrium_residual``), on the same grid: the uniform grid refined at the grips, the point
+loads, the mesh breakpoints and every obstacle sample (a sample that does not touch has λ = 0 and acts
+with zero force).  Both paths agree to rounding (test_output_function.py).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..model.director import _columns
+from ..model.problem import Problem, StringProperties
+from .nlp import StringNLP
+from .residual import evaluation_grid
+from .wrenches import static_events
+
+
+def unit_quaternions(v: np.ndarray) -> np.ndarray:
+    """(K, 4) unit quaternions (x, y, z, w) of non-zero quaternions v, each with the sign
+    ``director.frame_to_quat`` gives its rotation matrix (the component Shepperd's method takes from the
+    largest of trace and diagonal is positive)."""
+    n2 = np.einsum("ki,ki->k", v, v)
+    x2, y2, z2, w2 = (v * v).T
+    # 1 + trace and 1 + 2 R_aa − trace of R(v), times |v|²: 4 w², 4 x², 4 y², 4 z²
+    which = np.argmax(np.stack([3 * w2 - x2 - y2 - z2, w2 + x2 - y2 - z2, w2 - x2 + y2 - z2,
+                                w2 - x2 - y2 + z2], axis=1), axis=1)
+    sign = np.sign(v[np.arange(len(v)), np.array([3, 0, 1, 2])[which]])
+    sign[sign == 0] = 1.0
+    return v * (sign / np.sqrt(n2))[:, None]
+
+
+def _cross(a: ca.MX, b: ca.MX) -> ca.MX:
+    """Column-wise a × b of 3×K matrices (b may be one column: it is broadcast)."""
+    if b.shape[1] == 1 and a.shape[1] > 1:
+        b = ca.repmat(b, 1, a.shape[1])
+    if a.shape[1] == 1 and b.shape[1] > 1:
+        a = ca.repmat(a, 1, b.shape[1])
+    return ca.vertcat(a[1, :] * b[2, :] - a[2, :] * b[1, :], a[2, :] * b[0, :] - a[0, :] * b[2, :],
+                      a[0, :] * b[1, :] - a[1, :] * b[0, :])
+
+
+def _cumulative(f: ca.MX, s: np.ndarray) -> ca.MX:
+    """``residual._cumulative`` along the columns of f (3×K): ∫_{s_0}^{s_k} f ds by the trapezoid rule,
+    plus f_0 s_0 for the first interval from s = 0."""
+    steps = 0.5 * (f[:, 1:] + f[:, :-1]) * ca.repmat(ca.DM(np.diff(s)).T, 3, 1)
+    first = f[:, 0] * s[0]
+    return ca.horzcat(first, ca.repmat(first, 1, len(s) - 1) + ca.cumsum(steps, 1))
+
+
+def _column_norms_max(a: ca.MX) -> ca.MX:
+    return ca.mmax(ca.sqrt(ca.sum1(a * a)))
+
+
+class OutputFunction:
+    """The outputs of one NLP's solutions as one CasADi function (module docstring)."""
+
+    def __init__(self, nlp: StringNLP, problem: Problem, s_out: np.ndarray):
+        m, L, lay = nlp.model, nlp.length, nlp.params
+        self.grip_names = [g.name for g in problem.grips]
+        self.grid = s = evaluation_grid(L, static_events(nlp, problem))
+        K, M = len(s), m.quad.count
+        z = ca.MX.sym("z", m.layout.size)
+        p = ca.MX.sym("p", lay.size)
+        lam = ca.MX.sym("lam", int(nlp.lbg.size))
+        prof = ca.MX.sym("prof", 2 * K + 1)
+        rf, rt, rf_min = prof[:K].T, prof[K:2 * K].T, prof[2 * K]
+
+        nodes_v = ca.reshape(z[m.layout.rotation], m.layout.width, m.layout.nodes)  # column i: node i
+        vs = ca.MX.sym("v", 4)
+        frame_cols = ca.Function("frame_cols", [vs], [ca.vertcat(*(ca.vertcat(*c) for c in _columns(ca.vertsplit(vs), ca)))])
+        tq = frame_cols.map(M)(ca.mtimes(nodes_v, ca.DM(m.B.T)))[0:3, :]  # t̂ at the quadrature nodes
+        if m.layout.stretch:
+            tq = tq * ca.repmat(1 + ca.mtimes(ca.DM(m.B), z[m.layout.eps]).T, 3, 1)
+
+        point_s = np.array([g.s for g in problem.grips] + [ld.s for ld in problem.loads], dtype=float)
+        s_out = np.asarray(s_out, dtype=float)
+        pieces = [s, m.quad.nodes, point_s, nlp.obstacle_s, s_out]
+        splits = np.cumsum([len(a) for a in pieces])
+        w_all = m.mesh.integration_matrix(np.concatenate(pieces))
+        x_all = ca.repmat(z[0:3] * L, 1, int(splits[-1])) + ca.mtimes(tq, ca.DM(w_all.T))
+        x, x_nodes, point_x, sample_x, x_out = (x_all[:, a:b] for a, b in zip([0, *splits[:-1]], splits))
+
+        # the constitutive moment R diag(Rt, Rf, Rf) Ω at the grid
+        b_grid, db_grid = m.mesh.interpolation(s, "left")
+        vsd = ca.MX.sym("dv", 4)
+        c = ca.MX.sym("c", 3)
+        t, d1, d2 = (ca.vertcat(*col) for col in _columns(ca.vertsplit(vs), ca))
+        qv, w, dqv, dw = vs[0:3], vs[3], vsd[0:3], vsd[3]
+        omega = 2 * (w * dqv - dw * qv - ca.cross(qv, dqv)) / ca.dot(vs, vs)
+        moment_fn = ca.Function("moment_c", [vs, vsd, c], [t * c[0] * omega[0] + d1 * c[1] * omega[1] + d2 * c[2] * omega[2]])
+        moment_c = moment_fn.map(K)(ca.mtimes(nodes_v, ca.DM(b_grid.T)), ca.mtimes(nodes_v, ca.DM(db_grid.T)),
+                                    ca.vertcat(rt, rf, rf))
+
+        # the weight's integrals ∫_0^s D dσ and ∫_0^s D x dσ, and its total
+        gravity = p[lay["gravity"]]
+        d_nodes = p[lay["D"]]
+        w_grid = w_all[:K, :]
+        weight = ca.mtimes(ca.DM(w_grid), d_nodes).T
+        weight_moment = ca.mtimes(x_nodes * ca.repmat(d_nodes.T, 3, 1), ca.DM(w_grid.T))
+        total = ca.dot(ca.DM(m.quad.weights), d_nodes)
+        m_bal = -(_cross(weight_moment, gravity) - _cross(x, gravity) * ca.repmat(weight, 3, 1))
+
+        # point actions: grips, loads, then every obstacle sample (wrenches.wrench, ShapeOutputs._contacts)
+        forces, torques, flips, action_s, action_x = [], [], [], [], []
+        for k, g in enumerate(problem.grips):
+            rows = nlp.grip_rows[g.name]
+            force = -ca.mtimes(ca.DM(nlp.grip_axes[g.name].T), lam[rows["position"]])
+            v = nodes_v[:, m.mesh.node_index(g.s)]
+            tg, d1g, _ = (ca.vertcat(*col) for col in _columns(ca.vertsplit(v), ca))
+            target = ca.reshape(p[lay[f"grip:{g.name}:frame"]], 3, 3)
+            torque = ca.DM.zeros(3)
+            mu = lam[rows["angles"]] if rows["angles"] else None
+            if rows["angles"]:
+                torque = -(mu[0] * ca.cross(tg, target[:, 1]) + mu[1] * ca.cross(tg, target[:, 2]))
+                if len(rows["angles"]) == 3:
+                    torque -= mu[2] * ca.cross(d1g, target[:, 2])
+            forces.append(force)
+            torques.append(torque)
+            flips.append(ca.vertcat(ca.dot(tg, target[:, 0]), ca.dot(d1g, target[:, 1])))
+            action_s.append(g.s)
+            action_x.append(point_x[:, k])
+        grip_forces, grip_torques = ca.horzcat(*forces), ca.horzcat(*torques)
+        for k, ld in enumerate(problem.loads):
+            forces.append(p[lay[f"load:{k}:force"]])
+            torques.append(p[lay[f"load:{k}:moment"]])
+            action_s.append(ld.s)
+            action_x.append(point_x[:, len(problem.grips) + k])
+        contact_totals = []
+        for i, ob in enumerate(problem.obstacles):
+            samples = len(nlp.obstacle_s)
+            grads = nlp.obstacle_gradient[ob.type].map(samples)(sample_x, ca.repmat(p[lay[f"obstacle:{i}"]], 1, samples))
+            lam_i = ca.fmax(lam[nlp.obstacle_rows[i]], 0).T  # a row that does not touch acts with no force
+            f = -ca.repmat(lam_i, 3, 1) * grads
+            contact_totals.append(ca.sum2(f))
+            forces += ca.horzsplit(f)
+            torques += [ca.DM.zeros(3)] * samples
+            action_s += list(nlp.obstacle_s)
+            action_x += ca.horzsplit(sample_x)
+        self.n_obstacles = len(problem.obstacles)
+
+        # Σ_{a: s_a < s} (x_a − x(s)) × F_a + T_a by running sums over the actions sorted by s
+        total_force = total * gravity
+        if action_s:
+            order = np.argsort(np.asarray(action_s), kind="stable")
+            fa = ca.horzcat(*(forces[k] for k in order))
+            ca_ = _cross(ca.horzcat(*(action_x[k] for k in order)), fa) + ca.horzcat(*(torques[k] for k in order))
+            before = np.searchsorted(np.asarray(action_s)[order], s, side="left").tolist()
+            run_c = ca.horzcat(ca.DM.zeros(3), ca.cumsum(ca_, 1))[:, before]
+            run_f = ca.horzcat(ca.DM.zeros(3), ca.cumsum(fa, 1))
+            m_bal -= run_c - _cross(x, run_f[:, before])
+            total_force += run_f[:, -1]
+        delta = moment_c - m_bal
+        d_m = _column_norms_max(delta)
+        d_f = ca.norm_2(total_force)
+        gradient = np.gradient(np.eye(K), s, axis=0)  # np.gradient as a matrix: tridiagonal
+        tangent = ca.mtimes(x, ca.sparsify(ca.DM(gradient.T)))
+        phi = _cumulative(delta / ca.repmat(rf, 3, 1), s)
+        dx = _cumulative(_cross(phi, tangent), s)
+        metres = _column_norms_max(dx) + d_f * L**3 / (3 * rf_min)
+
+        v_out = ca.mtimes(nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T))
+        zero = ca.DM.zeros(3, 0)
+        self.function = ca.Function(
+            "dlo_outputs", [z, p, lam, prof],
+            [x_out, v_out, grip_forces if forces else zero, grip_torques if torques else zero,
+             ca.horzcat(*contact_totals) if contact_totals else zero, ca.vertcat(d_m, d_f, metres),
+             ca.horzcat(*flips) if flips else ca.DM.zeros(2, 0)],
+            ["z", "p", "lam", "prof"], ["points", "quaternions", "grip_forces", "grip_torques", "contacts",
+                                         "residual", "flip"])
+        self._profile_key: tuple | None = None
+
+    @staticmethod
+    def applies(nlp: StringNLP) -> bool:
+        """Director models with frames and without self-contact slots (others: the numpy path)."""
+        return bool(nlp.director and nlp.model.layout.frame and not nlp.self_contact_slots)
+
+    def profiles(self, string: StringProperties) -> np.ndarray:
+        """``prof``: Rf and Rt [N·m²] at the grid and Rf_min, remembered for the last string object."""
+        key = self._profile_key
+        if key is None or key[0] is not string:
+            s = self.grid
+            prof = np.concatenate([string.bend_stiffness(s), string.twist_stiffness(s), [string.bend_stiffness.minimum]])
+            self._profile_key = key = (string, prof)
+        return key[1]

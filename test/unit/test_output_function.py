@@ -1,0 +1,143 @@
+"""A result's outputs from one CasADi call (solver/output_function.py) against the numpy path it replaces.
+
+Both paths evaluate the same committed state: the centreline and orientations at the output points, each
+grip's reaction, each obstacle's contact force, the equilibrium residual and the flip test.  The numpy
+path (wrenches.py, residual.py, frames.py) is written term by term from the equations; the function is
+the same equations as one matrix expression.  They must agree to rounding for every update of a stream
+and for the cold solve, with contacts on and off, point loads with moments, interior grips (several
+elements), stretch, and compiled or interpreted.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from support.problems import clamped_pair, quat_about
+
+from dlo_ros.model import Grip, GripPose, Load, Problem, Profile, StringProperties
+from dlo_ros.model.obstacles import Obstacle
+from dlo_ros.scene import load_scene
+from dlo_ros.solver.compiled import InterpretedFunction, NativeFunction, compiler
+from dlo_ros.solver.options import SolverOptions
+from dlo_ros.solver.output_function import OutputFunction
+from dlo_ros.solver.shape_solver import ShapeSolver
+
+TOL = 1e-10
+
+
+def numpy_result(solver: ShapeSolver):
+    """The committed state's result through the numpy path."""
+    fns = solver.functions
+    saved, fns.outputs = fns.outputs, None
+    try:
+        return solver._outputs.result(solver.problem, solver.problem, solver._state, "", 0, 0.0, True, 0, None)
+    finally:
+        fns.outputs = saved
+
+
+def assert_same(a, b) -> None:
+    assert a.status == b.status and a.stable == b.stable, (a.message, b.message)
+    np.testing.assert_allclose(a.points, b.points, rtol=0, atol=TOL)
+    np.testing.assert_allclose(a.orientations, b.orientations, rtol=0, atol=TOL)
+    assert a.grips.keys() == b.grips.keys()
+    for name in a.grips:
+        np.testing.assert_allclose(a.grips[name].force, b.grips[name].force, rtol=0, atol=TOL)
+        np.testing.assert_allclose(a.grips[name].torque, b.grips[name].torque, rtol=0, atol=TOL)
+    assert a.contact_forces.keys() == b.contact_forces.keys()
+    for i in a.contact_forces:
+        np.testing.assert_allclose(a.contact_forces[i], b.contact_forces[i], rtol=0, atol=TOL)
+    assert a.equilibrium_residual_m == pytest.approx(b.equilibrium_residual_m, rel=1e-9, abs=1e-13)
+
+
+def three_clamps() -> Problem:
+    """An extensible, heavy cable held by three clamps (one interior: two elements) over a sphere."""
+    string = StringProperties(1.0, Profile.constant(0.02), Profile.constant(0.015), Profile.constant(2.0),
+                              stretch_stiffness=Profile.constant(40.0))
+    ident = [0.0, 0.0, 0.0, 1.0]
+    grips = (Grip("left", 0.0, "clamp", GripPose.checked([0.0, 0.0, 0.3], ident, "left")),
+             Grip("middle", 0.45, "clamp", GripPose.checked([0.4, 0.0, 0.32], quat_about("z", 0.2), "middle")),
+             Grip("right", 1.0, "clamp", GripPose.checked([0.85, 0.05, 0.3], ident, "right")))
+    ball = Obstacle("sphere", np.array([0.65, 0.02, 0.2, 0.08]), "ball")
+    return Problem(string, grips, gravity=np.array([0.0, 0.0, -9.81]), obstacles=(ball,))
+
+
+def loaded_cantilever() -> Problem:
+    """A clamped cantilever with a point force and a skew point moment at s = 0.6 m."""
+    string = StringProperties(1.0, Profile.constant(0.05), Profile.constant(0.04), Profile.constant(0.5))
+    grip = Grip("clamp", 0.0, "clamp", GripPose.checked([0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0], "clamp"))
+    load = Load(0.6, force=np.array([0.1, 0.2, 0.0]), moment=np.array([0.02, 0.01, 0.03]))
+    return Problem(string, (grip,), gravity=np.array([0.0, 0.0, -1.0]), loads=(load,))
+
+
+def default_cable() -> tuple[Problem, SolverOptions]:
+    scene = load_scene("default_cable")
+    return scene.problem, replace(scene.options, model="full")
+
+
+#: case → (problem and options, how far the stream lowers the last grip [m])
+CASES = {
+    "default_cable": (default_cable, 0.3),
+    "three_clamps": (lambda: (three_clamps(), SolverOptions(model="full", order=12)), 0.04),
+    "loaded_cantilever": (lambda: (loaded_cantilever(), SolverOptions(model="full", order=12)), 0.04),
+}
+
+
+def stream(problem: Problem, drop: float, steps: int = 8):
+    """Targets that lower the last grip by ``drop`` and turn it by 0.3 rad about x, step by step."""
+    grip = problem.grips[-1]
+    for k in range(1, steps + 1):
+        f = k / steps
+        position = grip.pose.position + np.array([0.0, 0.0, -drop * f])
+        q = quat_about("x", 0.3 * f)
+        yield {grip.name: (position, q)}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_the_outputs_function_equals_the_numpy_path_cold_and_streaming(case):
+    make, drop = CASES[case]
+    problem, options = make()
+    solver = ShapeSolver(problem, options, compile="off")
+    assert OutputFunction.applies(solver.nlp) and solver.functions.outputs is not None  # the premise
+    results = [solver.solve()]
+    assert results[0].ok, results[0].message
+    assert_same(results[0], numpy_result(solver))
+    touched = False
+    for targets in stream(problem, drop):
+        r = solver.solve(targets)
+        assert r.ok, r.message
+        assert_same(r, numpy_result(solver))
+        touched |= any(np.linalg.norm(f) > 1e-6 for f in r.contact_forces.values())
+        results.append(r)
+    if problem.obstacles:
+        assert touched, "the stream never pressed onto the obstacle: the contact terms went untested"
+
+
+@pytest.mark.skipif(compiler() is None, reason="needs a C compiler")
+def test_compiled_and_interpreted_outputs_agree(tmp_path, monkeypatch):
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)  # conftest turns compiling off
+    problem, options = default_cable()
+    solver = ShapeSolver(problem, options, compile="blocking")
+    assert isinstance(solver.functions.outputs, NativeFunction)
+    interpreted = InterpretedFunction(solver.functions.output_function.function)
+    for targets in [None, *stream(problem, 0.3, 4)]:
+        r = solver.solve(targets) if targets else solver.solve()
+        assert r.ok, r.message
+        state, nlp = solver._state, solver.nlp
+        args = (state.z, state.p, state.lam_g / (nlp.row_scale * nlp.sigma),
+                solver.functions.output_function.profiles(solver.problem.string))
+        for native, plain in zip(solver.functions.outputs(*args), interpreted(*args)):
+            np.testing.assert_allclose(native, plain, rtol=0, atol=1e-12)
+        assert_same(r, numpy_result(solver))
+
+
+def test_models_the_function_does_not_cover_keep_the_numpy_path():
+    """A clamp and a tangent grip leave the twist free: the tangent model, whose frames are transported
+    along s (no closed form): its outputs stay with numpy."""
+    problem = clamped_pair(right=(0.8, 0.0, 0.0), modes=("clamp", "tangent"), weight=0.5)
+    solver = ShapeSolver(problem, SolverOptions(model="full", order=12), compile="off")
+    assert not OutputFunction.applies(solver.nlp) and solver.functions.outputs is None
+    for targets in [None, *stream(problem, 0.04, 4)]:
+        r = solver.solve(targets) if targets else solver.solve()
+        assert r.ok and r.equilibrium_residual_m < 1e-3, r.message

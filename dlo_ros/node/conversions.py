@@ -120,30 +120,44 @@ def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
     return Path(header=h, poses=poses)
 
 
-def _cdr_header(stamp_ns: int, frame: bytes, offset: int) -> bytes:
+def _cdr_header(stamp_ns: int, frame: bytes, offset: int = 0) -> bytes:
     """A std_msgs/Header in CDR at ``offset`` (a multiple of 4 after the encapsulation): stamp (int32 sec,
     uint32 nanosec), frame_id (uint32 length with the NUL, the bytes, the NUL)."""
     ns = int(stamp_ns)
-    return (np.array([ns // 1_000_000_000], "<i4").tobytes() + np.array([ns % 1_000_000_000], "<u4").tobytes()
-            + np.array([len(frame) + 1], "<u4").tobytes() + frame + b"\0")
+    return struct.pack("<iII", ns // 1_000_000_000, ns % 1_000_000_000, len(frame) + 1) + frame + b"\0"
 
 
 def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_ns: int) -> bytes:
     """A nav_msgs/Path of these poses (every pose with the path's header), serialised as little-endian
     CDR for ``Publisher.publish(bytes)``: no per-pose Python message objects.  Alignment follows CDR:
     4-byte integers on 4, doubles on 8, offsets counted after the 4-byte encapsulation header."""
-    frame = frame_id.encode()
+    head = _cdr_header(stamp_ns, frame_id.encode())
     out = bytearray(b"\x00\x01\x00\x00")  # CDR, little endian
-    out += _cdr_header(stamp_ns, frame, 0)
+    out += head
     out += b"\0" * (-(len(out) - 4) % 4)
-    out += np.array([len(points)], "<u4").tobytes()
+    out += struct.pack("<I", len(points))
     rows = np.ascontiguousarray(np.concatenate([points, orientations], axis=1), dtype="<f8")
-    for row in rows:
-        out += b"\0" * (-(len(out) - 4) % 4)
-        out += _cdr_header(stamp_ns, frame, len(out) - 4)
-        out += b"\0" * (-(len(out) - 4) % 8)
-        out += row.tobytes()
+    if not len(rows):
+        return bytes(out)
+    # the first pose starts where the count left off (on 4)
+    out += head
+    out += b"\0" * (-(len(out) - 4) % 8)
+    out += rows[0].tobytes()
+    # every later pose starts on 8 (its predecessor ends with doubles): one layout, filled in for all at once
+    lead = len(head) + (-len(head) % 8)  # the header, then padding up to its pose's doubles
+    blocks = np.zeros((len(rows) - 1, lead + 56), dtype=np.uint8)
+    blocks[:, :len(head)] = np.frombuffer(head, dtype=np.uint8)
+    blocks[:, lead:] = rows[1:].view(np.uint8).reshape(len(rows) - 1, 56)
+    out += blocks.tobytes()
     return bytes(out)
+
+
+def wrench_cdr(wrench: GripWrench, frame_id: str, stamp_ns: int) -> bytes:
+    """``wrench_stamped`` serialised as little-endian CDR for ``Publisher.publish(bytes)``: the header,
+    padding to 8, then force and torque as six doubles."""
+    head = _cdr_header(stamp_ns, frame_id.encode())
+    values = np.concatenate([np.asarray(wrench.force, dtype="<f8"), np.asarray(wrench.torque, dtype="<f8")])
+    return b"\x00\x01\x00\x00" + head + b"\0" * (-len(head) % 8) + values.astype("<f8").tobytes()
 
 
 def result_path_cdr(result: ShapeResult, frame_id: str, stamp_ns: int) -> bytes:

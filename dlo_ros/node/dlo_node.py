@@ -530,7 +530,7 @@ class DloNode(Node):
         for name, wrench in r.grips.items():
             pub = self._wrench_pubs.get(name)
             if pub is not None:
-                pub.publish(conv.wrench_stamped(wrench, self.frame_id, stamp))
+                pub.publish(conv.wrench_cdr(wrench, self.frame_id, stamp))
         model_changed = self._record_update(u, stamp)
         latency = None if u.received_ns is None else (time.monotonic_ns() - u.received_ns) / 1e6
         self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)

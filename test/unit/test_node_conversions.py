@@ -14,6 +14,8 @@ from dlo_ros.model.rotations import matrix_to_quat, quat_to_matrix
 from dlo_ros.node import conversions as conv
 from dlo_ros.solver.result import GripWrench, ShapeResult
 
+FRAMES = ["", "w", "ab", "abc", "abcd", "world", "abcdef", "abcdefg", "abcdefgh", "a_longer_frame_7"]  # every length mod 8
+
 
 def arc_result(radius: float = 0.5, n: int = 41, angle: float = math.pi / 2) -> ShapeResult:
     """A circular arc in the x-z plane, poses with x along the tangent (curvature 1/radius)."""
@@ -92,6 +94,20 @@ def test_wrench():
     f, t = conv.wrench_to_arrays(msg)
     np.testing.assert_array_equal(f, w.force)
     np.testing.assert_array_equal(t, w.torque)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_the_serialised_wrench_reads_back_as_the_message(frame):
+    """The node publishes the wrenches as CDR bytes: deserialised, they are what wrench_stamped builds."""
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    w = GripWrench(np.array([1.0, -2.0, 3.5e-9]), np.array([0.1, 0.2, -0.3]))
+    stamp = 1_796_154_177_018_047_479
+    data = conv.wrench_cdr(w, frame, stamp)
+    expected = conv.wrench_stamped(w, frame, stamp)
+    assert deserialize_message(data, WrenchStamped) == expected
+    assert len(data) == len(serialize_message(expected))  # its padding bytes are not zeroed: compare sizes
 
 
 def test_curvature_of_an_arc_is_exact():
@@ -195,7 +211,7 @@ def test_in_frame_with_and_without_a_transform_lookup():
         conv.in_frame("", "world", p, q, "t", lookup)
 
 
-@pytest.mark.parametrize("frame", ["world", "w", "abc", "abcd", "a_longer_frame_7"])
+@pytest.mark.parametrize("frame", FRAMES)
 @pytest.mark.parametrize("n", [0, 1, 2, 51])
 def test_the_serialised_centreline_reads_back_as_the_message(frame, n):
     """The node publishes the Path as CDR bytes built from the arrays (#14's lean path): deserialised,

@@ -120,9 +120,9 @@ def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
     return Path(header=h, poses=poses)
 
 
-def _cdr_header(stamp_ns: int, frame: bytes, offset: int = 0) -> bytes:
-    """A std_msgs/Header in CDR at ``offset`` (a multiple of 4 after the encapsulation): stamp (int32 sec,
-    uint32 nanosec), frame_id (uint32 length with the NUL, the bytes, the NUL)."""
+def _cdr_header(stamp_ns: int, frame: bytes) -> bytes:
+    """A std_msgs/Header in CDR, to be placed at an offset that is a multiple of 4 after the encapsulation:
+    stamp (int32 sec, uint32 nanosec), frame_id (uint32 length with the NUL, the bytes, the NUL)."""
     ns = int(stamp_ns)
     return struct.pack("<iII", ns // 1_000_000_000, ns % 1_000_000_000, len(frame) + 1) + frame + b"\0"
 
@@ -157,7 +157,7 @@ def wrench_cdr(wrench: GripWrench, frame_id: str, stamp_ns: int) -> bytes:
     padding to 8, then force and torque as six doubles."""
     head = _cdr_header(stamp_ns, frame_id.encode())
     values = np.concatenate([np.asarray(wrench.force, dtype="<f8"), np.asarray(wrench.torque, dtype="<f8")])
-    return b"\x00\x01\x00\x00" + head + b"\0" * (-len(head) % 8) + values.astype("<f8").tobytes()
+    return b"\x00\x01\x00\x00" + head + b"\0" * (-len(head) % 8) + values.tobytes()
 
 
 def result_path_cdr(result: ShapeResult, frame_id: str, stamp_ns: int) -> bytes:

@@ -56,7 +56,8 @@ class NlpFunctions:
         self.output_function = OutputFunction(nlp, nlp.problem, np.linspace(0.0, nlp.length, nlp.options.output_points)) \
             if OutputFunction.applies(nlp) else None
         self.outputs = InterpretedFunction(self.output_function.function) if self.output_function is not None else None
-        self.compiled = False        # every function runs compiled C
+        self.compiled = False        # every derivative function runs compiled C
+        self.outputs_compiled = False  # the outputs' function runs compiled C
         self.compile_time_s = 0.0    # wall time of the compile that finished them [s]
         self.retired = False         # the solver was rebuilt: a running compile stops at its next swap
 
@@ -90,15 +91,20 @@ class NlpFunctions:
                     self.newton_native = native
                 if name == "kkt":
                     self.newton_active = self._active_loop(lib)
+                if name == "outputs":
+                    self.outputs_compiled = True
             else:
                 todo.append((name, fn, lib))
-        self.compiled = not todo
+        # the outputs' function is not a derivative: ``compiled`` says whether the derivatives are
+        self.compiled = all(name == "outputs" for name, _, _ in todo)
         if not todo or mode == "cached":
             return None
 
         def work(locked: bool) -> None:
             t0 = time.perf_counter()
-            for name, fn, lib in todo:
+            for name, fn, lib in todo:  # the derivatives first, the outputs' function last
+                if self.retired:  # the scene was rebuilt: nothing more to compile for this one
+                    return
                 nice = 10 if mode == "background" else 0
                 native, ok = compiled(fn, nice=nice, lib=lib,
                                       extra_source=native_newton.active_source(fn) if name == "kkt" else "")
@@ -113,10 +119,11 @@ class NlpFunctions:
                         self.newton_native = loop
                     if name == "kkt":
                         self.newton_active = self._active_loop(lib)
-            with (threading.Lock() if locked else lock):
-                if not self.retired:
-                    self.compiled = True
-                    self.compile_time_s = time.perf_counter() - t0
+                    if name == "outputs":
+                        self.outputs_compiled = True
+                    elif all(later == "outputs" for later, _, _ in todo[todo.index((name, fn, lib)) + 1:]):
+                        self.compiled = True  # every derivative runs compiled now
+                        self.compile_time_s = time.perf_counter() - t0
 
         if mode == "blocking":
             work(locked=True)

@@ -67,10 +67,12 @@ def twist_is_held(problem: Problem) -> bool:
 
 def breakpoints(problem: Problem) -> list[float]:
     """Arc lengths where the solution may have a kink: every grip strictly inside the string (a jump of
-    the internal force and moment), every point load and every knot of a piecewise-linear material
-    profile (a jump of the curvature's derivative)."""
+    the internal force and moment), every point load, both ends of every relative position (its reaction
+    is a point force at each) and every knot of a piecewise-linear material profile (a jump of the
+    curvature's derivative)."""
     L = problem.string.length
     out = [g.s for g in problem.grips] + [ld.s for ld in problem.loads]
+    out += [s for rel in problem.relative_positions for s in (rel.s_a, rel.s_b)]  # their reactions are point forces
     st = problem.string
     for prof in (st.bend_stiffness, st.twist_stiffness, st.weight_per_length, st.stretch_stiffness):
         if prof is not None and len(prof.s) > 1:
@@ -316,9 +318,14 @@ class StringNLP:
                 rows["angles"].append(len(g_rows))
                 add(m.angle_sym(z, name, g.s) - angles[k], 1.0, ("grip", g.name, name, k))
             self.grip_rows[g.name] = rows
+        #: per relative position: its rows and their axes (c_r in c_r · (x(s_b) − x(s_a) − offset) = 0)
+        self.relative_rows: list[list[int]] = []
+        self.relative_axes = in_plane if self.planar else np.eye(3)
         for i, _ in enumerate(P.relative_positions):
             off = p[lay[f"relative:{i}"]]
-            for k, axis in enumerate(in_plane if self.planar else np.eye(3)):
+            self.relative_rows.append([])
+            for k, axis in enumerate(self.relative_axes):
+                self.relative_rows[-1].append(len(g_rows))
                 add(ca.dot(ca.DM(axis), rel_x[:, 2 * i + 1] - rel_x[:, 2 * i] - off), L, ("relative", i, k))
         if self.director:
             for i, expr in enumerate(m.norm_rows_sym(z)):

@@ -15,9 +15,10 @@ Rf_min, from the string (``OutputFunction.profiles``); ``v``: the interpolated n
 d1·R_g e_y at its node (negative: the flipped sheet, ``frames.flipped_grips``).
 
 The arithmetic is the numpy path's, term for term (``wrenches.wrench``, ``wrenches.equilibrium``,
-``residual.equilibrium_residual``), on the same grid: the uniform grid refined at the grips, the point
-loads, the mesh breakpoints and every obstacle sample (a sample that does not touch has λ = 0 and acts
-with zero force).  Both paths agree to rounding (test_output_function.py).
+``residual.equilibrium_residual``), on the same grid (``wrenches.static_events``: refined at the grips,
+the point loads, the relative positions' ends and the mesh breakpoints), with every obstacle sample as
+a point action (one that does not touch has λ = 0 and acts with zero force).  Both paths agree to
+rounding (test_output_function.py).
 """
 from __future__ import annotations
 
@@ -34,15 +35,15 @@ from .wrenches import static_events
 def unit_quaternions(v: np.ndarray) -> np.ndarray:
     """(K, 4) unit quaternions (x, y, z, w) of non-zero quaternions v, each with the sign
     ``director.frame_to_quat`` gives its rotation matrix (the component Shepperd's method takes from the
-    largest of trace and diagonal is positive)."""
+    largest of trace and diagonal is positive).  Where two candidates tie to rounding the two may pick
+    q and −q: the same rotation."""
     n2 = np.einsum("ki,ki->k", v, v)
     x2, y2, z2, w2 = (v * v).T
     # 1 + trace and 1 + 2 R_aa − trace of R(v), times |v|²: 4 w², 4 x², 4 y², 4 z²
     which = np.argmax(np.stack([3 * w2 - x2 - y2 - z2, w2 + x2 - y2 - z2, w2 - x2 + y2 - z2,
                                 w2 - x2 - y2 + z2], axis=1), axis=1)
-    sign = np.sign(v[np.arange(len(v)), np.array([3, 0, 1, 2])[which]])
-    sign[sign == 0] = 1.0
-    return v * (sign / np.sqrt(n2))[:, None]
+    negative = v[np.arange(len(v)), np.array([3, 0, 1, 2])[which]] < 0
+    return np.where(negative[:, None], -v, v) / np.sqrt(n2)[:, None]  # −v, not −1 · v: no negative zeros
 
 
 def _cross(a: ca.MX, b: ca.MX) -> ca.MX:
@@ -88,7 +89,8 @@ class OutputFunction:
         if m.layout.stretch:
             tq = tq * ca.repmat(1 + ca.mtimes(ca.DM(m.B), z[m.layout.eps]).T, 3, 1)
 
-        point_s = np.array([g.s for g in problem.grips] + [ld.s for ld in problem.loads], dtype=float)
+        rel_s = [s_ for rel in problem.relative_positions for s_ in (rel.s_a, rel.s_b)]
+        point_s = np.array([g.s for g in problem.grips] + [ld.s for ld in problem.loads] + rel_s, dtype=float)
         s_out = np.asarray(s_out, dtype=float)
         pieces = [s, m.quad.nodes, point_s, nlp.obstacle_s, s_out]
         splits = np.cumsum([len(a) for a in pieces])
@@ -116,54 +118,56 @@ class OutputFunction:
         total = ca.dot(ca.DM(m.quad.weights), d_nodes)
         m_bal = -(_cross(weight_moment, gravity) - _cross(x, gravity) * ca.repmat(weight, 3, 1))
 
-        # point actions: grips, loads, then every obstacle sample (wrenches.wrench, ShapeOutputs._contacts)
-        forces, torques, flips, action_s, action_x = [], [], [], [], []
-        for k, g in enumerate(problem.grips):
+        # point actions at fixed arc lengths: grips (wrenches.wrench), loads, the relative positions' ends
+        forces, torques, flips = [], [], []
+        for g in problem.grips:
             rows = nlp.grip_rows[g.name]
             force = -ca.mtimes(ca.DM(nlp.grip_axes[g.name].T), lam[rows["position"]])
             v = nodes_v[:, m.mesh.node_index(g.s)]
             tg, d1g, _ = (ca.vertcat(*col) for col in _columns(ca.vertsplit(v), ca))
             target = ca.reshape(p[lay[f"grip:{g.name}:frame"]], 3, 3)
             torque = ca.DM.zeros(3)
-            mu = lam[rows["angles"]] if rows["angles"] else None
             if rows["angles"]:
+                mu = lam[rows["angles"]]
                 torque = -(mu[0] * ca.cross(tg, target[:, 1]) + mu[1] * ca.cross(tg, target[:, 2]))
                 if len(rows["angles"]) == 3:
                     torque -= mu[2] * ca.cross(d1g, target[:, 2])
             forces.append(force)
             torques.append(torque)
             flips.append(ca.vertcat(ca.dot(tg, target[:, 0]), ca.dot(d1g, target[:, 1])))
-            action_s.append(g.s)
-            action_x.append(point_x[:, k])
-        grip_forces, grip_torques = ca.horzcat(*forces), ca.horzcat(*torques)
-        for k, ld in enumerate(problem.loads):
+        grip_forces, grip_torques, flip = ca.horzcat(*forces), ca.horzcat(*torques), ca.horzcat(*flips)
+        for k, _ in enumerate(problem.loads):
             forces.append(p[lay[f"load:{k}:force"]])
             torques.append(p[lay[f"load:{k}:moment"]])
-            action_s.append(ld.s)
-            action_x.append(point_x[:, len(problem.grips) + k])
-        contact_totals = []
-        for i, ob in enumerate(problem.obstacles):
-            samples = len(nlp.obstacle_s)
-            grads = nlp.obstacle_gradient[ob.type].map(samples)(sample_x, ca.repmat(p[lay[f"obstacle:{i}"]], 1, samples))
-            lam_i = ca.fmax(lam[nlp.obstacle_rows[i]], 0).T  # a row that does not touch acts with no force
-            f = -ca.repmat(lam_i, 3, 1) * grads
-            contact_totals.append(ca.sum2(f))
-            forces += ca.horzsplit(f)
-            torques += [ca.DM.zeros(3)] * samples
-            action_s += list(nlp.obstacle_s)
-            action_x += ca.horzsplit(sample_x)
-        self.n_obstacles = len(problem.obstacles)
-
-        # Σ_{a: s_a < s} (x_a − x(s)) × F_a + T_a by running sums over the actions sorted by s
+        for rows in nlp.relative_rows:  # wrenches.relative_forces: −F_b at s_a, F_b at s_b
+            f_b = -ca.mtimes(ca.DM(nlp.relative_axes.T), lam[rows])
+            forces += [-f_b, f_b]
+            torques += [ca.DM.zeros(3), ca.DM.zeros(3)]
         total_force = total * gravity
-        if action_s:
-            order = np.argsort(np.asarray(action_s), kind="stable")
-            fa = ca.horzcat(*(forces[k] for k in order))
-            ca_ = _cross(ca.horzcat(*(action_x[k] for k in order)), fa) + ca.horzcat(*(torques[k] for k in order))
-            before = np.searchsorted(np.asarray(action_s)[order], s, side="left").tolist()
-            run_c = ca.horzcat(ca.DM.zeros(3), ca.cumsum(ca_, 1))[:, before]
-            run_f = ca.horzcat(ca.DM.zeros(3), ca.cumsum(fa, 1))
-            m_bal -= run_c - _cross(x, run_f[:, before])
+        # Σ_{a: s_a < s} (x_a − x(s)) × F_a + T_a = C(s) − x(s) × F(s), with C and F running sums over the
+        # actions sorted by s: the point actions and the obstacle samples (every obstacle's force at a
+        # sample summed: they share the samples) as two sorted groups
+        order = np.argsort(point_s, kind="stable")
+        point_f = ca.horzcat(*(forces[k] for k in order))
+        point_c = _cross(point_x[:, order.tolist()], point_f) + ca.horzcat(*(torques[k] for k in order))
+        groups = [(point_c, point_f, point_s[order])]
+        contact_totals = []
+        if problem.obstacles:
+            samples = len(nlp.obstacle_s)
+            sample_f = None
+            for i, ob in enumerate(problem.obstacles):
+                grads = nlp.obstacle_gradient[ob.type].map(samples)(sample_x, ca.repmat(p[lay[f"obstacle:{i}"]], 1, samples))
+                lam_i = ca.fmax(lam[nlp.obstacle_rows[i]], 0).T  # a row that does not touch acts with no force
+                f = -ca.repmat(lam_i, 3, 1) * grads
+                contact_totals.append(ca.sum2(f))
+                sample_f = f if sample_f is None else sample_f + f
+            groups.append((_cross(sample_x, sample_f), sample_f, np.asarray(nlp.obstacle_s)))
+        self.n_obstacles = len(problem.obstacles)
+        for c_a, f_a, s_a in groups:
+            before = np.searchsorted(s_a, s, side="left").tolist()  # how many of the group lie strictly before s
+            run_c = ca.horzcat(ca.DM.zeros(3), ca.cumsum(c_a, 1))
+            run_f = ca.horzcat(ca.DM.zeros(3), ca.cumsum(f_a, 1))
+            m_bal -= run_c[:, before] - _cross(x, run_f[:, before])
             total_force += run_f[:, -1]
         delta = moment_c - m_bal
         d_m = _column_norms_max(delta)
@@ -178,9 +182,8 @@ class OutputFunction:
         zero = ca.DM.zeros(3, 0)
         self.function = ca.Function(
             "dlo_outputs", [z, p, lam, prof],
-            [x_out, v_out, grip_forces if forces else zero, grip_torques if torques else zero,
-             ca.horzcat(*contact_totals) if contact_totals else zero, ca.vertcat(d_m, d_f, metres),
-             ca.horzcat(*flips) if flips else ca.DM.zeros(2, 0)],
+            [x_out, v_out, grip_forces, grip_torques, ca.horzcat(*contact_totals) if contact_totals else zero,
+             ca.vertcat(d_m, d_f, metres), flip],
             ["z", "p", "lam", "prof"], ["points", "quaternions", "grip_forces", "grip_torques", "contacts",
                                          "residual", "flip"])
         self._profile_key: tuple | None = None

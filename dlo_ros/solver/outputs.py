@@ -77,10 +77,10 @@ class ShapeOutputs:
         nlp, m, options = self.nlp, self.nlp.model, self.options
         z, p = state.z, state.p
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
-        s_out = self.s_out.copy()
         if self.fns.outputs is not None and self.contact_slots is None:
             return self._compiled_result(problem, state, lam_si, ipopt_status, iterations, violation, warm, steps,
                                          summary)
+        s_out = self.s_out.copy()
         if nlp.director:
             points = m.positions(z, s_out)
             quats = frame_to_quat(F.pose_frames(nlp, self.parameters, problem, z, s_out))
@@ -94,7 +94,7 @@ class ShapeOutputs:
         for c in self_contacts:  # equal and opposite on the two strands
             actions += [PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
                         PointAction(c.s_b, c.point_b, -c.force, np.zeros(3))]
-        residual = equilibrium(nlp, problem, frames_of, z, grips, actions)
+        residual = equilibrium(nlp, problem, frames_of, z, grips, actions, lam_si)
         flipped = F.flipped_grips(nlp, problem, z) if nlp.director else ""
         # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier complementarity)
         touching = [c for c in self_contacts if c.gap <= self.contact_slots.geometry.distance + 1e-7 * nlp.length]

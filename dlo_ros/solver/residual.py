@@ -19,8 +19,10 @@ force imbalance ΔF would cause at the tip of a cantilever:
 
 Pointwise δm oscillates about zero where only the discretisation is at fault and so integrates to
 about the centreline error itself; a shape off its equilibrium (a wrong branch, a kink the basis
-cannot follow, a load applied wrongly) accumulates.  ``moment`` keeps the pointwise max |δm|.  It is evaluated strictly between the arc lengths of point actions, on a grid
-of ``RESIDUAL_POINTS`` intervals, with the model's own quadrature for the weight's integrals.
+cannot follow, a load applied wrongly) accumulates.  ``moment`` keeps the pointwise max |δm|.  It is evaluated on a grid of
+``RESIDUAL_POINTS`` intervals refined at the grips, point loads, relative positions' ends and mesh
+breakpoints (``wrenches.static_events``), strictly between them; contact forces carry no moment, so
+m_bal does not jump where they act.  The weight's integrals use the model's own quadrature.
 """
 from __future__ import annotations
 
@@ -53,8 +55,11 @@ class EquilibriumResidual:
 
 
 def evaluation_grid(length: float, events: list[float], points: int = RESIDUAL_POINTS) -> np.ndarray:
-    """Midpoints of a grid of ``points`` intervals refined at every event arc length (never on one)."""
+    """Midpoints of a grid of ``points`` intervals refined at every event arc length (never on one).
+    Nodes closer than 1e-12 L merge: an event equal to a grid node up to rounding (0.3 and
+    0.30000000000000004) would otherwise leave a midpoint on the event itself."""
     grid = np.unique(np.concatenate([np.linspace(0.0, length, points + 1), np.clip(events, 0.0, length)]))
+    grid = grid[np.concatenate([[True], np.diff(grid) > 1e-12 * length])]
     return 0.5 * (grid[1:] + grid[:-1])
 
 

@@ -389,10 +389,11 @@ class ShapeSolver:
         return F.frames(self.nlp, self.parameters, self.problem, z, s, p)
 
     def equilibrium(self, problem: Problem, z: np.ndarray, grips: dict[str, GripWrench],
-                    contacts: list[PointAction] = ()) -> EquilibriumResidual:
-        """The strong-form equilibrium residual of shape z under the grip reactions ``grips`` and the
-        obstacle ``contacts`` (solver/residual.py)."""
-        return equilibrium(self.nlp, problem, self._outputs.frames_of(self.problem), z, grips, contacts)
+                    contacts: list[PointAction] = (), lam_si: np.ndarray | None = None) -> EquilibriumResidual:
+        """The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
+        obstacle ``contacts`` and (given the SI multipliers) the relative positions' reactions
+        (solver/residual.py)."""
+        return equilibrium(self.nlp, problem, self._outputs.frames_of(self.problem), z, grips, contacts, lam_si)
 
     # ---- solving ----------------------------------------------------------------------------------
     def _newton(self, start: SolverState, p: np.ndarray) -> tuple[bool, SolverState, int, float]:

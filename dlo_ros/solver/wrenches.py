@@ -116,24 +116,35 @@ def solve_unit_rows(a: np.ndarray, rhs: list[float]) -> np.ndarray | None:
 
 
 def static_events(nlp: StringNLP, problem: Problem) -> list[float]:
-    """The arc lengths [m] the residual's grid is refined at, whatever touches: grips, point loads, every
-    obstacle sample and (director models) the mesh breakpoints.  Fixed by the NLP's structure, so that
-    the grid is too (``output_function.py`` evaluates on it)."""
-    events = [g.s for g in problem.grips] + [ld.s for ld in problem.loads] + list(nlp.obstacle_s)
+    """The arc lengths [m] the residual's grid is refined at: grips, point loads, the relative positions'
+    ends and (director models) the mesh breakpoints.  Fixed by the NLP's structure, so that the grid is
+    too (``output_function.py`` evaluates on it).  Contact forces (obstacles, self-contact) carry no
+    moment: the balance moment only bends where they act, it does not jump, so the grid need not
+    follow them."""
+    events = [g.s for g in problem.grips] + [ld.s for ld in problem.loads]
+    events += [s for rel in problem.relative_positions for s in (rel.s_a, rel.s_b)]
     if nlp.director:
         events += list(nlp.model.mesh.breakpoints)
     return events
 
 
+def relative_forces(nlp: StringNLP, lam_si: np.ndarray) -> list[np.ndarray]:
+    """Per relative position, the force [N] its rows exert on the string at s_b, F_b = −Σ_r λ_r c_r (the
+    position rows' rule, ``wrench``); the string takes −F_b at s_a."""
+    return [-nlp.relative_axes.T @ lam_si[rows] for rows in nlp.relative_rows]
+
+
 def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.ndarray, grips: dict[str, GripWrench],
-                contacts: Sequence[PointAction] = ()) -> EquilibriumResidual:
-    """The strong-form equilibrium residual of shape z under the grip reactions ``grips`` and the
-    obstacle ``contacts`` (solver/residual.py)."""
+                contacts: Sequence[PointAction] = (), lam_si: np.ndarray | None = None) -> EquilibriumResidual:
+    """The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
+    obstacle ``contacts`` and, given the SI multipliers ``lam_si``, the relative positions' reactions
+    (solver/residual.py)."""
     m, st, L = nlp.model, problem.string, problem.string.length
     grip_s = {g.name: g.s for g in problem.grips}
-    s = evaluation_grid(L, static_events(nlp, problem) + [a.s for a in contacts])
+    s = evaluation_grid(L, static_events(nlp, problem))
     nodes = m.quad.nodes
-    point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads])
+    rel_s = [s for rel in problem.relative_positions for s in (rel.s_a, rel.s_b)] if lam_si is not None else []
+    point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads] + rel_s)
     # one evaluation of the shape for the grid, the quadrature nodes and the point actions
     s_all = np.concatenate([s, nodes, point_s])
     x_all = m.positions(z, s_all)
@@ -156,6 +167,11 @@ def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.nda
             n = nlp.r0[:, 2]
             moment = np.dot(moment, n) * n
         actions.append(PointAction(ld.s, point_x[len(grips) + k], np.asarray(ld.force, dtype=float), moment))
+    if rel_s:
+        first = len(grips) + len(problem.loads)
+        for k, (rel, force) in enumerate(zip(problem.relative_positions, relative_forces(nlp, lam_si))):
+            actions += [PointAction(rel.s_a, point_x[first + 2 * k], -force, np.zeros(3)),
+                        PointAction(rel.s_b, point_x[first + 2 * k + 1], force, np.zeros(3))]
     total = float(m.quad.weights @ d_nodes)
     return equilibrium_residual(s, x, moment_c, w @ d_nodes, w @ (d_nodes[:, None] * x_nodes), actions + list(contacts),
                                 problem.gravity_unit, total, L, st.bend_stiffness.minimum, rf)

@@ -16,11 +16,13 @@ import pytest
 from support.problems import clamped_pair, quat_about
 
 from dlo_ros.model import Grip, GripPose, Load, Problem, Profile, StringProperties
+from dlo_ros.model.problem import RelativePosition
 from dlo_ros.model.obstacles import Obstacle
 from dlo_ros.scene import load_scene
 from dlo_ros.solver.compiled import InterpretedFunction, NativeFunction, compiler
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.output_function import OutputFunction
+from dlo_ros.solver.residual import PointAction
 from dlo_ros.solver.shape_solver import ShapeSolver
 
 TOL = 1e-10
@@ -75,11 +77,18 @@ def default_cable() -> tuple[Problem, SolverOptions]:
     return scene.problem, replace(scene.options, model="full")
 
 
-#: case → (problem and options, how far the stream lowers the last grip [m])
+def tied_cable() -> tuple[Problem, SolverOptions]:
+    """default_cable with the points at 0.3 m and 0.7 m held 15 cm apart along x (paper eq. 6)."""
+    problem, options = default_cable()
+    return replace(problem, relative_positions=(RelativePosition(0.3, 0.7, np.array([0.15, 0.0, 0.0])),)), options
+
+
+#: case → (problem and options, how far the stream lowers the last grip [m], whether it presses on an obstacle)
 CASES = {
-    "default_cable": (default_cable, 0.3),
-    "three_clamps": (lambda: (three_clamps(), SolverOptions(model="full", order=12)), 0.04),
-    "loaded_cantilever": (lambda: (loaded_cantilever(), SolverOptions(model="full", order=12)), 0.04),
+    "default_cable": (default_cable, 0.3, True),
+    "three_clamps": (lambda: (three_clamps(), SolverOptions(model="full", order=12)), 0.04, True),
+    "loaded_cantilever": (lambda: (loaded_cantilever(), SolverOptions(model="full", order=12)), 0.04, False),
+    "tied_cable": (tied_cable, 0.3, False),  # the tie holds it off the table
 }
 
 
@@ -95,7 +104,7 @@ def stream(problem: Problem, drop: float, steps: int = 8):
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_the_outputs_function_equals_the_numpy_path_cold_and_streaming(case):
-    make, drop = CASES[case]
+    make, drop, presses = CASES[case]
     problem, options = make()
     solver = ShapeSolver(problem, options, compile="off")
     assert OutputFunction.applies(solver.nlp) and solver.functions.outputs is not None  # the premise
@@ -109,8 +118,8 @@ def test_the_outputs_function_equals_the_numpy_path_cold_and_streaming(case):
         assert_same(r, numpy_result(solver))
         touched |= any(np.linalg.norm(f) > 1e-6 for f in r.contact_forces.values())
         results.append(r)
-    if problem.obstacles:
-        assert touched, "the stream never pressed onto the obstacle: the contact terms went untested"
+    assert touched == presses, "the stream was meant to press onto an obstacle: the contact terms went untested" \
+        if presses else "a stream meant to stay clear touched"
 
 
 @pytest.mark.skipif(compiler() is None, reason="needs a C compiler")
@@ -141,3 +150,52 @@ def test_models_the_function_does_not_cover_keep_the_numpy_path():
     for targets in [None, *stream(problem, 0.04, 4)]:
         r = solver.solve(targets) if targets else solver.solve()
         assert r.ok and r.equilibrium_residual_m < 1e-3, r.message
+
+
+def test_a_relative_positions_reaction_enters_the_residual():
+    """The rows x(s_b) − x(s_a) = offset act on the string as a force F_b at s_b and −F_b at s_a.  Without
+    them in the residual a tied cable's equilibrium read as 2.7 m off (`unverified`); with them it is
+    verified and holds the offset, and both paths agree (the parametrised test).  Cold and streaming."""
+    problem, options = tied_cable()
+    rel = problem.relative_positions[0]
+    solver = ShapeSolver(problem, options, compile="off")
+    for targets in [None, *stream(problem, 0.3, 4)]:
+        r = solver.solve(targets) if targets else solver.solve()
+        assert r.ok, r.message  # verified: the residual is within the tolerance (1e-3 L)
+        x_a, x_b = solver.nlp.model.positions(solver._state.z, np.array([rel.s_a, rel.s_b]))
+        np.testing.assert_allclose(x_b - x_a, rel.offset, atol=1e-9)
+        # the tie pulls: without its reaction the strong-form balance is far off
+        grips = {name: r.grips[name] for name in r.grips}
+        contacts = [PointAction(float(solver.nlp.obstacle_s[j]), x, f, np.zeros(3)) for j, x, f in
+                    contact_actions(solver)]
+        untied = solver.equilibrium(solver.problem, solver._state.z, grips, contacts)
+        assert untied.metres > 100 * r.equilibrium_residual_m
+
+
+def contact_actions(solver: ShapeSolver):
+    """(sample index, position, force) of every touching obstacle sample of the committed state."""
+    nlp, state = solver.nlp, solver._state
+    lam = state.lam_g / (nlp.row_scale * nlp.sigma)
+    _, actions = solver._outputs._contacts(solver.problem, state.z, lam)
+    index = {float(s): j for j, s in enumerate(nlp.obstacle_s)}
+    return [(index[a.s], a.position, a.force) for a in actions]
+
+
+@pytest.mark.skipif(compiler() is None, reason="needs a C compiler")
+def test_kkt_compiled_speaks_of_the_derivatives_alone(tmp_path, monkeypatch):
+    """A cache that holds the derivatives' libraries but not the outputs' (e.g. filled before the outputs
+    were compiled): a 'cached' solver runs compiled derivatives and says so, with interpreted outputs."""
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)
+    problem, options = default_cable()
+    first = ShapeSolver(problem, options, compile="blocking")
+    assert first.kkt_compiled and first.functions.outputs_compiled
+    removed = list(tmp_path.glob("dlo_outputs_*.so"))
+    assert len(removed) == 1
+    removed[0].unlink()
+    solver = ShapeSolver(problem, options, compile="cached")
+    assert solver.kkt_compiled and isinstance(solver.functions.kkt_free, NativeFunction)
+    assert not solver.functions.outputs_compiled and isinstance(solver.functions.outputs, InterpretedFunction)
+    r = solver.solve()
+    assert r.ok and r.derivatives == "compiled", r.message
+    assert_same(r, numpy_result(solver))

@@ -177,5 +177,9 @@ class Problem:
                 return g
         raise KeyError(f"no grip named {name!r}; grips are {[g.name for g in self.grips]}")
 
+    def relative_ends(self) -> list[float]:
+        """s_a, s_b [m] of every relative position, in order: where their reactions act as point forces."""
+        return [s for rel in self.relative_positions for s in (rel.s_a, rel.s_b)]
+
     def with_grip_poses(self, poses: dict[str, GripPose]) -> "Problem":
         return replace(self, grips=tuple(replace(g, pose=poses.get(g.name, g.pose)) for g in self.grips))

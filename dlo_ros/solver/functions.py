@@ -102,7 +102,7 @@ class NlpFunctions:
 
         def work(locked: bool) -> None:
             t0 = time.perf_counter()
-            for name, fn, lib in todo:  # the derivatives first, the outputs' function last
+            for k, (name, fn, lib) in enumerate(todo):  # the derivatives first, the outputs' function last
                 if self.retired:  # the scene was rebuilt: nothing more to compile for this one
                     return
                 nice = 10 if mode == "background" else 0
@@ -121,7 +121,7 @@ class NlpFunctions:
                         self.newton_active = self._active_loop(lib)
                     if name == "outputs":
                         self.outputs_compiled = True
-                    elif all(later == "outputs" for later, _, _ in todo[todo.index((name, fn, lib)) + 1:]):
+                    elif all(later == "outputs" for later, _, _ in todo[k + 1:]):
                         self.compiled = True  # every derivative runs compiled now
                         self.compile_time_s = time.perf_counter() - t0
 

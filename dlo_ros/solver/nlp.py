@@ -72,7 +72,7 @@ def breakpoints(problem: Problem) -> list[float]:
     curvature's derivative)."""
     L = problem.string.length
     out = [g.s for g in problem.grips] + [ld.s for ld in problem.loads]
-    out += [s for rel in problem.relative_positions for s in (rel.s_a, rel.s_b)]  # their reactions are point forces
+    out += problem.relative_ends()  # their reactions are point forces
     st = problem.string
     for prof in (st.bend_stiffness, st.twist_stiffness, st.weight_per_length, st.stretch_stiffness):
         if prof is not None and len(prof.s) > 1:

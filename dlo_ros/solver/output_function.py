@@ -84,13 +84,14 @@ class OutputFunction:
 
         nodes_v = ca.reshape(z[m.layout.rotation], m.layout.width, m.layout.nodes)  # column i: node i
         vs = ca.MX.sym("v", 4)
+        # (t, d1, d2) of a quaternion, stacked: at the quadrature nodes, at the residual's grid, at the grips
         frame_cols = ca.Function("frame_cols", [vs], [ca.vertcat(*(ca.vertcat(*c) for c in _columns(ca.vertsplit(vs), ca)))])
         tq = frame_cols.map(M)(ca.mtimes(nodes_v, ca.DM(m.B.T)))[0:3, :]  # t̂ at the quadrature nodes
         if m.layout.stretch:
             tq = tq * ca.repmat(1 + ca.mtimes(ca.DM(m.B), z[m.layout.eps]).T, 3, 1)
 
-        rel_s = [s_ for rel in problem.relative_positions for s_ in (rel.s_a, rel.s_b)]
-        point_s = np.array([g.s for g in problem.grips] + [ld.s for ld in problem.loads] + rel_s, dtype=float)
+        point_s = np.array([g.s for g in problem.grips] + [ld.s for ld in problem.loads] + problem.relative_ends(),
+                           dtype=float)
         s_out = np.asarray(s_out, dtype=float)
         pieces = [s, m.quad.nodes, point_s, nlp.obstacle_s, s_out]
         splits = np.cumsum([len(a) for a in pieces])
@@ -102,7 +103,8 @@ class OutputFunction:
         b_grid, db_grid = m.mesh.interpolation(s, "left")
         vsd = ca.MX.sym("dv", 4)
         c = ca.MX.sym("c", 3)
-        t, d1, d2 = (ca.vertcat(*col) for col in _columns(ca.vertsplit(vs), ca))
+        cols = frame_cols(vs)
+        t, d1, d2 = cols[0:3], cols[3:6], cols[6:9]
         qv, w, dqv, dw = vs[0:3], vs[3], vsd[0:3], vsd[3]
         omega = 2 * (w * dqv - dw * qv - ca.cross(qv, dqv)) / ca.dot(vs, vs)
         moment_fn = ca.Function("moment_c", [vs, vsd, c], [t * c[0] * omega[0] + d1 * c[1] * omega[1] + d2 * c[2] * omega[2]])
@@ -123,8 +125,8 @@ class OutputFunction:
         for g in problem.grips:
             rows = nlp.grip_rows[g.name]
             force = -ca.mtimes(ca.DM(nlp.grip_axes[g.name].T), lam[rows["position"]])
-            v = nodes_v[:, m.mesh.node_index(g.s)]
-            tg, d1g, _ = (ca.vertcat(*col) for col in _columns(ca.vertsplit(v), ca))
+            cols = frame_cols(nodes_v[:, m.mesh.node_index(g.s)])
+            tg, d1g = cols[0:3], cols[3:6]
             target = ca.reshape(p[lay[f"grip:{g.name}:frame"]], 3, 3)
             torque = ca.DM.zeros(3)
             if rows["angles"]:

@@ -122,7 +122,7 @@ def static_events(nlp: StringNLP, problem: Problem) -> list[float]:
     moment: the balance moment only bends where they act, it does not jump, so the grid need not
     follow them."""
     events = [g.s for g in problem.grips] + [ld.s for ld in problem.loads]
-    events += [s for rel in problem.relative_positions for s in (rel.s_a, rel.s_b)]
+    events += problem.relative_ends()
     if nlp.director:
         events += list(nlp.model.mesh.breakpoints)
     return events
@@ -143,7 +143,7 @@ def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.nda
     grip_s = {g.name: g.s for g in problem.grips}
     s = evaluation_grid(L, static_events(nlp, problem))
     nodes = m.quad.nodes
-    rel_s = [s for rel in problem.relative_positions for s in (rel.s_a, rel.s_b)] if lam_si is not None else []
+    rel_s = problem.relative_ends() if lam_si is not None else []
     point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads] + rel_s)
     # one evaluation of the shape for the grid, the quadrature nodes and the point actions
     s_all = np.concatenate([s, nodes, point_s])

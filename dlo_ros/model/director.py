@@ -209,6 +209,14 @@ class DirectorModel:
         """W(s) with x(s) = x0 + W(s) · (1+ε)t̂ at the quadrature nodes."""
         return self._memo("W", s, self.mesh.integration_matrix)
 
+    def position_rows(self, s: np.ndarray) -> np.ndarray:
+        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every solve)."""
+        return self.mesh.integration_matrix(s)
+
+    def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """(len(w), 3) centreline positions [m] at the arc lengths whose rows of W are ``w``."""
+        return (np.asarray(z[0:3]) * self.length)[None, :] + w @ self.quad_tangents(z).T
+
     def interpolation(self, s: np.ndarray, side: str = "left") -> tuple[np.ndarray, np.ndarray]:
         """``ElementMesh.interpolation``, remembered."""
         return self._memo("B" + side, s, lambda x: self.mesh.interpolation(x, side))

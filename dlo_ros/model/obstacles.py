@@ -7,6 +7,8 @@ the string's radius be added as a clearance: h(x) + radius ≤ 0.
 """
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 from typing import Callable
@@ -26,6 +28,8 @@ def _vec(value: object, n: int, where: str) -> np.ndarray:
 
 #: numpy stand-ins for the CasADi functions the h below use (``lib=NUMPY``: plain arrays, no CasADi call)
 NUMPY = SimpleNamespace(dot=np.dot, norm_2=np.linalg.norm, fmin=min, fmax=max)
+#: the same over the rows of an (N, 3) array of points (the half-space and the sphere: ``Obstacle.h_many``)
+ROWS = SimpleNamespace(dot=lambda a, b: np.sum(a * b, axis=-1), norm_2=lambda v: np.sqrt(np.sum(v * v, axis=-1)))
 
 
 def _halfspace(x: ca.SX, p: ca.SX, lib=ca) -> ca.SX:
@@ -195,15 +199,24 @@ class Obstacle:
         return float(OBSTACLE_TYPES[self.type].h(np.asarray(x, dtype=float), self.params, NUMPY))
 
     def h_many(self, points: np.ndarray) -> np.ndarray:
-        """h at many points (N, 3) [m] (positive inside), in one CasADi call."""
+        """h at many points (N, 3) [m] (positive inside): numpy over the rows for the half-space and the
+        sphere, one CasADi call for the others."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         if points.shape[0] == 0:
             return np.zeros(0)
-        fn = _numeric_h(self.type).map(points.shape[0])
+        if self.type in ("halfspace", "sphere"):
+            return np.asarray(OBSTACLE_TYPES[self.type].h(points, self.params, ROWS), dtype=float)
+        fn = _numeric_h_many(self.type, points.shape[0])
         return np.asarray(fn(points.T, self.params)).ravel()
 
 
 _NUMERIC_H: dict[str, ca.Function] = {}
+
+
+@functools.lru_cache(maxsize=64)
+def _numeric_h_many(kind: str, count: int) -> ca.Function:
+    """``_numeric_h`` mapped over ``count`` points, built once per (type, count)."""
+    return _numeric_h(kind).map(count)
 
 
 def _numeric_h(kind: str) -> ca.Function:

@@ -29,12 +29,9 @@ class ChebyshevQuadrature:
     def integration_matrix(self, s: np.ndarray) -> np.ndarray:
         """W[q, j] with ∫_0^{s_q} f ds ≈ Σ_j W[q, j] f(s_j), shape (len(s), count)."""
         tau_q = 2.0 * np.asarray(s, dtype=float).ravel() / self.length - 1.0
-        anti = np.empty((tau_q.size, self.count))
-        for k in range(self.count):
-            coef = np.zeros(self.count)
-            coef[k] = 1.0
-            anti[:, k] = C.chebval(tau_q, C.chebint(coef, lbnd=-1.0))
-        return 0.5 * self.length * anti @ self._vinv
+        if not hasattr(self, "_antiderivatives"):  # column k: the Chebyshev series of ∫_{-1}^τ T_k
+            self._antiderivatives = C.chebint(np.eye(self.count), lbnd=-1.0)
+        return 0.5 * self.length * (C.chebvander(tau_q, self.count) @ self._antiderivatives) @ self._vinv
 
     def interpolation_matrix(self, s: np.ndarray) -> np.ndarray:
         """P[q, j] with f(s_q) ≈ Σ_j P[q, j] f(s_j) (polynomial interpolation)."""

@@ -222,8 +222,15 @@ class RitzModel:
 
     def positions(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(len(s), 3) centreline positions [m]."""
-        t = self.node_tangents(z)
-        return (np.asarray(z[0:3]) * self.length)[None, :] + self.position_matrix(s) @ t.T
+        return self.positions_at_rows(z, self.position_matrix(s))
+
+    def position_rows(self, s: np.ndarray) -> np.ndarray:
+        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every solve)."""
+        return self.quad.integration_matrix(np.asarray(s, dtype=float))
+
+    def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """(len(w), 3) centreline positions [m] at the arc lengths whose rows of W are ``w``."""
+        return (np.asarray(z[0:3]) * self.length)[None, :] + w @ self.node_tangents(z).T
 
     def zero_twist_psi(self, z: np.ndarray, s: np.ndarray, s_anchor: float, psi_anchor: float) -> np.ndarray:
         """ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles to."""

@@ -98,7 +98,7 @@ class AssembledKKT:
                 Om.append(W[1] - W[0])
                 kappa.append(0.0)
                 row_target[nlp.params[f"relative:{kind[1]}"]] = axis
-            elif kind[0] in ("obstacle", "self"):  # nonlinear in the positions: _nonlinear_rows
+            elif kind[0] in ("obstacle", "slot", "self"):  # nonlinear in the positions: _nonlinear_rows
                 continue
             else:
                 local.append(r)
@@ -206,14 +206,36 @@ class AssembledKKT:
                 h, dh, d2h = fn.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S))
                 li = lam[rows] / L  # S
                 rows_all += rows
-                g_all.append((h.T + radius) / L)
+                grad = dh
+                if nlp.obstacle_slots:  # samples a contact slot replaces read −1 (obstacle_slots.py)
+                    on = p[lay[f"samples:{i}:on"]]
+                    li = li * on
+                    g_all.append((on * (h.T + radius) - (1 - on) * L) / L)
+                    grad = dh * ca.repmat(on.T, 3, 1)
+                else:
+                    g_all.append((h.T + radius) / L)
                 a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), ca.DM(omega))
                 dx0 += L * ca.mtimes(dh, li)
                 if curved:  # a half-space's h is linear: no curvature term
                     term = d2h * ca.repmat(ca.mtimes(li.T, spread3), 3, 1)
                     weighted = term if weighted is None else weighted + term
-                grads.append(dh / L)
+                grads.append(grad / L)
             groups.append((omega, 1.0, grads, weighted))
+        for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
+            # contact slots (solver/obstacle_slots.py): rows on_k (ψ(X_k) + r) − (1 − on_k) L at X_k = x0 + T W_kᵀ
+            K, rows = nlp.obstacle_slots, nlp.slot_rows[i]
+            W, on = nlp.slot_matrix(p, i), p[lay[f"slots:{i}:on"]]
+            X = ca.repmat(z[0:3] * L, 1, K) + ca.mtimes(T, W.T)
+            fn, curved = self.obstacle_function(ob.type)
+            h, dh, d2h = fn.map(K, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, K))
+            li = lam[rows] * on / L
+            rows_all += rows
+            g_all.append((on * (h.T + radius) - (1 - on) * L) / L)
+            a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), W)
+            dx0 += L * ca.mtimes(dh, li)
+            weighted = d2h * ca.repmat(ca.mtimes(li.T, _sparse(np.kron(np.eye(K), np.ones((1, 3))))), 3, 1) \
+                if curved else None
+            groups.append((W, 1.0, [dh * ca.repmat(on.T, 3, 1) / L], weighted))
         slots = nlp.self_contact_slots
         if slots:
             rows = list(nlp.self_contact_rows)
@@ -298,8 +320,18 @@ class AssembledKKT:
             for i, ob in enumerate(P.obstacles):
                 x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
                 h = ca.Function(f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)])
-                values = h.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S))
-                parts.append((np.array(nlp.obstacle_rows[i]), (values.T + p[lay["radius"]][0]) / L))
+                values = h.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S)).T + p[lay["radius"]][0]
+                if nlp.obstacle_slots:
+                    on = p[lay[f"samples:{i}:on"]]
+                    values = on * values - (1 - on) * L
+                parts.append((np.array(nlp.obstacle_rows[i]), values / L))
+            for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
+                K, on = nlp.obstacle_slots, p[lay[f"slots:{i}:on"]]
+                X = ca.repmat(z[0:3] * L, 1, K) + ca.mtimes(T, nlp.slot_matrix(p, i).T)
+                x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
+                h = ca.Function(f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)])
+                values = h.map(K, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, K))
+                parts.append((np.array(nlp.slot_rows[i]), (on * (values.T + p[lay["radius"]][0]) - (1 - on) * L) / L))
         if nlp.self_contact_slots:
             K = nlp.self_contact_slots
             Q = ca.horzcat(*[p[lay[f"self:{k}"]][:M] for k in range(K)]).T

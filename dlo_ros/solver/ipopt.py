@@ -90,7 +90,7 @@ def witness(nlp: StringNLP, g: np.ndarray | None) -> str:
     names = {"grip": lambda k: f"grip {k[1]!r} {k[2]}", "obstacle": lambda k: f"obstacle {k[1]} at s = "
              f"{nlp.obstacle_s[k[2]]:.4g} m", "relative": lambda k: f"relative position {k[1]}",
              "norm": lambda k: f"unit norm at node {k[1]}", "fold": lambda k: f"fold guard at node {k[1]}",
-             "self": lambda k: f"self-contact slot {k[1]}"}
+             "self": lambda k: f"self-contact slot {k[1]}", "slot": lambda k: f"obstacle {k[1]} contact slot {k[2]}"}
     return f", most violated: {names.get(kind[0], str)(kind)} by {excess[i]:.3g}"
 
 

@@ -63,6 +63,8 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     if start.g is None:  # a warm start adopted from another model
         start.g = np.asarray(nlp.g_fn(start.z, start.p)).ravel()
     active = active_rows(nlp, start.lam_g, start.g)
+    if nlp.obstacle_slots:  # a row p switches off (obstacle_slots.py) holds nothing
+        active &= ~nlp.disabled_rows(p)
     steps = 0
     z, lam = start.z.copy(), np.where(active, start.lam_g, 0.0)
     reuse = kkt_fn is None and start.hessian is not None and start.g is not None and start.gradient is not None

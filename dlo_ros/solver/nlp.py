@@ -245,6 +245,16 @@ class StringNLP:
             lay.add(f"relative:{i}", 3)
         for i, ob in enumerate(P.obstacles):
             lay.add(f"obstacle:{i}", OBSTACLE_TYPES[ob.type].size)
+        #: contact slots per obstacle (solver/obstacle_slots.py): rows at arc lengths σ that are parameters,
+        #: placed at the string's closest approaches; per slot σ, on (1 or 0: an empty slot reads −1 ≤ 0) and
+        #: the row W(σ) of the integration matrix, x(σ) = x0 + T W(σ)ᵀ
+        self.obstacle_slots = self.options.obstacle_slots if P.obstacles else 0
+        for i, _ in enumerate(P.obstacles):
+            if self.obstacle_slots:
+                lay.add(f"samples:{i}:on", self.options.obstacle_samples)  # 0: the sample a slot replaces
+                lay.add(f"slots:{i}:s", self.obstacle_slots)
+                lay.add(f"slots:{i}:on", self.obstacle_slots)
+                lay.add(f"slots:{i}:w", self.obstacle_slots * M)  # slot k's row at k M … (k + 1) M
         self.self_contact_slots = self.options.self_contact_pairs if self.director else 0
         for k in range(self.self_contact_slots):
             lay.add(f"self:{k}", M + 1)
@@ -340,9 +350,25 @@ class StringNLP:
             h = OBSTACLE_TYPES[ob.type].h
             for j in range(len(self.obstacle_s)):
                 rows.append(len(g_rows))
-                expr = h(obs_x[:, j], p[lay[f"obstacle:{i}"]])
-                add(expr + radius, L, ("obstacle", i, j), -ca.inf, 0.0)
+                expr = h(obs_x[:, j], p[lay[f"obstacle:{i}"]]) + radius
+                if self.obstacle_slots:  # a sample replaced by a slot reads −1 ≤ 0 (obstacle_slots.py)
+                    on = p[lay[f"samples:{i}:on"]][j]
+                    expr = on * expr - (1 - on) * L
+                add(expr, L, ("obstacle", i, j), -ca.inf, 0.0)
             self.obstacle_rows.append(rows)
+        #: per obstacle: its contact slots' rows, on·(h(x(σ_k)) + r) − (1 − on) L ≤ 0, scaled by 1/L
+        self.slot_rows: list[list[int]] = []
+        for i, ob in enumerate(P.obstacles):
+            if not self.obstacle_slots:
+                break
+            h = OBSTACLE_TYPES[ob.type].h
+            on = p[lay[f"slots:{i}:on"]]
+            slot_x = ca.repmat(z[0:3] * L, 1, self.obstacle_slots) + ca.mtimes(t, self.slot_matrix(p, i).T)
+            self.slot_rows.append([])
+            for k in range(self.obstacle_slots):
+                self.slot_rows[-1].append(len(g_rows))
+                expr = on[k] * (h(slot_x[:, k], p[lay[f"obstacle:{i}"]]) + radius) - (1 - on[k]) * L
+                add(expr, L, ("slot", i, k), -ca.inf, 0.0)
         # self-contact slots: x(s_a) − x(s_b) = T q_k is linear in the tangents, whatever the pair
         self.self_contact_rows: list[int] = []
         for k in range(self.self_contact_slots):
@@ -358,7 +384,7 @@ class StringNLP:
         self.equality = self.lbg == self.ubg
         #: inequality rows a warm Newton update may make active (obstacle and self-contact rows: physical
         #: contacts; a fold guard at its bound is no equilibrium, so Newton leaves that to IPOPT)
-        self.contact_row = np.array([kind[0] in ("obstacle", "self") for kind in self.row_kind], dtype=bool)
+        self.contact_row = np.array([kind[0] in ("obstacle", "slot", "self") for kind in self.row_kind], dtype=bool)
         self.row_scale = np.array(self.row_scale)
         self.nlp = {"x": z, "p": p, "f": objective, "g": g}
         self.z_sym, self.p_sym, self.g_sym = z, p, g
@@ -400,6 +426,22 @@ class StringNLP:
         # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale)
         self._target_jacobian = np.asarray(ca.Function("dg_dp", [z, p], [ca.jacobian(g, p)])(np.zeros(z.shape[0]), np.zeros(lay.size)))
         self._target_jacobian[:, ~grip_only] = 0.0
+
+    def disabled_rows(self, p: np.ndarray) -> np.ndarray:
+        """Rows that p switches off (empty contact slots, samples a slot replaces): they read −1 ≤ 0 whatever
+        the shape, so a warm start's multiplier on one belongs to no row of p."""
+        off = np.zeros(self.lbg.size, dtype=bool)
+        for i, rows in enumerate(self.slot_rows):
+            lay = self.params
+            off[rows] = p[lay[f"slots:{i}:on"]] == 0
+            off[self.obstacle_rows[i]] = p[lay[f"samples:{i}:on"]] == 0
+        return off
+
+    def slot_matrix(self, p, i: int):
+        """W(σ) (K × M) of obstacle i's contact slots, from p (numpy or CasADi)."""
+        w = p[self.params[f"slots:{i}:w"]]
+        K, M = self.obstacle_slots, self.model.quad.count
+        return w.reshape(K, M) if isinstance(w, np.ndarray) else ca.reshape(w, M, K).T
 
     def _director_grip_rows(self, z: ca.SX, p: ca.SX, grip, add, first: int) -> list[int]:
         """Orientation rows of a grip on a director model: t·R_g e_y = t·R_g e_z = 0 (clamp, tangent) and

@@ -16,9 +16,12 @@ class SolverOptions:
     per field (for 'director': Legendre–Gauss–Lobatto nodes per element).  quadrature_nodes:
     Chebyshev–Lobatto nodes for the energy integrals and the centreline (for 'director': per element,
     at most order + 8).
-    obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) ≤ 0 is
-    imposed.  frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2
-    (away from the singularity); 'paper' is the paper's frame (singular at the straight state).
+    obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is
+    imposed.  obstacle_slots: per obstacle, rows whose arc lengths are parameters, placed at the string's
+    closest approaches to the obstacle and moved with them (solver/obstacle_slots.py); 0: the samples
+    alone.
+    frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2 (away from
+    the singularity); 'paper' is the paper's frame (singular at the straight state).
     rotation: how a 3D model represents the material frame: 'director' (default: nodal unit quaternions,
     or unit tangents when the twist is not held, on spectral elements split at interior grips, point
     loads and material kinks; no singular direction, see model/director.py) or 'euler' (the paper's
@@ -42,6 +45,7 @@ class SolverOptions:
     order: int = 16
     quadrature_nodes: int = 40
     obstacle_samples: int = 41
+    obstacle_slots: int = 2
     frame: str = "auto"
     output_points: int = 51
     tolerance: float = 1e-10
@@ -64,6 +68,8 @@ class SolverOptions:
             raise ValueError(f"solver.quadrature_nodes: must be in [max(8, order+2), 400], got {self.quadrature_nodes}")
         if not (2 <= self.obstacle_samples <= 1000):
             raise ValueError(f"solver.obstacle_samples: must be in [2, 1000], got {self.obstacle_samples}")
+        if not (0 <= self.obstacle_slots <= 256):
+            raise ValueError(f"solver.obstacle_slots: must be in [0, 256], got {self.obstacle_slots}")
         if self.frame not in FRAMES:
             raise ValueError(f"solver.frame: must be one of {FRAMES}, got {self.frame!r}")
         if not (2 <= self.output_points <= 10000):

@@ -160,10 +160,23 @@ class OutputFunction:
             for i, ob in enumerate(problem.obstacles):
                 grads = nlp.obstacle_gradient[ob.type].map(samples)(sample_x, ca.repmat(p[lay[f"obstacle:{i}"]], 1, samples))
                 lam_i = ca.fmax(lam[nlp.obstacle_rows[i]], 0).T  # a row that does not touch acts with no force
+                if nlp.obstacle_slots:  # nor does a sample a contact slot replaces
+                    lam_i = lam_i * p[lay[f"samples:{i}:on"]].T
                 f = -ca.repmat(lam_i, 3, 1) * grads
                 contact_totals.append(ca.sum2(f))
                 sample_f = f if sample_f is None else sample_f + f
             groups.append((_cross(sample_x, sample_f), sample_f, np.asarray(nlp.obstacle_s)))
+            for i, ob in enumerate(problem.obstacles if nlp.obstacle_slots else ()):
+                # contact slots (solver/obstacle_slots.py): their arc lengths are parameters, so the
+                # running sums over s_a < s are a 0/1 matrix of p instead of fixed columns
+                n_slots, on = nlp.obstacle_slots, p[lay[f"slots:{i}:on"]]
+                slot_x = ca.repmat(z[0:3] * L, 1, n_slots) + ca.mtimes(tq, nlp.slot_matrix(p, i).T)
+                grads = nlp.obstacle_gradient[ob.type].map(n_slots)(slot_x, ca.repmat(p[lay[f"obstacle:{i}"]], 1, n_slots))
+                f = -ca.repmat((ca.fmax(lam[nlp.slot_rows[i]], 0) * on).T, 3, 1) * grads
+                contact_totals[i] += ca.sum2(f)
+                before = ca.repmat(p[lay[f"slots:{i}:s"]], 1, K) < ca.repmat(ca.DM(s).T, n_slots, 1)  # K × grid
+                m_bal -= ca.mtimes(_cross(slot_x, f), before) - _cross(x, ca.mtimes(f, before))
+                total_force += ca.sum2(f)
         self.n_obstacles = len(problem.obstacles)
         for c_a, f_a, s_a in groups:
             before = np.searchsorted(s_a, s, side="left").tolist()  # how many of the group lie strictly before s

@@ -89,7 +89,7 @@ class ShapeOutputs:
             quats = pose_quaternions(nlp.r0, phi, theta, F.frames_psi(nlp, self.parameters, current, z, s_out, p))
         frames_of = self.frames_of(current)
         grips = {g.name: wrench(nlp, current.string, frames_of, g, z, lam_si) for g in problem.grips}
-        contacts, actions = self._contacts(problem, z, lam_si)
+        contacts, actions = self._contacts(problem, z, p, lam_si)
         self_contacts = self._self_contacts(z, lam_si)
         for c in self_contacts:  # equal and opposite on the two strands
             actions += [PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
@@ -164,10 +164,11 @@ class ShapeOutputs:
                                    float(np.linalg.norm(xa - xb))))
         return out
 
-    def _contacts(self, problem: Problem, z: np.ndarray,
+    def _contacts(self, problem: Problem, z: np.ndarray, p: np.ndarray,
                   lam_si: np.ndarray) -> tuple[dict[int, np.ndarray], list[PointAction]]:
-        """Each obstacle's total contact force [N] (−Σ_j λ_j ∇h(x_j) over its samples), and every touching
-        sample's force as a point action on the string (for the equilibrium residual)."""
+        """Each obstacle's total contact force [N] (−Σ_j λ_j ∇h(x_j) over its samples and contact slots), and
+        every touching sample's or slot's force as a point action on the string (for the equilibrium
+        residual)."""
         nlp = self.nlp
         contacts: dict[int, np.ndarray] = {}
         actions: list[PointAction] = []
@@ -178,6 +179,8 @@ class ShapeOutputs:
         for i, rows in enumerate(nlp.obstacle_rows):
             ob = problem.obstacles[i]
             lam = lam_si[rows]
+            if nlp.obstacle_slots:  # a sample a contact slot replaces acts with no force
+                lam = lam * p[nlp.params[f"samples:{i}:on"]]
             touch = np.flatnonzero(lam > 0)
             if not touch.size:
                 contacts[i] = np.zeros(3)
@@ -187,4 +190,15 @@ class ShapeOutputs:
             forces = -lam[touch, None] * grads
             contacts[i] = forces.sum(axis=0)
             actions += [PointAction(float(nlp.obstacle_s[j]), sample_x[j], f, np.zeros(3)) for j, f in zip(touch, forces)]
+        for i, rows in enumerate(nlp.slot_rows):  # contact slots (solver/obstacle_slots.py)
+            ob, lay = problem.obstacles[i], nlp.params
+            touch = np.flatnonzero((lam_si[rows] > 0) & (p[lay[f"slots:{i}:on"]] > 0))
+            if not touch.size:
+                continue
+            slot_x = nlp.model.positions_at_rows(z, nlp.slot_matrix(p, i)[touch])
+            grads = np.asarray(nlp.obstacle_gradient[ob.type](slot_x.T, ob.params)).reshape(3, -1).T
+            forces = -lam_si[np.asarray(rows)[touch], None] * grads
+            contacts[i] = contacts[i] + forces.sum(axis=0)
+            slot_s = p[lay[f"slots:{i}:s"]]
+            actions += [PointAction(float(slot_s[k]), x, f, np.zeros(3)) for k, x, f in zip(touch, slot_x, forces)]
         return contacts, actions

@@ -3,7 +3,8 @@
 p holds, at the quadrature nodes, the bending, twisting and stretching stiffnesses Rf, Rt, Re [N·m², N·m²,
 N] and the weight per length D [N/m]; the unit gravity direction; the string's radius [m]; each load's
 force [N] and moment [N·m]; each relative position's offset [m]; each obstacle's parameters; and each
-grip's target; and each self-contact slot's pair (empty here: ``self_contact.fill`` sets the pairs):
+grip's target; each self-contact slot's pair (empty here: ``self_contact.fill`` sets the pairs); and, with
+each obstacle's contact slots, placed at the reference shape's closest approaches (``obstacle_slots.py``):
 
 * director models: the position [m] and the orientation matrix R_g (column-major), and for each point
   load the unit rotation its moment's pseudo-potential is centred on (``model/director.py``);
@@ -22,6 +23,7 @@ import numpy as np
 
 from ..model.problem import GripPose, Problem
 from ..model.rotations import TANGENT_X, euler_from_frame, quat_to_matrix
+from . import obstacle_slots as OSL
 from .nlp import StringNLP
 
 
@@ -47,11 +49,17 @@ class ProblemParameters:
         self.nlp = nlp
         self._scene_p: tuple | None = None  # (scene objects, gravity, p without grip targets)
         self._euler_cache: dict[int, tuple] = {}
+        #: the contact slots the last ``pack`` found, per obstacle (read by the solver right after it)
+        self.placements: list[OSL.SlotPlacement] = []
 
-    def pack(self, problem: Problem, z_reference: np.ndarray) -> np.ndarray:
-        """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
+    def pack(self, problem: Problem, z_reference: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
+        """The NLP parameter vector for ``problem``; angles unwrapped to, and obstacle contact slots placed
+        on, the shape ``z_reference``.  ``keep``: a parameter vector whose slots stay while they are still
+        placed well for ``z_reference`` (``obstacle_slots.same_slots``)."""
         nlp, lay = self.nlp, self.nlp.params
         p = self.scene(problem).copy()
+        if nlp.obstacle_slots:
+            self.placements = self.place_slots(problem, z_reference, p, keep)
         if nlp.director:
             for g in problem.grips:
                 p[lay[f"grip:{g.name}:position"]] = g.pose.position
@@ -63,6 +71,51 @@ class ProblemParameters:
             p[lay[f"grip:{g.name}:position"]] = g.pose.position
             p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, reference)
         return p
+
+    def slots(self, p: np.ndarray, i: int) -> OSL.SlotPlacement:
+        """Obstacle i's contact slots as p holds them (clearance unknown: inf)."""
+        lay = self.nlp.params
+        return OSL.SlotPlacement(p[lay[f"slots:{i}:s"]].copy(), p[lay[f"slots:{i}:on"]].copy(),
+                                 p[lay[f"samples:{i}:on"]].copy(), np.full(self.nlp.obstacle_slots, np.inf))
+
+    def write_slots(self, p: np.ndarray, i: int, placement: OSL.SlotPlacement, keep: np.ndarray | None = None) -> None:
+        """Obstacle i's slots of p (in place) from ``placement`` (``keep``: a vector holding its rows already)."""
+        nlp, lay = self.nlp, self.nlp.params
+        if keep is not None:
+            for name in (f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w", f"samples:{i}:on"):
+                p[lay[name]] = keep[lay[name]]
+            return
+        rows = np.zeros((nlp.obstacle_slots, nlp.model.quad.count))
+        filled = placement.on > 0
+        if np.any(filled):
+            rows[filled] = nlp.model.position_rows(placement.s[filled])
+        p[lay[f"slots:{i}:s"]], p[lay[f"slots:{i}:on"]] = placement.s, placement.on
+        p[lay[f"slots:{i}:w"]], p[lay[f"samples:{i}:on"]] = rows.ravel(), placement.samples_on
+
+    def place_slots(self, problem: Problem, z: np.ndarray, p: np.ndarray,
+                    keep: np.ndarray | None = None) -> list[OSL.SlotPlacement]:
+        """Fill every obstacle's contact slots of p (in place) at the closest approaches of shape z
+        (``obstacle_slots``); ``keep``: a vector whose slots stay where they still fit.  Returns the
+        placements (with the shape's clearance at each slot)."""
+        nlp, m = self.nlp, self.nlp.model
+        L, S, radius = nlp.length, nlp.options.obstacle_samples, problem.string.radius
+        s_fine = OSL.fine_grid(L, S)
+        x = m.positions(z, s_fine)
+        placements = []
+        for i, ob in enumerate(problem.obstacles):
+            def clearance_at(s: np.ndarray, ob=ob) -> np.ndarray:
+                return -ob.h_many(m.positions_at_rows(z, m.position_rows(s))) - radius
+
+            if ob.type in OSL.FLAT:
+                found = (np.zeros(0), np.zeros(0))
+            else:
+                found = OSL.minima(s_fine, -ob.h_many(x) - radius, nlp.obstacle_s[1], OSL.band(L, radius), L,
+                                   clearance_at)
+            previous = self.slots(keep, i) if keep is not None else None
+            new = OSL.assign(found, nlp.obstacle_s, nlp.obstacle_slots, previous, L)
+            self.write_slots(p, i, new, keep if new.kept else None)
+            placements.append(new)
+        return placements
 
     def scene(self, problem: Problem) -> np.ndarray:
         """The parameter vector without grip targets (zeros there), cached while the string, gravity, loads,
@@ -90,6 +143,8 @@ class ProblemParameters:
             p[lay[f"relative:{i}"]] = rel.offset
         for i, ob in enumerate(problem.obstacles):
             p[lay[f"obstacle:{i}"]] = ob.params
+        for i, _ in enumerate(problem.obstacles if nlp.obstacle_slots else ()):  # no slots: every sample on
+            p[lay[f"samples:{i}:on"]] = 1.0
         for k in range(nlp.self_contact_slots):  # empty slots: b = −L, the row reads −1 ≤ 0 for any shape
             p[lay[f"self:{k}"].stop - 1] = -st.length
         p.flags.writeable = False

@@ -45,6 +45,7 @@ from .outputs import ShapeOutputs, no_shape
 from .parameters import ProblemParameters, check_moments
 from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, ShapeResult
+from . import obstacle_slots as OSL
 from . import self_contact as SC
 from . import topology as TP
 from .stability import is_stable, min_reduced_eigenvalue
@@ -65,6 +66,9 @@ JUMP_REFUSALS = ("self-contact: the string passed through itself", "self-contact
                  "topology:")
 #: substeps a refused warm update, or one Newton cannot take at once, is retried in (each count in turn)
 SUBSTEPS = (2, 4)
+
+#: how many times a solve is repeated with the obstacle contact slots placed on its own answer
+SLOT_ROUNDS = 2
 
 
 def structure_key(problem: Problem, options: SolverOptions) -> tuple:
@@ -141,6 +145,7 @@ class ShapeSolver:
         self._key = structure_key(problem, self.options)
         self._state: SolverState | None = None
         self._contact: SC.ContactSlots | None = None  # the self-contact pairs of the solve under way
+        self._slot_override: list | None = None  # the obstacle slots of a repeated solve (_place_slots_again)
         # the clamps' turns over the targets since the committed shape (None: none asked for since), and
         # those of the solve under way (topology.ClampTurns; the linking-number check)
         self._clamp_turns: TP.ClampTurns | None = None
@@ -357,9 +362,12 @@ class ShapeSolver:
         return ""
 
     # ---- the solution's parameters, start and fields (parameters.py, initial_guess.py, frames.py) ------
-    def pack_parameters(self, problem: Problem, z_reference: np.ndarray) -> np.ndarray:
-        """The NLP parameter vector for ``problem``; angles unwrapped to the shape ``z_reference``."""
-        p = self.parameters.pack(problem, z_reference)
+    def pack_parameters(self, problem: Problem, z_reference: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
+        """The NLP parameter vector for ``problem``; angles unwrapped to, and obstacle samples placed on, the
+        shape ``z_reference`` (``keep``: a vector whose samples stay while still placed well)."""
+        p = self.parameters.pack(problem, z_reference, keep)
+        for i, placement in enumerate(self._slot_override or ()):  # a round's slots (_place_slots_again)
+            self.parameters.write_slots(p, i, placement)
         if self._contact is not None:
             SC.fill(p, self._contact, self.nlp, problem.string.length)
         return p
@@ -426,6 +434,9 @@ class ShapeSolver:
         start = self._state if warm else None
         self._newton_far = False
         result, state = self._solve_pairs_fixed(problem, warm)
+        newton_only = result.ipopt_status.startswith("Newton")
+        if self.nlp.obstacle_slots:
+            result, state = self._place_slots_again(problem, result, state)
         # without self-contact the linking number is checked where a warm update left the Newton path
         # (IPOPT, continuation or the cold fallback can land a whole turn away; Newton converges from
         # next to the committed shape) or Newton went far from it (substeps, leaving a saddle:
@@ -435,11 +446,95 @@ class ShapeSolver:
         turns = self._turns_now
         lagging = turns is not None and any(abs(a) > np.pi / 2 for a in turns.turns.values())
         if (start is not None and state is not None and result.status in ("ok", "unverified")
-                and (lagging or self._newton_far or not result.ipopt_status.startswith("Newton"))):
+                and (lagging or self._newton_far or not newton_only)):
             jump = self._linking_jump(problem, start, state)
             if jump is not None:
                 return self._linking_failure(jump, result.iterations, True), None
         return result, state
+
+    def _place_slots_again(self, problem: Problem, result: ShapeResult,
+                           state: SolverState | None) -> tuple[ShapeResult, SolverState | None]:
+        """The obstacle contact slots (``obstacle_slots.py``) are placed on the shape a solve starts from;
+        while the answer touches an obstacle at a minimum that moved further than TOLERANCE·L from its slot,
+        the solve is repeated warm from the answer (at most SLOT_ROUNDS times), each slot at the secant
+        estimate of its fixed point σ = s*(σ) from the rounds so far (the first round: s* itself).  A
+        repeat that fails keeps the previous answer (a converged solution of its own rows)."""
+        committed, iterations, first = self._state, result.iterations, result
+        history: dict[tuple[int, int], list[tuple[float, float]]] = {}
+        nlp = self.nlp
+        for _ in range(SLOT_ROUNDS):
+            if state is None or result.status not in ("ok", "unverified"):
+                break
+            self.parameters.pack(problem, state.z, keep=state.p)
+            placements = self.parameters.placements
+            moved = False
+            for i, new in enumerate(placements):
+                if new.kept:
+                    continue
+                used = self.parameters.slots(state.p, i)
+                touching = (new.on > 0) & (new.clearance < OSL.TOUCH * nlp.length)
+                moved |= bool(np.any(touching & ((used.on == 0) | (np.abs(new.s - used.s) > OSL.TOLERANCE * nlp.length))))
+            if not moved:
+                break
+            override = []
+            for i, new in enumerate(placements):
+                used, s = self.parameters.slots(state.p, i), new.s.copy()
+                for k in np.flatnonzero((new.on > 0) & (used.on > 0)):
+                    trail = history.setdefault((i, k), [])
+                    trail.append((float(used.s[k]), float(new.s[k])))
+                    if len(trail) >= 2:  # secant on g(σ) = s*(σ) − σ
+                        (a, fa), (b, fb) = trail[-2], trail[-1]
+                        ga, gb = fa - a, fb - b
+                        if gb != ga:
+                            s[k] = float(np.clip(b - gb * (b - a) / (gb - ga), min(a, b, fa, fb), max(a, b, fa, fb)))
+                override.append(OSL.assign((s[new.on > 0], new.clearance[new.on > 0]), nlp.obstacle_s,
+                                           nlp.obstacle_slots, new, nlp.length))
+            self._state, self._slot_override = state, override
+            try:
+                again, new_state = self._solve_pairs_fixed(problem, True)
+            finally:
+                self._state, self._slot_override = committed, None
+            iterations += again.iterations
+            if new_state is None or again.status not in ("ok", "unverified"):
+                break
+            result, state = again, new_state
+        # the rounds refine the answer the first solve found: its method and warm start describe the result
+        result.iterations, result.ipopt_status, result.warm_started = iterations, first.ipopt_status, first.warm_started
+        return result, state
+
+    def _carry_slots(self, start: SolverState, p: np.ndarray) -> SolverState:
+        """``start`` with the obstacle contact slots (and sample switches) of ``p``, when they differ: each
+        row of the new placement takes the multiplier of the start's row nearest to it along s, within a
+        quarter of the sample spacing (the contact force stays where it acts), the others none; the
+        inequality rows' values are evaluated anew and the stored derivatives dropped."""
+        nlp = self.nlp
+        if not nlp.obstacle_slots:
+            return start
+        lay = nlp.params
+        names = [n for i in range(len(nlp.slot_rows))
+                 for n in (f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w", f"samples:{i}:on")]
+        if all(np.array_equal(start.p[lay[n]], p[lay[n]]) for n in names):
+            return start
+        moved = start.p.copy()
+        for n in names:
+            moved[lay[n]] = p[lay[n]]
+        lam = start.lam_g.copy()
+        reach = 0.25 * (nlp.obstacle_s[1] - nlp.obstacle_s[0])
+        for i, slot_rows in enumerate(nlp.slot_rows):
+            rows = np.concatenate([nlp.obstacle_rows[i], slot_rows])
+            old, new = self.parameters.slots(start.p, i), self.parameters.slots(moved, i)
+            on_old = np.flatnonzero(np.concatenate([old.samples_on, old.on]) > 0)
+            on_new = np.flatnonzero(np.concatenate([new.samples_on, new.on]) > 0)
+            s_old = np.concatenate([nlp.obstacle_s, old.s])
+            s_new = np.concatenate([nlp.obstacle_s, new.s])
+            carried = np.zeros(rows.size)
+            for j in on_new:  # the start's row nearest along s, within a quarter sample spacing
+                k = on_old[int(np.argmin(np.abs(s_old[on_old] - s_new[j])))] if on_old.size else None
+                if k is not None and abs(s_old[k] - s_new[j]) <= reach:
+                    carried[j] = start.lam_g[rows[k]]
+            lam[rows] = carried
+        g = np.asarray(nlp.g_fn(start.z, moved)).ravel()
+        return SolverState(start.z, lam, start.lam_x, moved, g=g, contact=start.contact)
 
     def _linking_failure(self, jump: TP.LinkChange, iterations: int, warm: bool) -> ShapeResult:
         """'failed': the update changed the clamped string's linking number (``_linking_jump``)."""
@@ -596,7 +691,8 @@ class ShapeSolver:
                       fraction: float = 1.0) -> tuple[bool, SolverState, int, float]:
         """Newton on the exact equilibrium equations (``moments.ExactMomentKKT``) from ``start`` to
         ``problem`` with its point moments scaled by ``fraction``."""
-        p = self.pack_parameters(problem, start.z)
+        p = self.pack_parameters(problem, start.z, keep=start.p)
+        start = self._carry_slots(start, p)
         if fraction != 1.0:
             for i, _ in enumerate(problem.loads):
                 p[self.nlp.params[f"load:{i}:moment"]] *= fraction
@@ -607,7 +703,11 @@ class ShapeSolver:
                       steps: int) -> ShapeResult:
         """The result of an exact-moment Newton solution: the pseudo-potential re-centred on it (its
         gradient is then M·δθ exactly), derivatives re-evaluated there for the stability verdict."""
-        state.p = self.pack_parameters(problem, state.z)
+        p = self.pack_parameters(problem, state.z)
+        for i in range(len(problem.obstacles) if self.nlp.obstacle_slots else 0):  # the slots z was solved with
+            for name in (f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w"):
+                p[self.nlp.params[name]] = state.p[self.nlp.params[name]]
+        state.p = p
         state.hessian = state.jacobian = state.gradient = state.energies = state.kkt = state.residual = None
         state.g = None
         return self._result(problem, state, "Newton (exact moments)", iterations, violation, warm, steps)
@@ -626,7 +726,7 @@ class ShapeSolver:
         if ok:
             return self._escape_saddle_moments(problem, self._exact_result(problem, new, iterations, viol,
                                                                            result.warm_started, 0), new)
-        p0 = self.pack_parameters(problem, state.z)
+        p0 = self.pack_parameters(problem, state.z, keep=state.p)
         for i, _ in enumerate(problem.loads):
             p0[self.nlp.params[f"load:{i}:moment"]] = 0.0
         ok, base, it, viol = self._newton(state, p0)
@@ -677,8 +777,8 @@ class ShapeSolver:
         iterations, steps, last_status = 0, 0, ""
         unverified: tuple[ShapeResult, SolverState] | None = None  # IPOPT's warm answer, over the residual tolerance
         if warm:
-            start = self._state
-            p1 = self.pack_parameters(problem, start.z)
+            p1 = self.pack_parameters(problem, self._state.z, keep=self._state.p)
+            start = self._carry_slots(self._state, p1)
             ok, state, it, viol = self._newton(start, p1)
             iterations += it
             if not ok:

@@ -5,7 +5,8 @@ from the source's pose frames (and strain), the Euler models from the source's f
 solution gets θ ≡ π/2, a solution without ψ its zero-twist ψ, an inextensible one ε ≡ 0), re-extracting
 the Euler angles of the material frames in the target's reference frame R0 (unwrapped along s) when the
 frames differ.  Multipliers are matched by constraint-row identity (grip, name, component), the grip
-position rows through the reaction force vector (each model may use other axes for them); rows the
+position rows through the reaction force vector (each model may use other axes for them), an obstacle's
+contact slots by their arc length (each model places its own: ``obstacle_slots.py``); rows the
 source did not have get zero, and a director target gets least-squares multipliers of its equality rows
 at the adopted shape, ∇f + J_freeᵀ λ ≈ 0 (zeros would make its first Newton update fail).
 """
@@ -20,6 +21,7 @@ from ..model.problem import Problem
 from ..model.rotations import euler_from_frame
 from .functions import NlpFunctions
 from .initial_guess import match_clamp_rolls
+from . import obstacle_slots as OSL
 from .nlp import StringNLP
 from .parameters import ProblemParameters
 from .state import SolverState
@@ -39,6 +41,7 @@ class SourceShape:
     x0_scaled: np.ndarray                 # x(0) / L_target (Euler target's first unknowns)
     forces: dict[str, np.ndarray]         # each grip's reaction force [N]
     multipliers: dict[tuple, float]       # the source's SI multipliers by row identity
+    slots: list[tuple[np.ndarray, np.ndarray]]  # per obstacle: its filled contact slots' s [m] and SI multipliers
 
 
 def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> SourceShape:
@@ -61,15 +64,19 @@ def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> S
     lam_src = src.lam_g / (nlp.row_scale * nlp.sigma) if src.lam_g.size else src.lam_g
     # grip position rows: carry the reaction force vector, whatever axes each model's rows use
     forces = {name: nlp.grip_axes[name].T @ lam_src[rows["position"]] for name, rows in nlp.grip_rows.items()}
-    multipliers = {kind: lam_src[i] for i, kind in enumerate(nlp.row_kind)}
+    multipliers = {kind: lam_src[i] for i, kind in enumerate(nlp.row_kind) if kind[0] != "slot"}
+    slots = []
+    for i, rows in enumerate(nlp.slot_rows):
+        filled = src.p[nlp.params[f"slots:{i}:on"]] > 0
+        slots.append((src.p[nlp.params[f"slots:{i}:s"]][filled], lam_src[np.asarray(rows)[filled]]))
     return SourceShape(src.z[0:3] * source.model.length, frames, eps, f,
-                       src.z[0:3] * source.model.length / target.model.length, forces, multipliers)
+                       src.z[0:3] * source.model.length / target.model.length, forces, multipliers, slots)
 
 
 def warm_state(nlp: StringNLP, fns: NlpFunctions, parameters: ProblemParameters, problem: Problem,
                source: SourceShape) -> SolverState:
     """The target's warm start (z, λ, p) for ``problem`` from the sampled ``source``."""
-    model, lay = nlp.model, nlp.model.layout
+    model, lay, lay_p = nlp.model, nlp.model.layout, nlp.params
     if nlp.director:
         frames = source.frames
         if lay.frame:
@@ -91,6 +98,15 @@ def warm_state(nlp: StringNLP, fns: NlpFunctions, parameters: ProblemParameters,
             continue
         lam[i] = value * nlp.row_scale[i] * nlp.sigma
     p = parameters.pack(problem, z)
+    for i, rows in enumerate(nlp.slot_rows):  # a slot at the arc length of a source's slot takes its multiplier
+        if i >= len(source.slots) or not source.slots[i][0].size:
+            continue
+        src_s, src_lam = source.slots[i]
+        for k, row in enumerate(rows):
+            if p[lay_p[f"slots:{i}:on"]][k] > 0:
+                j = int(np.argmin(np.abs(src_s - p[lay_p[f"slots:{i}:s"]][k])))
+                if abs(src_s[j] - p[lay_p[f"slots:{i}:s"]][k]) <= OSL.TOLERANCE * nlp.length:
+                    lam[row] = src_lam[j] * nlp.row_scale[row] * nlp.sigma
     if nlp.director:
         # rows the source had no twin for (unit norms, folds, the frame rows): least-squares multipliers
         nf = nlp.n_free_rows

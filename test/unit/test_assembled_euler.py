@@ -103,7 +103,7 @@ def test_the_planar_feature_scene_has_every_row_kind():
     """The feature scene exercises what it claims: 3 grip modes, relative rows, a moment, 4 obstacle types."""
     nlp = build("planar features")
     kinds = {k[0] if k[0] != "grip" else f"grip {k[2] if k[2] != 'position' else 'position'}" for k in nlp.row_kind}
-    assert kinds == {"grip position", "grip phi", "relative", "obstacle"}
+    assert kinds == {"grip position", "grip phi", "relative", "obstacle", "slot"}
     assert {ob.type for ob in nlp.problem.obstacles} == {"halfspace", "sphere", "capsule", "box"}
     assert nlp.stretch and len(nlp.problem.loads) == 1 and nlp.obstacle_g_fn is not None
 

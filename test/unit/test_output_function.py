@@ -111,14 +111,17 @@ def test_the_outputs_function_equals_the_numpy_path_cold_and_streaming(case):
     first = solver.solve()
     assert first.ok, first.message
     assert_same(first, numpy_result(solver))
-    touched = False
+    touched = slotted = False
     for targets in stream(problem, drop):
         r = solver.solve(targets)
         assert r.ok, r.message
         assert_same(r, numpy_result(solver))
         touched |= any(np.linalg.norm(f) > 1e-6 for f in r.contact_forces.values())
+        slotted |= any(np.any(solver._state.lam_g[rows] > 1e-8) for rows in solver.nlp.slot_rows)
     assert touched == presses, "the stream was meant to press onto an obstacle: the contact terms went untested" \
         if presses else "a stream meant to stay clear touched"
+    # a curved obstacle pressed on: a contact slot (obstacle_slots.py) carried force, so its terms were compared
+    assert slotted == (presses and any(ob.type != "halfspace" for ob in problem.obstacles))
 
 
 @pytest.mark.skipif(compiler() is None, reason="needs a C compiler")
@@ -171,7 +174,7 @@ def test_a_relative_positions_reaction_enters_the_residual():
 def contact_actions(solver: ShapeSolver) -> list[PointAction]:
     """Every touching obstacle sample's force on the committed state, as a point action."""
     nlp, state = solver.nlp, solver._state
-    return solver._outputs._contacts(solver.problem, state.z, state.lam_g / (nlp.row_scale * nlp.sigma))[1]
+    return solver._outputs._contacts(solver.problem, state.z, state.p, state.lam_g / (nlp.row_scale * nlp.sigma))[1]
 
 
 @pytest.mark.skipif(compiler() is None, reason="needs a C compiler")

@@ -41,7 +41,7 @@ def frames_psi(nlp: StringNLP, parameters: ProblemParameters, problem: Problem, 
     anchor = anchor_grip(problem)
     psi_anchor = 0.0
     if anchor is not None:
-        pp = p if p is not None else parameters.pack(problem, z)
+        pp = p if p is not None else parameters.pack(problem, z, slots=False)
         psi_anchor = float(pp[nlp.params[f"grip:{anchor.name}:angles"]][2])
     if m.layout.planar:  # θ ≡ π/2: ψ' = −φ' cosθ = 0, so ψ is the anchor's everywhere
         return np.full(np.shape(s), psi_anchor)

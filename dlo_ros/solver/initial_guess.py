@@ -64,7 +64,7 @@ def initial_guess(nlp: StringNLP, parameters: ProblemParameters, problem: Proble
         z[lay.slice("theta")] = fit(theta)
     # bend the guess so it meets every held angle: add the piecewise-linear interpolant of the
     # residuals at the grips
-    p = parameters.pack(problem, z)
+    p = parameters.pack(problem, z, slots=False)
     fields = {"phi": phi, "theta": theta, "psi": np.zeros_like(nodes)}
     for k, name in enumerate(("phi", "theta", "psi")):
         if lay.planar and name != "phi" or name == "psi" and not lay.twist:

@@ -39,7 +39,7 @@ from typing import Callable
 import numpy as np
 
 #: a slot is kept, and a solve is not repeated, while its minimum moved less than this × L
-TOLERANCE = 1e-4
+TOLERANCE = 3e-4
 
 #: a closest approach touches when its clearance is below this × L
 TOUCH = 1e-6

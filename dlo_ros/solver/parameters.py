@@ -52,13 +52,15 @@ class ProblemParameters:
         #: the contact slots the last ``pack`` found, per obstacle (read by the solver right after it)
         self.placements: list[OSL.SlotPlacement] = []
 
-    def pack(self, problem: Problem, z_reference: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
+    def pack(self, problem: Problem, z_reference: np.ndarray, keep: np.ndarray | None = None,
+             slots: bool = True) -> np.ndarray:
         """The NLP parameter vector for ``problem``; angles unwrapped to, and obstacle contact slots placed
         on, the shape ``z_reference``.  ``keep``: a parameter vector whose slots stay while they are still
-        placed well for ``z_reference`` (``obstacle_slots.same_slots``)."""
+        placed well for ``z_reference``; ``slots`` False: leave them empty (a caller that reads grip angles
+        only)."""
         nlp, lay = self.nlp, self.nlp.params
         p = self.scene(problem).copy()
-        if nlp.obstacle_slots:
+        if nlp.obstacle_slots and slots:
             self.placements = self.place_slots(problem, z_reference, p, keep)
         if nlp.director:
             for g in problem.grips:

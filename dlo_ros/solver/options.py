@@ -18,8 +18,8 @@ class SolverOptions:
     at most order + 8).
     obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is
     imposed.  obstacle_slots: per obstacle, rows whose arc lengths are parameters, placed at the string's
-    closest approaches to the obstacle and moved with them (solver/obstacle_slots.py); 0: the samples
-    alone.
+    closest approaches to the obstacle and moved with them (solver/obstacle_slots.py); 0 (default): the
+    samples alone.
     frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2 (away from
     the singularity); 'paper' is the paper's frame (singular at the straight state).
     rotation: how a 3D model represents the material frame: 'director' (default: nodal unit quaternions,
@@ -45,7 +45,7 @@ class SolverOptions:
     order: int = 16
     quadrature_nodes: int = 40
     obstacle_samples: int = 41
-    obstacle_slots: int = 2
+    obstacle_slots: int = 0
     frame: str = "auto"
     output_points: int = 51
     tolerance: float = 1e-10

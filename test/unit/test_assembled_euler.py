@@ -50,7 +50,7 @@ def build(case: str) -> StringNLP:
     """The NLP of a named case: 'planar <scene>', 'planar features', 'euler seed N', 'euler stretched N'."""
     if case.startswith("planar features"):
         problem = planar_scene(stretch="inextensible" not in case)
-        return StringNLP(problem, SolverOptions(model="planar", order=10))
+        return StringNLP(problem, SolverOptions(model="planar", order=10, obstacle_slots=2))
     if case.startswith("planar "):
         scene = load_scene(case.split()[1])
         return StringNLP(scene.problem, dataclasses.replace(scene.options, model="planar"))

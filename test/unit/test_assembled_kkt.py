@@ -1,7 +1,7 @@
 """The assembled KKT functions of director models (dlo_ros.solver.assembled, #14) equal the KKT
 system differentiated here from the whole flattened NLP (CasADi SX AD of ``StringNLP.nlp``'s objective
-and rows, with ``energy_fn``), for the contact-free rows and for every row (obstacles of each type,
-self-contact slots); and their compiled C equals them too."""
+and rows, with ``energy_fn``), for the contact-free rows and for every row (obstacles of each type with
+their contact slots and sample switches, self-contact slots); and their compiled C equals them too."""
 from __future__ import annotations
 
 import dataclasses
@@ -93,9 +93,9 @@ def obstacle_scene():
                                   "stretched 7, 2 slots"])
 def test_the_assembled_system_of_every_row_equals_the_flattened_one(case):
     if case.startswith("obstacles"):
-        problem, options = obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=3)
+        problem, options = obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=3, obstacle_slots=2)
     elif case.startswith("seed"):
-        problem, options = random_scene(24), SolverOptions(model="full")
+        problem, options = random_scene(24), SolverOptions(model="full", obstacle_slots=2)
     else:
         problem, options = stretched_scene(7), SolverOptions(model="full", self_contact_pairs=2)
     nlp = StringNLP(problem, options)
@@ -132,7 +132,7 @@ def test_the_compiled_assembled_system_equals_the_interpreted_one(tmp_path, monk
 
 @pytest.mark.parametrize("slots", [0, 3])
 def test_the_assembled_inequality_rows_equal_the_flattened_ones(slots):
-    nlp = StringNLP(obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=slots))
+    nlp = StringNLP(obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=slots, obstacle_slots=2))
     values = ca.Function("g", [nlp.z_sym, nlp.p_sym], [nlp.g_sym[nlp.n_free_rows:]])
     rng = np.random.default_rng(5)
     for _ in range(2):
@@ -142,7 +142,7 @@ def test_the_assembled_inequality_rows_equal_the_flattened_ones(slots):
 
 
 def test_the_assembled_constraint_jacobian_equals_the_flattened_one():
-    nlp = StringNLP(obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=2))
+    nlp = StringNLP(obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=2, obstacle_slots=2))
     reference = ca.Function("flat_jacobian", [nlp.z_sym, nlp.p_sym], [ca.jacobian(nlp.g_sym, nlp.z_sym)])
     rng = np.random.default_rng(9)
     z, p = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0])

@@ -427,12 +427,16 @@ class StringNLP:
         self._target_jacobian = np.asarray(ca.Function("dg_dp", [z, p], [ca.jacobian(g, p)])(np.zeros(z.shape[0]), np.zeros(lay.size)))
         self._target_jacobian[:, ~grip_only] = 0.0
 
+    @staticmethod
+    def slot_parameters(i: int) -> tuple[str, str, str, str]:
+        """The names of obstacle i's slot parameters in p: σ, on, W(σ) and the samples' switches."""
+        return f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w", f"samples:{i}:on"
+
     def disabled_rows(self, p: np.ndarray) -> np.ndarray:
         """Rows that p switches off (empty contact slots, samples a slot replaces): they read −1 ≤ 0 whatever
         the shape, so a warm start's multiplier on one belongs to no row of p."""
-        off = np.zeros(self.lbg.size, dtype=bool)
+        off, lay = np.zeros(self.lbg.size, dtype=bool), self.params
         for i, rows in enumerate(self.slot_rows):
-            lay = self.params
             off[rows] = p[lay[f"slots:{i}:on"]] == 0
             off[self.obstacle_rows[i]] = p[lay[f"samples:{i}:on"]] == 0
         return off

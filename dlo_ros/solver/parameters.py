@@ -84,7 +84,7 @@ class ProblemParameters:
         """Obstacle i's slots of p (in place) from ``placement`` (``keep``: a vector holding its rows already)."""
         nlp, lay = self.nlp, self.nlp.params
         if keep is not None:
-            for name in (f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w", f"samples:{i}:on"):
+            for name in nlp.slot_parameters(i):
                 p[lay[name]] = keep[lay[name]]
             return
         rows = np.zeros((nlp.obstacle_slots, nlp.model.quad.count))

@@ -363,8 +363,8 @@ class ShapeSolver:
 
     # ---- the solution's parameters, start and fields (parameters.py, initial_guess.py, frames.py) ------
     def pack_parameters(self, problem: Problem, z_reference: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
-        """The NLP parameter vector for ``problem``; angles unwrapped to, and obstacle samples placed on, the
-        shape ``z_reference`` (``keep``: a vector whose samples stay while still placed well)."""
+        """The NLP parameter vector for ``problem``; angles unwrapped to, and obstacle contact slots placed
+        on, the shape ``z_reference`` (``keep``: a vector whose slots stay while still placed well)."""
         p = self.parameters.pack(problem, z_reference, keep)
         for i, placement in enumerate(self._slot_override or ()):  # a round's slots (_place_slots_again)
             self.parameters.write_slots(p, i, placement)
@@ -511,8 +511,7 @@ class ShapeSolver:
         if not nlp.obstacle_slots:
             return start
         lay = nlp.params
-        names = [n for i in range(len(nlp.slot_rows))
-                 for n in (f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w", f"samples:{i}:on")]
+        names = [n for i in range(len(nlp.slot_rows)) for n in nlp.slot_parameters(i)]
         if all(np.array_equal(start.p[lay[n]], p[lay[n]]) for n in names):
             return start
         moved = start.p.copy()
@@ -705,7 +704,7 @@ class ShapeSolver:
         gradient is then M·δθ exactly), derivatives re-evaluated there for the stability verdict."""
         p = self.pack_parameters(problem, state.z)
         for i in range(len(problem.obstacles) if self.nlp.obstacle_slots else 0):  # the slots z was solved with
-            for name in (f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w"):
+            for name in self.nlp.slot_parameters(i):
                 p[self.nlp.params[name]] = state.p[self.nlp.params[name]]
         state.p = p
         state.hessian = state.jacobian = state.gradient = state.energies = state.kkt = state.residual = None

@@ -215,6 +215,8 @@ class StringNLP:
                                    self.stretch, self.planar)
         self.sigma = L / problem.string.bend_stiffness.maximum
         self._moment_stiffness: ca.Function | None = None
+        #: IPOPT's derivative functions (``ipopt_derivatives``), built on first use
+        self._ipopt_derivatives: dict[str, ca.Function] | None = None
         self._build()
 
     # ------------------------------------------------------------------------------------------------
@@ -550,4 +552,33 @@ class StringNLP:
                     "max_iter": min(o.max_iterations, 200),
                 }
             )
-        return ca.nlpsol("dlo_warm" if warm else "dlo_cold", "ipopt", self.nlp, {"ipopt": ipopt, "print_time": False, "error_on_fail": False})
+        return ca.nlpsol("dlo_warm" if warm else "dlo_cold", "ipopt", self.nlp,
+                         {"ipopt": ipopt, "print_time": False, "error_on_fail": False, **self.ipopt_derivatives()})
+
+    def ipopt_derivatives(self) -> dict[str, ca.Function]:
+        """IPOPT's derivative functions (nlpsol's ``grad_f``, ``jac_g`` and ``hess_lag`` options) from the
+        assembled KKT function, built once and shared by the cold and the warm solver.  Left to nlpsol,
+        each solver would differentiate the flattened NLP symbolically: its SX Hessian is most of a
+        solver's set-up (bench/results/compile_cost.md).  IPOPT's Hessian is that of
+        γ f + λᵀg; ``hessian_fn`` gives ∇²f + Σ λ_i ∇²g_i, which is linear in λ, so
+
+            ∇²(γ f + λᵀg) = H(z, p, λ) + (γ − 1) H(z, p, 0),
+
+        the second term evaluated only when γ ≠ 1 (IPOPT's restoration phase)."""
+        if self._ipopt_derivatives is None:
+            n, m, n_p = self.z_sym.shape[0], self.lbg.size, self.p_sym.shape[0]
+            z, p, gamma, lam = ca.MX.sym("x", n), ca.MX.sym("p", n_p), ca.MX.sym("lam_f"), ca.MX.sym("lam_g", m)
+            zero = ca.MX.zeros(m)
+            hess = self.hessian_fn(z, p, lam) + ca.if_else(gamma == 1, ca.MX.zeros(n, n),
+                                                            (gamma - 1) * self.hessian_fn(z, p, zero), True)
+            x, f = self.nlp["x"], self.nlp["f"]
+            self._ipopt_derivatives = {
+                # the gradient alone: the KKT function would evaluate the Hessian as well
+                "grad_f": ca.Function("nlp_grad_f", [x, self.nlp["p"]], [f, ca.gradient(f, x)],
+                                      ["x", "p"], ["f", "grad_f_x"]),
+                "jac_g": ca.Function("nlp_jac_g", [z, p], [self.g_fn(z, p), self.jac_g_fn(z, p)],
+                                     ["x", "p"], ["g", "jac_g_x"]),
+                "hess_lag": ca.Function("nlp_hess_l", [z, p, gamma, lam], [ca.triu(hess)],
+                                        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
+            }
+        return self._ipopt_derivatives

@@ -424,7 +424,8 @@ def test_far_from_itself_is_unchanged():
         poses = None if c is None else {"right": ((c, 0.0, 0.0), STRAIGHT)}
         a, b = on.solve(poses), off.solve(poses)
         assert a.ok and b.ok and a.iterations == b.iterations and not a.self_contacts
-        assert a.energy["total"] == pytest.approx(b.energy["total"], rel=1e-12)
+        # (the two NLPs' derivatives are assembled with and without the slot rows: rounding differs)
+        assert a.energy["total"] == pytest.approx(b.energy["total"], rel=1e-10)
         # the cold answer leaves the planar saddle toward one of two mirror images (a neutral choice)
         assert distance_modulo_chord_rotation(a.points, b.points) < 1e-9
         if c is not None:

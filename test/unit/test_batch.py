@@ -11,7 +11,7 @@ import pytest
 
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
-from dlo_ros.solver.batch import query_many
+from dlo_ros.solver.batch import process_pool, query_many, stop_pool
 from random_scenes import targets_near
 
 
@@ -113,3 +113,19 @@ def test_a_pool_stops_at_once_and_its_process_exits_cleanly(tmp_path):
     ended, seconds, all_done = proc.stdout.split()
     assert ended == "True" and all_done == "True"
     assert float(seconds) < 10.0  # well below the minute a graceful shutdown would wait
+
+
+def test_background_workers_yield_to_the_parent():
+    """A node's query and fit workers run BACKGROUND_NICE above the node's nice value (so that on a
+    shared core the stream's updates come first); a planner's default pool runs at the caller's."""
+    import os
+
+    from dlo_ros.solver.batch import BACKGROUND_NICE
+
+    base = os.nice(0)
+    for nice, expected in ((BACKGROUND_NICE, min(base + BACKGROUND_NICE, 19)), (0, base)):
+        pool = process_pool(1, nice=nice)
+        try:
+            assert pool.submit(os.nice, 0).result(timeout=60) == expected
+        finally:
+            stop_pool(pool)

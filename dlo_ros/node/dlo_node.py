@@ -197,9 +197,9 @@ class DloNode(Node):
         self._queries_pending = 0
         self._query_pool = None
         if self._query_workers:
-            from ..solver.batch import BACKGROUND_NICE, process_pool
+            from ..solver.batch import process_pool
 
-            self._query_pool = process_pool(self._query_workers, nice=BACKGROUND_NICE)
+            self._query_pool = process_pool(self._query_workers, background=True)
         self.get_logger().info(
             f"scene '{safe_text(scene.name)}' ({safe_text(scene.source)}): grips {self.grip_names}, "
             f"{len(problem.obstacles)} obstacle(s), frame '{safe_text(self.frame_id)}'; building the solver"

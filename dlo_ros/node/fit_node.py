@@ -42,7 +42,7 @@ class NodeFitter:
     """``~/observed``, ``~/fit`` and the continuous fit timer of ``node`` (a DloNode); see the module docstring."""
 
     def __init__(self, node) -> None:
-        from ..solver.batch import BACKGROUND_NICE, process_pool
+        from ..solver.batch import process_pool
 
         self.node = node
         self.health = FitHealth()
@@ -52,7 +52,7 @@ class NodeFitter:
         self._last_fitted = 0  # number of the newest cloud a fit started on
         self._done: list[tuple[Future, CloudSnapshot, FitConfig]] = []
         self._done_lock = threading.Lock()
-        self._pool = process_pool(1, nice=BACKGROUND_NICE)
+        self._pool = process_pool(1, background=True)
         self._wake = node.create_guard_condition(self._on_fit_done)
         from .dlo_node import CLOUD_QOS
 
@@ -226,10 +226,10 @@ class NodeFitter:
         self._pool.submit(_warm_fit_worker)
 
     def _new_pool(self) -> None:
-        from ..solver.batch import BACKGROUND_NICE, process_pool, stop_pool
+        from ..solver.batch import process_pool, stop_pool
 
         stop_pool(self._pool, 1.0)
-        self._pool = process_pool(1, nice=BACKGROUND_NICE)
+        self._pool = process_pool(1, background=True)
 
     def close(self, timeout: float) -> None:
         from ..solver.batch import stop_pool

@@ -33,8 +33,10 @@ from ..model.problem import Problem
 from .options import SolverOptions
 from .result import ShapeResult
 
-#: The nice value of a node's query and fit workers: on a shared core the stream's updates come first
-#: (bench/results/soak_3_clients.md)
+#: The nice value added to a node's query and fit workers (``process_pool(background=True)``), so that
+#: the stream comes first on a shared core (bench/results/soak_3_clients.md against soak_no_queries.md).
+#: Not SCHED_IDLE: it favours the stream more, but starves the workers whenever both cores are busy
+#: (a planner beside the node, or CI's two test processes), and their queries would time out.
 BACKGROUND_NICE = 10
 
 #: Solvers a worker process keeps (least recently used dropped first).
@@ -46,14 +48,14 @@ _default_lock = threading.Lock()
 _worker_lock = threading.Lock()  # a thread executor's workers share this process's solvers: one at a time
 
 
-def process_pool(workers: int | None = None, nice: int = 0) -> ProcessPoolExecutor:
+def process_pool(workers: int | None = None, background: bool = False) -> ProcessPoolExecutor:
     """A process pool for :func:`solve_chunk`: ``workers`` (default ``os.cpu_count()``) processes started
     with 'spawn' (a fork of a process with CasADi and DDS threads is unsafe) that ignore SIGINT (a
-    Ctrl-C reaches the whole process group; the parent decides how to stop).  ``nice``: added to the
-    workers' nice value, so that work of the parent's (a node's stream) comes first on a shared core."""
+    Ctrl-C reaches the whole process group; the parent decides how to stop).  ``background``: the
+    workers run BACKGROUND_NICE above the caller, so that a node's stream comes first on a shared core."""
     return ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1,
                                mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init,
-                               initargs=(int(nice),))
+                               initargs=(bool(background),))
 
 
 def stop_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> bool:
@@ -76,12 +78,12 @@ def stop_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> bool:
     return not manager.is_alive()
 
 
-def _worker_init(nice: int = 0) -> None:
+def _worker_init(background: bool = False) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if nice > 0:
-        os.nice(nice)
+    if background:
+        os.nice(BACKGROUND_NICE)
 
 
 def default_executor() -> ProcessPoolExecutor:

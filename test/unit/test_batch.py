@@ -116,16 +116,17 @@ def test_a_pool_stops_at_once_and_its_process_exits_cleanly(tmp_path):
 
 
 def test_background_workers_yield_to_the_parent():
-    """A node's query and fit workers run BACKGROUND_NICE above the node's nice value (so that on a
-    shared core the stream's updates come first); a planner's default pool runs at the caller's."""
+    """A node's query and fit workers (``background=True``) run BACKGROUND_NICE above the caller's nice
+    value (so that on a shared core the stream's updates come first); a planner's default pool runs at
+    the caller's."""
     import os
 
     from dlo_ros.solver.batch import BACKGROUND_NICE
 
     base = os.nice(0)
-    for nice, expected in ((BACKGROUND_NICE, min(base + BACKGROUND_NICE, 19)), (0, base)):
-        pool = process_pool(1, nice=nice)
+    for background, nice in ((True, min(base + BACKGROUND_NICE, 19)), (False, base)):
+        pool = process_pool(1, background=background)
         try:
-            assert pool.submit(os.nice, 0).result(timeout=60) == expected
+            assert pool.submit(os.nice, 0).result(timeout=60) == nice
         finally:
             stop_pool(pool)

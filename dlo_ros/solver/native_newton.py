@@ -28,7 +28,8 @@ import casadi as ca
 import numpy as np
 
 from .compiled import COMPILER_LOCK, build_library, cache_dir, compiler, fingerprint
-from .nlp import NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION, NEWTON_STEPS
+from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE,
+                  NEWTON_REGULARISATION, NEWTON_STEPS)
 
 #: return codes of dlo_newton_run
 CONVERGED, NOT_CONVERGED, SINGULAR, STEP_TOO_LARGE, EVALUATION_FAILED = 0, 1, 2, 3, 4
@@ -188,31 +189,37 @@ def _compile(fn: ca.Function, cc: str, lib: Path, nice: int) -> bool:
     return build_library(fn, lib, cc, nice=nice, extra_source=driver)
 
 
-#: Newton with a fixed active set on the full KKT function (``StringNLP.kkt_fn``), appended to its
-#: generated code.  See ``ActiveNewton``.
+#: Newton with an active set on the full KKT function (``StringNLP.kkt_fn``), appended to its generated
+#: code.  See ``ActiveNewton``.
 ACTIVE_DRIVER = r"""
 #include <math.h>
 #include <stdlib.h>
 
 typedef void (*dlo_dgesv_active_t)(int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb, int *info);
 
-/* Newton on [H J_A^T; J_A 0] for the rows idx (held at bound); see dlo_ros/solver/native_newton.py.
-   z (n), lam (rows): in at the start, out at the last iterate.  grad, g, jac (rows x n, column-major),
-   hess (n x n), energies: out at the last evaluation; with given = 1 they are in as well, the first
-   step's derivatives (not an evaluation: convergence needs one). */
-CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, int rows, int m, const int *idx,
-    int max_steps, int given, double max_step, double reg, double tol_dual, double tol_prim, double *z,
-    const double *p, double *lam, const double *bound, double *grad, double *g, double *jac, double *hess,
-    double *energies, int *steps) {
-  int N = n + m, one = 1, info = 0, code = 1;
+/* Newton on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see dlo_ros/solver/newton.py
+   (_active_steps, the same rules).  At each evaluated iterate after the first step, while switches
+   remain, one row of those with switchable[i] changes: the most violated inactive one joins, else the
+   active one with the most negative multiplier leaves (its multiplier set to 0); an iterate where a row
+   changed is not converged.  z (n), lam (rows), active (rows): in at the start, out at the last iterate.
+   grad, g, jac (rows x n, column-major), hess (n x n), energies: out at the last evaluation; with
+   given = 1 they are in as well, the first step's derivatives (not an evaluation: convergence needs one). */
+CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, int rows, int *active,
+    const int *switchable, int switches, int max_steps, int given, double max_step, double reg, double tol_dual,
+    double tol_prim, double join_tol, double leave_tol, double *z, const double *p, double *lam,
+    const double *ub, double *grad, double *g, double *jac, double *hess, double *energies, int *steps) {
+  int one = 1, info = 0, code = 1;
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   FUNCTION_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
   casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 5 ? sz_res : 5));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
   casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
-  double *A = malloc(sizeof(double) * N * N), *rhs = malloc(sizeof(double) * N);
-  int *ipiv = malloc(sizeof(int) * N);
+  int most = 0;  /* rows that can be active: the matrix is sized for them, not for every row */
+  for (int i = 0; i < rows; ++i) most += active[i] || switchable[i];
+  int *idx = malloc(sizeof(int) * (most > 1 ? most : 1));
+  double *A = malloc(sizeof(double) * (n + most) * (n + most)), *rhs = malloc(sizeof(double) * (n + most));
+  int *ipiv = malloc(sizeof(int) * (n + most));
   *steps = 0;
   for (int it = 0; ; ++it) {
     int evaluated = !(it == 0 && given);
@@ -221,7 +228,22 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, 
       res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
       if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; *steps = it; break; }
     }
-    int converged = 1;
+    int switched = 0;
+    if (it > 0 && switches > 0) {
+      int join = -1, leave = -1;
+      double excess = join_tol, negative = -leave_tol;
+      for (int i = 0; i < rows; ++i) {
+        if (!switchable[i]) continue;
+        if (!active[i] && g[i] - ub[i] > excess) { excess = g[i] - ub[i]; join = i; }
+        if (active[i] && lam[i] < negative) { negative = lam[i]; leave = i; }
+      }
+      if (join >= 0) { active[join] = 1; switched = 1; }
+      else if (leave >= 0) { active[leave] = 0; lam[leave] = 0.0; switched = 1; }
+      switches -= switched;
+    }
+    int m = 0;
+    for (int i = 0; i < rows; ++i) if (active[i]) idx[m++] = i;
+    int N = n + m, converged = !switched;
     for (int j = 0; j < n; ++j) {
       double v = grad[j];
       for (int k = 0; k < m; ++k) v += lam[idx[k]] * jac[idx[k] + (size_t)j * rows];
@@ -229,7 +251,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, 
       if (!(fabs(v) < tol_dual)) converged = 0;
     }
     for (int k = 0; k < m; ++k) {
-      double v = g[idx[k]] - bound[k];
+      double v = g[idx[k]] - ub[idx[k]];
       rhs[n + k] = -v;
       if (!(fabs(v) < tol_prim)) converged = 0;
     }
@@ -261,7 +283,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, 
     for (int j = 0; j < n; ++j) z[j] += rhs[j];
     for (int k = 0; k < m; ++k) lam[idx[k]] += rhs[n + k];
   }
-  free(arg); free(res); free(iw); free(w); free(A); free(rhs); free(ipiv);
+  free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(ipiv);
   return code;
 }
 """
@@ -281,7 +303,8 @@ def active_library_path(fn: ca.Function) -> Path:
 @dataclass
 class ActiveOutcome:
     """What one ``ActiveNewton`` call returns: ``code`` (CONVERGED, …), the last iterate (z, λ over every
-    row), the derivatives [∇f, g, ∂g/∂z, ∇²L, energies] evaluated there, and the steps taken."""
+    row), the derivatives [∇f, g, ∂g/∂z, ∇²L, energies] evaluated there, the steps taken and the active
+    set there."""
 
     code: int
     z: np.ndarray
@@ -292,36 +315,39 @@ class ActiveOutcome:
     hessian: np.ndarray
     energies: np.ndarray
     steps: int
+    active: np.ndarray
 
 
 class ActiveNewton:
-    """Newton steps with a fixed active set in one compiled call: the inner loop of
-    ``newton._newton_active`` (the same regularised steps, convergence test, step limit and step count),
-    in C around the compiled full KKT function, whose library it shares.  The active-set changes stay in
-    Python.  Not re-entrant per instance: callers serialise calls (ShapeSolver holds a lock)."""
+    """Newton steps with an active set in one compiled call: the inner loop of ``newton._newton_active``
+    (``newton._active_steps``: the same regularised steps, row switches, convergence test, step limit
+    and step count), in C around the compiled full KKT function, whose library it shares.  Not
+    re-entrant per instance: callers serialise calls (ShapeSolver holds a lock)."""
 
     def __init__(self, lib_path: Path, n: int, rows: int):
         self._lib = ctypes.CDLL(str(lib_path))
         self._run = self._lib.dlo_newton_active_run
         dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int, ip, ctypes.c_int,
+        self._run.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ip, ip, ctypes.c_int, ctypes.c_int,
                               ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
-                              dp, dp, dp, dp, dp, dp, dp, dp, dp, ip]
+                              ctypes.c_double, ctypes.c_double, dp, dp, dp, dp, dp, dp, dp, dp, dp, ip]
         self._dgesv = _dgesv_pointer()
         self.n, self.rows = n, rows
 
-    def __call__(self, z: np.ndarray, lam: np.ndarray, p: np.ndarray, idx: np.ndarray, bound: np.ndarray,
-                 max_steps: int, first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
-                 ) -> ActiveOutcome:
-        """From (z, λ) with the rows ``idx`` held at ``bound``; ``first``: (∇f, g, ∂g/∂z, ∇²L) for the
-        first step instead of an evaluation."""
+    def __call__(self, z: np.ndarray, lam: np.ndarray, p: np.ndarray, active: np.ndarray, ub: np.ndarray,
+                 switchable: np.ndarray, switches: int, max_steps: int,
+                 first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> ActiveOutcome:
+        """From (z, λ) with the rows ``active`` held at ``ub`` (both over every row); up to ``switches``
+        changes among the rows ``switchable``; ``first``: (∇f, g, ∂g/∂z, ∇²L) for the first step instead
+        of an evaluation."""
         n, rows = self.n, self.rows
         z = np.array(z, dtype=float, copy=True)
         lam = np.array(lam, dtype=float, copy=True)
         p = np.ascontiguousarray(p, dtype=float)
-        idx_c = np.ascontiguousarray(idx, dtype=np.intc)
-        bound = np.ascontiguousarray(bound, dtype=float)
+        act = np.ascontiguousarray(active, dtype=np.intc).copy()
+        switch = np.ascontiguousarray(switchable, dtype=np.intc)
+        ub = np.ascontiguousarray(ub, dtype=float)
         grad, g = np.zeros(n), np.zeros(rows)
         jac, hess, energies = np.zeros(rows * n), np.zeros(n * n), np.full(5, np.nan)
         if first is not None:
@@ -331,11 +357,11 @@ class ActiveNewton:
             hess[:] = np.asarray(first[3], dtype=float).ravel(order="F")
         steps = ctypes.c_int(0)
         dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-        code = self._run(self._dgesv, n, rows, idx_c.size, idx_c.ctypes.data_as(ip), int(max_steps),
-                         int(first is not None), NEWTON_MAX_STEP, NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE,
-                         NEWTON_PRIMAL_TOLERANCE, z.ctypes.data_as(dp), p.ctypes.data_as(dp), lam.ctypes.data_as(dp),
-                         bound.ctypes.data_as(dp), grad.ctypes.data_as(dp), g.ctypes.data_as(dp),
-                         jac.ctypes.data_as(dp), hess.ctypes.data_as(dp), energies.ctypes.data_as(dp),
-                         ctypes.byref(steps))
+        code = self._run(self._dgesv, n, rows, act.ctypes.data_as(ip), switch.ctypes.data_as(ip), int(switches),
+                         int(max_steps), int(first is not None), NEWTON_MAX_STEP, NEWTON_REGULARISATION,
+                         NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE, JOIN_TOLERANCE, LEAVE_TOLERANCE,
+                         z.ctypes.data_as(dp), p.ctypes.data_as(dp), lam.ctypes.data_as(dp), ub.ctypes.data_as(dp),
+                         grad.ctypes.data_as(dp), g.ctypes.data_as(dp), jac.ctypes.data_as(dp),
+                         hess.ctypes.data_as(dp), energies.ctypes.data_as(dp), ctypes.byref(steps))
         return ActiveOutcome(int(code), z, lam, grad, g, jac.reshape(rows, n, order="F"),
-                             hess.reshape(n, n, order="F"), energies, steps.value)
+                             hess.reshape(n, n, order="F"), energies, steps.value, act.astype(bool))

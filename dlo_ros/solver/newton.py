@@ -8,7 +8,10 @@ For the equality rows and the inequality rows in the active set A (at first: tho
 
 repeated until ‖∇f + J_Aᵀλ_A‖∞ < 1e-9 and ‖g_A − g_bound‖∞ < 1e-11 (scaled units).  At that point the
 KKT conditions of the whole problem hold when every inactive row is within its bound and every active
-inequality's λ ≥ 0.  If not, the active set changes by one row, as in an active-set method: the most
+inequality's λ ≥ 0.  Between steps, a contact row that the last step left violated (or with a negative
+multiplier) already joins (leaves) A, one row per step and at most NEWTON_STEP_SWITCHES times
+(``_active_steps``).  If the converged point is still wrong, the active set changes by one row, as in
+an active-set method: the most
 violated contact row (obstacle or self-contact, ``StringNLP.contact_row``; a violated fold guard is no
 equilibrium and gives up) joins A or, if none is violated, the active inequality with the most negative
 λ leaves it; Newton goes on from that point, at most ``NEWTON_ACTIVE_SET_CHANGES`` times (a grip move
@@ -25,8 +28,8 @@ from scipy.linalg.lapack import dgesv as _gesv
 
 from .functions import NlpFunctions
 from .native_newton import CONVERGED
-from .nlp import (NEWTON_ACTIVE_SET_CHANGES, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE,
-                  NEWTON_REGULARISATION, NEWTON_STEPS, StringNLP)
+from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_ACTIVE_SET_CHANGES, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
+                  NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION, NEWTON_STEP_SWITCHES, NEWTON_STEPS, StringNLP)
 from .state import SolverState
 
 
@@ -119,67 +122,91 @@ def kkt_step(hess: np.ndarray, ja: np.ndarray, r_dual: np.ndarray, r_prim: np.nd
 def _newton_active(nlp: StringNLP, kkt_fn, start: SolverState, z: np.ndarray, lam: np.ndarray, p: np.ndarray,
                    active: np.ndarray, max_steps: int, reuse: bool,
                    native=None) -> tuple[bool, SolverState | None, int, np.ndarray | None]:
-    """Newton steps from (z, λ) with the rows ``active`` held at their bound.  Returns (ok, state, steps,
-    the next active set): ok with the KKT point when it satisfies every row and sign; else, when Newton
-    converged but the active set is wrong, that point and the corrected set (violated rows in, negative
-    multipliers out); else (False, None, steps, None).  ``reuse``: (z, λ) is the start's own point and
-    only grip targets changed since, so its stored derivatives give the first step.  ``native``: the
-    compiled loop of ``kkt_fn`` (``native_newton.ActiveNewton``), or None for the numpy loop."""
+    """Newton steps from (z, λ) with the rows ``active`` held at their bound, contact rows switching
+    between steps as ``_active_steps`` says.  Returns (ok, state, steps, the next active set): ok with the
+    KKT point when it satisfies every row and sign; else, when Newton converged but the active set is
+    wrong, that point and the corrected set (violated rows in, negative multipliers out); else (False,
+    None, steps, None).  ``reuse``: (z, λ) is the start's own point and only grip targets changed since,
+    so its stored derivatives give the first step.  ``native``: the compiled loop of ``kkt_fn``
+    (``native_newton.ActiveNewton``), or None for the numpy loop."""
     equality = nlp.equality
     z, lam = z.copy(), np.where(active, lam, 0.0)
-    idx = np.flatnonzero(active)
-    bound = nlp.ubg[idx]
+    # contact rows may switch (a row p switches off holds nothing: obstacle_slots.py); fold guards may not
+    switchable = nlp.contact_row & ~equality
+    if nlp.obstacle_slots:
+        switchable &= ~nlp.disabled_rows(p)
     # Only grip targets changed → they enter g linearly (row = (x − target)/scale), so ∇f, J and H
     # stored at the start stay exact and g shifts by a known amount: the first step needs no evaluation.
     keep = ~nlp.grip_parameter_mask
     reuse = reuse and np.array_equal(start.p[keep], p[keep])
     first = (start.gradient, start.g + nlp.target_shift(start.p, p), start.jacobian, start.hessian) if reuse else None
     if native is not None:  # the loop of _active_steps in one compiled call (native_newton.ActiveNewton)
-        out = native(z, lam, p, idx, bound, max_steps, first)
+        out = native(z, lam, p, active, nlp.ubg, switchable, NEWTON_STEP_SWITCHES, max_steps, first)
         if out.code != CONVERGED:
             return False, None, out.steps, None
-        z, lam, it = out.z, out.lam, out.steps
+        z, lam, it, active = out.z, out.lam, out.steps, out.active
         grad, g, jac, hess, energies = out.gradient, out.g, out.jacobian, out.hessian, out.energies
     else:
-        found = _active_steps(kkt_fn, z, lam, p, idx, bound, max_steps, first)
+        found = _active_steps(kkt_fn, z, lam, p, active, nlp.ubg, switchable, NEWTON_STEP_SWITCHES, max_steps, first)
         if found[0] is None:
             return False, None, found[-1], None
-        z, lam, grad, g, jac, hess, energies, it = found
+        z, lam, grad, g, jac, hess, energies, it, active = found
     state = SolverState(z, lam, start.lam_x, p, hessian=hess, jacobian=jac, energies=energies.ravel(), g=g,
                         gradient=grad)
     excess = np.where(~active, g - nlp.ubg, 0.0)
     negative = np.where(active & ~equality, lam, 0.0)
     changed = active.copy()
-    if np.any(excess[~nlp.contact_row] > 1e-9):  # a fold guard: no equilibrium, IPOPT takes over
+    if np.any(excess[~nlp.contact_row] > JOIN_TOLERANCE):  # a fold guard: no equilibrium, IPOPT takes over
         return False, None, it, None
-    if excess.max(initial=0.0) > 1e-9:  # the most violated row joins (one change at a time:
+    if excess.max(initial=0.0) > JOIN_TOLERANCE:  # the most violated row joins (one change at a time:
         changed[np.argmax(excess)] = True  # several at once over-constrain the sampled contact)
-    elif negative.min(initial=0.0) < -1e-12:  # else the most negative multiplier leaves
+    elif negative.min(initial=0.0) < -LEAVE_TOLERANCE:  # else the most negative multiplier leaves
         changed[np.argmin(negative)] = False
     else:
         return True, state, it, None
     return False, state, it, changed
 
 
-def _active_steps(kkt_fn, z: np.ndarray, lam: np.ndarray, p: np.ndarray, idx: np.ndarray, bound: np.ndarray,
-                  max_steps: int, first: tuple | None) -> tuple:
-    """Newton steps on [∇²L J_Aᵀ; J_A 0] for the rows ``idx`` held at ``bound``, from (z, λ) (changed in
-    place), until the residual converges at an evaluated point: (z, λ, ∇f, g, ∂g/∂z, ∇²L, energies, steps)
-    there, or (None, steps) on no convergence, a singular matrix or too large a step.  ``first``:
-    (∇f, g, ∂g/∂z, ∇²L) for the first step instead of an evaluation."""
+def _active_steps(kkt_fn, z: np.ndarray, lam: np.ndarray, p: np.ndarray, active: np.ndarray, ub: np.ndarray,
+                  switchable: np.ndarray, switches: int, max_steps: int, first: tuple | None) -> tuple:
+    """Newton steps on [∇²L J_Aᵀ; J_A 0] for the rows ``active`` held at their bound ``ub`` (both over
+    every row), from (z, λ) (changed in place), until the residual converges at an evaluated point:
+    (z, λ, ∇f, g, ∂g/∂z, ∇²L, energies, steps, active) there, or (None, steps) on no convergence, a
+    singular matrix or too large a step.  ``first``: (∇f, g, ∂g/∂z, ∇²L) for the first step instead of
+    an evaluation.
+
+    At each evaluated iterate after the first step, while ``switches`` remain, one of the rows
+    ``switchable`` changes: the most violated inactive row joins (excess over JOIN_TOLERANCE), else the
+    active row with the most negative multiplier (below −LEAVE_TOLERANCE) leaves, its multiplier set to
+    0; an iterate where a row changed is not converged.  Waiting for convergence before each change (the
+    outer loop in ``_newton_active``) spent 4–10 steps on an active set that the first step already
+    showed to be wrong.  One row per iterate, because several at once over-constrain the sampled
+    contact; the budget bounds a cycle, after which the set is held and the outer loop decides."""
     n = z.size
+    active = active.copy()
     for it in range(max_steps + 1):
         if it == 0 and first is not None:
             (grad, g, jac, hess), energies = first, None
         else:
             grad, g, jac, hess, energies = kkt_fn(z, p, lam)
             grad, g = grad.ravel(), g.ravel()
+        switched = False
+        if it > 0 and switches > 0:
+            excess = np.where(switchable & ~active, g - ub, -np.inf)
+            negative = np.where(switchable & active, lam, np.inf)
+            if excess.size and excess.max() > JOIN_TOLERANCE:
+                active[np.argmax(excess)] = switched = True
+            elif negative.size and negative.min() < -LEAVE_TOLERANCE:
+                leave = np.argmin(negative)
+                active[leave], lam[leave], switched = False, 0.0, True
+            switches -= switched
+        idx = np.flatnonzero(active)
         ja = jac[idx]
         r_dual = grad + lam[idx] @ ja
-        r_prim = g[idx] - bound
-        if energies is not None and np.abs(r_dual).max(initial=0.0) < NEWTON_DUAL_TOLERANCE and \
+        r_prim = g[idx] - ub[idx]
+        if not switched and energies is not None and np.abs(r_dual).max(initial=0.0) < NEWTON_DUAL_TOLERANCE and \
                 np.abs(r_prim).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE:
-            return z, lam, grad, g, jac, hess, energies, it
+            return z, lam, grad, g, jac, hess, energies, it, active
         if it == max_steps:
             break
         step = kkt_step(hess, ja, r_dual, r_prim)

@@ -105,6 +105,11 @@ NEWTON_STEPS = 3
 NEWTON_MAX_STEP = 0.5
 #: active-set changes a warm Newton update may make before IPOPT takes over (newton.py)
 NEWTON_ACTIVE_SET_CHANGES = 6
+#: contact rows that may join or leave between Newton steps, per active set, before it is held (newton.py)
+NEWTON_STEP_SWITCHES = 4
+#: a contact row joins the active set above this excess g − bound, an active one leaves below −LEAVE_TOLERANCE
+#: multiplier (scaled units)
+JOIN_TOLERANCE, LEAVE_TOLERANCE = 1e-9, 1e-12
 #: a warm update has converged when ‖∇f + Jᵀλ‖∞ and ‖g − bound‖∞ (scaled units) are below these
 NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE = 1e-9, 1e-11
 

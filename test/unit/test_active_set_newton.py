@@ -78,3 +78,39 @@ def test_newton_across_the_change_equals_the_cold_solve(stream):
         f_warm, f_cold = table_force(r), table_force(cold)
         assert np.linalg.norm(f_warm - f_cold) < 1e-5 * np.linalg.norm(f_cold), (f_warm, f_cold)
         assert f_warm[2] > 0 and balance(r) < 1e-8 * (1 + np.linalg.norm(f_warm)), balance(r)
+
+
+@pytest.mark.parametrize("drop", [0.045, 0.04])
+def test_a_contact_leaves_between_steps(drop):
+    """Raising the grips off the table from a shape resting on it, with the table's rows held: with row
+    switches (``_active_steps``) the rows leave between steps and the same call ends at the contact-free
+    equilibrium, which the solver's own update reaches too; without switches the call ends with the
+    rows held and a negative multiplier (the table pulling), which is left to the outer loop."""
+    from dlo_ros.model.problem import GripPose
+    from dlo_ros.solver.newton import _active_steps, active_rows
+    from dlo_ros.solver.nlp import NEWTON_STEP_SWITCHES
+
+    solver = ShapeSolver(SCENE.problem, replace(SCENE.options, model="planar"), compile="off")
+    assert touches(solver.solve(targets(0.055)))
+    state, nlp = solver.snapshot(), solver.nlp
+    g0 = np.asarray(nlp.g_fn(state.z, state.p)).ravel()
+    active = active_rows(nlp, state.lam_g, g0)
+    contact = nlp.contact_row & ~nlp.equality
+    assert np.any(active & contact)
+    raised = SCENE.problem.with_grip_poses({k: GripPose(np.array(x), q) for k, (x, q) in targets(drop).items()})
+    p = solver.pack_parameters(raised, state.z)
+    lam = np.where(active, state.lam_g, 0.0)
+
+    def kkt(*a):
+        return [np.asarray(v) for v in nlp.kkt_fn(*a)]
+
+    held = _active_steps(kkt, state.z.copy(), lam.copy(), p, active, nlp.ubg, contact, 0, 30, None)
+    assert held[0] is not None and np.array_equal(held[-1], active)
+    assert held[1][active & contact].min() < 0  # the table would have to pull
+    switched = _active_steps(kkt, state.z.copy(), lam.copy(), p, active, nlp.ubg, contact, NEWTON_STEP_SWITCHES, 30,
+                             None)
+    assert switched[0] is not None and not np.any(switched[-1] & contact)
+    assert np.all(switched[3][contact] <= nlp.ubg[contact] + 1e-9)  # free of the table everywhere
+    update = solver.solve(targets(drop))
+    assert update.ok and update.ipopt_status == "Newton" and not touches(update)
+    np.testing.assert_allclose(switched[0], solver.snapshot().z, atol=1e-9)

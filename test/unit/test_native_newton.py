@@ -155,15 +155,17 @@ def test_one_active_call_takes_the_numpy_steps(solvers):
     g0 = np.asarray(nlp.g_fn(state.z, state.p)).ravel()
     active = active_rows(nlp, state.lam_g, g0)
     assert np.any(active[nlp.n_free_rows:])  # obstacle rows are held
-    idx = np.flatnonzero(active)
     p = native.pack_parameters(scene.problem.with_grip_poses(
         {"right": GripPose(np.array([0.58, 0.06, 0.34]), rot), "left": GripPose(np.array([0.0, 0.0, 0.34]), rot)}),
         state.z)
     lam = np.where(active, state.lam_g, 0.0)
-    out = native.functions.newton_active(state.z, lam, p, idx, nlp.ubg[idx], 10)
-    z, lam_ref, grad, g, jac, hess, energies, steps = _active_steps(
-        lambda *a: [np.asarray(v) for v in nlp.kkt_fn(*a)], state.z.copy(), lam.copy(), p, idx, nlp.ubg[idx], 10, None)
+    switchable = nlp.contact_row & ~nlp.equality
+    out = native.functions.newton_active(state.z, lam, p, active, nlp.ubg, switchable, 4, 10)
+    z, lam_ref, grad, g, jac, hess, energies, steps, active_ref = _active_steps(
+        lambda *a: [np.asarray(v) for v in nlp.kkt_fn(*a)], state.z.copy(), lam.copy(), p, active, nlp.ubg,
+        switchable, 4, 10, None)
     assert out.code == 0 and out.steps == steps >= 2
+    np.testing.assert_array_equal(out.active, active_ref)
     np.testing.assert_allclose(out.z, z, atol=1e-12)
     np.testing.assert_allclose(out.lam, lam_ref, atol=1e-9 * np.abs(lam_ref).max())
     np.testing.assert_allclose(out.hessian, hess, atol=1e-9 * np.abs(hess).max())

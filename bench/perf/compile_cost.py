@@ -14,7 +14,7 @@ function of a warm update (``kkt_free``: Newton matrix and residual), the KKT fu
 * flattened: CasADi SX AD of the whole NLP expression (what the package built before).
 
 For each: CasADi instructions, size of the generated C, time to generate it and to compile it with gcc
--O1 (as ``solver/compiled.py`` does), and the time per call interpreted (``InterpretedFunction``) and
+(``compiled.FLAGS``, as ``solver/compiled.py`` does), and the time per call interpreted (``InterpretedFunction``) and
 compiled (``NativeFunction``) at the solved equilibrium, all measured in the same run.  Then "start-up
 to full speed": a ShapeSolver of the scene with ``compile='blocking'`` and an empty cache, from the
 constructor to every function compiled and the first solve done.  Nothing is cached between rows.
@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 from bench.common import machine  # noqa: E402
 
 from dlo_ros.scene import load_scene  # noqa: E402
-from dlo_ros.solver.compiled import InterpretedFunction, NativeFunction  # noqa: E402
+from dlo_ros.solver.compiled import FLAGS, InterpretedFunction, NativeFunction  # noqa: E402
 from dlo_ros.solver.options import SolverOptions  # noqa: E402
 from dlo_ros.solver.shape_solver import ShapeSolver  # noqa: E402
 
@@ -81,7 +81,7 @@ def cost(fn: ca.Function, args: list) -> dict:
         generate_s = time.perf_counter() - t0
         source = Path(tmp, fn.name() + ".c")
         t0 = time.perf_counter()
-        subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-o", str(Path(tmp, "lib.so")), str(source), "-lm"],
+        subprocess.run(["gcc", "-shared", "-fPIC", *FLAGS, "-o", str(Path(tmp, "lib.so")), str(source), "-lm"],
                        check=True)
         gcc_s = time.perf_counter() - t0
         native = NativeFunction(Path(tmp, "lib.so"), fn)
@@ -161,10 +161,10 @@ def main() -> None:
         "matrix and residual of a contact-free warm update), `kkt` (every row), `obstacle_g` (the inequality "
         "rows' values). *assembled*: what the package builds (`solver/assembled.py`, `solver/assembled_euler.py`); "
         "*flattened*: SX AD of the whole NLP, what it built before. "
-        "gcc -O1 as `solver/compiled.py` runs it; times per call: mean of 200 calls; |compiled − interpreted| "
+        f"gcc {' '.join(FLAGS)} as `solver/compiled.py` runs it; times per call: mean of 200 calls; |compiled − interpreted| "
         "is the largest difference of any output.",
         "",
-        "| model | unknowns | function | built | CasADi instructions | C [KB] | generate C [s] | gcc -O1 [s] "
+        f"| model | unknowns | function | built | CasADi instructions | C [KB] | generate C [s] | gcc {' '.join(FLAGS)} [s] "
         "| interpreted [ms] | compiled [ms] | interpreted / compiled | \\|compiled − interpreted\\| |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]

@@ -1,7 +1,7 @@
 """Compile CasADi functions to C once and cache the shared objects on disk.
 
 ``compiled(fn)`` loads ``<cache>/<name>_<fingerprint>.so``; only when that file is missing is C
-generated for ``fn`` and compiled (gcc -O1).  The cache lives in $DLO_CACHE_DIR, else
+generated for ``fn`` and compiled (gcc, ``FLAGS``).  The cache lives in $DLO_CACHE_DIR, else
 $XDG_CACHE_HOME/dlo_ros, else ~/.cache/dlo_ros.  Without a C compiler the original (interpreted)
 function is returned, so everything still works, only slower.
 
@@ -22,6 +22,11 @@ import ctypes
 
 import casadi as ca
 import numpy as np
+
+
+#: gcc's flags.  The assembled KKT functions compile in about the same time at -O1 and -O3, and run
+#: faster at -O3 (bench/results/compile_cost.md); the flattened ones took minutes at any level.
+FLAGS = ("-O3",)
 
 
 def cache_dir() -> Path:
@@ -119,12 +124,12 @@ class InterpretedFunction:
         return [out.reshape(shape, order="F").copy() for out, shape in zip(self._outputs, self._out_shapes)]
 
 
-def library_path(fn: ca.Function, flags: tuple[str, ...] = ("-O1",)) -> Path:
+def library_path(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path:
     """Where the compiled library of ``fn`` is (or will be) cached: ``<cache>/<name>_<fingerprint>.so``."""
     return cache_dir() / f"{fn.name()}_{fingerprint(fn, flags)}.so"
 
 
-def cached_library(fn: ca.Function, flags: tuple[str, ...] = ("-O1",)) -> Path | None:
+def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | None:
     """Path of the compiled library of ``fn`` if it is already in the cache, else None (no compiling,
     no C generated: milliseconds)."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
@@ -152,7 +157,7 @@ def _source_digest() -> bytes:
     return _SOURCE_DIGEST
 
 
-def fingerprint(fn: ca.Function, flags: tuple[str, ...] = ("-O1",)) -> str:
+def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
     """A cache key of ``fn`` that needs no code generation.
 
     It hashes the CasADi version, the compiler flags, the dlo_ros sources that build NLPs, the
@@ -184,13 +189,13 @@ def _generate(fn: ca.Function, tmp: str) -> bytes:
     return Path(tmp, f"{fn.name()}.c").read_bytes()
 
 
-def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0, lib: Path | None = None,
+def compiled(fn: ca.Function, flags: tuple[str, ...] = FLAGS, nice: int = 0, lib: Path | None = None,
              extra_source: str = "") -> tuple[NativeFunction | InterpretedFunction, bool]:
     """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
     ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``);
     ``extra_source``: C appended to ``fn``'s (then ``lib`` must be a path keyed by it too).
 
-    -O1: higher levels compile longer for little gain on this code (bench/results/compile_cost.md).
+    ``FLAGS``: see there.
     ShapeSolver runs it niced in the background; the cache makes it once per scene structure and machine.
     """
     cc = compiler()
@@ -204,7 +209,7 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O1",), nice: int = 0, 
     return NativeFunction(lib, fn), True
 
 
-def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = ("-O1",), nice: int = 0,
+def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = FLAGS, nice: int = 0,
                   extra_source: str = "") -> bool:
     """Generate C for ``fn`` (plus ``extra_source`` appended to it), compile it to the shared object
     ``lib`` and put it in place atomically (concurrent processes never load a half-written file); False

@@ -646,7 +646,8 @@ class ShapeSolver:
         if turns is None or set(turns.frames) != {g.name for g in clamps}:
             s = np.array([g.s for g in clamps])
             turns = TP.ClampTurns({g.name: f for g, f in zip(clamps, self.model.pose_frames(self._state.z, s))})
-        return turns.advanced({g.name: quat_to_frame(g.pose.orientation) for g in clamps})
+        frames = quat_to_frame(np.array([g.pose.orientation for g in clamps]))
+        return turns.advanced({g.name: f for g, f in zip(clamps, frames)})
 
     def _linking_jump(self, problem: Problem, start: SolverState, state: SolverState) -> TP.LinkChange | None:
         """ΔLk (``topology.link_change``) of the span between the first and the last clamp from the

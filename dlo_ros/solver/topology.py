@@ -198,6 +198,14 @@ def clamp_turn(frame0: np.ndarray, frame1: np.ndarray) -> float:
     return float(signed_angle(moved, frame1[:, 1], frame1[:, 0]))
 
 
+def _turn(frame0: np.ndarray | None, frame1: np.ndarray) -> float:
+    """``clamp_turn``, 0 without a previous frame, and exactly 0 for an unchanged frame without computing
+    it (a stream that moves grips without turning them: the usual case)."""
+    if frame0 is None or np.array_equal(frame0, frame1):
+        return 0.0
+    return clamp_turn(frame0, frame1)
+
+
 @dataclass(frozen=True)
 class ClampTurns:
     """How far [rad] each clamp (by grip name) has turned about its tangent over the targets requested since
@@ -208,7 +216,7 @@ class ClampTurns:
 
     def advanced(self, requested: dict[str, np.ndarray]) -> ClampTurns:
         """Turns after one more target: each clamp's step from its last requested frame (``clamp_turn``)."""
-        turns = {name: self.turns.get(name, 0.0) + (clamp_turn(self.frames[name], frame) if name in self.frames else 0.0)
+        turns = {name: self.turns.get(name, 0.0) + _turn(self.frames.get(name), frame)
                  for name, frame in requested.items()}
         return ClampTurns(dict(requested), turns)
 

@@ -28,8 +28,8 @@ Attempt = tuple[bool, SolverState, str, int, float]
 
 
 class IpoptSolvers:
-    """The cold and the warm IPOPT solver of one NLP, each created on first use (building them is about
-    half of a build, and a helper that only takes Newton steps never needs them)."""
+    """The cold and the warm IPOPT solver of one NLP, each created on first use (a helper that only takes
+    Newton steps never needs them); both use the NLP's ``ipopt_derivatives``."""
 
     def __init__(self, nlp: StringNLP):
         self.nlp = nlp

@@ -14,9 +14,8 @@ Contract:
 * One lock serialises every entry: CasADi's IPOPT must never run in two threads at once.  MUMPS (IPOPT's
   linear solver) is not thread-safe across instances either, so every IPOPT call in the process also
   holds the module-wide ``IPOPT_LOCK`` (Newton updates and derivative evaluations do not).
-* With ``lazy_ipopt`` the IPOPT solvers are created on first use (``prepare()`` creates them ahead):
-  building them is about half of a build, and a helper used only for Newton updates or stability
-  checks never needs them.
+* With ``lazy_ipopt`` the IPOPT solvers are created on first use (``prepare()`` creates them ahead): a
+  helper used only for Newton updates or stability checks never needs them.
 
 ShapeSolver holds the state (NLP, scene, committed equilibrium, compile thread) and the lock; the work is
 done by the modules named above and by ``functions.py`` (the NLP's derivatives, compiled in the

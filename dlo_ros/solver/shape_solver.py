@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import threading
 import time
+import weakref
 
 import numpy as np
 
@@ -143,6 +144,13 @@ class ShapeSolver:
         self.problem = problem
         self._key = structure_key(problem, self.options)
         self._state: SolverState | None = None
+        # (source solver, its state, the state adopted from it): adopt_warm_start's last mapping (weak
+        # references: a pooled model must not keep an evicted one alive)
+        self._adopted: tuple[weakref.ref, weakref.ref, SolverState] | None = None
+        lay = self.nlp.params
+        self._grip_positions = np.zeros(lay.size, dtype=bool)  # p's grip position rows
+        for grip in problem.grips:
+            self._grip_positions[lay[f"grip:{grip.name}:position"]] = True
         self._contact: SC.ContactSlots | None = None  # the self-contact pairs of the solve under way
         self._slot_override: list | None = None  # the obstacle slots of a repeated solve (_place_slots_again)
         # the clamps' turns over the targets since the committed shape (None: none asked for since), and
@@ -210,6 +218,8 @@ class ShapeSolver:
             src = other._state if state is None else state
             if src is None:
                 return False
+            if self._adopt_again(other, src):
+                return True
             source = sample_source(other, src, self.nlp)
         with self._lock:  # warm_state evaluates this solver's functions: never beside a solve of it
             state = warm_state(self.nlp, self.functions, self.parameters, self.problem, source)
@@ -218,6 +228,26 @@ class ShapeSolver:
                 # the same pairs in the same slots: the multipliers warm_state matched row by row belong to them
                 state.contact = contact.copy()
                 SC.fill(state.p, state.contact, self.nlp, self.problem.string.length)
+            self._state = state
+            self._clamp_turns = None
+            self._adopted = (weakref.ref(other), weakref.ref(src), state.copy()) if contact is None else None
+        return True
+
+    def _adopt_again(self, other: ShapeSolver, src: SolverState) -> bool:
+        """Adopt the state adopted last time from the same state ``src`` of ``other``, without sampling
+        and mapping it again, when this solver's scene differs from that adoption's in grip positions
+        at most (then the mapping is the same: warm_state depends on the scene through p, and on grip
+        positions only through p's target rows, which are packed anew).  What a query that another
+        model answers does on every call: the held shape is the same until the stream commits."""
+        adopted = self._adopted
+        if adopted is None or adopted[0]() is not other or adopted[1]() is not src:
+            return False
+        with self._lock:
+            state = adopted[2].copy()
+            state.p = self.parameters.pack(self.problem, state.z)
+            keep = ~self._grip_positions
+            if not np.array_equal(state.p[keep], adopted[2].p[keep]):
+                return False
             self._state = state
             self._clamp_turns = None
         return True

@@ -329,3 +329,41 @@ def test_closed_hanging_loop_both_clamps_at_one_point():
         assert r.ok, (x, r.message)
     assert r.stable is True
     assert np.max(np.linalg.norm(r.points - ref.points, axis=1)) <= TOL
+
+
+def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves():
+    """A planar stream answers out-of-plane queries with the 3D model, warm-started from the held shape
+    mapped onto it (ShapeSolver.adopt_warm_start).  The mapping is made once per held shape and reused
+    by the next queries: each query's start is, bit for bit, the mapping made afresh for it, also after
+    the stream committed a new shape; and the answers equal those of a fresh solver holding the same
+    shape to rounding."""
+    q1 = {"right": ([0.55, 0.06, 0.38], [0, 0, 0, 1])}
+    q2 = {"right": ([0.62, -0.05, 0.42], [0, 0, 0, 1])}
+    moved = {"right": ([0.58, 0.0, 0.36], [0, 0, 0, 1])}
+    solver, r = auto(hanging())
+    assert r.model.planar
+
+    answered_by = []
+    finish = solver._finish
+    solver._finish = lambda *a, **kw: answered_by.append(kw.get("solver")) or finish(*a, **kw)
+
+    def query(q):
+        answer = solver.solve(q, commit=False)
+        assert answer.ok and not answer.model.planar
+        other = answered_by[-1]  # the 3D model's solver
+        assert other is not None and other is not solver.inner
+        start = other._state.copy()  # commit=False leaves the start in place
+        other._adopted = None  # the mapping made afresh
+        assert other.adopt_warm_start(solver.inner)
+        np.testing.assert_array_equal(other._state.z, start.z)
+        np.testing.assert_array_equal(other._state.lam_g, start.lam_g)
+        np.testing.assert_array_equal(other._state.p, start.p)
+        return answer
+
+    first = [query(q) for q in (q1, q2, q1)]
+    np.testing.assert_array_equal(first[0].points, first[2].points)
+    for q, answer in ((q1, first[0]), (q2, first[1])):
+        fresh, _ = auto(hanging())
+        np.testing.assert_allclose(answer.points, fresh.solve(q, commit=False).points, atol=1e-12)
+    assert solver.solve(moved).ok  # the stream commits a new held shape
+    query(q2)

@@ -48,6 +48,8 @@ must stay near 0; a change near a whole number means a jump to another topologic
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -193,9 +195,25 @@ class LinkChange:
 
 def clamp_turn(frame0: np.ndarray, frame1: np.ndarray) -> float:
     """The angle [rad] a clamp turned about its tangent between frames (3, 3) (columns t, d1, d2): from the
-    old d1 transported to the new tangent to the new d1, in (−π, π]."""
-    moved = transport(frame0[:, 1], frame0[:, 0], frame1[:, 0])
-    return float(signed_angle(moved, frame1[:, 1], frame1[:, 0]))
+    old d1 transported to the new tangent to the new d1, in (−π, π] (``transport`` and ``signed_angle``
+    on one vector, in floats: numpy's per-call cost is most of it at this size)."""
+    (a0, a1, _), (b0, b1, _), (c0, c1, _) = frame0.tolist()
+    (p0, p1, _), (q0, q1, _), (r0, r1, _) = frame1.tolist()
+    t0, v, t1, d1 = (a0, b0, c0), (a1, b1, c1), (p0, q0, r0), (p1, q1, r1)
+    c = _fdot(t0, t1)
+    k = _fcross(t0, t1)
+    kv, kxv = _fdot(k, v), _fcross(k, v)
+    scale = kv / max(1.0 + c, 1e-300)
+    moved = tuple(c * v[i] + kxv[i] + scale * k[i] for i in range(3))
+    return math.atan2(_fdot(_fcross(moved, d1), t1), _fdot(moved, d1))
+
+
+def _fdot(a: tuple, b: tuple) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _fcross(a: tuple, b: tuple) -> tuple:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 def _turn(frame0: np.ndarray | None, frame1: np.ndarray) -> float:

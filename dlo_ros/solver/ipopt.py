@@ -27,18 +27,27 @@ IPOPT_LOCK = threading.Lock()  # MUMPS is not thread-safe across IPOPT instances
 Attempt = tuple[bool, SolverState, str, int, float]
 
 
+#: IPOPT iterations of one attempt to leave a saddle (``escape_saddle``): the successful attempts over
+#: the unit tests took 5–62; a failed one ran to the solver's limit (500, 1.4 s at order 16), four times
+#: per escape, while a stream waited
+ESCAPE_MAX_ITERATIONS = 150
+
+
 class IpoptSolvers:
-    """The cold and the warm IPOPT solver of one NLP, each created on first use (a helper that only takes
-    Newton steps never needs them); both use the NLP's ``ipopt_derivatives``."""
+    """The IPOPT solvers of one NLP: cold, warm and the cold one for leaving saddles (at most
+    ESCAPE_MAX_ITERATIONS), each created on first use (a helper that only takes Newton steps never needs
+    them); all use the NLP's ``ipopt_derivatives``."""
 
     def __init__(self, nlp: StringNLP):
         self.nlp = nlp
-        self._solvers: dict[bool, object] = {}  # warm? → IPOPT nlpsol
+        self._solvers: dict[str, object] = {}  # "cold", "warm" or "escape" → IPOPT nlpsol
 
-    def get(self, warm: bool):
-        if warm not in self._solvers:
-            self._solvers[warm] = self.nlp.make_solver(warm=warm)
-        return self._solvers[warm]
+    def get(self, warm: bool, escape: bool = False):
+        kind = "escape" if escape else "warm" if warm else "cold"
+        if kind not in self._solvers:
+            self._solvers[kind] = self.nlp.make_solver(
+                warm=warm, max_iterations=min(self.nlp.options.max_iterations, ESCAPE_MAX_ITERATIONS) if escape else None)
+        return self._solvers[kind]
 
     @property
     def cold(self):
@@ -49,7 +58,7 @@ class IpoptSolvers:
         return self.get(True)
 
     def prepare(self) -> None:
-        """Create both solvers now."""
+        """Create the cold and the warm solver now."""
         self.get(False), self.get(True)
 
     def free(self) -> None:

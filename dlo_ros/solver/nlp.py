@@ -533,8 +533,9 @@ class StringNLP:
         return self._target_jacobian @ (p_new - p_old)
 
     # ------------------------------------------------------------------------------------------------
-    def make_solver(self, warm: bool) -> ca.Function:
-        """An IPOPT solver for this NLP: cold (default barrier start) or warm (primal-dual warm start)."""
+    def make_solver(self, warm: bool, max_iterations: int | None = None) -> ca.Function:
+        """An IPOPT solver for this NLP: cold (default barrier start) or warm (primal-dual warm start);
+        ``max_iterations``: IPOPT's limit (default: the options', and at most 200 when warm)."""
         o = self.options
         ipopt = {
             "print_level": 0,
@@ -557,6 +558,8 @@ class StringNLP:
                     "max_iter": min(o.max_iterations, 200),
                 }
             )
+        if max_iterations is not None:
+            ipopt["max_iter"] = int(max_iterations)
         return ca.nlpsol("dlo_warm" if warm else "dlo_cold", "ipopt", self.nlp,
                          {"ipopt": ipopt, "print_time": False, "error_on_fail": False, **self.ipopt_derivatives()})
 

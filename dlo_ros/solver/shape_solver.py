@@ -451,10 +451,11 @@ class ShapeSolver:
                 return True, state, iterations, viol
         return False, start, iterations, np.inf
 
-    def _ipopt_call(self, warm: bool, z0: np.ndarray, p: np.ndarray, start: SolverState | None = None) -> Attempt:
-        """One IPOPT solve from z0 (warm: with ``start``'s multipliers)."""
+    def _ipopt_call(self, warm: bool, z0: np.ndarray, p: np.ndarray, start: SolverState | None = None,
+                    escape: bool = False) -> Attempt:
+        """One IPOPT solve from z0 (warm: with ``start``'s multipliers; escape: cold, leaving a saddle)."""
         if start is None:
-            return call(self.nlp, self._ipopt.get(warm), z0, p)
+            return call(self.nlp, self._ipopt.get(warm, escape), z0, p)
         return call(self.nlp, self._ipopt.get(warm), z0, p, start.lam_g, start.lam_x)
 
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
@@ -787,7 +788,7 @@ class ShapeSolver:
                                state: SolverState) -> tuple[ShapeResult, SolverState]:
         """``_escape_saddle`` where every re-solve is polished on the exact equilibrium equations."""
         def attempt(z0: np.ndarray, p: np.ndarray) -> Attempt:
-            ok, trial, status, it, viol = self._ipopt_call(False, z0, p)
+            ok, trial, status, it, viol = self._ipopt_call(False, z0, p, escape=True)
             if not ok:
                 return ok, trial, status, it, viol
             ok, polished, it2, viol = self._exact_newton(trial, problem)
@@ -840,7 +841,8 @@ class ShapeSolver:
             if ok:
                 result = self._result(problem, state, last_status, iterations, viol, True, steps)
                 if result.status == "ok":
-                    return self._escape_saddle(problem, result, state)
+                    escaped = self._escape_saddle(problem, result, state)
+                    return escaped if escaped[0].stable is not False else self._stable_cold(problem, *escaped)
                 if result.status == "unverified":
                     # IPOPT from the warm start can end on a spurious stationary point of the discrete
                     # problem (a folded field, residual of metres); the cold guess decides, the smaller
@@ -887,10 +889,28 @@ class ShapeSolver:
                 return (result, new), iterations
         return None, iterations
 
+    def _stable_cold(self, problem: Problem, unstable: ShapeResult,
+                     state: SolverState) -> tuple[ShapeResult, SolverState]:
+        """A warm update that found only unstable equilibria near its start (Newton, IPOPT and the
+        escapes): the cold solve from the initial guess instead, if it is verified, stable and lower.
+        (The planar cable pressed onto the table: every escape from the planar saddle failed, the cold
+        solve found the stable out-of-plane shape.)  Otherwise the unstable answer, as it was."""
+        z0 = self.initial_guess(problem)
+        ok, cold, status, it, viol = self._ipopt_call(False, z0, self.pack_parameters(problem, z0))
+        unstable.iterations += it
+        if ok:
+            result = self._result(problem, cold, status, unstable.iterations, viol, False, 0)
+            if result.status == "ok":
+                result, cold = self._escape_saddle(problem, result, cold)
+            if result.status == "ok" and result.stable and lower_than(result, unstable):
+                result.message += "; no stable equilibrium near the warm start: solved cold"
+                return result, cold
+        return unstable, state
+
     def _escape_saddle(self, problem: Problem, result: ShapeResult,
                        state: SolverState) -> tuple[ShapeResult, SolverState]:
         """Leave an unstable stationary point along its negative-curvature mode (``ipopt.escape_saddle``)."""
-        return escape_saddle(result, state, lambda z0, p: self._ipopt_call(False, z0, p),
+        return escape_saddle(result, state, lambda z0, p: self._ipopt_call(False, z0, p, escape=True),
                              lambda *attempt: self._result(problem, *attempt))
 
     # ---- results ----------------------------------------------------------------------------------

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import atexit
 import collections
+import dataclasses
 import multiprocessing
 import os
 import pickle
@@ -155,8 +156,14 @@ def _worker_solver(scene: bytes, problem: Problem, options: SolverOptions, compi
     else:
         values, solver = entry
         if values != scene:
-            solver.set_problem(problem)
-            solver.solve()
+            held, _ = pickle.loads(values)
+            if _grips_moved_only(held, problem):
+                # only the grips moved (a node's stream did): a warm update, as the stream's, which runs
+                # auto's checks every recheck_every updates; set_problem would check the model now
+                solver.solve({g.name: g.pose for g in problem.grips})
+            else:
+                solver.set_problem(problem)
+                solver.solve()
     _WORKER_SOLVERS[key] = (scene, solver)
     while len(_WORKER_SOLVERS) > WORKER_SOLVERS:
         _, (_, old) = _WORKER_SOLVERS.popitem(last=False)
@@ -164,3 +171,15 @@ def _worker_solver(scene: bytes, problem: Problem, options: SolverOptions, compi
         if close is not None:
             close()
     return solver
+
+
+def _grips_moved_only(old: Problem, new: Problem) -> bool:
+    """Whether ``new`` differs from ``old`` in grip poses at most (field by field: pickles of the whole
+    problems can differ where only the sharing of equal objects does)."""
+    def rest(grip) -> bytes:
+        return pickle.dumps([getattr(grip, f.name) for f in dataclasses.fields(grip) if f.name != "pose"])
+
+    if len(old.grips) != len(new.grips) or any(rest(a) != rest(b) for a, b in zip(old.grips, new.grips)):
+        return False
+    return all(pickle.dumps(getattr(old, f.name)) == pickle.dumps(getattr(new, f.name))
+               for f in dataclasses.fields(new) if f.name != "grips")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -130,3 +131,36 @@ def test_background_workers_yield_to_the_parent():
             assert pool.submit(os.nice, 0).result(timeout=60) == nice
         finally:
             stop_pool(pool)
+
+
+def test_a_worker_follows_a_moving_stream_by_warm_updates(scene, monkeypatch):
+    """A node's worker gets the scene at the stream's current targets with every query.  When only the
+    grips moved since its last call, it updates its held shape as the stream does (a warm update, auto's
+    checks every recheck_every updates) instead of re-setting the scene (which checks the model at once):
+    its answers equal those of one in-process auto solver taken through the same targets."""
+    import collections
+
+    from dlo_ros.model.problem import GripPose
+    from dlo_ros.solver import batch
+
+    monkeypatch.setattr(batch, "_WORKER_SOLVERS", collections.OrderedDict())
+    problem = scene.problem
+    rot = problem.grip("right").pose.orientation
+    held = [problem.with_grip_poses({"right": GripPose(problem.grip("right").pose.position + d, rot)})
+            for d in (np.zeros(3), np.array([0.004, 0.0, 0.003]), np.array([0.008, 0.0, 0.006]))]
+    queries = targets_near(problem, 3, seed=3)
+    reference = make_solver(problem, scene.options, compile="off", checks="sync")
+    assert reference.solve().ok
+    checks = []
+    original = batch._grips_moved_only
+    monkeypatch.setattr(batch, "_grips_moved_only", lambda a, b: checks.append(original(a, b)) or checks[-1])
+    for k, (h, q) in enumerate(zip(held, queries)):
+        (answer,) = batch.solve_chunk(batch.scene_payload(h, scene.options), [q], "off")
+        if k:
+            assert reference.solve({g.name: g.pose for g in h.grips}).ok
+        expected = reference.solve(q, commit=False)
+        assert answer.ok and expected.ok
+        np.testing.assert_allclose(answer.points, expected.points, atol=1e-12)
+    assert checks == [True, True]
+    stiffer = replace(problem, string=replace(problem.string, bend_stiffness=problem.string.bend_stiffness.scaled(2.0)))
+    assert not original(problem, stiffer) and original(problem, held[2])

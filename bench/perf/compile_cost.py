@@ -14,10 +14,11 @@ function of a warm update (``kkt_free``: Newton matrix and residual), the KKT fu
 * flattened: CasADi SX AD of the whole NLP expression (what the package built before).
 
 For each: CasADi instructions, size of the generated C, time to generate it and to compile it with gcc
-(``compiled.FLAGS`` as ``solver/compiled.py`` does; the flattened ones at -O1, as the package did), and the time per call interpreted (``InterpretedFunction``) and
-compiled (``NativeFunction``) at the solved equilibrium, all measured in the same run.  Then "start-up
-to full speed": a ShapeSolver of the scene with ``compile='blocking'`` and an empty cache, from the
-constructor to every function compiled and the first solve done.  Nothing is cached between rows.
+(``compiled.FLAGS`` as ``solver/compiled.py`` does; the flattened ones at -O1, as the package did), and
+the time per call interpreted (``InterpretedFunction``) and compiled (``NativeFunction``) at the solved
+equilibrium, all measured in the same run.  Then "start-up to full speed": a ShapeSolver of the scene
+with ``compile='blocking'`` and an empty cache, from the constructor to every function compiled and the
+first solve done.  Nothing is cached between rows.
 """
 from __future__ import annotations
 
@@ -167,7 +168,8 @@ def main() -> None:
         "rows' values). *assembled*: what the package builds (`solver/assembled.py`, `solver/assembled_euler.py`); "
         "*flattened*: SX AD of the whole NLP, what it built before. "
         f"gcc {' '.join(FLAGS)} as `solver/compiled.py` runs it (the flattened functions: "
-        f"{' '.join(FLATTENED_FLAGS)}, as the package compiled them); times per call: mean of 200 calls; |compiled − interpreted| "
+        f"{' '.join(FLATTENED_FLAGS)}, as the package compiled them); times per call: mean of 200 calls; "
+        "|compiled − interpreted| "
         "is the largest difference of any output.",
         "",
         "| model | unknowns | function | built | CasADi instructions | C [KB] | generate C [s] | gcc [s] "

@@ -45,8 +45,8 @@ class IpoptSolvers:
     def get(self, warm: bool, escape: bool = False):
         kind = "escape" if escape else "warm" if warm else "cold"
         if kind not in self._solvers:
-            self._solvers[kind] = self.nlp.make_solver(
-                warm=warm, max_iterations=min(self.nlp.options.max_iterations, ESCAPE_MAX_ITERATIONS) if escape else None)
+            limit = min(self.nlp.options.max_iterations, ESCAPE_MAX_ITERATIONS) if escape else None
+            self._solvers[kind] = self.nlp.make_solver(warm=warm, max_iterations=limit)
         return self._solvers[kind]
 
     @property

@@ -458,6 +458,11 @@ class ShapeSolver:
             return call(self.nlp, self._ipopt.get(warm, escape), z0, p)
         return call(self.nlp, self._ipopt.get(warm), z0, p, start.lam_g, start.lam_x)
 
+    def _cold_ipopt(self, problem: Problem) -> Attempt:
+        """IPOPT from the initial guess (``initial_guess``), cold."""
+        z0 = self.initial_guess(problem)
+        return self._ipopt_call(False, z0, self.pack_parameters(problem, z0))
+
     def _solve_locked(self, problem: Problem, warm: bool) -> tuple[ShapeResult, SolverState | None]:
         if self.nlp.self_contact_slots:
             return self._solve_self_contact(problem, warm)
@@ -848,9 +853,7 @@ class ShapeSolver:
                     # problem (a folded field, residual of metres); the cold guess decides, the smaller
                     # residual wins
                     unverified = (result, state)
-        z0 = self.initial_guess(problem)
-        p = self.pack_parameters(problem, z0)
-        ok, state, last_status, it, viol = self._ipopt_call(False, z0, p)
+        ok, state, last_status, it, viol = self._cold_ipopt(problem)
         iterations += it
         if ok:
             result = self._result(problem, state, last_status, iterations, viol, False, 0)
@@ -895,8 +898,7 @@ class ShapeSolver:
         escapes): the cold solve from the initial guess instead, if it is verified, stable and lower.
         (The planar cable pressed onto the table: every escape from the planar saddle failed, the cold
         solve found the stable out-of-plane shape.)  Otherwise the unstable answer, as it was."""
-        z0 = self.initial_guess(problem)
-        ok, cold, status, it, viol = self._ipopt_call(False, z0, self.pack_parameters(problem, z0))
+        ok, cold, status, it, viol = self._cold_ipopt(problem)
         unstable.iterations += it
         if ok:
             result = self._result(problem, cold, status, unstable.iterations, viol, False, 0)

@@ -369,6 +369,24 @@ class AutoShapeSolver:
             solver.reset()  # nothing to map: never keep an older, unrelated warm start
         return solver
 
+    def _compile_ahead(self, solver: ShapeSolver) -> None:
+        """A model that a switch or the queries will use: compile it in the background, once the
+        streaming model's own compile is done (the stream reaches full speed first), if the stream
+        compiles at all.  Its libraries land in the cache, where the query workers find them."""
+        if self.compile not in ("background", "blocking") or solver.kkt_compiled or solver.compile_pending:
+            return
+        streaming = self.inner._compile_thread
+
+        def start() -> None:
+            if streaming is not None:
+                streaming.join()
+            if solver.compile_mode == "cached":  # not streaming meanwhile (a stream compiles by itself)
+                solver.start_compile("background")
+            solver.compile_pending = False
+
+        solver.compile_pending = True
+        threading.Thread(target=start, name="dlo-compile-ahead", daemon=True).start()
+
     def _submit(self, fn, keys: set, *args) -> None:
         """Run ``fn(*args)`` on the worker; ``keys``: the pooled models it may use meanwhile."""
         self._job_keys = frozenset(keys)
@@ -494,6 +512,7 @@ class AutoShapeSolver:
                 if not commit:  # a query must not change the streaming model: answer with the richer one
                     self._wait_for_check()
                     other = self._solver_for(richer, problem, stream=False, source=self.inner)
+                    self._compile_ahead(other)  # it answers every such query: compiled, as the stream
                     answer = other.solve({g.name: g.pose for g in problem.grips}, commit=False)
                     return self._finish(answer, t0, [], choice=richer, solver=other)
                 reasons = ([f"targets left the plane ({why}): full model"] if why else []) + (
@@ -653,6 +672,7 @@ class AutoShapeSolver:
             solver = self._solver_for(choice, problem, stream=False)
             if ("",) + choice.key() == self._full_key or choice.obstacles != self.choice.obstacles:
                 solver.prepare()
+                self._compile_ahead(solver)
             self._job_keys = self._job_keys - {("",) + choice.key()}  # built: a switch to it need not wait
 
     def _evaluate(self, snap: _Snapshot, prepare: bool) -> _Verdict:

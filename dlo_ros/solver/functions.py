@@ -60,6 +60,8 @@ class NlpFunctions:
         self.outputs_compiled = False  # the outputs' function runs compiled C
         self.compile_time_s = 0.0    # wall time of the compile that finished them [s]
         self.retired = False         # the solver was rebuilt: a running compile stops at its next swap
+        #: ('cached' mode) (name, function, library path) of each library not in the cache at the start
+        self.waiting: list[tuple[str, ca.Function, object]] = []
 
     def retire(self) -> None:
         """The solver no longer uses these functions: a background compile stops before its next swap."""
@@ -82,21 +84,12 @@ class NlpFunctions:
                 continue
             # the full KKT function's library also holds its active-set Newton loop
             lib = native_newton.active_library_path(fn) if name == "kkt" else library_path(fn)
-            native = native_newton.cached(fn, *self._sizes(), kkt_lib=lib) if name == "kkt_free" else None
-            if lib.exists() and (native is not None or name != "kkt_free"):
-                # compiled on an earlier start: load now, no waiting
-                setattr(self, name, NativeFunction(lib, fn))
-                if name == "kkt_free":
-                    self.newton_step = self._compiled_newton_step(fn, lib)
-                    self.newton_native = native
-                if name == "kkt":
-                    self.newton_active = self._active_loop(lib)
-                if name == "outputs":
-                    self.outputs_compiled = True
-            else:
+            if not self._load(name, fn, lib):  # not compiled on an earlier start
                 todo.append((name, fn, lib))
         # the outputs' function is not a derivative: ``compiled`` says whether the derivatives are
         self.compiled = all(name == "outputs" for name, _, _ in todo)
+        if mode == "cached":
+            self.waiting = todo
         if not todo or mode == "cached":
             return None
 
@@ -131,6 +124,32 @@ class NlpFunctions:
         thread = threading.Thread(target=work, args=(False,), name="dlo-compile", daemon=True)
         thread.start()
         return thread
+
+    def _load(self, name: str, fn: ca.Function, lib) -> bool:
+        """Swap in the library ``lib`` of the function ``name`` if it is in the cache (for the contact-free
+        function: with its Newton loop's library); False if it is not there yet."""
+        native = native_newton.cached(fn, *self._sizes(), kkt_lib=lib) if name == "kkt_free" else None
+        if not lib.exists() or (native is None and name == "kkt_free"):
+            return False
+        setattr(self, name, NativeFunction(lib, fn))
+        if name == "kkt_free":
+            self.newton_step = self._compiled_newton_step(fn, lib)
+            self.newton_native = native
+        if name == "kkt":
+            self.newton_active = self._active_loop(lib)
+        if name == "outputs":
+            self.outputs_compiled = True
+        return True
+
+    def load_cached(self) -> bool:
+        """('cached' mode) Swap in the libraries that reached the cache since ``start_compile`` (another
+        process or solver compiled them); True if anything was swapped in.  The caller holds the
+        solver's lock.  A check costs a file lookup per missing library."""
+        loaded = [item for item in self.waiting if self._load(*item)]
+        if loaded:
+            self.waiting = [item for item in self.waiting if item not in loaded]
+            self.compiled = all(name == "outputs" for name, _, _ in self.waiting)
+        return bool(loaded)
 
     def _sizes(self) -> tuple[int, int, int]:
         nlp = self.nlp

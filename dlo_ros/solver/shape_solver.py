@@ -70,6 +70,10 @@ SUBSTEPS = (2, 4)
 #: how many times a solve is repeated with the obstacle contact slots placed on its own answer
 SLOT_ROUNDS = 2
 
+#: ('cached' mode) the least time [s] between two looks into the cache for libraries that another
+#: solver or process has compiled since (e.g. a node's query model, for its query workers)
+CACHE_RECHECK_S = 1.0
+
 
 def structure_key(problem: Problem, options: SolverOptions) -> tuple:
     """What fixes the NLP's structure; problems with equal keys share one NLP."""
@@ -119,6 +123,8 @@ class ShapeSolver:
         self.reference_frame = None if reference_frame is None else np.array(reference_frame, dtype=float)
         self._lock = threading.Lock()
         self._compile_thread: threading.Thread | None = None
+        self._cache_checked = time.monotonic()  # ('cached' mode) the last look into the cache
+        self.compile_pending = False  # a compile is about to start (AutoShapeSolver._compile_ahead)
         self._build(problem)
 
     def _build(self, problem: Problem) -> None:
@@ -169,11 +175,13 @@ class ShapeSolver:
 
     def start_compile(self, mode: str) -> None:
         """Switch the compile mode (e.g. a helper solver promoted to stream) and start compiling if
-        that mode asks for it and nothing is compiled or compiling yet."""
+        that mode asks for it and nothing is compiled or compiling yet (any thread: the libraries
+        already cached are swapped in under the solver's lock)."""
         check_compile_mode(mode)
-        self.compile_mode = mode
-        if not self.kkt_compiled and self._compile_thread is None:
-            self._start_compile()
+        with self._lock:
+            self.compile_mode = mode
+            if not self.kkt_compiled and self._compile_thread is None:
+                self._start_compile()
 
     def _start_compile(self) -> None:
         thread = self.functions.start_compile(self.compile_mode, self._lock)
@@ -318,6 +326,9 @@ class ShapeSolver:
             if reason:
                 return self._failure("unreachable", reason, t0)
             self._turns_now = self._advance_clamp_turns(problem)
+            if self.functions.waiting and time.monotonic() - self._cache_checked > CACHE_RECHECK_S:
+                self._cache_checked = time.monotonic()
+                self.functions.load_cached()
             warm = warm and self._state is not None
             result, state = self._solve_locked(problem, warm)
             if warm and result.status == "failed" and result.message.startswith(JUMP_REFUSALS):

@@ -126,3 +126,55 @@ def test_never_two_compilers_at_once_in_one_process(tmp_path, monkeypatch):
         t.join(30)
     assert len(results) == 4 and not any(ok for _, ok in results)
     assert peak[0] == 1
+
+
+def test_a_cached_solver_takes_up_libraries_compiled_after_it_started(tmp_path, monkeypatch):
+    """A solver that may not compile ('cached': a query worker) swaps in the libraries another solver
+    compiled after it started, at its next look into the cache, and answers as before."""
+    from dlo_ros.solver import shape_solver
+
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.delenv("DLO_NO_COMPILE")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(shape_solver, "CACHE_RECHECK_S", 0.0)
+    problem = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1)
+    waiting = ShapeSolver(problem, PLANAR, compile="cached")
+    interpreted = ShapeSolver(problem, PLANAR, compile="off")
+    first = waiting.solve()
+    assert first.ok and first.derivatives == "interpreted" and not waiting.kkt_compiled
+    assert ShapeSolver(problem, PLANAR, compile="blocking").kkt_compiled  # another solver compiles
+    np.testing.assert_allclose(first.points, interpreted.solve().points, atol=1e-9)
+    for k in range(1, 4):
+        target = {"right": ((0.6 - 0.01 * k, 0.0, 0.02 * k), (0.0, 0.0, 0.0, 1.0))}
+        a, b = waiting.solve(target), interpreted.solve(target)
+        assert a.ok and b.ok and a.derivatives == "compiled" and b.derivatives == "interpreted"
+        np.testing.assert_allclose(a.points, b.points, atol=1e-9)
+    assert waiting.functions.newton_native is not None and not waiting.functions.waiting  # all swapped in
+
+
+def test_the_model_answering_queries_is_compiled_in_the_background(tmp_path, monkeypatch):
+    """An auto solver on a planar stream answers out-of-plane queries with its 3D model; that model is
+    compiled in the background (never blocking a query), and the compiled answers equal the first ones."""
+    import time
+
+    from dlo_ros.solver import make_solver
+
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.delenv("DLO_NO_COMPILE")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    problem = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1)
+    solver = make_solver(problem, SolverOptions(order=8, error_tolerance=1.0), compile="background", checks="sync")
+    assert solver.solve().model.planar
+    query = {"right": ((0.55, 0.05, 0.05), (0.0, 0.0, 0.0, 1.0))}
+    first = solver.solve(query, commit=False)
+    assert first.ok and not first.model.planar and first.derivatives == "interpreted"
+    deadline = time.monotonic() + 300
+    answer = first
+    while answer.derivatives != "compiled" and time.monotonic() < deadline:
+        time.sleep(0.2)
+        answer = solver.solve(query, commit=False)
+        assert answer.ok and not answer.model.planar
+    assert answer.derivatives == "compiled"
+    np.testing.assert_allclose(answer.points, first.points, atol=1e-9)

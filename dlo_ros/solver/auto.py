@@ -513,7 +513,8 @@ class AutoShapeSolver:
                     self._wait_for_check()
                     other = self._solver_for(richer, problem, stream=False, source=self.inner)
                     self._compile_ahead(other)  # it answers every such query: compiled, as the stream
-                    answer = other.solve({g.name: g.pose for g in problem.grips}, commit=False)
+                    # the poses are checked, and in the plane if ``other`` is planar (above)
+                    answer = other.solve({g.name: g.pose for g in problem.grips}, commit=False, checked=True)
                     return self._finish(answer, t0, [], choice=richer, solver=other)
                 reasons = ([f"targets left the plane ({why}): full model"] if why else []) + (
                     [f"obstacle(s) {sorted(entering)} came within reach"] if entering else []) + (

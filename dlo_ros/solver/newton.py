@@ -97,6 +97,27 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     return False, start, steps, np.inf
 
 
+def fill_start(nlp: StringNLP, fns: NlpFunctions, state: SolverState) -> None:
+    """Store in ``state`` the derivatives that a warm update's first step from it reuses instead of
+    evaluating them (``newton``): the contact-free Newton matrix and residual when no obstacle row is
+    active, else ∇f, g, ∂g/∂z and ∇²L over every row (λ of the inactive rows taken as 0, as Newton does).
+    For a state mapped from another model (``ShapeSolver.adopt_warm_start``), from which every query
+    that model answers starts."""
+    if state.g is None:
+        state.g = np.asarray(nlp.g_fn(state.z, state.p)).ravel()
+    active = active_rows(nlp, state.lam_g, state.g)
+    nf = nlp.n_free_rows
+    if not np.any(active[nf:]):
+        kkt, residual, grad, energies = fns.kkt_free(state.z, state.p, state.lam_g[:nf])
+        state.kkt, state.residual = kkt, residual[:, 0]
+        state.g, state.jacobian = all_rows(nlp, fns, state.z, state.p, kkt, state.residual)
+        state.hessian = kkt[:state.z.size, :state.z.size]
+    else:
+        grad, g, state.jacobian, state.hessian, energies = fns.kkt(state.z, state.p, np.where(active, state.lam_g, 0.0))
+        state.g = np.asarray(g).ravel()
+    state.gradient, state.energies = np.asarray(grad).ravel(), np.asarray(energies).ravel()
+
+
 def active_rows(nlp: StringNLP, lam: np.ndarray, g: np.ndarray) -> np.ndarray:
     """The rows a KKT point holds: the equalities, and the inequalities at their bound with a positive
     multiplier (IPOPT leaves ~1e-10 barrier multipliers on rows far from their bound; those are inactive)."""

@@ -38,7 +38,7 @@ from .initial_guess import initial_guess
 from .ipopt import (IPOPT_LOCK, LEFT_SADDLE, SUCCESS, Attempt, IpoptSolvers, call, escape_saddle, lower_than,
                     witness)
 from .moments import ExactMomentKKT
-from .newton import leave_saddle, newton
+from .newton import fill_start, leave_saddle, newton
 from .nlp import StringNLP, has_point_moments
 from .options import SolverOptions
 from .outputs import ShapeOutputs, no_shape
@@ -162,6 +162,7 @@ class ShapeSolver:
         # the clamps' turns over the targets since the committed shape (None: none asked for since), and
         # those of the solve under way (topology.ClampTurns; the linking-number check)
         self._clamp_turns: TP.ClampTurns | None = None
+        self._turns_start: tuple | None = None  # (z, clamp names, ClampTurns): _committed_turns' last answer
         self._turns_now: TP.ClampTurns | None = None
         # the solve under way reached its Newton answer far from the committed shape (substeps, a saddle left)
         self._newton_far = False
@@ -238,8 +239,27 @@ class ShapeSolver:
                 SC.fill(state.p, state.contact, self.nlp, self.problem.string.length)
             self._state = state
             self._clamp_turns = None
-            self._adopted = (weakref.ref(other), weakref.ref(src), state.copy()) if contact is None else None
+            self._adopted = None
+            if contact is None:  # what every query from it reuses: its derivatives, evaluated once here
+                fill_start(self.nlp, self.functions, state)
+                self._adopted = (weakref.ref(other), weakref.ref(src), state)
+                self._state = self._adopted_copy(state, state.p)
         return True
+
+    def _adopted_copy(self, adopted: SolverState, p: np.ndarray) -> SolverState:
+        """A copy of the adopted state at the parameters ``p`` (which differ in grip targets at most), with its
+        derivatives: those do not depend on the targets, except g and the residual, shifted exactly (the
+        targets enter g linearly)."""
+        state = adopted.copy()
+        state.p = p
+        shift = self.nlp.target_shift(adopted.p, p)
+        state.g = adopted.g + shift
+        state.jacobian, state.hessian, state.gradient, state.energies = (adopted.jacobian, adopted.hessian,
+                                                                         adopted.gradient, adopted.energies)
+        if adopted.kkt is not None:
+            state.kkt, state.residual = adopted.kkt, adopted.residual.copy()
+            state.residual[state.z.size:] += shift[:self.nlp.n_free_rows]
+        return state
 
     def _adopt_again(self, other: ShapeSolver, src: SolverState) -> bool:
         """Adopt the state adopted last time from the same state ``src`` of ``other``, without sampling
@@ -251,12 +271,11 @@ class ShapeSolver:
         if adopted is None or adopted[0]() is not other or adopted[1]() is not src:
             return False
         with self._lock:
-            state = adopted[2].copy()
-            state.p = self.parameters.pack(self.problem, state.z)
+            p = self.parameters.pack(self.problem, adopted[2].z)
             keep = ~self._grip_positions
-            if not np.array_equal(state.p[keep], adopted[2].p[keep]):
+            if not np.array_equal(p[keep], adopted[2].p[keep]):
                 return False
-            self._state = state
+            self._state = self._adopted_copy(adopted[2], p)
             self._clamp_turns = None
         return True
 
@@ -690,10 +709,20 @@ class ShapeSolver:
             return None
         turns = self._clamp_turns
         if turns is None or set(turns.frames) != {g.name for g in clamps}:
-            s = np.array([g.s for g in clamps])
-            turns = TP.ClampTurns({g.name: f for g, f in zip(clamps, self.model.pose_frames(self._state.z, s))})
+            turns = self._committed_turns(clamps)
         frames = quat_to_frame(np.array([g.pose.orientation for g in clamps]))
         return turns.advanced({g.name: f for g, f in zip(clamps, frames)})
+
+    def _committed_turns(self, clamps: list) -> TP.ClampTurns:
+        """No turn yet, from the committed shape's own clamp frames; kept while that shape is the same
+        (queries start from it every time)."""
+        z, names = self._state.z, tuple(g.name for g in clamps)
+        cached = self._turns_start
+        if cached is None or cached[1] != names or not np.array_equal(cached[0], z):
+            s = np.array([g.s for g in clamps])
+            cached = (z.copy(), names, TP.ClampTurns({g.name: f for g, f in zip(clamps, self.model.pose_frames(z, s))}))
+            self._turns_start = cached
+        return cached[2]
 
     def _linking_jump(self, problem: Problem, start: SolverState, state: SolverState) -> TP.LinkChange | None:
         """ΔLk (``topology.link_change``) of the span between the first and the last clamp from the

@@ -335,8 +335,9 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
     """A planar stream answers out-of-plane queries with the 3D model, warm-started from the held shape
     mapped onto it (ShapeSolver.adopt_warm_start).  The mapping is made once per held shape and reused
     by the next queries: each query's start is, bit for bit, the mapping made afresh for it, also after
-    the stream committed a new shape; and the answers equal those of a fresh solver holding the same
-    shape to rounding."""
+    the stream committed a new shape; its derivatives, evaluated once per mapping, are those at each
+    query's own targets; and the answers equal those of a fresh solver holding the same shape to
+    rounding."""
     q1 = {"right": ([0.55, 0.06, 0.38], [0, 0, 0, 1])}
     q2 = {"right": ([0.62, -0.05, 0.42], [0, 0, 0, 1])}
     moved = {"right": ([0.58, 0.0, 0.36], [0, 0, 0, 1])}
@@ -352,7 +353,14 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
         assert answer.ok and not answer.model.planar
         other = answered_by[-1]  # the 3D model's solver
         assert other is not None and other is not solver.inner
-        start = other._state.copy()  # commit=False leaves the start in place
+        held, nf = other._state, other.nlp.n_free_rows  # commit=False leaves the start in place
+        # its stored derivatives (evaluated once per mapping, the residual and g shifted to each query's
+        # targets) are those at its own z and p
+        kkt, residual, _, _ = other.functions.kkt_free(held.z, held.p, held.lam_g[:nf])
+        np.testing.assert_allclose(held.kkt, kkt, rtol=0, atol=1e-12 * np.abs(kkt).max())
+        np.testing.assert_allclose(held.residual, residual[:, 0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(held.g, np.asarray(other.nlp.g_fn(held.z, held.p)).ravel(), rtol=0, atol=1e-12)
+        start = held.copy()
         other._adopted = None  # the mapping made afresh
         assert other.adopt_warm_start(solver.inner)
         np.testing.assert_array_equal(other._state.z, start.z)

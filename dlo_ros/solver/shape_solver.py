@@ -163,6 +163,7 @@ class ShapeSolver:
         # those of the solve under way (topology.ClampTurns; the linking-number check)
         self._clamp_turns: TP.ClampTurns | None = None
         self._turns_start: tuple | None = None  # (z, clamp names, ClampTurns): _committed_turns' last answer
+        self._clamp_frames: tuple | None = None  # (the clamps' target quaternions as bytes, their frames)
         self._turns_now: TP.ClampTurns | None = None
         # the solve under way reached its Newton answer far from the committed shape (substeps, a saddle left)
         self._newton_far = False
@@ -710,8 +711,11 @@ class ShapeSolver:
         turns = self._clamp_turns
         if turns is None or set(turns.frames) != {g.name for g in clamps}:
             turns = self._committed_turns(clamps)
-        frames = quat_to_frame(np.array([g.pose.orientation for g in clamps]))
-        return turns.advanced({g.name: f for g, f in zip(clamps, frames)})
+        orientations = np.array([g.pose.orientation for g in clamps])
+        key = orientations.tobytes()
+        if self._clamp_frames is None or self._clamp_frames[0] != key:  # grips that moved without turning: kept
+            self._clamp_frames = (key, quat_to_frame(orientations))
+        return turns.advanced({g.name: f for g, f in zip(clamps, self._clamp_frames[1])})
 
     def _committed_turns(self, clamps: list) -> TP.ClampTurns:
         """No turn yet, from the committed shape's own clamp frames; kept while that shape is the same

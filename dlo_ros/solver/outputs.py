@@ -94,7 +94,7 @@ class ShapeOutputs:
         for c in self_contacts:  # equal and opposite on the two strands
             actions += [PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
                         PointAction(c.s_b, c.point_b, -c.force, np.zeros(3))]
-        residual = equilibrium(nlp, problem, frames_of, z, grips, actions, lam_si)
+        residual = equilibrium(nlp, problem, z, grips, actions, lam_si)
         flipped = F.flipped_grips(nlp, problem, z) if nlp.director else ""
         # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier complementarity)
         touching = [c for c in self_contacts if c.gap <= self.contact_slots.geometry.distance + 1e-7 * nlp.length]

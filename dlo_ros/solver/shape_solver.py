@@ -461,7 +461,7 @@ class ShapeSolver:
         """The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
         obstacle ``contacts`` and (given the SI multipliers) the relative positions' reactions
         (solver/residual.py)."""
-        return equilibrium(self.nlp, problem, self._outputs.frames_of(self.problem), z, grips, contacts, lam_si)
+        return equilibrium(self.nlp, problem, z, grips, contacts, lam_si)
 
     # ---- solving ----------------------------------------------------------------------------------
     def _newton(self, start: SolverState, p: np.ndarray) -> tuple[bool, SolverState, int, float]:

@@ -10,7 +10,7 @@ A grip's reaction (the wrench the gripper exerts ON the string, world frame, abo
 
 ``equilibrium`` evaluates the strong-form residual of ``residual.py`` from the shape, the constitutive
 moment and these reactions.  ``frames_of(z, s)`` is the solver's material-frame function
-(``frames.frames`` bound to its NLP and scene).
+(``frames.frames`` bound to its NLP and scene), for the torque at an Euler pole.
 """
 from __future__ import annotations
 
@@ -134,7 +134,7 @@ def relative_forces(nlp: StringNLP, lam_si: np.ndarray) -> list[np.ndarray]:
     return [-nlp.relative_axes.T @ lam_si[rows] for rows in nlp.relative_rows]
 
 
-def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.ndarray, grips: dict[str, GripWrench],
+def equilibrium(nlp: StringNLP, problem: Problem, z: np.ndarray, grips: dict[str, GripWrench],
                 contacts: Sequence[PointAction] = (), lam_si: np.ndarray | None = None) -> EquilibriumResidual:
     """The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
     obstacle ``contacts`` and, given the SI multipliers ``lam_si``, the relative positions' reactions
@@ -157,7 +157,7 @@ def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.nda
     elif nlp.director:
         moment_c = rf[:, None] * m.world_curvature(z, s)
     else:
-        moment_c = euler_moments(nlp, frames_of, L, z, s, rf, st.twist_stiffness(s))
+        moment_c = euler_moments(nlp, z, s, rf, st.twist_stiffness(s))
     d_nodes = st.weight_per_length(nodes)
     w = m.position_matrix(s_all)[:len(s)]  # remembered by positions(z, s_all)
     actions = [PointAction(grip_s[name], point_x[k], wr.force, wr.torque) for k, (name, wr) in enumerate(grips.items())]
@@ -177,14 +177,21 @@ def equilibrium(nlp: StringNLP, problem: Problem, frames_of: FramesOf, z: np.nda
                                 problem.gravity_unit, total, L, st.bend_stiffness.minimum, rf)
 
 
-def euler_moments(nlp: StringNLP, frames_of: FramesOf, length: float, z: np.ndarray, s: np.ndarray, rf: np.ndarray,
-                  rt: np.ndarray) -> np.ndarray:
-    """m = Q diag(Rf, Rf, Rt) ω with ω = axial(Qᵀ Q') by central differences of the Euler frames
-    (Rt = 0 where the twist is not modelled: the frames then carry no twist moment)."""
-    h = 1e-6 * length
-    q0, qm, qp = frames_of(z, s), frames_of(z, s - h), frames_of(z, s + h)
-    skew = np.einsum("kji,kjl->kil", q0, (qp - qm) / (2 * h))
-    omega = 0.5 * np.stack([skew[:, 2, 1] - skew[:, 1, 2], skew[:, 0, 2] - skew[:, 2, 0],
-                            skew[:, 1, 0] - skew[:, 0, 1]], axis=1)
-    c = np.stack([rf, rf, rt if nlp.model.layout.twist else np.zeros_like(rf)], axis=1)
-    return np.einsum("kij,kj->ki", q0, c * omega)
+def euler_moments(nlp: StringNLP, z: np.ndarray, s: np.ndarray, rf: np.ndarray, rt: np.ndarray) -> np.ndarray:
+    """m = Q diag(Rf, Rf, Rt) Qᵀ ω [N·m] of an Euler model at arc lengths s, from the angles and their
+    s-derivatives (no frames, no differences).  For Q = R0 Rz(−φ) Ry(−θ) Rz(−ψ) the Darboux vector is
+
+        ω = R0 a − ψ' ζ,   a = −φ' e_z − θ' (sin φ, cos φ, 0),   ζ = R0 (−cos φ sin θ, sin φ sin θ, cos θ),
+
+    so with ω·ζ = −φ' cos θ − ψ' (the twist rate):  m = Rf (R0 a − (a·ζ_0) ζ) + Rt (ω·ζ) ζ,  ζ_0 = R0ᵀ ζ.
+    Rt = 0 where the twist is not modelled (the frames then carry no twist moment)."""
+    f = nlp.model.fields(z, np.asarray(s, dtype=float), ("phi", "theta", "psi"))
+    phi, dphi, theta, dtheta = f["phi"], f["dphi"], f["theta"], f["dtheta"]
+    sp, cp, st, ct = np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta)
+    a = np.stack([-dtheta * sp, -dtheta * cp, -dphi], axis=1)
+    zeta0 = np.stack([-cp * st, sp * st, ct], axis=1)
+    bend = a - np.einsum("ki,ki->k", a, zeta0)[:, None] * zeta0
+    moment = rf[:, None] * bend
+    if nlp.model.layout.twist:
+        moment += (rt * (-dphi * ct - f["dpsi"]))[:, None] * zeta0
+    return moment @ nlp.r0.T

@@ -47,3 +47,34 @@ def test_cross3_is_the_cross_product_with_broadcasting():
     a, b = rng.normal(size=(5, 3)), rng.normal(size=3)
     assert np.allclose(cross3(a, b), np.cross(a, b), rtol=0, atol=1e-15)
     assert np.allclose(cross3(b, a), np.cross(b, a), rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("opts", [dict(model="planar", order=10), dict(model="full", rotation="euler", order=16)],
+                         ids=["planar", "euler-3d-twist"])
+def test_euler_moments_match_their_definition(opts):
+    """The Euler models' constitutive moment written from the angles (wrenches.euler_moments) against its
+    definition m = Q diag(Rf, Rf, Rt) axial(QᵀQ') on the published material frames Q(s), Q' by central
+    differences, on a bent (and for the 3D model, twisted) solution."""
+    from dataclasses import replace
+
+    from dlo_ros.scene import load_scene
+    from dlo_ros.solver import ShapeSolver
+    from dlo_ros.solver.wrenches import euler_moments
+
+    scene = load_scene("default_cable")
+    solver = ShapeSolver(scene.problem, replace(scene.options, **opts), compile="off")
+    grip = scene.problem.grip("right").pose
+    offset = np.array([-0.05, 0.05 if opts["model"] == "full" else 0.0, 0.03])
+    assert solver.solve({"right": (grip.position + offset, grip.orientation)}).ok
+    z, L, string = solver.snapshot().z, scene.problem.string.length, scene.problem.string
+    s = np.linspace(0.02, 0.98, 40) * L
+    rf, rt = string.bend_stiffness(s), string.twist_stiffness(s)
+    h = 1e-5 * L
+    q = solver.frames(z, s)
+    dq = (solver.frames(z, s + h) - solver.frames(z, s - h)) / (2 * h)
+    skew = np.einsum("kji,kjl->kil", q, dq)
+    omega = 0.5 * np.stack([skew[:, 2, 1] - skew[:, 1, 2], skew[:, 0, 2] - skew[:, 2, 0], skew[:, 1, 0] - skew[:, 0, 1]], 1)
+    twist = rt if solver.model.layout.twist else np.zeros_like(rt)
+    expected = np.einsum("kij,kj->ki", q, np.stack([rf, rf, twist], axis=1) * omega)
+    assert np.abs(expected).max() > 1e-2  # bent
+    np.testing.assert_allclose(euler_moments(solver.nlp, z, s, rf, rt), expected, rtol=0, atol=1e-7 * np.abs(expected).max())

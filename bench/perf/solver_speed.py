@@ -7,6 +7,9 @@ per update along a smooth closed path (x, z) — ≥ 100 updates, median and p90
 cache on a later start, for the interpreted and the compiled derivatives side by side (same run).
 
     bash scripts/dlo-env run python bench/perf/solver_speed.py [--updates 200] [--out bench/results/solver_speed.md]
+
+``--model planar --order 12``: the model ``solver.model: auto`` streams for this planar scene (the path
+stays in the x–z plane), e.g. ``--out bench/results/solver_speed_planar.md``.
 """
 from __future__ import annotations
 
@@ -14,7 +17,9 @@ import argparse
 import os
 import platform
 import statistics
+import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -78,9 +83,14 @@ def main() -> None:
     ap.add_argument("--scene", default="default_cable")
     ap.add_argument("--updates", type=int, default=200)
     ap.add_argument("--cold", type=int, default=5)
+    ap.add_argument("--model", choices=["full", "planar"], help="solver.model (default: the scene's)")
+    ap.add_argument("--order", type=int, help="solver.order (default: the scene's)")
     ap.add_argument("--out", default="bench/results/solver_speed.md")
     args = ap.parse_args()
     scene = load_scene(args.scene)
+    if args.model or args.order:
+        scene = replace(scene, options=replace(scene.options, model=args.model or scene.options.model,
+                                               order=args.order or scene.options.order))
     os.environ.pop("DLO_NO_COMPILE", None)
     rows = [run("off", scene, args.updates, args.cold)]
     import tempfile
@@ -98,7 +108,7 @@ def main() -> None:
     rows[1]["mode"], rows[2]["mode"] = "compiled (first start)", "compiled (later start, cached)"
     base = rows[0]["warm_median_ms"]
     lines = [
-        f"# Solver speed: `{args.scene}`", "",
+        f"# Solver speed: `{args.scene}`, solver.model {scene.options.model}", "",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, load average "
         f"{', '.join(f'{v:.2f}' for v in os.getloadavg())} at the end; git {_git()}; "
         f"{rows[0]['variables']} unknowns, {rows[0]['constraints']} constraints (order {scene.options.order}, "
@@ -111,7 +121,7 @@ def main() -> None:
             f"| {r['mode']} | {r['build_s']:.2f} | {r['compile_s']:.1f} | {r['cold_ms']:.1f} | {r['warm_median_ms']:.2f} | "
             f"{r['warm_p90_ms']:.2f} | {r['warm_p99_ms']:.2f} | {r['warm_median_ms'] / base:.2f} | {r['iterations_median']:.0f} | {r['newton_fraction']:.0%} |"
         )
-    lines += ["", "Command: `bash scripts/dlo-env run python bench/perf/solver_speed.py`", ""]
+    lines += ["", f"Command: `bash scripts/dlo-env run python bench/perf/solver_speed.py {' '.join(sys.argv[1:])}`".replace(" `", "`"), ""]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines))
     print("\n".join(lines))

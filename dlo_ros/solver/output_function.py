@@ -1,18 +1,21 @@
-"""A returned shape's outputs as one CasADi function (frame director models, no self-contact slots).
+"""A returned shape's outputs as one CasADi function (frame director models and the planar model, no
+self-contact slots).
 
 ``ShapeOutputs`` builds a result from many small numpy evaluations: the centreline and frames at the
 output points, each grip's reaction, each obstacle's contact force and the equilibrium residual
-(``wrenches.py``, ``residual.py``).  For a director model with frames (the default 3D model) every
-one of them is a fixed composition of matrix products with the structure's constant interpolation
-matrices, so this module writes them as one function
+(``wrenches.py``, ``residual.py``).  For a director model with frames (the default 3D model) and for
+the planar model (what ``solver.model: auto`` streams while a scene stays in its plane) every one of
+them is a fixed composition of matrix products with the structure's constant interpolation matrices,
+so this module writes them as one function
 
     outputs(z, p, λ, prof) → (x(s_out), v(s_out), F_grips, T_grips, F_obstacles, residual, flip)
 
 evaluated in one call (compiled C when the solver's derivatives are compiled, CasADi's virtual
 machine until then).  ``λ``: every row's SI multiplier; ``prof`` = (Rf, Rt) at the residual's grid and
 Rf_min, from the string (``OutputFunction.profiles``); ``v``: the interpolated nodal quaternions
-(``unit_quaternions`` turns them into the published orientations); ``flip``: per grip t·R_g e_x and
-d1·R_g e_y at its node (negative: the flipped sheet, ``frames.flipped_grips``).
+(``unit_quaternions`` turns them into the published orientations), for the planar model φ (1 × K);
+``flip``: per grip t·R_g e_x and d1·R_g e_y at its node (negative: the flipped sheet,
+``frames.flipped_grips``; ones for the planar model, which has no flipped sheet).
 
 The arithmetic is the numpy path's, term for term (``wrenches.wrench``, ``wrenches.equilibrium``,
 ``residual.equilibrium_residual``), on the same grid (``wrenches.static_events``: refined at the grips,
@@ -82,34 +85,45 @@ class OutputFunction:
         prof = ca.MX.sym("prof", 2 * K + 1)
         rf, rt, rf_min = prof[:K].T, prof[K:2 * K].T, prof[2 * K]
 
-        nodes_v = ca.reshape(z[m.layout.rotation], m.layout.width, m.layout.nodes)  # column i: node i
-        vs = ca.MX.sym("v", 4)
-        # (t, d1, d2) of a quaternion, stacked: at the quadrature nodes, at the residual's grid, at the grips
-        frame_cols = ca.Function("frame_cols", [vs], [ca.vertcat(*(ca.vertcat(*c) for c in _columns(ca.vertsplit(vs), ca)))])
-        tq = frame_cols.map(M)(ca.mtimes(nodes_v, ca.DM(m.B.T)))[0:3, :]  # t̂ at the quadrature nodes
-        if m.layout.stretch:
-            tq = tq * ca.repmat(1 + ca.mtimes(ca.DM(m.B), z[m.layout.eps]).T, 3, 1)
+        self.planar = planar = not nlp.director
+        if planar:  # the planar model: φ(s) in the plane of R0's first two columns, θ ≡ π/2, ψ constant
+            c_phi, c_eps = m.coefficients(z, "phi"), m.coefficients(z, "eps")
+            tq = m.tangents(ca.mtimes(ca.DM(m.B), c_phi), None,
+                            ca.mtimes(ca.DM(m.B), c_eps) if c_eps is not None else None, lib=ca)
+            normal = ca.DM(nlp.r0[:, 2])
+        else:
+            nodes_v = ca.reshape(z[m.layout.rotation], m.layout.width, m.layout.nodes)  # column i: node i
+            vs = ca.MX.sym("v", 4)
+            # (t, d1, d2) of a quaternion, stacked: at the quadrature nodes, at the residual's grid, at the grips
+            frame_cols = ca.Function("frame_cols", [vs], [ca.vertcat(*(ca.vertcat(*c) for c in _columns(ca.vertsplit(vs), ca)))])
+            tq = frame_cols.map(M)(ca.mtimes(nodes_v, ca.DM(m.B.T)))[0:3, :]  # t̂ at the quadrature nodes
+            if m.layout.stretch:
+                tq = tq * ca.repmat(1 + ca.mtimes(ca.DM(m.B), z[m.layout.eps]).T, 3, 1)
 
         point_s = np.array([g.s for g in problem.grips] + [ld.s for ld in problem.loads] + problem.relative_ends(),
                            dtype=float)
         s_out = np.asarray(s_out, dtype=float)
         pieces = [s, m.quad.nodes, point_s, nlp.obstacle_s, s_out]
         splits = np.cumsum([len(a) for a in pieces])
-        w_all = m.mesh.integration_matrix(np.concatenate(pieces))
+        w_all = m.position_matrix(np.concatenate(pieces)) if planar else m.mesh.integration_matrix(np.concatenate(pieces))
         x_all = ca.repmat(z[0:3] * L, 1, int(splits[-1])) + ca.mtimes(tq, ca.DM(w_all.T))
         x, x_nodes, point_x, sample_x, x_out = (x_all[:, a:b] for a, b in zip([0, *splits[:-1]], splits))
 
-        # the constitutive moment R diag(Rt, Rf, Rf) Ω at the grid
-        b_grid, db_grid = m.mesh.interpolation(s, "left")
-        vsd = ca.MX.sym("dv", 4)
-        c = ca.MX.sym("c", 3)
-        cols = frame_cols(vs)
-        t, d1, d2 = cols[0:3], cols[3:6], cols[6:9]
-        qv, w, dqv, dw = vs[0:3], vs[3], vsd[0:3], vsd[3]
-        omega = 2 * (w * dqv - dw * qv - ca.cross(qv, dqv)) / ca.dot(vs, vs)
-        moment_fn = ca.Function("moment_c", [vs, vsd, c], [t * c[0] * omega[0] + d1 * c[1] * omega[1] + d2 * c[2] * omega[2]])
-        moment_c = moment_fn.map(K)(ca.mtimes(nodes_v, ca.DM(b_grid.T)), ca.mtimes(nodes_v, ca.DM(db_grid.T)),
-                                    ca.vertcat(rt, rf, rf))
+        # the constitutive moment at the grid: R diag(Rt, Rf, Rf) Ω; the planar model's −Rf φ' n
+        # (wrenches.euler_moments at θ ≡ π/2, no twist)
+        if planar:
+            moment_c = ca.mtimes(-normal, rf * ca.mtimes(ca.DM(m.matrices(s)[1]), c_phi).T)
+        else:
+            b_grid, db_grid = m.mesh.interpolation(s, "left")
+            vsd = ca.MX.sym("dv", 4)
+            c = ca.MX.sym("c", 3)
+            cols = frame_cols(vs)
+            t, d1, d2 = cols[0:3], cols[3:6], cols[6:9]
+            qv, w, dqv, dw = vs[0:3], vs[3], vsd[0:3], vsd[3]
+            omega = 2 * (w * dqv - dw * qv - ca.cross(qv, dqv)) / ca.dot(vs, vs)
+            moment_fn = ca.Function("moment_c", [vs, vsd, c], [t * c[0] * omega[0] + d1 * c[1] * omega[1] + d2 * c[2] * omega[2]])
+            moment_c = moment_fn.map(K)(ca.mtimes(nodes_v, ca.DM(b_grid.T)), ca.mtimes(nodes_v, ca.DM(db_grid.T)),
+                                        ca.vertcat(rt, rf, rf))
 
         # the weight's integrals ∫_0^s D dσ and ∫_0^s D x dσ, and its total
         gravity = p[lay["gravity"]]
@@ -125,6 +139,11 @@ class OutputFunction:
         for g in problem.grips:
             rows = nlp.grip_rows[g.name]
             force = -ca.mtimes(ca.DM(nlp.grip_axes[g.name].T), lam[rows["position"]])
+            if planar:  # only φ is held: the torque is along the plane normal, n·T = μ_φ
+                forces.append(force)
+                torques.append(lam[rows["angles"][0]] * normal if rows["angles"] else ca.DM.zeros(3))
+                flips.append(ca.DM.ones(2))  # no flipped sheet: φ is the tangent's angle itself
+                continue
             cols = frame_cols(nodes_v[:, m.mesh.node_index(g.s)])
             tg, d1g = cols[0:3], cols[3:6]
             target = ca.reshape(p[lay[f"grip:{g.name}:frame"]], 3, 3)
@@ -140,7 +159,8 @@ class OutputFunction:
         grip_forces, grip_torques, flip = ca.horzcat(*forces), ca.horzcat(*torques), ca.horzcat(*flips)
         for k, _ in enumerate(problem.loads):
             forces.append(p[lay[f"load:{k}:force"]])
-            torques.append(p[lay[f"load:{k}:moment"]])
+            moment = p[lay[f"load:{k}:moment"]]  # the planar model's: its component along n (checked)
+            torques.append(moment[0] * normal if planar else moment)
         for rows in nlp.relative_rows:  # wrenches.relative_forces: −F_b at s_a, F_b at s_b
             f_b = -ca.mtimes(ca.DM(nlp.relative_axes.T), lam[rows])
             forces += [-f_b, f_b]
@@ -193,7 +213,10 @@ class OutputFunction:
         dx = _cumulative(_cross(phi, tangent), s)
         metres = _column_norms_max(dx) + d_f * L**3 / (3 * rf_min)
 
-        v_out = ca.mtimes(nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T))
+        if planar:  # φ at the outputs (the orientations: ``frames.frames_psi`` and ``pose_quaternions``)
+            v_out = ca.mtimes(ca.DM(m.matrices(s_out)[0]), c_phi).T
+        else:
+            v_out = ca.mtimes(nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T))
         zero = ca.DM.zeros(3, 0)
         self.function = ca.Function(
             "dlo_outputs", [z, p, lam, prof],
@@ -205,8 +228,11 @@ class OutputFunction:
 
     @staticmethod
     def applies(nlp: StringNLP) -> bool:
-        """Director models with frames and without self-contact slots (others: the numpy path)."""
-        return bool(nlp.director and nlp.model.layout.frame and not nlp.self_contact_slots)
+        """Director models with frames and the planar model, without self-contact slots (others, the
+        tangent director model and the 3D Euler-angle model: the numpy path)."""
+        if nlp.self_contact_slots:
+            return False
+        return bool(nlp.model.layout.frame if nlp.director else nlp.model.layout.planar)
 
     def profiles(self, string: StringProperties) -> np.ndarray:
         """``prof``: Rf and Rt [N·m²] at the grid and Rf_min, remembered for the last string object."""

@@ -78,8 +78,8 @@ class ShapeOutputs:
         z, p = state.z, state.p
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         if self.fns.outputs is not None and self.contact_slots is None:
-            return self._compiled_result(problem, state, lam_si, ipopt_status, iterations, violation, warm, steps,
-                                         summary)
+            return self._compiled_result(problem, current, state, lam_si, ipopt_status, iterations, violation, warm,
+                                         steps, summary)
         s_out = self.s_out.copy()
         if nlp.director:
             points = m.positions(z, s_out)
@@ -101,8 +101,9 @@ class ShapeOutputs:
         return self._assemble(problem, state, summary, points, quats, grips, contacts, residual, flipped, touching,
                               ipopt_status, iterations, violation, warm, steps)
 
-    def _compiled_result(self, problem: Problem, state: SolverState, lam_si: np.ndarray, ipopt_status: str,
-                         iterations: int, violation: float, warm: bool, steps: int, summary: Any) -> ShapeResult:
+    def _compiled_result(self, problem: Problem, current: Problem, state: SolverState, lam_si: np.ndarray,
+                         ipopt_status: str, iterations: int, violation: float, warm: bool, steps: int,
+                         summary: Any) -> ShapeResult:
         """``result`` from one call of the outputs' function (``output_function.py``): the same shape,
         wrenches, contact forces, residual and flip test as the numpy path."""
         plan = self.fns.output_function
@@ -114,7 +115,13 @@ class ShapeOutputs:
         flipped = ", ".join(g.name for k, g in enumerate(problem.grips)
                             if g.mode != "pin" and (flip[0, k] < 0 or (g.mode == "clamp" and flip[1, k] < 0)))
         residual = EquilibriumResidual(float(res[0, 0]), float(res[1, 0]), float(res[2, 0]))
-        return self._assemble(problem, state, summary, points.T, unit_quaternions(v_out.T), grips, contacts, residual,
+        if plan.planar:  # v_out is φ: the orientations as ``sample`` and the numpy path make them
+            phi = v_out.ravel()
+            quats = pose_quaternions(self.nlp.r0, phi, np.full(phi.size, np.pi / 2),
+                                     F.frames_psi(self.nlp, self.parameters, current, state.z, self.s_out, state.p))
+        else:
+            quats = unit_quaternions(v_out.T)
+        return self._assemble(problem, state, summary, points.T, quats, grips, contacts, residual,
                               flipped, [], ipopt_status, iterations, violation, warm, steps)
 
     def _assemble(self, problem: Problem, state: SolverState, summary: Any, points: np.ndarray, quats: np.ndarray,

@@ -83,23 +83,53 @@ def tied_cable() -> tuple[Problem, SolverOptions]:
     return replace(problem, relative_positions=(RelativePosition(0.3, 0.7, np.array([0.15, 0.0, 0.0])),)), options
 
 
+def planar(make):
+    """The same scene with the planar model (order 24): its outputs function (φ in the x–z plane)."""
+    def build():
+        problem, options = make()
+        return problem, replace(options, model="planar", order=24)
+    return build
+
+
+def planar_loads() -> tuple[Problem, SolverOptions]:
+    """A cantilever in the x–z plane with an in-plane point force and a point moment about the plane's
+    normal (the only moments the planar model takes), stretchable."""
+    string = StringProperties(1.0, Profile.constant(0.05), Profile.constant(0.04), Profile.constant(0.5),
+                              stretch_stiffness=Profile.constant(30.0))
+    grip = Grip("clamp", 0.0, "clamp", GripPose.checked([0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0], "clamp"))
+    load = Load(0.6, force=np.array([0.1, 0.0, 0.05]), moment=np.array([0.0, 0.02, 0.0]))
+    return Problem(string, (grip,), gravity=np.array([0.0, 0.0, -1.0]), loads=(load,)), \
+        SolverOptions(model="planar", order=24)
+
+
 #: case → (problem and options, how far the stream lowers the last grip [m], whether it presses on an obstacle)
 CASES = {
     "default_cable": (default_cable, 0.3, True),
     "three_clamps": (lambda: (three_clamps(), SolverOptions(model="full", order=12, obstacle_slots=2)), 0.04, True),
     "loaded_cantilever": (lambda: (loaded_cantilever(), SolverOptions(model="full", order=12)), 0.04, False),
     "tied_cable": (tied_cable, 0.3, False),  # the tie holds it off the table
+    "planar_default_cable": (planar(default_cable), 0.3, True),
+    "planar_tied_cable": (planar(tied_cable), 0.3, False),
+    "planar_loads": (planar_loads, 0.04, False),
 }
 
 
-def stream(problem: Problem, drop: float, steps: int = 8):
-    """Targets that lower the last grip by ``drop`` and turn it by 0.3 rad about x, step by step."""
+def stream(problem: Problem, drop: float, steps: int = 8, axis: str = "x"):
+    """Targets that lower the last grip by ``drop`` and turn it by 0.3 rad about ``axis`` (y: in the
+    x–z plane of the planar cases), step by step."""
     grip = problem.grips[-1]
     for k in range(1, steps + 1):
         f = k / steps
         position = grip.pose.position + np.array([0.0, 0.0, -drop * f])
-        q = quat_about("x", 0.3 * f)
+        q = quat_about(axis, 0.3 * f) if axis == "x" else _times(quat_about(axis, 0.3 * f), grip.pose.orientation)
         yield {grip.name: (position, q)}
+
+
+def _times(a, b):
+    """The quaternion product a ⊗ b (x, y, z, w)."""
+    from dlo_ros.model.rotations import quat_multiply_matrices
+
+    return quat_multiply_matrices(a, b)[0] @ np.asarray(b, dtype=float)
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
@@ -112,7 +142,7 @@ def test_the_outputs_function_equals_the_numpy_path_cold_and_streaming(case):
     assert first.ok, first.message
     assert_same(first, numpy_result(solver))
     touched = slotted = False
-    for targets in stream(problem, drop):
+    for targets in stream(problem, drop, axis="y" if options.model == "planar" else "x"):
         r = solver.solve(targets)
         assert r.ok, r.message
         assert_same(r, numpy_result(solver))
@@ -125,14 +155,15 @@ def test_the_outputs_function_equals_the_numpy_path_cold_and_streaming(case):
 
 
 @pytest.mark.skipif(compiler() is None, reason="needs a C compiler")
-def test_compiled_and_interpreted_outputs_agree(tmp_path, monkeypatch):
+@pytest.mark.parametrize("make", [default_cable, planar(default_cable)], ids=["full", "planar"])
+def test_compiled_and_interpreted_outputs_agree(make, tmp_path, monkeypatch):
     monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
     monkeypatch.delenv("DLO_NO_COMPILE", raising=False)  # conftest turns compiling off
-    problem, options = default_cable()
+    problem, options = make()
     solver = ShapeSolver(problem, options, compile="blocking")
     assert isinstance(solver.functions.outputs, NativeFunction)
     interpreted = InterpretedFunction(solver.functions.output_function.function)
-    for targets in [None, *stream(problem, 0.3, 4)]:
+    for targets in [None, *stream(problem, 0.3, 4, axis="y" if options.model == "planar" else "x")]:
         r = solver.solve(targets) if targets else solver.solve()
         assert r.ok, r.message
         state, nlp = solver._state, solver.nlp

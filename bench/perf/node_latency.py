@@ -22,7 +22,8 @@ deserialisation, the target's serialisation and deserialisation, and one LU of t
 Node overhead above the floor = closed-loop p50 - in-process solve p50 - echo closed-loop p50.
 
     scripts/dlo-env run python bench/perf/node_latency.py [--mode interpreted|native|both] [--model full|auto|...]
-                                                     [--n 300] [--rate 100] [--seconds 5] [--floor-only]
+                                                     [--n 300] [--rate 100] [--seconds 5] [--path 3d|planar]
+                                                     [--floor-only]
                                                      [--out FILE]
 
 --floor-only measures just the floor (about half a minute) and prints it (written only with --out); the
@@ -54,25 +55,41 @@ Q0 = (0.0, 0.0, 0.0, 1.0)
 LEFT = ((0.0, 0.0, 0.4), Q0)
 
 
+PATHS = ("3d", "planar")
+PATH = {"kind": "3d"}  # the motion of this run (--path)
+
+
 def target(i: int, n: int):
-    """A smooth dual-arm-like motion: the right grip circles (radius 5 cm) and turns about the tangent."""
+    """A smooth dual-arm-like motion.  '3d': the right grip circles (radius 5 cm, height ±3 cm) and turns
+    about the cable's axis by up to ±0.3 rad, so the shape leaves the plane; 'planar': it circles with
+    radius 5 cm in the x–z plane that holds both grips, without turning, so the shape stays in that plane."""
     a = 2 * math.pi * i / n
+    if PATH["kind"] == "planar":
+        return [LEFT, ((0.55 + 0.05 * math.cos(a), 0.0, 0.42 + 0.05 * math.sin(a)), Q0)]
     pos = (0.55 + 0.05 * math.cos(a), 0.05 * math.sin(a), 0.42 + 0.03 * math.sin(2 * a))
     tw = 0.3 * math.sin(a)
     return [LEFT, (pos, (math.sin(tw / 2), 0.0, 0.0, math.cos(tw / 2)))]
 
 
+MOTION = {
+    "3d": "The right grip circles (radius 5 cm, height ±3 cm) and twists by up to ±0.3 rad",
+    "planar": "The right grip circles (radius 5 cm) in the x–z plane of both grips without turning (the shape "
+              "stays in that plane: `auto` streams its planar model)",
+}
+
+
 NOTE = (
     "One run on a shared 2-CPU VM: repeated runs differ by tens of percent with the other load, between "
-    "the two modes as much as within one. Where the node's own time goes (the node under cProfile, compiled, "
-    "closed loop, 600 targets, 2026-12-02): its executor thread spends about 0.9 ms of Python per wake-up "
-    "outside rcl_wait (rclpy's SingleThreadedExecutor rebuilds the wait set of the node's ~18 entities "
-    "(subscriptions, services, parameter services, timers) every time), holding the GIL the solver thread "
-    "needs; the Path's bytes take 0.1 ms to build and its publish 1.3 ms of which most is DDS. "
-    "rclpy.experimental.EventsExecutor would remove the wait-set rebuild (the echo's floor above: 0.6 against "
-    "0.9 ms), but it does not run the node's coroutine services (ros2/rclpy#1473). rclpy's "
-    "MultiThreadedExecutor, tried first, added 3-8 ms per update and p99 outliers of several hundred ms (GIL "
-    "contention with the solver thread)."
+    "the two modes as much as within one. Where the node's own time goes (probes in the node's target "
+    "callback, its solver thread and its Path publish; `auto`, compiled, the 3D closed loop, 300 targets, "
+    "2026-12-03, median): the executor's target callback (deserialise, check, hand over) 0.16 ms; from the "
+    "callback to the solver thread starting the solve 0.43 ms (the callback, the executor's next wait-set "
+    "rebuild, 0.16 ms idle, and the thread switch); the solve 1.9 ms; from the solve's end to the Path "
+    "published 0.13 ms (its publish call 0.07 ms); the rest of the round trip is the DDS transport the echo "
+    "measures. rclpy.experimental.EventsExecutor would remove part of the wait-set rebuild (the echo's floor "
+    "above), but it does not run the node's coroutine services (ros2/rclpy#1473) and its raw target "
+    "subscriptions delivered nothing. rclpy's MultiThreadedExecutor, tried first, added 3-8 ms per update and "
+    "p99 outliers of several hundred ms (GIL contention with the solver thread)."
 )
 
 
@@ -189,7 +206,9 @@ def measure(native: bool, args) -> tuple[list[str], float, float]:
         f"Node overhead (closed-loop p50 minus in-process solve p50): {c50 - s50:.1f} ms. "
         f"Node RSS after the run: {rss:.0f} MiB; targets received {diag.get('targets received')}, "
         f"coalesced {diag.get('targets coalesced')}, failures {diag.get('failures')}, "
-        f"stable {diag.get('stable updates')}/{diag.get('updates')}.",
+        f"stable {diag.get('stable updates')}/{diag.get('updates')}; the model at the end: "
+        f"{'planar' if diag.get('model.planar') == 'True' else '3D'}, order {diag.get('model.order')}, "
+        f"{diag.get('model.variables')} unknowns.",
         "",
     ], c50, s50
 
@@ -384,11 +403,14 @@ def main() -> int:
                     help="node compile mode off (interpreted), blocking (native), or both (default)")
     ap.add_argument("--model", default="full", choices=("auto", "full", "planar", "scene"),
                     help="solver.model of the node (default full; 'scene': the scene's own, i.e. auto)")
+    ap.add_argument("--path", choices=PATHS, default="3d",
+                    help="the grips' motion: '3d' (circle and twist, default) or 'planar' (circle in the grips' plane)")
     ap.add_argument("--floor-only", action="store_true",
                     help="measure only the floor (the echo without a solve, in-process message costs, one LU); "
                          "printed, written only with --out")
     ap.add_argument("--out", help="the report (default bench/results/node_latency.md; none with --floor-only)")
     args = ap.parse_args()
+    PATH["kind"] = args.path
 
     modes = [] if args.floor_only else {"interpreted": [False], "native": [True], "both": [False, True]}[args.mode]
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), "?")
@@ -400,14 +422,15 @@ def main() -> int:
         f"ROS 2 Jazzy PyPI wheels, Fast DDS, discovery on localhost; git {_git_head()}.",
         "",
         f"Command: `scripts/dlo-env run python bench/perf/node_latency.py --mode {args.mode} --model {args.model} "
-        f"--n {args.n} --rate {args.rate:g} --seconds {args.seconds:g}{' --floor-only' if args.floor_only else ''}`",
+        f"--n {args.n} --rate {args.rate:g} --seconds {args.seconds:g}"
+        f"{' --path ' + args.path if args.path != '3d' else ''}{' --floor-only' if args.floor_only else ''}`",
         "",
         "The node runs in a subprocess on scene `default_cable` (1 m cable, two clamps, table half-space, "
         f"51 output points) with `solver.model: {args.model}`; this process publishes `~/grips/targets` and "
         "receives `~/centerline`. Latency = "
         "reception time minus the centreline's header stamp, which is the stamp of the newest target it "
-        "answers (same clock, same machine). The right grip circles (radius 5 cm, height ±3 cm) and twists "
-        f"by up to ±0.3 rad, {args.n} targets per revolution. Open-loop latency includes waiting for the "
+        f"answers (same clock, same machine). {MOTION[args.path]}, "
+        f"{args.n} targets per revolution. Open-loop latency includes waiting for the "
         "solve in progress (the newest target is taken as soon as the worker is free; older ones are "
         "coalesced, never queued). In the flood, this process publishing flat out takes one of the two "
         "CPUs and the node's receiving thread competes with its solver thread for the other and for the GIL.",

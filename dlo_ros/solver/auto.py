@@ -582,8 +582,10 @@ class AutoShapeSolver:
         st = problem.string
         geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
                                        tuple(g.s for g in problem.grips))
-        z = self.inner.snapshot().z
-        d = SC.closest_distance(self.inner.model.positions(z, geometry.s), geometry)
+        points = self.inner.model.positions(self.inner.snapshot().z, geometry.s)
+        if SC.certainly_apart(points, geometry):  # the usual answer, for a tenth of the search's cost
+            return ""
+        d = SC.closest_distance(points, geometry)
         if not d < geometry.reach:
             return ""
         return (f"self-contact: the shape comes within {d:.3g} m of itself (reach {geometry.reach:.3g} m, "

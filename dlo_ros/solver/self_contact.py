@@ -133,51 +133,121 @@ class ContactSlots:
 def _far_pairs(points: np.ndarray, geometry: ContactGeometry, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Sample pairs (P, 2), a < b, within ``radius`` of each other and at least the exclusion arc apart,
     and their distances."""
-    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")  # rows (i, j) with i < j
     if pairs.size == 0:
         return np.zeros((0, 2), dtype=int), np.zeros(0)
-    pairs = np.sort(pairs, axis=1)
     far = (pairs[:, 1] - pairs[:, 0]) * geometry.spacing >= geometry.exclusion - 1e-12
     if geometry.held.size:
         ga, gb = geometry.held[pairs[:, 0]], geometry.held[pairs[:, 1]]
         far &= ~((ga >= 0) & (gb >= 0) & (ga != gb))
     pairs = pairs[far]
-    return pairs, np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
+    d = points[pairs[:, 0]] - points[pairs[:, 1]]
+    return pairs, np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
 def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple[tuple[int, int], float]]:
     """Pairs within reach whose distance is a local minimum along one strand, with their distances [m],
     nearest first.  A neighbour closer along s than the exclusion arc is a step along the same strand: a
     pair next to one is a minimum only when it is already closer than D (a bend tighter than D/2).
-    Vectorised over the pairs the tree returned (neighbours looked up in their sorted keys)."""
+    Vectorised over the pairs the tree returned (neighbours read from a table of their distances)."""
     pairs, dist = _far_pairs(points, geometry, geometry.reach)
     if not len(pairs):
         return []
     n = len(geometry.s)
-    keys = pairs[:, 0] * n + pairs[:, 1]
-    order = np.argsort(keys)
-    keys, table = keys[order], dist[order]
-    near = geometry.exclusion - 1e-12
-
-    def leaves_minimum(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Whether each neighbour pair (a, b) leaves its pair's distance a minimum on its side."""
-        outside = (a < 0) | (b >= n)
-        a_, b_ = np.clip(a, 0, n - 1), np.clip(b, 0, n - 1)
-        idx = np.minimum(np.searchsorted(keys, a_ * n + b_), len(keys) - 1)
-        other = np.where(keys[idx] == a_ * n + b_, table[idx], np.inf)
-        same_strand = (b - a) * geometry.spacing < near
-        placed = np.zeros(len(a), dtype=bool)
-        if geometry.held.size:
-            ga, gb = geometry.held[a_], geometry.held[b_]
-            placed = (ga >= 0) & (gb >= 0) & (ga != gb)
-        return outside | placed | np.where(same_strand, dist < geometry.distance, dist <= other)
-
     a, b = pairs[:, 0], pairs[:, 1]
+    # the distance of each pair within reach at [a + 1, b + 1]; a neighbour pair off the string, not within
+    # reach or left out (held by two grips) reads +inf, which leaves the pair a minimum on that side
+    table = np.full((n + 2, n + 2), np.inf)
+    table[a + 1, b + 1] = dist
+    held = np.concatenate(([-1], geometry.held, [-1])) if geometry.held.size else None
+    near = geometry.exclusion - 1e-12
+    closer_than_d = dist < geometry.distance
+
+    def leaves_minimum(a2: np.ndarray, b2: np.ndarray) -> np.ndarray:
+        """Whether each neighbour pair (a2, b2) leaves its pair's distance a minimum on its side."""
+        # (a neighbour off the string is one sample further apart than its pair: never on the same strand)
+        same_strand = (b2 - a2) * geometry.spacing < near
+        out = np.where(same_strand, closer_than_d, dist <= table[a2 + 1, b2 + 1])
+        if held is not None:  # both samples placed by two different grips
+            ga, gb = held[a2 + 1], held[b2 + 1]
+            out |= (ga >= 0) & (gb >= 0) & (ga != gb)
+        return out
+
     along_b = leaves_minimum(a, b - 1) & leaves_minimum(a, b + 1)
     along_a = leaves_minimum(a - 1, b) & leaves_minimum(a + 1, b)
     chosen = np.flatnonzero(along_a | along_b)
     chosen = chosen[np.argsort(dist[chosen], kind="stable")]
     return [((int(a[i]), int(b[i])), float(dist[i])) for i in chosen]
+
+
+def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
+    """True when ``candidate_pairs(points, geometry)`` is provably empty (no two strands within reach),
+    from O(N) turning angles and one dense distance test; False when this shortcut cannot tell (then
+    ``candidate_pairs`` decides).  Exact, never a guess:
+
+    * pairs k = b − a samples apart with m ≤ k < K (m the smallest separation the exclusion arc allows,
+      K ≈ 1.25 reach / h): if the polyline turns by less than 90° over every K − 1 consecutive segments,
+      all segment directions between a and b are within 90° of each other, so the inner neighbour pairs
+      (a, b − 1) and (a + 1, b) are strictly closer than (a, b) (|c + e|² − |c|² = 2 c·e + |e|² > 0 with e
+      the step and c the rest of the chord): no such pair is a local minimum, unless the inner neighbour
+      is a step along the same strand (k = m); those pairs are minima only when closer than D, and their
+      chord is at least cos(T/2) × the polyline's length over them (T the turning over those m segments:
+      every direction is within T/2 of the middle one along the turning path);
+    * pairs k ≥ K: none is within reach (their distances, from one Gram matrix, all above it);
+    * no pair within K samples is placed by two different grips (their samples count as minima).
+    """
+    n = len(points)
+    h, reach = geometry.spacing, geometry.reach
+    near = geometry.exclusion - 1e-12
+    m = int(np.ceil(near / h))
+    while m > 1 and (m - 1) * h >= near:  # the smallest k with k h ≥ near, as _far_pairs rounds it
+        m -= 1
+    while m * h < near:
+        m += 1
+    big = max(m + 1, int(np.ceil(1.25 * reach / h)) + 1)
+    if n < 3 or n > 401 or m >= n:
+        return n < 2 or m >= n  # no pair is far enough apart, or too many samples for the dense test
+    if geometry.held.size:
+        grips = [np.flatnonzero(geometry.held == g) for g in np.unique(geometry.held[geometry.held >= 0])]
+        for i, gi in enumerate(grips):
+            for gj in grips[i + 1:]:
+                if np.abs(gi[:, None] - gj[None, :]).min() < big:
+                    return False
+    steps = np.diff(points, axis=0)
+    lengths = np.sqrt(np.einsum("ij,ij->i", steps, steps))
+    if not lengths.min() > 0.1 * h:  # (a step this short would leave the strict inequalities to rounding)
+        return False
+    unit = steps / lengths[:, None]
+    turns = np.arccos(np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0))
+    total = np.concatenate(([0.0], np.cumsum(turns)))
+
+    def most_turning(segments: int) -> float:
+        """The largest turning [rad] over ``segments`` consecutive segments."""
+        segments = min(segments, n - 1)
+        return float(np.max(total[segments - 1:] - total[:n - segments]))
+
+    if not most_turning(big - 1) < np.pi / 2 - 1e-9:
+        return False
+    windows = np.concatenate(([0.0], np.cumsum(lengths)))
+    shortest = float(np.min(windows[m:] - windows[:n - m]))
+    if not np.cos(most_turning(m) / 2) * shortest > geometry.distance * (1 + 1e-9):
+        return False
+    if big <= n - 1:
+        centred = points - points.mean(axis=0)  # (smaller numbers: less rounding in |x|² + |y|² − 2 x·y)
+        sq = np.einsum("ij,ij->i", centred, centred)
+        squared = sq[:, None] + sq[None, :] - 2.0 * (centred @ centred.T) + _off_band(n, big)
+        if not squared.min() > reach * reach * (1 + 1e-9) + 1e-15:
+            return False
+    return True
+
+
+@functools.lru_cache(maxsize=8)
+def _off_band(n: int, k: int) -> np.ndarray:
+    """(n, n): 0 where b − a ≥ k, +inf elsewhere."""
+    out = np.full((n, n), np.inf)
+    out[np.triu_indices(n, k)] = 0.0
+    out.flags.writeable = False
+    return out
 
 
 def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:

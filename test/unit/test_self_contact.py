@@ -479,6 +479,106 @@ def test_penetration_check_is_complete(seed):
             assert np.linalg.norm(pts[a] - pts[b]) == pytest.approx(d.min())
 
 
+def brute_candidates(pts: np.ndarray, geometry) -> dict[tuple[int, int], float]:
+    """``candidate_pairs`` by its definition, pair by pair: every pair (a, b) the exclusion arc apart, not
+    placed by two different grips and within reach, whose distance no neighbour pair one sample along one
+    strand undercuts (a neighbour on the same strand: only a pair already closer than D counts)."""
+    n, h, near = len(pts), geometry.spacing, geometry.exclusion - 1e-12
+    held = geometry.held
+
+    def placed(i, j):
+        return held.size > 0 and held[i] >= 0 and held[j] >= 0 and held[i] != held[j]
+
+    def dist(i, j):
+        return float(np.linalg.norm(pts[i] - pts[j]))
+
+    def listed(i, j):
+        return 0 <= i < j < n and (j - i) * h >= near and not placed(i, j) and dist(i, j) <= geometry.reach
+
+    out = {}
+    for a in range(n):
+        for b in range(a + 1, n):
+            if not listed(a, b):
+                continue
+            d = dist(a, b)
+
+            def leaves(i, j):
+                if i < 0 or j >= n or placed(i, j):
+                    return True
+                if (j - i) * h < near:
+                    return d < geometry.distance
+                return d <= (dist(i, j) if listed(i, j) else np.inf)
+
+            if (leaves(a, b - 1) and leaves(a, b + 1)) or (leaves(a - 1, b) and leaves(a + 1, b)):
+                out[(a, b)] = d
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_candidate_pairs_match_their_definition(seed):
+    """The vectorised ``candidate_pairs`` (k-d tree, neighbour table) returns exactly the pairs of
+    ``brute_candidates``, nearest first, on random curves folded tighter and tighter, with and without two
+    grips at the ends."""
+    for grips in ((), (0.0, L)):
+        geometry = SC.contact_geometry(L, 0.02, grip_s=grips)
+        total = 0
+        for scale in (1.0, 0.3, 0.15, 0.08):
+            pts = random_curve(seed, len(geometry.s)) * scale
+            found = SC.candidate_pairs(pts, geometry)
+            expected = brute_candidates(pts, geometry)
+            assert {pair for pair, _ in found} == set(expected), (seed, grips, scale)
+            assert [d for _, d in found] == sorted(d for _, d in found)
+            for pair, d in found:
+                assert d == pytest.approx(expected[pair], abs=1e-15)
+            total += len(found)
+        assert total > 0  # the folded curves do come near themselves
+
+
+def small_loop(s: np.ndarray, circumference: float) -> np.ndarray:
+    """A straight strand along x with a circular loop of ``circumference`` at s = L/2 that closes on
+    itself (its end passes 0.002 L above its start)."""
+    rho = circumference / (2 * np.pi)
+    theta = np.clip((s - 0.5 * L) / rho, 0.0, 2 * np.pi)
+    x = np.minimum(s, 0.5 * L) + np.maximum(s - 0.5 * L - circumference, 0.0) + rho * np.sin(theta)
+    return np.stack([x, rho * (1 - np.cos(theta)), 0.002 * L * theta / (2 * np.pi)], axis=1)
+
+
+def test_certainly_apart_never_hides_a_candidate():
+    """``certainly_apart`` is a shortcut for "``candidate_pairs`` is empty": on gentle arcs (where it must
+    answer True, or it would be dead code) and on random curves folded tighter and tighter, with and without
+    grips, True never comes with a candidate pair."""
+    random_apart = 0
+    for grips in ((), (0.0, L), (0.0, 0.03 * L)):
+        geometry = SC.contact_geometry(L, 0.005, grip_s=grips)
+        s = geometry.s
+        for radius in (1.0, 0.4, 0.25):  # arcs of L / radius radians (the last nearly closes a circle)
+            pts = np.stack([radius * np.sin(s / radius), radius * (1 - np.cos(s / radius)), 0 * s], axis=1)
+            apart = SC.certainly_apart(pts, geometry)
+            assert not (apart and SC.candidate_pairs(pts, geometry)), (grips, radius)
+            if grips != (0.0, 0.03 * L) and radius >= 0.4:  # two grips 0.03 L apart: the shortcut declines
+                assert apart, (grips, radius)
+        # a straight strand with a small loop that closes on itself (its crossing pair is fewer samples
+        # apart than the dense test looks at), and one compressed to a third over a few samples
+        step = np.where((s > 0.5 * L) & (s < 0.53 * L), 0.3, 1.0) * geometry.spacing
+        squeezed = np.stack([np.concatenate(([0.0], np.cumsum(step[1:]))), 0 * s, 0 * s], axis=1)
+        for pts in (small_loop(s, 10 * geometry.spacing), squeezed):
+            assert SC.candidate_pairs(pts, geometry) and not SC.certainly_apart(pts, geometry), grips
+        # radius 0: the exclusion arc is two samples, the reach many; a loop of ten samples turns gently
+        # over two but closes within the samples the dense test leaves to the turning bound
+        thin = SC.contact_geometry(L, 0.0, grip_s=grips)
+        pts = small_loop(thin.s, 10 * thin.spacing)
+        assert SC.candidate_pairs(pts, thin) and not SC.certainly_apart(pts, thin), grips
+        for seed in range(8):
+            rng = np.random.default_rng(seed)  # a gentle random space curve: two harmonics over the length
+            gentle = sum(np.outer(np.sin(np.pi * k * s / L + rng.uniform(0, 6)), rng.normal(size=3)) / k ** 2
+                         for k in (1, 2)) * 0.3 * L + np.outer(s, rng.normal(size=3))
+            for pts in [gentle] + [random_curve(seed, len(s)) * scale for scale in (3.0, 1.0, 0.3, 0.15)]:
+                apart = SC.certainly_apart(pts, geometry)
+                assert not (apart and SC.candidate_pairs(pts, geometry)), (grips, seed)
+                random_apart += apart
+    assert random_apart > 0  # the shortcut is also exercised off the arcs
+
+
 def test_crossing_flip_is_detected():
     """Two straight strands crossing at right angles 0.05 L apart: moving one through the other flips the
     crossing sign; moving it further away on the same side does not."""

@@ -207,7 +207,7 @@ def measure(native: bool, args) -> tuple[list[str], float, float]:
         f"Node RSS after the run: {rss:.0f} MiB; targets received {diag.get('targets received')}, "
         f"coalesced {diag.get('targets coalesced')}, failures {diag.get('failures')}, "
         f"stable {diag.get('stable updates')}/{diag.get('updates')}; the model at the end: "
-        f"{'planar' if diag.get('model.planar') == 'True' else '3D'}, order {diag.get('model.order')}, "
+        f"{'planar' if diag.get('model.planar') == 'true' else '3D'}, order {diag.get('model.order')}, "
         f"{diag.get('model.variables')} unknowns.",
         "",
     ], c50, s50

@@ -583,7 +583,7 @@ class AutoShapeSolver:
         geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
                                        tuple(g.s for g in problem.grips))
         points = self.inner.model.positions(self.inner.snapshot().z, geometry.s)
-        if SC.certainly_apart(points, geometry):  # the usual answer, for a tenth of the search's cost
+        if SC.certainly_apart(points, geometry):  # the usual answer, proved without the k-d tree search
             return ""
         d = SC.closest_distance(points, geometry)
         if not d < geometry.reach:

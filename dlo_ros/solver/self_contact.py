@@ -36,7 +36,9 @@ pairs within the reach D + max(4 h, 0.03 L) (O(N log N), nothing quadratic); of 
 distance is a local minimum along either strand (the closest partner of each sample on the other
 strand) fill the slots, nearest first.  A pair in a slot that carries a force keeps its slot.  After a
 solve the same query on the answer finds every penetration (``penetrations``); a penetrating pair not in
-a slot is added and the solve repeated from the same start (``ShapeSolver``).
+a slot is added and the solve repeated from the same start (``ShapeSolver``).  auto asks on every update
+whether a shape without self-contact rows comes within reach of itself: ``certainly_apart`` answers
+"no" from the turning angles and one dense distance test when it can prove it, the search otherwise.
 
 Topology, along a warm stream (both reported as a failure, the shape not published):
 * ``crossing_flips``: for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the sign of

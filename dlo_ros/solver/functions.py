@@ -106,15 +106,8 @@ class NlpFunctions:
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile
                         return
-                    setattr(self, name, native)
-                    if name == "kkt_free":
-                        self.newton_step = self._compiled_newton_step(fn, lib)
-                        self.newton_native = loop
-                    if name == "kkt":
-                        self.newton_active = self._active_loop(lib)
-                    if name == "outputs":
-                        self.outputs_compiled = True
-                    elif all(later == "outputs" for later, _, _ in todo[k + 1:]):
+                    self._install(name, native, fn, lib, loop)
+                    if name != "outputs" and all(later == "outputs" for later, _, _ in todo[k + 1:]):
                         self.compiled = True  # every derivative runs compiled now
                         self.compile_time_s = time.perf_counter() - t0
 
@@ -131,15 +124,20 @@ class NlpFunctions:
         native = native_newton.cached(fn, *self._sizes(), kkt_lib=lib) if name == "kkt_free" else None
         if not lib.exists() or (native is None and name == "kkt_free"):
             return False
-        setattr(self, name, NativeFunction(lib, fn))
+        self._install(name, NativeFunction(lib, fn), fn, lib, native)
+        return True
+
+    def _install(self, name: str, native, fn: ca.Function, lib, loop) -> None:
+        """Put the compiled ``native`` of the function ``name`` in place: for the contact-free function
+        with its compiled Newton step and loop ``loop``, for the full one with its active-set loop."""
+        setattr(self, name, native)
         if name == "kkt_free":
             self.newton_step = self._compiled_newton_step(fn, lib)
-            self.newton_native = native
+            self.newton_native = loop
         if name == "kkt":
             self.newton_active = self._active_loop(lib)
         if name == "outputs":
             self.outputs_compiled = True
-        return True
 
     def load_cached(self) -> bool:
         """('cached' mode) Swap in the libraries that reached the cache since ``start_compile`` (another

@@ -68,8 +68,10 @@ class EchoNode:
 
     def _echo(self, data: bytes, kind: type) -> None:
         msg = deserialize_message(data, kind)
-        self.publish(time_to_ns(msg.header.stamp))
+        # counted before the Path goes out: a client that has it may stop the echo at once, and the stop
+        # can interrupt this callback right after the publish
         self.answered += 1
+        self.publish(time_to_ns(msg.header.stamp))
 
 
 def spin(executor, kind: str) -> None:

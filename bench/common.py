@@ -185,6 +185,16 @@ def machine() -> dict:
     return info
 
 
+def write_report(lines: list[str], out: str | Path, script: str, argv: list[str]) -> None:
+    """Append the command that regenerates a Markdown report (``script`` run with ``argv`` through
+    scripts/dlo-env), write it to ``out`` and print it."""
+    command = " ".join([f"bash scripts/dlo-env run python {script}", *argv])
+    text = "\n".join([*lines, "", f"Command: `{command}`", ""])
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    Path(out).write_text(text)
+    print(text)
+
+
 class Timer:
     def __enter__(self):
         self.t0 = time.perf_counter()

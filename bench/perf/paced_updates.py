@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
-import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -25,6 +23,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # run as a script: make `bench` importable
+from bench.common import machine, write_report  # noqa: E402
 from solver_speed import path_targets  # noqa: E402
 
 from dlo_ros.scene import load_scene  # noqa: E402
@@ -71,11 +71,11 @@ def main() -> None:
     targets = path_targets(scene, args.updates + 1)
     pauses = [("sleep", g) for g in args.gaps] + [("busy", BUSY_WAIT_MS)]
     columns = " | ".join(f"{'sleep' if k == 'sleep' else 'busy wait'} {ms:g} ms" for k, ms in pauses)
+    info = machine()
     lines = [
         "# Warm updates back to back and spaced in time", "",
-        f"Machine: {platform.machine()}, {os.cpu_count()} cores (shared with other work), Python "
-        f"{platform.python_version()}, load average {os.getloadavg()[0]:.2f} at the start; git "
-        f"{subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True, text=True).stdout.strip()}.",
+        f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores (shared with other work), Python "
+        f"{info.get('python')}, load average {os.getloadavg()[0]:.2f} at the start; git {info.get('git', '?')}.",
         "", f"`default_cable`, compiled derivatives, {args.updates} warm updates of 1 % of L per row; median "
         "(p90) of each update's wall time [ms], by the pause before every update.", "",
         f"| model | {columns} |", "|---|" + "---|" * len(pauses),
@@ -94,11 +94,7 @@ def main() -> None:
                 times[p] += list(timed_updates(solver, targets[1 + r * chunk: 1 + (r + 1) * chunk], orientation, *p))
         cells = [f"{np.median(t):.2f} ({np.percentile(t, 90):.2f})" for t in times.values()]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    command = " ".join(["bash scripts/dlo-env run python bench/perf/paced_updates.py", *sys.argv[1:]])
-    lines += ["", f"Command: `{command}`", ""]
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text("\n".join(lines))
-    print("\n".join(lines))
+    write_report(lines, args.out, "bench/perf/paced_updates.py", sys.argv[1:])
 
 
 if __name__ == "__main__":

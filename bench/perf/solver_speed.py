@@ -25,8 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dlo_ros.scene import load_scene
-from dlo_ros.solver import ShapeSolver
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # run as a script: make `bench` importable
+from bench.common import write_report  # noqa: E402
+
+from dlo_ros.scene import load_scene  # noqa: E402
+from dlo_ros.solver import ShapeSolver  # noqa: E402
 
 
 def path_targets(scene, updates: int) -> list[np.ndarray]:
@@ -122,11 +125,7 @@ def main() -> None:
             f"| {r['mode']} | {r['build_s']:.2f} | {r['compile_s']:.1f} | {r['cold_ms']:.1f} | {r['warm_median_ms']:.2f} | "
             f"{r['warm_p90_ms']:.2f} | {r['warm_p99_ms']:.2f} | {r['warm_median_ms'] / base:.2f} | {r['iterations_median']:.0f} | {r['newton_fraction']:.0%} |"
         )
-    command = " ".join(["bash scripts/dlo-env run python bench/perf/solver_speed.py", *sys.argv[1:]])
-    lines += ["", f"Command: `{command}`", ""]
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text("\n".join(lines))
-    print("\n".join(lines))
+    write_report(lines, args.out, "bench/perf/solver_speed.py", sys.argv[1:])
 
 
 if __name__ == "__main__":

@@ -55,8 +55,7 @@ Q0 = (0.0, 0.0, 0.0, 1.0)
 LEFT = ((0.0, 0.0, 0.4), Q0)
 
 
-PATHS = ("3d", "planar")
-PATH = {"kind": "3d"}  # the motion of this run (--path)
+PATH = {"kind": "3d"}  # the motion of this run (--path: a key of MOTION)
 
 
 def target(i: int, n: int):
@@ -403,7 +402,7 @@ def main() -> int:
                     help="node compile mode off (interpreted), blocking (native), or both (default)")
     ap.add_argument("--model", default="full", choices=("auto", "full", "planar", "scene"),
                     help="solver.model of the node (default full; 'scene': the scene's own, i.e. auto)")
-    ap.add_argument("--path", choices=PATHS, default="3d",
+    ap.add_argument("--path", choices=tuple(MOTION), default="3d",
                     help="the grips' motion: '3d' (circle and twist, default) or 'planar' (circle in the grips' plane)")
     ap.add_argument("--floor-only", action="store_true",
                     help="measure only the floor (the echo without a solve, in-process message costs, one LU); "

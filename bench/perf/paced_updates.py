@@ -14,7 +14,6 @@ that the machine's drift over the run falls on every column alike.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from dataclasses import replace
@@ -75,7 +74,7 @@ def main() -> None:
     lines = [
         "# Warm updates back to back and spaced in time", "",
         f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores (shared with other work), Python "
-        f"{info.get('python')}, load average {os.getloadavg()[0]:.2f} at the start; git {info.get('git', '?')}.",
+        f"{info.get('python')}, load average {info['load_average'][0]:.2f} at the start; git {info.get('git', '?')}.",
         "", f"`default_cable`, compiled derivatives, {args.updates} warm updates of 1 % of L per row; median "
         "(p90) of each update's wall time [ms], by the pause before every update.", "",
         f"| model | {columns} |", "|---|" + "---|" * len(pauses),

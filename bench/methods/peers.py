@@ -24,7 +24,13 @@ is a weld equality (soft: solref time constant 2·dt), joint damping integrated 
 """
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
 import time
+import weakref
+from pathlib import Path
 
 import numpy as np
 
@@ -319,9 +325,97 @@ class MuJoCoRunner(PeerRunner):
                                                                            "sim_time": d.time})
 
 
+# ---------------------------------------------------------------------------------------------------
+#: where mujoco-core 4 is installed for MuJoCoRodRunner's worker (the bench's own environment keeps mujoco
+#: 3.17 for the cable peer): ``bash scripts/dlo-env run pip install --no-deps --target .bench-mujoco4 -r requirements-bench-mujoco4.txt``
+MUJOCO4_DIR = Path(__file__).resolve().parents[2] / ".bench-mujoco4"
+
+
+class MuJoCoRodRunner(PeerRunner):
+    """MuJoCo 4's rod: a 1D flexcomp with discrete-elastic-rod bending and torsion, inextensible edges,
+    relaxed to rest in a worker process (``mujoco_rod_worker.py``, which says how the rod is built).
+    Line density 1 kg/m (mass scaling, as for the other peers); every vertex damped at ζ of the first
+    mode (c = ζ · 2 ω₁ per unit mass); dt = cfl / (N ω₁).  The integrator is implicit in the rod's forces,
+    so no segment mode bounds the step; what does is inextensibility.  MuJoCo's equality constraints are
+    soft (impedance at most 0.9999, time constant 2 dt), and the edges give way by about N² dt² in all: on
+    the chord-0.6 elastica, dt = 0.2/ω₁ shortened the rod by 2.3 % at N = 160 (error 0.13 L), and
+    cfl = 3 keeps it within 0.1 % at N = 40–160.  At N = 320 the twist of the edges next to the held far
+    end blew up at every dt tried below 0.004 s, so the bench stops at N = 160."""
+
+    def __init__(self, case: Case, segments: int, radius: float = 0.005, zeta: float = 1.0, cfl: float = 3.0, **kw):
+        super().__init__(case, segments, **kw)
+        if not (MUJOCO4_DIR / "mujoco").is_dir():
+            raise ImportError(f"mujoco-core 4 is not installed in {MUJOCO4_DIR} (see requirements-bench-mujoco4.txt)")
+        if not case.planar and case.tau:
+            raise NotImplementedError("the twisted case: the far end's turn is not held by the position equalities")
+        self.radius, self.zeta, self.cfl = radius, zeta, cfl
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(MUJOCO4_DIR), os.environ.get("PYTHONPATH", "")]))
+        self._worker = subprocess.Popen([sys.executable, "-u", str(Path(__file__).with_name("mujoco_rod_worker.py"))],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+        weakref.finalize(self, _stop_worker, self._worker)
+        t0 = time.perf_counter()
+        first = self._call(self._job(case.problem, *initial_polyline(case.problem, self.N, case.tau), max_time=0.0))
+        if "error" in first:
+            raise RuntimeError(first["error"])
+        self.version = first.get("mujoco", "?")
+        self.build_time_s = time.perf_counter() - t0
+
+    def _call(self, job: dict) -> dict:
+        self._worker.stdin.write(json.dumps(job) + "\n")
+        self._worker.stdin.flush()
+        line = self._worker.stdout.readline()
+        if not line:
+            raise RuntimeError(f"the MuJoCo 4 worker exited ({self._worker.poll()})")
+        return json.loads(line)
+
+    def _job(self, problem, nodes, frames, max_time=None) -> dict:
+        st = problem.string
+        L, N, r = st.length, self.N, self.radius
+        Rf = float(st.bend_stiffness.maximum)
+        Rt = float(st.twist_stiffness.maximum)
+        D = float(st.weight_per_length.maximum)
+        E = 4 * Rf / (np.pi * r**4)
+        w1 = OMEGA1 * np.sqrt(Rf) / L**2
+        dt = self.cfl / (N * w1)
+        modes = {g.name: g.mode for g in problem.grips}
+        dl = L / N
+        loads = [(min(int(round(ld.s / dl)), N), list(ld.force), list(ld.moment)) for ld in problem.loads]
+        return {"nodes": nodes.tolist(), "segment": dl, "left": modes["left"], "right": modes["right"], "radius": r,
+                "young": E, "poisson": min(max(Rf / Rt - 1.0, 0.0), 0.49) if Rt > 0 else 0.49, "mass": L,
+                "gravity": list(problem.gravity_unit * D), "planes": [(list(ob.point), list(ob.normal)) for ob in problem.obstacles],
+                "loads": loads, "dt": dt, "damping_per_mass": self.zeta * 2 * w1, "contact_time": 2 * dt, "impedance": 0.9999, "constraint_time": 2 * dt,
+                "check_every": max(1, int(0.02 / (w1 * dt))), "v_tol": self.settle * L * w1, "v_max": 1e3 * L * w1,
+                "t_min": 3.0 / w1, "max_time": self.max_time if max_time is None else max_time}
+
+    def _relax(self, problem, nodes, frames) -> Outcome:
+        job = self._job(problem, nodes, frames)
+        answer = self._call(job)
+        if "error" in answer:
+            return Outcome(False, None, np.nan, 0, None, np.nan, answer["error"])
+        pos = np.asarray(answer["nodes"])
+        L = problem.string.length
+        pts = interp_points(np.arange(self.N + 1) * L / self.N, pos, S_OUT * L) if np.all(np.isfinite(pos)) else None
+        if answer["ok"]:
+            self.previous = (pos, None, problem)
+        return Outcome(answer["ok"], pts, answer["wall_s"], answer["steps"], None, np.nan, answer["message"],
+                       extra={"dt": job["dt"], "steps": answer["steps"],
+                              "sim_time": answer["sim_time"]})
+
+
+def _stop_worker(worker: subprocess.Popen) -> None:
+    if worker.poll() is None:
+        worker.stdin.close()
+        try:
+            worker.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            worker.kill()
+
+
 def make_peer(method: str, setting, case: Case, **kw):
     if method == "pyelastica":
         return PyElasticaRunner(case, int(setting), **kw)
     if method == "mujoco":
         return MuJoCoRunner(case, int(setting), **kw)
+    if method == "mujoco-rod":
+        return MuJoCoRodRunner(case, int(setting), **kw)
     raise ValueError(method)

@@ -7,7 +7,7 @@
 3. ``default``  the project's ShapeSolver defaults (the 3D director model: quaternions on spectral elements), orders 4 … 16;
    ``default-planar`` the same with ``model: planar`` (planar cases only).
 4. ``rod``      a discretised rod, N segments + IPOPT (planar: angles; 3D: unit quaternions).
-5. ``pyelastica`` / ``mujoco``: the dynamic peers (bench/methods/peers.py).
+5. ``pyelastica`` / ``mujoco`` / ``mujoco-rod``: the dynamic peers (bench/methods/peers.py).
 
 Planar cases: methods 1–2 use the planar Euler-angle model (φ ≡ π, θ = π/2 − β; the paper's examples
 2–3 are planar) from bench/methods/planar.py.  3D cases: methods 1–2 use dlo_ros's StringNLP / ShapeSolver with
@@ -339,7 +339,7 @@ def make_runner(method: str, setting, case: Case, **kw) -> _Runner:
         if case.planar:
             return PlanarRunner(case, PlanarRod(case.problem, int(setting)))
         return Rod3DRunner(case, int(setting))
-    if method in ("pyelastica", "mujoco"):
+    if method in PEERS:
         from . import peers
 
         return peers.make_peer(method, setting, case, **kw)
@@ -356,4 +356,8 @@ METHOD_LABELS = {
     "rod": "4 discretised rod+IPOPT",
     "pyelastica": "5a PyElastica (damped Cosserat)",
     "mujoco": "5b MuJoCo cable (damped)",
+    "mujoco-rod": "5c MuJoCo 4 rod: 1D flex, discrete elastic rod (damped)",
 }
+
+#: the dynamic peers (bench/methods/peers.py), relaxed to rest by damped time stepping
+PEERS = ("pyelastica", "mujoco", "mujoco-rod")

@@ -10,7 +10,7 @@ import numpy as np
 from dlo_ros.model.problem import GripPose
 
 from bench.common import Case, asym_case, elastica_case, heavy_case, loads_case, max_error, twist_case
-from bench.methods.runners import METHOD_LABELS, ORDERS, SEGMENTS, make_runner
+from bench.methods.runners import METHOD_LABELS, ORDERS, PEERS, SEGMENTS, make_runner
 from bench.suite.references import reference, reference_for
 
 
@@ -36,6 +36,8 @@ def settings(case: Case, quick: bool, methods=None) -> list[tuple[str, object]]:
     out += [("pyelastica", n) for n in peers]
     if case.planar:
         out += [("mujoco", n) for n in peers]
+        # implicit in the rod's forces: N = 160 costs less than the cable's N = 40 (bench/methods/peers.py)
+        out += [("mujoco-rod", n) for n in (peers if quick else peers + (160,))]
     return [(m, n) for m, n in out if methods is None or m in methods]
 
 
@@ -63,14 +65,14 @@ def run_case(case: Case, quick: bool, log=print, bar=None, methods=None) -> dict
         row = {"case": case.name, "method": method, "setting": setting}
         try:
             kw = {}
-            if method in ("pyelastica", "mujoco"):
+            if method in PEERS:
                 kw = {"settle": 1e-4, "max_time": 20.0 if quick else 60.0}
             if method == "paper":
                 kw = {"time_limit": 30.0 if quick else 60.0}
             runner = make_runner(method, setting, case, **kw)
             row["build_s"] = runner.build_time_s
             ref_pts = reference_for(method, ref)
-            repeats = 1 if method in ("paper", "pyelastica", "mujoco") else 3
+            repeats = 1 if method == "paper" or method in PEERS else 3
             cold = [runner.cold(case.problem) for _ in range(repeats)]
             c = cold[-1]
             row.update(cold_ok=c.ok, cold_s=statistics.median(o.time_s for o in cold), cold_iter=c.iterations,
@@ -90,7 +92,7 @@ def run_case(case: Case, quick: bool, log=print, bar=None, methods=None) -> dict
                            warm_msg=w.message)
             else:
                 row.update(warm_ok=False, warm_s=np.nan, warm_err=np.nan, warm_msg="pre-target solve failed")
-            if method in ("pyelastica", "mujoco"):
+            if method in PEERS:
                 row["peer"] = {k: (float(v) if isinstance(v, (int, float, np.floating)) else v) for k, v in c.extra.items()}
         except ImportError as exc:
             row.update(error=f"not installed: {exc}")

@@ -1,9 +1,9 @@
 """How the dynamic peers' settings were chosen (and where their time steps blow up).
 
 On the chord-0.6L elastica with N = 20 segments, each knob is swept with the others at their defaults:
-time-step factor ``cfl`` (PyElastica dt = cfl·(L/N)/√(EA/m'); MuJoCo dt = cfl·2/ω_max with ω_max the
-one-segment bending frequency), damping ratio ``zeta`` (ν = ζ·2ω₁ for PyElastica's velocity damper; the
-joints' damping for MuJoCo), the rod radius (PyElastica: EA/EI = 4/r², the stretch error and the axial
+time-step factor ``cfl`` (PyElastica dt = cfl·(L/N)/√(EA/m'); MuJoCo's cable dt = cfl·2/ω_max with ω_max
+the one-segment bending frequency; MuJoCo 4's rod dt = cfl/(N ω₁)), damping ratio ``zeta`` (ν = ζ·2ω₁ for
+PyElastica's velocity damper; the joints' damping for MuJoCo's cable; every vertex's for its rod), the rod radius (PyElastica: EA/EI = 4/r², the stretch error and the axial
 wave speed), and the rest tolerance ``settle``.  Reported: time to rest, simulated time, steps, error.
 The fastest setting that keeps the error at the discretisation floor (≈ 2.5e-2 L at N = 20, first order
 in L/N because both clamp a whole end segment) is what bench/methods/peers.py uses.
@@ -20,6 +20,7 @@ KNOBS = {
                    "radius": [0.005, 0.002, 0.001], "settle": [1e-3, 1e-4, 1e-5]},
     "mujoco": {"cfl": [0.25, 0.5, 0.9, 1.5, 3.0], "zeta": [0.25, 0.5, 1.0, 2.0, 4.0],
                "settle": [1e-3, 1e-4, 1e-5]},
+    "mujoco-rod": {"cfl": [0.75, 1.5, 3.0, 6.0, 12.0], "zeta": [0.5, 1.0, 2.0, 4.0], "settle": [1e-3, 1e-4, 1e-5]},
 }
 
 

@@ -5,12 +5,13 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.methods.runners import METHOD_LABELS
+from bench.methods.runners import METHOD_LABELS, PEERS
 
 COLORS = {"paper": "#000000", "fourier": "#1f77b4", "fourier-3d": "#17becf", "fourier-3d-z": "#bcbd22", "default": "#d62728", "default-planar": "#ff7f0e",
-          "rod": "#2ca02c", "pyelastica": "#9467bd", "mujoco": "#8c564b"}
+          "rod": "#2ca02c", "pyelastica": "#9467bd", "mujoco": "#8c564b",
+          "mujoco-rod": "#e377c2"}
 MARKERS = {"paper": "*", "fourier": "s", "fourier-3d": "x", "fourier-3d-z": "+", "default": "o", "default-planar": "D", "rod": "^", "pyelastica": "v",
-           "mujoco": "P"}
+           "mujoco": "P", "mujoco-rod": "X"}
 
 
 def _plt():
@@ -99,7 +100,7 @@ def pareto_table(result: dict, marks=None) -> str:
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result["rows"]:
         note = r.get("error") or ("" if r.get("cold_ok") else str(r.get("cold_msg", ""))[:60])
-        if r["method"] in ("pyelastica", "mujoco") and "peer" in r:
+        if r["method"] in PEERS and "peer" in r:
             pe = r["peer"]
             note = (note + " " if note else "") + f"dt {pe.get('dt', np.nan):.1e} s, {int(pe.get('steps', 0))} steps"
         lines.append(

@@ -1,6 +1,7 @@
 """Issue 5: the speed-vs-accuracy benchmark, the stability map and the paper's examples, in one command.
 
     bash scripts/dlo-env run pip install -r requirements-bench.txt      # once: matplotlib, tqdm, pyelastica, mujoco
+    bash scripts/dlo-env run pip install --no-deps --target .bench-mujoco4 -r requirements-bench-mujoco4.txt   # once: MuJoCo 4
     bash scripts/dlo-env run python bench/suite/run_all.py [--quick] [--only pareto,stability,paper]
     bash scripts/dlo-env run python bench/suite/run_all.py --methods fourier-3d-z   # re-run some rows, merge into raw.json
 

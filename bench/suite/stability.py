@@ -30,13 +30,13 @@ from dlo_ros.model.problem import GripPose
 from bench.common import Case, elastica_case, heavy_case, make_problem, max_error, table, twist_case
 from bench.methods.planar import PlanarRod
 from bench.methods.rod3d import Rod3D
-from bench.methods.runners import make_runner, twisted_problem
+from bench.methods.runners import PEERS, make_runner, twisted_problem
 from bench.suite.references import elastica_points
 
 TOL = 0.05
 
 PLANAR_METHODS = [("paper", 10), ("fourier", 10), ("fourier", 16), ("fourier-3d", 16), ("fourier-3d-z", 16), ("default", 16), ("default-planar", 16),
-                  ("rod", 80), ("pyelastica", 20), ("mujoco", 20)]
+                  ("rod", 80), ("pyelastica", 20), ("mujoco", 20), ("mujoco-rod", 20)]
 TWIST_METHODS = [("paper", 10), ("fourier", 10), ("fourier", 16), ("default", 16), ("rod", 40), ("pyelastica", 20)]
 
 
@@ -200,7 +200,7 @@ def _cell(out, ref, align, mirror=True) -> dict:
 
 
 def _run_method(sweep, method, setting, vals, refs, quick) -> list[dict]:
-    peer = method in ("pyelastica", "mujoco")
+    peer = method in PEERS
     peer_kw = {"settle": 1e-4, "max_time": 10.0 if quick else 30.0}
     nm_kw = {"time_limit": 15.0 if quick else 20.0}
     kw = peer_kw if peer else nm_kw if method == "paper" else {}

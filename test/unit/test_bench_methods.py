@@ -107,6 +107,20 @@ def test_mujoco_cable_settles_near_the_elastica():
     assert max_error(out.points, elastica_points(0.6), True) < 0.05  # first order in L/N: measured ≈ 2.5e-2
 
 
+def test_mujoco4_rod_settles_near_the_elastica_and_converges():
+    from bench.methods.peers import MUJOCO4_DIR, MuJoCoRodRunner
+
+    if not (MUJOCO4_DIR / "mujoco").is_dir():
+        pytest.skip("mujoco-core 4 is not installed (requirements-bench-mujoco4.txt)")
+    case = elastica_case(0.6)
+    errors = []
+    for n in (20, 80):
+        out = MuJoCoRodRunner(case, n, settle=1e-4, max_time=30).cold(case.problem)
+        assert out.ok, out.message
+        errors.append(max_error(out.points, elastica_points(0.6), True))
+    assert errors[0] < 0.05 and errors[1] < errors[0] / 3  # first order in L/N (a clamped end segment)
+
+
 def test_pyelastica_settles_near_the_elastica():
     pytest.importorskip("elastica")
     from bench.methods.peers import PyElasticaRunner

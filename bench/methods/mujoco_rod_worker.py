@@ -12,14 +12,16 @@ qpos0 is straight (MuJoCo keeps the bending of qpos0 as the rest curvature), lai
 along its tangent; ``<pin id="0 1"/>`` clamps the first edge there (``id="0"`` for a pin).  The far end's
 vertices are held at their targets by connect equalities between sites (the last two for a clamp).  The
 run starts from the job's polyline (qpos), with the weight per length as gravity on a line density of
-1 kg/m, point loads as forces on the nearest vertex (a moment as a couple on the two vertices of its
-edge), planes as plane geoms, and damps every vertex's motion (dof damping c = 2 ζ ω₁ m_vertex) until
+1 kg/m (the flexcomp's mass is spread evenly over its N + 1 points, so the job asks for L (N + 1)/N),
+point loads as forces on the nearest vertex (a moment as two couples, one on each edge at that vertex),
+planes as plane geoms, no self-collision (at N = 160 the capsules of elements two apart overlap), and damps every vertex's motion (dof damping c = 2 ζ ω₁ m_vertex) until
 the largest vertex speed is below ``v_tol`` after ``t_min``.  Integrator: ``discrete`` with the Newton
 solver (MuJoCo's advice for rods: bending and torsion implicit).
 """
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 
@@ -38,8 +40,8 @@ def build(job: dict):
     straight = start + np.outer(np.arange(n + 1) * dl, tangent)
     pts = " ".join(f"{v:.15g}" for v in straight.ravel())
     elements = " ".join(f"{i} {i + 1}" for i in range(n))
-    pins = "0 1" if job["left"] == "clamp" else "0"
-    held = [n - 1, n] if job["right"] == "clamp" else [n]
+    pins = "0" if job["left"] == "pin" else "0 1"  # a clamp or a tangent grip holds the first edge's direction
+    held = [n] if job["right"] == "pin" else [n - 1, n]
     r = float(job["radius"])
     planes = "".join(
         f'<geom type="plane" size="5 5 0.1" pos="{p[0] - r * q[0]:.15g} {p[1] - r * q[1]:.15g} {p[2] - r * q[2]:.15g}" '
@@ -53,7 +55,7 @@ def build(job: dict):
 <worldbody>{planes}{targets}
 <flexcomp name="rod" type="direct" dim="1" point="{pts}" element="{elements}" radius="{r:.8g}" mass="{job['mass']:.15g}">
  <edge equality="true" solref="{job['constraint_time']:.8g} 1" solimp="{job['impedance']} {job['impedance']} 0.001 0.5 2"/><elasticity young="{job['young']:.10g}" poisson="{job['poisson']:.10g}"/>
- <contact condim="1" solref="{job['contact_time']:.6g} 1"/><pin id="{pins}"/>
+ <contact condim="1" selfcollide="none" solref="{job['contact_time']:.6g} 1"/><pin id="{pins}"/>
 </flexcomp></worldbody></mujoco>"""
     spec = mujoco.MjSpec.from_string(xml)
     imp = [job["impedance"], job["impedance"], 0.001, 0.5, 2.0]  # near-hard
@@ -103,14 +105,15 @@ def relax(job: dict) -> dict:
             for k, f, m in loads:
                 if k in vertex_bodies:
                     data.xfrc_applied[vertex_bodies[k], :3] += f
-                if np.any(m):  # a couple on the edge (k, k+1) with moment m (its part normal to the edge)
+                if np.any(m):  # half the moment on each edge at vertex k, as a couple (its part normal to the edge)
                     pos = vertex_positions(data, vertex_bodies, straight) if pos is None else pos
-                    j = min(k, n - 1)
-                    e = pos[j + 1] - pos[j]
-                    couple = np.cross(m, e) / float(e @ e)
-                    for idx, sign in ((j + 1, 1.0), (j, -1.0)):
-                        if idx in vertex_bodies:
-                            data.xfrc_applied[vertex_bodies[idx], :3] += sign * couple
+                    edges = [j for j in (k - 1, k) if 0 <= j < n]
+                    for j in edges:
+                        e = pos[j + 1] - pos[j]
+                        couple = np.cross(m / len(edges), e) / float(e @ e)
+                        for idx, sign in ((j + 1, 1.0), (j, -1.0)):
+                            if idx in vertex_bodies:
+                                data.xfrc_applied[vertex_bodies[idx], :3] += sign * couple
             mujoco.mj_step(model, data)
         steps += check
         v = float(np.abs(data.qvel[slide]).max())
@@ -129,6 +132,9 @@ def relax(job: dict) -> dict:
 
 
 def main() -> None:
+    # the answers get their own descriptor; fd 1 (where MuJoCo's C library may print) goes to stderr
+    answers = os.fdopen(os.dup(1), "w")
+    os.dup2(2, 1)
     for line in sys.stdin:
         if not line.strip():
             continue
@@ -136,8 +142,8 @@ def main() -> None:
             answer = relax(json.loads(line))
         except Exception as exc:  # noqa: BLE001 - reported to the parent, which records it as the method's error
             answer = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        sys.stdout.write(json.dumps(answer) + "\n")
-        sys.stdout.flush()
+        answers.write(json.dumps(answer) + "\n")
+        answers.flush()
 
 
 if __name__ == "__main__":

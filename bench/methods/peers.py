@@ -1,6 +1,7 @@
-"""The dynamic peers robotics users reach for (method 5): PyElastica and MuJoCo's cable, relaxed to rest.
+"""The dynamic peers robotics users reach for (method 5): PyElastica, MuJoCo 3's cable and MuJoCo 4's rod
+(``MuJoCoRodRunner``, whose docstring and worker module say how it differs), relaxed to rest.
 
-Both start from the same feasible buckled polyline (N segments of exact length L/N, the end segments
+All three start from the same feasible buckled polyline (N segments of exact length L/N, the end segments
 along the clamps, the far end on its target — the peers clamp by fixing the first/last *segment*, their
 standard usage, which is first order in L/N), hold both ends, add weight/loads/table, and integrate
 damped dynamics until the largest node speed falls below ``settle`` · L · ω₁ (ω₁ = 22.4 √(Rf/m')/L², the
@@ -337,19 +338,20 @@ class MuJoCoRodRunner(PeerRunner):
     Line density 1 kg/m (mass scaling, as for the other peers); every vertex damped at ζ of the first
     mode (c = ζ · 2 ω₁ per unit mass); dt = cfl / (N ω₁).  The integrator is implicit in the rod's forces,
     so no segment mode bounds the step; what does is inextensibility.  MuJoCo's equality constraints are
-    soft (impedance at most 0.9999, time constant 2 dt), and the edges give way by about N² dt² in all: on
-    the chord-0.6 elastica, dt = 0.2/ω₁ shortened the rod by 2.3 % at N = 160 (error 0.13 L), and
-    cfl = 3 keeps it within 0.1 % at N = 40–160.  At N = 320 the twist of the edges next to the held far
-    end blew up at every dt tried below 0.004 s, so the bench stops at N = 160."""
+    soft (impedance at most 0.9999, time constant 2 dt), and the rod shortens by about N² dt² in all,
+    which moves the buckled shape several times as much: on the chord-0.6 elastica at N = 320, cfl 6 /
+    3 / 1.5 shortened it by 0.18 / 0.05 / 0.01 % with errors 3.5e-2 / 8.7e-3 / 1.9e-3 L; cfl 1.5 leaves the
+    first-order discretisation error in charge up to N = 160."""
 
-    def __init__(self, case: Case, segments: int, radius: float = 0.005, zeta: float = 1.0, cfl: float = 3.0, **kw):
+    def __init__(self, case: Case, segments: int, radius: float = 0.005, zeta: float = 1.0, cfl: float = 1.5, **kw):
         super().__init__(case, segments, **kw)
         if not (MUJOCO4_DIR / "mujoco").is_dir():
             raise ImportError(f"mujoco-core 4 is not installed in {MUJOCO4_DIR} (see requirements-bench-mujoco4.txt)")
         if not case.planar and case.tau:
             raise NotImplementedError("the twisted case: the far end's turn is not held by the position equalities")
         self.radius, self.zeta, self.cfl = radius, zeta, cfl
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(MUJOCO4_DIR), os.environ.get("PYTHONPATH", "")]))
+        path = [str(MUJOCO4_DIR)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(path))
         self._worker = subprocess.Popen([sys.executable, "-u", str(Path(__file__).with_name("mujoco_rod_worker.py"))],
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
         weakref.finalize(self, _stop_worker, self._worker)
@@ -381,7 +383,7 @@ class MuJoCoRodRunner(PeerRunner):
         dl = L / N
         loads = [(min(int(round(ld.s / dl)), N), list(ld.force), list(ld.moment)) for ld in problem.loads]
         return {"nodes": nodes.tolist(), "segment": dl, "left": modes["left"], "right": modes["right"], "radius": r,
-                "young": E, "poisson": min(max(Rf / Rt - 1.0, 0.0), 0.49) if Rt > 0 else 0.49, "mass": L,
+                "young": E, "poisson": min(max(Rf / Rt - 1.0, 0.0), 0.49) if Rt > 0 else 0.49, "mass": L * (N + 1) / N,
                 "gravity": list(problem.gravity_unit * D), "planes": [(list(ob.point), list(ob.normal)) for ob in problem.obstacles],
                 "loads": loads, "dt": dt, "damping_per_mass": self.zeta * 2 * w1, "contact_time": 2 * dt, "impedance": 0.9999, "constraint_time": 2 * dt,
                 "check_every": max(1, int(0.02 / (w1 * dt))), "v_tol": self.settle * L * w1, "v_max": 1e3 * L * w1,

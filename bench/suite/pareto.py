@@ -36,8 +36,8 @@ def settings(case: Case, quick: bool, methods=None) -> list[tuple[str, object]]:
     out += [("pyelastica", n) for n in peers]
     if case.planar:
         out += [("mujoco", n) for n in peers]
-        # implicit in the rod's forces: N = 160 costs less than the cable's N = 40 (bench/methods/peers.py)
-        out += [("mujoco-rod", n) for n in (peers if quick else peers + (160,))]
+        # implicit in the rod's forces: N = 320 costs less than the cable's N = 40 (bench/methods/peers.py)
+        out += [("mujoco-rod", n) for n in (peers if quick else peers + (160, 320))]
     return [(m, n) for m, n in out if methods is None or m in methods]
 
 

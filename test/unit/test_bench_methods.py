@@ -13,7 +13,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from bench.common import S_OUT, elastica_case, max_error, rotation_about_x, twist_case  # noqa: E402
+from bench.common import (S_OUT, elastica_case, heavy_case, loads_case, max_error, rotation_about_x,  # noqa: E402
+                          twist_case)
 from bench.methods.nlp_tools import augmented_lagrangian_nm  # noqa: E402
 from bench.methods.peers import initial_polyline  # noqa: E402
 from bench.methods.planar import PlanarRitz, PlanarRod  # noqa: E402
@@ -119,6 +120,21 @@ def test_mujoco4_rod_settles_near_the_elastica_and_converges():
         assert out.ok, out.message
         errors.append(max_error(out.points, elastica_points(0.6), True))
     assert errors[0] < 0.05 and errors[1] < errors[0] / 3  # first order in L/N (a clamped end segment)
+
+
+@pytest.mark.parametrize("make_case", [loads_case, heavy_case], ids=["point_loads", "heavy_table"])
+def test_mujoco4_rod_carries_loads_weight_and_table_contact(make_case):
+    """Against the bench's discretised rod with IPOPT (N = 160, second order): a lost load or a couple of the
+    wrong sign moves the shape by far more than the peer's first-order error (a couple's sign: caught)."""
+    from bench.methods.peers import MUJOCO4_DIR, MuJoCoRodRunner
+
+    if not (MUJOCO4_DIR / "mujoco").is_dir():
+        pytest.skip("mujoco-core 4 is not installed (requirements-bench-mujoco4.txt)")
+    case = make_case()
+    reference, _ = PlanarRod(case.problem, 160).cold(case.problem)
+    out = MuJoCoRodRunner(case, 80, settle=1e-4, max_time=30).cold(case.problem)
+    assert reference.ok and out.ok, out.message
+    assert max_error(out.points, reference.points, mirror=True) < 0.015  # measured 4.8e-3 / 9.2e-3 at N = 80
 
 
 def test_pyelastica_settles_near_the_elastica():

@@ -43,6 +43,11 @@ def twisted_problem(case: Case, tau: float, problem=None):
     return problem.with_grip_poses({"right": GripPose(right.pose.position, quat_twisted(beta, tau))})
 
 
+#: the paper's 3D model: Euler angles in one Ritz basis (SolverOptions' defaults are the director model,
+#: which has no basis and no frame: without these the Fourier rows silently ran the default)
+EULER_3D = {"model": "full", "rotation": "euler"}
+
+
 class _Runner:
     label = ""
 
@@ -191,7 +196,7 @@ class Paper3DRunner(_Runner):
     def __init__(self, case: Case, order: int = 10, time_limit: float = NM_TIME_LIMIT):
         self.case = case
         t0 = time.perf_counter()
-        self.helper = ShapeSolver(case.problem, SolverOptions(basis="fourier", order=order, frame="paper"), compile="off")
+        self.helper = ShapeSolver(case.problem, SolverOptions(basis="fourier", order=order, frame="paper", **EULER_3D), compile="off")
         import casadi as ca
 
         nlp = self.helper.nlp
@@ -325,12 +330,12 @@ def make_runner(method: str, setting, case: Case, **kw) -> _Runner:
     if method == "fourier":
         if case.planar:
             return PlanarRunner(case, PlanarRitz(case.problem, "fourier", int(setting)))
-        return ShapeSolverRunner(case, SolverOptions(basis="fourier", order=int(setting), frame="paper", output_points=101))
+        return ShapeSolverRunner(case, SolverOptions(basis="fourier", order=int(setting), frame="paper", output_points=101, **EULER_3D))
     if method == "fourier-3d":  # Euler angles in the paper's frame, full 3D model, also on planar cases
-        return ShapeSolverRunner(case, SolverOptions(basis="fourier", order=int(setting), frame="paper", output_points=101))
+        return ShapeSolverRunner(case, SolverOptions(basis="fourier", order=int(setting), frame="paper", output_points=101, **EULER_3D))
     if method == "fourier-3d-z":  # the same, with the scene turned so the chord runs along z (the paper's geometry)
         return RotatedRunner(case, lambda c: ShapeSolverRunner(
-            c, SolverOptions(basis="fourier", order=int(setting), frame="paper", output_points=101)))
+            c, SolverOptions(basis="fourier", order=int(setting), frame="paper", output_points=101, **EULER_3D)))
     if method == "default":
         return ShapeSolverRunner(case, SolverOptions(order=int(setting), output_points=101), **kw)
     if method == "default-planar":

@@ -149,3 +149,20 @@ def test_pyelastica_settles_near_the_elastica():
 
 
 assert S_OUT[0] == 0.0
+
+
+def test_the_euler_rows_run_the_papers_model_and_the_default_rows_the_director_model():
+    """SolverOptions' defaults are the director model, which has no basis and no frame: the Fourier rows
+    must ask for Euler angles, or they silently run the default (as they did until the 2026-12-03 run)."""
+    from dlo_ros.model.director import DirectorModel
+    from dlo_ros.model.ritz import RitzModel
+
+    from bench.methods.runners import make_runner
+
+    for method in ("fourier-3d", "fourier-3d-z"):
+        runner = make_runner(method, 8, elastica_case(0.6))
+        solver = getattr(runner, "solver", None) or runner.inner.solver
+        assert isinstance(solver.nlp.model, RitzModel) and solver.nlp.model.basis.name == "fourier", method
+    assert isinstance(make_runner("fourier", 8, twist_case()).solver.nlp.model, RitzModel)
+    assert isinstance(make_runner("paper", 10, twist_case()).helper.nlp.model, RitzModel)
+    assert isinstance(make_runner("default", 8, elastica_case(0.6)).solver.nlp.model, DirectorModel)

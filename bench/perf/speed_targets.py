@@ -1,6 +1,6 @@
 """Issue #14's figures in one command: run every speed benchmark, then set each target beside its measurement.
 
-    bash scripts/dlo-env run python bench/perf/speed_targets.py               # about 20 min: every step, the table
+    bash scripts/dlo-env run python bench/perf/speed_targets.py               # about 8 min: every step, the table
     bash scripts/dlo-env run python bench/perf/speed_targets.py --skip-suite  # the same, the rod comparison as it is
     bash scripts/dlo-env run python bench/perf/speed_targets.py --table-only  # the table from the files as they are
 
@@ -280,7 +280,7 @@ def report(found: list[Figure], done: list[tuple[Step, float, int]], info: dict)
     lines += [f"| {f.figure} | {f.target} | {f.measured} | {'yes' if f.met else 'no'} | {f.source} |" for f in found]
     if done:
         lines += ["", "Steps of this run:", "", "| step | minutes | exit |", "|---|---:|---:|"]
-        lines += [f"| `{s.script} {' '.join(s.args).replace('{out}', s.out)}` | {dt / 60:.1f} | {code} |"
+        lines += [f"| `{s.script} {' '.join(s.args).replace('{out}', f'bench/results/{s.out}')}` | {dt / 60:.1f} | {code} |"
                   for s, dt, code in done]
     return lines
 

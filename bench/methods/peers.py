@@ -32,6 +32,7 @@ import sys
 import time
 import weakref
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -79,6 +80,19 @@ def initial_polyline(problem, N: int, tau: float = 0.0, sag_sign: float | None =
     return nodes, frames
 
 
+class RodConstants(NamedTuple):
+    """What every peer derives from the string (SI units; E and G in Pa for the peer's radius r)."""
+
+    L: float
+    N: int
+    r: float
+    Rf: float
+    Rt: float
+    D: float
+    E: float
+    G: float
+
+
 class PeerRunner:
     """Common bookkeeping: cold = relax from the buckled polyline; warm = relax from the previous
     equilibrium with the far end moved (the old shape stretched affinely along the chord)."""
@@ -91,6 +105,15 @@ class PeerRunner:
     def cold(self, problem) -> Outcome:
         nodes, frames = initial_polyline(problem, self.N, self.case.tau)
         return self._relax(problem, nodes, frames)
+
+    def _constants(self, problem) -> "RodConstants":
+        """The string's length, largest stiffnesses and weight, this peer's segments and radius, and the
+        circular section's moduli that give Rf = E π r⁴/4 and Rt = G π r⁴/2 (G = E/3 where Rt = 0)."""
+        st, r = problem.string, self.radius
+        Rf, Rt = float(st.bend_stiffness.maximum), float(st.twist_stiffness.maximum)
+        E = 4 * Rf / (np.pi * r**4)
+        G = 2 * Rt / (np.pi * r**4) if Rt > 0 else E / 3
+        return RodConstants(st.length, self.N, r, Rf, Rt, float(st.weight_per_length.maximum), E, G)
 
     def warm(self, problem) -> Outcome:
         """Planar cases: the previous equilibrium's segment angles, re-projected (Gauss–Newton, exact segment
@@ -119,14 +142,8 @@ class PyElasticaRunner(PeerRunner):
     def _relax(self, problem, nodes, frames, max_time=None) -> Outcome:
         import elastica as ea
 
-        st = problem.string
-        L, N, r = st.length, self.N, self.radius
-        Rf = float(st.bend_stiffness.maximum)
-        Rt = float(st.twist_stiffness.maximum)
-        D = float(st.weight_per_length.maximum)
+        L, N, r, Rf, Rt, D, E, G = self._constants(problem)
         area = np.pi * r**2
-        E = 4 * Rf / (np.pi * r**4)
-        G = 2 * Rt / (np.pi * r**4) if Rt > 0 else E / 3
         density = 1.0 / area  # m' = 1 kg/m
         dl = L / N
         dt = self.cfl * dl / np.sqrt(E * area / 1.0)
@@ -229,13 +246,7 @@ class MuJoCoRunner(PeerRunner):
     def _model(self, problem, nodes, frames):
         import mujoco
 
-        st = problem.string
-        L, N, r = st.length, self.N, self.radius
-        Rf = float(st.bend_stiffness.maximum)
-        Rt = float(st.twist_stiffness.maximum)
-        D = float(st.weight_per_length.maximum)
-        E = 4 * Rf / (np.pi * r**4)
-        G = 2 * Rt / (np.pi * r**4) if Rt > 0 else E / 3
+        L, N, r, Rf, Rt, D, E, G = self._constants(problem)
         dl = L / N
         # capsules overlap by their caps: density such that m' = 1 kg/m including the caps
         density = 1.0 / (np.pi * r**2 + (4.0 / 3.0) * np.pi * r**3 / dl)
@@ -371,12 +382,7 @@ class MuJoCoRodRunner(PeerRunner):
         return json.loads(line)
 
     def _job(self, problem, nodes, frames, max_time=None) -> dict:
-        st = problem.string
-        L, N, r = st.length, self.N, self.radius
-        Rf = float(st.bend_stiffness.maximum)
-        Rt = float(st.twist_stiffness.maximum)
-        D = float(st.weight_per_length.maximum)
-        E = 4 * Rf / (np.pi * r**4)
+        L, N, r, Rf, Rt, D, E, _ = self._constants(problem)
         w1 = OMEGA1 * np.sqrt(Rf) / L**2
         dt = self.cfl / (N * w1)
         modes = {g.name: g.mode for g in problem.grips}

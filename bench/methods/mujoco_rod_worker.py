@@ -6,16 +6,17 @@ mujoco 3.17 for that peer and runs this one in its own process, with mujoco-core
 imports only numpy and mujoco.  Protocol: one JSON job per stdin line, one JSON answer per stdout line.
 
 The rod: N + 1 vertices, ``<edge equality="true"/>`` (inextensible: near-hard, impedance 0.9999, as the
-far end's equalities; MuJoCo's default is far too soft for a line density of 1 kg/m), ``<elasticity young poisson>``
-with a circular section of the flex radius (bending E I, torsion G J).  Its reference configuration
+far end's equalities; MuJoCo's default is far too soft for a line density of 1 kg/m),
+``<elasticity young poisson>`` with a circular section of the flex radius (bending E I, torsion G J).  Its reference configuration
 qpos0 is straight (MuJoCo keeps the bending of qpos0 as the rest curvature), laid from the left grip
 along its tangent; ``<pin id="0 1"/>`` clamps the first edge there (``id="0"`` for a pin).  The far end's
 vertices are held at their targets by connect equalities between sites (the last two for a clamp).  The
 run starts from the job's polyline (qpos), with the weight per length as gravity on a line density of
 1 kg/m (the flexcomp's mass is spread evenly over its N + 1 points, so the job asks for L (N + 1)/N),
 point loads as forces on the nearest vertex (a moment as two couples, one on each edge at that vertex),
-planes as plane geoms, no self-collision (at N = 160 the capsules of elements two apart overlap), and damps every vertex's motion (dof damping c = 2 ζ ω₁ m_vertex) until
-the largest vertex speed is below ``v_tol`` after ``t_min``.  Integrator: ``discrete`` with the Newton
+planes as plane geoms, no self-collision (at N = 160 the capsules of elements two apart overlap), and
+damps every vertex's motion (dof damping c = 2 ζ ω₁ m_vertex) until the largest vertex speed is below
+``v_tol`` after ``t_min``.  Integrator: ``discrete`` with the Newton
 solver (MuJoCo's advice for rods: bending and torsion implicit).
 """
 from __future__ import annotations
@@ -51,7 +52,7 @@ def build(job: dict):
                       for k in held)
     g = job["gravity"]
     xml = f"""<mujoco><option timestep="{job['dt']:.8g}" gravity="{g[0]:.15g} {g[1]:.15g} {g[2]:.15g}"
- integrator="discrete" solver="Newton"><flag refsafe="disable"/></option>
+ integrator="discrete" solver="Newton"/>
 <worldbody>{planes}{targets}
 <flexcomp name="rod" type="direct" dim="1" point="{pts}" element="{elements}" radius="{r:.8g}" mass="{job['mass']:.15g}">
  <edge equality="true" solref="{job['constraint_time']:.8g} 1" solimp="{job['impedance']} {job['impedance']} 0.001 0.5 2"/><elasticity young="{job['young']:.10g}" poisson="{job['poisson']:.10g}"/>
@@ -87,8 +88,9 @@ def vertex_positions(data, vertex_bodies: dict, straight: np.ndarray) -> np.ndar
 def relax(job: dict) -> dict:
     """Relax the rod of ``job`` (nodes, segment, left/right grip modes, radius, young, poisson, mass,
     gravity, planes [(point, normal)], loads [(vertex, force, moment)], dt, damping_per_mass,
-    contact_time, check_every, v_tol, v_max, t_min, max_time) and return its vertices, whether it settled, a message, the
-    wall time (model build included, as for the cable peer), the steps and the simulated time."""
+    contact_time, impedance, constraint_time, check_every, v_tol, v_max, t_min, max_time) and return its
+    vertices, whether it settled, a message, the wall time (model build included, as for the cable peer),
+    the steps and the simulated time."""
     import mujoco
 
     t0 = time.perf_counter()

@@ -127,9 +127,9 @@ def _solver_for(problem: Problem, options: SolverOptions, compile: str,
 
     if options.model == "auto":
         try:
-            return build(replace(options, model="planar"))
+            return build(options.with_model("planar"))
         except ValueError:  # not a planar scene
-            return build(replace(options, model="full"))
+            return build(options.with_model("full"))
     return build(options)
 
 

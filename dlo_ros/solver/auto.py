@@ -328,11 +328,11 @@ class AutoShapeSolver:
             obstacles = tuple(problem.obstacles[i] for i in choice.obstacles)
             self._reduced_cache = (key, problem.string, problem.obstacles, st, obstacles)
         reduced = replace(problem, string=st, obstacles=obstacles)
-        opts = replace(self.options, model="planar" if choice.planar else "full", order=choice.order,
-                       quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
-                       obstacle_samples=choice.samples,
-                       self_contact_pairs=(self.options.self_contact_pairs or AUTO_SELF_CONTACT_PAIRS)
-                       if choice.self_contact else 0)
+        opts = self.options.with_model("planar" if choice.planar else "full", order=choice.order,
+                                       quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
+                                       obstacle_samples=choice.samples,
+                                       self_contact_pairs=(self.options.self_contact_pairs or AUTO_SELF_CONTACT_PAIRS)
+                                       if choice.self_contact else 0)
         return reduced, opts
 
     def _solver_for(self, choice: ModelChoice, problem: Problem, *, stream: bool, source: ShapeSolver | None = None,

@@ -1,7 +1,7 @@
 """Solver options (the ``solver`` section of a scene file)."""
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 FRAMES = ("auto", "paper")
 MODELS = ("auto", "full", "planar")
@@ -13,7 +13,9 @@ class SolverOptions:
     """How the Ritz NLP is built and solved.
 
     basis/order: Ritz basis ('chebyshev' default, or the paper's 'fourier') and number of functions
-    per field (for 'director': Legendre–Gauss–Lobatto nodes per element).  quadrature_nodes:
+    per field (for 'director': Legendre–Gauss–Lobatto nodes per element; the director model has no Ritz
+    basis, so model 'full' with rotation 'director' refuses 'fourier' and frame 'paper', which it would
+    ignore).  quadrature_nodes:
     Chebyshev–Lobatto nodes for the energy integrals and the centreline (for 'director': per element,
     at most order + 8).
     obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is
@@ -86,6 +88,12 @@ class SolverOptions:
             raise ValueError(f"solver.rotation: must be one of {ROTATIONS}, got {self.rotation!r}")
         if self.model == "planar" and self.frame != "auto":
             raise ValueError("solver.model: 'planar' needs solver.frame 'auto'")
+        if self.model == "full" and self.rotation == "director" and (self.basis != "chebyshev" or self.frame != "auto"):
+            # the director model has nodal elements and no singular frame: it would ignore both
+            name = "basis" if self.basis != "chebyshev" else "frame"
+            raise ValueError(f"solver.{name}: {getattr(self, name)!r} belongs to the Euler-angle model; the 3D model "
+                             "(solver.rotation 'director', the default) has neither a Ritz basis nor a reference frame: "
+                             "set solver.rotation 'euler' to use it")
         if not (self.error_tolerance >= 0 and self.error_tolerance < 1e3):
             raise ValueError(f"solver.error_tolerance: must be >= 0 m (0 = 1e-3·L), got {self.error_tolerance}")
         if not (1 <= self.recheck_every <= 100000):
@@ -99,6 +107,14 @@ class SolverOptions:
                              "(solver.model 'full' or 'auto', solver.rotation 'director')")
         if not (0 < self.max_strain < 10):
             raise ValueError("solver.max_strain: must be in (0, 10)")
+
+    def with_model(self, model: str, **changes) -> "SolverOptions":
+        """These options for the fixed ``model`` ('planar' or 'full') that auto or a fit builds from them: a
+        3D director model takes the default basis and frame, which it does not have (the scene's may be
+        meant for the planar model)."""
+        if model == "full" and self.rotation == "director":
+            changes = {"basis": "chebyshev", "frame": "auto", **changes}
+        return replace(self, model=model, **changes)
 
     @classmethod
     def from_dict(cls, d: dict) -> "SolverOptions":

@@ -375,3 +375,18 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
         np.testing.assert_allclose(answer.points, fresh.solve(q, commit=False).points, atol=1e-12)
     assert solver.solve(moved).ok  # the stream commits a new held shape
     query(q2)
+
+
+def test_a_fourier_basis_serves_the_planar_model_and_the_3d_model_uses_its_own_elements():
+    """solver.basis belongs to the planar (and Euler-angle) models: auto streams its planar model in that
+    basis, and when a target leaves the plane it builds the director model with its default options instead
+    of refusing them (SolverOptions.with_model); each result reports the basis its model used."""
+    opts = SolverOptions(basis="fourier", order=12)
+    solver = make_solver(clamped_pair(right=(0.7, 0, 0)), opts, compile="off", checks="sync")
+    planar = solver.solve()
+    assert planar.ok and planar.model.planar and planar.basis == "fourier"
+    out_of_plane = solver.solve({"right": ([0.6, 0.2, 0.1], [0, 0, 0, 1])})
+    assert out_of_plane.ok and not out_of_plane.model.planar, out_of_plane.message
+    assert out_of_plane.basis == "chebyshev"
+    assert opts.with_model("full").basis == "chebyshev" and opts.with_model("planar").basis == "fourier"
+    assert SolverOptions(basis="fourier", rotation="euler").with_model("full").basis == "fourier"

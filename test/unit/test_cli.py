@@ -95,11 +95,19 @@ def test_solve_json_is_strict_json(default_json):
 
 
 def test_solve_overrides():
-    done = run("solve", "elastica_clamped", "--json", "--points", "7", "--basis", "fourier", "--order", "16")
+    done = run("solve", "elastica_clamped", "--json", "--points", "7", "--basis", "fourier", "--order", "16",
+               "--model", "planar")
     assert done.returncode == 0, done.stderr
     out = json.loads(done.stdout)
     assert np.array(out["points"]).shape == (7, 3)
     assert (out["solver"]["basis"], out["solver"]["order"]) == ("fourier", 16)
+
+
+def test_a_basis_the_model_would_ignore_is_refused():
+    """--order implies --model full, the 3D director model, which has no Ritz basis: --basis fourier there
+    would be reported and silently not used."""
+    done = run("solve", "elastica_clamped", "--json", "--basis", "fourier", "--order", "16")
+    assert done.returncode == 2 and "--basis" in done.stderr and "rotation 'euler'" in done.stderr, done.stderr
 
 
 # ---- exit codes ----------------------------------------------------------------------------------------

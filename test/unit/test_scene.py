@@ -398,6 +398,8 @@ MALFORMED = [
     ("solver basis typo", "solver", {"basis": "chebychev"}, "solver.basis:"),
     ("solver basis a number", "solver", {"basis": 5}, "solver.basis:"),
     ("solver tolerance NaN", "solver", {"tolerance": float("nan")}, "solver.tolerance:"),
+    ("Fourier basis on the 3D director model", "solver", {"model": "full", "basis": "fourier"}, "solver.basis:"),
+    ("paper frame on the 3D director model", "solver", {"model": "full", "frame": "paper"}, "solver.frame:"),
     ("quadrature too coarse for the order", "solver", {"order": 50}, "solver.quadrature_nodes:"),
     ("solver not a mapping", "solver", [1, 2], "solver:"),
     ("name not a string", "name", 3, "name:"),
@@ -493,3 +495,10 @@ def test_unknown_key_in_file_reports_its_line(tmp_path):
         load_scene(path)
     assert str(info.value).startswith("string.stiffnes: unknown key")
     assert info.value.line == 5
+
+
+def test_euler_options_are_accepted_with_the_euler_model_and_where_a_planar_model_may_use_them():
+    """basis and frame belong to the Euler-angle (and planar) models: accepted with rotation 'euler' and with
+    model 'auto' (which may stream its planar model); refused only where nothing could use them."""
+    scene_from_dict(_set(minimal(), "solver", {"model": "full", "rotation": "euler", "basis": "fourier", "frame": "paper"}))
+    scene_from_dict(_set(minimal(), "solver", {"model": "auto", "basis": "fourier"}))

@@ -164,7 +164,8 @@ def test_straight_and_nearly_straight_targets_converge():
 
 
 def test_paper_frame_is_selectable_and_solves_a_bent_scene():
-    r = ShapeSolver(clamped_pair(right=(0.5, 0, 0)), SolverOptions(frame="paper", output_points=201)).solve()
+    r = ShapeSolver(clamped_pair(right=(0.5, 0, 0)),
+                    SolverOptions(frame="paper", model="full", rotation="euler", output_points=201)).solve()
     assert r.ok
     assert _elastica_errors(r, 0.5)[0] < 1e-4
 

@@ -33,7 +33,7 @@ import re
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -251,9 +251,12 @@ def stale(found: list[Figure], done: list[tuple[Step, float, int]], results: Pat
     """``found`` with every figure whose file this run did not write (its step failed, or the file is older
     than the run) marked not met and 'not re-measured'."""
     old = {s.out: code for s, _, code in done if code != 0 or (results / s.out).stat().st_mtime < since}
-    return [f if not any(f.source.startswith(name) or f", {name}" in f.source for name in old) else
-            Figure(f.figure, f.target, f"{f.measured} — not re-measured (step exited "
-                   f"{next(c for n, c in old.items() if n in f.source)})", False, f.source) for f in found]
+    marked = []
+    for f in found:
+        code = next((c for name, c in old.items() if f.source.startswith(name) or f", {name}" in f.source), None)
+        marked.append(f if code is None else
+                      replace(f, measured=f"{f.measured} — not re-measured (step exited {code})", met=False))
+    return marked
 
 
 def run_steps(steps, results: Path) -> list[tuple[Step, float, int]]:

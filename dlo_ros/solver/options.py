@@ -88,9 +88,9 @@ class SolverOptions:
             raise ValueError(f"solver.rotation: must be one of {ROTATIONS}, got {self.rotation!r}")
         if self.model == "planar" and self.frame != "auto":
             raise ValueError("solver.model: 'planar' needs solver.frame 'auto'")
-        if self.model == "full" and self.rotation == "director" and (self.basis != "chebyshev" or self.frame != "auto"):
-            # the director model has nodal elements and no singular frame: it would ignore both
-            name = "basis" if self.basis != "chebyshev" else "frame"
+        ignored = self._ignored_by_director()
+        if ignored:
+            name = ignored[0]
             raise ValueError(f"solver.{name}: {getattr(self, name)!r} belongs to the Euler-angle model; the 3D model "
                              "(solver.rotation 'director', the default) has neither a Ritz basis nor a reference frame: "
                              "set solver.rotation 'euler' to use it")
@@ -113,8 +113,15 @@ class SolverOptions:
         3D director model takes the default basis and frame, which it does not have (the scene's may be
         meant for the planar model)."""
         if model == "full" and self.rotation == "director":
-            changes = {"basis": "chebyshev", "frame": "auto", **changes}
+            changes = {"basis": SolverOptions.basis, "frame": SolverOptions.frame, **changes}
         return replace(self, model=model, **changes)
+
+    def _ignored_by_director(self) -> list[str]:
+        """The Euler-angle options set away from their defaults where the 3D director model is built (model
+        'full', rotation 'director'): it has nodal elements and no singular frame, and would ignore them."""
+        if self.model != "full" or self.rotation != "director":
+            return []
+        return [name for name in ("basis", "frame") if getattr(self, name) != getattr(SolverOptions, name)]
 
     @classmethod
     def from_dict(cls, d: dict) -> "SolverOptions":

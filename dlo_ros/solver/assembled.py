@@ -282,23 +282,29 @@ class AssembledKKT:
         return ca.sparsity_cast(blocks, ca.diagcat(*[ca.Sparsity.dense(3, 3)] * S))
 
     # ---- the KKT functions -------------------------------------------------------------------------
-    def kkt_free(self) -> ca.Function:
-        """``dlo_kkt_free``: (z, p, λ_free) → [K, r, ∇f, energies] as the flattened one of ``StringNLP``:
-        K = [∇²L Jᵀ; J 0] and r = [∇f + Jᵀλ; g] over the rows before the first inequality row."""
+    def kkt_free(self) -> tuple[ca.Function, ca.Function]:
+        """(``dlo_kkt_free``, ``dlo_residual_free``): (z, p, λ_free) → [K, r, ∇f, energies] as the flattened
+        one of ``StringNLP``, K = [∇²L Jᵀ; J 0] and r = [∇f + Jᵀλ; g] over the rows before the first
+        inequality row; and (z, p, λ_free) → r alone (the same expression, without K's products: a
+        fraction of the cost, for the chord steps of ``native_newton``)."""
         nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
         grad, hess, g, jac, grad_f, energies = self._system(z, p, lam, nf)
         kkt = ca.blockcat([[hess, jac.T], [jac, ca.MX(nf, nf)]])
-        return ca.Function("dlo_kkt_free", [z, p, lam], [ca.densify(kkt), ca.densify(ca.vertcat(grad, g)),
-                                                         ca.densify(grad_f), ca.densify(energies)])
+        residual = ca.densify(ca.vertcat(grad, g))
+        return (ca.Function("dlo_kkt_free", [z, p, lam], [ca.densify(kkt), residual, ca.densify(grad_f),
+                                                          ca.densify(energies)]),
+                ca.Function("dlo_residual_free", [z, p, lam], [residual]))
 
-    def kkt(self) -> ca.Function:
-        """``dlo_kkt``: (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every row, as ``StringNLP.kkt_fn``."""
+    def kkt(self) -> tuple[ca.Function, ca.Function]:
+        """(``dlo_kkt``, ``dlo_residual``): (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every row, as
+        ``StringNLP.kkt_fn``; and (z, p, λ) → [∇L; g] (the chord steps of ``native_newton.ActiveNewton``)."""
         nlp, n, rows = self.nlp, self.n, self.nlp.g_sym.shape[0]
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam", rows)
-        _, hess, g, jac, grad_f, energies = self._system(z, p, lam, rows)
-        return ca.Function("dlo_kkt", [z, p, lam], [ca.densify(grad_f), ca.densify(g), ca.densify(jac),
-                                                    ca.densify(hess), ca.densify(energies)])
+        grad, hess, g, jac, grad_f, energies = self._system(z, p, lam, rows)
+        return (ca.Function("dlo_kkt", [z, p, lam], [ca.densify(grad_f), ca.densify(g), ca.densify(jac),
+                                                     ca.densify(hess), ca.densify(energies)]),
+                ca.Function("dlo_residual", [z, p, lam], [ca.densify(ca.vertcat(grad, g))]))
 
     def inequality_g(self) -> ca.Function:
         """``dlo_obstacle_g``: (z, p) → the values of the rows after the free rows (folds, obstacles,

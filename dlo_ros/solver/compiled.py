@@ -182,18 +182,20 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
 COMPILER_LOCK = threading.Lock()
 
 
-def _generate(fn: ca.Function, tmp: str) -> bytes:
+def _generate(fn: ca.Function, tmp: str, also: tuple[ca.Function, ...] = ()) -> bytes:
     gen = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
-    gen.add(fn)
+    for f in (fn, *also):
+        gen.add(f)
     gen.generate(tmp + os.sep)
     return Path(tmp, f"{fn.name()}.c").read_bytes()
 
 
 def compiled(fn: ca.Function, flags: tuple[str, ...] = FLAGS, nice: int = 0, lib: Path | None = None,
-             extra_source: str = "") -> tuple[NativeFunction | InterpretedFunction, bool]:
+             extra_source: str = "", also: tuple[ca.Function, ...] = ()) -> tuple[NativeFunction | InterpretedFunction, bool]:
     """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
     ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``);
-    ``extra_source``: C appended to ``fn``'s (then ``lib`` must be a path keyed by it too).
+    ``extra_source``: C appended to ``fn``'s, ``also``: functions compiled into the same library (then
+    ``lib`` must be a path keyed by them too).
 
     ``FLAGS``: see there.
     ShapeSolver runs it niced in the background; the cache makes it once per scene structure and machine.
@@ -205,19 +207,19 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = FLAGS, nice: int = 0, lib
     lib = lib or library_path(fn, flags)
     if not lib.exists():
         with COMPILER_LOCK:  # one compiler at a time in this process
-            return _compile_locked(fn, cc, flags, nice, lib, name, extra_source)
+            return _compile_locked(fn, cc, flags, nice, lib, name, extra_source, also)
     return NativeFunction(lib, fn), True
 
 
 def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = FLAGS, nice: int = 0,
-                  extra_source: str = "") -> bool:
-    """Generate C for ``fn`` (plus ``extra_source`` appended to it), compile it to the shared object
+                  extra_source: str = "", also: tuple[ca.Function, ...] = ()) -> bool:
+    """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile it to the shared object
     ``lib`` and put it in place atomically (concurrent processes never load a half-written file); False
     if the compiler fails.  Callers hold COMPILER_LOCK."""
     lib.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         source = Path(tmp, f"{fn.name()}.c")
-        source.write_bytes(_generate(fn, tmp) + extra_source.encode())
+        source.write_bytes(_generate(fn, tmp, also) + extra_source.encode())
         tmp_lib = Path(tmp, lib.name)
         cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(source), "-lm"]
         if nice and shutil.which("nice"):
@@ -230,9 +232,9 @@ def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = 
     return True
 
 
-def _compile_locked(fn: ca.Function, cc: str, flags: tuple[str, ...], nice: int, lib: Path,
-                    name: str, extra_source: str = "") -> tuple[NativeFunction | InterpretedFunction, bool]:
+def _compile_locked(fn: ca.Function, cc: str, flags: tuple[str, ...], nice: int, lib: Path, name: str,
+                    extra_source: str = "", also: tuple[ca.Function, ...] = ()) -> tuple[NativeFunction | InterpretedFunction, bool]:
     # another thread may have built it while this one waited
-    if not lib.exists() and not build_library(fn, lib, cc, flags, nice, extra_source):
+    if not lib.exists() and not build_library(fn, lib, cc, flags, nice, extra_source, also):
         return InterpretedFunction(fn), False
     return NativeFunction(lib, fn), True

@@ -99,9 +99,11 @@ class NlpFunctions:
                 if self.retired:  # the scene was rebuilt: nothing more to compile for this one
                     return
                 nice = 10 if mode == "background" else 0
+                active = name == "kkt"  # with its active-set loop and the residual function that loop uses
                 native, ok = compiled(fn, nice=nice, lib=lib,
-                                      extra_source=native_newton.active_source(fn) if name == "kkt" else "")
-                loop = native_newton.build(fn, *self._sizes(), nice=nice, kkt_lib=lib) if ok and name == "kkt_free" \
+                                      extra_source=native_newton.active_source(fn, nlp.residual_fn) if active else "",
+                                      also=(nlp.residual_fn,) if active else ())
+                loop = native_newton.build(fn, self.nlp.residual_free_fn, *self._sizes(), nice=nice, kkt_lib=lib) if ok and name == "kkt_free" \
                     else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile

@@ -1,20 +1,27 @@
-"""A contact-free warm update as one compiled call: the Newton loop in C around the compiled KKT function.
+"""A contact-free warm update as one compiled call: chord Newton steps in C around the compiled KKT function.
 
-``newton.newton_free`` takes its first ``NEWTON_STEPS`` steps in one CasADi call and every further step
-in Python.  Here the whole loop is one C function, compiled together with the generated code of
-``StringNLP.kkt_free_fn``: from u = [z; λ_free] and the Newton system (K, r) at u it repeats
+``newton.newton_free`` takes its first ``NEWTON_STEPS`` Newton steps in one CasADi call and every further
+step in Python.  Here the whole loop is one C function, compiled together with the generated code of
+``StringNLP.kkt_free_fn`` and of ``StringNLP.residual_free_fn`` (its r alone, without K's matrix
+products: a small fraction of its cost).  From u = [z; λ_free] and the Newton system (K, r) at u it
+factors K once and repeats chord steps
 
-    solve (K + diag(δ I_n, −δ I_nf)) Δ = r  (LAPACK dgesv),  u ← u − Δ,  (K, r, ∇f, energies) ← kkt_free(u)
+    solve (K + diag(δ I_n, −δ I_nf)) Δ = r  (LAPACK dgetrf once, dgetrs per step),  u ← u − Δ,  r ← r(u)
 
-taking at least ``NEWTON_STEPS`` steps (as the fused CasADi call does), then stopping once
-‖r_dual‖∞ < 1e-9 and ‖r_primal‖∞ < 1e-11, at ``max_steps``, at a singular matrix, or at a step larger than
-``NEWTON_MAX_STEP`` in any scaled unknown — the same rules and the same regularisation δ =
-NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  LAPACK's dgesv is the one SciPy ships
-(``scipy.linalg.cython_lapack``), passed in as a function pointer, so nothing is linked.  The call goes
-through ctypes, which releases the GIL.
+evaluating and factoring K anew only where a step shrinks by less than ``NEWTON_CHORD_CONTRACTION``
+against the one before.  It stops once ‖r_dual‖∞ < 1e-9 and ‖r_primal‖∞ < 1e-11 and the last step is
+below ``NEWTON_CHORD_TOLERANCE`` in every scaled unknown (or no longer shrinks: round-off), and then
+evaluates K, ∇f and the energies at the answer, which the stability eigenvalue and the next update's
+first step use.  It also stops at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` evaluations of K, at a
+singular matrix, or at a step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same
+regularisation δ = NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  The answer is the root the
+Python path's Newton steps converge to, within round-off: at a grip move of 1 % of L the chord steps
+shrink 20–50× each, so about seven steps cost less than one more evaluation of K.  LAPACK is the one
+SciPy ships (``scipy.linalg.cython_lapack``), passed in as function pointers, so nothing is linked.  The
+call goes through ctypes, which releases the GIL.
 
 The library is cached beside the KKT function's (``compiled.cache_dir``), keyed by that function's
-fingerprint and this module's C source.
+fingerprint (which also fixes its residual's code) and this module's C source.
 """
 from __future__ import annotations
 
@@ -28,8 +35,9 @@ import casadi as ca
 import numpy as np
 
 from .compiled import COMPILER_LOCK, build_library, cache_dir, compiler, fingerprint
-from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE,
-                  NEWTON_REGULARISATION, NEWTON_STEPS)
+from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
+                  NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE,
+                  NEWTON_REGULARISATION)
 
 #: return codes of dlo_newton_run
 CONVERGED, NOT_CONVERGED, SINGULAR, STEP_TOO_LARGE, EVALUATION_FAILED = 0, 1, 2, 3, 4
@@ -39,7 +47,9 @@ DRIVER = r"""
 #include <stdlib.h>
 #include <string.h>
 
-typedef void (*dlo_dgesv_t)(int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb, int *info);
+typedef void (*dlo_dgetrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
+typedef void (*dlo_dgetrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb,
+                             int *info);
 
 static int dlo_converged(const double *r, int n, int m, double tol_dual, double tol_prim) {
   for (int i = 0; i < n; ++i) if (!(fabs(r[i]) < tol_dual)) return 0;
@@ -47,29 +57,47 @@ static int dlo_converged(const double *r, int n, int m, double tol_dual, double 
   return 1;
 }
 
-/* Newton on the contact-free KKT system; see dlo_ros/solver/native_newton.py.  u, K, r: in at the
-   start, out at the last iterate; grad, energies: out at the last evaluation. */
-CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_dgesv_t dgesv, int n, int m, int min_steps, int max_steps,
-    double max_step, double reg, double tol_dual, double tol_prim, double *u, const double *p, double *K,
-    double *r, double *grad, double *energies, int *steps, double *largest) {
+/* LU of K + diag(reg max(max|K|, 1) I_n, -reg max(max|K|, 1) I_m) into A; LAPACK's info. */
+static int dlo_factor(dlo_dgetrf_t dgetrf, const double *K, double *A, int *ipiv, int n, int N, double reg) {
+  double kmax = 1.0;
+  int info = 0;
+  for (int i = 0; i < N * N; ++i) { A[i] = K[i]; if (fabs(K[i]) > kmax) kmax = fabs(K[i]); }
+  double delta = reg * kmax;
+  for (int i = 0; i < N; ++i) A[i * N + i] += (i < n ? delta : -delta);
+  dgetrf(&N, &N, A, &N, ipiv, &info);
+  return info;
+}
+
+/* Chord Newton on the contact-free KKT system; see dlo_ros/solver/native_newton.py.  u, K, r: in at the
+   start, out at the last iterate; grad, energies: out there (the last call evaluates K at it). */
+CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_dgetrf_t dgetrf, dlo_dgetrs_t dgetrs, int n, int m, int max_evaluations,
+    int max_steps, double max_step, double reg, double tol_dual, double tol_prim, double tol_step,
+    double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad, double *energies,
+    int *steps, int *evaluations, double *largest) {
   int N = n + m, one = 1, info = 0, code = 1;
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  FUNCTION_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  char trans = 'N';
+  casadi_int sz_arg, sz_res, sz_iw, sz_w, sz_arg2, sz_res2, sz_iw2, sz_w2;
+  KKT_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  RESIDUAL_work(&sz_arg2, &sz_res2, &sz_iw2, &sz_w2);
+  if (sz_arg2 > sz_arg) sz_arg = sz_arg2;
+  if (sz_res2 > sz_res) sz_res = sz_res2;
+  if (sz_iw2 > sz_iw) sz_iw = sz_iw2;
+  if (sz_w2 > sz_w) sz_w = sz_w2;
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
   casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 4 ? sz_res : 4));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
   casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
   double *A = malloc(sizeof(double) * N * N), *step = malloc(sizeof(double) * N);
   int *ipiv = malloc(sizeof(int) * N);
-  *steps = 0; *largest = 0.0;
-  for (int it = 0; ; ++it) {
-    if (it >= min_steps && dlo_converged(r, n, m, tol_dual, tol_prim)) { code = 0; break; }
-    if (it == max_steps) { code = 1; break; }
-    double kmax = 1.0;
-    for (int i = 0; i < N * N; ++i) { A[i] = K[i]; if (fabs(K[i]) > kmax) kmax = fabs(K[i]); }
-    double delta = reg * kmax;
-    for (int i = 0; i < N; ++i) { A[i * N + i] += (i < n ? delta : -delta); step[i] = r[i]; }
-    dgesv(&N, &one, A, &N, ipiv, step, &N, &info);
+  double previous = INFINITY;  /* the last step's max |dz| since K was factored */
+  int fresh = 1;               /* K, grad and energies belong to u */
+  int here = 1;                /* the factored K is u's */
+  *steps = 0; *evaluations = 0; *largest = 0.0;
+  if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) code = 2;
+  else for (;;) {
+    if (*steps == max_steps) { code = 1; break; }
+    memcpy(step, r, sizeof(double) * N);
+    dgetrs(&trans, &N, &one, A, &N, ipiv, step, &N, &info);
     if (info != 0) { code = 2; break; }
     double big = 0.0;
     int finite = 1;
@@ -77,13 +105,48 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_dgesv_t dgesv, int n, int m, int min
       if (!isfinite(step[i])) finite = 0;
       if (i < n && fabs(step[i]) > big) big = fabs(step[i]);
     }
-    if (!finite || big > max_step) { code = 3; *largest = big; break; }
-    if (big > *largest) *largest = big;
-    for (int i = 0; i < N; ++i) u[i] -= step[i];
     arg[0] = u; arg[1] = p; arg[2] = u + n;
     res[0] = K; res[1] = r; res[2] = grad; res[3] = energies;
-    if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
-    *steps = it + 1;
+    if (!finite || big > max_step) {
+      if (here || *evaluations >= max_evaluations) { code = 3; *largest = big; break; }
+      /* a step of an earlier iterate's K: Newton's own step, from K evaluated here */
+      if (KKT(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      ++*evaluations;
+      if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) { code = 2; break; }
+      here = fresh = 1;
+      previous = INFINITY;
+      continue;
+    }
+    if (big > *largest) *largest = big;
+    for (int i = 0; i < N; ++i) u[i] -= step[i];
+    ++*steps;
+    here = 0;
+    int shrinking = big <= contraction * previous;
+    if ((big > chord_start || (!shrinking && !(big <= tol_step))) && *evaluations < max_evaluations) {
+      /* Newton's own steps while they are above chord_start, then chord steps; or too slow for the
+         factored K: evaluate and factor it here */
+      if (KKT(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      ++*evaluations;
+      if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) { code = 2; break; }
+      previous = INFINITY;
+      here = fresh = 1;
+    } else {
+      res[0] = r;
+      if (RESIDUAL(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      previous = big;
+      fresh = 0;
+    }
+    /* converged: r within tolerance, and the last step below tol_step (u then within about
+       contraction * tol_step of the root) or no longer shrinking (round-off) */
+    if (dlo_converged(r, n, m, tol_dual, tol_prim) && (big <= tol_step || !shrinking)) {
+      if (!fresh) {  /* the derivatives at the answer */
+        res[0] = K; res[1] = r; res[2] = grad; res[3] = energies;
+        if (KKT(arg, res, iw, w, 0) != 0) { code = 4; break; }
+        ++*evaluations;
+      }
+      code = dlo_converged(r, n, m, tol_dual, tol_prim) ? 0 : 1;
+      break;
+    }
   }
   free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv);
   return code;
@@ -91,11 +154,11 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_dgesv_t dgesv, int n, int m, int min
 """
 
 
-def _dgesv_pointer() -> int:
-    """The address of SciPy's LAPACK dgesv (from the PyCapsule scipy.linalg.cython_lapack exports)."""
+def _lapack_pointer(name: str) -> int:
+    """The address of SciPy's LAPACK routine ``name`` (from the PyCapsules scipy.linalg.cython_lapack exports)."""
     from scipy.linalg import cython_lapack
 
-    capsule = cython_lapack.__pyx_capi__["dgesv"]
+    capsule = cython_lapack.__pyx_capi__[name]
     get_name = ctypes.pythonapi.PyCapsule_GetName
     get_name.restype, get_name.argtypes = ctypes.c_char_p, [ctypes.py_object]
     get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
@@ -125,6 +188,7 @@ class NewtonOutcome:
     energies: np.ndarray
     steps: int
     largest: float
+    evaluations: int = 0
 
 
 class NativeNewton:
@@ -136,14 +200,16 @@ class NativeNewton:
         self._run = self._lib.dlo_newton_run
         dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int,
-                              ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
-                              dp, dp, dp, dp, dp, dp, ip, dp]
-        self._dgesv = _dgesv_pointer()
+        self._run.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int,
+                              ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
+                              ctypes.c_double, ctypes.c_double, ctypes.c_double, dp, dp, dp, dp, dp, dp, ip, ip, dp]
+        self._dgetrf, self._dgetrs = _lapack_pointer("dgetrf"), _lapack_pointer("dgetrs")
         self.n, self.nf, self.n_p = n, nf, n_p
 
     def __call__(self, u: np.ndarray, p: np.ndarray, kkt: np.ndarray, residual: np.ndarray,
                  max_steps: int) -> NewtonOutcome:
+        """From u = [z; λ_free] with K, r at u; ``max_steps``: the most evaluations of K on the way (the one
+        at the answer is not counted)."""
         n, nf = self.n, self.nf
         N = n + nf
         u = np.array(u, dtype=float, copy=True)
@@ -151,27 +217,29 @@ class NativeNewton:
         K = np.array(kkt, dtype=float, copy=True, order="F").reshape(N * N, order="F")
         r = np.array(residual, dtype=float, copy=True).ravel()
         grad, energies = np.zeros(n), np.full(5, np.nan)
-        steps, largest = ctypes.c_int(0), ctypes.c_double(0.0)
+        steps, evaluations, largest = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(0.0)
         dp = ctypes.POINTER(ctypes.c_double)
-        code = self._run(self._dgesv, n, nf, NEWTON_STEPS, int(max_steps), NEWTON_MAX_STEP, NEWTON_REGULARISATION,
-                         NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE, u.ctypes.data_as(dp), p.ctypes.data_as(dp),
-                         K.ctypes.data_as(dp), r.ctypes.data_as(dp), grad.ctypes.data_as(dp),
-                         energies.ctypes.data_as(dp), ctypes.byref(steps), ctypes.byref(largest))
+        code = self._run(self._dgetrf, self._dgetrs, n, nf, int(max_steps), NEWTON_CHORD_STEPS, NEWTON_MAX_STEP,
+                         NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE,
+                         NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, u.ctypes.data_as(dp), p.ctypes.data_as(dp), K.ctypes.data_as(dp),
+                         r.ctypes.data_as(dp), grad.ctypes.data_as(dp), energies.ctypes.data_as(dp),
+                         ctypes.byref(steps), ctypes.byref(evaluations), ctypes.byref(largest))
         return NewtonOutcome(int(code), u, K.reshape(N, N, order="F"), r, grad, energies, steps.value,
-                             largest.value)
+                             largest.value, evaluations.value)
 
 
-def build(fn: ca.Function, n: int, nf: int, n_p: int, nice: int = 0,
+def build(fn: ca.Function, residual: ca.Function, n: int, nf: int, n_p: int, nice: int = 0,
           kkt_lib: Path | None = None) -> NativeNewton | None:
-    """The driver compiled with ``fn`` (the contact-free KKT function), from the cache or built now (one
-    compiler at a time per process); None without a C compiler or if compiling fails."""
+    """The driver compiled with ``fn`` (the contact-free KKT function) and ``residual`` (its r alone), from
+    the cache or built now (one compiler at a time per process); None without a C compiler or if
+    compiling fails."""
     cc = compiler()
     if cc is None or os.environ.get("DLO_NO_COMPILE"):
         return None
     lib = library_path(fn, kkt_lib)
     if not lib.exists():
         with COMPILER_LOCK:
-            if not lib.exists() and not _compile(fn, cc, lib, nice):
+            if not lib.exists() and not _compile(fn, residual, cc, lib, nice):
                 return None
     return NativeNewton(lib, n, nf, n_p)
 
@@ -184,9 +252,11 @@ def cached(fn: ca.Function, n: int, nf: int, n_p: int, kkt_lib: Path | None = No
     return NativeNewton(lib, n, nf, n_p) if lib.exists() else None
 
 
-def _compile(fn: ca.Function, cc: str, lib: Path, nice: int) -> bool:
-    driver = DRIVER.replace("FUNCTION_work", f"{fn.name()}_work").replace("FUNCTION(", f"{fn.name()}(")
-    return build_library(fn, lib, cc, nice=nice, extra_source=driver)
+def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:
+    driver = DRIVER
+    for token, name in (("KKT", fn.name()), ("RESIDUAL", residual.name())):
+        driver = driver.replace(f"{token}_work", f"{name}_work").replace(f"{token}(", f"{name}(")
+    return build_library(fn, lib, cc, nice=nice, extra_source=driver, also=(residual,))
 
 
 #: Newton with an active set on the full KKT function (``StringNLP.kkt_fn``), appended to its generated
@@ -194,23 +264,59 @@ def _compile(fn: ca.Function, cc: str, lib: Path, nice: int) -> bool:
 ACTIVE_DRIVER = r"""
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
-typedef void (*dlo_dgesv_active_t)(int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb, int *info);
+typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
+typedef void (*dlo_getrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb,
+                            int *info);
 
-/* Newton on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see dlo_ros/solver/newton.py
-   (_active_steps, the same rules).  At each evaluated iterate after the first step, while switches
-   remain, one row of those with switchable[i] changes: the most violated inactive one joins, else the
-   active one with the most negative multiplier leaves (its multiplier set to 0); an iterate where a row
-   changed is not converged.  z (n), lam (rows), active (rows): in at the start, out at the last iterate.
-   grad, g, jac (rows x n, column-major), hess (n x n), energies: out at the last evaluation; with
-   given = 1 they are in as well, the first step's derivatives (not an evaluation: convergence needs one). */
-CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, int rows, int *active,
-    const int *switchable, int switches, int max_steps, int given, double max_step, double reg, double tol_dual,
-    double tol_prim, double join_tol, double leave_tol, double *z, const double *p, double *lam,
-    const double *ub, double *grad, double *g, double *jac, double *hess, double *energies, int *steps) {
+/* [H J_A^T; J_A 0] + diag(delta I_n, -delta I_m) of the m rows idx into A (N = n + m), and its LU. */
+static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double *jac, const int *idx, int n,
+                             int m, int rows, double reg, double *A, int *ipiv) {
+  int N = n + m, info = 0;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) A[i + (size_t)j * N] = hess[i + (size_t)j * n];
+  for (int k = 0; k < m; ++k) {
+    for (int j = 0; j < n; ++j) {
+      double a = jac[idx[k] + (size_t)j * rows];
+      A[(n + k) + (size_t)j * N] = a;
+      A[j + (size_t)(n + k) * N] = a;
+    }
+    for (int l = 0; l < m; ++l) A[(n + k) + (size_t)(n + l) * N] = 0.0;
+  }
+  double kmax = 1.0;
+  for (int i = 0; i < N * N; ++i) if (fabs(A[i]) > kmax) kmax = fabs(A[i]);
+  double delta = reg * kmax;
+  for (int i = 0; i < N; ++i) A[i * N + i] += (i < n ? delta : -delta);
+  getrf(&N, &N, A, &N, ipiv, &info);
+  return info;
+}
+
+/* Newton, then chord, steps on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see
+   dlo_ros/solver/native_newton.py (ActiveNewton) and newton.py (_active_steps, the same row switches).
+   Each step's matrix is evaluated (Newton's own steps) until an evaluated iterate changes no row and the
+   steps are below chord_start; after that the factored matrix is kept while the steps shrink by the
+   contraction factor, the residual function giving grad L and g in between.  At each evaluated iterate
+   after the first step, while switches remain, one row of those with switchable[i] changes: the most
+   violated inactive one joins, else the active one with the most negative multiplier leaves (its
+   multiplier set to 0); an iterate where a row changed is not converged.  z (n), lam (rows), active
+   (rows): in at the start, out at the answer.  grad, g, jac (rows x n, column-major), hess (n x n),
+   energies: out at the answer (evaluated there); with given = 1 they are in as well, the first step's
+   derivatives. */
+CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t getrs, int n, int rows, int *active,
+    const int *switchable, int switches, int max_evaluations, int max_steps, int given, double max_step,
+    double reg, double tol_dual, double tol_prim, double tol_step, double contraction, double chord_start, double join_tol,
+    double leave_tol, double *z, const double *p, double *lam, const double *ub, double *grad, double *g,
+    double *jac, double *hess, double *energies, int *steps, int *evaluations) {
   int one = 1, info = 0, code = 1;
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  char trans = 'N';
+  casadi_int sz_arg, sz_res, sz_iw, sz_w, sz_arg2, sz_res2, sz_iw2, sz_w2;
   FUNCTION_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  RESIDUAL_work(&sz_arg2, &sz_res2, &sz_iw2, &sz_w2);
+  if (sz_arg2 > sz_arg) sz_arg = sz_arg2;
+  if (sz_res2 > sz_res) sz_res = sz_res2;
+  if (sz_iw2 > sz_iw) sz_iw = sz_iw2;
+  if (sz_w2 > sz_w) sz_w = sz_w2;
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
   casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 5 ? sz_res : 5));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
@@ -219,17 +325,23 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, 
   for (int i = 0; i < rows; ++i) most += active[i] || switchable[i];
   int *idx = malloc(sizeof(int) * (most > 1 ? most : 1));
   double *A = malloc(sizeof(double) * (n + most) * (n + most)), *rhs = malloc(sizeof(double) * (n + most));
+  double *lgrad = malloc(sizeof(double) * (n + rows));  /* the residual function's [grad L; g] */
   int *ipiv = malloc(sizeof(int) * (n + most));
-  *steps = 0;
-  for (int it = 0; ; ++it) {
-    int evaluated = !(it == 0 && given);
-    if (evaluated) {
-      arg[0] = z; arg[1] = p; arg[2] = lam;
-      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; *steps = it; break; }
-    }
+  int fresh = 0, m = 0, factored = 0, here = 0;  /* here: the factored matrix is this iterate's */
+  int settled = switches == 0;  /* an evaluated iterate changed no row (or none may change) */
+  double previous = INFINITY, big = 0.0;
+  int shrinking = 1;
+  *steps = 0; *evaluations = 0;
+  arg[0] = z; arg[1] = p; arg[2] = lam;
+  if (!given) {
+    res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+    if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; goto done; }
+    ++*evaluations;
+    fresh = 1;
+  }
+  for (;;) {
     int switched = 0;
-    if (it > 0 && switches > 0) {
+    if (*steps > 0 && switches > 0 && fresh) {
       int join = -1, leave = -1;
       double excess = join_tol, negative = -leave_tol;
       for (int i = 0; i < rows; ++i) {
@@ -240,13 +352,21 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, 
       if (join >= 0) { active[join] = 1; switched = 1; }
       else if (leave >= 0) { active[leave] = 0; lam[leave] = 0.0; switched = 1; }
       switches -= switched;
+      settled = !switched;
     }
-    int m = 0;
+    m = 0;
     for (int i = 0; i < rows; ++i) if (active[i]) idx[m++] = i;
     int N = n + m, converged = !switched;
+    /* the residual: from the last evaluation (grad f + J_A^T lam_A) where it is fresh, else the
+       residual function's grad L (lam is 0 on every inactive row) */
     for (int j = 0; j < n; ++j) {
-      double v = grad[j];
-      for (int k = 0; k < m; ++k) v += lam[idx[k]] * jac[idx[k] + (size_t)j * rows];
+      double v;
+      if (fresh || given && *steps == 0) {
+        v = grad[j];
+        for (int k = 0; k < m; ++k) v += lam[idx[k]] * jac[idx[k] + (size_t)j * rows];
+      } else {
+        v = lgrad[j];
+      }
       rhs[j] = -v;
       if (!(fabs(v) < tol_dual)) converged = 0;
     }
@@ -255,43 +375,78 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_dgesv_active_t dgesv, int n, 
       rhs[n + k] = -v;
       if (!(fabs(v) < tol_prim)) converged = 0;
     }
-    if (converged && evaluated) { code = 0; *steps = it; break; }
-    if (it == max_steps) { code = 1; *steps = it; break; }
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) A[i + (size_t)j * N] = hess[i + (size_t)j * n];
-    for (int k = 0; k < m; ++k) {
-      for (int j = 0; j < n; ++j) {
-        double a = jac[idx[k] + (size_t)j * rows];
-        A[(n + k) + (size_t)j * N] = a;
-        A[j + (size_t)(n + k) * N] = a;
-      }
-      for (int l = 0; l < m; ++l) A[(n + k) + (size_t)(n + l) * N] = 0.0;
+    if (converged && (fresh || (*steps > 0 && (big <= tol_step || !shrinking)))) {
+      if (fresh) { code = 0; break; }
+      /* the derivatives at the answer, and the test once more on them */
+      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+      if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      ++*evaluations;
+      fresh = 1;
+      continue;
     }
-    double kmax = 1.0;
-    for (int i = 0; i < N * N; ++i) if (fabs(A[i]) > kmax) kmax = fabs(A[i]);
-    double delta = reg * kmax;
-    for (int i = 0; i < N; ++i) A[i * N + i] += (i < n ? delta : -delta);
-    dgesv(&N, &one, A, &N, ipiv, rhs, &N, &info);
-    if (info != 0) { code = 2; *steps = it; break; }
-    double big = 0.0;
+    if (*steps == max_steps) { code = 1; break; }
+    if (!factored || switched) {
+      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) { code = 2; break; }
+      factored = 1;
+      here = fresh || *steps == 0;
+      previous = INFINITY;
+    }
+    getrs(&trans, &N, &one, A, &N, ipiv, rhs, &N, &info);
+    if (info != 0) { code = 2; break; }
+    big = 0.0;
     int finite = 1;
     for (int i = 0; i < N; ++i) {
       if (!isfinite(rhs[i])) finite = 0;
       if (i < n && fabs(rhs[i]) > big) big = fabs(rhs[i]);
     }
-    if (!finite || big > max_step) { code = 3; *steps = it; break; }
+    if (!finite || big > max_step) {
+      if (here || *evaluations >= max_evaluations) { code = 3; break; }
+      /* a step of the matrix of an earlier iterate: Newton's own step, from derivatives evaluated here */
+      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+      if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      ++*evaluations;
+      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) { code = 2; break; }
+      here = fresh = 1;
+      previous = INFINITY;
+      continue;
+    }
     for (int j = 0; j < n; ++j) z[j] += rhs[j];
     for (int k = 0; k < m; ++k) lam[idx[k]] += rhs[n + k];
+    ++*steps;
+    here = 0;
+    shrinking = big <= contraction * previous;
+    if ((!settled || big > chord_start || (!shrinking && !(big <= tol_step))) && *evaluations < max_evaluations) {
+      /* Newton's own steps (the same iterates and row decisions as _active_steps) until an evaluated
+         iterate changes no row and the steps are below chord_start, then chord steps; or too slow for
+         the factored matrix: evaluate and factor it here */
+      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+      if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      ++*evaluations;
+      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) { code = 2; break; }
+      previous = INFINITY;
+      here = fresh = 1;
+    } else {
+      res[0] = lgrad;
+      if (RESIDUAL(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      memcpy(g, lgrad + n, sizeof(double) * rows);
+      previous = big;
+      fresh = 0;
+    }
   }
-  free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(ipiv);
+done:
+  free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(lgrad); free(ipiv);
   return code;
 }
 """
 
 
-def active_source(fn: ca.Function) -> str:
-    """The active-set driver's C, bound to the generated function ``fn`` (``StringNLP.kkt_fn``)."""
-    return ACTIVE_DRIVER.replace("FUNCTION_work", f"{fn.name()}_work").replace("FUNCTION(", f"{fn.name()}(")
+def active_source(fn: ca.Function, residual: ca.Function) -> str:
+    """The active-set driver's C, bound to the generated functions ``fn`` (``StringNLP.kkt_fn``) and
+    ``residual`` (``StringNLP.residual_fn``)."""
+    source = ACTIVE_DRIVER
+    for token, name in (("FUNCTION", fn.name()), ("RESIDUAL", residual.name())):
+        source = source.replace(f"{token}_work", f"{name}_work").replace(f"{token}(", f"{name}(")
+    return source
 
 
 def active_library_path(fn: ca.Function) -> Path:
@@ -316,31 +471,39 @@ class ActiveOutcome:
     energies: np.ndarray
     steps: int
     active: np.ndarray
+    evaluations: int = 0
 
 
 class ActiveNewton:
-    """Newton steps with an active set in one compiled call: the inner loop of ``newton._newton_active``
-    (``newton._active_steps``: the same regularised steps, row switches, convergence test, step limit
-    and step count), in C around the compiled full KKT function, whose library it shares.  Not
-    re-entrant per instance: callers serialise calls (ShapeSolver holds a lock)."""
+    """Newton with an active set in one compiled call: the inner loop of ``newton._active_steps`` (its
+    regularised steps, row switches at evaluated iterates, convergence test and step limit), whose
+    tail is chord steps.  Each step evaluates the full KKT function (Newton's own steps, the same iterates
+    and row decisions) until an evaluated iterate changes no row and the steps are below
+    ``NEWTON_CHORD_START``; then [∇²L J_Aᵀ; J_A 0] stays factored and only the residual [∇L; g] is
+    evaluated per step, as in the contact-free loop (``NativeNewton``: the same contraction, tolerance and
+    retry rules, the derivatives evaluated at the answer).  In C around the compiled full KKT function and
+    its residual, whose library it shares.  Not re-entrant per instance: callers serialise calls
+    (ShapeSolver holds a lock)."""
 
     def __init__(self, lib_path: Path, n: int, rows: int):
         self._lib = ctypes.CDLL(str(lib_path))
         self._run = self._lib.dlo_newton_active_run
-        dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+        dp, ip, c_int, c_double = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_int, \
+            ctypes.c_double
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ip, ip, ctypes.c_int, ctypes.c_int,
-                              ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
-                              ctypes.c_double, ctypes.c_double, dp, dp, dp, dp, dp, dp, dp, dp, dp, ip]
-        self._dgesv = _dgesv_pointer()
+        self._run.argtypes = [ctypes.c_void_p, ctypes.c_void_p, c_int, c_int, ip, ip, c_int, c_int, c_int, c_int,
+                              c_double, c_double, c_double, c_double, c_double, c_double, c_double, c_double,
+                              c_double, dp, dp, dp, dp, dp, dp, dp, dp, dp, ip, ip]
+        self._dgetrf, self._dgetrs = _lapack_pointer("dgetrf"), _lapack_pointer("dgetrs")
         self.n, self.rows = n, rows
 
     def __call__(self, z: np.ndarray, lam: np.ndarray, p: np.ndarray, active: np.ndarray, ub: np.ndarray,
                  switchable: np.ndarray, switches: int, max_steps: int,
                  first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> ActiveOutcome:
         """From (z, λ) with the rows ``active`` held at ``ub`` (both over every row); up to ``switches``
-        changes among the rows ``switchable``; ``first``: (∇f, g, ∂g/∂z, ∇²L) for the first step instead
-        of an evaluation."""
+        changes among the rows ``switchable``; ``max_steps``: the most evaluations of the full KKT function
+        on the way (the one at the answer not counted); ``first``: (∇f, g, ∂g/∂z, ∇²L) for the first step
+        instead of an evaluation."""
         n, rows = self.n, self.rows
         z = np.array(z, dtype=float, copy=True)
         lam = np.array(lam, dtype=float, copy=True)
@@ -355,13 +518,17 @@ class ActiveNewton:
             g[:] = np.ravel(first[1])
             jac[:] = np.asarray(first[2], dtype=float).ravel(order="F")
             hess[:] = np.asarray(first[3], dtype=float).ravel(order="F")
-        steps = ctypes.c_int(0)
+        steps, evaluations = ctypes.c_int(0), ctypes.c_int(0)
         dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-        code = self._run(self._dgesv, n, rows, act.ctypes.data_as(ip), switch.ctypes.data_as(ip), int(switches),
-                         int(max_steps), int(first is not None), NEWTON_MAX_STEP, NEWTON_REGULARISATION,
-                         NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE, JOIN_TOLERANCE, LEAVE_TOLERANCE,
-                         z.ctypes.data_as(dp), p.ctypes.data_as(dp), lam.ctypes.data_as(dp), ub.ctypes.data_as(dp),
+        code = self._run(self._dgetrf, self._dgetrs, n, rows, act.ctypes.data_as(ip), switch.ctypes.data_as(ip),
+                         int(switches), int(max_steps), NEWTON_CHORD_STEPS, int(first is not None), NEWTON_MAX_STEP,
+                         NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE,
+                         NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, JOIN_TOLERANCE, LEAVE_TOLERANCE,
+                         z.ctypes.data_as(dp),
+                         p.ctypes.data_as(dp), lam.ctypes.data_as(dp), ub.ctypes.data_as(dp),
                          grad.ctypes.data_as(dp), g.ctypes.data_as(dp), jac.ctypes.data_as(dp),
-                         hess.ctypes.data_as(dp), energies.ctypes.data_as(dp), ctypes.byref(steps))
+                         hess.ctypes.data_as(dp), energies.ctypes.data_as(dp), ctypes.byref(steps),
+                         ctypes.byref(evaluations))
         return ActiveOutcome(int(code), z, lam, grad, g, jac.reshape(rows, n, order="F"),
-                             hess.reshape(n, n, order="F"), energies, steps.value, act.astype(bool))
+                             hess.reshape(n, n, order="F"), energies, steps.value, act.astype(bool),
+                             evaluations.value)

@@ -273,7 +273,7 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
         if not (np.isfinite(u).all() and largest[0, 0] <= NEWTON_MAX_STEP):
             return False, start, NEWTON_STEPS, np.inf, None
         unknowns, residual, first = u[:, 0], residual[:, 0], NEWTON_STEPS
-    for it in range(first, max_steps + 1):
+    for it in range(first, max(first, max_steps) + 1):  # the compiled loop's chord steps may number more
         z, lam_free = unknowns[:n], unknowns[n:]
         if energies is not None and np.abs(residual[:n]).max() < NEWTON_DUAL_TOLERANCE and \
                 np.abs(residual[n:]).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE:
@@ -286,7 +286,7 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
             state = SolverState(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
                                 energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual)
             return True, state, it, violation(nlp, g), None
-        if it == max_steps:
+        if it >= max_steps:
             break
         _, _, step, info = _gesv(regularised(kkt, n), residual)
         if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:

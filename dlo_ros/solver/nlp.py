@@ -112,6 +112,13 @@ NEWTON_STEP_SWITCHES = 4
 JOIN_TOLERANCE, LEAVE_TOLERANCE = 1e-9, 1e-12
 #: a warm update has converged when ‖∇f + Jᵀλ‖∞ and ‖g − bound‖∞ (scaled units) are below these
 NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE = 1e-9, 1e-11
+#: the compiled loops (native_newton.py) take Newton's own steps while a step exceeds NEWTON_CHORD_START
+#: in a scaled unknown (and, with an active set, until an evaluated iterate changes no row), then chord
+#: steps on the last factored matrix.  They have converged when, besides the tolerances above, the last
+#: step is below NEWTON_CHORD_TOLERANCE (or no longer shrinks: round-off); a step that shrinks by less
+#: than NEWTON_CHORD_CONTRACTION against the one before has the matrix evaluated and factored anew; at
+#: most NEWTON_CHORD_STEPS steps
+NEWTON_CHORD_START, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_STEPS = 0.05, 1e-11, 0.25, 40
 
 #: δ / max|K| of the regularised Newton matrix K + diag(δ I, −δ I) of every warm update (newton.regularised)
 NEWTON_REGULARISATION = 1e-10
@@ -408,8 +415,8 @@ class StringNLP:
         # assembled from per-quadrature-node derivatives (solver/assembled.py, assembled_euler.py): compact
         # code (seconds of gcc instead of minutes), a faster interpreted call, and no flattened Hessian to build
         assembled = AssembledKKT(self) if self.director else AssembledEulerKKT(self)
-        self.kkt_free_fn = assembled.kkt_free()
-        self.kkt_fn = assembled.kkt()
+        self.kkt_free_fn, self.residual_free_fn = assembled.kkt_free()
+        self.kkt_fn, self.residual_fn = assembled.kkt()
         if nf < g.shape[0]:
             self.obstacle_g_fn = assembled.inequality_g()
         zm, pm, lm = ca.MX.sym("z", z.shape[0]), ca.MX.sym("p", lay.size), ca.MX.sym("lam", g.shape[0])

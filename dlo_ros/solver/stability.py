@@ -37,7 +37,16 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
     if basis.shape[1] == 0:
         return None
     value, vector = lowest_eigenpair(basis.T @ h @ basis)
-    state.unstable_direction = basis @ vector if value < 0 else None
+    if value < 0:
+        direction = basis @ vector
+        # LAPACK's sign of an eigenvector is arbitrary, and rounding can flip it: the direction is
+        # signed by its first entry above a tenth of the largest (not the largest: a mode of a
+        # near-symmetric shape has pairs of entries of equal size), so that two paths to the same
+        # saddle leave it the same way
+        first = np.flatnonzero(np.abs(direction) > 0.1 * np.abs(direction).max())[0]
+        state.unstable_direction = direction * np.sign(direction[first])
+    else:
+        state.unstable_direction = None
     return value
 
 

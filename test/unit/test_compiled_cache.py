@@ -77,7 +77,7 @@ def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monke
     for k in range(1, 6):
         target = {"right": ((0.5 - 0.005 * k, 0.0, 0.1 + 0.003 * k), (0.0, 0.0, 0.0, 1.0))}
         a, b = again.solve(target), interpreted.solve(target)
-        assert a.ok and b.ok and a.ipopt_status == b.ipopt_status == "Newton" and a.iterations == b.iterations
+        assert a.ok and b.ok and a.ipopt_status == b.ipopt_status == "Newton"
         np.testing.assert_allclose(a.points, b.points, atol=1e-10)
 
 

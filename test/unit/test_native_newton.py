@@ -1,7 +1,8 @@
-"""The warm update as one compiled call (dlo_ros.solver.native_newton, #14): the C Newton loop around
-the compiled contact-free KKT function takes the same steps as the Python path (fused CasADi call plus
-Python steps on the interpreted functions), so a stream gives the same shapes to 1e-10, and results say
-which derivatives ran."""
+"""The warm update as one compiled call (dlo_ros.solver.native_newton, #14): the C loop around the
+compiled contact-free KKT function takes chord steps (K factored once, the residual alone evaluated per
+step) to the root the Python path's Newton steps (fused CasADi call plus Python steps on the interpreted
+functions) converge to, so a stream gives the same shapes to 1e-10; the active-set loop takes the Python
+path's own steps; results say which derivatives ran."""
 from __future__ import annotations
 
 import numpy as np
@@ -12,6 +13,9 @@ from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver
 from dlo_ros.solver.compiled import compiler
 from dlo_ros.solver.newton import regularised
+from dlo_ros.solver.nlp import (NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
+                                NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
+                                NEWTON_PRIMAL_TOLERANCE)
 from dlo_ros.solver.options import SolverOptions
 
 pytestmark = pytest.mark.skipif(compiler() is None, reason="no C compiler")
@@ -50,33 +54,100 @@ def test_a_stream_with_the_compiled_loop_equals_the_interpreted_one(solvers):
         assert a.status == b.status == "ok" and a.ipopt_status == b.ipopt_status
         newton += a.ipopt_status == "Newton"
         np.testing.assert_allclose(a.points, b.points, atol=1e-10)
-        assert a.iterations == b.iterations
         assert a.energy["total"] == pytest.approx(b.energy["total"], rel=1e-10)
+        assert a.min_eigenvalue == pytest.approx(b.min_eigenvalue, rel=1e-8)
     assert newton >= 20  # the compiled loop was what ran
 
 
-def test_one_call_takes_the_python_steps(solvers):
-    """From the same start the C loop's iterate, Newton matrix and energies equal those of the
-    regularised steps taken here in numpy on the interpreted function (to rounding)."""
+def chord_reference(nlp, u, p, kkt, residual, max_evaluations: int):
+    """The C loop's contract in numpy on the interpreted functions (native_newton's module docstring):
+    (u, K, energies at the answer, steps, evaluations of K)."""
+    n = nlp.z_sym.shape[0]
+    k, r, energies = kkt, residual, None
+    lu = regularised(k, n)
+    previous, evaluations, steps, fresh, here = np.inf, 0, 0, True, True
+
+    def evaluate(u):
+        k, r, _, energies = (np.asarray(v) for v in nlp.kkt_free_fn(u[:n], p, u[n:]))
+        return k, r[:, 0], energies
+
+    while steps < NEWTON_CHORD_STEPS:
+        step = np.linalg.solve(lu, r)
+        big = np.abs(step[:n]).max()
+        if big > NEWTON_MAX_STEP:
+            assert not here and evaluations < max_evaluations, "the reference refused the step"
+            (k, r, energies), evaluations = evaluate(u), evaluations + 1
+            lu, previous, fresh, here = regularised(k, n), np.inf, True, True
+            continue
+        u, steps, here = u - step, steps + 1, False
+        shrinking = big <= NEWTON_CHORD_CONTRACTION * previous
+        if (big > NEWTON_CHORD_START or (not shrinking and big > NEWTON_CHORD_TOLERANCE)) and \
+                evaluations < max_evaluations:
+            (k, r, energies), evaluations = evaluate(u), evaluations + 1
+            lu, previous, fresh, here = regularised(k, n), np.inf, True, True
+        else:
+            r, previous, fresh = np.asarray(nlp.residual_free_fn(u[:n], p, u[n:]))[:, 0], big, False
+        if np.abs(r[:n]).max() < NEWTON_DUAL_TOLERANCE and np.abs(r[n:]).max() < NEWTON_PRIMAL_TOLERANCE and \
+                (big <= NEWTON_CHORD_TOLERANCE or not shrinking):
+            if not fresh:
+                (k, r, energies), evaluations = evaluate(u), evaluations + 1
+            return u, k, energies, steps, evaluations
+    raise AssertionError("the reference did not converge")
+
+
+def newton_root(nlp, u, p, kkt, residual):
+    """The root of r by plain regularised Newton steps in numpy, to round-off."""
+    n = nlp.z_sym.shape[0]
+    k, r = kkt, residual
+    for _ in range(12):
+        u = u - np.linalg.solve(regularised(k, n), r)
+        k, r, _, _ = (np.asarray(v) for v in nlp.kkt_free_fn(u[:n], p, u[n:]))
+        r = r[:, 0]
+    return u
+
+
+@pytest.mark.parametrize("move", [0.01, 0.06], ids=["1%L", "6%L"])
+def test_one_call_takes_the_chord_steps_to_the_newton_root(solvers, move):
+    """From the same start the C loop's iterate, Newton matrix, energies and counts equal those of the
+    chord steps taken here in numpy on the interpreted functions (to rounding), and its answer is the
+    root plain Newton steps converge to.  At 6 % of L the first steps exceed NEWTON_CHORD_START and are
+    Newton's own (K evaluated on the way)."""
     scene, native, interpreted = solvers
     native.solve()
     state, nlp = native.snapshot(), native.nlp
     n, nf = state.z.size, nlp.n_free_rows
     rot = scene.problem.grip("right").pose.orientation
-    p = native.pack_parameters(scene.problem.with_grip_poses({"right": GripPose(targets(scene, 3)[1], rot)}), state.z)
+    target = scene.problem.grip("right").pose.position + move * np.array([-1.0, 0.4, 1.0]) / np.sqrt(2.16)
+    p = native.pack_parameters(scene.problem.with_grip_poses({"right": GripPose(target, rot)}), state.z)
     kkt, residual, _, _ = (np.asarray(v) for v in nlp.kkt_free_fn(state.z, p, state.lam_g[:nf]))
-    u = np.concatenate([state.z, state.lam_g[:nf]])
-    out = native.functions.newton_native(u, p, kkt, residual[:, 0], 10)
-    assert out.code == 0 and out.steps >= 3
-    k, r = kkt, residual[:, 0]
-    for _ in range(out.steps):
-        u = u - np.linalg.solve(regularised(k, n), r)
-        k, r, _, energies = (np.asarray(v) for v in nlp.kkt_free_fn(u[:n], p, u[n:]))
-        r = r[:, 0]
+    u0 = np.concatenate([state.z, state.lam_g[:nf]])
+    out = native.functions.newton_native(u0, p, kkt, residual[:, 0], 10)
+    u, k, energies, steps, evaluations = chord_reference(nlp, u0, p, kkt, residual[:, 0], 10)
+    assert out.code == 0 and (out.steps, out.evaluations) == (steps, evaluations)
+    assert evaluations >= (2 if move > 0.05 else 1) and steps >= 3
     np.testing.assert_allclose(out.u, u, atol=1e-12)
     np.testing.assert_allclose(out.kkt, k, atol=1e-9 * np.abs(k).max())
     np.testing.assert_allclose(out.energies, energies.ravel(), rtol=1e-12)
     assert np.abs(out.residual[:n]).max() < 1e-9 and np.abs(out.residual[n:]).max() < 1e-11
+    np.testing.assert_allclose(out.u[:n], newton_root(nlp, u0, p, kkt, residual[:, 0])[:n], atol=1e-11)
+
+
+def test_the_compiled_loop_refuses_a_step_the_python_path_refuses(solvers):
+    """A start whose first step exceeds NEWTON_MAX_STEP ends the call without an answer (code 3), as
+    the Python path gives up there (then substeps or IPOPT take over)."""
+    from dlo_ros.solver.native_newton import STEP_TOO_LARGE
+
+    scene, native, _ = solvers
+    native.solve()
+    state, nlp = native.snapshot(), native.nlp
+    nf = nlp.n_free_rows
+    rot = scene.problem.grip("right").pose.orientation
+    u0 = np.concatenate([state.z, state.lam_g[:nf]])
+    far = native.pack_parameters(scene.problem.with_grip_poses(
+        {"right": GripPose(np.array([0.1, 0.3, 0.9]), rot)}), state.z)
+    kkt, residual, _, _ = (np.asarray(v) for v in nlp.kkt_free_fn(state.z, far, state.lam_g[:nf]))
+    out = native.functions.newton_native(u0, far, kkt, residual[:, 0], 10)
+    assert out.code == STEP_TOO_LARGE and out.largest > 0.5
 
 
 @pytest.mark.parametrize("options", [SolverOptions(model="planar", order=12),
@@ -142,9 +213,11 @@ def test_contact_updates_with_the_compiled_active_set_loop_equal_the_numpy_loop(
         native.functions.newton_active = loop
 
 
-def test_one_active_call_takes_the_numpy_steps(solvers):
-    """From a state resting on the table, with its active rows held, the C loop's iterate, multipliers
-    and derivatives equal those of newton._active_steps on the interpreted function (to rounding)."""
+def test_one_active_call_reaches_the_numpy_loops_answer(solvers):
+    """From a state resting on the table, with its active rows held and the grips moved, the C loop's
+    chord steps end at the KKT point newton._active_steps (regularised Newton steps in numpy on the
+    interpreted function) ends at: the same active set, iterate and multipliers (to rounding), with the
+    derivatives evaluated there."""
     from dlo_ros.solver.newton import _active_steps, active_rows
 
     scene, native, interpreted = solvers
@@ -164,10 +237,36 @@ def test_one_active_call_takes_the_numpy_steps(solvers):
     z, lam_ref, grad, g, jac, hess, energies, steps, active_ref = _active_steps(
         lambda *a: [np.asarray(v) for v in nlp.kkt_fn(*a)], state.z.copy(), lam.copy(), p, active, nlp.ubg,
         switchable, 4, 10, None)
-    assert out.code == 0 and out.steps == steps >= 2
+    assert out.code == 0 and steps >= 2 and out.steps >= steps
+    assert out.evaluations < steps  # chord steps: fewer evaluations of the full function than Newton's
     np.testing.assert_array_equal(out.active, active_ref)
-    np.testing.assert_allclose(out.z, z, atol=1e-12)
-    np.testing.assert_allclose(out.lam, lam_ref, atol=1e-9 * np.abs(lam_ref).max())
-    np.testing.assert_allclose(out.hessian, hess, atol=1e-9 * np.abs(hess).max())
-    np.testing.assert_allclose(out.jacobian, jac, atol=1e-12)
-    np.testing.assert_allclose(out.energies, np.ravel(energies), rtol=1e-12)
+    np.testing.assert_allclose(out.z, z, atol=1e-11)
+    np.testing.assert_allclose(out.lam, lam_ref, atol=1e-8 * np.abs(lam_ref).max())
+    here = [np.asarray(v) for v in nlp.kkt_fn(out.z, p, out.lam)]
+    np.testing.assert_allclose(out.hessian, here[3], atol=1e-9 * np.abs(here[3]).max())
+    np.testing.assert_allclose(out.jacobian, here[2], atol=1e-12)
+    np.testing.assert_allclose(out.gradient, here[0].ravel(), atol=1e-12)
+    np.testing.assert_allclose(out.energies, here[4].ravel(), rtol=1e-12)
+
+
+def test_a_query_whose_chord_steps_outnumber_newtons_cap_is_still_a_newton_answer(solvers):
+    """A grip moved 8 cm takes the compiled loop more chord steps than the ten Newton steps the Python
+    path allows; the converged answer is still taken (not handed to substeps and IPOPT) and equals the
+    interpreted path's."""
+    scene, native, interpreted = solvers
+    held = {g.name: (g.pose.position, g.pose.orientation) for g in scene.problem.grips}  # the scene's own
+    native.reset(), interpreted.reset()
+    native.solve(held), interpreted.solve(held)
+    rot = scene.problem.grip("right").pose.orientation
+    x = scene.problem.grip("right").pose.position + 0.08 * np.array([-0.6, 0.5, 0.6])
+    calls = []
+    loop = native.functions.newton_native
+    native.functions.newton_native = lambda *a: calls.append(loop(*a)) or calls[-1]
+    try:
+        a = native.solve({"right": (x, rot)}, commit=False)
+    finally:
+        native.functions.newton_native = loop
+    b = interpreted.solve({"right": (x, rot)}, commit=False)
+    assert len(calls) == 1 and calls[0].code == 0 and calls[0].steps > 10, [(c.code, c.steps) for c in calls]
+    assert a.status == b.status == "ok" and a.ipopt_status == b.ipopt_status == "Newton"
+    np.testing.assert_allclose(a.points, b.points, atol=1e-10)

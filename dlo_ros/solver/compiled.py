@@ -191,7 +191,8 @@ def _generate(fn: ca.Function, tmp: str, also: tuple[ca.Function, ...] = ()) -> 
 
 
 def compiled(fn: ca.Function, flags: tuple[str, ...] = FLAGS, nice: int = 0, lib: Path | None = None,
-             extra_source: str = "", also: tuple[ca.Function, ...] = ()) -> tuple[NativeFunction | InterpretedFunction, bool]:
+             extra_source: str = "",
+             also: tuple[ca.Function, ...] = ()) -> tuple[NativeFunction | InterpretedFunction, bool]:
     """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
     ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``);
     ``extra_source``: C appended to ``fn``'s, ``also``: functions compiled into the same library (then
@@ -213,9 +214,9 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = FLAGS, nice: int = 0, lib
 
 def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = FLAGS, nice: int = 0,
                   extra_source: str = "", also: tuple[ca.Function, ...] = ()) -> bool:
-    """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile it to the shared object
-    ``lib`` and put it in place atomically (concurrent processes never load a half-written file); False
-    if the compiler fails.  Callers hold COMPILER_LOCK."""
+    """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile it to
+    the shared object ``lib`` and put it in place atomically (concurrent processes never load a
+    half-written file); False if the compiler fails.  Callers hold COMPILER_LOCK."""
     lib.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         source = Path(tmp, f"{fn.name()}.c")
@@ -233,7 +234,8 @@ def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = 
 
 
 def _compile_locked(fn: ca.Function, cc: str, flags: tuple[str, ...], nice: int, lib: Path, name: str,
-                    extra_source: str = "", also: tuple[ca.Function, ...] = ()) -> tuple[NativeFunction | InterpretedFunction, bool]:
+                    extra_source: str = "",
+                    also: tuple[ca.Function, ...] = ()) -> tuple[NativeFunction | InterpretedFunction, bool]:
     # another thread may have built it while this one waited
     if not lib.exists() and not build_library(fn, lib, cc, flags, nice, extra_source, also):
         return InterpretedFunction(fn), False

@@ -103,8 +103,8 @@ class NlpFunctions:
                 native, ok = compiled(fn, nice=nice, lib=lib,
                                       extra_source=native_newton.active_source(fn, nlp.residual_fn) if active else "",
                                       also=(nlp.residual_fn,) if active else ())
-                loop = native_newton.build(fn, self.nlp.residual_free_fn, *self._sizes(), nice=nice, kkt_lib=lib) if ok and name == "kkt_free" \
-                    else None
+                loop = native_newton.build(fn, nlp.residual_free_fn, *self._sizes(), nice=nice, kkt_lib=lib) \
+                    if ok and name == "kkt_free" else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile
                         return

@@ -35,9 +35,9 @@ import casadi as ca
 import numpy as np
 
 from .compiled import COMPILER_LOCK, build_library, cache_dir, compiler, fingerprint
-from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
-                  NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE,
-                  NEWTON_REGULARISATION)
+from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START,
+                  NEWTON_CHORD_STEPS, NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
+                  NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION)
 
 #: return codes of dlo_newton_run
 CONVERGED, NOT_CONVERGED, SINGULAR, STEP_TOO_LARGE, EVALUATION_FAILED = 0, 1, 2, 3, 4
@@ -72,7 +72,8 @@ static int dlo_factor(dlo_dgetrf_t dgetrf, const double *K, double *A, int *ipiv
    start, out at the last iterate; grad, energies: out there (the last call evaluates K at it). */
 CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_dgetrf_t dgetrf, dlo_dgetrs_t dgetrs, int n, int m, int max_evaluations,
     int max_steps, double max_step, double reg, double tol_dual, double tol_prim, double tol_step,
-    double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad, double *energies,
+    double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad,
+    double *energies,
     int *steps, int *evaluations, double *largest) {
   int N = n + m, one = 1, info = 0, code = 1;
   char trans = 'N';
@@ -221,9 +222,10 @@ class NativeNewton:
         dp = ctypes.POINTER(ctypes.c_double)
         code = self._run(self._dgetrf, self._dgetrs, n, nf, int(max_steps), NEWTON_CHORD_STEPS, NEWTON_MAX_STEP,
                          NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE,
-                         NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, u.ctypes.data_as(dp), p.ctypes.data_as(dp), K.ctypes.data_as(dp),
-                         r.ctypes.data_as(dp), grad.ctypes.data_as(dp), energies.ctypes.data_as(dp),
-                         ctypes.byref(steps), ctypes.byref(evaluations), ctypes.byref(largest))
+                         NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, u.ctypes.data_as(dp), p.ctypes.data_as(dp),
+                         K.ctypes.data_as(dp), r.ctypes.data_as(dp), grad.ctypes.data_as(dp),
+                         energies.ctypes.data_as(dp), ctypes.byref(steps), ctypes.byref(evaluations),
+                         ctypes.byref(largest))
         return NewtonOutcome(int(code), u, K.reshape(N, N, order="F"), r, grad, energies, steps.value,
                              largest.value, evaluations.value)
 
@@ -305,7 +307,8 @@ static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double
    derivatives. */
 CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t getrs, int n, int rows, int *active,
     const int *switchable, int switches, int max_evaluations, int max_steps, int given, double max_step,
-    double reg, double tol_dual, double tol_prim, double tol_step, double contraction, double chord_start, double join_tol,
+    double reg, double tol_dual, double tol_prim, double tol_step, double contraction, double chord_start,
+    double join_tol,
     double leave_tol, double *z, const double *p, double *lam, const double *ub, double *grad, double *g,
     double *jac, double *hess, double *energies, int *steps, int *evaluations) {
   int one = 1, info = 0, code = 1;

@@ -42,10 +42,27 @@ from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEW
 #: return codes of dlo_newton_run
 CONVERGED, NOT_CONVERGED, SINGULAR, STEP_TOO_LARGE, EVALUATION_FAILED = 0, 1, 2, 3, 4
 
-DRIVER = r"""
+#: C both drivers begin with: the headers, and the larger of two generated functions' work sizes
+_C_COMMON = r"""
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+
+typedef int (*dlo_work_t)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
+
+static void dlo_work(dlo_work_t first, dlo_work_t second, casadi_int *sz_arg, casadi_int *sz_res,
+                     casadi_int *sz_iw, casadi_int *sz_w) {
+  casadi_int a, r, i, w;
+  first(sz_arg, sz_res, sz_iw, sz_w);
+  second(&a, &r, &i, &w);
+  if (a > *sz_arg) *sz_arg = a;
+  if (r > *sz_res) *sz_res = r;
+  if (i > *sz_iw) *sz_iw = i;
+  if (w > *sz_w) *sz_w = w;
+}
+"""
+
+DRIVER = _C_COMMON + r"""
 
 typedef void (*dlo_dgetrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
 typedef void (*dlo_dgetrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb,
@@ -77,13 +94,8 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_dgetrf_t dgetrf, dlo_dgetrs_t dgetrs
     int *steps, int *evaluations, double *largest) {
   int N = n + m, one = 1, info = 0, code = 1;
   char trans = 'N';
-  casadi_int sz_arg, sz_res, sz_iw, sz_w, sz_arg2, sz_res2, sz_iw2, sz_w2;
-  KKT_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  RESIDUAL_work(&sz_arg2, &sz_res2, &sz_iw2, &sz_w2);
-  if (sz_arg2 > sz_arg) sz_arg = sz_arg2;
-  if (sz_res2 > sz_res) sz_res = sz_res2;
-  if (sz_iw2 > sz_iw) sz_iw = sz_iw2;
-  if (sz_w2 > sz_w) sz_w = sz_w2;
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  dlo_work(KKT_work, RESIDUAL_work, &sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
   casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 4 ? sz_res : 4));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
@@ -263,10 +275,7 @@ def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: i
 
 #: Newton with an active set on the full KKT function (``StringNLP.kkt_fn``), appended to its generated
 #: code.  See ``ActiveNewton``.
-ACTIVE_DRIVER = r"""
-#include <math.h>
-#include <stdlib.h>
-#include <string.h>
+ACTIVE_DRIVER = _C_COMMON + r"""
 
 typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
 typedef void (*dlo_getrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb,
@@ -313,13 +322,8 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
     double *jac, double *hess, double *energies, int *steps, int *evaluations) {
   int one = 1, info = 0, code = 1;
   char trans = 'N';
-  casadi_int sz_arg, sz_res, sz_iw, sz_w, sz_arg2, sz_res2, sz_iw2, sz_w2;
-  FUNCTION_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  RESIDUAL_work(&sz_arg2, &sz_res2, &sz_iw2, &sz_w2);
-  if (sz_arg2 > sz_arg) sz_arg = sz_arg2;
-  if (sz_res2 > sz_res) sz_res = sz_res2;
-  if (sz_iw2 > sz_iw) sz_iw = sz_iw2;
-  if (sz_w2 > sz_w) sz_w = sz_w2;
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  dlo_work(FUNCTION_work, RESIDUAL_work, &sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
   casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 5 ? sz_res : 5));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));

@@ -90,8 +90,7 @@ static int dlo_factor(dlo_dgetrf_t dgetrf, const double *K, double *A, int *ipiv
 CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_dgetrf_t dgetrf, dlo_dgetrs_t dgetrs, int n, int m, int max_evaluations,
     int max_steps, double max_step, double reg, double tol_dual, double tol_prim, double tol_step,
     double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad,
-    double *energies,
-    int *steps, int *evaluations, double *largest) {
+    double *energies, int *steps, int *evaluations, double *largest) {
   int N = n + m, one = 1, info = 0, code = 1;
   char trans = 'N';
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -317,8 +316,7 @@ static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double
 CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t getrs, int n, int rows, int *active,
     const int *switchable, int switches, int max_evaluations, int max_steps, int given, double max_step,
     double reg, double tol_dual, double tol_prim, double tol_step, double contraction, double chord_start,
-    double join_tol,
-    double leave_tol, double *z, const double *p, double *lam, const double *ub, double *grad, double *g,
+    double join_tol, double leave_tol, double *z, const double *p, double *lam, const double *ub, double *grad, double *g,
     double *jac, double *hess, double *energies, int *steps, int *evaluations) {
   int one = 1, info = 0, code = 1;
   char trans = 'N';

@@ -2,7 +2,8 @@
 compiled contact-free KKT function takes chord steps (K factored once, the residual alone evaluated per
 step) to the root the Python path's Newton steps (fused CasADi call plus Python steps on the interpreted
 functions) converge to, so a stream gives the same shapes to 1e-10; the active-set loop takes the Python
-path's own steps; results say which derivatives ran."""
+path's own steps until its set settles, then chord steps, to the same KKT point; results say which
+derivatives ran."""
 from __future__ import annotations
 
 import numpy as np

@@ -304,12 +304,14 @@ static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double
 
 /* Newton, then chord, steps on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see
    dlo_ros/solver/native_newton.py (ActiveNewton) and newton.py (_active_steps, the same row switches).
-   Each step's matrix is evaluated (Newton's own steps) until an evaluated iterate changes no row and the
-   steps are below chord_start; after that the factored matrix is kept while the steps shrink by the
-   contraction factor, the residual function giving grad L and g in between.  At each evaluated iterate
-   after the first step, while switches remain, one row of those with switchable[i] changes: the most
-   violated inactive one joins, else the active one with the most negative multiplier leaves (its
-   multiplier set to 0); an iterate where a row changed is not converged.  z (n), lam (rows), active
+   Each step's matrix is evaluated (Newton's own steps) until an iterate where the rows are checked
+   changes no row and the steps are below chord_start; after that the factored matrix is kept while the
+   steps shrink by the contraction factor, the residual function giving grad L and g in between.  The
+   rows are checked at the first iterate (a Newton step reached it: its g and multipliers are Newton's
+   own) and at each evaluated iterate after it: while switches remain, one row of those with
+   switchable[i] changes, the most violated inactive one joining, else the active one with the most
+   negative multiplier leaving (its multiplier set to 0), and the matrix is evaluated there; an iterate
+   where a row changed is not converged.  z (n), lam (rows), active
    (rows): in at the start, out at the answer.  grad, g, jac (rows x n, column-major), hess (n x n),
    energies: out at the answer (evaluated there); with given = 1 they are in as well, the first step's
    derivatives. */
@@ -333,7 +335,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
   double *lgrad = malloc(sizeof(double) * (n + rows));  /* the residual function's [grad L; g] */
   int *ipiv = malloc(sizeof(int) * (n + most));
   int fresh = 0, m = 0, factored = 0, here = 0;  /* here: the factored matrix is this iterate's */
-  int settled = switches == 0;  /* an evaluated iterate changed no row (or none may change) */
+  int settled = switches == 0;  /* a check of the rows changed none (or none may change) */
   double previous = INFINITY, big = 0.0;
   int shrinking = 1;
   *steps = 0; *evaluations = 0;
@@ -346,7 +348,9 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
   }
   for (;;) {
     int switched = 0;
-    if (*steps > 0 && switches > 0 && fresh) {
+    /* rows switch where the derivatives are evaluated, and at the first iterate, which a Newton step
+       reached whatever the start (there the residual function's g and the multipliers are Newton's own) */
+    if (*steps > 0 && switches > 0 && (fresh || *steps == 1)) {
       int join = -1, leave = -1;
       double excess = join_tol, negative = -leave_tol;
       for (int i = 0; i < rows; ++i) {
@@ -358,6 +362,14 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
       else if (leave >= 0) { active[leave] = 0; lam[leave] = 0.0; switched = 1; }
       switches -= switched;
       settled = !switched;
+      if (switched && !fresh) {
+        /* the changed set's matrix from derivatives evaluated here: with the start's, a row joining
+           beside an active sample (their Jacobians nearly equal) sent steps over max_step */
+        res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+        if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
+        ++*evaluations;
+        fresh = 1;
+      }
     }
     m = 0;
     for (int i = 0; i < rows; ++i) if (active[i]) idx[m++] = i;
@@ -420,10 +432,11 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
     ++*steps;
     here = 0;
     shrinking = big <= contraction * previous;
-    if ((!settled || big > chord_start || (!shrinking && !(big <= tol_step))) && *evaluations < max_evaluations) {
-      /* Newton's own steps (the same iterates and row decisions as _active_steps) until an evaluated
-         iterate changes no row and the steps are below chord_start, then chord steps; or too slow for
-         the factored matrix: evaluate and factor it here */
+    if (((!settled && *steps > 1) || big > chord_start || (!shrinking && !(big <= tol_step))) &&
+        *evaluations < max_evaluations) {
+      /* Newton's own steps (the same iterates and row decisions as _active_steps) until a check of the
+         rows changes none and the steps are below chord_start, then chord steps; or too slow for the
+         factored matrix: evaluate and factor it here */
       res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
       if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
       ++*evaluations;
@@ -481,10 +494,12 @@ class ActiveOutcome:
 
 class ActiveNewton:
     """Newton with an active set in one compiled call: the inner loop of ``newton._active_steps`` (its
-    regularised steps, row switches at evaluated iterates, convergence test and step limit), whose
-    tail is chord steps.  Each step evaluates the full KKT function (Newton's own steps, the same iterates
-    and row decisions) until an evaluated iterate changes no row and the steps are below
-    ``NEWTON_CHORD_START``; then [∇²L J_Aᵀ; J_A 0] stays factored and only the residual [∇L; g] is
+    regularised steps, row switches, convergence test and step limit), whose tail is chord steps.  Each
+    step evaluates the full KKT function (Newton's own steps, the same iterates and row decisions) until
+    a check of the rows changes none and the steps are below ``NEWTON_CHORD_START``.  The rows are
+    checked at the first iterate, which a Newton step reached (the residual function's g and the
+    multipliers there are Newton's own: no evaluation needed unless a row changes), and at every
+    evaluated iterate.  After that [∇²L J_Aᵀ; J_A 0] stays factored and only the residual [∇L; g] is
     evaluated per step, as in the contact-free loop (``NativeNewton``: the same contraction, tolerance and
     retry rules, the derivatives evaluated at the answer).  In C around the compiled full KKT function and
     its residual, whose library it shares.  Not re-entrant per instance: callers serialise calls

@@ -113,7 +113,7 @@ JOIN_TOLERANCE, LEAVE_TOLERANCE = 1e-9, 1e-12
 #: a warm update has converged when ‖∇f + Jᵀλ‖∞ and ‖g − bound‖∞ (scaled units) are below these
 NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE = 1e-9, 1e-11
 #: the compiled loops (native_newton.py) take Newton's own steps while a step exceeds NEWTON_CHORD_START
-#: in a scaled unknown (and, with an active set, until an evaluated iterate changes no row), then chord
+#: in a scaled unknown (and, with an active set, until a check of the rows changes none), then chord
 #: steps on the last factored matrix.  They have converged when, besides the tolerances above, the last
 #: step is below NEWTON_CHORD_TOLERANCE (or no longer shrinks: round-off); a step that shrinks by less
 #: than NEWTON_CHORD_CONTRACTION against the one before has the matrix evaluated and factored anew; at

@@ -8,8 +8,10 @@ factors K once and repeats chord steps
 
     solve (K + diag(δ I_n, −δ I_nf)) Δ = r  (LAPACK dgetrf once, dgetrs per step),  u ← u − Δ,  r ← r(u)
 
-evaluating and factoring K anew only where a step shrinks by less than ``NEWTON_CHORD_CONTRACTION``
-against the one before.  It stops once ‖r_dual‖∞ < 1e-9 and ‖r_primal‖∞ < 1e-11 and the last step is
+evaluating and factoring K anew while the steps exceed ``NEWTON_CHORD_START`` (Newton's own steps, far
+from the answer), where a step shrinks by less than ``NEWTON_CHORD_CONTRACTION`` against the one
+before, and where a step of an earlier iterate's K would exceed ``NEWTON_MAX_STEP`` (then Newton's own
+step from here is taken instead).  It stops once ‖r_dual‖∞ < 1e-9 and ‖r_primal‖∞ < 1e-11 and the last step is
 below ``NEWTON_CHORD_TOLERANCE`` in every scaled unknown (or no longer shrinks: round-off), and then
 evaluates K, ∇f and the energies at the answer, which the stability eigenvalue and the next update's
 first step use.  It also stops at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` evaluations of K, at a
@@ -60,13 +62,24 @@ static void dlo_work(dlo_work_t first, dlo_work_t second, casadi_int *sz_arg, ca
   if (i > *sz_iw) *sz_iw = i;
   if (w > *sz_w) *sz_w = w;
 }
+
+typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
+typedef void (*dlo_getrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb,
+                            int *info);
+
+/* The LU of A + diag(delta I_n, -delta I_(N-n)), delta = reg max(max|A|, 1), in place; LAPACK's info. */
+static int dlo_regularised_lu(dlo_getrf_t getrf, double *A, int *ipiv, int n, int N, double reg) {
+  double kmax = 1.0;
+  int info = 0;
+  for (int i = 0; i < N * N; ++i) if (fabs(A[i]) > kmax) kmax = fabs(A[i]);
+  double delta = reg * kmax;
+  for (int i = 0; i < N; ++i) A[i * N + i] += (i < n ? delta : -delta);
+  getrf(&N, &N, A, &N, ipiv, &info);
+  return info;
+}
 """
 
 DRIVER = _C_COMMON + r"""
-
-typedef void (*dlo_dgetrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
-typedef void (*dlo_dgetrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb,
-                             int *info);
 
 static int dlo_converged(const double *r, int n, int m, double tol_dual, double tol_prim) {
   for (int i = 0; i < n; ++i) if (!(fabs(r[i]) < tol_dual)) return 0;
@@ -74,20 +87,15 @@ static int dlo_converged(const double *r, int n, int m, double tol_dual, double 
   return 1;
 }
 
-/* LU of K + diag(reg max(max|K|, 1) I_n, -reg max(max|K|, 1) I_m) into A; LAPACK's info. */
-static int dlo_factor(dlo_dgetrf_t dgetrf, const double *K, double *A, int *ipiv, int n, int N, double reg) {
-  double kmax = 1.0;
-  int info = 0;
-  for (int i = 0; i < N * N; ++i) { A[i] = K[i]; if (fabs(K[i]) > kmax) kmax = fabs(K[i]); }
-  double delta = reg * kmax;
-  for (int i = 0; i < N; ++i) A[i * N + i] += (i < n ? delta : -delta);
-  dgetrf(&N, &N, A, &N, ipiv, &info);
-  return info;
+/* The regularised LU of K into A (dlo_regularised_lu); LAPACK's info. */
+static int dlo_factor(dlo_getrf_t getrf, const double *K, double *A, int *ipiv, int n, int N, double reg) {
+  memcpy(A, K, sizeof(double) * N * N);
+  return dlo_regularised_lu(getrf, A, ipiv, n, N, reg);
 }
 
 /* Chord Newton on the contact-free KKT system; see dlo_ros/solver/native_newton.py.  u, K, r: in at the
    start, out at the last iterate; grad, energies: out there (the last call evaluates K at it). */
-CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_dgetrf_t dgetrf, dlo_dgetrs_t dgetrs, int n, int m, int max_evaluations,
+CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, int n, int m, int max_evaluations,
     int max_steps, double max_step, double reg, double tol_dual, double tol_prim, double tol_step,
     double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad,
     double *energies, int *steps, int *evaluations, double *largest) {
@@ -276,14 +284,10 @@ def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: i
 #: code.  See ``ActiveNewton``.
 ACTIVE_DRIVER = _C_COMMON + r"""
 
-typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
-typedef void (*dlo_getrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb,
-                            int *info);
-
-/* [H J_A^T; J_A 0] + diag(delta I_n, -delta I_m) of the m rows idx into A (N = n + m), and its LU. */
+/* The regularised LU (dlo_regularised_lu) of [H J_A^T; J_A 0] of the m rows idx, into A (N = n + m). */
 static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double *jac, const int *idx, int n,
                              int m, int rows, double reg, double *A, int *ipiv) {
-  int N = n + m, info = 0;
+  int N = n + m;
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i) A[i + (size_t)j * N] = hess[i + (size_t)j * n];
   for (int k = 0; k < m; ++k) {
@@ -294,12 +298,7 @@ static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double
     }
     for (int l = 0; l < m; ++l) A[(n + k) + (size_t)(n + l) * N] = 0.0;
   }
-  double kmax = 1.0;
-  for (int i = 0; i < N * N; ++i) if (fabs(A[i]) > kmax) kmax = fabs(A[i]);
-  double delta = reg * kmax;
-  for (int i = 0; i < N; ++i) A[i * N + i] += (i < n ? delta : -delta);
-  getrf(&N, &N, A, &N, ipiv, &info);
-  return info;
+  return dlo_regularised_lu(getrf, A, ipiv, n, N, reg);
 }
 
 /* Newton, then chord, steps on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see
@@ -378,7 +377,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
        residual function's grad L (lam is 0 on every inactive row) */
     for (int j = 0; j < n; ++j) {
       double v;
-      if (fresh || given && *steps == 0) {
+      if (fresh || *steps == 0) {  /* the start's derivatives, given or evaluated */
         v = grad[j];
         for (int k = 0; k < m; ++k) v += lam[idx[k]] * jac[idx[k] + (size_t)j * rows];
       } else {

@@ -154,9 +154,11 @@ class ShapeSolver:
         # references: a pooled model must not keep an evicted one alive)
         self._adopted: tuple[weakref.ref, weakref.ref, SolverState] | None = None
         lay = self.nlp.params
-        self._grip_positions = np.zeros(lay.size, dtype=bool)  # p's grip position rows
+        self._grip_targets = np.zeros(lay.size, dtype=bool)  # p's grip target rows (positions, orientations)
         for grip in problem.grips:
-            self._grip_positions[lay[f"grip:{grip.name}:position"]] = True
+            for name in ("position", "frame", "angles"):
+                if f"grip:{grip.name}:{name}" in lay.slices:
+                    self._grip_targets[lay[f"grip:{grip.name}:{name}"]] = True
         self._contact: SC.ContactSlots | None = None  # the self-contact pairs of the solve under way
         self._slot_override: list | None = None  # the obstacle slots of a repeated solve (_place_slots_again)
         # the clamps' turns over the targets since the committed shape (None: none asked for since), and
@@ -231,8 +233,12 @@ class ShapeSolver:
             if self._adopt_again(other, src):
                 return True
             source = sample_source(other, src, self.nlp)
+            held = other._held_poses(src) if state is None else None
         with self._lock:  # warm_state evaluates this solver's functions: never beside a solve of it
-            state = warm_state(self.nlp, self.functions, self.parameters, self.problem, source)
+            # at the grip targets ``src`` holds (its equilibrium's own), so that a solve from it moves
+            # them from there: substeps (``_newton_in_substeps``) then split a real move
+            at = self.problem if held is None else self.problem.with_grip_poses(held)
+            state = warm_state(self.nlp, self.functions, self.parameters, at, source)
             contact = getattr(src, "contact", None)
             if contact is not None and len(contact.pairs) == self.nlp.self_contact_slots:
                 # the same pairs in the same slots: the multipliers warm_state matched row by row belong to them
@@ -244,39 +250,42 @@ class ShapeSolver:
             if contact is None:  # what every query from it reuses: its derivatives, evaluated once here
                 fill_start(self.nlp, self.functions, state)
                 self._adopted = (weakref.ref(other), weakref.ref(src), state)
-                self._state = self._adopted_copy(state, state.p)
+                self._state = self._adopted_copy(state)
         return True
 
-    def _adopted_copy(self, adopted: SolverState, p: np.ndarray) -> SolverState:
-        """A copy of the adopted state at the parameters ``p`` (which differ in grip targets at most), with its
-        derivatives: those do not depend on the targets, except g and the residual, shifted exactly (the
-        targets enter g linearly)."""
+    def _held_poses(self, src: SolverState) -> dict[str, GripPose] | None:
+        """The grip poses ``src`` (this solver's committed state) is the equilibrium of: the scene's, when
+        its grip targets are the ones ``src.p`` holds; None when they are not (a scene set since, whose
+        poses ``src`` was not solved for).  The caller holds the lock."""
+        mask = self.nlp.grip_parameter_mask
+        p = self.parameters.pack(self.problem, src.z, src.p)
+        return {g.name: g.pose for g in self.problem.grips} if np.array_equal(p[mask], src.p[mask]) else None
+
+    def _adopted_copy(self, adopted: SolverState) -> SolverState:
+        """A copy of the adopted state with its derivatives (a solve from it shifts g and the residual to
+        its own targets: ``newton``)."""
         state = adopted.copy()
-        state.p = p
-        shift = self.nlp.target_shift(adopted.p, p)
-        state.g = adopted.g + shift
+        state.g = adopted.g
         state.jacobian, state.hessian, state.gradient, state.energies = (adopted.jacobian, adopted.hessian,
                                                                          adopted.gradient, adopted.energies)
-        if adopted.kkt is not None:
-            state.kkt, state.residual = adopted.kkt, adopted.residual.copy()
-            state.residual[state.z.size:] += shift[:self.nlp.n_free_rows]
+        state.kkt, state.residual = adopted.kkt, adopted.residual
         return state
 
     def _adopt_again(self, other: ShapeSolver, src: SolverState) -> bool:
         """Adopt the state adopted last time from the same state ``src`` of ``other``, without sampling
-        and mapping it again, when this solver's scene differs from that adoption's in grip positions
-        at most (then the mapping is the same: warm_state depends on the scene through p, and on grip
-        positions only through p's target rows, which are packed anew).  What a query that another
-        model answers does on every call: the held shape is the same until the stream commits."""
+        and mapping it again, when this solver's scene differs from that adoption's in grip poses at most
+        (the adopted state is at the grip targets it was mapped for: ``adopt_warm_start``; a solve from it
+        moves them to the scene's).  What a query that another model answers does on every call: the
+        held shape is the same until the stream commits."""
         adopted = self._adopted
         if adopted is None or adopted[0]() is not other or adopted[1]() is not src:
             return False
         with self._lock:
             p = self.parameters.pack(self.problem, adopted[2].z)
-            keep = ~self._grip_positions
+            keep = ~self._grip_targets
             if not np.array_equal(p[keep], adopted[2].p[keep]):
                 return False
-            self._state = self._adopted_copy(adopted[2], p)
+            self._state = self._adopted_copy(adopted[2])
             self._clamp_turns = None
         return True
 

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from dlo_ros.model import Obstacle, Profile
+from dlo_ros.model.problem import GripPose
+from dlo_ros.scene import load_scene
 from dlo_ros.solver import AutoShapeSolver, ShapeSolver, SolverOptions, make_solver
 from support.problems import clamped_pair, quat_about
 
@@ -335,9 +337,9 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
     """A planar stream answers out-of-plane queries with the 3D model, warm-started from the held shape
     mapped onto it (ShapeSolver.adopt_warm_start).  The mapping is made once per held shape and reused
     by the next queries: each query's start is, bit for bit, the mapping made afresh for it, also after
-    the stream committed a new shape; its derivatives, evaluated once per mapping, are those at each
-    query's own targets; and the answers equal those of a fresh solver holding the same shape to
-    rounding."""
+    the stream committed a new shape; it is at the stream's held targets (the equilibrium's own, from
+    which a solve moves to the query's), with its derivatives there, evaluated once per mapping; and
+    the answers equal those of a fresh solver holding the same shape to rounding."""
     q1 = {"right": ([0.55, 0.06, 0.38], [0, 0, 0, 1])}
     q2 = {"right": ([0.62, -0.05, 0.42], [0, 0, 0, 1])}
     moved = {"right": ([0.58, 0.0, 0.36], [0, 0, 0, 1])}
@@ -354,8 +356,9 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
         other = answered_by[-1]  # the 3D model's solver
         assert other is not None and other is not solver.inner
         held, nf = other._state, other.nlp.n_free_rows  # commit=False leaves the start in place
-        # its stored derivatives (evaluated once per mapping, the residual and g shifted to each query's
-        # targets) are those at its own z and p
+        np.testing.assert_array_equal(held.p[other.nlp.params["grip:right:position"]],
+                                      solver.problem.grip("right").pose.position)
+        # its stored derivatives (evaluated once per mapping) are those at its own z and p
         kkt, residual, _, _ = other.functions.kkt_free(held.z, held.p, held.lam_g[:nf])
         np.testing.assert_allclose(held.kkt, kkt, rtol=0, atol=1e-12 * np.abs(kkt).max())
         np.testing.assert_allclose(held.residual, residual[:, 0], rtol=0, atol=1e-12)
@@ -375,6 +378,25 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
         np.testing.assert_allclose(answer.points, fresh.solve(q, commit=False).points, atol=1e-12)
     assert solver.solve(moved).ok  # the stream commits a new held shape
     query(q2)
+
+
+def test_a_query_newton_cannot_take_in_one_move_is_answered_in_substeps_from_the_held_targets():
+    """``default_cable`` held planar, queried 15 cm away towards the table: one Newton move from the
+    mapped held shape makes a contact appear and the active-set steps grow too large.  The 3D model's
+    start is at the held targets, so the move is split into substeps (ShapeSolver._newton_in_substeps)
+    and Newton answers; with the start labelled with the query's own targets the substeps were no
+    move at all, and IPOPT answered in tens of milliseconds.  The answer is the stable shape a cold
+    solve of the same targets finds."""
+    scene = load_scene("default_cable")
+    target = {"right": GripPose(np.array([0.57548848, -0.03298794, 0.28098936]), np.array([0.0, 0.0, 0.0, 1.0]))}
+    solver = make_solver(scene.problem, scene.options, compile="off", checks="sync")
+    assert solver.solve().model.planar
+    answered = solver.solve(target, commit=False)
+    assert answered.ok and answered.stable and not answered.model.planar
+    assert answered.ipopt_status == "Newton", answered.ipopt_status
+    cold = make_solver(scene.problem.with_grip_poses(target), scene.options, compile="off", checks="sync").solve()
+    assert cold.ok and cold.stable and cold.ipopt_status != "Newton"
+    assert np.max(np.linalg.norm(answered.points - cold.points, axis=1)) < 1e-7
 
 
 def test_a_fourier_basis_serves_the_planar_model_and_the_3d_model_uses_its_own_elements():

@@ -328,11 +328,16 @@ class AutoShapeSolver:
             obstacles = tuple(problem.obstacles[i] for i in choice.obstacles)
             self._reduced_cache = (key, problem.string, problem.obstacles, st, obstacles)
         reduced = replace(problem, string=st, obstacles=obstacles)
-        opts = self.options.with_model("planar" if choice.planar else "full", order=choice.order,
-                                       quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
-                                       obstacle_samples=choice.samples,
-                                       self_contact_pairs=(self.options.self_contact_pairs or AUTO_SELF_CONTACT_PAIRS)
-                                       if choice.self_contact else 0)
+        model = (choice.planar, choice.order, choice.samples, choice.self_contact)
+        known = getattr(self, "_reduced_options", {})
+        opts = known.get(model)
+        if opts is None:  # made once per model: a frozen dataclass's replace costs more than the lookup
+            opts = self.options.with_model(
+                "planar" if choice.planar else "full", order=choice.order,
+                quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
+                obstacle_samples=choice.samples,
+                self_contact_pairs=(self.options.self_contact_pairs or AUTO_SELF_CONTACT_PAIRS) if choice.self_contact else 0)
+            self._reduced_options = {**known, model: opts}
         return reduced, opts
 
     def _solver_for(self, choice: ModelChoice, problem: Problem, *, stream: bool, source: ShapeSolver | None = None,

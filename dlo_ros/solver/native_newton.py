@@ -218,35 +218,37 @@ class NativeNewton:
     def __init__(self, lib_path: Path, n: int, nf: int, n_p: int):
         self._lib = ctypes.CDLL(str(lib_path))
         self._run = self._lib.dlo_newton_run
-        dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+        vp, ip = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int,
+        self._run.argtypes = [vp, vp, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                               ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
-                              ctypes.c_double, ctypes.c_double, ctypes.c_double, dp, dp, dp, dp, dp, dp, ip, ip, dp]
-        self._dgetrf, self._dgetrs = _lapack_pointer("dgetrf"), _lapack_pointer("dgetrs")
+                              ctypes.c_double, ctypes.c_double, ctypes.c_double, vp, vp, vp, vp, vp, vp, ip, ip,
+                              ctypes.POINTER(ctypes.c_double)]
         self.n, self.nf, self.n_p = n, nf, n_p
+        N = n + nf
+        # the call's arrays, allocated once and passed by their addresses (an ndarray's ctypes pointer costs
+        # microseconds per argument and call)
+        self._u, self._p, self._K, self._r = np.zeros(N), np.zeros(n_p), np.zeros((N, N), order="F"), np.zeros(N)
+        self._grad, self._energies = np.zeros(n), np.zeros(5)
+        self._steps, self._evaluations, self._largest = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(0.0)
+        self._head = (_lapack_pointer("dgetrf"), _lapack_pointer("dgetrs"), n, nf)
+        self._tail = (NEWTON_CHORD_STEPS, NEWTON_MAX_STEP, NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE,
+                      NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START,
+                      *(a.ctypes.data for a in (self._u, self._p, self._K, self._r, self._grad, self._energies)),
+                      ctypes.byref(self._steps), ctypes.byref(self._evaluations), ctypes.byref(self._largest))
 
     def __call__(self, u: np.ndarray, p: np.ndarray, kkt: np.ndarray, residual: np.ndarray,
                  max_steps: int) -> NewtonOutcome:
         """From u = [z; λ_free] with K, r at u; ``max_steps``: the most evaluations of K on the way (the one
         at the answer is not counted)."""
-        n, nf = self.n, self.nf
-        N = n + nf
-        u = np.array(u, dtype=float, copy=True)
-        p = np.ascontiguousarray(p, dtype=float)
-        K = np.array(kkt, dtype=float, copy=True, order="F").reshape(N * N, order="F")
-        r = np.array(residual, dtype=float, copy=True).ravel()
-        grad, energies = np.zeros(n), np.full(5, np.nan)
-        steps, evaluations, largest = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(0.0)
-        dp = ctypes.POINTER(ctypes.c_double)
-        code = self._run(self._dgetrf, self._dgetrs, n, nf, int(max_steps), NEWTON_CHORD_STEPS, NEWTON_MAX_STEP,
-                         NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE,
-                         NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, u.ctypes.data_as(dp), p.ctypes.data_as(dp),
-                         K.ctypes.data_as(dp), r.ctypes.data_as(dp), grad.ctypes.data_as(dp),
-                         energies.ctypes.data_as(dp), ctypes.byref(steps), ctypes.byref(evaluations),
-                         ctypes.byref(largest))
-        return NewtonOutcome(int(code), u, K.reshape(N, N, order="F"), r, grad, energies, steps.value,
-                             largest.value, evaluations.value)
+        self._u[:] = u
+        self._p[:] = p
+        self._K[:] = kkt
+        self._r[:] = np.ravel(residual)
+        self._energies[:] = np.nan
+        code = self._run(*self._head, int(max_steps), *self._tail)
+        return NewtonOutcome(int(code), self._u.copy(), self._K.copy(order="F"), self._r.copy(), self._grad.copy(),
+                             self._energies.copy(), self._steps.value, self._largest.value, self._evaluations.value)
 
 
 def build(fn: ca.Function, residual: ca.Function, n: int, nf: int, n_p: int, nice: int = 0,

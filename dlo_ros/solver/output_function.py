@@ -8,13 +8,13 @@ the planar model (what ``solver.model: auto`` streams while a scene stays in its
 them is a fixed composition of matrix products with the structure's constant interpolation matrices,
 so this module writes them as one function
 
-    outputs(z, p, λ, prof) → (x(s_out), v(s_out), F_grips, T_grips, F_obstacles, residual, flip)
+    outputs(z, p, λ, prof) → (x(s_out), q(s_out), F_grips, T_grips, F_obstacles, residual, flip)
 
 evaluated in one call (compiled C when the solver's derivatives are compiled, CasADi's virtual
 machine until then).  ``λ``: every row's SI multiplier; ``prof`` = (Rf, Rt) at the residual's grid and
-Rf_min, from the string (``OutputFunction.profiles``); ``v``: the interpolated nodal quaternions
-(``unit_quaternions`` turns them into the published orientations), for the planar model φ (1 × K);
-``flip``: per grip t·R_g e_x and d1·R_g e_y at its node (negative: the flipped sheet,
+Rf_min, from the string (``OutputFunction.profiles``); ``q``: the published orientations, the
+interpolated nodal quaternions made unit with ``director.frame_to_quat``'s sign (4 × K), for the
+planar model φ (1 × K); ``flip``: per grip t·R_g e_x and d1·R_g e_y at its node (negative: the flipped sheet,
 ``frames.flipped_grips``; ones for the planar model, which has no flipped sheet).
 
 The arithmetic is the numpy path's, term for term (``wrenches.wrench``, ``wrenches.equilibrium``,
@@ -35,18 +35,19 @@ from .residual import evaluation_grid
 from .wrenches import static_events
 
 
-def unit_quaternions(v: np.ndarray) -> np.ndarray:
-    """(K, 4) unit quaternions (x, y, z, w) of non-zero quaternions v, each with the sign
-    ``director.frame_to_quat`` gives its rotation matrix (the component Shepperd's method takes from the
-    largest of trace and diagonal is positive).  Where two candidates tie to rounding the two may pick
-    q and −q: the same rotation."""
-    n2 = np.einsum("ki,ki->k", v, v)
-    x2, y2, z2, w2 = (v * v).T
-    # 1 + trace and 1 + 2 R_aa − trace of R(v), times |v|²: 4 w², 4 x², 4 y², 4 z²
-    which = np.argmax(np.stack([3 * w2 - x2 - y2 - z2, w2 + x2 - y2 - z2, w2 - x2 + y2 - z2,
-                                w2 - x2 - y2 + z2], axis=1), axis=1)
-    negative = v[np.arange(len(v)), np.array([3, 0, 1, 2])[which]] < 0
-    return np.where(negative[:, None], -v, v) / np.sqrt(n2)[:, None]  # −v, not −1 · v: no negative zeros
+def _unit_quaternion() -> ca.Function:
+    """The unit quaternion (x, y, z, w) of a non-zero quaternion v, with the sign
+    ``director.frame_to_quat`` gives its rotation matrix: the component Shepperd's method takes from the
+    first largest of 1 + trace and 1 + 2 R_aa − trace (times |v|²: 4 w², 4 x², 4 y², 4 z²) is positive.
+    Where two candidates tie to rounding the two may pick q and −q: the same rotation."""
+    v = ca.SX.sym("v", 4)
+    x2, y2, z2, w2 = v[0] * v[0], v[1] * v[1], v[2] * v[2], v[3] * v[3]
+    a = [3 * w2 - x2 - y2 - z2, w2 + x2 - y2 - z2, w2 - x2 + y2 - z2, w2 - x2 - y2 + z2]
+    component = [v[3], v[0], v[1], v[2]]
+    chosen = ca.if_else(a[2] >= a[3], component[2], component[3])
+    chosen = ca.if_else(ca.logic_and(a[1] >= a[2], a[1] >= a[3]), component[1], chosen)
+    chosen = ca.if_else(ca.logic_and(ca.logic_and(a[0] >= a[1], a[0] >= a[2]), a[0] >= a[3]), component[0], chosen)
+    return ca.Function("unit_quaternion", [v], [ca.if_else(chosen < 0, -v, v) / ca.sqrt(ca.dot(v, v))])
 
 
 def _cross(a: ca.MX, b: ca.MX) -> ca.MX:
@@ -216,7 +217,7 @@ class OutputFunction:
         if planar:  # φ at the outputs (the orientations: ``frames.frames_psi`` and ``pose_quaternions``)
             v_out = ca.mtimes(ca.DM(m.matrices(s_out)[0]), c_phi).T
         else:
-            v_out = ca.mtimes(nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T))
+            v_out = _unit_quaternion().map(len(s_out))(ca.mtimes(nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T)))
         zero = ca.DM.zeros(3, 0)
         self.function = ca.Function(
             "dlo_outputs", [z, p, lam, prof],

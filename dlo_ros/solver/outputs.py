@@ -22,7 +22,6 @@ from .functions import NlpFunctions
 from .nlp import StringNLP
 from .options import SolverOptions
 from .parameters import ProblemParameters
-from .output_function import unit_quaternions
 from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, SelfContact, ShapeResult
 from .self_contact import slot_multiplier
@@ -120,7 +119,7 @@ class ShapeOutputs:
             quats = pose_quaternions(self.nlp.r0, phi, np.full(phi.size, np.pi / 2),
                                      F.frames_psi(self.nlp, self.parameters, current, state.z, self.s_out, state.p))
         else:
-            quats = unit_quaternions(v_out.T)
+            quats = v_out.T
         return self._assemble(problem, state, summary, points.T, quats, grips, contacts, residual,
                               flipped, [], ipopt_status, iterations, violation, warm, steps)
 

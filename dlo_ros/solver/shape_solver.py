@@ -89,6 +89,17 @@ def structure_key(problem: Problem, options: SolverOptions) -> tuple:
     )
 
 
+def only_poses_differ(problem: Problem, other: Problem) -> bool:
+    """Whether ``problem`` is ``other`` but for its grips' poses: the same string, gravity, loads,
+    obstacles and relative positions (the same objects), and grips of the same names, arc lengths and
+    modes.  Then both validate alike (a pose is checked where it is made: ``GripPose.checked``) and
+    share their NLP's structure (``structure_key``)."""
+    return (problem.string is other.string and problem.gravity is other.gravity and problem.loads is other.loads
+            and problem.obstacles is other.obstacles and problem.relative_positions is other.relative_positions
+            and len(problem.grips) == len(other.grips)
+            and all(a.name == b.name and a.s == b.s and a.mode == b.mode for a, b in zip(problem.grips, other.grips)))
+
+
 def with_checked_poses(problem: Problem, poses: dict | None) -> Problem:
     """``problem`` with new grip poses (GripPose or (position, quaternion) per grip name), validated:
     unknown names, NaN and bad quaternions raise ValueError naming the grip."""
@@ -315,6 +326,10 @@ class ShapeSolver:
         Same structure: only parameter values change and the warm start is kept.  Otherwise the NLP is
         rebuilt (and the next solve is cold).  Raises ValueError naming the offending field.
         """
+        with self._lock:
+            if only_poses_differ(problem, self.problem):  # validated already, the same structure and values
+                self.problem = problem
+                return
         problem.validate()
         with self._lock:
             if structure_key(problem, self.options) == self._key:

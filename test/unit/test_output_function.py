@@ -132,6 +132,22 @@ def _times(a, b):
     return quat_multiply_matrices(a, b)[0] @ np.asarray(b, dtype=float)
 
 
+def test_the_published_quaternion_is_the_unit_quaternion_of_the_rotation_with_frame_to_quats_sign():
+    """The outputs' orientation of an interpolated (non-unit) nodal quaternion v: v / |v| with the sign
+    Shepperd's method gives the rotation matrix of v (``director.frame_to_quat``), for v of every size
+    and each of the four components largest."""
+    from dlo_ros.model.director import frame_to_quat
+    from dlo_ros.model.rotations import quat_to_matrix
+    from dlo_ros.solver.output_function import _unit_quaternion
+
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(400, 4)) * rng.uniform(0.2, 3.0, size=(400, 1))
+    v[:4] = np.diag([5.0, -5.0, 5.0, -5.0]) + 0.1  # x, y, z and w by far the largest, either sign
+    q = np.asarray(_unit_quaternion().map(len(v))(v.T)).T
+    expected = frame_to_quat(np.array([quat_to_matrix(u / np.linalg.norm(u)) for u in v]))
+    np.testing.assert_allclose(q, expected, rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_the_outputs_function_equals_the_numpy_path_cold_and_streaming(case):
     make, drop, presses = CASES[case]

@@ -6,7 +6,7 @@ string's tangent, pointing toward increasing s.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -62,6 +62,15 @@ class StringProperties:
             prof = getattr(self, name)
             if prof is not None and not all(np.isfinite(prof.values)):
                 raise ValueError(f"string.{name}: contains NaN or infinity")
+
+
+def _copied(value, **changes):
+    """A copy of the frozen dataclass ``value`` with ``changes``, without ``dataclasses.replace``'s call
+    of ``__init__`` (for values that are valid already; a warm update makes several per target)."""
+    new = object.__new__(type(value))
+    new.__dict__.update(value.__dict__)
+    new.__dict__.update(changes)
+    return new
 
 
 @dataclass(frozen=True)
@@ -182,4 +191,5 @@ class Problem:
         return [s for rel in self.relative_positions for s in (rel.s_a, rel.s_b)]
 
     def with_grip_poses(self, poses: dict[str, GripPose]) -> "Problem":
-        return replace(self, grips=tuple(replace(g, pose=poses.get(g.name, g.pose)) for g in self.grips))
+        """This problem with the grips named in ``poses`` at those poses (checked ones: ``GripPose.checked``)."""
+        return _copied(self, grips=tuple(_copied(g, pose=poses[g.name]) if g.name in poses else g for g in self.grips))

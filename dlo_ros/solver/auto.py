@@ -378,7 +378,7 @@ class AutoShapeSolver:
         """A model that a switch or the queries will use: compile it in the background, once the
         streaming model's own compile is done (the stream reaches full speed first), if the stream
         compiles at all.  Its libraries land in the cache, where the query workers find them."""
-        if self.compile not in ("background", "blocking") or solver.kkt_compiled or solver.compile_pending:
+        if self.compile not in ("background", "blocking") or solver.all_compiled or solver.compile_pending:
             return
         streaming = self.inner._compile_thread
 
@@ -822,7 +822,8 @@ class AutoShapeSolver:
         return full.unstable_eigenvalue()
 
     # ---- plumbing -----------------------------------------------------------------------------------
-    def model_summary(self, choice: ModelChoice | None = None, solver: ShapeSolver | None = None) -> ModelSummary:
+    def model_summary(self, choice: ModelChoice | None = None, solver: ShapeSolver | None = None,
+                      changed: tuple[str, ...] = ()) -> ModelSummary:
         """The ``model`` object of a result: the streaming model, or ``choice``/``solver`` (a query's).
 
         estimated_error_m: the basis-order estimate of the last check of this model (the change of the
@@ -830,7 +831,7 @@ class AutoShapeSolver:
         deepest cut into an obstacle between its samples, None until the first check has finished.  It
         does not include the a-priori bounds of the dropped gravity (≤ δ/10) and stretch (≤ δ/2).  In
         background mode it describes a solve up to recheck_every updates earlier: checked_updates_ago
-        says how many (0: this very shape)."""
+        says how many (0: this very shape).  ``changed``: the changes of model this very solve made."""
         streaming = choice is None
         c, s = (self.choice, self.inner) if streaming else (choice, solver)
         checked = streaming and not self._unchecked
@@ -844,7 +845,7 @@ class AutoShapeSolver:
             checked_updates_ago=self._updates - self._checked_update if checked else None,
             reasons=tuple(c.reasons), changes=tuple(r for _, r in self.changes),
             rotation=inner.rotation, elements=inner.elements, breakpoints=inner.breakpoints,
-            self_contact_pairs=inner.self_contact_pairs,
+            self_contact_pairs=inner.self_contact_pairs, changed=changed,
         )
 
     def _finish(self, result: ShapeResult, t0: float, notes: list[str], choice: ModelChoice | None = None,
@@ -852,7 +853,7 @@ class AutoShapeSolver:
         """Attach the model (the streaming one, or the query's ``choice``/``solver``) and the time; give
         contact forces the scene's obstacle indices."""
         c = choice or self.choice
-        result.model = replace(self.model_summary(choice, solver), changed=tuple(notes))
+        result.model = self.model_summary(choice, solver, tuple(notes))
         result.solve_time_ms = (time.perf_counter() - t0) * 1e3
         if result.ok and result.contact_forces and len(c.obstacles) != len(self.problem.obstacles):
             result.contact_forces = {c.obstacles[i]: f for i, f in result.contact_forces.items() if i < len(c.obstacles)}

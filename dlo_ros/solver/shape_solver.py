@@ -161,22 +161,17 @@ class ShapeSolver:
         self.problem = problem
         self._key = structure_key(problem, self.options)
         self._state: SolverState | None = None
-        # (source solver, its state, the state adopted from it): adopt_warm_start's last mapping (weak
-        # references: a pooled model must not keep an evicted one alive)
-        self._adopted: tuple[weakref.ref, weakref.ref, SolverState] | None = None
-        lay = self.nlp.params
-        self._grip_targets = np.zeros(lay.size, dtype=bool)  # p's grip target rows (positions, orientations)
-        for grip in problem.grips:
-            for name in ("position", "frame", "angles"):
-                if f"grip:{grip.name}:{name}" in lay.slices:
-                    self._grip_targets[lay[f"grip:{grip.name}:{name}"]] = True
+        # (source solver, its state, the state adopted from it, this solver's scene then): adopt_warm_start's
+        # last mapping (weak references: a pooled model must not keep an evicted one alive)
+        self._adopted: tuple[weakref.ref, weakref.ref, SolverState, Problem] | None = None
         self._contact: SC.ContactSlots | None = None  # the self-contact pairs of the solve under way
         self._slot_override: list | None = None  # the obstacle slots of a repeated solve (_place_slots_again)
         # the clamps' turns over the targets since the committed shape (None: none asked for since), and
         # those of the solve under way (topology.ClampTurns; the linking-number check)
         self._clamp_turns: TP.ClampTurns | None = None
         self._turns_start: tuple | None = None  # (z, clamp names, ClampTurns): _committed_turns' last answer
-        self._clamp_frames: tuple | None = None  # (the clamps' target quaternions as bytes, their frames)
+        # (the clamps' target quaternions as bytes, their frames, (ClampTurns, it advanced to them) or None)
+        self._clamp_frames: tuple | None = None
         self._turns_now: TP.ClampTurns | None = None
         # the solve under way reached its Newton answer far from the committed shape (substeps, a saddle left)
         self._newton_far = False
@@ -195,7 +190,7 @@ class ShapeSolver:
         check_compile_mode(mode)
         with self._lock:
             self.compile_mode = mode
-            if not self.kkt_compiled and self._compile_thread is None:
+            if not self.all_compiled and self._compile_thread is None:
                 self._start_compile()
 
     def _start_compile(self) -> None:
@@ -208,6 +203,13 @@ class ShapeSolver:
         if self._compile_thread is not None:
             self._compile_thread.join(timeout)
         return self.kkt_compiled
+
+    @property
+    def all_compiled(self) -> bool:
+        """Whether every function a solve calls runs compiled C: the derivatives and, for the models that
+        have one, the outputs' function (a new version may change it alone: its derivatives then load
+        from the cache, and it still has to be compiled)."""
+        return self.functions.compiled and (self.functions.outputs is None or self.functions.outputs_compiled)
 
     @property
     def kkt_compiled(self) -> bool:
@@ -260,7 +262,7 @@ class ShapeSolver:
             self._adopted = None
             if contact is None:  # what every query from it reuses: its derivatives, evaluated once here
                 fill_start(self.nlp, self.functions, state)
-                self._adopted = (weakref.ref(other), weakref.ref(src), state)
+                self._adopted = (weakref.ref(other), weakref.ref(src), state, self.problem)
                 self._state = self._adopted_copy(state)
         return True
 
@@ -285,16 +287,14 @@ class ShapeSolver:
     def _adopt_again(self, other: ShapeSolver, src: SolverState) -> bool:
         """Adopt the state adopted last time from the same state ``src`` of ``other``, without sampling
         and mapping it again, when this solver's scene differs from that adoption's in grip poses at most
-        (the adopted state is at the grip targets it was mapped for: ``adopt_warm_start``; a solve from it
-        moves them to the scene's).  What a query that another model answers does on every call: the
-        held shape is the same until the stream commits."""
+        (``only_poses_differ``: the mapping is then the same, at the grip targets ``src`` holds; a solve
+        from it moves them to the scene's).  What a query that another model answers does on every call:
+        the held shape is the same until the stream commits."""
         adopted = self._adopted
         if adopted is None or adopted[0]() is not other or adopted[1]() is not src:
             return False
         with self._lock:
-            p = self.parameters.pack(self.problem, adopted[2].z)
-            keep = ~self._grip_targets
-            if not np.array_equal(p[keep], adopted[2].p[keep]):
+            if not only_poses_differ(self.problem, adopted[3]):
                 return False
             self._state = self._adopted_copy(adopted[2])
             self._clamp_turns = None
@@ -738,8 +738,13 @@ class ShapeSolver:
         orientations = np.array([g.pose.orientation for g in clamps])
         key = orientations.tobytes()
         if self._clamp_frames is None or self._clamp_frames[0] != key:  # grips that moved without turning: kept
-            self._clamp_frames = (key, quat_to_frame(orientations))
-        return turns.advanced({g.name: f for g, f in zip(clamps, self._clamp_frames[1])})
+            self._clamp_frames = (key, quat_to_frame(orientations), None)
+        key, frames, last = self._clamp_frames
+        if last is not None and last[0] is turns:  # the same step as the last time (queries from one shape)
+            return last[1]
+        advanced = turns.advanced({g.name: f for g, f in zip(clamps, frames)})
+        self._clamp_frames = (key, frames, (turns, advanced))
+        return advanced
 
     def _committed_turns(self, clamps: list) -> TP.ClampTurns:
         """No turn yet, from the committed shape's own clamp frames; kept while that shape is the same
@@ -989,7 +994,15 @@ class ShapeSolver:
                         solve_time_ms=(time.perf_counter() - t0) * 1e3)
 
     def model_summary(self) -> ModelSummary:
-        """What this solver models (the ``model`` of a result)."""
+        """What this solver models (the ``model`` of a result); made once per NLP, string and obstacle count
+        (all it depends on)."""
+        key = (self.nlp, self.problem.string, len(self.problem.obstacles))
+        known = getattr(self, "_summary", None)
+        if known is None or any(a is not b for a, b in zip(known[0][:2], key)) or known[0][2] != key[2]:
+            known = self._summary = (key, self._model_summary())
+        return known[1]
+
+    def _model_summary(self) -> ModelSummary:
         lay = self.model.layout
         common = dict(planar=lay.planar, twist=lay.twist, stretch=lay.stretch,
                       gravity=not self.problem.string.weight_per_length.is_zero, order=lay.order,

@@ -523,6 +523,19 @@ class DloNode(Node):
     def _on_update(self, u: Update) -> None:
         if self._closing:
             return
+        try:
+            self._publish_update(u)
+        except Exception:
+            if self._stopping():  # SIGINT shut the context down under this update: nothing left to publish to
+                return
+            raise
+
+    def _stopping(self) -> bool:
+        """The node is closing, or its context was shut down (a signal reaches rclpy's handler before
+        ``close``; an update in flight then finds its publishers invalid)."""
+        return self._closing or not self.context.ok()
+
+    def _publish_update(self, u: Update) -> None:
         r = u.result
         stamp = u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds
         # the shape first: recording and bookkeeping need not delay it
@@ -586,7 +599,7 @@ class DloNode(Node):
         return changes
 
     def _on_failure(self, kind: str, message: str, u: Update | None) -> None:
-        if self._closing:
+        if self._stopping():
             return
         if u is not None:
             self._record_update(u, u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds)

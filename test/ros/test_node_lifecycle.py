@@ -234,3 +234,33 @@ def test_a_clean_stop_ends_a_background_compile(tmp_path):
             proc.stop()
     text = log.read_text()
     assert "Traceback" not in text and "terminate called" not in text, text
+
+
+def test_an_update_in_flight_when_the_context_shuts_down_is_dropped_without_an_error():
+    """A signal reaches rclpy's handler, which shuts the context down, before ``main`` calls the node's
+    ``close``: an update the solver thread is publishing meanwhile finds its publishers invalid.  It is
+    dropped (no exception for the engine to report as a solver error with its traceback, which the
+    README node test once caught), and so is a failure reported then."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from dlo_ros.node.dlo_node import DloNode
+
+    with allocate_domain_id() as lease:
+        context = Context()
+        rclpy.init(context=context, domain_id=lease.domain_id)
+        node = DloNode(context=context, parameter_overrides=[Parameter("scene", value=TEST_SCENE),
+                                                             Parameter("compile", value="off")])
+        try:
+            wait_until(lambda: getattr(node, "_latest", None) is not None, 60.0)
+            update = node._latest
+            before = (node.health.failures, node.health.last_error)
+            context.shutdown()  # what rclpy's SIGINT handler does
+            node._on_update(update)  # raised RCLError: "publisher's context is invalid"
+            node._on_failure("internal", "RCLError: Failed to publish", update)
+            assert (node.health.failures, node.health.last_error) == before
+        finally:
+            node.close()
+            node.destroy_node()
+            context.try_shutdown()

@@ -296,6 +296,29 @@ class AssembledKKT:
                                                           ca.densify(energies)]),
                 ca.Function("dlo_residual_free", [z, p, lam], [residual]))
 
+    def kkt_free_split(self) -> ca.Function:
+        """``dlo_kkt_free_split``: (z, p, λ_free) → [K − [Eᵀ W 0; 0 0], r, ∇f, energies, W] with W = diag(∇²φ_k) E
+        (d·M × n): ``kkt_free``'s outputs with K's per-node Hessian part Eᵀ W left out, and W.  That
+        product is most of K's cost in CasADi's sparse loops (E is dense within an element); the compiled
+        Newton loops (``native_newton``) add it with one BLAS dgemm of ``E``."""
+        nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
+        z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
+        grad, hess, g, jac, grad_f, energies, weighted = self._system(z, p, lam, nf, split=True)
+        kkt = ca.blockcat([[hess, jac.T], [jac, ca.MX(nf, nf)]])
+        return ca.Function("dlo_kkt_free_split", [z, p, lam], [ca.densify(kkt), ca.densify(ca.vertcat(grad, g)),
+                                                               ca.densify(grad_f), ca.densify(energies),
+                                                               ca.densify(weighted)])
+
+    def kkt_split(self) -> ca.Function:
+        """``dlo_kkt_split``: ``kkt``'s outputs with ∇²L's per-node part Eᵀ W left out, and W last (as
+        ``kkt_free_split``)."""
+        nlp, n, rows = self.nlp, self.n, self.nlp.g_sym.shape[0]
+        z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam", rows)
+        _, hess, g, jac, grad_f, energies, weighted = self._system(z, p, lam, rows, split=True)
+        return ca.Function("dlo_kkt_split", [z, p, lam], [ca.densify(grad_f), ca.densify(g), ca.densify(jac),
+                                                          ca.densify(hess), ca.densify(energies),
+                                                          ca.densify(weighted)])
+
     def kkt(self) -> tuple[ca.Function, ca.Function]:
         """(``dlo_kkt``, ``dlo_residual``): (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every row, as
         ``StringNLP.kkt_fn``; and (z, p, λ) → [∇L; g] (the chord steps of ``native_newton.ActiveNewton``)."""
@@ -399,8 +422,9 @@ class AssembledKKT:
         _, jac = self._in_row_order(parts, rows)
         return ca.Function("constraint_jacobian", [z, p], [ca.densify(jac) if jac is not None else ca.MX(0, n)])
 
-    def _system(self, z, p, lam, rows: int):
-        """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their multipliers)."""
+    def _system(self, z, p, lam, rows: int, split: bool = False):
+        """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their multipliers).
+        ``split``: ∇²L without its per-node part Eᵀ W, and W = diag(∇²φ_k) E as a seventh item."""
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         lay, sigma = nlp.params, nlp.sigma
         E = _sparse(self.E)
@@ -443,7 +467,7 @@ class AssembledKKT:
             weighted_E = E * ca.repmat(hess_k.T, 1, n)
         else:
             weighted_E = ca.mtimes(ca.sparsity_cast(hess_k, ca.diagcat(*[ca.Sparsity.dense(d, d)] * M)), E)
-        hess = ca.mtimes(E.T, weighted_E) + hess_loc
+        hess = hess_loc if split else ca.mtimes(E.T, weighted_E) + hess_loc
 
         parts = []  # (rows, g, ∂g/∂z)
         if pos_rows.size:
@@ -469,6 +493,8 @@ class AssembledKKT:
         for i, force in enumerate(forces):
             work += ca.dot(force, x0 + ca.mtimes(T, ca.DM(self.loads_W[i])))
         energies = ca.vertcat(bend, twist, stretch, grav, work)
+        if split:
+            return grad, hess, g, jac, grad_f, energies, weighted_E
         return grad, hess, g, jac, grad_f, energies
 
 

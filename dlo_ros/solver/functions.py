@@ -101,9 +101,9 @@ class NlpFunctions:
                 nice = 10 if mode == "background" else 0
                 active = name == "kkt"  # with its active-set loop and the residual function that loop uses
                 native, ok = compiled(fn, nice=nice, lib=lib,
-                                      extra_source=native_newton.active_source(fn, nlp.residual_fn) if active else "",
-                                      also=(nlp.residual_fn,) if active else ())
-                loop = native_newton.build(fn, nlp.residual_free_fn, *self._sizes(), nice=nice, kkt_lib=lib) \
+                                      extra_source=native_newton.active_source(nlp.kkt_split_fn, nlp.residual_fn)
+                                      if active else "", also=(nlp.residual_fn, nlp.kkt_split_fn) if active else ())
+                loop = native_newton.build(nlp, nice=nice, kkt_lib=lib) \
                     if ok and name == "kkt_free" else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile
@@ -123,7 +123,7 @@ class NlpFunctions:
     def _load(self, name: str, fn: ca.Function, lib) -> bool:
         """Swap in the library ``lib`` of the function ``name`` if it is in the cache (for the contact-free
         function: with its Newton loop's library); False if it is not there yet."""
-        native = native_newton.cached(fn, *self._sizes(), kkt_lib=lib) if name == "kkt_free" else None
+        native = native_newton.cached(self.nlp, kkt_lib=lib) if name == "kkt_free" else None
         if not lib.exists() or (native is None and name == "kkt_free"):
             return False
         self._install(name, NativeFunction(lib, fn), fn, lib, native)
@@ -151,14 +151,10 @@ class NlpFunctions:
             self.compiled = all(name == "outputs" for name, _, _ in self.waiting)
         return bool(loaded)
 
-    def _sizes(self) -> tuple[int, int, int]:
-        nlp = self.nlp
-        return nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0]
-
     def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
         """The active-set Newton loop in the full KKT function's library (None if it cannot be loaded)."""
         try:
-            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size))
+            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size), self.nlp.node_map)
         except (OSError, AttributeError):
             return None
 

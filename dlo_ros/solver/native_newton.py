@@ -2,8 +2,11 @@
 
 ``newton.newton_free`` takes its first ``NEWTON_STEPS`` Newton steps in one CasADi call and every further
 step in Python.  Here the whole loop is one C function, compiled together with the generated code of
-``StringNLP.kkt_free_fn`` and of ``StringNLP.residual_free_fn`` (its r alone, without K's matrix
-products: a small fraction of its cost).  From u = [z; λ_free] and the Newton system (K, r) at u it
+``StringNLP.kkt_free_split_fn`` and of ``StringNLP.residual_free_fn`` (its r alone, without K's matrix
+products: a small fraction of its cost).  The split function is ``kkt_free_fn`` without K's per-node
+Hessian part Eᵀ W, W = diag(∇²φ_k) E (``assembled.py``), which it returns instead: CasADi's sparse
+loops spent three quarters of K's time on that product, and one BLAS dgemm with the node map E adds it
+(``dlo_add_node_part``) at a fraction of that.  From u = [z; λ_free] and the Newton system (K, r) at u it
 factors K once and repeats chord steps
 
     solve (K + diag(δ I_n, −δ I_nf)) Δ = r  (LAPACK dgetrf once, dgetrs per step),  u ← u − Δ,  r ← r(u)
@@ -18,8 +21,9 @@ first step use.  It also stops at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` 
 singular matrix, or at a step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same
 regularisation δ = NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  The answer is the root the
 Python path's Newton steps converge to, within round-off: at a grip move of 1 % of L the chord steps
-shrink 20–50× each, so about seven steps cost less than one more evaluation of K.  LAPACK is the one
-SciPy ships (``scipy.linalg.cython_lapack``), passed in as function pointers, so nothing is linked.  The
+shrink 20–50× each, so about seven steps cost less than one more evaluation of K.  LAPACK and BLAS are
+the ones SciPy ships (``scipy.linalg.cython_lapack``, ``cython_blas``), passed in as function pointers,
+so nothing is linked.  The
 call goes through ctypes, which releases the GIL.
 
 The library is cached beside the KKT function's (``compiled.cache_dir``), keyed by that function's
@@ -63,6 +67,17 @@ static void dlo_work(dlo_work_t first, dlo_work_t second, casadi_int *sz_arg, ca
   if (w > *sz_w) *sz_w = w;
 }
 
+typedef void (*dlo_gemm_t)(char *ta, char *tb, int *m, int *n, int *k, double *alpha, double *a, int *lda, double *b,
+                           int *ldb, double *beta, double *c, int *ldc);
+
+/* The Hessian's per-node part added to a split function's output: H += E^T W (BLAS dgemm), E (rows x n) the
+   node map, W = diag(hess_k) E as the split function gives it, H at leading dimension ldh. */
+static void dlo_add_node_part(dlo_gemm_t gemm, const double *E, const double *W, int rows, int n, double *H, int ldh) {
+  char t = 'T', no = 'N';
+  double one = 1.0;
+  gemm(&t, &no, &n, &n, &rows, &one, (double *)E, &rows, (double *)W, &rows, &one, H, &ldh);
+}
+
 typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
 typedef void (*dlo_getrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv, double *b, int *ldb,
                             int *info);
@@ -87,6 +102,16 @@ static int dlo_converged(const double *r, int n, int m, double tol_dual, double 
   return 1;
 }
 
+/* K, r, grad, energies at arg into res[0..3]: the split function (K without its per-node Hessian part),
+   then that part added (dlo_add_node_part); nonzero if the function fails. */
+static int dlo_kkt_eval(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, double *W,
+                        dlo_gemm_t gemm, const double *E, int rows_e, int n, int N) {
+  res[4] = W;
+  if (KKT(arg, res, iw, w, 0) != 0) return 1;
+  dlo_add_node_part(gemm, E, W, rows_e, n, res[0], N);
+  return 0;
+}
+
 /* The regularised LU of K into A (dlo_regularised_lu); LAPACK's info. */
 static int dlo_factor(dlo_getrf_t getrf, const double *K, double *A, int *ipiv, int n, int N, double reg) {
   memcpy(A, K, sizeof(double) * N * N);
@@ -95,7 +120,8 @@ static int dlo_factor(dlo_getrf_t getrf, const double *K, double *A, int *ipiv, 
 
 /* Chord Newton on the contact-free KKT system; see dlo_ros/solver/native_newton.py.  u, K, r: in at the
    start, out at the last iterate; grad, energies: out there (the last call evaluates K at it). */
-CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, int n, int m, int max_evaluations,
+CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, dlo_gemm_t dgemm, const double *E,
+    int rows_e, int n, int m, int max_evaluations,
     int max_steps, double max_step, double reg, double tol_dual, double tol_prim, double tol_step,
     double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad,
     double *energies, int *steps, int *evaluations, double *largest) {
@@ -104,10 +130,11 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   dlo_work(KKT_work, RESIDUAL_work, &sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
-  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 4 ? sz_res : 4));
+  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 5 ? sz_res : 5));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
   casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
   double *A = malloc(sizeof(double) * N * N), *step = malloc(sizeof(double) * N);
+  double *W = malloc(sizeof(double) * rows_e * n);
   int *ipiv = malloc(sizeof(int) * N);
   double previous = INFINITY;  /* the last step's max |dz| since K was factored */
   int fresh = 1;               /* K, grad and energies belong to u */
@@ -130,7 +157,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     if (!finite || big > max_step) {
       if (here || *evaluations >= max_evaluations) { code = 3; *largest = big; break; }
       /* a step of an earlier iterate's K: Newton's own step, from K evaluated here */
-      if (KKT(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, E, rows_e, n, N) != 0) { code = 4; break; }
       ++*evaluations;
       if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) { code = 2; break; }
       here = fresh = 1;
@@ -145,7 +172,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     if ((big > chord_start || (!shrinking && !(big <= tol_step))) && *evaluations < max_evaluations) {
       /* Newton's own steps while they are above chord_start, then chord steps; or too slow for the
          factored K: evaluate and factor it here */
-      if (KKT(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, E, rows_e, n, N) != 0) { code = 4; break; }
       ++*evaluations;
       if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) { code = 2; break; }
       previous = INFINITY;
@@ -161,24 +188,25 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     if (dlo_converged(r, n, m, tol_dual, tol_prim) && (big <= tol_step || !shrinking)) {
       if (!fresh) {  /* the derivatives at the answer */
         res[0] = K; res[1] = r; res[2] = grad; res[3] = energies;
-        if (KKT(arg, res, iw, w, 0) != 0) { code = 4; break; }
+        if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, E, rows_e, n, N) != 0) { code = 4; break; }
         ++*evaluations;
       }
       code = dlo_converged(r, n, m, tol_dual, tol_prim) ? 0 : 1;
       break;
     }
   }
-  free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv);
+  free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv); free(W);
   return code;
 }
 """
 
 
 def _lapack_pointer(name: str) -> int:
-    """The address of SciPy's LAPACK routine ``name`` (from the PyCapsules scipy.linalg.cython_lapack exports)."""
-    from scipy.linalg import cython_lapack
+    """The address of SciPy's LAPACK (or, for dgemm, BLAS) routine ``name`` (from the PyCapsules
+    scipy.linalg.cython_lapack and cython_blas export)."""
+    from scipy.linalg import cython_blas, cython_lapack
 
-    capsule = cython_lapack.__pyx_capi__[name]
+    capsule = (cython_blas if name == "dgemm" else cython_lapack).__pyx_capi__[name]
     get_name = ctypes.pythonapi.PyCapsule_GetName
     get_name.restype, get_name.argtypes = ctypes.c_char_p, [ctypes.py_object]
     get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
@@ -215,12 +243,12 @@ class NativeNewton:
     """The compiled Newton loop of one NLP's contact-free system (see the module docstring).  Not
     re-entrant per instance: callers serialise calls (ShapeSolver holds a lock)."""
 
-    def __init__(self, lib_path: Path, n: int, nf: int, n_p: int):
+    def __init__(self, lib_path: Path, n: int, nf: int, n_p: int, node_map: np.ndarray):
         self._lib = ctypes.CDLL(str(lib_path))
         self._run = self._lib.dlo_newton_run
         vp, ip = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [vp, vp, ctypes.c_int, ctypes.c_int, ctypes.c_int,
+        self._run.argtypes = [vp, vp, vp, vp, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                               ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                               ctypes.c_double, ctypes.c_double, ctypes.c_double, vp, vp, vp, vp, vp, vp, ip, ip,
                               ctypes.POINTER(ctypes.c_double)]
@@ -231,7 +259,9 @@ class NativeNewton:
         self._u, self._p, self._K, self._r = np.zeros(N), np.zeros(n_p), np.zeros((N, N), order="F"), np.zeros(N)
         self._grad, self._energies = np.zeros(n), np.zeros(5)
         self._steps, self._evaluations, self._largest = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(0.0)
-        self._head = (_lapack_pointer("dgetrf"), _lapack_pointer("dgetrs"), n, nf)
+        self._E = np.asfortranarray(node_map, dtype=float)  # E (d·M × n), kept alive for the call
+        self._head = (_lapack_pointer("dgetrf"), _lapack_pointer("dgetrs"), _lapack_pointer("dgemm"),
+                      self._E.ctypes.data, self._E.shape[0], n, nf)
         self._tail = (NEWTON_CHORD_STEPS, NEWTON_MAX_STEP, NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE,
                       NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START,
                       *(a.ctypes.data for a in (self._u, self._p, self._K, self._r, self._grad, self._energies)),
@@ -251,28 +281,31 @@ class NativeNewton:
                              self._energies.copy(), self._steps.value, self._largest.value, self._evaluations.value)
 
 
-def build(fn: ca.Function, residual: ca.Function, n: int, nf: int, n_p: int, nice: int = 0,
-          kkt_lib: Path | None = None) -> NativeNewton | None:
-    """The driver compiled with ``fn`` (the contact-free KKT function) and ``residual`` (its r alone), from
-    the cache or built now (one compiler at a time per process); None without a C compiler or if
-    compiling fails."""
+def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | None:
+    """The driver of ``nlp``'s contact-free system (``StringNLP.kkt_free_split_fn`` and ``residual_free_fn``
+    compiled with it), from the cache or built now (one compiler at a time per process); None without a C
+    compiler or if compiling fails.  ``kkt_lib``: ``kkt_free_fn``'s library path, which keys this one."""
     cc = compiler()
     if cc is None or os.environ.get("DLO_NO_COMPILE"):
         return None
-    lib = library_path(fn, kkt_lib)
+    lib = library_path(nlp.kkt_free_fn, kkt_lib)
     if not lib.exists():
         with COMPILER_LOCK:
-            if not lib.exists() and not _compile(fn, residual, cc, lib, nice):
+            if not lib.exists() and not _compile(nlp.kkt_free_split_fn, nlp.residual_free_fn, cc, lib, nice):
                 return None
-    return NativeNewton(lib, n, nf, n_p)
+    return _instance(nlp, lib)
 
 
-def cached(fn: ca.Function, n: int, nf: int, n_p: int, kkt_lib: Path | None = None) -> NativeNewton | None:
+def cached(nlp, kkt_lib: Path | None = None) -> NativeNewton | None:
     """The driver if the cache holds it (no compiling), else None."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
-    lib = library_path(fn, kkt_lib)
-    return NativeNewton(lib, n, nf, n_p) if lib.exists() else None
+    lib = library_path(nlp.kkt_free_fn, kkt_lib)
+    return _instance(nlp, lib) if lib.exists() else None
+
+
+def _instance(nlp, lib: Path) -> NativeNewton:
+    return NativeNewton(lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0], nlp.node_map)
 
 
 def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:
@@ -285,6 +318,16 @@ def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: i
 #: Newton with an active set on the full KKT function (``StringNLP.kkt_fn``), appended to its generated
 #: code.  See ``ActiveNewton``.
 ACTIVE_DRIVER = _C_COMMON + r"""
+
+/* grad f, g, dg/dz, hess L, energies at arg into res[0..4]: the split function (hess L without its per-node
+   part), then that part added (dlo_add_node_part); nonzero if the function fails. */
+static int dlo_full_eval(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, double *W,
+                         dlo_gemm_t gemm, const double *E, int rows_e, int n) {
+  res[5] = W;
+  if (FUNCTION(arg, res, iw, w, 0) != 0) return 1;
+  dlo_add_node_part(gemm, E, W, rows_e, n, res[3], n);
+  return 0;
+}
 
 /* The regularised LU (dlo_regularised_lu) of [H J_A^T; J_A 0] of the m rows idx, into A (N = n + m). */
 static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double *jac, const int *idx, int n,
@@ -316,7 +359,8 @@ static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double
    (rows): in at the start, out at the answer.  grad, g, jac (rows x n, column-major), hess (n x n),
    energies: out at the answer (evaluated there); with given = 1 they are in as well, the first step's
    derivatives. */
-CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t getrs, int n, int rows, int *active,
+CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t getrs, dlo_gemm_t gemm, const double *E,
+    int rows_e, int n, int rows, int *active,
     const int *switchable, int switches, int max_evaluations, int max_steps, int given, double max_step,
     double reg, double tol_dual, double tol_prim, double tol_step, double contraction, double chord_start,
     double join_tol, double leave_tol, double *z, const double *p, double *lam, const double *ub, double *grad, double *g,
@@ -326,7 +370,8 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   dlo_work(FUNCTION_work, RESIDUAL_work, &sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
-  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 5 ? sz_res : 5));
+  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 6 ? sz_res : 6));
+  double *W = malloc(sizeof(double) * rows_e * n);
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
   casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
   int most = 0;  /* rows that can be active: the matrix is sized for them, not for every row */
@@ -343,7 +388,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
   arg[0] = z; arg[1] = p; arg[2] = lam;
   if (!given) {
     res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-    if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; goto done; }
+    if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; goto done; }
     ++*evaluations;
     fresh = 1;
   }
@@ -367,7 +412,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
         /* the changed set's matrix from derivatives evaluated here: with the start's, a row joining
            beside an active sample (their Jacobians nearly equal) sent steps over max_step */
         res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-        if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
+        if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; break; }
         ++*evaluations;
         fresh = 1;
       }
@@ -397,7 +442,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
       if (fresh) { code = 0; break; }
       /* the derivatives at the answer, and the test once more on them */
       res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; break; }
       ++*evaluations;
       fresh = 1;
       continue;
@@ -421,7 +466,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
       if (here || *evaluations >= max_evaluations) { code = 3; break; }
       /* a step of the matrix of an earlier iterate: Newton's own step, from derivatives evaluated here */
       res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; break; }
       ++*evaluations;
       if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) { code = 2; break; }
       here = fresh = 1;
@@ -439,7 +484,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
          rows changes none and the steps are below chord_start, then chord steps; or too slow for the
          factored matrix: evaluate and factor it here */
       res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (FUNCTION(arg, res, iw, w, 0) != 0) { code = 4; break; }
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; break; }
       ++*evaluations;
       if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) { code = 2; break; }
       previous = INFINITY;
@@ -453,14 +498,14 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
     }
   }
 done:
-  free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(lgrad); free(ipiv);
+  free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(lgrad); free(ipiv); free(W);
   return code;
 }
 """
 
 
 def active_source(fn: ca.Function, residual: ca.Function) -> str:
-    """The active-set driver's C, bound to the generated functions ``fn`` (``StringNLP.kkt_fn``) and
+    """The active-set driver's C, bound to the generated functions ``fn`` (``StringNLP.kkt_split_fn``) and
     ``residual`` (``StringNLP.residual_fn``)."""
     source = ACTIVE_DRIVER
     for token, name in (("FUNCTION", fn.name()), ("RESIDUAL", residual.name())):
@@ -502,20 +547,24 @@ class ActiveNewton:
     multipliers there are Newton's own: no evaluation needed unless a row changes), and at every
     evaluated iterate.  After that [∇²L J_Aᵀ; J_A 0] stays factored and only the residual [∇L; g] is
     evaluated per step, as in the contact-free loop (``NativeNewton``: the same contraction, tolerance and
-    retry rules, the derivatives evaluated at the answer).  In C around the compiled full KKT function and
-    its residual, whose library it shares.  Not re-entrant per instance: callers serialise calls
+    retry rules, the derivatives evaluated at the answer).  In C around the compiled split full KKT
+    function (``StringNLP.kkt_split_fn``: ∇²L's per-node part added by BLAS, as in ``NativeNewton``) and
+    its residual, compiled into the full KKT function's library.  Not re-entrant per instance: callers serialise calls
     (ShapeSolver holds a lock)."""
 
-    def __init__(self, lib_path: Path, n: int, rows: int):
+    def __init__(self, lib_path: Path, n: int, rows: int, node_map: np.ndarray):
         self._lib = ctypes.CDLL(str(lib_path))
         self._run = self._lib.dlo_newton_active_run
         dp, ip, c_int, c_double = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_int, \
             ctypes.c_double
+        vp = ctypes.c_void_p
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [ctypes.c_void_p, ctypes.c_void_p, c_int, c_int, ip, ip, c_int, c_int, c_int, c_int,
+        self._run.argtypes = [vp, vp, vp, vp, c_int, c_int, c_int, ip, ip, c_int, c_int, c_int, c_int,
                               c_double, c_double, c_double, c_double, c_double, c_double, c_double, c_double,
                               c_double, dp, dp, dp, dp, dp, dp, dp, dp, dp, ip, ip]
-        self._dgetrf, self._dgetrs = _lapack_pointer("dgetrf"), _lapack_pointer("dgetrs")
+        self._E = np.asfortranarray(node_map, dtype=float)  # E (d·M × n), kept alive for the call
+        self._head = (_lapack_pointer("dgetrf"), _lapack_pointer("dgetrs"), _lapack_pointer("dgemm"),
+                      self._E.ctypes.data, self._E.shape[0])
         self.n, self.rows = n, rows
 
     def __call__(self, z: np.ndarray, lam: np.ndarray, p: np.ndarray, active: np.ndarray, ub: np.ndarray,
@@ -541,7 +590,7 @@ class ActiveNewton:
             hess[:] = np.asarray(first[3], dtype=float).ravel(order="F")
         steps, evaluations = ctypes.c_int(0), ctypes.c_int(0)
         dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-        code = self._run(self._dgetrf, self._dgetrs, n, rows, act.ctypes.data_as(ip), switch.ctypes.data_as(ip),
+        code = self._run(*self._head, n, rows, act.ctypes.data_as(ip), switch.ctypes.data_as(ip),
                          int(switches), int(max_steps), NEWTON_CHORD_STEPS, int(first is not None), NEWTON_MAX_STEP,
                          NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE,
                          NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, JOIN_TOLERANCE, LEAVE_TOLERANCE,

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import functools
+
 import casadi as ca
 import numpy as np
 
@@ -415,6 +417,9 @@ class StringNLP:
         # assembled from per-quadrature-node derivatives (solver/assembled.py, assembled_euler.py): compact
         # code (seconds of gcc instead of minutes), a faster interpreted call, and no flattened Hessian to build
         assembled = AssembledKKT(self) if self.director else AssembledEulerKKT(self)
+        self._assembled = assembled
+        #: E (d·M × n): the unknowns → the per-node values u_k (``assembled.py``)
+        self.node_map = assembled.E
         self.kkt_free_fn, self.residual_free_fn = assembled.kkt_free()
         self.kkt_fn, self.residual_fn = assembled.kkt()
         if nf < g.shape[0]:
@@ -534,6 +539,17 @@ class StringNLP:
         profiles = {k: p[lay[k]] for k in ("Rf", "Rt", "Re", "D")}
         for name, value in self.model.material_terms(profiles).items():
             p[lay[name]] = value.ravel(order="F")
+
+    @functools.cached_property
+    def kkt_free_split_fn(self) -> ca.Function:
+        """``kkt_free_fn`` with K's per-node Hessian part Eᵀ W left out and W last (``assembled.py``): what
+        the compiled contact-free loop evaluates, adding Eᵀ W by BLAS.  Built when first asked for."""
+        return self._assembled.kkt_free_split()
+
+    @functools.cached_property
+    def kkt_split_fn(self) -> ca.Function:
+        """``kkt_fn`` split as ``kkt_free_split_fn`` (the compiled active-set loop's)."""
+        return self._assembled.kkt_split()
 
     def target_shift(self, p_old: np.ndarray, p_new: np.ndarray) -> np.ndarray:
         """g(z, p_new) − g(z, p_old) when only grip targets differ (exact: they enter g linearly)."""

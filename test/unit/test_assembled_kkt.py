@@ -148,3 +148,43 @@ def test_the_assembled_constraint_jacobian_equals_the_flattened_one():
     z, p = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0])
     got, want = ca.DM(nlp.jac_g_fn(z, p)).full(), ca.DM(ca.densify(reference(z, p))).full()
     assert np.max(np.abs(got - want)) <= 1e-12 * (1.0 + np.max(np.abs(want)))
+
+
+def _split_cases(case: str) -> StringNLP:
+    if case == "default_cable":
+        scene = load_scene(case)
+        return StringNLP(scene.problem, dataclasses.replace(scene.options, model="full", order=12))
+    if case == "stretched 2, 2 self-contact slots":
+        return StringNLP(stretched_scene(2), SolverOptions(model="full", self_contact_pairs=2))
+    if case == "obstacles of every type, slots":
+        return StringNLP(obstacle_scene(), SolverOptions(model="full", order=12, obstacle_slots=2))
+    from test_assembled_euler import planar_scene
+
+    model, rotation = ("planar", "director") if case == "planar" else ("full", "euler")
+    return StringNLP(planar_scene(), SolverOptions(model=model, rotation=rotation, order=10))
+
+
+@pytest.mark.parametrize("case", ["default_cable", "stretched 2, 2 self-contact slots", "obstacles of every type, slots",
+                                  "planar", "euler"])
+def test_the_split_systems_plus_their_node_part_equal_the_flattened_ones(case):
+    """What the compiled Newton loops evaluate (native_newton): ``kkt_free_split_fn`` and ``kkt_split_fn``,
+    the systems without the Hessian's per-node part, plus Eᵀ W (W their last output, E the node map),
+    equal the system differentiated from the flattened NLP, for every model."""
+    nlp = _split_cases(case)
+    E, n, nf = nlp.node_map, nlp.z_sym.shape[0], nlp.n_free_rows
+
+    def free(z, p, lam):
+        kkt, residual, grad_f, energies, weighted = (np.asarray(a, dtype=float) for a in nlp.kkt_free_split_fn(z, p, lam))
+        kkt[:n, :n] += E.T @ weighted
+        return kkt, residual, grad_f, energies
+
+    assert_equal_systems(free, nlp)
+    reference = flattened(nlp)
+    rng = np.random.default_rng(5)
+    rows = nlp.g_sym.shape[0]
+    z, p, lam = rng.normal(size=n), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0]), rng.normal(size=rows)
+    grad_f, g, jac, hess, _, weighted = (np.asarray(a, dtype=float) for a in nlp.kkt_split_fn(z, p, lam))
+    for name, a, b in zip(["grad f", "g", "jacobian", "hessian"], [grad_f, g, jac, hess + E.T @ weighted],
+                          reference(z, p, lam)):
+        b = ca.DM(ca.densify(b)).full()
+        assert np.max(np.abs(a.reshape(b.shape) - b)) <= 1e-12 * (1.0 + np.max(np.abs(b))), (name, nf)

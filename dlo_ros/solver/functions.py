@@ -154,7 +154,8 @@ class NlpFunctions:
     def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
         """The active-set Newton loop in the full KKT function's library (None if it cannot be loaded)."""
         try:
-            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size), self.nlp.node_map)
+            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size),
+                                              native_newton.NodeBlocks(self.nlp.node_map, self.nlp.node_width))
         except (OSError, AttributeError):
             return None
 

@@ -5,8 +5,8 @@ step in Python.  Here the whole loop is one C function, compiled together with t
 ``StringNLP.kkt_free_split_fn`` and of ``StringNLP.residual_free_fn`` (its r alone, without K's matrix
 products: a small fraction of its cost).  The split function is ``kkt_free_fn`` without K's per-node
 Hessian part Eᵀ W, W = diag(∇²φ_k) E (``assembled.py``), which it returns instead: CasADi's sparse
-loops spent three quarters of K's time on that product, and one BLAS dgemm with the node map E adds it
-(``dlo_add_node_part``) at a fraction of that.  From u = [z; λ_free] and the Newton system (K, r) at u it
+loops spent three quarters of K's time on that product, and BLAS dgemm calls on the node map E's dense
+blocks (``NodeBlocks``, ``dlo_add_node_part``) add it at a fraction of that.  From u = [z; λ_free] and the Newton system (K, r) at u it
 factors K once and repeats chord steps
 
     solve (K + diag(δ I_n, −δ I_nf)) Δ = r  (LAPACK dgetrf once, dgetrs per step),  u ← u − Δ,  r ← r(u)
@@ -70,12 +70,37 @@ static void dlo_work(dlo_work_t first, dlo_work_t second, casadi_int *sz_arg, ca
 typedef void (*dlo_gemm_t)(char *ta, char *tb, int *m, int *n, int *k, double *alpha, double *a, int *lda, double *b,
                            int *ldb, double *beta, double *c, int *ldc);
 
-/* The Hessian's per-node part added to a split function's output: H += E^T W (BLAS dgemm), E (rows x n) the
-   node map, W = diag(hess_k) E as the split function gives it, H at leading dimension ldh. */
-static void dlo_add_node_part(dlo_gemm_t gemm, const double *E, const double *W, int rows, int n, double *H, int ldh) {
+/* The node map E (rows x n) as dense blocks: group g holds E[row[..], col[..]] for its count[2g] rows and
+   count[2g + 1] columns (column-major, in block), every other entry of E is zero (NodeBlocks). */
+typedef struct {
+  int groups, chunk;
+  const int *count, *row, *col;
+  const double *block;
+} dlo_node_map;
+
+/* The Hessian's per-node part added to a split function's output: H += E^T W, W = diag(hess_k) E (rows_w x
+   n, as the split function gives it), H at leading dimension ldh: per group, BLAS dgemm of its block
+   against W's rows gathered, at most map->chunk rows a call (small enough that OpenBLAS runs it on this
+   thread: its worker threads would spin on the other core).  buf: chunk x n + (largest group's columns) x n. */
+static void dlo_add_node_part(dlo_gemm_t gemm, const dlo_node_map *map, const double *W, int rows_w, int n,
+                              double *H, int ldh, double *buf) {
   char t = 'T', no = 'N';
-  double one = 1.0;
-  gemm(&t, &no, &n, &n, &rows, &one, (double *)E, &rows, (double *)W, &rows, &one, H, &ldh);
+  double one = 1.0, zero = 0.0;
+  const int *row = map->row, *col = map->col;
+  const double *block = map->block;
+  for (int g = 0; g < map->groups; ++g) {
+    int R = map->count[2 * g], C = map->count[2 * g + 1];
+    double *wg = buf, *out = buf + (size_t)map->chunk * n;
+    for (int start = 0; start < R; start += map->chunk) {
+      int k = R - start < map->chunk ? R - start : map->chunk;
+      for (int c = 0; c < n; ++c)
+        for (int i = 0; i < k; ++i) wg[i + (size_t)k * c] = W[row[start + i] + (size_t)rows_w * c];
+      gemm(&t, &no, &C, &n, &k, &one, (double *)block + start, &R, wg, &k, &zero, out, &C);
+      for (int c = 0; c < n; ++c)
+        for (int j = 0; j < C; ++j) H[col[j] + (size_t)ldh * c] += out[j + (size_t)C * c];
+    }
+    row += R; col += C; block += (size_t)R * C;
+  }
 }
 
 typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
@@ -105,10 +130,10 @@ static int dlo_converged(const double *r, int n, int m, double tol_dual, double 
 /* K, r, grad, energies at arg into res[0..3]: the split function (K without its per-node Hessian part),
    then that part added (dlo_add_node_part); nonzero if the function fails. */
 static int dlo_kkt_eval(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, double *W,
-                        dlo_gemm_t gemm, const double *E, int rows_e, int n, int N) {
+                        dlo_gemm_t gemm, const dlo_node_map *map, int rows_e, int n, int N, double *buf) {
   res[4] = W;
   if (KKT(arg, res, iw, w, 0) != 0) return 1;
-  dlo_add_node_part(gemm, E, W, rows_e, n, res[0], N);
+  dlo_add_node_part(gemm, map, W, rows_e, n, res[0], N, buf);
   return 0;
 }
 
@@ -120,8 +145,8 @@ static int dlo_factor(dlo_getrf_t getrf, const double *K, double *A, int *ipiv, 
 
 /* Chord Newton on the contact-free KKT system; see dlo_ros/solver/native_newton.py.  u, K, r: in at the
    start, out at the last iterate; grad, energies: out there (the last call evaluates K at it). */
-CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, dlo_gemm_t dgemm, const double *E,
-    int rows_e, int n, int m, int max_evaluations,
+CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, dlo_gemm_t dgemm,
+    const dlo_node_map *map, int rows_e, int buf_size, int n, int m, int max_evaluations,
     int max_steps, double max_step, double reg, double tol_dual, double tol_prim, double tol_step,
     double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad,
     double *energies, int *steps, int *evaluations, double *largest) {
@@ -134,7 +159,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
   casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
   double *A = malloc(sizeof(double) * N * N), *step = malloc(sizeof(double) * N);
-  double *W = malloc(sizeof(double) * rows_e * n);
+  double *W = malloc(sizeof(double) * rows_e * n), *buf = malloc(sizeof(double) * (buf_size > 1 ? buf_size : 1));
   int *ipiv = malloc(sizeof(int) * N);
   double previous = INFINITY;  /* the last step's max |dz| since K was factored */
   int fresh = 1;               /* K, grad and energies belong to u */
@@ -157,7 +182,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     if (!finite || big > max_step) {
       if (here || *evaluations >= max_evaluations) { code = 3; *largest = big; break; }
       /* a step of an earlier iterate's K: Newton's own step, from K evaluated here */
-      if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, E, rows_e, n, N) != 0) { code = 4; break; }
+      if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, map, rows_e, n, N, buf) != 0) { code = 4; break; }
       ++*evaluations;
       if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) { code = 2; break; }
       here = fresh = 1;
@@ -172,7 +197,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     if ((big > chord_start || (!shrinking && !(big <= tol_step))) && *evaluations < max_evaluations) {
       /* Newton's own steps while they are above chord_start, then chord steps; or too slow for the
          factored K: evaluate and factor it here */
-      if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, E, rows_e, n, N) != 0) { code = 4; break; }
+      if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, map, rows_e, n, N, buf) != 0) { code = 4; break; }
       ++*evaluations;
       if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) { code = 2; break; }
       previous = INFINITY;
@@ -188,14 +213,14 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     if (dlo_converged(r, n, m, tol_dual, tol_prim) && (big <= tol_step || !shrinking)) {
       if (!fresh) {  /* the derivatives at the answer */
         res[0] = K; res[1] = r; res[2] = grad; res[3] = energies;
-        if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, E, rows_e, n, N) != 0) { code = 4; break; }
+        if (dlo_kkt_eval(arg, res, iw, w, W, dgemm, map, rows_e, n, N, buf) != 0) { code = 4; break; }
         ++*evaluations;
       }
       code = dlo_converged(r, n, m, tol_dual, tol_prim) ? 0 : 1;
       break;
     }
   }
-  free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv); free(W);
+  free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv); free(W); free(buf);
   return code;
 }
 """
@@ -212,6 +237,52 @@ def _lapack_pointer(name: str) -> int:
     get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
     get_pointer.restype, get_pointer.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
     return int(get_pointer(capsule, get_name(capsule)))
+
+
+class _NodeMapStruct(ctypes.Structure):
+    """dlo_node_map in the drivers' C."""
+
+    _fields_ = [("groups", ctypes.c_int), ("chunk", ctypes.c_int), ("count", ctypes.c_void_p),
+                ("row", ctypes.c_void_p), ("col", ctypes.c_void_p), ("block", ctypes.c_void_p)]
+
+
+class NodeBlocks:
+    """The node map E (d·M × n, ``StringNLP.node_map``) as dense blocks for the drivers' ``dlo_add_node_part``
+    (H += Eᵀ W): E's columns grouped by the per-node components (row mod d) they reach, each group with
+    the rows any of its columns reaches.  For the default 3D model, four groups (one per quaternion
+    component) of 16 columns and 48 rows: a quarter of the multiplications of Eᵀ W as one dense product.
+    ``chunk``: the most rows one dgemm call takes, so that OpenBLAS runs it on the calling thread."""
+
+    def __init__(self, node_map: np.ndarray, width: int):
+        E = np.asarray(node_map, dtype=float)
+        n = E.shape[1]
+        groups: dict[tuple, list[int]] = {}
+        for c in range(n):
+            support = np.flatnonzero(E[:, c])
+            if support.size:
+                groups.setdefault(tuple(sorted(set((support % width).tolist()))), []).append(c)
+        counts, rows, cols, blocks = [], [], [], []
+        for members in groups.values():
+            reached = np.flatnonzero(np.any(E[:, members] != 0, axis=1))
+            counts += [reached.size, len(members)]
+            rows.append(reached)
+            cols.append(np.array(members))
+            blocks.append(E[np.ix_(reached, members)].ravel(order="F"))
+        self.count = np.array(counts, dtype=np.intc)
+        self.row = np.ascontiguousarray(np.concatenate(rows), dtype=np.intc)
+        self.col = np.ascontiguousarray(np.concatenate(cols), dtype=np.intc)
+        self.block = np.ascontiguousarray(np.concatenate(blocks), dtype=float)
+        widest, deepest = max(len(c) for c in cols), max(r.size for r in rows)
+        self.rows_w = E.shape[0]
+        self.chunk = max(1, min(deepest, CHUNK_WORK // (widest * n)))
+        self.buf_size = (self.chunk + widest) * n
+        self.struct = _NodeMapStruct(len(groups), self.chunk, self.count.ctypes.data, self.row.ctypes.data,
+                                     self.col.ctypes.data, self.block.ctypes.data)
+
+
+#: the most multiplications (m·n·k) of one dgemm in ``dlo_add_node_part``: below OpenBLAS's threshold for
+#: threads (65536 · 4), whose workers would spin on the other core between calls
+CHUNK_WORK = 150_000
 
 
 def library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
@@ -243,12 +314,12 @@ class NativeNewton:
     """The compiled Newton loop of one NLP's contact-free system (see the module docstring).  Not
     re-entrant per instance: callers serialise calls (ShapeSolver holds a lock)."""
 
-    def __init__(self, lib_path: Path, n: int, nf: int, n_p: int, node_map: np.ndarray):
+    def __init__(self, lib_path: Path, n: int, nf: int, n_p: int, node_map: NodeBlocks):
         self._lib = ctypes.CDLL(str(lib_path))
         self._run = self._lib.dlo_newton_run
         vp, ip = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [vp, vp, vp, vp, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int,
+        self._run.argtypes = [vp, vp, vp, vp, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                               ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                               ctypes.c_double, ctypes.c_double, ctypes.c_double, vp, vp, vp, vp, vp, vp, ip, ip,
                               ctypes.POINTER(ctypes.c_double)]
@@ -259,9 +330,9 @@ class NativeNewton:
         self._u, self._p, self._K, self._r = np.zeros(N), np.zeros(n_p), np.zeros((N, N), order="F"), np.zeros(N)
         self._grad, self._energies = np.zeros(n), np.zeros(5)
         self._steps, self._evaluations, self._largest = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(0.0)
-        self._E = np.asfortranarray(node_map, dtype=float)  # E (d·M × n), kept alive for the call
+        self._map = node_map  # kept alive for the calls
         self._head = (_lapack_pointer("dgetrf"), _lapack_pointer("dgetrs"), _lapack_pointer("dgemm"),
-                      self._E.ctypes.data, self._E.shape[0], n, nf)
+                      ctypes.addressof(node_map.struct), node_map.rows_w, node_map.buf_size, n, nf)
         self._tail = (NEWTON_CHORD_STEPS, NEWTON_MAX_STEP, NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE,
                       NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START,
                       *(a.ctypes.data for a in (self._u, self._p, self._K, self._r, self._grad, self._energies)),
@@ -305,7 +376,8 @@ def cached(nlp, kkt_lib: Path | None = None) -> NativeNewton | None:
 
 
 def _instance(nlp, lib: Path) -> NativeNewton:
-    return NativeNewton(lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0], nlp.node_map)
+    return NativeNewton(lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0],
+                        NodeBlocks(nlp.node_map, nlp.node_width))
 
 
 def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:
@@ -322,10 +394,10 @@ ACTIVE_DRIVER = _C_COMMON + r"""
 /* grad f, g, dg/dz, hess L, energies at arg into res[0..4]: the split function (hess L without its per-node
    part), then that part added (dlo_add_node_part); nonzero if the function fails. */
 static int dlo_full_eval(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, double *W,
-                         dlo_gemm_t gemm, const double *E, int rows_e, int n) {
+                         dlo_gemm_t gemm, const dlo_node_map *map, int rows_e, int n, double *buf) {
   res[5] = W;
   if (FUNCTION(arg, res, iw, w, 0) != 0) return 1;
-  dlo_add_node_part(gemm, E, W, rows_e, n, res[3], n);
+  dlo_add_node_part(gemm, map, W, rows_e, n, res[3], n, buf);
   return 0;
 }
 
@@ -359,8 +431,8 @@ static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double
    (rows): in at the start, out at the answer.  grad, g, jac (rows x n, column-major), hess (n x n),
    energies: out at the answer (evaluated there); with given = 1 they are in as well, the first step's
    derivatives. */
-CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t getrs, dlo_gemm_t gemm, const double *E,
-    int rows_e, int n, int rows, int *active,
+CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t getrs, dlo_gemm_t gemm,
+    const dlo_node_map *map, int rows_e, int buf_size, int n, int rows, int *active,
     const int *switchable, int switches, int max_evaluations, int max_steps, int given, double max_step,
     double reg, double tol_dual, double tol_prim, double tol_step, double contraction, double chord_start,
     double join_tol, double leave_tol, double *z, const double *p, double *lam, const double *ub, double *grad, double *g,
@@ -371,7 +443,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
   dlo_work(FUNCTION_work, RESIDUAL_work, &sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
   casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 6 ? sz_res : 6));
-  double *W = malloc(sizeof(double) * rows_e * n);
+  double *W = malloc(sizeof(double) * rows_e * n), *buf = malloc(sizeof(double) * (buf_size > 1 ? buf_size : 1));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
   casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
   int most = 0;  /* rows that can be active: the matrix is sized for them, not for every row */
@@ -388,7 +460,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
   arg[0] = z; arg[1] = p; arg[2] = lam;
   if (!given) {
     res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-    if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; goto done; }
+    if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) { code = 4; goto done; }
     ++*evaluations;
     fresh = 1;
   }
@@ -412,7 +484,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
         /* the changed set's matrix from derivatives evaluated here: with the start's, a row joining
            beside an active sample (their Jacobians nearly equal) sent steps over max_step */
         res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-        if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; break; }
+        if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) { code = 4; break; }
         ++*evaluations;
         fresh = 1;
       }
@@ -442,7 +514,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
       if (fresh) { code = 0; break; }
       /* the derivatives at the answer, and the test once more on them */
       res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; break; }
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) { code = 4; break; }
       ++*evaluations;
       fresh = 1;
       continue;
@@ -466,7 +538,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
       if (here || *evaluations >= max_evaluations) { code = 3; break; }
       /* a step of the matrix of an earlier iterate: Newton's own step, from derivatives evaluated here */
       res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; break; }
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) { code = 4; break; }
       ++*evaluations;
       if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) { code = 2; break; }
       here = fresh = 1;
@@ -484,7 +556,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
          rows changes none and the steps are below chord_start, then chord steps; or too slow for the
          factored matrix: evaluate and factor it here */
       res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (dlo_full_eval(arg, res, iw, w, W, gemm, E, rows_e, n) != 0) { code = 4; break; }
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) { code = 4; break; }
       ++*evaluations;
       if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) { code = 2; break; }
       previous = INFINITY;
@@ -499,6 +571,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
   }
 done:
   free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(lgrad); free(ipiv); free(W);
+  free(buf);
   return code;
 }
 """
@@ -552,19 +625,19 @@ class ActiveNewton:
     its residual, compiled into the full KKT function's library.  Not re-entrant per instance: callers serialise calls
     (ShapeSolver holds a lock)."""
 
-    def __init__(self, lib_path: Path, n: int, rows: int, node_map: np.ndarray):
+    def __init__(self, lib_path: Path, n: int, rows: int, node_map: NodeBlocks):
         self._lib = ctypes.CDLL(str(lib_path))
         self._run = self._lib.dlo_newton_active_run
         dp, ip, c_int, c_double = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_int, \
             ctypes.c_double
         vp = ctypes.c_void_p
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [vp, vp, vp, vp, c_int, c_int, c_int, ip, ip, c_int, c_int, c_int, c_int,
+        self._run.argtypes = [vp, vp, vp, vp, c_int, c_int, c_int, c_int, ip, ip, c_int, c_int, c_int, c_int,
                               c_double, c_double, c_double, c_double, c_double, c_double, c_double, c_double,
                               c_double, dp, dp, dp, dp, dp, dp, dp, dp, dp, ip, ip]
-        self._E = np.asfortranarray(node_map, dtype=float)  # E (d·M × n), kept alive for the call
+        self._map = node_map  # kept alive for the calls
         self._head = (_lapack_pointer("dgetrf"), _lapack_pointer("dgetrs"), _lapack_pointer("dgemm"),
-                      self._E.ctypes.data, self._E.shape[0])
+                      ctypes.addressof(node_map.struct), node_map.rows_w, node_map.buf_size)
         self.n, self.rows = n, rows
 
     def __call__(self, z: np.ndarray, lam: np.ndarray, p: np.ndarray, active: np.ndarray, ub: np.ndarray,

@@ -418,8 +418,8 @@ class StringNLP:
         # code (seconds of gcc instead of minutes), a faster interpreted call, and no flattened Hessian to build
         assembled = AssembledKKT(self) if self.director else AssembledEulerKKT(self)
         self._assembled = assembled
-        #: E (d·M × n): the unknowns → the per-node values u_k (``assembled.py``)
-        self.node_map = assembled.E
+        #: E (d·M × n): the unknowns → the per-node values u_k (``assembled.py``), d = node_width
+        self.node_map, self.node_width = assembled.E, assembled.d
         self.kkt_free_fn, self.residual_free_fn = assembled.kkt_free()
         self.kkt_fn, self.residual_fn = assembled.kkt()
         if nf < g.shape[0]:

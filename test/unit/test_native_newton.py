@@ -6,9 +6,12 @@ path's own steps until its set settles, then chord steps, to the same KKT point;
 derivatives ran."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from dlo_ros.model import Grip, Profile
 from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver
@@ -271,3 +274,32 @@ def test_a_query_whose_chord_steps_outnumber_newtons_cap_is_still_a_newton_answe
     assert len(calls) == 1 and calls[0].code == 0 and calls[0].steps > 10, [(c.code, c.steps) for c in calls]
     assert a.status == b.status == "ok" and a.ipopt_status == b.ipopt_status == "Newton"
     np.testing.assert_allclose(a.points, b.points, atol=1e-10)
+
+
+@pytest.mark.parametrize("model", ["full", "planar", "full, stretch, 2 elements"])
+def test_the_node_blocks_hold_the_node_map_exactly_in_small_dgemm_calls(model):
+    """``NodeBlocks``, from which the compiled loops add Eᵀ W: its blocks put back together are E, entry for
+    entry, each column in one group; and no dgemm call multiplies more than ``CHUNK_WORK`` (so OpenBLAS
+    keeps it on the calling thread)."""
+    from dlo_ros.solver.native_newton import CHUNK_WORK, NodeBlocks
+    from dlo_ros.solver.nlp import StringNLP
+
+    scene = load_scene("default_cable")
+    problem, options = scene.problem, replace(scene.options, model=model.split(",")[0], order=16)
+    if "stretch" in model:
+        problem = replace(problem, string=replace(problem.string, stretch_stiffness=Profile.constant(50.0)),
+                          grips=problem.grips + (Grip("middle", 0.5, "pin", GripPose.checked([0.3, 0.0, 0.2], [0, 0, 0, 1],
+                                                                                             "middle")),))
+    nlp = StringNLP(problem, options)
+    E = nlp.node_map
+    blocks = NodeBlocks(E, nlp.node_width)
+    rebuilt = np.zeros_like(E)
+    row = col = block = 0
+    for g in range(blocks.count.size // 2):
+        R, C = blocks.count[2 * g], blocks.count[2 * g + 1]
+        rows, cols = blocks.row[row:row + R], blocks.col[col:col + C]
+        assert not rebuilt[:, cols].any()  # each column in one group
+        rebuilt[np.ix_(rows, cols)] = blocks.block[block:block + R * C].reshape(R, C, order="F")
+        assert blocks.chunk * C * E.shape[1] <= CHUNK_WORK or blocks.chunk == 1
+        row, col, block = row + R, col + C, block + R * C
+    np.testing.assert_array_equal(rebuilt, E)

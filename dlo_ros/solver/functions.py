@@ -136,8 +136,12 @@ class NlpFunctions:
         if name == "kkt_free":
             self.newton_step = self._compiled_newton_step(fn, lib)
             self.newton_native = loop
+            if loop is not None:  # K by its split function and BLAS, as the loop evaluates it
+                self.kkt_free = self._with_node_part(native_newton.library_path(fn, lib), self.nlp.kkt_free_split_fn, 0)
         if name == "kkt":
             self.newton_active = self._active_loop(lib)
+            if self.newton_active is not None:
+                self.kkt = self._with_node_part(lib, self.nlp.kkt_split_fn, 3)
         if name == "outputs":
             self.outputs_compiled = True
 
@@ -150,6 +154,12 @@ class NlpFunctions:
             self.waiting = [item for item in self.waiting if item not in loaded]
             self.compiled = all(name == "outputs" for name, _, _ in self.waiting)
         return bool(loaded)
+
+    def _with_node_part(self, lib, split: ca.Function, target: int) -> native_newton.WithNodePart:
+        """The compiled ``split`` function in ``lib`` (the Newton loop's library holds it) with the
+        Hessian's per-node part added to output ``target``."""
+        return native_newton.WithNodePart(NativeFunction(lib, split),
+                                          native_newton.NodeBlocks(self.nlp.node_map, self.nlp.node_width), target)
 
     def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
         """The active-set Newton loop in the full KKT function's library (None if it cannot be loaded)."""

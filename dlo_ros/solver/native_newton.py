@@ -280,6 +280,34 @@ class NodeBlocks:
                                      self.col.ctypes.data, self.block.ctypes.data)
 
 
+class WithNodePart:
+    """A compiled split function (``StringNLP.kkt_free_split_fn``, ``kkt_split_fn``) called as the whole one:
+    its last output W dropped and Eᵀ W added to the top-left n × n block of output ``target`` (K, ∇²L),
+    one product per ``NodeBlocks`` group (numpy: each below OpenBLAS's threshold for threads), so that the
+    evaluations Python makes (a saddle's escape, the derivatives at an adopted start, the stability check
+    of a state without them) take the same shortcut as the compiled loops.  Not re-entrant (the split
+    function's buffers): callers serialise calls, as for ``compiled.NativeFunction``."""
+
+    def __init__(self, split, blocks: NodeBlocks, target: int):
+        self._split, self._target = split, target
+        self._groups = []
+        row = col = block = 0
+        for g in range(blocks.count.size // 2):
+            R, C = int(blocks.count[2 * g]), int(blocks.count[2 * g + 1])
+            values = blocks.block[block:block + R * C].reshape(R, C, order="F")
+            self._groups.append((blocks.row[row:row + R].astype(np.intp), blocks.col[col:col + C].astype(np.intp),
+                                 np.ascontiguousarray(values.T)))
+            row, col, block = row + R, col + C, block + R * C
+
+    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        *out, weighted = self._split(*args)
+        h = out[self._target]
+        n = weighted.shape[1]
+        for rows, cols, block_t in self._groups:
+            h[cols, :n] += block_t @ weighted[rows]
+        return out
+
+
 #: the most multiplications (m·n·k) of one dgemm in ``dlo_add_node_part``: below OpenBLAS's threshold for
 #: threads (65536 · 4), whose workers would spin on the other core between calls
 CHUNK_WORK = 150_000

@@ -20,6 +20,7 @@ from dlo_ros.model.problem import RelativePosition
 from dlo_ros.model.obstacles import Obstacle
 from dlo_ros.scene import load_scene
 from dlo_ros.solver.compiled import InterpretedFunction, NativeFunction, compiler
+from dlo_ros.solver.native_newton import WithNodePart
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.output_function import OutputFunction
 from dlo_ros.solver.residual import PointAction
@@ -237,7 +238,7 @@ def test_kkt_compiled_speaks_of_the_derivatives_alone(tmp_path, monkeypatch):
     assert len(removed) == 1
     removed[0].unlink()
     solver = ShapeSolver(problem, options, compile="cached")
-    assert solver.kkt_compiled and isinstance(solver.functions.kkt_free, NativeFunction)
+    assert solver.kkt_compiled and isinstance(solver.functions.kkt_free, (NativeFunction, WithNodePart))
     assert not solver.functions.outputs_compiled and isinstance(solver.functions.outputs, InterpretedFunction)
     r = solver.solve()
     assert r.ok and r.derivatives == "compiled", r.message

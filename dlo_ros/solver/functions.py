@@ -14,6 +14,9 @@ One ``NlpFunctions`` per ``StringNLP``:
 * ``outputs(z, p, λ, prof)``: a solution's published outputs in one call (``output_function.py``; None
   for the models it does not cover, whose outputs numpy evaluates), compiled last.
 
+The KKT functions are compiled split (``StringNLP.kkt_free_split_fn``, ``kkt_split_fn``: without the
+Hessian's per-node part Eᵀ W, which ``native_newton.WithNodePart`` adds by BLAS, as the compiled loops do).
+
 Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
 background thread and swap each in when it is ready; libraries are cached per machine), 'blocking'
 (compile or load now), 'cached' (load a library compiled earlier, never compile) and 'off'.
@@ -78,8 +81,10 @@ class NlpFunctions:
         # the contact-free function first: it is the one a stream uses while nothing touches
         todo = []
         outputs_fn = self.output_function.function if self.output_function is not None else None
-        for name, fn in (("kkt_free", nlp.kkt_free_fn), ("obstacle_g", nlp.obstacle_g_fn), ("kkt", nlp.kkt_fn),
-                         ("outputs", outputs_fn)):
+        # the KKT functions compiled are the split ones (K without its per-node Hessian part, which
+        # native_newton adds with BLAS), whose libraries the Newton loops share
+        for name, fn in (("kkt_free", nlp.kkt_free_split_fn), ("obstacle_g", nlp.obstacle_g_fn),
+                         ("kkt", nlp.kkt_split_fn), ("outputs", outputs_fn)):
             if fn is None:
                 continue
             # the full KKT function's library also holds its active-set Newton loop
@@ -101,8 +106,8 @@ class NlpFunctions:
                 nice = 10 if mode == "background" else 0
                 active = name == "kkt"  # with its active-set loop and the residual function that loop uses
                 native, ok = compiled(fn, nice=nice, lib=lib,
-                                      extra_source=native_newton.active_source(nlp.kkt_split_fn, nlp.residual_fn)
-                                      if active else "", also=(nlp.residual_fn, nlp.kkt_split_fn) if active else ())
+                                      extra_source=native_newton.active_source(fn, nlp.residual_fn) if active else "",
+                                      also=(nlp.residual_fn,) if active else ())
                 loop = native_newton.build(nlp, nice=nice, kkt_lib=lib) \
                     if ok and name == "kkt_free" else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock
@@ -130,18 +135,18 @@ class NlpFunctions:
         return True
 
     def _install(self, name: str, native, fn: ca.Function, lib, loop) -> None:
-        """Put the compiled ``native`` of the function ``name`` in place: for the contact-free function
-        with its compiled Newton step and loop ``loop``, for the full one with its active-set loop."""
+        """Put the compiled ``native`` of the function ``name`` in place: for the KKT functions (compiled
+        split) with the Hessian's per-node part added (``native_newton.WithNodePart``), the contact-free one
+        with its compiled Newton step and loop ``loop``, the full one with its active-set loop."""
+        if name in ("kkt_free", "kkt"):
+            native = native_newton.WithNodePart(native, native_newton.NodeBlocks(self.nlp.node_map, self.nlp.node_width),
+                                                0 if name == "kkt_free" else 3)
         setattr(self, name, native)
         if name == "kkt_free":
             self.newton_step = self._compiled_newton_step(fn, lib)
             self.newton_native = loop
-            if loop is not None:  # K by its split function and BLAS, as the loop evaluates it
-                self.kkt_free = self._with_node_part(native_newton.library_path(fn, lib), self.nlp.kkt_free_split_fn, 0)
         if name == "kkt":
             self.newton_active = self._active_loop(lib)
-            if self.newton_active is not None:
-                self.kkt = self._with_node_part(lib, self.nlp.kkt_split_fn, 3)
         if name == "outputs":
             self.outputs_compiled = True
 
@@ -155,12 +160,6 @@ class NlpFunctions:
             self.compiled = all(name == "outputs" for name, _, _ in self.waiting)
         return bool(loaded)
 
-    def _with_node_part(self, lib, split: ca.Function, target: int) -> native_newton.WithNodePart:
-        """The compiled ``split`` function in ``lib`` (the Newton loop's library holds it) with the
-        Hessian's per-node part added to output ``target``."""
-        return native_newton.WithNodePart(NativeFunction(lib, split),
-                                          native_newton.NodeBlocks(self.nlp.node_map, self.nlp.node_width), target)
-
     def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
         """The active-set Newton loop in the full KKT function's library (None if it cannot be loaded)."""
         try:
@@ -169,10 +168,19 @@ class NlpFunctions:
         except (OSError, AttributeError):
             return None
 
-    def _compiled_newton_step(self, fn: ca.Function, lib) -> InterpretedFunction:
-        """``newton_fn`` calling the compiled contact-free library (``casadi.external``); the current one
-        if it cannot be loaded (then the steps are still right, only slower)."""
+    def _compiled_newton_step(self, split: ca.Function, lib) -> InterpretedFunction:
+        """``newton_fn`` around the compiled split contact-free function (``casadi.external``) plus the
+        Hessian's per-node part (a CasADi product: this path serves only while the loop is missing); the
+        current one if the library cannot be loaded (then the steps are still right, only slower)."""
+        nlp = self.nlp
         try:
-            return InterpretedFunction(self.nlp.newton_function(ca.external(fn.name(), str(lib))))
+            external = ca.external(split.name(), str(lib))
         except RuntimeError:
             return self.newton_step
+        n, nf = nlp.z_sym.shape[0], nlp.n_free_rows
+        z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.p_sym.shape[0]), ca.MX.sym("lam", nf)
+        kkt, residual, grad, energies, weighted = external(z, p, lam)
+        node = ca.mtimes(ca.sparsify(ca.DM(nlp.node_map)).T, weighted)
+        kkt = kkt + ca.blockcat([[node, ca.MX(n, nf)], [ca.MX(nf, n), ca.MX(nf, nf)]])
+        return InterpretedFunction(nlp.newton_function(ca.Function("dlo_kkt_free", [z, p, lam],
+                                                                   [kkt, residual, grad, energies])))

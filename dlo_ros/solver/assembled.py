@@ -297,10 +297,10 @@ class AssembledKKT:
                 ca.Function("dlo_residual_free", [z, p, lam], [residual]))
 
     def kkt_free_split(self) -> ca.Function:
-        """``dlo_kkt_free_split``: (z, p, λ_free) → [K − [Eᵀ W 0; 0 0], r, ∇f, energies, W] with W = diag(∇²φ_k) E
-        (d·M × n): ``kkt_free``'s outputs with K's per-node Hessian part Eᵀ W left out, and W.  That
-        product is most of K's cost in CasADi's sparse loops (E is dense within an element); the compiled
-        Newton loops (``native_newton``) add it with one BLAS dgemm of ``E``."""
+        """``dlo_kkt_free_split``: (z, p, λ_free) → [K − [Eᵀ W 0; 0 0], r, ∇f, energies, W] with
+        W = diag(∇²φ_k) E (d·M × n): ``kkt_free``'s outputs with K's per-node Hessian part Eᵀ W left out,
+        and W.  That product is most of K's cost in CasADi's sparse loops (E is dense within an element);
+        the compiled functions add it with BLAS, by dense blocks of E (``native_newton.NodeBlocks``)."""
         nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
         grad, hess, g, jac, grad_f, energies, weighted = self._system(z, p, lam, nf, split=True)

@@ -336,7 +336,8 @@ class AutoShapeSolver:
                 "planar" if choice.planar else "full", order=choice.order,
                 quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
                 obstacle_samples=choice.samples,
-                self_contact_pairs=(self.options.self_contact_pairs or AUTO_SELF_CONTACT_PAIRS) if choice.self_contact else 0)
+                self_contact_pairs=(self.options.self_contact_pairs or AUTO_SELF_CONTACT_PAIRS)
+                if choice.self_contact else 0)
             self._reduced_options = {**known, model: opts}
         return reduced, opts
 

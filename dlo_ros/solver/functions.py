@@ -139,8 +139,8 @@ class NlpFunctions:
         split) with the Hessian's per-node part added (``native_newton.WithNodePart``), the contact-free one
         with its compiled Newton step and loop ``loop``, the full one with its active-set loop."""
         if name in ("kkt_free", "kkt"):
-            native = native_newton.WithNodePart(native, native_newton.NodeBlocks(self.nlp.node_map, self.nlp.node_width),
-                                                0 if name == "kkt_free" else 3)
+            blocks = native_newton.NodeBlocks(self.nlp.node_map, self.nlp.node_width)
+            native = native_newton.WithNodePart(native, blocks, 0 if name == "kkt_free" else 3)
         setattr(self, name, native)
         if name == "kkt_free":
             self.newton_step = self._compiled_newton_step(fn, lib)

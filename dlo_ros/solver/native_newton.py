@@ -6,8 +6,8 @@ step in Python.  Here the whole loop is one C function, compiled together with t
 products: a small fraction of its cost).  The split function is ``kkt_free_fn`` without K's per-node
 Hessian part Eᵀ W, W = diag(∇²φ_k) E (``assembled.py``), which it returns instead: CasADi's sparse
 loops spent three quarters of K's time on that product, and BLAS dgemm calls on the node map E's dense
-blocks (``NodeBlocks``, ``dlo_add_node_part``) add it at a fraction of that.  From u = [z; λ_free] and the Newton system (K, r) at u it
-factors K once and repeats chord steps
+blocks (``NodeBlocks``, ``dlo_add_node_part``) add it at a fraction of that.  From u = [z; λ_free] and
+the Newton system (K, r) at u it factors K once and repeats chord steps
 
     solve (K + diag(δ I_n, −δ I_nf)) Δ = r  (LAPACK dgetrf once, dgetrs per step),  u ← u − Δ,  r ← r(u)
 

@@ -217,7 +217,8 @@ class OutputFunction:
         if planar:  # φ at the outputs (the orientations: ``frames.frames_psi`` and ``pose_quaternions``)
             v_out = ca.mtimes(ca.DM(m.matrices(s_out)[0]), c_phi).T
         else:
-            v_out = _unit_quaternion().map(len(s_out))(ca.mtimes(nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T)))
+            v_out = ca.mtimes(nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T))
+            v_out = _unit_quaternion().map(len(s_out))(v_out)
         zero = ca.DM.zeros(3, 0)
         self.function = ca.Function(
             "dlo_outputs", [z, p, lam, prof],

@@ -164,8 +164,8 @@ def _split_cases(case: str) -> StringNLP:
     return StringNLP(planar_scene(), SolverOptions(model=model, rotation=rotation, order=10))
 
 
-@pytest.mark.parametrize("case", ["default_cable", "stretched 2, 2 self-contact slots", "obstacles of every type, slots",
-                                  "planar", "euler"])
+@pytest.mark.parametrize("case", ["default_cable", "stretched 2, 2 self-contact slots",
+                                  "obstacles of every type, slots", "planar", "euler"])
 def test_the_split_systems_plus_their_node_part_equal_the_flattened_ones(case):
     """What the compiled Newton loops evaluate (native_newton): ``kkt_free_split_fn`` and ``kkt_split_fn``,
     the systems without the Hessian's per-node part, plus Eᵀ W (W their last output, E the node map),
@@ -174,7 +174,8 @@ def test_the_split_systems_plus_their_node_part_equal_the_flattened_ones(case):
     E, n, nf = nlp.node_map, nlp.z_sym.shape[0], nlp.n_free_rows
 
     def free(z, p, lam):
-        kkt, residual, grad_f, energies, weighted = (np.asarray(a, dtype=float) for a in nlp.kkt_free_split_fn(z, p, lam))
+        outputs = nlp.kkt_free_split_fn(z, p, lam)
+        kkt, residual, grad_f, energies, weighted = (np.asarray(a, dtype=float) for a in outputs)
         kkt[:n, :n] += E.T @ weighted
         return kkt, residual, grad_f, energies
 

@@ -287,9 +287,9 @@ def test_the_node_blocks_hold_the_node_map_exactly_in_small_dgemm_calls(model):
     scene = load_scene("default_cable")
     problem, options = scene.problem, replace(scene.options, model=model.split(",")[0], order=16)
     if "stretch" in model:
+        middle = Grip("middle", 0.5, "pin", GripPose.checked([0.3, 0.0, 0.2], [0, 0, 0, 1], "middle"))
         problem = replace(problem, string=replace(problem.string, stretch_stiffness=Profile.constant(50.0)),
-                          grips=problem.grips + (Grip("middle", 0.5, "pin", GripPose.checked([0.3, 0.0, 0.2], [0, 0, 0, 1],
-                                                                                             "middle")),))
+                          grips=problem.grips + (middle,))
     nlp = StringNLP(problem, options)
     E = nlp.node_map
     blocks = NodeBlocks(E, nlp.node_width)

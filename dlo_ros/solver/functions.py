@@ -139,8 +139,7 @@ class NlpFunctions:
         split) with the Hessian's per-node part added (``native_newton.WithNodePart``), the contact-free one
         with its compiled Newton step and loop ``loop``, the full one with its active-set loop."""
         if name in ("kkt_free", "kkt"):
-            blocks = native_newton.NodeBlocks(self.nlp.node_map, self.nlp.node_width)
-            native = native_newton.WithNodePart(native, blocks, 0 if name == "kkt_free" else 3)
+            native = native_newton.WithNodePart(native, self.nlp.node_blocks, 0 if name == "kkt_free" else 3)
         setattr(self, name, native)
         if name == "kkt_free":
             self.newton_step = self._compiled_newton_step(fn, lib)
@@ -163,8 +162,7 @@ class NlpFunctions:
     def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
         """The active-set Newton loop in the full KKT function's library (None if it cannot be loaded)."""
         try:
-            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size),
-                                              native_newton.NodeBlocks(self.nlp.node_map, self.nlp.node_width))
+            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size), self.nlp.node_blocks)
         except (OSError, AttributeError):
             return None
 

@@ -404,8 +404,7 @@ def cached(nlp, kkt_lib: Path | None = None) -> NativeNewton | None:
 
 
 def _instance(nlp, lib: Path) -> NativeNewton:
-    return NativeNewton(lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0],
-                        NodeBlocks(nlp.node_map, nlp.node_width))
+    return NativeNewton(lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0], nlp.node_blocks)
 
 
 def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:

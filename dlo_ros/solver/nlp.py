@@ -547,6 +547,14 @@ class StringNLP:
         return self._assembled.kkt_free_split()
 
     @functools.cached_property
+    def node_blocks(self):
+        """The node map as the dense blocks the compiled functions add Eᵀ W by (``native_newton.NodeBlocks``),
+        made once per NLP."""
+        from .native_newton import NodeBlocks
+
+        return NodeBlocks(self.node_map, self.node_width)
+
+    @functools.cached_property
     def kkt_split_fn(self) -> ca.Function:
         """``kkt_fn`` split as ``kkt_free_split_fn`` (the compiled active-set loop's)."""
         return self._assembled.kkt_split()

@@ -261,17 +261,16 @@ class NodeBlocks:
             support = np.flatnonzero(E[:, c])
             if support.size:
                 groups.setdefault(tuple(sorted(set((support % width).tolist()))), []).append(c)
-        counts, rows, cols, blocks = [], [], [], []
+        #: (rows, columns, E[rows, columns]) of each group
+        self.groups = []
         for members in groups.values():
             reached = np.flatnonzero(np.any(E[:, members] != 0, axis=1))
-            counts += [reached.size, len(members)]
-            rows.append(reached)
-            cols.append(np.array(members))
-            blocks.append(E[np.ix_(reached, members)].ravel(order="F"))
-        self.count = np.array(counts, dtype=np.intc)
+            self.groups.append((reached, np.array(members), E[np.ix_(reached, members)]))
+        rows, cols, blocks = ([group[i] for group in self.groups] for i in range(3))
+        self.count = np.array([(r.size, c.size) for r, c, _ in self.groups], dtype=np.intc).ravel()
         self.row = np.ascontiguousarray(np.concatenate(rows), dtype=np.intc)
         self.col = np.ascontiguousarray(np.concatenate(cols), dtype=np.intc)
-        self.block = np.ascontiguousarray(np.concatenate(blocks), dtype=float)
+        self.block = np.concatenate([b.ravel(order="F") for b in blocks])
         widest, deepest = max(len(c) for c in cols), max(r.size for r in rows)
         self.rows_w = E.shape[0]
         self.chunk = max(1, min(deepest, CHUNK_WORK // (widest * n)))
@@ -290,14 +289,7 @@ class WithNodePart:
 
     def __init__(self, split, blocks: NodeBlocks, target: int):
         self._split, self._target = split, target
-        self._groups = []
-        row = col = block = 0
-        for g in range(blocks.count.size // 2):
-            R, C = int(blocks.count[2 * g]), int(blocks.count[2 * g + 1])
-            values = blocks.block[block:block + R * C].reshape(R, C, order="F")
-            self._groups.append((blocks.row[row:row + R].astype(np.intp), blocks.col[col:col + C].astype(np.intp),
-                                 np.ascontiguousarray(values.T)))
-            row, col, block = row + R, col + C, block + R * C
+        self._groups = [(rows, cols, np.ascontiguousarray(block.T)) for rows, cols, block in blocks.groups]
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
         *out, weighted = self._split(*args)
@@ -383,11 +375,11 @@ class NativeNewton:
 def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | None:
     """The driver of ``nlp``'s contact-free system (``StringNLP.kkt_free_split_fn`` and ``residual_free_fn``
     compiled with it), from the cache or built now (one compiler at a time per process); None without a C
-    compiler or if compiling fails.  ``kkt_lib``: ``kkt_free_fn``'s library path, which keys this one."""
+    compiler or if compiling fails.  ``kkt_lib``: the split function's own library path, which keys this one."""
     cc = compiler()
     if cc is None or os.environ.get("DLO_NO_COMPILE"):
         return None
-    lib = library_path(nlp.kkt_free_fn, kkt_lib)
+    lib = library_path(nlp.kkt_free_split_fn, kkt_lib)
     if not lib.exists():
         with COMPILER_LOCK:
             if not lib.exists() and not _compile(nlp.kkt_free_split_fn, nlp.residual_free_fn, cc, lib, nice):
@@ -399,7 +391,7 @@ def cached(nlp, kkt_lib: Path | None = None) -> NativeNewton | None:
     """The driver if the cache holds it (no compiling), else None."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
-    lib = library_path(nlp.kkt_free_fn, kkt_lib)
+    lib = library_path(nlp.kkt_free_split_fn, kkt_lib)
     return _instance(nlp, lib) if lib.exists() else None
 
 

@@ -16,8 +16,9 @@ from the answer), where a step shrinks by less than ``NEWTON_CHORD_CONTRACTION``
 before, and where a step of an earlier iterate's K would exceed ``NEWTON_MAX_STEP`` (then Newton's own
 step from here is taken instead).  It stops once ‖r_dual‖∞ < 1e-9 and ‖r_primal‖∞ < 1e-11 and the last step is
 below ``NEWTON_CHORD_TOLERANCE`` in every scaled unknown (or no longer shrinks: round-off), and then
-evaluates K, ∇f and the energies at the answer, which the stability eigenvalue and the next update's
-first step use.  It also stops at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` evaluations of K, at a
+evaluates K, ∇f and the energies at the answer, which the next update's first step uses, and there the
+stability eigenvalue (``stability.min_reduced_eigenvalue``: the same LAPACK routines, geqp3, orgqr and
+syevr, on K's blocks, in the same call).  It also stops at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` evaluations of K, at a
 singular matrix, or at a step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same
 regularisation δ = NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  The answer is the root the
 Python path's Newton steps converge to, within round-off: at a grip move of 1 % of L the chord steps
@@ -119,7 +120,97 @@ static int dlo_regularised_lu(dlo_getrf_t getrf, double *A, int *ipiv, int n, in
 }
 """
 
-DRIVER = _C_COMMON + r"""
+#: The stability eigenvalue (``stability.min_reduced_eigenvalue``) of the contact-free answer, in C beside
+#: the loop: the same LAPACK routines on the same matrices as the numpy path.
+_C_EIGEN = r"""
+typedef void (*dlo_geqp3_t)(int *m, int *n, double *a, int *lda, int *jpvt, double *tau, double *work, int *lwork,
+                            int *info);
+typedef void (*dlo_orgqr_t)(int *m, int *n, int *k, double *a, int *lda, double *tau, double *work, int *lwork,
+                            int *info);
+typedef void (*dlo_syevr_t)(char *jobz, char *range, char *uplo, int *n, double *a, int *lda, double *vl, double *vu,
+                            int *il, int *iu, double *abstol, int *m, double *w, double *z, int *ldz, int *isuppz,
+                            double *work, int *lwork, int *iwork, int *liwork, int *info);
+
+/* SciPy's LAPACK and BLAS routines the eigenvalue needs; chunk: the most multiplications of one dgemm */
+typedef struct {
+  dlo_geqp3_t geqp3;
+  dlo_orgqr_t orgqr;
+  dlo_syevr_t syevr;
+  dlo_gemm_t gemm;
+  int chunk;
+} dlo_eigen_lapack;
+
+/* C = op(A) B column block by column block, each dgemm call within la->chunk multiplications (as
+   dlo_add_node_part: OpenBLAS then stays on this thread); op(A) is rows x inner. */
+static void dlo_gemm_chunked(const dlo_eigen_lapack *la, char ta, int rows, int cols, int inner, const double *A,
+                             int lda, const double *B, int ldb, double *C, int ldc) {
+  char no = 'N';
+  double one = 1.0, zero = 0.0;
+  long per = (long)rows * inner;
+  int step = per > 0 ? (int)(la->chunk / per) : cols;
+  if (step < 1) step = 1;
+  for (int c = 0; c < cols; c += step) {
+    int k = cols - c < step ? cols - c : step;
+    la->gemm(&ta, &no, &rows, &k, &inner, &one, (double *)A, &lda, (double *)B + (size_t)ldb * c, &ldb, &zero,
+             C + (size_t)ldc * c, &ldc);
+  }
+}
+
+/* The smallest eigenvalue of N^T H N and its eigenvector N v, N an orthonormal basis of the null space of
+   the m x n matrix J (leading dimension ldj): LAPACK geqp3 of J^T, rank = number of |R_kk| above
+   max(m, n) eps |R_00|, Q from orgqr, N = Q's last n - rank columns; syevr for the one eigenpair.  H: n x n
+   at leading dimension ldh.  0: done; 1: no freedom (rank n); -1: LAPACK failed (the caller's numpy path
+   decides). */
+static int dlo_reduced_eigen(const dlo_eigen_lapack *la, const double *H, int ldh, const double *J, int ldj, int n,
+                             int m, double *value, double *direction) {
+  int k = m < n ? m : n, info = 0, code = -1;
+  /* the workspace sizes SciPy's wrappers pass (the unblocked algorithms): blocked ones call BLAS 3 at
+     sizes where OpenBLAS's threads spin on the other core (a native call's CPU time doubled) */
+  int lw_qr = 3 * m + 1, lw_q = n > 1 ? n : 1, lwork = 26 * n + 3 * m + 1, liwork = 10 * n + 1;
+  double *qr = malloc(sizeof(double) * ((size_t)n * (m > 0 ? m : 1))), *tau = calloc((size_t)n + 1, sizeof(double));
+  double *Q = calloc((size_t)n * n, sizeof(double)), *work = malloc(sizeof(double) * lwork);
+  double *T = malloc(sizeof(double) * (size_t)n * n), *M = malloc(sizeof(double) * (size_t)n * n);
+  double *v = malloc(sizeof(double) * ((size_t)n + 1));
+  int *jpvt = calloc((size_t)m + 1, sizeof(int)), *iwork = malloc(sizeof(int) * liwork), isuppz[2];
+  int rank = 0;
+  if (m > 0) {
+    for (int j = 0; j < m; ++j)
+      for (int i = 0; i < n; ++i) qr[i + (size_t)n * j] = J[j + (size_t)ldj * i];
+    la->geqp3(&n, &m, qr, &n, jpvt, tau, work, &lw_qr, &info);
+    if (info != 0) goto done;
+    double big = fabs(qr[0]), eps = 2.220446049250313e-16, limit = (m > n ? m : n) * eps * big;
+    for (int i = 0; i < k; ++i) if (fabs(qr[i + (size_t)n * i]) > limit) ++rank;
+    memcpy(Q, qr, sizeof(double) * (size_t)n * k);
+  }
+  if (rank == n) { code = 1; goto done; }
+  /* Q from its k reflectors (numpy's path pads tau with zeros to n: identity reflectors, the same Q) */
+  la->orgqr(&n, &n, &k, Q, &n, tau, work, &lw_q, &info);
+  if (info != 0) goto done;
+  {
+    int r = n - rank, found = 0, il = 1, lw_eig = 26 * r;
+    char jobz = 'V', range = 'I', uplo = 'L', tr = 'T', no = 'N';
+    double vl = 0.0, vu = 0.0, abstol = 0.0, w[1];
+    const double *basis = Q + (size_t)n * rank;
+    dlo_gemm_chunked(la, no, n, r, n, H, ldh, basis, n, T, n);      /* T = H N */
+    dlo_gemm_chunked(la, tr, r, r, n, basis, n, T, n, M, r);        /* M = N^T H N */
+    la->syevr(&jobz, &range, &uplo, &r, M, &r, &vl, &vu, &il, &il, &abstol, &found, w, v, &r, isuppz, work, &lw_eig,
+              iwork, &liwork, &info);
+    if (info != 0 || found != 1) goto done;
+    *value = w[0];
+    for (int i = 0; i < n; ++i) {
+      double s = 0.0;
+      for (int j = 0; j < r; ++j) s += basis[i + (size_t)n * j] * v[j];
+      direction[i] = s;
+    }
+    code = 0;
+  }
+done:
+  free(qr); free(tau); free(Q); free(work); free(T); free(M); free(v); free(jpvt); free(iwork);
+  return code;
+}
+"""
+
+DRIVER = _C_COMMON + _C_EIGEN + r"""
 
 static int dlo_converged(const double *r, int n, int m, double tol_dual, double tol_prim) {
   for (int i = 0; i < n; ++i) if (!(fabs(r[i]) < tol_dual)) return 0;
@@ -149,7 +240,8 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     const dlo_node_map *map, int rows_e, int buf_size, int n, int m, int max_evaluations,
     int max_steps, double max_step, double reg, double tol_dual, double tol_prim, double tol_step,
     double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad,
-    double *energies, int *steps, int *evaluations, double *largest) {
+    double *energies, int *steps, int *evaluations, double *largest, const dlo_eigen_lapack *eigen,
+    double *eig_value, double *eig_direction, int *eig_code) {
   int N = n + m, one = 1, info = 0, code = 1;
   char trans = 'N';
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -220,6 +312,10 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
       break;
     }
   }
+  *eig_code = -1;
+  if (code == 0) {  /* the stability eigenvalue at the answer: H = K's top-left block, J its bottom-left */
+    *eig_code = dlo_reduced_eigen(eigen, K, N, K + n, N, n, m, eig_value, eig_direction);
+  }
   free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv); free(W); free(buf);
   return code;
 }
@@ -237,6 +333,18 @@ def _lapack_pointer(name: str) -> int:
     get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
     get_pointer.restype, get_pointer.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
     return int(get_pointer(capsule, get_name(capsule)))
+
+
+class _EigenLapackStruct(ctypes.Structure):
+    """dlo_eigen_lapack in the driver's C."""
+
+    _fields_ = [("geqp3", ctypes.c_void_p), ("orgqr", ctypes.c_void_p), ("syevr", ctypes.c_void_p),
+                ("gemm", ctypes.c_void_p), ("chunk", ctypes.c_int)]
+
+
+def _eigen_lapack() -> _EigenLapackStruct:
+    return _EigenLapackStruct(*(_lapack_pointer(name) for name in ("dgeqp3", "dorgqr", "dsyevr", "dgemm")),
+                              CHUNK_WORK)
 
 
 class _NodeMapStruct(ctypes.Structure):
@@ -317,7 +425,9 @@ def library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
 @dataclass
 class NewtonOutcome:
     """What one call returns: ``code`` (CONVERGED, …), the last iterate u and K, r, ∇f, energies there,
-    the steps taken and the largest |Δz|."""
+    the steps taken and the largest |Δz|; once converged, ``eigen``: the stability eigenvalue there and
+    its eigenvector in z (``stability.min_reduced_eigenvalue`` on K's blocks, ``SolverState.reduced_eigen``),
+    None when the free rows leave no freedom or LAPACK failed (the numpy path then decides)."""
 
     code: int
     u: np.ndarray
@@ -328,6 +438,7 @@ class NewtonOutcome:
     steps: int
     largest: float
     evaluations: int = 0
+    eigen: tuple[float, np.ndarray] | None = None
 
 
 class NativeNewton:
@@ -342,21 +453,24 @@ class NativeNewton:
         self._run.argtypes = [vp, vp, vp, vp, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                               ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                               ctypes.c_double, ctypes.c_double, ctypes.c_double, vp, vp, vp, vp, vp, vp, ip, ip,
-                              ctypes.POINTER(ctypes.c_double)]
+                              ctypes.POINTER(ctypes.c_double), vp, ctypes.POINTER(ctypes.c_double), vp, ip]
         self.n, self.nf, self.n_p = n, nf, n_p
         N = n + nf
         # the call's arrays, allocated once and passed by their addresses (an ndarray's ctypes pointer costs
         # microseconds per argument and call)
         self._u, self._p, self._K, self._r = np.zeros(N), np.zeros(n_p), np.zeros((N, N), order="F"), np.zeros(N)
-        self._grad, self._energies = np.zeros(n), np.zeros(5)
+        self._grad, self._energies, self._direction = np.zeros(n), np.zeros(5), np.zeros(n)
         self._steps, self._evaluations, self._largest = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(0.0)
-        self._map = node_map  # kept alive for the calls
+        self._eig_value, self._eig_code = ctypes.c_double(0.0), ctypes.c_int(-1)
+        self._map, self._lapack = node_map, _eigen_lapack()  # kept alive for the calls
         self._head = (_lapack_pointer("dgetrf"), _lapack_pointer("dgetrs"), _lapack_pointer("dgemm"),
                       ctypes.addressof(node_map.struct), node_map.rows_w, node_map.buf_size, n, nf)
         self._tail = (NEWTON_CHORD_STEPS, NEWTON_MAX_STEP, NEWTON_REGULARISATION, NEWTON_DUAL_TOLERANCE,
                       NEWTON_PRIMAL_TOLERANCE, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START,
                       *(a.ctypes.data for a in (self._u, self._p, self._K, self._r, self._grad, self._energies)),
-                      ctypes.byref(self._steps), ctypes.byref(self._evaluations), ctypes.byref(self._largest))
+                      ctypes.byref(self._steps), ctypes.byref(self._evaluations), ctypes.byref(self._largest),
+                      ctypes.addressof(self._lapack), ctypes.byref(self._eig_value), self._direction.ctypes.data,
+                      ctypes.byref(self._eig_code))
 
     def __call__(self, u: np.ndarray, p: np.ndarray, kkt: np.ndarray, residual: np.ndarray,
                  max_steps: int) -> NewtonOutcome:
@@ -368,8 +482,11 @@ class NativeNewton:
         self._r[:] = np.ravel(residual)
         self._energies[:] = np.nan
         code = self._run(*self._head, int(max_steps), *self._tail)
+        eigen = (self._eig_value.value, self._direction.copy()) if code == CONVERGED and self._eig_code.value == 0 \
+            else None
         return NewtonOutcome(int(code), self._u.copy(), self._K.copy(order="F"), self._r.copy(), self._grad.copy(),
-                             self._energies.copy(), self._steps.value, self._largest.value, self._evaluations.value)
+                             self._energies.copy(), self._steps.value, self._largest.value, self._evaluations.value,
+                             eigen)
 
 
 def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | None:

@@ -112,9 +112,11 @@ def fill_start(nlp: StringNLP, fns: NlpFunctions, state: SolverState) -> None:
         state.kkt, state.residual = kkt, residual[:, 0]
         state.g, state.jacobian = all_rows(nlp, fns, state.z, state.p, kkt, state.residual)
         state.hessian = kkt[:state.z.size, :state.z.size]
+        state.reduced_eigen = None
     else:
         grad, g, state.jacobian, state.hessian, energies = fns.kkt(state.z, state.p, np.where(active, state.lam_g, 0.0))
         state.g = np.asarray(g).ravel()
+        state.reduced_eigen = None
     state.gradient, state.energies = np.asarray(grad).ravel(), np.asarray(energies).ravel()
 
 
@@ -257,14 +259,14 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
     else:
         kkt, residual, grad, energies = fns.kkt_free(unknowns[:n], p, unknowns[n:])
         residual = residual[:, 0]
-    first = 0
+    first, eigen = 0, None
     native = fns.newton_native if fused else None
     if native is not None:  # the whole loop in one compiled call (native_newton.py), the GIL released
         out = native(unknowns, p, kkt, residual, max_steps)
         if out.code != CONVERGED:
             return False, start, out.steps, np.inf, None
         unknowns, kkt, residual, grad, energies = out.u, out.kkt, out.residual, out.gradient, out.energies
-        first = out.steps
+        first, eigen = out.steps, out.eigen
     elif fused:
         try:
             u, kkt, residual, grad, energies, largest = fns.newton_step(unknowns, p, kkt, residual)
@@ -284,10 +286,12 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
                 contact = np.all(g[nf:][~nlp.contact_row[nf:]] <= nlp.ubg[nf:][~nlp.contact_row[nf:]] + 1e-9)
                 return False, start, it, np.inf, SolverState(z.copy(), lam, start.lam_x, p, g=g) if contact else None
             state = SolverState(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
-                                energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual)
+                                energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual,
+                                reduced_eigen=eigen)
             return True, state, it, violation(nlp, g), None
         if it >= max_steps:
             break
+        eigen = None  # not this iterate's
         _, _, step, info = _gesv(regularised(kkt, n), residual)
         if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
             return False, start, it, np.inf, None

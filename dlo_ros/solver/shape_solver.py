@@ -817,6 +817,7 @@ class ShapeSolver:
                 p[self.nlp.params[name]] = state.p[self.nlp.params[name]]
         state.p = p
         state.hessian = state.jacobian = state.gradient = state.energies = state.kkt = state.residual = None
+        state.reduced_eigen = None
         state.g = None
         return self._result(problem, state, "Newton (exact moments)", iterations, violation, warm, steps)
 

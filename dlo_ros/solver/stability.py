@@ -22,7 +22,14 @@ from .state import SolverState
 
 def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState) -> float | None:
     """λ_min of ``state`` (None when the active rows leave no freedom).  Fills the state's missing
-    derivatives (Hessian, Jacobian, energies, gradient) and its ``unstable_direction``."""
+    derivatives (Hessian, Jacobian, energies, gradient) and its ``unstable_direction``.  The pair the
+    compiled loop computed with the state's Hessian (``SolverState.reduced_eigen``) is taken as it is: it
+    reduces on the free rows, and a contact-free state's obstacle rows have zero Jacobian rows, which leave
+    the null space as it is."""
+    if state.reduced_eigen is not None and state.hessian is not None:
+        value, direction = state.reduced_eigen
+        state.unstable_direction = signed(direction) if value < 0 else None
+        return value
     active = np.zeros(0, dtype=bool)
     if nlp.lbg.size:
         g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
@@ -37,17 +44,16 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
     if basis.shape[1] == 0:
         return None
     value, vector = lowest_eigenpair(basis.T @ h @ basis)
-    if value < 0:
-        direction = basis @ vector
-        # LAPACK's sign of an eigenvector is arbitrary, and rounding can flip it: the direction is
-        # signed by its first entry above a tenth of the largest (not the largest: a mode of a
-        # near-symmetric shape has pairs of entries of equal size), so that two paths to the same
-        # saddle leave it the same way
-        first = np.flatnonzero(np.abs(direction) > 0.1 * np.abs(direction).max())[0]
-        state.unstable_direction = direction * np.sign(direction[first])
-    else:
-        state.unstable_direction = None
+    state.unstable_direction = signed(basis @ vector) if value < 0 else None
     return value
+
+
+def signed(direction: np.ndarray) -> np.ndarray:
+    """An eigenvector with its sign fixed: LAPACK's sign is arbitrary, and rounding can flip it, so it is
+    signed by its first entry above a tenth of the largest (not the largest: a mode of a near-symmetric
+    shape has pairs of entries of equal size), so that two paths to the same saddle leave it the same way."""
+    first = np.flatnonzero(np.abs(direction) > 0.1 * np.abs(direction).max())[0]
+    return direction * np.sign(direction[first])
 
 
 def is_stable(min_eigenvalue: float, hessian: np.ndarray) -> bool:

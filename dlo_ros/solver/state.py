@@ -26,6 +26,9 @@ class SolverState:
     gradient: np.ndarray | None = None  # ∇f at z
     g: np.ndarray | None = None  # constraint values (scaled rows) at z
     unstable_direction: np.ndarray | None = None  # eigenvector of the most negative reduced curvature
+    #: (λ_min, its eigenvector in z) of ``hessian`` reduced on the free rows, computed with it by the
+    #: compiled loop (native_newton.py); cleared with ``hessian``, None when not computed
+    reduced_eigen: tuple[float, np.ndarray] | None = None
     kkt: np.ndarray | None = None       # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
     residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
     contact: object | None = None  # self_contact.ContactSlots whose pairs p holds (self-contact models)

@@ -61,6 +61,7 @@ def test_a_stream_with_the_compiled_loop_equals_the_interpreted_one(solvers):
         assert a.energy["total"] == pytest.approx(b.energy["total"], rel=1e-10)
         assert a.min_eigenvalue == pytest.approx(b.min_eigenvalue, rel=1e-8)
     assert newton >= 20  # the compiled loop was what ran
+    assert native._state.reduced_eigen is not None  # the last eigenvalue came from the compiled call
 
 
 def chord_reference(nlp, u, p, kkt, residual, max_evaluations: int):
@@ -134,6 +135,16 @@ def test_one_call_takes_the_chord_steps_to_the_newton_root(solvers, move):
     np.testing.assert_allclose(out.energies, energies.ravel(), rtol=1e-12)
     assert np.abs(out.residual[:n]).max() < 1e-9 and np.abs(out.residual[n:]).max() < 1e-11
     np.testing.assert_allclose(out.u[:n], newton_root(nlp, u0, p, kkt, residual[:, 0])[:n], atol=1e-11)
+    # the stability eigenpair the call computed at the answer, against an SVD null space and a full
+    # symmetric eigendecomposition of the reduced Hessian of the same K
+    import scipy.linalg
+
+    basis = scipy.linalg.null_space(out.kkt[n:, :n])
+    values, vectors = np.linalg.eigh(basis.T @ out.kkt[:n, :n] @ basis)
+    assert values[1] - values[0] > 1e-6 * abs(values).max()  # a simple eigenvalue: its vector is defined
+    value, direction = out.eigen
+    assert value == pytest.approx(values[0], rel=1e-10, abs=1e-12 * abs(values).max())
+    assert abs(direction @ (basis @ vectors[:, 0])) == pytest.approx(1.0, abs=1e-10)
 
 
 def test_the_compiled_loop_refuses_a_step_the_python_path_refuses(solvers):

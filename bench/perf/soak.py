@@ -2,10 +2,11 @@
 concurrent shape queries, over real DDS; RSS, latency, failures, stamp/shape agreement, model.
 
     bash scripts/dlo-env run python bench/perf/soak.py [--seconds 600] [--rate 100] [--param-every 60]
-        [--query-clients 2] [--query-rate 2] [--out bench/results/soak.md]
+        [--query-clients 2] [--query-rate 2] [--compile background] [--out bench/results/soak.md]
 
-The node runs the default scene with ``solver.model: auto`` (interpreted derivatives) in its own process
-and ROS domain; this process publishes the right grip's targets along a closed 3D path (±5 cm,
+The node runs the default scene with ``solver.model: auto`` in its own process and ROS domain, with
+``--compile`` (default ``background``, the node's own default: interpreted derivatives until gcc has
+built the scene's, from the cache when an earlier run built them; ``off``: interpreted throughout); this process publishes the right grip's targets along a closed 3D path (±5 cm,
 ±0.2 rad of yaw, ±0.6 rad of twist, one loop per 20 s) and receives the centrelines.  Every
 ``--param-every`` s it changes ``string.bend_stiffness`` (0.02 ↔ 0.025 N·m²) through the parameter
 service; ``--query-clients`` clients (each its own DDS participant) call ``~/query_shape`` at
@@ -88,10 +89,13 @@ def main() -> None:
     ap.add_argument("--param-every", type=float, default=60.0, help="seconds between parameter changes (0: none)")
     ap.add_argument("--query-clients", type=int, default=2)
     ap.add_argument("--query-rate", type=float, default=2.0, help="queries per second per client")
+    ap.add_argument("--compile", default="background", choices=("background", "blocking", "off"),
+                    help="the node's compile parameter (default: its own default)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "soak.md"))
     args = ap.parse_args()
     samples, sent, changes = [], {}, []
-    with running_node("--ros-args", "-p", "compile:=off", startup_timeout=300.0, client_name="soak") as (proc, cl):
+    with running_node("--ros-args", "-p", f"compile:={args.compile}", startup_timeout=300.0,
+                      client_name="soak") as (proc, cl):
         c0, start = cl.path_count, time.monotonic()
         clock = lambda: time.monotonic() - start  # noqa: E731
         queries = [Queries(proc.domain_id, i, args.query_rate, clock) for i in range(args.query_clients)]
@@ -136,7 +140,8 @@ def main() -> None:
     lines = ["# Node soak", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, Python {info.get('python')}; git {info.get('git', '?')}.",
              f"Command: `bash scripts/dlo-env run python bench/perf/soak.py --seconds {args.seconds:g} --rate {args.rate:g} "
-             f"--param-every {args.param_every:g} --query-clients {args.query_clients} --query-rate {args.query_rate:g}`", "",
+             f"--param-every {args.param_every:g} --query-clients {args.query_clients} --query-rate {args.query_rate:g} "
+             f"--compile {args.compile}`", "",
              f"{k} targets in {elapsed:.0f} s ({k / elapsed:.0f}/s), {len(events)} centrelines ({len(events) / elapsed:.1f}/s); "
              f"latency target → centreline p50 {np.percentile(lat, 50):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
              f"max {lat.max():.0f} ms; failures {final.get('failures')}, unverified shapes {final.get('unverified updates')}, "

@@ -411,8 +411,10 @@ class DloNode(Node):
         from ..solver.batch import scene_payload, solve_chunk
 
         problem, options = self.engine.query_scene()
+        # checks beside the queries: the workers' held shape follows the stream, and auto's check due on one
+        # of its updates, run in front of a query, made that query wait 0.1–0.2 s
         return problem, self._query_pool.submit(solve_chunk, scene_payload(problem, options), queries,
-                                                self._worker_compile)
+                                                self._worker_compile, "background")
 
     @property
     def _worker_compile(self) -> str:

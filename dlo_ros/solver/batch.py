@@ -125,14 +125,17 @@ def query_many(problem: Problem, options: SolverOptions | None, targets: Sequenc
     return [result for future in futures for result in future.result()]
 
 
-def solve_chunk(scene: bytes, targets: list[dict], compile: str = "cached") -> list[ShapeResult]:
+def solve_chunk(scene: bytes, targets: list[dict], compile: str = "cached", checks: str = "sync") -> list[ShapeResult]:
     """(worker) Solve ``targets`` with this process's solver of the pickled (problem, options)
     ``scene``, each from the held shape at the scene's poses (``commit=False``); the solver is kept
-    for the next call."""
+    for the next call.  ``checks``: the a-posteriori checks of an auto solver (``make_solver``): 'sync'
+    for a batch (a scene solved once, checked before its queries), 'background' for a node's workers,
+    whose held shape follows the stream: a check due on one of its updates then runs beside the
+    queries, not in front of them."""
     problem, options = pickle.loads(scene)
     results = []
     with _worker_lock:  # one CasADi/IPOPT solver must never be called from two threads at once
-        solver = _worker_solver(scene, problem, options, compile)
+        solver = _worker_solver(scene, problem, options, compile, checks)
         for poses in targets:
             try:
                 result = solver.solve(poses, warm=True, commit=False)
@@ -142,16 +145,16 @@ def solve_chunk(scene: bytes, targets: list[dict], compile: str = "cached") -> l
     return results
 
 
-def _worker_solver(scene: bytes, problem: Problem, options: SolverOptions, compile: str):
+def _worker_solver(scene: bytes, problem: Problem, options: SolverOptions, compile: str, checks: str):
     """This process's solver for the scene's structure, built once, holding the shape at the scene's
     values and poses (re-solved from its previous shape when they change)."""
     from .auto import make_solver
     from .shape_solver import structure_key
 
-    key = pickle.dumps((structure_key(problem, options), options), protocol=pickle.HIGHEST_PROTOCOL)
+    key = pickle.dumps((structure_key(problem, options), options, checks), protocol=pickle.HIGHEST_PROTOCOL)
     entry = _WORKER_SOLVERS.pop(key, None)
     if entry is None:
-        solver = make_solver(problem, options, compile=compile, checks="sync")
+        solver = make_solver(problem, options, compile=compile, checks=checks)
         solver.solve()  # the held shape: every query starts from it
     else:
         values, solver = entry

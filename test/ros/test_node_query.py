@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from dlo_ros.model import Profile
-from support.node import TEST_SCENE, clean_node, node_args
+from support.node import TEST_SCENE, clean_node, node_args, wait_until
 from support.problems import quat_about
 
 NODE_ARGS = node_args("diagnostics_period:=0.2")
@@ -186,3 +186,42 @@ def test_concurrent_queries_beside_the_stream(tmp_path):
         if refused:
             assert "busy" in proc.output()
         assert proc.alive()
+
+
+def test_the_node_asks_its_query_workers_for_checks_beside_the_queries():
+    """The node's query workers hold a shape that follows the stream; auto's checks due on its updates must
+    run on the worker's check thread (``solve_chunk(..., checks='background')``, test_batch), not in front
+    of the query waiting for that update.  In-process node, its pool replaced by one that records."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from dlo_ros.node.client import allocate_domain_id
+    from dlo_ros.node.dlo_node import DloNode
+    from dlo_ros.solver.batch import solve_chunk
+
+    class Recording:
+        def __init__(self):
+            self.calls = []
+
+        def submit(self, fn, *args):
+            self.calls.append((fn, args))
+            return None
+
+    with allocate_domain_id() as lease:
+        context = Context()
+        rclpy.init(context=context, domain_id=lease.domain_id)
+        node = DloNode(context=context, parameter_overrides=[Parameter("scene", value=TEST_SCENE),
+                                                             Parameter("compile", value="off"),
+                                                             Parameter("query_workers", value=0)])
+        try:
+            wait_until(lambda: getattr(node, "_latest", None) is not None, 60.0)  # the scene is there
+            node._query_pool = pool = Recording()
+            node._to_query_worker([])
+            ((fn, args),) = pool.calls
+            assert fn is solve_chunk and args[1:] == ([], "off", "background")
+        finally:
+            node._query_pool = None
+            node.close()
+            node.destroy_node()
+            context.try_shutdown()

@@ -164,3 +164,34 @@ def test_a_worker_follows_a_moving_stream_by_warm_updates(scene, monkeypatch):
     assert checks == [True, True]
     stiffer = replace(problem, string=replace(problem.string, bend_stiffness=problem.string.bend_stiffness.scaled(2.0)))
     assert not original(problem, stiffer) and original(problem, held[2])
+
+
+def test_a_node_workers_checks_run_beside_its_queries_not_in_front_of_them(scene, monkeypatch):
+    """The node's query workers (``checks='background'``) hold a shape that follows the stream: auto's
+    checks, due every recheck_every held updates, run on the worker's check thread, never inside the
+    held update a query waits for; a batch's workers (``'sync'``) run them in line, as before."""
+    import collections
+
+    from dlo_ros.model.problem import GripPose
+    from dlo_ros.solver import batch
+    from dlo_ros.solver.auto import AutoShapeSolver
+
+    inline = []
+    original = AutoShapeSolver._check_now
+    monkeypatch.setattr(AutoShapeSolver, "_check_now",
+                        lambda self, *a: inline.append(self.checks) or original(self, *a))
+    problem = scene.problem
+    rot = problem.grip("right").pose.orientation
+    query = targets_near(problem, 1, seed=5)[0]
+    updates = scene.options.recheck_every + 2
+    for checks in ("background", "sync"):
+        monkeypatch.setattr(batch, "_WORKER_SOLVERS", collections.OrderedDict())
+        for k in range(updates):
+            moved = problem.with_grip_poses(
+                {"right": GripPose(problem.grip("right").pose.position + 0.002 * k * np.array([1.0, 0.0, 1.0]), rot)})
+            (answer,) = batch.solve_chunk(batch.scene_payload(moved, scene.options), [query], "off", checks)
+            assert answer.ok, answer.message
+        (solver,) = (entry[1] for entry in batch._WORKER_SOLVERS.values())
+        assert solver.checks == checks
+        solver.close()
+    assert "background" not in inline and inline.count("sync") >= 2  # the first solve's and a held update's

@@ -412,7 +412,7 @@ class DloNode(Node):
 
         problem, options = self.engine.query_scene()
         # checks beside the queries: the workers' held shape follows the stream, and auto's check due on one
-        # of its updates, run in front of a query, made that query wait 0.1–0.2 s
+        # of its updates, run in front of a query, made that query wait 0.2–0.6 s (CHANGELOG)
         return problem, self._query_pool.submit(solve_chunk, scene_payload(problem, options), queries,
                                                 self._worker_compile, "background")
 

@@ -376,9 +376,10 @@ class AutoShapeSolver:
         return solver
 
     def _compile_ahead(self, solver: ShapeSolver) -> None:
-        """A model that a switch or the queries will use: compile it in the background, once the
-        streaming model's own compile is done (the stream reaches full speed first), if the stream
-        compiles at all.  Its libraries land in the cache, where the query workers find them."""
+        """A model that a switch, the queries or a background check will use: compile it in the
+        background, once the streaming model's own compile is done (the stream reaches full speed
+        first), if the stream compiles at all.  Its libraries land in the cache, where the query workers
+        find them."""
         if self.compile not in ("background", "blocking") or solver.all_compiled or solver.compile_pending:
             return
         streaming = self.inner._compile_thread
@@ -808,8 +809,13 @@ class AutoShapeSolver:
         (the next or the previous order, or 2n − 1 obstacle samples) solved from the checked shape (same
         branch): the a-posteriori estimate of the coarser of the two; nan when that solve fails
         (inconclusive: the next check retries).  The shadow is pooled: it is the model an escalation
-        switches to."""
+        switches to.  With background checks it is compiled ahead (``_compile_ahead``), as the models a
+        switch or the queries use."""
         shadow = self._solver_for(choice, snap.problem, stream=False, source=snap.inner, state=snap.state)
+        if self._worker is not None:
+            # beside a stream: an interpreted shadow holds the GIL through long CasADi calls, and the
+            # stream's updates during a check waited for them (compiled once, later checks release it)
+            self._compile_ahead(shadow)
         result = shadow.solve(snap.poses)
         if not result.ok:
             return float("nan")

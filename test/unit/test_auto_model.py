@@ -412,3 +412,26 @@ def test_a_fourier_basis_serves_the_planar_model_and_the_3d_model_uses_its_own_e
     assert out_of_plane.basis == "chebyshev"
     assert opts.with_model("full").basis == "chebyshev" and opts.with_model("planar").basis == "fourier"
     assert SolverOptions(basis="fourier", rotation="euler").with_model("full").basis == "fourier"
+
+
+@pytest.mark.parametrize("checks", ["background", "sync"])
+def test_background_checks_compile_their_order_shadows_ahead(checks, monkeypatch):
+    """Beside a stream (background checks) the order shadows a check solves are compiled ahead, as the
+    models of a switch or a query are: interpreted, they held the GIL through long CasADi calls while the
+    stream's updates waited.  A one-shot solve (sync checks) compiles nothing it does not stream."""
+    ahead = []
+    monkeypatch.setattr(AutoShapeSolver, "_compile_ahead", lambda self, solver: ahead.append(solver))
+    solver = make_solver(hanging(), SolverOptions(output_points=51), compile="off", checks=checks)
+    try:
+        assert solver.solve().ok
+        for k in range(4):  # the first background job builds the models ahead; a check follows it
+            solver._wait_for_check()
+            assert solver.solve({"right": ([0.58, 0.0, 0.39 - 0.002 * k], [0, 0, 0, 1])}).ok
+        solver._wait_for_check()
+        shadows = [s for s in ahead if s.options.order != solver.choice.order]
+        if checks == "background":
+            assert shadows and all(s is not solver.inner for s in shadows)
+        else:
+            assert not shadows
+    finally:
+        solver.close()

@@ -690,6 +690,17 @@ def _default_params_file() -> str | None:
     return str(path) if path.is_file() else None
 
 
+def new_executor(context=None) -> SingleThreadedExecutor:
+    """The node's executor (on ``context``, default rclpy's).  A SIGINT or SIGTERM during rclpy's constructor (which shuts the context down
+    under it) leaves a half-built executor whose ``__del__`` reads an attribute the constructor had not
+    set yet: "Exception ignored ... AttributeError: ... '_sigint_gc'" with a traceback at exit.  The
+    attribute is set first, so a failed construction leaves nothing for ``__del__`` to trip on."""
+    executor = SingleThreadedExecutor.__new__(SingleThreadedExecutor)
+    executor._sigint_gc = None
+    executor.__init__(context=context)
+    return executor
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") -> int:
     """Run the node until Ctrl-C / SIGINT / SIGTERM / shutdown; returns the exit code.
 
@@ -736,7 +747,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
         # competes with the solver thread for the GIL.
         # rclpy.experimental.EventsExecutor (rclpy 7.1.6 here) cannot serve this node: its raw target
         # subscriptions delivered nothing under it, and coroutine services do not run (ros2/rclpy#1473).
-        executor = SingleThreadedExecutor()
+        executor = new_executor()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -264,3 +264,41 @@ def test_an_update_in_flight_when_the_context_shuts_down_is_dropped_without_an_e
             node.close()
             node.destroy_node()
             context.try_shutdown()
+
+
+def test_a_signal_during_the_executors_constructor_leaves_no_traceback(monkeypatch):
+    """A SIGINT that lands while rclpy builds the node's executor shuts the context down under its
+    constructor, which then raises; the half-built executor must not print "Exception ignored ...
+    AttributeError: '_sigint_gc'" with a traceback when it is collected (seen once in the whole suite,
+    test_sigint_while_the_solver_is_built).  Reproduced by a constructor that fails at that step."""
+    import gc
+    import sys
+
+    import rclpy.executors
+    from rclpy.context import Context
+
+    from dlo_ros.node.dlo_node import new_executor
+
+    class Interrupted(Exception):
+        pass
+
+    def interrupted(*_a, **_k):
+        raise Interrupted("the context was shut down under the constructor")
+
+    unraisable = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: unraisable.append(u))
+    with allocate_domain_id() as lease:
+        context = Context()
+        rclpy.init(context=context, domain_id=lease.domain_id)
+        try:
+            monkeypatch.setattr(rclpy.executors, "SignalHandlerGuardCondition", interrupted)
+            with pytest.raises(Interrupted):
+                new_executor(context)
+            gc.collect()
+            assert not unraisable, [str(u.exc_value) for u in unraisable]
+            monkeypatch.undo()
+            executor = new_executor(context)  # the usual construction is unchanged
+            assert executor._sigint_gc is not None
+            executor.shutdown()
+        finally:
+            context.try_shutdown()

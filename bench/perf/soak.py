@@ -6,15 +6,15 @@ concurrent shape queries, over real DDS; RSS, latency, failures, stamp/shape agr
 
 The node runs the default scene with ``solver.model: auto`` in its own process and ROS domain, with
 ``--compile`` (default ``background``, the node's own default: interpreted derivatives until gcc has
-built the scene's, from the cache when an earlier run built them; ``off``: interpreted throughout); this process publishes the right grip's targets along a closed 3D path (±5 cm,
-±0.2 rad of yaw, ±0.6 rad of twist, one loop per 20 s) and receives the centrelines.  Every
-``--param-every`` s it changes ``string.bend_stiffness`` (0.02 ↔ 0.025 N·m²) through the parameter
-service; ``--query-clients`` clients (each its own DDS participant) call ``~/query_shape`` at
-``--query-rate`` Hz each with the right grip 2–4 cm from the current target.  Every 10 s it samples the
-node's RSS and its diagnostics.  Reported: RSS over time, its change after the first minute, latency
-target → centreline p50/p99/max, centrelines per second, failures and unverified shapes, query latency
-and answers, and every centreline whose stamp and shape disagree (its right end not at the target
-published with that stamp by more than 1e-6 m).
+built the scene's, from the cache when an earlier run built them; ``off``: interpreted throughout); this
+process publishes the right grip's targets along a closed 3D path (±5 cm, ±0.2 rad of yaw, ±0.6 rad of
+twist, one loop per 20 s) and receives the centrelines. Every ``--param-every`` s it changes
+``string.bend_stiffness`` (0.02 ↔ 0.025 N·m²) through the parameter service; ``--query-clients`` clients
+(each its own DDS participant) call ``~/query_shape`` at ``--query-rate`` Hz each with the right grip 2–4
+cm from the current target. Every 10 s it samples the node's RSS and its diagnostics. Reported: RSS over
+time, its change after the first minute, latency target → centreline p50/p99/max, centrelines per second,
+failures and unverified shapes, query latency and answers, and every centreline whose stamp and shape
+disagree (its right end not at the target published with that stamp by more than 1e-6 m).
 """
 from __future__ import annotations
 
@@ -140,8 +140,8 @@ def main() -> None:
     lines = ["# Node soak", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, Python {info.get('python')}; git {info.get('git', '?')}.",
              f"Command: `bash scripts/dlo-env run python bench/perf/soak.py --seconds {args.seconds:g} --rate {args.rate:g} "
-             f"--param-every {args.param_every:g} --query-clients {args.query_clients} --query-rate {args.query_rate:g} "
-             f"--compile {args.compile}`", "",
+             f"--param-every {args.param_every:g} --query-clients {args.query_clients} "
+             f"--query-rate {args.query_rate:g} --compile {args.compile}`", "",
              f"{k} targets in {elapsed:.0f} s ({k / elapsed:.0f}/s), {len(events)} centrelines ({len(events) / elapsed:.1f}/s); "
              f"latency target → centreline p50 {np.percentile(lat, 50):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
              f"max {lat.max():.0f} ms; failures {final.get('failures')}, unverified shapes {final.get('unverified updates')}, "

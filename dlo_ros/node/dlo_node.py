@@ -691,10 +691,11 @@ def _default_params_file() -> str | None:
 
 
 def new_executor(context=None) -> SingleThreadedExecutor:
-    """The node's executor (on ``context``, default rclpy's).  A SIGINT or SIGTERM during rclpy's constructor (which shuts the context down
-    under it) leaves a half-built executor whose ``__del__`` reads an attribute the constructor had not
-    set yet: "Exception ignored ... AttributeError: ... '_sigint_gc'" with a traceback at exit.  The
-    attribute is set first, so a failed construction leaves nothing for ``__del__`` to trip on."""
+    """The node's executor (on ``context``, default rclpy's).  A SIGINT or SIGTERM during rclpy's
+    constructor (which shuts the context down under it) leaves a half-built executor whose ``__del__``
+    reads an attribute the constructor had not set yet: "Exception ignored ... AttributeError: ...
+    '_sigint_gc'" with a traceback at exit.  The attribute is set first, so a failed construction leaves
+    nothing for ``__del__`` to trip on."""
     executor = SingleThreadedExecutor.__new__(SingleThreadedExecutor)
     executor._sigint_gc = None
     executor.__init__(context=context)

@@ -953,7 +953,11 @@ class ShapeSolver:
         """A warm Newton update that landed on an unstable equilibrium, continued downhill by shifted Newton
         steps (``newton.leave_saddle``, either way along the unstable mode): (the first stable, verified
         result of lower energy, or None: then IPOPT and ``_escape_saddle`` take over; the iterations
-        counted so far)."""
+        counted so far).  Where the steps reach only a lower but still unstable equilibrium, that one is
+        left by ``_escape_saddle`` (a cable lying on a table that buckles out of its plane: the steps hold
+        the table's contacts and stop on a lower saddle; IPOPT's warm start from the update's start falls
+        back onto the first saddle, whose escapes can run to their iteration limit)."""
+        lower: tuple[ShapeResult, SolverState] | None = None
         for sign in (1.0, -1.0):
             ok, new, it, viol = leave_saddle(self.nlp, self.functions, state, state.p, saddle.min_eigenvalue, sign,
                                              fused=self.fused_newton)
@@ -961,8 +965,18 @@ class ShapeSolver:
             if not ok:
                 continue
             result = self._result(problem, new, "Newton", iterations, viol, True, 0)
-            if result.status == "ok" and result.stable and lower_than(result, saddle):
+            if result.status != "ok" or not lower_than(result, saddle):
+                continue
+            if result.stable:
                 result.message += LEFT_SADDLE
+                return (result, new), iterations
+            if result.stable is False and lower is None:
+                lower = (result, new)
+        if lower is not None:
+            lower[0].iterations = iterations
+            result, new = self._escape_saddle(problem, *lower)
+            iterations = result.iterations
+            if result.status == "ok" and result.stable:
                 return (result, new), iterations
         return None, iterations
 

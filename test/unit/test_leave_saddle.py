@@ -73,3 +73,42 @@ def test_the_saddle_itself_is_what_plain_newton_finds():
     saddle = solver._result(SCENE.problem, state, "Newton", 0, 0.0, True, 0)
     assert saddle.status == "ok" and saddle.stable is False and saddle.min_eigenvalue < 0
     assert np.abs(saddle.points[:, 1]).max() < 1e-9
+
+
+def circling(updates: int) -> list[dict]:
+    """The right grip's targets of bench/perf/solver_speed.py: steps of 1 % of L around an ellipse of
+    radius 0.08 L in the x–z plane (one lap every 50 updates; the sag touches down once per lap)."""
+    start = SCENE.problem.grip("right").pose.position
+    radius, dtheta = 0.08 * L, 0.01 * L / (0.08 * L)
+    return [{"right": (start + radius * np.array([np.cos(i * dtheta) - 1.0, 0.0, np.sin(i * dtheta)]), Q)}
+            for i in range(1, updates + 1)]
+
+
+@pytest.mark.parametrize("compile_mode", ["off", "blocking"])
+def test_a_lower_saddle_reached_by_the_newton_steps_is_left_from_there(compile_mode, tmp_path, monkeypatch):
+    """At the 330th update of that stream the shifted Newton steps, which hold the table's contacts,
+    stop on a lower saddle.  IPOPT's warm start from the update's start fell back onto the first saddle,
+    whose four escapes each ran to ESCAPE_MAX_ITERATIONS (711 iterations, 3 s, before the update was
+    solved cold).  Leaving the lower saddle instead keeps the update's cost bounded, and its answer is
+    the stable shape a cold solve finds (up to the mirror image)."""
+    from dlo_ros.solver.ipopt import ESCAPE_MAX_ITERATIONS
+
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    solver = ShapeSolver(SCENE.problem, SCENE.options, compile=compile_mode)
+    assert solver.solve().ok
+    targets = circling(330)
+    for poses in targets[:-1]:
+        r = solver.solve(poses)
+        assert r.ok and r.stable, r.message
+    escapes = []
+    original = solver._escape_saddle
+    monkeypatch.setattr(solver, "_escape_saddle", lambda *a: escapes.append(a[1].min_eigenvalue) or original(*a))
+    warm = solver.solve(targets[-1])
+    assert warm.ok and warm.stable and warm.warm_started, warm.message
+    assert len(escapes) == 1 and escapes[0] < 0, "no lower saddle: the stream no longer tests what it says"
+    assert warm.iterations < ESCAPE_MAX_ITERATIONS and "solved cold" not in warm.message
+
+    cold = ShapeSolver(SCENE.problem, SCENE.options, compile="off").solve(targets[-1])
+    assert cold.ok and cold.stable and not cold.warm_started, cold.message
+    assert warm.energy["total"] == pytest.approx(cold.energy["total"], rel=1e-8)
+    assert mirrored_distance(warm.points, cold.points) < 1e-6 * L

@@ -403,13 +403,18 @@ class AutoShapeSolver:
         with self._pool_lock:
             return self._pool.get((tag,) + choice.key())
 
+    def _wait_for_model(self, choice: ModelChoice) -> None:
+        """Until the running background job is done, if it may be using (or building) the pooled model of
+        ``choice``: one solver is never called from two threads at once."""
+        job, key = self._job, ("",) + choice.key()
+        while job is not None and not job.done() and key in self._job_keys:
+            wait([job], timeout=0.005)
+
     def _switch(self, choice: ModelChoice, reason: str) -> None:
         """Stream on ``choice`` from now on, mapping the warm start; unchecked until its first check.
         Waits for a running background job only if that job may be using the model switched to."""
-        job, key = self._job, ("",) + choice.key()
         t0 = time.perf_counter()
-        while job is not None and not job.done() and key in self._job_keys:  # until that model is built
-            wait([job], timeout=0.005)
+        self._wait_for_model(choice)
         t1 = time.perf_counter()
         pooled = self._pooled(choice) is not None
         self.changes.append((time.time(), reason))
@@ -548,6 +553,8 @@ class AutoShapeSolver:
             result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
             if commit and result.status == "failed" and result.message.startswith("topology:"):
                 result = self._richer_for_topology(problem, result, notes)
+            if commit and result.status == "ok" and result.stable is False:
+                result = self._richer_for_stability(problem, result, notes)
             # an unverified result (residual over the tolerance) is committed as the warm start and checked:
             # the check escalates the order
             if result.status not in ("ok", "unverified") or not commit:
@@ -614,6 +621,29 @@ class AutoShapeSolver:
             if not (result.status == "failed" and result.message.startswith("topology:")):
                 return result
         return result
+
+    def _richer_for_stability(self, problem: Problem, result: ShapeResult, notes: list[str]) -> ShapeResult:
+        """A committed equilibrium that is unstable, after the inner solver's own attempts to leave it (its
+        shifted Newton steps, IPOPT's escapes, the cold solve).  Where the model is too coarse the
+        smallest eigenvalue of the reduced Hessian can be a discretisation error (``paper_rect_paper``'s
+        strip circling: -0.009 at order 12, +0.012 at order 16 and +0.008 at order 24 at one target),
+        and the shape answered is not one the string rests in.  The update is tried on the next order,
+        warm-started from that shape, without touching the stream; if that answer is stable, the stream
+        switches to that order and answers it, else the unstable answer stands."""
+        higher = [order for order in ORDERS if order > self.choice.order]
+        if not higher:
+            return result
+        richer = replace(self.choice, order=higher[0], reasons=list(self.choice.reasons))
+        poses = {g.name: g.pose for g in self._reduced(richer, problem)[0].grips}
+        self._wait_for_model(richer)  # a running check may be using that order as its shadow
+        other = self._solver_for(richer, problem, stream=False, source=self.inner)
+        trial = other.solve(poses, warm=True, commit=False, checked=True)
+        if not (trial.status == "ok" and trial.stable):
+            return result
+        self._switch(richer, f"order {richer.order}: the order-{self.choice.order} equilibrium is unstable "
+                             f"(eigenvalue {result.min_eigenvalue:.3g}), the order-{richer.order} one stable")
+        notes.append(self.changes[-1][1])
+        return self.inner.solve(poses, warm=True, commit=True, checked=True)
 
     # ---- checks -------------------------------------------------------------------------------------
     def _check_now(self, snap: _Snapshot, result: ShapeResult, notes: list[str]) -> ShapeResult:

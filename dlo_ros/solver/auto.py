@@ -553,8 +553,10 @@ class AutoShapeSolver:
             result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
             if commit and result.status == "failed" and result.message.startswith("topology:"):
                 result = self._richer_for_topology(problem, result, notes)
-            if commit and result.status == "ok" and result.stable is False:
-                result = self._richer_for_stability(problem, result, notes)
+            if result.status == "ok" and result.stable is False:
+                result, answered_by = self._richer_for_stability(problem, result, notes, commit)
+                if answered_by is not None:  # a query answered by the next order's model
+                    return self._finish(result, t0, [], choice=answered_by[0], solver=answered_by[1])
             # an unverified result (residual over the tolerance) is committed as the warm start and checked:
             # the check escalates the order
             if result.status not in ("ok", "unverified") or not commit:
@@ -622,28 +624,33 @@ class AutoShapeSolver:
                 return result
         return result
 
-    def _richer_for_stability(self, problem: Problem, result: ShapeResult, notes: list[str]) -> ShapeResult:
-        """A committed equilibrium that is unstable, after the inner solver's own attempts to leave it (its
-        shifted Newton steps, IPOPT's escapes, the cold solve).  Where the model is too coarse the
-        smallest eigenvalue of the reduced Hessian can be a discretisation error (``paper_rect_paper``'s
-        strip circling: -0.009 at order 12, +0.012 at order 16 and +0.008 at order 24 at one target),
-        and the shape answered is not one the string rests in.  The update is tried on the next order,
-        warm-started from that shape, without touching the stream; if that answer is stable, the stream
-        switches to that order and answers it, else the unstable answer stands."""
+    def _richer_for_stability(self, problem: Problem, result: ShapeResult, notes: list[str], commit: bool = True
+                              ) -> tuple[ShapeResult, tuple[ModelChoice, ShapeSolver] | None]:
+        """An equilibrium that is unstable, after the inner solver's own attempts to leave it (its shifted
+        Newton steps, IPOPT's escapes, the cold solve).  Where the model is too coarse the smallest
+        eigenvalue of the reduced Hessian can be a discretisation error (``paper_rect_paper``'s strip
+        circling: -0.009 at order 12, +0.012 at order 16 and +0.008 at order 24 at one target), and the
+        shape answered is not one the string rests in.  The update is tried on the next order, warm-started
+        from the stream's committed shape (for an update: the unstable answer itself), without touching
+        the stream; if that answer is stable it is returned, and an update (``commit``) switches the
+        stream to that order and answers there.  Else the unstable answer stands.  Returns (the answer, the
+        next order's (choice, solver) when that answered a query, else None)."""
         higher = [order for order in ORDERS if order > self.choice.order]
         if not higher:
-            return result
+            return result, None
         richer = replace(self.choice, order=higher[0], reasons=list(self.choice.reasons))
         poses = {g.name: g.pose for g in self._reduced(richer, problem)[0].grips}
         self._wait_for_model(richer)  # a running check may be using that order as its shadow
         other = self._solver_for(richer, problem, stream=False, source=self.inner)
         trial = other.solve(poses, warm=True, commit=False, checked=True)
         if not (trial.status == "ok" and trial.stable):
-            return result
+            return result, None
+        if not commit:  # a query: the stream keeps its model
+            return trial, (richer, other)
         self._switch(richer, f"order {richer.order}: the order-{self.choice.order} equilibrium is unstable "
                              f"(eigenvalue {result.min_eigenvalue:.3g}), the order-{richer.order} one stable")
         notes.append(self.changes[-1][1])
-        return self.inner.solve(poses, warm=True, commit=True, checked=True)
+        return self.inner.solve(poses, warm=True, commit=True, checked=True), None
 
     # ---- checks -------------------------------------------------------------------------------------
     def _check_now(self, snap: _Snapshot, result: ShapeResult, notes: list[str]) -> ShapeResult:

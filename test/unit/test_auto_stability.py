@@ -59,3 +59,22 @@ def test_an_unstable_answer_on_a_coarse_order_is_solved_again_on_the_next(warm):
     assert result.energy["total"] < premise.energy["total"]
     assert result.energy["total"] == pytest.approx(reference.energy["total"], rel=1e-4)
     assert mirrored_distance(result.points, reference.points) < 1e-3 * L
+
+
+def test_a_query_answered_unstable_on_a_coarse_order_is_answered_by_the_next_without_moving_the_stream():
+    poses = target(46)
+    coarse = ShapeSolver(SCENE.problem, replace(SCENE.options, model="full", order=12), compile="off")
+    assert coarse.solve(poses).stable is False, "order 12 is stable here: the test no longer tests what it says"
+    solver = make_solver(SCENE.problem, SCENE.options, compile="off", checks="background")
+    solver._switch(solver._full_choice(solver.choice, SCENE.problem), "test: the 3D model")
+    assert solver.inner.adopt_warm_start(coarse)
+    changes = list(solver.changes)
+
+    answer = solver.solve(poses, commit=False)
+    assert answer.ok and answer.stable, answer.message
+    assert answer.model.order == 16
+    assert solver.choice.order == 12 and solver.changes == changes  # the stream kept its model
+    held = solver.solve(poses, commit=False)  # and its warm start: the same query, the same answer
+    solver.close()
+    assert held.ok and held.stable and held.model.order == 16
+    np.testing.assert_allclose(held.points, answer.points, atol=1e-12)

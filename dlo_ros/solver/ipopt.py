@@ -21,6 +21,7 @@ from .stability import is_stable
 from .state import SolverState
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+TIME_LIMIT = "Maximum_WallTime_Exceeded"  # IPOPT's status for a call stopped by its max_wall_time
 IPOPT_LOCK = threading.Lock()  # MUMPS is not thread-safe across IPOPT instances (coin-or/Ipopt#733)
 
 #: (ok, state, IPOPT's return status, iterations, constraint violation [m or rad]) of one IPOPT solve
@@ -36,17 +37,22 @@ ESCAPE_MAX_ITERATIONS = 150
 class IpoptSolvers:
     """The IPOPT solvers of one NLP: cold, warm and the cold one for leaving saddles (at most
     ESCAPE_MAX_ITERATIONS), each created on first use (a helper that only takes Newton steps never needs
-    them); all use the NLP's ``ipopt_derivatives``."""
+    them); all use the NLP's ``ipopt_derivatives``.  The warm solver, and the copies of the cold ones
+    that a warm update calls, stop at ``solver.update_time_limit``."""
 
     def __init__(self, nlp: StringNLP):
         self.nlp = nlp
-        self._solvers: dict[str, object] = {}  # "cold", "warm" or "escape" → IPOPT nlpsol
+        self._solvers: dict[str, object] = {}  # kind ("cold", "escape", their "_in_update" copies, "warm_in_update") → nlpsol
 
-    def get(self, warm: bool, escape: bool = False):
-        kind = "escape" if escape else "warm" if warm else "cold"
+    def get(self, warm: bool, escape: bool = False, in_update: bool = False):
+        """The warm solver, or the cold one (``escape``: for leaving a saddle); ``in_update``: the copy that
+        stops at ``solver.update_time_limit`` (a warm update's; the warm solver always does)."""
+        in_update = in_update or warm
+        kind = ("escape" if escape else "warm" if warm else "cold") + ("_in_update" if in_update else "")
         if kind not in self._solvers:
             limit = min(self.nlp.options.max_iterations, ESCAPE_MAX_ITERATIONS) if escape else None
-            self._solvers[kind] = self.nlp.make_solver(warm=warm, max_iterations=limit)
+            wall = self.nlp.options.update_time_limit if in_update else 0.0
+            self._solvers[kind] = self.nlp.make_solver(warm=warm, max_iterations=limit, max_wall_time=wall)
         return self._solvers[kind]
 
     @property

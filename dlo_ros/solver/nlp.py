@@ -564,9 +564,10 @@ class StringNLP:
         return self._target_jacobian @ (p_new - p_old)
 
     # ------------------------------------------------------------------------------------------------
-    def make_solver(self, warm: bool, max_iterations: int | None = None) -> ca.Function:
+    def make_solver(self, warm: bool, max_iterations: int | None = None, max_wall_time: float = 0.0) -> ca.Function:
         """An IPOPT solver for this NLP: cold (default barrier start) or warm (primal-dual warm start);
-        ``max_iterations``: IPOPT's limit (default: the options', and at most 200 when warm)."""
+        ``max_iterations``: IPOPT's limit (default: the options', and at most 200 when warm);
+        ``max_wall_time`` [s]: IPOPT's limit on one call's wall-clock time (0: none)."""
         o = self.options
         ipopt = {
             "print_level": 0,
@@ -591,6 +592,8 @@ class StringNLP:
             )
         if max_iterations is not None:
             ipopt["max_iter"] = int(max_iterations)
+        if max_wall_time > 0:
+            ipopt["max_wall_time"] = float(max_wall_time)
         return ca.nlpsol("dlo_warm" if warm else "dlo_cold", "ipopt", self.nlp,
                          {"ipopt": ipopt, "print_time": False, "error_on_fail": False, **self.ipopt_derivatives()})
 

@@ -36,6 +36,10 @@ class SolverOptions:
     recheck_every: 'auto' repeats its a-posteriori checks every this many streamed updates.
     output_points: centreline samples in a result.  tolerance: IPOPT's (scaled) convergence tolerance.
     max_continuation_steps: the largest number of equal steps a failed warm update is split into.
+    update_time_limit [s]: how long a warm update (one that starts from a committed shape) may try: no
+    IPOPT attempt starts after it, and each attempt within a warm update stops at it (IPOPT's
+    ``max_wall_time``); the update then answers ``failed`` and names this limit.  0: no limit.  A cold
+    solve is not limited.
     self_contact_pairs: capacity of the self-contact pair list (director 3D models only; 0: self-contact
     is not modelled).  Each slot is one inequality row |x(s_a) − x(s_b)|² ≥ D² whose pair of arc lengths is
     a parameter, refreshed from the current shape before every solve (solver/self_contact.py).
@@ -58,6 +62,7 @@ class SolverOptions:
     rotation: str = "director"
     error_tolerance: float = 0.0
     recheck_every: int = 10
+    update_time_limit: float = 2.0
     self_contact_pairs: int = 0
     self_contact_samples: int = 0
 
@@ -96,6 +101,8 @@ class SolverOptions:
                              "set solver.rotation 'euler' to use it")
         if not (self.error_tolerance >= 0 and self.error_tolerance < 1e3):
             raise ValueError(f"solver.error_tolerance: must be >= 0 m (0 = 1e-3·L), got {self.error_tolerance}")
+        if not (0 <= self.update_time_limit <= 3600):
+            raise ValueError(f"solver.update_time_limit: must be in [0, 3600] s (0: no limit), got {self.update_time_limit}")
         if not (1 <= self.recheck_every <= 100000):
             raise ValueError(f"solver.recheck_every: must be in [1, 100000], got {self.recheck_every}")
         if not (0 <= self.self_contact_pairs <= 400):

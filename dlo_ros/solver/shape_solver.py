@@ -35,8 +35,8 @@ from ..model.problem import GripPose, Problem
 from . import frames as F
 from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .initial_guess import initial_guess
-from .ipopt import (IPOPT_LOCK, LEFT_SADDLE, SUCCESS, Attempt, IpoptSolvers, call, escape_saddle, lower_than,
-                    witness)
+from .ipopt import (IPOPT_LOCK, LEFT_SADDLE, SUCCESS, TIME_LIMIT, Attempt, IpoptSolvers, call, escape_saddle,
+                    lower_than, witness)
 from .moments import ExactMomentKKT
 from .newton import fill_start, leave_saddle, newton
 from .nlp import StringNLP, has_point_moments
@@ -133,6 +133,7 @@ class ShapeSolver:
         self.lazy_ipopt = lazy_ipopt
         self.reference_frame = None if reference_frame is None else np.array(reference_frame, dtype=float)
         self._lock = threading.Lock()
+        self._deadline: float | None = None  # perf_counter() at which the warm update in progress stops trying
         self._compile_thread: threading.Thread | None = None
         self._cache_checked = time.monotonic()  # ('cached' mode) the last look into the cache
         self.compile_pending = False  # a compile is about to start (AutoShapeSolver._compile_ahead)
@@ -374,9 +375,17 @@ class ShapeSolver:
                 self._cache_checked = time.monotonic()
                 self.functions.load_cached()
             warm = warm and self._state is not None
-            result, state = self._solve_locked(problem, warm)
-            if warm and result.status == "failed" and result.message.startswith(JUMP_REFUSALS):
-                result, state = self._in_substeps(problem, result)
+            limit = self.options.update_time_limit
+            self._deadline = t0 + limit if warm and limit > 0 else None
+            try:
+                result, state = self._solve_locked(problem, warm)
+                if warm and result.status == "failed" and result.message.startswith(JUMP_REFUSALS):
+                    result, state = self._in_substeps(problem, result)
+            finally:
+                self._deadline = None
+            if warm and limit > 0 and result.status == "failed" and time.perf_counter() - t0 >= limit:
+                result.message = (f"no answer within solver.update_time_limit ({limit:g} s): the update stopped; "
+                                  f"{result.message}")
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
             result.derivatives = "compiled" if self.functions.compiled else "interpreted"
             if commit:  # every target of the stream counts, failed ones too (topology.ClampTurns)
@@ -508,9 +517,15 @@ class ShapeSolver:
 
     def _ipopt_call(self, warm: bool, z0: np.ndarray, p: np.ndarray, start: SolverState | None = None,
                     escape: bool = False) -> Attempt:
-        """One IPOPT solve from z0 (warm: with ``start``'s multipliers; escape: cold, leaving a saddle)."""
+        """One IPOPT solve from z0 (warm: with ``start``'s multipliers; escape: cold, leaving a saddle).
+        Within a warm update past its ``solver.update_time_limit`` none starts: a failed attempt, with
+        IPOPT's own status for a call stopped by that limit."""
+        in_update = self._deadline is not None
+        if in_update and time.perf_counter() >= self._deadline:
+            m, n = self.nlp.lbg.size, z0.size
+            return False, SolverState(z0, np.zeros(m), np.zeros(n), p), TIME_LIMIT, 0, np.inf
         if start is None:
-            return call(self.nlp, self._ipopt.get(warm, escape), z0, p)
+            return call(self.nlp, self._ipopt.get(warm, escape, in_update), z0, p)
         return call(self.nlp, self._ipopt.get(warm), z0, p, start.lam_g, start.lam_x)
 
     def _cold_ipopt(self, problem: Problem) -> Attempt:

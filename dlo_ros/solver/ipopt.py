@@ -37,17 +37,16 @@ ESCAPE_MAX_ITERATIONS = 150
 class IpoptSolvers:
     """The IPOPT solvers of one NLP: cold, warm and the cold one for leaving saddles (at most
     ESCAPE_MAX_ITERATIONS), each created on first use (a helper that only takes Newton steps never needs
-    them); all use the NLP's ``ipopt_derivatives``.  The warm solver, and the copies of the cold ones
-    that a warm update calls, stop at ``solver.update_time_limit``."""
+    them); all use the NLP's ``ipopt_derivatives``.  A warm update calls copies of them that stop at
+    ``solver.update_time_limit``."""
 
     def __init__(self, nlp: StringNLP):
         self.nlp = nlp
-        self._solvers: dict[str, object] = {}  # kind ("cold", "escape", their "_in_update" copies, "warm_in_update") → nlpsol
+        self._solvers: dict[str, object] = {}  # "cold", "warm", "escape" and their "_in_update" copies → nlpsol
 
     def get(self, warm: bool, escape: bool = False, in_update: bool = False):
-        """The warm solver, or the cold one (``escape``: for leaving a saddle); ``in_update``: the copy that
-        stops at ``solver.update_time_limit`` (a warm update's; the warm solver always does)."""
-        in_update = in_update or warm
+        """The warm or the cold solver (``escape``: the cold one for leaving a saddle); ``in_update``: its
+        copy that stops at ``solver.update_time_limit`` (for a warm update's attempts)."""
         kind = ("escape" if escape else "warm" if warm else "cold") + ("_in_update" if in_update else "")
         if kind not in self._solvers:
             limit = min(self.nlp.options.max_iterations, ESCAPE_MAX_ITERATIONS) if escape else None
@@ -64,8 +63,8 @@ class IpoptSolvers:
         return self.get(True)
 
     def prepare(self) -> None:
-        """Create the cold and the warm solver now."""
-        self.get(False), self.get(True)
+        """Create the cold solver and a warm update's warm solver now."""
+        self.get(False), self.get(True, in_update=True)
 
     def free(self) -> None:
         """Drop the solvers (freeing an IPOPT/MUMPS instance must not overlap a solve in another thread)."""

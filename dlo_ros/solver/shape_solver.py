@@ -526,7 +526,7 @@ class ShapeSolver:
             return False, SolverState(z0, np.zeros(m), np.zeros(n), p), TIME_LIMIT, 0, np.inf
         if start is None:
             return call(self.nlp, self._ipopt.get(warm, escape, in_update), z0, p)
-        return call(self.nlp, self._ipopt.get(warm), z0, p, start.lam_g, start.lam_x)
+        return call(self.nlp, self._ipopt.get(warm, in_update=in_update), z0, p, start.lam_g, start.lam_x)
 
     def _cold_ipopt(self, problem: Problem) -> Attempt:
         """IPOPT from the initial guess (``initial_guess``), cold."""

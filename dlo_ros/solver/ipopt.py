@@ -22,6 +22,7 @@ from .state import SolverState
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 TIME_LIMIT = "Maximum_WallTime_Exceeded"  # IPOPT's status for a call stopped by its max_wall_time
+INFEASIBLE = "Infeasible_Problem_Detected"
 IPOPT_LOCK = threading.Lock()  # MUMPS is not thread-safe across IPOPT instances (coin-or/Ipopt#733)
 
 #: (ok, state, IPOPT's return status, iterations, constraint violation [m or rad]) of one IPOPT solve

@@ -55,14 +55,6 @@ class IpoptSolvers:
             self._solvers[kind] = self.nlp.make_solver(warm=warm, max_iterations=limit, max_wall_time=wall)
         return self._solvers[kind]
 
-    @property
-    def cold(self):
-        return self.get(False)
-
-    @property
-    def warm(self):
-        return self.get(True)
-
     def prepare(self) -> None:
         """Create the cold solver and a warm update's warm solver now."""
         self.get(False), self.get(True, in_update=True)

@@ -52,8 +52,9 @@ class NativeFunction:
         self._lib = ctypes.CDLL(str(lib_path))
         name = fn.name()
         self._fn = getattr(self._lib, name)
+        self._work_fn = getattr(self._lib, f"{name}_work")
         sz = [ctypes.c_longlong() for _ in range(4)]
-        getattr(self._lib, f"{name}_work")(*[ctypes.byref(v) for v in sz])
+        self._work_fn(*[ctypes.byref(v) for v in sz])
         n_arg, n_res, n_iw, n_w = (v.value for v in sz)
         self._in_shapes = [fn.size_in(i) for i in range(fn.n_in())]
         self._out_shapes = [fn.size_out(i) for i in range(fn.n_out())]
@@ -74,6 +75,16 @@ class NativeFunction:
             self._res[i] = a.ctypes.data_as(dp)
         self._iw = (ctypes.c_longlong * max(n_iw, 1))()
         self._w = (ctypes.c_double * max(n_w, 1))()
+
+    @property
+    def out_shapes(self) -> list[tuple[int, int]]:
+        """The outputs' (rows, columns)."""
+        return list(self._out_shapes)
+
+    def address(self) -> tuple[int, int]:
+        """The addresses of the generated function and of its ``_work`` sizes function, for C that calls it
+        (``native_newton.UpdateOutputs``); valid while this object (its library) lives."""
+        return (ctypes.cast(self._fn, ctypes.c_void_p).value, ctypes.cast(self._work_fn, ctypes.c_void_p).value)
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
         for buf, value in zip(self._inputs, args):

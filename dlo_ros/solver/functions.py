@@ -148,6 +148,18 @@ class NlpFunctions:
             self.newton_active = self._active_loop(lib)
         if name == "outputs":
             self.outputs_compiled = True
+        self._attach()
+
+    def _attach(self) -> None:
+        """Let the compiled loops evaluate, in their own call, what a converged update needs beyond the
+        loop: the obstacle rows (the contact-free loop) and the outputs, as far as those are compiled
+        (``native_newton.UpdateOutputs``)."""
+        obstacle = self.obstacle_g if isinstance(self.obstacle_g, NativeFunction) else None
+        outputs = self.outputs if isinstance(self.outputs, NativeFunction) else None
+        if self.newton_native is not None and (obstacle is not None or outputs is not None):
+            self.newton_native.after = native_newton.UpdateOutputs(self.nlp, obstacle, outputs)
+        if self.newton_active is not None and outputs is not None:
+            self.newton_active.after = native_newton.UpdateOutputs(self.nlp, None, outputs)
 
     def load_cached(self) -> bool:
         """('cached' mode) Swap in the libraries that reached the cache since ``start_compile`` (another
@@ -162,7 +174,8 @@ class NlpFunctions:
     def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
         """The active-set Newton loop in the full KKT function's library (None if it cannot be loaded)."""
         try:
-            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size), self.nlp.node_blocks)
+            return native_newton.ActiveNewton(lib, self.nlp.z_sym.shape[0], int(self.nlp.lbg.size), self.nlp.node_blocks,
+                                              self.nlp.equality)
         except (OSError, AttributeError):
             return None
 

@@ -1,4 +1,4 @@
-"""A contact-free warm update as one compiled call: chord Newton steps in C around the compiled KKT function.
+"""A warm update as one compiled call: chord Newton steps in C around the compiled KKT function.
 
 ``newton.newton_free`` takes its first ``NEWTON_STEPS`` Newton steps in one CasADi call and every further
 step in Python.  Here the whole loop is one C function, compiled together with the generated code of
@@ -7,7 +7,8 @@ products: a small fraction of its cost).  The split function is ``kkt_free_fn`` 
 Hessian part Eᵀ W, W = diag(∇²φ_k) E (``assembled.py``), which it returns instead: CasADi's sparse
 loops spent three quarters of K's time on that product, and BLAS dgemm calls on the node map E's dense
 blocks (``NodeBlocks``, ``dlo_add_node_part``) add it at a fraction of that.  From u = [z; λ_free] and
-the Newton system (K, r) at u it factors K once and repeats chord steps
+the Newton system (K, r) at u (carried from the last answer, or evaluated first in the call) it factors K
+once and repeats chord steps
 
     solve (K + diag(δ I_n, −δ I_nf)) Δ = r  (LAPACK dgetrf once, dgetrs per step),  u ← u − Δ,  r ← r(u)
 
@@ -27,6 +28,15 @@ shrink 20–50× each, so about seven steps cost less than one more evaluation o
 the ones SciPy ships (``scipy.linalg.cython_lapack``, ``cython_blas``), passed in as function pointers,
 so nothing is linked.  The
 call goes through ctypes, which releases the GIL.
+
+At the answer the same call also evaluates what a result needs beyond the loop (``UpdateOutputs``): the
+obstacle rows' values, which the contact-free system leaves out (one above its bound: a contact appeared,
+and ``newton`` goes on with it active), and then the outputs' function (``output_function.py``: the
+published points and orientations, the grip wrenches, the contact forces and the equilibrium residual).
+Both are generated functions of their own libraries, called by address, so that neither arrives later
+than the loop's library needs.  ``ActiveNewton``, the loop with obstacle rows active, computes the
+stability eigenpair and the outputs at its answer in the same way: a warm update that Newton answers is
+one compiled call either way.
 
 The library is cached beside the KKT function's (``compiled.cache_dir``), keyed by that function's
 fingerprint (which also fixes its residual's code) and this module's C source.
@@ -103,6 +113,61 @@ static void dlo_add_node_part(dlo_gemm_t gemm, const dlo_node_map *map, const do
     }
     row += R; col += C; block += (size_t)R * C;
   }
+}
+
+/* A generated CasADi function of another library (the obstacle rows', the outputs'), by its address. */
+typedef int (*dlo_casadi_t)(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem);
+
+/* What a converged update also evaluates in the same call (see UpdateOutputs in native_newton.py): the
+   obstacle rows' values (contact-free loop only: the active-set loop has every row), then, if none of them
+   is violated, the outputs' function (output_function.py) at (z, p, lambda_SI, prof).  A NULL function is
+   skipped.  done: out, 1 when the rows were evaluated, 2 when the outputs were as well. */
+typedef struct {
+  dlo_casadi_t obstacle, outputs;
+  dlo_work_t obstacle_work, outputs_work;
+  int rows, free_rows, n_out;
+  const double *ub, *lam_div, *prof;
+  double *g, *lam_si;
+  double *out[8];
+  int done;
+} dlo_after;
+
+static int dlo_call(dlo_casadi_t fn, dlo_work_t work, const double **in, double **out) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 4 ? sz_arg : 4));
+  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 8 ? sz_res : 8));
+  casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
+  casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
+  for (int i = 0; i < 4; ++i) arg[i] = in[i];
+  for (int i = 0; i < 8; ++i) res[i] = out[i];
+  int code = fn(arg, res, iw, w, 0);
+  free(arg); free(res); free(iw); free(w);
+  return code;
+}
+
+/* After convergence at (z, p) with multipliers lam (every row if all_rows, else the free rows) and, for
+   the contact-free loop, the free rows' values g_free: a->g gets every row's value, and the outputs
+   their buffers, unless an obstacle row exceeds its bound by more than 1e-9 (a contact appeared: the
+   caller goes on with it active). */
+static void dlo_after_run(dlo_after *a, const double *z, const double *p, const double *lam, int all_rows,
+                          const double *g_free) {
+  a->done = 0;
+  if (g_free != NULL) {
+    memcpy(a->g, g_free, sizeof(double) * a->free_rows);
+    if (a->rows > a->free_rows) {
+      if (a->obstacle == NULL) return;
+      const double *in[4] = {z, p, NULL, NULL};
+      double *out[8] = {a->g + a->free_rows, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+      if (dlo_call(a->obstacle, a->obstacle_work, in, out) != 0) return;
+    }
+  }
+  a->done = 1;
+  for (int i = a->free_rows; i < a->rows; ++i) if (!(a->g[i] <= a->ub[i] + 1e-9)) return;
+  if (a->outputs == NULL) return;
+  for (int i = 0; i < a->rows; ++i) a->lam_si[i] = (all_rows || i < a->free_rows ? lam[i] : 0.0) / a->lam_div[i];
+  const double *in[4] = {z, p, a->lam_si, a->prof};
+  if (dlo_call(a->outputs, a->outputs_work, in, a->out) == 0) a->done = 2;
 }
 
 typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
@@ -242,7 +307,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     int max_steps, double max_step, double reg, double tol_dual, double tol_prim, double tol_step,
     double contraction, double chord_start, double *u, const double *p, double *K, double *r, double *grad,
     double *energies, int *steps, int *evaluations, double *largest, const dlo_eigen_lapack *eigen,
-    double *eig_value, double *eig_direction, int *eig_code) {
+    double *eig_value, double *eig_direction, int *eig_code, dlo_after *after, int given) {
   int N = n + m, one = 1, info = 0, code = 1;
   char trans = 'N';
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -258,7 +323,12 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
   int fresh = 1;               /* K, grad and energies belong to u */
   int here = 1;                /* the factored K is u's */
   *steps = 0; *evaluations = 0; *largest = 0.0;
-  if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) code = 2;
+  if (!given) {  /* K and r at the start, not carried from an earlier answer: evaluated here (not counted) */
+    arg[0] = u; arg[1] = p; arg[2] = u + n;
+    res[0] = K; res[1] = r; res[2] = grad; res[3] = energies;
+  }
+  if (!given && dlo_kkt_eval(arg, res, iw, w, W, dgemm, map, rows_e, n, N, buf) != 0) code = 4;
+  else if (dlo_factor(dgetrf, K, A, ipiv, n, N, reg) != 0) code = 2;
   else for (;;) {
     if (*steps == max_steps) { code = 1; break; }
     memcpy(step, r, sizeof(double) * N);
@@ -316,6 +386,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
   *eig_code = -1;
   if (code == 0) {  /* the stability eigenvalue at the answer: H = K's top-left block, J its bottom-left */
     *eig_code = dlo_reduced_eigen(eigen, K, N, K + n, N, n, m, eig_value, eig_direction);
+    if (after != NULL) dlo_after_run(after, u, p, u + n, 0, r + n);
   }
   free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv); free(W); free(buf);
   return code;
@@ -440,6 +511,94 @@ class NewtonOutcome:
     largest: float
     evaluations: int = 0
     eigen: tuple[float, np.ndarray] | None = None
+    #: every row's value at the answer, when the call evaluated the obstacle rows (``UpdateOutputs``)
+    g: np.ndarray | None = None
+    #: the outputs at the answer, when the call evaluated them (``UpdateOutputs``)
+    outputs: ComputedOutputs | None = None
+
+
+@dataclass
+class ComputedOutputs:
+    """The outputs' function's values (``output_function.OutputFunction``: points, orientations, grip forces
+    and torques, contact forces, residual, flip) as a converged loop evaluated them, with the inputs it
+    evaluated them at: a result uses them only for the same (z, p, λ_SI, prof) (``matches``)."""
+
+    z: np.ndarray
+    p: np.ndarray
+    lam_si: np.ndarray
+    prof: np.ndarray
+    values: list[np.ndarray]
+
+    def matches(self, z: np.ndarray, p: np.ndarray, lam_si: np.ndarray, prof: np.ndarray) -> bool:
+        return (np.array_equal(self.z, z) and np.array_equal(self.p, p) and np.array_equal(self.lam_si, lam_si)
+                and (self.prof is prof or np.array_equal(self.prof, prof)))
+
+
+class _AfterStruct(ctypes.Structure):
+    """dlo_after in the drivers' C."""
+
+    _fields_ = [("obstacle", ctypes.c_void_p), ("outputs", ctypes.c_void_p), ("obstacle_work", ctypes.c_void_p),
+                ("outputs_work", ctypes.c_void_p), ("rows", ctypes.c_int), ("free_rows", ctypes.c_int),
+                ("n_out", ctypes.c_int), ("ub", ctypes.c_void_p), ("lam_div", ctypes.c_void_p),
+                ("prof", ctypes.c_void_p), ("g", ctypes.c_void_p), ("lam_si", ctypes.c_void_p),
+                ("out", ctypes.c_void_p * 8), ("done", ctypes.c_int)]
+
+
+class UpdateOutputs:
+    """What a converged loop evaluates in the same call, so that a warm update is one compiled call: the
+    obstacle rows' values (``StringNLP.obstacle_g_fn``; the contact-free loop, whose system leaves them
+    out) and, when none is violated, the outputs' function (``output_function.py``) at the answer, with
+    λ_SI = λ / (row_scale · σ) and the string's profiles ``prof``.  Both are generated functions of their
+    own libraries (``compiled.NativeFunction``), called by address: neither loop's library is rebuilt when
+    they arrive.  Either may be None (not compiled yet): the caller then evaluates what is missing.  Not
+    re-entrant: the loops' callers serialise calls."""
+
+    def __init__(self, nlp, obstacle, outputs):
+        rows = int(nlp.lbg.size)
+        self.rows = rows
+        self._ub = np.ascontiguousarray(nlp.ubg, dtype=float)
+        # λ_SI = λ / (row_scale · σ), divided as ShapeOutputs divides (the same rounding: ComputedOutputs.matches)
+        self._div = np.ascontiguousarray(nlp.row_scale * nlp.sigma, dtype=float) if rows else np.zeros(0)
+        self._g, self._lam_si = np.zeros(max(rows, 1)), np.zeros(max(rows, 1))
+        self._prof: np.ndarray | None = None
+        self._shapes = outputs.out_shapes if outputs is not None else []
+        self._out = [np.zeros(max(r * c, 1)) for r, c in self._shapes]
+        self._struct = _AfterStruct()
+        st = self._struct
+        st.rows, st.free_rows, st.n_out = rows, nlp.n_free_rows, len(self._out)
+        st.ub, st.lam_div, st.g, st.lam_si = (a.ctypes.data for a in (self._ub, self._div, self._g, self._lam_si))
+        for i, a in enumerate(self._out):
+            st.out[i] = a.ctypes.data
+        self._functions = (obstacle, outputs)  # kept alive for the addresses
+        self.obstacle = obstacle.address() if obstacle is not None else None
+        self.outputs = outputs.address() if outputs is not None else None
+        if self.obstacle is not None:
+            st.obstacle, st.obstacle_work = self.obstacle
+        self.address = ctypes.addressof(st)
+
+    def prepare(self, prof: np.ndarray | None) -> int:
+        """Before a call: the outputs are evaluated when ``prof`` is given (the profiles of the string being
+        solved for); the struct's address."""
+        st = self._struct
+        st.done = 0
+        if prof is None or self.outputs is None:
+            st.outputs = st.outputs_work = None
+            self._prof = None
+        else:
+            st.outputs, st.outputs_work = self.outputs
+            self._prof = prof = np.ascontiguousarray(prof, dtype=float)
+            st.prof = prof.ctypes.data
+        return self.address
+
+    def collect(self, z: np.ndarray, p: np.ndarray) -> tuple[np.ndarray | None, ComputedOutputs | None]:
+        """After a converged call at (z, p): (every row's value, the outputs), each None if not evaluated."""
+        done = self._struct.done
+        g = self._g[:self.rows].copy() if done >= 1 else None
+        if done < 2:
+            return g, None
+        values = [out[:r * c].reshape((r, c), order="F").copy() for out, (r, c) in zip(self._out, self._shapes)]
+        return g, ComputedOutputs(z.copy(), np.array(p, dtype=float), self._lam_si[:self.rows].copy(), self._prof,
+                                  values)
 
 
 class NativeNewton:
@@ -454,8 +613,11 @@ class NativeNewton:
         self._run.argtypes = [vp, vp, vp, vp, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                               ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                               ctypes.c_double, ctypes.c_double, ctypes.c_double, vp, vp, vp, vp, vp, vp, ip, ip,
-                              ctypes.POINTER(ctypes.c_double), vp, ctypes.POINTER(ctypes.c_double), vp, ip]
+                              ctypes.POINTER(ctypes.c_double), vp, ctypes.POINTER(ctypes.c_double), vp, ip, vp,
+                              ctypes.c_int]
         self.n, self.nf, self.n_p = n, nf, n_p
+        #: what a converged call also evaluates (``UpdateOutputs``), None: nothing
+        self.after: UpdateOutputs | None = None
         N = n + nf
         # the call's arrays, allocated once and passed by their addresses (an ndarray's ctypes pointer costs
         # microseconds per argument and call)
@@ -473,21 +635,29 @@ class NativeNewton:
                       ctypes.addressof(self._lapack), ctypes.byref(self._eig_value), self._direction.ctypes.data,
                       ctypes.byref(self._eig_code))
 
-    def __call__(self, u: np.ndarray, p: np.ndarray, kkt: np.ndarray, residual: np.ndarray,
-                 max_steps: int) -> NewtonOutcome:
-        """From u = [z; λ_free] with K, r at u; ``max_steps``: the most evaluations of K on the way (the one
-        at the answer is not counted)."""
+    def __call__(self, u: np.ndarray, p: np.ndarray, kkt: np.ndarray | None, residual: np.ndarray | None,
+                 max_steps: int, prof: np.ndarray | None = None) -> NewtonOutcome:
+        """From u = [z; λ_free] with K, r at u (None: evaluated at u in the call, not counted);
+        ``max_steps``: the most evaluations of K on the way (the one at the answer is not counted);
+        ``prof``: the string's profiles, for the outputs (``after``)."""
         self._u[:] = u
         self._p[:] = p
-        self._K[:] = kkt
-        self._r[:] = np.ravel(residual)
+        given = kkt is not None
+        if given:
+            self._K[:] = kkt
+            self._r[:] = np.ravel(residual)
         self._energies[:] = np.nan
-        code = self._run(*self._head, int(max_steps), *self._tail)
-        eigen = (self._eig_value.value, self._direction.copy()) if code == CONVERGED and self._eig_code.value == 0 \
-            else None
-        return NewtonOutcome(int(code), self._u.copy(), self._K.copy(order="F"), self._r.copy(), self._grad.copy(),
-                             self._energies.copy(), self._steps.value, self._largest.value, self._evaluations.value,
-                             eigen)
+        after = self.after
+        code = self._run(*self._head, int(max_steps), *self._tail, after.prepare(prof) if after is not None else None,
+                         int(given))
+        out = NewtonOutcome(int(code), self._u.copy(), self._K.copy(order="F"), self._r.copy(), self._grad.copy(),
+                            self._energies.copy(), self._steps.value, self._largest.value, self._evaluations.value)
+        if code == CONVERGED:
+            if self._eig_code.value == 0:
+                out.eigen = (self._eig_value.value, self._direction.copy())
+            if after is not None:
+                out.g, out.outputs = after.collect(out.u[:self.n], self._p)
+        return out
 
 
 def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | None:
@@ -526,7 +696,7 @@ def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: i
 
 #: Newton with an active set on the full KKT function (``StringNLP.kkt_fn``), appended to its generated
 #: code.  See ``ActiveNewton``.
-ACTIVE_DRIVER = _C_COMMON + r"""
+ACTIVE_DRIVER = _C_COMMON + _C_EIGEN + r"""
 
 /* grad f, g, dg/dz, hess L, energies at arg into res[0..4]: the split function (hess L without its per-node
    part), then that part added (dlo_add_node_part); nonzero if the function fails. */
@@ -573,7 +743,8 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
     const int *switchable, int switches, int max_evaluations, int max_steps, int given, double max_step,
     double reg, double tol_dual, double tol_prim, double tol_step, double contraction, double chord_start,
     double join_tol, double leave_tol, double *z, const double *p, double *lam, const double *ub, double *grad, double *g,
-    double *jac, double *hess, double *energies, int *steps, int *evaluations) {
+    double *jac, double *hess, double *energies, int *steps, int *evaluations, const int *equality,
+    const dlo_eigen_lapack *eigen, double *eig_value, double *eig_direction, int *eig_code, dlo_after *after) {
   int one = 1, info = 0, code = 1;
   char trans = 'N';
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -706,6 +877,20 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(dlo_getrf_t getrf, dlo_getrs_t ge
       fresh = 0;
     }
   }
+  *eig_code = -1;
+  if (code == 0) {
+    /* the stability eigenvalue at the answer, on the rows stability.min_reduced_eigenvalue holds: the
+       equalities, and the rows with |lambda| > 1e-9 or within 1e-9 of their bound */
+    int held = 0, *rows_held = malloc(sizeof(int) * (rows > 0 ? rows : 1));
+    for (int i = 0; i < rows; ++i)
+      if (equality[i] || fabs(lam[i]) > 1e-9 || g[i] > ub[i] - 1e-9) rows_held[held++] = i;
+    double *J = malloc(sizeof(double) * ((size_t)held * n + 1));
+    for (int j = 0; j < n; ++j)
+      for (int k = 0; k < held; ++k) J[k + (size_t)held * j] = jac[rows_held[k] + (size_t)rows * j];
+    *eig_code = dlo_reduced_eigen(eigen, hess, n, J, held > 0 ? held : 1, n, held, eig_value, eig_direction);
+    free(J); free(rows_held);
+    if (after != NULL) dlo_after_run(after, z, p, lam, 1, NULL);
+  }
 done:
   free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(lgrad); free(ipiv); free(W);
   free(buf);
@@ -746,6 +931,11 @@ class ActiveOutcome:
     steps: int
     active: np.ndarray
     evaluations: int = 0
+    #: once converged, the stability eigenvalue there and its eigenvector in z (``SolverState.reduced_eigen``,
+    #: on the rows ``stability.min_reduced_eigenvalue`` holds), None if LAPACK failed
+    eigen: tuple[float, np.ndarray] | None = None
+    #: the outputs at the answer, when the call evaluated them (``UpdateOutputs``)
+    outputs: ComputedOutputs | None = None
 
 
 class ActiveNewton:
@@ -757,12 +947,13 @@ class ActiveNewton:
     multipliers there are Newton's own: no evaluation needed unless a row changes), and at every
     evaluated iterate.  After that [∇²L J_Aᵀ; J_A 0] stays factored and only the residual [∇L; g] is
     evaluated per step, as in the contact-free loop (``NativeNewton``: the same contraction, tolerance and
-    retry rules, the derivatives evaluated at the answer).  In C around the compiled split full KKT
+    retry rules, the derivatives evaluated at the answer, and there the stability eigenpair, on the rows
+    ``stability.min_reduced_eigenvalue`` holds, and the outputs, ``after``).  In C around the compiled split full KKT
     function (``StringNLP.kkt_split_fn``: ∇²L's per-node part added by BLAS, as in ``NativeNewton``) and
     its residual, compiled into the full KKT function's library.  Not re-entrant per instance: callers serialise calls
     (ShapeSolver holds a lock)."""
 
-    def __init__(self, lib_path: Path, n: int, rows: int, node_map: NodeBlocks):
+    def __init__(self, lib_path: Path, n: int, rows: int, node_map: NodeBlocks, equality: np.ndarray):
         self._lib = ctypes.CDLL(str(lib_path))
         self._run = self._lib.dlo_newton_active_run
         dp, ip, c_int, c_double = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_int, \
@@ -771,19 +962,27 @@ class ActiveNewton:
         self._run.restype = ctypes.c_int
         self._run.argtypes = [vp, vp, vp, vp, c_int, c_int, c_int, c_int, ip, ip, c_int, c_int, c_int, c_int,
                               c_double, c_double, c_double, c_double, c_double, c_double, c_double, c_double,
-                              c_double, dp, dp, dp, dp, dp, dp, dp, dp, dp, ip, ip]
-        self._map = node_map  # kept alive for the calls
+                              c_double, dp, dp, dp, dp, dp, dp, dp, dp, dp, ip, ip, vp, vp, vp, vp, vp, vp]
+        self._map, self._lapack = node_map, _eigen_lapack()  # kept alive for the calls
+        self._equality = np.ascontiguousarray(equality, dtype=np.intc)
+        self._eig_value, self._eig_code, self._direction = ctypes.c_double(0.0), ctypes.c_int(-1), np.zeros(n)
+        self._eigen_args = (self._equality.ctypes.data, ctypes.addressof(self._lapack),
+                            ctypes.addressof(self._eig_value), self._direction.ctypes.data,
+                            ctypes.addressof(self._eig_code))
+        #: what a converged call also evaluates (``UpdateOutputs``), None: nothing
+        self.after: UpdateOutputs | None = None
         self._head = (_lapack_pointer("dgetrf"), _lapack_pointer("dgetrs"), _lapack_pointer("dgemm"),
                       ctypes.addressof(node_map.struct), node_map.rows_w, node_map.buf_size)
         self.n, self.rows = n, rows
 
     def __call__(self, z: np.ndarray, lam: np.ndarray, p: np.ndarray, active: np.ndarray, ub: np.ndarray,
                  switchable: np.ndarray, switches: int, max_steps: int,
-                 first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> ActiveOutcome:
+                 first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
+                 prof: np.ndarray | None = None) -> ActiveOutcome:
         """From (z, λ) with the rows ``active`` held at ``ub`` (both over every row); up to ``switches``
         changes among the rows ``switchable``; ``max_steps``: the most evaluations of the full KKT function
         on the way (the one at the answer not counted); ``first``: (∇f, g, ∂g/∂z, ∇²L) for the first step
-        instead of an evaluation."""
+        instead of an evaluation; ``prof``: the string's profiles, for the outputs (``after``)."""
         n, rows = self.n, self.rows
         z = np.array(z, dtype=float, copy=True)
         lam = np.array(lam, dtype=float, copy=True)
@@ -808,7 +1007,13 @@ class ActiveNewton:
                          p.ctypes.data_as(dp), lam.ctypes.data_as(dp), ub.ctypes.data_as(dp),
                          grad.ctypes.data_as(dp), g.ctypes.data_as(dp), jac.ctypes.data_as(dp),
                          hess.ctypes.data_as(dp), energies.ctypes.data_as(dp), ctypes.byref(steps),
-                         ctypes.byref(evaluations))
-        return ActiveOutcome(int(code), z, lam, grad, g, jac.reshape(rows, n, order="F"),
-                             hess.reshape(n, n, order="F"), energies, steps.value, act.astype(bool),
-                             evaluations.value)
+                         ctypes.byref(evaluations), *self._eigen_args,
+                         self.after.prepare(prof) if self.after is not None else None)
+        out = ActiveOutcome(int(code), z, lam, grad, g, jac.reshape(rows, n, order="F"),
+                            hess.reshape(n, n, order="F"), energies, steps.value, act.astype(bool), evaluations.value)
+        if code == CONVERGED:
+            if self._eig_code.value == 0:
+                out.eigen = (self._eig_value.value, self._direction.copy())
+            if self.after is not None:
+                out.outputs = self.after.collect(z, p)[1]
+        return out

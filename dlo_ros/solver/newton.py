@@ -57,12 +57,14 @@ def violation(nlp: StringNLP, g: np.ndarray) -> float:
 
 
 def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray, max_steps: int = 10,
-           fused: bool = True, kkt_fn=None) -> tuple[bool, SolverState, int, float]:
+           fused: bool = True, kkt_fn=None, prof: np.ndarray | None = None) -> tuple[bool, SolverState, int, float]:
     """Warm update from ``start`` to the parameters ``p`` (see the module docstring).  While no obstacle
     row is active this is ``newton_free``; ``fused``: its first steps in one call of ``newton_step``.
     ``kkt_fn``: another system of the same form as ``fns.kkt`` (z, p, λ) → [∇f, g, ∂g/∂z, K, energies]
     (``moments.ExactMomentKKT``: K need not be symmetric); the returned state then carries that
-    function's derivatives, not ∇²L."""
+    function's derivatives, not ∇²L.  ``prof``: the profiles of the string solved for
+    (``OutputFunction.profiles``), given when the answer's outputs are wanted: a compiled loop then
+    evaluates them in its call (``native_newton.UpdateOutputs``, ``SolverState.outputs``)."""
     if start.g is None:  # a warm start adopted from another model
         start.g = np.asarray(nlp.g_fn(start.z, start.p)).ravel()
     active = active_rows(nlp, start.lam_g, start.g)
@@ -72,7 +74,7 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     z, lam = start.z.copy(), np.where(active, start.lam_g, 0.0)
     reuse = kkt_fn is None and start.hessian is not None and start.g is not None and start.gradient is not None
     if kkt_fn is None and not np.any(active[nlp.n_free_rows:]):
-        ok, state, steps, viol, contact = _newton_free(nlp, fns, start, p, max_steps, fused)
+        ok, state, steps, viol, contact = _newton_free(nlp, fns, start, p, max_steps, fused, prof)
         if ok or contact is None:
             return ok, state, steps, viol
         # a contact appeared: go on from the contact-free answer with its most violated row active
@@ -86,7 +88,8 @@ def newton(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray,
     kkt_fn = kkt_fn or fns.kkt
     seen = {active.tobytes()}
     for _ in range(NEWTON_ACTIVE_SET_CHANGES + 1):
-        ok, state, it, changed = _newton_active(nlp, kkt_fn, start, z, lam, p, active, max_steps, reuse, native)
+        ok, state, it, changed = _newton_active(nlp, kkt_fn, start, z, lam, p, active, max_steps, reuse, native,
+                                                prof)
         steps += it
         if ok:
             return True, state, steps, violation(nlp, state.g)
@@ -112,11 +115,11 @@ def fill_start(nlp: StringNLP, fns: NlpFunctions, state: SolverState) -> None:
         state.kkt, state.residual = kkt, residual[:, 0]
         state.g, state.jacobian = all_rows(nlp, fns, state.z, state.p, kkt, state.residual)
         state.hessian = kkt[:state.z.size, :state.z.size]
-        state.reduced_eigen = None
+        state.reduced_eigen = state.outputs = None
     else:
         grad, g, state.jacobian, state.hessian, energies = fns.kkt(state.z, state.p, np.where(active, state.lam_g, 0.0))
         state.g = np.asarray(g).ravel()
-        state.reduced_eigen = None
+        state.reduced_eigen = state.outputs = None
     state.gradient, state.energies = np.asarray(grad).ravel(), np.asarray(energies).ravel()
 
 
@@ -143,15 +146,16 @@ def kkt_step(hess: np.ndarray, ja: np.ndarray, r_dual: np.ndarray, r_prim: np.nd
 
 
 def _newton_active(nlp: StringNLP, kkt_fn, start: SolverState, z: np.ndarray, lam: np.ndarray, p: np.ndarray,
-                   active: np.ndarray, max_steps: int, reuse: bool,
-                   native=None) -> tuple[bool, SolverState | None, int, np.ndarray | None]:
+                   active: np.ndarray, max_steps: int, reuse: bool, native=None,
+                   prof: np.ndarray | None = None) -> tuple[bool, SolverState | None, int, np.ndarray | None]:
     """Newton steps from (z, λ) with the rows ``active`` held at their bound, contact rows switching
     between steps as ``_active_steps`` says.  Returns (ok, state, steps, the next active set): ok with the
     KKT point when it satisfies every row and sign; else, when Newton converged but the active set is
     wrong, that point and the corrected set (violated rows in, negative multipliers out); else (False,
     None, steps, None).  ``reuse``: (z, λ) is the start's own point and only grip targets changed since,
     so its stored derivatives give the first step.  ``native``: the compiled loop of ``kkt_fn``
-    (``native_newton.ActiveNewton``), or None for the numpy loop."""
+    (``native_newton.ActiveNewton``), or None for the numpy loop; it also returns the stability eigenpair
+    and, given ``prof``, the outputs at the answer (``newton``)."""
     equality = nlp.equality
     z, lam = z.copy(), np.where(active, lam, 0.0)
     # contact rows may switch (a row p switches off holds nothing: obstacle_slots.py); fold guards may not
@@ -163,19 +167,21 @@ def _newton_active(nlp: StringNLP, kkt_fn, start: SolverState, z: np.ndarray, la
     keep = ~nlp.grip_parameter_mask
     reuse = reuse and np.array_equal(start.p[keep], p[keep])
     first = (start.gradient, start.g + nlp.target_shift(start.p, p), start.jacobian, start.hessian) if reuse else None
+    eigen = outputs = None
     if native is not None:  # the loop of _active_steps in one compiled call (native_newton.ActiveNewton)
-        out = native(z, lam, p, active, nlp.ubg, switchable, NEWTON_STEP_SWITCHES, max_steps, first)
+        out = native(z, lam, p, active, nlp.ubg, switchable, NEWTON_STEP_SWITCHES, max_steps, first, prof)
         if out.code != CONVERGED:
             return False, None, out.steps, None
         z, lam, it, active = out.z, out.lam, out.steps, out.active
         grad, g, jac, hess, energies = out.gradient, out.g, out.jacobian, out.hessian, out.energies
+        eigen, outputs = out.eigen, out.outputs
     else:
         found = _active_steps(kkt_fn, z, lam, p, active, nlp.ubg, switchable, NEWTON_STEP_SWITCHES, max_steps, first)
         if found[0] is None:
             return False, None, found[-1], None
         z, lam, grad, g, jac, hess, energies, it, active = found
     state = SolverState(z, lam, start.lam_x, p, hessian=hess, jacobian=jac, energies=energies.ravel(), g=g,
-                        gradient=grad)
+                        gradient=grad, reduced_eigen=eigen, outputs=outputs)
     excess = np.where(~active, g - nlp.ubg, 0.0)
     negative = np.where(active & ~equality, lam, 0.0)
     changed = active.copy()
@@ -241,7 +247,8 @@ def _active_steps(kkt_fn, z: np.ndarray, lam: np.ndarray, p: np.ndarray, active:
 
 
 def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.ndarray, max_steps: int,
-                fused: bool = True) -> tuple[bool, SolverState, int, float, SolverState | None]:
+                fused: bool = True, prof: np.ndarray | None = None
+                 ) -> tuple[bool, SolverState, int, float, SolverState | None]:
     """``newton`` while no obstacle row is active: the active rows are the free rows (all equalities),
     and the contact-free function returns the Newton matrix K and residual r themselves.  Steps
     K [Δz; Δλ] = −r start from the start's own K with r shifted by the new targets, when only targets
@@ -249,24 +256,26 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
     the compiled contact-free function once it is loaded); if r is not yet converged, each further step
     is one evaluation and one LAPACK solve.  The obstacle rows' values are evaluated once, at the end,
     to check that none is violated; if one is, the last item returned is that converged contact-free point
-    (z, λ, g), from which ``newton`` goes on with the violated rows active."""
+    (z, λ, g), from which ``newton`` goes on with the violated rows active.  The compiled loop evaluates
+    those rows, the stability eigenpair and (given ``prof``) the outputs in its own call."""
     nf, n, rows = nlp.n_free_rows, start.z.size, nlp.lbg.size
     unknowns = np.concatenate([start.z, start.lam_g[:nf]])
     keep = ~nlp.grip_parameter_mask
+    native = fns.newton_native if fused else None
+    kkt = residual = energies = None
     if start.kkt is not None and np.array_equal(start.p[keep], p[keep]):  # targets enter g linearly
-        kkt, residual, energies = start.kkt, start.residual.copy(), None
+        kkt, residual = start.kkt, start.residual.copy()
         residual[n:] += nlp.target_shift(start.p, p)[:nf]
-    else:
+    elif native is None:  # (the compiled loop evaluates them in its call)
         kkt, residual, grad, energies = fns.kkt_free(unknowns[:n], p, unknowns[n:])
         residual = residual[:, 0]
-    first, eigen = 0, None
-    native = fns.newton_native if fused else None
+    first, eigen, rows_g, outputs = 0, None, None, None
     if native is not None:  # the whole loop in one compiled call (native_newton.py), the GIL released
-        out = native(unknowns, p, kkt, residual, max_steps)
+        out = native(unknowns, p, kkt, residual, max_steps, prof)
         if out.code != CONVERGED:
             return False, start, out.steps, np.inf, None
         unknowns, kkt, residual, grad, energies = out.u, out.kkt, out.residual, out.gradient, out.energies
-        first, eigen = out.steps, out.eigen
+        first, eigen, rows_g, outputs = out.steps, out.eigen, out.g, out.outputs
     elif fused:
         try:
             u, kkt, residual, grad, energies, largest = fns.newton_step(unknowns, p, kkt, residual)
@@ -279,7 +288,7 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
         z, lam_free = unknowns[:n], unknowns[n:]
         if energies is not None and np.abs(residual[:n]).max() < NEWTON_DUAL_TOLERANCE and \
                 np.abs(residual[n:]).max(initial=0.0) < NEWTON_PRIMAL_TOLERANCE:
-            g, jac = all_rows(nlp, fns, z, p, kkt, residual)
+            g, jac = all_rows(nlp, fns, z, p, kkt, residual, rows_g)
             lam = np.zeros(rows)
             lam[:nf] = lam_free
             if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared (or a fold guard: no equilibrium)
@@ -287,11 +296,11 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
                 return False, start, it, np.inf, SolverState(z.copy(), lam, start.lam_x, p, g=g) if contact else None
             state = SolverState(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
                                 energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual,
-                                reduced_eigen=eigen)
+                                reduced_eigen=eigen, outputs=outputs)
             return True, state, it, violation(nlp, g), None
         if it >= max_steps:
             break
-        eigen = None  # not this iterate's
+        eigen = rows_g = outputs = None  # not this iterate's
         _, _, step, info = _gesv(regularised(kkt, n), residual)
         if info != 0 or not np.isfinite(step).all() or np.abs(step[:n]).max() > NEWTON_MAX_STEP:
             return False, start, it, np.inf, None
@@ -316,15 +325,17 @@ def derivatives(nlp: StringNLP, fns: NlpFunctions, z: np.ndarray, p: np.ndarray,
 
 
 def all_rows(nlp: StringNLP, fns: NlpFunctions, z: np.ndarray, p: np.ndarray, kkt: np.ndarray,
-             residual: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+             residual: np.ndarray, g: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(g, ∂g/∂z) over every row from the contact-free system (K, r) at z: the free rows' values are r's
-    last rows and their Jacobian K's lower-left block; the obstacle rows' values are evaluated, their
-    Jacobian rows are zeros (unused while they are inactive)."""
+    last rows and their Jacobian K's lower-left block; the obstacle rows' values are evaluated (unless
+    ``g``, every row's value, is given: the compiled loop's), their Jacobian rows are zeros (unused while
+    they are inactive)."""
     n, nf, rows = z.size, nlp.n_free_rows, nlp.lbg.size
-    g = np.empty(rows)
-    g[:nf] = residual[n:]
-    if nf < rows:
-        g[nf:] = fns.obstacle_g(z, p)[0].ravel()
+    if g is None:
+        g = np.empty(rows)
+        g[:nf] = residual[n:]
+        if nf < rows:
+            g[nf:] = fns.obstacle_g(z, p)[0].ravel()
     jac = np.zeros((rows, n))
     jac[:nf] = kkt[n:, :n]
     return g, jac

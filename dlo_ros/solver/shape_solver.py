@@ -497,17 +497,24 @@ class ShapeSolver:
         return equilibrium(self.nlp, problem, z, grips, contacts, lam_si)
 
     # ---- solving ----------------------------------------------------------------------------------
-    def _newton(self, start: SolverState, p: np.ndarray) -> tuple[bool, SolverState, int, float]:
-        return newton(self.nlp, self.functions, start, p, fused=self.fused_newton)
+    def _newton(self, start: SolverState, p: np.ndarray,
+                problem: Problem | None = None) -> tuple[bool, SolverState, int, float]:
+        """``newton.newton`` from ``start`` to ``p``; given ``problem`` (what p packs), a compiled loop also
+        evaluates the answer's outputs in its call."""
+        plan = self.functions.output_function
+        prof = plan.profiles(problem.string) if problem is not None and plan is not None else None
+        return newton(self.nlp, self.functions, start, p, fused=self.fused_newton, prof=prof)
 
-    def _newton_in_substeps(self, start: SolverState, p1: np.ndarray) -> tuple[bool, SolverState, int, float]:
-        """Newton along the straight path from ``start.p`` to ``p1`` in SUBSTEPS equal parts, each
-        warm-started from the last (the continuation IPOPT would do next, at the cost of Newton steps)."""
+    def _newton_in_substeps(self, start: SolverState, p1: np.ndarray,
+                            problem: Problem | None = None) -> tuple[bool, SolverState, int, float]:
+        """Newton along the straight path from ``start.p`` to ``p1`` (``problem``'s) in SUBSTEPS equal parts,
+        each warm-started from the last (the continuation IPOPT would do next, at the cost of Newton steps)."""
         iterations = 0
         for parts in SUBSTEPS:
             state, ok = start, True
             for i in range(1, parts + 1):
-                ok, state, it, viol = self._newton(state, p1 if i == parts else start.p + (p1 - start.p) * (i / parts))
+                ok, state, it, viol = self._newton(state, p1, problem) if i == parts else \
+                    self._newton(state, start.p + (p1 - start.p) * (i / parts))
                 iterations += it
                 if not ok:
                     break
@@ -832,7 +839,7 @@ class ShapeSolver:
                 p[self.nlp.params[name]] = state.p[self.nlp.params[name]]
         state.p = p
         state.hessian = state.jacobian = state.gradient = state.energies = state.kkt = state.residual = None
-        state.reduced_eigen = None
+        state.reduced_eigen = state.outputs = None
         state.g = None
         return self._result(problem, state, "Newton (exact moments)", iterations, violation, warm, steps)
 
@@ -905,10 +912,10 @@ class ShapeSolver:
         if warm:
             p1 = self.pack_parameters(problem, self._state.z, keep=self._state.p)
             start = self._carry_slots(self._state, p1)
-            ok, state, it, viol = self._newton(start, p1)
+            ok, state, it, viol = self._newton(start, p1, problem)
             iterations += it
             if not ok:
-                ok, state, it, viol = self._newton_in_substeps(start, p1)
+                ok, state, it, viol = self._newton_in_substeps(start, p1, problem)
                 iterations += it
                 self._newton_far = ok
             if ok:

@@ -103,7 +103,7 @@ def test_cold_start_inside_a_warm_update_is_checked():
     with the check off the same update publishes a shape whose Lk is a different integer."""
     sol = twisted_solver()
     twist_up(sol)
-    fail = lambda start, p: (False, start, 0, float("inf"))  # noqa: E731
+    fail = lambda start, p, problem=None: (False, start, 0, float("inf"))  # noqa: E731
     ipopt = sol._ipopt_call
 
     def cold_only(warm, z0, p, start=None):

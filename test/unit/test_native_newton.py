@@ -262,6 +262,83 @@ def test_one_active_call_reaches_the_numpy_loops_answer(solvers):
     np.testing.assert_allclose(out.jacobian, here[2], atol=1e-12)
     np.testing.assert_allclose(out.gradient, here[0].ravel(), atol=1e-12)
     np.testing.assert_allclose(out.energies, here[4].ravel(), rtol=1e-12)
+    # the stability eigenpair the call computed at the answer, on the rows stability.py holds there,
+    # against an SVD null space and a full symmetric eigendecomposition of the reduced Hessian
+    import scipy.linalg
+
+    held = nlp.equality | (np.abs(out.lam) > 1e-9) | (out.g > nlp.ubg - 1e-9)
+    assert np.any(held[nlp.n_free_rows:])  # the table's rows are among them
+    basis = scipy.linalg.null_space(out.jacobian[held])
+    values, vectors = np.linalg.eigh(basis.T @ out.hessian @ basis)
+    assert values[1] - values[0] > 1e-6 * abs(values).max()  # a simple eigenvalue: its vector is defined
+    value, direction = out.eigen
+    assert value == pytest.approx(values[0], rel=1e-10, abs=1e-12 * abs(values).max())
+    assert abs(direction @ (basis @ vectors[:, 0])) == pytest.approx(1.0, abs=1e-10)
+
+
+def test_a_warm_update_is_one_compiled_call(solvers):
+    """On the table and off it, a stream's Newton updates call no compiled function but their loop: the
+    obstacle rows, the stability eigenpair and the outputs come from the loop's own call
+    (``native_newton.UpdateOutputs``), and those outputs are the outputs' function's values at the
+    answer, to the bit.  (An update whose Newton lands on a saddle leaves it by steps in Python:
+    ``newton.leave_saddle``.)  The interpreted solver's stream gives the same shapes, wrenches and
+    eigenvalues."""
+    from dlo_ros.solver import compiled as C
+    from dlo_ros.solver import native_newton as NN
+
+    scene, native, interpreted = solvers
+    fns = native.functions
+    assert fns.outputs_compiled and fns.newton_native.after is not None and fns.newton_active.after is not None
+    rot = scene.problem.grip("right").pose.orientation
+    native.reset(), interpreted.reset()
+    native.solve(lowered(0.02, rot)), interpreted.solve(lowered(0.02, rot))
+    other, loops = [], {"free": 0, "active": 0}
+    wrapped = [(C.NativeFunction, "__call__"), (NN.WithNodePart, "__call__")]
+    saved = [getattr(cls, name) for cls, name in wrapped]
+    free, active = NN.NativeNewton.__call__, NN.ActiveNewton.__call__
+
+    def counting(kind, call):
+        def run(*a, **k):
+            loops[kind] += 1
+            return call(*a, **k)
+        return run
+
+    try:
+        for (cls, name), call in zip(wrapped, saved):
+            setattr(cls, name, lambda *a, _cls=cls.__name__, _call=call, **k: other.append(_cls) or _call(*a, **k))
+        NN.NativeNewton.__call__, NN.ActiveNewton.__call__ = counting("free", free), counting("active", active)
+        results, single = [], 0
+        for drop in list(np.arange(0.025, 0.0651, 0.005)) + list(np.arange(0.06, 0.0199, -0.005)):
+            other.clear()
+            results.append(native.solve(lowered(float(drop), rot)))
+            assert results[-1].ipopt_status == "Newton", results[-1].message
+            if "left an unstable equilibrium" not in results[-1].message:
+                assert not other, other  # no compiled call beside the loop's
+                state = native._state
+                assert state.outputs is not None and state.reduced_eigen is not None
+                single += 1
+    finally:
+        for (cls, name), call in zip(wrapped, saved):
+            setattr(cls, name, call)
+        NN.NativeNewton.__call__, NN.ActiveNewton.__call__ = free, active
+    assert loops["free"] >= 3 and loops["active"] >= 3, loops  # both loops ran, off and on the table
+    assert single >= len(results) - 2, (single, len(results))
+    nlp, state = native.nlp, native._state
+    lam_si = state.lam_g / (nlp.row_scale * nlp.sigma)
+    direct = fns.outputs(state.z, state.p, lam_si, fns.output_function.profiles(native.problem.string))
+    for mine, theirs in zip(state.outputs.values, direct):
+        np.testing.assert_array_equal(mine, theirs)
+    interpreted.reset()
+    interpreted.solve(lowered(0.02, rot))
+    for drop, a in zip(list(np.arange(0.025, 0.0651, 0.005)) + list(np.arange(0.06, 0.0199, -0.005)), results):
+        b = interpreted.solve(lowered(float(drop), rot))
+        assert a.status == b.status == "ok" and a.stable == b.stable
+        np.testing.assert_allclose(a.points, b.points, atol=1e-10)
+        np.testing.assert_allclose(a.orientations, b.orientations, atol=1e-9)
+        for name in a.grips:
+            np.testing.assert_allclose(a.grips[name].force, b.grips[name].force, atol=1e-7)
+        assert a.min_eigenvalue == pytest.approx(b.min_eigenvalue, rel=1e-8)
+        assert a.equilibrium_residual_m == pytest.approx(b.equilibrium_residual_m, rel=1e-6, abs=1e-12)
 
 
 def test_a_query_whose_chord_steps_outnumber_newtons_cap_is_still_a_newton_answer(solvers):

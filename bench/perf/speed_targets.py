@@ -271,14 +271,29 @@ def run_steps(steps, results: Path) -> list[tuple[Step, float, int]]:
     return done
 
 
-def report(found: list[Figure], done: list[tuple[Step, float, int]], info: dict) -> list[str]:
+def machine_pace(results: Path) -> str:
+    """The machine's own pace in the run that wrote the result files, from two figures no target depends
+    on: a DDS round trip through an echo node that does not solve (``node_latency_auto.md``'s floor) and
+    an interpreted warm update (``solver_speed.md``).  Runs on different days compare by these."""
+    try:
+        echo = row(_read(results, "node_latency_auto.md")[0], "p50 [ms]", "closed loop (300 targets), Single")
+        interp = row(_read(results, "solver_speed.md")[0], "warm median ms", "off")
+    except (OSError, LookupError, ValueError):  # a file missing or of another layout: no line
+        return ""
+    return (f"The machine's pace in this run (no target depends on it): a DDS round trip through an echo node "
+            f"that does not solve, closed loop, p50 {number(echo['p50 [ms]']):.2f} ms (node_latency_auto.md); an "
+            f"interpreted warm update, median {number(interp['warm median ms']):.2f} ms (solver_speed.md).  Runs on "
+            f"other days compare by these.")
+
+
+def report(found: list[Figure], done: list[tuple[Step, float, int]], info: dict, pace: str = "") -> list[str]:
     load = ", ".join(f"{v:.2f}" for v in info.get("load_average", ()))
     lines = ["# Issue #14's targets beside their measurements", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus', '?')} cores (shared; load average {load} at the end), "
              f"Python {info.get('python', '?')}; git {info.get('git', '?')}; written {time.strftime('%Y-%m-%d %H:%M')}.", "",
              "Every figure is read from the result file named beside it (with the git revision that file records); "
              "`bench/README.md` says which command writes it.  Absolute times drift ±20 % on this shared machine; "
-             "the ratios in each file come from one run.", "",
+             "the ratios in each file come from one run." + (f"  {pace}" if pace else ""), "",
              "| figure | target | measured | met | from |", "|---|---|---|---|---|"]
     lines += [f"| {f.figure} | {f.target} | {f.measured} | {'yes' if f.met else 'no'} | {f.source} |" for f in found]
     if done:
@@ -299,8 +314,9 @@ def main() -> None:
     if not args.table_only:
         steps = STEPS if args.skip_suite else STEPS + (SUITE,)
         done = run_steps(steps, results)
-    write_report(report(stale(figures(results), done, results, since), done, machine()), args.out,
-                 "bench/perf/speed_targets.py", sys.argv[1:])
+    found = stale(figures(results), done, results, since)
+    write_report(report(found, done, machine(), machine_pace(results)), args.out, "bench/perf/speed_targets.py",
+                 sys.argv[1:])
     if any(code for _, _, code in done):
         sys.exit(1)
 

@@ -153,3 +153,19 @@ def test_a_file_this_run_did_not_write_is_not_met(tmp_path):
     assert not queries.met and "not re-measured" in queries.measured
     assert [f for f in marked if "not re-measured" in f.measured] == [queries]
     assert st.stale(found, [(step, 1.0, 0)], results, since=0.0) == found  # written by this run: unchanged
+
+
+def test_the_machine_pace_is_read_from_the_echo_floor_and_the_interpreted_update(tmp_path):
+    """The pace line quotes the echo round trip (the node's executor, closed loop) and the interpreted warm
+    update of the files it reads, and is left out when a file lacks them."""
+    results = _copy(tmp_path)
+    echo = st.number(st.row((results / "node_latency_auto.md").read_text(), "p50 [ms]",
+                            "closed loop (300 targets), Single")["p50 [ms]"])
+    interpreted = st.number(st.row((results / "solver_speed.md").read_text(), "warm median ms", "off")["warm median ms"])
+    line = st.machine_pace(results)
+    assert f"p50 {echo:.2f} ms" in line and f"median {interpreted:.2f} ms" in line
+    text = (results / "node_latency_auto.md").read_text()
+    (results / "node_latency_auto.md").write_text(text.replace("SingleThreadedExecutor", "another executor"))
+    assert st.machine_pace(results) == ""
+    (results / "solver_speed.md").unlink()
+    assert st.machine_pace(results) == ""

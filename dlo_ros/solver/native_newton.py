@@ -147,13 +147,13 @@ static int dlo_call(dlo_casadi_t fn, dlo_work_t work, const double **in, double 
 }
 
 /* After convergence at (z, p) with multipliers lam (every row if all_rows, else the free rows) and, for
-   the contact-free loop, the free rows' values g_free: a->g gets every row's value, and the outputs
-   their buffers, unless an obstacle row exceeds its bound by more than 1e-9 (a contact appeared: the
-   caller goes on with it active). */
+   the contact-free loop, the free rows' values g_free: there a->g gets every row's value, and the
+   outputs are evaluated unless an obstacle row exceeds its bound by more than 1e-9 (a contact appeared:
+   the caller goes on with it active).  The active-set loop (g_free NULL) has every row: the outputs. */
 static void dlo_after_run(dlo_after *a, const double *z, const double *p, const double *lam, int all_rows,
                           const double *g_free) {
   a->done = 0;
-  if (g_free != NULL) {
+  if (g_free != NULL) {  /* the contact-free loop: its obstacle rows, and none of them violated */
     memcpy(a->g, g_free, sizeof(double) * a->free_rows);
     if (a->rows > a->free_rows) {
       if (a->obstacle == NULL) return;
@@ -161,9 +161,10 @@ static void dlo_after_run(dlo_after *a, const double *z, const double *p, const 
       double *out[8] = {a->g + a->free_rows, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
       if (dlo_call(a->obstacle, a->obstacle_work, in, out) != 0) return;
     }
+    a->done = 1;
+    for (int i = a->free_rows; i < a->rows; ++i) if (!(a->g[i] <= a->ub[i] + 1e-9)) return;
   }
   a->done = 1;
-  for (int i = a->free_rows; i < a->rows; ++i) if (!(a->g[i] <= a->ub[i] + 1e-9)) return;
   if (a->outputs == NULL) return;
   for (int i = 0; i < a->rows; ++i) a->lam_si[i] = (all_rows || i < a->free_rows ? lam[i] : 0.0) / a->lam_div[i];
   const double *in[4] = {z, p, a->lam_si, a->prof};
@@ -591,7 +592,8 @@ class UpdateOutputs:
         return self.address
 
     def collect(self, z: np.ndarray, p: np.ndarray) -> tuple[np.ndarray | None, ComputedOutputs | None]:
-        """After a converged call at (z, p): (every row's value, the outputs), each None if not evaluated."""
+        """After a converged call at (z, p): (every row's value, the outputs), each None if not evaluated (the
+        values only from the contact-free loop, which evaluates its obstacle rows)."""
         done = self._struct.done
         g = self._g[:self.rows].copy() if done >= 1 else None
         if done < 2:

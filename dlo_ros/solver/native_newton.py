@@ -121,11 +121,11 @@ typedef int (*dlo_casadi_t)(const casadi_real **arg, casadi_real **res, casadi_i
 /* What a converged update also evaluates in the same call (see UpdateOutputs in native_newton.py): the
    obstacle rows' values (contact-free loop only: the active-set loop has every row), then, if none of them
    is violated, the outputs' function (output_function.py) at (z, p, lambda_SI, prof).  A NULL function is
-   skipped.  done: out, 1 when the rows were evaluated, 2 when the outputs were as well. */
+   skipped.  done: out, bit 1 set when g holds every row's value, bit 2 when the outputs were evaluated. */
 typedef struct {
   dlo_casadi_t obstacle, outputs;
   dlo_work_t obstacle_work, outputs_work;
-  int rows, free_rows, n_out;
+  int rows, free_rows;
   const double *ub, *lam_div, *prof;
   double *g, *lam_si;
   double *out[8];
@@ -164,11 +164,10 @@ static void dlo_after_run(dlo_after *a, const double *z, const double *p, const 
     a->done = 1;
     for (int i = a->free_rows; i < a->rows; ++i) if (!(a->g[i] <= a->ub[i] + 1e-9)) return;
   }
-  a->done = 1;
   if (a->outputs == NULL) return;
   for (int i = 0; i < a->rows; ++i) a->lam_si[i] = (all_rows || i < a->free_rows ? lam[i] : 0.0) / a->lam_div[i];
   const double *in[4] = {z, p, a->lam_si, a->prof};
-  if (dlo_call(a->outputs, a->outputs_work, in, a->out) == 0) a->done = 2;
+  if (dlo_call(a->outputs, a->outputs_work, in, a->out) == 0) a->done |= 2;
 }
 
 typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int *info);
@@ -540,7 +539,7 @@ class _AfterStruct(ctypes.Structure):
 
     _fields_ = [("obstacle", ctypes.c_void_p), ("outputs", ctypes.c_void_p), ("obstacle_work", ctypes.c_void_p),
                 ("outputs_work", ctypes.c_void_p), ("rows", ctypes.c_int), ("free_rows", ctypes.c_int),
-                ("n_out", ctypes.c_int), ("ub", ctypes.c_void_p), ("lam_div", ctypes.c_void_p),
+                ("ub", ctypes.c_void_p), ("lam_div", ctypes.c_void_p),
                 ("prof", ctypes.c_void_p), ("g", ctypes.c_void_p), ("lam_si", ctypes.c_void_p),
                 ("out", ctypes.c_void_p * 8), ("done", ctypes.c_int)]
 
@@ -566,7 +565,7 @@ class UpdateOutputs:
         self._out = [np.zeros(max(r * c, 1)) for r, c in self._shapes]
         self._struct = _AfterStruct()
         st = self._struct
-        st.rows, st.free_rows, st.n_out = rows, nlp.n_free_rows, len(self._out)
+        st.rows, st.free_rows = rows, nlp.n_free_rows
         st.ub, st.lam_div, st.g, st.lam_si = (a.ctypes.data for a in (self._ub, self._div, self._g, self._lam_si))
         for i, a in enumerate(self._out):
             st.out[i] = a.ctypes.data
@@ -595,8 +594,8 @@ class UpdateOutputs:
         """After a converged call at (z, p): (every row's value, the outputs), each None if not evaluated (the
         values only from the contact-free loop, which evaluates its obstacle rows)."""
         done = self._struct.done
-        g = self._g[:self.rows].copy() if done >= 1 else None
-        if done < 2:
+        g = self._g[:self.rows].copy() if done & 1 else None
+        if not done & 2:
             return g, None
         values = [out[:r * c].reshape((r, c), order="F").copy() for out, (r, c) in zip(self._out, self._shapes)]
         return g, ComputedOutputs(z.copy(), np.array(p, dtype=float), self._lam_si[:self.rows].copy(), self._prof,

@@ -229,6 +229,8 @@ class WorkerPool(Executor):
         with self._lock:
             if self._stopped:
                 raise RuntimeError("cannot schedule new futures after the pool was stopped")
+            if self._pool is not None and self._dead_workers(self._pool):  # died while idle: not noticed yet
+                self._replace(self._generation, f"a worker process had died ({self._dead_workers(self._pool)})")
             for attempt in range(2):
                 pool, generation = self._live_pool(), self._generation
                 try:

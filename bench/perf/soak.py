@@ -2,7 +2,7 @@
 concurrent shape queries, over real DDS; RSS, latency, failures, stamp/shape agreement, model.
 
     bash scripts/dlo-env run python bench/perf/soak.py [--seconds 600] [--rate 100] [--param-every 60]
-        [--query-clients 2] [--query-rate 2] [--compile background] [--out bench/results/soak.md]
+        [--query-clients 2] [--query-rate 5] [--compile background] [--out bench/results/soak.md]
 
 The node runs the default scene with ``solver.model: auto`` in its own process and ROS domain, with
 ``--compile`` (default ``background``, the node's own default: interpreted derivatives until gcc has
@@ -11,8 +11,10 @@ process publishes the right grip's targets along a closed 3D path (±5 cm, ±0.2
 twist, one loop per 20 s) and receives the centrelines. Every ``--param-every`` s it changes
 ``string.bend_stiffness`` (0.02 ↔ 0.025 N·m²) through the parameter service; ``--query-clients`` clients
 (each its own DDS participant) call ``~/query_shape`` at ``--query-rate`` Hz each with the right grip 2–4
-cm from the current target. Every 10 s it samples the node's RSS and its diagnostics. Reported: RSS over
-time, its change after the first minute, latency target → centreline p50/p99/max, centrelines per second,
+cm from the current target. Every 10 s it samples the node's RSS, its query workers' RSS and its
+diagnostics. Reported first, the issue #35 table: stream failures (must be 0), valid queries answered
+with an empty plan (must be 0), the node's and the workers' RSS change after the first minute (flat
+within 5 %), latency p50/p99/max; then RSS over time, latency target → centreline p50/p99/max, centrelines per second,
 failures and unverified shapes, query latency and answers, and every centreline whose stamp and shape
 disagree (its right end not at the target published with that stamp by more than 1e-6 m).
 """
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import threading
 import time
@@ -82,13 +85,42 @@ class Queries(threading.Thread):
                     self.empty += 1
 
 
+def worker_rss_mb(pid: int) -> list[float]:
+    """RSS [MB] of each worker process (query and fit workers: multiprocessing's spawned children) of the
+    node ``pid``, in pid order (Linux /proc; empty elsewhere)."""
+    out = []
+    for entry in sorted((e for e in os.listdir("/proc") if e.isdigit()), key=int):
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                stat = f.read()
+            if int(stat[stat.rindex(")") + 2:].split()[1]) != pid:
+                continue
+            with open(f"/proc/{entry}/cmdline") as f:
+                if "spawn_main" not in f.read():
+                    continue
+            with open(f"/proc/{entry}/status") as f:
+                rss = next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
+            out.append(rss / 1024)
+        except (OSError, ValueError, IndexError, StopIteration):
+            continue
+    return out
+
+
+def change_after_first_minute(t: np.ndarray, mb: np.ndarray) -> str:
+    """'a → b MB (+x %)': from the first sample at t >= 60 s to the last one."""
+    after = mb[t >= 60.0]
+    if len(after) < 2:
+        return "n/a (run shorter than a minute)"
+    return f"{after[0]:.0f} → {after[-1]:.0f} MB ({(after[-1] - after[0]) / after[0] * 100:+.1f} %)"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=600.0)
     ap.add_argument("--rate", type=float, default=100.0)
     ap.add_argument("--param-every", type=float, default=60.0, help="seconds between parameter changes (0: none)")
     ap.add_argument("--query-clients", type=int, default=2)
-    ap.add_argument("--query-rate", type=float, default=2.0, help="queries per second per client")
+    ap.add_argument("--query-rate", type=float, default=5.0, help="queries per second per client")
     ap.add_argument("--compile", default="background", choices=("background", "blocking", "off"),
                     help="the node's compile parameter (default: its own default)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "soak.md"))
@@ -117,7 +149,8 @@ def main() -> None:
                 v = cl.diagnostic_values()
                 samples.append((now, proc.rss_bytes() / 2**20, cl.path_count - c0, v.get("model.order", ""),
                                 v.get("model.planar", ""), v.get("model.estimated_error_m", ""),
-                                v.get("failures", ""), v.get("unverified updates", "")))
+                                v.get("failures", ""), v.get("unverified updates", ""),
+                                worker_rss_mb(proc.pid)))
                 next_sample += 10.0
             time.sleep(max(0.0, start + k / args.rate - time.monotonic()))
         elapsed = clock()
@@ -137,11 +170,28 @@ def main() -> None:
     after = rss[[i for i, s in enumerate(samples) if s[0] >= 60.0]]
     qlat = np.concatenate([q.latency_ms for q in queries]) if queries else np.array([])
     info = machine()
+    t_s = np.array([s[0] for s in samples])
+    n_workers = max((len(s[8]) for s in samples), default=0)
+    workers = [np.array([s[8][i] if i < len(s[8]) else np.nan for s in samples]) for i in range(n_workers)]
     lines = ["# Node soak", "",
              f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, Python {info.get('python')}; git {info.get('git', '?')}.",
              f"Command: `bash scripts/dlo-env run python bench/perf/soak.py --seconds {args.seconds:g} --rate {args.rate:g} "
              f"--param-every {args.param_every:g} --query-clients {args.query_clients} "
              f"--query-rate {args.query_rate:g} --compile {args.compile}`", "",
+             "| issue #35 | value | target |", "|---|---|---|",
+             f"| stream failures | {final.get('failures')} | 0 |",
+             f"| valid queries answered with an empty plan | "
+             f"{sum(q.empty for q in queries) if queries else 'n/a'} of "
+             f"{sum(q.answered + q.empty + q.errors for q in queries)} "
+             f"({sum(q.errors for q in queries)} client errors/timeouts) | 0 |",
+             f"| node RSS after minute 1 | {change_after_first_minute(t_s, rss)} | within 5 % |"]
+    lines += [f"| query/fit worker {i + 1} RSS after minute 1 | {change_after_first_minute(t_s, w)} | within 5 % |"
+              for i, w in enumerate(workers)]
+    lines += [f"| latency target → centreline p50 / p99 / max | {np.percentile(lat, 50):.1f} / "
+              f"{np.percentile(lat, 99):.1f} / {lat.max():.0f} ms | |",
+              f"| query latency p50 / p99 / max | "
+              + (f"{np.percentile(qlat, 50):.0f} / {np.percentile(qlat, 99):.0f} / {qlat.max():.0f} ms"
+                 if len(qlat) else "n/a") + " | |", "",
              f"{k} targets in {elapsed:.0f} s ({k / elapsed:.0f}/s), {len(events)} centrelines ({len(events) / elapsed:.1f}/s); "
              f"latency target → centreline p50 {np.percentile(lat, 50):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
              f"max {lat.max():.0f} ms; failures {final.get('failures')}, unverified shapes {final.get('unverified updates')}, "
@@ -168,9 +218,10 @@ def main() -> None:
         lines.append("Parameter changes (string.bend_stiffness): " + "; ".join(
             f"t = {t:.0f} s → {b:g} ({'accepted' if ok else 'refused: ' + reason}, {ms:.0f} ms)"
             for t, b, ok, reason, ms in changes) + ".")
-    lines += ["", "| t s | RSS MB | centrelines | order | planar | estimated error m | failures | unverified |",
-              "|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {s[0]:.0f} | {s[1]:.0f} | {s[2]} | {s[3]} | {s[4]} | {s[5]} | {s[6]} | {s[7]} |" for s in samples]
+    lines += ["", "| t s | RSS MB | workers' RSS MB | centrelines | order | planar | estimated error m | failures "
+              "| unverified |", "|---|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {s[0]:.0f} | {s[1]:.0f} | {', '.join(f'{m:.0f}' for m in s[8]) or '-'} | {s[2]} | {s[3]} | "
+              f"{s[4]} | {s[5]} | {s[6]} | {s[7]} |" for s in samples]
     Path(args.out).write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

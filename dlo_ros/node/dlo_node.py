@@ -197,9 +197,9 @@ class DloNode(Node):
         self._queries_pending = 0
         self._query_pool = None
         if self._query_workers:
-            from ..solver.batch import process_pool
+            from ..solver.batch import WorkerPool  # replaces a dead or stuck worker; dies with the node
 
-            self._query_pool = process_pool(self._query_workers, background=True)
+            self._query_pool = WorkerPool(self._query_workers, background=True)
         self.get_logger().info(
             f"scene '{safe_text(scene.name)}' ({safe_text(scene.source)}): grips {self.grip_names}, "
             f"{len(problem.obstacles)} obstacle(s), frame '{safe_text(self.frame_id)}'; building the solver"
@@ -413,8 +413,10 @@ class DloNode(Node):
         problem, options = self.engine.query_scene()
         # checks beside the queries: the workers' held shape follows the stream, and auto's check due on one
         # of its updates, run in front of a query, made that query wait 0.2–0.6 s (CHANGELOG)
+        # the warm-up (no queries) builds the solver: not limited
+        timeout = (float(self.get_parameter("query_timeout").value) or None) if queries else None
         return problem, self._query_pool.submit(solve_chunk, scene_payload(problem, options), queries,
-                                                self._worker_compile, "background")
+                                                self._worker_compile, "background", timeout=timeout)
 
     @property
     def _worker_compile(self) -> str:

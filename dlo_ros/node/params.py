@@ -79,6 +79,10 @@ STATIC = (
               "Worker processes that answer ~/query_shape beside the stream, each with its own solver of the "
               "scene (they take the other cores); 0: queries are solved in the solver thread between stream "
               "updates.", read_only=True, low=0, high=16),
+    ParamSpec("query_timeout", "double", 30.0,
+              "Longest a query worker may take for one ~/query_shape [s]; past it the call answers an empty plan "
+              "(timeout) and the worker is killed and replaced. 0 = no limit.", read_only=True, low=0.0,
+              high=3600.0),
     ParamSpec("grip_names", "string_array", [],
               "Informational: the scene's grips in configuration order (the order of ~/grips/targets poses).",
               read_only=True, from_scene=True),

@@ -1,0 +1,162 @@
+"""Worker processes that recover and clean up after themselves (dlo_ros.solver.batch, #35): a worker
+killed mid-batch makes only its queries answer ``failed`` (naming the cause) and the next call runs on
+a rebuilt pool; a query past its timeout answers ``failed``/timeout and its worker is replaced; and
+no worker or resource tracker outlives a SIGKILLed parent."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from dlo_ros.scene import load_scene
+from dlo_ros.solver import make_solver
+from dlo_ros.solver.batch import TaskTimeout, WorkerPool, query_many
+from random_scenes import targets_near
+from support.node import wait_until
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("default_cable")
+
+
+def reference_answers(scene, targets):
+    """Independent answers: one in-process solver, each query from the scene's held shape."""
+    solver = make_solver(scene.problem, scene.options, compile="off", checks="sync")
+    assert solver.solve().ok
+    return [solver.solve(t, commit=False) for t in targets]
+
+
+def assert_answers(batch, single):
+    assert [r.status for r in batch] == [r.status for r in single]
+    for a, b in zip(batch, single):
+        if a.ok:
+            np.testing.assert_allclose(a.points, b.points, atol=1e-9)
+
+
+def test_a_worker_killed_mid_batch_fails_its_queries_and_the_pool_is_rebuilt(scene, monkeypatch):
+    monkeypatch.setenv("DLO_NO_COMPILE", "1")  # inherited by the spawned workers
+    targets = targets_near(scene.problem, 24, radius=0.05)
+    pool = WorkerPool(2)
+    try:
+        batch: list = []
+        call = threading.Thread(target=lambda: batch.extend(query_many(scene.problem, scene.options, targets,
+                                                                       pool, chunks=2)))
+        call.start()
+        pids = wait_until(lambda: pool.worker_pids() if len(pool.worker_pids()) == 2 else None, 60.0)
+        assert pids, "the workers never started"
+        time.sleep(0.5)  # inside the build or the first queries: the batch takes seconds interpreted
+        os.kill(pids[0], signal.SIGKILL)
+        call.join(60.0)
+        assert not call.is_alive(), "query_many hung on a dead worker"
+        assert len(batch) == len(targets)
+        failed = [r for r in batch if r.status == "failed" and "SIGKILL" in r.message]
+        assert failed, [r.message for r in batch]
+        assert all(f"pid {pids[0]}" in r.message for r in failed)
+        # the next call: a new pool, every answer equal to the in-process solver's
+        again = query_many(scene.problem, scene.options, targets[:6], pool, chunks=2)
+        assert pool.restarts == 1 and pids[0] not in pool.worker_pids()
+        assert_answers(again, reference_answers(scene, targets[:6]))
+    finally:
+        pool.stop()
+
+
+def test_a_query_past_its_timeout_answers_timeout_and_its_worker_is_replaced(scene, monkeypatch):
+    monkeypatch.setenv("DLO_NO_COMPILE", "1")
+    targets = targets_near(scene.problem, 4, radius=0.05)
+    pool = WorkerPool(1)
+    try:
+        # a stuck task through the public seam: its worker is killed after 1 s
+        assert pool.submit(os.getpid).result(60) > 0
+        stuck_pid = pool.worker_pids()[0]
+        t0 = time.monotonic()
+        with pytest.raises(TaskTimeout, match="timeout"):
+            pool.submit(time.sleep, 600.0, timeout=1.0).result(30)
+        assert time.monotonic() - t0 < 10.0
+        assert wait_until(lambda: not os.path.exists(f"/proc/{stuck_pid}") or _zombie(stuck_pid), 10.0)
+        # a real query batch past its timeout (a fresh worker builds its solver first: seconds)
+        t0 = time.monotonic()
+        late = query_many(scene.problem, scene.options, targets, pool, timeout=0.05)
+        assert time.monotonic() - t0 < 10.0
+        assert [r.status for r in late] == ["failed"] * len(targets)
+        assert all(r.message.startswith("timeout:") for r in late), [r.message for r in late]
+        # then answered on a replaced worker
+        assert_answers(query_many(scene.problem, scene.options, targets, pool), reference_answers(scene, targets))
+        assert pool.restarts == 2
+    finally:
+        pool.stop()
+
+
+def _zombie(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            stat = f.read()
+    except OSError:
+        return True
+    return stat[stat.rindex(")") + 2] == "Z"
+
+
+PARENT = """
+import os, sys, threading, time
+from dlo_ros.solver.batch import {factory}
+
+if __name__ == "__main__":
+    pool = {factory}(2)
+    def work():  # from a thread that ends: PR_SET_PDEATHSIG follows the creating thread
+        futures = [pool.submit(time.sleep, 0.5) for _ in range(2)]
+        [f.result() for f in futures]
+        pool.submit(time.sleep, 600.0)  # one worker busy, one idle when the parent dies
+    t = threading.Thread(target=work)
+    t.start()
+    t.join()
+    time.sleep(1.0)
+    print("ready", flush=True)
+    time.sleep(600)
+"""
+
+
+def children_of(pid: int) -> list[int]:
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    stat = f.read()
+            except OSError:
+                continue
+            if int(stat[stat.rindex(")") + 2:].split()[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("factory", ["WorkerPool", "process_pool"])
+def test_no_worker_or_resource_tracker_outlives_a_sigkilled_parent(tmp_path, factory):
+    script = tmp_path / "parent.py"
+    script.write_text(PARENT.format(factory=factory))
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    children: list[int] = []
+    try:
+        assert parent.stdout.readline().strip() == "ready"
+        children = children_of(parent.pid)
+        names = {pid: open(f"/proc/{pid}/cmdline").read().replace("\0", " ") for pid in children}
+        assert len(children) == 3, names  # two workers and multiprocessing's resource tracker
+        assert any("resource_tracker" in n for n in names.values()), names
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(10)
+        deadline = time.monotonic() + 5.0
+        while (left := [p for p in children if not _zombie(p)]) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not left, {p: names[p] for p in left}
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+        for pid in children:  # whatever survived (the test failed): not left running
+            if not _zombie(pid):
+                os.kill(pid, signal.SIGKILL)

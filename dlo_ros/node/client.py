@@ -26,9 +26,12 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Callable, Iterable, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .query_reply import QueryAnswer
 
 #: Domain ids that keep Fast DDS's UDP ports valid (0 is left to interactive use).
 DOMAIN_IDS = tuple(range(1, 102)) + tuple(range(215, 233))
@@ -439,15 +442,27 @@ class DloClient:
         return future.result()
 
     def query(self, start: tuple, goal: tuple, *, frame_id: str | None = None, timeout: float = 30.0):
-        """Call ~/query_shape; returns (points, orientations) of the plan (empty arrays when empty)."""
+        """Call ~/query_shape; returns (points, orientations) of a verified shape, empty arrays for any
+        other answer (see :meth:`query_shape` for which)."""
+        answer = self.query_shape(start, goal, frame_id=frame_id, timeout=timeout)
+        if answer.verified:
+            return answer.points, answer.orientations
+        return np.zeros((0, 3)), np.zeros((0, 4))
+
+    def query_shape(self, start: tuple, goal: tuple, *, frame_id: str | None = None,
+                    timeout: float = 30.0) -> "QueryAnswer":
+        """Call ~/query_shape; the reply decoded (``query_reply.decode``): its ``status`` is 'verified'
+        (a verified, stable equilibrium), 'unverified' (a shape, not verified), 'no_equilibrium',
+        'unstable', 'failed', 'invalid', 'busy' or 'not_ready' (msg_docs/node.md)."""
         from .conversions import pose_stamped
+        from .query_reply import decode
 
         frame = self.frame_id if frame_id is None else frame_id
         req = self._msgs["GetPlan"].Request()
         req.start = pose_stamped(start[0], start[1], frame, 0)
         req.goal = pose_stamped(goal[0], goal[1], frame, 0)
         resp = self._call(self._query, req, timeout)
-        return self._path_to_arrays(resp.plan)
+        return decode(resp.plan.header.frame_id, *self._path_to_arrays(resp.plan))
 
     @property
     def _cloud_pub(self):

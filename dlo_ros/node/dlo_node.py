@@ -48,6 +48,7 @@ from visualization_msgs.msg import MarkerArray
 from ..model.problem import GripPose, Problem
 from . import conversions as conv
 from . import params as P
+from . import query_reply
 from .engine import ShapeEngine, Update, build_solver, target_miss, options_with_output_points
 from .signals import exit_on_second_signal, node_starting, terminate_children
 from .health import Health, model_text, new_model_changes
@@ -351,24 +352,28 @@ class DloNode(Node):
             for name, ps, label in zip(self.grip_names, (request.start, request.goal), ("start", "goal")):
                 poses[name] = self._checked(ps.pose, ps.header.frame_id, f"query_shape.{label} ({name})")
         except TargetError as exc:
-            return self._query_failed(response, f"{exc}")
+            return self._query_failed(response, f"{exc}", "invalid")
         if not self.engine.ready:
-            return self._query_failed(response, f"the solver is not ready ({self.engine.state})")
+            return self._query_failed(response, f"the solver is not ready ({self.engine.state})", "not_ready")
         if self._queries_pending >= QUERIES_PER_WORKER * max(self._query_workers, 1):
             return self._query_failed(response, f"busy: {self._queries_pending} queries are being answered; "
-                                                "try again")  # bounded: a flood never builds a queue
+                                                "try again", "busy")  # bounded: a flood never builds a queue
         self._queries_pending += 1
         try:
             result = await self._await_job(self._query_job(poses))
         except Exception as exc:  # noqa: BLE001 - cancelled at shutdown, or a solver exception
-            return self._query_failed(response, f"{type(exc).__name__}: {exc}")
+            return self._query_failed(response, f"{type(exc).__name__}: {exc}", "failed")
         finally:
             self._queries_pending -= 1
-        if not result.ok:
-            return self._query_failed(response, f"no equilibrium ({result.status}): {result.message}")
-        if result.stable is False:
+        # the reply's status is in plan.header.frame_id (dlo_ros/node/query_reply.py, msg_docs/node.md)
+        kind = query_reply.result_kind(result)
+        if kind == "unstable":
             return self._query_failed(
-                response, f"the equilibrium found is unstable (min eigenvalue {result.min_eigenvalue:.3g})")
+                response, f"the equilibrium found is unstable (min eigenvalue {result.min_eigenvalue:.3g})", kind)
+        if kind != query_reply.VERIFIED:
+            if query_reply.carries_shape(kind):  # the shape, marked as not verified
+                response.plan = conv.result_to_path(result, query_reply.reply_frame(self.frame_id, kind), now)
+            return self._query_failed(response, f"{kind} ({result.status}): {result.message}", kind)
         response.plan = conv.result_to_path(result, self.frame_id, now)
         self.health.query(True)
         return response
@@ -423,11 +428,15 @@ class DloNode(Node):
         """Query workers never start gcc: compiled derivatives only from the cache (or none when 'off')."""
         return "off" if self.compile_mode == "off" else "cached"
 
-    def _query_failed(self, response, reason: str):
+    def _query_failed(self, response, reason: str, kind: str):
+        """A reply that is not a verified shape: ``plan.header.frame_id`` gets the ``#<kind>`` suffix
+        (query_reply.py); its poses, if any, are already in ``response.plan``."""
+        response.plan.header.frame_id = query_reply.reply_frame(self.frame_id, kind)
         reason = safe_text(reason)
         self.health.query(False, reason)
         # throttled per call site by rclpy (a client can call the service in a loop); counted in the diagnostics
-        self.get_logger().warning(f"query_shape: empty plan: {reason}",
+        what = "unverified plan" if response.plan.poses else "empty plan"
+        self.get_logger().warning(f"query_shape: {what}: {reason}",
                                   throttle_duration_sec=max(float(self.health.throttle_s), 1e-9))
         return response
 

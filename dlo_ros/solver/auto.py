@@ -80,6 +80,7 @@ from ..model.rotations import TANGENT_X, euler_from_frame, farthest_pole, frame_
 from .nlp import choose_reference_frame, has_point_moments, planarity_violation
 from .options import SolverOptions
 from .protocol import Solver
+from .query_verify import QueryBudget, verified_answer
 from . import self_contact as SC
 from .result import ShapeResult
 from .shape_solver import IPOPT_LOCK, ShapeSolver, with_checked_poses
@@ -527,7 +528,7 @@ class AutoShapeSolver:
                     self._compile_ahead(other)  # it answers every such query: compiled, as the stream
                     # the poses are checked, and in the plane if ``other`` is planar (above)
                     answer = other.solve({g.name: g.pose for g in problem.grips}, commit=False, checked=True)
-                    return self._finish(answer, t0, [], choice=richer, solver=other)
+                    return self._refine_query(problem, answer, t0, richer, other)
                 reasons = ([f"targets left the plane ({why}): full model"] if why else []) + (
                     [f"obstacle(s) {sorted(entering)} came within reach"] if entering else []) + (
                     [stretch_why] if stretch_why else [])
@@ -556,10 +557,12 @@ class AutoShapeSolver:
             if result.status == "ok" and result.stable is False:
                 result, answered_by = self._richer_for_stability(problem, result, notes, commit)
                 if answered_by is not None:  # a query answered by the next order's model
-                    return self._finish(result, t0, [], choice=answered_by[0], solver=answered_by[1])
+                    return self._refine_query(problem, result, t0, *answered_by)
             # an unverified result (residual over the tolerance) is committed as the warm start and checked:
             # the check escalates the order
-            if result.status not in ("ok", "unverified") or not commit:
+            if not commit:
+                return self._refine_query(problem, result, t0)
+            if result.status not in ("ok", "unverified"):
                 return self._finish(result, t0, notes)
             approach = self._self_approach(problem)
             if approach:  # the shape came within reach of itself: solve this update again with self-contact
@@ -653,6 +656,49 @@ class AutoShapeSolver:
         return self.inner.solve(poses, warm=True, commit=True, checked=True), None
 
     # ---- checks -------------------------------------------------------------------------------------
+    def _refine_query(self, problem: Problem, result: ShapeResult, t0: float,
+                      choice: ModelChoice | None = None, solver: ShapeSolver | None = None) -> ShapeResult:
+        """A query's answer (``commit=False``; ``result`` of the model ``choice`` on ``solver``, by
+        default the stream's).  One whose residual is over the tolerance ('unverified') is refined as a
+        cold solve's is (``_check_now``): the checks run on the query's own shape and escalate (3D when
+        the planar shape is unstable in 3D, the next order, more obstacle samples) until they pass, on
+        pooled copies, never the streaming model.  Stops at ``solver.update_time_limit`` from ``t0``;
+        'ok' only when the checks passed (``query_verify.verified_answer``)."""
+        if result.status != "unverified":
+            return self._finish(result, t0, [], choice=choice, solver=solver)
+        self._wait_for_check()  # a running check may hold the pooled models the refinement uses
+        budget = QueryBudget(self.options.update_time_limit, t0)
+        base = choice or self.choice
+        choice = replace(base, reasons=list(base.reasons))
+        # the same answer again on a copy that keeps its state (the checks start from it); the copy is
+        # tagged apart from the stream's model, which a query never touches
+        solver = self._solver_for(choice, problem, stream=False, source=solver or self.inner, tag="query")
+        poses = {g.name: g.pose for g in self._reduced(choice, problem)[0].grips}
+        answer = solver.solve(poses, warm=True, commit=True, checked=True)
+        estimate, stopped = None, ""
+        for _ in range(2 * len(ORDERS) + 2):
+            if answer.status not in ("ok", "unverified"):
+                stopped = f"the model {choice.order}/{choice.samples} failed ({answer.message})"
+                answer = result  # the previous model's shape stays the answer
+                break
+            result = answer
+            if budget.expired():
+                stopped = budget.reason()
+                break
+            verdict = self._evaluate(self._snapshot(problem, poses, answer, solver, choice), False, lower=False)
+            if verdict.choice is None:
+                estimate = verdict.estimate
+                break
+            choice = replace(verdict.choice, reasons=list(choice.reasons) + [f"query: {verdict.reason}"])
+            same = choice.key() == self.choice.key()  # never the stream's own model
+            solver = self._solver_for(choice, problem, stream=False, source=solver, tag="query" if same else "")
+            poses = {g.name: g.pose for g in self._reduced(choice, problem)[0].grips}
+            answer = solver.solve(poses, warm=True, commit=True, checked=True)
+        else:
+            stopped = "the model checks kept escalating"
+        answer = verified_answer(answer, estimate, self.tolerance, stopped)
+        return self._finish(answer, t0, [], choice=choice, solver=solver, estimate=estimate)
+
     def _check_now(self, snap: _Snapshot, result: ShapeResult, notes: list[str]) -> ShapeResult:
         """Synchronous checks: escalate and re-solve while one fails."""
         for _ in range(2 * len(ORDERS) + 2):
@@ -669,9 +715,12 @@ class AutoShapeSolver:
             snap = self._snapshot(snap.problem, snap.poses, result)
         return result
 
-    def _snapshot(self, problem: Problem, poses: dict, result: ShapeResult) -> _Snapshot:
-        """What a check needs of the streaming model's committed ``result`` (a copy, for another thread)."""
-        return _Snapshot(self.inner, self.inner.snapshot(), replace(self.choice, reasons=list(self.choice.reasons)),
+    def _snapshot(self, problem: Problem, poses: dict, result: ShapeResult, solver: ShapeSolver | None = None,
+                  choice: ModelChoice | None = None) -> _Snapshot:
+        """What a check needs of the streaming model's committed ``result`` (a copy, for another thread),
+        or of a query's: ``result`` committed on ``solver``, a model of ``choice``."""
+        solver, choice = solver or self.inner, choice or self.choice
+        return _Snapshot(solver, solver.snapshot(), replace(choice, reasons=list(choice.reasons)),
                          problem, poses, result.points.copy(),
                          max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
                          self._generation, float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)),
@@ -722,11 +771,12 @@ class AutoShapeSolver:
                 self._compile_ahead(solver)
             self._job_keys = self._job_keys - {("",) + choice.key()}  # built: a switch to it need not wait
 
-    def _evaluate(self, snap: _Snapshot, prepare: bool) -> _Verdict:
+    def _evaluate(self, snap: _Snapshot, prepare: bool, lower: bool = True) -> _Verdict:
         """One pass of the a-posteriori checks on a snapshot; the first that fails decides.
 
         prepare: also create the IPOPT solvers of the model it escalates to (background checks, so the
-        streaming thread's switch builds nothing)."""
+        streaming thread's switch builds nothing).  lower: try the next lower order (once per model;
+        a query's checks do not, so that they leave the stream's record of tries alone)."""
         tol, choice, problem = self.tolerance, snap.choice, snap.problem
         verdict = _Verdict(snap, estimate=choice.estimated_error_m)
         order_error = choice.order_error_m
@@ -763,7 +813,7 @@ class AutoShapeSolver:
             # at the highest order the estimate stays the one that led there (order 24 against 32): the
             # best available, and conservative; model.tolerance_met compares it with the tolerance
             lower_key = replace(choice, order=ORDERS[i - 1]).key() if i > 0 else None
-            if verdict.choice is None and lower_key is not None and lower_key not in self._lower_tried:
+            if verdict.choice is None and lower and lower_key is not None and lower_key not in self._lower_tried:
                 # the lowest order that meets the tolerance: try the next lower one once per model
                 # (tol/4, not tol/2: a margin against switching back and forth)
                 self._lower_tried.add(lower_key)
@@ -867,7 +917,7 @@ class AutoShapeSolver:
 
     # ---- plumbing -----------------------------------------------------------------------------------
     def model_summary(self, choice: ModelChoice | None = None, solver: ShapeSolver | None = None,
-                      changed: tuple[str, ...] = ()) -> ModelSummary:
+                      changed: tuple[str, ...] = (), estimate: float | None = None) -> ModelSummary:
         """The ``model`` object of a result: the streaming model, or ``choice``/``solver`` (a query's).
 
         estimated_error_m: the basis-order estimate of the last check of this model (the change of the
@@ -875,29 +925,33 @@ class AutoShapeSolver:
         deepest cut into an obstacle between its samples, None until the first check has finished.  It
         does not include the a-priori bounds of the dropped gravity (≤ δ/10) and stretch (≤ δ/2).  In
         background mode it describes a solve up to recheck_every updates earlier: checked_updates_ago
-        says how many (0: this very shape).  ``changed``: the changes of model this very solve made."""
+        says how many (0: this very shape).  ``changed``: the changes of model this very solve made.
+        ``estimate``: a refined query's own checked estimate (``_refine_query``): checked, 0 updates ago."""
         streaming = choice is None
         c, s = (self.choice, self.inner) if streaming else (choice, solver)
         checked = streaming and not self._unchecked
         est = c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None
+        if estimate is not None and np.isfinite(estimate):
+            checked, est = True, float(estimate)
         inner = s.model_summary()
         return ModelSummary(
             planar=c.planar, twist=c.twist, stretch=c.stretch, gravity=c.gravity, order=c.order,
             obstacles=len(c.obstacles), obstacle_samples=c.samples, estimated_error_m=est,
             tolerance_m=self.tolerance, tolerance_met=None if est is None else bool(est <= self.tolerance),
             variables=s.model.layout.size, auto=True, checked=checked, checks=self.checks,
-            checked_updates_ago=self._updates - self._checked_update if checked else None,
+            checked_updates_ago=(0 if estimate is not None else self._updates - self._checked_update)
+            if checked else None,
             reasons=tuple(c.reasons), changes=tuple(r for _, r in self.changes),
             rotation=inner.rotation, elements=inner.elements, breakpoints=inner.breakpoints,
             self_contact_pairs=inner.self_contact_pairs, changed=changed,
         )
 
     def _finish(self, result: ShapeResult, t0: float, notes: list[str], choice: ModelChoice | None = None,
-                solver: ShapeSolver | None = None) -> ShapeResult:
+                solver: ShapeSolver | None = None, estimate: float | None = None) -> ShapeResult:
         """Attach the model (the streaming one, or the query's ``choice``/``solver``) and the time; give
         contact forces the scene's obstacle indices."""
         c = choice or self.choice
-        result.model = self.model_summary(choice, solver, tuple(notes))
+        result.model = self.model_summary(choice, solver, tuple(notes), estimate)
         result.solve_time_ms = (time.perf_counter() - t0) * 1e3
         if result.ok and result.contact_forces and len(c.obstacles) != len(self.problem.obstacles):
             result.contact_forces = {c.obstacles[i]: f for i, f in result.contact_forces.items() if i < len(c.obstacles)}

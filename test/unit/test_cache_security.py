@@ -90,13 +90,14 @@ def _planted(tmp_path: Path, marker: Path) -> Path:
     source = tmp_path / "planted.c"
     source.write_text(PLANTED_C)
     out = tmp_path / "planted.so"
-    subprocess.run([compiled.compiler(), "-shared", "-fPIC", f'-DMARKER="{marker}"', "-o", str(out),
-                    str(source)], check=True, capture_output=True)
+    subprocess.run([compiled.compiler(), "-shared", "-fPIC", f'-DMARKER="{marker}"', "-o",
+                    str(out), str(source)], check=True, capture_output=True)
     return out
 
 
 def _plant(planted: Path, lib: Path, with_record: bool) -> None:
-    """Put ``planted`` at ``lib``; ``with_record``: also a matching record (as if this user wrote it)."""
+    """Put ``planted`` at ``lib`` (a new file); ``with_record``: also a matching record (as if this
+    user wrote it)."""
     data = planted.read_bytes()
     lib.unlink(missing_ok=True)
     lib.write_bytes(data)
@@ -105,7 +106,8 @@ def _plant(planted: Path, lib: Path, with_record: bool) -> None:
 
 
 def _record_matches(lib: Path) -> bool:
-    """An independent check of an entry: a regular file whose sha256 is the one its record names."""
+    """An independent check of an entry: a regular file whose sha256 is the one its record
+    names."""
     st = os.lstat(lib)
     words = Path(f"{lib}.sha256").read_text().split()
     return stat.S_ISREG(st.st_mode) and words == [hashlib.sha256(lib.read_bytes()).hexdigest(),
@@ -124,16 +126,15 @@ def _assert_answers(solver, interpreted_points) -> None:
 
 def test_a_planted_library_is_never_run_and_is_rebuilt(built, tmp_path, monkeypatch,
                                                        interpreted_points):
-    """Compiled into the exact path the solver loads, without a matching record: its constructor never
-    runs; a cached solver goes interpreted, a compiling one rebuilds the entry."""
+    """Compiled into the exact path the solver loads, without a matching record: its constructor
+    never runs; a cached solver goes interpreted, a compiling one rebuilds the entry."""
     cache = _copy(built, tmp_path, monkeypatch)
     marker = tmp_path / "marker"
     lib = _kkt_free(cache)
     _plant(_planted(tmp_path, marker), lib, with_record=False)
-    fn_lib = compiled.library_path(ShapeSolver(_problem(), PLANAR, compile="off").nlp.kkt_free_split_fn)
-    assert fn_lib == lib  # the path the solver would load
-    assert compiled.cached_library(
-        ShapeSolver(_problem(), PLANAR, compile="off").nlp.kkt_free_split_fn) is None
+    fn = ShapeSolver(_problem(), PLANAR, compile="off").nlp.kkt_free_split_fn
+    assert compiled.library_path(fn) == lib  # the path the solver would load
+    assert compiled.cached_library(fn) is None
     with warnings.catch_warnings(record=True) as record:
         warnings.simplefilter("always")
         cached = ShapeSolver(_problem(), PLANAR, compile="cached")
@@ -194,7 +195,7 @@ def _symlink(lib: Path, tmp_path: Path) -> None:
     real = tmp_path / "elsewhere.so"
     shutil.copyfile(lib, real)
     lib.unlink()
-    lib.symlink_to(real)  # the record still matches the target's bytes: a symlink is refused anyway
+    lib.symlink_to(real)  # the record matches the target's bytes: a symlink is refused anyway
 
 
 def _foreign(lib: Path, tmp_path: Path) -> None:
@@ -202,7 +203,8 @@ def _foreign(lib: Path, tmp_path: Path) -> None:
     source = tmp_path / "foreign.c"
     source.write_text("int dlo_something_else(void) { return 1; }\n")
     out = tmp_path / "foreign.so"
-    subprocess.run([compiled.compiler(), "-shared", "-fPIC", "-o", str(out), str(source)], check=True)
+    subprocess.run([compiled.compiler(), "-shared", "-fPIC", "-o", str(out), str(source)],
+                   check=True)
     _plant(out, lib, with_record=True)
 
 
@@ -332,5 +334,25 @@ def test_the_cli_on_an_unsafe_cache_answers_with_one_warning_and_no_traceback(tm
                          capture_output=True, text=True, env=env, timeout=600)
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in run.stderr
-    assert run.stderr.count("compiled-code cache") == 1 and "writable by group or others" in run.stderr
+    assert run.stderr.count("compiled-code cache") == 1
+    assert "writable by group or others" in run.stderr
     assert os.listdir(cache) == []
+
+
+def test_without_proc_the_checked_bytes_are_loaded_from_a_private_copy(tmp_path, monkeypatch):
+    """Where /proc/self/fd is missing, the descriptor's bytes are copied into a private temporary
+    directory, loaded from there, and the copy removed; the function answers."""
+    import tempfile
+
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path / "cache"))
+    private = tmp_path / "tmp"
+    private.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(private))
+    real_exists = os.path.exists
+    monkeypatch.setattr(os.path, "exists",
+                        lambda p: False if str(p).startswith("/proc/self/fd/") else real_exists(p))
+    native, ok = compiled.compiled(_sine())
+    assert ok and isinstance(native, compiled.NativeFunction)
+    np.testing.assert_allclose(native(np.array([0.3, 1.0]))[0].ravel(), np.sin([0.3, 1.0]))
+    assert _record_matches(compiled.library_path(_sine()))
+    assert list(private.iterdir()) == []  # the compile's and the load's temporary files are gone

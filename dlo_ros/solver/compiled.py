@@ -257,6 +257,8 @@ def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = 
             if subprocess.run(cmd, capture_output=True, text=True).returncode != 0:
                 return False
             return cache_store.store(lib, tmp_lib.read_bytes())
-    except OSError as e:  # the temporary directory is full or unwritable
-        cache_store.warn_once(lib.parent, f"C cannot be generated ({e.strerror or e})")
+    except (OSError, RuntimeError) as e:  # the temporary directory is full or unwritable
+        # (CasADi's code generator reports a failed write as RuntimeError)
+        reason = getattr(e, "strerror", None) or e
+        cache_store.warn_once(lib.parent, f"C cannot be generated ({reason})")
         return False

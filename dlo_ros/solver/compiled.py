@@ -1,9 +1,11 @@
 """Compile CasADi functions to C once and cache the shared objects on disk.
 
-``compiled(fn)`` loads ``<cache>/<name>_<fingerprint>.so``; only when that file is missing is C
-generated for ``fn`` and compiled (gcc, ``FLAGS``).  The cache lives in $DLO_CACHE_DIR, else
-$XDG_CACHE_HOME/dlo_ros, else ~/.cache/dlo_ros.  Without a C compiler the original (interpreted)
-function is returned, so everything still works, only slower.
+``compiled(fn)`` loads ``<cache>/<name>_<fingerprint>.so``; only when that file is missing or
+refused is C generated for ``fn`` and compiled (gcc, ``FLAGS``).  The cache lives in
+$DLO_CACHE_DIR, else $XDG_CACHE_HOME/dlo_ros, else ~/.cache/dlo_ros.  Every load and write goes
+through ``cache_store`` (owner, mode and sha256 checks; atomic writes).  Without a C compiler, or
+with an unsafe or unwritable cache, the original (interpreted) function is returned, so
+everything still works, only slower.
 
 The fingerprint (see ``fingerprint``) identifies the function without generating its C, so a cache
 look-up costs an evaluation, never a code generation (bench/results/compile_cost.md has the costs).
@@ -23,17 +25,17 @@ import ctypes
 import casadi as ca
 import numpy as np
 
+from . import cache_store
+from .cache_store import UnusableLibrary, cache_dir
+
+__all__ = ["FLAGS", "COMPILER_LOCK", "InterpretedFunction", "NativeFunction", "UnusableLibrary",
+           "build_library", "cache_dir", "cached_library", "compiled", "compiler", "fingerprint",
+           "library_path", "load_native"]
+
 
 #: gcc's flags.  The assembled KKT functions compile in about the same time at -O1 and -O3, and run
 #: faster at -O3 (bench/results/compile_cost.md); the flattened ones took minutes at any level.
 FLAGS = ("-O3",)
-
-
-def cache_dir() -> Path:
-    root = os.environ.get("DLO_CACHE_DIR")
-    if root:
-        return Path(root)
-    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "dlo_ros"
 
 
 def compiler() -> str | None:
@@ -49,8 +51,9 @@ class NativeFunction:
     """
 
     def __init__(self, lib_path: Path, fn: ca.Function):
-        self._lib = ctypes.CDLL(str(lib_path))
+        """UnusableLibrary if ``cache_store.load`` refuses ``lib_path`` (nothing of it was run)."""
         name = fn.name()
+        self._lib = cache_store.load(lib_path, (name, f"{name}_work"))
         self._fn = getattr(self._lib, name)
         self._work_fn = getattr(self._lib, f"{name}_work")
         sz = [ctypes.c_longlong() for _ in range(4)]
@@ -141,12 +144,21 @@ def library_path(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path:
 
 
 def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | None:
-    """Path of the compiled library of ``fn`` if it is already in the cache, else None (no compiling,
-    no C generated: milliseconds)."""
+    """Path of the compiled library of ``fn`` if the cache holds it and ``cache_store`` would load
+    it (directory, owner, mode and sha256 checked), else None (no compiling, no C generated)."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
     lib = library_path(fn, flags)
-    return lib if lib.exists() else None
+    return lib if cache_store.is_verified(lib) else None
+
+
+def load_native(lib: Path, fn: ca.Function) -> NativeFunction | None:
+    """``fn``'s compiled library ``lib`` if it is in the cache and passes every check, else
+    None."""
+    try:
+        return NativeFunction(lib, fn)
+    except UnusableLibrary:
+        return None
 
 
 _SOURCE_DIGEST: bytes | None = None
@@ -215,39 +227,38 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = FLAGS, nice: int = 0, lib
     cc = compiler()
     if cc is None or os.environ.get("DLO_NO_COMPILE"):
         return InterpretedFunction(fn), False
-    name = fn.name()
     lib = lib or library_path(fn, flags)
-    if not lib.exists():
+    native = load_native(lib, fn)
+    if native is None:  # missing, damaged or refused: (re)build it
         with COMPILER_LOCK:  # one compiler at a time in this process
-            return _compile_locked(fn, cc, flags, nice, lib, name, extra_source, also)
-    return NativeFunction(lib, fn), True
+            native = load_native(lib, fn)  # another thread may have built it meanwhile
+            if native is None and build_library(fn, lib, cc, flags, nice, extra_source, also):
+                native = load_native(lib, fn)
+    return (native, True) if native is not None else (InterpretedFunction(fn), False)
 
 
 def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = FLAGS, nice: int = 0,
                   extra_source: str = "", also: tuple[ca.Function, ...] = ()) -> bool:
     """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile it to
-    the shared object ``lib`` and put it in place atomically (concurrent processes never load a
-    half-written file); False if the compiler fails.  Callers hold COMPILER_LOCK."""
-    lib.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        source = Path(tmp, f"{fn.name()}.c")
-        source.write_bytes(_generate(fn, tmp, also) + extra_source.encode())
-        tmp_lib = Path(tmp, lib.name)
-        cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(source), "-lm"]
-        if nice and shutil.which("nice"):
-            cmd = ["nice", "-n", str(nice), *cmd]
-        if subprocess.run(cmd, capture_output=True, text=True).returncode != 0:
-            return False
-        partial = lib.with_suffix(f".{os.getpid()}.tmp")
-        shutil.copyfile(tmp_lib, partial)
-        os.replace(partial, lib)
-    return True
-
-
-def _compile_locked(fn: ca.Function, cc: str, flags: tuple[str, ...], nice: int, lib: Path, name: str,
-                    extra_source: str = "",
-                    also: tuple[ca.Function, ...] = ()) -> tuple[NativeFunction | InterpretedFunction, bool]:
-    # another thread may have built it while this one waited
-    if not lib.exists() and not build_library(fn, lib, cc, flags, nice, extra_source, also):
-        return InterpretedFunction(fn), False
-    return NativeFunction(lib, fn), True
+    the shared object ``lib`` in a private temporary directory and store it with its sha256 record
+    (``cache_store.store``: atomic, 0600; concurrent processes never load a half-written file);
+    False if the cache is unsafe or unwritable (one warning) or the compiler fails.  Callers hold
+    COMPILER_LOCK."""
+    if not cache_store.writable_dir(lib.parent):  # before spending a compile on it
+        return False
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            source = Path(tmp, f"{fn.name()}.c")
+            source.write_bytes(_generate(fn, tmp, also) + extra_source.encode())
+            tmp_lib = Path(tmp, lib.name)
+            cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(source), "-lm"]
+            if nice and shutil.which("nice"):
+                cmd = ["nice", "-n", str(nice), *cmd]
+            if subprocess.run(cmd, capture_output=True, text=True).returncode != 0:
+                return False
+            return cache_store.store(lib, tmp_lib.read_bytes())
+    except (OSError, RuntimeError) as e:  # the temporary directory is full or unwritable
+        # (CasADi's code generator reports a failed write as RuntimeError)
+        reason = getattr(e, "strerror", None) or e
+        cache_store.warn_once(lib.parent, f"C cannot be generated ({reason})")
+        return False

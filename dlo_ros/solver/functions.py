@@ -32,7 +32,8 @@ import casadi as ca
 import numpy as np
 
 from . import native_newton
-from .compiled import InterpretedFunction, NativeFunction, compiled, compiler, library_path
+from .compiled import (InterpretedFunction, NativeFunction, compiled, compiler, library_path,
+                       load_native)
 from .nlp import StringNLP
 from .output_function import OutputFunction
 
@@ -129,9 +130,10 @@ class NlpFunctions:
         """Swap in the library ``lib`` of the function ``name`` if it is in the cache (for the contact-free
         function: with its Newton loop's library); False if it is not there yet."""
         native = native_newton.cached(self.nlp, kkt_lib=lib) if name == "kkt_free" else None
-        if not lib.exists() or (native is None and name == "kkt_free"):
+        own = load_native(lib, fn)  # checked by cache_store: None if missing or refused
+        if own is None or (native is None and name == "kkt_free"):
             return False
-        self._install(name, NativeFunction(lib, fn), fn, lib, native)
+        self._install(name, own, fn, lib, native)
         return True
 
     def _install(self, name: str, native, fn: ca.Function, lib, loop) -> None:

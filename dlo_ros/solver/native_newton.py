@@ -52,6 +52,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .cache_store import UnusableLibrary, load as load_library
 from .compiled import COMPILER_LOCK, build_library, cache_dir, compiler, fingerprint
 from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START,
                   NEWTON_CHORD_STEPS, NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
@@ -607,7 +608,8 @@ class NativeNewton:
     re-entrant per instance: callers serialise calls (ShapeSolver holds a lock)."""
 
     def __init__(self, lib_path: Path, n: int, nf: int, n_p: int, node_map: NodeBlocks):
-        self._lib = ctypes.CDLL(str(lib_path))
+        # checked by cache_store (UnusableLibrary if refused)
+        self._lib = load_library(lib_path, ("dlo_newton_run",))
         self._run = self._lib.dlo_newton_run
         vp, ip = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)
         self._run.restype = ctypes.c_int
@@ -669,23 +671,30 @@ def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | Non
     if cc is None or os.environ.get("DLO_NO_COMPILE"):
         return None
     lib = library_path(nlp.kkt_free_split_fn, kkt_lib)
-    if not lib.exists():
+    loop = _instance(nlp, lib)
+    if loop is None:  # missing, damaged or refused: (re)build it
         with COMPILER_LOCK:
-            if not lib.exists() and not _compile(nlp.kkt_free_split_fn, nlp.residual_free_fn, cc, lib, nice):
-                return None
-    return _instance(nlp, lib)
+            loop = _instance(nlp, lib)
+            fn, residual = nlp.kkt_free_split_fn, nlp.residual_free_fn
+            if loop is None and _compile(fn, residual, cc, lib, nice):
+                loop = _instance(nlp, lib)
+    return loop
 
 
 def cached(nlp, kkt_lib: Path | None = None) -> NativeNewton | None:
     """The driver if the cache holds it (no compiling), else None."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
-    lib = library_path(nlp.kkt_free_split_fn, kkt_lib)
-    return _instance(nlp, lib) if lib.exists() else None
+    return _instance(nlp, library_path(nlp.kkt_free_split_fn, kkt_lib))
 
 
-def _instance(nlp, lib: Path) -> NativeNewton:
-    return NativeNewton(lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0], nlp.node_blocks)
+def _instance(nlp, lib: Path) -> NativeNewton | None:
+    """The loop in ``lib`` if the cache holds it and it passes ``cache_store.load``'s checks."""
+    try:
+        return NativeNewton(lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0],
+                            nlp.node_blocks)
+    except UnusableLibrary:
+        return None
 
 
 def _compile(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:
@@ -955,7 +964,7 @@ class ActiveNewton:
     (ShapeSolver holds a lock)."""
 
     def __init__(self, lib_path: Path, n: int, rows: int, node_map: NodeBlocks, equality: np.ndarray):
-        self._lib = ctypes.CDLL(str(lib_path))
+        self._lib = load_library(lib_path, ("dlo_newton_active_run",))  # checked, as above
         self._run = self._lib.dlo_newton_active_run
         dp, ip, c_int, c_double = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_int, \
             ctypes.c_double

@@ -414,8 +414,8 @@ class AutoShapeSolver:
     def _switch(self, choice: ModelChoice, reason: str, start: tuple | None = None) -> None:
         """Stream on ``choice`` from now on, mapping the warm start; unchecked until its first check.
         Waits for a running background job only if that job may be using the model switched to.
-        ``start``: (solver, its state or None, problem) to map instead of the streaming model's committed
-        shape at ``self.problem`` (None: a cold start)."""
+        ``start``: (solver, its state or None, problem) to map instead of the streaming model's
+        committed shape at ``self.problem`` (None: a cold start)."""
         t0 = time.perf_counter()
         self._wait_for_model(choice)
         t1 = time.perf_counter()
@@ -556,7 +556,8 @@ class AutoShapeSolver:
                         self._submit(self._prebuild, {("",) + ahead.key()}, [ahead], problem)
             reduced = self._reduced(self.choice, problem)[0]
             inner_poses = {g.name: g.pose for g in reduced.grips}
-            before = (self.inner, self.inner.committed_state if warm else None, before_problem)  # recovery.py
+            # the shape this update starts from (a switch to self-contact may start there)
+            before = (self.inner, self.inner.committed_state if warm else None, before_problem)
             # the poses are checked and the plane too (above): the inner solver need not check them again
             result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
             if commit and result.status == "failed" and result.message.startswith("topology:"):
@@ -573,8 +574,8 @@ class AutoShapeSolver:
             if approach:  # the shape came within reach of itself: solve this update again with self-contact
                 start, why = self._contact_start(problem, before)
                 self.problem = problem if start is None else before_problem
-                self._switch(replace(self._full_choice(self.choice, problem), self_contact=True), approach + why,
-                             start)
+                contact = replace(self._full_choice(self.choice, problem), self_contact=True)
+                self._switch(contact, approach + why, start)
                 notes.append(self.changes[-1][1])
                 reduced = self._reduced(self.choice, problem)[0]
                 inner_poses = {g.name: g.pose for g in reduced.grips}
@@ -618,10 +619,12 @@ class AutoShapeSolver:
                 f"2·radius {2 * st.radius:.3g} m): full model with self-contact")
 
     def _contact_start(self, problem: Problem, before: tuple) -> tuple[tuple | None, str]:
-        """Where the self-contact model starts when a committed shape without self-contact came within reach
-        of itself: that shape, when it is a topology reference (``recovery.why_not_reference``); else the
-        shape committed before this update (the last one apart from itself), or a cold start when there
-        was none.  Returns (``_switch``'s start: None for the answer itself, the reason added)."""
+        """Where the self-contact model starts when a committed shape without self-contact came
+        within reach of itself: that shape, when it is a topology reference
+        (``recovery.why_not_reference``); else the shape committed before this update (the last one
+        apart from itself), or a cold start when there was none.  ``before``: (solver, its state
+        before this update or None, the scene then).  Returns (``_switch``'s start: None for the
+        answer itself; the reason added to the change's)."""
         solver, state, previous = before
         st = problem.string
         geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
@@ -632,7 +635,8 @@ class AutoShapeSolver:
         if not why:
             return None, ""
         where = "the shape before this update" if state is not None else "a cold start"
-        return (solver, state, previous), f" (from {where}: the answer without self-contact is no reference, {why})"
+        why = f" (from {where}: the answer without self-contact is no reference, {why})"
+        return (solver, state, previous), why
 
     def _richer_for_topology(self, problem: Problem, result: ShapeResult, notes: list[str]) -> ShapeResult:
         """A warm update refused because the clamped string's linking number changed (the model jumped to a

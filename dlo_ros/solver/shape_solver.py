@@ -234,8 +234,9 @@ class ShapeSolver:
 
     @property
     def committed_state(self) -> SolverState | None:
-        """The committed equilibrium itself, not a copy (``snapshot`` copies): for the thread that streams,
-        between its solves.  A commit replaces the object; nothing changes its z, λ or p in place."""
+        """The committed equilibrium itself, not a copy (``snapshot`` copies): for the thread
+        that streams, between its solves.  A commit replaces the object; nothing changes its z, λ or
+        p in place."""
         return self._state
 
     def snapshot(self) -> SolverState | None:
@@ -690,7 +691,8 @@ class ShapeSolver:
             z0 = start.z if start is not None else self.initial_guess(problem)
             candidates = SC.candidate_pairs(self.model.positions(z0, geometry.s), geometry)
             if start is not None and RC.through_itself(candidates, geometry, st.length):
-                reference = None  # mapped from a model without self-contact, through itself (recovery.py)
+                # mapped from a model without self-contact, through itself (recovery.py)
+                reference = None
         slots, _ = SC.assign(slots, [pair for pair, _ in candidates], keep, capacity)
         slack = RC.SLACK * st.length
         iterations = 0
@@ -723,8 +725,8 @@ class ShapeSolver:
                         f"self-contact: the string passed through itself between the last shape and this one "
                         f"(the crossing at s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m changed sides)"),
                         iterations=iterations, warm_started=warm), None
-                swept = SC.swept_crossing(self.model.positions(reference.z, geometry.s), points, geometry) \
-                    if reference is not None else None
+                swept = None if reference is None else SC.swept_crossing(
+                    self.model.positions(reference.z, geometry.s), points, geometry)
                 if swept is not None:
                     a, b = swept
                     return no_shape(self.options, self.model_summary(), "failed", (
@@ -732,12 +734,12 @@ class ShapeSolver:
                         f"through itself (moved straight, s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
                         f"meet on the way); a jump of the solver, not published"),
                         iterations=iterations, warm_started=warm), None
-                jump = self._linking_jump(problem, reference, state) if reference is not None else None
+                jump = None if reference is None else self._linking_jump(problem, reference, state)
                 if jump is not None:
                     return self._linking_failure(jump, iterations, warm), None
                 if reference is None and start is not None:
-                    result.message += ("; its warm start passed through itself (mapped from a model without "
-                                       "self-contact): checked as a cold start")
+                    result.message += ("; its warm start passed through itself (mapped from a "
+                                       "model without self-contact): checked as a cold start")
                 state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
                 return result, state
             if start is None:

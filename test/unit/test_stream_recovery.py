@@ -1,20 +1,21 @@
 """A target the stream cannot follow never wedges it (issue #35, solver/recovery.py).
 
-The known failure: on default_cable (both ends clamped, tangents along +x), both grips sent to one point
-(x = 0.3 m) close the cable into a loop.  The model without self-contact answers a planar figure eight
-whose strands pass through each other (2.2 mm apart at s = 0.245 / 0.755 m where the self-contact rows
-keep D = 10.6 mm); auto switched to its self-contact model and adopted that shape as the new model's
-committed shape, the reference of every later update's topology checks.  From a shape through itself
-every shape that is not through itself is "not reached without passing through itself": every later
-target was refused until a reset.
+The known failure: on default_cable (both ends clamped, tangents along +x), both grips sent to one
+point (x = 0.3 m) close the cable into a loop. The model without self-contact answers a planar
+figure eight whose strands pass through each other (2.2 mm apart at s = 0.245 / 0.755 m where the
+self-contact rows keep D = 10.6 mm); auto switched to its self-contact model and adopted that shape
+as the new model's committed shape, the reference of every later update's topology checks. From a
+shape through itself every shape that is not through itself is "not reached without passing through
+itself": every later target was refused until a reset.
 
-What is checked: after the refused target (reported as before: 'failed', a self-contact message), or a
-target stopped by its time limit, or grips farther apart than the cable reaches ('unreachable'), every
-ordinary target answers 'ok' (a verified equilibrium), stable, and equal to the cold solve of that target
-by a fresh solver of the same model (1e-6 m on every published point: the equilibrium is unique on that
-branch, and both answers are converged to IPOPT's and Newton's tolerances, a few 1e-8 m here).  Streams:
-auto with sync and background checks, and the full model with 16 self-contact pairs (which refused the
-closed loop and recovered before this change too: the control)."""
+What is checked: after the refused target (reported as before: 'failed', a self-contact message),
+or a target stopped by its time limit, or grips farther apart than the cable reaches
+('unreachable'), every ordinary target answers 'ok' (a verified equilibrium), stable, and equal to
+the cold solve of that target by a fresh solver of the same model (1e-6 m on every published point:
+the equilibrium is unique on that branch, and both answers are converged to IPOPT's and Newton's
+tolerances, a few 1e-8 m here). Streams: auto with sync and background checks, and the full model
+with 16 self-contact pairs (which refused the closed loop and recovered before this change too: the
+control)."""
 from __future__ import annotations
 
 import functools
@@ -36,9 +37,10 @@ LEFT = ((0.0, 0.0, 0.4), Q)
 LOOP = {"left": ((0.3, 0.0, 0.4), Q), "right": ((0.3, 0.0, 0.4), Q)}
 #: grips farther apart than the 1 m cable reaches
 APART = {"left": LEFT, "right": ((1.2, 0.0, 0.4), Q)}
-#: ordinary targets after the one the stream could not follow (right grip; the left one back at its start)
-ORDINARY = [(0.5, 0.0, 0.4), (0.55, 0.0, 0.4), (0.6, 0.0, 0.4), (0.58, 0.03, 0.42), (0.62, -0.02, 0.4),
-            (0.52, 0.0, 0.38)]
+#: ordinary targets after the one the stream could not follow (the right grip's position; the left
+#: grip back at its start)
+ORDINARY = [(0.5, 0.0, 0.4), (0.55, 0.0, 0.4), (0.6, 0.0, 0.4), (0.58, 0.03, 0.42),
+            (0.62, -0.02, 0.4), (0.52, 0.0, 0.38)]
 #: no time limit, except where a test forces one: the tests assert answers, never timings
 OPTIONS = replace(SCENE.options, update_time_limit=0.0)
 TOLERANCE_M = 1e-6
@@ -47,7 +49,8 @@ STREAMS = ["auto-sync", "auto-background", "full-contact"]
 
 def stream_solver(kind: str):
     if kind == "full-contact":
-        return ShapeSolver(SCENE.problem, replace(OPTIONS, model="full", self_contact_pairs=16), compile="off")
+        options = replace(OPTIONS, model="full", self_contact_pairs=16)
+        return ShapeSolver(SCENE.problem, options, compile="off")
     return make_solver(SCENE.problem, OPTIONS, compile="off", checks=kind.split("-")[1])
 
 
@@ -57,9 +60,10 @@ def ordinary(x: tuple) -> dict:
 
 @functools.lru_cache(maxsize=None)
 def cold(x: tuple, order: int, pairs: int, samples: int):
-    """The target ``x`` solved cold by a fresh full-model solver of that order, self-contact pairs and
-    obstacle samples (the model an answer reports: auto's inner model is this one)."""
-    options = OPTIONS.with_model("full", order=order, quadrature_nodes=max(OPTIONS.quadrature_nodes, 2 * order + 8),
+    """The target ``x`` solved cold by a fresh full-model solver of that order, self-contact pairs
+    and obstacle samples (the model an answer reports: auto's inner model is this one)."""
+    nodes = max(OPTIONS.quadrature_nodes, 2 * order + 8)
+    options = OPTIONS.with_model("full", order=order, quadrature_nodes=nodes,
                                  obstacle_samples=samples, self_contact_pairs=pairs)
     problem = with_checked_poses(SCENE.problem, ordinary(x))
     with blas_threads(1):
@@ -75,7 +79,7 @@ def assert_follows(solver, targets=ORDINARY) -> None:
             r = solver.solve(ordinary(x))
         assert r.status == "ok" and r.stable, (x, r.status, r.message)
         m = r.model
-        samples = m.obstacle_samples if m.obstacle_samples is not None else OPTIONS.obstacle_samples
+        samples = OPTIONS.obstacle_samples if m.obstacle_samples is None else m.obstacle_samples
         ref = cold(x, m.order, m.self_contact_pairs, samples)
         gap = float(np.max(np.linalg.norm(r.points - ref.points, axis=1)))
         assert gap < TOLERANCE_M, (x, gap, m)
@@ -91,8 +95,8 @@ def start(kind: str):
 
 @pytest.mark.parametrize("kind", STREAMS)
 def test_closed_loop_then_ordinary_targets(kind):
-    """The closed loop is refused as a jump (as before: 'failed', a self-contact message); every ordinary
-    target after it is followed."""
+    """The closed loop is refused as a jump (as before: 'failed', a self-contact message); every
+    ordinary target after it is followed."""
     solver = start(kind)
     with blas_threads(1):
         r = solver.solve(LOOP)
@@ -103,8 +107,8 @@ def test_closed_loop_then_ordinary_targets(kind):
 
 @pytest.mark.parametrize("kind", STREAMS)
 def test_time_limit_then_ordinary_targets(kind, monkeypatch):
-    """The closed loop's update on the self-contact model stopped by its time limit (1 ns, forced on that
-    update alone): 'failed', saying so; every ordinary target after it is followed."""
+    """The closed loop's update on the self-contact model stopped by its time limit (1 ns, forced
+    on that update alone): 'failed', saying so; every ordinary target after it is followed."""
     forced = {"on": True}
     solve = ShapeSolver.solve
 
@@ -130,8 +134,8 @@ def test_time_limit_then_ordinary_targets(kind, monkeypatch):
 
 @pytest.mark.parametrize("kind", STREAMS)
 def test_unreachable_grips_then_ordinary_targets(kind):
-    """Grips 1.2 m apart (the cable is 1 m): 'unreachable'; after the closed loop and them, every ordinary
-    target is followed."""
+    """Grips 1.2 m apart (the cable is 1 m): 'unreachable'; after the closed loop and them, every
+    ordinary target is followed."""
     solver = start(kind)
     with blas_threads(1):
         solver.solve(LOOP)
@@ -142,9 +146,9 @@ def test_unreachable_grips_then_ordinary_targets(kind):
 
 
 def test_adopted_start_through_itself_is_not_a_reference():
-    """The mechanism under auto's switch: a self-contact model that adopts the planar model's closed loop
-    (a figure eight through itself: in its plane the loop cannot cross over) follows every ordinary target
-    from it; the first answer says its start was checked as a cold start."""
+    """The mechanism under auto's switch: a self-contact model that adopts the planar model's
+    closed loop (a figure eight through itself: in its plane the loop cannot cross over) follows
+    every ordinary target from it; the first answer says its start was checked as a cold start."""
     free = ShapeSolver(SCENE.problem, replace(OPTIONS, model="planar", order=12), compile="off")
     with blas_threads(1):
         assert free.solve().ok
@@ -154,8 +158,8 @@ def test_adopted_start_through_itself_is_not_a_reference():
     eight = free.model.positions(free.snapshot().z, geometry.s)
     closest = SC.closest_distance(eight, geometry)
     assert closest < 0.5 * geometry.distance, closest  # the strands pass through each other
-    contact = ShapeSolver(SCENE.problem, replace(OPTIONS, model="full", order=12, self_contact_pairs=16),
-                          compile="off")
+    options = replace(OPTIONS, model="full", order=12, self_contact_pairs=16)
+    contact = ShapeSolver(SCENE.problem, options, compile="off")
     assert contact.adopt_warm_start(free)
     with blas_threads(1):
         first = contact.solve(ordinary(ORDINARY[0]))

@@ -81,6 +81,7 @@ from .nlp import choose_reference_frame, has_point_moments, planarity_violation
 from .options import SolverOptions
 from .protocol import Solver
 from .query_verify import QueryBudget, verified_answer
+from . import recovery as RC
 from . import self_contact as SC
 from .result import ShapeResult
 from .shape_solver import IPOPT_LOCK, ShapeSolver, with_checked_poses
@@ -411,9 +412,11 @@ class AutoShapeSolver:
         while job is not None and not job.done() and key in self._job_keys:
             wait([job], timeout=0.005)
 
-    def _switch(self, choice: ModelChoice, reason: str) -> None:
+    def _switch(self, choice: ModelChoice, reason: str, start: tuple | None = None) -> None:
         """Stream on ``choice`` from now on, mapping the warm start; unchecked until its first check.
-        Waits for a running background job only if that job may be using the model switched to."""
+        Waits for a running background job only if that job may be using the model switched to.
+        ``start``: (solver, its state or None, problem) to map instead of the streaming model's
+        committed shape at ``self.problem`` (None: a cold start)."""
         t0 = time.perf_counter()
         self._wait_for_model(choice)
         t1 = time.perf_counter()
@@ -422,7 +425,10 @@ class AutoShapeSolver:
         del self.changes[:-50]  # the newest 50 (all are in the log and the recording)
         if choice.order > self.choice.order and choice.planar == self.choice.planar:
             self._lower_tried.add(replace(choice, order=self.choice.order).key())  # just found too coarse
-        self.inner = self._solver_for(choice, self.problem, stream=True, source=self.inner)
+        source, state, problem = (self.inner, None, self.problem) if start is None else start
+        self.inner = self._solver_for(choice, problem, stream=True, source=source, state=state)
+        if start is not None and state is None:
+            self.inner.reset()
         waited, built = t1 - t0, time.perf_counter() - t1
         if waited > 0.05 or built > 0.2:  # visible in the change's reason: the stream stalled this long
             self.changes[-1] = (self.changes[-1][0], f"{reason} [waited {waited:.2f} s for the worker's build, "
@@ -503,6 +509,7 @@ class AutoShapeSolver:
         check is waited for first (its verdict is about an earlier solve and is dropped)."""
         with self._lock:
             t0 = time.perf_counter()
+            before_problem = self.problem
             try:
                 problem = with_checked_poses(self.problem, poses)
             except (ValueError, KeyError) as exc:
@@ -550,6 +557,8 @@ class AutoShapeSolver:
                         self._submit(self._prebuild, {("",) + ahead.key()}, [ahead], problem)
             reduced = self._reduced(self.choice, problem)[0]
             inner_poses = {g.name: g.pose for g in reduced.grips}
+            # the shape this update starts from (a switch to self-contact may start there)
+            before = (self.inner, self.inner.committed_state if warm else None, before_problem)
             # the poses are checked and the plane too (above): the inner solver need not check them again
             result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
             if commit and result.status == "failed" and result.message.startswith("topology:"):
@@ -566,8 +575,10 @@ class AutoShapeSolver:
                 return self._finish(result, t0, notes)
             approach = self._self_approach(problem)
             if approach:  # the shape came within reach of itself: solve this update again with self-contact
-                self.problem = problem
-                self._switch(replace(self._full_choice(self.choice, problem), self_contact=True), approach)
+                start, why = self._contact_start(problem, before)
+                self.problem = problem if start is None else before_problem
+                contact = replace(self._full_choice(self.choice, problem), self_contact=True)
+                self._switch(contact, approach + why, start)
                 notes.append(self.changes[-1][1])
                 reduced = self._reduced(self.choice, problem)[0]
                 inner_poses = {g.name: g.pose for g in reduced.grips}
@@ -609,6 +620,26 @@ class AutoShapeSolver:
             return ""
         return (f"self-contact: the shape comes within {d:.3g} m of itself (reach {geometry.reach:.3g} m, "
                 f"2·radius {2 * st.radius:.3g} m): full model with self-contact")
+
+    def _contact_start(self, problem: Problem, before: tuple) -> tuple[tuple | None, str]:
+        """Where the self-contact model starts when a committed shape without self-contact came
+        within reach of itself: that shape, when it is a topology reference
+        (``recovery.why_not_reference``); else the shape committed before this update (the last one
+        apart from itself), or a cold start when there was none.  ``before``: (solver, its state
+        before this update or None, the scene then).  Returns (``_switch``'s start: None for the
+        answer itself; the reason added to the change's)."""
+        solver, state, previous = before
+        st = problem.string
+        geometry = SC.contact_geometry(st.length, st.radius, self.options.self_contact_samples,
+                                       tuple(g.s for g in problem.grips))
+        after = self.inner.model.positions(self.inner.committed_state.z, geometry.s)
+        earlier = None if state is None else solver.model.positions(state.z, geometry.s)
+        why = RC.why_not_reference(earlier, after, geometry, st.length)
+        if not why:
+            return None, ""
+        where = "the shape before this update" if state is not None else "a cold start"
+        why = f" (from {where}: the answer without self-contact is no reference, {why})"
+        return (solver, state, previous), why
 
     def _richer_for_topology(self, problem: Problem, result: ShapeResult, notes: list[str]) -> ShapeResult:
         """A warm update refused because the clamped string's linking number changed (the model jumped to a

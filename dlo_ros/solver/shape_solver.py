@@ -47,6 +47,7 @@ from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, ShapeResult
 from . import obstacle_slots as OSL
 from . import self_contact as SC
+from . import recovery as RC
 from . import topology as TP
 from .stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
@@ -230,6 +231,13 @@ class ShapeSolver:
     @property
     def has_warm_start(self) -> bool:
         return self._state is not None
+
+    @property
+    def committed_state(self) -> SolverState | None:
+        """The committed equilibrium itself, not a copy (``snapshot`` copies): for the thread
+        that streams, between its solves.  A commit replaces the object; nothing changes its z, λ or
+        p in place."""
+        return self._state
 
     def snapshot(self) -> SolverState | None:
         """A copy of the committed equilibrium (for adopt_warm_start from another thread, later)."""
@@ -676,13 +684,17 @@ class ShapeSolver:
             start, previous, warm = None, None, False
         slots = previous.pairs if previous is not None else [None] * capacity
         keep = self._loaded_slots(start) if start is not None and previous is not None else set()
+        reference = start  # what the sweep and the linking number are checked against
         if previous is not None and previous.candidates is not None:  # the committed shape's, found when committed
             candidates = previous.candidates
         else:
             z0 = start.z if start is not None else self.initial_guess(problem)
             candidates = SC.candidate_pairs(self.model.positions(z0, geometry.s), geometry)
+            if start is not None and RC.through_itself(candidates, geometry, st.length):
+                # mapped from a model without self-contact, through itself (recovery.py)
+                reference = None
         slots, _ = SC.assign(slots, [pair for pair, _ in candidates], keep, capacity)
-        slack = 1e-7 * st.length
+        slack = RC.SLACK * st.length
         iterations = 0
         committed, round_start = self._state, start
         for _ in range(SC.CONTACT_ROUNDS):
@@ -713,8 +725,8 @@ class ShapeSolver:
                         f"self-contact: the string passed through itself between the last shape and this one "
                         f"(the crossing at s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m changed sides)"),
                         iterations=iterations, warm_started=warm), None
-                swept = SC.swept_crossing(self.model.positions(start.z, geometry.s), points, geometry) \
-                    if start is not None else None
+                swept = None if reference is None else SC.swept_crossing(
+                    self.model.positions(reference.z, geometry.s), points, geometry)
                 if swept is not None:
                     a, b = swept
                     return no_shape(self.options, self.model_summary(), "failed", (
@@ -722,9 +734,12 @@ class ShapeSolver:
                         f"through itself (moved straight, s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
                         f"meet on the way); a jump of the solver, not published"),
                         iterations=iterations, warm_started=warm), None
-                jump = self._linking_jump(problem, start, state) if start is not None else None
+                jump = None if reference is None else self._linking_jump(problem, reference, state)
                 if jump is not None:
                     return self._linking_failure(jump, iterations, warm), None
+                if reference is None and start is not None:
+                    result.message += ("; its warm start passed through itself (mapped from a "
+                                       "model without self-contact): checked as a cold start")
                 state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
                 return result, state
             if start is None:

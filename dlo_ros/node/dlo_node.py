@@ -198,7 +198,7 @@ class DloNode(Node):
         self._queries_pending = 0
         self._query_pool = None
         if self._query_workers:
-            from ..solver.batch import WorkerPool  # replaces a dead or stuck worker; dies with the node
+            from ..solver.worker_pool import WorkerPool  # replaces a dead or stuck worker; dies with the node
 
             self._query_pool = WorkerPool(self._query_workers, background=True)
         self.get_logger().info(
@@ -670,7 +670,7 @@ class DloNode(Node):
         self._closing = True
         pool = getattr(self, "_query_pool", None)
         if pool is not None:
-            from ..solver.batch import stop_pool
+            from ..solver.worker_pool import stop_pool
 
             stop_pool(pool, timeout)
         fitter = getattr(self, "_fitter", None)

@@ -16,7 +16,8 @@ import pytest
 
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
-from dlo_ros.solver.batch import TaskTimeout, WorkerPool, query_many
+from dlo_ros.solver.batch import query_many
+from dlo_ros.solver.worker_pool import TaskTimeout, WorkerPool
 from random_scenes import targets_near
 from support.node import wait_until
 
@@ -104,7 +105,7 @@ def _zombie(pid: int) -> bool:
 
 PARENT = """
 import os, sys, threading, time
-from dlo_ros.solver.batch import {factory}
+from dlo_ros.solver.worker_pool import {factory}
 
 if __name__ == "__main__":
     pool = {factory}(2)

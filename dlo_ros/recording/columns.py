@@ -20,7 +20,8 @@ class ColumnError(ValueError):
 
 
 class Budget:
-    """Bytes kept from the file so far (numbers 8 bytes each, text 1 byte per character)."""
+    """Bytes kept from the file so far (numbers 8 bytes each, text 1 byte per character; the
+    reader adds its rows' overhead)."""
 
     def __init__(self, limit: int) -> None:
         self.limit = limit
@@ -29,7 +30,7 @@ class Budget:
     def take(self, n: int, where: str) -> None:
         self.used += n
         if self.used > self.limit:
-            raise ColumnError(f"{where}: the recording holds more than {self.limit >> 20} MiB of "
+            raise ColumnError(f"{where}: the recording holds more than {self.limit} bytes of "
                               "data to read back (msg_docs/recording.md, Limits)")
 
 

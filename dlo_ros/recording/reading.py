@@ -133,8 +133,8 @@ class _Rows:
     """Rows of one entity collected chunk by chunk as ``(update, row id, value)`` (or only
     counted, ``keep=False``), sorted on demand."""
 
-    def __init__(self, entity: str, limit: int, keep: bool = True) -> None:
-        self.entity, self.limit, self.keep = entity, limit, keep
+    def __init__(self, entity: str, limit: int, budget: Budget, keep: bool = True) -> None:
+        self.entity, self.limit, self.budget, self.keep = entity, limit, budget, keep
         self.items: list[tuple[int, bytes, Any]] = []
         self.count = 0
 
@@ -143,7 +143,8 @@ class _Rows:
         if self.count > self.limit:
             raise ColumnError(f"{self.entity}: more than {self.limit} rows "
                               "(msg_docs/recording.md, Limits)")
-        if self.keep:
+        if self.keep:  # the Python objects of a kept row, beyond the numbers Columns counted
+            self.budget.take(LIMITS["row_bytes"] * len(values), self.entity)
             self.items.extend((-1 if u is None else u, rid, v)
                               for u, rid, v in zip(updates, row_ids, values))
 
@@ -163,8 +164,10 @@ class _Reader:
         n = LIMITS["updates"]
         kept = (P.E_SCENE_CHANGES, P.E_DATA_RESULT, P.E_DATA_TARGETS, P.E_REJECTED, P.E_STATUS,
                 P.E_MODEL, P.E_RECORDER, P.E_CABLE)
-        self.rows = {e: _Rows(e, n, keep) for e in kept}
-        self.series = {key: _Rows(f"{P.E_MODEL_SERIES}/{key}", n, keep) for key in P.MODEL_SCALARS}
+        self.keep = keep
+        self.rows = {e: _Rows(e, n, self.budget, keep) for e in kept}
+        self.series = {key: _Rows(f"{P.E_MODEL_SERIES}/{key}", n, self.budget, keep)
+                       for key in P.MODEL_SCALARS}
 
     def chunk(self, entity: str, batch: Any) -> None:
         if entity not in self.entities:
@@ -172,6 +175,8 @@ class _Reader:
             if len(self.entities) > LIMITS["entities"]:
                 raise ColumnError(f"more than {LIMITS['entities']} entities "
                                   "(msg_docs/recording.md, Limits)")
+        if not self.keep:  # nothing is kept: the budget bounds one chunk's converted columns
+            self.budget.used = 0
         cols = Columns(batch, entity, self.budget)
         if entity == P.E_SCENE:
             self.scene.extend(zip(cols.texts("TextDocument:text"), cols.texts("scene_name"),

@@ -30,7 +30,8 @@ LIMITS = {
     "entities": 10_000,             # distinct entity paths
     "updates": 250_000,             # rows of data/result (and of each other entity read back)
     "samples": 10_000,              # centreline samples per result (solver.output_points at most)
-    "kept_bytes": 512 << 20,        # numbers (8 bytes each) and text kept from the file, 512 MiB
+    "kept_bytes": 768 << 20,        # what is kept from the file, 768 MiB: numbers (8 bytes
+    "row_bytes": 1024,              # each), text (1 per character) and 1 KiB per row kept
 }
 
 MAGIC = b"RRF2"

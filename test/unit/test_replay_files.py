@@ -267,3 +267,23 @@ def test_checking_a_long_recording_does_not_keep_its_updates(tmp_path):
         assert code == "0", done.stdout + done.stderr
         growth[n] = int(mb)
     assert growth[6000] < growth[300] + 40, growth  # 14 MB more file: no growth per update
+
+
+def test_count_and_data_limits_refuse_in_one_line(small, monkeypatch):
+    """The row and kept-data limits, lowered below what the 12-update recording holds."""
+    from dlo_ros.recording import rrd_file
+    from dlo_ros.recording.replay import RecordingError, check_recording
+
+    assert len(read_recording(small, details=False).results) == 12
+    monkeypatch.setitem(rrd_file.LIMITS, "updates", 11)
+    with pytest.raises(RecordingError, match=r": more than 11 rows") as err:
+        read_recording(small)
+    assert str(small) in str(err.value) and "\n" not in str(err.value)
+    monkeypatch.setitem(rrd_file.LIMITS, "updates", 12)
+    monkeypatch.setitem(rrd_file.LIMITS, "kept_bytes", 12 * 1024)  # 12 rows of 1 KiB, and numbers
+    with pytest.raises(RecordingError, match=r"more than 12288 bytes of data"):
+        read_recording(small, details=False)
+    assert check_recording(small).updates == 12  # keeps nothing: the limit is per chunk there
+    monkeypatch.setitem(rrd_file.LIMITS, "entities", 3)
+    with pytest.raises(RecordingError, match=r"more than 3 entities"):
+        check_recording(small)

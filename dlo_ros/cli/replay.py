@@ -42,17 +42,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--update", type=int, metavar="N", help="with --screenshot: show update N (default: the last)")
 
 
+def _read(path: Path, details: bool):
+    """The recording, or UsageError with its one-line reason; a note on stderr if it ends early."""
+    from ..recording import replay
+
+    try:
+        rec = replay.read_recording(path, details=details)
+    except ValueError as exc:  # RecordingError and the like: one line naming the file
+        raise UsageError(str(exc)) from None
+    if rec.truncated:
+        _note_truncated(path, len(rec.results), rec.file_bytes, rec.complete_bytes)
+    return rec
+
+
+def _note_truncated(path: Path, updates: int, file_bytes: int, complete_bytes: int) -> None:
+    print(f"dlo replay: note: {path} ends early (a cut-off recording, {file_bytes} bytes): read "
+          f"{updates} updates from its first {complete_bytes} bytes, up to the last complete "
+          "message", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     from ..recording import replay, viewer
 
     path = Path(args.file)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
     if args.resolve:
         if not (args.tolerance >= 0 and math.isfinite(args.tolerance)):
             raise UsageError(f"--tolerance: must be a finite number >= 0, got {args.tolerance}")
+        rec = _read(path, details=False)
         try:
-            rec = replay.read_recording(path)
             with stdout_to_stderr():  # IPOPT's banner must not mix with the report
                 report = replay.resolve(rec, args.tolerance, compile="blocking" if args.compile else "cached")
         except UsageError:
@@ -61,10 +78,12 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
         print(json.dumps(json_safe(report)) if args.json else replay.format_resolve(report))
         return EXIT_OK if report["ok"] else EXIT_NOT_OK
-    try:
-        replay.read_recording(path)  # a clear error for a file that is not a recording, before starting a viewer
+    try:  # a clear error for a file that is not a recording, before starting a viewer
+        check = replay.check_recording(path)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    if check.truncated:
+        _note_truncated(path, check.updates, check.file_bytes, check.complete_bytes)
     if args.screenshot:
         try:
             out = viewer.screenshot(path, args.screenshot, update=args.update)

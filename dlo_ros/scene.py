@@ -656,6 +656,7 @@ def read_regular_file(path: Path, source: str, limit: int, what: str = "scene fi
     by kind, and a huge file by size, whatever happens to the path meanwhile.  ``what`` names the kind of
     file in the messages, ``doc`` where its limits are documented.
     """
+    a = "an" if what[:1] in "aeiou" else "a"
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
@@ -663,12 +664,13 @@ def read_regular_file(path: Path, source: str, limit: int, what: str = "scene fi
     try:
         info = os.fstat(fd)
         if stat.S_ISDIR(info.st_mode):
-            raise FileLimitError(f"{source}: is a directory, not a {what}")
+            raise FileLimitError(f"{source}: is a directory, not {a} {what}")
         if not stat.S_ISREG(info.st_mode):
-            raise FileLimitError(f"{source}: not a regular file (a FIFO, socket or device); a {what} must be "
+            raise FileLimitError(f"{source}: not a regular file (a FIFO, socket or device); {a} {what} must be "
                                  "a regular file")
         if info.st_size > limit:
-            raise FileLimitError(f"{source}: the file has {info.st_size} bytes, a {what} at most {limit} ({doc})")
+            raise FileLimitError(f"{source}: the file has {info.st_size} bytes, {a} {what} at most {limit} "
+                                 f"({doc})")
         chunks, size = [], 0
         while size <= limit:
             chunk = os.read(fd, min(1 << 16, limit + 1 - size))
@@ -677,7 +679,7 @@ def read_regular_file(path: Path, source: str, limit: int, what: str = "scene fi
             chunks.append(chunk)
             size += len(chunk)
         if size > limit:  # it grew after fstat
-            raise FileLimitError(f"{source}: the file has more than {limit} bytes, a {what} at most {limit} "
+            raise FileLimitError(f"{source}: the file has more than {limit} bytes, {a} {what} at most {limit} "
                                  f"({doc})")
     except OSError as exc:
         raise FileLimitError(f"{source}: cannot read the {what}: {exc.strerror or type(exc).__name__}") from None

@@ -10,7 +10,8 @@ the 0.999 quantile of the χ² distribution (a correct model with the stated noi
 thousand fits) with a floor of 4 for model error (discretisation, the chord error of the sampled
 centreline, a σ stated a little low: an rms residual up to twice the stated σ passes).  When it fails
 only because of a few points far beyond the robust loss's threshold (at most OUTLIER_FRACTION of them,
-and the remaining points pass), the fit passes: Huber's loss has down-weighted them.  Otherwise the fit is
+and the remaining points fit as truncated Gaussian noise: reduced χ² ≤ INNER_MAX), the fit passes:
+Huber's loss has down-weighted them.  Otherwise the fit is
 a ``misfit`` and :func:`diagnose` names the likely cause from the points and the scene alone: wrong units
 (the cloud spans ~1000× the cable), far from the grips (a wrong scene or frame), longer than the cable
 (its arc length, estimated from the cloud, exceeds the scene's length), or too many outliers.
@@ -37,6 +38,9 @@ MODEL_ERROR_FLOOR = 4.0
 #: (Gaussian noise alone puts exp(-2.5²/2) = 4.4 % of the points there: the point-to-curve residual has
 #: two components)
 OUTLIER_FRACTION = 0.20
+#: the largest reduced χ² of the points within the robust loss's threshold for the rest to be outliers
+#: (Gaussian noise truncated at 2.5 σ gives 0.86: (2 − 2.5² e^(−3.125) / (1 − e^(−3.125))) / 2)
+INNER_MAX = 1.5
 #: a cloud whose extent is this many times the cable's length (or 1/this) has the wrong units
 UNIT_RATIO = 100.0
 #: a cloud whose arc length exceeds the scene's length by this factor is of a longer cable
@@ -152,21 +156,24 @@ def evaluate_gate(problem: Problem, data: ObservationSet, chi2_total: float, dof
     u = [d / o.sigma for d, o in zip(distances, data.observations)]
     points = sum(len(x) for x in u)
     outside = sum(int(np.sum(x > huber)) for x in u)
+    fraction = outside / max(points, 1)
     inner = chi2_total - sum(float(np.sum(x[x > huber] ** 2)) for x in u)
-    inner_dof = dof - 2 * outside
-    inner_passes = inner_dof > 0 and inner / inner_dof <= threshold(inner_dof)
-    if inner_passes and outside <= OUTLIER_FRACTION * points:
+    inner_reduced = inner / max(dof - 2 * outside, 1)
+    # the points within the robust loss's threshold fit as Gaussian noise would (truncated at huber σ)
+    inner_fits = dof > 2 * outside and inner_reduced <= INNER_MAX
+    if inner_fits and fraction <= OUTLIER_FRACTION:
         return Gate(True, reduced, bound, note=f"{outside} of {points} points lie beyond {huber:g} σ: outliers, "
-                                               "down-weighted by the robust loss", noise_ratio2=inner / inner_dof)
+                                               "down-weighted by the robust loss", noise_ratio2=inner_reduced)
+    causes = (geometric_cause(problem, obs, lengths=False) for obs in data.observations)
+    cause = next((c for c in causes if c), "")
+    if not cause and inner_fits and fraction <= 0.5:
+        cause = (f"outliers: {outside} of {points} points ({100 * fraction:.0f} %) lie beyond {huber:g} σ of the "
+                 f"fitted shape, more than the robust loss forgives ({100 * OUTLIER_FRACTION:.0f} %)")
+    causes = (geometric_cause(problem, obs) for obs in data.observations)
+    cause = cause or next((c for c in causes if c), "") or (
+        "the fitted shape does not explain the points (a shape the scene's string cannot take: wrong "
+        "scene, grip poses or model, or σ stated too small)")
     rms = np.sqrt(np.mean(np.concatenate(distances) ** 2))
     sigma = min(o.sigma for o in data.observations)
-    if inner_passes:  # the points near the shape fit it: the rest are outliers
-        cause = (f"outliers: {outside} of {points} points ({100 * outside / points:.0f} %) lie beyond {huber:g} σ of "
-                 f"the fitted shape, more than the robust loss forgives ({100 * OUTLIER_FRACTION:.0f} %)")
-    else:
-        causes = (geometric_cause(problem, obs) for obs in data.observations)
-        cause = next((c for c in causes if c), "") or (
-            "the fitted shape does not explain the points (a shape the scene's string cannot take: wrong "
-            "scene, grip poses or model, or σ stated too small)")
     return Gate(False, reduced, bound, f"misfit: reduced chi2 {reduced:.4g} > {bound:.3g} (rms residual "
                                        f"{rms * 1e3:.3g} mm, sigma {sigma * 1e3:.3g} mm): {cause}")

@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
 from scipy.stats import chi2 as chi2_distribution
 
@@ -41,6 +42,10 @@ OUTLIER_FRACTION = 0.20
 #: the largest reduced χ² of the points within the robust loss's threshold for the rest to be outliers
 #: (Gaussian noise truncated at 2.5 σ gives 0.86: (2 − 2.5² e^(−3.125) / (1 − e^(−3.125))) / 2)
 INNER_MAX = 1.5
+#: points beyond the robust loss are outliers only if at most this share of their nearest neighbours are
+#: beyond it too (:func:`clustering`), and NEIGHBOURS are looked at
+CLUSTERED = 0.6
+NEIGHBOURS = 6
 #: a cloud whose extent is this many times the cable's length (or 1/this) has the wrong units
 UNIT_RATIO = 100.0
 #: a cloud whose arc length exceeds the scene's length by this factor is of a longer cable
@@ -145,6 +150,20 @@ def arc_length(points: np.ndarray, sigma: float, length: float) -> float:
     return float(np.sum(np.linalg.norm(np.diff(centroids[keep], axis=0), axis=1)))
 
 
+def clustering(data: ObservationSet, u: list[np.ndarray], huber: float) -> float:
+    """The mean fraction of the NEIGHBOURS nearest points (in space) of each point beyond ``huber`` σ that
+    are beyond it too: about the fraction of such points or less for scattered outliers, near 1 for a
+    systematic misfit (whole stretches of the cloud off the fitted shape)."""
+    shares = []
+    for obs, x in zip(data.observations, u):
+        outside = x > huber
+        if not outside.any() or len(x) <= NEIGHBOURS:
+            continue
+        _, idx = cKDTree(obs.points).query(obs.points[outside], k=NEIGHBOURS + 1)
+        shares.append(outside[idx[:, 1:]].mean(axis=1))
+    return float(np.mean(np.concatenate(shares))) if shares else 0.0
+
+
 def evaluate_gate(problem: Problem, data: ObservationSet, chi2_total: float, dof: int,
                   distances: list[np.ndarray], huber: float) -> Gate:
     """The gate on a fit's residuals: ``chi2_total`` = Σ (r/σ)² over all rows, ``dof`` its degrees of
@@ -166,13 +185,15 @@ def evaluate_gate(problem: Problem, data: ObservationSet, chi2_total: float, dof
                                                "down-weighted by the robust loss", noise_ratio2=inner_reduced)
     causes = (geometric_cause(problem, obs, lengths=False) for obs in data.observations)
     cause = next((c for c in causes if c), "")
-    if not cause and inner_fits and fraction <= 0.5:
+    if not cause and inner_fits and fraction <= 0.5 and clustering(data, u, huber) <= CLUSTERED:
         cause = (f"outliers: {outside} of {points} points ({100 * fraction:.0f} %) lie beyond {huber:g} σ of the "
                  f"fitted shape, more than the robust loss forgives ({100 * OUTLIER_FRACTION:.0f} %)")
     causes = (geometric_cause(problem, obs) for obs in data.observations)
     cause = cause or next((c for c in causes if c), "") or (
         "the fitted shape does not explain the points (a shape the scene's string cannot take: wrong "
-        "scene, grip poses or model, or σ stated too small)")
+        "scene, grip poses, length or model, or σ stated too small; the points follow at least about "
+        f"{max(arc_length(o.points, o.sigma, problem.string.length) for o in data.observations):.3g} m of "
+        f"curve, the string is {problem.string.length:g} m)")
     rms = np.sqrt(np.mean(np.concatenate(distances) ** 2))
     sigma = min(o.sigma for o in data.observations)
     return Gate(False, reduced, bound, f"misfit: reduced chi2 {reduced:.4g} > {bound:.3g} (rms residual "

@@ -41,8 +41,9 @@ def case(rng: np.random.Generator) -> dict:
             "sigma": float(rng.choice([5e-4, 1.5e-3, 3e-3])), "count": int(rng.integers(200, 401))}
 
 
-def run(c: dict, rng: np.random.Generator, stated: float = 1.0) -> tuple[str, float, float, float]:
-    """(status, error, stated σ, reported σ) of D/Rf; the observation states ``stated`` × the true noise."""
+def run(c: dict, rng: np.random.Generator, stated: float = 1.0) -> tuple[str, float, float, float, float]:
+    """(status, error, stated σ, reported σ) of D/Rf and χ²_red; the observation states ``stated`` × the
+    true noise."""
     frame = tilted(c["tilt"])
     ref = solve_clamped(c["L"], c["Rf"], 0.75 * c["Rf"], np.zeros(3), frame, mode_end="free", D=c["D"])
     s = rng.uniform(0.0, c["L"], c["count"])
@@ -56,8 +57,8 @@ def run(c: dict, rng: np.random.Generator, stated: float = 1.0) -> tuple[str, fl
                                                                     stated * c["sigma"]),), ("Rf", "D")))
     est = res.ratios.get("D/Rf")
     if est is None:
-        return res.status, np.nan, np.nan, np.nan
-    return res.status, est.value - c["D"] / c["Rf"], est.std / res.sigma_scale, est.std
+        return res.status, np.nan, np.nan, np.nan, res.chi2_reduced
+    return res.status, est.value - c["D"] / c["Rf"], est.std / res.sigma_scale, est.std, res.chi2_reduced
 
 
 def main() -> int:
@@ -70,12 +71,15 @@ def main() -> int:
     for k in range(args.cases):
         rng = np.random.default_rng(args.seed * 10_000 + k)
         c = case(rng)
-        status, err, stated, reported = run(c, rng, args.stated)
-        rows.append((status, err, stated, reported))
+        status, err, stated, reported, chi2 = run(c, rng, args.stated)
+        rows.append((status, err, stated, reported, chi2))
         print(f"case {k:2d}: L {c['L']:.3f} m, DL³/Rf {c['D'] * c['L'] ** 3 / c['Rf']:5.2f}, σ {c['sigma'] * 1e3:.1f} mm: "
-              f"{status}, error/σ stated {err / stated:+.2f}, reported {err / reported:+.2f}", flush=True)
+              f"{status}, χ²_red {chi2:.3f}, error/σ stated {err / stated:+.2f}, reported {err / reported:+.2f}",
+              flush=True)
     err, stated, reported = (np.array([r[i] for r in rows]) for i in (1, 2, 3))
     n = len(rows)
+    chi2 = np.array([r[4] for r in rows])
+    print(f"χ²_red: min {np.nanmin(chi2):.3f}, max {np.nanmax(chi2):.3f}")
     print(f"misfit (false alarms): {sum(r[0] == 'misfit' for r in rows)}/{n}; not ok: "
           f"{sum(r[0] != 'ok' for r in rows)}/{n}")
     for name, sd in (("stated σ", stated), ("reported σ", reported)):

@@ -651,26 +651,28 @@ def read_regular_file(path: Path, source: str, limit: int, what: str = "scene fi
                       doc: str = "msg_docs/scene_format.md, Limits") -> bytes:
     """The bytes of a regular file of at most ``limit`` bytes, or FileLimitError naming ``source``.
 
-    Opened without blocking (a FIFO without a writer would hang a plain open) and checked with fstat on
-    the open descriptor before a byte is read, so a directory, a FIFO or a device (/dev/zero) is refused
-    by kind, and a huge file by size, whatever happens to the path meanwhile.  ``what`` names the kind of
-    file in the messages, ``doc`` where its limits are documented.
+    Opened without blocking (a FIFO without a writer would hang a plain open) and checked with
+    fstat on the open descriptor before a byte is read, so a directory, a FIFO or a device
+    (/dev/zero) is refused by kind, and a huge file by size, whatever happens to the path
+    meanwhile.  ``what`` names the kind of file in the messages, ``doc`` where its limits are
+    documented.
     """
     a = "an" if what[:1] in "aeiou" else "a"
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
-        raise FileLimitError(f"{source}: cannot open the {what}: {exc.strerror or type(exc).__name__}") from None
+        reason = exc.strerror or type(exc).__name__
+        raise FileLimitError(f"{source}: cannot open the {what}: {reason}") from None
     try:
         info = os.fstat(fd)
         if stat.S_ISDIR(info.st_mode):
             raise FileLimitError(f"{source}: is a directory, not {a} {what}")
         if not stat.S_ISREG(info.st_mode):
-            raise FileLimitError(f"{source}: not a regular file (a FIFO, socket or device); {a} {what} must be "
-                                 "a regular file")
+            raise FileLimitError(f"{source}: not a regular file (a FIFO, socket or device); {a} "
+                                 f"{what} must be a regular file")
         if info.st_size > limit:
-            raise FileLimitError(f"{source}: the file has {info.st_size} bytes, {a} {what} at most {limit} "
-                                 f"({doc})")
+            raise FileLimitError(f"{source}: the file has {info.st_size} bytes, {a} {what} at "
+                                 f"most {limit} ({doc})")
         chunks, size = [], 0
         while size <= limit:
             chunk = os.read(fd, min(1 << 16, limit + 1 - size))
@@ -679,10 +681,11 @@ def read_regular_file(path: Path, source: str, limit: int, what: str = "scene fi
             chunks.append(chunk)
             size += len(chunk)
         if size > limit:  # it grew after fstat
-            raise FileLimitError(f"{source}: the file has more than {limit} bytes, {a} {what} at most {limit} "
-                                 f"({doc})")
+            raise FileLimitError(f"{source}: the file has more than {limit} bytes, {a} {what} at "
+                                 f"most {limit} ({doc})")
     except OSError as exc:
-        raise FileLimitError(f"{source}: cannot read the {what}: {exc.strerror or type(exc).__name__}") from None
+        reason = exc.strerror or type(exc).__name__
+        raise FileLimitError(f"{source}: cannot read the {what}: {reason}") from None
     finally:
         os.close(fd)
     return b"".join(chunks)
@@ -694,8 +697,9 @@ def _read_text(path: Path, source: str) -> str:
     try:
         data = read_regular_file(path, source, LIMITS["file_bytes"])
     except FileLimitError as exc:
-        raise SceneError(str(exc).replace("a scene file must be a regular file", "a scene must be a YAML file"),
-                         source=source) from None
+        message = str(exc).replace("a scene file must be a regular file",
+                                   "a scene must be a YAML file")
+        raise SceneError(message, source=source) from None
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -714,10 +718,11 @@ def _compose(text: str) -> tuple[object, yaml.Node | None]:
 
 
 def parse_bounded_yaml(text: str, source: str) -> object:
-    """The document of YAML (or JSON) ``text`` read with the scene reader's bounds (:data:`LIMITS`: nesting
-    depth, aliases, nodes with aliases expanded, scalar characters, integer digits; YAML 1.2 floats,
-    duplicate keys refused).  Raises FileLimitError with one line: ``<source>:<line>: <key path>: over a
-    limit: ...`` or ``<source>:<line>:<column>: YAML syntax error: ...`` (never the offending text)."""
+    """The document of YAML (or JSON) ``text`` read with the scene reader's bounds (:data:`LIMITS`:
+    nesting depth, aliases, nodes with aliases expanded, scalar characters, integer digits; YAML
+    1.2 floats, duplicate keys refused).  Raises FileLimitError with one line: ``<source>:<line>:
+    <key path>: over a limit: ...`` or ``<source>:<line>:<column>: YAML syntax error: ...`` (never
+    the offending text)."""
     try:
         return _compose(text)[0]
     except _LimitError as exc:
@@ -729,8 +734,8 @@ def parse_bounded_yaml(text: str, source: str) -> object:
         detail = safe_text(": ".join(p for p in (exc.context, exc.problem) if p))
         raise FileLimitError(f"{where}: YAML syntax error: {detail}") from None
     except yaml.YAMLError as exc:
-        raise FileLimitError(f"{source}: YAML error: {safe_text(getattr(exc, 'reason', '') or type(exc).__name__)}") \
-            from None
+        reason = safe_text(getattr(exc, "reason", "") or type(exc).__name__)
+        raise FileLimitError(f"{source}: YAML error: {reason}") from None
 
 
 def load_scene(path_or_name: str | Path) -> Scene:

@@ -1,10 +1,12 @@
 """``dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE] [--rrd FILE]`` (msg_docs/cli.md, fitting.md).
 
-Exit codes as every ``dlo`` subcommand: 0 the fit converged and explains the points, 1 it ran but did
-not converge, an equilibrium failed, or the fitted shapes do not explain the points (status ``misfit``:
-one line ``dlo fit: misfit: ...`` on stderr says why, and ``--write-scene`` writes nothing), 2 malformed
-observation file or scene, or bad usage (one line on stderr naming the key path, no traceback).  The handler raises ``ObservationError`` (prefixed with the file), ``SceneError``
-or ``FileNotFoundError``; the wrapper in ``dlo_ros.cli`` turns the first into its ``UsageError``.
+Exit codes as every ``dlo`` subcommand: 0 the fit converged and explains the points, 1 it ran but
+did not converge, an equilibrium failed, or the fitted shapes do not explain the points (status
+``misfit``: one line ``dlo fit: misfit: ...`` on stderr says why, and ``--write-scene`` writes
+nothing), 2 malformed observation file or scene, or bad usage (one line on stderr naming the key
+path, no traceback).  The handler raises ``ObservationError`` (prefixed with the file),
+``SceneError`` or ``FileNotFoundError``; the wrapper in ``dlo_ros.cli`` turns the first into its
+``UsageError``.
 """
 from __future__ import annotations
 
@@ -17,7 +19,8 @@ from pathlib import Path
 
 import yaml
 
-HELP = "identify Rf, Rt, D, Re from observed shapes (exit 0 if the fit converged and explains the points)"
+HELP = ("identify Rf, Rt, D, Re from observed shapes (exit 0 if the fit converged and explains "
+        "the points)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -87,7 +87,8 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
              if n not in fitted and getattr(base, PROFILE[n]) is not None}
     cause = precheck(problem, data)
     if cause:  # no stiffness makes this string explain these points: no equilibrium is solved
-        return FitResult("misfit", f"misfit: {cause}", fixed=fixed, time_s=time.perf_counter() - t0, names=names)
+        return FitResult("misfit", f"misfit: {cause}", fixed=fixed, names=names,
+                         time_s=time.perf_counter() - t0)
     objective = Objective(problem, options, data, par, settings, cache)
     try:
         return gated(_fit(objective, par, fixed, settings, t0), problem, data, settings)
@@ -175,21 +176,23 @@ def _fit(objective: Objective, par: Parameterisation, fixed: dict[str, float], s
                      time.perf_counter() - t0, current.chi2 / dof, names, cov, string, ident, dof)
 
 
-def gated(result: FitResult, problem: Problem, data: ObservationSet, settings: FitSettings) -> FitResult:
-    """``result`` through the goodness-of-fit gate (``gate.py``): status 'misfit' with the cause when the
-    fitted shapes do not explain the points (a converged fit, or one that stopped without descent);
-    otherwise the standard deviations inflated by sqrt(χ²_red) when it is over 1 (σ stated too small or
-    model error: the residuals say how large the noise really is; without the outliers the gate forgave,
-    which the robust loss already down-weighted)."""
+def gated(result: FitResult, problem: Problem, data: ObservationSet,
+          settings: FitSettings) -> FitResult:
+    """``result`` through the goodness-of-fit gate (``gate.py``): status 'misfit' with the cause
+    when the fitted shapes do not explain the points (a converged fit, or one that stopped without
+    descent); otherwise the standard deviations inflated by sqrt(χ²_red) when it is over 1 (σ
+    stated too small or model error: the residuals say how large the noise really is; without the
+    outliers the gate forgave, which the robust loss already down-weighted)."""
     if result.status not in ("ok", "not_converged") or not result.observations:
         return result
-    distances = [np.linalg.norm(o.points - fit.feet, axis=1) for o, fit in zip(data.observations,
-                                                                                result.observations)]
+    distances = [np.linalg.norm(o.points - fit.feet, axis=1)
+                 for o, fit in zip(data.observations, result.observations)]
     gate = evaluate_gate(problem, data, result.chi2_reduced * result.dof, result.dof, distances,
                          settings.huber)
     result = replace(result, chi2_threshold=gate.threshold)
     if not gate.passed:
-        return replace(result, status="misfit", message=f"{gate.cause} ({result.status}: {result.message})")
+        return replace(result, status="misfit",
+                       message=f"{gate.cause} ({result.status}: {result.message})")
     if gate.note:
         result = replace(result, message=f"{result.message}; {gate.note}")
     scale = float(np.sqrt(max(gate.noise_ratio2, 1.0)))

@@ -21,13 +21,14 @@ from .pointfiles import MAX_POINTS, read_points
 PARAMETERS = ("Rf", "Rt", "D", "Re")
 #: standard gravity [m/s²]: a known mass [kg] is turned into a weight [N] with it
 STANDARD_GRAVITY = 9.80665
-#: the most observations in one set: each builds its own equilibrium solver (about 1.5 MB each, and one
-#: solve per observation and iteration)
+#: the most observations in one set: each builds its own equilibrium solver (about 1.5 MB each, and
+#: one solve per observation and iteration)
 MAX_OBSERVATIONS = 100
-#: the most points over all observations of a set (the residuals and their Jacobian are held at once)
+#: the most points over all observations of a set (the residuals and their Jacobian are held at
+#: once)
 MAX_TOTAL_POINTS = 1_000_000
-#: the largest coordinate [m] of a point or a grip position: farther is no cable in a lab (1e30 m made
-#: every later number meaningless and ``--write-scene`` wrote a weight of 5e-7 N/m)
+#: the largest coordinate [m] of a point or a grip position: farther is no cable in a lab (1e30 m
+#: made every later number meaningless and ``--write-scene`` wrote a weight of 5e-7 N/m)
 MAX_COORDINATE = 1e4
 #: the largest σ of the points [m], and of a force [N], torque [N·m] or mass [kg]
 MAX_SIGMA = {"points": 1.0, "force": 1e6, "torque": 1e6, "mass": 1e6}
@@ -140,7 +141,8 @@ def _positive(value: object, key: str, upper: float = float("inf")) -> float:
     if not (np.isfinite(x) and x > 0):
         raise ObservationError(f"{key}: expected a finite number > 0, got {x}")
     if x > upper:
-        raise ObservationError(f"{key}: {x:g} is over the limit of {upper:g} (msg_docs/fitting.md, Limits)")
+        raise ObservationError(f"{key}: {x:g} is over the limit of {upper:g} "
+                               "(msg_docs/fitting.md, Limits)")
     return x
 
 
@@ -161,7 +163,8 @@ def _points(value: object, key: str) -> np.ndarray:
     if isinstance(value, list) and len(value) > MAX_POINTS:
         raise ObservationError(f"{key}: {len(value)} points, over the limit of {MAX_POINTS}")
     if isinstance(value, np.ndarray) and value.dtype.kind not in "fiu":
-        raise ObservationError(f"{key}: the points must be real numbers, got dtype {value.dtype.kind!r}")
+        raise ObservationError(f"{key}: the points must be real numbers, got dtype "
+                               f"{value.dtype.kind!r}")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
@@ -177,8 +180,9 @@ def _points(value: object, key: str) -> np.ndarray:
         raise ObservationError(f"{key}[{bad[0]}]: contains NaN or infinity")
     far = np.flatnonzero(np.any(np.abs(arr) > MAX_COORDINATE, axis=1))
     if far.size:
-        raise ObservationError(f"{key}[{far[0]}]: a coordinate of {np.abs(arr[far[0]]).max():.3g} m, over the "
-                               f"limit of {MAX_COORDINATE:g} m (msg_docs/fitting.md, Limits)")
+        raise ObservationError(f"{key}[{far[0]}]: a coordinate of {np.abs(arr[far[0]]).max():.3g} "
+                               f"m, over the limit of {MAX_COORDINATE:g} m (msg_docs/fitting.md, "
+                               "Limits)")
     return arr
 
 
@@ -242,8 +246,8 @@ def _observation(value: object, key: str, sigma: float | None, base: Path) -> Ob
         except (TypeError, ValueError, OverflowError) as exc:
             raise ObservationError(str(exc)) from None
         if np.abs(poses[str(grip)].position).max() > MAX_COORDINATE:
-            raise ObservationError(f"{where}.position: a coordinate over the limit of {MAX_COORDINATE:g} m "
-                                   "(msg_docs/fitting.md, Limits)")
+            raise ObservationError(f"{where}.position: a coordinate over the limit of "
+                                   f"{MAX_COORDINATE:g} m (msg_docs/fitting.md, Limits)")
     force = _force(d["force"], f"{key}.force") if d.get("force") is not None else None
     torque = _torque(d["torque"], f"{key}.torque") if d.get("torque") is not None else None
     return Observation(str(d.get("name", key)), poses, points, s, force, torque)
@@ -272,7 +276,8 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
         if "value" not in md:
             raise ObservationError("total_mass.value: missing")
         value = _positive(md["value"], "total_mass.value", MAX_SIGMA["mass"])
-        mass = MassObservation(value, _positive(md.get("sigma", 1e-3 * value), "total_mass.sigma", MAX_SIGMA["mass"]))
+        mass = MassObservation(value, _positive(md.get("sigma", 1e-3 * value), "total_mass.sigma",
+                                                MAX_SIGMA["mass"]))
     profiles = {}
     for name, spec in _mapping(d.get("profiles") or {}, "profiles").items():
         where = f"profiles.{name}"
@@ -293,15 +298,15 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
     if not isinstance(items, list) or not items:
         raise ObservationError("observations: expected a non-empty list")
     if len(items) > MAX_OBSERVATIONS:
-        raise ObservationError(f"observations: {len(items)} items, at most {MAX_OBSERVATIONS} are allowed "
-                               "(msg_docs/fitting.md, Limits)")
+        raise ObservationError(f"observations: {len(items)} items, at most {MAX_OBSERVATIONS} are "
+                               "allowed (msg_docs/fitting.md, Limits)")
     obs, total = [], 0
     for i, v in enumerate(items):
         obs.append(_observation(v, f"observations[{i}]", sigma, base))
         total += len(obs[-1].points)
         if total > MAX_TOTAL_POINTS:
-            raise ObservationError(f"observations[{i}]: more than {MAX_TOTAL_POINTS} points in all "
-                                   "(msg_docs/fitting.md, Limits)")
+            raise ObservationError(f"observations[{i}]: more than {MAX_TOTAL_POINTS} points in "
+                                   "all (msg_docs/fitting.md, Limits)")
     obs = tuple(obs)
     scene = d.get("scene", "")
     if not isinstance(scene, str):
@@ -320,7 +325,8 @@ def load_observations(path: str | Path) -> ObservationSet:
                                  "msg_docs/fitting.md, Limits").decode("utf-8")
         data = parse_bounded_yaml(text, str(path))
     except FileLimitError as exc:
-        raise ObservationError(str(exc).replace("YAML syntax error", "YAML/JSON syntax error")) from None
+        message = str(exc).replace("YAML syntax error", "YAML/JSON syntax error")
+        raise ObservationError(message) from None
     except UnicodeDecodeError:
         raise ObservationError(f"{path}: not a UTF-8 text file") from None
     try:

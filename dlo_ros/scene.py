@@ -43,6 +43,7 @@ from .solver.options import SolverOptions
 __all__ = [
     "DEFAULT_SCENE", "Scene", "SceneError", "scene_from_dict", "load_scene", "scene_to_dict",
     "TOP_LEVEL_KEYS", "STRING_KEYS", "GRIP_KEYS", "LOAD_KEYS", "RELATIVE_KEYS", "OBSTACLE_KEYS", "LIMITS",
+    "FileLimitError", "read_regular_file", "parse_bounded_yaml",
 ]
 
 DEFAULT_SCENE = "default_cable"
@@ -642,29 +643,36 @@ def _line_of(key: str, lines: dict[str, int]) -> int | None:
     return lines.get(key) if key else None
 
 
-def _read_text(path: Path, source: str) -> str:
-    """The scene file's text: a regular file of at most LIMITS['file_bytes'] bytes, UTF-8.
+class FileLimitError(ValueError):
+    """A file refused by :func:`read_regular_file`: one line starting with its source name."""
 
-    Opened without blocking (a FIFO without a writer would hang a plain open) and checked with fstat on
-    the open descriptor before a byte is read, so a directory, a FIFO or a device (/dev/zero) is refused
-    by kind, and a huge file by size, whatever happens to the path meanwhile.
+
+def read_regular_file(path: Path, source: str, limit: int, what: str = "scene file",
+                      doc: str = "msg_docs/scene_format.md, Limits") -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes, or FileLimitError naming ``source``.
+
+    Opened without blocking (a FIFO without a writer would hang a plain open) and checked with
+    fstat on the open descriptor before a byte is read, so a directory, a FIFO or a device
+    (/dev/zero) is refused by kind, and a huge file by size, whatever happens to the path
+    meanwhile.  ``what`` names the kind of file in the messages, ``doc`` where its limits are
+    documented.
     """
-    limit = LIMITS["file_bytes"]
+    a = "an" if what[:1] in "aeiou" else "a"
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
-        raise SceneError(f"{source}: cannot open the scene file: {exc.strerror or type(exc).__name__}",
-                         source=source) from None
+        reason = exc.strerror or type(exc).__name__
+        raise FileLimitError(f"{source}: cannot open the {what}: {reason}") from None
     try:
         info = os.fstat(fd)
         if stat.S_ISDIR(info.st_mode):
-            raise SceneError(f"{source}: is a directory, not a scene file", source=source)
+            raise FileLimitError(f"{source}: is a directory, not {a} {what}")
         if not stat.S_ISREG(info.st_mode):
-            raise SceneError(f"{source}: not a regular file (a FIFO, socket or device); a scene must be a "
-                             "YAML file", source=source)
+            raise FileLimitError(f"{source}: not a regular file (a FIFO, socket or device); {a} "
+                                 f"{what} must be a regular file")
         if info.st_size > limit:
-            raise SceneError(f"{source}: the file has {info.st_size} bytes, a scene file at most {limit} "
-                             "(msg_docs/scene_format.md, Limits)", source=source)
+            raise FileLimitError(f"{source}: the file has {info.st_size} bytes, {a} {what} at "
+                                 f"most {limit} ({doc})")
         chunks, size = [], 0
         while size <= limit:
             chunk = os.read(fd, min(1 << 16, limit + 1 - size))
@@ -673,15 +681,27 @@ def _read_text(path: Path, source: str) -> str:
             chunks.append(chunk)
             size += len(chunk)
         if size > limit:  # it grew after fstat
-            raise SceneError(f"{source}: the file has more than {limit} bytes, a scene file at most {limit} "
-                             "(msg_docs/scene_format.md, Limits)", source=source)
+            raise FileLimitError(f"{source}: the file has more than {limit} bytes, {a} {what} at "
+                                 f"most {limit} ({doc})")
     except OSError as exc:
-        raise SceneError(f"{source}: cannot read the scene file: {exc.strerror or type(exc).__name__}",
-                         source=source) from None
+        reason = exc.strerror or type(exc).__name__
+        raise FileLimitError(f"{source}: cannot read the {what}: {reason}") from None
     finally:
         os.close(fd)
+    return b"".join(chunks)
+
+
+def _read_text(path: Path, source: str) -> str:
+    """The scene file's text: a regular file of at most LIMITS['file_bytes'] bytes, UTF-8
+    (:func:`read_regular_file`)."""
     try:
-        return b"".join(chunks).decode("utf-8")
+        data = read_regular_file(path, source, LIMITS["file_bytes"])
+    except FileLimitError as exc:
+        message = str(exc).replace("a scene file must be a regular file",
+                                   "a scene must be a YAML file")
+        raise SceneError(message, source=source) from None
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise SceneError(f"{source}: not a UTF-8 text file ({exc.reason} at byte {exc.start})", source=source) from None
 
@@ -695,6 +715,27 @@ def _compose(text: str) -> tuple[object, yaml.Node | None]:
         return data, node
     finally:
         loader.dispose()
+
+
+def parse_bounded_yaml(text: str, source: str) -> object:
+    """The document of YAML (or JSON) ``text`` read with the scene reader's bounds (:data:`LIMITS`:
+    nesting depth, aliases, nodes with aliases expanded, scalar characters, integer digits; YAML
+    1.2 floats, duplicate keys refused).  Raises FileLimitError with one line: ``<source>:<line>:
+    <key path>: over a limit: ...`` or ``<source>:<line>:<column>: YAML syntax error: ...`` (never
+    the offending text)."""
+    try:
+        return _compose(text)[0]
+    except _LimitError as exc:
+        line = f":{exc.problem_mark.line + 1}" if exc.problem_mark else ""
+        raise FileLimitError(f"{source}{line}: {exc.key}: over a limit: {exc.problem}") from None
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
+        detail = safe_text(": ".join(p for p in (exc.context, exc.problem) if p))
+        raise FileLimitError(f"{where}: YAML syntax error: {detail}") from None
+    except yaml.YAMLError as exc:
+        reason = safe_text(getattr(exc, "reason", "") or type(exc).__name__)
+        raise FileLimitError(f"{source}: YAML error: {reason}") from None
 
 
 def load_scene(path_or_name: str | Path) -> Scene:

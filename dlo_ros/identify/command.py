@@ -1,21 +1,26 @@
 """``dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE] [--rrd FILE]`` (msg_docs/cli.md, fitting.md).
 
-Exit codes as every ``dlo`` subcommand: 0 the fit converged, 1 it ran but did not converge or an
-equilibrium failed, 2 malformed observation file or scene, or bad usage (one line on stderr naming the
-key path, no traceback).  The handler raises ``ObservationError`` (prefixed with the file), ``SceneError``
-or ``FileNotFoundError``; the wrapper in ``dlo_ros.cli`` turns the first into its ``UsageError``.
+Exit codes as every ``dlo`` subcommand: 0 the fit converged and explains the points, 1 it ran but
+did not converge, an equilibrium failed, or the fitted shapes do not explain the points (status
+``misfit``: one line ``dlo fit: misfit: ...`` on stderr says why, and ``--write-scene`` writes
+nothing), 2 malformed observation file or scene, or bad usage (one line on stderr naming the key
+path, no traceback).  The handler raises ``ObservationError`` (prefixed with the file),
+``SceneError`` or ``FileNotFoundError``; the wrapper in ``dlo_ros.cli`` turns the first into its
+``UsageError``.
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
 import json
+import sys
 from dataclasses import replace
 from pathlib import Path
 
 import yaml
 
-HELP = "identify Rf, Rt, D, Re from observed shapes (exit 0 if the fit converged)"
+HELP = ("identify Rf, Rt, D, Re from observed shapes (exit 0 if the fit converged and explains "
+        "the points)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -63,6 +68,7 @@ def format_fit(result) -> str:
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from ..jsonio import json_safe, stdout_to_stderr
+    from ..text import safe_text
     from ..scene import load_scene, scene_to_dict
     from .fit import fit
     from .observations import ObservationError, load_observations
@@ -75,7 +81,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
             result = fit(scene.problem, scene.options, data)
         except ObservationError as exc:
             raise ObservationError(f"{args.observations}: {exc}") from None
-    if args.write_scene and result.string is not None:
+    if args.write_scene and result.status == "misfit":
+        print("dlo fit: --write-scene: not written: the fit is a misfit", file=sys.stderr)
+    elif args.write_scene and result.string is not None:
         fitted = replace(scene, problem=replace(scene.problem, string=result.string),
                          description=(scene.description + "\n" if scene.description else "") +
                          f"String fitted by `dlo fit {Path(args.observations).name}` ({result.status}).")
@@ -92,6 +100,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
         print(json.dumps(json_safe(result.to_dict()), allow_nan=False))
     else:
         print(summary)
+    if result.status == "misfit":
+        print(f"dlo fit: {safe_text(result.message, 1000)}", file=sys.stderr)
     return EXIT_OK if result.ok else EXIT_NOT_OK
 
 

@@ -28,11 +28,13 @@ data still seemed to determine it, moved it).  The search is bounded to a factor
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from ..model.problem import Problem
 from ..solver import SolverOptions
+from .gate import evaluate_gate, precheck
 from .identifiability import NEITHER, ORTHOGONAL, RANK_TOLERANCE, Identifiability, analyse
 from .objective import FitSettings, Objective, SolverCache
 from .observations import ObservationError, ObservationSet
@@ -83,9 +85,13 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
     names, base = par.labels, par.base
     fixed = {n: profile_mean(getattr(base, PROFILE[n]), base.length) for n in ("Rf", "Rt", "D", "Re")
              if n not in fitted and getattr(base, PROFILE[n]) is not None}
+    cause = precheck(problem, data)
+    if cause:  # no stiffness makes this string explain these points: no equilibrium is solved
+        return FitResult("misfit", f"misfit: {cause}", fixed=fixed, names=names,
+                         time_s=time.perf_counter() - t0)
     objective = Objective(problem, options, data, par, settings, cache)
     try:
-        return _fit(objective, par, fixed, settings, t0)
+        return gated(_fit(objective, par, fixed, settings, t0), problem, data, settings)
     finally:
         if cache is not None:
             for o in objective.observed:
@@ -167,7 +173,38 @@ def _fit(objective: Objective, par: Parameterisation, fixed: dict[str, float], s
                                                           est.std / fixed[b_name], unit, est.s)
     dof = max(current.rows - ident.rank, 1)
     return FitResult(status, message, parameters, ratios, dict(ident.why), fixed, current.fits, iterations, objective.solves,
-                     time.perf_counter() - t0, current.chi2 / dof, names, cov, string, ident)
+                     time.perf_counter() - t0, current.chi2 / dof, names, cov, string, ident, dof)
+
+
+def gated(result: FitResult, problem: Problem, data: ObservationSet,
+          settings: FitSettings) -> FitResult:
+    """``result`` through the goodness-of-fit gate (``gate.py``): status 'misfit' with the cause
+    when the fitted shapes do not explain the points (a converged fit, or one that stopped without
+    descent); otherwise the standard deviations inflated by sqrt(χ²_red) when it is over 1 (σ
+    stated too small or model error: the residuals say how large the noise really is; without the
+    outliers the gate forgave, which the robust loss already down-weighted)."""
+    if result.status not in ("ok", "not_converged") or not result.observations:
+        return result
+    distances = [np.linalg.norm(o.points - fit.feet, axis=1)
+                 for o, fit in zip(data.observations, result.observations)]
+    gate = evaluate_gate(problem, data, result.chi2_reduced * result.dof, result.dof, distances,
+                         settings.huber)
+    result = replace(result, chi2_threshold=gate.threshold)
+    if not gate.passed:
+        return replace(result, status="misfit",
+                       message=f"{gate.cause} ({result.status}: {result.message})")
+    if gate.note:
+        result = replace(result, message=f"{result.message}; {gate.note}")
+    scale = float(np.sqrt(max(gate.noise_ratio2, 1.0)))
+    if scale > 1.0:
+        def inflated(est: Estimate) -> Estimate:
+            return replace(est, std=est.std * scale)
+
+        result = replace(result, sigma_scale=scale,
+                         parameters={k: inflated(v) for k, v in result.parameters.items()},
+                         ratios={k: inflated(v) for k, v in result.ratios.items()},
+                         covariance_log=result.covariance_log * scale ** 2)
+    return result
 
 
 def _anchored(theta: np.ndarray, par: Parameterisation, ident: Identifiability, normal: np.ndarray) -> np.ndarray:

@@ -12,17 +12,28 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..model.problem import GripPose, Problem, finite_vector
-from .pointfiles import read_points
+from ..scene import LIMITS, FileLimitError, parse_bounded_yaml, read_regular_file
+from .pointfiles import MAX_POINTS, read_points
 
 #: parameters that can be fitted: bend, twist and stretch stiffness and weight per length
 PARAMETERS = ("Rf", "Rt", "D", "Re")
 #: standard gravity [m/s²]: a known mass [kg] is turned into a weight [N] with it
 STANDARD_GRAVITY = 9.80665
-#: the largest point cloud read per observation
-MAX_POINTS = 200_000
+#: the most observations in one set: each builds its own equilibrium solver (about 1.5 MB each, and
+#: one solve per observation and iteration)
+MAX_OBSERVATIONS = 100
+#: the most points over all observations of a set (the residuals and their Jacobian are held at
+#: once)
+MAX_TOTAL_POINTS = 1_000_000
+#: the largest coordinate [m] of a point or a grip position: farther is no cable in a lab (1e30 m
+#: made every later number meaningless and ``--write-scene`` wrote a weight of 5e-7 N/m)
+MAX_COORDINATE = 1e4
+#: the largest σ of the points [m], and of a force [N], torque [N·m] or mass [kg]
+MAX_SIGMA = {"points": 1.0, "force": 1e6, "torque": 1e6, "mass": 1e6}
+#: the largest observation file [bytes] (the scene files' limit; large clouds go in points_file)
+FILE_BYTES = LIMITS["file_bytes"]
 #: the most knots of a piecewise-linear profile fit
 MAX_KNOTS = 50
 
@@ -120,7 +131,7 @@ class ObservationSet:
 
 
 # ---- readers ----------------------------------------------------------------------------------------
-def _positive(value: object, key: str) -> float:
+def _positive(value: object, key: str, upper: float = float("inf")) -> float:
     if isinstance(value, bool):
         raise ObservationError(f"{key}: expected a number > 0, got {value!r}")
     try:
@@ -129,6 +140,9 @@ def _positive(value: object, key: str) -> float:
         raise ObservationError(f"{key}: expected a number > 0, got {type(value).__name__}") from None
     if not (np.isfinite(x) and x > 0):
         raise ObservationError(f"{key}: expected a finite number > 0, got {x}")
+    if x > upper:
+        raise ObservationError(f"{key}: {x:g} is over the limit of {upper:g} "
+                               "(msg_docs/fitting.md, Limits)")
     return x
 
 
@@ -146,9 +160,14 @@ def _only(d: dict, allowed: tuple[str, ...], key: str) -> None:
 
 
 def _points(value: object, key: str) -> np.ndarray:
+    if isinstance(value, list) and len(value) > MAX_POINTS:
+        raise ObservationError(f"{key}: {len(value)} points, over the limit of {MAX_POINTS}")
+    if isinstance(value, np.ndarray) and value.dtype.kind not in "fiu":
+        raise ObservationError(f"{key}: the points must be real numbers, got dtype "
+                               f"{value.dtype.kind!r}")
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ObservationError(f"{key}: expected a list of [x, y, z] points") from None
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise ObservationError(f"{key}: expected N rows of [x, y, z], got an array of shape {arr.shape}")
@@ -159,6 +178,11 @@ def _points(value: object, key: str) -> np.ndarray:
     bad = np.flatnonzero(~np.all(np.isfinite(arr), axis=1))
     if bad.size:
         raise ObservationError(f"{key}[{bad[0]}]: contains NaN or infinity")
+    far = np.flatnonzero(np.any(np.abs(arr) > MAX_COORDINATE, axis=1))
+    if far.size:
+        raise ObservationError(f"{key}[{far[0]}]: a coordinate of {np.abs(arr[far[0]]).max():.3g} "
+                               f"m, over the limit of {MAX_COORDINATE:g} m (msg_docs/fitting.md, "
+                               "Limits)")
     return arr
 
 
@@ -171,7 +195,7 @@ def _points_file(value: object, key: str, base: Path) -> np.ndarray:
     except FileNotFoundError:
         raise ObservationError(f"{key}: no such file: {path}") from None
     except (OSError, ValueError) as exc:
-        raise ObservationError(f"{key}: cannot read {path}: {exc}") from None
+        raise ObservationError(f"{key}: cannot read {path}: {str(exc)[:300]}") from None
     return _points(arr, key)
 
 
@@ -188,7 +212,7 @@ def _grip_vector(value: object, key: str, field: str) -> tuple[str, np.ndarray, 
         vector = finite_vector(d[field], 3, f"{key}.{field}")
     except (TypeError, ValueError) as exc:
         raise ObservationError(str(exc)) from None
-    return d["grip"], vector, _positive(d["sigma"], f"{key}.sigma")
+    return d["grip"], vector, _positive(d["sigma"], f"{key}.sigma", MAX_SIGMA[field])
 
 
 def _force(value: object, key: str) -> ForceObservation:
@@ -206,7 +230,7 @@ def _observation(value: object, key: str, sigma: float | None, base: Path) -> Ob
         raise ObservationError(f"{key}.points: give exactly one of points or points_file")
     points = _points(d["points"], f"{key}.points") if "points" in d else \
         _points_file(d["points_file"], f"{key}.points_file", base)
-    s = _positive(d["sigma"], f"{key}.sigma") if "sigma" in d else sigma
+    s = _positive(d["sigma"], f"{key}.sigma", MAX_SIGMA["points"]) if "sigma" in d else sigma
     if s is None:
         raise ObservationError(f"{key}.sigma: missing (give it here or at the top level)")
     poses = {}
@@ -219,8 +243,11 @@ def _observation(value: object, key: str, sigma: float | None, base: Path) -> Ob
                 raise ObservationError(f"{where}.{name}: missing")
         try:
             poses[str(grip)] = GripPose.checked(pd["position"], pd["orientation"], where)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise ObservationError(str(exc)) from None
+        if np.abs(poses[str(grip)].position).max() > MAX_COORDINATE:
+            raise ObservationError(f"{where}.position: a coordinate over the limit of "
+                                   f"{MAX_COORDINATE:g} m (msg_docs/fitting.md, Limits)")
     force = _force(d["force"], f"{key}.force") if d.get("force") is not None else None
     torque = _torque(d["torque"], f"{key}.torque") if d.get("torque") is not None else None
     return Observation(str(d.get("name", key)), poses, points, s, force, torque)
@@ -233,7 +260,7 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
                                f"got {type(d).__name__}")
     _only(d, ("scene", "parameters", "sigma", "total_mass", "profiles", "observations"), "")
     base = base or Path(".")
-    sigma = _positive(d["sigma"], "sigma") if "sigma" in d else None
+    sigma = _positive(d["sigma"], "sigma", MAX_SIGMA["points"]) if "sigma" in d else None
     params = d.get("parameters", ["Rf", "D"])
     if not isinstance(params, list) or not params:
         raise ObservationError(f"parameters: expected a non-empty list among {list(PARAMETERS)}")
@@ -248,8 +275,9 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
         _only(md, ("value", "sigma"), "total_mass")
         if "value" not in md:
             raise ObservationError("total_mass.value: missing")
-        value = _positive(md["value"], "total_mass.value")
-        mass = MassObservation(value, _positive(md.get("sigma", 1e-3 * value), "total_mass.sigma"))
+        value = _positive(md["value"], "total_mass.value", MAX_SIGMA["mass"])
+        mass = MassObservation(value, _positive(md.get("sigma", 1e-3 * value), "total_mass.sigma",
+                                                MAX_SIGMA["mass"]))
     profiles = {}
     for name, spec in _mapping(d.get("profiles") or {}, "profiles").items():
         where = f"profiles.{name}"
@@ -269,7 +297,17 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
     items = d["observations"]
     if not isinstance(items, list) or not items:
         raise ObservationError("observations: expected a non-empty list")
-    obs = tuple(_observation(v, f"observations[{i}]", sigma, base) for i, v in enumerate(items))
+    if len(items) > MAX_OBSERVATIONS:
+        raise ObservationError(f"observations: {len(items)} items, at most {MAX_OBSERVATIONS} are "
+                               "allowed (msg_docs/fitting.md, Limits)")
+    obs, total = [], 0
+    for i, v in enumerate(items):
+        obs.append(_observation(v, f"observations[{i}]", sigma, base))
+        total += len(obs[-1].points)
+        if total > MAX_TOTAL_POINTS:
+            raise ObservationError(f"observations[{i}]: more than {MAX_TOTAL_POINTS} points in "
+                                   "all (msg_docs/fitting.md, Limits)")
+    obs = tuple(obs)
     scene = d.get("scene", "")
     if not isinstance(scene, str):
         raise ObservationError("scene: expected a scene name or file")
@@ -280,14 +318,15 @@ def load_observations(path: str | Path) -> ObservationSet:
     """Read an observation file (YAML or JSON).  Raises ObservationError (``<file>: <key path>: ...`` or
     ``<file>:<line>:<column>: YAML/JSON syntax error ...``) or FileNotFoundError."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         raise FileNotFoundError(f"{path}: no such observation file")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark else str(path)
-        raise ObservationError(f"{where}: YAML/JSON syntax error: {getattr(exc, 'problem', '') or exc}") from None
+        text = read_regular_file(path, str(path), FILE_BYTES, "observation file",
+                                 "msg_docs/fitting.md, Limits").decode("utf-8")
+        data = parse_bounded_yaml(text, str(path))
+    except FileLimitError as exc:
+        message = str(exc).replace("YAML syntax error", "YAML/JSON syntax error")
+        raise ObservationError(message) from None
     except UnicodeDecodeError:
         raise ObservationError(f"{path}: not a UTF-8 text file") from None
     try:

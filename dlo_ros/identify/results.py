@@ -55,11 +55,15 @@ class ObservationFit:
 
 @dataclass
 class FitResult:
-    """status: 'ok' (converged), 'not_converged' (iteration limit or no descent) or 'failed' (an
-    equilibrium could not be solved: message).  parameters: the determined ones; ratios: the determined
-    ratios (D/Rf, Rt/Rf, Re/Rf); not_identifiable[name]: why the data cannot determine it; fixed: the
-    scene's values of parameters not fitted (the estimates are conditional on them); string: the scene's
-    string with the fitted values; chi2_reduced: Σ(r/σ)² / (2 N_points + force, torque and mass rows − rank)."""
+    """status: 'ok' (converged and the fitted shapes explain the points), 'misfit' (they do not:
+    the reduced χ² is over ``chi2_threshold``, ``gate.py``; the message says why), 'not_converged'
+    (iteration limit or no descent) or 'failed' (an equilibrium could not be solved: message).
+    parameters: the determined ones; ratios: the determined ratios (D/Rf, Rt/Rf, Re/Rf);
+    not_identifiable[name]: why the data cannot determine it; fixed: the scene's values of
+    parameters not fitted (the estimates are conditional on them); string: the scene's string with
+    the fitted values; chi2_reduced: Σ(r/σ)² / dof, dof = 2 N_points + force, torque and mass rows
+    − rank; sigma_scale: the factor the stds were inflated by (sqrt(chi2_reduced) when it is over
+    1)."""
 
     status: str
     message: str
@@ -76,6 +80,9 @@ class FitResult:
     covariance_log: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     string: StringProperties | None = None
     identifiability: Identifiability | None = None
+    dof: int = 0
+    chi2_threshold: float = float("nan")
+    sigma_scale: float = 1.0
 
     @property
     def ok(self) -> bool:
@@ -91,7 +98,9 @@ class FitResult:
             "not_identifiable": dict(self.not_identifiable),
             "fixed": dict(self.fixed),
             "observations": [o.as_dict() for o in self.observations],
-            "chi2_reduced": self.chi2_reduced,
+            "chi2_reduced": self.chi2_reduced, "chi2_threshold": self.chi2_threshold,
+            "dof": self.dof,
+            "sigma_scale": self.sigma_scale,
             "iterations": self.iterations, "equilibrium_solves": self.equilibrium_solves, "time_s": self.time_s,
             "fitted": list(self.names),
             "covariance_log": self.covariance_log.tolist(),

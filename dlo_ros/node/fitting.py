@@ -7,7 +7,8 @@ estimate is applied (pure: no ROS; msg_docs/node.md "Fitting").
   process (its own equilibrium solvers: a CasADi/IPOPT solver object is never shared between threads,
   and an interpreted CasADi call holds the GIL, so a thread would slow the stream).  The worker keeps
   its solvers from one fit to the next: the first fit of a structure pays for building them.
-* :func:`plan_application`: which ``string.*`` parameters an estimate changes, and whether every value it
+* :func:`plan_application`: which ``string.*`` parameters an estimate changes, whether the fit
+  passed the goodness-of-fit gate (status ``ok``, not ``misfit``), and whether every value it
   changes is determined with a relative standard deviation within ``fit.apply_max_rel_sigma``.
 * :class:`FitHealth`: the counters and the last estimate for the diagnostics status ``<node>: fit``.
 """
@@ -112,8 +113,10 @@ def _relative(est) -> float:
 
 
 def plan_application(result, current: Mapping[str, float], bound: float) -> Application:
-    """The parameters ``result`` (a FitResult) would change from ``current`` (parameter name → value), applied
-    only when the fit converged and every changed value is determined with relative σ ≤ ``bound``.
+    """The parameters ``result`` (a FitResult) would change from ``current`` (parameter name →
+    value), applied only when the fit converged, passed the goodness-of-fit gate (status 'ok'; a
+    'misfit' does not explain the points, ``identify/gate.py``) and every changed value is
+    determined with relative σ ≤ ``bound``.
 
     A changed material is determined either absolutely (``result.parameters``) or as a ratio to one that
     does not change (``result.ratios``, e.g. D/Rf from shapes alone: the fit keeps Rf and moves D, which

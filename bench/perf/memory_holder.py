@@ -1,16 +1,20 @@
 """What the node's solver holder keeps, over time, without ROS: RSS and live solver objects.
 
     bash scripts/dlo-env run python bench/perf/memory_holder.py [--seconds 150] [--param-every 10]
-        [--rate 100] [--compile background] [--every 10]
+        [--rate 100] [--compile background] [--every 10] [--query-rate 0]
 
 Runs the node's ShapeEngine with its solver (``build_solver``: ``solver.model: auto`` of the
 default scene, background checks) in this process, streams the soak's target path
 (bench/perf/soak.py) at ``--rate`` Hz and changes ``string.bend_stiffness`` (0.025 ↔ 0.02 N·m², the
-node's own edit) every ``--param-every`` s.  Every ``--every`` s, after a full garbage collection,
-it prints RSS, auto's pooled models and the live ShapeSolver / casadi.Function objects
-(``gc.get_objects`` by type: CasADi and IPOPT memory is invisible to tracemalloc, so growth there
-shows as RSS and these counts), and which object types changed in number.  A flat run rules the
-solver holder out as the cause of node growth; bench/perf/soak.py measures the whole node over DDS.
+node's own edit) every ``--param-every`` s; with ``--query-rate`` the engine also answers queries
+(the node's ``query_workers: 0``) 2-4 cm from the target.  Every ``--every`` s, after a full
+garbage collection, it prints RSS, auto's pooled models and the live ShapeSolver / casadi.Function
+objects (``gc.get_objects`` by type: CasADi and IPOPT memory is invisible to tracemalloc, so growth
+there shows as RSS and these counts), and which object types changed in number.  A flat run rules
+the solver holder out as the cause of node growth; bench/perf/soak.py measures the whole node over
+DDS.  (Not inside a running rclpy node: a ``gc.get_objects`` from another thread can catch a tuple
+rclpy is still filling, and its service take then fails with "SystemError: bad argument to internal
+function".)
 """
 from __future__ import annotations
 
@@ -58,6 +62,8 @@ def main() -> None:
     ap.add_argument("--param-every", type=float, default=10.0)
     ap.add_argument("--rate", type=float, default=100.0)
     ap.add_argument("--every", type=float, default=10.0)
+    ap.add_argument("--query-rate", type=float, default=0.0,
+                    help="queries per second answered by the engine (the node's query_workers: 0)")
     ap.add_argument("--compile", default="background",
                     choices=("background", "blocking", "off"))
     args = ap.parse_args()
@@ -72,7 +78,9 @@ def main() -> None:
         time.sleep(0.05)
     names = [g.name for g in scene.problem.grips]
     before = live_counts()
-    start, k, changes = time.monotonic(), 0, 0
+    start, k, changes, queries, n_queries = time.monotonic(), 0, 0, [], 0
+    rng = np.random.default_rng(0)
+    next_query = 0.0 if args.query_rate > 0 else float("inf")
     next_change, next_sample = args.param_every, 0.0
     print("| t s | RSS MB | pooled models | ShapeSolver | casadi.Function | changes "
           "| types changed |")
@@ -82,6 +90,14 @@ def main() -> None:
                  for n, (p, q) in zip(names, target(now))}
         engine.submit_targets(poses)
         k += 1
+        if now >= next_query:  # the right grip 2-4 cm from its target, as soak.py's clients
+            offset = rng.normal(size=3)
+            step = 0.02 * (1 + rng.random()) * offset / np.linalg.norm(offset)
+            goal = poses[names[1]].position + step
+            n_queries += 1
+            queries.append(engine.query({names[1]: GripPose(goal, poses[names[1]].orientation)}))
+            queries = [q for q in queries if not q.done()]
+            next_query += 1.0 / args.query_rate
         if args.param_every > 0 and now >= next_change:
             values = {"string.bend_stiffness": 0.025 if changes % 2 == 0 else 0.02}
             engine.change_problem(lambda pr, v=values: replace(
@@ -101,8 +117,8 @@ def main() -> None:
             before, next_sample = counts, next_sample + args.every
         time.sleep(max(0.0, start + k / args.rate - time.monotonic()))
     engine.stop()
-    print(f"{k} targets, {changes} parameter changes, {len(failures)} failures"
-          + (f": {failures[:3]}" if failures else ""))
+    print(f"{k} targets, {changes} parameter changes, {n_queries} queries, "
+          f"{len(failures)} failures" + (f": {failures[:3]}" if failures else ""))
 
 
 if __name__ == "__main__":

@@ -167,6 +167,10 @@ def worker_pids(pool) -> list[int]:
     return [pid for pid, p in list((getattr(pool, "_processes", None) or {}).items()) if p.is_alive()]
 
 
+#: Generations of replaced pools whose cause a late answer may still name (older ones are forgotten).
+KEPT_CAUSES = 16
+
+
 class WorkerDied(RuntimeError):
     """A worker process died with the work in flight on it (crashed, killed, or killed by
     :class:`WorkerPool` because another task on the pool timed out); the message names the cause."""
@@ -257,6 +261,8 @@ class WorkerPool(Executor):
             if generation != self._generation or self._pool is None:
                 return
             self._causes.setdefault(generation, cause)
+            for old_generation in [g for g in self._causes if g < generation - KEPT_CAUSES]:
+                del self._causes[old_generation]  # a long-lived node replaces workers without end
             old, self._pool = self._pool, None
             self._generation += 1
             self.restarts += 1

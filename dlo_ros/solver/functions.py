@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from . import native_newton
-from .compiled import (InterpretedFunction, NativeFunction, compiled, compiler, library_path,
+from .compiled import (FLAGS, InterpretedFunction, NativeFunction, compiled, compiler, library_path,
                        load_native)
 from .nlp import StringNLP
 from .output_function import OutputFunction
@@ -108,7 +108,8 @@ class NlpFunctions:
                 active = name == "kkt"  # with its active-set loop and the residual function that loop uses
                 native, ok = compiled(fn, nice=nice, lib=lib,
                                       extra_source=native_newton.active_source(fn, nlp.residual_fn) if active else "",
-                                      also=(nlp.residual_fn,) if active else ())
+                                      also=(nlp.residual_fn,) if active else (),
+                                      flags=native_newton.active_flags(fn, nlp.residual_fn) if active else FLAGS)
                 loop = native_newton.build(nlp, nice=nice, kkt_lib=lib) \
                     if ok and name == "kkt_free" else None
                 with (threading.Lock() if locked else lock):  # blocking: the caller may hold the solver's lock

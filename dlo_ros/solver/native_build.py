@@ -1,10 +1,11 @@
 """The compiled Newton drivers' C: read from the package, made into one source, keyed and compiled.
 
 The drivers are C files shipped in the package (``dlo_ros/solver/native/``, read through
-``importlib.resources``, so an installed package has them).  A driver's ``#include "x.h"`` of a file
-beside it is replaced by that file's text (once per source), and the result is appended to CasADi's
-generated code of the functions it runs, which ``-DDLO_SYSTEM=…`` and ``-DDLO_RESIDUAL=…`` name.  Every
-setting the drivers share with the Python paths arrives as a ``-D`` flag from ``native_settings``.
+``importlib.resources``, so an installed package has them).  A driver's ``#include "x.h"`` of a
+file beside it is replaced by that file's text (once per source), and the result is appended to
+CasADi's generated code of the functions it runs, which ``-DDLO_SYSTEM=…`` and
+``-DDLO_RESIDUAL=…`` name.  Every setting the drivers share with the Python paths arrives as a
+``-D`` flag from ``native_settings``.
 
 Cache keys: a driver's library name carries a digest of its assembled source and of the compiler
 flags with the settings' ``-D`` values (``driver_digest``), next to the generated function's
@@ -24,7 +25,7 @@ import casadi as ca
 from . import native_settings
 from .compiled import FLAGS, build_library, cache_dir, fingerprint
 
-#: the contact-free loop (``native_newton.NativeNewton``) and the active-set loop (``ActiveNewton``)
+#: the contact-free loop (``native_newton.NativeNewton``), the active-set loop (``ActiveNewton``)
 FREE_DRIVER, ACTIVE_DRIVER = "newton_free.c", "newton_active.c"
 
 #: a local include: a file of the native directory, by a plain name
@@ -62,8 +63,8 @@ def driver_source(name: str) -> str:
 
 
 def settings_flags() -> tuple[str, ...]:
-    """The compiler flags a driver's code depends on beside its functions' names: ``compiled.FLAGS``
-    and the shared settings (``native_settings.defines``)."""
+    """The compiler flags a driver's code depends on beside its functions' names:
+    ``compiled.FLAGS`` and the shared settings (``native_settings.defines``)."""
     return (*FLAGS, *native_settings.defines())
 
 
@@ -85,22 +86,23 @@ def driver_digest(name: str) -> str:
 
 
 def free_library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
-    """Where the contact-free driver compiled with ``fn`` (``StringNLP.kkt_free_split_fn``) is (or will
-    be) cached.  ``kkt_lib``: ``fn``'s own ``compiled.library_path``, when the caller has it (its name
-    carries the fingerprint, which otherwise costs an evaluation of ``fn``)."""
+    """Where the contact-free driver compiled with ``fn`` (``StringNLP.kkt_free_split_fn``) is (or
+    will be) cached.  ``kkt_lib``: ``fn``'s own ``compiled.library_path``, when the caller has it
+    (its name carries the fingerprint, which otherwise costs an evaluation of ``fn``)."""
     key = kkt_lib.stem.rsplit("_", 1)[1] if kkt_lib is not None else fingerprint(fn)
     return cache_dir() / f"dlo_newton_{key}_{driver_digest(FREE_DRIVER)}.so"
 
 
 def active_library_path(fn: ca.Function) -> Path:
-    """Where ``fn``'s library (``StringNLP.kkt_split_fn``) with the active-set driver appended is (or
-    will be) cached."""
-    return cache_dir() / f"{fn.name()}_{fingerprint(fn)}_active_{driver_digest(ACTIVE_DRIVER)}.so"
+    """Where ``fn``'s library (``StringNLP.kkt_split_fn``) with the active-set driver appended is
+    (or will be) cached."""
+    digest = driver_digest(ACTIVE_DRIVER)
+    return cache_dir() / f"{fn.name()}_{fingerprint(fn)}_active_{digest}.so"
 
 
 def compile_free(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:
-    """Build the contact-free driver around ``fn`` and ``residual`` into ``lib`` (``build_library``:
-    stored through ``cache_store``); False if the compiler fails or the cache is unusable.  Callers
-    hold ``compiled.COMPILER_LOCK``."""
+    """Build the contact-free driver around ``fn`` and ``residual`` into ``lib``
+    (``build_library``: stored through ``cache_store``); False if the compiler fails or the cache
+    is unusable.  Callers hold ``compiled.COMPILER_LOCK``."""
     return build_library(fn, lib, cc, flags=driver_flags(fn, residual), nice=nice,
                          extra_source=driver_source(FREE_DRIVER), also=(residual,))

@@ -39,13 +39,14 @@ stability eigenpair and the outputs at its answer in the same way: a warm update
 one compiled call either way.
 
 The C is ``native/newton_free.c`` (and ``newton_active.c`` for ``ActiveNewton``, in
-``native_active``), with the headers they include; ``native_build`` reads it from the package, passes
-the settings it shares with the Python paths as ``-D`` flags (``native_settings``) and keys the library,
-cached beside the KKT function's (``compiled.cache_dir``), by that function's fingerprint (which also
-fixes its residual's code) and a digest of the assembled C and those flags.  The Python side is split
-by job: ``native_blocks`` (LAPACK by address, the node map's blocks), ``native_outputs`` (what a
-converged call also evaluates), ``native_active`` (the active-set loop) and this module (the
-contact-free loop, and the names the other modules import from here).
+``native_active``), with the headers they include; ``native_build`` reads it from the package,
+passes the settings it shares with the Python paths as ``-D`` flags (``native_settings``) and keys
+the library, cached beside the KKT function's (``compiled.cache_dir``), by that function's
+fingerprint (which also fixes its residual's code) and a digest of the assembled C and those
+flags.  The Python side is split by job: ``native_blocks`` (LAPACK by address, the node map's
+blocks), ``native_outputs`` (what a converged call also evaluates), ``native_active`` (the
+active-set loop) and this module (the contact-free loop, and the names other modules import from
+here).
 """
 from __future__ import annotations
 
@@ -61,18 +62,19 @@ from .cache_store import UnusableLibrary, load as load_library
 from .compiled import COMPILER_LOCK, compiler
 from .native_active import ActiveNewton, ActiveOutcome
 from .native_blocks import CHUNK_WORK, NodeBlocks, WithNodePart, eigen_lapack, lapack_pointer
-from .native_build import (ACTIVE_DRIVER, active_library_path, compile_free, driver_flags, driver_source,
-                           free_library_path)
+from .native_build import (ACTIVE_DRIVER, active_library_path, compile_free, driver_flags,
+                           driver_source, free_library_path)
 from .native_outputs import ComputedOutputs, UpdateOutputs
 from .native_settings import (CONVERGED, EIGEN_FOUND, EVALUATION_FAILED, NOT_CONVERGED, SINGULAR,
                               STEP_TOO_LARGE)
-from .nlp import (NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS, NEWTON_CHORD_TOLERANCE,
-                  NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP, NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION)
+from .nlp import (NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
+                  NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
+                  NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION)
 
-__all__ = ["ActiveNewton", "ActiveOutcome", "CHUNK_WORK", "CONVERGED", "ComputedOutputs", "EVALUATION_FAILED",
-           "NOT_CONVERGED", "NativeNewton", "NewtonOutcome", "NodeBlocks", "SINGULAR", "STEP_TOO_LARGE",
-           "UpdateOutputs", "WithNodePart", "active_flags", "active_library_path", "active_source", "build",
-           "cached", "library_path"]
+__all__ = ["ActiveNewton", "ActiveOutcome", "CHUNK_WORK", "CONVERGED", "ComputedOutputs",
+           "EVALUATION_FAILED", "NOT_CONVERGED", "NativeNewton", "NewtonOutcome", "NodeBlocks",
+           "SINGULAR", "STEP_TOO_LARGE", "UpdateOutputs", "WithNodePart", "active_flags",
+           "active_library_path", "active_source", "build", "cached", "library_path"]
 
 
 def library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
@@ -82,8 +84,9 @@ def library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
 
 
 def active_source(fn: ca.Function, residual: ca.Function) -> str:
-    """The active-set driver's C, to append to the generated code of ``fn`` (``StringNLP.kkt_split_fn``)
-    and ``residual`` (``StringNLP.residual_fn``); compile it with ``active_flags``."""
+    """The active-set driver's C, to append to the generated code of ``fn``
+    (``StringNLP.kkt_split_fn``) and ``residual`` (``StringNLP.residual_fn``); compile it with
+    ``active_flags``."""
     return driver_source(ACTIVE_DRIVER)
 
 

@@ -293,8 +293,10 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
             lam = np.zeros(rows)
             lam[:nf] = lam_free
             tol = settings.CONTACT_APPEARED_TOLERANCE  # the compiled loop's too (dlo_after_run)
-            if np.any(g[nf:] > nlp.ubg[nf:] + tol):  # a contact appeared (or a fold guard: no equilibrium)
-                contact = np.all(g[nf:][~nlp.contact_row[nf:]] <= nlp.ubg[nf:][~nlp.contact_row[nf:]] + tol)
+            # a contact appeared (or a fold guard: no equilibrium)
+            if np.any(g[nf:] > nlp.ubg[nf:] + tol):
+                guards = ~nlp.contact_row[nf:]
+                contact = np.all(g[nf:][guards] <= nlp.ubg[nf:][guards] + tol)
                 return False, start, it, np.inf, SolverState(z.copy(), lam, start.lam_x, p, g=g) if contact else None
             state = SolverState(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
                                 energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual,

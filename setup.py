@@ -10,6 +10,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'bench', 'bench.*']),
+    # the compiled Newton drivers' C, read through importlib.resources (solver/native_build.py)
+    package_data={'dlo_ros.solver': ['native/*.c', 'native/*.h']},
     data_files=[
         # Marker that makes the package visible to ament_index_python / `ros2 pkg`.
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),

@@ -32,8 +32,8 @@ import casadi as ca
 import numpy as np
 
 from . import native_newton
-from .compiled import (InterpretedFunction, NativeFunction, compiled, compiler, library_path,
-                       load_native)
+from .compiled import (FLAGS, InterpretedFunction, NativeFunction, compiled, compiler,
+                       library_path, load_native)
 from .nlp import StringNLP
 from .output_function import OutputFunction
 
@@ -106,7 +106,9 @@ class NlpFunctions:
                     return
                 nice = 10 if mode == "background" else 0
                 active = name == "kkt"  # with its active-set loop and the residual function that loop uses
-                native, ok = compiled(fn, nice=nice, lib=lib,
+                # its -D settings: native_newton.active_flags
+                flags = native_newton.active_flags(fn, nlp.residual_fn) if active else FLAGS
+                native, ok = compiled(fn, nice=nice, lib=lib, flags=flags,
                                       extra_source=native_newton.active_source(fn, nlp.residual_fn) if active else "",
                                       also=(nlp.residual_fn,) if active else ())
                 loop = native_newton.build(nlp, nice=nice, kkt_lib=lib) \

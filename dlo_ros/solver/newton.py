@@ -26,8 +26,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.lapack import dgesv as _gesv
 
+from . import native_settings as settings
 from .functions import NlpFunctions
-from .native_newton import CONVERGED
+from .native_settings import CONVERGED
 from .nlp import (JOIN_TOLERANCE, LEAVE_TOLERANCE, NEWTON_ACTIVE_SET_CHANGES, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
                   NEWTON_PRIMAL_TOLERANCE, NEWTON_REGULARISATION, NEWTON_STEP_SWITCHES, NEWTON_STEPS, StringNLP)
 from .state import SolverState
@@ -291,8 +292,11 @@ def _newton_free(nlp: StringNLP, fns: NlpFunctions, start: SolverState, p: np.nd
             g, jac = all_rows(nlp, fns, z, p, kkt, residual, rows_g)
             lam = np.zeros(rows)
             lam[:nf] = lam_free
-            if np.any(g[nf:] > nlp.ubg[nf:] + 1e-9):  # a contact appeared (or a fold guard: no equilibrium)
-                contact = np.all(g[nf:][~nlp.contact_row[nf:]] <= nlp.ubg[nf:][~nlp.contact_row[nf:]] + 1e-9)
+            tol = settings.CONTACT_APPEARED_TOLERANCE  # the compiled loop's too (dlo_after_run)
+            # a contact appeared (or a fold guard: no equilibrium)
+            if np.any(g[nf:] > nlp.ubg[nf:] + tol):
+                guards = ~nlp.contact_row[nf:]
+                contact = np.all(g[nf:][guards] <= nlp.ubg[nf:][guards] + tol)
                 return False, start, it, np.inf, SolverState(z.copy(), lam, start.lam_x, p, g=g) if contact else None
             state = SolverState(z.copy(), lam, start.lam_x, p, hessian=kkt[:n, :n], jacobian=jac,
                                 energies=energies.ravel(), g=g, gradient=grad.ravel(), kkt=kkt, residual=residual,

@@ -14,6 +14,7 @@ from scipy.linalg.lapack import dgeqp3 as _geqp3
 from scipy.linalg.lapack import dorgqr as _orgqr
 from scipy.linalg.lapack import dsyevr as _syevr
 
+from . import native_settings as settings
 from .functions import NlpFunctions
 from .newton import derivatives
 from .nlp import StringNLP
@@ -33,7 +34,9 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
     active = np.zeros(0, dtype=bool)
     if nlp.lbg.size:
         g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
-        active = nlp.equality | (np.abs(state.lam_g) > 1e-9) | (g > nlp.ubg - 1e-9)
+        # the rows the compiled loops hold too (native/newton_active.c): one value, native_settings
+        active = (nlp.equality | (np.abs(state.lam_g) > settings.STABILITY_MULTIPLIER_TOLERANCE)
+                  | (g > nlp.ubg - settings.STABILITY_BOUND_TOLERANCE))
     if state.hessian is None:
         gradient, _, state.jacobian, state.hessian, state.energies = derivatives(nlp, fns, state.z, state.p,
                                                                                  state.lam_g, active)

@@ -391,3 +391,90 @@ def test_the_node_blocks_hold_the_node_map_exactly_in_small_dgemm_calls(model):
         assert blocks.chunk * C * E.shape[1] <= CHUNK_WORK or blocks.chunk == 1
         row, col, block = row + R, col + C, block + R * C
     np.testing.assert_array_equal(rebuilt, E)
+
+
+def test_the_compiled_stability_rows_follow_the_one_python_setting(solvers, tmp_path, monkeypatch):
+    """The rows the stability eigenvalue holds are set once, in ``native_settings``: with
+    STABILITY_BOUND_TOLERANCE raised to 5e-3 (scaled), inactive table rows within that of their
+    bound join them, in the C of the active-set loop (a library keyed by the new value, compiled
+    for it) and in ``stability.min_reduced_eigenvalue`` alike; both against an SVD null space and a
+    full eigendecomposition of the reduced Hessian on the rows that tolerance holds.  (Before #36
+    the C held its own 1e-9: its eigenvalue then missed by 0.1 of 3.0.)"""
+    import scipy.linalg
+
+    from dlo_ros.solver import native_settings, stability
+    from dlo_ros.solver.native_newton import active_library_path
+    from dlo_ros.solver.newton import active_rows
+    from dlo_ros.solver.state import SolverState
+
+    scene, native, _ = solvers
+    before = active_library_path(native.nlp.kkt_split_fn)
+    tol = 5e-3
+    monkeypatch.setattr(native_settings, "STABILITY_BOUND_TOLERANCE", tol)
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)
+    solver = ShapeSolver(scene.problem, SolverOptions(model="full", order=12), compile="blocking")
+    nlp = solver.nlp
+    assert active_library_path(nlp.kkt_split_fn).name != before.name  # keyed by the setting
+    assert solver.functions.newton_active is not None
+    rot = scene.problem.grip("right").pose.orientation
+    assert solver.solve(lowered(0.06, rot)).ok
+    state = solver.snapshot()
+    active = active_rows(nlp, state.lam_g, np.asarray(nlp.g_fn(state.z, state.p)).ravel())
+    moved = {"right": GripPose(np.array([0.58, 0.06, 0.34]), rot),
+             "left": GripPose(np.array([0.0, 0.0, 0.34]), rot)}
+    p = solver.pack_parameters(scene.problem.with_grip_poses(moved), state.z)
+    lam = np.where(active, state.lam_g, 0.0)
+    out = solver.functions.newton_active(state.z, lam, p, active, nlp.ubg,
+                                         nlp.contact_row & ~nlp.equality, 4, 10)
+    assert out.code == 0 and out.eigen is not None
+
+    def lowest(held):
+        basis = scipy.linalg.null_space(out.jacobian[held])
+        values = np.linalg.eigvalsh(basis.T @ out.hessian @ basis)
+        assert values[1] - values[0] > 1e-6 * abs(values).max()  # simple: a well-defined value
+        return values[0]
+
+    base = nlp.equality | (np.abs(out.lam) > 1e-9)
+    held, default = base | (out.g > nlp.ubg - tol), base | (out.g > nlp.ubg - 1e-9)
+    assert np.count_nonzero(held & ~default) >= 1  # the setting changes which rows are held
+    expected, other = lowest(held), lowest(default)
+    assert abs(expected - other) > 1e-6 * abs(other)  # ... and the eigenvalue
+    assert out.eigen[0] == pytest.approx(expected, rel=1e-10, abs=1e-12 * abs(expected))
+    fresh = SolverState(out.z, out.lam, state.lam_x, p, hessian=out.hessian, jacobian=out.jacobian,
+                        energies=out.energies, gradient=out.gradient, g=out.g)
+    value = stability.min_reduced_eigenvalue(nlp, solver.functions, fresh)
+    assert value == pytest.approx(expected, rel=1e-10, abs=1e-12 * abs(expected))
+
+
+def test_the_library_keys_change_with_the_c_and_with_every_setting(solvers, monkeypatch):
+    """A compiled loop is never loaded for C or settings other than its own: both library names
+    hash the assembled C (``native_build.driver_digest``) and the ``-D`` values
+    (``native_settings``)."""
+    from dlo_ros.solver import native_build, native_settings
+    from dlo_ros.solver.native_newton import active_library_path, library_path
+
+    _, native, _ = solvers
+    nlp = native.nlp
+
+    def names():
+        return library_path(nlp.kkt_free_split_fn).name, active_library_path(nlp.kkt_split_fn).name
+
+    first = names()
+    assert names() == first  # stable
+    for setting in ("STABILITY_MULTIPLIER_TOLERANCE", "STABILITY_BOUND_TOLERANCE",
+                    "CONTACT_APPEARED_TOLERANCE"):
+        with monkeypatch.context() as m:
+            m.setattr(native_settings, setting, 2 * getattr(native_settings, setting))
+            changed = names()
+        assert changed[0] != first[0] and changed[1] != first[1], setting
+    read = native_build.read
+    for edited in ("dlo_common.h", "dlo_eigen.h", "newton_free.c", "newton_active.c"):
+        with monkeypatch.context() as m:
+            m.setattr(native_build, "read",
+                      lambda name, e=edited: read(name) + ("\n/* */" if name == e else ""))
+            changed = names()
+        # a header both drivers include changes both names; a driver only its own
+        expected = (edited != "newton_active.c", edited != "newton_free.c")
+        assert (changed[0] != first[0], changed[1] != first[1]) == expected, edited
+    assert names() == first

@@ -1,0 +1,243 @@
+/* Newton with an active set in one call (dlo_ros/solver/native_active.py, ActiveNewton), around
+   the generated split full KKT function DLO_SYSTEM (StringNLP.kkt_split_fn) and its residual
+   DLO_RESIDUAL (StringNLP.residual_fn), both given as -D names by native_build.py. */
+#include "dlo_native.h"
+#include "dlo_common.h"
+#include "dlo_eigen.h"
+/* grad f, g, dg/dz, hess L, energies at arg into res[0..4]: the split function (hess L without its
+   per-node part), then that part added (dlo_add_node_part); nonzero if the function fails. */
+static int dlo_full_eval(const casadi_real **arg, casadi_real **res, casadi_int *iw,
+                         casadi_real *w, double *W, dlo_gemm_t gemm, const dlo_node_map *map,
+                         int rows_e, int n, double *buf) {
+  res[5] = W;
+  if (DLO_SYSTEM(arg, res, iw, w, 0) != 0) return 1;
+  dlo_add_node_part(gemm, map, W, rows_e, n, res[3], n, buf);
+  return 0;
+}
+
+/* The regularised LU (dlo_regularised_lu) of [H J_A^T; J_A 0] of the m rows idx, into A
+   (N = n + m). */
+static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double *jac,
+                             const int *idx, int n, int m, int rows, double reg, double *A,
+                             int *ipiv) {
+  int N = n + m;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) A[i + (size_t)j * N] = hess[i + (size_t)j * n];
+  for (int k = 0; k < m; ++k) {
+    for (int j = 0; j < n; ++j) {
+      double a = jac[idx[k] + (size_t)j * rows];
+      A[(n + k) + (size_t)j * N] = a;
+      A[j + (size_t)(n + k) * N] = a;
+    }
+    for (int l = 0; l < m; ++l) A[(n + k) + (size_t)(n + l) * N] = 0.0;
+  }
+  return dlo_regularised_lu(getrf, A, ipiv, n, N, reg);
+}
+
+/* Newton, then chord, steps on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see
+   dlo_ros/solver/native_newton.py (ActiveNewton) and newton.py (_active_steps, the same row
+   switches). Each step's matrix is evaluated (Newton's own steps) until an iterate where the rows
+   are checked changes no row and the steps are below chord_start; after that the factored matrix
+   is kept while the steps shrink by the contraction factor, the residual function giving grad L
+   and g in between.  The rows are checked at the first iterate (a Newton step reached it: its g
+   and multipliers are Newton's own) and at each evaluated iterate after it: while switches remain,
+   one row of those with switchable[i] changes, the most violated inactive one joining, else the
+   active one with the most negative multiplier leaving (its multiplier set to 0), and the matrix
+   is evaluated there; an iterate where a row changed is not converged.  z (n), lam (rows), active
+   (rows): in at the start, out at the answer.  grad, g, jac (rows x n, column-major), hess (n x
+   n), energies: out at the answer (evaluated there); with given = 1 they are in as well, the first
+   step's derivatives. */
+CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
+    dlo_getrf_t getrf, dlo_getrs_t getrs, dlo_gemm_t gemm, const dlo_node_map *map, int rows_e,
+    int buf_size, int n, int rows, int *active, const int *switchable, int switches,
+    int max_evaluations, int max_steps, int given, double max_step, double reg, double tol_dual,
+    double tol_prim, double tol_step, double contraction, double chord_start, double join_tol,
+    double leave_tol, double *z, const double *p, double *lam, const double *ub, double *grad,
+    double *g, double *jac, double *hess, double *energies, int *steps, int *evaluations,
+    const int *equality, const dlo_eigen_lapack *eigen, double *eig_value, double *eig_direction,
+    int *eig_code, dlo_after *after) {
+  int one = 1, info = 0, code = DLO_NOT_CONVERGED;
+  char trans = 'N';
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  dlo_work(DLO_SYSTEM_WORK, DLO_RESIDUAL_WORK, &sz_arg, &sz_res, &sz_iw, &sz_w);
+  const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
+  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 6 ? sz_res : 6));
+  double *W = malloc(sizeof(double) * rows_e * n);
+  double *buf = malloc(sizeof(double) * (buf_size > 1 ? buf_size : 1));
+  casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
+  casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
+  int most = 0;  /* rows that can be active: the matrix is sized for them, not for every row */
+  for (int i = 0; i < rows; ++i) most += active[i] || switchable[i];
+  int *idx = malloc(sizeof(int) * (most > 1 ? most : 1));
+  double *A = malloc(sizeof(double) * (n + most) * (n + most));
+  double *rhs = malloc(sizeof(double) * (n + most));
+  double *lgrad = malloc(sizeof(double) * (n + rows));  /* the residual function's [grad L; g] */
+  int *ipiv = malloc(sizeof(int) * (n + most));
+  int fresh = 0, m = 0, factored = 0, here = 0;  /* here: the factored matrix is this iterate's */
+  int settled = switches == 0;  /* a check of the rows changed none (or none may change) */
+  double previous = INFINITY, big = 0.0;
+  int shrinking = 1;
+  *steps = 0; *evaluations = 0;
+  arg[0] = z; arg[1] = p; arg[2] = lam;
+  if (!given) {
+    res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+    if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) {
+      code = DLO_EVALUATION_FAILED;
+      goto done;
+    }
+    ++*evaluations;
+    fresh = 1;
+  }
+  for (;;) {
+    int switched = 0;
+    /* rows switch where the derivatives are evaluated, and at the first iterate, which a Newton
+       step reached whatever the start (there the residual function's g and the multipliers are
+       Newton's own) */
+    if (*steps > 0 && switches > 0 && (fresh || *steps == 1)) {
+      int join = -1, leave = -1;
+      double excess = join_tol, negative = -leave_tol;
+      for (int i = 0; i < rows; ++i) {
+        if (!switchable[i]) continue;
+        if (!active[i] && g[i] - ub[i] > excess) { excess = g[i] - ub[i]; join = i; }
+        if (active[i] && lam[i] < negative) { negative = lam[i]; leave = i; }
+      }
+      if (join >= 0) { active[join] = 1; switched = 1; }
+      else if (leave >= 0) { active[leave] = 0; lam[leave] = 0.0; switched = 1; }
+      switches -= switched;
+      settled = !switched;
+      if (switched && !fresh) {
+        /* the changed set's matrix from derivatives evaluated here: with the start's, a row
+           joining beside an active sample (their Jacobians nearly equal) sent steps over
+           max_step */
+        res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+        if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) {
+          code = DLO_EVALUATION_FAILED;
+          break;
+        }
+        ++*evaluations;
+        fresh = 1;
+      }
+    }
+    m = 0;
+    for (int i = 0; i < rows; ++i) if (active[i]) idx[m++] = i;
+    int N = n + m, converged = !switched;
+    /* the residual: from the last evaluation (grad f + J_A^T lam_A) where it is fresh, else the
+       residual function's grad L (lam is 0 on every inactive row) */
+    for (int j = 0; j < n; ++j) {
+      double v;
+      if (fresh || *steps == 0) {  /* the start's derivatives, given or evaluated */
+        v = grad[j];
+        for (int k = 0; k < m; ++k) v += lam[idx[k]] * jac[idx[k] + (size_t)j * rows];
+      } else {
+        v = lgrad[j];
+      }
+      rhs[j] = -v;
+      if (!(fabs(v) < tol_dual)) converged = 0;
+    }
+    for (int k = 0; k < m; ++k) {
+      double v = g[idx[k]] - ub[idx[k]];
+      rhs[n + k] = -v;
+      if (!(fabs(v) < tol_prim)) converged = 0;
+    }
+    if (converged && (fresh || (*steps > 0 && (big <= tol_step || !shrinking)))) {
+      if (fresh) { code = DLO_CONVERGED; break; }
+      /* the derivatives at the answer, and the test once more on them */
+      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) {
+        code = DLO_EVALUATION_FAILED;
+        break;
+      }
+      ++*evaluations;
+      fresh = 1;
+      continue;
+    }
+    if (*steps == max_steps) { code = DLO_NOT_CONVERGED; break; }
+    if (!factored || switched) {
+      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) {
+        code = DLO_SINGULAR;
+        break;
+      }
+      factored = 1;
+      here = fresh || *steps == 0;
+      previous = INFINITY;
+    }
+    getrs(&trans, &N, &one, A, &N, ipiv, rhs, &N, &info);
+    if (info != 0) { code = DLO_SINGULAR; break; }
+    big = 0.0;
+    int finite = 1;
+    for (int i = 0; i < N; ++i) {
+      if (!isfinite(rhs[i])) finite = 0;
+      if (i < n && fabs(rhs[i]) > big) big = fabs(rhs[i]);
+    }
+    if (!finite || big > max_step) {
+      if (here || *evaluations >= max_evaluations) { code = DLO_STEP_TOO_LARGE; break; }
+      /* a step of the matrix of an earlier iterate: Newton's own step, from derivatives evaluated
+         here */
+      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) {
+        code = DLO_EVALUATION_FAILED;
+        break;
+      }
+      ++*evaluations;
+      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) {
+        code = DLO_SINGULAR;
+        break;
+      }
+      here = fresh = 1;
+      previous = INFINITY;
+      continue;
+    }
+    for (int j = 0; j < n; ++j) z[j] += rhs[j];
+    for (int k = 0; k < m; ++k) lam[idx[k]] += rhs[n + k];
+    ++*steps;
+    here = 0;
+    shrinking = big <= contraction * previous;
+    if (((!settled && *steps > 1) || big > chord_start || (!shrinking && !(big <= tol_step))) &&
+        *evaluations < max_evaluations) {
+      /* Newton's own steps (the same iterates and row decisions as _active_steps) until a check of
+         the rows changes none and the steps are below chord_start, then chord steps; or too slow
+         for the factored matrix: evaluate and factor it here */
+      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
+      if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) {
+        code = DLO_EVALUATION_FAILED;
+        break;
+      }
+      ++*evaluations;
+      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) {
+        code = DLO_SINGULAR;
+        break;
+      }
+      previous = INFINITY;
+      here = fresh = 1;
+    } else {
+      res[0] = lgrad;
+      if (DLO_RESIDUAL(arg, res, iw, w, 0) != 0) { code = DLO_EVALUATION_FAILED; break; }
+      memcpy(g, lgrad + n, sizeof(double) * rows);
+      previous = big;
+      fresh = 0;
+    }
+  }
+  *eig_code = DLO_EIGEN_FAILED;
+  if (code == DLO_CONVERGED) {
+    /* the stability eigenvalue at the answer, on the rows stability.min_reduced_eigenvalue holds:
+       the equalities, and the rows with |lambda| > DLO_STABILITY_MULTIPLIER_TOLERANCE or within
+       DLO_STABILITY_BOUND_TOLERANCE of their bound */
+    int held = 0, *rows_held = malloc(sizeof(int) * (rows > 0 ? rows : 1));
+    for (int i = 0; i < rows; ++i)
+      if (equality[i] || fabs(lam[i]) > DLO_STABILITY_MULTIPLIER_TOLERANCE ||
+          g[i] > ub[i] - DLO_STABILITY_BOUND_TOLERANCE) rows_held[held++] = i;
+    double *J = malloc(sizeof(double) * ((size_t)held * n + 1));
+    for (int j = 0; j < n; ++j)
+      for (int k = 0; k < held; ++k) J[k + (size_t)held * j] = jac[rows_held[k] + (size_t)rows *
+          j];
+    *eig_code = dlo_reduced_eigen(eigen, hess, n, J, held > 0 ? held : 1, n, held, eig_value,
+                                  eig_direction);
+    free(J); free(rows_held);
+    if (after != NULL) dlo_after_run(after, z, p, lam, 1, NULL);
+  }
+done:
+  free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(lgrad); free(ipiv);
+      free(W);
+  free(buf);
+  return code;
+}

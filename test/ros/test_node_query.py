@@ -204,8 +204,8 @@ def test_the_node_asks_its_query_workers_for_checks_beside_the_queries():
         def __init__(self):
             self.calls = []
 
-        def submit(self, fn, *args):
-            self.calls.append((fn, args))
+        def submit(self, fn, *args, **kwargs):
+            self.calls.append((fn, args, kwargs))
             return None
 
     with allocate_domain_id() as lease:
@@ -218,8 +218,9 @@ def test_the_node_asks_its_query_workers_for_checks_beside_the_queries():
             wait_until(lambda: getattr(node, "_latest", None) is not None, 60.0)  # the scene is there
             node._query_pool = pool = Recording()
             node._to_query_worker([])
-            ((fn, args),) = pool.calls
+            ((fn, args, kwargs),) = pool.calls
             assert fn is solve_chunk and args[1:] == ([], "off", "background")
+            assert kwargs == {"timeout": None}  # the warm-up builds the solver: never limited
         finally:
             node._query_pool = None
             node.close()

@@ -2,7 +2,8 @@
 flat after warm-up): live parameter changes, rebuilds for new options and model switches of
 ``auto`` must not leave solvers behind.
 
-Counts are of live objects (``gc.get_objects`` by exact type after ``gc.collect``), an independent
+Counts are of live objects (``gc.get_objects`` by exact type after ``gc.collect``), less those
+alive before the test (other tests in the same worker process may keep some), an independent
 measure of what is kept: a ShapeSolver owns its NLP's CasADi functions and IPOPT instances,
 whose memory tracemalloc cannot see.  Interpreted derivatives (``compile='off'``): nothing here
 depends on gcc.
@@ -32,7 +33,13 @@ def live(kind: type) -> int:
 
 
 @pytest.fixture
-def engine():
+def baseline():
+    """live() of each kind before the test builds anything: what other tests left reachable."""
+    return {kind: live(kind) for kind in (ShapeSolver, ca.Function, AutoShapeSolver)}
+
+
+@pytest.fixture
+def engine(baseline):
     scene = load_scene("default_cable")
     failures = []
     eng = ShapeEngine(scene.problem, scene.options,
@@ -65,7 +72,7 @@ def stream(eng: ShapeEngine, scene, n: int, phase: float) -> None:
         time.sleep(0.01)
 
 
-def test_parameter_changes_keep_the_solvers_flat(engine):
+def test_parameter_changes_keep_the_solvers_flat(engine, baseline):
     """Each bend-stiffness change re-solves with the same models (values are NLP parameters): after
     the first change the live ShapeSolvers and CasADi functions do not grow, and stay within auto's
     pool."""
@@ -78,13 +85,13 @@ def test_parameter_changes_keep_the_solvers_flat(engine):
         # the re-solve was for the changed stiffness
         stiffness = eng._solver.problem.string.bend_stiffness.maximum
         assert stiffness == pytest.approx(0.025 if i % 2 == 0 else 0.02)
-        seen.append((live(ShapeSolver), live(ca.Function)))
+        seen.append((live(ShapeSolver) - baseline[ShapeSolver], live(ca.Function) - baseline[ca.Function]))
     assert all(n <= AutoShapeSolver.POOL_SIZE for n, _ in seen), seen
     # flat after the warm-up (the first change may build a check's models)
     assert seen[-1] == seen[1], seen
 
 
-def test_option_rebuilds_release_the_old_solver(engine):
+def test_option_rebuilds_release_the_old_solver(engine, baseline):
     """A rebuild for new options (output_points) closes and drops the old auto solver, its pool
     too."""
     eng, _ = engine
@@ -94,12 +101,13 @@ def test_option_rebuilds_release_the_old_solver(engine):
         result = eng.change_options(edit).result(120.0)
         assert result is not None and result.ok, result
         assert len(result.points) == n
-        counts.append((live(AutoShapeSolver), live(ShapeSolver)))
+        counts.append((live(AutoShapeSolver) - baseline[AutoShapeSolver],
+                       live(ShapeSolver) - baseline[ShapeSolver]))
     assert all(autos == 1 for autos, _ in counts), counts
     assert counts[-1][1] == counts[0][1], counts
 
 
-def test_model_switches_stay_within_the_pool():
+def test_model_switches_stay_within_the_pool(baseline):
     """Switching auto's stream over ten models twice keeps at most POOL_SIZE models: the replaced
     ones are freed, not just forgotten by the pool."""
     scene = load_scene("default_cable")
@@ -111,5 +119,5 @@ def test_model_switches_stay_within_the_pool():
             for samples in (41, 81):
                 solver._switch(replace(base, order=order, samples=samples, reasons=[]), "test")
         assert len(solver._pool) <= AutoShapeSolver.POOL_SIZE
-        assert live(ShapeSolver) <= AutoShapeSolver.POOL_SIZE
+        assert live(ShapeSolver) - baseline[ShapeSolver] <= AutoShapeSolver.POOL_SIZE
     solver.close()

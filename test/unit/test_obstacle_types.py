@@ -21,27 +21,34 @@ from dlo_ros.solver.obstacle_slots import FLAT
 
 S2 = math.sqrt(0.5)
 
-#: per type: a scene mapping, points with their hand-computed exact signed distance h [m] (positive
-#: inside; the box's h is the inscribed superellipsoid, exact on the axes through its face centres),
-#: a plane (origin, unit normal) the obstacle lies clear of by more than 0.1 m and one it fits in.
+#: per type: a scene mapping, points with their hand-computed exact signed distance h [m]
+#: (positive inside; the box's h is the inscribed superellipsoid, exact on the axes through its
+#: face centres),
+#: a point inside the true obstacle (its distance bound must be ≤ 0 there; for the box a point near
+#: a corner, outside the inscribed superellipsoid), a plane (origin, unit normal) the obstacle lies
+#: clear of by more than 0.1 m, one it fits in, and one that cuts it away from its centre.
 SAMPLES: dict[str, dict] = {
     "halfspace": dict(
         spec={"type": "halfspace", "point": [0, 0, 0.1], "normal": [0, 0, 2]},
         points=[([0.3, -2, 0.4], -0.3), ([1, 1, -0.15], 0.25)],
-        clear=([0, 0, 0.5], [0, 0, 1]), fits=([0, 0, 0.5], [0, 1, 0])),
+        inside=[0, 0, 0], clear=([0, 0, 0.5], [0, 0, 1]), fits=([0, 0, 0.5], [0, 1, 0]),
+        cuts=([0, 0, 0], [0, 0, 1])),
     "sphere": dict(
         spec={"type": "sphere", "center": [1, 2, 3], "radius": 0.5},
         points=[([1, 2, 3.2], 0.3), ([1, 2 + 0.8 * 3, 3 + 0.6 * 3], -2.5)],
-        clear=([0, 0, 0], [1, 0, 0]), fits=([0, 0, 3], [0, 0, 1])),
+        inside=[1, 2, 3], clear=([0, 0, 0], [1, 0, 0]), fits=([0, 0, 3], [0, 0, 1]),
+        cuts=([1, 2, 3.3], [0, 0, 1])),
     "capsule": dict(
         spec={"type": "capsule", "a": [0, 0, 0], "b": [0, 0, 1], "radius": 0.1},
         points=[([0.04, 0.03, 0.5], 0.05), ([0, 0, 1.5], -0.4), ([0, 0.3, -0.4], -0.4)],
-        clear=([0.5, 0, 0], [1, 0, 0]), fits=([0, 0, 0], [0, 1, 0])),
+        inside=[0, 0, 0.5], clear=([0.5, 0, 0], [1, 0, 0]), fits=([0, 0, 0], [0, 1, 0]),
+        cuts=([0, 0, 0.8], [0, 0, 1])),
     "box": dict(
         spec={"type": "box", "center": [0, 0, 1], "half_extents": [0.1, 0.2, 0.3],
               "orientation": [0, 0, S2, S2]},  # 90° about z: the box's x axis is world y
         points=[([0, 0, 1], 0.1), ([0.2, 0, 1], 0.0), ([0, 0.15, 1], -0.05)],
-        clear=([0, 0, 2], [0, 0, 1]), fits=([0, 0, 1], [0, 1, 0])),
+        inside=[-0.198, 0.099, 1.297], clear=([0, 0, 2], [0, 0, 1]), fits=([0, 0, 1], [0, 1, 0]),
+        cuts=([0, 0, 1.25], [0, 0, 1])),
 }
 
 
@@ -57,8 +64,9 @@ def test_every_registered_type_has_a_sample_and_every_behaviour():
             assert getattr(cls, method) is not getattr(ObstacleType, method), (name, method)
         assert kind.name == name
         assert isinstance(kind.size, int) and kind.size > 0
-        assert kind.keys and all(isinstance(k, Key) and k.kind in ("vector", "number", "quaternion")
-                                 for k in kind.keys.values())
+        assert kind.keys
+        assert all(isinstance(k, Key) and k.kind in ("vector", "number", "quaternion")
+                   for k in kind.keys.values())
         assert isinstance(kind.flat, bool)
 
 
@@ -123,6 +131,7 @@ def test_h_against_hand_computed_distances(name):
         bound = kind.distance_bound(np.asarray(x, float), ob.params)
         assert bound <= -want + 1e-12  # a lower bound of the distance (−h outside)
     np.testing.assert_allclose(ob.h_many(points), [w for _, w in sample["points"]], atol=1e-12)
+    assert kind.distance_bound(np.array(sample["inside"], float), ob.params) <= 0.0
 
 
 @pytest.mark.parametrize("name", sorted(SAMPLES))
@@ -136,6 +145,8 @@ def test_plane_tests(name):
     origin, normal = (np.array(v, float) for v in sample["fits"])
     assert not kind.clear_of_plane(p, origin, normal, 0.0)
     assert kind.planarity_violation(p, origin, normal, 1e-6, 1.0) == ""
+    origin, normal = (np.array(v, float) for v in sample["cuts"])
+    assert not kind.clear_of_plane(p, origin, normal, 0.0)
 
 
 @pytest.mark.parametrize("name", sorted(SAMPLES))

@@ -35,7 +35,7 @@ import yaml
 from .model.obstacles import OBSTACLE_TYPES, Obstacle
 from .model.problem import GRIP_MODES, Grip, GripPose, Load, Problem, RelativePosition, StringProperties
 from .model.profile import Profile
-from .model.rotations import check_quaternion, matrix_to_quat
+from .model.rotations import check_quaternion
 from .text import safe_text
 from .paths import scene_path
 from .solver.options import SolverOptions
@@ -60,14 +60,11 @@ GRAVITY_KEYS = ("direction",)
 GRIP_KEYS = ("name", "s", "mode", "position", "orientation")
 LOAD_KEYS = ("s", "force", "moment")
 RELATIVE_KEYS = ("s_a", "s_b", "offset")
-#: Keys of each obstacle type (besides ``type`` and ``name``) and which of them are required.
+#: Keys of each obstacle type (besides ``type`` and ``name``) and which of them are required (each
+#: type's ``keys`` in ``model.obstacle_types``).
 OBSTACLE_KEYS: dict[str, dict[str, bool]] = {
-    "halfspace": {"point": False, "normal": False},
-    "sphere": {"center": True, "radius": True},
-    "capsule": {"a": True, "b": True, "radius": True},
-    "box": {"center": True, "orientation": False, "half_extents": True},
-}
-assert set(OBSTACLE_KEYS) == set(OBSTACLE_TYPES), "scene.OBSTACLE_KEYS is out of date with model.obstacles"
+    name: {k: key.required for k, key in kind.keys.items()}
+    for name, kind in OBSTACLE_TYPES.items()}
 
 #: What a scene may cost (documented in msg_docs/scene_format.md, "Limits").  File and YAML limits are
 #: checked while reading and composing, before any alias is expanded or any object is constructed; list
@@ -345,6 +342,14 @@ def _parse_loads(value: object, length: float) -> tuple[Load, ...]:
     return tuple(loads)
 
 
+#: how a value of each kind of obstacle key (``obstacle_types.Key.kind``) is checked
+_OBSTACLE_VALUE: dict[str, Any] = {
+    "number": _number,
+    "quaternion": lambda raw, where: _quaternion(raw, where).tolist(),
+    "vector": lambda raw, where: _vector(raw, 3, where).tolist(),
+}
+
+
 def _parse_obstacles(value: object) -> tuple[Obstacle, ...]:
     if value is None:
         return ()
@@ -354,11 +359,11 @@ def _parse_obstacles(value: object) -> tuple[Obstacle, ...]:
         key = f"obstacles[{i}]"
         d = _mapping(item, key)
         if "type" not in d:
-            raise _fail(f"{key}.type", f"required (one of {', '.join(OBSTACLE_KEYS)})")
+            raise _fail(f"{key}.type", f"required (one of {', '.join(OBSTACLE_TYPES)})")
         kind = _string(d["type"], f"{key}.type")
-        if kind not in OBSTACLE_KEYS:
-            raise _fail(f"{key}.type", f"must be one of {', '.join(OBSTACLE_KEYS)}, got {kind!r}")
-        spec = OBSTACLE_KEYS[kind]
+        if kind not in OBSTACLE_TYPES:
+            raise _fail(f"{key}.type", f"must be one of {', '.join(OBSTACLE_TYPES)}, got {kind!r}")
+        spec = OBSTACLE_TYPES[kind].keys
         _no_unknown(d, ("type", "name", *spec), key)
         name = _string(d.get("name", ""), f"{key}.name")
         if name and name in names:
@@ -366,19 +371,14 @@ def _parse_obstacles(value: object) -> tuple[Obstacle, ...]:
         if name:
             names[name] = i
         clean: dict[str, Any] = {"type": kind, "name": name}
-        for field_name, required in spec.items():
+        for field_name, field_spec in spec.items():
             where = f"{key}.{field_name}"
             raw = d.get(field_name)
             if raw is None:
-                if required:
+                if field_spec.required:
                     raise _fail(where, "required")
                 continue
-            if field_name == "radius":
-                clean[field_name] = _number(raw, where)
-            elif field_name == "orientation":
-                clean[field_name] = _quaternion(raw, where).tolist()
-            else:
-                clean[field_name] = _vector(raw, 3, where).tolist()
+            clean[field_name] = _OBSTACLE_VALUE[field_spec.kind](raw, where)
         try:
             obstacles.append(Obstacle.from_dict(clean, key))
         except ValueError as exc:
@@ -802,24 +802,6 @@ def _profile_to_yaml(p: Profile) -> float | dict:
     return {"table": [[float(s), float(v)] for s, v in zip(p.s, p.values)]}
 
 
-def _obstacle_to_dict(ob: Obstacle) -> dict:
-    out: dict[str, Any] = {"type": ob.type}
-    if ob.name:
-        out["name"] = ob.name
-    if ob.type == "halfspace":
-        out.update(point=ob.point.tolist(), normal=ob.normal.tolist())
-    elif ob.type == "sphere":
-        out.update(center=ob.centre.tolist(), radius=ob.radius)
-    elif ob.type == "capsule":
-        out.update(a=ob.a.tolist(), b=ob.b.tolist(), radius=ob.radius)
-    elif ob.type == "box":
-        out.update(center=ob.centre.tolist(), orientation=matrix_to_quat(ob.rotation).tolist(),
-                   half_extents=ob.half_extents.tolist())
-    else:  # pragma: no cover - guarded by the assert on OBSTACLE_KEYS
-        raise ValueError(f"obstacle type {ob.type!r} has no scene-file form")
-    return out
-
-
 def _floats(a: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(a, dtype=float).ravel()]
 
@@ -846,7 +828,7 @@ def scene_to_dict(scene: Scene) -> dict:
         for g in pr.grips
     ]
     out["loads"] = [{"s": float(ld.s), "force": _floats(ld.force), "moment": _floats(ld.moment)} for ld in pr.loads]
-    out["obstacles"] = [_obstacle_to_dict(ob) for ob in pr.obstacles]
+    out["obstacles"] = [ob.to_dict() for ob in pr.obstacles]
     out["relative_positions"] = [
         {"s_a": float(r.s_a), "s_b": float(r.s_b), "offset": _floats(r.offset)} for r in pr.relative_positions
     ]

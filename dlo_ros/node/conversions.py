@@ -11,7 +11,6 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from ..model.rotations import quat_z_to
 from ..shading import colour_map, energy_density
 from ..shading import frame_curvature as curvature
 from ..shading import frame_tangents as tangents  # noqa: F401 - part of this module's API
@@ -22,9 +21,9 @@ from nav_msgs.msg import Path
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..model.obstacles import Obstacle
+from ..model.obstacles import Obstacle, Primitive
 from ..model.problem import Problem
-from ..model.rotations import matrix_to_quat, quat_to_matrix
+from ..model.rotations import quat_to_matrix
 from ..solver.result import GripWrench, ShapeResult
 from .validation import TargetError, check_frame, normalise_frame
 
@@ -262,45 +261,47 @@ def _marker(h: Header, ns: str, mid: int, kind: int) -> Marker:
     return m
 
 
+def _primitive_markers(pr: Primitive, h: Header, mid: int) -> list[Marker]:
+    """The markers of one drawing primitive (ids mid, mid + 1, mid + 2), colour not yet set."""
+    if pr.kind == "sphere":
+        m = _marker(h, "obstacles", mid, Marker.SPHERE)
+        m.pose.position = _point(pr.centre)
+        m.scale = Vector3(x=2 * pr.radius, y=2 * pr.radius, z=2 * pr.radius)
+        return [m]
+    if pr.kind == "box":
+        m = _marker(h, "obstacles", mid, Marker.CUBE)
+        e = pr.half_sizes
+        m.pose = arrays_to_pose(pr.centre, pr.orientation)
+        m.scale = Vector3(x=2 * e[0], y=2 * e[1], z=2 * e[2])
+        return [m]
+    if pr.kind == "capsule":  # a cylinder plus two end spheres
+        r = pr.radius
+        m = _marker(h, "obstacles", mid, Marker.CYLINDER)
+        m.pose = arrays_to_pose(pr.centre, pr.orientation)
+        m.scale = Vector3(x=2 * r, y=2 * r, z=pr.length)
+        parts = [m]
+        for k, end in enumerate(pr.ends()):
+            e = _marker(h, "obstacles", mid + 1 + k, Marker.SPHERE)
+            e.pose.position = _point(end)
+            e.scale = Vector3(x=2 * r, y=2 * r, z=2 * r)
+            parts.append(e)
+        return parts
+    if pr.kind == "plane":  # a thin plate just behind the surface
+        thick = 0.01
+        m = _marker(h, "obstacles", mid, Marker.CUBE)
+        m.pose = arrays_to_pose(pr.centre - pr.axis * thick / 2, pr.orientation)
+        m.scale = Vector3(x=HALFSPACE_SIZE, y=HALFSPACE_SIZE, z=thick)
+        return [m]
+    return []  # pragma: no cover - every kind in PRIMITIVE_KINDS is drawn above
+
+
 def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0) -> list[Marker]:
     """One marker per obstacle (a capsule is a cylinder plus two end spheres, a half-space a plate)."""
     out: list[Marker] = []
     mid = start_id
     rgba = _rgba(OBSTACLE_RGBA[:3], OBSTACLE_RGBA[3])
     for ob in obstacles:
-        if ob.type == "sphere":
-            m = _marker(h, "obstacles", mid, Marker.SPHERE)
-            m.pose.position = _point(ob.centre)
-            m.scale = Vector3(x=2 * ob.radius, y=2 * ob.radius, z=2 * ob.radius)
-            parts = [m]
-        elif ob.type == "box":
-            m = _marker(h, "obstacles", mid, Marker.CUBE)
-            e = ob.half_extents
-            m.pose = arrays_to_pose(ob.centre, matrix_to_quat(ob.rotation))
-            m.scale = Vector3(x=2 * e[0], y=2 * e[1], z=2 * e[2])
-            parts = [m]
-        elif ob.type == "capsule":
-            a, b, r = ob.a, ob.b, ob.radius
-            axis = b - a
-            length = float(np.linalg.norm(axis))
-            m = _marker(h, "obstacles", mid, Marker.CYLINDER)
-            m.pose = arrays_to_pose((a + b) / 2, quat_z_to(axis))
-            m.scale = Vector3(x=2 * r, y=2 * r, z=length)
-            parts = [m]
-            for k, end in enumerate((a, b)):
-                e = _marker(h, "obstacles", mid + 1 + k, Marker.SPHERE)
-                e.pose.position = _point(end)
-                e.scale = Vector3(x=2 * r, y=2 * r, z=2 * r)
-                parts.append(e)
-        elif ob.type == "halfspace":
-            point, normal = ob.point, ob.normal
-            thick = 0.01
-            m = _marker(h, "obstacles", mid, Marker.CUBE)
-            m.pose = arrays_to_pose(point - normal * thick / 2, quat_z_to(normal))
-            m.scale = Vector3(x=HALFSPACE_SIZE, y=HALFSPACE_SIZE, z=thick)
-            parts = [m]
-        else:  # pragma: no cover - unknown future type: draw nothing
-            parts = []
+        parts = _primitive_markers(ob.primitive(), h, mid)
         for m in parts:
             m.color = rgba
             m.text = ob.name

@@ -22,7 +22,7 @@ class _SceneInfo:
     rf_table: tuple  # (s values, Rf values): Rf(s) piecewise linear, ends held
     force_scale: float  # m per N
     yaml_text: str
-    obstacles: list  # (archetype, kwargs, label, type)
+    obstacles: list  # (archetype, kwargs, label, colour RGB 0-255)
     centre: np.ndarray
     gravity: np.ndarray
     solver_kind: str
@@ -65,7 +65,7 @@ def scene_info(scene_or_problem: Any, frame_id: str | None = None, solver: Any =
     obstacles = []
     for ob in problem.obstacles:
         kind, kwargs = obstacle_shape(ob, centre, extent)
-        obstacles.append((kind, kwargs, ob.name or ob.type, ob.type))
+        obstacles.append((kind, kwargs, ob.name or ob.type, list(ob.primitive().colour)))
     kind = solver if isinstance(solver, str) else ("" if solver is None else type(solver).__name__)
     return _SceneInfo(
         name=str(getattr(scene_or_problem, "name", "problem")),

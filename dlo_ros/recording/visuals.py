@@ -8,7 +8,6 @@ from typing import Any
 
 import numpy as np
 
-from ..model.rotations import matrix_to_quat, quat_z_to
 from ..shading import VIRIDIS_STOPS, colour_map
 
 ENERGY_COLORS = [[230, 90, 90], [90, 200, 230], [200, 120, 230], [120, 200, 90], [230, 180, 60], [240, 240, 240]]
@@ -39,24 +38,25 @@ def quats_to_matrices(q: np.ndarray) -> np.ndarray:
 
 
 def obstacle_shape(ob: Any, centre: np.ndarray, extent: float) -> tuple[str, dict]:
-    """(archetype name, keyword arguments) drawing an obstacle (``dlo_ros.model.Obstacle``).
+    """(archetype name, keyword arguments) drawing an obstacle (``dlo_ros.model.Obstacle``) from
+    its ``primitive()``.
 
-    halfspace → a square slab of side 2·extent, 1 % of that thick, lying just behind the surface,
+    plane → a square slab of side 2·extent, 1 % of that thick, lying just behind the surface,
     centred on the projection of ``centre``; sphere → Ellipsoids3D; capsule → Capsules3D; box → Boxes3D.
     """
-    if ob.type == "halfspace":
-        point, normal = ob.point, ob.normal / np.linalg.norm(ob.normal)
-        foot = centre - np.dot(centre - point, normal) * normal
+    pr = ob.primitive()
+    if pr.kind == "plane":
+        normal = pr.axis / np.linalg.norm(pr.axis)
+        foot = centre - np.dot(centre - pr.centre, normal) * normal
         thick = 0.01 * extent
         return "Boxes3D", dict(centers=[foot - 0.5 * thick * normal], half_sizes=[[extent, extent, 0.5 * thick]],
-                               quaternions=[quat_z_to(normal)])
-    if ob.type == "sphere":
-        return "Ellipsoids3D", dict(centers=[ob.centre], half_sizes=[[ob.radius] * 3])
-    if ob.type == "capsule":
-        a, b = ob.a, ob.b
-        return "Capsules3D", dict(translations=[a], lengths=[float(np.linalg.norm(b - a))], radii=[ob.radius],
-                                  quaternions=[quat_z_to(b - a)])
-    if ob.type == "box":
-        return "Boxes3D", dict(centers=[ob.centre], half_sizes=[ob.half_extents],
-                               quaternions=[matrix_to_quat(ob.rotation)])
-    raise ValueError(f"obstacle type {ob.type!r} has no drawing")
+                               quaternions=[pr.orientation])
+    if pr.kind == "sphere":
+        return "Ellipsoids3D", dict(centers=[pr.centre], half_sizes=[pr.half_sizes])
+    if pr.kind == "capsule":
+        return "Capsules3D", dict(translations=[pr.ends()[0]], lengths=[pr.length],
+                                  radii=[pr.radius], quaternions=[pr.orientation])
+    if pr.kind == "box":
+        return "Boxes3D", dict(centers=[pr.centre], half_sizes=[pr.half_sizes],
+                               quaternions=[pr.orientation])
+    raise ValueError(f"obstacle primitive {pr.kind!r} has no drawing")

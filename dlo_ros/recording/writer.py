@@ -208,8 +208,7 @@ class _Writer:
             self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
         if first or static:
             self.rec.log(E_WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        for i, (kind, kwargs, label, ob_type) in enumerate(info.obstacles):
-            colour = [70, 72, 80] if ob_type == "halfspace" else [150, 150, 165]
+        for i, (kind, kwargs, label, colour) in enumerate(info.obstacles):
             arch = getattr(rr, kind)(**kwargs, colors=[colour], labels=[label], fill_mode=rr.components.FillMode.Solid)
             self.rec.log(f"{E_OBSTACLES}/{i}_{_part(label)}", arch, static=static)
         doc = rr.TextDocument(info.yaml_text or "# scene not recorded (a Problem was logged)", media_type="text/plain")

@@ -133,9 +133,8 @@ class ModelChoice:
 
 def obstacle_distance(ob: Obstacle, x: np.ndarray) -> float:
     """A lower bound of the distance [m] from x to the obstacle (≤ 0 inside)."""
-    if ob.type == "box":  # the solver's box is inscribed in the box; bound with the circumscribed sphere
-        return float(np.linalg.norm(x - ob.centre) - np.linalg.norm(ob.half_extents))
-    return -ob.h(np.asarray(x, dtype=float))
+    p = np.asarray(ob.params, dtype=float)
+    return ob.obstacle_type.distance_bound(np.asarray(x, dtype=float), p)
 
 
 def touches_obstacle(result: ShapeResult) -> bool:
@@ -159,16 +158,8 @@ def clear_of_plane(ob: Obstacle, origin: np.ndarray, normal: np.ndarray, margin:
     string lying in the plane cannot touch it, so the planar equilibrium is an equilibrium of the 3D
     problem with that obstacle inactive (the planar model leaves it out; its 3D stability is checked
     with it)."""
-    n = normal
-    if ob.type == "sphere":
-        return abs(np.dot(ob.centre - origin, n)) - ob.radius > margin
-    if ob.type == "capsule":
-        da, db = np.dot(ob.a - origin, n), np.dot(ob.b - origin, n)
-        return da * db > 0 and min(abs(da), abs(db)) - ob.radius > margin
-    if ob.type == "box":
-        return abs(np.dot(ob.centre - origin, n)) - np.linalg.norm(ob.half_extents) > margin
-    # half-space: parallel to the plane, with the plane outside it
-    return abs(abs(np.dot(ob.normal, n)) - 1.0) < 1e-12 and ob.h(origin) < -margin
+    p = np.asarray(ob.params, dtype=float)
+    return bool(ob.obstacle_type.clear_of_plane(p, origin, normal, margin))
 
 
 def imposes_twist(problem: Problem, r0: np.ndarray) -> bool:

@@ -185,12 +185,10 @@ def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float =
         if abs(np.dot(rel.offset, n)) > tolerance * L:
             return f"relative_positions[{i}].offset is not in the plane"
     for i, ob in enumerate(problem.obstacles):
-        if ob.type == "halfspace" and abs(np.dot(ob.normal, n)) > tolerance:
-            return f"obstacles[{i}]: the half-space's normal is not in the plane"
-        if ob.type in ("sphere", "box") and abs(np.dot(ob.centre - origin, n)) > tolerance * L:
-            return f"obstacles[{i}]: not centred on the plane"
-        if ob.type == "capsule" and max(abs(np.dot(ob.a - origin, n)), abs(np.dot(ob.b - origin, n))) > tolerance * L:
-            return f"obstacles[{i}]: not centred on the plane"
+        p = np.asarray(ob.params, dtype=float)
+        why = ob.obstacle_type.planarity_violation(p, origin, n, tolerance, L)
+        if why:
+            return f"obstacles[{i}]: {why}"
     return ""
 
 

@@ -38,6 +38,8 @@ from typing import Callable
 
 import numpy as np
 
+from ..model.obstacle_types import OBSTACLE_TYPES
+
 #: a slot is kept, and a solve is not repeated, while its minimum moved less than this × L
 TOLERANCE = 3e-4
 
@@ -49,7 +51,7 @@ DIP = 1e-6
 
 #: obstacle types without curvature: their slots stay empty (a string on a plane does not cut in between the
 #: samples beyond its own sag, and a flat contact has no point to slide to)
-FLAT = ("halfspace",)
+FLAT = tuple(name for name, kind in OBSTACLE_TYPES.items() if kind.flat)
 
 #: the clearance is measured on FINE points per sample interval (at most 4096 intervals in all)
 FINE = 16

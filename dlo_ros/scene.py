@@ -647,9 +647,10 @@ class FileLimitError(ValueError):
     """A file refused by :func:`read_regular_file`: one line starting with its source name."""
 
 
-def read_regular_file(path: Path, source: str, limit: int, what: str = "scene file",
-                      doc: str = "msg_docs/scene_format.md, Limits") -> bytes:
-    """The bytes of a regular file of at most ``limit`` bytes, or FileLimitError naming ``source``.
+def open_regular_file(path: Path, source: str, limit: int, what: str = "scene file",
+                      doc: str = "msg_docs/scene_format.md, Limits") -> int:
+    """A read-only descriptor on a regular file of at most ``limit`` bytes, or FileLimitError
+    naming ``source``; the caller closes it.
 
     Opened without blocking (a FIFO without a writer would hang a plain open) and checked with
     fstat on the open descriptor before a byte is read, so a directory, a FIFO or a device
@@ -673,6 +674,19 @@ def read_regular_file(path: Path, source: str, limit: int, what: str = "scene fi
         if info.st_size > limit:
             raise FileLimitError(f"{source}: the file has {info.st_size} bytes, {a} {what} at "
                                  f"most {limit} ({doc})")
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def read_regular_file(path: Path, source: str, limit: int, what: str = "scene file",
+                      doc: str = "msg_docs/scene_format.md, Limits") -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes (:func:`open_regular_file`), or
+    FileLimitError naming ``source``; a file that grew past ``limit`` after the check is refused too."""
+    a = "an" if what[:1] in "aeiou" else "a"
+    fd = open_regular_file(path, source, limit, what, doc)
+    try:
         chunks, size = [], 0
         while size <= limit:
             chunk = os.read(fd, min(1 << 16, limit + 1 - size))

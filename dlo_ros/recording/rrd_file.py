@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-import stat
 import struct
 import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+
+from ..scene import FileLimitError, open_regular_file
 
 #: What ``dlo replay`` accepts (msg_docs/recording.md, "Limits").  A 10-minute recording at 100 Hz
 #: (default_cable, 51 output points, paced like the node) is ~280 MB and 60,000 updates.
@@ -58,30 +59,15 @@ class RrdLayout:
 
 
 def _open_regular(path: Path) -> int:
-    """A descriptor on ``path`` opened without blocking (a FIFO without a writer would hang a plain
-    open) and checked with fstat to be a regular file within the size limit."""
+    """A descriptor on ``path``, a regular file within the size limit (``scene.open_regular_file``:
+    opened without blocking and checked with fstat)."""
     try:
-        flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
-        fd = os.open(path, flags)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise RrdFileError(f"{path}: cannot open: {exc.strerror or type(exc).__name__}") from None
-    try:
-        info = os.fstat(fd)
-        if stat.S_ISDIR(info.st_mode):
-            raise RrdFileError(f"{path}: is a directory, not a recording (.rrd)")
-        if not stat.S_ISREG(info.st_mode):
-            raise RrdFileError(f"{path}: not a regular file (a FIFO, socket or device); a "
-                               "recording must be an .rrd file")
-        limit = LIMITS["file_bytes"]
-        if info.st_size > limit:
-            raise RrdFileError(f"{path}: the file has {info.st_size} bytes, a recording at most "
-                               f"{limit} (msg_docs/recording.md, Limits)")
-        return fd
-    except BaseException:
-        os.close(fd)
-        raise
+        return open_regular_file(path, str(path), LIMITS["file_bytes"], "recording (.rrd)",
+                                 "msg_docs/recording.md, Limits")
+    except FileLimitError as exc:
+        if not os.path.lexists(path):
+            raise FileNotFoundError(f"{path}: no such file") from None
+        raise RrdFileError(str(exc)) from None
 
 
 def _read_at(fd: int, n: int, offset: int) -> bytes:

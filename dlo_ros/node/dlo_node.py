@@ -418,10 +418,12 @@ class DloNode(Node):
         problem, options = self.engine.query_scene()
         # checks beside the queries: the workers' held shape follows the stream, and auto's check due on one
         # of its updates, run in front of a query, made that query wait 0.2–0.6 s (CHANGELOG)
-        # the warm-up (no queries) builds the solver: not limited
+        # the warm-up (no queries) builds the solver: not limited.  A query is a pure function of its
+        # scene and targets: one whose worker died under it (or just before) runs once more
         timeout = (float(self.get_parameter("query_timeout").value) or None) if queries else None
         return problem, self._query_pool.submit(solve_chunk, scene_payload(problem, options), queries,
-                                                self._worker_compile, "background", timeout=timeout)
+                                                self._worker_compile, "background", timeout=timeout,
+                                                retries=1)
 
     @property
     def _worker_compile(self) -> str:

@@ -202,8 +202,17 @@ class WorkerPool(Executor):
         self._stopped = False
         self.restarts = 0  # pools replaced (dead worker or timeout)
 
-    def submit(self, fn, /, *args, timeout: float | None = None, **kwargs) -> Future:
+    def submit(self, fn, /, *args, timeout: float | None = None, retries: int = 0, **kwargs) -> Future:
+        """``fn(*args, **kwargs)`` on a worker; ``timeout`` [s] (None: none) as in the class docstring.
+        ``retries``: how many times a task whose worker died under it (not one killed for a timeout)
+        runs again on a new pool, for a task that is a pure function of its arguments; once they are
+        used up it fails with WorkerDied, so a task that kills its worker is not retried for ever."""
         answer: Future = Future()
+        self._start(answer, fn, args, kwargs, timeout, retries)
+        return answer
+
+    def _start(self, answer: Future, fn, args: tuple, kwargs: dict, timeout: float | None,
+               retries: int) -> None:
         with self._lock:
             if self._stopped:
                 raise RuntimeError("cannot schedule new futures after the pool was stopped")
@@ -223,10 +232,20 @@ class WorkerPool(Executor):
             timer = threading.Timer(float(timeout), self._expire, (answer, inner, generation, float(timeout)))
             timer.daemon = True
             timer.start()
-        inner.add_done_callback(lambda f: self._relay(f, answer, pool, generation, timer))
-        return answer
 
-    def _relay(self, inner: Future, answer: Future, pool, generation: int, timer) -> None:
+        def again() -> bool:
+            """Run the task once more on a new pool (``retries`` left); False when it cannot."""
+            if retries <= 0:
+                return False
+            try:
+                self._start(answer, fn, args, kwargs, timeout, retries - 1)
+            except (RuntimeError, BrokenProcessPool):  # stopped meanwhile
+                return False
+            return True
+
+        inner.add_done_callback(lambda f: self._relay(f, answer, pool, generation, timer, again))
+
+    def _relay(self, inner: Future, answer: Future, pool, generation: int, timer, again) -> None:
         if timer is not None:
             timer.cancel()
         if inner.cancelled():
@@ -234,9 +253,12 @@ class WorkerPool(Executor):
             return
         exc = inner.exception()
         if isinstance(exc, BrokenProcessPool):
-            cause = self._causes.get(generation) or f"a worker process died: {self._dead_workers(pool) or exc}"
-            _settle(answer, exc=WorkerDied(cause))
+            killed = self._causes.get(generation)  # by a timeout or stop(): never retried
+            cause = killed or f"a worker process died: {self._dead_workers(pool) or exc}"
             self._replace(generation, cause)
+            if answer.done() or (killed is None and again()):
+                return
+            _settle(answer, exc=WorkerDied(cause))
         elif exc is not None:
             _settle(answer, exc=exc)
         else:

@@ -11,36 +11,12 @@ import pytest
 
 from dlo_ros.node.client import NodeProcess, allocate_domain_id, running_node
 from support.node import group_processes, node_args, wait_until
+from support.procs import children, ended
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 
 LEFT = ((0.0, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))
 RIGHT = ((0.55, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))
-
-
-def ended(pid: int) -> bool:
-    """Whether process ``pid`` has exited (a zombie, or reaped)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            stat = f.read()
-    except OSError:
-        return True
-    return stat[stat.rindex(")") + 2] in "ZX"
-
-
-def children(pid: int) -> list[int]:
-    """Process ids whose parent is ``pid`` (Linux /proc)."""
-    out = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as f:
-                    stat = f.read()
-            except OSError:
-                continue
-            if int(stat[stat.rindex(")") + 2:].split()[1]) == pid:
-                out.append(int(entry))
-    return out
 
 
 def test_no_child_outlives_a_sigkilled_node(tmp_path):

@@ -220,7 +220,7 @@ def test_the_node_asks_its_query_workers_for_checks_beside_the_queries():
             node._to_query_worker([])
             ((fn, args, kwargs),) = pool.calls
             assert fn is solve_chunk and args[1:] == ([], "off", "background")
-            assert kwargs == {"timeout": None}  # the warm-up builds the solver: never limited
+            assert kwargs == {"timeout": None, "retries": 1}  # the warm-up builds the solver: not limited
         finally:
             node._query_pool = None
             node.close()

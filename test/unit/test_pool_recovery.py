@@ -17,9 +17,10 @@ import pytest
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
 from dlo_ros.solver.batch import query_many
-from dlo_ros.solver.worker_pool import TaskTimeout, WorkerPool
+from dlo_ros.solver.worker_pool import TaskTimeout, WorkerDied, WorkerPool
 from random_scenes import targets_near
 from support.node import wait_until
+from support.procs import children, ended
 
 
 @pytest.fixture(scope="module")
@@ -68,6 +69,39 @@ def test_a_worker_killed_mid_batch_fails_its_queries_and_the_pool_is_rebuilt(sce
         pool.stop()
 
 
+def _die() -> None:
+    """A task that kills its own worker."""
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_task_whose_worker_dies_is_retried_once_when_asked():
+    """retries=1: a task in flight on a worker killed from outside is answered by a new pool; a task
+    that kills its worker every time fails with WorkerDied after its one retry (two pools replaced);
+    retries=0 (the default) fails at once."""
+    pool = WorkerPool(1)
+    try:
+        first = pool.worker_pids() or [pool.submit(os.getpid).result(60)]
+        slow = pool.submit(_sleep_then_pid, 3.0, retries=1)
+        time.sleep(1.0)  # the task is running on the worker
+        os.kill(first[0], signal.SIGKILL)
+        answered_by = slow.result(60)
+        assert answered_by != first[0] and answered_by in pool.worker_pids()
+        assert pool.restarts == 1
+        with pytest.raises(WorkerDied, match="SIGKILL"):
+            pool.submit(_die, retries=1).result(60)
+        assert pool.restarts == 3
+        with pytest.raises(WorkerDied):
+            pool.submit(_die).result(60)
+        assert pool.restarts == 4
+    finally:
+        pool.stop()
+
+
+def _sleep_then_pid(seconds: float) -> int:
+    time.sleep(seconds)
+    return os.getpid()
+
+
 def test_a_query_past_its_timeout_answers_timeout_and_its_worker_is_replaced(scene, monkeypatch):
     monkeypatch.setenv("DLO_NO_COMPILE", "1")
     targets = targets_near(scene.problem, 4, radius=0.05)
@@ -80,7 +114,7 @@ def test_a_query_past_its_timeout_answers_timeout_and_its_worker_is_replaced(sce
         with pytest.raises(TaskTimeout, match="timeout"):
             pool.submit(time.sleep, 600.0, timeout=1.0).result(30)
         assert time.monotonic() - t0 < 10.0
-        assert wait_until(lambda: not os.path.exists(f"/proc/{stuck_pid}") or _zombie(stuck_pid), 10.0)
+        assert wait_until(lambda: not os.path.exists(f"/proc/{stuck_pid}") or ended(stuck_pid), 10.0)
         # a real query batch past its timeout (a fresh worker builds its solver first: seconds)
         t0 = time.monotonic()
         late = query_many(scene.problem, scene.options, targets, pool, timeout=0.05)
@@ -92,15 +126,6 @@ def test_a_query_past_its_timeout_answers_timeout_and_its_worker_is_replaced(sce
         assert pool.restarts == 2
     finally:
         pool.stop()
-
-
-def _zombie(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            stat = f.read()
-    except OSError:
-        return True
-    return stat[stat.rindex(")") + 2] == "Z"
 
 
 PARENT = """
@@ -122,42 +147,28 @@ if __name__ == "__main__":
 """
 
 
-def children_of(pid: int) -> list[int]:
-    out = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as f:
-                    stat = f.read()
-            except OSError:
-                continue
-            if int(stat[stat.rindex(")") + 2:].split()[1]) == pid:
-                out.append(int(entry))
-    return out
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 @pytest.mark.parametrize("factory", ["WorkerPool", "process_pool"])
 def test_no_worker_or_resource_tracker_outlives_a_sigkilled_parent(tmp_path, factory):
     script = tmp_path / "parent.py"
     script.write_text(PARENT.format(factory=factory))
     parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
-    children: list[int] = []
+    kids: list[int] = []
     try:
         assert parent.stdout.readline().strip() == "ready"
-        children = children_of(parent.pid)
-        names = {pid: open(f"/proc/{pid}/cmdline").read().replace("\0", " ") for pid in children}
-        assert len(children) == 3, names  # two workers and multiprocessing's resource tracker
+        kids = children(parent.pid)
+        names = {pid: open(f"/proc/{pid}/cmdline").read().replace("\0", " ") for pid in kids}
+        assert len(kids) == 3, names  # two workers and multiprocessing's resource tracker
         assert any("resource_tracker" in n for n in names.values()), names
         os.kill(parent.pid, signal.SIGKILL)
         parent.wait(10)
         deadline = time.monotonic() + 5.0
-        while (left := [p for p in children if not _zombie(p)]) and time.monotonic() < deadline:
+        while (left := [p for p in kids if not ended(p)]) and time.monotonic() < deadline:
             time.sleep(0.1)
         assert not left, {p: names[p] for p in left}
     finally:
         if parent.poll() is None:
             parent.kill()
-        for pid in children:  # whatever survived (the test failed): not left running
-            if not _zombie(pid):
+        for pid in kids:  # whatever survived (the test failed): not left running
+            if not ended(pid):
                 os.kill(pid, signal.SIGKILL)

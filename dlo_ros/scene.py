@@ -613,7 +613,7 @@ def _construct_int(loader: _SceneLoader, node: yaml.ScalarNode) -> int:
 _SceneLoader.add_constructor("tag:yaml.org,2002:int", _construct_int)
 
 
-def _key_lines(node: yaml.Node | None, path: str = "", out: dict[str, int] | None = None) -> dict[str, int]:
+def key_lines(node: yaml.Node | None, path: str = "", out: dict[str, int] | None = None) -> dict[str, int]:
     """Map every key path of a composed YAML document ("grips[1].orientation") to its 1-based line."""
     out = {} if out is None else out
     if isinstance(node, yaml.MappingNode):
@@ -622,12 +622,12 @@ def _key_lines(node: yaml.Node | None, path: str = "", out: dict[str, int] | Non
                 continue
             sub = f"{path}.{key_node.value}" if path else str(key_node.value)
             out.setdefault(sub, key_node.start_mark.line + 1)
-            _key_lines(value_node, sub, out)
+            key_lines(value_node, sub, out)
     elif isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
             sub = f"{path}[{i}]"
             out.setdefault(sub, item.start_mark.line + 1)
-            _key_lines(item, sub, out)
+            key_lines(item, sub, out)
     return out
 
 
@@ -705,8 +705,8 @@ def read_regular_file(path: Path, source: str, limit: int, what: str = "scene fi
     return b"".join(chunks)
 
 
-def _read_text(path: Path, source: str) -> str:
-    """The scene file's text: a regular file of at most LIMITS['file_bytes'] bytes, UTF-8
+def read_scene_text(path: Path, source: str) -> str:
+    """The text of a scene (or parameters) file, or SceneError naming ``source``: a regular file of at most LIMITS['file_bytes'] bytes, UTF-8
     (:func:`read_regular_file`)."""
     try:
         data = read_regular_file(path, source, LIMITS["file_bytes"])
@@ -732,13 +732,20 @@ def _compose(text: str) -> tuple[object, yaml.Node | None]:
 
 
 def parse_bounded_yaml(text: str, source: str) -> object:
-    """The document of YAML (or JSON) ``text`` read with the scene reader's bounds (:data:`LIMITS`:
-    nesting depth, aliases, nodes with aliases expanded, scalar characters, integer digits; YAML
-    1.2 floats, duplicate keys refused).  Raises FileLimitError with one line: ``<source>:<line>:
-    <key path>: over a limit: ...`` or ``<source>:<line>:<column>: YAML syntax error: ...`` (never
-    the offending text)."""
+    """The document of YAML (or JSON) ``text`` read with the scene reader's bounds
+    (:func:`compose_bounded_yaml`)."""
+    return compose_bounded_yaml(text, source)[0]
+
+
+def compose_bounded_yaml(text: str, source: str) -> tuple[object, yaml.Node | None]:
+    """(the document, its YAML node tree) of YAML (or JSON) ``text`` read with the scene reader's
+    bounds (:data:`LIMITS`: nesting depth, aliases, nodes with aliases expanded, scalar characters,
+    integer digits; YAML 1.2 floats, duplicate keys refused).  The node tree gives each key its line
+    (:func:`key_lines`).  Raises FileLimitError with one line: ``<source>:<line>: <key path>: over a
+    limit: ...`` or ``<source>:<line>:<column>: YAML syntax error: ...`` (never the offending
+    text)."""
     try:
-        return _compose(text)[0]
+        return _compose(text)
     except _LimitError as exc:
         line = f":{exc.problem_mark.line + 1}" if exc.problem_mark else ""
         raise FileLimitError(f"{source}{line}: {exc.key}: over a limit: {exc.problem}") from None
@@ -768,10 +775,10 @@ def load_scene(path_or_name: str | Path) -> Scene:
         exists_as_other = False
     path = given if exists_as_other else scene_path(path_or_name)
     source = safe_text(str(path), 4096)  # control characters escaped; a path is never cut (PATH_MAX)
-    text = _read_text(path, source)
+    text = read_scene_text(path, source)
     try:
         data, root = _compose(text)
-        lines = _key_lines(root)
+        lines = key_lines(root)
     except _LimitError as exc:
         mark = exc.problem_mark
         line = mark.line + 1 if mark else None

@@ -447,28 +447,19 @@ def read_params_file(path: str, node_name: str = "dlo") -> dict[str, tuple[Any, 
     not a mapping of node names to ``{ros__parameters: {...}}``, an empty or unknown parameter name,
     a value of the wrong type or out of range.
     """
-    import yaml
-
-    from ..scene import SceneError, _compose, _key_lines, _LimitError, _read_text  # LIMITS apply (1 MiB, ...)
+    from ..scene import (FileLimitError, SceneError, compose_bounded_yaml, key_lines,  # LIMITS apply
+                         read_scene_text)
 
     shown = safe_text(path, 4096)
     try:
-        text = _read_text(path, shown)
+        text = read_scene_text(path, shown)
     except SceneError as exc:
         raise ParamsError(f"params file {str(exc).replace('scene file', 'parameters file')}") from None
     try:
-        data, root = _compose(text)
-    except _LimitError as exc:
-        line = exc.problem_mark.line + 1 if exc.problem_mark else 0
-        raise ParamsError(f"params file {shown}:{line}: {exc.key}: over a limit: {exc.problem}") from None
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        where = f"{shown}:{mark.line + 1}:{mark.column + 1}" if mark else shown
-        detail = safe_text(": ".join(p for p in (exc.context, exc.problem) if p))
-        raise ParamsError(f"params file {where}: YAML syntax error: {detail}") from None
-    except yaml.YAMLError as exc:
-        raise ParamsError(f"params file {shown}: YAML error: {safe_text(getattr(exc, 'reason', '') or exc)}") from None
-    lines = _key_lines(root)
+        data, root = compose_bounded_yaml(text, shown)
+    except FileLimitError as exc:
+        raise ParamsError(f"params file {exc}") from None
+    lines = key_lines(root)
     shape = "a mapping of node names to {ros__parameters: {name: value, ...}} (e.g. '/**: {ros__parameters: ...}')"
     if not isinstance(data, dict) or not data:
         got = "an empty file" if data is None else f"a {type(data).__name__}"

@@ -34,3 +34,20 @@ def safe_text(value: object, limit: int = TEXT_LIMIT) -> str:
     if size > limit or len(text) > limit:
         return joined[: max(0, limit - 1)] + "…"
     return joined
+
+
+def one_line_warnings() -> None:
+    """For the ``dlo`` command and the node (applications, not the library): a warning that dlo_ros
+    raises (e.g. ``CacheWarning``, an unsafe compiled-code cache) prints as its message alone, one
+    line on stderr, instead of Python's ``file:line: Category: message`` plus a line of source code,
+    which reads like a traceback.  Other packages' warnings keep Python's format."""
+    import warnings
+
+    default = warnings.formatwarning
+
+    def formatwarning(message, category, filename, lineno, line=None):  # noqa: ANN001 - warnings' API
+        if category.__module__.startswith("dlo_ros"):
+            return f"{message}\n"
+        return default(message, category, filename, lineno, line)
+
+    warnings.formatwarning = formatwarning

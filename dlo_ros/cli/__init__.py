@@ -24,6 +24,7 @@ import os
 import sys
 from typing import Callable
 
+from ..text import one_line_warnings
 from . import demo, fit, node, replay, scenes, solve
 from .common import EXIT_NOT_OK, EXIT_OK, EXIT_USAGE, UsageError, _err
 from .demo import demo_path, format_demo, run_demo
@@ -72,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    one_line_warnings()
     entry = SUBCOMMANDS.get("node")
     if argv[:1] == ["node"] and entry is not None and entry[2] is node.run:
         # everything after `node` is the node's (and rclpy's): argparse would refuse `--scene` here

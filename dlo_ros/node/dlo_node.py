@@ -46,6 +46,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from ..model.problem import GripPose, Problem
+from ..text import one_line_warnings
 from . import conversions as conv
 from . import params as P
 from . import query_reply
@@ -724,6 +725,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
     after those checks and loading the scene.  ``prog``: the name in usage messages.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
+    one_line_warnings()
     # Every params file and -p value is checked here, in Python, before rcl reads them: rcl reports a
     # broken file only as "Failed to parse global arguments", ignores misspelt names and accepts any frame.
     try:

@@ -324,7 +324,8 @@ def test_cached_library_does_not_report_a_library_that_would_be_refused(tmp_path
 
 
 def test_the_cli_on_an_unsafe_cache_answers_with_one_warning_and_no_traceback(tmp_path):
-    """``dlo solve`` (cached mode) with a world-writable cache: exit 0, one warning line."""
+    """``dlo solve`` (cached mode) with a world-writable cache: exit 0, one warning line and nothing
+    else on stderr."""
     cache = tmp_path / "cache"
     cache.mkdir()
     os.chmod(cache, 0o777)
@@ -336,6 +337,9 @@ def test_the_cli_on_an_unsafe_cache_answers_with_one_warning_and_no_traceback(tm
     assert "Traceback" not in run.stderr
     assert run.stderr.count("compiled-code cache") == 1
     assert "writable by group or others" in run.stderr
+    # the warning is its message alone: no "file:line: CacheWarning:" and no line of source code
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("dlo_ros: compiled-code cache"), run.stderr
     assert os.listdir(cache) == []
 
 

@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from dlo_ros.identify.observations import MAX_OBSERVATIONS
+from support.cli import assert_one_line_error
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = {"name": "pair", "string": {"length": 1.0, "bend_stiffness": 0.02,
@@ -42,12 +43,7 @@ def run_fit(path, timeout: float = 60.0):
 
 def assert_refused(path, *words: str) -> str:
     code, err, peak = run_fit(path)
-    assert code == 2, (code, err)
-    assert "Traceback" not in err, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("dlo: error: "), err
-    for w in words:
-        assert w in err, (w, err)
+    assert_one_line_error(code, err, words)
     assert peak < PEAK_MB, f"peak RSS {peak:.0f} MB"
     return err
 

@@ -14,6 +14,7 @@ import pytest
 
 from dlo_ros import cli
 from dlo_ros.scene import LIMITS, SceneError, load_scene, scene_from_dict, scene_to_dict
+from support.cli import assert_one_line_error
 
 ROOT = Path(__file__).resolve().parents[2]
 GOOD_TAIL = "grips:\n  - {name: a, s: 0.0, position: [0, 0, 0]}\n"
@@ -41,12 +42,7 @@ def run_solve(path: os.PathLike | str, *extra: str, timeout: float = 60.0):
 
 def assert_refused(path, *words: str, **kwargs) -> str:
     code, err, wall, _ = run_solve(path, **kwargs)
-    assert code == 2, (code, err)
-    assert "Traceback" not in err, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("dlo: error: "), err
-    for w in words:
-        assert w in err, (w, err)
+    assert_one_line_error(code, err, words)
     return err
 
 

@@ -47,10 +47,10 @@ def why_not_reference(before: np.ndarray | None, after: np.ndarray, geometry: SC
     sample straight from ``before`` to it makes two of them meet (``self_contact.swept_crossing``:
     the string may have passed through itself on the way)."""
     candidates = SC.candidate_pairs(after, geometry)
-    limit = geometry.distance - SLACK * length
-    through = [(pair, d) for pair, d in candidates if d < limit]
+    through = SC.penetrations(candidates, geometry, SLACK * length)  # as through_itself
     if through:
-        (a, b), d = through[0]
+        a, b = through[0]
+        d = dict(candidates)[(a, b)]
         return (f"it passes through itself (s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
                 f"are {d:.3g} m apart, the rows keep {geometry.distance:.3g} m)")
     if before is not None:

@@ -1,6 +1,9 @@
-"""Console-script entry points (``dlo``, ``dlo_node``), kept free of heavy imports: ``dlo node`` installs
-its SIGINT/SIGTERM handling (dlo_ros.node.signals) before the CLI imports numpy, CasADi and rclpy, so
-that a SIGTERM in the first second stops it with exit code 0 instead of Python's default −15."""
+"""Console-script entry points (``dlo``, ``dlo_node``), kept free of heavy imports: ``dlo node``
+installs its SIGINT/SIGTERM handling (dlo_ros.node.signals) before the CLI imports numpy, CasADi
+and rclpy, so that a SIGTERM in the first second stops it with exit code 0 instead of Python's
+default −15.
+"""
+
 from __future__ import annotations
 
 import sys
@@ -17,7 +20,9 @@ def dlo() -> int:
         from .cli import main
 
         return main()
-    except KeyboardInterrupt:  # Ctrl-C (for `dlo node` also SIGTERM) while importing or starting: a clean stop
+    except (
+        KeyboardInterrupt
+    ):  # Ctrl-C (for `dlo node` also SIGTERM) while importing or starting: a clean stop
         if not node:
             return 130
         from .node.signals import ignore_signals_at_exit

@@ -1,5 +1,7 @@
 """Small helpers for commands that print one JSON document: strict JSON values, and keeping stray
-output (e.g. from C code) off stdout while it is produced."""
+output (e.g. from C code) off stdout while it is produced.
+"""
+
 from __future__ import annotations
 
 import contextlib

@@ -1,25 +1,43 @@
-"""Bend-energy shading of a centreline: the density ½ Rf κ² and the colour maps that draw it (numpy only).
+"""Bend-energy shading of a centreline: the density ½ Rf κ² and the colour maps that draw it (numpy
+only).
 
 One implementation for the two drawings of a shape: the recording's centreline (dlo_ros.recording,
-per segment of the polyline, viridis) and the node's line-strip marker (dlo_ros.node.conversions, per
-sample, :data:`HEAT_STOPS`).  They differ only in where κ comes from: the recording has the points of
-the polyline, the node the material frames at arc lengths s.  Both estimate κ as the turning angle
-between two tangents over the length between them (:func:`turning_angle`), exact for a circular arc.
+per segment of the polyline, viridis) and the node's line-strip marker (dlo_ros.node.conversions,
+per sample, :data:`HEAT_STOPS`).  They differ only in where κ comes from: the recording has the
+points of the polyline, the node the material frames at arc lengths s.  Both estimate κ as the
+turning angle between two tangents over the length between them (:func:`turning_angle`), exact for
+a circular arc.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 #: viridis at 0, 1/8, …, 1 (8-bit RGB); the recording's centreline colours.
-VIRIDIS_STOPS = np.array([
-    [68, 1, 84], [71, 44, 122], [59, 81, 139], [44, 113, 142], [33, 144, 141],
-    [39, 173, 129], [92, 200, 99], [170, 220, 50], [253, 231, 37]], dtype=float)
+VIRIDIS_STOPS = np.array(
+    [
+        [68, 1, 84],
+        [71, 44, 122],
+        [59, 81, 139],
+        [44, 113, 142],
+        [33, 144, 141],
+        [39, 173, 129],
+        [92, 200, 99],
+        [170, 220, 50],
+        [253, 231, 37],
+    ],
+    dtype=float,
+)
 #: blue (low) → cyan → green → yellow → red (high), RGB in [0, 1]; the node's marker colours.
-HEAT_STOPS = np.array([[0.0, 0.2, 1.0], [0.0, 0.9, 1.0], [0.1, 0.9, 0.1], [1.0, 0.9, 0.0], [1.0, 0.1, 0.0]])
+HEAT_STOPS = np.array(
+    [[0.0, 0.2, 1.0], [0.0, 0.9, 1.0], [0.1, 0.9, 0.1], [1.0, 0.9, 0.0], [1.0, 0.1, 0.0]]
+)
 
 
 def turning_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle [rad] between unit vectors ``a`` and ``b`` (…, 3), in [0, π]; atan2 keeps it accurate near 0."""
+    """Angle [rad] between unit vectors ``a`` and ``b`` (…, 3), in [0, π]; atan2 keeps it accurate
+    near 0.
+    """
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...i,...i->...", a, b))
 
 
@@ -31,8 +49,8 @@ def energy_density(kappa: np.ndarray, bend_stiffness: float | np.ndarray) -> np.
 def polyline_curvature(points: np.ndarray) -> np.ndarray:
     """κ [1/m] at the vertices of polylines (…, N, 3) → (…, N).
 
-    At an interior vertex: the turning angle between consecutive segments over the mean of their two
-    lengths; the end vertices take their neighbour's κ (0 with fewer than 3 points).
+    At an interior vertex: the turning angle between consecutive segments over the mean of their
+    two lengths; the end vertices take their neighbour's κ (0 with fewer than 3 points).
     """
     p = np.asarray(points, dtype=float)
     kappa = np.zeros(p.shape[:-1])
@@ -70,9 +88,10 @@ def frame_tangents(orientations: np.ndarray) -> np.ndarray:
 
 
 def frame_curvature(s: np.ndarray, orientations: np.ndarray) -> np.ndarray:
-    """κ(s) [1/m] at samples s with material frames ``orientations`` (N, 4): the turning angle between
-    neighbouring tangents over their Δs, central differences inside, one-sided at the ends (0 where Δs
-    is 0).  Exact for a circular arc sampled uniformly."""
+    """κ(s) [1/m] at samples s with material frames ``orientations`` (N, 4): the turning angle
+    between neighbouring tangents over their Δs, central differences inside, one-sided at the ends
+    (0 where Δs is 0).  Exact for a circular arc sampled uniformly.
+    """
     s = np.asarray(s, dtype=float)
     n = s.size
     if n < 2:
@@ -85,8 +104,9 @@ def frame_curvature(s: np.ndarray, orientations: np.ndarray) -> np.ndarray:
 
 
 def colour_map(values: np.ndarray, stops: np.ndarray = HEAT_STOPS) -> np.ndarray:
-    """Colours (…, C) of ``values`` in [0, 1] (clipped; NaN as 0), linear between equally spaced ``stops``
-    (K, C): 0 is ``stops[0]``, 1 is ``stops[-1]``."""
+    """Colours (…, C) of ``values`` in [0, 1] (clipped; NaN as 0), linear between equally spaced
+    ``stops`` (K, C): 0 is ``stops[0]``, 1 is ``stops[-1]``.
+    """
     v = np.clip(np.nan_to_num(np.asarray(values, dtype=float)), 0.0, 1.0) * (len(stops) - 1)
     i = np.minimum(v.astype(int), len(stops) - 2)
     f = (v - i)[..., None]

@@ -1,10 +1,10 @@
 """``dlo``: command-line access to scenes and the shape solver (no ROS needed).
 
-    dlo solve SCENE [--json] [--points N] [--basis B] [--order N] [--compile] [--rrd FILE] [--spawn] [--connect [ADDR]]
-    dlo scenes
-    dlo demo [--scene NAME] [--steps N] [--json] [--compile] [--rrd FILE] [--spawn] [--connect [ADDR]]
-    dlo replay FILE.rrd [--resolve [--tolerance M] [--json]] [--web] [--screenshot PNG]
-    dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE] [--rrd FILE]
+    dlo solve SCENE [--json] [--points N] [--basis B] [--order N] [--compile] [--rrd FILE]
+    [--spawn] [--connect [ADDR]] dlo scenes dlo demo [--scene NAME] [--steps N] [--json]
+    [--compile] [--rrd FILE] [--spawn] [--connect [ADDR]] dlo replay FILE.rrd [--resolve
+    [--tolerance M] [--json]] [--web] [--screenshot PNG] dlo fit OBSERVATIONS [--scene SCENE]
+    [--json] [--write-scene FILE] [--rrd FILE]
 
 SCENE is a scene file path or the name of a shipped scene (config/scenes/<name>.yaml).
 Exit codes: 0 success (solve: status ok), 1 the solve (or a demo step) did not reach status ok,
@@ -16,6 +16,7 @@ One module per subcommand (solve, scenes, demo, node, replay, fit), each with ``
 :func:`register_subcommand` adds more.  Shared: ``common`` (exit codes, UsageError) and ``record``
 (the recording flags).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,35 +32,62 @@ from .demo import demo_path, format_demo, run_demo
 from .scenes import scene_summaries
 from .solve import JSON_KEYS, format_summary, max_sag
 
-__all__ = ["EXIT_NOT_OK", "EXIT_OK", "EXIT_USAGE", "JSON_KEYS", "SUBCOMMANDS", "UsageError", "build_parser",
-           "demo_path", "format_demo", "format_summary", "main", "max_sag", "register_subcommand", "run_demo",
-           "scene_summaries"]
+__all__ = [
+    "EXIT_NOT_OK",
+    "EXIT_OK",
+    "EXIT_USAGE",
+    "JSON_KEYS",
+    "SUBCOMMANDS",
+    "UsageError",
+    "build_parser",
+    "demo_path",
+    "format_demo",
+    "format_summary",
+    "main",
+    "max_sag",
+    "register_subcommand",
+    "run_demo",
+    "scene_summaries",
+]
 
 # =====================================================================================================
 # SUBCOMMAND REGISTRY — add new subcommands here (or call register_subcommand() from your module).
 #   name -> (help, add_arguments(parser) -> None, handler(args) -> exit code)
-# The handler may raise SceneError / FileNotFoundError / UsageError: main() prints them as
-# "dlo: error: ..." and returns exit code 2.  "node": main() hands its arguments to the node unparsed
+# The handler may raise SceneError / FileNotFoundError / UsageError: main() prints them as "dlo:
+# error: ..." and returns exit code 2.  "node": main() hands its arguments to the node unparsed
 # (dlo_ros/node/params.py checks them).
 # =====================================================================================================
-Subcommand = tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]
+Subcommand = tuple[
+    str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]
+]
 
 SUBCOMMANDS: dict[str, Subcommand] = {
     name: (module.HELP, module.add_arguments, module.run)
-    for name, module in (("solve", solve), ("scenes", scenes), ("demo", demo), ("node", node), ("replay", replay),
-                         ("fit", fit))
+    for name, module in (
+        ("solve", solve),
+        ("scenes", scenes),
+        ("demo", demo),
+        ("node", node),
+        ("replay", replay),
+        ("fit", fit),
+    )
 }
 
 
-def register_subcommand(name: str, help: str, add_arguments: Callable[[argparse.ArgumentParser], None],
-                        handler: Callable[[argparse.Namespace], int]) -> None:
+def register_subcommand(
+    name: str,
+    help: str,
+    add_arguments: Callable[[argparse.ArgumentParser], None],
+    handler: Callable[[argparse.Namespace], int],
+) -> None:
     """Add (or replace) a subcommand of ``dlo``."""
     SUBCOMMANDS[name] = (help, add_arguments, handler)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="dlo", description="Static shape of a cable/rope/paper strip held by grippers (Hirai & Wakamatsu).",
+        prog="dlo",
+        description="Static shape of a cable/rope/paper strip held by grippers (Hirai & Wakamatsu).",
         epilog="Exit codes: 0 ok, 1 solve status not ok, 2 malformed scene or usage.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -88,8 +116,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args._handler(args))
     except (SceneError, FileNotFoundError, UsageError) as exc:
-        # FileNotFoundError/KeyError-style messages may come quoted; SceneError's never start with a quote
-        text = exc.args[0] if isinstance(exc, FileNotFoundError) and len(exc.args) == 1 else str(exc)
+        # FileNotFoundError/KeyError-style messages may come quoted; SceneError's never start with
+        # a quote
+        text = (
+            exc.args[0] if isinstance(exc, FileNotFoundError) and len(exc.args) == 1 else str(exc)
+        )
         _err(str(text))
         return EXIT_USAGE
     except KeyboardInterrupt:
@@ -98,7 +129,9 @@ def main(argv: list[str] | None = None) -> int:
         with contextlib.suppress(OSError):
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silence the flush at exit
         return EXIT_OK
-    except OSError as exc:  # a file the command was given cannot be read or written: its name and why
+    except (
+        OSError
+    ) as exc:  # a file the command was given cannot be read or written: its name and why
         from ..text import safe_text
 
         name = f"{safe_text(exc.filename)}: " if exc.filename is not None else ""

@@ -1,4 +1,5 @@
 """``python -m dlo_ros.cli ...``: the ``dlo`` command."""
+
 import sys
 
 from . import main

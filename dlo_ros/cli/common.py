@@ -1,4 +1,7 @@
-"""What every ``dlo`` subcommand shares: exit codes, the usage error, scene loading, the compile mode."""
+"""What every ``dlo`` subcommand shares: exit codes, the usage error, scene loading, the compile
+mode.
+"""
+
 from __future__ import annotations
 
 import sys
@@ -11,14 +14,16 @@ EXIT_USAGE = 2
 class UsageError(Exception):
     """Bad command-line input: printed as ``dlo: error: ...`` and exit code 2."""
 
+
 def _err(message: str) -> None:
     print(f"dlo: error: {message}", file=sys.stderr)
 
 
 def _compile_mode(enabled: bool) -> str:
-    """ShapeSolver's compile mode for a one-shot command: 'blocking' with --compile (compile the KKT
-    function to C now, about a minute per new scene structure, cached), else 'cached' (use a library
-    an earlier run compiled, never wait for gcc)."""
+    """ShapeSolver's compile mode for a one-shot command: 'blocking' with --compile (compile the
+    KKT function to C now, about a minute per new scene structure, cached), else 'cached' (use a
+    library an earlier run compiled, never wait for gcc).
+    """
     return "blocking" if enabled else "cached"
 
 

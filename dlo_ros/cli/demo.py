@@ -1,4 +1,7 @@
-"""``dlo demo``: the ROS node with a dual-arm driver over DDS, or (``--solver-only``) a grip moved in warm steps."""
+"""``dlo demo``: the ROS node with a dual-arm driver over DDS, or (``--solver-only``) a grip moved
+in warm steps.
+"""
+
 from __future__ import annotations
 
 import argparse
@@ -19,30 +22,40 @@ HELP = "the main job: the ROS node + a dual-arm driver over DDS, with a summary 
 
 
 def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
-    """The moving grip (named 'right', else the one with the largest s) and its ``steps`` target positions.
+    """The moving grip (named 'right', else the one with the largest s) and its ``steps`` target
+    positions.
 
-    It moves in a straight line, in equal steps, by 15 % of the chord toward the first grip and by 5 % of
-    the string length against gravity: small steps, always reachable.
+    It moves in a straight line, in equal steps, by 15 % of the chord toward the first grip and by
+    5 % of the string length against gravity: small steps, always reachable.
     """
     grips = scene.problem.grips
     moving = next((g for g in grips if g.name == "right"), max(grips, key=lambda g: g.s))
     start = np.asarray(moving.pose.position, dtype=float)
     first = min(grips, key=lambda g: g.s)
-    chord = start - np.asarray(first.pose.position, dtype=float) if first is not moving else np.zeros(3)
+    chord = (
+        start - np.asarray(first.pose.position, dtype=float)
+        if first is not moving
+        else np.zeros(3)
+    )
     up = -scene.problem.gravity_unit
     total = -0.15 * chord + 0.05 * scene.problem.string.length * up
     return moving.name, [start + total * (k / steps) for k in range(1, steps + 1)]
 
 
-def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str], None] | None = None,
-             compile: str = "cached", recorder=None) -> dict:
+def run_demo(
+    scene_name: str | None = None,
+    steps: int = 50,
+    log: Callable[[str], None] | None = None,
+    compile: str = "cached",
+    recorder=None,
+) -> dict:
     """Solve a scene cold, then move one grip through ``steps`` small warm-started updates.
 
-    Returns a summary dict: scene, moving_grip, steps, build_time_s, cold {status, message, time_ms,
-    iterations, stable}, warm {time_ms (list), median_ms, p90_ms, max_ms, iterations (list),
-    mean_iterations, statuses (status -> count), stable_count, ok_count}, final_sag_m, ok.
-    The CLI prints it with :func:`format_demo`.
-    ``recorder``: a dlo_ros.recording.Recorder; update 0 is the cold solve, update k the k-th step.
+    Returns a summary dict: scene, moving_grip, steps, build_time_s, cold {status, message,
+    time_ms, iterations, stable}, warm {time_ms (list), median_ms, p90_ms, max_ms, iterations
+    (list), mean_iterations, statuses (status -> count), stable_count, ok_count}, final_sag_m, ok.
+    The CLI prints it with :func:`format_demo`. ``recorder``: a dlo_ros.recording.Recorder; update
+    0 is the cold solve, update k the k-th step.
     """
     from ..model.problem import GripPose
     from ..scene import DEFAULT_SCENE, SceneError
@@ -51,7 +64,9 @@ def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str]
     scene = _load(scene_name or DEFAULT_SCENE)
     log = log or (lambda _msg: None)
     if compile == "blocking":
-        log(f"building the solver for {scene.name} (compiling C code: up to a minute the first time)")
+        log(
+            f"building the solver for {scene.name} (compiling C code: up to a minute the first time)"
+        )
     t0 = time.perf_counter()
     try:
         solver = make_solver(scene.problem, scene.options, compile=compile, checks="sync")
@@ -103,10 +118,17 @@ def run_demo(scene_name: str | None = None, steps: int = 50, log: Callable[[str]
         "moving_grip": name,
         "steps": steps,
         "build_time_s": build_s,
-        "cold": {"status": cold.status, "message": cold.message, "time_ms": cold.solve_time_ms,
-                 "iterations": cold.iterations, "stable": cold.stable},
+        "cold": {
+            "status": cold.status,
+            "message": cold.message,
+            "time_ms": cold.solve_time_ms,
+            "iterations": cold.iterations,
+            "stable": cold.stable,
+        },
         "warm": warm,
-        "final_sag_m": max_sag(last.points, grip_positions, scene.problem.gravity) if last.ok else None,
+        "final_sag_m": max_sag(last.points, grip_positions, scene.problem.gravity)
+        if last.ok
+        else None,
         "ok": cold.ok and warm["ok_count"] == steps,
     }
 
@@ -133,25 +155,43 @@ def format_demo(summary: dict) -> str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--solver-only", action="store_true",
-                   help="no ROS: solve the scene in this process and move a grip (the default demo runs the ROS "
-                        "node and a dual-arm driver over DDS; its options: python -m dlo_ros.node.demo --help)")
-    p.add_argument("--scene", default=None, metavar="NAME", help="scene name or file (default: default_cable)")
-    p.add_argument("--steps", type=int, default=50, metavar="N", help="number of warm-started grip moves (default 50)")
+    p.add_argument(
+        "--solver-only",
+        action="store_true",
+        help="no ROS: solve the scene in this process and move a grip (the default demo runs the ROS "
+        "node and a dual-arm driver over DDS; its options: python -m dlo_ros.node.demo --help)",
+    )
+    p.add_argument(
+        "--scene", default=None, metavar="NAME", help="scene name or file (default: default_cable)"
+    )
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=50,
+        metavar="N",
+        help="number of warm-started grip moves (default 50)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary dict as JSON")
-    p.add_argument("--compile", action="store_true",
-                   help="compile the solver's KKT function to C (about a minute per new scene structure)")
+    p.add_argument(
+        "--compile",
+        action="store_true",
+        help="compile the solver's KKT function to C (about a minute per new scene structure)",
+    )
     _add_record_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    """The main job: the ROS node on the default scene with a dual-arm driver in this process (real DDS),
-    printing updates, latency p50/p99, failures and stable shapes; ``--solver-only`` for the ROS-free demo."""
+    """The main job: the ROS node on the default scene with a dual-arm driver in this process (real
+    DDS), printing updates, latency p50/p99, failures and stable shapes; ``--solver-only`` for the
+    ROS-free demo.
+    """
     if not args.solver_only:
         from ..node.demo import run_demo_job
 
         job = ["--compile", "blocking" if args.compile else "cached"]
-        if getattr(args, "rrd", None):  # without --rrd the demo records to its default, ./dlo_demo.rrd
+        if getattr(
+            args, "rrd", None
+        ):  # without --rrd the demo records to its default, ./dlo_demo.rrd
             job += ["--rrd", args.rrd]
         return run_demo_job(job)
     if args.steps < 1:
@@ -161,8 +201,13 @@ def run(args: argparse.Namespace) -> int:
     with guard:
         recorder = _recorder(args)
         try:
-            summary = run_demo(args.scene, args.steps, log=log, compile=_compile_mode(args.compile),
-                               recorder=recorder)
+            summary = run_demo(
+                args.scene,
+                args.steps,
+                log=log,
+                compile=_compile_mode(args.compile),
+                recorder=recorder,
+            )
         finally:
             _close_recorder(recorder)
     print(json.dumps(json_safe(summary)) if args.json else format_demo(summary))

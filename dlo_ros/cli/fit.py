@@ -1,4 +1,7 @@
-"""``dlo fit OBSERVATIONS``: identify string parameters from observations (the command is dlo_ros.identify.command)."""
+"""``dlo fit OBSERVATIONS``: identify string parameters from observations (the command is
+dlo_ros.identify.command).
+"""
+
 from __future__ import annotations
 
 import argparse
@@ -11,10 +14,14 @@ add_arguments = command.add_arguments
 
 
 def run(args: argparse.Namespace) -> int:
-    """:func:`dlo_ros.identify.command.cmd_fit`; an ObservationError (a ValueError) is a usage error."""
+    """:func:`dlo_ros.identify.command.cmd_fit`; an ObservationError (a ValueError) is a usage
+    error.
+    """
     try:
         return command.cmd_fit(args)
-    except ValueError as exc:  # ObservationError (a ValueError; SceneError is caught by main first)
+    except (
+        ValueError
+    ) as exc:  # ObservationError (a ValueError; SceneError is caught by main first)
         from ..scene import SceneError
 
         if isinstance(exc, SceneError):

@@ -1,12 +1,17 @@
-"""``dlo node ARGS``: the ROS 2 node (its arguments reach it unparsed; dlo_ros/node/params.py checks them)."""
+"""``dlo node ARGS``: the ROS 2 node (its arguments reach it unparsed; dlo_ros/node/params.py
+checks them).
+"""
+
 from __future__ import annotations
 
 import argparse
 
 from .common import EXIT_OK, EXIT_USAGE
 
-HELP = ("run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--check] [--ros-args ...] "
-        "(`dlo node --help`)")
+HELP = (
+    "run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--check] [--ros-args ...] "
+    "(`dlo node --help`)"
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -14,20 +19,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """The built-in ``node`` subcommand (``main`` passes its arguments to :func:`run_node` unparsed)."""
+    """The built-in ``node`` subcommand (``main`` passes its arguments to :func:`run_node`
+    unparsed).
+    """
     return run_node(args.node_args)
 
 
 def run_node(argv: list[str]) -> int:
     """``dlo node ARGS``: the node's own command line (``--params-file``, ``--scene``, ``--check``,
-    ``--ros-args ...``), parsed and checked by dlo_ros.node.params.prepare_node_args; ``main`` hands
-    everything after ``node`` here untouched (argparse cannot pass ``--scene`` through a subparser)."""
+    ``--ros-args ...``), parsed and checked by dlo_ros.node.params.prepare_node_args; ``main``
+    hands everything after ``node`` here untouched (argparse cannot pass ``--scene`` through a
+    subparser).
+    """
     from ..node.signals import stop_on_first_signal
 
-    stop_on_first_signal()  # before the node's imports (CasADi, rclpy): SIGTERM then stops it with 0, not −15
+    # before the node's imports (CasADi, rclpy): SIGTERM then stops it with 0, not −15
+    stop_on_first_signal()
     from ..node.params import node_argument_parser
 
-    if any(a in ("-h", "--help") for a in argv[: argv.index("--ros-args") if "--ros-args" in argv else None]):
+    if any(
+        a in ("-h", "--help")
+        for a in argv[: argv.index("--ros-args") if "--ros-args" in argv else None]
+    ):
         node_argument_parser("dlo node").print_help()  # without importing rclpy
         return EXIT_OK
     from ..node import main as node_main

@@ -1,4 +1,7 @@
-"""The recording flags of ``dlo solve`` and ``dlo demo`` (``--rrd``, ``--spawn``, ``--connect``; msg_docs/recording.md)."""
+"""The recording flags of ``dlo solve`` and ``dlo demo`` (``--rrd``, ``--spawn``, ``--connect``;
+msg_docs/recording.md).
+"""
+
 from __future__ import annotations
 
 import argparse
@@ -9,11 +12,23 @@ from .common import UsageError
 
 def _add_record_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("rerun recording (any combination; default off)")
-    g.add_argument("--rrd", metavar="FILE", help="save a rerun recording to FILE (.rrd); `dlo replay FILE` opens it")
-    g.add_argument("--spawn", action="store_true", help="start a rerun viewer and stream the recording to it")
-    g.add_argument("--connect", nargs="?", const="", default=None, metavar="ADDR",
-                   help="stream to a running rerun viewer: HOST[:PORT] or rerun+http://HOST:PORT/proxy "
-                        "(no ADDR: 127.0.0.1:9876)")
+    g.add_argument(
+        "--rrd",
+        metavar="FILE",
+        help="save a rerun recording to FILE (.rrd); `dlo replay FILE` opens it",
+    )
+    g.add_argument(
+        "--spawn", action="store_true", help="start a rerun viewer and stream the recording to it"
+    )
+    g.add_argument(
+        "--connect",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="ADDR",
+        help="stream to a running rerun viewer: HOST[:PORT] or rerun+http://HOST:PORT/proxy "
+        "(no ADDR: 127.0.0.1:9876)",
+    )
 
 
 def _recorder(args: argparse.Namespace):
@@ -24,13 +39,18 @@ def _recorder(args: argparse.Namespace):
         return Recorder(rrd=args.rrd, spawn=args.spawn, connect=args.connect)
     except (RecordingUnavailable, ValueError) as exc:
         raise UsageError(str(exc)) from None
-    except RuntimeError as exc:  # e.g. no display for --spawn, or the recorder process did not start
+    except (
+        RuntimeError
+    ) as exc:  # e.g. no display for --spawn, or the recorder process did not start
         raise UsageError(f"{'--spawn' if args.spawn else 'recording'}: {exc}") from None
 
 
 def _close_recorder(recorder) -> None:
     recorder.close()
     if recorder.enabled and recorder.errors:
-        print(f"dlo: warning: recording: {recorder.errors} error(s), last: {recorder.last_error}", file=sys.stderr)
+        print(
+            f"dlo: warning: recording: {recorder.errors} error(s), last: {recorder.last_error}",
+            file=sys.stderr,
+        )
     if recorder.enabled and recorder.rrd is not None:
         print(f"dlo: recording saved to {recorder.rrd}", file=sys.stderr)

@@ -1,15 +1,19 @@
-"""``dlo replay FILE.rrd``: open a recording in the rerun viewer, render it, or re-solve it as a regression case.
+"""``dlo replay FILE.rrd``: open a recording in the rerun viewer, render it, or re-solve it as a
+regression case.
 
-    dlo replay FILE.rrd                      open it in the native viewer (needs a display; else says what to do)
-    dlo replay FILE.rrd --web                serve it to a browser (rerun --web-viewer; no display needed)
-    dlo replay FILE.rrd --screenshot PNG     render it headlessly to a PNG (needs a Vulkan driver, e.g. lavapipe)
-    dlo replay FILE.rrd --resolve [--tolerance M] [--json]
-                                             re-run today's solver on the recorded targets and compare shapes
+    dlo replay FILE.rrd                      open it in the native viewer (needs a display; else
+    says what to do) dlo replay FILE.rrd --web                serve it to a browser (rerun
+    --web-viewer; no display needed) dlo replay FILE.rrd --screenshot PNG     render it headlessly
+    to a PNG (needs a Vulkan driver, e.g. lavapipe) dlo replay FILE.rrd --resolve [--tolerance M]
+    [--json]
+                                             re-run today's solver on the recorded targets and
+                                             compare shapes
 
-Exit codes: 0 ok (``--resolve``: every update within the tolerance); 1 a deviation above the tolerance
-(or a status that changed), or the viewer / the renderer failed; 2 unreadable file or bad usage.
-Reading and re-solving: dlo_ros.recording.replay; viewing: dlo_ros.recording.viewer.
+Exit codes: 0 ok (``--resolve``: every update within the tolerance); 1 a deviation above the
+tolerance (or a status that changed), or the viewer / the renderer failed; 2 unreadable file or bad
+usage. Reading and re-solving: dlo_ros.recording.replay; viewing: dlo_ros.recording.viewer.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,18 +32,44 @@ HELP = "open a rerun recording (.rrd) in the viewer, or re-solve it and compare 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from ..recording.replay import DEFAULT_TOLERANCE
 
-    p.add_argument("file", metavar="FILE.rrd", help="a recording made with --rrd (dlo solve / dlo demo / the node)")
-    p.add_argument("--resolve", action="store_true",
-                   help="re-run the solver on the recorded targets and report how far today's shapes are from the "
-                        "recorded ones (exit 1 if any update exceeds --tolerance)")
-    p.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE, metavar="M",
-                   help=f"with --resolve: largest allowed centreline deviation [m] (default {DEFAULT_TOLERANCE:g})")
-    p.add_argument("--json", action="store_true", help="with --resolve: print the report as one JSON object")
-    p.add_argument("--compile", action="store_true",
-                   help="with --resolve: compile the solver's derivatives to C first (slow first build)")
-    p.add_argument("--web", action="store_true", help="serve the recording to a browser (rerun --web-viewer)")
-    p.add_argument("--screenshot", metavar="PNG", help="render the recording headlessly into PNG and exit")
-    p.add_argument("--update", type=int, metavar="N", help="with --screenshot: show update N (default: the last)")
+    p.add_argument(
+        "file",
+        metavar="FILE.rrd",
+        help="a recording made with --rrd (dlo solve / dlo demo / the node)",
+    )
+    p.add_argument(
+        "--resolve",
+        action="store_true",
+        help="re-run the solver on the recorded targets and report how far today's shapes are from the "
+        "recorded ones (exit 1 if any update exceeds --tolerance)",
+    )
+    p.add_argument(
+        "--tolerance",
+        type=float,
+        default=DEFAULT_TOLERANCE,
+        metavar="M",
+        help=f"with --resolve: largest allowed centreline deviation [m] (default {DEFAULT_TOLERANCE:g})",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="with --resolve: print the report as one JSON object"
+    )
+    p.add_argument(
+        "--compile",
+        action="store_true",
+        help="with --resolve: compile the solver's derivatives to C first (slow first build)",
+    )
+    p.add_argument(
+        "--web", action="store_true", help="serve the recording to a browser (rerun --web-viewer)"
+    )
+    p.add_argument(
+        "--screenshot", metavar="PNG", help="render the recording headlessly into PNG and exit"
+    )
+    p.add_argument(
+        "--update",
+        type=int,
+        metavar="N",
+        help="with --screenshot: show update N (default: the last)",
+    )
 
 
 def _read(path: Path, details: bool):
@@ -56,9 +86,12 @@ def _read(path: Path, details: bool):
 
 
 def _note_truncated(path: Path, updates: int, file_bytes: int, complete_bytes: int) -> None:
-    print(f"dlo replay: note: {path} ends early (a cut-off recording, {file_bytes} bytes): read "
-          f"{updates} updates from its first {complete_bytes} bytes, up to the last complete "
-          "message", file=sys.stderr)
+    print(
+        f"dlo replay: note: {path} ends early (a cut-off recording, {file_bytes} bytes): read "
+        f"{updates} updates from its first {complete_bytes} bytes, up to the last complete "
+        "message",
+        file=sys.stderr,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
         rec = _read(path, details=False)
         try:
             with stdout_to_stderr():  # IPOPT's banner must not mix with the report
-                report = replay.resolve(rec, args.tolerance, compile="blocking" if args.compile else "cached")
+                report = replay.resolve(
+                    rec, args.tolerance, compile="blocking" if args.compile else "cached"
+                )
         except UsageError:
             raise
         except ValueError as exc:
@@ -87,10 +122,14 @@ def run(args: argparse.Namespace) -> int:
     if args.screenshot:
         try:
             out = viewer.screenshot(path, args.screenshot, update=args.update)
-        except Exception as exc:  # noqa: BLE001 - the viewer's reasons are varied (no GPU, port, ...)
-            print(f"dlo replay: could not render {path} headlessly: {type(exc).__name__}: {exc}\n"
-                  "  the headless viewer needs a Vulkan adapter; a software one is Debian's mesa-vulkan-drivers "
-                  "(lavapipe)", file=sys.stderr)
+        # noqa: BLE001 - the viewer's reasons are varied (no GPU, port, ...)
+        except Exception as exc:
+            print(
+                f"dlo replay: could not render {path} headlessly: {type(exc).__name__}: {exc}\n"
+                "  the headless viewer needs a Vulkan adapter; a software one is Debian's mesa-vulkan-drivers "
+                "(lavapipe)",
+                file=sys.stderr,
+            )
             return EXIT_NOT_OK
         print(f"dlo replay: screenshot saved to {out}")
         return EXIT_OK
@@ -106,9 +145,15 @@ def _run_viewer(cmd: list[str]) -> int:
     try:
         code = subprocess.call(cmd)
     except OSError as exc:
-        print(f"dlo replay: could not start the rerun viewer ({' '.join(cmd)}): {exc}", file=sys.stderr)
+        print(
+            f"dlo replay: could not start the rerun viewer ({' '.join(cmd)}): {exc}",
+            file=sys.stderr,
+        )
         return EXIT_NOT_OK
     if code not in (0, -2, 130):  # Ctrl-C in the viewer is a normal way out
-        print(f"dlo replay: the rerun viewer exited with code {code} ({' '.join(cmd)})", file=sys.stderr)
+        print(
+            f"dlo replay: the rerun viewer exited with code {code} ({' '.join(cmd)})",
+            file=sys.stderr,
+        )
         return EXIT_NOT_OK
     return EXIT_OK

@@ -1,4 +1,5 @@
 """``dlo scenes``: list the shipped scenes with the first line of each one's description."""
+
 from __future__ import annotations
 
 import argparse
@@ -22,9 +23,13 @@ def scene_summaries() -> list[tuple[str, str]]:
     out = []
     for name in available_scenes():
         try:
-            data = yaml.load(scene_path(name).read_text(encoding="utf-8"), Loader=_SceneLoader)  # noqa: S506
+            # noqa: S506
+            data = yaml.load(scene_path(name).read_text(encoding="utf-8"), Loader=_SceneLoader)
             desc = data.get("description") if isinstance(data, dict) else None
-            first = next((ln.strip() for ln in str(desc or "").splitlines() if ln.strip()), "(no description)")
+            first = next(
+                (ln.strip() for ln in str(desc or "").splitlines() if ln.strip()),
+                "(no description)",
+            )
         except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
             first = f"(unreadable: {type(exc).__name__})"
         out.append((name, first))

@@ -1,4 +1,5 @@
 """``dlo solve SCENE``: solve a scene once and print the shape (a summary, or one JSON object)."""
+
 from __future__ import annotations
 
 import argparse
@@ -18,15 +19,31 @@ from .record import _add_record_arguments, _close_recorder, _recorder
 HELP = "solve a scene once and print the shape (exit 0 if status ok)"
 
 #: Keys of ``dlo solve --json`` output (ShapeResult.to_dict() plus scene and frame_id).
-JSON_KEYS = ("scene", "frame_id", "status", "message", "stable", "min_eigenvalue", "s", "points", "orientations",
-             "energy", "grips", "contact_forces", "solver")
+JSON_KEYS = (
+    "scene",
+    "frame_id",
+    "status",
+    "message",
+    "stable",
+    "min_eigenvalue",
+    "s",
+    "points",
+    "orientations",
+    "energy",
+    "grips",
+    "contact_forces",
+    "solver",
+)
 
 
-def _with_overrides(options, points: int | None, basis: str | None, order: int | None, model: str | None = None):
+def _with_overrides(
+    options, points: int | None, basis: str | None, order: int | None, model: str | None = None
+):
     """SolverOptions with the command-line overrides; raises UsageError naming the option.
 
     An explicit --order pins the order, so it implies --model full unless --model is given
-    (model 'auto' chooses the order itself)."""
+    (model 'auto' chooses the order itself).
+    """
     changes: dict[str, Any] = {}
     if model is not None:
         changes["model"] = model
@@ -46,8 +63,12 @@ def _with_overrides(options, points: int | None, basis: str | None, order: int |
     try:
         new.validate()
     except ValueError as exc:
-        flag = {"solver.output_points": "--points", "solver.basis": "--basis", "solver.order": "--order",
-                "solver.model": "--model"}
+        flag = {
+            "solver.output_points": "--points",
+            "solver.basis": "--basis",
+            "solver.order": "--order",
+            "solver.model": "--model",
+        }
         key = str(exc).split(":", 1)[0]
         raise UsageError(f"{flag.get(key, key)}: {str(exc).split(':', 1)[-1].strip()}") from None
     return new
@@ -67,43 +88,76 @@ def max_sag(points: np.ndarray, grip_positions: list[np.ndarray], gravity: np.nd
 
 
 def _vec(a: Any, digits: int = 4) -> str:
-    return "[" + ", ".join(f"{float(v) + 0.0:+.{digits}g}" for v in np.asarray(a, dtype=float).ravel()) + "]"
+    return (
+        "["
+        + ", ".join(f"{float(v) + 0.0:+.{digits}g}" for v in np.asarray(a, dtype=float).ravel())
+        + "]"
+    )
 
 
 def format_summary(scene, result) -> str:
     """Short human-readable summary of one solve."""
-    lines = [f"scene   {scene.name}  ({scene.source})", f"status  {result.status}: {result.message}"]
+    lines = [
+        f"scene   {scene.name}  ({scene.source})",
+        f"status  {result.status}: {result.message}",
+    ]
     if result.ok:
-        eig = "" if result.min_eigenvalue is None else f"  (min reduced eigenvalue {result.min_eigenvalue:.4g})"
+        eig = (
+            ""
+            if result.min_eigenvalue is None
+            else f"  (min reduced eigenvalue {result.min_eigenvalue:.4g})"
+        )
         lines.append(f"stable  {result.stable}{eig}")
-        lines.append("energy  " + "  ".join(f"{k} {v + 0.0:.6g}" for k, v in result.energy.items()) + "  [J]")
+        lines.append(
+            "energy  "
+            + "  ".join(f"{k} {v + 0.0:.6g}" for k, v in result.energy.items())
+            + "  [J]"
+        )
         width = max(len(n) for n in result.grips) if result.grips else 0
         for name, w in result.grips.items():
-            lines.append(f"grip    {name:<{width}}  force {_vec(w.force)} N  torque {_vec(w.torque)} N m")
+            lines.append(
+                f"grip    {name:<{width}}  force {_vec(w.force)} N  torque {_vec(w.torque)} N m"
+            )
         for i, f in result.contact_forces.items():
             if np.linalg.norm(f) > 0:
                 ob = scene.problem.obstacles[i]
-                lines.append(f"contact obstacles[{i}] {ob.name or ob.type}: total force {_vec(f)} N")
+                lines.append(
+                    f"contact obstacles[{i}] {ob.name or ob.type}: total force {_vec(f)} N"
+                )
         for c in result.self_contacts:
-            lines.append(f"self    s = {c.s_a:.4g} m and {c.s_b:.4g} m pressed together: force {_vec(c.force)} N "
-                         f"(on s = {c.s_a:.4g} m; gap {c.gap:.4g} m)")
-        sag = max_sag(result.points, [g.pose.position for g in scene.problem.grips], scene.problem.gravity)
+            lines.append(
+                f"self    s = {c.s_a:.4g} m and {c.s_b:.4g} m pressed together: force {_vec(c.force)} N "
+                f"(on s = {c.s_a:.4g} m; gap {c.gap:.4g} m)"
+            )
+        sag = max_sag(
+            result.points, [g.pose.position for g in scene.problem.grips], scene.problem.gravity
+        )
         lines.append(f"sag     {sag:.4g} m  (lowest point below the lowest grip, along gravity)")
     if result.status in ("ok", "unverified"):
-        lines.append(f"check   equilibrium residual {result.equilibrium_residual_m:.3g} m (equivalent centreline error)")
+        lines.append(
+            f"check   equilibrium residual {result.equilibrium_residual_m:.3g} m (equivalent centreline error)"
+        )
     lines.append(
         f"solver  {result.iterations} iterations, {result.solve_time_ms:.1f} ms, "
-        f"{result.basis} order {result.order}" + (f", IPOPT {result.ipopt_status}" if result.ipopt_status else "")
+        f"{result.basis} order {result.order}"
+        + (f", IPOPT {result.ipopt_status}" if result.ipopt_status else "")
     )
     m = result.model
     if m is not None:
-        kinds = ["planar" if m.planar else "3D"] + [k for k in ("twist", "stretch", "gravity") if getattr(m, k)]
+        kinds = ["planar" if m.planar else "3D"] + [
+            k for k in ("twist", "stretch", "gravity") if getattr(m, k)
+        ]
         err = m.estimated_error_m
         lines.append(
             f"model   {'auto' if m.auto else 'fixed'}: {', '.join(kinds)}; order {m.order}, "
             f"{m.obstacles} obstacle(s) in the NLP, {m.variables} unknowns"
-            + (f", estimated error {err:.2g} m (tolerance {m.tolerance_m:.2g} m"
-               + ("" if m.tolerance_met else ": NOT met, even at the highest order") + ")" if err is not None else "")
+            + (
+                f", estimated error {err:.2g} m (tolerance {m.tolerance_m:.2g} m"
+                + ("" if m.tolerance_met else ": NOT met, even at the highest order")
+                + ")"
+                if err is not None
+                else ""
+            )
         )
         for change in m.changes:
             lines.append(f"        model change: {change}")
@@ -111,17 +165,40 @@ def format_summary(scene, result) -> str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", metavar="SCENE", help="scene file path, or the name of a shipped scene (see `dlo scenes`)")
-    p.add_argument("--json", action="store_true", help="print exactly one JSON object (schema in msg_docs/cli.md)")
-    p.add_argument("--points", type=int, metavar="N", help="number of output samples along s (solver.output_points)")
+    p.add_argument(
+        "scene",
+        metavar="SCENE",
+        help="scene file path, or the name of a shipped scene (see `dlo scenes`)",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print exactly one JSON object (schema in msg_docs/cli.md)",
+    )
+    p.add_argument(
+        "--points",
+        type=int,
+        metavar="N",
+        help="number of output samples along s (solver.output_points)",
+    )
     p.add_argument("--basis", choices=("chebyshev", "fourier"), help="Ritz basis (solver.basis)")
-    p.add_argument("--order", type=int, metavar="N",
-                   help="basis functions per field (solver.order); raises solver.quadrature_nodes to "
-                        "ceil(10 N / 3) if the scene's is smaller; implies --model full unless --model is given")
-    p.add_argument("--model", choices=["auto", "full", "planar"],
-                   help="solver.model: auto (default: the smallest model the scene needs), full or planar")
-    p.add_argument("--compile", action="store_true",
-                   help="compile the solver's KKT function to C (slow first build; only useful for benchmarks)")
+    p.add_argument(
+        "--order",
+        type=int,
+        metavar="N",
+        help="basis functions per field (solver.order); raises solver.quadrature_nodes to "
+        "ceil(10 N / 3) if the scene's is smaller; implies --model full unless --model is given",
+    )
+    p.add_argument(
+        "--model",
+        choices=["auto", "full", "planar"],
+        help="solver.model: auto (default: the smallest model the scene needs), full or planar",
+    )
+    p.add_argument(
+        "--compile",
+        action="store_true",
+        help="compile the solver's KKT function to C (slow first build; only useful for benchmarks)",
+    )
     _add_record_arguments(p)
 
 
@@ -133,8 +210,12 @@ def run(args: argparse.Namespace) -> int:
     guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         try:
-            solver = make_solver(scene.problem, options, compile=_compile_mode(args.compile), checks="sync")
-        except ValueError as exc:  # the solver's own checks (e.g. loads[i].moment); they name the field
+            solver = make_solver(
+                scene.problem, options, compile=_compile_mode(args.compile), checks="sync"
+            )
+        except (
+            ValueError
+        ) as exc:  # the solver's own checks (e.g. loads[i].moment); they name the field
             raise UsageError(str(exc)) from None
         recorder = _recorder(args)
         try:
@@ -145,7 +226,9 @@ def run(args: argparse.Namespace) -> int:
                 recorder.log_targets(targets, update=0, ros_time_ns=stamp)
             result = solver.solve()
             if recorder.enabled:
-                recorder.log_result(result, update=0, ros_time_ns=stamp, targets=targets, warm=False)
+                recorder.log_result(
+                    result, update=0, ros_time_ns=stamp, targets=targets, warm=False
+                )
         finally:
             _close_recorder(recorder)
     if args.json:

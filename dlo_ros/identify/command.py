@@ -1,4 +1,5 @@
-"""``dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE] [--rrd FILE]`` (msg_docs/cli.md, fitting.md).
+"""``dlo fit OBSERVATIONS [--scene SCENE] [--json] [--write-scene FILE] [--rrd FILE]``
+(msg_docs/cli.md, fitting.md).
 
 Exit codes as every ``dlo`` subcommand: 0 the fit converged and explains the points, 1 it ran but
 did not converge, an equilibrium failed, or the fitted shapes do not explain the points (status
@@ -8,6 +9,7 @@ path, no traceback).  The handler raises ``ObservationError`` (prefixed with the
 ``SceneError`` or ``FileNotFoundError``; the wrapper in ``dlo_ros.cli`` turns the first into its
 ``UsageError``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,38 +21,65 @@ from pathlib import Path
 
 import yaml
 
-HELP = ("identify Rf, Rt, D, Re from observed shapes (exit 0 if the fit converged and explains "
-        "the points)")
+HELP = (
+    "identify Rf, Rt, D, Re from observed shapes (exit 0 if the fit converged and explains "
+    "the points)"
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("observations", metavar="OBSERVATIONS", help="observation file (YAML or JSON, msg_docs/fitting.md)")
-    p.add_argument("--scene", default=None, metavar="SCENE",
-                   help="scene name or file (default: the file's `scene`, relative to the file)")
-    p.add_argument("--json", action="store_true", help="print exactly one JSON object (FitResult.to_dict())")
-    p.add_argument("--write-scene", default=None, metavar="FILE", help="write the scene with the fitted values")
-    p.add_argument("--rrd", default=None, metavar="FILE",
-                   help="save a rerun drawing: observed points, fitted centrelines, residuals (.rrd)")
+    p.add_argument(
+        "observations",
+        metavar="OBSERVATIONS",
+        help="observation file (YAML or JSON, msg_docs/fitting.md)",
+    )
+    p.add_argument(
+        "--scene",
+        default=None,
+        metavar="SCENE",
+        help="scene name or file (default: the file's `scene`, relative to the file)",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="print exactly one JSON object (FitResult.to_dict())"
+    )
+    p.add_argument(
+        "--write-scene",
+        default=None,
+        metavar="FILE",
+        help="write the scene with the fitted values",
+    )
+    p.add_argument(
+        "--rrd",
+        default=None,
+        metavar="FILE",
+        help="save a rerun drawing: observed points, fitted centrelines, residuals (.rrd)",
+    )
 
 
 def _scene_argument(args: argparse.Namespace, data) -> str:
-    """--scene, else the file's ``scene`` (a path relative to the observation file, or a shipped name)."""
+    """--scene, else the file's ``scene`` (a path relative to the observation file, or a shipped
+    name).
+    """
     from .observations import ObservationError
 
     if args.scene:
         return args.scene
     if not data.scene:
-        raise ObservationError(f"{args.observations}: scene: no scene given (use --scene or a `scene:` key in "
-                               "the observation file)")
+        raise ObservationError(
+            f"{args.observations}: scene: no scene given (use --scene or a `scene:` key in "
+            "the observation file)"
+        )
     relative = Path(args.observations).parent / data.scene
     return str(relative) if relative.is_file() else data.scene
 
 
 def format_fit(result) -> str:
     """The human-readable summary of a FitResult."""
-    lines = [f"status: {result.status} ({result.message})",
-             f"equilibrium solves: {result.equilibrium_solves}, iterations: {result.iterations}, "
-             f"time: {result.time_s:.2f} s, reduced chi2: {result.chi2_reduced:.3g}"]
+    lines = [
+        f"status: {result.status} ({result.message})",
+        f"equilibrium solves: {result.equilibrium_solves}, iterations: {result.iterations}, "
+        f"time: {result.time_s:.2f} s, reduced chi2: {result.chi2_reduced:.3g}",
+    ]
     for name, est in {**result.parameters, **result.ratios}.items():
         lines.append(f"{name:6s} = {est.value:.6g} ± {est.std:.2g} {est.unit}")
     for name, value in result.fixed.items():
@@ -58,11 +87,15 @@ def format_fit(result) -> str:
     for name, why in result.not_identifiable.items():
         lines.append(f"{name:6s}: not identifiable (kept at the scene's value): {why}")
     for o in result.observations:
-        force = "" if o.force_residual_n is None else f", force residual {o.force_residual_n:.3g} N"
+        force = (
+            "" if o.force_residual_n is None else f", force residual {o.force_residual_n:.3g} N"
+        )
         if o.torque_residual_nm is not None:
             force += f", torque residual {o.torque_residual_nm:.3g} N·m"
-        lines.append(f"observation {o.name}: {o.points} points, rms {o.rms_m * 1e3:.3g} mm, median "
-                     f"{o.median_m * 1e3:.3g} mm, max {o.max_m * 1e3:.3g} mm, {o.downweighted} down-weighted{force}")
+        lines.append(
+            f"observation {o.name}: {o.points} points, rms {o.rms_m * 1e3:.3g} mm, median "
+            f"{o.median_m * 1e3:.3g} mm, max {o.max_m * 1e3:.3g} mm, {o.downweighted} down-weighted{force}"
+        )
     return "\n".join(lines)
 
 
@@ -84,10 +117,15 @@ def cmd_fit(args: argparse.Namespace) -> int:
     if args.write_scene and result.status == "misfit":
         print("dlo fit: --write-scene: not written: the fit is a misfit", file=sys.stderr)
     elif args.write_scene and result.string is not None:
-        fitted = replace(scene, problem=replace(scene.problem, string=result.string),
-                         description=(scene.description + "\n" if scene.description else "") +
-                         f"String fitted by `dlo fit {Path(args.observations).name}` ({result.status}).")
-        Path(args.write_scene).write_text(yaml.safe_dump(scene_to_dict(fitted), sort_keys=False), encoding="utf-8")
+        fitted = replace(
+            scene,
+            problem=replace(scene.problem, string=result.string),
+            description=(scene.description + "\n" if scene.description else "")
+            + f"String fitted by `dlo fit {Path(args.observations).name}` ({result.status}).",
+        )
+        Path(args.write_scene).write_text(
+            yaml.safe_dump(scene_to_dict(fitted), sort_keys=False), encoding="utf-8"
+        )
     summary = format_fit(result)
     if args.rrd:
         from .drawing import save_fit

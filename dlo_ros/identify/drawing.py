@@ -4,14 +4,17 @@ Entity tree (world frame, z up, metres; everything static):
 
 =================================  ================================================================
 ``world``                          ViewCoordinates RIGHT_HAND_Z_UP
-``world/fit/<i>_<name>/observed``  the observed points: grey, red where the robust loss down-weighted
+``world/fit/<i>_<name>/observed``  the observed points: grey, red where the robust loss
+down-weighted
                                    them (|r| > huber σ)
 ``world/fit/<i>_<name>/fitted``    the fitted equilibrium's centreline
-``world/fit/<i>_<name>/residuals`` one segment per point, from the point to its nearest point on the
+``world/fit/<i>_<name>/residuals`` one segment per point, from the point to its nearest point on
+the
                                    centreline (the point-to-curve residual)
 ``fit/summary``                    the text summary of ``dlo fit``
 =================================  ================================================================
 """
+
 from __future__ import annotations
 
 import re
@@ -30,12 +33,23 @@ def entity_name(index: int, name: str) -> str:
     return f"{index}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}"
 
 
-def draw_observation(rec, base: str, points: np.ndarray, shape: np.ndarray, feet: np.ndarray, sigma: float,
-                     huber: float, *, static: bool = True) -> None:
-    """Log one observation's drawing under ``base`` into the rerun RecordingStream ``rec``: ``observed``
-    (``points`` (N, 3) [m], red beyond ``huber`` σ of the centreline), ``fitted`` (``shape`` (S, 3) [m]) and
-    ``residuals`` (point → its nearest point ``feet`` (N, 3) on the centreline; empty arrays skip a part).
-    ``static``: timeless (``dlo fit --rrd``), or at the stream's current time (the node's recording)."""
+def draw_observation(
+    rec,
+    base: str,
+    points: np.ndarray,
+    shape: np.ndarray,
+    feet: np.ndarray,
+    sigma: float,
+    huber: float,
+    *,
+    static: bool = True,
+) -> None:
+    """Log one observation's drawing under ``base`` into the rerun RecordingStream ``rec``:
+    ``observed`` (``points`` (N, 3) [m], red beyond ``huber`` σ of the centreline), ``fitted``
+    (``shape`` (S, 3) [m]) and ``residuals`` (point → its nearest point ``feet`` (N, 3) on the
+    centreline; empty arrays skip a part). ``static``: timeless (``dlo fit --rrd``), or at the
+    stream's current time (the node's recording).
+    """
     import rerun as rr
 
     distance = np.linalg.norm(points - feet, axis=1) if len(feet) else np.zeros(len(points))
@@ -44,14 +58,23 @@ def draw_observation(rec, base: str, points: np.ndarray, shape: np.ndarray, feet
     if len(shape):
         rec.log(f"{base}/fitted", rr.LineStrips3D([shape], colors=[BLUE]), static=static)
     if len(feet):
-        rec.log(f"{base}/residuals", rr.LineStrips3D(np.stack([points, feet], axis=1), colors=[ORANGE]),
-                static=static)
+        rec.log(
+            f"{base}/residuals",
+            rr.LineStrips3D(np.stack([points, feet], axis=1), colors=[ORANGE]),
+            static=static,
+        )
 
 
-def save_fit(path: str | Path, result: FitResult, data: ObservationSet, summary: str,
-             settings: FitSettings = FitSettings()) -> None:
+def save_fit(
+    path: str | Path,
+    result: FitResult,
+    data: ObservationSet,
+    summary: str,
+    settings: FitSettings = FitSettings(),
+) -> None:
     """Write the drawing of ``result`` (fitted to ``data``) to the .rrd file ``path``.  Raises
-    RuntimeError when rerun-sdk cannot be imported."""
+    RuntimeError when rerun-sdk cannot be imported.
+    """
     try:
         import rerun as rr
     except ImportError as exc:
@@ -61,8 +84,15 @@ def save_fit(path: str | Path, result: FitResult, data: ObservationSet, summary:
     rec.save(str(path))
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     for i, (fitted, obs) in enumerate(zip(result.observations, data.observations)):
-        draw_observation(rec, f"world/fit/{entity_name(i, obs.name)}", obs.points, fitted.shape, fitted.feet,
-                         obs.sigma, settings.huber)
+        draw_observation(
+            rec,
+            f"world/fit/{entity_name(i, obs.name)}",
+            obs.points,
+            fitted.shape,
+            fitted.feet,
+            obs.sigma,
+            settings.huber,
+        )
     rec.log("fit/summary", rr.TextDocument(summary), static=True)
     rec.flush()
     rec.disconnect()

@@ -3,28 +3,30 @@
 Unknowns θ (``parameters.py``): for each fitted material the log of a uniform scale of the scene's
 profile, or (``ObservationSet.profiles``) the logs of a piecewise-linear table's knot values with a
 smoothness regulariser ½|Rθ|² added to Φ.  Inner level: every observation's equilibrium, one ``ShapeSolver`` per
-observation, warm-started from its previous θ (Newton on the KKT conditions; IPOPT only as its fallback).
-Outer level: minimise
+observation, warm-started from its previous θ (Newton on the KKT conditions; IPOPT only as its
+fallback). Outer level: minimise
 
     Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ Σ ((T_meas − T(θ)) / σ_T)²
            + ½ ((W_known − ∫D ds) / σ_W)²
 
 with r_j the point-to-curve residual of point j (``curve.py``), ρ Huber's loss (quadratic up to
-``huber`` σ, linear beyond: outliers count less), the optional measured grip force, grip torque (about the
-grip point) and known weight.
-The Jacobian comes from the implicit-function theorem on the KKT system (``solver/sensitivity.py``):
-one linear solve per observation and iteration, no finite differences.  Steps are Gauss–Newton steps
-with iteratively reweighted (Huber) normal matrix A = Jᵀ W J / σ², Levenberg-damped, restricted to the
-directions the data determine (``identifiability.py``), and clipped to ``max_step`` in log units.
+``huber`` σ, linear beyond: outliers count less), the optional measured grip force, grip torque
+(about the grip point) and known weight. The Jacobian comes from the implicit-function theorem on
+the KKT system (``solver/sensitivity.py``): one linear solve per observation and iteration, no
+finite differences.  Steps are Gauss–Newton steps with iteratively reweighted (Huber) normal matrix
+A = Jᵀ W J / σ², Levenberg-damped, restricted to the directions the data determine
+(``identifiability.py``), and clipped to ``max_step`` in log units.
 
-Covariance of θ: A⁺ (the pseudo-inverse on the determined directions) at the solution, with the stated
-σ; a parameter's standard deviation is value × sqrt(A⁺_kk) (first order).  Undetermined parameters get
-no number; they are listed with the reason, and the determined ratios are reported instead.  The fitted
-string reproduces the fitted shapes: along the common scale of all materials (which shapes alone do not
-see) it is shifted so that the first fitted of Rf, Rt, Re, D keeps the scene's value; otherwise an
-undetermined parameter stays where the steps left it (the scene's value unless an early step, when the
-data still seemed to determine it, moved it).  The search is bounded to a factor 1000 either way.
+Covariance of θ: A⁺ (the pseudo-inverse on the determined directions) at the solution, with the
+stated σ; a parameter's standard deviation is value × sqrt(A⁺_kk) (first order).  Undetermined
+parameters get no number; they are listed with the reason, and the determined ratios are reported
+instead.  The fitted string reproduces the fitted shapes: along the common scale of all materials
+(which shapes alone do not see) it is shifted so that the first fitted of Rf, Rt, Re, D keeps the
+scene's value; otherwise an undetermined parameter stays where the steps left it (the scene's value
+unless an early step, when the data still seemed to determine it, moved it).  The search is bounded
+to a factor 1000 either way.
 """
+
 from __future__ import annotations
 
 import time
@@ -46,11 +48,13 @@ __all__ = ["Estimate", "FitResult", "FitSettings", "ObservationFit", "check_requ
 UNITS = {"Rf": "N·m²", "Rt": "N·m²", "D": "N/m", "Re": "N"}
 #: held at the scene's value first when a direction is undetermined
 ANCHOR_ORDER = ("Rf", "Rt", "Re", "D")
-#: the search is bounded to a factor e^BOUND (1000) either way of the scene's values: data that do not
-#: determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
+#: the search is bounded to a factor e^BOUND (1000) either way of the scene's values: data that do
+#not : determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
 BOUND = float(np.log(1e3))
-AT_BOUND = ("the data drive it to the bound of the search (a factor 1000 from the scene's value): they do not "
-            "determine it; the other estimates are conditional on it being there")
+AT_BOUND = (
+    "the data drive it to the bound of the search (a factor 1000 from the scene's value): they do not "
+    "determine it; the other estimates are conditional on it being there"
+)
 #: ratios reported (numerator, denominator, unit)
 RATIOS = (("D", "Rf", "1/m³"), ("Rt", "Rf", "1"), ("Re", "Rf", "1/m²"))
 
@@ -65,30 +69,44 @@ def check_request(problem: Problem, data: ObservationSet) -> None:
     for i, name in enumerate(data.parameters):
         prof = getattr(st, PROFILE[name])
         if prof is None:
-            raise ObservationError(f"parameters[{i}]: Re cannot be fitted: the scene's string is inextensible "
-                                   "(string.stretch_stiffness null); give a starting value")
+            raise ObservationError(
+                f"parameters[{i}]: Re cannot be fitted: the scene's string is inextensible "
+                "(string.stretch_stiffness null); give a starting value"
+            )
         if prof.minimum <= 0:
-            raise ObservationError(f"parameters[{i}]: {name} cannot be fitted from a start of 0 (the scene's "
-                                   f"string.{PROFILE[name]}); give a positive starting value")
+            raise ObservationError(
+                f"parameters[{i}]: {name} cannot be fitted from a start of 0 (the scene's "
+                f"string.{PROFILE[name]}); give a positive starting value"
+            )
 
 
-def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
-        settings: FitSettings = FitSettings(), cache: SolverCache | None = None) -> FitResult:
+def fit(
+    problem: Problem,
+    options: SolverOptions,
+    data: ObservationSet,
+    settings: FitSettings = FitSettings(),
+    cache: SolverCache | None = None,
+) -> FitResult:
     """Fit ``data.parameters`` of ``problem``'s string to ``data`` (module docstring).  Raises
     ObservationError for a request the scene cannot support; solver failures give status 'failed'.
-    ``cache``: equilibrium solvers to take instead of building new ones, and to keep them in afterwards
-    (a process that fits repeatedly; ``objective.SolverCache``)."""
+    ``cache``: equilibrium solvers to take instead of building new ones, and to keep them in
+    afterwards (a process that fits repeatedly; ``objective.SolverCache``).
+    """
     t0 = time.perf_counter()
     check_request(problem, data)
     fitted = tuple(data.parameters)
     par = Parameterisation(problem.string, fitted, data.profiles)
     names, base = par.labels, par.base
-    fixed = {n: profile_mean(getattr(base, PROFILE[n]), base.length) for n in ("Rf", "Rt", "D", "Re")
-             if n not in fitted and getattr(base, PROFILE[n]) is not None}
+    fixed = {
+        n: profile_mean(getattr(base, PROFILE[n]), base.length)
+        for n in ("Rf", "Rt", "D", "Re")
+        if n not in fitted and getattr(base, PROFILE[n]) is not None
+    }
     cause = precheck(problem, data)
     if cause:  # no stiffness makes this string explain these points: no equilibrium is solved
-        return FitResult("misfit", f"misfit: {cause}", fixed=fixed, names=names,
-                         time_s=time.perf_counter() - t0)
+        return FitResult(
+            "misfit", f"misfit: {cause}", fixed=fixed, names=names, time_s=time.perf_counter() - t0
+        )
     objective = Objective(problem, options, data, par, settings, cache)
     try:
         return gated(_fit(objective, par, fixed, settings, t0), problem, data, settings)
@@ -98,20 +116,37 @@ def fit(problem: Problem, options: SolverOptions, data: ObservationSet,
                 cache.give(o.solver, settings.compile)
 
 
-def _fit(objective: Objective, par: Parameterisation, fixed: dict[str, float], settings: FitSettings,
-         t0: float) -> FitResult:
+def _fit(
+    objective: Objective,
+    par: Parameterisation,
+    fixed: dict[str, float],
+    settings: FitSettings,
+    t0: float,
+) -> FitResult:
     """The Levenberg–Marquardt iterations of :func:`fit` and its result."""
     names = par.labels
     evaluate = objective.evaluate
 
     def failed(message: str, iterations: int) -> FitResult:
-        return FitResult("failed", message, fixed=fixed, iterations=iterations, equilibrium_solves=objective.solves,
-                         time_s=time.perf_counter() - t0, names=names)
+        return FitResult(
+            "failed",
+            message,
+            fixed=fixed,
+            iterations=iterations,
+            equilibrium_solves=objective.solves,
+            time_s=time.perf_counter() - t0,
+            names=names,
+        )
 
     current = evaluate(np.zeros(len(names)))
     if isinstance(current, str):
         return failed(f"at the scene's values: {current}", 0)
-    status, message, mu, iterations = "not_converged", f"no convergence in {settings.max_iterations} iterations", 0.0, 0
+    status, message, mu, iterations = (
+        "not_converged",
+        f"no convergence in {settings.max_iterations} iterations",
+        0.0,
+        0,
+    )
     for iterations in range(1, settings.max_iterations + 1):
         ident = analyse(names, current.normal)
         vec, lam = ident.directions
@@ -133,7 +168,10 @@ def _fit(objective: Objective, par: Parameterisation, fixed: dict[str, float], s
                 break
             mu = max(4 * mu, 1e-3 * float(lam.max()))
         if accepted is None:
-            status, message = "not_converged", "no step decreased the cost (a local minimum or a kink of the loss)"
+            status, message = (
+                "not_converged",
+                "no step decreased the cost (a local minimum or a kink of the loss)",
+            )
             break
         current = accepted
         if float(np.abs(step).max()) < settings.step_tolerance:
@@ -148,71 +186,122 @@ def _fit(objective: Objective, par: Parameterisation, fixed: dict[str, float], s
     string = par.string(theta)
     for k, comp in enumerate(par.components):
         if ident.why.get(comp.label) == NEITHER and abs(theta[k]) > 1e-6:
-            message += (f"; {comp.label} is not determined and the fit left it at {par.value(string, k):.4g} "
-                        f"{UNITS[comp.material]}: the other estimates are conditional on that value")
+            message += (
+                f"; {comp.label} is not determined and the fit left it at {par.value(string, k):.4g} "
+                f"{UNITS[comp.material]}: the other estimates are conditional on that value"
+            )
     parameters, ratios = {}, {}
     for k, comp in enumerate(par.components):
         if comp.label in ident.why:
             continue
         value = par.value(string, k)
-        parameters[comp.label] = Estimate(comp.label, value, value * float(np.sqrt(max(cov[k, k], 0.0))),
-                                          UNITS[comp.material], comp.s)
+        parameters[comp.label] = Estimate(
+            comp.label,
+            value,
+            value * float(np.sqrt(max(cov[k, k], 0.0))),
+            UNITS[comp.material],
+            comp.s,
+        )
     for a_name, b_name, unit in RATIOS:
         for a in par.indices(a_name):
             for b in par.indices(b_name):
                 label = f"{names[a]}/{names[b]}"
                 c = np.zeros(len(names))
                 c[a], c[b] = 1.0, -1.0
-                if ident.determines(c) and AT_BOUND not in (ident.why.get(names[a]), ident.why.get(names[b])):
+                if ident.determines(c) and AT_BOUND not in (
+                    ident.why.get(names[a]),
+                    ident.why.get(names[b]),
+                ):
                     value = par.value(string, a) / par.value(string, b)
-                    ratios[label] = Estimate(label, value, value * float(np.sqrt(max(c @ cov @ c, 0.0))), unit,
-                                             par.components[b].s if par.components[b].s is not None else par.components[a].s)
+                    ratios[label] = Estimate(
+                        label,
+                        value,
+                        value * float(np.sqrt(max(c @ cov @ c, 0.0))),
+                        unit,
+                        par.components[b].s
+                        if par.components[b].s is not None
+                        else par.components[a].s,
+                    )
             if not par.indices(b_name) and names[a] in parameters and b_name in fixed:
                 est = parameters[names[a]]
-                ratios[f"{names[a]}/{b_name}"] = Estimate(f"{names[a]}/{b_name}", est.value / fixed[b_name],
-                                                          est.std / fixed[b_name], unit, est.s)
+                ratios[f"{names[a]}/{b_name}"] = Estimate(
+                    f"{names[a]}/{b_name}",
+                    est.value / fixed[b_name],
+                    est.std / fixed[b_name],
+                    unit,
+                    est.s,
+                )
     dof = max(current.rows - ident.rank, 1)
-    return FitResult(status, message, parameters, ratios, dict(ident.why), fixed, current.fits, iterations, objective.solves,
-                     time.perf_counter() - t0, current.chi2 / dof, names, cov, string, ident, dof)
+    return FitResult(
+        status,
+        message,
+        parameters,
+        ratios,
+        dict(ident.why),
+        fixed,
+        current.fits,
+        iterations,
+        objective.solves,
+        time.perf_counter() - t0,
+        current.chi2 / dof,
+        names,
+        cov,
+        string,
+        ident,
+        dof,
+    )
 
 
-def gated(result: FitResult, problem: Problem, data: ObservationSet,
-          settings: FitSettings) -> FitResult:
+def gated(
+    result: FitResult, problem: Problem, data: ObservationSet, settings: FitSettings
+) -> FitResult:
     """``result`` through the goodness-of-fit gate (``gate.py``): status 'misfit' with the cause
     when the fitted shapes do not explain the points (a converged fit, or one that stopped without
     descent); otherwise the standard deviations inflated by sqrt(χ²_red) when it is over 1 (σ
     stated too small or model error: the residuals say how large the noise really is; without the
-    outliers the gate forgave, which the robust loss already down-weighted)."""
+    outliers the gate forgave, which the robust loss already down-weighted).
+    """
     if result.status not in ("ok", "not_converged") or not result.observations:
         return result
-    distances = [np.linalg.norm(o.points - fit.feet, axis=1)
-                 for o, fit in zip(data.observations, result.observations)]
-    gate = evaluate_gate(problem, data, result.chi2_reduced * result.dof, result.dof, distances,
-                         settings.huber)
+    distances = [
+        np.linalg.norm(o.points - fit.feet, axis=1)
+        for o, fit in zip(data.observations, result.observations)
+    ]
+    gate = evaluate_gate(
+        problem, data, result.chi2_reduced * result.dof, result.dof, distances, settings.huber
+    )
     result = replace(result, chi2_threshold=gate.threshold)
     if not gate.passed:
-        return replace(result, status="misfit",
-                       message=f"{gate.cause} ({result.status}: {result.message})")
+        return replace(
+            result, status="misfit", message=f"{gate.cause} ({result.status}: {result.message})"
+        )
     if gate.note:
         result = replace(result, message=f"{result.message}; {gate.note}")
     scale = float(np.sqrt(max(gate.noise_ratio2, 1.0)))
     if scale > 1.0:
+
         def inflated(est: Estimate) -> Estimate:
             return replace(est, std=est.std * scale)
 
-        result = replace(result, sigma_scale=scale,
-                         parameters={k: inflated(v) for k, v in result.parameters.items()},
-                         ratios={k: inflated(v) for k, v in result.ratios.items()},
-                         covariance_log=result.covariance_log * scale ** 2)
+        result = replace(
+            result,
+            sigma_scale=scale,
+            parameters={k: inflated(v) for k, v in result.parameters.items()},
+            ratios={k: inflated(v) for k, v in result.ratios.items()},
+            covariance_log=result.covariance_log * scale**2,
+        )
     return result
 
 
-def _anchored(theta: np.ndarray, par: Parameterisation, ident: Identifiability, normal: np.ndarray) -> np.ndarray:
-    """θ shifted along the common scale u of the fitted materials that enter the solved models (u_k = 1, or
-    0 for a parameter no residual depends on, e.g. Rt of planar shapes), when the data do not see it
-    (shapes alone: the energy's minimiser does not change), so that the first fitted material in
-    ANCHOR_ORDER keeps the scene's value (a table: its mean log factor).  Only this exact symmetry is
-    used: moving along a merely weak direction would change the fitted shapes."""
+def _anchored(
+    theta: np.ndarray, par: Parameterisation, ident: Identifiability, normal: np.ndarray
+) -> np.ndarray:
+    """θ shifted along the common scale u of the fitted materials that enter the solved models (u_k
+    = 1, or 0 for a parameter no residual depends on, e.g. Rt of planar shapes), when the data do
+    not see it (shapes alone: the energy's minimiser does not change), so that the first fitted
+    material in ANCHOR_ORDER keeps the scene's value (a table: its mean log factor).  Only this
+    exact symmetry is used: moving along a merely weak direction would change the fitted shapes.
+    """
     diagonal = np.diag(normal)
     u = (diagonal > RANK_TOLERANCE * max(float(diagonal.max(initial=0.0)), 0.0)).astype(float)
     null = ident.null

@@ -21,6 +21,7 @@ cloud spans ~1000× the cable), far from the grips (a wrong scene or frame), lon
 the fit stop with "no step decreased the cost" and no hint).  msg_docs/fitting.md, "When the fit
 does not fit".
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -64,7 +65,8 @@ class Gate:
     """The gate's verdict: ``passed``; the reduced χ² and its threshold; ``cause`` the one-line
     reason when it failed; ``note`` what passed with a remark (outliers down-weighted);
     ``noise_ratio2`` the reduced χ² of the points the fit explains (all, or all but the forgiven
-    outliers): (actual noise / stated σ)²."""
+    outliers): (actual noise / stated σ)².
+    """
 
     passed: bool
     chi2_reduced: float
@@ -82,7 +84,8 @@ def threshold(dof: int) -> float:
 
 def precheck(problem: Problem, data: ObservationSet) -> str:
     """Why these points cannot be of this scene's string whatever its stiffness ('' when they may
-    be): wrong units or far from the grips (:func:`geometric_cause`)."""
+    be): wrong units or far from the grips (:func:`geometric_cause`).
+    """
     for obs in data.observations:
         cause = geometric_cause(problem, obs, lengths=False)
         if cause:
@@ -93,34 +96,43 @@ def precheck(problem: Problem, data: ObservationSet) -> str:
 def geometric_cause(problem: Problem, obs: Observation, lengths: bool = True) -> str:
     """The cause that the points of ``obs`` show by themselves, or ''.  A point on the string is
     within its length L of every grip (the chord is at most the arc), and the cloud spans at most
-    about L."""
+    about L.
+    """
     length = problem.string.length
     pts = obs.points
     extent = float(np.linalg.norm(np.ptp(pts, axis=0)))
     name = f"observation {obs.name!r}"
     if extent > UNIT_RATIO * length:
-        return (f"wrong units? {name}: the points span {extent:.4g} m, "
-                f"{extent / length:.0f}× the string's length "
-                f"{length:g} m (points are in metres: millimetres would be 1000×)")
+        return (
+            f"wrong units? {name}: the points span {extent:.4g} m, "
+            f"{extent / length:.0f}× the string's length "
+            f"{length:g} m (points are in metres: millimetres would be 1000×)"
+        )
     if len(pts) >= 10 and extent * UNIT_RATIO < length and extent < 0.1 * obs.sigma * UNIT_RATIO:
-        return (f"wrong units? {name}: the points span only {extent:.3g} m, "
-                f"1/{length / max(extent, 1e-12):.0f} of the string's "
-                f"length {length:g} m")
+        return (
+            f"wrong units? {name}: the points span only {extent:.3g} m, "
+            f"1/{length / max(extent, 1e-12):.0f} of the string's "
+            f"length {length:g} m"
+        )
     poses = problem.with_grip_poses(obs.poses).grips
     for grip in poses:
         reach = max(grip.s, length - grip.s)  # arc length from the grip to the farther end
         dist = np.linalg.norm(pts - grip.pose.position, axis=1)
         if np.median(dist) > 1.05 * reach + 3.0 * obs.sigma:
-            return (f"far from the grips: {name}: the points lie a median "
-                    f"{np.median(dist):.4g} m from grip {grip.name!r}, which holds the string "
-                    f"{reach:.4g} m from its farther end (wrong scene, "
-                    "frame or grip poses?)")
+            return (
+                f"far from the grips: {name}: the points lie a median "
+                f"{np.median(dist):.4g} m from grip {grip.name!r}, which holds the string "
+                f"{reach:.4g} m from its farther end (wrong scene, "
+                "frame or grip poses?)"
+            )
     if lengths:
         arc = arc_length(pts, obs.sigma, length)
         if arc > LENGTH_RATIO * length:
-            return (f"wrong length? {name}: the points follow a curve about {arc:.3g} m long, "
-                    "the scene's string is "
-                    f"{length:g} m (string.length)")
+            return (
+                f"wrong length? {name}: the points follow a curve about {arc:.3g} m long, "
+                "the scene's string is "
+                f"{length:g} m (string.length)"
+            )
     return ""
 
 
@@ -129,7 +141,8 @@ def arc_length(points: np.ndarray, sigma: float, length: float) -> float:
     one voxel): the points are averaged in cubic voxels of side max(5σ, L/50) (so noise no longer
     zig-zags), voxels of one point are dropped when most hold several (isolated outliers), and the
     longest path of the minimum spanning tree of the centroids is measured (its diameter, two
-    Dijkstra passes)."""
+    Dijkstra passes).
+    """
     side = max(5.0 * sigma, length / 50.0)
     while True:
         keys = np.floor((points - points.min(axis=0)) / side).astype(np.int64)
@@ -167,7 +180,8 @@ def longest_arc(problem: Problem, data: ObservationSet) -> float:
 def clustering(data: ObservationSet, u: list[np.ndarray], huber: float) -> float:
     """The mean fraction of the NEIGHBOURS nearest points (in space) of each point beyond ``huber``
     σ that are beyond it too: about the fraction of such points or less for scattered outliers,
-    near 1 for a systematic misfit (whole stretches of the cloud off the fitted shape)."""
+    near 1 for a systematic misfit (whole stretches of the cloud off the fitted shape).
+    """
     shares = []
     for obs, x in zip(data.observations, u):
         outside = x > huber
@@ -178,10 +192,17 @@ def clustering(data: ObservationSet, u: list[np.ndarray], huber: float) -> float
     return float(np.mean(np.concatenate(shares))) if shares else 0.0
 
 
-def evaluate_gate(problem: Problem, data: ObservationSet, chi2_total: float, dof: int,
-                  distances: list[np.ndarray], huber: float) -> Gate:
+def evaluate_gate(
+    problem: Problem,
+    data: ObservationSet,
+    chi2_total: float,
+    dof: int,
+    distances: list[np.ndarray],
+    huber: float,
+) -> Gate:
     """The gate on a fit's residuals: ``chi2_total`` = Σ (r/σ)² over all rows, ``dof`` its degrees
-    of freedom, ``distances`` each observation's |r| per point [m] (module docstring)."""
+    of freedom, ``distances`` each observation's |r| per point [m] (module docstring).
+    """
     bound = threshold(dof)
     reduced = chi2_total / max(dof, 1)
     if reduced <= bound:
@@ -196,23 +217,37 @@ def evaluate_gate(problem: Problem, data: ObservationSet, chi2_total: float, dof
     # σ)
     inner_fits = dof > 2 * outside and inner_reduced <= INNER_MAX
     if inner_fits and fraction <= OUTLIER_FRACTION:
-        note = (f"{outside} of {points} points lie beyond {huber:g} σ: outliers, down-weighted by "
-                "the robust loss")
+        note = (
+            f"{outside} of {points} points lie beyond {huber:g} σ: outliers, down-weighted by "
+            "the robust loss"
+        )
         return Gate(True, reduced, bound, note=note, noise_ratio2=inner_reduced)
     causes = (geometric_cause(problem, obs, lengths=False) for obs in data.observations)
     cause = next((c for c in causes if c), "")
     if not cause and inner_fits and fraction <= 0.5 and clustering(data, u, huber) <= CLUSTERED:
-        cause = (f"outliers: {outside} of {points} points ({100 * fraction:.0f} %) lie beyond "
-                 f"{huber:g} σ of the fitted shape, more than the robust loss forgives "
-                 f"({100 * OUTLIER_FRACTION:.0f} %)")
+        cause = (
+            f"outliers: {outside} of {points} points ({100 * fraction:.0f} %) lie beyond "
+            f"{huber:g} σ of the fitted shape, more than the robust loss forgives "
+            f"({100 * OUTLIER_FRACTION:.0f} %)"
+        )
     causes = (geometric_cause(problem, obs) for obs in data.observations)
-    cause = cause or next((c for c in causes if c), "") or (
-        "the fitted shape does not explain the points (a shape the scene's string cannot take: "
-        "wrong scene, grip poses, length or model, or σ stated too small; the points follow at "
-        f"least about {longest_arc(problem, data):.3g} m of "
-        f"curve, the string is {problem.string.length:g} m)")
+    cause = (
+        cause
+        or next((c for c in causes if c), "")
+        or (
+            "the fitted shape does not explain the points (a shape the scene's string cannot take: "
+            "wrong scene, grip poses, length or model, or σ stated too small; the points follow at "
+            f"least about {longest_arc(problem, data):.3g} m of "
+            f"curve, the string is {problem.string.length:g} m)"
+        )
+    )
     rms = np.sqrt(np.mean(np.concatenate(distances) ** 2))
     sigma = min(o.sigma for o in data.observations)
-    return Gate(False, reduced, bound, f"misfit: reduced chi2 {reduced:.4g} > {bound:.3g} (rms "
-                                       "residual "
-                                       f"{rms * 1e3:.3g} mm, sigma {sigma * 1e3:.3g} mm): {cause}")
+    return Gate(
+        False,
+        reduced,
+        bound,
+        f"misfit: reduced chi2 {reduced:.4g} > {bound:.3g} (rms "
+        "residual "
+        f"{rms * 1e3:.3g} mm, sigma {sigma * 1e3:.3g} mm): {cause}",
+    )

@@ -1,15 +1,18 @@
-"""The outer objective of a fit at θ: every observation's equilibrium, residuals, Jacobian and normal matrix.
+"""The outer objective of a fit at θ: every observation's equilibrium, residuals, Jacobian and
+normal matrix.
 
     Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ Σ ((T_meas − T(θ)) / σ_T)²
            + ½ ((W_known − ∫D ds) / σ_W)² + ½ |Rθ|²
 
-r_j: point-to-curve residuals (``curve.py``); ρ: Huber's loss; F: a measured grip force; T: a measured grip
-torque (about the grip point; dT/dθ for the director and planar models only); W: the known weight; R: the
-profile regulariser (``parameters.py``).  Each evaluation solves each observation's
-equilibrium once (its own warm-started ``ShapeSolver``) and takes dr/dθ from the KKT system
-(``solver/sensitivity.py``).  The Gauss–Newton normal matrix and gradient use Huber's IRLS weights
+r_j: point-to-curve residuals (``curve.py``); ρ: Huber's loss; F: a measured grip force; T: a
+measured grip torque (about the grip point; dT/dθ for the director and planar models only); W: the
+known weight; R: the profile regulariser (``parameters.py``).  Each evaluation solves each
+observation's equilibrium once (its own warm-started ``ShapeSolver``) and takes dr/dθ from the KKT
+system (``solver/sensitivity.py``).  The Gauss–Newton normal matrix and gradient use Huber's IRLS
+weights
 w_j = min(1, huber / u_j), u_j = |r_j| / σ.
 """
+
 from __future__ import annotations
 
 import collections
@@ -29,9 +32,11 @@ from .results import ObservationFit
 
 @dataclass(frozen=True)
 class FitSettings:
-    """max_iterations: outer LM iterations; huber: the loss's threshold in σ; samples: centreline samples
-    the points are projected on; step_tolerance: converged when the largest accepted step in θ is below
-    this; max_step: the largest step in θ (log units); compile: the equilibrium solvers' compile mode."""
+    """max_iterations: outer LM iterations; huber: the loss's threshold in σ; samples: centreline
+    samples the points are projected on; step_tolerance: converged when the largest accepted step
+    in θ is below this; max_step: the largest step in θ (log units); compile: the equilibrium
+    solvers' compile mode.
+    """
 
     max_iterations: int = 30
     huber: float = 2.5
@@ -43,8 +48,9 @@ class FitSettings:
 
 @dataclass
 class Evaluation:
-    """Φ at one θ (``cost``), the normal matrix A and gradient Jᵀ W r of the Gauss–Newton step, the residual
-    statistics per observation, Σ (r/σ)² (``chi2``) and the number of residual rows."""
+    """Φ at one θ (``cost``), the normal matrix A and gradient Jᵀ W r of the Gauss–Newton step, the
+    residual statistics per observation, Σ (r/σ)² (``chi2``) and the number of residual rows.
+    """
 
     theta: np.ndarray
     cost: float
@@ -56,24 +62,30 @@ class Evaluation:
 
 
 class SolverCache:
-    """Equilibrium solvers kept from one fit to the next, for a process that fits again and again (the
-    node's fit worker): building a solver takes seconds (interpreted CasADi), a solve tens of ms.
+    """Equilibrium solvers kept from one fit to the next, for a process that fits again and again
+    (the node's fit worker): building a solver takes seconds (interpreted CasADi), a solve tens of
+    ms.
 
-    ``take`` hands out a kept solver of the same structure (``structure_key``, model and compile mode)
-    with the new problem set and its warm start forgotten, so that its first solve is cold as a new
-    solver's; a planar solver only when the new problem lies in its plane (the check its NLP makes when
-    it is built).  ``give`` keeps a solver (the least recently given beyond ``size`` are dropped).  Not
-    thread-safe: one fit at a time per cache."""
+    ``take`` hands out a kept solver of the same structure (``structure_key``, model and compile
+    mode) with the new problem set and its warm start forgotten, so that its first solve is cold as
+    a new solver's; a planar solver only when the new problem lies in its plane (the check its NLP
+    makes when it is built).  ``give`` keeps a solver (the least recently given beyond ``size`` are
+    dropped).  Not thread-safe: one fit at a time per cache.
+    """
 
     def __init__(self, size: int = 4):
         self.size = size
-        self._solvers: collections.OrderedDict[bytes, list[ShapeSolver]] = collections.OrderedDict()
+        self._solvers: collections.OrderedDict[bytes, list[ShapeSolver]] = (
+            collections.OrderedDict()
+        )
 
     @staticmethod
     def _key(problem: Problem, options: SolverOptions, compile: str) -> bytes:
         from ..solver.shape_solver import structure_key
 
-        return pickle.dumps((structure_key(problem, options), compile), protocol=pickle.HIGHEST_PROTOCOL)
+        return pickle.dumps(
+            (structure_key(problem, options), compile), protocol=pickle.HIGHEST_PROTOCOL
+        )
 
     def take(self, problem: Problem, options: SolverOptions, compile: str) -> ShapeSolver | None:
         from ..solver.nlp import planarity_violation
@@ -105,22 +117,33 @@ class SolverCache:
 class ObservedShape:
     """One observation's solver and data."""
 
-    def __init__(self, base: Problem, obs: Observation, options: SolverOptions, compile: str,
-                 cache: SolverCache | None = None):
+    def __init__(
+        self,
+        base: Problem,
+        obs: Observation,
+        options: SolverOptions,
+        compile: str,
+        cache: SolverCache | None = None,
+    ):
         self.obs = obs
         self.problem = base.with_grip_poses(obs.poses)
         self.solver = _solver_for(self.problem, options, compile, cache)
 
     def solve(self, string: StringProperties) -> ShapeResult:
-        """The equilibrium of this observation's poses with ``string``, warm-started from the last one."""
+        """The equilibrium of this observation's poses with ``string``, warm-started from the last
+        one.
+        """
         self.solver.set_problem(replace(self.problem, string=string))
         return self.solver.solve()
 
 
-def _solver_for(problem: Problem, options: SolverOptions, compile: str,
-                cache: SolverCache | None = None) -> ShapeSolver:
-    """A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is planar;
-    from ``cache`` when it keeps one."""
+def _solver_for(
+    problem: Problem, options: SolverOptions, compile: str, cache: SolverCache | None = None
+) -> ShapeSolver:
+    """A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is
+    planar; from ``cache`` when it keeps one.
+    """
+
     def build(opts: SolverOptions) -> ShapeSolver:
         kept = cache.take(problem, opts, compile) if cache is not None else None
         return kept if kept is not None else ShapeSolver(problem, opts, compile=compile)
@@ -134,19 +157,34 @@ def _solver_for(problem: Problem, options: SolverOptions, compile: str,
 
 
 class Objective:
-    """Φ and its Gauss–Newton model at any θ (module docstring); ``solves`` counts equilibrium solves."""
+    """Φ and its Gauss–Newton model at any θ (module docstring); ``solves`` counts equilibrium
+    solves.
+    """
 
-    def __init__(self, problem: Problem, options: SolverOptions, data: ObservationSet, par: Parameterisation,
-                 settings: FitSettings, cache: SolverCache | None = None):
+    def __init__(
+        self,
+        problem: Problem,
+        options: SolverOptions,
+        data: ObservationSet,
+        par: Parameterisation,
+        settings: FitSettings,
+        cache: SolverCache | None = None,
+    ):
         self.data, self.par, self.settings = data, par, settings
-        # the scene with the knot tables from the start: a director model splits its elements at their knots
+        # the scene with the knot tables from the start: a director model splits its elements at
+        # their knots
         scene = replace(problem, string=par.base)
-        self.observed = [ObservedShape(scene, obs, options, settings.compile, cache) for obs in data.observations]
+        self.observed = [
+            ObservedShape(scene, obs, options, settings.compile, cache)
+            for obs in data.observations
+        ]
         for i, o in enumerate(self.observed):
             if o.obs.torque is not None and not (o.solver.nlp.director or o.solver.nlp.planar):
-                raise ObservationError(f"observations[{i}].torque: a measured torque needs the director or planar "
-                                       "model (solver.rotation 'director'); the scene's 3D Euler model does not "
-                                       "differentiate its grip torques")
+                raise ObservationError(
+                    f"observations[{i}].torque: a measured torque needs the director or planar "
+                    "model (solver.rotation 'director'); the scene's 3D Euler model does not "
+                    "differentiate its grip torques"
+                )
         self.regulariser = par.regulariser()
         self.s = np.linspace(0.0, par.length, settings.samples)
         self.solves = 0
@@ -169,7 +207,15 @@ class Objective:
             sigma = o.obs.sigma
             u = cr.distances / sigma
             w = np.where(u <= settings.huber, 1.0, settings.huber / np.maximum(u, 1e-300))
-            cost += float(np.sum(np.where(u <= settings.huber, 0.5 * u * u, settings.huber * u - 0.5 * settings.huber ** 2)))
+            cost += float(
+                np.sum(
+                    np.where(
+                        u <= settings.huber,
+                        0.5 * u * u,
+                        settings.huber * u - 0.5 * settings.huber**2,
+                    )
+                )
+            )
             chi2 += float(np.sum(u * u))
             rows += 2 * len(u)
             jw = cr.jacobian / sigma
@@ -179,11 +225,15 @@ class Objective:
             measured = []  # (measured, predicted, d predicted/dθ, σ) of the grip force and torque
             if o.obs.force is not None:
                 f = o.obs.force
-                measured.append((f.force, sens.grip_forces[f.grip], sens.d_grip_forces[f.grip], f.sigma))
+                measured.append(
+                    (f.force, sens.grip_forces[f.grip], sens.d_grip_forces[f.grip], f.sigma)
+                )
                 force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
             if o.obs.torque is not None:
                 t = o.obs.torque
-                measured.append((t.torque, sens.grip_torques[t.grip], sens.d_grip_torques[t.grip], t.sigma))
+                measured.append(
+                    (t.torque, sens.grip_torques[t.grip], sens.d_grip_torques[t.grip], t.sigma)
+                )
                 torque_res = float(np.linalg.norm(t.torque - sens.grip_torques[t.grip]))
             for value, predicted, d_predicted, sigma_v in measured:
                 r = (value - predicted) / sigma_v
@@ -194,9 +244,20 @@ class Objective:
                 normal += jv.T @ jv
                 gradient += jv.T @ r
             d = cr.distances
-            fits.append(ObservationFit(o.obs.name, len(d), float(np.sqrt(np.mean(d * d))), float(np.median(d)),
-                                       float(d.max()), int(np.sum(u > settings.huber)), force_res,
-                                       sens.points, o.obs.points - cr.residuals, torque_res))
+            fits.append(
+                ObservationFit(
+                    o.obs.name,
+                    len(d),
+                    float(np.sqrt(np.mean(d * d))),
+                    float(np.median(d)),
+                    float(d.max()),
+                    int(np.sum(u > settings.huber)),
+                    force_res,
+                    sens.points,
+                    o.obs.points - cr.residuals,
+                    torque_res,
+                )
+            )
         if data.total_mass is not None:
             weight, sigma_w = data.total_mass.weight
             predicted = profile_mean(string.weight_per_length, base.length) * base.length

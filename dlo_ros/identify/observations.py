@@ -1,11 +1,12 @@
 """Observations of a string's shape, and the observation file (``msg_docs/fitting.md``).
 
 An observation is one static shape: the grip poses it was held at and observed centreline points
-(unordered, noisy with a stated σ, possibly partial), optionally the force and the torque measured at a
-grip (each at one grip, not necessarily the same).  An
-observation set adds what is fitted, the scene it refers to and, optionally, the known total mass.
-Every reader raises ``ObservationError`` (a ValueError) whose message starts with the offending key path.
+(unordered, noisy with a stated σ, possibly partial), optionally the force and the torque measured
+at a grip (each at one grip, not necessarily the same).  An observation set adds what is fitted,
+the scene it refers to and, optionally, the known total mass. Every reader raises
+``ObservationError`` (a ValueError) whose message starts with the offending key path.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -44,8 +45,9 @@ class ObservationError(ValueError):
 
 @dataclass(frozen=True)
 class ForceObservation:
-    """The force [N] one grip exerts ON the string (world frame; a sensor on the gripper reads −force),
-    with its standard deviation σ [N] per component."""
+    """The force [N] one grip exerts ON the string (world frame; a sensor on the gripper reads
+    −force), with its standard deviation σ [N] per component.
+    """
 
     grip: str
     force: np.ndarray
@@ -54,9 +56,11 @@ class ForceObservation:
 
 @dataclass(frozen=True)
 class TorqueObservation:
-    """The torque [N·m] one grip exerts ON the string about the grip point (world frame), with its standard
-    deviation σ [N·m] per component.  A sensor on the gripper with origin o reading (F_s, T_s) gives
-    torque = −(T_s − r × F_s), r = x_grip − o.  The grip must hold an orientation (a pin exerts no torque)."""
+    """The torque [N·m] one grip exerts ON the string about the grip point (world frame), with its
+    standard deviation σ [N·m] per component.  A sensor on the gripper with origin o reading (F_s,
+    T_s) gives torque = −(T_s − r × F_s), r = x_grip − o.  The grip must hold an orientation (a pin
+    exerts no torque).
+    """
 
     grip: str
     torque: np.ndarray
@@ -65,9 +69,10 @@ class TorqueObservation:
 
 @dataclass(frozen=True)
 class Observation:
-    """One static shape: grip poses (grips not named keep the scene's poses), observed points (N, 3) [m]
-    in any order, their noise σ [m] (standard deviation per coordinate), an optional grip force and an
-    optional grip torque."""
+    """One static shape: grip poses (grips not named keep the scene's poses), observed points (N,
+    3) [m] in any order, their noise σ [m] (standard deviation per coordinate), an optional grip
+    force and an optional grip torque.
+    """
 
     name: str
     poses: dict[str, GripPose]
@@ -92,8 +97,9 @@ class MassObservation:
 
 @dataclass(frozen=True)
 class ProfileFit:
-    """Fit a material as a piecewise-linear table of ``knots`` values evenly spaced over [0, L], with the
-    smoothness regulariser of weight ``smoothing`` (``parameters.py``)."""
+    """Fit a material as a piecewise-linear table of ``knots`` values evenly spaced over [0, L],
+    with the smoothness regulariser of weight ``smoothing`` (``parameters.py``).
+    """
 
     knots: int
     smoothing: float = 1.0
@@ -102,7 +108,8 @@ class ProfileFit:
 @dataclass(frozen=True)
 class ObservationSet:
     """What a fit is given: the observations, the parameters to identify, the scene (name or path,
-    '' when the caller supplies it) and the known total mass."""
+    '' when the caller supplies it) and the known total mass.
+    """
 
     observations: tuple[Observation, ...]
     parameters: tuple[str, ...] = ("Rf", "D")
@@ -112,22 +119,31 @@ class ObservationSet:
     profiles: dict[str, ProfileFit] = field(default_factory=dict)
 
     def check(self, problem: Problem) -> None:
-        """Raise ObservationError when the observations do not fit ``problem`` (unknown grips, a torque at a
-        pin)."""
+        """Raise ObservationError when the observations do not fit ``problem`` (unknown grips, a
+        torque at a pin).
+        """
         names = {g.name for g in problem.grips}
         modes = {g.name: g.mode for g in problem.grips}
         for i, obs in enumerate(self.observations):
             for grip in obs.poses:
                 if grip not in names:
-                    raise ObservationError(f"observations[{i}].grips.{grip}: no such grip in the scene "
-                                           f"(grips: {sorted(names)})")
+                    raise ObservationError(
+                        f"observations[{i}].grips.{grip}: no such grip in the scene "
+                        f"(grips: {sorted(names)})"
+                    )
             if obs.force is not None and obs.force.grip not in names:
-                raise ObservationError(f"observations[{i}].force.grip: no grip {obs.force.grip!r} in the scene")
+                raise ObservationError(
+                    f"observations[{i}].force.grip: no grip {obs.force.grip!r} in the scene"
+                )
             if obs.torque is not None and obs.torque.grip not in names:
-                raise ObservationError(f"observations[{i}].torque.grip: no grip {obs.torque.grip!r} in the scene")
+                raise ObservationError(
+                    f"observations[{i}].torque.grip: no grip {obs.torque.grip!r} in the scene"
+                )
             if obs.torque is not None and modes[obs.torque.grip] == "pin":
-                raise ObservationError(f"observations[{i}].torque.grip: grip {obs.torque.grip!r} is a pin: it exerts "
-                                       "no torque (measure it at a clamp or tangent grip)")
+                raise ObservationError(
+                    f"observations[{i}].torque.grip: grip {obs.torque.grip!r} is a pin: it exerts "
+                    "no torque (measure it at a clamp or tangent grip)"
+                )
 
 
 # ---- readers ----------------------------------------------------------------------------------------
@@ -137,12 +153,15 @@ def _positive(value: object, key: str, upper: float = float("inf")) -> float:
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise ObservationError(f"{key}: expected a number > 0, got {type(value).__name__}") from None
+        raise ObservationError(
+            f"{key}: expected a number > 0, got {type(value).__name__}"
+        ) from None
     if not (np.isfinite(x) and x > 0):
         raise ObservationError(f"{key}: expected a finite number > 0, got {x}")
     if x > upper:
-        raise ObservationError(f"{key}: {x:g} is over the limit of {upper:g} "
-                               "(msg_docs/fitting.md, Limits)")
+        raise ObservationError(
+            f"{key}: {x:g} is over the limit of {upper:g} (msg_docs/fitting.md, Limits)"
+        )
     return x
 
 
@@ -163,14 +182,17 @@ def _points(value: object, key: str) -> np.ndarray:
     if isinstance(value, list) and len(value) > MAX_POINTS:
         raise ObservationError(f"{key}: {len(value)} points, over the limit of {MAX_POINTS}")
     if isinstance(value, np.ndarray) and value.dtype.kind not in "fiu":
-        raise ObservationError(f"{key}: the points must be real numbers, got dtype "
-                               f"{value.dtype.kind!r}")
+        raise ObservationError(
+            f"{key}: the points must be real numbers, got dtype {value.dtype.kind!r}"
+        )
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
         raise ObservationError(f"{key}: expected a list of [x, y, z] points") from None
     if arr.ndim != 2 or arr.shape[1] != 3:
-        raise ObservationError(f"{key}: expected N rows of [x, y, z], got an array of shape {arr.shape}")
+        raise ObservationError(
+            f"{key}: expected N rows of [x, y, z], got an array of shape {arr.shape}"
+        )
     if arr.shape[0] < 3:
         raise ObservationError(f"{key}: at least 3 points are needed, got {arr.shape[0]}")
     if arr.shape[0] > MAX_POINTS:
@@ -180,9 +202,11 @@ def _points(value: object, key: str) -> np.ndarray:
         raise ObservationError(f"{key}[{bad[0]}]: contains NaN or infinity")
     far = np.flatnonzero(np.any(np.abs(arr) > MAX_COORDINATE, axis=1))
     if far.size:
-        raise ObservationError(f"{key}[{far[0]}]: a coordinate of {np.abs(arr[far[0]]).max():.3g} "
-                               f"m, over the limit of {MAX_COORDINATE:g} m (msg_docs/fitting.md, "
-                               "Limits)")
+        raise ObservationError(
+            f"{key}[{far[0]}]: a coordinate of {np.abs(arr[far[0]]).max():.3g} "
+            f"m, over the limit of {MAX_COORDINATE:g} m (msg_docs/fitting.md, "
+            "Limits)"
+        )
     return arr
 
 
@@ -228,8 +252,11 @@ def _observation(value: object, key: str, sigma: float | None, base: Path) -> Ob
     _only(d, ("name", "grips", "points", "points_file", "sigma", "force", "torque"), key)
     if ("points" in d) == ("points_file" in d):
         raise ObservationError(f"{key}.points: give exactly one of points or points_file")
-    points = _points(d["points"], f"{key}.points") if "points" in d else \
-        _points_file(d["points_file"], f"{key}.points_file", base)
+    points = (
+        _points(d["points"], f"{key}.points")
+        if "points" in d
+        else _points_file(d["points_file"], f"{key}.points_file", base)
+    )
     s = _positive(d["sigma"], f"{key}.sigma", MAX_SIGMA["points"]) if "sigma" in d else sigma
     if s is None:
         raise ObservationError(f"{key}.sigma: missing (give it here or at the top level)")
@@ -246,18 +273,24 @@ def _observation(value: object, key: str, sigma: float | None, base: Path) -> Ob
         except (TypeError, ValueError, OverflowError) as exc:
             raise ObservationError(str(exc)) from None
         if np.abs(poses[str(grip)].position).max() > MAX_COORDINATE:
-            raise ObservationError(f"{where}.position: a coordinate over the limit of "
-                                   f"{MAX_COORDINATE:g} m (msg_docs/fitting.md, Limits)")
+            raise ObservationError(
+                f"{where}.position: a coordinate over the limit of "
+                f"{MAX_COORDINATE:g} m (msg_docs/fitting.md, Limits)"
+            )
     force = _force(d["force"], f"{key}.force") if d.get("force") is not None else None
     torque = _torque(d["torque"], f"{key}.torque") if d.get("torque") is not None else None
     return Observation(str(d.get("name", key)), poses, points, s, force, torque)
 
 
-def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | None = None) -> ObservationSet:
+def observation_set_from_dict(
+    d: object, source: str = "<dict>", base: Path | None = None
+) -> ObservationSet:
     """Parse the observation file's content (module docstring of ``msg_docs/fitting.md``)."""
     if not isinstance(d, dict):
-        raise ObservationError(f"expected a mapping of keys (scene, parameters, sigma, total_mass, observations), "
-                               f"got {type(d).__name__}")
+        raise ObservationError(
+            f"expected a mapping of keys (scene, parameters, sigma, total_mass, observations), "
+            f"got {type(d).__name__}"
+        )
     _only(d, ("scene", "parameters", "sigma", "total_mass", "profiles", "observations"), "")
     base = base or Path(".")
     sigma = _positive(d["sigma"], "sigma", MAX_SIGMA["points"]) if "sigma" in d else None
@@ -266,7 +299,9 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
         raise ObservationError(f"parameters: expected a non-empty list among {list(PARAMETERS)}")
     for i, name in enumerate(params):
         if name not in PARAMETERS:
-            raise ObservationError(f"parameters[{i}]: unknown parameter {name!r} (known: {', '.join(PARAMETERS)})")
+            raise ObservationError(
+                f"parameters[{i}]: unknown parameter {name!r} (known: {', '.join(PARAMETERS)})"
+            )
     if len(set(params)) != len(params):
         raise ObservationError("parameters: a parameter is listed twice")
     mass = None
@@ -276,8 +311,9 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
         if "value" not in md:
             raise ObservationError("total_mass.value: missing")
         value = _positive(md["value"], "total_mass.value", MAX_SIGMA["mass"])
-        mass = MassObservation(value, _positive(md.get("sigma", 1e-3 * value), "total_mass.sigma",
-                                                MAX_SIGMA["mass"]))
+        mass = MassObservation(
+            value, _positive(md.get("sigma", 1e-3 * value), "total_mass.sigma", MAX_SIGMA["mass"])
+        )
     profiles = {}
     for name, spec in _mapping(d.get("profiles") or {}, "profiles").items():
         where = f"profiles.{name}"
@@ -287,9 +323,15 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
         _only(spec, ("knots", "smoothing"), where)
         knots = spec.get("knots")
         if isinstance(knots, bool) or not isinstance(knots, int) or not 2 <= knots <= MAX_KNOTS:
-            raise ObservationError(f"{where}.knots: expected an integer in [2, {MAX_KNOTS}], got {knots!r}")
+            raise ObservationError(
+                f"{where}.knots: expected an integer in [2, {MAX_KNOTS}], got {knots!r}"
+            )
         smoothing = spec.get("smoothing", 1.0)
-        if isinstance(smoothing, bool) or not isinstance(smoothing, (int, float)) or not 0 <= smoothing < 1e12:
+        if (
+            isinstance(smoothing, bool)
+            or not isinstance(smoothing, (int, float))
+            or not 0 <= smoothing < 1e12
+        ):
             raise ObservationError(f"{where}.smoothing: expected a number >= 0, got {smoothing!r}")
         profiles[str(name)] = ProfileFit(knots, float(smoothing))
     if "observations" not in d:
@@ -298,15 +340,19 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
     if not isinstance(items, list) or not items:
         raise ObservationError("observations: expected a non-empty list")
     if len(items) > MAX_OBSERVATIONS:
-        raise ObservationError(f"observations: {len(items)} items, at most {MAX_OBSERVATIONS} are "
-                               "allowed (msg_docs/fitting.md, Limits)")
+        raise ObservationError(
+            f"observations: {len(items)} items, at most {MAX_OBSERVATIONS} are "
+            "allowed (msg_docs/fitting.md, Limits)"
+        )
     obs, total = [], 0
     for i, v in enumerate(items):
         obs.append(_observation(v, f"observations[{i}]", sigma, base))
         total += len(obs[-1].points)
         if total > MAX_TOTAL_POINTS:
-            raise ObservationError(f"observations[{i}]: more than {MAX_TOTAL_POINTS} points in "
-                                   "all (msg_docs/fitting.md, Limits)")
+            raise ObservationError(
+                f"observations[{i}]: more than {MAX_TOTAL_POINTS} points in "
+                "all (msg_docs/fitting.md, Limits)"
+            )
     obs = tuple(obs)
     scene = d.get("scene", "")
     if not isinstance(scene, str):
@@ -315,14 +361,16 @@ def observation_set_from_dict(d: object, source: str = "<dict>", base: Path | No
 
 
 def load_observations(path: str | Path) -> ObservationSet:
-    """Read an observation file (YAML or JSON).  Raises ObservationError (``<file>: <key path>: ...`` or
-    ``<file>:<line>:<column>: YAML/JSON syntax error ...``) or FileNotFoundError."""
+    """Read an observation file (YAML or JSON).  Raises ObservationError (``<file>: <key path>:
+    ...`` or ``<file>:<line>:<column>: YAML/JSON syntax error ...``) or FileNotFoundError.
+    """
     path = Path(path)
     if not path.exists() and not path.is_symlink():
         raise FileNotFoundError(f"{path}: no such observation file")
     try:
-        text = read_regular_file(path, str(path), FILE_BYTES, "observation file",
-                                 "msg_docs/fitting.md, Limits").decode("utf-8")
+        text = read_regular_file(
+            path, str(path), FILE_BYTES, "observation file", "msg_docs/fitting.md, Limits"
+        ).decode("utf-8")
         data = parse_bounded_yaml(text, str(path))
     except FileLimitError as exc:
         message = str(exc).replace("YAML syntax error", "YAML/JSON syntax error")

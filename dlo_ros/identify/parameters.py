@@ -2,16 +2,19 @@
 
 Each fitted material P ∈ {Rf, Rt, D, Re} (SI: N·m², N·m², N/m, N) is either
 
-* scaled uniformly from the scene's profile: P(s) = e^θ P_scene(s), one θ labelled ``Rf`` (a table keeps
+* scaled uniformly from the scene's profile: P(s) = e^θ P_scene(s), one θ labelled ``Rf`` (a table
+  keeps
   its shape); or
 * a piecewise-linear table with n knots s_k evenly spaced over [0, L] (``ProfileFit``): P(s_k) =
-  e^{θ_k} P_scene(s_k), linear in between, n values labelled ``Rf[k]``, with the smoothness regulariser
-  ½ λ Σ_k (θ_{k−1} − 2 θ_k + θ_{k+1})² (λ = ``smoothing``; dimensionless, θ in log units).  It penalises
-  curvature of log P along the knots, not its mean or slope, so it does not bias a constant or
-  log-linear profile and does not fix the overall scale.
+  e^{θ_k} P_scene(s_k), linear in between, n values labelled ``Rf[k]``, with the smoothness
+  regulariser ½ λ Σ_k (θ_{k−1} − 2 θ_k + θ_{k+1})² (λ = ``smoothing``; dimensionless, θ in log
+  units).  It penalises curvature of log P along the knots, not its mean or slope, so it does not
+  bias a constant or log-linear profile and does not fix the overall scale.
 
-dP/dθ is P itself (uniform) or the table with every value but knot k set to zero (``MaterialDirection``).
+dP/dθ is P itself (uniform) or the table with every value but knot k set to zero
+(``MaterialDirection``).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -24,7 +27,12 @@ from ..solver.sensitivity import MaterialDirection
 from .observations import ProfileFit
 
 #: the StringProperties field of each material
-PROFILE = {"Rf": "bend_stiffness", "Rt": "twist_stiffness", "D": "weight_per_length", "Re": "stretch_stiffness"}
+PROFILE = {
+    "Rf": "bend_stiffness",
+    "Rt": "twist_stiffness",
+    "D": "weight_per_length",
+    "Re": "stretch_stiffness",
+}
 
 
 @dataclass(frozen=True)
@@ -46,9 +54,13 @@ def profile_mean(profile: Profile, length: float) -> float:
 
 
 class Parameterisation:
-    """θ ↔ string for the materials ``names`` of ``string``; ``profiles[name]`` fits that one knot by knot."""
+    """θ ↔ string for the materials ``names`` of ``string``; ``profiles[name]`` fits that one knot
+    by knot.
+    """
 
-    def __init__(self, string: StringProperties, names: tuple[str, ...], profiles: dict[str, ProfileFit]):
+    def __init__(
+        self, string: StringProperties, names: tuple[str, ...], profiles: dict[str, ProfileFit]
+    ):
         self.length = string.length
         self.profiles = dict(profiles)
         changes, comps = {}, []
@@ -59,7 +71,9 @@ class Parameterisation:
                 continue
             knots = np.linspace(0.0, string.length, spec.knots)
             scene = getattr(string, PROFILE[name])
-            changes[PROFILE[name]] = Profile(tuple(float(s) for s in knots), tuple(float(v) for v in scene(knots)))
+            changes[PROFILE[name]] = Profile(
+                tuple(float(s) for s in knots), tuple(float(v) for v in scene(knots))
+            )
             comps += [Component(f"{name}[{k}]", name, k, float(s)) for k, s in enumerate(knots)]
         self.base = replace(string, **changes)
         self.components = tuple(comps)
@@ -77,7 +91,9 @@ class Parameterisation:
             if self.components[idx[0]].knot is None:
                 changes[PROFILE[material]] = prof.scaled(float(np.exp(theta[idx[0]])))
             else:
-                changes[PROFILE[material]] = Profile(prof.s, tuple(float(v) for v in np.asarray(prof.values) * np.exp(theta[idx])))
+                changes[PROFILE[material]] = Profile(
+                    prof.s, tuple(float(v) for v in np.asarray(prof.values) * np.exp(theta[idx]))
+                )
         return replace(self.base, **changes)
 
     def directions(self, string: StringProperties) -> tuple[MaterialDirection, ...]:
@@ -115,6 +131,8 @@ class Parameterisation:
             idx = self.indices(material)
             for k in range(1, len(idx) - 1):
                 row = np.zeros(len(self.components))
-                row[[idx[k - 1], idx[k], idx[k + 1]]] = np.sqrt(spec.smoothing) * np.array([1.0, -2.0, 1.0])
+                row[[idx[k - 1], idx[k], idx[k + 1]]] = np.sqrt(spec.smoothing) * np.array(
+                    [1.0, -2.0, 1.0]
+                )
                 rows.append(row)
         return np.array(rows).reshape(len(rows), len(self.components))

@@ -9,6 +9,7 @@ must equal the bytes that follow it, and its dtype must be real (no complex, obj
 arrays); a PLY's vertex count and property count are checked against the limits and the file's size
 before its body is parsed.  Every refusal is a ValueError with one line (no traceback).
 """
+
 from __future__ import annotations
 
 import ast
@@ -20,10 +21,24 @@ import numpy as np
 from ..scene import FileLimitError, read_regular_file
 
 #: PLY scalar types → numpy
-PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
-             "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
-             "uint": "u4", "uint32": "u4",
-             "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+PLY_TYPES = {
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
+}
 #: the longest PLY header read
 MAX_HEADER = 64 * 1024
 #: the largest point file [bytes]: 200,000 points of 3 doubles are 4.8 MB; an ASCII or colour PLY
@@ -40,7 +55,8 @@ DOC = "msg_docs/fitting.md, Limits"
 
 def read_points(path: Path) -> np.ndarray:
     """The points of a .npy or .ply file as an (N, 3) float array.  Raises ValueError (one line:
-    why)."""
+    why).
+    """
     suffix = path.suffix.lower()
     if suffix not in (".npy", ".ply"):
         raise ValueError(f"only .npy and .ply point files are read, got {suffix or 'no suffix'!r}")
@@ -53,7 +69,8 @@ def read_points(path: Path) -> np.ndarray:
 
 def read_npy(data: bytes) -> np.ndarray:
     """The (N, 3) points of a .npy file's bytes; the header is validated before any array is
-    made."""
+    made.
+    """
     f = io.BytesIO(data)
     try:
         major, _ = np.lib.format.read_magic(f)
@@ -68,8 +85,12 @@ def read_npy(data: bytes) -> np.ndarray:
     if not isinstance(header, dict) or set(header) != {"descr", "fortran_order", "shape"}:
         raise ValueError("not a valid .npy file (its header lacks descr, fortran_order or shape)")
     shape = header["shape"]
-    if (not isinstance(shape, tuple) or len(shape) != 2
-            or not all(type(n) is int and n >= 0 for n in shape) or shape[1] != 3):
+    if (
+        not isinstance(shape, tuple)
+        or len(shape) != 2
+        or not all(type(n) is int and n >= 0 for n in shape)
+        or shape[1] != 3
+    ):
         raise ValueError(f"expected an N × 3 array, the header says shape {str(shape)[:60]}")
     if shape[0] > MAX_POINTS:
         raise ValueError(f"{shape[0]} points, over the limit of {MAX_POINTS} ({DOC})")
@@ -78,17 +99,24 @@ def read_npy(data: bytes) -> np.ndarray:
         dtype = np.dtype(descr) if isinstance(descr, str) else None
     except TypeError:
         dtype = None
-    if (dtype is None or dtype.kind not in "fiu" or dtype.fields is not None
-            or dtype.subdtype is not None):
+    if (
+        dtype is None
+        or dtype.kind not in "fiu"
+        or dtype.fields is not None
+        or dtype.subdtype is not None
+    ):
         kind = "complex" if dtype is not None and dtype.kind == "c" else "non-real"
-        raise ValueError(f"the array's dtype is {kind} ({str(descr)[:40]!r}): points must be real "
-                         "numbers")
+        raise ValueError(
+            f"the array's dtype is {kind} ({str(descr)[:40]!r}): points must be real numbers"
+        )
     offset = f.tell()
     expected = shape[0] * 3 * dtype.itemsize
     if len(data) - offset != expected:
-        raise ValueError(f"the header promises {shape[0]} × 3 values of {dtype.itemsize} bytes "
-                         f"({expected} "
-                         f"bytes), the file holds {len(data) - offset} after the header")
+        raise ValueError(
+            f"the header promises {shape[0]} × 3 values of {dtype.itemsize} bytes "
+            f"({expected} "
+            f"bytes), the file holds {len(data) - offset} after the header"
+        )
     arr = np.frombuffer(data, dtype=dtype, count=shape[0] * 3, offset=offset)
     order = "F" if header["fortran_order"] else "C"
     return arr.reshape(shape, order=order).astype(float)
@@ -115,12 +143,14 @@ def read_ply(data: bytes) -> np.ndarray:
             if len(words) < 3 or words[1] != "vertex":
                 raise ValueError("the first element must be 'vertex'")
             if not words[2].isdigit() or len(words[2]) > 9:
-                raise ValueError(f"the vertex count {words[2][:20]!r} is not an integer below "
-                                 "10^9")
+                raise ValueError(
+                    f"the vertex count {words[2][:20]!r} is not an integer below 10^9"
+                )
             seen_vertex, count = True, int(words[2])
             if count > MAX_POINTS:
-                raise ValueError(f"{count} vertices, over the limit of {MAX_POINTS} points "
-                                 f"({DOC})")
+                raise ValueError(
+                    f"{count} vertices, over the limit of {MAX_POINTS} points ({DOC})"
+                )
         elif words[0] == "property" and seen_vertex:
             if len(words) < 3:
                 raise ValueError("a property line needs a type and a name")
@@ -138,8 +168,9 @@ def read_ply(data: bytes) -> np.ndarray:
     if fmt == "ascii":
         text = data[body_start:].decode("ascii", errors="replace").split("\n", count)[:count]
         try:
-            rows = np.array([line.split()[:len(props)] for line in text if line.strip()],
-                            dtype=float)
+            rows = np.array(
+                [line.split()[: len(props)] for line in text if line.strip()], dtype=float
+            )
         except ValueError:
             raise ValueError("a vertex row holds something that is not a number") from None
         if rows.shape != (count, len(props)):
@@ -150,7 +181,9 @@ def read_ply(data: bytes) -> np.ndarray:
         raise ValueError(f"unknown PLY format {fmt[:30]!r}")
     dtype = np.dtype([(n, order + t) for n, t in props])
     if len(data) - body_start < count * dtype.itemsize:
-        raise ValueError(f"expected {count} vertices of {dtype.itemsize} bytes, the file holds "
-                         f"{(len(data) - body_start) // max(dtype.itemsize, 1)}")
+        raise ValueError(
+            f"expected {count} vertices of {dtype.itemsize} bytes, the file holds "
+            f"{(len(data) - body_start) // max(dtype.itemsize, 1)}"
+        )
     rows = np.frombuffer(data, dtype=dtype, count=count, offset=body_start)
     return np.stack([rows[a].astype(float) for a in "xyz"], axis=1)

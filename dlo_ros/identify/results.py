@@ -1,5 +1,8 @@
-"""What a fit returns: determined values with standard deviations, ratios, what is not determined, and the
-residuals per observation (``FitResult.to_dict()`` is the JSON of ``dlo fit --json``, msg_docs/fitting.md)."""
+"""What a fit returns: determined values with standard deviations, ratios, what is not determined,
+and the residuals per observation (``FitResult.to_dict()`` is the JSON of ``dlo fit --json``,
+msg_docs/fitting.md).
+"""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -12,8 +15,9 @@ from .identifiability import Identifiability
 
 @dataclass
 class Estimate:
-    """A determined quantity: value, standard deviation (same unit) and unit.  For a table profile the
-    value is its mean over s (the fit scales the table)."""
+    """A determined quantity: value, standard deviation (same unit) and unit.  For a table profile
+    the value is its mean over s (the fit scales the table).
+    """
 
     name: str
     value: float
@@ -22,8 +26,12 @@ class Estimate:
     s: float | None = None  # the knot's arc length [m] of a piecewise-linear profile's value
 
     def as_dict(self) -> dict:
-        out = {"value": self.value, "std": self.std, "relative_std": self.std / abs(self.value) if self.value else None,
-               "unit": self.unit}
+        out = {
+            "value": self.value,
+            "std": self.std,
+            "relative_std": self.std / abs(self.value) if self.value else None,
+            "unit": self.unit,
+        }
         if self.s is not None:
             out["s"] = self.s
         return out
@@ -33,7 +41,8 @@ class Estimate:
 class ObservationFit:
     """Residuals of one observation at the fit: |r| statistics over its points [m], how many points the
     robust loss down-weighted (|r| > huber σ), the grip-force residual |F_meas − F| [N] and the grip-torque
-    residual |T_meas − T| [N·m] where measured."""
+    residual |T_meas − T| [N·m] where measured.
+    """
 
     name: str
     points: int
@@ -42,15 +51,23 @@ class ObservationFit:
     max_m: float
     downweighted: int
     force_residual_n: float | None = None
-    #: the fitted centreline (S, 3) [m] and each observed point's nearest point on it (N, 3) [m], for drawing
+    #: the fitted centreline (S, 3) [m] and each observed point's nearest point on it (N, 3) [m],
+    #for drawing
     shape: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
     feet: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
     torque_residual_nm: float | None = None
 
     def as_dict(self) -> dict:
-        return {"name": self.name, "points": self.points, "rms_m": self.rms_m, "median_m": self.median_m,
-                "max_m": self.max_m, "downweighted": self.downweighted, "force_residual_n": self.force_residual_n,
-                "torque_residual_nm": self.torque_residual_nm}
+        return {
+            "name": self.name,
+            "points": self.points,
+            "rms_m": self.rms_m,
+            "median_m": self.median_m,
+            "max_m": self.max_m,
+            "downweighted": self.downweighted,
+            "force_residual_n": self.force_residual_n,
+            "torque_residual_nm": self.torque_residual_nm,
+        }
 
 
 @dataclass
@@ -63,7 +80,8 @@ class FitResult:
     parameters not fitted (the estimates are conditional on them); string: the scene's string with
     the fitted values; chi2_reduced: Σ(r/σ)² / dof, dof = 2 N_points + force, torque and mass rows
     − rank; sigma_scale: the factor the stds were inflated by (sqrt(chi2_reduced) when it is over
-    1)."""
+    1).
+    """
 
     status: str
     message: str
@@ -92,16 +110,20 @@ class FitResult:
         """JSON-ready (``dlo fit --json``, msg_docs/fitting.md)."""
         ident = self.identifiability
         return {
-            "status": self.status, "message": self.message,
+            "status": self.status,
+            "message": self.message,
             "parameters": {k: v.as_dict() for k, v in self.parameters.items()},
             "ratios": {k: v.as_dict() for k, v in self.ratios.items()},
             "not_identifiable": dict(self.not_identifiable),
             "fixed": dict(self.fixed),
             "observations": [o.as_dict() for o in self.observations],
-            "chi2_reduced": self.chi2_reduced, "chi2_threshold": self.chi2_threshold,
+            "chi2_reduced": self.chi2_reduced,
+            "chi2_threshold": self.chi2_threshold,
             "dof": self.dof,
             "sigma_scale": self.sigma_scale,
-            "iterations": self.iterations, "equilibrium_solves": self.equilibrium_solves, "time_s": self.time_s,
+            "iterations": self.iterations,
+            "equilibrium_solves": self.equilibrium_solves,
+            "time_s": self.time_s,
             "fitted": list(self.names),
             "covariance_log": self.covariance_log.tolist(),
             "rank": None if ident is None else ident.rank,

@@ -4,6 +4,7 @@ A field f(s) (an Euler angle or the strain) is expanded as f(s) = Σ_k c_k b_k(s
 Each basis returns the matrix B[i, k] = b_k(s_i) and its derivative dB/ds, so that
 f(s_i) = (B c)_i and f'(s_i) = (B' c)_i are linear in the coefficients c.
 """
+
 from __future__ import annotations
 
 from typing import Protocol
@@ -29,8 +30,9 @@ class Basis(Protocol):
 class ChebyshevBasis:
     """b_k(s) = T_k(τ), τ = 2 s / L − 1, k = 0 … n−1 (Chebyshev polynomials of the first kind).
 
-    Polynomials resolve non-periodic profiles (asymmetric clamping angles, point loads) with spectral
-    accuracy, unlike the Fourier basis whose periodic part converges only algebraically there.
+    Polynomials resolve non-periodic profiles (asymmetric clamping angles, point loads) with
+    spectral accuracy, unlike the Fourier basis whose periodic part converges only algebraically
+    there.
     """
 
     name = "chebyshev"

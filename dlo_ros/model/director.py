@@ -4,9 +4,11 @@ Unknowns z = [x0/L (3), nodal values of the rotation field (4 N or 3 N), ε at t
 extensible)] on the ``ElementMesh`` (N global nodes, breakpoints at every interior grip, point load
 and material kink).  Two kinds of rotation field:
 
-* frame (twist modelled): q(s) = Σ_i ℓ_i(s) q_i, a polynomial through unit quaternions q_i (x, y, z, w)
+* frame (twist modelled): q(s) = Σ_i ℓ_i(s) q_i, a polynomial through unit quaternions q_i (x, y,
+  z, w)
   with |q_i|² = 1 imposed at every node.  Between nodes the rotation is that of q/|q| (any non-zero q
-  is a rotation, so no direction is singular).  Body curvature and twist (R' = R [Ω]×, R = [t d1 d2]):
+  is a rotation, so no direction is singular).  Body curvature and twist (R' = R [Ω]×, R = [t d1
+  d2]):
 
       Ω = 2 vec(q* ⊗ q') / |q|²  =  2 (w q'_v − w' q_v − q_v × q'_v) / |q|²,
       U_bend = ∫ ½ Rf (Ω_2² + Ω_3²) ds,   U_twist = ∫ ½ Rt Ω_1² ds.
@@ -16,21 +18,23 @@ and material kink).  Two kinds of rotation field:
       κ² = |(t/|t|)'|² = (|t'|² − (t·t')²/|t|²) / |t|²,   U_bend = ∫ ½ Rf κ² ds.
 
 Both bend energies carry the gauge term ½ c Rf ((ln|v|)')² (v = q with a factor 2, or t; c = GAUGE_WEIGHT): it vanishes where
-the interpolant keeps unit norm between nodes and is of the order of the interpolation error squared
-when resolved, but it forbids a field that dips toward zero between quadrature nodes, where the
-normalised rotation would jump unseen by the quadrature (a fold that costs no energy).
+the interpolant keeps unit norm between nodes and is of the order of the interpolation error
+squared when resolved, but it forbids a field that dips toward zero between quadrature nodes, where
+the normalised rotation would jump unseen by the quadrature (a fold that costs no energy).
 
-Both: x(s) = x0 + ∫_0^s (1 + ε) t̂ ds,  U_stretch = ∫ ½ Re ε²,  U_grav = −∫ D ĝ·x ds, every integral
-by the mesh's quadrature.  Grip orientations are held by rows that are linear in the node's rotation
-(t_g · R_g e_y = t_g · R_g e_z = 0, and for a clamp with twist d1_g · R_g e_z = 0), whose parameters
-are R_g itself: no angle is unwrapped and no pole exists.
+Both: x(s) = x0 + ∫_0^s (1 + ε) t̂ ds,  U_stretch = ∫ ½ Re ε²,  U_grav = −∫ D ĝ·x ds, every
+integral by the mesh's quadrature.  Grip orientations are held by rows that are linear in the
+node's rotation (t_g · R_g e_y = t_g · R_g e_z = 0, and for a clamp with twist d1_g · R_g e_z = 0),
+whose parameters are R_g itself: no angle is unwrapped and no pole exists.
 
 Point moments M at s_k are dead loads; their work M·δθ is not the variation of any function of the
-rotation, so it enters as the pseudo-potential W_M = M · θ_k with θ_k = 2 vec(q_k ⊗ q_ref*) (frame) or
-t_ref × t_k (tangent: the part of M normal to the tangent), whose gradient equals M·δθ exactly at
+rotation, so it enters as the pseudo-potential W_M = M · θ_k with θ_k = 2 vec(q_k ⊗ q_ref*) (frame)
+or t_ref × t_k (tangent: the part of M normal to the tangent), whose gradient equals M·δθ exactly
+at
 q_k = q_ref.  The solver substitutes q_ref = q_k/|q_k| after differentiating
 (``solver/moments.py``), which gives the exact equilibrium equations, and solves those.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -88,17 +92,27 @@ def quat_to_frame(q: np.ndarray) -> np.ndarray:
     """Rotation matrices (…, 3, 3) of quaternions (…, 4) (x, y, z, w), any non-zero norm."""
     x, y, z, w = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
     n2 = x * x + y * y + z * z + w * w
-    r = np.stack([
-        np.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
-    ], -2)
+    r = np.stack(
+        [
+            np.stack(
+                [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1
+            ),
+            np.stack(
+                [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1
+            ),
+            np.stack(
+                [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1
+            ),
+        ],
+        -2,
+    )
     return r / n2[..., None, None]
 
 
 def frame_to_quat(r: np.ndarray) -> np.ndarray:
-    """Unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3) (Shepperd's method: each row
-    from the largest of 1 + trace and the diagonal, so no division by a small number)."""
+    """Unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3) (Shepperd's method: each
+    row from the largest of 1 + trace and the diagonal, so no division by a small number).
+    """
     r = np.asarray(r, dtype=float)
     m = r.reshape(-1, 3, 3)
     d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
@@ -109,8 +123,15 @@ def frame_to_quat(r: np.ndarray) -> np.ndarray:
     if np.any(k):
         w = 0.5 * np.sqrt(1.0 + tr[k])
         mk = m[k]
-        out[k] = np.stack([(mk[:, 2, 1] - mk[:, 1, 2]) / (4 * w), (mk[:, 0, 2] - mk[:, 2, 0]) / (4 * w),
-                           (mk[:, 1, 0] - mk[:, 0, 1]) / (4 * w), w], axis=1)
+        out[k] = np.stack(
+            [
+                (mk[:, 2, 1] - mk[:, 1, 2]) / (4 * w),
+                (mk[:, 0, 2] - mk[:, 2, 0]) / (4 * w),
+                (mk[:, 1, 0] - mk[:, 0, 1]) / (4 * w),
+                w,
+            ],
+            axis=1,
+        )
     for a in range(3):  # the largest diagonal entry is a: q_a first
         k = which == a + 1
         if not np.any(k):
@@ -147,15 +168,16 @@ def _columns(q, lib):
 
 
 def integrands(rows, drows, frame: bool):
-    """(b, τ, t̂) of the rotation field's values ``rows`` and s-derivatives ``drows`` (4 quaternion or 3
-    tangent components; CasADi scalars or row vectors, element-wise): U_bend = ∫ ½ Rf b ds,
+    """(b, τ, t̂) of the rotation field's values ``rows`` and s-derivatives ``drows`` (4 quaternion
+    or 3 tangent components; CasADi scalars or row vectors, element-wise): U_bend = ∫ ½ Rf b ds,
     U_twist = ∫ ½ Rt τ ds (τ = 0 for the tangent model), t̂ the unit tangent (3 components).
 
     frame:   b = Ω_2² + Ω_3² + c Ω_0²,  τ = Ω_1²,  Ω = 2 (w q'_v − w' q_v − q_v × q'_v) / |q|²,
              Ω_0 = 2 q·q' / |q|² (the gauge term, c = GAUGE_WEIGHT: zero where |q| is constant, it keeps
-             the interpolant from dipping toward q = 0 between quadrature nodes, a rotation jump the
-             quadrature would not see);
-    tangent: b = (|t'|² − (1 − c)(t·t')²/|t|²) / |t|²  = κ² + c ((ln|t|)')²  (the same gauge term)."""
+             the interpolant from dipping toward q = 0 between quadrature nodes, a rotation jump
+             the quadrature would not see);
+    tangent: b = (|t'|² − (1 − c)(t·t')²/|t|²) / |t|²  = κ² + c ((ln|t|)')²  (the same gauge term).
+    """
     if frame:
         x, y, zq, wq = rows
         dx, dy, dz, dw = drows
@@ -169,7 +191,11 @@ def integrands(rows, drows, frame: bool):
     tdt = rows[0] * drows[0] + rows[1] * drows[1] + rows[2] * drows[2]
     dd = drows[0] ** 2 + drows[1] ** 2 + drows[2] ** 2
     inv = 1 / ca.sqrt(n2)
-    return (dd - (1 - GAUGE_WEIGHT) * tdt * tdt / n2) / n2, 0, [rows[0] * inv, rows[1] * inv, rows[2] * inv]
+    return (
+        (dd - (1 - GAUGE_WEIGHT) * tdt * tdt / n2) / n2,
+        0,
+        [rows[0] * inv, rows[1] * inv, rows[2] * inv],
+    )
 
 
 class DirectorModel:
@@ -183,7 +209,9 @@ class DirectorModel:
         self.layout = DirectorLayout(mesh.count, frame, stretch, mesh.order, mesh.element_count)
         self.B, self.dB = mesh.B, mesh.dB
         # the composite quadrature, under the names RitzModel's single-interval one has
-        self.quad = SimpleNamespace(nodes=mesh.quad_nodes, weights=mesh.weights, count=mesh.quad_count)
+        self.quad = SimpleNamespace(
+            nodes=mesh.quad_nodes, weights=mesh.weights, count=mesh.quad_count
+        )
         self._cache: dict[bytes, np.ndarray] = {}
 
     # ---- numpy -----------------------------------------------------------------------------------
@@ -195,7 +223,9 @@ class DirectorModel:
         return np.asarray(z[self.layout.eps]) if self.layout.stretch else None
 
     def _memo(self, kind: str, s: np.ndarray, make):
-        """``make(s)`` remembered per (kind, s): a running solver asks for the same arc lengths again."""
+        """``make(s)`` remembered per (kind, s): a running solver asks for the same arc lengths
+        again.
+        """
         s = np.ascontiguousarray(s, dtype=float).ravel()
         key = kind.encode() + s.tobytes()
         hit = self._cache.get(key)
@@ -210,7 +240,9 @@ class DirectorModel:
         return self._memo("W", s, self.mesh.integration_matrix)
 
     def position_rows(self, s: np.ndarray) -> np.ndarray:
-        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every solve)."""
+        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every
+        solve).
+        """
         return self.mesh.integration_matrix(s)
 
     def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -233,7 +265,9 @@ class DirectorModel:
 
     def positions(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(len(s), 3) centreline positions [m]."""
-        return (np.asarray(z[0:3]) * self.length)[None, :] + self.position_matrix(s) @ self.quad_tangents(z).T
+        return (np.asarray(z[0:3]) * self.length)[None, :] + self.position_matrix(
+            s
+        ) @ self.quad_tangents(z).T
 
     def tangents_at(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Unit tangents (len(s), 3)."""
@@ -242,18 +276,23 @@ class DirectorModel:
             return np.array(_columns(v.T, np)[0]).T
         return v / np.linalg.norm(v, axis=1)[:, None]
 
-    def pose_frames(self, z: np.ndarray, s: np.ndarray, anchor: tuple[float, np.ndarray] | None = None) -> np.ndarray:
-        """Frames (len(s), 3, 3) with columns (t, d1, d2) — the pose convention, x along the tangent.
+    def pose_frames(
+        self, z: np.ndarray, s: np.ndarray, anchor: tuple[float, np.ndarray] | None = None
+    ) -> np.ndarray:
+        """Frames (len(s), 3, 3) with columns (t, d1, d2) — the pose convention, x along the
+        tangent.
 
         The tangent model has no roll: its frames are transported without twist (d1' = −(t'·d1) t)
-        from ``anchor`` = (s_a, R_a) (default: d1 ⊥ t closest to the world z-axis at s = 0), on a grid
-        four times finer than s.
+        from ``anchor`` = (s_a, R_a) (default: d1 ⊥ t closest to the world z-axis at s = 0), on a
+        grid four times finer than s.
         """
         s = np.asarray(s, dtype=float)
         if self.layout.frame:
             return quat_to_frame(self.interpolation(s)[0] @ self.node_values(z))
         s_anchor, r_anchor = anchor if anchor is not None else (0.0, None)
-        fine = np.unique(np.concatenate([np.linspace(0.0, self.length, 4 * max(len(s), 16) + 1), s, [s_anchor]]))
+        fine = np.unique(
+            np.concatenate([np.linspace(0.0, self.length, 4 * max(len(s), 16) + 1), s, [s_anchor]])
+        )
         t = self.tangents_at(z, fine)
         k0 = int(np.argmin(np.abs(fine - s_anchor)))
         if r_anchor is None:
@@ -263,8 +302,9 @@ class DirectorModel:
         return transported_frames(t, k0, hint)[np.searchsorted(fine, s)]
 
     def curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
-        """Body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3), of the frame model (the
-        tangent model has no body frame: ``world_curvature``)."""
+        """Body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3), of the frame model
+        (the tangent model has no body frame: ``world_curvature``).
+        """
         if not self.layout.frame:
             raise ValueError("the tangent model has no body frame; use world_curvature")
         b, db = self.interpolation(s, side)
@@ -274,10 +314,14 @@ class DirectorModel:
         return 2 * (w * dqv - dw * qv - cross3(qv, dqv)) / n2
 
     def world_curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
-        """World-frame Darboux vector: R Ω (frame model) or t̂ × t̂' (tangent model, no twist), (len(s), 3)."""
+        """World-frame Darboux vector: R Ω (frame model) or t̂ × t̂' (tangent model, no twist),
+        (len(s), 3).
+        """
         if self.layout.frame:
             b = self.interpolation(s, side)[0]
-            return np.einsum("kij,kj->ki", quat_to_frame(b @ self.node_values(z)), self.curvature(z, s, side))
+            return np.einsum(
+                "kij,kj->ki", quat_to_frame(b @ self.node_values(z)), self.curvature(z, s, side)
+            )
         b, db = self.interpolation(s, side)
         v, dv = b @ self.node_values(z), db @ self.node_values(z)
         n = np.linalg.norm(v, axis=1)[:, None]
@@ -290,10 +334,14 @@ class DirectorModel:
         return {"weight_moments": self.mesh.quad_count, "weight_total": 1}
 
     def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Σ_j w_j D_j x(σ_j) = x0 ΣwD + Σ_k m_k (1+ε_k) t_k with m = W(σ)ᵀ (w ∘ D), assembled once."""
+        """Σ_j w_j D_j x(σ_j) = x0 ΣwD + Σ_k m_k (1+ε_k) t_k with m = W(σ)ᵀ (w ∘ D), assembled
+        once.
+        """
         wd = self.mesh.weights * profiles["D"]
-        return {"weight_moments": self.position_matrix(self.mesh.quad_nodes).T @ wd,
-                "weight_total": np.array([wd.sum()])}
+        return {
+            "weight_moments": self.position_matrix(self.mesh.quad_nodes).T @ wd,
+            "weight_total": np.array([wd.sum()]),
+        }
 
     def quad_nodes(self) -> np.ndarray:
         return self.mesh.quad_nodes
@@ -302,10 +350,16 @@ class DirectorModel:
         lay = self.layout
         V = ca.reshape(z[lay.rotation], lay.width, lay.nodes)  # column i = node i
         # sparse: B selects nodes, B' is block-diagonal by element
-        return V, ca.mtimes(V, ca.sparsify(ca.DM(self.B.T))), ca.mtimes(V, ca.sparsify(ca.DM(self.dB.T)))
+        return (
+            V,
+            ca.mtimes(V, ca.sparsify(ca.DM(self.B.T))),
+            ca.mtimes(V, ca.sparsify(ca.DM(self.dB.T))),
+        )
 
     def energy_terms(self, z: ca.SX, profiles: dict[str, ca.SX], gravity: ca.SX):
-        """(bend, twist, stretch, gravity) energies [J] and the quadrature-node tangents (1+ε)t̂ (3×M)."""
+        """(bend, twist, stretch, gravity) energies [J] and the quadrature-node tangents (1+ε)t̂
+        (3×M).
+        """
         lay, w = self.layout, ca.DM(self.mesh.weights)
         _, v, dv = self._fields_sym(z)
         rows = [v[k, :].T for k in range(lay.width)]
@@ -320,7 +374,9 @@ class DirectorModel:
             t = t * ca.repmat(ca.reshape(1 + eps, 1, -1), 3, 1)
         else:
             stretch = ca.SX(0)
-        grav = weight_energy_sym(z[0:3] * self.length, t, profiles["weight_total"], profiles["weight_moments"], gravity)
+        grav = weight_energy_sym(
+            z[0:3] * self.length, t, profiles["weight_total"], profiles["weight_moments"], gravity
+        )
         return bend, twist, stretch, grav, t
 
     def positions_sym(self, z: ca.SX, t: ca.SX, s: np.ndarray) -> ca.SX:
@@ -328,7 +384,7 @@ class DirectorModel:
 
     def node_sym(self, z: ca.SX, i: int) -> ca.SX:
         lay = self.layout
-        return z[lay.rotation][lay.width * i: lay.width * (i + 1)]
+        return z[lay.rotation][lay.width * i : lay.width * (i + 1)]
 
     def node_columns_sym(self, z: ca.SX, i: int) -> tuple[ca.SX, ca.SX | None]:
         """(t, d1) at node i (d1 None for the tangent model)."""
@@ -344,24 +400,27 @@ class DirectorModel:
         return [ca.sumsqr(V[:, i]) - 1.0 for i in range(self.layout.nodes)]
 
     def fold_rows_sym(self, z: ca.SX) -> list[ca.SX]:
-        """c − v_i · v_{i+1} ≤ 0 for neighbouring nodes: neighbouring tangents within 90° (c = 0), neighbouring
-        quaternions within a 120° rotation and of one sign (c = cos 60°).  Inactive on any resolved
-        shape; they forbid a fold between two nodes, which the normalised field would hide from the
-        quadrature (its energy is not seen between quadrature nodes)."""
+        """c − v_i · v_{i+1} ≤ 0 for neighbouring nodes: neighbouring tangents within 90° (c = 0),
+        neighbouring quaternions within a 120° rotation and of one sign (c = cos 60°).  Inactive on
+        any resolved shape; they forbid a fold between two nodes, which the normalised field would
+        hide from the quadrature (its energy is not seen between quadrature nodes).
+        """
         lay = self.layout
         V = ca.reshape(z[lay.rotation], lay.width, lay.nodes)
         c = 0.5 if lay.frame else 0.0
         return [c - ca.dot(V[:, i], V[:, i + 1]) for i in range(lay.nodes - 1)]
 
     def moment_work_sym(self, z: ca.SX, i: int, moment: ca.SX, reference: ca.SX) -> ca.SX:
-        """Pseudo-potential of a point moment at node i (module docstring); ``reference`` is q_ref (4)
-        for the frame model, t_ref (3, in the first 3 of 4 entries) for the tangent model."""
+        """Pseudo-potential of a point moment at node i (module docstring); ``reference`` is q_ref
+        (4) for the frame model, t_ref (3, in the first 3 of 4 entries) for the tangent model.
+        """
         return self.moment_work_node_sym(self.node_sym(z, i), moment, reference)
 
     def moment_work_node_sym(self, v: ca.SX, moment: ca.SX, reference: ca.SX) -> ca.SX:
         """``moment_work_sym`` of the node value v (4 or 3)."""
         if self.layout.frame:
-            # vec(q ⊗ q_ref*) = −q_w r_v ... for p = q, r* = (−r_v, r_w): vec = p_w(−r_v) + r_w p_v + p_v × (−r_v)
+            # vec(q ⊗ q_ref*) = −q_w r_v ... for p = q, r* = (−r_v, r_w): vec = p_w(−r_v) + r_w p_v
+            # + p_v × (−r_v)
             pv, pw, rv, rw = v[0:3], v[3], reference[0:3], reference[3]
             theta = 2 * (rw * pv - pw * rv - ca.cross(pv, rv))
             return ca.dot(moment, theta)
@@ -369,8 +428,12 @@ class DirectorModel:
         return ca.dot(moment, ca.cross(reference[0:3], t))
 
     # ---- guesses and transfers -------------------------------------------------------------------
-    def z_from_frames(self, x0: np.ndarray, frames: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
-        """z from the position of s = 0 and pose frames (N, 3, 3) (columns t, d1, d2) at the nodes."""
+    def z_from_frames(
+        self, x0: np.ndarray, frames: np.ndarray, eps: np.ndarray | None = None
+    ) -> np.ndarray:
+        """z from the position of s = 0 and pose frames (N, 3, 3) (columns t, d1, d2) at the
+        nodes.
+        """
         z = np.zeros(self.layout.size)
         z[0:3] = np.asarray(x0, dtype=float) / self.length
         if self.layout.frame:
@@ -385,8 +448,9 @@ class DirectorModel:
 
 def transported_frames(t: np.ndarray, k0: int, hint: np.ndarray) -> np.ndarray:
     """Frames (K, 3, 3) (columns t, d1, d2) along unit tangents t (K, 3) without twist: d1 at k0 is
-    ``hint`` made perpendicular to t[k0], and is carried to its neighbours, both ways, by the smallest
-    rotation between consecutive tangents (a discrete d1' = −(t'·d1) t)."""
+    ``hint`` made perpendicular to t[k0], and is carried to its neighbours, both ways, by the
+    smallest rotation between consecutive tangents (a discrete d1' = −(t'·d1) t).
+    """
     d1s = np.empty_like(t)
     d1 = hint - np.dot(hint, t[k0]) * t[k0]
     d1s[k0] = d1 / np.linalg.norm(d1)

@@ -118,7 +118,11 @@ class ClampedElastica:
         sn, cn, _, _ = ellipj(r, self.m)
         cn2 = cn * cn
         dn2 = 1.0 - self.m * sn * sn
-        return 2.0 * n * self.E + sn * elliprf(cn2, dn2, 1.0) - (self.m / 3.0) * sn**3 * elliprd(cn2, dn2, 1.0)
+        return (
+            2.0 * n * self.E
+            + sn * elliprf(cn2, dn2, 1.0)
+            - (self.m / 3.0) * sn**3 * elliprd(cn2, dn2, 1.0)
+        )
 
     # --------------------------------------------------------------- kinematics
     def positions(self, s: ArrayLike) -> NDArray[np.float64]:
@@ -178,7 +182,9 @@ def _chord_ratio(m: float) -> float:
     return 2.0 * float(ellipe(m)) / float(ellipk(m)) - 1.0
 
 
-def clamped_clamped_elastica(length: float, bend_stiffness: float, chord: float) -> ClampedElastica:
+def clamped_clamped_elastica(
+    length: float, bend_stiffness: float, chord: float
+) -> ClampedElastica:
     """Exact first symmetric buckled shape of a rod clamped horizontally at (0,0) and (a,0).
 
     Solves the chord condition ``a/L = 2E(k)/K(k) - 1`` (eq. 6) for ``m = k^2`` with
@@ -195,9 +201,20 @@ def clamped_clamped_elastica(length: float, bend_stiffness: float, chord: float)
     if not (np.isfinite(Rf) and Rf > 0.0):
         raise ValueError(f"bend_stiffness must be positive, got {bend_stiffness!r}")
     if not (0.0 < a < L):
-        raise ValueError(f"chord must satisfy 0 < chord < length, got chord={chord!r}, length={length!r}")
+        raise ValueError(
+            f"chord must satisfy 0 < chord < length, got chord={chord!r}, length={length!r}"
+        )
 
     ratio = a / L
-    m = brentq(lambda mm: _chord_ratio(mm) - ratio, 0.0, 0.95, xtol=1e-300, rtol=4.0 * np.finfo(float).eps, maxiter=500)
+    m = brentq(
+        lambda mm: _chord_ratio(mm) - ratio,
+        0.0,
+        0.95,
+        xtol=1e-300,
+        rtol=4.0 * np.finfo(float).eps,
+        maxiter=500,
+    )
     m = float(m)
-    return ClampedElastica(length=L, bend_stiffness=Rf, chord=a, k=float(np.sqrt(m)), K=float(ellipk(m)))
+    return ClampedElastica(
+        length=L, bend_stiffness=Rf, chord=a, k=float(np.sqrt(m)), K=float(ellipk(m))
+    )

@@ -1,12 +1,13 @@
 """Spectral elements along the arc length: breakpoints, nodal interpolation and quadrature.
 
-The string [0, L] is split at breakpoints 0 = b_0 < b_1 < … < b_E = L.  On element e = [b_e, b_{e+1}]
-a field is the polynomial of degree n_e − 1 through its values at the n_e Legendre–Gauss–Lobatto (LGL)
-nodes of the element; the end nodes of neighbouring elements are the same node, so every field is
-continuous across a breakpoint while its derivative may jump there (a kink at a grip, a point load or
-a jump of the material).  ``order`` nodes are shared out by length, n_e = max(MIN_NODES,
-⌈order · h_e / L⌉ + 1), so the unknowns of a field, N = Σ (n_e − 1) + 1, stay close to ``order``
-however many elements there are (each element's field is smooth, so it needs fewer).
+The string [0, L] is split at breakpoints 0 = b_0 < b_1 < … < b_E = L.  On element e = [b_e,
+b_{e+1}] a field is the polynomial of degree n_e − 1 through its values at the n_e
+Legendre–Gauss–Lobatto (LGL) nodes of the element; the end nodes of neighbouring elements are the
+same node, so every field is continuous across a breakpoint while its derivative may jump there (a
+kink at a grip, a point load or a jump of the material).  ``order`` nodes are shared out by length,
+n_e = max(MIN_NODES, ⌈order · h_e / L⌉ + 1), so the unknowns of a field, N = Σ (n_e − 1) + 1, stay
+close to ``order`` however many elements there are (each element's field is smooth, so it needs
+fewer).
 
 Integrals are taken by the LGL rule on the same nodes (the spectral element method's collocated
 quadrature, exact for polynomials of degree ≤ 2n − 3 on every element): for samples f_k at the
@@ -18,6 +19,7 @@ W integrating each element's interpolant exactly.  Collocation makes a field's v
 unknown itself and its derivative one row of the element's differentiation matrix, so the energy's
 Hessian costs O(E n³) instead of O(E n² m) for m separate quadrature nodes.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,23 +34,35 @@ def lgl_nodes(count: int) -> tuple[np.ndarray, np.ndarray]:
     if count < 2:
         raise ValueError("at least 2 nodes per element")
     p = Leg.Legendre.basis(count - 1)
-    x = np.concatenate([[-1.0], np.sort(p.deriv().roots().real), [1.0]]) if count > 2 else np.array([-1.0, 1.0])
+    x = (
+        np.concatenate([[-1.0], np.sort(p.deriv().roots().real), [1.0]])
+        if count > 2
+        else np.array([-1.0, 1.0])
+    )
     w = 2.0 / (count * (count - 1) * p(x) ** 2)
     return x, w
 
 
 class NodalElement:
-    """The polynomial through n LGL nodes of [0, h]: values, s-derivatives and integrals at any s."""
+    """The polynomial through n LGL nodes of [0, h]: values, s-derivatives and integrals at any
+    s.
+    """
 
     def __init__(self, count: int, size: float) -> None:
         self.count, self.size = int(count), float(size)
         self.tau, weights = lgl_nodes(count)
         self.nodes = 0.5 * self.size * (self.tau + 1.0)
         self.weights = 0.5 * self.size * weights
-        self._vinv = np.linalg.inv(C.chebvander(self.tau, count - 1))  # nodal values → Chebyshev coefficients
+        self._vinv = np.linalg.inv(
+            C.chebvander(self.tau, count - 1)
+        )  # nodal values → Chebyshev coefficients
         eye = np.eye(count)
-        self._der = np.stack([np.concatenate([C.chebder(eye[k]), [0.0]]) for k in range(count)], axis=1)
-        self._int = np.stack([C.chebint(eye[k], lbnd=-1.0) for k in range(count)], axis=1)  # (count+1, count)
+        self._der = np.stack(
+            [np.concatenate([C.chebder(eye[k]), [0.0]]) for k in range(count)], axis=1
+        )
+        self._int = np.stack(
+            [C.chebint(eye[k], lbnd=-1.0) for k in range(count)], axis=1
+        )  # (count+1, count)
         self.D = self.matrices(self.nodes)[1]  # differentiation matrix at the element's own nodes
 
     def matrices(self, local_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -58,7 +72,9 @@ class NodalElement:
         return v @ self._vinv, (v @ self._der) @ self._vinv * (2.0 / self.size)
 
     def integral(self, local_s: np.ndarray) -> np.ndarray:
-        """I with ∫_0^s f = I f_nodes for local arc lengths in [0, h] (the interpolant, exactly)."""
+        """I with ∫_0^s f = I f_nodes for local arc lengths in [0, h] (the interpolant,
+        exactly).
+        """
         tau = 2.0 * np.asarray(local_s, dtype=float) / self.size - 1.0
         return 0.5 * self.size * (C.chebvander(tau, self.count) @ self._int) @ self._vinv
 
@@ -68,13 +84,16 @@ MIN_NODES = 6
 
 
 class ElementMesh:
-    """Breakpoints, global nodes and the composite quadrature of one string: ``order`` LGL nodes shared
-    out by element length; ``extra`` > 0: n_e + ``extra`` Clenshaw–Curtis quadrature nodes per element
-    instead of the collocated LGL rule."""
+    """Breakpoints, global nodes and the composite quadrature of one string: ``order`` LGL nodes
+    shared out by element length; ``extra`` > 0: n_e + ``extra`` Clenshaw–Curtis quadrature nodes
+    per element instead of the collocated LGL rule.
+    """
 
     def __init__(self, length: float, breakpoints, order: int, extra: int = 0) -> None:
         self.length = float(length)
-        b = np.unique(np.concatenate([[0.0, self.length], np.asarray(breakpoints, dtype=float).ravel()]))
+        b = np.unique(
+            np.concatenate([[0.0, self.length], np.asarray(breakpoints, dtype=float).ravel()])
+        )
         b = b[(b >= 0.0) & (b <= self.length)]
         # breakpoints closer than 1e-9 L merge (a grip at a load's s is one breakpoint)
         keep = np.concatenate([[True], np.diff(b) > 1e-9 * self.length])
@@ -84,25 +103,37 @@ class ElementMesh:
             raise ValueError("solver.order must be at least 3")
         self.order = int(order)
         sizes = np.diff(self.breakpoints)
-        self.counts = [order] if len(sizes) == 1 else \
-            [max(MIN_NODES, int(np.ceil(order * h / self.length)) + 1) for h in sizes]
+        self.counts = (
+            [order]
+            if len(sizes) == 1
+            else [max(MIN_NODES, int(np.ceil(order * h / self.length)) + 1) for h in sizes]
+        )
         self.elements = [NodalElement(n, h) for n, h in zip(self.counts, sizes)]
         # first global node of each element (its last node is the next element's first)
         self.first = np.concatenate([[0], np.cumsum([n - 1 for n in self.counts])]).astype(int)
         self.count = int(self.first[-1]) + 1  # global nodes
         starts = self.breakpoints[:-1]
-        self.nodes = np.concatenate([lo + el.nodes[:-1] for lo, el in zip(starts, self.elements)] + [[self.length]])
-        self.quads = [ChebyshevQuadrature(el.count + extra, el.size) for el in self.elements] if extra else None
+        self.nodes = np.concatenate(
+            [lo + el.nodes[:-1] for lo, el in zip(starts, self.elements)] + [[self.length]]
+        )
+        self.quads = (
+            [ChebyshevQuadrature(el.count + extra, el.size) for el in self.elements]
+            if extra
+            else None
+        )
         per = [el.count + extra for el in self.elements]
         self.quad_first = np.concatenate([[0], np.cumsum(per)]).astype(int)
         if self.quads is None:
-            self.quad_nodes = np.concatenate([lo + el.nodes for lo, el in zip(starts, self.elements)])
+            self.quad_nodes = np.concatenate(
+                [lo + el.nodes for lo, el in zip(starts, self.elements)]
+            )
             self.weights = np.concatenate([el.weights for el in self.elements])
         else:
             self.quad_nodes = np.concatenate([lo + q.nodes for lo, q in zip(starts, self.quads)])
             self.weights = np.concatenate([q.weights for q in self.quads])
         self.quad_count = self.quad_nodes.size
-        # B: global nodal values → values at the quadrature nodes (a selection when collocated); dB: derivatives
+        # B: global nodal values → values at the quadrature nodes (a selection when collocated);
+        # dB: derivatives
         self.B = np.zeros((self.quad_count, self.count))
         self.dB = np.zeros((self.quad_count, self.count))
         for e, el in enumerate(self.elements):
@@ -125,12 +156,16 @@ class ElementMesh:
     def element_of(self, s: np.ndarray, side: str = "left") -> np.ndarray:
         """Element index of each s; at a breakpoint the element on ``side`` ('left' or 'right')."""
         inner = self.breakpoints[1:-1]
-        idx = np.searchsorted(inner, np.asarray(s, dtype=float), side="left" if side == "left" else "right")
+        idx = np.searchsorted(
+            inner, np.asarray(s, dtype=float), side="left" if side == "left" else "right"
+        )
         return np.clip(idx, 0, self.element_count - 1)
 
     def interpolation(self, s, side: str = "left") -> tuple[np.ndarray, np.ndarray]:
-        """(B, B') of shape (len(s), count): field values and s-derivatives at s from the nodal values.
-        At a breakpoint the derivative is the one-sided derivative of the element on ``side``."""
+        """(B, B') of shape (len(s), count): field values and s-derivatives at s from the nodal
+        values. At a breakpoint the derivative is the one-sided derivative of the element on
+        ``side``.
+        """
         s = np.atleast_1d(np.asarray(s, dtype=float))
         B, dB = np.zeros((s.size, self.count)), np.zeros((s.size, self.count))
         which = self.element_of(s, side)
@@ -153,6 +188,9 @@ class ElementMesh:
             W[np.ix_(full, cols)] = el.weights if self.quads is None else self.quads[e].weights
             part = (s > lo) & (s < hi)
             if np.any(part):
-                W[np.ix_(part, cols)] = el.integral(s[part] - lo) if self.quads is None else \
-                    self.quads[e].integration_matrix(s[part] - lo)
+                W[np.ix_(part, cols)] = (
+                    el.integral(s[part] - lo)
+                    if self.quads is None
+                    else self.quads[e].integration_matrix(s[part] - lo)
+                )
         return W

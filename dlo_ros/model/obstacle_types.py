@@ -18,6 +18,7 @@ vector ``p`` (its pose and size, the NLP's layout in ``fields``):
 Adding a type is one class here plus its tests (CONTRIBUTING.md, "A new obstacle type").  The style
 is PyElastica's one class per contact pair: no ``if type == ...`` anywhere else.
 """
+
 from __future__ import annotations
 
 import functools
@@ -37,8 +38,9 @@ from .rotations import check_quaternion, matrix_to_quat, quat_to_matrix, quat_z_
 #: CasADi)
 NUMPY = SimpleNamespace(dot=np.dot, norm_2=np.linalg.norm, fmin=min, fmax=max)
 #: the same over the rows of an (N, 3) array of points (``HalfSpace.h_many``, ``Sphere.h_many``)
-ROWS = SimpleNamespace(dot=lambda a, b: np.sum(a * b, axis=-1),
-                       norm_2=lambda v: np.sqrt(np.sum(v * v, axis=-1)))
+ROWS = SimpleNamespace(
+    dot=lambda a, b: np.sum(a * b, axis=-1), norm_2=lambda v: np.sqrt(np.sum(v * v, axis=-1))
+)
 
 BOX_EXPONENT = 8
 
@@ -54,7 +56,8 @@ PRIMITIVE_KINDS = ("plane", "sphere", "capsule", "box")
 class Key:
     """A scene-file key of an obstacle type: its value's ``kind`` ('vector': 3 numbers, 'number',
     'quaternion': x, y, z, w) and whether it is required (else the type's ``parse`` has a
-    default)."""
+    default).
+    """
 
     kind: str
     required: bool
@@ -113,7 +116,8 @@ class ObstacleType(ABC):
     docstring).
 
     Subclasses set the class attributes and implement every abstract method;
-    test/unit/test_obstacle_types.py checks each registered type for all of them."""
+    test/unit/test_obstacle_types.py checks each registered type for all of them.
+    """
 
     name: ClassVar[str]  # the scene's ``type`` string
     size: ClassVar[int]  # length of p
@@ -133,21 +137,24 @@ class ObstacleType(ABC):
     @abstractmethod
     def h(self, x: Any, p: Any, lib: Any = ca) -> Any:
         """Signed distance [m], positive inside: CasADi with ``lib=ca``; numpy with ``lib=NUMPY``
-        (one point) or ``ROWS`` (rows of points) unless ``casadi_only``."""
+        (one point) or ``ROWS`` (rows of points) unless ``casadi_only``.
+        """
 
     #: whether ``h`` works only in CasADi (then ``h_at`` calls a CasADi Function)
     casadi_only: ClassVar[bool] = False
 
     def h_at(self, x: np.ndarray, p: np.ndarray) -> float:
         """h at one point [m]: numpy unless ``casadi_only`` (a streaming solver asks every
-        update)."""
+        update).
+        """
         if self.casadi_only:
             return float(numeric_h(self.name)(x, p))
         return float(self.h(np.asarray(x, dtype=float), p, NUMPY))
 
     def h_many(self, points: np.ndarray, p: np.ndarray) -> np.ndarray:
         """h at the rows of ``points`` (N ≥ 1, 3) [m]: one mapped CasADi call (overridden where
-        numpy over rows is exact)."""
+        numpy over rows is exact).
+        """
         return np.asarray(numeric_h_many(self.name, points.shape[0])(points.T, p)).ravel()
 
     @abstractmethod
@@ -155,17 +162,26 @@ class ObstacleType(ABC):
         """A lower bound of the distance [m] from x to the obstacle (≤ 0 inside)."""
 
     @abstractmethod
-    def clear_of_plane(self, p: np.ndarray, origin: np.ndarray, normal: np.ndarray,
-                       margin: float) -> bool:
+    def clear_of_plane(
+        self, p: np.ndarray, origin: np.ndarray, normal: np.ndarray, margin: float
+    ) -> bool:
         """Is the obstacle more than ``margin`` [m] from the plane through ``origin`` (unit
-        ``normal``)?"""
+        ``normal``)?
+        """
 
     @abstractmethod
-    def planarity_violation(self, p: np.ndarray, origin: np.ndarray, normal: np.ndarray,
-                            tolerance: float, length: float) -> str:
+    def planarity_violation(
+        self,
+        p: np.ndarray,
+        origin: np.ndarray,
+        normal: np.ndarray,
+        tolerance: float,
+        length: float,
+    ) -> str:
         """Why the obstacle does not fit the planar model of the plane (``origin``, unit
         ``normal``), or "": directions within ``tolerance``, offsets within ``tolerance`` ·
-        ``length``."""
+        ``length``.
+        """
 
     @abstractmethod
     def primitive(self, p: np.ndarray) -> Primitive:
@@ -241,8 +257,14 @@ class HalfSpace(ObstacleType):
         return ""
 
     def primitive(self, p):
-        return Primitive("plane", p[0:3].copy(), quat_z_to(p[3:6]), p[3:6].copy(), np.zeros(3),
-                         colour=PLANE_COLOUR)
+        return Primitive(
+            "plane",
+            p[0:3].copy(),
+            quat_z_to(p[3:6]),
+            p[3:6].copy(),
+            np.zeros(3),
+            colour=PLANE_COLOUR,
+        )
 
 
 @register
@@ -280,8 +302,14 @@ class Sphere(ObstacleType):
 
     def primitive(self, p):
         r = float(p[3])
-        return Primitive("sphere", p[0:3].copy(), np.array([0.0, 0.0, 0.0, 1.0]),
-                         np.array([0.0, 0.0, 1.0]), np.full(3, r), r)
+        return Primitive(
+            "sphere",
+            p[0:3].copy(),
+            np.array([0.0, 0.0, 0.0, 1.0]),
+            np.array([0.0, 0.0, 1.0]),
+            np.full(3, r),
+            r,
+        )
 
 
 @register
@@ -322,8 +350,14 @@ class Capsule(ObstacleType):
     def primitive(self, p):
         a, b, r = p[0:3], p[3:6], float(p[6])
         length = float(np.linalg.norm(b - a))
-        return Primitive("capsule", (a + b) / 2, quat_z_to(b - a), (b - a) / length,
-                         np.array([r, r, 0.5 * length]), r)
+        return Primitive(
+            "capsule",
+            (a + b) / 2,
+            quat_z_to(b - a),
+            (b - a) / length,
+            np.array([r, r, 0.5 * length]),
+            r,
+        )
 
 
 @register
@@ -339,10 +373,16 @@ class Box(ObstacleType):
 
     name = "box"
     size = 15
-    keys = {"center": Key("vector", True), "orientation": Key("quaternion", False),
-            "half_extents": Key("vector", True)}
-    fields = {"centre": slice(0, 3), "rotation_transposed": slice(3, 12),
-              "half_extents": slice(12, 15)}
+    keys = {
+        "center": Key("vector", True),
+        "orientation": Key("quaternion", False),
+        "half_extents": Key("vector", True),
+    }
+    fields = {
+        "centre": slice(0, 3),
+        "rotation_transposed": slice(3, 12),
+        "half_extents": slice(12, 15),
+    }
     casadi_only = True
 
     def parse(self, d, where):
@@ -359,9 +399,11 @@ class Box(ObstacleType):
         return np.asarray(p[3:12], dtype=float).reshape(3, 3).T
 
     def to_dict(self, p):
-        return {"center": p[0:3].tolist(),
-                "orientation": matrix_to_quat(self.rotation(p)).tolist(),
-                "half_extents": p[12:15].tolist()}
+        return {
+            "center": p[0:3].tolist(),
+            "orientation": matrix_to_quat(self.rotation(p)).tolist(),
+            "half_extents": p[12:15].tolist(),
+        }
 
     def h(self, x, p, lib=ca):
         c, rt, e = p[0:3], ca.reshape(p[3:12], 3, 3).T, p[12:15]
@@ -382,5 +424,6 @@ class Box(ObstacleType):
 
     def primitive(self, p):
         rotation = self.rotation(p)
-        return Primitive("box", p[0:3].copy(), matrix_to_quat(rotation), rotation[:, 2].copy(),
-                         p[12:15].copy())
+        return Primitive(
+            "box", p[0:3].copy(), matrix_to_quat(rotation), rotation[:, 2].copy(), p[12:15].copy()
+        )

@@ -1,13 +1,14 @@
 """Obstacles as inequality constraints h(x) ≤ 0 (paper eq. 8): h > 0 inside, h < 0 outside.
 
-Each obstacle type has a fixed-size parameter vector (its pose and size), so moving an obstacle changes
-parameter values of the NLP, never its structure.  Every h is a signed distance [m] (exact for
-half-space, sphere and capsule; for the box a smooth inscribed approximation, see
+Each obstacle type has a fixed-size parameter vector (its pose and size), so moving an obstacle
+changes parameter values of the NLP, never its structure.  Every h is a signed distance [m] (exact
+for half-space, sphere and capsule; for the box a smooth inscribed approximation, see
 ``obstacle_types.Box``), which lets the string's radius be added as a clearance: h(x) + radius ≤ 0.
 
 What differs between types lives in ``obstacle_types`` (one class per type, registered in
 ``OBSTACLE_TYPES``); ``Obstacle`` is one obstacle: its type's name, parameter vector and name.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -16,12 +17,21 @@ import numpy as np
 
 from .obstacle_types import BOX_EXPONENT, NUMPY, OBSTACLE_TYPES, ROWS, ObstacleType, Primitive
 
-__all__ = ["BOX_EXPONENT", "NUMPY", "OBSTACLE_FIELDS", "OBSTACLE_TYPES", "ROWS", "Obstacle",
-           "ObstacleType", "Primitive"]
+__all__ = [
+    "BOX_EXPONENT",
+    "NUMPY",
+    "OBSTACLE_FIELDS",
+    "OBSTACLE_TYPES",
+    "ROWS",
+    "Obstacle",
+    "ObstacleType",
+    "Primitive",
+]
 
 #: where each named field of an obstacle type sits in its parameter vector (the NLP's layout)
 OBSTACLE_FIELDS: dict[str, dict[str, slice | int]] = {
-    k: t.fields for k, t in OBSTACLE_TYPES.items()}
+    k: t.fields for k, t in OBSTACLE_TYPES.items()
+}
 
 
 @dataclass(frozen=True)
@@ -31,7 +41,8 @@ class Obstacle:
     Read its geometry through the named accessors (``point``, ``normal``, ``centre``, ``radius``,
     ``a``, ``b``, ``rotation``, ``half_extents``; each exists for the types whose ``fields`` list
     it): only the type's class in ``obstacle_types`` knows the parameter vector's layout.  What
-    differs between types is asked of ``obstacle_type``."""
+    differs between types is asked of ``obstacle_type``.
+    """
 
     type: str
     params: np.ndarray = field(compare=False)
@@ -95,12 +106,15 @@ class Obstacle:
             raise ValueError(f"{where}: must be a mapping with a 'type'")
         kind = d.get("type")
         if kind not in OBSTACLE_TYPES:
-            raise ValueError(f"{where}.type: must be one of {sorted(OBSTACLE_TYPES)}, got {kind!r}")
+            raise ValueError(
+                f"{where}.type: must be one of {sorted(OBSTACLE_TYPES)}, got {kind!r}"
+            )
         return Obstacle(kind, OBSTACLE_TYPES[kind].parse(d, where), str(d.get("name", "")))
 
     def to_dict(self) -> dict:
         """The scene-file form: type, name (when set) and the type's keys (``from_dict`` of it is
-        equal)."""
+        equal).
+        """
         out: dict = {"type": self.type}
         if self.name:
             out["name"] = self.name
@@ -109,7 +123,8 @@ class Obstacle:
 
     def h(self, x: np.ndarray) -> float:
         """Numerical h(x) [m] (positive inside): the NLP's formula, in numpy where the type allows
-        (a streaming solver asks every update)."""
+        (a streaming solver asks every update).
+        """
         return self.obstacle_type.h_at(x, self.params)
 
     def h_many(self, points: np.ndarray) -> np.ndarray:

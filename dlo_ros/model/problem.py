@@ -1,9 +1,10 @@
 """The physical problem: a string, where it is held, what acts on it, what it must avoid.
 
-Every quantity is SI: lengths in m, stiffnesses Rf, Rt in N·m², Re in N, weight per length D in N/m,
-forces in N, moments in N·m.  Orientations are quaternions (x, y, z, w) of a pose whose x-axis is the
-string's tangent, pointing toward increasing s.
+Every quantity is SI: lengths in m, stiffnesses Rf, Rt in N·m², Re in N, weight per length D in
+N/m, forces in N, moments in N·m.  Orientations are quaternions (x, y, z, w) of a pose whose x-axis
+is the string's tangent, pointing toward increasing s.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -12,7 +13,8 @@ import numpy as np
 
 from .obstacles import Obstacle
 from .profile import Profile
-from .rotations import PoseError, check_position, check_quaternion  # noqa: F401 - PoseError re-exported
+# noqa: F401 - PoseError re-exported
+from .rotations import PoseError, check_position, check_quaternion
 
 GRIP_MODES = ("clamp", "pin", "tangent")
 
@@ -55,18 +57,27 @@ class StringProperties:
         if self.weight_per_length.minimum < 0:
             raise ValueError("string.weight_per_length: must be >= 0 everywhere")
         if self.stretch_stiffness is not None and self.stretch_stiffness.minimum <= 0:
-            raise ValueError("string.stretch_stiffness: must be > 0 everywhere (omit it for inextensible)")
+            raise ValueError(
+                "string.stretch_stiffness: must be > 0 everywhere (omit it for inextensible)"
+            )
         if not (np.isfinite(self.radius) and self.radius >= 0):
             raise ValueError(f"string.radius: must be >= 0, got {self.radius}")
-        for name in ("bend_stiffness", "twist_stiffness", "weight_per_length", "stretch_stiffness"):
+        for name in (
+            "bend_stiffness",
+            "twist_stiffness",
+            "weight_per_length",
+            "stretch_stiffness",
+        ):
             prof = getattr(self, name)
             if prof is not None and not all(np.isfinite(prof.values)):
                 raise ValueError(f"string.{name}: contains NaN or infinity")
 
 
 def _copied(value, **changes):
-    """A copy of the frozen dataclass ``value`` with ``changes``, without ``dataclasses.replace``'s call
-    of ``__init__`` (for values that are valid already; a warm update makes several per target)."""
+    """A copy of the frozen dataclass ``value`` with ``changes``, without ``dataclasses.replace``'s
+    call of ``__init__`` (for values that are valid already; a warm update makes several per
+    target).
+    """
     new = object.__new__(type(value))
     new.__dict__.update(value.__dict__)
     new.__dict__.update(changes)
@@ -75,15 +86,21 @@ def _copied(value, **changes):
 
 @dataclass(frozen=True)
 class GripPose:
-    """Where a grip holds the string: position [m] and orientation (x, y, z, w), x along the tangent."""
+    """Where a grip holds the string: position [m] and orientation (x, y, z, w), x along the
+    tangent.
+    """
 
     position: np.ndarray
     orientation: np.ndarray
 
     @staticmethod
-    def checked(position: object, orientation: object, where: str, quat_tolerance: float = 1e-3) -> "GripPose":
-        """The one validation of a grip pose (scene files, targets, queries, observations): the quaternion
-        normalised, or PoseError (a ValueError with a ``kind``) naming ``where``.position/.orientation."""
+    def checked(
+        position: object, orientation: object, where: str, quat_tolerance: float = 1e-3
+    ) -> "GripPose":
+        """The one validation of a grip pose (scene files, targets, queries, observations): the
+        quaternion normalised, or PoseError (a ValueError with a ``kind``) naming
+        ``where``.position/.orientation.
+        """
         return GripPose(
             check_position(position, f"{where}.position"),
             check_quaternion(orientation, f"{where}.orientation", quat_tolerance),
@@ -172,10 +189,14 @@ class Problem:
 
     def farthest_apart(self, reach: float = 1.0) -> tuple[Grip, Grip, float, float] | None:
         """The first pair of grips farther apart than ``reach`` times the string between them, as
-        (a, b, distance [m], reach × span [m]); None when every pair is within reach."""
+        (a, b, distance [m], reach × span [m]); None when every pair is within reach.
+        """
         for i, a in enumerate(self.grips):
-            for b in self.grips[i + 1:]:
-                dist, span = float(np.linalg.norm(a.pose.position - b.pose.position)), abs(a.s - b.s) * reach
+            for b in self.grips[i + 1 :]:
+                dist, span = (
+                    float(np.linalg.norm(a.pose.position - b.pose.position)),
+                    abs(a.s - b.s) * reach,
+                )
                 if dist > span + 1e-12:
                     return a, b, dist, span
         return None
@@ -187,9 +208,18 @@ class Problem:
         raise KeyError(f"no grip named {name!r}; grips are {[g.name for g in self.grips]}")
 
     def relative_ends(self) -> list[float]:
-        """s_a, s_b [m] of every relative position, in order: where their reactions act as point forces."""
+        """s_a, s_b [m] of every relative position, in order: where their reactions act as point
+        forces.
+        """
         return [s for rel in self.relative_positions for s in (rel.s_a, rel.s_b)]
 
     def with_grip_poses(self, poses: dict[str, GripPose]) -> "Problem":
-        """This problem with the grips named in ``poses`` at those poses (checked ones: ``GripPose.checked``)."""
-        return _copied(self, grips=tuple(_copied(g, pose=poses[g.name]) if g.name in poses else g for g in self.grips))
+        """This problem with the grips named in ``poses`` at those poses (checked ones:
+        ``GripPose.checked``).
+        """
+        return _copied(
+            self,
+            grips=tuple(
+                _copied(g, pose=poses[g.name]) if g.name in poses else g for g in self.grips
+            ),
+        )

@@ -1,4 +1,5 @@
 """Material properties that are constant or vary along the arc length."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass

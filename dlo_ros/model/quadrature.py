@@ -6,6 +6,7 @@ interpolant p of degree M−1 gives
     ∫_0^σ f ds ≈ Σ_j W_j(σ) f_j               (cumulative integration matrix W)
 Both are exact for polynomials of degree ≤ M−1 and converge spectrally for smooth f.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,7 +32,12 @@ class ChebyshevQuadrature:
         tau_q = 2.0 * np.asarray(s, dtype=float).ravel() / self.length - 1.0
         if not hasattr(self, "_antiderivatives"):  # column k: the Chebyshev series of ∫_{-1}^τ T_k
             self._antiderivatives = C.chebint(np.eye(self.count), lbnd=-1.0)
-        return 0.5 * self.length * (C.chebvander(tau_q, self.count) @ self._antiderivatives) @ self._vinv
+        return (
+            0.5
+            * self.length
+            * (C.chebvander(tau_q, self.count) @ self._antiderivatives)
+            @ self._vinv
+        )
 
     def interpolation_matrix(self, s: np.ndarray) -> np.ndarray:
         """P[q, j] with f(s_q) ≈ Σ_j P[q, j] f(s_j) (polynomial interpolation)."""

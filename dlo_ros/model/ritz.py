@@ -1,8 +1,8 @@
 """Ritz discretisation of the string energy (Hirai & Wakamatsu, secs. 2–3) as CasADi expressions.
 
-Unknowns z = [x0/L (3), c_φ (n), c_θ (n), c_ψ (n, only if twist is held), c_ε (n, only if extensible)]:
-the position of s = 0 scaled by L, and the coefficients of the Euler angles φ(s), θ(s), ψ(s) and of the
-strain ε(s) in a basis of n functions.  On M Chebyshev–Lobatto nodes s_j:
+Unknowns z = [x0/L (3), c_φ (n), c_θ (n), c_ψ (n, only if twist is held), c_ε (n, only if
+extensible)]: the position of s = 0 scaled by L, and the coefficients of the Euler angles φ(s),
+θ(s), ψ(s) and of the strain ε(s) in a basis of n functions.  On M Chebyshev–Lobatto nodes s_j:
 
     ζ_j   = R0 [−sinθ cosφ, sinθ sinφ, cosθ]_j                       unit tangent (eq. 1)
     x(σ)  = x0 + Σ_j W_j(σ) (1 + ε_j) ζ_j                            centreline (eq. 2)
@@ -10,14 +10,16 @@ strain ε(s) in a basis of n functions.  On M Chebyshev–Lobatto nodes s_j:
     U_twist   = Σ_j w_j ½ Rt_j (φ'_j cosθ_j + ψ'_j)²                   ½ Rt ω²
     U_stretch = Σ_j w_j ½ Re_j ε_j²
     U_grav    = Σ_j w_j D_j (−ĝ · x(s_j))                              D × height
-(the terms quadratic in the coefficients are assembled once per material as matrices: ``material_terms``)
+(the terms quadratic in the coefficients are assembled once per material as matrices:
+``material_terms``)
     W         = Σ_k F_k · x(s_k) − m_k φ(s_k)                          eq. 5, m_k = M_k · n
 
 with Clenshaw–Curtis weights w and the cumulative integration matrix W (see quadrature.py).  The
-point-moment work −m φ is exact for moments about the reference normal n = R0 e_z (a rotation of the
-frame about n by α changes φ by −α).  Material profiles (Rf, Rt, Re, D at the nodes) and the gravity
-direction are NLP parameters, so changing them never rebuilds the problem.
+point-moment work −m φ is exact for moments about the reference normal n = R0 e_z (a rotation of
+the frame about n by α changes φ by −α).  Material profiles (Rf, Rt, Re, D at the nodes) and the
+gravity direction are NLP parameters, so changing them never rebuilds the problem.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -63,8 +65,17 @@ class FieldLayout:
 class RitzModel:
     """Maps the unknowns z to fields, positions and energy terms, numerically and symbolically."""
 
-    def __init__(self, length: float, basis: str, order: int, nodes: int, r0: np.ndarray, twist: bool, stretch: bool,
-                 planar: bool = False):
+    def __init__(
+        self,
+        length: float,
+        basis: str,
+        order: int,
+        nodes: int,
+        r0: np.ndarray,
+        twist: bool,
+        stretch: bool,
+        planar: bool = False,
+    ):
         self.length = float(length)
         self.basis: Basis = make_basis(basis, order, length)
         self.quad = ChebyshevQuadrature(nodes, length)
@@ -74,7 +85,7 @@ class RitzModel:
         self.layout = FieldLayout(order, twist, stretch, planar)
         s = self.quad.nodes
         self._cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self.B = self.basis.values(s)        # (M, n)
+        self.B = self.basis.values(s)  # (M, n)
         self.dB = self.basis.derivatives(s)  # (M, n)
 
     # ---- fields -----------------------------------------------------------------------------------
@@ -88,9 +99,10 @@ class RitzModel:
     def tangents(self, phi, theta, eps=None, lib=ca):
         """(1 + ε) ζ at the nodes: a 3×M expression (lib = casadi) or array (lib = numpy).
 
-        A planar model has θ ≡ π/2 exactly: ζ = R0 [−cos φ, sin φ, 0], two columns of R0, so the tangent
-        has no out-of-plane part (cos(π/2) in floating point is 6e-17).  It saves little work: CasADi
-        already simplifies sin θ = 1 in the general formula (0.3 % of the planar KKT instructions).
+        A planar model has θ ≡ π/2 exactly: ζ = R0 [−cos φ, sin φ, 0], two columns of R0, so the
+        tangent has no out-of-plane part (cos(π/2) in floating point is 6e-17).  It saves little
+        work: CasADi already simplifies sin θ = 1 in the general formula (0.3 % of the planar KKT
+        instructions).
         """
         if self.layout.planar:
             local, r0 = [-lib.cos(phi), lib.sin(phi)], self.r0[:, :2]
@@ -106,14 +118,20 @@ class RitzModel:
         return t if eps is None else t * (1 + eps)[None, :]
 
     def matrices(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(B(s), B'(s), W(s)) for arc lengths s, memoised: a running solver asks for the same s again."""
+        """(B(s), B'(s), W(s)) for arc lengths s, memoised: a running solver asks for the same s
+        again.
+        """
         s = np.ascontiguousarray(s, dtype=float).ravel()
         key = s.tobytes()
         hit = self._cache.get(key)
         if hit is None:
             if len(self._cache) > 256:
                 self._cache.clear()
-            hit = (self.basis.values(s), self.basis.derivatives(s), self.quad.integration_matrix(s))
+            hit = (
+                self.basis.values(s),
+                self.basis.derivatives(s),
+                self.quad.integration_matrix(s),
+            )
             self._cache[key] = hit
         return hit
 
@@ -135,13 +153,13 @@ class RitzModel:
         return sizes
 
     def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The parts of the energy that depend on the material alone, assembled once per string (numpy):
+        """The parts of the energy that depend on the material alone, assembled once per string
+        (numpy):
 
-            K_bend    = B'ᵀ diag(w Rf) B'     ½ ∫ Rf θ'² ds = ½ c_θᵀ K_bend c_θ   (planar: ½ c_φᵀ K_bend c_φ)
-            K_twist   = B'ᵀ diag(w Rt) B'     the ψ'² part of ½ ∫ Rt ω² ds
-            K_stretch = Bᵀ diag(w Re) B       ½ ∫ Re ε² ds
-            m         = W(s_nodes)ᵀ (w ∘ D)   Σ_j w_j D_j x(s_j) = x0 Σ_j w_j D_j + Σ_k m_k t_k
-            ΣwD                                the weight [N]
+            K_bend    = B'ᵀ diag(w Rf) B'     ½ ∫ Rf θ'² ds = ½ c_θᵀ K_bend c_θ   (planar: ½ c_φᵀ
+            K_bend c_φ) K_twist   = B'ᵀ diag(w Rt) B'     the ψ'² part of ½ ∫ Rt ω² ds K_stretch =
+            Bᵀ diag(w Re) B       ½ ∫ Re ε² ds m         = W(s_nodes)ᵀ (w ∘ D)   Σ_j w_j D_j x(s_j)
+            = x0 Σ_j w_j D_j + Σ_k m_k t_k ΣwD                                the weight [N]
 
         Each is the same quadrature as the symbolic sum it replaces (so the energy is unchanged to
         rounding), but its Hessian costs nothing per evaluation instead of M·n² operations.
@@ -181,13 +199,17 @@ class RitzModel:
             bend = quadratic("K_bend", cth) + 0.5 * ca.dot(w, profiles["Rf"] * st**2 * dphi**2)
         if cpsi is not None:  # ½ Rt (φ' cosθ + ψ')² = ½ Rt (φ' cosθ)² + Rt φ' cosθ ψ' + ½ Rt ψ'²
             a = dphi * ca.cos(th)
-            twist = ca.dot(w, profiles["Rt"] * a * (0.5 * a + ca.mtimes(dB, cpsi))) + quadratic("K_twist", cpsi)
+            twist = ca.dot(w, profiles["Rt"] * a * (0.5 * a + ca.mtimes(dB, cpsi))) + quadratic(
+                "K_twist", cpsi
+            )
         else:
             twist = ca.SX(0)
         eps = ca.mtimes(ca.DM(self.B), ceps) if ceps is not None else None
         stretch = quadratic("K_stretch", ceps) if ceps is not None else ca.SX(0)
         t = self.tangents(phi, th, eps)
-        grav = weight_energy_sym(z[0:3] * self.length, t, profiles["weight_total"], profiles["weight_moments"], gravity)
+        grav = weight_energy_sym(
+            z[0:3] * self.length, t, profiles["weight_total"], profiles["weight_moments"], gravity
+        )
         return bend, twist, stretch, grav, t
 
     def positions_sym(self, z: ca.SX, t: ca.SX, s: np.ndarray) -> ca.SX:
@@ -201,7 +223,9 @@ class RitzModel:
         return ca.mtimes(ca.DM(self.basis.values(np.array([s]))), c)
 
     # ---- numerical evaluation of a solution -------------------------------------------------------
-    def fields(self, z: np.ndarray, s: np.ndarray, names: tuple[str, ...] = ("phi", "theta", "psi", "eps")) -> dict[str, np.ndarray]:
+    def fields(
+        self, z: np.ndarray, s: np.ndarray, names: tuple[str, ...] = ("phi", "theta", "psi", "eps")
+    ) -> dict[str, np.ndarray]:
         """φ, θ, ψ, ε (or only ``names``) and their s-derivatives at arc lengths s.
 
         Fields that are not unknowns are constants: θ = π/2 in a planar model, ψ = ε = 0.
@@ -225,15 +249,21 @@ class RitzModel:
         return self.positions_at_rows(z, self.position_matrix(s))
 
     def position_rows(self, s: np.ndarray) -> np.ndarray:
-        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every solve)."""
+        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every
+        solve).
+        """
         return self.quad.integration_matrix(np.asarray(s, dtype=float))
 
     def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
         """(len(w), 3) centreline positions [m] at the arc lengths whose rows of W are ``w``."""
         return (np.asarray(z[0:3]) * self.length)[None, :] + w @ self.node_tangents(z).T
 
-    def zero_twist_psi(self, z: np.ndarray, s: np.ndarray, s_anchor: float, psi_anchor: float) -> np.ndarray:
-        """ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles to."""
+    def zero_twist_psi(
+        self, z: np.ndarray, s: np.ndarray, s_anchor: float, psi_anchor: float
+    ) -> np.ndarray:
+        """ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles
+        to.
+        """
         f = self.fields(z, self.quad.nodes, ("phi", "theta"))
         g = -f["dphi"] * np.cos(f["theta"])
         W = self.position_matrix(np.append(np.asarray(s, dtype=float), s_anchor))

@@ -1,4 +1,7 @@
-"""``python -m dlo_ros.node [--params-file FILE] [--scene NAME] [--check] [--ros-args ...]`` (also ``dlo node ...``)"""
+"""``python -m dlo_ros.node [--params-file FILE] [--scene NAME] [--check] [--ros-args ...]`` (also
+``dlo node ...``)
+"""
+
 import sys
 
 from . import main

@@ -1,12 +1,14 @@
-"""``sensor_msgs/PointCloud2`` ↔ an (N, 3) array of observed points (pure: numpy only, duck-typed messages).
+"""``sensor_msgs/PointCloud2`` ↔ an (N, 3) array of observed points (pure: numpy only, duck-typed
+messages).
 
-:func:`cloud_points` is what the node's ``~/observed`` subscription runs on a deserialised cloud.  It
-accepts ``x``, ``y``, ``z`` fields of datatype FLOAT32 or FLOAT64 (count 1) at any offsets inside
-``point_step`` (other fields are ignored), either byte order, organised (height > 1) or not, and
-raises :class:`~dlo_ros.node.validation.TargetError` naming the offending field for anything else:
-the frame, the size, the layout, NaN / infinity, too few or too many points.  Its cost is bounded by
-``max_points`` (the point count is checked before any point is read).
+:func:`cloud_points` is what the node's ``~/observed`` subscription runs on a deserialised cloud.
+It accepts ``x``, ``y``, ``z`` fields of datatype FLOAT32 or FLOAT64 (count 1) at any offsets
+inside ``point_step`` (other fields are ignored), either byte order, organised (height > 1) or not,
+and raises :class:`~dlo_ros.node.validation.TargetError` naming the offending field for anything
+else: the frame, the size, the layout, NaN / infinity, too few or too many points.  Its cost is
+bounded by ``max_points`` (the point count is checked before any point is read).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,10 +18,20 @@ from .validation import TargetError, check_frame_size, normalise_frame, safe_tex
 #: sensor_msgs/PointField datatypes read as coordinates: FLOAT32 = 7, FLOAT64 = 8
 FLOAT_TYPES = {7: "f4", 8: "f8"}
 #: the datatype names, for messages (sensor_msgs/PointField constants)
-TYPE_NAMES = {1: "INT8", 2: "UINT8", 3: "INT16", 4: "UINT16", 5: "INT32", 6: "UINT32", 7: "FLOAT32", 8: "FLOAT64"}
+TYPE_NAMES = {
+    1: "INT8",
+    2: "UINT8",
+    3: "INT16",
+    4: "UINT16",
+    5: "INT32",
+    6: "UINT32",
+    7: "FLOAT32",
+    8: "FLOAT64",
+}
 #: fewest points a fit can use (the observation file's minimum, dlo_ros.identify.observations)
 MIN_POINTS = 3
-#: bytes per point allowed for in the size limit of a serialised cloud (x, y, z, rgb, intensity, normals, ...)
+#: bytes per point allowed for in the size limit of a serialised cloud (x, y, z, rgb, intensity,
+#normals, ...)
 MAX_POINT_BYTES = 64
 #: bytes of a serialised cloud beyond its points: header, field descriptions
 CLOUD_OVERHEAD_BYTES = 64 * 1024
@@ -31,28 +43,48 @@ def cloud_bytes_limit(max_points: int) -> int:
 
 
 def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -> np.ndarray:
-    """The (N, 3) float64 points [m] of the PointCloud2 ``msg``, which must be in ``frame_id``; TargetError
-    (kind 'frame', 'count', 'invalid' or 'non_finite') naming the field otherwise (module docstring)."""
+    """The (N, 3) float64 points [m] of the PointCloud2 ``msg``, which must be in ``frame_id``;
+    TargetError (kind 'frame', 'count', 'invalid' or 'non_finite') naming the field otherwise
+    (module docstring).
+    """
     cloud_frame = msg.header.frame_id
     check_frame_size(cloud_frame, where)
     if normalise_frame(cloud_frame) != normalise_frame(frame_id) or not cloud_frame:
-        raise TargetError("frame", f"{where}: header.frame_id is '{safe_text(cloud_frame, 80)}', not the node's frame "
-                                   f"'{frame_id}' (clouds are not transformed: publish them in '{frame_id}')")
-    width, height, step, row_step = int(msg.width), int(msg.height), int(msg.point_step), int(msg.row_step)
+        raise TargetError(
+            "frame",
+            f"{where}: header.frame_id is '{safe_text(cloud_frame, 80)}', not the node's frame "
+            f"'{frame_id}' (clouds are not transformed: publish them in '{frame_id}')",
+        )
+    width, height, step, row_step = (
+        int(msg.width),
+        int(msg.height),
+        int(msg.point_step),
+        int(msg.row_step),
+    )
     n = width * height
     if n < MIN_POINTS:
-        raise TargetError("count", f"{where}: width × height = {width} × {height} = {n} points; a fit needs at "
-                                   f"least {MIN_POINTS}")
+        raise TargetError(
+            "count",
+            f"{where}: width × height = {width} × {height} = {n} points; a fit needs at "
+            f"least {MIN_POINTS}",
+        )
     if n > max_points:
-        raise TargetError("count", f"{where}: width × height = {n} points, over fit.max_points = {max_points}")
+        raise TargetError(
+            "count", f"{where}: width × height = {n} points, over fit.max_points = {max_points}"
+        )
     if step <= 0 or row_step < width * step:
-        raise TargetError("invalid", f"{where}: point_step {step} and row_step {row_step} do not hold width {width} "
-                                     "points per row")
+        raise TargetError(
+            "invalid",
+            f"{where}: point_step {step} and row_step {row_step} do not hold width {width} "
+            "points per row",
+        )
     data = msg.data
     size = len(data)
     if size < row_step * (height - 1) + width * step:
-        raise TargetError("invalid", f"{where}: data holds {size} bytes, less than height {height} × row_step "
-                                     f"{row_step}")
+        raise TargetError(
+            "invalid",
+            f"{where}: data holds {size} bytes, less than height {height} × row_step {row_step}",
+        )
     order = ">" if msg.is_bigendian else "<"
     fields = {f.name: f for f in msg.fields}
     try:  # rclpy gives an array.array('B'): read in place
@@ -64,40 +96,69 @@ def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -
         f = fields.get(axis)
         if f is None:
             names = ", ".join(safe_text(name, 20) for name in list(fields)[:10]) or "none"
-            raise TargetError("invalid", f"{where}: fields: no field '{axis}' (fields: {names}); x, y, z are needed")
+            raise TargetError(
+                "invalid",
+                f"{where}: fields: no field '{axis}' (fields: {names}); x, y, z are needed",
+            )
         kind = FLOAT_TYPES.get(int(f.datatype))
         if kind is None:
-            raise TargetError("invalid", f"{where}: fields['{axis}'].datatype is "
-                                         f"{TYPE_NAMES.get(int(f.datatype), int(f.datatype))}, not FLOAT32 or FLOAT64")
+            raise TargetError(
+                "invalid",
+                f"{where}: fields['{axis}'].datatype is "
+                f"{TYPE_NAMES.get(int(f.datatype), int(f.datatype))}, not FLOAT32 or FLOAT64",
+            )
         if int(f.count) != 1:
-            raise TargetError("invalid", f"{where}: fields['{axis}'].count is {int(f.count)}, not 1")
+            raise TargetError(
+                "invalid", f"{where}: fields['{axis}'].count is {int(f.count)}, not 1"
+            )
         offset, nbytes = int(f.offset), int(kind[1])
         if offset < 0 or offset + nbytes > step:
-            raise TargetError("invalid", f"{where}: fields['{axis}'].offset {offset} + {nbytes} bytes is outside "
-                                         f"point_step {step}")
+            raise TargetError(
+                "invalid",
+                f"{where}: fields['{axis}'].offset {offset} + {nbytes} bytes is outside "
+                f"point_step {step}",
+            )
         # one strided view per row block: rows may be padded (row_step > width × point_step)
-        view = np.lib.stride_tricks.as_strided(raw[offset:], shape=(height, width, nbytes),
-                                               strides=(row_step, step, 1), writeable=False)
+        view = np.lib.stride_tricks.as_strided(
+            raw[offset:],
+            shape=(height, width, nbytes),
+            strides=(row_step, step, 1),
+            writeable=False,
+        )
         out[:, k] = np.ascontiguousarray(view).view(order + kind).reshape(n)
     bad = np.flatnonzero(~np.all(np.isfinite(out), axis=1))
     if bad.size:
         i = int(bad[0])
         axis = "xyz"[int(np.flatnonzero(~np.isfinite(out[i]))[0])]
-        raise TargetError("non_finite", f"{where}: point {i} (row {i // width}, column {i % width}): field '{axis}' is "
-                                        f"{out[i, 'xyz'.index(axis)]}; {bad.size} point(s) are NaN or infinite (drop "
-                                        "invalid points before publishing)")
+        raise TargetError(
+            "non_finite",
+            f"{where}: point {i} (row {i // width}, column {i % width}): field '{axis}' is "
+            f"{out[i, 'xyz'.index(axis)]}; {bad.size} point(s) are NaN or infinite (drop "
+            "invalid points before publishing)",
+        )
     return out
 
 
 def points_to_cloud(points: np.ndarray, frame_id: str, stamp_ns: int):
-    """An unorganised PointCloud2 (height 1) of float32 ``x``, ``y``, ``z`` for ``points`` (N, 3) [m]."""
+    """An unorganised PointCloud2 (height 1) of float32 ``x``, ``y``, ``z`` for ``points`` (N, 3)
+    [m].
+    """
     from sensor_msgs.msg import PointCloud2, PointField
 
     from .conversions import header
 
     pts = np.ascontiguousarray(np.asarray(points, dtype="<f4").reshape(-1, 3))
     return PointCloud2(
-        header=header(frame_id, stamp_ns), height=1, width=len(pts),
-        fields=[PointField(name=a, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, a in enumerate("xyz")],
-        is_bigendian=False, point_step=12, row_step=12 * len(pts), data=pts.tobytes(), is_dense=True,
+        header=header(frame_id, stamp_ns),
+        height=1,
+        width=len(pts),
+        fields=[
+            PointField(name=a, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+            for i, a in enumerate("xyz")
+        ],
+        is_bigendian=False,
+        point_step=12,
+        row_step=12 * len(pts),
+        data=pts.tobytes(),
+        is_dense=True,
     )

@@ -2,8 +2,10 @@
 
 Pure functions: they build or read message objects but need no node, context or graph, so they are
 unit-tested directly.  Conventions (see msg_docs/node.md): SI units, quaternions (x, y, z, w), a
-centreline pose's x-axis along the string's tangent, wrenches in the node's frame about the grip point.
+centreline pose's x-axis along the string's tangent, wrenches in the node's frame about the grip
+point.
 """
+
 from __future__ import annotations
 
 import struct
@@ -55,43 +57,65 @@ def pose_to_arrays(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
 def arrays_to_pose(position: Sequence[float], orientation: Sequence[float]) -> Pose:
     p = [float(v) for v in position]
     q = [float(v) for v in orientation]
-    return Pose(position=Point(x=p[0], y=p[1], z=p[2]),
-                orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))
+    return Pose(
+        position=Point(x=p[0], y=p[1], z=p[2]),
+        orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]),
+    )
 
 
-def pose_stamped(position: Sequence[float], orientation: Sequence[float], frame_id: str, stamp_ns: int) -> PoseStamped:
-    return PoseStamped(header=header(frame_id, stamp_ns), pose=arrays_to_pose(position, orientation))
+def pose_stamped(
+    position: Sequence[float], orientation: Sequence[float], frame_id: str, stamp_ns: int
+) -> PoseStamped:
+    return PoseStamped(
+        header=header(frame_id, stamp_ns), pose=arrays_to_pose(position, orientation)
+    )
 
 
 def quat_multiply(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
     """Hamilton product a ⊗ b of quaternions (x, y, z, w)."""
     ax, ay, az, aw = (float(v) for v in a)
     bx, by, bz, bw = (float(v) for v in b)
-    return np.array([
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    ])
+    return np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ]
+    )
 
 
-def transform_pose(position: np.ndarray, orientation: np.ndarray, translation: Sequence[float],
-                   rotation: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    """Apply the transform (translation, rotation quaternion) — e.g. a tf2 TransformStamped from the
-    pose's frame into the target frame — to a pose: p' = R p + t, q' = r ⊗ q."""
+def transform_pose(
+    position: np.ndarray,
+    orientation: np.ndarray,
+    translation: Sequence[float],
+    rotation: Sequence[float],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Apply the transform (translation, rotation quaternion) — e.g. a tf2 TransformStamped from
+    the pose's frame into the target frame — to a pose: p' = R p + t, q' = r ⊗ q.
+    """
     r = np.asarray(rotation, dtype=float)
     r = r / np.linalg.norm(r)
-    p = quat_to_matrix(r) @ np.asarray(position, dtype=float) + np.asarray(translation, dtype=float)
+    p = quat_to_matrix(r) @ np.asarray(position, dtype=float) + np.asarray(
+        translation, dtype=float
+    )
     return p, quat_multiply(r, orientation)
 
 
-def in_frame(frame_id: str, node_frame: str, position: np.ndarray, orientation: np.ndarray, where: str,
-             lookup: Callable[[str, str], tuple[Sequence[float], Sequence[float]]] | None = None):
+def in_frame(
+    frame_id: str,
+    node_frame: str,
+    position: np.ndarray,
+    orientation: np.ndarray,
+    where: str,
+    lookup: Callable[[str, str], tuple[Sequence[float], Sequence[float]]] | None = None,
+):
     """(position, orientation) of a pose given in ``frame_id``, expressed in ``node_frame``.
 
     Same frame (a leading '/' ignored): returned as is.  Otherwise ``lookup(node_frame, frame_id)``
-    (e.g. tf2's lookup_transform) gives (translation, rotation) from frame_id into node_frame; without a
-    lookup, for an empty frame_id, or when the lookup raises, TargetError('frame') names the problem.
+    (e.g. tf2's lookup_transform) gives (translation, rotation) from frame_id into node_frame;
+    without a lookup, for an empty frame_id, or when the lookup raises, TargetError('frame') names
+    the problem.
     """
     if frame_id and normalise_frame(frame_id) == normalise_frame(node_frame):
         return position, orientation
@@ -100,7 +124,9 @@ def in_frame(frame_id: str, node_frame: str, position: np.ndarray, orientation: 
     try:
         translation, rotation = lookup(normalise_frame(node_frame), normalise_frame(frame_id))
     except Exception as exc:  # noqa: BLE001 - tf2's lookup exceptions
-        raise TargetError("frame", f"{where}: no transform from '{frame_id}' to '{node_frame}': {exc}") from None
+        raise TargetError(
+            "frame", f"{where}: no transform from '{frame_id}' to '{node_frame}': {exc}"
+        ) from None
     return transform_pose(position, orientation, translation, rotation)
 
 
@@ -112,24 +138,37 @@ def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
     h = header(frame_id, stamp_ns)
     poses = []
     for p, q in zip(result.points.tolist(), result.orientations.tolist()):
-        poses.append(PoseStamped(
-            header=h,
-            pose=Pose(position=Point(x=p[0], y=p[1], z=p[2]), orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])),
-        ))
+        poses.append(
+            PoseStamped(
+                header=h,
+                pose=Pose(
+                    position=Point(x=p[0], y=p[1], z=p[2]),
+                    orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]),
+                ),
+            )
+        )
     return Path(header=h, poses=poses)
 
 
 def _cdr_header(stamp_ns: int, frame: bytes) -> bytes:
-    """A std_msgs/Header in CDR, to be placed at an offset that is a multiple of 4 after the encapsulation:
-    stamp (int32 sec, uint32 nanosec), frame_id (uint32 length with the NUL, the bytes, the NUL)."""
+    """A std_msgs/Header in CDR, to be placed at an offset that is a multiple of 4 after the
+    encapsulation: stamp (int32 sec, uint32 nanosec), frame_id (uint32 length with the NUL, the
+    bytes, the NUL).
+    """
     ns = int(stamp_ns)
-    return struct.pack("<iII", ns // 1_000_000_000, ns % 1_000_000_000, len(frame) + 1) + frame + b"\0"
+    return (
+        struct.pack("<iII", ns // 1_000_000_000, ns % 1_000_000_000, len(frame) + 1)
+        + frame
+        + b"\0"
+    )
 
 
 def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_ns: int) -> bytes:
-    """A nav_msgs/Path of these poses (every pose with the path's header), serialised as little-endian
-    CDR for ``Publisher.publish(bytes)``: no per-pose Python message objects.  Alignment follows CDR:
-    4-byte integers on 4, doubles on 8, offsets counted after the 4-byte encapsulation header."""
+    """A nav_msgs/Path of these poses (every pose with the path's header), serialised as
+    little-endian CDR for ``Publisher.publish(bytes)``: no per-pose Python message objects.
+    Alignment follows CDR: 4-byte integers on 4, doubles on 8, offsets counted after the 4-byte
+    encapsulation header.
+    """
     head = _cdr_header(stamp_ns, frame_id.encode())
     out = bytearray(b"\x00\x01\x00\x00")  # CDR, little endian
     out += head
@@ -142,20 +181,24 @@ def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_
     out += head
     out += b"\0" * (-(len(out) - 4) % 8)
     out += rows[0].tobytes()
-    # every later pose starts on 8 (its predecessor ends with doubles): one layout, filled in for all at once
+    # every later pose starts on 8 (its predecessor ends with doubles): one layout, filled in for
+    # all at once
     lead = len(head) + (-len(head) % 8)  # the header, then padding up to its pose's doubles
     blocks = np.zeros((len(rows) - 1, lead + 56), dtype=np.uint8)
-    blocks[:, :len(head)] = np.frombuffer(head, dtype=np.uint8)
+    blocks[:, : len(head)] = np.frombuffer(head, dtype=np.uint8)
     blocks[:, lead:] = rows[1:].view(np.uint8).reshape(len(rows) - 1, 56)
     out += blocks.tobytes()
     return bytes(out)
 
 
 def wrench_cdr(wrench: GripWrench, frame_id: str, stamp_ns: int) -> bytes:
-    """``wrench_stamped`` serialised as little-endian CDR for ``Publisher.publish(bytes)``: the header,
-    padding to 8, then force and torque as six doubles."""
+    """``wrench_stamped`` serialised as little-endian CDR for ``Publisher.publish(bytes)``: the
+    header, padding to 8, then force and torque as six doubles.
+    """
     head = _cdr_header(stamp_ns, frame_id.encode())
-    values = np.concatenate([np.asarray(wrench.force, dtype="<f8"), np.asarray(wrench.torque, dtype="<f8")])
+    values = np.concatenate(
+        [np.asarray(wrench.force, dtype="<f8"), np.asarray(wrench.torque, dtype="<f8")]
+    )
     return b"\x00\x01\x00\x00" + head + b"\0" * (-len(head) % 8) + values.tobytes()
 
 
@@ -169,28 +212,39 @@ class CdrError(ValueError):
 
 
 def _cdr_header_at(data: bytes, offset: int) -> tuple[int, str, int]:
-    """(stamp [ns], frame_id, offset after it) of a std_msgs/Header at ``offset`` (aligned to 4)."""
+    """(stamp [ns], frame_id, offset after it) of a std_msgs/Header at ``offset`` (aligned to
+    4).
+    """
     sec, nanosec, length = struct.unpack_from("<iII", data, offset)
     start = offset + 12
     if length < 1 or start + length > len(data):
         raise CdrError(f"frame_id of length {length} runs past the message")
-    return sec * 1_000_000_000 + nanosec, data[start:start + length - 1].decode(errors="replace"), start + length
+    return (
+        sec * 1_000_000_000 + nanosec,
+        data[start : start + length - 1].decode(errors="replace"),
+        start + length,
+    )
 
 
 def path_from_cdr(data: bytes) -> tuple[int, str, np.ndarray, np.ndarray]:
-    """(stamp [ns], frame_id, points (N, 3), quaternions (N, 4)) of a serialised nav_msgs/Path (what a
-    raw subscription takes): the inverse of :func:`path_cdr` for any Path, whatever its poses' headers.
-    No per-pose Python message objects: rclpy's deserialisation of a 51-pose Path costs several times
-    more (bench/results/node_latency.md).  Raises CdrError on bytes that are not a little-endian Path."""
+    """(stamp [ns], frame_id, points (N, 3), quaternions (N, 4)) of a serialised nav_msgs/Path
+    (what a raw subscription takes): the inverse of :func:`path_cdr` for any Path, whatever its
+    poses' headers. No per-pose Python message objects: rclpy's deserialisation of a 51-pose Path
+    costs several times more (bench/results/node_latency.md).  Raises CdrError on bytes that are
+    not a little-endian Path.
+    """
     if len(data) < 8 or data[:2] != b"\x00\x01":
         raise CdrError("not little-endian CDR")
     try:
         stamp, frame, offset = _cdr_header_at(data, 4)
-        pad = lambda o, a: o + (-(o - 4) % a)  # noqa: E731 - alignment counts from after the 4-byte prefix
+        # noqa: E731 - alignment counts from after the 4-byte prefix
+        pad = lambda o, a: o + (-(o - 4) % a)
         offset = pad(offset, 4)
         (count,) = struct.unpack_from("<I", data, offset)
         offset += 4
-        if count > (len(data) - offset) // 64:  # a pose takes at least 64 bytes: never allocate for a lie
+        if (
+            count > (len(data) - offset) // 64
+        ):  # a pose takes at least 64 bytes: never allocate for a lie
             raise CdrError(f"{count} poses do not fit in {len(data)} bytes")
         values = np.empty((count, 7))
         for k in range(count):
@@ -212,7 +266,9 @@ def path_to_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def wrench_stamped(wrench: GripWrench, frame_id: str, stamp_ns: int) -> WrenchStamped:
-    """Force [N] and torque [N m] the gripper exerts on the string (frame axes, about the grip point)."""
+    """Force [N] and torque [N m] the gripper exerts on the string (frame axes, about the grip
+    point).
+    """
     f = [float(v) for v in wrench.force]
     t = [float(v) for v in wrench.torque]
     msg = WrenchStamped(header=header(frame_id, stamp_ns))
@@ -230,8 +286,14 @@ def wrench_to_arrays(msg: WrenchStamped) -> tuple[np.ndarray, np.ndarray]:
 
 
 def bending_energy_density(s: np.ndarray, orientations: np.ndarray, bend_stiffness) -> np.ndarray:
-    """½ Rf(s) κ(s)² [J/m] per sample; ``bend_stiffness`` is a Profile (callable on s) or a number."""
-    rf = bend_stiffness(np.asarray(s, dtype=float)) if callable(bend_stiffness) else float(bend_stiffness)
+    """½ Rf(s) κ(s)² [J/m] per sample; ``bend_stiffness`` is a Profile (callable on s) or a
+    number.
+    """
+    rf = (
+        bend_stiffness(np.asarray(s, dtype=float))
+        if callable(bend_stiffness)
+        else float(bend_stiffness)
+    )
     return energy_density(curvature(s, orientations), rf)
 
 
@@ -296,7 +358,9 @@ def _primitive_markers(pr: Primitive, h: Header, mid: int) -> list[Marker]:
 
 
 def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0) -> list[Marker]:
-    """One marker per obstacle (a capsule is a cylinder plus two end spheres, a half-space a plate)."""
+    """One marker per obstacle (a capsule is a cylinder plus two end spheres, a half-space a
+    plate).
+    """
     out: list[Marker] = []
     mid = start_id
     rgba = _rgba(OBSTACLE_RGBA[:3], OBSTACLE_RGBA[3])
@@ -310,13 +374,20 @@ def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0
     return out
 
 
-def result_markers(result: ShapeResult, problem: Problem, frame_id: str, stamp_ns: int, *,
-                   force_scale: float = 0.1, energy_scale: float = 0.0) -> MarkerArray:
-    """The string (line strip coloured by bending energy density), the grips, the obstacles, the grip forces,
-    and each self-contact's force on both strands (namespace 'self_contacts').
+def result_markers(
+    result: ShapeResult,
+    problem: Problem,
+    frame_id: str,
+    stamp_ns: int,
+    *,
+    force_scale: float = 0.1,
+    energy_scale: float = 0.0,
+) -> MarkerArray:
+    """The string (line strip coloured by bending energy density), the grips, the obstacles, the
+    grip forces, and each self-contact's force on both strands (namespace 'self_contacts').
 
-    energy_scale [J/m]: density shown in full red (0: the shape's maximum).  Starts with DELETEALL so a
-    consumer never keeps markers of an earlier, larger scene.
+    energy_scale [J/m]: density shown in full red (0: the shape's maximum).  Starts with DELETEALL
+    so a consumer never keeps markers of an earlier, larger scene.
     """
     h = header(frame_id, stamp_ns)
     markers: list[Marker] = [Marker(header=h, action=Marker.DELETEALL)]
@@ -345,7 +416,10 @@ def result_markers(result: ShapeResult, problem: Problem, frame_id: str, stamp_n
         if wrench is not None:
             f = _marker(h, "forces", i, Marker.ARROW)
             start = np.asarray(g.pose.position, dtype=float)
-            f.points = [_point(start), _point(start + force_scale * np.asarray(wrench.force, dtype=float))]
+            f.points = [
+                _point(start),
+                _point(start + force_scale * np.asarray(wrench.force, dtype=float)),
+            ]
             f.scale = Vector3(x=0.006, y=0.012, z=0.0)
             f.color = _rgba(FORCE_RGB)
             f.text = f"{g.name}: {np.linalg.norm(wrench.force):.3g} N on the string"
@@ -356,7 +430,10 @@ def result_markers(result: ShapeResult, problem: Problem, frame_id: str, stamp_n
         for side, (point, force) in enumerate(((c.point_a, c.force), (c.point_b, -c.force))):
             m = _marker(h, "self_contacts", 2 * k + side, Marker.ARROW)
             start = np.asarray(point, dtype=float)
-            m.points = [_point(start), _point(start + force_scale * np.asarray(force, dtype=float))]
+            m.points = [
+                _point(start),
+                _point(start + force_scale * np.asarray(force, dtype=float)),
+            ]
             m.scale = Vector3(x=0.004, y=0.008, z=0.0)
             m.color = _rgba(SELF_CONTACT_RGB)
             m.text = f"self-contact s = {c.s_a if side == 0 else c.s_b:.4g} m: {np.linalg.norm(c.force):.3g} N"
@@ -368,8 +445,12 @@ def result_markers(result: ShapeResult, problem: Problem, frame_id: str, stamp_n
 
 # ---- diagnostics ---------------------------------------------------------------------------------------
 
-LEVELS = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN, "error": DiagnosticStatus.ERROR,
-          "stale": DiagnosticStatus.STALE}
+LEVELS = {
+    "ok": DiagnosticStatus.OK,
+    "warn": DiagnosticStatus.WARN,
+    "error": DiagnosticStatus.ERROR,
+    "stale": DiagnosticStatus.STALE,
+}
 
 
 def format_value(value: object) -> str:
@@ -382,11 +463,17 @@ def format_value(value: object) -> str:
     return str(value)
 
 
-def diagnostic_status(name: str, level: str, message: str, hardware_id: str,
-                      values: Mapping[str, object]) -> DiagnosticStatus:
-    """A DiagnosticStatus; ``level`` one of 'ok', 'warn', 'error', 'stale'; values become strings."""
+def diagnostic_status(
+    name: str, level: str, message: str, hardware_id: str, values: Mapping[str, object]
+) -> DiagnosticStatus:
+    """A DiagnosticStatus; ``level`` one of 'ok', 'warn', 'error', 'stale'; values become
+    strings.
+    """
     return DiagnosticStatus(
-        level=LEVELS[level], name=name, message=message, hardware_id=hardware_id,
+        level=LEVELS[level],
+        name=name,
+        message=message,
+        hardware_id=hardware_id,
         values=[KeyValue(key=str(k), value=format_value(v)) for k, v in values.items()],
     )
 

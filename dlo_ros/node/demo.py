@@ -1,8 +1,9 @@
 """The dual-arm demo: the node in a subprocess, a driver in this process, real DDS between them.
 
 ``run_demo_job(argv)`` starts ``python -m dlo_ros.node`` on the default scene with a sphere "post"
-added (a demo scene written to a temporary directory), waits for its first centreline, then moves the
-two grippers through a short manoeuvre by publishing ``~/grips/targets`` (PoseArray) at a fixed rate:
+added (a demo scene written to a temporary directory), waits for its first centreline, then moves
+the two grippers through a short manoeuvre by publishing ``~/grips/targets`` (PoseArray) at a fixed
+rate:
 
 1. bring the ends together (and raise them a little),
 2. twist the right end by half a turn about the cable's tangent,
@@ -11,9 +12,11 @@ two grippers through a short manoeuvre by publishing ``~/grips/targets`` (PoseAr
 It records every centreline it receives and prints a summary: targets sent, centrelines received,
 end-to-end latency target -> centreline (p50/p99/max; the centreline's header stamp is the stamp of
 the newest target it answers), failures and rejected inputs, how many shapes were stable, and where
-the cable ended.  The node is always stopped (SIGINT, then SIGTERM/SIGKILL of its process group) and
-the temporary directory removed.  Run it with ``python -m dlo_ros.node.demo`` (or through the CLI).
+the cable ended.  The node is always stopped (SIGINT, then SIGTERM/SIGKILL of its process group)
+and the temporary directory removed.  Run it with ``python -m dlo_ros.node.demo`` (or through the
+CLI).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,7 +34,8 @@ DEMO_SCENE = "default_cable"
 #: Added to the default scene: the obstacle the cable is carried over.
 POST = {"type": "sphere", "name": "post", "center": [0.175, 0.35, 0.25], "radius": 0.08}
 
-#: (time [s], left position, right position, right twist about the tangent [rad], phase starting here)
+#: (time [s], left position, right position, right twist about the tangent [rad], phase starting
+#here)
 KEYFRAMES = (
     (0.0, (0.0, 0.0, 0.40), (0.60, 0.0, 0.40), 0.0, "bring the ends together"),
     (2.0, (0.0, 0.0, 0.55), (0.35, 0.0, 0.55), 0.0, "twist the right end by half a turn"),
@@ -64,28 +68,36 @@ def phase_at(t: float) -> str:
 
 
 def targets_at(t: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """[(left position, quaternion), (right position, quaternion)] at time t (smoothstep between keyframes)."""
+    """[(left position, quaternion), (right position, quaternion)] at time t (smoothstep between
+    keyframes).
+    """
     t = min(max(t, 0.0), duration())
     for (t0, l0, r0, a0, _), (t1, l1, r1, a1, _) in zip(KEYFRAMES, KEYFRAMES[1:]):
         if t <= t1:
             u = (t - t0) / (t1 - t0)
             u = u * u * (3 - 2 * u)
             break
+
     def lerp(a, b):
         a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
         return a + u * (b - a)
+
     return [(lerp(l0, l1), _twist(0.0)), (lerp(r0, r1), _twist(a0 + u * (a1 - a0)))]
 
 
 def write_demo_scene(directory: Path) -> Path:
-    """The default scene plus the post, validated and written as ``<directory>/dual_arm_demo.yaml``."""
+    """The default scene plus the post, validated and written as
+    ``<directory>/dual_arm_demo.yaml``.
+    """
     import yaml
 
     from ..scene import load_scene, scene_from_dict, scene_to_dict
 
     d = scene_to_dict(load_scene(DEMO_SCENE))
     d["name"] = "dual_arm_demo"
-    d["description"] = f"{DEMO_SCENE} plus a sphere 'post' the cable is carried over (dlo_ros.node.demo)."
+    d["description"] = (
+        f"{DEMO_SCENE} plus a sphere 'post' the cable is carried over (dlo_ros.node.demo)."
+    )
     d["obstacles"] = list(d.get("obstacles", [])) + [dict(POST)]
     scene_from_dict(d)  # validate before the node sees it
     path = Path(directory) / "dual_arm_demo.yaml"
@@ -101,18 +113,23 @@ def _percentiles(values: Sequence[float]) -> tuple[float, float, float]:
 
 
 def _model_summary(values: dict) -> str:
-    """The node's final model from its diagnostics (model.* keys): what it solved, its estimated error
-    against the tolerance, and how many times it changed."""
+    """The node's final model from its diagnostics (model.* keys): what it solved, its estimated
+    error against the tolerance, and how many times it changed.
+    """
     if not values.get("model.order"):
         return "not reported"
+
     def yes(key: str) -> bool:
         return str(values.get(key)).lower() == "true"
 
     kind = "planar" if yes("model.planar") else "3D"
     fields = [f for f in ("twist", "stretch", "gravity") if yes(f"model.{f}")]
-    text = (("auto: " if yes("model.auto") else "") + ", ".join([kind, *fields])
-            + f", order {values['model.order']}, {values.get('model.variables', '?')} unknowns, "
-              f"{values.get('model.obstacles', '?')} obstacle(s) in the NLP")
+    text = (
+        ("auto: " if yes("model.auto") else "")
+        + ", ".join([kind, *fields])
+        + f", order {values['model.order']}, {values.get('model.variables', '?')} unknowns, "
+        f"{values.get('model.obstacles', '?')} obstacle(s) in the NLP"
+    )
     est, tol = values.get("model.estimated_error_m"), values.get("model.tolerance_m")
     if est not in (None, "", "None"):
         met = "met" if float(est) <= float(tol) else "NOT met"
@@ -124,9 +141,10 @@ def _model_summary(values: dict) -> str:
 
 
 def model_settled(values: dict, held: int = 0) -> bool:
-    """auto's checks describe the final shape — a solve of the last target: at most ``held`` updates ago
-    (``held`` the solves of the last target since the manoeuvre's end) — and its model meets the tolerance
-    or is the richest order (a fixed model: always)."""
+    """auto's checks describe the final shape — a solve of the last target: at most ``held``
+    updates ago (``held`` the solves of the last target since the manoeuvre's end) — and its model
+    meets the tolerance or is the richest order (a fixed model: always).
+    """
     from ..solver.auto import ORDERS
 
     if str(values.get("model.auto")).lower() != "true":
@@ -141,10 +159,11 @@ def model_settled(values: dict, held: int = 0) -> bool:
 
 
 def _settle(client, values: dict, timeout: float):
-    """Hold the last target (republished at 5 Hz: each solve applies the background checks' verdicts)
-    until ``model_settled`` or ``timeout`` s.  Returns (diagnostic values, last centreline or None, seconds,
-    solves), with 0 s and 0 solves when the final shape's checks were already done, or None when
-    settling is off (timeout 0)."""
+    """Hold the last target (republished at 5 Hz: each solve applies the background checks'
+    verdicts) until ``model_settled`` or ``timeout`` s.  Returns (diagnostic values, last
+    centreline or None, seconds, solves), with 0 s and 0 solves when the final shape's checks were
+    already done, or None when settling is off (timeout 0).
+    """
     if timeout <= 0:
         return None
     if model_settled(values):
@@ -157,7 +176,9 @@ def _settle(client, values: dict, timeout: float):
         held += 1
         final = client.wait_for_path(5.0, where=lambda ev, s=stamp: ev.stamp_ns == s) or final
         expected = base + held
-        diag = client.wait_for_diagnostics(lambda v, st: int(v.get("targets received") or 0) >= expected, 2.0)
+        diag = client.wait_for_diagnostics(
+            lambda v, st: int(v.get("targets received") or 0) >= expected, 2.0
+        )
         if diag:
             values = diag[0]
             if model_settled(values, held):
@@ -168,31 +189,59 @@ def _settle(client, values: dict, timeout: float):
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="dlo demo", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--rate", type=float, default=50.0, help="target publication rate [Hz] (default 50)")
-    ap.add_argument("--speed", type=float, default=1.0,
-                    help="manoeuvre speed factor (default 1: the manoeuvre takes %.0f s)" % duration())
-    ap.add_argument("--compile", default="off", choices=("background", "blocking", "cached", "off"),
-                    help="the node's compile mode (default off: interpreted derivatives, no gcc; 'blocking' "
-                         "compiles before the first solve, seconds the first time for this scene)")
-    ap.add_argument("--model", default="auto", choices=("auto", "full", "planar", "scene"),
-                    help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
-                         "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "
-                         "own setting)")
-    ap.add_argument("--settle", type=float, default=120.0, metavar="S",
-                    help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final shape "
-                         "are done and meet the tolerance, at most S seconds (default 120; 0: do not wait)")
-    ap.add_argument("--startup-timeout", type=float, default=60.0,
-                    help="seconds to wait for the node's first centreline (default 60)")
+    ap.add_argument(
+        "--rate", type=float, default=50.0, help="target publication rate [Hz] (default 50)"
+    )
+    ap.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="manoeuvre speed factor (default 1: the manoeuvre takes %.0f s)" % duration(),
+    )
+    ap.add_argument(
+        "--compile",
+        default="off",
+        choices=("background", "blocking", "cached", "off"),
+        help="the node's compile mode (default off: interpreted derivatives, no gcc; 'blocking' "
+        "compiles before the first solve, seconds the first time for this scene)",
+    )
+    ap.add_argument(
+        "--model",
+        default="auto",
+        choices=("auto", "full", "planar", "scene"),
+        help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
+        "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "
+        "own setting)",
+    )
+    ap.add_argument(
+        "--settle",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final shape "
+        "are done and meet the tolerance, at most S seconds (default 120; 0: do not wait)",
+    )
+    ap.add_argument(
+        "--startup-timeout",
+        type=float,
+        default=60.0,
+        help="seconds to wait for the node's first centreline (default 60)",
+    )
     ap.add_argument("--log", metavar="FILE", help="keep the node's output in FILE")
-    ap.add_argument("--rrd", metavar="FILE", default=DEFAULT_RRD,
-                    help=f"the node records the run to this rerun file (default ./{DEFAULT_RRD}, overwritten each "
-                         "run; `dlo replay FILE` opens it); '' for no recording")
+    ap.add_argument(
+        "--rrd",
+        metavar="FILE",
+        default=DEFAULT_RRD,
+        help=f"the node records the run to this rerun file (default ./{DEFAULT_RRD}, overwritten each "
+        "run; `dlo replay FILE` opens it); '' for no recording",
+    )
     return ap
 
 
 def run_demo_job(argv: Sequence[str] | None = None) -> int:
     """Run the demo (see the module docstring); returns the exit code (0: the demo ran and the node
-    shut down cleanly)."""
+    shut down cleanly).
+    """
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.rate <= 0 or args.speed <= 0:
         print("dlo demo: --rate and --speed must be > 0", file=sys.stderr)
@@ -210,25 +259,39 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
         if rrd is not None:
             rrd.parent.mkdir(parents=True, exist_ok=True)
             rrd.unlink(missing_ok=True)  # a stale file must not pass for this run's recording
-        node_args = ["--scene", str(scene), "--ros-args", "-p", f"compile:={args.compile}",
-                     *([] if args.model == "scene" else ["-p", f"solver.model:={args.model}"]),
-                     "-p", "diagnostics_period:=0.25",
-                     *([] if rrd is None else ["-p", f"record.rrd:={rrd}"])]
+        node_args = [
+            "--scene",
+            str(scene),
+            "--ros-args",
+            "-p",
+            f"compile:={args.compile}",
+            *([] if args.model == "scene" else ["-p", f"solver.model:={args.model}"]),
+            "-p",
+            "diagnostics_period:=0.25",
+            *([] if rrd is None else ["-p", f"record.rrd:={rrd}"]),
+        ]
         node = NodeProcess(node_args, lease.domain_id, log_path=args.log or tmp / "node.log")
         client = DloClient(lease.domain_id, client_name="dlo_demo_driver")
-        print(f"dlo demo: node pid {node.pid}, ROS_DOMAIN_ID={lease.domain_id}, scene {DEMO_SCENE} + sphere 'post' "
-              f"at {POST['center']} (r = {POST['radius']} m)")
+        print(
+            f"dlo demo: node pid {node.pid}, ROS_DOMAIN_ID={lease.domain_id}, scene {DEMO_SCENE} + sphere 'post' "
+            f"at {POST['center']} (r = {POST['radius']} m)"
+        )
         t0 = time.monotonic()
         first = None
         while first is None and node.alive() and time.monotonic() - t0 < args.startup_timeout:
             first = client.wait_for_path(0.5)
         if first is None:
-            print(f"dlo demo: the node published no centreline within {args.startup_timeout:.0f} s "
-                  f"(alive: {node.alive()}); its output:\n{node.output()}", file=sys.stderr)
+            print(
+                f"dlo demo: the node published no centreline within {args.startup_timeout:.0f} s "
+                f"(alive: {node.alive()}); its output:\n{node.output()}",
+                file=sys.stderr,
+            )
             return 1
         client.wait_for_subscribers(10.0)
-        print(f"dlo demo: first centreline after {time.monotonic() - t0:.1f} s; manoeuvre of "
-              f"{duration() / args.speed:.1f} s at {args.rate:g} Hz")
+        print(
+            f"dlo demo: first centreline after {time.monotonic() - t0:.1f} s; manoeuvre of "
+            f"{duration() / args.speed:.1f} s at {args.rate:g} Hz"
+        )
 
         published: dict[int, float] = {}
         period = 1.0 / args.rate
@@ -252,7 +315,8 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
         published[last_stamp] = duration()
         final = client.wait_for_path(10.0, where=lambda ev: ev.stamp_ns == last_stamp)
         diag = client.wait_for_diagnostics(
-            lambda v, st: v.get("targets received") == str(len(published)), 5.0)
+            lambda v, st: v.get("targets received") == str(len(published)), 5.0
+        )
         values = diag[0] if diag else client.diagnostic_values()
         events = [ev for ev in client.paths if ev.stamp_ns in published]
         settled = _settle(client, values, args.settle) if final is not None else None
@@ -267,32 +331,58 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
         failures = int(values.get("failures", "0") or 0)
         rejected = int(values.get("rejected inputs", "0") or 0)
         print("dlo demo: summary")
-        print(f"  targets published       {len(published)} ({args.rate:g} Hz, PoseArray for both grips)")
-        print(f"  centrelines received    {len(events)} during the manoeuvre ({updates} shapes published by the node "
-              f"in total, {values.get('targets coalesced', '?')} targets coalesced)")
+        print(
+            f"  targets published       {len(published)} ({args.rate:g} Hz, PoseArray for both grips)"
+        )
+        print(
+            f"  centrelines received    {len(events)} during the manoeuvre ({updates} shapes published by the node "
+            f"in total, {values.get('targets coalesced', '?')} targets coalesced)"
+        )
         print(f"  latency target->path    p50 {p50:.1f} ms, p99 {p99:.1f} ms, max {pmax:.1f} ms")
-        print(f"  solve time (last)       {values.get('solve time ms', '?')} ms, "
-              f"{values.get('iterations', '?')} iterations")
-        print(f"  failures                {failures} failed solves, {rejected} rejected inputs"
-              + (f" (last: {values.get('last error')})" if failures + rejected else ""))
+        print(
+            f"  solve time (last)       {values.get('solve time ms', '?')} ms, "
+            f"{values.get('iterations', '?')} iterations"
+        )
+        print(
+            f"  failures                {failures} failed solves, {rejected} rejected inputs"
+            + (f" (last: {values.get('last error')})" if failures + rejected else "")
+        )
         unverified = int(values.get("unverified updates", "0") or 0)
-        print(f"  stable shapes           {stable} of {updates}"
-              + (f" ({unverified} published unverified: equilibrium residual over the tolerance)" if unverified else ""))
+        print(
+            f"  stable shapes           {stable} of {updates}"
+            + (
+                f" ({unverified} published unverified: equilibrium residual over the tolerance)"
+                if unverified
+                else ""
+            )
+        )
         print(f"  model                   {_model_summary(values)}")
         if settled is not None:
             done = model_settled(values, held)
-            print(f"  settling                {'checked' if done else f'NOT checked within {args.settle:g} s'}: held the "
-                  f"last target {settle_s:.1f} s ({held} more solves) for auto's checks of the final shape (model above)")
-        print(f"  recording               {rrd if rrd is not None else 'off'}"
-              + (" (complete when the node has stopped; `dlo replay FILE` opens it)" if rrd is not None else ""))
+            print(
+                f"  settling                {'checked' if done else f'NOT checked within {args.settle:g} s'}: held the "
+                f"last target {settle_s:.1f} s ({held} more solves) for auto's checks of the final shape (model above)"
+            )
+        print(
+            f"  recording               {rrd if rrd is not None else 'off'}"
+            + (
+                " (complete when the node has stopped; `dlo replay FILE` opens it)"
+                if rrd is not None
+                else ""
+            )
+        )
         if final is not None:
             centre, r = np.asarray(POST["center"]), float(POST["radius"])
             gap = float(np.min(np.linalg.norm(final.points - centre, axis=1)) - r)
             resting = "resting on the post" if gap < 0.02 else f"{gap * 100:.1f} cm from the post"
-            print(f"  final shape             ends at the last target; lowest point "
-                  f"z = {final.points[:, 2].min():.3f} m, {resting}")
+            print(
+                f"  final shape             ends at the last target; lowest point "
+                f"z = {final.points[:, 2].min():.3f} m, {resting}"
+            )
         else:
-            print("  final shape             the centreline of the last target did not arrive within 10 s")
+            print(
+                "  final shape             the centreline of the last target did not arrive within 10 s"
+            )
         code = 0 if events and final is not None else 1
     except KeyboardInterrupt:
         print("dlo demo: interrupted", file=sys.stderr)
@@ -304,15 +394,22 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
             rc = node.stop(timeout=15.0)
             text = node.output()
             clean = rc == 0 and "Traceback" not in text
-            print(f"dlo demo: node stopped (exit code {rc}{'' if clean else ', NOT clean'}); "
-                  f"total {time.monotonic() - t_job:.1f} s")
+            print(
+                f"dlo demo: node stopped (exit code {rc}{'' if clean else ', NOT clean'}); "
+                f"total {time.monotonic() - t_job:.1f} s"
+            )
             if rrd is not None:
                 size = rrd.stat().st_size if rrd.is_file() else 0
-                print(f"dlo demo: recording: {rrd} ({size / 1e6:.1f} MB)" if size else
-                      f"dlo demo: recording: {rrd} was not written (see the node's output)")
-            for line in text.splitlines():  # the node's INFO lines for every change of model, with reasons
+                print(
+                    f"dlo demo: recording: {rrd} ({size / 1e6:.1f} MB)"
+                    if size
+                    else f"dlo demo: recording: {rrd} was not written (see the node's output)"
+                )
+            for line in (
+                text.splitlines()
+            ):  # the node's INFO lines for every change of model, with reasons
                 if "model change (update" in line:
-                    print("  " + line[line.index("model change"):])
+                    print("  " + line[line.index("model change") :])
             if not clean:
                 print(text[-4000:], file=sys.stderr)
                 code = code or 1

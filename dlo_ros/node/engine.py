@@ -1,8 +1,10 @@
 """The node's solving engine: one worker thread owns the ShapeSolver (no ROS here).
 
-* Streaming targets go into a "latest pending targets" slot: per grip the newest accepted pose, plus
-  the stamp of the newest message.  The worker drains the slot, so a burst of targets never builds a
-  queue: whatever arrives while a solve runs is merged, and the next solve uses the newest of everything.
+* Streaming targets go into a "latest pending targets" slot: per grip the newest accepted pose,
+  plus
+  the stamp of the newest message.  The worker drains the slot, so a burst of targets never builds
+  a queue: whatever arrives while a solve runs is merged, and the next solve uses the newest of
+  everything.
 * Every solve warm-starts from the last committed shape (``ShapeSolver.solve(..., warm=True)``).
 * Control jobs (query, reset, parameter changes, a rebuild for a new output resolution) are queued
   and run before the next streaming solve; callers get a ``concurrent.futures.Future``.
@@ -13,6 +15,7 @@
 
 Callbacks run in the worker thread.  All CasADi/IPOPT calls happen in that one thread.
 """
+
 from __future__ import annotations
 
 import collections
@@ -29,7 +32,10 @@ from ..solver.result import ShapeResult
 from .validation import grip_miss
 
 
-CHECKED_TRIGGERS = ("parameters", "rebuild")  # re-solves whose answer is checked before it is published
+CHECKED_TRIGGERS = (
+    "parameters",
+    "rebuild",
+)  # re-solves whose answer is checked before it is published
 
 
 @dataclass
@@ -37,12 +43,12 @@ class Update:
     """One solve of the streaming state, as handed to ``on_update`` / ``on_failure``."""
 
     result: ShapeResult
-    problem: Problem          # the problem solved (grip poses = the targets)
-    trigger: str              # 'initial', 'targets', 'parameters', 'reset', 'rebuild'
-    stamp_ns: int | None      # header stamp of the newest target included (None: not target-driven)
-    received_ns: int | None   # monotonic time that target arrived
-    targets_merged: int = 0   # target messages folded into this solve
-    finished_ns: int = 0      # monotonic time the solve finished
+    problem: Problem  # the problem solved (grip poses = the targets)
+    trigger: str  # 'initial', 'targets', 'parameters', 'reset', 'rebuild'
+    stamp_ns: int | None  # header stamp of the newest target included (None: not target-driven)
+    received_ns: int | None  # monotonic time that target arrived
+    targets_merged: int = 0  # target messages folded into this solve
+    finished_ns: int = 0  # monotonic time the solve finished
 
 
 @dataclass
@@ -57,16 +63,21 @@ class ShapeEngine:
 
     make_solver(problem, options) builds the solver (may take long: it runs in the worker).
     on_update(update) gets every converged streaming solve; on_failure(kind, message, update) every
-    failed one (kind = the ShapeResult status or 'internal').  on_state(text) tells what the worker is
-    doing ('building', 'ready', 'failed: ...') for the diagnostics.
+    failed one (kind = the ShapeResult status or 'internal').  on_state(text) tells what the worker
+    is doing ('building', 'ready', 'failed: ...') for the diagnostics.
     """
 
-    def __init__(self, problem: Problem, options: SolverOptions, *,
-                 make_solver: Callable[[Problem, SolverOptions], object],
-                 on_update: Callable[[Update], None],
-                 on_failure: Callable[[str, str, Update | None], None],
-                 on_state: Callable[[str], None] = lambda s: None,
-                 name: str = "dlo-solver"):
+    def __init__(
+        self,
+        problem: Problem,
+        options: SolverOptions,
+        *,
+        make_solver: Callable[[Problem, SolverOptions], object],
+        on_update: Callable[[Update], None],
+        on_failure: Callable[[str, str, Update | None], None],
+        on_state: Callable[[str], None] = lambda s: None,
+        name: str = "dlo-solver",
+    ):
         self._problem0 = problem
         self._options = options
         self._make_solver = make_solver
@@ -84,7 +95,7 @@ class ShapeEngine:
         self._solver = None
         self.state = "not started"
         self.targets_received = 0
-        self.targets_coalesced = 0   # received but superseded before a solve used them
+        self.targets_coalesced = 0  # received but superseded before a solve used them
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
     # ---- called from any thread ----------------------------------------------------------------------
@@ -115,8 +126,12 @@ class ShapeEngine:
         with self._cond:
             return dict(self._targets)
 
-    def submit_targets(self, poses: dict[str, GripPose], stamp_ns: int | None = None,
-                       received_ns: int | None = None) -> None:
+    def submit_targets(
+        self,
+        poses: dict[str, GripPose],
+        stamp_ns: int | None = None,
+        received_ns: int | None = None,
+    ) -> None:
         """Merge checked poses into the pending slot (newest wins per grip) and wake the worker."""
         with self._cond:
             self._targets.update(poses)
@@ -129,8 +144,10 @@ class ShapeEngine:
             self._cond.notify_all()
 
     def query_scene(self) -> tuple[Problem, SolverOptions] | None:
-        """The scene a query is answered in, for a solver outside this engine: the solver's problem (its
-        current values) at the current targets, and its options; None until the solver is built."""
+        """The scene a query is answered in, for a solver outside this engine: the solver's problem
+        (its current values) at the current targets, and its options; None until the solver is
+        built.
+        """
         solver = self._solver
         if solver is None:
             return None
@@ -139,7 +156,9 @@ class ShapeEngine:
         return solver.problem.with_grip_poses(targets), solver.options
 
     def query(self, poses: dict[str, GripPose]) -> Future:
-        """Future of the ShapeResult for the current targets updated by ``poses`` (commit=False)."""
+        """Future of the ShapeResult for the current targets updated by ``poses``
+        (commit=False).
+        """
         return self._submit("query", dict(poses))
 
     def reset(self) -> Future:
@@ -147,11 +166,15 @@ class ShapeEngine:
         return self._submit("reset", None)
 
     def change_problem(self, edit: Callable[[Problem], Problem]) -> Future:
-        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem) and re-solve the targets."""
+        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem) and re-solve the
+        targets.
+        """
         return self._submit("problem", edit)
 
     def change_options(self, edit: Callable[[SolverOptions], SolverOptions]) -> Future:
-        """Rebuild the solver with edited options (the next solve is cold) and re-solve the targets."""
+        """Rebuild the solver with edited options (the next solve is cold) and re-solve the
+        targets.
+        """
         return self._submit("options", edit)
 
     def _submit(self, kind: str, payload: object) -> Future:
@@ -210,8 +233,9 @@ class ShapeEngine:
 
     def _take_slot(self) -> tuple[dict[str, GripPose], int | None, int | None, int]:
         """Empty the pending slot (caller holds the lock): (the targets, newest stamp, its arrival,
-        messages merged).  The targets are taken with their stamp, under the same lock: a target arriving
-        between the two would otherwise be solved under the previous one's stamp."""
+        messages merged).  The targets are taken with their stamp, under the same lock: a target
+        arriving between the two would otherwise be solved under the previous one's stamp.
+        """
         stamp, received, merged = self._stamp_ns, self._received_ns, self._merged
         self.targets_coalesced += max(0, merged - 1)
         self._dirty, self._stamp_ns, self._received_ns, self._merged = False, None, None, 0
@@ -223,17 +247,30 @@ class ShapeEngine:
         for job in jobs:
             job.future.set_exception(exc)
 
-    def _stream(self, trigger: str, targets: dict[str, GripPose], stamp_ns: int | None, received_ns: int | None,
-                merged: int) -> ShapeResult | None:
+    def _stream(
+        self,
+        trigger: str,
+        targets: dict[str, GripPose],
+        stamp_ns: int | None,
+        received_ns: int | None,
+        merged: int,
+    ) -> ShapeResult | None:
         solver = self._solver
         update = None
         try:
-            # after a live change of values or options the answer is checked before it is published: the
-            # shape latched until the next target must not be one the changed scene makes unstable
-            result = solver.solve(targets, warm=True, commit=True, check_now=trigger in CHECKED_TRIGGERS)
-            shaped = result.ok or result.status == "unverified"  # unverified: a shape, published with a warning
+            # after a live change of values or options the answer is checked before it is
+            # published: the shape latched until the next target must not be one the changed scene
+            # makes unstable
+            result = solver.solve(
+                targets, warm=True, commit=True, check_now=trigger in CHECKED_TRIGGERS
+            )
+            shaped = (
+                result.ok or result.status == "unverified"
+            )  # unverified: a shape, published with a warning
             problem = solver.problem if shaped else solver.problem.with_grip_poses(targets)
-            update = Update(result, problem, trigger, stamp_ns, received_ns, merged, time.monotonic_ns())
+            update = Update(
+                result, problem, trigger, stamp_ns, received_ns, merged, time.monotonic_ns()
+            )
             miss = target_miss(result, problem, targets)
             if miss:
                 self._on_failure("internal", miss, update)
@@ -243,7 +280,9 @@ class ShapeEngine:
                 self._on_failure(result.status, result.message, update)
             return result
         except Exception as exc:  # noqa: BLE001 - a bug must not kill the worker
-            self._on_failure("internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", update)
+            self._on_failure(
+                "internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", update
+            )
             return None
 
     def _stream_now(self, trigger: str) -> ShapeResult | None:
@@ -293,15 +332,19 @@ def target_miss(result: ShapeResult, problem: Problem, targets: dict[str, GripPo
     """validation.grip_miss for a converged result (tolerance 1e-5 L); '' otherwise."""
     if result.status not in ("ok", "unverified") or len(result.points) == 0:
         return ""
-    return grip_miss(result.points, result.s,
-                     [(g.name, g.s, targets[g.name].position) for g in problem.grips if g.name in targets],
-                     1e-5 * problem.string.length)
+    return grip_miss(
+        result.points,
+        result.s,
+        [(g.name, g.s, targets[g.name].position) for g in problem.grips if g.name in targets],
+        1e-5 * problem.string.length,
+    )
 
 
 def build_solver(problem: Problem, options: SolverOptions, compile: str | None = None):
     """The node's solver for a scene: ``dlo_ros.solver.make_solver`` (it picks the model for
     solver.model 'auto', with its a-posteriori checks on a worker thread so that the stream never
-    waits for them).  compile: 'background', 'blocking', 'cached' or 'off'; None: 'background'."""
+    waits for them).  compile: 'background', 'blocking', 'cached' or 'off'; None: 'background'.
+    """
     from ..solver import make_solver
 
     return make_solver(problem, options, compile=compile or "background", checks="background")

@@ -1,5 +1,5 @@
-"""The node's identification interfaces (``fit.enabled``): ``~/observed``, ``~/fit`` and the diagnostics
-status ``<node>: fit`` (msg_docs/node.md "Fitting").
+"""The node's identification interfaces (``fit.enabled``): ``~/observed``, ``~/fit`` and the
+diagnostics status ``<node>: fit`` (msg_docs/node.md "Fitting").
 
 Threads: every callback here runs in the node's executor thread, and only checks, copies and hands
 over.  A fit runs in its own worker process (one, spawned at start-up, kept; its own equilibrium
@@ -10,6 +10,7 @@ logs it, records it and reports it.  One fit at a time: ``~/fit`` answers at onc
 when a fit started (its outcome goes to the diagnostics, the log and the recording), false with the
 reason when one is already running, no cloud has arrived or the solver is not built yet.
 """
+
 from __future__ import annotations
 
 import threading
@@ -30,7 +31,6 @@ from .fitting import CloudSnapshot, FitConfig, FitHealth, fit_payload, plan_appl
 from .validation import TargetError, safe_text
 
 
-
 def _warm_fit_worker() -> bool:
     """(fit worker) Import the fit's modules (CasADi) before the first fit asks for them."""
     import dlo_ros.identify.fit  # noqa: F401
@@ -39,7 +39,9 @@ def _warm_fit_worker() -> bool:
 
 
 class NodeFitter:
-    """``~/observed``, ``~/fit`` and the continuous fit timer of ``node`` (a DloNode); see the module docstring."""
+    """``~/observed``, ``~/fit`` and the continuous fit timer of ``node`` (a DloNode); see the
+    module docstring.
+    """
 
     def __init__(self, node) -> None:
         from ..solver.batch import process_pool
@@ -56,7 +58,9 @@ class NodeFitter:
         self._wake = node.create_guard_condition(self._on_fit_done)
         from .dlo_node import CLOUD_QOS
 
-        self._sub = node.create_subscription(PointCloud2, "~/observed", self._on_cloud, CLOUD_QOS, raw=True)
+        self._sub = node.create_subscription(
+            PointCloud2, "~/observed", self._on_cloud, CLOUD_QOS, raw=True
+        )
         self._srv = node.create_service(Trigger, "~/fit", self._on_fit)
         period = float(node.get_parameter("fit.period_s").value)
         self._timer = node.create_timer(period, self._on_timer) if period > 0 else None
@@ -68,13 +72,18 @@ class NodeFitter:
         try:
             limit = cloud_bytes_limit(self.max_points)
             if len(data) > limit:
-                raise TargetError("size", f"{where}: message of {len(data)} bytes is over the limit of {limit} bytes "
-                                          f"(fit.max_points {self.max_points} × {limit // self.max_points} bytes); "
-                                          "it was not read")
+                raise TargetError(
+                    "size",
+                    f"{where}: message of {len(data)} bytes is over the limit of {limit} bytes "
+                    f"(fit.max_points {self.max_points} × {limit // self.max_points} bytes); "
+                    "it was not read",
+                )
             try:
                 msg = deserialize_message(data, PointCloud2)
             except Exception as exc:  # noqa: BLE001 - a malformed buffer is bad input, not a bug
-                raise TargetError("invalid", f"{where}: not a readable PointCloud2 ({type(exc).__name__})") from None
+                raise TargetError(
+                    "invalid", f"{where}: not a readable PointCloud2 ({type(exc).__name__})"
+                ) from None
             points = cloud_points(msg, node.frame_id, self.max_points, where)
         except TargetError as exc:
             self._reject(exc)
@@ -88,11 +97,16 @@ class NodeFitter:
         node = self.node
         text = safe_text(exc)
         self.health.rejected(f"{exc.kind}: {text}")
-        node.recorder.log_rejected(f"{exc.kind}: {text}", update=node._record_n,
-                                   ros_time_ns=node.get_clock().now().nanoseconds)
+        node.recorder.log_rejected(
+            f"{exc.kind}: {text}",
+            update=node._record_n,
+            ros_time_ns=node.get_clock().now().nanoseconds,
+        )
         if node.health.should_warn(f"observed:{exc.kind}"):
-            node.get_logger().warning(f"rejected observed cloud ({exc.kind}): {text}; no fit uses it (the stream "
-                                      "is unaffected)")
+            node.get_logger().warning(
+                f"rejected observed cloud ({exc.kind}): {text}; no fit uses it (the stream "
+                "is unaffected)"
+            )
         node._publish_diagnostics(immediate=True)
 
     def _on_fit(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -109,23 +123,36 @@ class NodeFitter:
     # ---- a fit ----------------------------------------------------------------------------------------------
     def config(self) -> FitConfig:
         g = self.node.get_parameter
-        return FitConfig(parameters=tuple(g("fit.parameters").value), point_sigma=float(g("fit.point_sigma").value),
-                         total_mass=float(g("fit.total_mass").value),
-                         apply_max_rel_sigma=float(g("fit.apply_max_rel_sigma").value),
-                         max_iterations=int(g("fit.max_iterations").value), compile=self.node._worker_compile)
+        return FitConfig(
+            parameters=tuple(g("fit.parameters").value),
+            point_sigma=float(g("fit.point_sigma").value),
+            total_mass=float(g("fit.total_mass").value),
+            apply_max_rel_sigma=float(g("fit.apply_max_rel_sigma").value),
+            max_iterations=int(g("fit.max_iterations").value),
+            compile=self.node._worker_compile,
+        )
 
     def start(self, snapshot: CloudSnapshot | None) -> tuple[bool, str]:
-        """Start a fit of ``snapshot`` in the worker process (executor thread); (started, message)."""
+        """Start a fit of ``snapshot`` in the worker process (executor thread); (started,
+        message).
+        """
         if self._running is not None:
-            return False, f"busy: the fit of cloud {self._running.number} is running; try again when it is done"
+            return (
+                False,
+                f"busy: the fit of cloud {self._running.number} is running; try again when it is done",
+            )
         if snapshot is None:
-            return False, "no cloud received on ~/observed yet (or every one was rejected: see the diagnostics)"
+            return (
+                False,
+                "no cloud received on ~/observed yet (or every one was rejected: see the diagnostics)",
+            )
         scene = self.node.engine.query_scene()
         if scene is None:
             return False, f"the solver is not ready ({self.node.engine.state})"
         problem, options = scene
-        # the string as the node's parameters hold it now (the solver thread may not have applied a change
-        # made just before): the fit starts there, and plan_application compares with the same values
+        # the string as the node's parameters hold it now (the solver thread may not have applied a
+        # change made just before): the fit starts there, and plan_application compares with the
+        # same values
         problem = replace(problem, string=self.node._check_problem.string)
         config = self.config()
         payload = fit_payload(problem, options, snapshot, config)
@@ -138,9 +165,11 @@ class NodeFitter:
         self._running, self._last_fitted = snapshot, snapshot.number
         self.health.started()
         job.add_done_callback(lambda f: self._finished(f, snapshot, config))
-        message = (f"fitting {', '.join(config.parameters)} to cloud {snapshot.number} ({len(snapshot.points)} points, "
-                   f"σ {config.point_sigma:g} m); the estimate goes to /diagnostics ('{self.node.get_fully_qualified_name()}"
-                   ": fit') and is applied if its relative σ <= fit.apply_max_rel_sigma")
+        message = (
+            f"fitting {', '.join(config.parameters)} to cloud {snapshot.number} ({len(snapshot.points)} points, "
+            f"σ {config.point_sigma:g} m); the estimate goes to /diagnostics ('{self.node.get_fully_qualified_name()}"
+            ": fit') and is applied if its relative σ <= fit.apply_max_rel_sigma"
+        )
         self.node.get_logger().info(message)
         self.node._publish_diagnostics(immediate=True)
         return True, message
@@ -166,9 +195,12 @@ class NodeFitter:
         node = self.node
         try:
             result, error = job.result(timeout=0), ""
-        except Exception as exc:  # noqa: BLE001 - ObservationError (a request the scene cannot fit) or a worker crash
+        # noqa: BLE001 - ObservationError (a request the scene cannot fit) or a worker crash
+        except Exception as exc:
             result, error = None, safe_text(f"{type(exc).__name__}: {exc}")
-            if isinstance(exc, BrokenProcessPool):  # e.g. a crash inside IPOPT: the next fit gets a new worker
+            if isinstance(
+                exc, BrokenProcessPool
+            ):  # e.g. a crash inside IPOPT: the next fit gets a new worker
                 error += " (the fit worker process died; the next fit starts a new one)"
                 self._new_pool()
         application = None
@@ -185,9 +217,17 @@ class NodeFitter:
         else:
             node.get_logger().warning(text)
         fitted = result.observations[0] if result is not None and result.observations else None
-        node.recorder.log_fit(snapshot.points, fitted.shape if fitted else [], fitted.feet if fitted else [],
-                              sigma=config.point_sigma, huber=FitSettings().huber,
-                              text=text, ok=ok, update=node._record_n, ros_time_ns=snapshot.stamp_ns)
+        node.recorder.log_fit(
+            snapshot.points,
+            fitted.shape if fitted else [],
+            fitted.feet if fitted else [],
+            sigma=config.point_sigma,
+            huber=FitSettings().huber,
+            text=text,
+            ok=ok,
+            update=node._record_n,
+            ros_time_ns=snapshot.stamp_ns,
+        )
         node._publish_diagnostics(immediate=True)
 
     def _apply(self, application):
@@ -195,10 +235,15 @@ class NodeFitter:
         from .fitting import Application
 
         node = self.node
-        result = node.set_parameters_atomically([Parameter(n, value=v) for n, v in application.values.items()])
+        result = node.set_parameters_atomically(
+            [Parameter(n, value=v) for n, v in application.values.items()]
+        )
         if not result.successful:
-            return Application({}, f"not applied: the node refused {sorted(application.values)}: "
-                                   f"{safe_text(result.reason)} ({application.reason})")
+            return Application(
+                {},
+                f"not applied: the node refused {sorted(application.values)}: "
+                f"{safe_text(result.reason)} ({application.reason})",
+            )
         return application
 
     @staticmethod
@@ -206,20 +251,32 @@ class NodeFitter:
         head = f"fit of cloud {snapshot.number} ({len(snapshot.points)} points)"
         if result is None:
             return f"{head}: failed: {error}"
-        parts = [f"{name} = {est.value:.6g} ± {est.std:.2g} {est.unit}"
-                 for name, est in {**result.parameters, **result.ratios}.items()]
+        parts = [
+            f"{name} = {est.value:.6g} ± {est.std:.2g} {est.unit}"
+            for name, est in {**result.parameters, **result.ratios}.items()
+        ]
         if result.not_identifiable:
             parts.append(f"not identifiable: {', '.join(result.not_identifiable)}")
         rms = f", rms {result.observations[0].rms_m * 1e3:.3g} mm" if result.observations else ""
-        return (f"{head}: {result.status} ({result.message}) in {result.time_s:.2f} s, {result.equilibrium_solves} "
-                f"solves{rms}: {'; '.join(parts) or 'no estimate'}; {application.reason if application else ''}")
+        return (
+            f"{head}: {result.status} ({result.message}) in {result.time_s:.2f} s, {result.equilibrium_solves} "
+            f"solves{rms}: {'; '.join(parts) or 'no estimate'}; {application.reason if application else ''}"
+        )
 
     # ---- diagnostics, warm-up, shutdown -----------------------------------------------------------------------
     def status(self, hardware_id: str):
         level, message = self.health.level_and_message()
-        values = {k: safe_text(v, 2000) if isinstance(v, str) else v for k, v in self.health.values().items()}
-        return conv.diagnostic_status(f"{self.node.get_fully_qualified_name()}: fit", level, safe_text(message, 2000),
-                                      hardware_id, values)
+        values = {
+            k: safe_text(v, 2000) if isinstance(v, str) else v
+            for k, v in self.health.values().items()
+        }
+        return conv.diagnostic_status(
+            f"{self.node.get_fully_qualified_name()}: fit",
+            level,
+            safe_text(message, 2000),
+            hardware_id,
+            values,
+        )
 
     def warm(self) -> None:
         """Start the worker process and its imports now (after the node's first shape)."""

@@ -2,15 +2,17 @@
 
 The level follows the latest event of the streaming state:
 * 'error' while no solver could be built;
-* 'warn' while starting (no shape yet), when the newest input was rejected or its solve failed (the last
-  good shape stays published), when the published equilibrium is unstable, or when the solver's model
-  misses its error tolerance (``solver.model: auto``: estimated_error_m > tolerance_m, or "tolerance not
-  met" in its reasons);
+* 'warn' while starting (no shape yet), when the newest input was rejected or its solve failed (the
+  last
+  good shape stays published), when the published equilibrium is unstable, or when the solver's
+  model misses its error tolerance (``solver.model: auto``: estimated_error_m > tolerance_m, or
+  "tolerance not met" in its reasons);
 * 'ok' otherwise.
 Counters and the last error (with its kind, see validation.KINDS) stay in the values, and so do the
-current model (``ShapeResult.model.as_dict()`` of the newest solve, keys ``model.*``) and its last change.
-The model arrives here in that JSON form (solver/summary.py), as in the recording.
+current model (``ShapeResult.model.as_dict()`` of the newest solve, keys ``model.*``) and its last
+change. The model arrives here in that JSON form (solver/summary.py), as in the recording.
 """
+
 from __future__ import annotations
 
 import collections
@@ -33,15 +35,33 @@ def resident_mb() -> float | None:
         pass
     return None
 
+
 RATE_WINDOW_S = 2.0
 #: ShapeResult.model.as_dict() entries shown in the diagnostics as ``model.<key>`` (in this order).
-MODEL_KEYS = ("auto", "planar", "twist", "stretch", "gravity", "order", "obstacles", "obstacle_samples", "variables",
-              "estimated_error_m", "tolerance_m", "tolerance_met", "checked", "checked_updates_ago", "rotation")
+MODEL_KEYS = (
+    "auto",
+    "planar",
+    "twist",
+    "stretch",
+    "gravity",
+    "order",
+    "obstacles",
+    "obstacle_samples",
+    "variables",
+    "estimated_error_m",
+    "tolerance_m",
+    "tolerance_met",
+    "checked",
+    "checked_updates_ago",
+    "rotation",
+)
 
 
 def model_text(model: Mapping | None) -> str:
-    """One line for a ShapeResult.model.as_dict(): 'auto: planar, twist, gravity, order 12, 15 unknowns, 1 obstacle(s),
-    estimated error 4.3e-05 m (tolerance 0.001 m)'; '' for an empty model."""
+    """One line for a ShapeResult.model.as_dict(): 'auto: planar, twist, gravity, order 12, 15
+    unknowns, 1 obstacle(s), estimated error 4.3e-05 m (tolerance 0.001 m)'; '' for an empty
+    model.
+    """
     if not model:
         return ""
     parts = ["planar" if model.get("planar") else "3D"]
@@ -54,7 +74,10 @@ def model_text(model: Mapping | None) -> str:
         parts.append(f"{model['obstacles']} obstacle(s)")
     est, tol = model.get("estimated_error_m"), model.get("tolerance_m")
     if isinstance(est, (int, float)):
-        parts.append(f"estimated error {est:.2g} m" + (f" (tolerance {tol:.2g} m)" if isinstance(tol, (int, float)) else ""))
+        parts.append(
+            f"estimated error {est:.2g} m"
+            + (f" (tolerance {tol:.2g} m)" if isinstance(tol, (int, float)) else "")
+        )
     elif isinstance(tol, (int, float)):
         parts.append(f"error not estimated yet (tolerance {tol:.2g} m)")
     return ("auto: " if model.get("auto") else "") + ", ".join(parts)
@@ -63,10 +86,11 @@ def model_text(model: Mapping | None) -> str:
 def new_model_changes(model: Mapping, seen: int) -> tuple[list[str], int]:
     """The model changes to report for one solve, and the new ``seen``.
 
-    ``model``: its ShapeResult.model.as_dict(); ``seen``: how many entries of ``model['changes']`` (the solver's
-    whole history of changes) were already reported (0 after a new solver was built).  The changes are
-    ``model['changed']`` (made during the solve), after any change the solver made between solves (e.g.
-    in set_problem after a parameter change), which only shows as a new entry of ``changes``.
+    ``model``: its ShapeResult.model.as_dict(); ``seen``: how many entries of ``model['changes']``
+    (the solver's whole history of changes) were already reported (0 after a new solver was built).
+    The changes are ``model['changed']`` (made during the solve), after any change the solver made
+    between solves (e.g. in set_problem after a parameter change), which only shows as a new entry
+    of ``changes``.
     """
     changed = [str(r) for r in model.get("changed") or ()]
     history = model.get("changes")
@@ -85,17 +109,24 @@ def new_model_changes(model: Mapping, seen: int) -> tuple[list[str], int]:
 
 
 class Health:
-    def __init__(self, *, scene: str = "", frame_id: str = "", grips: tuple[str, ...] = (),
-                 throttle_s: float = 1.0, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        *,
+        scene: str = "",
+        frame_id: str = "",
+        grips: tuple[str, ...] = (),
+        throttle_s: float = 1.0,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self._lock = threading.Lock()
         self._clock = clock
         self.throttle_s = throttle_s
         self.scene, self.frame_id, self.grips = scene, frame_id, tuple(grips)
         self.state = "starting"
-        self.last: ShapeResult | None = None      # last published (converged) streaming solve
+        self.last: ShapeResult | None = None  # last published (converged) streaming solve
         self.last_trigger = ""
         self.last_latency_ms: float | None = None  # target arrival -> solve finished
-        self.last_status = ""                      # status of the newest streaming event
+        self.last_status = ""  # status of the newest streaming event
         self.last_message = ""
         self.newest_is_error = False
         self.updates = self.stable_updates = self.unstable_updates = self.unverified_updates = 0
@@ -108,12 +139,12 @@ class Health:
         self.targets_received = self.targets_coalesced = 0
         self._update_times: collections.deque[float] = collections.deque()
         self._warned: dict[str, float] = {}
-        self.model: dict = {}                      # ShapeResult.model of the newest streaming solve
-        self.model_changes = 0                     # model changes seen since start
-        self.last_model_change = ""                # the reasons of the newest solve that changed the model
-        self.last_model_change_time: float | None = None      # clock() when the node saw it
-        self.last_model_change_stamp_ns: int | None = None    # ROS time of the solve that made it
-        self.last_model_change_update: int | None = None      # that solve's update number (recording)
+        self.model: dict = {}  # ShapeResult.model of the newest streaming solve
+        self.model_changes = 0  # model changes seen since start
+        self.last_model_change = ""  # the reasons of the newest solve that changed the model
+        self.last_model_change_time: float | None = None  # clock() when the node saw it
+        self.last_model_change_stamp_ns: int | None = None  # ROS time of the solve that made it
+        self.last_model_change_update: int | None = None  # that solve's update number (recording)
 
     # ---- events -----------------------------------------------------------------------------------------
     def set_state(self, state: str) -> None:
@@ -138,17 +169,27 @@ class Health:
             while self._update_times and now - self._update_times[0] > RATE_WINDOW_S:
                 self._update_times.popleft()
 
-    def set_model(self, model: Mapping | None, changes: Sequence[str] = (), *, stamp_ns: int | None = None,
-                  update: int | None = None) -> None:
-        """The model of the newest streaming solve (ok or failed; ``ShapeResult.model.as_dict()``) and the model
-        changes it made (reasons, oldest first), stamped with the solve's ROS time and update number."""
+    def set_model(
+        self,
+        model: Mapping | None,
+        changes: Sequence[str] = (),
+        *,
+        stamp_ns: int | None = None,
+        update: int | None = None,
+    ) -> None:
+        """The model of the newest streaming solve (ok or failed; ``ShapeResult.model.as_dict()``)
+        and the model changes it made (reasons, oldest first), stamped with the solve's ROS time
+        and update number.
+        """
         now = self._clock()
         with self._lock:
             if model:
                 self.model = dict(model)
             if changes:
                 self.model_changes += len(changes)
-                self.last_model_change = "; ".join(str(c) for c in changes)  # one solve may make several
+                self.last_model_change = "; ".join(
+                    str(c) for c in changes
+                )  # one solve may make several
                 self.last_model_change_time = now
                 self.last_model_change_stamp_ns = stamp_ns
                 self.last_model_change_update = update
@@ -164,14 +205,17 @@ class Health:
         over = isinstance(est, (int, float)) and isinstance(tol, (int, float)) and est > tol
         if not (over or m.get("tolerance_met") is False):
             return ""
-        text = "model: tolerance not met" + (f" at order {m['order']}" if m.get("order") is not None else "")
+        text = "model: tolerance not met" + (
+            f" at order {m['order']}" if m.get("order") is not None else ""
+        )
         if isinstance(est, (int, float)) and isinstance(tol, (int, float)):
             text += f"; estimated error {est:.3g} m vs tolerance {tol:.3g} m"
         return text
 
     def error(self, kind: str, message: str, *, rejected: bool) -> bool:
         """A rejected input (rejected=True) or a failed solve; returns whether to log a warning now
-        (at most one per kind every ``throttle_s``)."""
+        (at most one per kind every ``throttle_s``).
+        """
         now = self._clock()
         kind = kind if kind in self.errors else "internal"
         with self._lock:
@@ -191,7 +235,9 @@ class Health:
             return False
 
     def should_warn(self, key: str) -> bool:
-        """Throttle for warnings that are not errors (e.g. 'unstable'): True at most every ``throttle_s``."""
+        """Throttle for warnings that are not errors (e.g. 'unstable'): True at most every
+        ``throttle_s``.
+        """
         now = self._clock()
         with self._lock:
             last = self._warned.get(key)
@@ -228,14 +274,22 @@ class Health:
                     return "warn", f"no shape yet; {self.last_status}: {self.last_message}"
                 return "warn", f"no shape yet ({self.state})"
             if self.newest_is_error:
-                what = "input rejected" if self.last_status == "rejected" else f"solve failed ({self.last_status})"
+                what = (
+                    "input rejected"
+                    if self.last_status == "rejected"
+                    else f"solve failed ({self.last_status})"
+                )
                 return "warn", f"{what}, the last good shape stays published: {self.last_message}"
             if r.status == "unverified":
                 tolerance = self._tolerance_problem()
-                return "warn", (f"{tolerance}; " if tolerance else "") + \
-                    f"published shape is not a verified equilibrium: {r.message}"
+                return "warn", (
+                    f"{tolerance}; " if tolerance else ""
+                ) + f"published shape is not a verified equilibrium: {r.message}"
             if r.stable is False:
-                return "warn", f"published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g})"
+                return (
+                    "warn",
+                    f"published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g})",
+                )
             tolerance = self._tolerance_problem()
             if tolerance:
                 return "warn", tolerance
@@ -276,7 +330,9 @@ class Health:
                 "targets coalesced": self.targets_coalesced,
                 "last error": self.last_error,
                 "last error kind": self.last_error_kind,
-                "last error age s": None if self.last_error_time is None else now - self.last_error_time,
+                "last error age s": None
+                if self.last_error_time is None
+                else now - self.last_error_time,
                 "queries": self.queries,
                 "queries failed": self.queries_failed,
                 "last query error": self.last_query_error,
@@ -291,9 +347,13 @@ class Health:
             out["model.reasons"] = "; ".join(str(r) for r in m.get("reasons") or ())
             out["model.changes"] = self.model_changes
             out["model.last change"] = self.last_model_change
-            out["model.last change time"] = (None if self.last_model_change_stamp_ns is None
-                                             else f"{self.last_model_change_stamp_ns / 1e9:.3f}")
+            out["model.last change time"] = (
+                None
+                if self.last_model_change_stamp_ns is None
+                else f"{self.last_model_change_stamp_ns / 1e9:.3f}"
+            )
             out["model.last change update"] = self.last_model_change_update
-            out["model.last change age s"] = (None if self.last_model_change_time is None
-                                              else now - self.last_model_change_time)
+            out["model.last change age s"] = (
+                None if self.last_model_change_time is None else now - self.last_model_change_time
+            )
         return out

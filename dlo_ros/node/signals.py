@@ -1,18 +1,21 @@
-"""How the node process answers SIGINT and SIGTERM (no ROS here, so it can run before rclpy is imported).
+"""How the node process answers SIGINT and SIGTERM (no ROS here, so it can run before rclpy is
+imported).
 
 Contract (msg_docs/node.md, "Exit codes"): the first SIGINT or SIGTERM at any time — while Python
-imports rclpy and CasADi, while the node starts, or while it runs — stops the node cleanly with exit
-code 0.  A second one while it is stopping ends the process at once, also with 0, after terminating
-the process's children (a gcc compiling the solver); the recording may then be cut short.  Once the
-node has stopped, the process ignores both while Python finalises.  (A signal in the first few
-milliseconds, before Python runs the entry point, still has the default action.)
+imports rclpy and CasADi, while the node starts, or while it runs — stops the node cleanly with
+exit code 0.  A second one while it is stopping ends the process at once, also with 0, after
+terminating the process's children (a gcc compiling the solver); the recording may then be cut
+short.  Once the node has stopped, the process ignores both while Python finalises.  (A signal in
+the first few milliseconds, before Python runs the entry point, still has the default action.)
 
-rclpy installs its own handlers in ``rclpy.init`` (they shut the context down, which ends the spin).
-Before that, :func:`stop_on_first_signal` replaces Python's defaults (SIGTERM killed the process with
-−15): while the modules are still imported a first signal leaves at once with 0 (nothing is open yet,
-and unwinding an import could escape as an uncaught interrupt, −2); from :func:`node_starting` on it
-raises ``KeyboardInterrupt``, so that the node closes its solver and recording.
+rclpy installs its own handlers in ``rclpy.init`` (they shut the context down, which ends the
+spin). Before that, :func:`stop_on_first_signal` replaces Python's defaults (SIGTERM killed the
+process with −15): while the modules are still imported a first signal leaves at once with 0
+(nothing is open yet, and unwinding an import could escape as an uncaught interrupt, −2); from
+:func:`node_starting` on it raises ``KeyboardInterrupt``, so that the node closes its solver and
+recording.
 """
+
 from __future__ import annotations
 
 import os
@@ -23,20 +26,27 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _exit_code: int | None = None  # set once the process is stopping: the next signal leaves with it
 
 
-_node_started = False  # set just before rclpy.init: from then on a stop unwinds (the node closes its recording)
+# set just before rclpy.init: from then on a stop unwinds (the node closes its recording)
+_node_started = False
 
 
 def node_starting() -> None:
-    """The node is about to start (rclpy.init): a first signal now unwinds through KeyboardInterrupt, so
-    that the node stops cleanly; before, there is nothing to close and the process leaves at once."""
+    """The node is about to start (rclpy.init): a first signal now unwinds through
+    KeyboardInterrupt, so that the node stops cleanly; before, there is nothing to close and the
+    process leaves at once.
+    """
     global _node_started
     _node_started = True
 
 
 def _interrupt(signum, frame) -> None:
-    if _exit_code is not None:  # rclpy restores this handler at its shutdown; the process is stopping
+    if (
+        _exit_code is not None
+    ):  # rclpy restores this handler at its shutdown; the process is stopping
         _leave(signum, frame)
-    if not _node_started:  # still importing: unwinding an import can escape as an uncaught interrupt (−2)
+    if (
+        not _node_started
+    ):  # still importing: unwinding an import can escape as an uncaught interrupt (−2)
         exit_on_second_signal(0)
         _leave(signum, frame)
     exit_on_second_signal(0)  # whatever catches this interrupt, a second signal leaves at once
@@ -51,14 +61,17 @@ def _leave(signum, frame) -> None:
 
 
 def stop_on_first_signal() -> None:
-    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (until rclpy installs its handlers)."""
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (until rclpy installs its
+    handlers).
+    """
     for sig in STOP_SIGNALS:
         signal.signal(sig, _interrupt)
 
 
 def exit_on_second_signal(code: int) -> None:
-    """From now on (the process is stopping), SIGINT or SIGTERM terminates the children and exits with
-    ``code`` at once, without unwinding (a thread may be inside CasADi/IPOPT)."""
+    """From now on (the process is stopping), SIGINT or SIGTERM terminates the children and exits
+    with ``code`` at once, without unwinding (a thread may be inside CasADi/IPOPT).
+    """
     global _exit_code
     _exit_code = code
     for sig in STOP_SIGNALS:
@@ -66,16 +79,18 @@ def exit_on_second_signal(code: int) -> None:
 
 
 def ignore_signals_at_exit() -> None:
-    """The process is about to exit: SIGINT and SIGTERM are ignored from now on.  CPython's finalisation
-    resets every signal with a Python handler to its default action, and a Ctrl-C during it (it can
-    take a second: DDS and CasADi teardown) killed the process with −2."""
+    """The process is about to exit: SIGINT and SIGTERM are ignored from now on.  CPython's
+    finalisation resets every signal with a Python handler to its default action, and a Ctrl-C
+    during it (it can take a second: DDS and CasADi teardown) killed the process with −2.
+    """
     for sig in STOP_SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
 
 
 def terminate_children() -> None:
-    """SIGTERM every descendant of this process (e.g. gcc and its cc1), deepest first (Linux /proc; best
-    effort, silent elsewhere)."""
+    """SIGTERM every descendant of this process (e.g. gcc and its cc1), deepest first (Linux /proc;
+    best effort, silent elsewhere).
+    """
     parents: dict[int, int] = {}
     try:
         entries = os.listdir("/proc")
@@ -87,7 +102,7 @@ def terminate_children() -> None:
         try:
             with open(f"/proc/{entry}/stat") as f:
                 stat = f.read()
-            parents[int(entry)] = int(stat[stat.rindex(")") + 2:].split()[1])
+            parents[int(entry)] = int(stat[stat.rindex(")") + 2 :].split()[1])
         except (OSError, ValueError, IndexError):
             continue
     found, frontier = [], [os.getpid()]

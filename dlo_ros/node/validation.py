@@ -4,6 +4,7 @@ Every check raises :class:`TargetError`, whose ``kind`` says which class of bad 
 node counts and throttles warnings per kind, and reports them in the diagnostics) and whose message
 names the offending input (``grips/left/target: quaternion norm is 1.2, not 1 (tolerance 0.001)``).
 """
+
 from __future__ import annotations
 
 import math
@@ -12,14 +13,16 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..model.problem import GripPose, PoseError
-from ..text import TEXT_LIMIT, safe_text  # noqa: F401  (re-exported: the node's modules import it from here)
+# noqa: F401  (re-exported: the node's modules import it from here)
+from ..text import TEXT_LIMIT, safe_text
 
-#: Longest ``header.frame_id`` of a target (or ``frame_id`` parameter) the node accepts; tf2 frame ids are short.
+#: Longest ``header.frame_id`` of a target (or ``frame_id`` parameter) the node accepts; tf2 frame
+#ids are short.
 FRAME_ID_LIMIT = 256
 
-#: Largest serialised target message (PoseStamped or PoseArray, CDR bytes) the node deserialises: room
-#: for a 256-character frame_id and 64 poses (a scene has at most 16 grips), so a miscounted array is
-#: still named by its count, and a huge one is refused by its size before any work.
+#: Largest serialised target message (PoseStamped or PoseArray, CDR bytes) the node deserialises:
+#room : for a 256-character frame_id and 64 poses (a scene has at most 16 grips), so a miscounted
+#array is : still named by its count, and a huge one is refused by its size before any work.
 TARGET_BYTES_LIMIT = 4096
 
 #: |‖q‖ − 1| up to this is normalised silently; beyond it the target is rejected.
@@ -27,18 +30,17 @@ QUATERNION_TOLERANCE = 1e-3
 
 #: The kinds of bad input and failures the node reports (diagnostics keys ``errors.<kind>``).
 KINDS = (
-    "size",          # a serialised target message over TARGET_BYTES_LIMIT bytes
-    "non_finite",    # NaN or infinity in a position or quaternion
-    "quaternion",    # zero or not unit within QUATERNION_TOLERANCE
-    "frame",         # header.frame_id is not the node's frame (and no transform is available)
-    "count",         # a PoseArray whose length is not the number of grips
-    "unreachable",   # grips farther apart than the string between them reaches
-    "invalid",       # anything else the solver refused as input
-    "infeasible",    # IPOPT: no point satisfies the constraints (e.g. obstacles)
-    "failed",        # the solver found no equilibrium
-    "internal",      # an unexpected exception (a bug): reported, never fatal
+    "size",  # a serialised target message over TARGET_BYTES_LIMIT bytes
+    "non_finite",  # NaN or infinity in a position or quaternion
+    "quaternion",  # zero or not unit within QUATERNION_TOLERANCE
+    "frame",  # header.frame_id is not the node's frame (and no transform is available)
+    "count",  # a PoseArray whose length is not the number of grips
+    "unreachable",  # grips farther apart than the string between them reaches
+    "invalid",  # anything else the solver refused as input
+    "infeasible",  # IPOPT: no point satisfies the constraints (e.g. obstacles)
+    "failed",  # the solver found no equilibrium
+    "internal",  # an unexpected exception (a bug): reported, never fatal
 )
-
 
 
 class TargetError(ValueError):
@@ -55,25 +57,37 @@ def normalise_frame(frame_id: str) -> str:
 
 
 def check_message_size(n_bytes: int, where: str) -> None:
-    """TargetError('size') for a serialised message over :data:`TARGET_BYTES_LIMIT` bytes (checked before it
-    is deserialised)."""
+    """TargetError('size') for a serialised message over :data:`TARGET_BYTES_LIMIT` bytes (checked
+    before it is deserialised).
+    """
     if n_bytes > TARGET_BYTES_LIMIT:
-        raise TargetError("size", f"{where}: message of {n_bytes} bytes is over the limit of {TARGET_BYTES_LIMIT} "
-                                  "bytes; it was not read")
+        raise TargetError(
+            "size",
+            f"{where}: message of {n_bytes} bytes is over the limit of {TARGET_BYTES_LIMIT} "
+            "bytes; it was not read",
+        )
 
 
 def check_frame_size(frame_id: str, where: str) -> None:
-    """TargetError('frame') for a ``header.frame_id`` longer than :data:`FRAME_ID_LIMIT` characters (checked
-    before anything compares, transforms, logs or records it)."""
+    """TargetError('frame') for a ``header.frame_id`` longer than :data:`FRAME_ID_LIMIT` characters
+    (checked before anything compares, transforms, logs or records it).
+    """
     if len(frame_id) > FRAME_ID_LIMIT:
-        raise TargetError("frame", f"{where}: header.frame_id has {len(frame_id)} characters (at most "
-                                   f"{FRAME_ID_LIMIT}): '{safe_text(frame_id, 40)}'")
+        raise TargetError(
+            "frame",
+            f"{where}: header.frame_id has {len(frame_id)} characters (at most "
+            f"{FRAME_ID_LIMIT}): '{safe_text(frame_id, 40)}'",
+        )
 
 
 def check_frame(frame_id: str, expected: str, where: str) -> None:
-    """TargetError('frame') unless ``frame_id`` names ``expected`` (an empty frame_id is rejected too)."""
+    """TargetError('frame') unless ``frame_id`` names ``expected`` (an empty frame_id is rejected
+    too).
+    """
     if not frame_id:
-        raise TargetError("frame", f"{where}: header.frame_id is empty; targets must be given in '{expected}'")
+        raise TargetError(
+            "frame", f"{where}: header.frame_id is empty; targets must be given in '{expected}'"
+        )
     check_frame_size(frame_id, where)
     if normalise_frame(frame_id) != normalise_frame(expected):
         raise TargetError(
@@ -83,10 +97,14 @@ def check_frame(frame_id: str, expected: str, where: str) -> None:
         )
 
 
-def check_pose(position: Sequence[float], orientation: Sequence[float], where: str,
-               tolerance: float = QUATERNION_TOLERANCE) -> GripPose:
-    """A GripPose with the quaternion normalised (``GripPose.checked``, the one pose validation), or
-    TargetError of the same kind naming the problem.
+def check_pose(
+    position: Sequence[float],
+    orientation: Sequence[float],
+    where: str,
+    tolerance: float = QUATERNION_TOLERANCE,
+) -> GripPose:
+    """A GripPose with the quaternion normalised (``GripPose.checked``, the one pose validation),
+    or TargetError of the same kind naming the problem.
 
     position: (x, y, z) [m]; orientation: (x, y, z, w).
     """
@@ -106,10 +124,14 @@ def check_count(count: int, grip_names: Sequence[str], where: str) -> None:
         )
 
 
-def grip_miss(points: np.ndarray, s: np.ndarray, grips: Iterable[tuple[str, float, np.ndarray]],
-              tolerance: float) -> str:
-    """Why a converged shape does not pass through its grip targets ('' if it does, or if no grip sits
-    on an output sample).  A sanity check of the solver's result, never expected to fire.
+def grip_miss(
+    points: np.ndarray,
+    s: np.ndarray,
+    grips: Iterable[tuple[str, float, np.ndarray]],
+    tolerance: float,
+) -> str:
+    """Why a converged shape does not pass through its grip targets ('' if it does, or if no grip
+    sits on an output sample).  A sanity check of the solver's result, never expected to fire.
 
     points (N, 3), s (N,): the centreline; grips: (name, s, target position).
     """
@@ -122,8 +144,10 @@ def grip_miss(points: np.ndarray, s: np.ndarray, grips: Iterable[tuple[str, floa
             continue  # the grip is between output samples
         miss = float(np.linalg.norm(points[k] - np.asarray(target, dtype=float)))
         if not miss <= tolerance:
-            return (f"the solver reported an equilibrium that misses grip '{name}' by {miss:.3g} m "
-                    f"(at {_fmt(points[k])}, target {_fmt(np.asarray(target, dtype=float))})")
+            return (
+                f"the solver reported an equilibrium that misses grip '{name}' by {miss:.3g} m "
+                f"(at {_fmt(points[k])}, target {_fmt(np.asarray(target, dtype=float))})"
+            )
     return ""
 
 

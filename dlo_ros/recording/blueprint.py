@@ -1,26 +1,45 @@
-"""The recording's default rerun blueprint: the 3D world beside the time series and the event log."""
+"""The recording's default rerun blueprint: the 3D world beside the time series and the event
+log.
+"""
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .paths import E_EIGEN, E_ENERGY, E_ITERATIONS, E_MODEL_SERIES, E_SOLVE_TIME, E_WORLD, TIMELINE_UPDATE
+from .paths import (
+    E_EIGEN,
+    E_ENERGY,
+    E_ITERATIONS,
+    E_MODEL_SERIES,
+    E_SOLVE_TIME,
+    E_WORLD,
+    TIMELINE_UPDATE,
+)
 
 if TYPE_CHECKING:
     from .scene_info import _SceneInfo
 
 
 def auto_model(info: _SceneInfo | None) -> bool:
-    """Whether the recorded solver picks its model (solver.model 'auto', not a ShapeSolver of it)."""
-    return info is not None and info.model == "auto" and info.solver_kind in ("", "AutoShapeSolver")
+    """Whether the recorded solver picks its model (solver.model 'auto', not a ShapeSolver of
+    it).
+    """
+    return (
+        info is not None and info.model == "auto" and info.solver_kind in ("", "AutoShapeSolver")
+    )
 
 
 def default_blueprint(info: _SceneInfo | None = None) -> Any:
-    """3D world view (left) beside the time series and the event log (right); timeline ``update``."""
+    """3D world view (left) beside the time series and the event log (right); timeline
+    ``update``.
+    """
     import rerun.blueprint as rrb
 
-    world = rrb.Spatial3DView(origin=E_WORLD, name="World (m, z up)", eye_controls=_eye(info) if info else None)
+    world = rrb.Spatial3DView(
+        origin=E_WORLD, name="World (m, z up)", eye_controls=_eye(info) if info else None
+    )
     views = [
         rrb.TimeSeriesView(origin=E_ENERGY, name="Energy [J]"),
         rrb.TimeSeriesView(origin=E_SOLVE_TIME, name="Solve time [ms]"),
@@ -29,8 +48,13 @@ def default_blueprint(info: _SceneInfo | None = None) -> Any:
     ]
     shares = [3, 2, 2, 2]
     if auto_model(info):  # the model changes: its error estimate beside the tolerance
-        views.append(rrb.TimeSeriesView(origin=E_MODEL_SERIES, name="Model: estimated error vs tolerance [m]",
-                                        contents=["$origin/estimated_error_m", "$origin/tolerance_m"]))
+        views.append(
+            rrb.TimeSeriesView(
+                origin=E_MODEL_SERIES,
+                name="Model: estimated error vs tolerance [m]",
+                contents=["$origin/estimated_error_m", "$origin/tolerance_m"],
+            )
+        )
         shares.append(2)
     views.append(rrb.TextLogView(origin="events", name="Events: status, rejected inputs, model"))
     shares.append(2)
@@ -44,7 +68,9 @@ def default_blueprint(info: _SceneInfo | None = None) -> Any:
 
 
 def _eye(info: _SceneInfo) -> Any:
-    """Camera looking at the cable from the side: perpendicular to the grips' chord and to gravity."""
+    """Camera looking at the cable from the side: perpendicular to the grips' chord and to
+    gravity.
+    """
     import rerun.blueprint as rrb
 
     g, L = info.gravity, info.length

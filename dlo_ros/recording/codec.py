@@ -1,9 +1,10 @@
 """The wire format between a Recorder and its writer: snapshots of what was logged, as flat tuples.
 
 A result or a target set is copied into a tuple of primitives and bytes (a few µs to build and to
-pickle); :func:`decode` turns any queued message back into an :class:`_Item` for the writer.  Copies,
-never references into the caller's objects.
+pickle); :func:`decode` turns any queued message back into an :class:`_Item` for the writer.
+Copies, never references into the caller's objects.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -38,14 +39,17 @@ class _ResultSnap:
     bend_stiffness: Any
     targets: dict | None = None
     model: dict = field(default_factory=dict)
-    # one row per self-contact: s_a, s_b [m], point_a, point_b [m], force on s_a [N] (its opposite acts on s_b)
+    # one row per self-contact: s_a, s_b [m], point_a, point_b [m], force on s_a [N] (its opposite
+    # acts on s_b)
     self_contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 11)))
 
 
 @dataclass
 class _FitSnap:
-    """A fit as the node recorded it: observed points, fitted centreline and each point's nearest point on
-    it (m), the stated σ [m] and the robust loss's threshold [σ], the summary text, whether it was ok."""
+    """A fit as the node recorded it: observed points, fitted centreline and each point's nearest
+    point on it (m), the stated σ [m] and the robust loss's threshold [σ], the summary text,
+    whether it was ok.
+    """
 
     points: np.ndarray
     shape: np.ndarray
@@ -62,8 +66,16 @@ def _pose_bytes(pose: Any) -> bytes:
 
 
 def _encode_targets(poses: Mapping[str, Any], update: int, ros_time_ns: int) -> tuple:
-    """log_targets' message: a flat tuple of primitives and bytes (a few µs to build and to pickle)."""
-    return ("T", update, ros_time_ns, tuple(str(n) for n in poses), b"".join(_pose_bytes(p) for p in poses.values()))
+    """log_targets' message: a flat tuple of primitives and bytes (a few µs to build and to
+    pickle).
+    """
+    return (
+        "T",
+        update,
+        ros_time_ns,
+        tuple(str(n) for n in poses),
+        b"".join(_pose_bytes(p) for p in poses.values()),
+    )
 
 
 def _decode_poses(names: tuple, data: bytes) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -71,23 +83,43 @@ def _decode_poses(names: tuple, data: bytes) -> dict[str, tuple[np.ndarray, np.n
     return {n: (arr[i, 0:3], arr[i, 3:7]) for i, n in enumerate(names)}
 
 
-def encode_result(result: Any, update: int, ros_time_ns: int, bend_stiffness: Any, targets: Any,
-                   warm: bool | None) -> tuple:
+def encode_result(
+    result: Any,
+    update: int,
+    ros_time_ns: int,
+    bend_stiffness: Any,
+    targets: Any,
+    warm: bool | None,
+) -> tuple:
     """log_result's message: the result copied into a flat tuple of primitives and bytes."""
     energy, grips = result.energy, result.grips
     return (
-        "R", update, ros_time_ns, str(result.status), str(result.message), result.stable,
-        None if result.min_eigenvalue is None else float(result.min_eigenvalue), int(result.iterations),
-        float(result.solve_time_ms), (bool(result.warm_started), warm),
-        tuple(energy), np.fromiter(energy.values(), float, len(energy)).tobytes(),
-        tuple(grips), b"".join(np.asarray(w.force, dtype=float).tobytes() for w in grips.values()),
-        np.asarray(result.s, dtype=float).tobytes(), np.asarray(result.points, dtype=float).tobytes(),
+        "R",
+        update,
+        ros_time_ns,
+        str(result.status),
+        str(result.message),
+        result.stable,
+        None if result.min_eigenvalue is None else float(result.min_eigenvalue),
+        int(result.iterations),
+        float(result.solve_time_ms),
+        (bool(result.warm_started), warm),
+        tuple(energy),
+        np.fromiter(energy.values(), float, len(energy)).tobytes(),
+        tuple(grips),
+        b"".join(np.asarray(w.force, dtype=float).tobytes() for w in grips.values()),
+        np.asarray(result.s, dtype=float).tobytes(),
+        np.asarray(result.points, dtype=float).tobytes(),
         np.asarray(result.orientations, dtype=float).tobytes(),
         None if bend_stiffness is None else np.asarray(bend_stiffness, dtype=float).tobytes(),
-        None if targets is None else (tuple(str(n) for n in targets), b"".join(_pose_bytes(p) for p in targets.values())),
+        None
+        if targets is None
+        else (tuple(str(n) for n in targets), b"".join(_pose_bytes(p) for p in targets.values())),
         result.model_dict(),
-        b"".join(np.concatenate([[c.s_a, c.s_b], c.point_a, c.point_b, c.force]).astype(float).tobytes()
-                 for c in getattr(result, "self_contacts", ())),
+        b"".join(
+            np.concatenate([[c.s_a, c.s_b], c.point_a, c.point_b, c.force]).astype(float).tobytes()
+            for c in getattr(result, "self_contacts", ())
+        ),
     )
 
 
@@ -98,18 +130,48 @@ def decode(message: Any) -> _Item:
     if message[0] == "T":
         _, update, t, names, data = message
         return _Item("targets", update, t, _decode_poses(names, data))
-    (_, update, t, status, text, stable, eig, iterations, ms, warm, e_names, e_data, g_names, g_data,
-     s, points, orientations, rf, targets, model, contacts) = message
+    (
+        _,
+        update,
+        t,
+        status,
+        text,
+        stable,
+        eig,
+        iterations,
+        ms,
+        warm,
+        e_names,
+        e_data,
+        g_names,
+        g_data,
+        s,
+        points,
+        orientations,
+        rf,
+        targets,
+        model,
+        contacts,
+    ) = message
     f = np.frombuffer(g_data, dtype=float).reshape(len(g_names), 3)
     bend = None if rf is None else np.frombuffer(rf, dtype=float)
     snap = _ResultSnap(
-        status=status, message=text, stable=stable, min_eigenvalue=eig, iterations=iterations, solve_time_ms=ms,
-        warm_started=warm[0], warm_call=warm[1], s=np.frombuffer(s, dtype=float), points=np.frombuffer(points, dtype=float).reshape(-1, 3),
+        status=status,
+        message=text,
+        stable=stable,
+        min_eigenvalue=eig,
+        iterations=iterations,
+        solve_time_ms=ms,
+        warm_started=warm[0],
+        warm_call=warm[1],
+        s=np.frombuffer(s, dtype=float),
+        points=np.frombuffer(points, dtype=float).reshape(-1, 3),
         orientations=np.frombuffer(orientations, dtype=float).reshape(-1, 4),
         energy=dict(zip(e_names, np.frombuffer(e_data, dtype=float).tolist())),
         forces={n: f[i] for i, n in enumerate(g_names)},
         bend_stiffness=None if bend is None else (float(bend[0]) if bend.size == 1 else bend),
-        targets=None if targets is None else _decode_poses(*targets), model=model,
+        targets=None if targets is None else _decode_poses(*targets),
+        model=model,
         self_contacts=np.frombuffer(contacts, dtype=float).reshape(-1, 11),
     )
     return _Item("result", update, t, snap)

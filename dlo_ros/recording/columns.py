@@ -6,6 +6,7 @@ returns the cells as ``str`` / ``bool`` / float64 numpy arrays, counting what it
 byte budget.  A wrong type, a non-finite number where a finite one is needed or a budget overrun
 is a :class:`ColumnError` (a ValueError) with one line naming the entity and the column.
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -21,7 +22,8 @@ class ColumnError(ValueError):
 
 class Budget:
     """Bytes kept from the file so far (numbers 8 bytes each, text 1 byte per character; the
-    reader adds its rows' overhead)."""
+    reader adds its rows' overhead).
+    """
 
     def __init__(self, limit: int) -> None:
         self.limit = limit
@@ -30,8 +32,10 @@ class Budget:
     def take(self, n: int, where: str) -> None:
         self.used += n
         if self.used > self.limit:
-            raise ColumnError(f"{where}: the recording holds more than {self.limit} bytes of "
-                              "data to read back (msg_docs/recording.md, Limits)")
+            raise ColumnError(
+                f"{where}: the recording holds more than {self.limit} bytes of "
+                "data to read back (msg_docs/recording.md, Limits)"
+            )
 
 
 class Columns:
@@ -71,8 +75,9 @@ class Columns:
         if pa.types.is_timestamp(col.type) or pa.types.is_duration(col.type):
             col = col.cast(pa.int64())
         if not pa.types.is_integer(col.type):
-            raise ColumnError(f"{self._where(name)} has type {col.type}, expected an integer "
-                              "index")
+            raise ColumnError(
+                f"{self._where(name)} has type {col.type}, expected an integer index"
+            )
         return col.to_pylist()
 
     def row_ids(self) -> list[bytes]:
@@ -81,7 +86,8 @@ class Columns:
 
     def texts(self, name: str, *, first: bool = True) -> list[Any]:
         """A string column: per row its first string (``first``) or the list of strings; None where
-        null or empty."""
+        null or empty.
+        """
         import pyarrow as pa
 
         col = self._list(name)
@@ -107,10 +113,12 @@ class Columns:
             raise ColumnError(f"{self._where(name)} has type {col.type}, expected booleans")
         return [c[0] if c else None for c in col.to_pylist()]
 
-    def numbers(self, name: str, *, finite: bool = True,
-                per_row: int | None = None) -> list[np.ndarray | None]:
+    def numbers(
+        self, name: str, *, finite: bool = True, per_row: int | None = None
+    ) -> list[np.ndarray | None]:
         """A numeric column: per row a float64 array (None where null).  ``finite``: NaN or inf is
-        an error; ``per_row``: the largest number of values a cell may have."""
+        an error; ``per_row``: the largest number of values a cell may have.
+        """
         import pyarrow as pa
 
         col = self._list(name)
@@ -122,8 +130,9 @@ class Columns:
         values = col.flatten().to_numpy(zero_copy_only=False).astype(np.float64, copy=False)
         self.budget.take(8 * len(values), self._where(name))
         if finite and len(values) and not np.all(np.isfinite(values)):
-            raise ColumnError(f"{self._where(name)}: NaN or infinite value where a number is "
-                              "expected")
+            raise ColumnError(
+                f"{self._where(name)}: NaN or infinite value where a number is expected"
+            )
         offsets = col.offsets.to_numpy(zero_copy_only=False)
         offsets = offsets - offsets[0]
         valid = col.is_valid().to_numpy(zero_copy_only=False)
@@ -132,28 +141,34 @@ class Columns:
             if not valid[i]:
                 out.append(None)
                 continue
-            cell = values[offsets[i]:offsets[i + 1]]
+            cell = values[offsets[i] : offsets[i + 1]]
             if per_row is not None and len(cell) > per_row:
-                raise ColumnError(f"{self._where(name)}: {len(cell)} values in one row, at most "
-                                  f"{per_row} (msg_docs/recording.md, Limits)")
+                raise ColumnError(
+                    f"{self._where(name)}: {len(cell)} values in one row, at most "
+                    f"{per_row} (msg_docs/recording.md, Limits)"
+                )
             out.append(cell.copy())
         return out
 
     def strips(self, name: str, per_row: int) -> list[np.ndarray | None]:
         """``LineStrips3D:strips`` as the centreline it draws: the first point of each strip and
-        the last point of the last one, (n, 3) float64 per row (None where null or empty)."""
+        the last point of the last one, (n, 3) float64 per row (None where null or empty).
+        """
         import pyarrow as pa
 
         col = self._list(name)
         if col is None:
             return [None] * self.rows
         inner = col.type.value_type
-        if not ((pa.types.is_list(inner) or pa.types.is_large_list(inner))
-                and pa.types.is_fixed_size_list(inner.value_type)
-                and inner.value_type.list_size == 3
-                and pa.types.is_floating(inner.value_type.value_type)):
-            raise ColumnError(f"{self._where(name)} has type {col.type}, expected line strips of "
-                              "3D points")
+        if not (
+            (pa.types.is_list(inner) or pa.types.is_large_list(inner))
+            and pa.types.is_fixed_size_list(inner.value_type)
+            and inner.value_type.list_size == 3
+            and pa.types.is_floating(inner.value_type.value_type)
+        ):
+            raise ColumnError(
+                f"{self._where(name)} has type {col.type}, expected line strips of 3D points"
+            )
         strips = col.flatten()  # one entry per strip
         points = strips.flatten().flatten().to_numpy(zero_copy_only=False)
         self.budget.take(8 * len(points), self._where(name))
@@ -168,9 +183,11 @@ class Columns:
                 out.append(None)
                 continue
             if b - a + 1 > per_row:
-                raise ColumnError(f"{self._where(name)}: {b - a} strips in one row, at most "
-                                  f"{per_row} (msg_docs/recording.md, Limits)")
-            starts, ends = strip_off[a:b], strip_off[a + 1:b + 1]
+                raise ColumnError(
+                    f"{self._where(name)}: {b - a} strips in one row, at most "
+                    f"{per_row} (msg_docs/recording.md, Limits)"
+                )
+            starts, ends = strip_off[a:b], strip_off[a + 1 : b + 1]
             if np.any(ends <= starts):
                 raise ColumnError(f"{self._where(name)}: an empty line strip")
             out.append(np.vstack([points[starts], points[ends[-1] - 1][None, :]]))

@@ -1,4 +1,5 @@
-"""Entity paths and timelines of a dlo_ros recording: the names the writer logs under and replay reads back.
+"""Entity paths and timelines of a dlo_ros recording: the names the writer logs under and replay
+reads back.
 
 Entity tree (world frame, right-handed, z up, metres; timelines ``update`` (sequence) and
 ``ros_time`` (timestamp)):
@@ -17,21 +18,23 @@ Entity tree (world frame, right-handed, z up, metres; timelines ``update`` (sequ
 ``timeseries/energy``          bend, twist, stretch, gravity, external_work, total [J]
 ``timeseries/min_eigenvalue``  smallest reduced Hessian eigenvalue (< 0: unstable)
 ``model/<key>``                the solver's model per update (``ShapeResult.model``): ``order``,
-                               ``variables``, ``planar`` (1/0), ``estimated_error_m``, ``tolerance_m``
+                               ``variables``, ``planar`` (1/0), ``estimated_error_m``,
+                               ``tolerance_m``
 ``events/status``              status text, logged when it (or stability) changes
-``events/rejected``            every rejected input with its reason (WARN)
-``events/model``               model events (INFO): changes of the model with their reasons, scene changes
-``events/recorder``            the recorder's own warnings (dropped items)
-``world/fit/observed``         the node's fits (``log_fit``): observed points, red beyond the robust
-``world/fit/fitted``           loss's threshold; the fitted centreline; one segment per point to its
-``world/fit/residuals``        nearest point on it (dlo_ros.identify.drawing), at the fit's update
-``events/fit``                 each fit's summary line and what it applied (INFO; WARN if not ok)
-``scene/yaml``                 the scene file (scene_to_dict as YAML), static; ``scene/changes`` later ones
-``scene/legend``               colour and arrow scales (static)
-``data/result``                exact float64 copy of each result (for ``dlo replay --resolve``)
-``data/targets``               exact float64 copy of each received target set
+``events/rejected``            every rejected input with its reason (WARN) ``events/model``
+model events (INFO): changes of the model with their reasons, scene changes ``events/recorder``
+the recorder's own warnings (dropped items) ``world/fit/observed``         the node's fits
+(``log_fit``): observed points, red beyond the robust ``world/fit/fitted``           loss's
+threshold; the fitted centreline; one segment per point to its ``world/fit/residuals``
+nearest point on it (dlo_ros.identify.drawing), at the fit's update ``events/fit``
+each fit's summary line and what it applied (INFO; WARN if not ok) ``scene/yaml``
+the scene file (scene_to_dict as YAML), static; ``scene/changes`` later ones ``scene/legend``
+colour and arrow scales (static) ``data/result``                exact float64 copy of each result
+(for ``dlo replay --resolve``) ``data/targets``               exact float64 copy of each received
+target set
 =============================  ===================================================================
 """
+
 from __future__ import annotations
 
 TIMELINE_UPDATE = "update"
@@ -47,15 +50,24 @@ E_SOLVE_TIME = "timeseries/solve_time_ms"
 E_ITERATIONS = "timeseries/iterations"
 E_ENERGY = "timeseries/energy"
 E_EIGEN = "timeseries/min_eigenvalue"
-E_MODEL_SERIES = "model"  # model/<key>: scalars of ShapeResult.model, one row per result that has them
-#: ShapeResult.model entries recorded as scalars (model/<key>; booleans as 1/0), with their series names.
-MODEL_SCALARS = {"order": "basis order", "variables": "unknowns", "planar": "planar (1) / 3D (0)",
-                 "estimated_error_m": "estimated error [m]", "tolerance_m": "tolerance [m]"}
+E_MODEL_SERIES = (
+    "model"  # model/<key>: scalars of ShapeResult.model, one row per result that has them
+)
+#: ShapeResult.model entries recorded as scalars (model/<key>; booleans as 1/0), with their series
+#names.
+MODEL_SCALARS = {
+    "order": "basis order",
+    "variables": "unknowns",
+    "planar": "planar (1) / 3D (0)",
+    "estimated_error_m": "estimated error [m]",
+    "tolerance_m": "tolerance [m]",
+}
 E_STATUS = "events/status"
 E_REJECTED = "events/rejected"
 E_MODEL = "events/model"
 E_RECORDER = "events/recorder"
-E_FIT = "world/fit"  # world/fit/{observed,fitted,residuals}: the node's newest fit (dlo_ros.identify.drawing)
+# world/fit/{observed,fitted,residuals}: the node's newest fit (dlo_ros.identify.drawing)
+E_FIT = "world/fit"
 E_FIT_EVENTS = "events/fit"  # each fit's summary and what it applied (INFO) or why not (WARN)
 E_SCENE = "scene/yaml"
 E_SCENE_CHANGES = "scene/changes"

@@ -7,6 +7,7 @@ end); rerun's chunk API (``rerun.chunk.RrdReader(...).stream()``) then yields on
 of which :mod:`.columns` keeps only the typed columns dlo_ros needs: no chunk is held after it
 was read.  Every failure is one :class:`RecordingError` line naming the file.
 """
+
 from __future__ import annotations
 
 import json
@@ -73,7 +74,8 @@ class Recording:
 def rows_of(chunks: list[Any]) -> list[dict[str, Any]]:
     """Rows of one entity's chunks as dicts (index columns as int, components as Python lists), in
     logging order: by ``update`` then by row id.  For tests and small recordings: it converts every
-    column to Python objects (:func:`read_recording` reads only the columns it needs)."""
+    column to Python objects (:func:`read_recording` reads only the columns it needs).
+    """
     import pyarrow as pa
 
     rows: list[dict[str, Any]] = []
@@ -86,6 +88,7 @@ def rows_of(chunks: list[Any]) -> list[dict[str, Any]]:
             cols[name] = col.to_pylist()
         for i in range(rb.num_rows):
             rows.append({name: values[i] for name, values in cols.items()})
+
     def key(row: dict[str, Any]) -> tuple[int, bytes]:
         update = row.get(P.TIMELINE_UPDATE)
         return (update if update is not None else -1, row.get("rerun.controls.RowId") or b"")
@@ -110,8 +113,9 @@ def _poses(names: list | None, flat: np.ndarray | None, where: str) -> dict[str,
     if not names or flat is None:
         return None
     if len(flat) != 7 * len(names):
-        raise ColumnError(f"{where}: {len(flat)} pose values for {len(names)} grips, expected 7 "
-                          "per grip")
+        raise ColumnError(
+            f"{where}: {len(flat)} pose values for {len(names)} grips, expected 7 per grip"
+        )
     arr = flat.reshape(len(names), 7)
     return {str(n): (arr[i, 0:3].copy(), arr[i, 3:7].copy()) for i, n in enumerate(names)}
 
@@ -131,7 +135,8 @@ def _or_empty(values: np.ndarray | None) -> np.ndarray:
 
 class _Rows:
     """Rows of one entity collected chunk by chunk as ``(update, row id, value)`` (or only
-    counted, ``keep=False``), sorted on demand."""
+    counted, ``keep=False``), sorted on demand.
+    """
 
     def __init__(self, entity: str, limit: int, budget: Budget, keep: bool = True) -> None:
         self.entity, self.limit, self.budget, self.keep = entity, limit, budget, keep
@@ -141,12 +146,14 @@ class _Rows:
     def add(self, updates: list, row_ids: list[bytes], values: list) -> None:
         self.count += len(values)
         if self.count > self.limit:
-            raise ColumnError(f"{self.entity}: more than {self.limit} rows "
-                              "(msg_docs/recording.md, Limits)")
+            raise ColumnError(
+                f"{self.entity}: more than {self.limit} rows (msg_docs/recording.md, Limits)"
+            )
         if self.keep:  # the Python objects of a kept row, beyond the numbers Columns counted
             self.budget.take(LIMITS["row_bytes"] * len(values), self.entity)
-            self.items.extend((-1 if u is None else u, rid, v)
-                              for u, rid, v in zip(updates, row_ids, values))
+            self.items.extend(
+                (-1 if u is None else u, rid, v) for u, rid, v in zip(updates, row_ids, values)
+            )
 
     def sorted(self) -> list[tuple[int, bytes, Any]]:
         return sorted(self.items, key=lambda t: (t[0], t[1]))
@@ -154,7 +161,8 @@ class _Rows:
 
 class _Reader:
     """Reads the chunks of one recording as rerun streams them, one at a time, keeping only the
-    typed values of the columns dlo_ros needs (no chunk is held after it was read)."""
+    typed values of the columns dlo_ros needs (no chunk is held after it was read).
+    """
 
     def __init__(self, path: Path, details: bool, keep: bool = True) -> None:
         self.path, self.details = path, details
@@ -162,48 +170,77 @@ class _Reader:
         self.entities: set[str] = set()
         self.scene: list[tuple[str | None, str | None, str | None]] = []
         n = LIMITS["updates"]
-        kept = (P.E_SCENE_CHANGES, P.E_DATA_RESULT, P.E_DATA_TARGETS, P.E_REJECTED, P.E_STATUS,
-                P.E_MODEL, P.E_RECORDER, P.E_CABLE)
+        kept = (
+            P.E_SCENE_CHANGES,
+            P.E_DATA_RESULT,
+            P.E_DATA_TARGETS,
+            P.E_REJECTED,
+            P.E_STATUS,
+            P.E_MODEL,
+            P.E_RECORDER,
+            P.E_CABLE,
+        )
         self.keep = keep
         self.rows = {e: _Rows(e, n, self.budget, keep) for e in kept}
-        self.series = {key: _Rows(f"{P.E_MODEL_SERIES}/{key}", n, self.budget, keep)
-                       for key in P.MODEL_SCALARS}
+        self.series = {
+            key: _Rows(f"{P.E_MODEL_SERIES}/{key}", n, self.budget, keep)
+            for key in P.MODEL_SCALARS
+        }
 
     def chunk(self, entity: str, batch: Any) -> None:
         if entity not in self.entities:
             self.entities.add(entity)
             if len(self.entities) > LIMITS["entities"]:
-                raise ColumnError(f"more than {LIMITS['entities']} entities "
-                                  "(msg_docs/recording.md, Limits)")
+                raise ColumnError(
+                    f"more than {LIMITS['entities']} entities (msg_docs/recording.md, Limits)"
+                )
         if not self.keep:  # nothing is kept: the budget bounds one chunk's converted columns
             self.budget.used = 0
         cols = Columns(batch, entity, self.budget)
         if entity == P.E_SCENE:
-            self.scene.extend(zip(cols.texts("TextDocument:text"), cols.texts("scene_name"),
-                                  cols.texts("solver")))
+            self.scene.extend(
+                zip(
+                    cols.texts("TextDocument:text"), cols.texts("scene_name"), cols.texts("solver")
+                )
+            )
         elif entity == P.E_SCENE_CHANGES:
-            self.rows[entity].add(updates_of(cols, True), cols.row_ids(),
-                                  cols.texts("TextDocument:text"))
+            self.rows[entity].add(
+                updates_of(cols, True), cols.row_ids(), cols.texts("TextDocument:text")
+            )
         elif entity == P.E_DATA_RESULT:
             self._results(cols)
         elif entity == P.E_DATA_TARGETS:
             ups = updates_of(cols, True)
             names = cols.texts("grip_names", first=False)
-            poses = [_poses(n, flat, f"{entity} update {u} poses")
-                     for u, n, flat in zip(ups, names, cols.numbers("poses"))]
+            poses = [
+                _poses(n, flat, f"{entity} update {u} poses")
+                for u, n, flat in zip(ups, names, cols.numbers("poses"))
+            ]
             self.rows[entity].add(ups, cols.row_ids(), poses)
         elif entity == P.E_REJECTED or (self.details and entity in EVENTS):
-            self.rows[entity].add(updates_of(cols, entity == P.E_REJECTED), cols.row_ids(),
-                                  cols.texts("TextLog:text"))
+            self.rows[entity].add(
+                updates_of(cols, entity == P.E_REJECTED),
+                cols.row_ids(),
+                cols.texts("TextLog:text"),
+            )
         elif self.details and entity == P.E_CABLE:
-            self.rows[entity].add(updates_of(cols, False), cols.row_ids(),
-                                  cols.strips("LineStrips3D:strips", LIMITS["samples"]))
-        elif self.details and entity.startswith(P.E_MODEL_SERIES + "/") and \
-                entity[len(P.E_MODEL_SERIES) + 1:] in self.series:
-            values = [None if v is None or not len(v) else float(v[0])
-                      for v in cols.numbers("Scalars:scalars", finite=False)]
-            self.series[entity[len(P.E_MODEL_SERIES) + 1:]].add(updates_of(cols, False),
-                                                                cols.row_ids(), values)
+            self.rows[entity].add(
+                updates_of(cols, False),
+                cols.row_ids(),
+                cols.strips("LineStrips3D:strips", LIMITS["samples"]),
+            )
+        elif (
+            self.details
+            and entity.startswith(P.E_MODEL_SERIES + "/")
+            and entity[len(P.E_MODEL_SERIES) + 1 :] in self.series
+        ):
+            values = [
+                None if v is None or not len(v) else float(v[0])
+                for v in cols.numbers("Scalars:scalars", finite=False)
+            ]
+            self.series[entity[len(P.E_MODEL_SERIES) + 1 :]].add(
+                updates_of(cols, False), cols.row_ids(), values
+            )
 
     def _results(self, cols: Columns) -> None:
         where = P.E_DATA_RESULT
@@ -223,17 +260,26 @@ class _Reader:
         for i in range(cols.rows):
             p = pts[i] if pts[i] is not None else np.zeros(0)
             if len(p) % 3:
-                raise ColumnError(f"{where}: update {ups[i]} has {len(p)} point values, not a "
-                                  "multiple of 3")
-            values.append(RecordedResult(
-                update=int(ups[i]), ros_time_ns=ros[i], status=status[i] or "",
-                message=message[i] or "",
-                warm_started=bool(warm_started[i]), warm_call=warm[i],
-                s=s[i] if s[i] is not None else np.zeros(0), points=p.reshape(-1, 3),
-                targets=_poses(names[i], poses[i], f"{where} update {ups[i]} target_poses"),
-                energy={str(k): float(v) for k, v in zip(terms[i] or [], _or_empty(energy[i]))},
-                model=_model(model[i]),
-            ))
+                raise ColumnError(
+                    f"{where}: update {ups[i]} has {len(p)} point values, not a multiple of 3"
+                )
+            values.append(
+                RecordedResult(
+                    update=int(ups[i]),
+                    ros_time_ns=ros[i],
+                    status=status[i] or "",
+                    message=message[i] or "",
+                    warm_started=bool(warm_started[i]),
+                    warm_call=warm[i],
+                    s=s[i] if s[i] is not None else np.zeros(0),
+                    points=p.reshape(-1, 3),
+                    targets=_poses(names[i], poses[i], f"{where} update {ups[i]} target_poses"),
+                    energy={
+                        str(k): float(v) for k, v in zip(terms[i] or [], _or_empty(energy[i]))
+                    },
+                    model=_model(model[i]),
+                )
+            )
         self.rows[where].add(ups, cols.row_ids(), values)
 
     def recording(self, store: Any, layout: RrdLayout) -> Recording:
@@ -244,20 +290,28 @@ class _Reader:
         if scene_yaml.startswith("# scene not recorded"):
             scene_yaml = ""
         rows = {e: r.sorted() for e, r in self.rows.items()}
-        series = {k: [(u, v) for u, _, v in r.sorted() if u >= 0 and v is not None]
-                  for k, r in self.series.items()}
+        series = {
+            k: [(u, v) for u, _, v in r.sorted() if u >= 0 and v is not None]
+            for k, r in self.series.items()
+        }
         targets = [(u, poses) for u, _, poses in rows[P.E_DATA_TARGETS] if poses is not None]
         return Recording(
-            path=self.path, application_id=str(store.application_id),
-            recording_id=str(store.recording_id), entities=self.entities, scene_yaml=scene_yaml,
-            scene_name=scene_name, solver_kind=solver_kind,
+            path=self.path,
+            application_id=str(store.application_id),
+            recording_id=str(store.recording_id),
+            entities=self.entities,
+            scene_yaml=scene_yaml,
+            scene_name=scene_name,
+            solver_kind=solver_kind,
             scene_changes=[(u, t or "") for u, _, t in rows[P.E_SCENE_CHANGES]],
-            results=[v for _, _, v in rows[P.E_DATA_RESULT]], targets=targets,
+            results=[v for _, _, v in rows[P.E_DATA_RESULT]],
+            targets=targets,
             rejected=[(u, t or "") for u, _, t in rows[P.E_REJECTED]],
             events=[(e, None if u < 0 else u, t or "") for e in EVENTS for u, _, t in rows[e]],
             centrelines={u: c for u, _, c in rows[P.E_CABLE] if u >= 0 and c is not None},
             model_series={k: v for k, v in series.items() if v},
-            truncated=layout.truncated, file_bytes=layout.file_bytes,
+            truncated=layout.truncated,
+            file_bytes=layout.file_bytes,
             complete_bytes=layout.complete_bytes,
         )
 
@@ -305,26 +359,35 @@ def check_recording(path: str | Path) -> RecordingCheck:
     """Check that ``path`` is a readable dlo recording without keeping its data: every chunk is
     read and its columns checked as :func:`read_recording` would (same limits and errors), then
     dropped, so the memory used does not grow with the number of updates.  What ``dlo replay
-    FILE`` does before it starts a viewer."""
+    FILE`` does before it starts a viewer.
+    """
     path = Path(path)
     reader = _Reader(path, details=False, keep=False)
     store, layout = _stream(path, reader)
-    return RecordingCheck(path, str(store.application_id), frozenset(reader.entities),
-                          reader.rows[P.E_DATA_RESULT].count, layout.truncated, layout.file_bytes,
-                          layout.complete_bytes)
+    return RecordingCheck(
+        path,
+        str(store.application_id),
+        frozenset(reader.entities),
+        reader.rows[P.E_DATA_RESULT].count,
+        layout.truncated,
+        layout.file_bytes,
+        layout.complete_bytes,
+    )
 
 
 def _stream(path: Path, reader: _Reader) -> tuple[Any, RrdLayout]:
     """Feed every chunk of the file's first recording to ``reader``, one chunk at a time; (its
     store entry, the file's layout).  Every failure is a :class:`RecordingError` naming the
-    file."""
+    file.
+    """
     try:
         import warnings
 
         from rerun.chunk import RrdReader
     except ImportError as exc:
-        raise RecordingError(f"reading recordings needs rerun-sdk (Python >= 3.11): "
-                             f"{exc}") from None
+        raise RecordingError(
+            f"reading recordings needs rerun-sdk (Python >= 3.11): {exc}"
+        ) from None
     with open_rrd(path) as (name, layout):
         try:
             with warnings.catch_warnings():  # "no footer/manifest": expected for a truncated file
@@ -343,13 +406,17 @@ def _stream(path: Path, reader: _Reader) -> tuple[Any, RrdLayout]:
             raise
         except BaseException as exc:  # noqa: BLE001 - rerun raises plain errors for corrupt or
             # foreign files, and a Rust panic (pyo3's PanicException) is a BaseException
-            raise RecordingError(f"{path}: not a readable rerun recording ({type(exc).__name__}: "
-                                 f"{_one_line(str(exc).replace(name, str(path)))})") from None
+            raise RecordingError(
+                f"{path}: not a readable rerun recording ({type(exc).__name__}: "
+                f"{_one_line(str(exc).replace(name, str(path)))})"
+            ) from None
     application = str(stores[0].application_id)
     if not reader.entities & set(DLO_ENTITIES) and application not in DLO_APPLICATIONS:
-        raise RecordingError(f"{path}: not a dlo_ros recording (application "
-                             f"'{_one_line(application)}' has none of the entities "
-                             f"{', '.join(DLO_ENTITIES)})")
+        raise RecordingError(
+            f"{path}: not a dlo_ros recording (application "
+            f"'{_one_line(application)}' has none of the entities "
+            f"{', '.join(DLO_ENTITIES)})"
+        )
     return stores[0], layout
 
 

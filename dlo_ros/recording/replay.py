@@ -4,6 +4,7 @@
 The format is documented in msg_docs/recording.md.  ``dlo replay`` (dlo_ros.cli.replay) is its
 command line.
 """
+
 from __future__ import annotations
 
 import math
@@ -12,8 +13,15 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from . import paths as P
-from .reading import (RecordedResult, Recording, RecordingCheck, RecordingError,  # noqa: F401
-                      check_recording, read_recording, rows_of)
+from .reading import (
+    RecordedResult,
+    Recording,
+    RecordingCheck,
+    RecordingError,  # noqa: F401
+    check_recording,
+    read_recording,
+    rows_of,
+)
 
 if TYPE_CHECKING:
     from ..solver import Solver
@@ -41,8 +49,9 @@ def _make_solver(kind: str, scene, compile: str) -> Solver:
 
 
 def deviation(recorded: RecordedResult, result: Any) -> float:
-    """Largest distance [m] between the recorded centreline and today's; 0 when both failed with the
-    same status; inf when the statuses differ or the sampling changed."""
+    """Largest distance [m] between the recorded centreline and today's; 0 when both failed with
+    the same status; inf when the statuses differ or the sampling changed.
+    """
     if recorded.status != result.status:
         return math.inf
     if recorded.status != "ok":
@@ -53,20 +62,29 @@ def deviation(recorded: RecordedResult, result: Any) -> float:
     return float(np.max(np.linalg.norm(now - recorded.points, axis=1))) if len(now) else 0.0
 
 
-def resolve(rec: Recording, tolerance: float = DEFAULT_TOLERANCE, compile: str = "cached",
-            progress: Callable[[str], None] | None = None) -> dict:
-    """Re-run the solver on the recorded targets, update by update, and compare with the recorded shapes.
+def resolve(
+    rec: Recording,
+    tolerance: float = DEFAULT_TOLERANCE,
+    compile: str = "cached",
+    progress: Callable[[str], None] | None = None,
+) -> dict:
+    """Re-run the solver on the recorded targets, update by update, and compare with the recorded
+    shapes.
 
     The solver is the recorded kind (ShapeSolver / AutoShapeSolver) built from the recorded scene
-    (``scene/yaml``, later ``scene/changes``).  Each update uses the grip poses recorded with its result
-    (else the received targets folded up to it) and is called warm or cold as recorded (``warm`` given
-    to log_result; else the first update cold, the others warm unless the result was not warm-started).
-    Returns the report dict printed by ``dlo replay --resolve --json``.
+    (``scene/yaml``, later ``scene/changes``).  Each update uses the grip poses recorded with its
+    result (else the received targets folded up to it) and is called warm or cold as recorded
+    (``warm`` given to log_result; else the first update cold, the others warm unless the result
+    was not warm-started). Returns the report dict printed by ``dlo replay --resolve --json``.
     """
     if not rec.scene_yaml:
-        raise ValueError(f"{rec.path}: the recording has no scene ({P.E_SCENE}); it cannot be re-solved")
+        raise ValueError(
+            f"{rec.path}: the recording has no scene ({P.E_SCENE}); it cannot be re-solved"
+        )
     if not rec.results:
-        raise ValueError(f"{rec.path}: the recording has no results ({P.E_DATA_RESULT}); nothing to re-solve")
+        raise ValueError(
+            f"{rec.path}: the recording has no results ({P.E_DATA_RESULT}); nothing to re-solve"
+        )
     scene = _scene_from_yaml(rec.scene_yaml, f"{rec.path}#{P.E_SCENE}")
     solver = _make_solver(rec.solver_kind, scene, compile)
     changes = sorted(rec.scene_changes)
@@ -76,7 +94,9 @@ def resolve(rec: Recording, tolerance: float = DEFAULT_TOLERANCE, compile: str =
     rows = []
     for recorded in sorted(rec.results, key=lambda r: r.update):
         while ci < len(changes) and changes[ci][0] <= recorded.update:
-            new = _scene_from_yaml(changes[ci][1], f"{rec.path}#{P.E_SCENE_CHANGES}@{changes[ci][0]}")
+            new = _scene_from_yaml(
+                changes[ci][1], f"{rec.path}#{P.E_SCENE_CHANGES}@{changes[ci][0]}"
+            )
             if new.options == scene.options:
                 solver.set_problem(new.problem)
             else:
@@ -94,33 +114,57 @@ def resolve(rec: Recording, tolerance: float = DEFAULT_TOLERANCE, compile: str =
             warm = bool(rows) and recorded.warm_started
         result = solver.solve(poses, warm=warm)
         dev = deviation(recorded, result)
-        rows.append({"update": recorded.update, "recorded_status": recorded.status, "status": result.status,
-                     "max_deviation_m": dev})
+        rows.append(
+            {
+                "update": recorded.update,
+                "recorded_status": recorded.status,
+                "status": result.status,
+                "max_deviation_m": dev,
+            }
+        )
         if progress is not None:
             progress(f"update {recorded.update}: {dev:.3g} m")
     finite = [r["max_deviation_m"] for r in rows if math.isfinite(r["max_deviation_m"])]
-    worst = max(rows, key=lambda r: (r["max_deviation_m"] if not math.isnan(r["max_deviation_m"]) else -1))
+    worst = max(
+        rows, key=lambda r: r["max_deviation_m"] if not math.isnan(r["max_deviation_m"]) else -1
+    )
     exceeding = [r["update"] for r in rows if not r["max_deviation_m"] <= tolerance]
     return {
-        "file": str(rec.path), "scene": scene.name, "solver": rec.solver_kind or "default",
-        "tolerance_m": tolerance, "updates": rows, "count": len(rows),
-        "max_deviation_m": worst["max_deviation_m"], "worst_update": worst["update"],
+        "file": str(rec.path),
+        "scene": scene.name,
+        "solver": rec.solver_kind or "default",
+        "tolerance_m": tolerance,
+        "updates": rows,
+        "count": len(rows),
+        "max_deviation_m": worst["max_deviation_m"],
+        "worst_update": worst["update"],
         "mean_deviation_m": float(np.mean(finite)) if finite else None,
-        "exceeding": exceeding, "ok": not exceeding,
+        "exceeding": exceeding,
+        "ok": not exceeding,
     }
 
 
 def format_resolve(report: dict) -> str:
-    lines = [f"replay  {report['file']}: scene {report['scene']}, {report['count']} updates, "
-             f"solver {report['solver']}",
-             f"{'update':>7}  {'recorded':<11} {'now':<11} max deviation [m]"]
+    lines = [
+        f"replay  {report['file']}: scene {report['scene']}, {report['count']} updates, "
+        f"solver {report['solver']}",
+        f"{'update':>7}  {'recorded':<11} {'now':<11} max deviation [m]",
+    ]
     for r in report["updates"]:
         flag = "" if r["max_deviation_m"] <= report["tolerance_m"] else "   > tolerance"
-        lines.append(f"{r['update']:>7}  {r['recorded_status']:<11} {r['status']:<11} {r['max_deviation_m']:.3g}{flag}")
-    verdict = "OK" if report["ok"] else f"DIFFERS at updates {report['exceeding'][:20]}" + \
-        (" ..." if len(report["exceeding"]) > 20 else "")
+        lines.append(
+            f"{r['update']:>7}  {r['recorded_status']:<11} {r['status']:<11} {r['max_deviation_m']:.3g}{flag}"
+        )
+    verdict = (
+        "OK"
+        if report["ok"]
+        else f"DIFFERS at updates {report['exceeding'][:20]}"
+        + (" ..." if len(report["exceeding"]) > 20 else "")
+    )
     mean = report["mean_deviation_m"]
-    lines.append(f"summary {report['count']} updates re-solved: max deviation {report['max_deviation_m']:.3g} m "
-                 f"(update {report['worst_update']}), mean {'n/a' if mean is None else f'{mean:.3g}'} m; "
-                 f"{len(report['exceeding'])} above the tolerance {report['tolerance_m']:.3g} m -> {verdict}")
+    lines.append(
+        f"summary {report['count']} updates re-solved: max deviation {report['max_deviation_m']:.3g} m "
+        f"(update {report['worst_update']}), mean {'n/a' if mean is None else f'{mean:.3g}'} m; "
+        f"{len(report['exceeding'])} above the tolerance {report['tolerance_m']:.3g} m -> {verdict}"
+    )
     return "\n".join(lines)

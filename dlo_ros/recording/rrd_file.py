@@ -11,6 +11,7 @@ file, which rerun reads as a footer-less (legacy) recording.
 
 Every refusal is a :class:`RrdFileError` (a ValueError) with one line naming the file.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -26,13 +27,13 @@ from ..scene import FileLimitError, open_regular_file
 #: What ``dlo replay`` accepts (msg_docs/recording.md, "Limits").  A 10-minute recording at 100 Hz
 #: (default_cable, 51 output points, paced like the node) is ~280 MB and 60,000 updates.
 LIMITS = {
-    "file_bytes": 1 << 30,          # 1 GiB
-    "messages": 1_000_000,          # rrd messages (chunks) in the file
-    "entities": 10_000,             # distinct entity paths
-    "updates": 250_000,             # rows of data/result (and of each other entity read back)
-    "samples": 10_000,              # centreline samples per result (solver.output_points at most)
-    "kept_bytes": 768 << 20,        # what is kept from the file, 768 MiB: numbers (8 bytes
-    "row_bytes": 1024,              # each), text (1 per character) and 1 KiB per row kept
+    "file_bytes": 1 << 30,  # 1 GiB
+    "messages": 1_000_000,  # rrd messages (chunks) in the file
+    "entities": 10_000,  # distinct entity paths
+    "updates": 250_000,  # rows of data/result (and of each other entity read back)
+    "samples": 10_000,  # centreline samples per result (solver.output_points at most)
+    "kept_bytes": 768 << 20,  # what is kept from the file, 768 MiB: numbers (8 bytes
+    "row_bytes": 1024,  # each), text (1 per character) and 1 KiB per row kept
 }
 
 MAGIC = b"RRF2"
@@ -53,17 +54,23 @@ class RrdLayout:
     """What the walk over the message headers found."""
 
     file_bytes: int
-    messages: int       # complete messages, the end message excluded
+    messages: int  # complete messages, the end message excluded
     complete_bytes: int  # header + complete messages (== file_bytes for a whole file)
-    truncated: bool     # it ends inside a message, before its end message or inside the footer
+    truncated: bool  # it ends inside a message, before its end message or inside the footer
 
 
 def _open_regular(path: Path) -> int:
     """A descriptor on ``path``, a regular file within the size limit (``scene.open_regular_file``:
-    opened without blocking and checked with fstat)."""
+    opened without blocking and checked with fstat).
+    """
     try:
-        return open_regular_file(path, str(path), LIMITS["file_bytes"], "recording (.rrd)",
-                                 "msg_docs/recording.md, Limits")
+        return open_regular_file(
+            path,
+            str(path),
+            LIMITS["file_bytes"],
+            "recording (.rrd)",
+            "msg_docs/recording.md, Limits",
+        )
     except FileLimitError as exc:
         if not os.path.lexists(path):
             raise FileNotFoundError(f"{path}: no such file") from None
@@ -76,20 +83,23 @@ def _read_at(fd: int, n: int, offset: int) -> bytes:
 
 def scan(fd: int, path: Path) -> RrdLayout:
     """Walk the messages of the open file ``fd``: check the header, each message's kind and count,
-    and find the end of the last complete message."""
+    and find the end of the last complete message.
+    """
     size = os.fstat(fd).st_size
     if size == 0:
         raise RrdFileError(f"{path}: the file is empty, not a rerun recording (.rrd)")
     head = _read_at(fd, HEADER_BYTES, 0)
     if not head.startswith(MAGIC[: len(head)]) or len(head) < len(MAGIC):
-        raise RrdFileError(f"{path}: not a rerun recording (.rrd): it does not start with "
-                           f"{MAGIC.decode()}")
+        raise RrdFileError(
+            f"{path}: not a rerun recording (.rrd): it does not start with {MAGIC.decode()}"
+        )
     if len(head) < HEADER_BYTES:
         raise RrdFileError(f"{path}: the file ends inside the rrd header ({size} bytes)")
     compression, serializer, pad1, pad2 = head[8:12]
     if compression not in (0, 1) or serializer != 2 or pad1 or pad2:
-        raise RrdFileError(f"{path}: unknown rrd encoding options {head[8:12].hex()} (not "
-                           "written by rerun 0.41)")
+        raise RrdFileError(
+            f"{path}: unknown rrd encoding options {head[8:12].hex()} (not written by rerun 0.41)"
+        )
     offset, count, limit = HEADER_BYTES, 0, LIMITS["messages"]
     while offset < size:
         raw = _read_at(fd, MESSAGE_HEADER.size, offset)
@@ -97,8 +107,10 @@ def scan(fd: int, path: Path) -> RrdLayout:
             return RrdLayout(size, count, offset, True)
         kind, length = MESSAGE_HEADER.unpack(raw)
         if kind not in KINDS:
-            raise RrdFileError(f"{path}: garbled rrd message at byte {offset} (kind {kind}, not "
-                               "one rerun 0.41 writes)")
+            raise RrdFileError(
+                f"{path}: garbled rrd message at byte {offset} (kind {kind}, not "
+                "one rerun 0.41 writes)"
+            )
         end = offset + MESSAGE_HEADER.size + length
         if end > size:
             return RrdLayout(size, count, offset, True)
@@ -108,8 +120,9 @@ def scan(fd: int, path: Path) -> RrdLayout:
             return RrdLayout(size, count, size, not whole)
         count += 1
         if count > limit:
-            raise RrdFileError(f"{path}: more than {limit} rrd messages (msg_docs/recording.md, "
-                               "Limits)")
+            raise RrdFileError(
+                f"{path}: more than {limit} rrd messages (msg_docs/recording.md, Limits)"
+            )
         offset = end
     # no end message: a writer that was killed between two messages (rerun reads this as legacy)
     return RrdLayout(size, count, offset, True)
@@ -118,7 +131,8 @@ def scan(fd: int, path: Path) -> RrdLayout:
 def _copy_prefix(fd: int, n: int, path: Path) -> str:
     """The first ``n`` bytes of ``fd`` in a new temporary file (copied 1 MiB at a time)."""
     out = tempfile.NamedTemporaryFile(  # noqa: SIM115 - removed by open_rrd
-        prefix="dlo_replay_", suffix=".rrd", delete=False)
+        prefix="dlo_replay_", suffix=".rrd", delete=False
+    )
     try:
         with out:
             done = 0

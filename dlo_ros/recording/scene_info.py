@@ -1,4 +1,5 @@
 """What the writer needs of a scene, as plain data (the writer process never imports the model)."""
+
 from __future__ import annotations
 
 import math
@@ -12,7 +13,9 @@ from .visuals import obstacle_shape
 
 @dataclass
 class _SceneInfo:
-    """What the writer needs of a scene (plain data: the writer process never imports the model)."""
+    """What the writer needs of a scene (plain data: the writer process never imports the
+    model).
+    """
 
     name: str
     frame_id: str
@@ -32,7 +35,11 @@ class _SceneInfo:
 
     def bend_stiffness(self, s: np.ndarray) -> np.ndarray:
         xs, vs = self.rf_table
-        return np.interp(np.asarray(s, dtype=float), xs, vs) if len(xs) > 1 else np.full(np.shape(s), vs[0])
+        return (
+            np.interp(np.asarray(s, dtype=float), xs, vs)
+            if len(xs) > 1
+            else np.full(np.shape(s), vs[0])
+        )
 
 
 def scene_yaml(scene: Any) -> str:
@@ -41,11 +48,17 @@ def scene_yaml(scene: Any) -> str:
 
     from ..scene import scene_to_dict
 
-    return yaml.safe_dump(scene_to_dict(scene), sort_keys=False, default_flow_style=None, width=120)
+    return yaml.safe_dump(
+        scene_to_dict(scene), sort_keys=False, default_flow_style=None, width=120
+    )
 
 
-def scene_info(scene_or_problem: Any, frame_id: str | None = None, solver: Any = None,
-               force_scale: float | None = None) -> _SceneInfo:
+def scene_info(
+    scene_or_problem: Any,
+    frame_id: str | None = None,
+    solver: Any = None,
+    force_scale: float | None = None,
+) -> _SceneInfo:
     """The writer's view of a Scene (or a bare Problem: then no YAML, not re-solvable)."""
     problem = getattr(scene_or_problem, "problem", scene_or_problem)
     is_scene = problem is not scene_or_problem
@@ -70,9 +83,17 @@ def scene_info(scene_or_problem: Any, frame_id: str | None = None, solver: Any =
     return _SceneInfo(
         name=str(getattr(scene_or_problem, "name", "problem")),
         frame_id=str(frame_id or getattr(scene_or_problem, "frame_id", "world")),
-        length=L, grip_s={g.name: float(g.s) for g in problem.grips}, grip_order=tuple(g.name for g in problem.grips),
-        rf_table=(tuple(st.bend_stiffness.s), tuple(st.bend_stiffness.values)), force_scale=scale,
-        yaml_text=scene_yaml(scene_or_problem) if is_scene else "", obstacles=obstacles, centre=centre,
-        gravity=gu, solver_kind=kind, radius=float(st.radius), grip_positions=gpos,
+        length=L,
+        grip_s={g.name: float(g.s) for g in problem.grips},
+        grip_order=tuple(g.name for g in problem.grips),
+        rf_table=(tuple(st.bend_stiffness.s), tuple(st.bend_stiffness.values)),
+        force_scale=scale,
+        yaml_text=scene_yaml(scene_or_problem) if is_scene else "",
+        obstacles=obstacles,
+        centre=centre,
+        gravity=gu,
+        solver_kind=kind,
+        radius=float(st.radius),
+        grip_positions=gpos,
         model=str(getattr(getattr(scene_or_problem, "options", None), "model", "") or ""),
     )

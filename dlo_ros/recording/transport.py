@@ -1,9 +1,10 @@
 """Where the writer runs: a child process fed through a pipe (default) or a thread of this process.
 
 Both backends take messages from :class:`~dlo_ros.recording.recorder.Recorder` with ``submit``
-(never blocking the caller: when the bounded backlog is full the oldest droppable message goes and is
-counted) and answer ``flush`` / ``close`` with the writer's error stats.
+(never blocking the caller: when the bounded backlog is full the oldest droppable message goes and
+is counted) and answer ``flush`` / ``close`` with the writer's error stats.
 """
+
 from __future__ import annotations
 
 import collections
@@ -26,8 +27,9 @@ log = logging.getLogger(__name__)
 
 
 def _drop_oldest(queue: collections.deque, limit: int) -> int:
-    """Make room in ``queue`` of (payload, keep) by dropping its oldest droppable entry; returns 1 if one
-    was dropped."""
+    """Make room in ``queue`` of (payload, keep) by dropping its oldest droppable entry; returns 1
+    if one was dropped.
+    """
     if len(queue) < limit:
         return 0
     for i, (_, keep) in enumerate(queue):
@@ -38,8 +40,10 @@ def _drop_oldest(queue: collections.deque, limit: int) -> int:
 
 
 class _ThreadBackend:
-    """The writer in a background thread of this process (``backend="thread"``).  Simple, but rerun's
-    Python work shares the GIL with the caller: on a loaded machine it slows the solver thread."""
+    """The writer in a background thread of this process (``backend="thread"``).  Simple, but
+    rerun's Python work shares the GIL with the caller: on a loaded machine it slows the solver
+    thread.
+    """
 
     def __init__(self, cfg: _Config, timeout: float, queue_size: int) -> None:
         del timeout
@@ -94,7 +98,10 @@ class _ThreadBackend:
     def _drain(self, deadline: float) -> bool:
         with self._cond:
             while self._queue or self._busy:
-                if not self._cond.wait(max(0.0, deadline - time.monotonic())) and time.monotonic() >= deadline:
+                if (
+                    not self._cond.wait(max(0.0, deadline - time.monotonic()))
+                    and time.monotonic() >= deadline
+                ):
                     return False
         return True
 
@@ -121,11 +128,13 @@ def _frame(message: Any) -> bytes:
 
 
 def _write_all(fd: int, data: bytes, deadline: float | None = None) -> None:
-    """Write all of ``data`` to a (possibly non-blocking) fd, waiting for room until ``deadline``."""
+    """Write all of ``data`` to a (possibly non-blocking) fd, waiting for room until
+    ``deadline``.
+    """
     view = memoryview(data)
     while view:
         try:
-            view = view[os.write(fd, view):]
+            view = view[os.write(fd, view) :]
         except BlockingIOError:
             wait = None if deadline is None else deadline - time.monotonic()
             if wait is not None and wait <= 0:
@@ -157,28 +166,40 @@ def _read_frame(fd: int, deadline: float | None = None) -> Any:
 
 
 F_SETPIPE_SZ = 1031  # Linux fcntl: set a pipe's buffer size
-CHILD_NICE = 19  # the recorder process runs at the lowest priority: it yields the CPU to the solver
-CHILD_POLL_SECONDS = 0.02  # the recorder process reads its pipe at most this often while data flows
+CHILD_NICE = (
+    19  # the recorder process runs at the lowest priority: it yields the CPU to the solver
+)
+CHILD_POLL_SECONDS = (
+    0.02  # the recorder process reads its pipe at most this often while data flows
+)
 
 
 class _ProcessBackend:
     """The writer in a child process (``backend="process"``, the default).
 
     ``submit`` pickles the snapshot and writes it into a non-blocking pipe (enlarged to 1 MiB where
-    Linux allows): tens of microseconds in the caller's thread, no background Python thread competing
-    for the GIL.  Only when the pipe is full does a frame wait in the bounded backlog (drop-oldest),
-    which a small thread writes out as soon as the child has read.  The child
-    (``python -c 'from dlo_ros.recording.transport import _child_main; ...'``) makes every rerun call; it ignores
-    SIGINT (Ctrl-C stops the parent, which then closes it) and finishes the recording on EOF.
+    Linux allows): tens of microseconds in the caller's thread, no background Python thread
+    competing for the GIL.  Only when the pipe is full does a frame wait in the bounded backlog
+    (drop-oldest), which a small thread writes out as soon as the child has read.  The child
+    (``python -c 'from dlo_ros.recording.transport import _child_main; ...'``) makes every rerun
+    call; it ignores SIGINT (Ctrl-C stops the parent, which then closes it) and finishes the
+    recording on EOF.
     """
 
     def __init__(self, cfg: _Config, timeout: float, queue_size: int) -> None:
         env = dict(os.environ)
         package_root = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = os.pathsep.join([package_root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+        env["PYTHONPATH"] = os.pathsep.join(
+            [package_root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])
+        )
         code = "import sys; from dlo_ros.recording.transport import _child_main; sys.exit(_child_main())"
-        self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     env=env, close_fds=True)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", code],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            env=env,
+            close_fds=True,
+        )
         self._in, self._out = self.proc.stdin.fileno(), self.proc.stdout.fileno()
         self.dead = False
         self.dropped = 0
@@ -206,10 +227,14 @@ class _ProcessBackend:
         self._limit = queue_size
         self._cond = threading.Condition()
         self._backlog: collections.deque = collections.deque()  # (frame bytes, keep)
-        self._partial = b""  # the unwritten tail of a frame (never dropped: the stream must stay framed)
+        self._partial = (
+            b""  # the unwritten tail of a frame (never dropped: the stream must stay framed)
+        )
         self._stop = False
         self._request_lock = threading.Lock()
-        self._thread = threading.Thread(target=self._drain_loop, name="dlo-recorder-pipe", daemon=True)
+        self._thread = threading.Thread(
+            target=self._drain_loop, name="dlo-recorder-pipe", daemon=True
+        )
         self._thread.start()
 
     @property
@@ -273,7 +298,10 @@ class _ProcessBackend:
         """The child is gone (lock held): count it once, drop what waits."""
         if not self.dead:
             self.dead = True
-            self.stats = {"errors": self.stats["errors"] + 1, "last_error": f"recorder process: {exc}"}
+            self.stats = {
+                "errors": self.stats["errors"] + 1,
+                "last_error": f"recorder process: {exc}",
+            }
             log.warning("recorder: the recorder process has gone (%s); recording stopped", exc)
         self.dropped += len(self._backlog)
         self._backlog.clear()
@@ -281,7 +309,9 @@ class _ProcessBackend:
         self._cond.notify_all()
 
     def _request(self, kind: str, timeout: float) -> tuple[bool, dict]:
-        """Write everything, then ask the child to ``flush`` or ``close`` and wait for its answer."""
+        """Write everything, then ask the child to ``flush`` or ``close`` and wait for its
+        answer.
+        """
         deadline = time.monotonic() + timeout
         with self._request_lock:
             with self._cond:
@@ -292,7 +322,9 @@ class _ProcessBackend:
                         if time.monotonic() >= deadline:
                             return False, self.stats
                         select.select([], [self._in], [], max(0.0, deadline - time.monotonic()))
-                    _write_all(self._in, _frame((kind, max(0.1, deadline - time.monotonic()))), deadline)
+                    _write_all(
+                        self._in, _frame((kind, max(0.1, deadline - time.monotonic()))), deadline
+                    )
                 except TimeoutError:
                     return False, self.stats
                 except OSError as exc:
@@ -382,8 +414,8 @@ def _child_main() -> int:
             n = struct.unpack_from("<I", buf)[0]
             if len(buf) < 4 + n:
                 break
-            message = pickle.loads(bytes(buf[4:4 + n]))  # noqa: S301 - frames from our parent
-            del buf[:4 + n]
+            message = pickle.loads(bytes(buf[4 : 4 + n]))  # noqa: S301 - frames from our parent
+            del buf[: 4 + n]
             if message[0] == "item":
                 writer.handle(message[1], message[2])
             elif message[0] == "flush":
@@ -398,6 +430,6 @@ def _child_main() -> int:
             return 0
         if writer.due() == 0.0:
             writer.send_batches()
-        # Sleep while frames accumulate: a write into the pipe of a reader that is not waiting on it
-        # wakes nobody, so a stream of updates costs the solver's process no context switches.
+        # Sleep while frames accumulate: a write into the pipe of a reader that is not waiting on
+        # it wakes nobody, so a stream of updates costs the solver's process no context switches.
         time.sleep(CHILD_POLL_SECONDS)

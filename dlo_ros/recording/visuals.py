@@ -2,6 +2,7 @@
 
 The bend-energy density and its colour map are dlo_ros.shading's, shared with the node's markers.
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -10,7 +11,14 @@ import numpy as np
 
 from ..shading import VIRIDIS_STOPS, colour_map
 
-ENERGY_COLORS = [[230, 90, 90], [90, 200, 230], [200, 120, 230], [120, 200, 90], [230, 180, 60], [240, 240, 240]]
+ENERGY_COLORS = [
+    [230, 90, 90],
+    [90, 200, 230],
+    [200, 120, 230],
+    [120, 200, 90],
+    [230, 180, 60],
+    [240, 240, 240],
+]
 AXIS_COLORS = [[230, 60, 60], [60, 200, 60], [70, 110, 255]]
 
 
@@ -42,21 +50,30 @@ def obstacle_shape(ob: Any, centre: np.ndarray, extent: float) -> tuple[str, dic
     its ``primitive()``.
 
     plane → a square slab of side 2·extent, 1 % of that thick, lying just behind the surface,
-    centred on the projection of ``centre``; sphere → Ellipsoids3D; capsule → Capsules3D; box → Boxes3D.
+    centred on the projection of ``centre``; sphere → Ellipsoids3D; capsule → Capsules3D; box →
+    Boxes3D.
     """
     pr = ob.primitive()
     if pr.kind == "plane":
         normal = pr.axis / np.linalg.norm(pr.axis)
         foot = centre - np.dot(centre - pr.centre, normal) * normal
         thick = 0.01 * extent
-        return "Boxes3D", dict(centers=[foot - 0.5 * thick * normal], half_sizes=[[extent, extent, 0.5 * thick]],
-                               quaternions=[pr.orientation])
+        return "Boxes3D", dict(
+            centers=[foot - 0.5 * thick * normal],
+            half_sizes=[[extent, extent, 0.5 * thick]],
+            quaternions=[pr.orientation],
+        )
     if pr.kind == "sphere":
         return "Ellipsoids3D", dict(centers=[pr.centre], half_sizes=[pr.half_sizes])
     if pr.kind == "capsule":
-        return "Capsules3D", dict(translations=[pr.ends()[0]], lengths=[pr.length],
-                                  radii=[pr.radius], quaternions=[pr.orientation])
+        return "Capsules3D", dict(
+            translations=[pr.ends()[0]],
+            lengths=[pr.length],
+            radii=[pr.radius],
+            quaternions=[pr.orientation],
+        )
     if pr.kind == "box":
-        return "Boxes3D", dict(centers=[pr.centre], half_sizes=[pr.half_sizes],
-                               quaternions=[pr.orientation])
+        return "Boxes3D", dict(
+            centers=[pr.centre], half_sizes=[pr.half_sizes], quaternions=[pr.orientation]
+        )
     raise ValueError(f"obstacle primitive {pr.kind!r} has no drawing")

@@ -1,8 +1,10 @@
-"""The writer: owns the rerun RecordingStream and turns queued items into rerun calls, in one thread.
+"""The writer: owns the rerun RecordingStream and turns queued items into rerun calls, in one
+thread.
 
 It runs in the recorder's child process or thread (dlo_ros.recording.transport); nothing here is
 called from the solver's thread.
 """
+
 from __future__ import annotations
 
 import json
@@ -18,10 +20,35 @@ import numpy as np
 from ..shading import segment_energy_density
 from .blueprint import default_blueprint
 from .codec import decode, _FitSnap, _Item, _ResultSnap
-from .paths import (E_CABLE, E_DATA_RESULT, E_DATA_TARGETS, E_EIGEN, E_ENERGY, E_FIT, E_FIT_EVENTS, E_FRAMES,
-                    E_GRIPS, E_ITERATIONS, E_LEGEND, E_MODEL, E_MODEL_SERIES, E_OBSTACLES, E_RECORDER,
-                    E_REJECTED, E_SCENE, E_SCENE_CHANGES, E_SOLVE_TIME, E_STATUS, E_TARGETS, E_WORLD,
-                    ENERGY_TERMS, MODEL_SCALARS, TIMELINE_ROS, TIMELINE_UPDATE, _part)
+from .paths import (
+    E_CABLE,
+    E_DATA_RESULT,
+    E_DATA_TARGETS,
+    E_EIGEN,
+    E_ENERGY,
+    E_FIT,
+    E_FIT_EVENTS,
+    E_FRAMES,
+    E_GRIPS,
+    E_ITERATIONS,
+    E_LEGEND,
+    E_MODEL,
+    E_MODEL_SERIES,
+    E_OBSTACLES,
+    E_RECORDER,
+    E_REJECTED,
+    E_SCENE,
+    E_SCENE_CHANGES,
+    E_SOLVE_TIME,
+    E_STATUS,
+    E_TARGETS,
+    E_WORLD,
+    ENERGY_TERMS,
+    MODEL_SCALARS,
+    TIMELINE_ROS,
+    TIMELINE_UPDATE,
+    _part,
+)
 from .scene_info import _SceneInfo
 from .visuals import AXIS_COLORS, ENERGY_COLORS, quats_to_matrices, viridis
 
@@ -43,7 +70,8 @@ class _Config:
     frames: int
 
 
-BATCH_SECONDS = 0.1  # rows wait at most this long in the writer before they are sent (live viewers lag this much)
+# rows wait at most this long in the writer before they are sent (live viewers lag this much)
+BATCH_SECONDS = 0.1
 BATCH_ROWS = 512  # ... or until this many rows are buffered
 
 
@@ -68,10 +96,10 @@ def _concat(values: list) -> Any:
 class _Writer:
     """Owns the rerun RecordingStream and turns items into rerun calls, in one thread.
 
-    Static data is logged at once; time-stamped rows are buffered per (entity, archetype) and sent with
-    ``send_columns`` at most every BATCH_SECONDS (or BATCH_ROWS rows, or on flush/close): one rerun call
-    per entity per batch instead of one per row, because the per-row Python cost is what the CPU pays
-    (the bench's recording-overhead script measures it).
+    Static data is logged at once; time-stamped rows are buffered per (entity, archetype) and sent
+    with ``send_columns`` at most every BATCH_SECONDS (or BATCH_ROWS rows, or on flush/close): one
+    rerun call per entity per batch instead of one per row, because the per-row Python cost is what
+    the CPU pays (the bench's recording-overhead script measures it).
     """
 
     def __init__(self, cfg: _Config) -> None:
@@ -79,7 +107,8 @@ class _Writer:
             import rerun as rr
         except ImportError as exc:  # Python 3.10, or a broken install
             raise RecordingUnavailable(
-                f"recording needs rerun-sdk (Python >= 3.11; see requirements.txt): {exc}") from None
+                f"recording needs rerun-sdk (Python >= 3.11; see requirements.txt): {exc}"
+            ) from None
         self._rr = rr
         self.cfg = cfg
         self.rec = rr.RecordingStream(cfg.application_id, recording_id=cfg.recording_id)
@@ -88,7 +117,8 @@ class _Writer:
             Path(cfg.rrd).parent.mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(str(cfg.rrd)))
         if cfg.spawn:
-            # Starts the `rerun` viewer and waits until it listens; it needs a display for its window.
+            # Starts the `rerun` viewer and waits until it listens; it needs a display for its
+            # window.
             rr.spawn(port=cfg.spawn_port, connect=False, recording=self.rec)
         for url in dict.fromkeys(cfg.urls):
             sinks.append(rr.GrpcSink(url))
@@ -158,10 +188,14 @@ class _Writer:
                 for name in names:
                     values = [_instances(f[name]) if name in f else [] for _, _, f in entries]
                     data = _concat(values)
-                    if arch == "AnyValues":  # as an Arrow array: rerun's generic path boxes every number
+                    if (
+                        arch == "AnyValues"
+                    ):  # as an Arrow array: rerun's generic path boxes every number
                         data = pa.array(data)
                     groups.setdefault(tuple(len(v) for v in values), {})[name] = data
-                self._send_columns(entity, arch, [u for u, _, _ in entries], [t for _, t, _ in entries], groups)
+                self._send_columns(
+                    entity, arch, [u for u, _, _ in entries], [t for _, t, _ in entries], groups
+                )
             except Exception as exc:  # noqa: BLE001
                 self._error(f"sending {entity}", exc)
 
@@ -179,7 +213,9 @@ class _Writer:
 
     # -- items
     def _row(self, entity: str, arch: str, item: _Item, **fields: Any) -> None:
-        self._rows.setdefault((entity, arch), []).append((int(item.update), int(item.ros_time_ns), fields))
+        self._rows.setdefault((entity, arch), []).append(
+            (int(item.update), int(item.ros_time_ns), fields)
+        )
         self._count_row()
 
     def _count_row(self) -> None:
@@ -188,12 +224,16 @@ class _Writer:
             self._oldest = time.monotonic()
 
     def _report_drops(self, dropped: int, item: _Item) -> None:
-        text = (f"recorder queue full: {dropped - self.dropped_reported} item(s) dropped before this one "
-                f"({dropped} in total)")
+        text = (
+            f"recorder queue full: {dropped - self.dropped_reported} item(s) dropped before this one "
+            f"({dropped} in total)"
+        )
         if item.update is not None:
             self._row(E_RECORDER, "TextLog", item, text=text, level="WARN")
         else:
-            self.rec.log(E_RECORDER, self._rr.TextLog(text, level=self._rr.TextLogLevel.WARN), static=True)
+            self.rec.log(
+                E_RECORDER, self._rr.TextLog(text, level=self._rr.TextLogLevel.WARN), static=True
+            )
         self.dropped_reported = dropped
 
     def _handle_scene(self, item: _Item) -> None:
@@ -209,11 +249,20 @@ class _Writer:
         if first or static:
             self.rec.log(E_WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for i, (kind, kwargs, label, colour) in enumerate(info.obstacles):
-            arch = getattr(rr, kind)(**kwargs, colors=[colour], labels=[label], fill_mode=rr.components.FillMode.Solid)
+            arch = getattr(rr, kind)(
+                **kwargs, colors=[colour], labels=[label], fill_mode=rr.components.FillMode.Solid
+            )
             self.rec.log(f"{E_OBSTACLES}/{i}_{_part(label)}", arch, static=static)
-        doc = rr.TextDocument(info.yaml_text or "# scene not recorded (a Problem was logged)", media_type="text/plain")
-        props = rr.AnyValues(scene_name=info.name, frame_id=info.frame_id, solver=info.solver_kind,
-                             grip_names=list(info.grip_order))
+        doc = rr.TextDocument(
+            info.yaml_text or "# scene not recorded (a Problem was logged)",
+            media_type="text/plain",
+        )
+        props = rr.AnyValues(
+            scene_name=info.name,
+            frame_id=info.frame_id,
+            solver=info.solver_kind,
+            grip_names=list(info.grip_order),
+        )
         self.rec.log(E_SCENE if static else E_SCENE_CHANGES, doc, props, static=static)
         if not self.blueprint_sent:
             self._send_blueprint(info)
@@ -237,25 +286,45 @@ class _Writer:
         self._pending_results.append(item)
         self._count_row()
 
-    # -- batched, vectorised over the rows of a batch (the per-row Python cost is what the CPU pays)
-    def _send(self, entity: str, arch: str, items: list[_Item], **fields: tuple[Any, list[int]]) -> None:
-        """send_columns of ``arch`` rows for ``items``; fields: name → (concatenated data, instances per row)."""
+    # -- batched, vectorised over the rows of a batch (the per-row Python cost is what the CPU
+    # pays)
+    def _send(
+        self, entity: str, arch: str, items: list[_Item], **fields: tuple[Any, list[int]]
+    ) -> None:
+        """send_columns of ``arch`` rows for ``items``; fields: name → (concatenated data,
+        instances per row).
+        """
         try:
             groups: dict[tuple, dict] = {}
             for name, (data, lengths) in fields.items():
                 groups.setdefault(tuple(int(n) for n in lengths), {})[name] = data
-            self._send_columns(entity, arch, [int(it.update) for it in items], [int(it.ros_time_ns) for it in items],
-                               groups)
+            self._send_columns(
+                entity,
+                arch,
+                [int(it.update) for it in items],
+                [int(it.ros_time_ns) for it in items],
+                groups,
+            )
         except Exception as exc:  # noqa: BLE001
             self._error(f"sending {entity}", exc)
 
-    def _send_columns(self, entity: str, arch: str, updates: list[int], stamps: list[int],
-                      groups: dict[tuple, dict]) -> None:
-        """One send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns]; ``groups``: instances per
-        row → {field: concatenated data} (fields with the same instance counts share a partition)."""
+    def _send_columns(
+        self,
+        entity: str,
+        arch: str,
+        updates: list[int],
+        stamps: list[int],
+        groups: dict[tuple, dict],
+    ) -> None:
+        """One send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns]; ``groups``:
+        instances per row → {field: concatenated data} (fields with the same instance counts share
+        a partition).
+        """
         rr = self._rr
-        indexes = [rr.TimeColumn(TIMELINE_UPDATE, sequence=updates),
-                   rr.TimeColumn(TIMELINE_ROS, timestamp=np.array(stamps, dtype="datetime64[ns]"))]
+        indexes = [
+            rr.TimeColumn(TIMELINE_UPDATE, sequence=updates),
+            rr.TimeColumn(TIMELINE_ROS, timestamp=np.array(stamps, dtype="datetime64[ns]")),
+        ]
         columns: list[Any] = []
         for lengths, fields in groups.items():
             columns.extend(getattr(rr, arch).columns(**fields).partition(list(lengths)))
@@ -270,8 +339,13 @@ class _Writer:
                 by_grip.setdefault(name, []).append((it, pos, quat))
                 names.append(name)
                 flat.append(np.concatenate([pos, quat]))
-            self._row(E_DATA_TARGETS, "AnyValues", it, grip_names=names, poses=np.concatenate(flat) if flat else
-                      np.zeros(0))
+            self._row(
+                E_DATA_TARGETS,
+                "AnyValues",
+                it,
+                grip_names=names,
+                poses=np.concatenate(flat) if flat else np.zeros(0),
+            )
         orange = np.array([255, 150, 40], np.uint8)
         for name, rows in by_grip.items():
             m = len(rows)
@@ -280,34 +354,73 @@ class _Writer:
             x_axis = quats_to_matrices(np.array([r[2] for r in rows]))[:, :, 0]
             ones = [1] * m
             path = f"{E_TARGETS}/{_part(name)}"
-            self._send(path, "Points3D", its, positions=(pos, ones), radii=(np.full(m, 0.012 * L), ones),
-                       colors=(np.tile(orange, (m, 1)), ones), labels=([f"{name} target"] * m, ones))
-            self._send(path, "Arrows3D", its, origins=(pos, ones), vectors=(0.12 * L * x_axis, ones),
-                       colors=(np.tile(orange, (m, 1)), ones), radii=(np.full(m, 0.003 * L), ones))
+            self._send(
+                path,
+                "Points3D",
+                its,
+                positions=(pos, ones),
+                radii=(np.full(m, 0.012 * L), ones),
+                colors=(np.tile(orange, (m, 1)), ones),
+                labels=([f"{name} target"] * m, ones),
+            )
+            self._send(
+                path,
+                "Arrows3D",
+                its,
+                origins=(pos, ones),
+                vectors=(0.12 * L * x_axis, ones),
+                colors=(np.tile(orange, (m, 1)), ones),
+                radii=(np.full(m, 0.003 * L), ones),
+            )
 
     def _send_results(self, items: list[_Item]) -> None:
         snaps: list[_ResultSnap] = [it.payload for it in items]
         ones = [1] * len(items)
-        self._send(E_SOLVE_TIME, "Scalars", items, scalars=(np.array([r.solve_time_ms for r in snaps]), ones))
-        self._send(E_ITERATIONS, "Scalars", items, scalars=(np.array([float(r.iterations) for r in snaps]), ones))
+        self._send(
+            E_SOLVE_TIME,
+            "Scalars",
+            items,
+            scalars=(np.array([r.solve_time_ms for r in snaps]), ones),
+        )
+        self._send(
+            E_ITERATIONS,
+            "Scalars",
+            items,
+            scalars=(np.array([float(r.iterations) for r in snaps]), ones),
+        )
         shapes: dict[int, list[int]] = {}
         for i, (it, r) in enumerate(zip(items, snaps)):
-            data: dict[str, Any] = dict(status=r.status, message=r.message, warm_started=r.warm_started,
-                                        iterations=r.iterations)
+            data: dict[str, Any] = dict(
+                status=r.status,
+                message=r.message,
+                warm_started=r.warm_started,
+                iterations=r.iterations,
+            )
             if r.warm_call is not None:
                 data["warm"] = bool(r.warm_call)
             if r.targets is not None:
                 data["target_names"] = list(r.targets)
-                data["target_poses"] = np.concatenate([np.concatenate(p) for p in r.targets.values()])
+                data["target_poses"] = np.concatenate(
+                    [np.concatenate(p) for p in r.targets.values()]
+                )
             if r.status == "ok" and len(r.points) >= 2:
                 shapes.setdefault(len(r.points), []).append(i)
-                data.update(s=r.s, points=r.points.ravel(), orientations=r.orientations.ravel(),
-                            energy_terms=list(r.energy), energy=np.array(list(r.energy.values()), dtype=float),
-                            grip_names=list(r.forces),
-                            grip_forces=np.concatenate(list(r.forces.values())) if r.forces else np.zeros(0))
+                data.update(
+                    s=r.s,
+                    points=r.points.ravel(),
+                    orientations=r.orientations.ravel(),
+                    energy_terms=list(r.energy),
+                    energy=np.array(list(r.energy.values()), dtype=float),
+                    grip_names=list(r.forces),
+                    grip_forces=np.concatenate(list(r.forces.values()))
+                    if r.forces
+                    else np.zeros(0),
+                )
                 if r.stable is not None:
                     data["stable"] = bool(r.stable)
-                if len(r.self_contacts):  # rows of s_a, s_b, point_a, point_b, force on s_a (flattened)
+                if len(
+                    r.self_contacts
+                ):  # rows of s_a, s_b, point_a, point_b, force on s_a (flattened)
                     data["self_contacts"] = r.self_contacts.ravel()
             if r.model:  # also for a failed solve: the model it was attempted with
                 data["model"] = _json(r.model)
@@ -329,11 +442,17 @@ class _Writer:
                     have.append(i)
                     values.append(float(v))
             if have:
-                self._send(f"{E_MODEL_SERIES}/{key}", "Scalars", [items[i] for i in have],
-                           scalars=(np.array(values), [1] * len(have)))
+                self._send(
+                    f"{E_MODEL_SERIES}/{key}",
+                    "Scalars",
+                    [items[i] for i in have],
+                    scalars=(np.array(values), [1] * len(have)),
+                )
 
     def _send_shapes(self, items: list[_Item], snaps: list[_ResultSnap]) -> None:
-        """Centrelines, frames, grips, forces, energies, eigenvalues of ok results with N samples each."""
+        """Centrelines, frames, grips, forces, energies, eigenvalues of ok results with N samples
+        each.
+        """
         sc = self.scene
         m = len(snaps)
         P = np.stack([r.points for r in snaps])  # (m, N, 3)
@@ -351,29 +470,45 @@ class _Writer:
                 rf[i] = 1.0
         density = segment_energy_density(P, rf)  # (m, N-1)
         if self.energy_scale is None:
-            self.energy_scale = max(0.5 * float(np.max(rf[0])) * (2 * math.pi / L) ** 2,
-                                    1.25 * float(np.max(density[0])))
+            self.energy_scale = max(
+                0.5 * float(np.max(rf[0])) * (2 * math.pi / L) ** 2,
+                1.25 * float(np.max(density[0])),
+            )
             self._log_legend()
         rows = [n - 1] * m
         ones = [1] * m
         radius = max(sc.radius if sc else 0.0, 0.004 * L)
         segments = np.stack([P[:, :-1], P[:, 1:]], axis=2).reshape(-1, 2, 3)
-        self._send(E_CABLE, "LineStrips3D", items, strips=(segments, rows),
-                   colors=(viridis(density / self.energy_scale).reshape(-1, 3), rows),
-                   radii=(np.full(m, radius), ones))
+        self._send(
+            E_CABLE,
+            "LineStrips3D",
+            items,
+            strips=(segments, rows),
+            colors=(viridis(density / self.energy_scale).reshape(-1, 3), rows),
+            radii=(np.full(m, radius), ones),
+        )
         axes = np.array(AXIS_COLORS, dtype=np.uint8)
         if self.n_frames:  # material frames at a few samples
             idx = np.unique(np.round(np.linspace(0, n - 1, self.n_frames)).astype(int))
             k = len(idx)
             rot = quats_to_matrices(O[:, idx].reshape(-1, 4)).reshape(m, k, 3, 3)
             a = 0.05 * L
-            vectors = a * np.concatenate([rot[:, :, :, 0], rot[:, :, :, 1], rot[:, :, :, 2]], axis=1)
+            vectors = a * np.concatenate(
+                [rot[:, :, :, 0], rot[:, :, :, 1], rot[:, :, :, 2]], axis=1
+            )
             origins = np.concatenate([P[:, idx]] * 3, axis=1)
-            self._send(E_FRAMES, "Arrows3D", items, vectors=(vectors.reshape(-1, 3), [3 * k] * m),
-                       origins=(origins.reshape(-1, 3), [3 * k] * m),
-                       colors=(np.tile(np.repeat(axes, k, axis=0), (m, 1)), [3 * k] * m),
-                       radii=(np.full(m, 0.002 * L), ones))
-        if sc is not None:  # grips: pose on the solved shape (the s of the first row), and the reaction force
+            self._send(
+                E_FRAMES,
+                "Arrows3D",
+                items,
+                vectors=(vectors.reshape(-1, 3), [3 * k] * m),
+                origins=(origins.reshape(-1, 3), [3 * k] * m),
+                colors=(np.tile(np.repeat(axes, k, axis=0), (m, 1)), [3 * k] * m),
+                radii=(np.full(m, 0.002 * L), ones),
+            )
+        if (
+            sc is not None
+        ):  # grips: pose on the solved shape (the s of the first row), and the reaction force
             s0 = S[0]
             b = 0.1 * L
             for name, s_g in sc.grip_s.items():
@@ -383,24 +518,43 @@ class _Writer:
                 pos = P[:, j0] * (1 - w) + P[:, j1] * w  # (m, 3)
                 rot = quats_to_matrices(O[:, int(np.argmin(np.abs(s0 - s_g)))])  # (m, 3, 3)
                 path = f"{E_GRIPS}/{_part(name)}"
-                self._send(path, "Arrows3D", items, vectors=((b * rot.transpose(0, 2, 1)).reshape(-1, 3), [3] * m),
-                           origins=(np.repeat(pos, 3, axis=0), [3] * m), colors=(np.tile(axes, (m, 1)), [3] * m),
-                           radii=(np.full(3 * m, 0.004 * L), [3] * m))
+                self._send(
+                    path,
+                    "Arrows3D",
+                    items,
+                    vectors=((b * rot.transpose(0, 2, 1)).reshape(-1, 3), [3] * m),
+                    origins=(np.repeat(pos, 3, axis=0), [3] * m),
+                    colors=(np.tile(axes, (m, 1)), [3] * m),
+                    radii=(np.full(3 * m, 0.004 * L), [3] * m),
+                )
                 have = [i for i, r in enumerate(snaps) if name in r.forces]
                 if have:
                     f = np.array([snaps[i].forces[name] for i in have])
                     one = [1] * len(have)
-                    self._send(path + "/force", "Arrows3D", [items[i] for i in have],
-                               vectors=(sc.force_scale * f, one), origins=(pos[have], one),
-                               colors=(np.tile(np.array([230, 60, 230], np.uint8), (len(have), 1)), one),
-                               radii=(np.full(len(have), 0.005 * L), one),
-                               labels=([f"{x:.3g} N" for x in np.linalg.norm(f, axis=1)], one))
+                    self._send(
+                        path + "/force",
+                        "Arrows3D",
+                        [items[i] for i in have],
+                        vectors=(sc.force_scale * f, one),
+                        origins=(pos[have], one),
+                        colors=(np.tile(np.array([230, 60, 230], np.uint8), (len(have), 1)), one),
+                        radii=(np.full(len(have), 0.005 * L), one),
+                        labels=([f"{x:.3g} N" for x in np.linalg.norm(f, axis=1)], one),
+                    )
         energy = np.array([[float(r.energy.get(t, 0.0)) for t in ENERGY_TERMS] for r in snaps])
         self._send(E_ENERGY, "Scalars", items, scalars=(energy.ravel(), [len(ENERGY_TERMS)] * m))
-        eig = [i for i, r in enumerate(snaps) if r.min_eigenvalue is not None and math.isfinite(r.min_eigenvalue)]
+        eig = [
+            i
+            for i, r in enumerate(snaps)
+            if r.min_eigenvalue is not None and math.isfinite(r.min_eigenvalue)
+        ]
         if eig:
-            self._send(E_EIGEN, "Scalars", [items[i] for i in eig],
-                       scalars=(np.array([snaps[i].min_eigenvalue for i in eig]), [1] * len(eig)))
+            self._send(
+                E_EIGEN,
+                "Scalars",
+                [items[i] for i in eig],
+                scalars=(np.array([snaps[i].min_eigenvalue for i in eig]), [1] * len(eig)),
+            )
 
     def _log_legend(self) -> None:
         rr, sc = self._rr, self.scene
@@ -411,13 +565,33 @@ class _Writer:
             "* axes: x = tangent (red), y (green), z (blue): material frames and grip poses",
         ]
         if sc is not None:
-            lines.append(f"* magenta arrows: force each gripper exerts on the string, {sc.force_scale:.4g} m per N")
+            lines.append(
+                f"* magenta arrows: force each gripper exerts on the string, {sc.force_scale:.4g} m per N"
+            )
         lines.append("* orange: grip targets as received (point and tangent)")
-        self.rec.log(E_LEGEND, rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
-        self.rec.log(E_ENERGY, rr.SeriesLines(names=list(ENERGY_TERMS), colors=ENERGY_COLORS), static=True)
-        self.rec.log(E_SOLVE_TIME, rr.SeriesLines(names=["solve time [ms]"], colors=[[255, 170, 60]]), static=True)
-        self.rec.log(E_ITERATIONS, rr.SeriesLines(names=["iterations"], colors=[[120, 180, 255]]), static=True)
-        self.rec.log(E_EIGEN, rr.SeriesLines(names=["min eigenvalue"], colors=[[120, 220, 120]]), static=True)
+        self.rec.log(
+            E_LEGEND,
+            rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
+        self.rec.log(
+            E_ENERGY, rr.SeriesLines(names=list(ENERGY_TERMS), colors=ENERGY_COLORS), static=True
+        )
+        self.rec.log(
+            E_SOLVE_TIME,
+            rr.SeriesLines(names=["solve time [ms]"], colors=[[255, 170, 60]]),
+            static=True,
+        )
+        self.rec.log(
+            E_ITERATIONS,
+            rr.SeriesLines(names=["iterations"], colors=[[120, 180, 255]]),
+            static=True,
+        )
+        self.rec.log(
+            E_EIGEN,
+            rr.SeriesLines(names=["min eigenvalue"], colors=[[120, 220, 120]]),
+            static=True,
+        )
         for key, name in MODEL_SCALARS.items():
             self.rec.log(f"{E_MODEL_SERIES}/{key}", rr.SeriesLines(names=[name]), static=True)
 
@@ -428,16 +602,22 @@ class _Writer:
         self._row(E_MODEL, "TextLog", item, text=[item.payload], level=["INFO"])
 
     def _handle_fit(self, item: _Item) -> None:
-        from ..identify.drawing import draw_observation  # imported only by a recording that has a fit
+        from ..identify.drawing import (
+            draw_observation,
+        )  # imported only by a recording that has a fit
 
         fit: _FitSnap = item.payload
         self.send_batches()  # keep the rows of earlier updates before this one
         self.rec.set_time(TIMELINE_UPDATE, sequence=int(item.update))
         self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
-        draw_observation(self.rec, E_FIT, fit.points, fit.shape, fit.feet, fit.sigma, fit.huber, static=False)
+        draw_observation(
+            self.rec, E_FIT, fit.points, fit.shape, fit.feet, fit.sigma, fit.huber, static=False
+        )
         level = self._rr.TextLogLevel.INFO if fit.ok else self._rr.TextLogLevel.WARN
         self.rec.log(E_FIT_EVENTS, self._rr.TextLog(fit.text, level=level))
 
 
 def _json(value: Any) -> str:
-    return json.dumps(value, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o), sort_keys=True)
+    return json.dumps(
+        value, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o), sort_keys=True
+    )

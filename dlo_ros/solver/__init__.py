@@ -1,4 +1,5 @@
 """CasADi + IPOPT solver of the Ritz NLP (no ROS)."""
+
 from .options import SolverOptions
 from .result import STATUSES, GripWrench, ShapeResult
 from .summary import ModelSummary
@@ -6,5 +7,14 @@ from .protocol import Solver
 from .shape_solver import ShapeSolver
 from .auto import AutoShapeSolver, make_solver
 
-__all__ = ["AutoShapeSolver", "make_solver", "ModelSummary", "Solver", "SolverOptions", "STATUSES", "GripWrench",
-           "ShapeResult", "ShapeSolver"]
+__all__ = [
+    "AutoShapeSolver",
+    "make_solver",
+    "ModelSummary",
+    "Solver",
+    "SolverOptions",
+    "STATUSES",
+    "GripWrench",
+    "ShapeResult",
+    "ShapeSolver",
+]

@@ -22,6 +22,7 @@ A digest is computed once per process per file version (device, inode, size, mti
 a 667 kB library costs 0.36 ms, a first check 1.2 ms, a later one 49 us
 (msg_docs/model_and_solver.md).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -51,12 +52,14 @@ class CacheWarning(RuntimeWarning):
 
 class UnusableLibrary(OSError):
     """A cached library that is missing, damaged or refused: rebuild it, or use the interpreted
-    function."""
+    function.
+    """
 
 
 class UnsafeCache(UnusableLibrary):
     """The cache directory (or an ancestor) could be written by another user: nothing in it is
-    used."""
+    used.
+    """
 
 
 _lock = threading.RLock()
@@ -92,9 +95,12 @@ def warn_once(directory: Path, reason: str) -> None:
         if _warned:
             return
         _warned = True
-    warnings.warn(f"dlo_ros: compiled-code cache {directory} not used: {reason}; "
-                  "using interpreted derivatives (same answers, slower). See SECURITY.md.",
-                  CacheWarning, stacklevel=3)
+    warnings.warn(
+        f"dlo_ros: compiled-code cache {directory} not used: {reason}; "
+        "using interpreted derivatives (same answers, slower). See SECURITY.md.",
+        CacheWarning,
+        stacklevel=3,
+    )
 
 
 def _writable_by_others(st: os.stat_result) -> bool:
@@ -115,13 +121,15 @@ def _check_ancestors(path: Path) -> None:
         if st.st_uid not in (0, euid):
             raise UnsafeCache(f"its ancestor {p} is owned by uid {st.st_uid}")
         if _writable_by_others(st):
-            raise UnsafeCache(f"its ancestor {p} is writable by others "
-                              f"(mode {st.st_mode & 0o7777:o})")
+            raise UnsafeCache(
+                f"its ancestor {p} is writable by others (mode {st.st_mode & 0o7777:o})"
+            )
 
 
 def open_dir(path: Path, create: bool = False) -> int:
     """A descriptor of the checked cache directory ``path`` (created 0700 when ``create``).
-    UnsafeCache if it fails a check; FileNotFoundError (not created) or another OSError."""
+    UnsafeCache if it fails a check; FileNotFoundError (not created) or another OSError.
+    """
     if create:
         missing = [p for p in (path, *path.parents) if not os.path.lexists(p)]
         for p in reversed(missing):  # ancestors too (e.g. ~/.cache): 0700, never the umask's 0775
@@ -136,8 +144,9 @@ def open_dir(path: Path, create: bool = False) -> int:
         if st.st_uid != euid:
             raise UnsafeCache(f"it is owned by uid {st.st_uid}, not {euid}")
         if st.st_mode & 0o022:
-            raise UnsafeCache(f"it is writable by group or others (mode {st.st_mode & 0o7777:o}; "
-                              f"chmod 700 it)")
+            raise UnsafeCache(
+                f"it is writable by group or others (mode {st.st_mode & 0o7777:o}; chmod 700 it)"
+            )
     except BaseException:
         os.close(fd)
         raise
@@ -146,7 +155,8 @@ def open_dir(path: Path, create: bool = False) -> int:
 
 def _open_entry(dfd: int, name: str) -> tuple[int, os.stat_result]:
     """(descriptor, fstat) of the file ``name``: a non-empty regular file of this uid, no
-    group/other write; UnusableLibrary otherwise.  Never blocks (a FIFO is refused after fstat)."""
+    group/other write; UnusableLibrary otherwise.  Never blocks (a FIFO is refused after fstat).
+    """
     try:
         fd = os.open(name, _OPEN_FLAGS, dir_fd=dfd)
     except FileNotFoundError as e:
@@ -154,10 +164,17 @@ def _open_entry(dfd: int, name: str) -> tuple[int, os.stat_result]:
     except OSError as e:  # ELOOP: a symlink; ENXIO and others: not a file
         raise UnusableLibrary(f"{name} cannot be opened safely ({e.strerror})") from e
     st = os.fstat(fd)
-    problem = ("is not a regular file" if not stat.S_ISREG(st.st_mode) else
-               f"is owned by uid {st.st_uid}" if st.st_uid != os.geteuid() else
-               "is writable by group or others" if st.st_mode & 0o022 else
-               "is empty" if st.st_size == 0 else None)
+    problem = (
+        "is not a regular file"
+        if not stat.S_ISREG(st.st_mode)
+        else f"is owned by uid {st.st_uid}"
+        if st.st_uid != os.geteuid()
+        else "is writable by group or others"
+        if st.st_mode & 0o022
+        else "is empty"
+        if st.st_size == 0
+        else None
+    )
     if problem:
         os.close(fd)
         raise UnusableLibrary(f"{name} {problem}")
@@ -240,7 +257,8 @@ def is_verified(lib: Path) -> bool:
 
 def _dlopen(fd: int, st: os.stat_result, name: str) -> ctypes.CDLL:
     """Load the file open on ``fd`` (what was hashed): through /proc/self/fd, else a private
-    copy."""
+    copy.
+    """
     proc = f"/proc/self/fd/{fd}"
     try:
         if os.path.exists(proc):
@@ -257,7 +275,8 @@ def _dlopen(fd: int, st: os.stat_result, name: str) -> ctypes.CDLL:
 
 def load(lib: Path, symbols: Sequence[str]) -> ctypes.CDLL:
     """The library ``lib`` if every check passes (module docstring) and it has ``symbols``;
-    UnusableLibrary (UnsafeCache, after the warning) otherwise.  Never loads anything refused."""
+    UnusableLibrary (UnsafeCache, after the warning) otherwise.  Never loads anything refused.
+    """
     dfd = _checked_dir(lib.parent)
     try:
         with _lock:
@@ -283,14 +302,15 @@ def load(lib: Path, symbols: Sequence[str]) -> ctypes.CDLL:
 
 def _write_atomic(dfd: int, name: str, data: bytes) -> None:
     tmp = f".{name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600,
-                 dir_fd=dfd)
+    fd = os.open(
+        tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600, dir_fd=dfd
+    )
     try:
         try:
             os.fchmod(fd, 0o600)
             view = memoryview(data)
             while view:
-                view = view[os.write(fd, view):]
+                view = view[os.write(fd, view) :]
             os.fsync(fd)
         finally:
             os.close(fd)
@@ -310,19 +330,28 @@ def writable_dir(directory: Path) -> bool:
         os.close(open_dir(directory, create=True))
         return True
     except OSError as e:
-        warn_once(directory, str(e) if isinstance(e, UnsafeCache) else
-                  f"it cannot be created or opened ({e.strerror or e})")
+        warn_once(
+            directory,
+            str(e)
+            if isinstance(e, UnsafeCache)
+            else f"it cannot be created or opened ({e.strerror or e})",
+        )
         return False
 
 
 def store(lib: Path, data: bytes) -> bool:
     """Put the library ``data`` at ``lib`` with its record, each atomically (0600); False after the
-    warning if the cache cannot take it (unsafe, read-only, full): no temporary file is left."""
+    warning if the cache cannot take it (unsafe, read-only, full): no temporary file is left.
+    """
     try:
         dfd = open_dir(lib.parent, create=True)
     except OSError as e:
-        warn_once(lib.parent, str(e) if isinstance(e, UnsafeCache) else
-                  f"it cannot be created or opened ({e.strerror or e})")
+        warn_once(
+            lib.parent,
+            str(e)
+            if isinstance(e, UnsafeCache)
+            else f"it cannot be created or opened ({e.strerror or e})",
+        )
         return False
     try:
         digest = hashlib.sha256(data).hexdigest()

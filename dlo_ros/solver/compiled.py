@@ -10,6 +10,7 @@ everything still works, only slower.
 The fingerprint (see ``fingerprint``) identifies the function without generating its C, so a cache
 look-up costs an evaluation, never a code generation (bench/results/compile_cost.md has the costs).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -28,9 +29,21 @@ import numpy as np
 from . import cache_store
 from .cache_store import UnusableLibrary, cache_dir
 
-__all__ = ["FLAGS", "COMPILER_LOCK", "InterpretedFunction", "NativeFunction", "UnusableLibrary",
-           "build_library", "cache_dir", "cached_library", "compiled", "compiler", "fingerprint",
-           "library_path", "load_native"]
+__all__ = [
+    "FLAGS",
+    "COMPILER_LOCK",
+    "InterpretedFunction",
+    "NativeFunction",
+    "UnusableLibrary",
+    "build_library",
+    "cache_dir",
+    "cached_library",
+    "compiled",
+    "compiler",
+    "fingerprint",
+    "library_path",
+    "load_native",
+]
 
 
 #: gcc's flags.  The assembled KKT functions compile in about the same time at -O1 and -O3, and run
@@ -39,15 +52,17 @@ FLAGS = ("-O3",)
 
 
 def compiler() -> str | None:
-    return os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
+    return (
+        os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
+    )
 
 
 class NativeFunction:
     """Calls a CasADi-generated C function through ctypes with preallocated numpy buffers.
 
     Every output is returned dense (column-major reshaped to its shape) as a fresh array; no DM is
-    created or converted (``casadi.Function.__call__`` would).  ctypes releases the GIL during the call.
-    Not re-entrant: callers serialise calls (ShapeSolver holds a lock).
+    created or converted (``casadi.Function.__call__`` would).  ctypes releases the GIL during the
+    call. Not re-entrant: callers serialise calls (ShapeSolver holds a lock).
     """
 
     def __init__(self, lib_path: Path, fn: ca.Function):
@@ -85,16 +100,23 @@ class NativeFunction:
         return list(self._out_shapes)
 
     def address(self) -> tuple[int, int]:
-        """The addresses of the generated function and of its ``_work`` sizes function, for C that calls it
-        (``native_newton.UpdateOutputs``); valid while this object (its library) lives."""
-        return (ctypes.cast(self._fn, ctypes.c_void_p).value, ctypes.cast(self._work_fn, ctypes.c_void_p).value)
+        """The addresses of the generated function and of its ``_work`` sizes function, for C that
+        calls it (``native_newton.UpdateOutputs``); valid while this object (its library) lives.
+        """
+        return (
+            ctypes.cast(self._fn, ctypes.c_void_p).value,
+            ctypes.cast(self._work_fn, ctypes.c_void_p).value,
+        )
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
         for buf, value in zip(self._inputs, args):
             buf[:] = np.asarray(value, dtype=float).ravel(order="F")
         if self._fn(self._arg, self._res, self._iw, self._w, 0) != 0:
             raise RuntimeError("native CasADi function failed")
-        return [out.reshape(shape, order="F").copy() for out, shape in zip(self._outputs, self._out_shapes)]
+        return [
+            out.reshape(shape, order="F").copy()
+            for out, shape in zip(self._outputs, self._out_shapes)
+        ]
 
 
 class InterpretedFunction:
@@ -135,17 +157,23 @@ class InterpretedFunction:
         for buf, value in zip(self._inputs, args):
             buf[:] = np.asarray(value, dtype=float).ravel(order="F")
         self._eval()
-        return [out.reshape(shape, order="F").copy() for out, shape in zip(self._outputs, self._out_shapes)]
+        return [
+            out.reshape(shape, order="F").copy()
+            for out, shape in zip(self._outputs, self._out_shapes)
+        ]
 
 
 def library_path(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path:
-    """Where the compiled library of ``fn`` is (or will be) cached: ``<cache>/<name>_<fingerprint>.so``."""
+    """Where the compiled library of ``fn`` is (or will be) cached:
+    ``<cache>/<name>_<fingerprint>.so``.
+    """
     return cache_dir() / f"{fn.name()}_{fingerprint(fn, flags)}.so"
 
 
 def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | None:
     """Path of the compiled library of ``fn`` if the cache holds it and ``cache_store`` would load
-    it (directory, owner, mode and sha256 checked), else None (no compiling, no C generated)."""
+    it (directory, owner, mode and sha256 checked), else None (no compiling, no C generated).
+    """
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
     lib = library_path(fn, flags)
@@ -154,7 +182,8 @@ def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | No
 
 def load_native(lib: Path, fn: ca.Function) -> NativeFunction | None:
     """``fn``'s compiled library ``lib`` if it is in the cache and passes every check, else
-    None."""
+    None.
+    """
     try:
         return NativeFunction(lib, fn)
     except UnusableLibrary:
@@ -165,14 +194,25 @@ _SOURCE_DIGEST: bytes | None = None
 
 
 def _source_digest() -> bytes:
-    """Hash of the dlo_ros sources that build the compiled functions (model/, solver/nlp.py, assembled*.py,
-    options.py, and the outputs' output_function.py, residual.py and wrenches.py)."""
+    """Hash of the dlo_ros sources that build the compiled functions (model/, solver/nlp.py,
+    assembled*.py, options.py, and the outputs' output_function.py, residual.py and
+    wrenches.py).
+    """
     global _SOURCE_DIGEST
     if _SOURCE_DIGEST is None:
         root = Path(__file__).resolve().parent.parent
         files = sorted((root / "model").glob("*.py")) + [
-            root / "solver" / n for n in ("nlp.py", "assembled.py", "assembled_euler.py", "options.py",
-                                          "output_function.py", "residual.py", "wrenches.py")]
+            root / "solver" / n
+            for n in (
+                "nlp.py",
+                "assembled.py",
+                "assembled_euler.py",
+                "options.py",
+                "output_function.py",
+                "residual.py",
+                "wrenches.py",
+            )
+        ]
         h = hashlib.sha256()
         for f in files:
             h.update(f.name.encode() + f.read_bytes())
@@ -190,9 +230,13 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
     that differ in any of them get different keys.
     """
     h = hashlib.sha256()
-    h.update(ca.__version__.encode() + " ".join(flags).encode() + _source_digest() + fn.name().encode())
+    h.update(
+        ca.__version__.encode() + " ".join(flags).encode() + _source_digest() + fn.name().encode()
+    )
     shapes = [fn.size_in(i) for i in range(fn.n_in())]
-    h.update(repr((shapes, [fn.size_out(i) for i in range(fn.n_out())], fn.n_instructions())).encode())
+    h.update(
+        repr((shapes, [fn.size_out(i) for i in range(fn.n_out())], fn.n_instructions())).encode()
+    )
     rng = np.random.default_rng(20261122)
     for _ in range(2):
         out = fn(*[rng.uniform(0.5, 1.5, (r, c)) for r, c in shapes])
@@ -201,7 +245,8 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
     return h.hexdigest()[:16]
 
 
-#: Held while a compiler runs: never more than one per process (concurrent compiles multiply the memory).
+#: Held while a compiler runs: never more than one per process (concurrent compiles multiply the
+#memory).
 COMPILER_LOCK = threading.Lock()
 
 
@@ -213,16 +258,21 @@ def _generate(fn: ca.Function, tmp: str, also: tuple[ca.Function, ...] = ()) -> 
     return Path(tmp, f"{fn.name()}.c").read_bytes()
 
 
-def compiled(fn: ca.Function, flags: tuple[str, ...] = FLAGS, nice: int = 0, lib: Path | None = None,
-             extra_source: str = "",
-             also: tuple[ca.Function, ...] = ()) -> tuple[NativeFunction | InterpretedFunction, bool]:
+def compiled(
+    fn: ca.Function,
+    flags: tuple[str, ...] = FLAGS,
+    nice: int = 0,
+    lib: Path | None = None,
+    extra_source: str = "",
+    also: tuple[ca.Function, ...] = (),
+) -> tuple[NativeFunction | InterpretedFunction, bool]:
     """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
     ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``);
-    ``extra_source``: C appended to ``fn``'s, ``also``: functions compiled into the same library (then
-    ``lib`` must be a path keyed by them too).
+    ``extra_source``: C appended to ``fn``'s, ``also``: functions compiled into the same library
+    (then ``lib`` must be a path keyed by them too).
 
-    ``FLAGS``: see there.
-    ShapeSolver runs it niced in the background; the cache makes it once per scene structure and machine.
+    ``FLAGS``: see there. ShapeSolver runs it niced in the background; the cache makes it once per
+    scene structure and machine.
     """
     cc = compiler()
     if cc is None or os.environ.get("DLO_NO_COMPILE"):
@@ -237,13 +287,21 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = FLAGS, nice: int = 0, lib
     return (native, True) if native is not None else (InterpretedFunction(fn), False)
 
 
-def build_library(fn: ca.Function, lib: Path, cc: str, flags: tuple[str, ...] = FLAGS, nice: int = 0,
-                  extra_source: str = "", also: tuple[ca.Function, ...] = ()) -> bool:
-    """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile it to
-    the shared object ``lib`` in a private temporary directory and store it with its sha256 record
-    (``cache_store.store``: atomic, 0600; concurrent processes never load a half-written file);
-    False if the cache is unsafe or unwritable (one warning) or the compiler fails.  Callers hold
-    COMPILER_LOCK."""
+def build_library(
+    fn: ca.Function,
+    lib: Path,
+    cc: str,
+    flags: tuple[str, ...] = FLAGS,
+    nice: int = 0,
+    extra_source: str = "",
+    also: tuple[ca.Function, ...] = (),
+) -> bool:
+    """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile
+    it to the shared object ``lib`` in a private temporary directory and store it with its sha256
+    record (``cache_store.store``: atomic, 0600; concurrent processes never load a half-written
+    file); False if the cache is unsafe or unwritable (one warning) or the compiler fails.  Callers
+    hold COMPILER_LOCK.
+    """
     if not cache_store.writable_dir(lib.parent):  # before spending a compile on it
         return False
     try:

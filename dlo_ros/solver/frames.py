@@ -1,11 +1,13 @@
 """Frames and strain of a solution z, at any arc lengths s [m].
 
-Two conventions: material frames Q(s) = [ξ η ζ] (ζ the tangent; the Euler models' frames, built from
-φ, θ, ψ in the reference frame R0) and pose frames Q(s)·TANGENT_X = [t y z] (x along the tangent; the
-published orientations and grip poses).  Where the model solves no twist (the tangent director model, or
-an Euler model without ψ) the frames carry no twist from the first held grip along s (the zero-twist ψ,
-anchored at that grip's roll), which is the equilibrium when nothing holds the twist.
+Two conventions: material frames Q(s) = [ξ η ζ] (ζ the tangent; the Euler models' frames, built
+from φ, θ, ψ in the reference frame R0) and pose frames Q(s)·TANGENT_X = [t y z] (x along the
+tangent; the published orientations and grip poses).  Where the model solves no twist (the tangent
+director model, or an Euler model without ψ) the frames carry no twist from the first held grip
+along s (the zero-twist ψ, anchored at that grip's roll), which is the equilibrium when nothing
+holds the twist.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,7 +19,9 @@ from .parameters import ProblemParameters
 
 
 def anchor_grip(problem: Problem) -> Grip | None:
-    """The grip the twist-free frames start from: the first (smallest s) that holds an orientation."""
+    """The grip the twist-free frames start from: the first (smallest s) that holds an
+    orientation.
+    """
     return next((g for g in sorted(problem.grips, key=lambda g: g.s) if g.mode != "pin"), None)
 
 
@@ -31,10 +35,17 @@ def strain(nlp: StringNLP, z: np.ndarray, s: np.ndarray) -> np.ndarray:
     return m.fields(z, np.asarray(s), ("eps",))["eps"]
 
 
-def frames_psi(nlp: StringNLP, parameters: ProblemParameters, problem: Problem, z: np.ndarray, s: np.ndarray,
-               p: np.ndarray | None = None) -> np.ndarray:
-    """ψ(s) [rad] of an Euler model as published: the solved field, or the zero-twist ψ anchored at the
-    first held grip (its target ψ from ``p``, or from ``problem`` packed at z)."""
+def frames_psi(
+    nlp: StringNLP,
+    parameters: ProblemParameters,
+    problem: Problem,
+    z: np.ndarray,
+    s: np.ndarray,
+    p: np.ndarray | None = None,
+) -> np.ndarray:
+    """ψ(s) [rad] of an Euler model as published: the solved field, or the zero-twist ψ anchored at
+    the first held grip (its target ψ from ``p``, or from ``problem`` packed at z).
+    """
     m = nlp.model
     if m.layout.twist:
         return m.fields(z, s)["psi"]
@@ -48,23 +59,37 @@ def frames_psi(nlp: StringNLP, parameters: ProblemParameters, problem: Problem, 
     return m.zero_twist_psi(z, s, anchor.s if anchor is not None else 0.0, psi_anchor)
 
 
-def pose_frames(nlp: StringNLP, parameters: ProblemParameters, problem: Problem, z: np.ndarray,
-                s: np.ndarray) -> np.ndarray:
-    """Frames (len(s), 3, 3) in the pose convention (columns: tangent, y, z) of solution z.  A director
-    model without twist carries its frames without twist from the first held grip."""
+def pose_frames(
+    nlp: StringNLP, parameters: ProblemParameters, problem: Problem, z: np.ndarray, s: np.ndarray
+) -> np.ndarray:
+    """Frames (len(s), 3, 3) in the pose convention (columns: tangent, y, z) of solution z.  A
+    director model without twist carries its frames without twist from the first held grip.
+    """
     if not nlp.director:
         return frames(nlp, parameters, problem, z, s) @ TANGENT_X
     anchor = anchor_grip(problem)
-    return nlp.model.pose_frames(z, s, None if anchor is None else (anchor.s, quat_to_matrix(anchor.pose.orientation)))
+    return nlp.model.pose_frames(
+        z, s, None if anchor is None else (anchor.s, quat_to_matrix(anchor.pose.orientation))
+    )
 
 
-def frames(nlp: StringNLP, parameters: ProblemParameters, problem: Problem, z: np.ndarray, s: np.ndarray,
-           p: np.ndarray | None = None) -> np.ndarray:
-    """Material frames Q(s) (columns ξ, η, ζ) of solution z; ψ from the zero-twist rule if not solved."""
+def frames(
+    nlp: StringNLP,
+    parameters: ProblemParameters,
+    problem: Problem,
+    z: np.ndarray,
+    s: np.ndarray,
+    p: np.ndarray | None = None,
+) -> np.ndarray:
+    """Material frames Q(s) (columns ξ, η, ζ) of solution z; ψ from the zero-twist rule if not
+    solved.
+    """
     if nlp.director:
         return pose_frames(nlp, parameters, problem, z, s) @ TANGENT_X.T
     f = nlp.model.fields(z, s)
-    return material_frames(nlp.r0, f["phi"], f["theta"], frames_psi(nlp, parameters, problem, z, s, p))
+    return material_frames(
+        nlp.r0, f["phi"], f["theta"], frames_psi(nlp, parameters, problem, z, s, p)
+    )
 
 
 def node_frame(nlp: StringNLP, z: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray | None]:
@@ -78,15 +103,19 @@ def node_frame(nlp: StringNLP, z: np.ndarray, s: float) -> tuple[np.ndarray, np.
 
 
 def flipped_grips(nlp: StringNLP, problem: Problem, z: np.ndarray) -> str:
-    """Grips of a director model whose orientation rows hold on the wrong sheet (t = −t_g, or d1 = −d1_g
-    for a clamp with twist): the rows t·R_g e_y = t·R_g e_z = 0 allow it, the grip does not."""
+    """Grips of a director model whose orientation rows hold on the wrong sheet (t = −t_g, or d1 =
+    −d1_g for a clamp with twist): the rows t·R_g e_y = t·R_g e_z = 0 allow it, the grip does
+    not.
+    """
     bad = []
     for g in problem.grips:
         if g.mode == "pin":
             continue
         t, d1 = node_frame(nlp, z, g.s)
         target = quat_to_matrix(g.pose.orientation)
-        if np.dot(t, target[:, 0]) < 0 or (g.mode == "clamp" and d1 is not None and np.dot(d1, target[:, 1]) < 0):
+        if np.dot(t, target[:, 0]) < 0 or (
+            g.mode == "clamp" and d1 is not None and np.dot(d1, target[:, 1]) < 0
+        ):
             bad.append(g.name)
     return ", ".join(bad)
 

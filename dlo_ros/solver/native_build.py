@@ -12,6 +12,7 @@ flags with the settings' ``-D`` values (``driver_digest``), next to the generate
 ``compiled.fingerprint``; a change to either C or a setting gives a new name, hence a new build.
 Loading stays ``cache_store``'s (owner, mode and sha256 checks), as for every compiled library.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -57,6 +58,7 @@ def driver_source(name: str) -> str:
                 return ""
             seen.add(header)
             return expand(read(header))
+
         return _INCLUDE.sub(include, text)
 
     return expand(read(name))
@@ -64,22 +66,29 @@ def driver_source(name: str) -> str:
 
 def settings_flags() -> tuple[str, ...]:
     """The compiler flags a driver's code depends on beside its functions' names:
-    ``compiled.FLAGS`` and the shared settings (``native_settings.defines``)."""
+    ``compiled.FLAGS`` and the shared settings (``native_settings.defines``).
+    """
     return (*FLAGS, *native_settings.defines())
 
 
 def driver_flags(system: ca.Function, residual: ca.Function) -> tuple[str, ...]:
     """Every flag a driver is compiled with, around the generated functions ``system`` and
-    ``residual``."""
-    names = (f"-DDLO_SYSTEM={system.name()}", f"-DDLO_SYSTEM_WORK={system.name()}_work",
-             f"-DDLO_RESIDUAL={residual.name()}", f"-DDLO_RESIDUAL_WORK={residual.name()}_work")
+    ``residual``.
+    """
+    names = (
+        f"-DDLO_SYSTEM={system.name()}",
+        f"-DDLO_SYSTEM_WORK={system.name()}_work",
+        f"-DDLO_RESIDUAL={residual.name()}",
+        f"-DDLO_RESIDUAL_WORK={residual.name()}_work",
+    )
     return (*settings_flags(), *names)
 
 
 def driver_digest(name: str) -> str:
     """8 hex digits of sha256 over the driver's assembled source and ``settings_flags``.  The
     functions' names are left out: the library's name carries the system function's name and
-    fingerprint, which fixes its residual's code too."""
+    fingerprint, which fixes its residual's code too.
+    """
     h = hashlib.sha256(driver_source(name).encode())
     h.update("\0".join(settings_flags()).encode())
     return h.hexdigest()[:8]
@@ -88,14 +97,16 @@ def driver_digest(name: str) -> str:
 def free_library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
     """Where the contact-free driver compiled with ``fn`` (``StringNLP.kkt_free_split_fn``) is (or
     will be) cached.  ``kkt_lib``: ``fn``'s own ``compiled.library_path``, when the caller has it
-    (its name carries the fingerprint, which otherwise costs an evaluation of ``fn``)."""
+    (its name carries the fingerprint, which otherwise costs an evaluation of ``fn``).
+    """
     key = kkt_lib.stem.rsplit("_", 1)[1] if kkt_lib is not None else fingerprint(fn)
     return cache_dir() / f"dlo_newton_{key}_{driver_digest(FREE_DRIVER)}.so"
 
 
 def active_library_path(fn: ca.Function) -> Path:
     """Where ``fn``'s library (``StringNLP.kkt_split_fn``) with the active-set driver appended is
-    (or will be) cached."""
+    (or will be) cached.
+    """
     digest = driver_digest(ACTIVE_DRIVER)
     return cache_dir() / f"{fn.name()}_{fingerprint(fn)}_active_{digest}.so"
 
@@ -103,6 +114,14 @@ def active_library_path(fn: ca.Function) -> Path:
 def compile_free(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:
     """Build the contact-free driver around ``fn`` and ``residual`` into ``lib``
     (``build_library``: stored through ``cache_store``); False if the compiler fails or the cache
-    is unusable.  Callers hold ``compiled.COMPILER_LOCK``."""
-    return build_library(fn, lib, cc, flags=driver_flags(fn, residual), nice=nice,
-                         extra_source=driver_source(FREE_DRIVER), also=(residual,))
+    is unusable.  Callers hold ``compiled.COMPILER_LOCK``.
+    """
+    return build_library(
+        fn,
+        lib,
+        cc,
+        flags=driver_flags(fn, residual),
+        nice=nice,
+        extra_source=driver_source(FREE_DRIVER),
+        also=(residual,),
+    )

@@ -1,6 +1,8 @@
-"""What a converged compiled Newton loop evaluates in the same call beyond the loop: the obstacle rows'
-values and the outputs' function (``UpdateOutputs``), and those outputs as a result uses them
-(``ComputedOutputs``)."""
+"""What a converged compiled Newton loop evaluates in the same call beyond the loop: the obstacle
+rows' values and the outputs' function (``UpdateOutputs``), and those outputs as a result uses them
+(``ComputedOutputs``).
+"""
+
 from __future__ import annotations
 
 import ctypes
@@ -11,9 +13,11 @@ import numpy as np
 
 @dataclass
 class ComputedOutputs:
-    """The outputs' function's values (``output_function.OutputFunction``: points, orientations, grip forces
-    and torques, contact forces, residual, flip) as a converged loop evaluated them, with the inputs it
-    evaluated them at: a result uses them only for the same (z, p, λ_SI, prof) (``matches``)."""
+    """The outputs' function's values (``output_function.OutputFunction``: points, orientations,
+    grip forces and torques, contact forces, residual, flip) as a converged loop evaluated them,
+    with the inputs it evaluated them at: a result uses them only for the same (z, p, λ_SI, prof)
+    (``matches``).
+    """
 
     z: np.ndarray
     p: np.ndarray
@@ -22,35 +26,54 @@ class ComputedOutputs:
     values: list[np.ndarray]
 
     def matches(self, z: np.ndarray, p: np.ndarray, lam_si: np.ndarray, prof: np.ndarray) -> bool:
-        return (np.array_equal(self.z, z) and np.array_equal(self.p, p) and np.array_equal(self.lam_si, lam_si)
-                and (self.prof is prof or np.array_equal(self.prof, prof)))
+        return (
+            np.array_equal(self.z, z)
+            and np.array_equal(self.p, p)
+            and np.array_equal(self.lam_si, lam_si)
+            and (self.prof is prof or np.array_equal(self.prof, prof))
+        )
 
 
 class _AfterStruct(ctypes.Structure):
     """dlo_after in the drivers' C (native/dlo_common.h)."""
 
-    _fields_ = [("obstacle", ctypes.c_void_p), ("outputs", ctypes.c_void_p), ("obstacle_work", ctypes.c_void_p),
-                ("outputs_work", ctypes.c_void_p), ("rows", ctypes.c_int), ("free_rows", ctypes.c_int),
-                ("ub", ctypes.c_void_p), ("lam_div", ctypes.c_void_p),
-                ("prof", ctypes.c_void_p), ("g", ctypes.c_void_p), ("lam_si", ctypes.c_void_p),
-                ("out", ctypes.c_void_p * 8), ("done", ctypes.c_int)]
+    _fields_ = [
+        ("obstacle", ctypes.c_void_p),
+        ("outputs", ctypes.c_void_p),
+        ("obstacle_work", ctypes.c_void_p),
+        ("outputs_work", ctypes.c_void_p),
+        ("rows", ctypes.c_int),
+        ("free_rows", ctypes.c_int),
+        ("ub", ctypes.c_void_p),
+        ("lam_div", ctypes.c_void_p),
+        ("prof", ctypes.c_void_p),
+        ("g", ctypes.c_void_p),
+        ("lam_si", ctypes.c_void_p),
+        ("out", ctypes.c_void_p * 8),
+        ("done", ctypes.c_int),
+    ]
 
 
 class UpdateOutputs:
-    """What a converged loop evaluates in the same call, so that a warm update is one compiled call: the
-    obstacle rows' values (``StringNLP.obstacle_g_fn``; the contact-free loop, whose system leaves them
-    out) and, when none is violated, the outputs' function (``output_function.py``) at the answer, with
-    λ_SI = λ / (row_scale · σ) and the string's profiles ``prof``.  Both are generated functions of their
-    own libraries (``compiled.NativeFunction``), called by address: neither loop's library is rebuilt when
-    they arrive.  Either may be None (not compiled yet): the caller then evaluates what is missing.  Not
-    re-entrant: the loops' callers serialise calls."""
+    """What a converged loop evaluates in the same call, so that a warm update is one compiled
+    call: the obstacle rows' values (``StringNLP.obstacle_g_fn``; the contact-free loop, whose
+    system leaves them out) and, when none is violated, the outputs' function
+    (``output_function.py``) at the answer, with λ_SI = λ / (row_scale · σ) and the string's
+    profiles ``prof``.  Both are generated functions of their own libraries
+    (``compiled.NativeFunction``), called by address: neither loop's library is rebuilt when they
+    arrive.  Either may be None (not compiled yet): the caller then evaluates what is missing.  Not
+    re-entrant: the loops' callers serialise calls.
+    """
 
     def __init__(self, nlp, obstacle, outputs):
         rows = int(nlp.lbg.size)
         self.rows = rows
         self._ub = np.ascontiguousarray(nlp.ubg, dtype=float)
-        # λ_SI = λ / (row_scale · σ), divided as ShapeOutputs divides (the same rounding: ComputedOutputs.matches)
-        self._div = np.ascontiguousarray(nlp.row_scale * nlp.sigma, dtype=float) if rows else np.zeros(0)
+        # λ_SI = λ / (row_scale · σ), divided as ShapeOutputs divides (the same rounding:
+        # ComputedOutputs.matches)
+        self._div = (
+            np.ascontiguousarray(nlp.row_scale * nlp.sigma, dtype=float) if rows else np.zeros(0)
+        )
         self._g, self._lam_si = np.zeros(max(rows, 1)), np.zeros(max(rows, 1))
         self._prof: np.ndarray | None = None
         self._shapes = outputs.out_shapes if outputs is not None else []
@@ -58,7 +81,9 @@ class UpdateOutputs:
         self._struct = _AfterStruct()
         st = self._struct
         st.rows, st.free_rows = rows, nlp.n_free_rows
-        st.ub, st.lam_div, st.g, st.lam_si = (a.ctypes.data for a in (self._ub, self._div, self._g, self._lam_si))
+        st.ub, st.lam_div, st.g, st.lam_si = (
+            a.ctypes.data for a in (self._ub, self._div, self._g, self._lam_si)
+        )
         for i, a in enumerate(self._out):
             st.out[i] = a.ctypes.data
         self._functions = (obstacle, outputs)  # kept alive for the addresses
@@ -69,8 +94,9 @@ class UpdateOutputs:
         self.address = ctypes.addressof(st)
 
     def prepare(self, prof: np.ndarray | None) -> int:
-        """Before a call: the outputs are evaluated when ``prof`` is given (the profiles of the string being
-        solved for); the struct's address."""
+        """Before a call: the outputs are evaluated when ``prof`` is given (the profiles of the
+        string being solved for); the struct's address.
+        """
         st = self._struct
         st.done = 0
         if prof is None or self.outputs is None:
@@ -82,13 +108,25 @@ class UpdateOutputs:
             st.prof = prof.ctypes.data
         return self.address
 
-    def collect(self, z: np.ndarray, p: np.ndarray) -> tuple[np.ndarray | None, ComputedOutputs | None]:
-        """After a converged call at (z, p): (every row's value, the outputs), each None if not evaluated (the
-        values only from the contact-free loop, which evaluates its obstacle rows)."""
+    def collect(
+        self, z: np.ndarray, p: np.ndarray
+    ) -> tuple[np.ndarray | None, ComputedOutputs | None]:
+        """After a converged call at (z, p): (every row's value, the outputs), each None if not
+        evaluated (the values only from the contact-free loop, which evaluates its obstacle
+        rows).
+        """
         done = self._struct.done
-        g = self._g[:self.rows].copy() if done & 1 else None
+        g = self._g[: self.rows].copy() if done & 1 else None
         if not done & 2:
             return g, None
-        values = [out[:r * c].reshape((r, c), order="F").copy() for out, (r, c) in zip(self._out, self._shapes)]
-        return g, ComputedOutputs(z.copy(), np.array(p, dtype=float), self._lam_si[:self.rows].copy(), self._prof,
-                                  values)
+        values = [
+            out[: r * c].reshape((r, c), order="F").copy()
+            for out, (r, c) in zip(self._out, self._shapes)
+        ]
+        return g, ComputedOutputs(
+            z.copy(),
+            np.array(p, dtype=float),
+            self._lam_si[: self.rows].copy(),
+            self._prof,
+            values,
+        )

@@ -6,6 +6,7 @@ The Python side reads them from this module at call time (``stability.min_reduce
 ``newton``'s contact check).  Newton's step tolerances (``nlp.NEWTON_*``) reach the drivers as
 call arguments instead, so they are single already.
 """
+
 from __future__ import annotations
 
 #: The stability check holds a row (reduces the Hessian on its null space) when |λ| exceeds
@@ -26,20 +27,32 @@ CONVERGED, NOT_CONVERGED, SINGULAR, STEP_TOO_LARGE, EVALUATION_FAILED = 0, 1, 2,
 #: unknown), LAPACK failed (the numpy path decides).
 EIGEN_FOUND, EIGEN_NO_FREEDOM, EIGEN_FAILED = 0, 1, -1
 
-_NAMES = ("STABILITY_MULTIPLIER_TOLERANCE", "STABILITY_BOUND_TOLERANCE",
-          "CONTACT_APPEARED_TOLERANCE", "CONVERGED", "NOT_CONVERGED", "SINGULAR", "STEP_TOO_LARGE",
-          "EVALUATION_FAILED", "EIGEN_FOUND", "EIGEN_NO_FREEDOM", "EIGEN_FAILED")
+_NAMES = (
+    "STABILITY_MULTIPLIER_TOLERANCE",
+    "STABILITY_BOUND_TOLERANCE",
+    "CONTACT_APPEARED_TOLERANCE",
+    "CONVERGED",
+    "NOT_CONVERGED",
+    "SINGULAR",
+    "STEP_TOO_LARGE",
+    "EVALUATION_FAILED",
+    "EIGEN_FOUND",
+    "EIGEN_NO_FREEDOM",
+    "EIGEN_FAILED",
+)
 
 
 def _literal(value: float | int) -> str:
     """A C literal of ``value`` that parses back to the same double or int: ``repr`` of a float is
-    the shortest string that round-trips, and C's strtod rounds correctly."""
+    the shortest string that round-trips, and C's strtod rounds correctly.
+    """
     text = repr(float(value)) if isinstance(value, float) else str(int(value))
     return f"({text})" if text.startswith("-") else text
 
 
 def defines() -> tuple[str, ...]:
     """The settings as the compiler's ``-DDLO_<NAME>=<value>`` flags, read now (so a changed value
-    gives other flags, and another library)."""
+    gives other flags, and another library).
+    """
     module = globals()
     return tuple(f"-DDLO_{name}={_literal(module[name])}" for name in _NAMES)

@@ -1,4 +1,5 @@
 """Solver options (the ``solver`` section of a scene file)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
@@ -13,34 +14,32 @@ class SolverOptions:
     """How the Ritz NLP is built and solved.
 
     basis/order: Ritz basis ('chebyshev' default, or the paper's 'fourier') and number of functions
-    per field (for 'director': Legendre–Gauss–Lobatto nodes per element; the director model has no Ritz
-    basis, so model 'full' with rotation 'director' refuses 'fourier' and frame 'paper', which it would
-    ignore).  quadrature_nodes:
-    Chebyshev–Lobatto nodes for the energy integrals and the centreline (for 'director': per element,
-    at most order + 8).
-    obstacle_samples: points along s, uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is
-    imposed.  obstacle_slots: per obstacle, rows whose arc lengths are parameters, placed at the string's
-    closest approaches to the obstacle and moved with them (solver/obstacle_slots.py); 0 (default): the
-    samples alone.
-    frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2 (away from
-    the singularity); 'paper' is the paper's frame (singular at the straight state).
-    rotation: how a 3D model represents the material frame: 'director' (default: nodal unit quaternions,
-    or unit tangents when the twist is not held, on spectral elements split at interior grips, point
+    per field (for 'director': Legendre–Gauss–Lobatto nodes per element; the director model has no
+    Ritz basis, so model 'full' with rotation 'director' refuses 'fourier' and frame 'paper', which
+    it would ignore).  quadrature_nodes: Chebyshev–Lobatto nodes for the energy integrals and the
+    centreline (for 'director': per element, at most order + 8). obstacle_samples: points along s,
+    uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is imposed.  obstacle_slots:
+    per obstacle, rows whose arc lengths are parameters, placed at the string's closest approaches
+    to the obstacle and moved with them (solver/obstacle_slots.py); 0 (default): the samples alone.
+    frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2 (away
+    from the singularity); 'paper' is the paper's frame (singular at the straight state). rotation:
+    how a 3D model represents the material frame: 'director' (default: nodal unit quaternions, or
+    unit tangents when the twist is not held, on spectral elements split at interior grips, point
     loads and material kinks; no singular direction, see model/director.py) or 'euler' (the paper's
-    Euler angles in one Ritz basis over [0, L], with ``frame``; kept for the benchmark).  Planar models
-    always use the in-plane angle φ.
-    model: 'auto' (default: the smallest model the scene needs, checked a posteriori against
-    error_tolerance, see solver/auto.py), 'full' (3D: φ, θ and, when two clamps hold it, ψ) or 'planar'
-    (φ only, θ ≡ π/2: the string stays in the working plane; requires a planar scene and frame 'auto').
-    error_tolerance [m]: what 'auto' guarantees on the centreline; 0 means 1e-3·L (1 mm on 1 m).
-    recheck_every: 'auto' repeats its a-posteriori checks every this many streamed updates.
-    output_points: centreline samples in a result.  tolerance: IPOPT's (scaled) convergence tolerance.
-    max_continuation_steps: the largest number of equal steps a failed warm update is split into.
-    update_time_limit [s]: how long a warm update (one that starts from a committed shape) may try: no
-    IPOPT attempt starts after it, and each attempt within a warm update stops at it (IPOPT's
-    ``max_wall_time``); the update then answers ``failed`` and names this limit.  0: no limit.  A cold
-    solve is not limited.
-    self_contact_pairs: capacity of the self-contact pair list (director 3D models only; 0: self-contact
+    Euler angles in one Ritz basis over [0, L], with ``frame``; kept for the benchmark).  Planar
+    models always use the in-plane angle φ. model: 'auto' (default: the smallest model the scene
+    needs, checked a posteriori against error_tolerance, see solver/auto.py), 'full' (3D: φ, θ and,
+    when two clamps hold it, ψ) or 'planar' (φ only, θ ≡ π/2: the string stays in the working
+    plane; requires a planar scene and frame 'auto'). error_tolerance [m]: what 'auto' guarantees
+    on the centreline; 0 means 1e-3·L (1 mm on 1 m). recheck_every: 'auto' repeats its a-posteriori
+    checks every this many streamed updates. output_points: centreline samples in a result.
+    tolerance: IPOPT's (scaled) convergence tolerance. max_continuation_steps: the largest number
+    of equal steps a failed warm update is split into. update_time_limit [s]: how long a warm
+    update (one that starts from a committed shape) may try: no IPOPT attempt starts after it, and
+    each attempt within a warm update stops at it (IPOPT's ``max_wall_time``); the update then
+    answers ``failed`` and names this limit.  0: no limit.  A cold solve is not limited.
+    self_contact_pairs: capacity of the self-contact pair list (director 3D models only; 0:
+    self-contact
     is not modelled).  Each slot is one inequality row |x(s_a) − x(s_b)|² ≥ D² whose pair of arc lengths is
     a parameter, refreshed from the current shape before every solve (solver/self_contact.py).
     self_contact_samples: points along s where self-contact is checked (0: from the radius, see
@@ -72,19 +71,29 @@ class SolverOptions:
         if not (2 <= self.order <= 60):
             raise ValueError(f"solver.order: must be in [2, 60], got {self.order}")
         if not (max(8, self.order + 2) <= self.quadrature_nodes <= 400):
-            raise ValueError(f"solver.quadrature_nodes: must be in [max(8, order+2), 400], got {self.quadrature_nodes}")
+            raise ValueError(
+                f"solver.quadrature_nodes: must be in [max(8, order+2), 400], got {self.quadrature_nodes}"
+            )
         if not (2 <= self.obstacle_samples <= 1000):
-            raise ValueError(f"solver.obstacle_samples: must be in [2, 1000], got {self.obstacle_samples}")
+            raise ValueError(
+                f"solver.obstacle_samples: must be in [2, 1000], got {self.obstacle_samples}"
+            )
         if not (0 <= self.obstacle_slots <= 256):
-            raise ValueError(f"solver.obstacle_slots: must be in [0, 256], got {self.obstacle_slots}")
+            raise ValueError(
+                f"solver.obstacle_slots: must be in [0, 256], got {self.obstacle_slots}"
+            )
         if self.frame not in FRAMES:
             raise ValueError(f"solver.frame: must be one of {FRAMES}, got {self.frame!r}")
         if not (2 <= self.output_points <= 10000):
-            raise ValueError(f"solver.output_points: must be in [2, 10000], got {self.output_points}")
+            raise ValueError(
+                f"solver.output_points: must be in [2, 10000], got {self.output_points}"
+            )
         if not (0 < self.tolerance < 1e-2):
             raise ValueError(f"solver.tolerance: must be in (0, 1e-2), got {self.tolerance}")
         if not (1 <= self.max_iterations <= 100000):
-            raise ValueError(f"solver.max_iterations: must be in [1, 100000], got {self.max_iterations}")
+            raise ValueError(
+                f"solver.max_iterations: must be in [1, 100000], got {self.max_iterations}"
+            )
         if not (1 <= self.max_continuation_steps <= 1024):
             raise ValueError("solver.max_continuation_steps: must be in [1, 1024]")
         if self.model not in MODELS:
@@ -96,46 +105,69 @@ class SolverOptions:
         ignored = self._ignored_by_director()
         if ignored:
             name = ignored[0]
-            raise ValueError(f"solver.{name}: {getattr(self, name)!r} belongs to the Euler-angle model; the 3D model "
-                             "(solver.rotation 'director', the default) has neither a Ritz basis nor a reference frame: "
-                             "set solver.rotation 'euler' to use it")
+            raise ValueError(
+                f"solver.{name}: {getattr(self, name)!r} belongs to the Euler-angle model; the 3D model "
+                "(solver.rotation 'director', the default) has neither a Ritz basis nor a reference frame: "
+                "set solver.rotation 'euler' to use it"
+            )
         if not (self.error_tolerance >= 0 and self.error_tolerance < 1e3):
-            raise ValueError(f"solver.error_tolerance: must be >= 0 m (0 = 1e-3·L), got {self.error_tolerance}")
+            raise ValueError(
+                f"solver.error_tolerance: must be >= 0 m (0 = 1e-3·L), got {self.error_tolerance}"
+            )
         if not (0 <= self.update_time_limit <= 3600):
-            raise ValueError(f"solver.update_time_limit: must be in [0, 3600] s (0: no limit), got {self.update_time_limit}")
+            raise ValueError(
+                f"solver.update_time_limit: must be in [0, 3600] s (0: no limit), got {self.update_time_limit}"
+            )
         if not (1 <= self.recheck_every <= 100000):
-            raise ValueError(f"solver.recheck_every: must be in [1, 100000], got {self.recheck_every}")
+            raise ValueError(
+                f"solver.recheck_every: must be in [1, 100000], got {self.recheck_every}"
+            )
         if not (0 <= self.self_contact_pairs <= 400):
-            raise ValueError(f"solver.self_contact_pairs: must be in [0, 400], got {self.self_contact_pairs}")
+            raise ValueError(
+                f"solver.self_contact_pairs: must be in [0, 400], got {self.self_contact_pairs}"
+            )
         if self.self_contact_samples != 0 and not (3 <= self.self_contact_samples <= 4000):
-            raise ValueError(f"solver.self_contact_samples: must be 0 (auto) or in [3, 4000], got {self.self_contact_samples}")
+            raise ValueError(
+                f"solver.self_contact_samples: must be 0 (auto) or in [3, 4000], got {self.self_contact_samples}"
+            )
         if self.self_contact_pairs and (self.model == "planar" or self.rotation != "director"):
-            raise ValueError("solver.self_contact_pairs: self-contact needs the 3D director model "
-                             "(solver.model 'full' or 'auto', solver.rotation 'director')")
+            raise ValueError(
+                "solver.self_contact_pairs: self-contact needs the 3D director model "
+                "(solver.model 'full' or 'auto', solver.rotation 'director')"
+            )
         if not (0 < self.max_strain < 10):
             raise ValueError("solver.max_strain: must be in (0, 10)")
 
     def with_model(self, model: str, **changes) -> "SolverOptions":
-        """These options for the fixed ``model`` ('planar' or 'full') that auto or a fit builds from them: a
-        3D director model takes the default basis and frame, which it does not have (the scene's may be
-        meant for the planar model)."""
+        """These options for the fixed ``model`` ('planar' or 'full') that auto or a fit builds
+        from them: a 3D director model takes the default basis and frame, which it does not have
+        (the scene's may be meant for the planar model).
+        """
         if model == "full" and self.rotation == "director":
             changes = {"basis": SolverOptions.basis, "frame": SolverOptions.frame, **changes}
         return replace(self, model=model, **changes)
 
     def _ignored_by_director(self) -> list[str]:
-        """The Euler-angle options set away from their defaults where the 3D director model is built (model
-        'full', rotation 'director'): it has nodal elements and no singular frame, and would ignore them."""
+        """The Euler-angle options set away from their defaults where the 3D director model is
+        built (model 'full', rotation 'director'): it has nodal elements and no singular frame, and
+        would ignore them.
+        """
         if self.model != "full" or self.rotation != "director":
             return []
-        return [name for name in ("basis", "frame") if getattr(self, name) != getattr(SolverOptions, name)]
+        return [
+            name
+            for name in ("basis", "frame")
+            if getattr(self, name) != getattr(SolverOptions, name)
+        ]
 
     @classmethod
     def from_dict(cls, d: dict) -> "SolverOptions":
         known = {f.name: f.type for f in fields(cls)}
         unknown = set(d) - set(known)
         if unknown:
-            raise ValueError(f"solver.{sorted(unknown)[0]}: unknown option (known: {sorted(known)})")
+            raise ValueError(
+                f"solver.{sorted(unknown)[0]}: unknown option (known: {sorted(known)})"
+            )
         kwargs = {}
         for key, value in d.items():
             default = getattr(cls, key)
@@ -149,7 +181,9 @@ class SolverOptions:
                 else:
                     kwargs[key] = float(value)
             except (TypeError, ValueError):
-                raise ValueError(f"solver.{key}: expected a {type(default).__name__}, got {value!r}") from None
+                raise ValueError(
+                    f"solver.{key}: expected a {type(default).__name__}, got {value!r}"
+                ) from None
         opts = cls(**kwargs)
         opts.validate()
         return opts

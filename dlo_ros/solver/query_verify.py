@@ -5,13 +5,16 @@ AutoShapeSolver as a cold solve's answer is: its a-posteriori checks run on the 
 (planar stability in 3D, the basis order's shadow, the obstacle samples' shadow) and escalate to a
 richer model until they pass.  This module holds the two decisions around that loop:
 
-* :class:`QueryBudget` — the refinement stops when ``solver.update_time_limit`` [s] has passed since
-  the query started (0: no limit).  The limit bounds how long a caller waits; it never turns an answer
-  into a verdict: a refinement cut short leaves the answer 'unverified', and its message says why.
+* :class:`QueryBudget` — the refinement stops when ``solver.update_time_limit`` [s] has passed
+  since
+  the query started (0: no limit).  The limit bounds how long a caller waits; it never turns an
+  answer into a verdict: a refinement cut short leaves the answer 'unverified', and its message
+  says why.
 * :func:`verified_answer` — the final status: 'ok' only when the checks finished, the residual and
   the checks' error estimate are both within the tolerance; otherwise 'unverified' (the shape kept,
   no stability verdict), with the reason in the message.
 """
+
 from __future__ import annotations
 
 import math
@@ -23,7 +26,9 @@ from .result import ShapeResult
 
 @dataclass
 class QueryBudget:
-    """The time a query's refinement may take: ``limit`` [s] from ``start`` (``time.perf_counter``)."""
+    """The time a query's refinement may take: ``limit`` [s] from ``start``
+    (``time.perf_counter``).
+    """
 
     limit: float
     start: float = field(default_factory=time.perf_counter)
@@ -33,17 +38,21 @@ class QueryBudget:
         return self.limit > 0 and time.perf_counter() - self.start >= self.limit
 
     def reason(self) -> str:
-        return (f"solver.update_time_limit ({self.limit:g} s) reached before the answer was verified "
-                f"(refinement stopped after {time.perf_counter() - self.start:.2f} s)")
+        return (
+            f"solver.update_time_limit ({self.limit:g} s) reached before the answer was verified "
+            f"(refinement stopped after {time.perf_counter() - self.start:.2f} s)"
+        )
 
 
-def verified_answer(result: ShapeResult, estimate: float | None, tolerance: float,
-                    stopped: str = "") -> ShapeResult:
+def verified_answer(
+    result: ShapeResult, estimate: float | None, tolerance: float, stopped: str = ""
+) -> ShapeResult:
     """``result`` (the refined answer, changed in place and returned) with its final status.
 
-    estimate [m]: the error estimate of the checks that passed on this very shape (None: they did not
-    finish). stopped: why the refinement ended before its checks passed ('' when they passed).
-    An answer that is not 'ok' or 'unverified' (failed, infeasible, ...) is returned as it is."""
+    estimate [m]: the error estimate of the checks that passed on this very shape (None: they did
+    not finish). stopped: why the refinement ended before its checks passed ('' when they passed).
+    An answer that is not 'ok' or 'unverified' (failed, infeasible, ...) is returned as it is.
+    """
     if result.status not in ("ok", "unverified"):
         return result
     why = stopped

@@ -21,6 +21,7 @@ Two rules, both made of the self-contact module's own tests (``self_contact.py``
   cold start is (the answer must not penetrate itself); that answer, once committed, is the
   reference.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,32 +33,40 @@ from . import self_contact as SC
 SLACK = 1e-7
 
 
-def through_itself(candidates: list[tuple[tuple[int, int], float]], geometry: SC.ContactGeometry,
-                   length: float) -> bool:
+def through_itself(
+    candidates: list[tuple[tuple[int, int], float]], geometry: SC.ContactGeometry, length: float
+) -> bool:
     """Whether a shape whose ``candidate_pairs`` are ``candidates`` penetrates itself: a pair
-    closer than the distance D the self-contact rows keep, less ``SLACK``·L (``length``: L [m])."""
+    closer than the distance D the self-contact rows keep, less ``SLACK``·L (``length``: L [m]).
+    """
     return bool(SC.penetrations(candidates, geometry, SLACK * length))
 
 
-def why_not_reference(before: np.ndarray | None, after: np.ndarray, geometry: SC.ContactGeometry,
-                      length: float) -> str:
+def why_not_reference(
+    before: np.ndarray | None, after: np.ndarray, geometry: SC.ContactGeometry, length: float
+) -> str:
     """Why the shape sampled at ``after`` ((N, 3) points [m] at ``geometry.s``) cannot be the
     topology reference of a self-contact stream whose last verified shape is ``before`` (the same
     samples, or None): '' when it can.  It cannot when it penetrates itself, or when moving every
     sample straight from ``before`` to it makes two of them meet (``self_contact.swept_crossing``:
-    the string may have passed through itself on the way)."""
+    the string may have passed through itself on the way).
+    """
     candidates = SC.candidate_pairs(after, geometry)
     through = SC.penetrations(candidates, geometry, SLACK * length)  # as through_itself
     if through:
         a, b = through[0]
         d = dict(candidates)[(a, b)]
-        return (f"it passes through itself (s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
-                f"are {d:.3g} m apart, the rows keep {geometry.distance:.3g} m)")
+        return (
+            f"it passes through itself (s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m "
+            f"are {d:.3g} m apart, the rows keep {geometry.distance:.3g} m)"
+        )
     if before is not None:
         swept = SC.swept_crossing(before, after, geometry)
         if swept is not None:
             a, b = swept
-            return (f"it is not reached from the last shape without the string passing through "
-                    f"itself (s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m meet on the "
-                    f"way)")
+            return (
+                f"it is not reached from the last shape without the string passing through "
+                f"itself (s = {geometry.s[a]:.4g} m and {geometry.s[b]:.4g} m meet on the "
+                f"way)"
+            )
     return ""

@@ -1,4 +1,7 @@
-"""The result of one solve: what the node, the CLI, rerun logging and the benchmarks all consume."""
+"""The result of one solve: what the node, the CLI, rerun logging and the benchmarks all
+consume.
+"""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -7,14 +10,16 @@ import numpy as np
 
 from .summary import ModelSummary
 
-#: 'unverified': the solver converged but the shape fails the equilibrium check (equilibrium_residual_m
-#: over the tolerance); it carries the shape for inspection, never a stability verdict
+#: 'unverified': the solver converged but the shape fails the equilibrium check
+#(equilibrium_residual_m : over the tolerance); it carries the shape for inspection, never a
+#stability verdict
 STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
 
 
 @dataclass
 class GripWrench:
-    """Reaction at a grip: the force [N] and torque [N·m] the gripper exerts ON the string, world frame.
+    """Reaction at a grip: the force [N] and torque [N·m] the gripper exerts ON the string, world
+    frame.
 
     The torque is about the grip point.  The gripper feels the opposite (−force, −torque).
     """
@@ -27,8 +32,8 @@ class GripWrench:
 class SelfContact:
     """A pair of points of the string pressed against each other (solver/self_contact.py).
 
-    s_a < s_b [m] and their centreline points [m]; force [N] acts on the string at s_a, −force at s_b
-    (along x(s_a) − x(s_b)); gap [m] is their centreline distance.
+    s_a < s_b [m] and their centreline points [m]; force [N] acts on the string at s_a, −force at
+    s_b (along x(s_a) − x(s_b)); gap [m] is their centreline distance.
     """
 
     s_a: float
@@ -45,13 +50,13 @@ class ShapeResult:
 
     points (N, 3) [m] and orientations (N, 4) (x, y, z, w; pose x-axis along the tangent) at arc
     lengths s (N,).  energy [J]: bend, twist, stretch, gravity, external_work and total = U − W.
-    min_eigenvalue: smallest eigenvalue of the Hessian of the Lagrangian reduced to the null space of
-    the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable.
+    min_eigenvalue: smallest eigenvalue of the Hessian of the Lagrangian reduced to the null space
+    of the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable.
     constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
-    equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as an
-    equivalent centreline error (solver/residual.py); NaN when there is no shape.
-    self_contacts: the pairs of points pressed together (empty when self-contact is not modelled or
-    nothing touches); min_self_distance [m]: the closest approach of two strands at the self-contact
+    equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as
+    an equivalent centreline error (solver/residual.py); NaN when there is no shape. self_contacts:
+    the pairs of points pressed together (empty when self-contact is not modelled or nothing
+    touches); min_self_distance [m]: the closest approach of two strands at the self-contact
     samples (inf when no two strands are within the candidate reach, NaN when self-contact is not
     modelled; JSON null for both).
     """
@@ -70,7 +75,8 @@ class ShapeResult:
     solve_time_ms: float = 0.0
     constraint_violation: float = float("nan")
     warm_started: bool = False
-    #: 'compiled' (the KKT functions as compiled C, warm updates one compiled Newton call) or 'interpreted'
+    #: 'compiled' (the KKT functions as compiled C, warm updates one compiled Newton call) or
+    #'interpreted'
     derivatives: str = ""
     continuation_steps: int = 0
     basis: str = ""
@@ -104,11 +110,25 @@ class ShapeResult:
             "points": arr(self.points),
             "orientations": arr(self.orientations),
             "energy": {k: float(v) for k, v in self.energy.items()},
-            "grips": {name: {"force": arr(w.force), "torque": arr(w.torque)} for name, w in self.grips.items()},
+            "grips": {
+                name: {"force": arr(w.force), "torque": arr(w.torque)}
+                for name, w in self.grips.items()
+            },
             "contact_forces": {str(i): arr(f) for i, f in self.contact_forces.items()},
-            "self_contacts": [{"s_a": c.s_a, "s_b": c.s_b, "point_a": arr(c.point_a), "point_b": arr(c.point_b),
-                               "force": arr(c.force), "gap": c.gap} for c in self.self_contacts],
-            "min_self_distance": self.min_self_distance if np.isfinite(self.min_self_distance) else None,
+            "self_contacts": [
+                {
+                    "s_a": c.s_a,
+                    "s_b": c.s_b,
+                    "point_a": arr(c.point_a),
+                    "point_b": arr(c.point_b),
+                    "force": arr(c.force),
+                    "gap": c.gap,
+                }
+                for c in self.self_contacts
+            ],
+            "min_self_distance": self.min_self_distance
+            if np.isfinite(self.min_self_distance)
+            else None,
             "model": self.model_dict(),
             "solver": {
                 "iterations": self.iterations,

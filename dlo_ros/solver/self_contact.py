@@ -1,59 +1,66 @@
 """Self-contact: non-adjacent parts of the string stay at least two radii apart (issue #15).
 
 Formulation (director 3D models, ``solver.self_contact_pairs`` > 0).  The centreline is sampled at
-σ_j = j h, j = 0 … N−1, h = L/(N−1) (N = ``solver.self_contact_samples``, or from the radius: h = r,
-clipped to [L/400, L/100]).  For a pair of samples further apart along s than the exclusion arc S,
+σ_j = j h, j = 0 … N−1, h = L/(N−1) (N = ``solver.self_contact_samples``, or from the radius: h =
+r, clipped to [L/400, L/100]).  For a pair of samples further apart along s than the exclusion arc
+S,
 
     |x(σ_a) − x(σ_b)|² ≥ D²,   D² = (2r)² + h²/2,   S = max(π D / 2, 2 h),
 
-is an inequality row of the NLP.  The NLP has a fixed number K of pair slots (``StringNLP``): slot k's
-parameters are q_k = W(σ_a) − W(σ_b) (rows of the centreline's integration matrix, so that
-x(σ_a) − x(σ_b) = T q_k with T the quadrature-node tangents) and its bound b_k = D², both scaled by 1/(2D)
-so that the row reads a distance (``fill``); an empty slot has q_k = 0, b_k = −L and reads −1 ≤ 0 for
-any shape.  Pairs are parameters, so the active set changes
-during a stream without rebuilding the NLP.
+is an inequality row of the NLP.  The NLP has a fixed number K of pair slots (``StringNLP``): slot
+k's parameters are q_k = W(σ_a) − W(σ_b) (rows of the centreline's integration matrix, so that
+x(σ_a) − x(σ_b) = T q_k with T the quadrature-node tangents) and its bound b_k = D², both scaled by
+1/(2D) so that the row reads a distance (``fill``); an empty slot has q_k = 0, b_k = −L and reads
+−1 ≤ 0 for any shape.  Pairs are parameters, so the active set changes during a stream without
+rebuilding the NLP.
 
-Error bound between samples.  Near their closest points two strands are straight to O(κ h²), so each
+Error bound between samples.  Near their closest points two strands are straight to O(κ h²), so
+each
 sample pair's offset from the closest points is a u − b v with |a|, |b| ≤ h/2 (u, v the unit tangents);
 choosing the signs of a and b so that a b (u·v) ≥ 0 gives |a u − b v|² ≤ h²/2 whatever the angle.
-Hence d_true² ≥ d_sample² − h²/2 ≥ (2r)²: the true centreline distance is at least 2r − κ_max h²/4 (κ_max
-the largest curvature of the two strands near contact; each strand leaves its tangent line by at most
-κ (h/2)²/2 within half a spacing).  The price is a separation of at most √((2r)² + h²/2) for parallel
-strands whose samples line up (D instead of 2r: 6 % of the diameter at h = r).
+Hence d_true² ≥ d_sample² − h²/2 ≥ (2r)²: the true centreline distance is at least 2r − κ_max h²/4
+(κ_max the largest curvature of the two strands near contact; each strand leaves its tangent line
+by at most κ (h/2)²/2 within half a spacing).  The price is a separation of at most √((2r)² + h²/2)
+for parallel strands whose samples line up (D instead of 2r: 6 % of the diameter at h = r).
 
-Radius zero ("may touch, may not cross"): D = h/√2.  Two polyline chords of length h that cross have an
-end pair no further apart than h/√2, so a shape whose sample pairs all keep D does not cross itself at
-the sample polyline's resolution; the centreline deviates from that polyline by at most κ h²/8.
+Radius zero ("may touch, may not cross"): D = h/√2.  Two polyline chords of length h that cross
+have an end pair no further apart than h/√2, so a shape whose sample pairs all keep D does not
+cross itself at the sample polyline's resolution; the centreline deviates from that polyline by at
+most κ h²/8.
 
 The exclusion arc S: on a circle of radius ρ the chord over an arc S is 2ρ sin(S/2ρ) ≥ D for every
-ρ ≥ D/2 when S = πD/2, so the rows never act on a bend gentler than radius D/2 ≈ r (a tube cannot bend
-tighter than its radius); pairs closer along s than that are neighbours on one strand, not a contact.
-Pairs of samples within S of two different grips are not checked either: the scene places those grips
-(both ends of a closed loop held at one point, or two grips closer than 2r).
+ρ ≥ D/2 when S = πD/2, so the rows never act on a bend gentler than radius D/2 ≈ r (a tube cannot
+bend tighter than its radius); pairs closer along s than that are neighbours on one strand, not a
+contact. Pairs of samples within S of two different grips are not checked either: the scene places
+those grips (both ends of a closed loop held at one point, or two grips closer than 2r).
 
-Candidate pairs come from the current shape: a k-d tree over the N samples (scipy's cKDTree) gives the
-pairs within the reach D + max(4 h, 0.03 L) (O(N log N), nothing quadratic); of those, the pairs whose
-distance is a local minimum along either strand (the closest partner of each sample on the other
-strand) fill the slots, nearest first.  A pair in a slot that carries a force keeps its slot.  After a
-solve the same query on the answer finds every penetration (``penetrations``); a penetrating pair not in
-a slot is added and the solve repeated from the same start (``ShapeSolver``).  auto asks on every update
-whether a shape without self-contact rows comes within reach of itself: ``certainly_apart`` answers
-"no" from the turning angles and one dense distance test when it can prove it, the search otherwise.
+Candidate pairs come from the current shape: a k-d tree over the N samples (scipy's cKDTree) gives
+the pairs within the reach D + max(4 h, 0.03 L) (O(N log N), nothing quadratic); of those, the
+pairs whose distance is a local minimum along either strand (the closest partner of each sample on
+the other strand) fill the slots, nearest first.  A pair in a slot that carries a force keeps its
+slot.  After a solve the same query on the answer finds every penetration (``penetrations``); a
+penetrating pair not in a slot is added and the solve repeated from the same start
+(``ShapeSolver``).  auto asks on every update whether a shape without self-contact rows comes
+within reach of itself: ``certainly_apart`` answers "no" from the turning angles and one dense
+distance test when it can prove it, the search otherwise.
 
 Topology, along a warm stream (both reported as a failure, the shape not published):
 * ``crossing_flips``: for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the sign of
-  (x_b − x_a)·(t_a × t_b) says which strand lies on top; it cannot change while the strands stay within
-  reach of each other unless one passed through the other between two updates.  (x_b − x_a)·n̂ (n̂ the
-  unit normal t_a × t_b) is the signed distance between the two tangent lines, so the sign is kept only
-  where that is at least half the pair's distance (``CROSSING_OVERLAP``): there the lines' closest points
-  lie near the samples and the strands do lie over one another.  Side by side in one plane (the legs of a
-  planar hairpin) the tangent lines meet far from the samples, the product is rounding noise, and a tiny
-  out-of-plane motion flipped it: a crossing the string never made (measured: a pinned hairpin at order
-  32, refused at its first 15° turn of a clamp).
-* ``swept_crossing``: a jump (IPOPT may land far from the start, e.g. a twisted rod releasing its twist)
-  is checked by moving every sample straight from the old shape to the new one: if no two samples meet
-  on the way, the shapes are isotopic; if two do, the string may have passed through itself.
+  (x_b − x_a)·(t_a × t_b) says which strand lies on top; it cannot change while the strands stay
+  within reach of each other unless one passed through the other between two updates.  (x_b −
+  x_a)·n̂ (n̂ the unit normal t_a × t_b) is the signed distance between the two tangent lines, so
+  the sign is kept only where that is at least half the pair's distance (``CROSSING_OVERLAP``):
+  there the lines' closest points lie near the samples and the strands do lie over one another.
+  Side by side in one plane (the legs of a planar hairpin) the tangent lines meet far from the
+  samples, the product is rounding noise, and a tiny out-of-plane motion flipped it: a crossing the
+  string never made (measured: a pinned hairpin at order 32, refused at its first 15° turn of a
+  clamp).
+* ``swept_crossing``: a jump (IPOPT may land far from the start, e.g. a twisted rod releasing its
+  twist)
+  is checked by moving every sample straight from the old shape to the new one: if no two samples
+  meet on the way, the shapes are isotopic; if two do, the string may have passed through itself.
 """
+
 from __future__ import annotations
 
 import functools
@@ -75,8 +82,10 @@ CROSSING_OVERLAP = 0.5
 
 @dataclass(frozen=True)
 class ContactGeometry:
-    """The sampling of the self-contact rows (module docstring): sample arc lengths s [m], spacing h [m],
-    the sample-pair distance D [m] the rows keep, the exclusion arc S [m], and the candidate reach [m]."""
+    """The sampling of the self-contact rows (module docstring): sample arc lengths s [m], spacing
+    h [m], the sample-pair distance D [m] the rows keep, the exclusion arc S [m], and the candidate
+    reach [m].
+    """
 
     s: np.ndarray
     spacing: float
@@ -84,30 +93,37 @@ class ContactGeometry:
     exclusion: float
     reach: float
     radius: float
-    held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # per sample: grip index within S, or −1
+    held: np.ndarray = field(
+        default_factory=lambda: np.zeros(0, dtype=int)
+    )  # per sample: grip index within S, or −1
 
     @property
     def key(self) -> tuple:
         return (len(self.s), self.distance)
 
     def tolerance(self, curvature: float) -> float:
-        """How far below 2r the true centreline distance may come between samples [m] (module docstring)."""
-        return curvature * self.spacing ** 2 / 4
+        """How far below 2r the true centreline distance may come between samples [m] (module
+        docstring).
+        """
+        return curvature * self.spacing**2 / 4
 
 
 @functools.lru_cache(maxsize=16)
-def contact_geometry(length: float, radius: float, samples: int = 0, grip_s: tuple[float, ...] = ()) -> ContactGeometry:
+def contact_geometry(
+    length: float, radius: float, samples: int = 0, grip_s: tuple[float, ...] = ()
+) -> ContactGeometry:
     """The sampling for a string of ``length`` and ``radius`` [m]; ``samples`` 0 picks h = r within
-    [L/400, L/100].  ``grip_s``: the grips' arc lengths [m] (pairs of samples within the exclusion arc of
-    two different grips are never checked: the scene places those grips, e.g. both ends of a closed loop
-    at one point)."""
+    [L/400, L/100].  ``grip_s``: the grips' arc lengths [m] (pairs of samples within the exclusion
+    arc of two different grips are never checked: the scene places those grips, e.g. both ends of a
+    closed loop at one point).
+    """
     if samples:
         n = samples
     else:
         h = min(max(radius, length / 400), length / 100)
         n = int(np.ceil(length / h - 1e-9)) + 1
     h = length / (n - 1)
-    distance = float(np.sqrt(4 * radius ** 2 + h ** 2 / 2))
+    distance = float(np.sqrt(4 * radius**2 + h**2 / 2))
     exclusion = max(np.pi * distance / 2, 2 * h)
     reach = distance + max(4 * h, 0.03 * length)
     s = np.linspace(0.0, length, n)
@@ -119,8 +135,9 @@ def contact_geometry(length: float, radius: float, samples: int = 0, grip_s: tup
 
 @dataclass
 class ContactSlots:
-    """The pair held by each slot ((a, b) sample indices, a < b, or None) with the geometry they index,
-    and the crossing signs of the shape they were last checked on."""
+    """The pair held by each slot ((a, b) sample indices, a < b, or None) with the geometry they
+    index, and the crossing signs of the shape they were last checked on.
+    """
 
     geometry: ContactGeometry
     pairs: list[tuple[int, int] | None]
@@ -132,9 +149,12 @@ class ContactSlots:
         return ContactSlots(self.geometry, list(self.pairs), dict(self.signs), self.candidates)
 
 
-def _far_pairs(points: np.ndarray, geometry: ContactGeometry, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sample pairs (P, 2), a < b, within ``radius`` of each other and at least the exclusion arc apart,
-    and their distances."""
+def _far_pairs(
+    points: np.ndarray, geometry: ContactGeometry, radius: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sample pairs (P, 2), a < b, within ``radius`` of each other and at least the exclusion arc
+    apart, and their distances.
+    """
     pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")  # rows (i, j) with i < j
     if pairs.size == 0:
         return np.zeros((0, 2), dtype=int), np.zeros(0)
@@ -147,18 +167,23 @@ def _far_pairs(points: np.ndarray, geometry: ContactGeometry, radius: float) -> 
     return pairs, np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
-def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple[tuple[int, int], float]]:
-    """Pairs within reach whose distance is a local minimum along one strand, with their distances [m],
-    nearest first.  A neighbour closer along s than the exclusion arc is a step along the same strand: a
-    pair next to one is a minimum only when it is already closer than D (a bend tighter than D/2).
-    Vectorised over the pairs the tree returned (neighbours read from a table of their distances)."""
+def candidate_pairs(
+    points: np.ndarray, geometry: ContactGeometry
+) -> list[tuple[tuple[int, int], float]]:
+    """Pairs within reach whose distance is a local minimum along one strand, with their distances
+    [m], nearest first.  A neighbour closer along s than the exclusion arc is a step along the same
+    strand: a pair next to one is a minimum only when it is already closer than D (a bend tighter
+    than D/2). Vectorised over the pairs the tree returned (neighbours read from a table of their
+    distances).
+    """
     pairs, dist = _far_pairs(points, geometry, geometry.reach)
     if not len(pairs):
         return []
     n = len(geometry.s)
     a, b = pairs[:, 0], pairs[:, 1]
-    # the distance of each pair within reach at [a + 1, b + 1]; a neighbour pair off the string, not within
-    # reach or left out (held by two grips) reads +inf, which leaves the pair a minimum on that side
+    # the distance of each pair within reach at [a + 1, b + 1]; a neighbour pair off the string,
+    # not within reach or left out (held by two grips) reads +inf, which leaves the pair a minimum
+    # on that side
     table = np.full((n + 2, n + 2), np.inf)
     table[a + 1, b + 1] = dist
     held = np.concatenate(([-1], geometry.held, [-1])) if geometry.held.size else None
@@ -166,8 +191,11 @@ def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple
     closer_than_d = dist < geometry.distance
 
     def leaves_minimum(a2: np.ndarray, b2: np.ndarray) -> np.ndarray:
-        """Whether each neighbour pair (a2, b2) leaves its pair's distance a minimum on its side."""
-        # (a neighbour off the string is one sample further apart than its pair: never on the same strand)
+        """Whether each neighbour pair (a2, b2) leaves its pair's distance a minimum on its
+        side.
+        """
+        # (a neighbour off the string is one sample further apart than its pair: never on the same
+        # strand)
         same_strand = (b2 - a2) * geometry.spacing < near
         out = np.where(same_strand, closer_than_d, dist <= table[a2 + 1, b2 + 1])
         if held is not None:  # both samples placed by two different grips
@@ -183,18 +211,21 @@ def candidate_pairs(points: np.ndarray, geometry: ContactGeometry) -> list[tuple
 
 
 def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
-    """True when ``candidate_pairs(points, geometry)`` is provably empty (no two strands within reach),
-    from O(N) turning angles and one dense distance test; False when this shortcut cannot tell (then
-    ``candidate_pairs`` decides).  Exact, never a guess:
+    """True when ``candidate_pairs(points, geometry)`` is provably empty (no two strands within
+    reach), from O(N) turning angles and one dense distance test; False when this shortcut cannot
+    tell (then ``candidate_pairs`` decides).  Exact, never a guess:
 
-    * pairs k = b − a samples apart with m ≤ k < K (m the smallest separation the exclusion arc allows,
-      K ≈ 1.25 reach / h): if the polyline turns by less than 90° over every K − 1 consecutive segments,
-      all segment directions between a and b are within 90° of each other, so the inner neighbour pairs
+    * pairs k = b − a samples apart with m ≤ k < K (m the smallest separation the exclusion arc
+      allows,
+      K ≈ 1.25 reach / h): if the polyline turns by less than 90° over every K − 1 consecutive
+      segments, all segment directions between a and b are within 90° of each other, so the inner
+      neighbour pairs
       (a, b − 1) and (a + 1, b) are strictly closer than (a, b) (|c + e|² − |c|² = 2 c·e + |e|² > 0 with e
-      the step and c the rest of the chord): no such pair is a local minimum, unless the inner neighbour
-      is a step along the same strand (k = m); those pairs are minima only when closer than D, and their
-      chord is at least cos(T/2) × the polyline's length over them (T the turning over those m segments:
-      every direction is within T/2 of the middle one along the turning path);
+      the step and c the rest of the chord): no such pair is a local minimum, unless the inner
+      neighbour is a step along the same strand (k = m); those pairs are minima only when closer
+      than D, and their chord is at least cos(T/2) × the polyline's length over them (T the turning
+      over those m segments: every direction is within T/2 of the middle one along the turning
+      path);
     * pairs k ≥ K: none is within reach (their distances, from one Gram matrix, all above it);
     * no pair within K samples is placed by two different grips (their samples count as minima).
     """
@@ -208,16 +239,23 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
         m += 1
     big = max(m + 1, int(np.ceil(1.25 * reach / h)) + 1)
     if n < 3 or n > 401 or m >= n:
-        return n < 2 or m >= n  # no pair is far enough apart, or too many samples for the dense test
+        return (
+            n < 2 or m >= n
+        )  # no pair is far enough apart, or too many samples for the dense test
     if geometry.held.size:
-        grips = [np.flatnonzero(geometry.held == g) for g in np.unique(geometry.held[geometry.held >= 0])]
+        grips = [
+            np.flatnonzero(geometry.held == g)
+            for g in np.unique(geometry.held[geometry.held >= 0])
+        ]
         for i, gi in enumerate(grips):
-            for gj in grips[i + 1:]:
+            for gj in grips[i + 1 :]:
                 if np.abs(gi[:, None] - gj[None, :]).min() < big:
                     return False
     steps = np.diff(points, axis=0)
     lengths = np.sqrt(np.einsum("ij,ij->i", steps, steps))
-    if not lengths.min() > 0.1 * h:  # (a step this short would leave the strict inequalities to rounding)
+    if (
+        not lengths.min() > 0.1 * h
+    ):  # (a step this short would leave the strict inequalities to rounding)
         return False
     unit = steps / lengths[:, None]
     turns = np.arccos(np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0))
@@ -226,16 +264,18 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
     def most_turning(segments: int) -> float:
         """The largest turning [rad] over ``segments`` consecutive segments."""
         segments = min(segments, n - 1)
-        return float(np.max(total[segments - 1:] - total[:n - segments]))
+        return float(np.max(total[segments - 1 :] - total[: n - segments]))
 
     if not most_turning(big - 1) < np.pi / 2 - 1e-9:
         return False
     windows = np.concatenate(([0.0], np.cumsum(lengths)))
-    shortest = float(np.min(windows[m:] - windows[:n - m]))
+    shortest = float(np.min(windows[m:] - windows[: n - m]))
     if not np.cos(most_turning(m) / 2) * shortest > geometry.distance * (1 + 1e-9):
         return False
     if big <= n - 1:
-        centred = points - points.mean(axis=0)  # (smaller numbers: less rounding in |x|² + |y|² − 2 x·y)
+        centred = points - points.mean(
+            axis=0
+        )  # (smaller numbers: less rounding in |x|² + |y|² − 2 x·y)
         sq = np.einsum("ij,ij->i", centred, centred)
         squared = sq[:, None] + sq[None, :] - 2.0 * (centred @ centred.T) + _off_band(n, big)
         if not squared.min() > reach * reach * (1 + 1e-9) + 1e-15:
@@ -253,25 +293,35 @@ def _off_band(n: int, k: int) -> np.ndarray:
 
 
 def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:
-    """The closest approach [m] of two strands: the smallest candidate pair's distance (``candidate_pairs``:
-    not a pair of neighbours on one strand), inf when no two strands are within reach."""
+    """The closest approach [m] of two strands: the smallest candidate pair's distance
+    (``candidate_pairs``: not a pair of neighbours on one strand), inf when no two strands are
+    within reach.
+    """
     candidates = candidate_pairs(points, geometry)
     return min((d for _, d in candidates), default=float("inf"))
 
 
-def penetrations(candidates: list[tuple[tuple[int, int], float]], geometry: ContactGeometry,
-                 slack: float) -> list[tuple[int, int]]:
-    """The candidate pairs (``candidate_pairs``) closer than D − slack [m], nearest first.  When none is,
-    no sample pair the exclusion arc apart is: from any pair closer than D, stepping along one strand
-    while the distance falls ends on a candidate closer still."""
+def penetrations(
+    candidates: list[tuple[tuple[int, int], float]], geometry: ContactGeometry, slack: float
+) -> list[tuple[int, int]]:
+    """The candidate pairs (``candidate_pairs``) closer than D − slack [m], nearest first.  When
+    none is, no sample pair the exclusion arc apart is: from any pair closer than D, stepping along
+    one strand while the distance falls ends on a candidate closer still.
+    """
     return [pair for pair, d in candidates if d < geometry.distance - slack]
 
 
-def assign(slots: list[tuple[int, int] | None], wanted: list[tuple[int, int]], keep: set[int],
-           capacity: int) -> tuple[list[tuple[int, int] | None], list[tuple[int, int]]]:
-    """New slot contents: the slots in ``keep`` (carrying a force) stay; the rest of the capacity goes to
-    the ``wanted`` pairs in their order (a chosen pair already in a slot keeps that slot, so its
-    multiplier stays with it).  Returns the slots and the wanted pairs that found no slot."""
+def assign(
+    slots: list[tuple[int, int] | None],
+    wanted: list[tuple[int, int]],
+    keep: set[int],
+    capacity: int,
+) -> tuple[list[tuple[int, int] | None], list[tuple[int, int]]]:
+    """New slot contents: the slots in ``keep`` (carrying a force) stay; the rest of the capacity
+    goes to the ``wanted`` pairs in their order (a chosen pair already in a slot keeps that slot,
+    so its multiplier stays with it).  Returns the slots and the wanted pairs that found no
+    slot.
+    """
     slots = list(slots) + [None] * (capacity - len(slots))
     kept = {slots[k] for k in keep if slots[k] is not None}
     chosen: list[tuple[int, int]] = []
@@ -281,8 +331,9 @@ def assign(slots: list[tuple[int, int] | None], wanted: list[tuple[int, int]], k
             continue
         (chosen if len(chosen) < capacity - len(kept) else left).append(pair)
     chosen_set = set(chosen)
-    new: list[tuple[int, int] | None] = [slots[k] if (k in keep or slots[k] in chosen_set) else None
-                                         for k in range(capacity)]
+    new: list[tuple[int, int] | None] = [
+        slots[k] if (k in keep or slots[k] in chosen_set) else None for k in range(capacity)
+    ]
     held = {pair for pair in new if pair is not None}
     free = [k for k in range(capacity) if new[k] is None]
     for pair in chosen:
@@ -292,10 +343,12 @@ def assign(slots: list[tuple[int, int] | None], wanted: list[tuple[int, int]], k
 
 
 def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
-    """p with every slot's q_k and b_k set (module docstring), scaled so that the row reads a distance:
+    """p with every slot's q_k and b_k set (module docstring), scaled so that the row reads a
+    distance:
     q_k = (W(σ_a) − W(σ_b)) / √(2D) and b_k = D/2, so that the NLP row (b_k − |T q_k|²)/L equals
     (D² − |x_a − x_b|²)/(2 D L) ≈ (D − |x_a − x_b|)/L near contact, whatever the radius (a row in D² would
-    hold the distance only to 1e-10 L²/D).  An empty slot: q_k = 0, b_k = −L (the row reads −1)."""
+    hold the distance only to 1e-10 L²/D).  An empty slot: q_k = 0, b_k = −L (the row reads −1).
+    """
     lay, w = nlp.params, nlp.model.position_matrix(slots.geometry.s)
     d = slots.geometry.distance
     scale = 1.0 / np.sqrt(2.0 * d)
@@ -305,21 +358,24 @@ def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
             p[sl] = 0.0
             p[sl.stop - 1] = -length
         else:
-            p[sl.start:sl.stop - 1] = scale * (w[pair[0]] - w[pair[1]])
+            p[sl.start : sl.stop - 1] = scale * (w[pair[0]] - w[pair[1]])
             p[sl.stop - 1] = d / 2
     return p
 
 
 def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
     """The SI multiplier λ [N/m] of D² − |x_a − x_b|² ≤ 0 from a slot row's λ / (row_scale σ) [N] (``fill``:
-    the row is that constraint divided by 2D)."""
+    the row is that constraint divided by 2D).
+    """
     return lam_row_si / (2.0 * geometry.distance)
 
 
-def crossing_signs(points: np.ndarray, tangents: np.ndarray,
-                   candidates: list[tuple[tuple[int, int], float]]) -> dict[tuple[int, int], float]:
-    """Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair (``candidate_pairs``) whose tangents cross
-    and that lie over one another along the normal (module docstring)."""
+def crossing_signs(
+    points: np.ndarray, tangents: np.ndarray, candidates: list[tuple[tuple[int, int], float]]
+) -> dict[tuple[int, int], float]:
+    """Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair (``candidate_pairs``) whose
+    tangents cross and that lie over one another along the normal (module docstring).
+    """
     out = {}
     for (a, b), _ in candidates:
         normal = np.cross(tangents[a], tangents[b])
@@ -332,18 +388,24 @@ def crossing_signs(points: np.ndarray, tangents: np.ndarray,
     return out
 
 
-def crossing_flips(before: dict[tuple[int, int], float], after: dict[tuple[int, int], float]) -> list[tuple[int, int]]:
+def crossing_flips(
+    before: dict[tuple[int, int], float], after: dict[tuple[int, int], float]
+) -> list[tuple[int, int]]:
     """Pairs whose crossing sign changed between two shapes of a stream (both within reach)."""
     return [pair for pair, sign in after.items() if pair in before and before[pair] * sign < 0]
 
 
-def swept_crossing(before: np.ndarray, after: np.ndarray, geometry: ContactGeometry) -> tuple[int, int] | None:
-    """A pair of samples (exclusion arc apart) that meet when every sample moves straight from ``before``
+def swept_crossing(
+    before: np.ndarray, after: np.ndarray, geometry: ContactGeometry
+) -> tuple[int, int] | None:
+    """A pair of samples (exclusion arc apart) that meet when every sample moves straight from
+    ``before``
     to ``after`` (N, 3): its distance min_τ |Δ0 + τ (Δ1 − Δ0)| falls below half of min(D, h/√2), the
     resolution at which the sample polyline can tell two centrelines apart; None when no pair does.
-    If the straight motion keeps every pair apart, the two shapes are isotopic (the string did not pass
-    through itself); if it does not, it may have.  Only pairs that can meet are tested: a k-d tree over
-    ``before`` with the radius D plus twice the largest displacement."""
+    If the straight motion keeps every pair apart, the two shapes are isotopic (the string did not
+    pass through itself); if it does not, it may have.  Only pairs that can meet are tested: a k-d
+    tree over ``before`` with the radius D plus twice the largest displacement.
+    """
     move = float(np.max(np.linalg.norm(after - before, axis=1), initial=0.0))
     pairs, _ = _far_pairs(before, geometry, geometry.distance + 2 * move)
     if not len(pairs):

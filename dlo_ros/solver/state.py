@@ -1,10 +1,12 @@
-"""A committed equilibrium of one NLP: the KKT point (z, λ) a solve ended on and what it already knows there.
+"""A committed equilibrium of one NLP: the KKT point (z, λ) a solve ended on and what it already
+knows there.
 
-The next solve warm-starts from it: Newton steps reuse the stored Newton matrix and residual when only
-the grip targets changed (they enter the constraints linearly), IPOPT restarts from z and its
-multipliers, the stability check reuses the stored Hessian and Jacobian.  Everything is in the NLP's
-scaled units (z: ``StringNLP`` unknowns, λ: IPOPT's multipliers, λ_SI = λ / (row_scale · σ)).
+The next solve warm-starts from it: Newton steps reuse the stored Newton matrix and residual when
+only the grip targets changed (they enter the constraints linearly), IPOPT restarts from z and its
+multipliers, the stability check reuses the stored Hessian and Jacobian.  Everything is in the
+NLP's scaled units (z: ``StringNLP`` unknowns, λ: IPOPT's multipliers, λ_SI = λ / (row_scale · σ)).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -20,24 +22,35 @@ class SolverState:
     lam_g: np.ndarray
     lam_x: np.ndarray
     p: np.ndarray
-    hessian: np.ndarray | None = None   # ∇²L at z, when the solve already has it
+    hessian: np.ndarray | None = None  # ∇²L at z, when the solve already has it
     jacobian: np.ndarray | None = None  # ∂g/∂z at z
     energies: np.ndarray | None = None  # bend, twist, stretch, gravity, work at z
     gradient: np.ndarray | None = None  # ∇f at z
     g: np.ndarray | None = None  # constraint values (scaled rows) at z
-    unstable_direction: np.ndarray | None = None  # eigenvector of the most negative reduced curvature
-    #: (λ_min, its eigenvector in z) of ``hessian`` reduced on the rows ``stability.min_reduced_eigenvalue``
-    #: holds, computed with it by a compiled loop (native_newton.py); cleared with ``hessian``, None when not
-    #: computed
+    unstable_direction: np.ndarray | None = (
+        None  # eigenvector of the most negative reduced curvature
+    )
+    #: (λ_min, its eigenvector in z) of ``hessian`` reduced on the rows
+    #``stability.min_reduced_eigenvalue`` : holds, computed with it by a compiled loop
+    #(native_newton.py); cleared with ``hessian``, None when not : computed
     reduced_eigen: tuple[float, np.ndarray] | None = None
-    kkt: np.ndarray | None = None       # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
+    kkt: np.ndarray | None = None  # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
     residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
-    contact: object | None = None  # self_contact.ContactSlots whose pairs p holds (self-contact models)
-    #: the outputs at z as the compiled loop that reached it evaluated them (native_newton.ComputedOutputs,
-    #: with the inputs it used), None when not evaluated
+    contact: object | None = (
+        None  # self_contact.ContactSlots whose pairs p holds (self-contact models)
+    )
+    #: the outputs at z as the compiled loop that reached it evaluated them
+    #(native_newton.ComputedOutputs, : with the inputs it used), None when not evaluated
     outputs: object | None = None
 
     def copy(self) -> SolverState:
-        """z, λ and p copied (what another thread may adopt later); the derivative caches are left out."""
-        return SolverState(self.z.copy(), self.lam_g.copy(), self.lam_x.copy(), self.p.copy(),
-                           contact=None if self.contact is None else self.contact.copy())
+        """z, λ and p copied (what another thread may adopt later); the derivative caches are left
+        out.
+        """
+        return SolverState(
+            self.z.copy(),
+            self.lam_g.copy(),
+            self.lam_x.copy(),
+            self.p.copy(),
+            contact=None if self.contact is None else self.contact.copy(),
+        )

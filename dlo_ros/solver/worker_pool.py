@@ -1,14 +1,17 @@
 """Process pools for solver work that repair themselves and die with their parent.
 
-* :func:`process_pool` — a ``ProcessPoolExecutor`` of spawned workers that ignore SIGINT and die with
+* :func:`process_pool` — a ``ProcessPoolExecutor`` of spawned workers that ignore SIGINT and die
+  with
   this process (:func:`die_with_parent`), even when it is SIGKILLed.
 * :class:`WorkerPool` — the same, plus: a dead worker fails only the tasks in flight on it
-  (:class:`WorkerDied`, naming its pid and exit code) and the next ``submit`` runs on a new pool; a task
-  with a ``timeout`` fails with :class:`TaskTimeout` after it and its workers are killed and replaced.
+  (:class:`WorkerDied`, naming its pid and exit code) and the next ``submit`` runs on a new pool; a
+  task with a ``timeout`` fails with :class:`TaskTimeout` after it and its workers are killed and
+  replaced.
 * :func:`stop_pool`, :func:`worker_pids` — stop either kind now; the live workers' process ids.
 
 Used by ``batch.query_many`` and by the node's query and fit workers.
 """
+
 from __future__ import annotations
 
 import multiprocessing
@@ -21,42 +24,55 @@ import time
 from concurrent.futures import Executor, Future, InvalidStateError, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
-#: The nice value added to a node's query and fit workers (``process_pool(background=True)``), so that
-#: the stream comes first on a shared core (bench/results/soak_3_clients.md against soak_no_queries.md).
-#: Not SCHED_IDLE: it favours the stream more, but starves the workers whenever both cores are busy
-#: (a planner beside the node, or CI's two test processes), and their queries would time out.
+#: The nice value added to a node's query and fit workers (``process_pool(background=True)``), so
+#that : the stream comes first on a shared core (bench/results/soak_3_clients.md against
+#soak_no_queries.md). : Not SCHED_IDLE: it favours the stream more, but starves the workers
+#whenever both cores are busy : (a planner beside the node, or CI's two test processes), and their
+#queries would time out.
 BACKGROUND_NICE = 10
 
 
 def process_pool(workers: int | None = None, background: bool = False) -> ProcessPoolExecutor:
-    """A process pool for :func:`solve_chunk`: ``workers`` (default ``os.cpu_count()``) processes started
-    with 'spawn' (a fork of a process with CasADi and DDS threads is unsafe) that ignore SIGINT (a
-    Ctrl-C reaches the whole process group; the parent decides how to stop) and die with this process
-    (:func:`die_with_parent`), even when it is SIGKILLed.  ``background``: the workers run
-    BACKGROUND_NICE above the caller, so that a node's stream comes first on a shared core.
+    """A process pool for :func:`solve_chunk`: ``workers`` (default ``os.cpu_count()``) processes
+    started with 'spawn' (a fork of a process with CasADi and DDS threads is unsafe) that ignore
+    SIGINT (a Ctrl-C reaches the whole process group; the parent decides how to stop) and die with
+    this process (:func:`die_with_parent`), even when it is SIGKILLed.  ``background``: the workers
+    run BACKGROUND_NICE above the caller, so that a node's stream comes first on a shared core.
 
-    It does not recover from a dead worker (``BrokenProcessPool``) and has no timeout: :class:`WorkerPool`
-    adds both."""
-    return _Pool(max_workers=workers or os.cpu_count() or 1, mp_context=multiprocessing.get_context("spawn"),
-                 initializer=_worker_init, initargs=(bool(background), os.getpid()))
+    It does not recover from a dead worker (``BrokenProcessPool``) and has no timeout:
+    :class:`WorkerPool` adds both.
+    """
+    return _Pool(
+        max_workers=workers or os.cpu_count() or 1,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_worker_init,
+        initargs=(bool(background), os.getpid()),
+    )
 
 
 class _Pool(ProcessPoolExecutor):
-    """A ProcessPoolExecutor whose workers are started from one long-lived thread (:data:`_SPAWNER`).
+    """A ProcessPoolExecutor whose workers are started from one long-lived thread
+    (:data:`_SPAWNER`).
 
-    Why: ``PR_SET_PDEATHSIG`` fires when the *thread* that created a child ends, not its process.  The
-    executor starts workers from whichever thread calls ``submit`` (or its manager thread, replacing
-    one): a batch submitted from a short-lived thread would have its workers SIGKILLed when that thread
-    returned.  The spawner thread lives as long as the process, so the signal means "the parent died"."""
+    Why: ``PR_SET_PDEATHSIG`` fires when the *thread* that created a child ends, not its process.
+    The executor starts workers from whichever thread calls ``submit`` (or its manager thread,
+    replacing one): a batch submitted from a short-lived thread would have its workers SIGKILLed
+    when that thread returned.  The spawner thread lives as long as the process, so the signal
+    means "the parent died".
+    """
 
-    def _spawn_process(self) -> None:  # CPython >= 3.9 (concurrent.futures.process); else the default
+    def _spawn_process(
+        self,
+    ) -> None:  # CPython >= 3.9 (concurrent.futures.process); else the default
         _SPAWNER.call(super()._spawn_process)
         # every worker ever started, for naming a dead one's exit code (the executor forgets them)
         self.started = {**getattr(self, "started", {}), **(self._processes or {})}
 
 
 class _Spawner:
-    """One daemon thread, started on first use, that runs the calls handed to it (see :class:`_Pool`)."""
+    """One daemon thread, started on first use, that runs the calls handed to it (see
+    :class:`_Pool`).
+    """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -68,7 +84,9 @@ class _Spawner:
             return fn()
         with self._lock:
             if self._thread is None or not self._thread.is_alive():
-                self._thread = threading.Thread(target=self._run, name="dlo-worker-spawner", daemon=True)
+                self._thread = threading.Thread(
+                    target=self._run, name="dlo-worker-spawner", daemon=True
+                )
                 self._thread.start()
         done: Future = Future()
         self._calls.put((fn, done))
@@ -85,20 +103,23 @@ class _Spawner:
 
 _SPAWNER = _Spawner()
 
-#: [s] How often a worker checks that its parent is alive, where ``PR_SET_PDEATHSIG`` does not apply (not
-#: Linux) or cannot act (the worker was started by a thread that was not the spawner's).
+#: [s] How often a worker checks that its parent is alive, where ``PR_SET_PDEATHSIG`` does not
+#apply (not : Linux) or cannot act (the worker was started by a thread that was not the spawner's).
 PARENT_CHECK_S = 0.5
 
 
 def die_with_parent(parent_pid: int) -> str:
-    """(worker) End this process when ``parent_pid`` (its parent) dies, however it dies; returns how.
+    """(worker) End this process when ``parent_pid`` (its parent) dies, however it dies; returns
+    how.
 
-    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (the kernel kills the worker even while it is inside
-    IPOPT holding the GIL); it fires on the death of the creating thread, which :class:`_Pool` keeps
-    alive for the whole process.  Everywhere, also a daemon thread that polls ``os.getppid()`` every
-    PARENT_CHECK_S s and leaves with ``os._exit`` once the worker was re-parented.  A worker that
-    outlived its parent also held multiprocessing's resource tracker alive (spawned children inherit
-    the write end of its pipe, and it exits only at end-of-file)."""
+    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (the kernel kills the worker even while it is
+    inside IPOPT holding the GIL); it fires on the death of the creating thread, which
+    :class:`_Pool` keeps alive for the whole process.  Everywhere, also a daemon thread that polls
+    ``os.getppid()`` every PARENT_CHECK_S s and leaves with ``os._exit`` once the worker was
+    re-parented.  A worker that outlived its parent also held multiprocessing's resource tracker
+    alive (spawned children inherit the write end of its pipe, and it exits only at
+    end-of-file).
+    """
     how = "watchdog"
     if sys.platform.startswith("linux"):
         try:
@@ -139,7 +160,8 @@ def stop_pool(pool, timeout: float = 5.0) -> bool:
 
     Joining matters: CPython 3.11's exit hook wakes every live manager thread through a pipe that
     the thread closes as it ends, so a ``shutdown(wait=False)`` followed by interpreter exit can
-    race the two and print an ``OSError: Bad file descriptor`` traceback."""
+    race the two and print an ``OSError: Bad file descriptor`` traceback.
+    """
     if isinstance(pool, WorkerPool):
         return pool.stop(timeout)
     # private attributes, read before shutdown() drops them; absent on other executors
@@ -150,7 +172,9 @@ def stop_pool(pool, timeout: float = 5.0) -> bool:
         if process.is_alive():
             process.terminate()
     deadline = time.monotonic() + timeout
-    for process in workers:  # a worker stuck in C code ignores SIGTERM until it returns: SIGKILL it
+    for (
+        process
+    ) in workers:  # a worker stuck in C code ignores SIGTERM until it returns: SIGKILL it
         process.join(max(0.0, min(1.0, deadline - time.monotonic())))
         if process.is_alive():
             process.kill()
@@ -161,36 +185,47 @@ def stop_pool(pool, timeout: float = 5.0) -> bool:
 
 
 def worker_pids(pool) -> list[int]:
-    """The process ids of ``pool``'s live workers (a ProcessPoolExecutor or :class:`WorkerPool`)."""
+    """The process ids of ``pool``'s live workers (a ProcessPoolExecutor or
+    :class:`WorkerPool`).
+    """
     if isinstance(pool, WorkerPool):
         return pool.worker_pids()
-    return [pid for pid, p in list((getattr(pool, "_processes", None) or {}).items()) if p.is_alive()]
+    return [
+        pid for pid, p in list((getattr(pool, "_processes", None) or {}).items()) if p.is_alive()
+    ]
 
 
-#: Generations of replaced pools whose cause a late answer may still name (older ones are forgotten).
+#: Generations of replaced pools whose cause a late answer may still name (older ones are
+#forgotten).
 KEPT_CAUSES = 16
 
 
 class WorkerDied(RuntimeError):
     """A worker process died with the work in flight on it (crashed, killed, or killed by
-    :class:`WorkerPool` because another task on the pool timed out); the message names the cause."""
+    :class:`WorkerPool` because another task on the pool timed out); the message names the
+    cause.
+    """
 
 
 class TaskTimeout(TimeoutError):
-    """A task of a :class:`WorkerPool` was not answered within its timeout; its workers were killed."""
+    """A task of a :class:`WorkerPool` was not answered within its timeout; its workers were
+    killed.
+    """
 
 
 class WorkerPool(Executor):
     """A :func:`process_pool` that repairs itself: ``submit(fn, *args, timeout=...)``.
 
     * A dead worker breaks a ProcessPoolExecutor for good; here the tasks in flight on it fail with
-      :class:`WorkerDied` (naming the worker's pid and exit code, or the reason it was killed) and the
-      next ``submit`` runs on a new pool.
-    * ``timeout`` [s]: a task not done by then fails with :class:`TaskTimeout`, and the pool's workers
-      are killed (a worker stuck in IPOPT cannot be interrupted otherwise) and replaced; the other tasks
-      then in flight fail with WorkerDied naming the timeout.
+      :class:`WorkerDied` (naming the worker's pid and exit code, or the reason it was killed) and
+      the next ``submit`` runs on a new pool.
+    * ``timeout`` [s]: a task not done by then fails with :class:`TaskTimeout`, and the pool's
+      workers
+      are killed (a worker stuck in IPOPT cannot be interrupted otherwise) and replaced; the other
+      tasks then in flight fail with WorkerDied naming the timeout.
 
-    Thread-safe.  ``max_workers``: the worker count."""
+    Thread-safe.  ``max_workers``: the worker count.
+    """
 
     def __init__(self, workers: int | None = None, background: bool = False) -> None:
         self.max_workers = workers or os.cpu_count() or 1
@@ -202,34 +237,49 @@ class WorkerPool(Executor):
         self._stopped = False
         self.restarts = 0  # pools replaced (dead worker or timeout)
 
-    def submit(self, fn, /, *args, timeout: float | None = None, retries: int = 0, **kwargs) -> Future:
-        """``fn(*args, **kwargs)`` on a worker; ``timeout`` [s] (None: none) as in the class docstring.
-        ``retries``: how many times a task whose worker died under it (not one killed for a timeout)
-        runs again on a new pool, for a task that is a pure function of its arguments; once they are
-        used up it fails with WorkerDied, so a task that kills its worker is not retried for ever."""
+    def submit(
+        self, fn, /, *args, timeout: float | None = None, retries: int = 0, **kwargs
+    ) -> Future:
+        """``fn(*args, **kwargs)`` on a worker; ``timeout`` [s] (None: none) as in the class
+        docstring. ``retries``: how many times a task whose worker died under it (not one killed
+        for a timeout) runs again on a new pool, for a task that is a pure function of its
+        arguments; once they are used up it fails with WorkerDied, so a task that kills its worker
+        is not retried for ever.
+        """
         answer: Future = Future()
         self._start(answer, fn, args, kwargs, timeout, retries)
         return answer
 
-    def _start(self, answer: Future, fn, args: tuple, kwargs: dict, timeout: float | None,
-               retries: int) -> None:
+    def _start(
+        self, answer: Future, fn, args: tuple, kwargs: dict, timeout: float | None, retries: int
+    ) -> None:
         with self._lock:
             if self._stopped:
                 raise RuntimeError("cannot schedule new futures after the pool was stopped")
-            if self._pool is not None and self._dead_workers(self._pool):  # died while idle: not noticed yet
-                self._replace(self._generation, f"a worker process had died ({self._dead_workers(self._pool)})")
+            if self._pool is not None and self._dead_workers(
+                self._pool
+            ):  # died while idle: not noticed yet
+                self._replace(
+                    self._generation,
+                    f"a worker process had died ({self._dead_workers(self._pool)})",
+                )
             for attempt in range(2):
                 pool, generation = self._live_pool(), self._generation
                 try:
                     inner = pool.submit(fn, *args, **kwargs)
                     break
                 except BrokenProcessPool as exc:  # a worker died while idle: a new pool, once
-                    self._replace(generation, f"a worker process had died ({self._dead_workers(pool) or exc})")
+                    self._replace(
+                        generation,
+                        f"a worker process had died ({self._dead_workers(pool) or exc})",
+                    )
                     if attempt:
                         raise
         timer = None
         if timeout is not None:
-            timer = threading.Timer(float(timeout), self._expire, (answer, inner, generation, float(timeout)))
+            timer = threading.Timer(
+                float(timeout), self._expire, (answer, inner, generation, float(timeout))
+            )
             timer.daemon = True
             timer.start()
 
@@ -277,8 +327,9 @@ class WorkerPool(Executor):
         return self._pool
 
     def _replace(self, generation: int, cause: str) -> None:
-        """Kill generation ``generation``'s workers (if it is still the current pool); the next submit
-        starts a new pool."""
+        """Kill generation ``generation``'s workers (if it is still the current pool); the next
+        submit starts a new pool.
+        """
         with self._lock:
             if generation != self._generation or self._pool is None:
                 return
@@ -288,8 +339,11 @@ class WorkerPool(Executor):
             old, self._pool = self._pool, None
             self._generation += 1
             self.restarts += 1
-        # in a thread: this may run in the old pool's manager thread (a done callback), which stop_pool joins
-        threading.Thread(target=stop_pool, args=(old, 2.0), name="dlo-pool-stop", daemon=True).start()
+        # in a thread: this may run in the old pool's manager thread (a done callback), which
+        # stop_pool joins
+        threading.Thread(
+            target=stop_pool, args=(old, 2.0), name="dlo-pool-stop", daemon=True
+        ).start()
 
     @staticmethod
     def _dead_workers(pool) -> str:
@@ -297,7 +351,8 @@ class WorkerPool(Executor):
         from multiprocessing.connection import wait
 
         procs = list(getattr(pool, "started", {}).values())
-        try:  # a worker's sentinel is ready once it has ended (its exit code may still be unreaped)
+        # a worker's sentinel is ready once it has ended (its exit code may still be unreaped)
+        try:
             ended = set(wait([p.sentinel for p in procs], timeout=0))
         except (OSError, ValueError):
             ended = set()
@@ -306,12 +361,21 @@ class WorkerPool(Executor):
             if p.sentinel in ended:
                 p.join(0.2)
                 code = p.exitcode
-                name = f" ({signal.Signals(-code).name})" if code is not None and -code in _SIGNALS else ""
-                text.append(f"pid {p.pid} ended" + ("" if code is None else f" with exit code {code}{name}"))
+                name = (
+                    f" ({signal.Signals(-code).name})"
+                    if code is not None and -code in _SIGNALS
+                    else ""
+                )
+                text.append(
+                    f"pid {p.pid} ended"
+                    + ("" if code is None else f" with exit code {code}{name}")
+                )
         return ", ".join(text)
 
     def worker_pids(self) -> list[int]:
-        """The process ids of the current workers (started on demand: empty before the first task)."""
+        """The process ids of the current workers (started on demand: empty before the first
+        task).
+        """
         with self._lock:
             pool = self._pool
         return [] if pool is None else worker_pids(pool)

@@ -10,7 +10,7 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'bench', 'bench.*']),
-    # the compiled Newton drivers' C, read through importlib.resources (solver/native_build.py)
+    # the compiled Newton drivers' C, read through importlib.resources (solver/native/build.py)
     package_data={'dlo_ros.solver': ['native/*.c', 'native/*.h']},
     data_files=[
         # Marker that makes the package visible to ament_index_python / `ros2 pkg`.

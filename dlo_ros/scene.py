@@ -105,8 +105,8 @@ OBSTACLE_KEYS: dict[str, dict[str, bool]] = {
 }
 
 #: What a scene may cost (documented in msg_docs/scene_format.md, "Limits").  File and YAML limits
-#are : checked while reading and composing, before any alias is expanded or any object is
-#constructed; list : and string limits before the items are parsed (for dicts too).
+# are : checked while reading and composing, before any alias is expanded or any object is
+# constructed; list : and string limits before the items are parsed (for dicts too).
 LIMITS: dict[str, int] = {
     "file_bytes": 1 << 20,  # size of a scene file (1 MiB; the shipped ones are < 3 KB)
     "depth": 16,  # nesting of mappings and lists (a valid scene needs 4)
@@ -522,7 +522,7 @@ def _check_moments(problem: Problem, options: SolverOptions) -> None:
     """The solver models point moments about the working-plane normal only; say so at load time."""
     if not any(np.any(ld.moment != 0) for ld in problem.loads):
         return
-    from .solver.nlp import choose_reference_frame
+    from .solver.build.nlp import choose_reference_frame
 
     n = choose_reference_frame(problem, options.frame)[:, 2]
     for i, ld in enumerate(problem.loads):

@@ -25,7 +25,7 @@ from dlo_ros.model.basis import make_basis
 from dlo_ros.model.problem import Problem
 from dlo_ros.model.quadrature import ChebyshevQuadrature
 from dlo_ros.model.rotations import quat_to_matrix
-from dlo_ros.solver.initial_guess import inverse_j0
+from dlo_ros.solver.build.initial_guess import inverse_j0
 
 from bench.common import S_OUT, Outcome, interp_points
 from bench.methods.nlp_tools import CasadiNLP, NLPSolution, augmented_lagrangian_nm

@@ -8,13 +8,13 @@ For ``default_cable`` with each fixed model, every function a solve evaluates �
 function of a warm update (``kkt_free``: Newton matrix and residual), the KKT function over every row
 (``kkt``) and the inequality rows' values (``obstacle_g``) — built two ways, side by side:
 
-* assembled: what the package builds (``solver/assembled.py`` for director models,
-  ``solver/assembled_euler.py`` for the planar and Euler-angle models: a loop over quadrature nodes plus
+* assembled: what the package builds (``solver/build/assembled.py`` for director models,
+  ``solver/build/assembled_euler.py`` for the planar and Euler-angle models: a loop over quadrature nodes plus
   sparse products);
 * flattened: CasADi SX AD of the whole NLP expression (what the package built before).
 
 For each: CasADi instructions, size of the generated C, time to generate it and to compile it with gcc
-(``compiled.FLAGS`` as ``solver/compiled.py`` does; the flattened ones at -O1, as the package did), and
+(``compiled.FLAGS`` as ``solver/build/compiled.py`` does; the flattened ones at -O1, as the package did), and
 the time per call interpreted (``InterpretedFunction``) and compiled (``NativeFunction``) at the solved
 equilibrium, all measured in the same run.  Then "start-up to full speed": a ShapeSolver of the scene
 with ``compile='blocking'`` and an empty cache, from the constructor to every function compiled and the
@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 from bench.common import machine  # noqa: E402
 
 from dlo_ros.scene import load_scene  # noqa: E402
-from dlo_ros.solver.compiled import FLAGS, InterpretedFunction, NativeFunction  # noqa: E402
+from dlo_ros.solver.build.compiled import FLAGS, InterpretedFunction, NativeFunction  # noqa: E402
 from dlo_ros.solver.options import SolverOptions  # noqa: E402
 from dlo_ros.solver.shape_solver import ShapeSolver  # noqa: E402
 
@@ -165,9 +165,9 @@ def main() -> None:
         "",
         "`default_cable`, every function a solve evaluates, at the solved equilibrium: `kkt_free` (the Newton "
         "matrix and residual of a contact-free warm update), `kkt` (every row), `obstacle_g` (the inequality "
-        "rows' values). *assembled*: what the package builds (`solver/assembled.py`, `solver/assembled_euler.py`); "
+        "rows' values). *assembled*: what the package builds (`solver/build/assembled.py`, `solver/build/assembled_euler.py`); "
         "*flattened*: SX AD of the whole NLP, what it built before. "
-        f"gcc {' '.join(FLAGS)} as `solver/compiled.py` runs it (the flattened functions: "
+        f"gcc {' '.join(FLAGS)} as `solver/build/compiled.py` runs it (the flattened functions: "
         f"{' '.join(FLATTENED_FLAGS)}, as the package compiled them); times per call: mean of 200 calls; "
         "|compiled − interpreted| "
         "is the largest difference of any output.",

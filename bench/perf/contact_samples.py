@@ -17,7 +17,7 @@ sample count, in one process, one after another:
   Newton evaluates while a contact is active), the contact-free one, the inequality rows' values.
 
 ``solver.model: auto`` raises the samples when doubling them moves the shape by more than half the
-tolerance (``solver/auto.py``); the main job's summary lists those changes.
+tolerance (``solver/auto/auto_solver.py``); the main job's summary lists those changes.
 """
 from __future__ import annotations
 

@@ -48,7 +48,7 @@ from dlo_ros.identify.parameters import Parameterisation  # noqa: E402
 from dlo_ros.model import Grip, GripPose, Problem, Profile, StringProperties  # noqa: E402
 from dlo_ros.model.rotations import matrix_to_quat  # noqa: E402
 from dlo_ros.solver import ShapeSolver, SolverOptions  # noqa: E402
-from dlo_ros.solver.sensitivity import shape_sensitivity  # noqa: E402
+from dlo_ros.solver.results.sensitivity import shape_sensitivity  # noqa: E402
 
 L, RF, RT, D, TILT = 0.5, 0.02, 0.015, 0.5, -0.3
 SIGMA, SIGMA_F = 1.5e-3, 2e-3

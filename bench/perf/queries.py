@@ -29,7 +29,7 @@ from random_scenes import targets_near  # noqa: E402
 
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver import make_solver  # noqa: E402
-from dlo_ros.solver.batch import process_pool, query_many  # noqa: E402
+from dlo_ros.solver.parallel.batch import process_pool, query_many  # noqa: E402
 
 
 def main() -> None:

@@ -17,7 +17,7 @@ At each of the figure's chords (0.8 … 0.2 L) the answer is measured on its own
   that fits it best in least squares (both ends and end tangents lie on the x-axis, so a planar shape lies
   in such a plane);
 * writhe: the Gauss writhe of the centreline extended at both ends by straight rays along its end tangents
-  (``dlo_ros.solver.topology.ray_writhe``), ≈ 0 for a planar shape and near ±1 once a loop has closed;
+  (``dlo_ros.solver.contact.topology.ray_writhe``), ≈ 0 for a planar shape and near ±1 once a loop has closed;
 * min self-distance / 2r: the closest approach of the centreline to itself between points more than the
   solver's exclusion arc apart along s (its non-adjacent pairs; ``self_contact.contact_geometry``), and
   between points more than 0.25 L apart (the strands of a loop; an open shape's value for the exclusion
@@ -90,8 +90,8 @@ def turned_to_xz(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def measure(sol, result) -> dict:
     from test_fig2_reference import closest_self_approach
 
-    from dlo_ros.solver import self_contact as SC
-    from dlo_ros.solver.topology import ray_writhe
+    from dlo_ros.solver.contact import self_contact as SC
+    from dlo_ros.solver.contact.topology import ray_writhe
     m = {"status": result.status, "stable": result.stable, "min_eig": result.min_eigenvalue,
          "warm": result.warm_started, "message": result.message, "iterations": result.iterations,
          "ms": result.solve_time_ms}

@@ -8,7 +8,7 @@ r_j: point-to-curve residuals (``curve.py``); ρ: Huber's loss; F: a measured gr
 measured grip torque (about the grip point; dT/dθ for the director and planar models only); W: the
 known weight; R: the profile regulariser (``parameters.py``).  Each evaluation solves each
 observation's equilibrium once (its own warm-started ``ShapeSolver``) and takes dr/dθ from the KKT
-system (``solver/sensitivity.py``).  The Gauss–Newton normal matrix and gradient use Huber's IRLS
+system (``solver/results/sensitivity.py``).  The Gauss–Newton normal matrix and gradient use Huber's IRLS
 weights
 w_j = min(1, huber / u_j), u_j = |r_j| / σ.
 """
@@ -23,7 +23,7 @@ import numpy as np
 
 from ..model.problem import Problem, StringProperties
 from ..solver import ShapeResult, ShapeSolver, SolverOptions
-from ..solver.sensitivity import shape_sensitivity
+from ..solver.results.sensitivity import shape_sensitivity
 from .curve import point_to_curve
 from .observations import Observation, ObservationError, ObservationSet
 from .parameters import Parameterisation, profile_mean
@@ -88,7 +88,7 @@ class SolverCache:
         )
 
     def take(self, problem: Problem, options: SolverOptions, compile: str) -> ShapeSolver | None:
-        from ..solver.nlp import planarity_violation
+        from ..solver.build.nlp import planarity_violation
 
         kept = self._solvers.get(self._key(problem, options, compile))
         while kept:

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..model.profile import Profile
 from ..model.problem import StringProperties
-from ..solver.sensitivity import MaterialDirection
+from ..solver.results.sensitivity import MaterialDirection
 from .observations import ProfileFit
 
 #: the StringProperties field of each material

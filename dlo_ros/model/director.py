@@ -32,7 +32,7 @@ rotation, so it enters as the pseudo-potential W_M = M · θ_k with θ_k = 2 vec
 or t_ref × t_k (tangent: the part of M normal to the tangent), whose gradient equals M·δθ exactly
 at
 q_k = q_ref.  The solver substitutes q_ref = q_k/|q_k| after differentiating
-(``solver/moments.py``), which gives the exact equilibrium equations, and solves those.
+(``solver/build/moments.py``), which gives the exact equilibrium equations, and solves those.
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ import numpy as np
 
 from .obstacles import Obstacle
 from .profile import Profile
+
 # noqa: F401 - PoseError re-exported
 from .rotations import PoseError, check_position, check_quaternion
 

@@ -26,7 +26,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..model.obstacles import Obstacle, Primitive
 from ..model.problem import Problem
 from ..model.rotations import quat_to_matrix
-from ..solver.result import GripWrench, ShapeResult
+from ..solver.results.result import GripWrench, ShapeResult
 from .validation import TargetError, check_frame, normalise_frame
 
 # ---- time ------------------------------------------------------------------------------------------

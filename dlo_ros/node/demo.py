@@ -35,7 +35,7 @@ DEMO_SCENE = "default_cable"
 POST = {"type": "sphere", "name": "post", "center": [0.175, 0.35, 0.25], "radius": 0.08}
 
 #: (time [s], left position, right position, right twist about the tangent [rad], phase starting
-#here)
+# here)
 KEYFRAMES = (
     (0.0, (0.0, 0.0, 0.40), (0.60, 0.0, 0.40), 0.0, "bring the ends together"),
     (2.0, (0.0, 0.0, 0.55), (0.35, 0.0, 0.55), 0.0, "twist the right end by half a turn"),
@@ -145,7 +145,7 @@ def model_settled(values: dict, held: int = 0) -> bool:
     updates ago (``held`` the solves of the last target since the manoeuvre's end) — and its model
     meets the tolerance or is the richest order (a fixed model: always).
     """
-    from ..solver.auto import ORDERS
+    from ..solver.auto.auto_solver import ORDERS
 
     if str(values.get("model.auto")).lower() != "true":
         return True

@@ -105,7 +105,7 @@ DIAGNOSTICS_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 #: ~/observed: sensors publish clouds best effort (rclpy's qos_profile_sensor_data); a best-effort
-#reader : matches both best-effort and reliable writers.  Only the newest cloud matters.
+# reader : matches both best-effort and reliable writers.  Only the newest cloud matters.
 CLOUD_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=1,
@@ -227,7 +227,7 @@ class DloNode(Node):
             raise StartupError(f"parameter {exc}") from None
         if self.compile_mode == "off":
             os.environ["DLO_NO_COMPILE"] = (
-                "1"  # read by dlo_ros.solver.compiled (this process only)
+                "1"  # read by dlo_ros.solver.build.compiled (this process only)
             )
 
         self._tf_buffer = None
@@ -298,7 +298,7 @@ class DloNode(Node):
         self._queries_pending = 0
         self._query_pool = None
         if self._query_workers:
-            from ..solver.worker_pool import (
+            from ..solver.parallel.worker_pool import (
                 WorkerPool,
             )  # replaces a dead or stuck worker; dies with the node
 
@@ -582,7 +582,7 @@ class DloNode(Node):
         """Submit ``queries`` to the query workers in the engine's current scene: (that scene's
         problem, the Future of their ShapeResults).
         """
-        from ..solver.batch import scene_payload, solve_chunk
+        from ..solver.parallel.batch import scene_payload, solve_chunk
 
         problem, options = self.engine.query_scene()
         # checks beside the queries: the workers' held shape follows the stream, and auto's check
@@ -926,7 +926,7 @@ class DloNode(Node):
         self._closing = True
         pool = getattr(self, "_query_pool", None)
         if pool is not None:
-            from ..solver.worker_pool import stop_pool
+            from ..solver.parallel.worker_pool import stop_pool
 
             stop_pool(pool, timeout)
         fitter = getattr(self, "_fitter", None)

@@ -28,7 +28,7 @@ from typing import Callable
 
 from ..model.problem import GripPose, Problem
 from ..solver.options import SolverOptions
-from ..solver.result import ShapeResult
+from ..solver.results.result import ShapeResult
 from .validation import grip_miss
 
 

@@ -44,7 +44,7 @@ class NodeFitter:
     """
 
     def __init__(self, node) -> None:
-        from ..solver.batch import process_pool
+        from ..solver.parallel.batch import process_pool
 
         self.node = node
         self.health = FitHealth()
@@ -283,12 +283,12 @@ class NodeFitter:
         self._pool.submit(_warm_fit_worker)
 
     def _new_pool(self) -> None:
-        from ..solver.batch import process_pool, stop_pool
+        from ..solver.parallel.batch import process_pool, stop_pool
 
         stop_pool(self._pool, 1.0)
         self._pool = process_pool(1, background=True)
 
     def close(self, timeout: float) -> None:
-        from ..solver.batch import stop_pool
+        from ..solver.parallel.batch import stop_pool
 
         stop_pool(self._pool, timeout)

@@ -10,7 +10,7 @@ The level follows the latest event of the streaming state:
 * 'ok' otherwise.
 Counters and the last error (with its kind, see validation.KINDS) stay in the values, and so do the
 current model (``ShapeResult.model.as_dict()`` of the newest solve, keys ``model.*``) and its last
-change. The model arrives here in that JSON form (solver/summary.py), as in the recording.
+change. The model arrives here in that JSON form (solver/results/summary.py), as in the recording.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import threading
 import time
 from typing import Callable, Mapping, Sequence
 
-from ..solver.result import ShapeResult
+from ..solver.results.result import ShapeResult
 from .validation import KINDS
 
 

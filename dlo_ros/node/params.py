@@ -160,7 +160,7 @@ STATIC = (
 )
 
 #: String properties: parameter name -> StringProperties field.  A table-valued (s-dependent)
-#property : is represented by its maximum; setting the parameter scales the whole table.
+# property : is represented by its maximum; setting the parameter scales the whole table.
 STRING_FIELDS = {
     "string.bend_stiffness": "bend_stiffness",
     "string.twist_stiffness": "twist_stiffness",
@@ -472,7 +472,7 @@ ROS_PARAMETER_PREFIXES = ("qos_overrides.",)
 #: Longest ``scene`` / ``record.*`` value (a path).
 PATH_CHARS = 4096
 #: ROS arguments (inside --ros-args) that take a value: the value is skipped when looking for
-#parameters.
+# parameters.
 _ROS_ARGS_WITH_VALUE = (
     "-r",
     "--remap",

@@ -1,11 +1,11 @@
 """CasADi + IPOPT solver of the Ritz NLP (no ROS)."""
 
 from .options import SolverOptions
-from .result import STATUSES, GripWrench, ShapeResult
-from .summary import ModelSummary
+from .results.result import STATUSES, GripWrench, ShapeResult
+from .results.summary import ModelSummary
 from .protocol import Solver
 from .shape_solver import ShapeSolver
-from .auto import AutoShapeSolver, make_solver
+from .auto.auto_solver import AutoShapeSolver, make_solver
 
 __all__ = [
     "AutoShapeSolver",

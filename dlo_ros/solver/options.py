@@ -20,7 +20,7 @@ class SolverOptions:
     centreline (for 'director': per element, at most order + 8). obstacle_samples: points along s,
     uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is imposed.  obstacle_slots:
     per obstacle, rows whose arc lengths are parameters, placed at the string's closest approaches
-    to the obstacle and moved with them (solver/obstacle_slots.py); 0 (default): the samples alone.
+    to the obstacle and moved with them (solver/contact/obstacle_slots.py); 0 (default): the samples alone.
     frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2 (away
     from the singularity); 'paper' is the paper's frame (singular at the straight state). rotation:
     how a 3D model represents the material frame: 'director' (default: nodal unit quaternions, or
@@ -28,7 +28,7 @@ class SolverOptions:
     loads and material kinks; no singular direction, see model/director.py) or 'euler' (the paper's
     Euler angles in one Ritz basis over [0, L], with ``frame``; kept for the benchmark).  Planar
     models always use the in-plane angle φ. model: 'auto' (default: the smallest model the scene
-    needs, checked a posteriori against error_tolerance, see solver/auto.py), 'full' (3D: φ, θ and,
+    needs, checked a posteriori against error_tolerance, see solver/auto/auto_solver.py), 'full' (3D: φ, θ and,
     when two clamps hold it, ψ) or 'planar' (φ only, θ ≡ π/2: the string stays in the working
     plane; requires a planar scene and frame 'auto'). error_tolerance [m]: what 'auto' guarantees
     on the centreline; 0 means 1e-3·L (1 mm on 1 m). recheck_every: 'auto' repeats its a-posteriori
@@ -41,7 +41,7 @@ class SolverOptions:
     self_contact_pairs: capacity of the self-contact pair list (director 3D models only; 0:
     self-contact
     is not modelled).  Each slot is one inequality row |x(s_a) − x(s_b)|² ≥ D² whose pair of arc lengths is
-    a parameter, refreshed from the current shape before every solve (solver/self_contact.py).
+    a parameter, refreshed from the current shape before every solve (solver/contact/self_contact.py).
     self_contact_samples: points along s where self-contact is checked (0: from the radius, see
     ``self_contact.contact_geometry``).
     """

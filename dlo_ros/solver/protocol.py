@@ -13,7 +13,7 @@ solver.
   status says so.
 * ``query_many(targets, executor=None)``: one answer per ``{grip: pose}`` mapping, in order, solved
   in
-  worker processes (dlo_ros.solver.batch); the solver itself is untouched.
+  worker processes (dlo_ros.solver.parallel.batch); the solver itself is untouched.
 * ``set_problem(problem)``: new scene values (raises ValueError naming the field); ``reset()``: the
   next
   solve is cold; ``close()``: stop helper threads (later solves still work).
@@ -29,8 +29,8 @@ from typing import Mapping, Protocol, Sequence, runtime_checkable
 
 from ..model.problem import GripPose, Problem
 from .options import SolverOptions
-from .result import ShapeResult
-from .summary import ModelSummary
+from .results.result import ShapeResult
+from .results.summary import ModelSummary
 
 
 @runtime_checkable

@@ -40,10 +40,10 @@ import numpy as np
 from ..model.director import quat_to_frame
 from ..model.rotations import slerp
 from ..model.problem import GripPose, Problem
-from . import frames as F
-from .functions import COMPILE_MODES, NlpFunctions, check_compile_mode
-from .initial_guess import initial_guess
-from .ipopt import (
+from .build import frames as F
+from .build.functions import COMPILE_MODES, NlpFunctions, check_compile_mode
+from .build.initial_guess import initial_guess
+from .update.ipopt import (
     INFEASIBLE,
     IPOPT_LOCK,
     LEFT_SADDLE,
@@ -56,23 +56,23 @@ from .ipopt import (
     lower_than,
     witness,
 )
-from .moments import ExactMomentKKT
-from .newton import fill_start, leave_saddle, newton
-from .nlp import StringNLP, has_point_moments
+from .build.moments import ExactMomentKKT
+from .update.newton import fill_start, leave_saddle, newton
+from .build.nlp import StringNLP, has_point_moments
 from .options import SolverOptions
-from .outputs import ShapeOutputs, no_shape
-from .parameters import ProblemParameters, check_moments
-from .residual import EquilibriumResidual, PointAction
-from .result import GripWrench, ShapeResult
-from . import obstacle_slots as OSL
-from . import self_contact as SC
-from . import recovery as RC
-from . import topology as TP
-from .stability import is_stable, min_reduced_eigenvalue
+from .results.outputs import ShapeOutputs, no_shape
+from .build.parameters import ProblemParameters, check_moments
+from .results.residual import EquilibriumResidual, PointAction
+from .results.result import GripWrench, ShapeResult
+from .contact import obstacle_slots as OSL
+from .contact import self_contact as SC
+from .update import recovery as RC
+from .contact import topology as TP
+from .results.stability import is_stable, min_reduced_eigenvalue
 from .state import SolverState
-from .summary import ModelSummary
-from .warm_start import sample_source, warm_state
-from .wrenches import equilibrium
+from .results.summary import ModelSummary
+from .update.warm_start import sample_source, warm_state
+from .results.wrenches import equilibrium
 
 __all__ = [
     "COMPILE_MODES",
@@ -92,14 +92,14 @@ __all__ = [
 MOMENT_NEWTON_STEPS = 25
 MOMENT_CONTINUATION_SOLVES = 40
 #: the messages of a warm update refused as a jump of the solver (retried in substeps,
-#``_in_substeps``)
+# ``_in_substeps``)
 JUMP_REFUSALS = (
     "self-contact: the string passed through itself",
     "self-contact: this shape is not reached",
     "topology:",
 )
 #: substeps a refused warm update, or one Newton cannot take at once, is retried in (each count in
-#turn)
+# turn)
 SUBSTEPS = (2, 4)
 
 #: how many times a solve is repeated with the obstacle contact slots placed on its own answer
@@ -479,7 +479,7 @@ class ShapeSolver:
             except (ValueError, KeyError) as exc:
                 return self._failure("invalid", str(exc).strip("'\""), t0)
             if self.nlp.planar and not checked:
-                from .nlp import planarity_violation
+                from .build.nlp import planarity_violation
 
                 why = planarity_violation(problem, self.nlp.r0[:, 2], tolerance=1e-7)
                 if why:
@@ -581,10 +581,10 @@ class ShapeSolver:
     def query_many(self, targets, executor=None) -> list[ShapeResult]:
         """Answers to many independent queries (``{grip: pose}`` each) in worker processes, in
         order, with this solver's scene and options; this solver and its warm start are untouched
-        (dlo_ros.solver.batch.query_many: ``executor`` defaults to a process pool on every
+        (dlo_ros.solver.parallel.batch.query_many: ``executor`` defaults to a process pool on every
         core).
         """
-        from .batch import query_many
+        from .parallel.batch import query_many
 
         return query_many(self.problem, self.options, targets, executor)
 
@@ -658,7 +658,7 @@ class ShapeSolver:
     ) -> EquilibriumResidual:
         """The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
         obstacle ``contacts`` and (given the SI multipliers) the relative positions' reactions
-        (solver/residual.py).
+        (solver/results/residual.py).
         """
         return equilibrium(self.nlp, problem, z, grips, contacts, lam_si)
 
@@ -885,7 +885,7 @@ class ShapeSolver:
             warm_started=warm,
         )
 
-    # ---- self-contact (solver/self_contact.py) ----------------------------------------------------------
+    # ---- self-contact (solver/contact/self_contact.py) ----------------------------------------------------------
     def _solve_self_contact(
         self, problem: Problem, warm: bool
     ) -> tuple[ShapeResult, SolverState | None]:

@@ -31,8 +31,8 @@ class SolverState:
         None  # eigenvector of the most negative reduced curvature
     )
     #: (λ_min, its eigenvector in z) of ``hessian`` reduced on the rows
-    #``stability.min_reduced_eigenvalue`` : holds, computed with it by a compiled loop
-    #(native_newton.py); cleared with ``hessian``, None when not : computed
+    # ``stability.min_reduced_eigenvalue`` : holds, computed with it by a compiled loop
+    # (native_newton.py); cleared with ``hessian``, None when not : computed
     reduced_eigen: tuple[float, np.ndarray] | None = None
     kkt: np.ndarray | None = None  # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
     residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
@@ -40,7 +40,7 @@ class SolverState:
         None  # self_contact.ContactSlots whose pairs p holds (self-contact models)
     )
     #: the outputs at z as the compiled loop that reached it evaluated them
-    #(native_newton.ComputedOutputs, : with the inputs it used), None when not evaluated
+    # (native_newton.ComputedOutputs, : with the inputs it used), None when not evaluated
     outputs: object | None = None
 
     def copy(self) -> SolverState:

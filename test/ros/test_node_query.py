@@ -198,7 +198,7 @@ def test_the_node_asks_its_query_workers_for_checks_beside_the_queries():
 
     from dlo_ros.node.client import allocate_domain_id
     from dlo_ros.node.dlo_node import DloNode
-    from dlo_ros.solver.batch import solve_chunk
+    from dlo_ros.solver.parallel.batch import solve_chunk
 
     class Recording:
         def __init__(self):

@@ -87,8 +87,8 @@ def test_a_contact_leaves_between_steps(drop):
     equilibrium, which the solver's own update reaches too; without switches the call ends with the
     rows held and a negative multiplier (the table pulling), which is left to the outer loop."""
     from dlo_ros.model.problem import GripPose
-    from dlo_ros.solver.newton import _active_steps, active_rows
-    from dlo_ros.solver.nlp import NEWTON_STEP_SWITCHES
+    from dlo_ros.solver.update.newton import _active_steps, active_rows
+    from dlo_ros.solver.build.nlp import NEWTON_STEP_SWITCHES
 
     solver = ShapeSolver(SCENE.problem, replace(SCENE.options, model="planar"), compile="off")
     assert touches(solver.solve(targets(0.055)))

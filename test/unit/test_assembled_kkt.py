@@ -1,4 +1,4 @@
-"""The assembled KKT functions of director models (dlo_ros.solver.assembled, #14) equal the KKT
+"""The assembled KKT functions of director models (dlo_ros.solver.build.assembled, #14) equal the KKT
 system differentiated here from the whole flattened NLP (CasADi SX AD of ``StringNLP.nlp``'s objective
 and rows, with ``energy_fn``), for the contact-free rows and for every row (obstacles of each type with
 their contact slots and sample switches, self-contact slots); and their compiled C equals them too."""
@@ -14,8 +14,8 @@ from dlo_ros.model.obstacles import Obstacle
 from dlo_ros.model.problem import Load, RelativePosition
 from dlo_ros.model.profile import Profile
 from dlo_ros.scene import load_scene
-from dlo_ros.solver.compiled import NativeFunction, compiled, compiler
-from dlo_ros.solver.nlp import StringNLP
+from dlo_ros.solver.build.compiled import NativeFunction, compiled, compiler
+from dlo_ros.solver.build.nlp import StringNLP
 from dlo_ros.solver.options import SolverOptions
 from random_scenes import random_scene
 

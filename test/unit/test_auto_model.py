@@ -245,7 +245,7 @@ def test_obstacle_samples_go_up_when_the_shape_moves_with_them_unless_a_slot_hol
     although no sample cuts in.  With the samples alone, while the shape touches an obstacle the check
     solves the same model with 2n − 1 samples (the samples shadow), counts twice its change as the
     sampling error, says so and doubles the samples.  With contact slots a row sits at the
-    closest approach itself (solver/obstacle_slots.py): the shadow's change is small and the 41 samples
+    closest approach itself (solver/contact/obstacle_slots.py): the shadow's change is small and the 41 samples
     stay (``obstacle_slots: 2``; off by default).  Either final answer is within δ/2 of an order-24 solve with 321 samples (an independent
     reference by convergence), where the 41-sample answer without slots is not."""
     free = clamped_pair(right=(0.6, 0.0, 0.0), weight=1.0, bend=0.05, twist=0.04)

@@ -1,4 +1,4 @@
-"""Many queries at once (dlo_ros.solver.batch, #14): the batch answers equal the single answers
+"""Many queries at once (dlo_ros.solver.parallel.batch, #14): the batch answers equal the single answers
 (``solve(poses, commit=False)``), in order, with any executor; the caller's stream is untouched; a bad
 query answers with its status without losing the others."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
-from dlo_ros.solver.batch import process_pool, query_many, stop_pool
+from dlo_ros.solver.parallel.batch import process_pool, query_many, stop_pool
 from random_scenes import targets_near
 
 
@@ -85,7 +85,7 @@ def test_a_dask_cluster_runs_the_same_call(scene, monkeypatch):
 
 STOP_POOL_SCRIPT = """
 import time
-from dlo_ros.solver.batch import process_pool, stop_pool
+from dlo_ros.solver.parallel.batch import process_pool, stop_pool
 
 if __name__ == "__main__":
     pool = process_pool(2)
@@ -122,7 +122,7 @@ def test_background_workers_yield_to_the_parent():
     the caller's."""
     import os
 
-    from dlo_ros.solver.batch import BACKGROUND_NICE
+    from dlo_ros.solver.parallel.batch import BACKGROUND_NICE
 
     base = os.nice(0)
     for background, nice in ((True, min(base + BACKGROUND_NICE, 19)), (False, base)):
@@ -141,7 +141,7 @@ def test_a_worker_follows_a_moving_stream_by_warm_updates(scene, monkeypatch):
     import collections
 
     from dlo_ros.model.problem import GripPose
-    from dlo_ros.solver import batch
+    from dlo_ros.solver.parallel import batch
 
     monkeypatch.setattr(batch, "_WORKER_SOLVERS", collections.OrderedDict())
     problem = scene.problem
@@ -173,8 +173,8 @@ def test_a_node_workers_checks_run_beside_its_queries_not_in_front_of_them(scene
     import collections
 
     from dlo_ros.model.problem import GripPose
-    from dlo_ros.solver import batch
-    from dlo_ros.solver.auto import AutoShapeSolver
+    from dlo_ros.solver.parallel import batch
+    from dlo_ros.solver.auto.auto_solver import AutoShapeSolver
 
     inline = []
     original = AutoShapeSolver._check_now

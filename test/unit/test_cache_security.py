@@ -19,7 +19,11 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from dlo_ros.solver import ShapeSolver, cache_store, compiled
+from dlo_ros.solver import ShapeSolver
+
+from dlo_ros.solver.native import cache_store
+
+from dlo_ros.solver.build import compiled
 from dlo_ros.solver.options import SolverOptions
 
 from support.problems import clamped_pair

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from dlo_ros.model import Obstacle
-from dlo_ros.solver import ShapeSolver, compiled
-from dlo_ros.solver.newton import derivatives
-from dlo_ros.solver.nlp import StringNLP
+from dlo_ros.solver import ShapeSolver
+from dlo_ros.solver.build import compiled
+from dlo_ros.solver.update.newton import derivatives
+from dlo_ros.solver.build.nlp import StringNLP
 from dlo_ros.solver.options import SolverOptions
 
 from support.problems import clamped_pair
@@ -69,7 +70,7 @@ def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monke
     np.testing.assert_allclose(a.points, b.points, atol=1e-9)
     # small moves: Newton updates, whose steps run in one call around the compiled library
     # (casadi.external of the split function inside newton_fn) for the compiled solver, around the
-    # assembled MX function (solver/assembled_euler.py) for the other
+    # assembled MX function (solver/build/assembled_euler.py) for the other
     def kkt_classes(solver, name):
         return {f.class_name() for f in solver.functions.newton_step.function.find_functions() if f.name() == name}
 

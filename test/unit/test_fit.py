@@ -1,4 +1,4 @@
-"""Identification of Rf, Rt, D from observed shapes (dlo_ros/identify, dlo_ros/solver/sensitivity.py, `dlo fit`).
+"""Identification of Rf, Rt, D from observed shapes (dlo_ros/identify, dlo_ros/solver/results/sensitivity.py, `dlo fit`).
 
 Observations come from the independent Kirchhoff shooting solver (test/reference/kirchhoff.py), never from
 the package's solver: a string of L = 0.5 m clamped at one end, its tangent 0.3 rad below horizontal,
@@ -29,7 +29,7 @@ from dlo_ros.model import Grip, GripPose, Problem, Profile, StringProperties
 from dlo_ros.model.rotations import matrix_to_quat
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver, SolverOptions
-from dlo_ros.solver.sensitivity import shape_sensitivity
+from dlo_ros.solver.results.sensitivity import shape_sensitivity
 
 L, RF, RT, D = 0.5, 0.02, 0.015, 0.5
 TILT = -0.3

@@ -61,7 +61,7 @@ def test_a_warm_update_onto_the_saddle_leaves_it_on_the_newton_path(compile_mode
 
 def test_the_saddle_itself_is_what_plain_newton_finds():
     """The premise: without leaving, this update's Newton answer is the in-plane, unstable equilibrium."""
-    from dlo_ros.solver.newton import newton
+    from dlo_ros.solver.update.newton import newton
 
     solver = ShapeSolver(SCENE.problem, OPTIONS, compile="off")
     assert solver.solve(lowered(0.045)).ok
@@ -91,7 +91,7 @@ def test_a_lower_saddle_reached_by_the_newton_steps_is_left_from_there(compile_m
     whose four escapes each ran to ESCAPE_MAX_ITERATIONS (711 iterations, 3 s, before the update was
     solved cold).  Leaving the lower saddle instead keeps the update's cost bounded, and its answer is
     the stable shape a cold solve finds (up to the mirror image)."""
-    from dlo_ros.solver.ipopt import ESCAPE_MAX_ITERATIONS
+    from dlo_ros.solver.update.ipopt import ESCAPE_MAX_ITERATIONS
 
     monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
     solver = ShapeSolver(SCENE.problem, SCENE.options, compile=compile_mode)

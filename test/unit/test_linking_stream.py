@@ -1,4 +1,4 @@
-"""The linking-number check of a clamped, twisted string along a stream (#15, solver/topology.py).
+"""The linking-number check of a clamped, twisted string along a stream (#15, solver/contact/topology.py).
 
 The known failure: a string clamped at both ends on the x axis (Rt/Rf = 0.7, radius 0.02 L, 16 self-contact
 pairs), the right clamp turned 3 full turns about its tangent in 30° steps, then the ends brought
@@ -18,7 +18,7 @@ import pytest
 from support.problems import clamped_pair
 
 from dlo_ros.model.director import quat_to_frame
-from dlo_ros.solver import topology as TP
+from dlo_ros.solver.contact import topology as TP
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
 
@@ -165,7 +165,7 @@ def test_auto_does_not_publish_lost_turns():
     would publish a shape 2 turns short (Lk −0.42, energy 32.5 → 6.2 J).  That update is refused for its
     linking number, auto re-solves it at the next order, and every published shape has Lk = the turns
     applied, to 2 turns."""
-    from dlo_ros.solver.auto import AutoShapeSolver
+    from dlo_ros.solver.auto.auto_solver import AutoShapeSolver
 
     p = clamped_pair(right=(START, 0.0, 0.0), bend=1.0, twist=0.7)
     sol = AutoShapeSolver(replace(p, string=replace(p.string, radius=0.02)), SolverOptions(), compile="off",

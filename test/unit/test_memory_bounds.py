@@ -22,7 +22,7 @@ from dlo_ros.model import GripPose
 from dlo_ros.node import params as P
 from dlo_ros.node.engine import ShapeEngine, build_solver, options_with_output_points
 from dlo_ros.scene import load_scene
-from dlo_ros.solver.auto import ORDERS, AutoShapeSolver
+from dlo_ros.solver.auto.auto_solver import ORDERS, AutoShapeSolver
 from dlo_ros.solver.shape_solver import ShapeSolver
 
 

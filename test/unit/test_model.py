@@ -96,7 +96,7 @@ def test_the_first_frame_avoids_held_tangents_on_its_pole():
     """Grippers holding the string across the chord (tangents along y = chord × up): the chord-and-gravity
     frame has them on its pole, so the pole is turned away; along the chord, it is not."""
     from dlo_ros.model.rotations import pole_angle_deg
-    from dlo_ros.solver.nlp import choose_reference_frame
+    from dlo_ros.solver.build.nlp import choose_reference_frame
 
     along = choose_reference_frame(clamped_pair(right=(0.6, 0, 0)), "auto")
     assert np.allclose(np.abs(along[:, 2]), [0, 1, 0])  # the chord-and-gravity plane's normal

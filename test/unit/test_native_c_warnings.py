@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from dlo_ros.solver import native_build
-from dlo_ros.solver.compiled import compiler
+from dlo_ros.solver.native import build as native_build
+from dlo_ros.solver.build.compiled import compiler
 
 pytestmark = pytest.mark.skipif(compiler() is None, reason="no C compiler (gcc, cc, clang or $CC)")
 

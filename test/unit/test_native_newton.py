@@ -1,4 +1,4 @@
-"""The warm update as one compiled call (dlo_ros.solver.native_newton, #14): the C loop around the
+"""The warm update as one compiled call (dlo_ros.solver.native.newton, #14): the C loop around the
 compiled contact-free KKT function takes chord steps (K factored once, the residual alone evaluated per
 step) to the root the Python path's Newton steps (fused CasADi call plus Python steps on the interpreted
 functions) converge to, so a stream gives the same shapes to 1e-10; the active-set loop takes the Python
@@ -15,9 +15,9 @@ from dlo_ros.model import Grip, Profile
 from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver
-from dlo_ros.solver.compiled import compiler
-from dlo_ros.solver.newton import regularised
-from dlo_ros.solver.nlp import (NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
+from dlo_ros.solver.build.compiled import compiler
+from dlo_ros.solver.update.newton import regularised
+from dlo_ros.solver.build.nlp import (NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
                                 NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
                                 NEWTON_PRIMAL_TOLERANCE)
 from dlo_ros.solver.options import SolverOptions
@@ -150,7 +150,7 @@ def test_one_call_takes_the_chord_steps_to_the_newton_root(solvers, move):
 def test_the_compiled_loop_refuses_a_step_the_python_path_refuses(solvers):
     """A start whose first step exceeds NEWTON_MAX_STEP ends the call without an answer (code 3), as
     the Python path gives up there (then substeps or IPOPT take over)."""
-    from dlo_ros.solver.native_newton import STEP_TOO_LARGE
+    from dlo_ros.solver.native.newton import STEP_TOO_LARGE
 
     scene, native, _ = solvers
     native.solve()
@@ -233,7 +233,7 @@ def test_one_active_call_reaches_the_numpy_loops_answer(solvers):
     chord steps end at the KKT point newton._active_steps (regularised Newton steps in numpy on the
     interpreted function) ends at: the same active set, iterate and multipliers (to rounding), with the
     derivatives evaluated there."""
-    from dlo_ros.solver.newton import _active_steps, active_rows
+    from dlo_ros.solver.update.newton import _active_steps, active_rows
 
     scene, native, interpreted = solvers
     rot = scene.problem.grip("right").pose.orientation
@@ -283,8 +283,8 @@ def test_a_warm_update_is_one_compiled_call(solvers):
     answer, to the bit.  (An update whose Newton lands on a saddle leaves it by steps in Python:
     ``newton.leave_saddle``.)  The interpreted solver's stream gives the same shapes, wrenches and
     eigenvalues."""
-    from dlo_ros.solver import compiled as C
-    from dlo_ros.solver import native_newton as NN
+    from dlo_ros.solver.build import compiled as C
+    from dlo_ros.solver.native import newton as NN
 
     scene, native, interpreted = solvers
     fns = native.functions
@@ -369,8 +369,8 @@ def test_the_node_blocks_hold_the_node_map_exactly_in_small_dgemm_calls(model):
     """``NodeBlocks``, from which the compiled loops add Eᵀ W: its blocks put back together are E, entry for
     entry, each column in one group; and no dgemm call multiplies more than ``CHUNK_WORK`` (so OpenBLAS
     keeps it on the calling thread)."""
-    from dlo_ros.solver.native_newton import CHUNK_WORK, NodeBlocks
-    from dlo_ros.solver.nlp import StringNLP
+    from dlo_ros.solver.native.newton import CHUNK_WORK, NodeBlocks
+    from dlo_ros.solver.build.nlp import StringNLP
 
     scene = load_scene("default_cable")
     problem, options = scene.problem, replace(scene.options, model=model.split(",")[0], order=16)
@@ -402,9 +402,11 @@ def test_the_compiled_stability_rows_follow_the_one_python_setting(solvers, tmp_
     the C held its own 1e-9: its eigenvalue then missed by 0.1 of 3.0.)"""
     import scipy.linalg
 
-    from dlo_ros.solver import native_settings, stability
-    from dlo_ros.solver.native_newton import active_library_path
-    from dlo_ros.solver.newton import active_rows
+    from dlo_ros.solver.native import settings as native_settings
+
+    from dlo_ros.solver.results import stability
+    from dlo_ros.solver.native.newton import active_library_path
+    from dlo_ros.solver.update.newton import active_rows
     from dlo_ros.solver.state import SolverState
 
     scene, native, _ = solvers
@@ -451,8 +453,9 @@ def test_the_library_keys_change_with_the_c_and_with_every_setting(solvers, monk
     """A compiled loop is never loaded for C or settings other than its own: both library names
     hash the assembled C (``native_build.driver_digest``) and the ``-D`` values
     (``native_settings``)."""
-    from dlo_ros.solver import native_build, native_settings
-    from dlo_ros.solver.native_newton import active_library_path, library_path
+    from dlo_ros.solver.native import build as native_build
+    from dlo_ros.solver.native import settings as native_settings
+    from dlo_ros.solver.native.newton import active_library_path, library_path
 
     _, native, _ = solvers
     nlp = native.nlp

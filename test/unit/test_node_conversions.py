@@ -12,7 +12,7 @@ from visualization_msgs.msg import Marker
 from dlo_ros.model import Grip, GripPose, Obstacle, Problem, Profile, StringProperties
 from dlo_ros.model.rotations import matrix_to_quat, quat_to_matrix
 from dlo_ros.node import conversions as conv
-from dlo_ros.solver.result import GripWrench, ShapeResult
+from dlo_ros.solver.results.result import GripWrench, ShapeResult
 
 FRAMES = ["", "w", "ab", "abc", "abcd", "world", "abcdef", "abcdefg", "abcdefgh", "a_longer_frame_7"]  # every length mod 8
 

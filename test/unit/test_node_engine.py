@@ -16,7 +16,7 @@ import pytest
 from dlo_ros.model import Grip, GripPose, Problem, Profile, StringProperties
 from dlo_ros.node.engine import ShapeEngine, options_with_output_points
 from dlo_ros.solver import SolverOptions
-from dlo_ros.solver.result import ShapeResult
+from dlo_ros.solver.results.result import ShapeResult
 
 Q = np.array([0.0, 0.0, 0.0, 1.0])
 

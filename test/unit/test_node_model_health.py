@@ -7,7 +7,7 @@ import pytest
 
 from dlo_ros.node.conversions import diagnostic_status, diagnostic_values
 from dlo_ros.node.health import Health, model_text, new_model_changes
-from dlo_ros.solver.result import ShapeResult
+from dlo_ros.solver.results.result import ShapeResult
 
 class FakeClock:
     def __init__(self):

@@ -19,7 +19,7 @@ from dlo_ros.node.validation import (
     check_pose,
     normalise_frame,
 )
-from dlo_ros.solver.result import ShapeResult
+from dlo_ros.solver.results.result import ShapeResult
 
 Q = (0.0, 0.0, 0.0, 1.0)
 

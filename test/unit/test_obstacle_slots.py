@@ -1,4 +1,4 @@
-"""Contact slots (dlo_ros.solver.obstacle_slots, #14): an obstacle row at the string's closest approach.
+"""Contact slots (dlo_ros.solver.contact.obstacle_slots, #14): an obstacle row at the string's closest approach.
 
 A heavy cable clamped at both ends rests on a round post off its middle.  Its shape is compared with an
 independent shooting solution of the planar elastica touching the post at one point
@@ -14,7 +14,7 @@ import pytest
 
 from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import scene_from_dict
-from dlo_ros.solver import obstacle_slots as OSL
+from dlo_ros.solver.contact import obstacle_slots as OSL
 from dlo_ros.solver.shape_solver import ShapeSolver
 from reference import post_contact
 

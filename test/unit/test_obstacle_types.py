@@ -17,7 +17,7 @@ from dlo_ros.model.obstacle_types import (OBSTACLE_TYPES, PRIMITIVE_KINDS, Key, 
                                           Primitive, register)
 from dlo_ros.model.obstacles import Obstacle
 from dlo_ros.scene import SceneError, scene_from_dict, scene_to_dict
-from dlo_ros.solver.obstacle_slots import FLAT
+from dlo_ros.solver.contact.obstacle_slots import FLAT
 
 S2 = math.sqrt(0.5)
 

@@ -1,4 +1,4 @@
-"""A result's outputs from one CasADi call (solver/output_function.py) against the numpy path it replaces.
+"""A result's outputs from one CasADi call (solver/build/output_function.py) against the numpy path it replaces.
 
 Both paths evaluate the same committed state: the centreline and orientations at the output points, each
 grip's reaction, each obstacle's contact force, the equilibrium residual and the flip test.  The numpy
@@ -19,11 +19,11 @@ from dlo_ros.model import Grip, GripPose, Load, Problem, Profile, StringProperti
 from dlo_ros.model.problem import RelativePosition
 from dlo_ros.model.obstacles import Obstacle
 from dlo_ros.scene import load_scene
-from dlo_ros.solver.compiled import InterpretedFunction, NativeFunction, compiler
-from dlo_ros.solver.native_newton import WithNodePart
+from dlo_ros.solver.build.compiled import InterpretedFunction, NativeFunction, compiler
+from dlo_ros.solver.native.newton import WithNodePart
 from dlo_ros.solver.options import SolverOptions
-from dlo_ros.solver.output_function import OutputFunction
-from dlo_ros.solver.residual import PointAction
+from dlo_ros.solver.build.output_function import OutputFunction
+from dlo_ros.solver.results.residual import PointAction
 from dlo_ros.solver.shape_solver import ShapeSolver
 
 TOL = 1e-10
@@ -139,7 +139,7 @@ def test_the_published_quaternion_is_the_unit_quaternion_of_the_rotation_with_fr
     and each of the four components largest."""
     from dlo_ros.model.director import frame_to_quat
     from dlo_ros.model.rotations import quat_to_matrix
-    from dlo_ros.solver.output_function import _unit_quaternion
+    from dlo_ros.solver.build.output_function import _unit_quaternion
 
     rng = np.random.default_rng(3)
     v = rng.normal(size=(400, 4)) * rng.uniform(0.2, 3.0, size=(400, 1))

@@ -39,8 +39,8 @@ from test_linking_stream import linking
 
 from dlo_ros.model import Grip, GripPose, Problem, Profile, StringProperties
 from dlo_ros.model.director import quat_to_frame
-from dlo_ros.solver import self_contact as SC
-from dlo_ros.solver import topology as TP
+from dlo_ros.solver.contact import self_contact as SC
+from dlo_ros.solver.contact import topology as TP
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
 

@@ -1,4 +1,4 @@
-"""Worker processes that recover and clean up after themselves (dlo_ros.solver.batch, #35): a worker
+"""Worker processes that recover and clean up after themselves (dlo_ros.solver.parallel.batch, #35): a worker
 killed mid-batch makes only its queries answer ``failed`` (naming the cause) and the next call runs on
 a rebuilt pool; a query past its timeout answers ``failed``/timeout and its worker is replaced; and
 no worker or resource tracker outlives a SIGKILLed parent."""
@@ -16,8 +16,8 @@ import pytest
 
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
-from dlo_ros.solver.batch import query_many
-from dlo_ros.solver.worker_pool import TaskTimeout, WorkerDied, WorkerPool
+from dlo_ros.solver.parallel.batch import query_many
+from dlo_ros.solver.parallel.worker_pool import TaskTimeout, WorkerDied, WorkerPool
 from random_scenes import targets_near
 from support.node import wait_until
 from support.procs import children, ended
@@ -130,7 +130,7 @@ def test_a_query_past_its_timeout_answers_timeout_and_its_worker_is_replaced(sce
 
 PARENT = """
 import os, sys, threading, time
-from dlo_ros.solver.worker_pool import {factory}
+from dlo_ros.solver.parallel.worker_pool import {factory}
 
 if __name__ == "__main__":
     pool = {factory}(2)

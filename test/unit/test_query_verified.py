@@ -17,7 +17,7 @@ import pytest
 from dlo_ros.node.query_reply import VERIFIED, decode, reply_frame, result_kind
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
-from dlo_ros.solver.batch import scene_payload, solve_chunk
+from dlo_ros.solver.parallel.batch import scene_payload, solve_chunk
 from dlo_ros.solver.shape_solver import with_checked_poses
 from random_scenes import targets_near
 

@@ -26,8 +26,8 @@ from dlo_ros.model.obstacles import Obstacle  # noqa: E402
 from dlo_ros.recording.replay import read_recording, resolve  # noqa: E402
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver import ShapeSolver  # noqa: E402
-from dlo_ros.solver.result import ShapeResult  # noqa: E402
-from dlo_ros.solver.summary import ModelSummary  # noqa: E402
+from dlo_ros.solver.results.result import ShapeResult  # noqa: E402
+from dlo_ros.solver.results.summary import ModelSummary  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 RERUN = str(Path(sys.executable).parent / "rerun")

@@ -1,6 +1,6 @@
 """The equilibrium residual's balance moment against its definition evaluated point by point.
 
-m_bal(s) = −Σ_{a: s_a < s} [(x_a − x(s)) × F_a + T_a] − ∫_0^s (x(σ) − x(s)) × D ĝ dσ (solver/residual.py),
+m_bal(s) = −Σ_{a: s_a < s} [(x_a − x(s)) × F_a + T_a] − ∫_0^s (x(σ) − x(s)) × D ĝ dσ (solver/results/residual.py),
 written here as a plain double loop over grid points and actions, on random data.
 """
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dlo_ros.model.rotations import cross3
-from dlo_ros.solver.residual import PointAction, equilibrium_residual
+from dlo_ros.solver.results.residual import PointAction, equilibrium_residual
 
 
 def _direct_delta(s, x, moment_c, weight, weight_moment, actions, g):
@@ -59,7 +59,7 @@ def test_euler_moments_match_their_definition(opts):
 
     from dlo_ros.scene import load_scene
     from dlo_ros.solver import ShapeSolver
-    from dlo_ros.solver.wrenches import euler_moments
+    from dlo_ros.solver.results.wrenches import euler_moments
 
     scene = load_scene("default_cable")
     solver = ShapeSolver(scene.problem, replace(scene.options, **opts), compile="off")

@@ -18,7 +18,7 @@ from test_fig2_reference import distance_modulo_chord_rotation
 from test_self_contact import L, ORDER, PAIRS, R, RF, fig2
 
 from dlo_ros.model.problem import Load
-from dlo_ros.solver import self_contact as SC
+from dlo_ros.solver.contact import self_contact as SC
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
 

@@ -6,7 +6,7 @@ import threading
 import numpy as np
 
 from dlo_ros.solver import ShapeSolver, SolverOptions
-from dlo_ros.solver.newton import derivatives
+from dlo_ros.solver.update.newton import derivatives
 from support.problems import clamped_pair
 
 Q = [0.0, 0.0, 0.0, 1.0]

@@ -1,4 +1,4 @@
-"""A target the stream cannot follow never wedges it (issue #35, solver/recovery.py).
+"""A target the stream cannot follow never wedges it (issue #35, solver/update/recovery.py).
 
 The known failure: on default_cable (both ends clamped, tangents along +x), both grips sent to one
 point (x = 0.3 m) close the cable into a loop. The model without self-contact answers a planar
@@ -27,7 +27,7 @@ from reference.kirchhoff import blas_threads
 
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver, make_solver
-from dlo_ros.solver import self_contact as SC
+from dlo_ros.solver.contact import self_contact as SC
 from dlo_ros.solver.shape_solver import with_checked_poses
 
 SCENE = load_scene("default_cable")

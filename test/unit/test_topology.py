@@ -1,4 +1,4 @@
-"""The linking number Lk = Tw + Wr (dlo_ros/solver/topology.py) against closed forms: a circle with k
+"""The linking number Lk = Tw + Wr (dlo_ros/solver/contact/topology.py) against closed forms: a circle with k
 turns of twist, a helix's twist and Fuller writhe, a flat figure-eight, Călugăreanu's theorem on a
 trefoil ribbon (Gauss linking with its push-off, an independent integer), Fuller's formula against the
 Gauss writhe on a deformation that does not pass through itself."""
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dlo_ros.solver import topology as TP
+from dlo_ros.solver.contact import topology as TP
 
 
 def unit(v: np.ndarray) -> np.ndarray:

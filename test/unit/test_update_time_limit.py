@@ -13,7 +13,7 @@ import pytest
 import dlo_ros.solver.shape_solver as shape_solver
 from dlo_ros.scene import load_scene, scene_from_dict
 from dlo_ros.solver import ShapeSolver, SolverOptions
-from dlo_ros.solver.ipopt import TIME_LIMIT
+from dlo_ros.solver.update.ipopt import TIME_LIMIT
 
 SCENE = load_scene("default_cable")
 Q = SCENE.problem.grip("right").pose.orientation

@@ -1,0 +1,322 @@
+"""Compile CasADi functions to C once and cache the shared objects on disk.
+
+``compiled(fn)`` loads ``<cache>/<name>_<fingerprint>.so``; only when that file is missing or
+refused is C generated for ``fn`` and compiled (gcc, ``FLAGS``).  The cache lives in
+$DLO_CACHE_DIR, else $XDG_CACHE_HOME/dlo_ros, else ~/.cache/dlo_ros.  Every load and write goes
+through ``cache_store`` (owner, mode and sha256 checks; atomic writes).  Without a C compiler, or
+with an unsafe or unwritable cache, the original (interpreted) function is returned, so
+everything still works, only slower.
+
+The fingerprint (see ``fingerprint``) identifies the function without generating its C, so a cache
+look-up costs an evaluation, never a code generation (bench/results/compile_cost.md has the costs).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import threading
+import tempfile
+from pathlib import Path
+
+import ctypes
+
+import casadi as ca
+import numpy as np
+
+from ..native import cache_store
+from ..native.cache_store import UnusableLibrary, cache_dir
+
+__all__ = [
+    "FLAGS",
+    "COMPILER_LOCK",
+    "InterpretedFunction",
+    "NativeFunction",
+    "UnusableLibrary",
+    "build_library",
+    "cache_dir",
+    "cached_library",
+    "compiled",
+    "compiler",
+    "fingerprint",
+    "library_path",
+    "load_native",
+]
+
+
+#: gcc's flags.  The assembled KKT functions compile in about the same time at -O1 and -O3, and run
+#: faster at -O3 (bench/results/compile_cost.md); the flattened ones took minutes at any level.
+FLAGS = ("-O3",)
+
+
+def compiler() -> str | None:
+    return (
+        os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
+    )
+
+
+class NativeFunction:
+    """Calls a CasADi-generated C function through ctypes with preallocated numpy buffers.
+
+    Every output is returned dense (column-major reshaped to its shape) as a fresh array; no DM is
+    created or converted (``casadi.Function.__call__`` would).  ctypes releases the GIL during the
+    call. Not re-entrant: callers serialise calls (ShapeSolver holds a lock).
+    """
+
+    def __init__(self, lib_path: Path, fn: ca.Function):
+        """UnusableLibrary if ``cache_store.load`` refuses ``lib_path`` (nothing of it was run)."""
+        name = fn.name()
+        self._lib = cache_store.load(lib_path, (name, f"{name}_work"))
+        self._fn = getattr(self._lib, name)
+        self._work_fn = getattr(self._lib, f"{name}_work")
+        sz = [ctypes.c_longlong() for _ in range(4)]
+        self._work_fn(*[ctypes.byref(v) for v in sz])
+        n_arg, n_res, n_iw, n_w = (v.value for v in sz)
+        self._in_shapes = [fn.size_in(i) for i in range(fn.n_in())]
+        self._out_shapes = [fn.size_out(i) for i in range(fn.n_out())]
+        for i in range(fn.n_out()):
+            if fn.nnz_out(i) != fn.numel_out(i):
+                raise ValueError(f"{name}: output {i} must be dense for NativeFunction")
+        for i in range(fn.n_in()):
+            if fn.nnz_in(i) != fn.numel_in(i):
+                raise ValueError(f"{name}: input {i} must be dense for NativeFunction")
+        self._inputs = [np.zeros(r * c) for r, c in self._in_shapes]
+        self._outputs = [np.zeros(r * c) for r, c in self._out_shapes]
+        dp = ctypes.POINTER(ctypes.c_double)
+        self._arg = (dp * max(n_arg, len(self._inputs)))()
+        self._res = (dp * max(n_res, len(self._outputs)))()
+        for i, a in enumerate(self._inputs):
+            self._arg[i] = a.ctypes.data_as(dp)
+        for i, a in enumerate(self._outputs):
+            self._res[i] = a.ctypes.data_as(dp)
+        self._iw = (ctypes.c_longlong * max(n_iw, 1))()
+        self._w = (ctypes.c_double * max(n_w, 1))()
+
+    @property
+    def out_shapes(self) -> list[tuple[int, int]]:
+        """The outputs' (rows, columns)."""
+        return list(self._out_shapes)
+
+    def address(self) -> tuple[int, int]:
+        """The addresses of the generated function and of its ``_work`` sizes function, for C that
+        calls it (``native_newton.UpdateOutputs``); valid while this object (its library) lives.
+        """
+        return (
+            ctypes.cast(self._fn, ctypes.c_void_p).value,
+            ctypes.cast(self._work_fn, ctypes.c_void_p).value,
+        )
+
+    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        for buf, value in zip(self._inputs, args):
+            buf[:] = np.asarray(value, dtype=float).ravel(order="F")
+        if self._fn(self._arg, self._res, self._iw, self._w, 0) != 0:
+            raise RuntimeError("native CasADi function failed")
+        return [
+            out.reshape(shape, order="F").copy()
+            for out, shape in zip(self._outputs, self._out_shapes)
+        ]
+
+
+class InterpretedFunction:
+    """Same interface as NativeFunction, on casadi.Function (used when no C compiler is present).
+
+    Evaluates through ``Function.buffer()`` on preallocated numpy arrays: no DM is created or
+    converted (``fn(*args)`` would, for every input and output).  Not re-entrant (one work buffer):
+    callers serialise calls, as for NativeFunction.
+    """
+
+    def __init__(self, fn: ca.Function):
+        self._fn = fn
+        for i in range(fn.n_in()):
+            if fn.nnz_in(i) != fn.numel_in(i):
+                raise ValueError(f"{fn.name()}: input {i} must be dense")
+        self._dense_out = all(fn.nnz_out(i) == fn.numel_out(i) for i in range(fn.n_out()))
+        if not self._dense_out:  # sparse outputs: the plain call (not used on a hot path)
+            return
+        self._buffer, self._eval = fn.buffer()
+        self._inputs = [np.zeros(fn.numel_in(i)) for i in range(fn.n_in())]
+        self._out_shapes = [fn.size_out(i) for i in range(fn.n_out())]
+        self._outputs = [np.zeros(r * c) for r, c in self._out_shapes]
+        for i, a in enumerate(self._inputs):
+            self._buffer.set_arg(i, memoryview(a))
+        for i, a in enumerate(self._outputs):
+            self._buffer.set_res(i, memoryview(a))
+
+    @property
+    def function(self) -> ca.Function:
+        """The casadi.Function this evaluates."""
+        return self._fn
+
+    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        if not self._dense_out:
+            out = self._fn(*args)
+            out = out if isinstance(out, (list, tuple)) else [out]
+            return [np.asarray(o) for o in out]
+        for buf, value in zip(self._inputs, args):
+            buf[:] = np.asarray(value, dtype=float).ravel(order="F")
+        self._eval()
+        return [
+            out.reshape(shape, order="F").copy()
+            for out, shape in zip(self._outputs, self._out_shapes)
+        ]
+
+
+def library_path(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path:
+    """Where the compiled library of ``fn`` is (or will be) cached:
+    ``<cache>/<name>_<fingerprint>.so``.
+    """
+    return cache_dir() / f"{fn.name()}_{fingerprint(fn, flags)}.so"
+
+
+def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | None:
+    """Path of the compiled library of ``fn`` if the cache holds it and ``cache_store`` would load
+    it (directory, owner, mode and sha256 checked), else None (no compiling, no C generated).
+    """
+    if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
+        return None
+    lib = library_path(fn, flags)
+    return lib if cache_store.is_verified(lib) else None
+
+
+def load_native(lib: Path, fn: ca.Function) -> NativeFunction | None:
+    """``fn``'s compiled library ``lib`` if it is in the cache and passes every check, else
+    None.
+    """
+    try:
+        return NativeFunction(lib, fn)
+    except UnusableLibrary:
+        return None
+
+
+_SOURCE_DIGEST: bytes | None = None
+
+
+def _source_digest() -> bytes:
+    """Hash of the dlo_ros sources that build the compiled functions (model/, solver/build/nlp.py,
+    assembled*.py, options.py, and the outputs' output_function.py, residual.py and
+    wrenches.py).
+    """
+    global _SOURCE_DIGEST
+    if _SOURCE_DIGEST is None:
+        root = Path(__file__).resolve().parent.parent
+        files = sorted((root / "model").glob("*.py")) + [
+            root / "solver" / n
+            for n in (
+                "nlp.py",
+                "assembled.py",
+                "assembled_euler.py",
+                "options.py",
+                "output_function.py",
+                "residual.py",
+                "wrenches.py",
+            )
+        ]
+        h = hashlib.sha256()
+        for f in files:
+            h.update(f.name.encode() + f.read_bytes())
+        _SOURCE_DIGEST = h.digest()
+    return _SOURCE_DIGEST
+
+
+def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
+    """A cache key of ``fn`` that needs no code generation.
+
+    It hashes the CasADi version, the compiler flags, the dlo_ros sources that build NLPs, the
+    function's name, input/output shapes and instruction count, and its outputs at two fixed
+    pseudo-random inputs in [0.5, 1.5].  Constants baked into the expressions (the reference frame
+    R0, the objective scale σ, the basis and quadrature matrices) change those outputs, so two NLPs
+    that differ in any of them get different keys.
+    """
+    h = hashlib.sha256()
+    h.update(
+        ca.__version__.encode() + " ".join(flags).encode() + _source_digest() + fn.name().encode()
+    )
+    shapes = [fn.size_in(i) for i in range(fn.n_in())]
+    h.update(
+        repr((shapes, [fn.size_out(i) for i in range(fn.n_out())], fn.n_instructions())).encode()
+    )
+    rng = np.random.default_rng(20261122)
+    for _ in range(2):
+        out = fn(*[rng.uniform(0.5, 1.5, (r, c)) for r, c in shapes])
+        for o in out if isinstance(out, (list, tuple)) else [out]:
+            h.update(np.ascontiguousarray(np.asarray(o, dtype=float)).tobytes())
+    return h.hexdigest()[:16]
+
+
+#: Held while a compiler runs: never more than one per process (concurrent compiles multiply the
+#memory).
+COMPILER_LOCK = threading.Lock()
+
+
+def _generate(fn: ca.Function, tmp: str, also: tuple[ca.Function, ...] = ()) -> bytes:
+    gen = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
+    for f in (fn, *also):
+        gen.add(f)
+    gen.generate(tmp + os.sep)
+    return Path(tmp, f"{fn.name()}.c").read_bytes()
+
+
+def compiled(
+    fn: ca.Function,
+    flags: tuple[str, ...] = FLAGS,
+    nice: int = 0,
+    lib: Path | None = None,
+    extra_source: str = "",
+    also: tuple[ca.Function, ...] = (),
+) -> tuple[NativeFunction | InterpretedFunction, bool]:
+    """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
+    ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``);
+    ``extra_source``: C appended to ``fn``'s, ``also``: functions compiled into the same library
+    (then ``lib`` must be a path keyed by them too).
+
+    ``FLAGS``: see there. ShapeSolver runs it niced in the background; the cache makes it once per
+    scene structure and machine.
+    """
+    cc = compiler()
+    if cc is None or os.environ.get("DLO_NO_COMPILE"):
+        return InterpretedFunction(fn), False
+    lib = lib or library_path(fn, flags)
+    native = load_native(lib, fn)
+    if native is None:  # missing, damaged or refused: (re)build it
+        with COMPILER_LOCK:  # one compiler at a time in this process
+            native = load_native(lib, fn)  # another thread may have built it meanwhile
+            if native is None and build_library(fn, lib, cc, flags, nice, extra_source, also):
+                native = load_native(lib, fn)
+    return (native, True) if native is not None else (InterpretedFunction(fn), False)
+
+
+def build_library(
+    fn: ca.Function,
+    lib: Path,
+    cc: str,
+    flags: tuple[str, ...] = FLAGS,
+    nice: int = 0,
+    extra_source: str = "",
+    also: tuple[ca.Function, ...] = (),
+) -> bool:
+    """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile
+    it to the shared object ``lib`` in a private temporary directory and store it with its sha256
+    record (``cache_store.store``: atomic, 0600; concurrent processes never load a half-written
+    file); False if the cache is unsafe or unwritable (one warning) or the compiler fails.  Callers
+    hold COMPILER_LOCK.
+    """
+    if not cache_store.writable_dir(lib.parent):  # before spending a compile on it
+        return False
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            source = Path(tmp, f"{fn.name()}.c")
+            source.write_bytes(_generate(fn, tmp, also) + extra_source.encode())
+            tmp_lib = Path(tmp, lib.name)
+            cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(source), "-lm"]
+            if nice and shutil.which("nice"):
+                cmd = ["nice", "-n", str(nice), *cmd]
+            if subprocess.run(cmd, capture_output=True, text=True).returncode != 0:
+                return False
+            return cache_store.store(lib, tmp_lib.read_bytes())
+    except (OSError, RuntimeError) as e:  # the temporary directory is full or unwritable
+        # (CasADi's code generator reports a failed write as RuntimeError)
+        reason = getattr(e, "strerror", None) or e
+        cache_store.warn_once(lib.parent, f"C cannot be generated ({reason})")
+        return False

@@ -1,0 +1,338 @@
+"""A returned shape's outputs as one CasADi function (frame director models and the planar model,
+no self-contact slots).
+
+``ShapeOutputs`` builds a result from many small numpy evaluations: the centreline and frames at
+the output points, each grip's reaction, each obstacle's contact force and the equilibrium residual
+(``wrenches.py``, ``residual.py``).  For a director model with frames (the default 3D model) and
+for the planar model (what ``solver.model: auto`` streams while a scene stays in its plane) every
+one of them is a fixed composition of matrix products with the structure's constant interpolation
+matrices, so this module writes them as one function
+
+    outputs(z, p, λ, prof) → (x(s_out), q(s_out), F_grips, T_grips, F_obstacles, residual, flip)
+
+evaluated in one call (compiled C when the solver's derivatives are compiled, CasADi's virtual
+machine until then).  ``λ``: every row's SI multiplier; ``prof`` = (Rf, Rt) at the residual's grid
+and Rf_min, from the string (``OutputFunction.profiles``); ``q``: the published orientations, the
+interpolated nodal quaternions made unit with ``director.frame_to_quat``'s sign (4 × K), for the
+planar model φ (1 × K); ``flip``: per grip t·R_g e_x and d1·R_g e_y at its node (negative: the
+flipped sheet, ``frames.flipped_grips``; ones for the planar model, which has no flipped sheet).
+
+The arithmetic is the numpy path's, term for term (``wrenches.wrench``, ``wrenches.equilibrium``,
+``residual.equilibrium_residual``), on the same grid (``wrenches.static_events``: refined at the
+grips, the point loads, the relative positions' ends and the mesh breakpoints), with every obstacle
+sample as a point action (one that does not touch has λ = 0 and acts with zero force).  Both paths
+agree to rounding (test_output_function.py).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ...model.director import _columns
+from ...model.problem import Problem, StringProperties
+from .nlp import StringNLP
+from ..results.residual import evaluation_grid
+from ..results.wrenches import static_events
+
+
+def _unit_quaternion() -> ca.Function:
+    """The unit quaternion (x, y, z, w) of a non-zero quaternion v, with the sign
+    ``director.frame_to_quat`` gives its rotation matrix: the component Shepperd's method takes
+    from the
+    first largest of 1 + trace and 1 + 2 R_aa − trace (times |v|²: 4 w², 4 x², 4 y², 4 z²) is positive.
+    Where two candidates tie to rounding the two may pick q and −q: the same rotation.
+    """
+    v = ca.SX.sym("v", 4)
+    x2, y2, z2, w2 = v[0] * v[0], v[1] * v[1], v[2] * v[2], v[3] * v[3]
+    a = [3 * w2 - x2 - y2 - z2, w2 + x2 - y2 - z2, w2 - x2 + y2 - z2, w2 - x2 - y2 + z2]
+    component = [v[3], v[0], v[1], v[2]]
+    chosen = ca.if_else(a[2] >= a[3], component[2], component[3])
+    chosen = ca.if_else(ca.logic_and(a[1] >= a[2], a[1] >= a[3]), component[1], chosen)
+    chosen = ca.if_else(
+        ca.logic_and(ca.logic_and(a[0] >= a[1], a[0] >= a[2]), a[0] >= a[3]), component[0], chosen
+    )
+    return ca.Function(
+        "unit_quaternion", [v], [ca.if_else(chosen < 0, -v, v) / ca.sqrt(ca.dot(v, v))]
+    )
+
+
+def _cross(a: ca.MX, b: ca.MX) -> ca.MX:
+    """Column-wise a × b of 3×K matrices (b may be one column: it is broadcast)."""
+    if b.shape[1] == 1 and a.shape[1] > 1:
+        b = ca.repmat(b, 1, a.shape[1])
+    if a.shape[1] == 1 and b.shape[1] > 1:
+        a = ca.repmat(a, 1, b.shape[1])
+    return ca.vertcat(
+        a[1, :] * b[2, :] - a[2, :] * b[1, :],
+        a[2, :] * b[0, :] - a[0, :] * b[2, :],
+        a[0, :] * b[1, :] - a[1, :] * b[0, :],
+    )
+
+
+def _cumulative(f: ca.MX, s: np.ndarray) -> ca.MX:
+    """``residual._cumulative`` along the columns of f (3×K): ∫_{s_0}^{s_k} f ds by the trapezoid
+    rule, plus f_0 s_0 for the first interval from s = 0.
+    """
+    steps = 0.5 * (f[:, 1:] + f[:, :-1]) * ca.repmat(ca.DM(np.diff(s)).T, 3, 1)
+    first = f[:, 0] * s[0]
+    return ca.horzcat(first, ca.repmat(first, 1, len(s) - 1) + ca.cumsum(steps, 1))
+
+
+def _column_norms_max(a: ca.MX) -> ca.MX:
+    return ca.mmax(ca.sqrt(ca.sum1(a * a)))
+
+
+class OutputFunction:
+    """The outputs of one NLP's solutions as one CasADi function (module docstring)."""
+
+    def __init__(self, nlp: StringNLP, problem: Problem, s_out: np.ndarray):
+        m, L, lay = nlp.model, nlp.length, nlp.params
+        self.grip_names = [g.name for g in problem.grips]
+        self.grid = s = evaluation_grid(L, static_events(nlp, problem))
+        K, M = len(s), m.quad.count
+        z = ca.MX.sym("z", m.layout.size)
+        p = ca.MX.sym("p", lay.size)
+        lam = ca.MX.sym("lam", int(nlp.lbg.size))
+        prof = ca.MX.sym("prof", 2 * K + 1)
+        rf, rt, rf_min = prof[:K].T, prof[K : 2 * K].T, prof[2 * K]
+
+        self.planar = planar = not nlp.director
+        if (
+            planar
+        ):  # the planar model: φ(s) in the plane of R0's first two columns, θ ≡ π/2, ψ constant
+            c_phi, c_eps = m.coefficients(z, "phi"), m.coefficients(z, "eps")
+            tq = m.tangents(
+                ca.mtimes(ca.DM(m.B), c_phi),
+                None,
+                ca.mtimes(ca.DM(m.B), c_eps) if c_eps is not None else None,
+                lib=ca,
+            )
+            normal = ca.DM(nlp.r0[:, 2])
+        else:
+            nodes_v = ca.reshape(
+                z[m.layout.rotation], m.layout.width, m.layout.nodes
+            )  # column i: node i
+            vs = ca.MX.sym("v", 4)
+            # (t, d1, d2) of a quaternion, stacked: at the quadrature nodes, at the residual's
+            # grid, at the grips
+            frame_cols = ca.Function(
+                "frame_cols",
+                [vs],
+                [ca.vertcat(*(ca.vertcat(*c) for c in _columns(ca.vertsplit(vs), ca)))],
+            )
+            tq = frame_cols.map(M)(ca.mtimes(nodes_v, ca.DM(m.B.T)))[
+                0:3, :
+            ]  # t̂ at the quadrature nodes
+            if m.layout.stretch:
+                tq = tq * ca.repmat(1 + ca.mtimes(ca.DM(m.B), z[m.layout.eps]).T, 3, 1)
+
+        point_s = np.array(
+            [g.s for g in problem.grips]
+            + [ld.s for ld in problem.loads]
+            + problem.relative_ends(),
+            dtype=float,
+        )
+        s_out = np.asarray(s_out, dtype=float)
+        pieces = [s, m.quad.nodes, point_s, nlp.obstacle_s, s_out]
+        splits = np.cumsum([len(a) for a in pieces])
+        w_all = (
+            m.position_matrix(np.concatenate(pieces))
+            if planar
+            else m.mesh.integration_matrix(np.concatenate(pieces))
+        )
+        x_all = ca.repmat(z[0:3] * L, 1, int(splits[-1])) + ca.mtimes(tq, ca.DM(w_all.T))
+        x, x_nodes, point_x, sample_x, x_out = (
+            x_all[:, a:b] for a, b in zip([0, *splits[:-1]], splits)
+        )
+
+        # the constitutive moment at the grid: R diag(Rt, Rf, Rf) Ω; the planar model's −Rf φ' n
+        # (wrenches.euler_moments at θ ≡ π/2, no twist)
+        if planar:
+            moment_c = ca.mtimes(-normal, rf * ca.mtimes(ca.DM(m.matrices(s)[1]), c_phi).T)
+        else:
+            b_grid, db_grid = m.mesh.interpolation(s, "left")
+            vsd = ca.MX.sym("dv", 4)
+            c = ca.MX.sym("c", 3)
+            cols = frame_cols(vs)
+            t, d1, d2 = cols[0:3], cols[3:6], cols[6:9]
+            qv, w, dqv, dw = vs[0:3], vs[3], vsd[0:3], vsd[3]
+            omega = 2 * (w * dqv - dw * qv - ca.cross(qv, dqv)) / ca.dot(vs, vs)
+            moment_fn = ca.Function(
+                "moment_c",
+                [vs, vsd, c],
+                [t * c[0] * omega[0] + d1 * c[1] * omega[1] + d2 * c[2] * omega[2]],
+            )
+            moment_c = moment_fn.map(K)(
+                ca.mtimes(nodes_v, ca.DM(b_grid.T)),
+                ca.mtimes(nodes_v, ca.DM(db_grid.T)),
+                ca.vertcat(rt, rf, rf),
+            )
+
+        # the weight's integrals ∫_0^s D dσ and ∫_0^s D x dσ, and its total
+        gravity = p[lay["gravity"]]
+        d_nodes = p[lay["D"]]
+        w_grid = w_all[:K, :]
+        weight = ca.mtimes(ca.DM(w_grid), d_nodes).T
+        weight_moment = ca.mtimes(x_nodes * ca.repmat(d_nodes.T, 3, 1), ca.DM(w_grid.T))
+        total = ca.dot(ca.DM(m.quad.weights), d_nodes)
+        m_bal = -(_cross(weight_moment, gravity) - _cross(x, gravity) * ca.repmat(weight, 3, 1))
+
+        # point actions at fixed arc lengths: grips (wrenches.wrench), loads, the relative
+        # positions' ends
+        forces, torques, flips = [], [], []
+        for g in problem.grips:
+            rows = nlp.grip_rows[g.name]
+            force = -ca.mtimes(ca.DM(nlp.grip_axes[g.name].T), lam[rows["position"]])
+            if planar:  # only φ is held: the torque is along the plane normal, n·T = μ_φ
+                forces.append(force)
+                torques.append(
+                    lam[rows["angles"][0]] * normal if rows["angles"] else ca.DM.zeros(3)
+                )
+                flips.append(ca.DM.ones(2))  # no flipped sheet: φ is the tangent's angle itself
+                continue
+            cols = frame_cols(nodes_v[:, m.mesh.node_index(g.s)])
+            tg, d1g = cols[0:3], cols[3:6]
+            target = ca.reshape(p[lay[f"grip:{g.name}:frame"]], 3, 3)
+            torque = ca.DM.zeros(3)
+            if rows["angles"]:
+                mu = lam[rows["angles"]]
+                torque = -(mu[0] * ca.cross(tg, target[:, 1]) + mu[1] * ca.cross(tg, target[:, 2]))
+                if len(rows["angles"]) == 3:
+                    torque -= mu[2] * ca.cross(d1g, target[:, 2])
+            forces.append(force)
+            torques.append(torque)
+            flips.append(ca.vertcat(ca.dot(tg, target[:, 0]), ca.dot(d1g, target[:, 1])))
+        grip_forces, grip_torques, flip = (
+            ca.horzcat(*forces),
+            ca.horzcat(*torques),
+            ca.horzcat(*flips),
+        )
+        for k, _ in enumerate(problem.loads):
+            forces.append(p[lay[f"load:{k}:force"]])
+            moment = p[
+                lay[f"load:{k}:moment"]
+            ]  # the planar model's: its component along n (checked)
+            torques.append(moment[0] * normal if planar else moment)
+        for rows in nlp.relative_rows:  # wrenches.relative_forces: −F_b at s_a, F_b at s_b
+            f_b = -ca.mtimes(ca.DM(nlp.relative_axes.T), lam[rows])
+            forces += [-f_b, f_b]
+            torques += [ca.DM.zeros(3), ca.DM.zeros(3)]
+        total_force = total * gravity
+        # Σ_{a: s_a < s} (x_a − x(s)) × F_a + T_a = C(s) − x(s) × F(s), with C and F running sums
+        # over the actions sorted by s: the point actions and the obstacle samples (every
+        # obstacle's force at a sample summed: they share the samples) as two sorted groups
+        order = np.argsort(point_s, kind="stable")
+        point_f = ca.horzcat(*(forces[k] for k in order))
+        point_c = _cross(point_x[:, order.tolist()], point_f) + ca.horzcat(
+            *(torques[k] for k in order)
+        )
+        groups = [(point_c, point_f, point_s[order])]
+        contact_totals = []
+        if problem.obstacles:
+            samples = len(nlp.obstacle_s)
+            sample_f = None
+            for i, ob in enumerate(problem.obstacles):
+                grads = nlp.obstacle_gradient[ob.type].map(samples)(
+                    sample_x, ca.repmat(p[lay[f"obstacle:{i}"]], 1, samples)
+                )
+                lam_i = ca.fmax(
+                    lam[nlp.obstacle_rows[i]], 0
+                ).T  # a row that does not touch acts with no force
+                if nlp.obstacle_slots:  # nor does a sample a contact slot replaces
+                    lam_i = lam_i * p[lay[f"samples:{i}:on"]].T
+                f = -ca.repmat(lam_i, 3, 1) * grads
+                contact_totals.append(ca.sum2(f))
+                sample_f = f if sample_f is None else sample_f + f
+            groups.append((_cross(sample_x, sample_f), sample_f, np.asarray(nlp.obstacle_s)))
+            for i, ob in enumerate(problem.obstacles if nlp.obstacle_slots else ()):
+                # contact slots (solver/contact/obstacle_slots.py): their arc lengths are parameters, so
+                # the running sums over s_a < s are a 0/1 matrix of p instead of fixed columns
+                n_slots, on = nlp.obstacle_slots, p[lay[f"slots:{i}:on"]]
+                slot_x = ca.repmat(z[0:3] * L, 1, n_slots) + ca.mtimes(tq, nlp.slot_matrix(p, i).T)
+                grads = nlp.obstacle_gradient[ob.type].map(n_slots)(
+                    slot_x, ca.repmat(p[lay[f"obstacle:{i}"]], 1, n_slots)
+                )
+                f = -ca.repmat((ca.fmax(lam[nlp.slot_rows[i]], 0) * on).T, 3, 1) * grads
+                contact_totals[i] += ca.sum2(f)
+                before = ca.repmat(p[lay[f"slots:{i}:s"]], 1, K) < ca.repmat(
+                    ca.DM(s).T, n_slots, 1
+                )  # K × grid
+                m_bal -= ca.mtimes(_cross(slot_x, f), before) - _cross(x, ca.mtimes(f, before))
+                total_force += ca.sum2(f)
+        self.n_obstacles = len(problem.obstacles)
+        for c_a, f_a, s_a in groups:
+            before = np.searchsorted(
+                s_a, s, side="left"
+            ).tolist()  # how many of the group lie strictly before s
+            run_c = ca.horzcat(ca.DM.zeros(3), ca.cumsum(c_a, 1))
+            run_f = ca.horzcat(ca.DM.zeros(3), ca.cumsum(f_a, 1))
+            m_bal -= run_c[:, before] - _cross(x, run_f[:, before])
+            total_force += run_f[:, -1]
+        delta = moment_c - m_bal
+        d_m = _column_norms_max(delta)
+        d_f = ca.norm_2(total_force)
+        gradient = np.gradient(np.eye(K), s, axis=0)  # np.gradient as a matrix: tridiagonal
+        tangent = ca.mtimes(x, ca.sparsify(ca.DM(gradient.T)))
+        phi = _cumulative(delta / ca.repmat(rf, 3, 1), s)
+        dx = _cumulative(_cross(phi, tangent), s)
+        metres = _column_norms_max(dx) + d_f * L**3 / (3 * rf_min)
+
+        if (
+            planar
+        ):  # φ at the outputs (the orientations: ``frames.frames_psi`` and ``pose_quaternions``)
+            v_out = ca.mtimes(ca.DM(m.matrices(s_out)[0]), c_phi).T
+        else:
+            v_out = ca.mtimes(nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T))
+            v_out = _unit_quaternion().map(len(s_out))(v_out)
+        zero = ca.DM.zeros(3, 0)
+        self.function = ca.Function(
+            "dlo_outputs",
+            [z, p, lam, prof],
+            [
+                x_out,
+                v_out,
+                grip_forces,
+                grip_torques,
+                ca.horzcat(*contact_totals) if contact_totals else zero,
+                ca.vertcat(d_m, d_f, metres),
+                flip,
+            ],
+            ["z", "p", "lam", "prof"],
+            [
+                "points",
+                "quaternions",
+                "grip_forces",
+                "grip_torques",
+                "contacts",
+                "residual",
+                "flip",
+            ],
+        )
+        self._profile_key: tuple | None = None
+
+    @staticmethod
+    def applies(nlp: StringNLP) -> bool:
+        """Director models with frames and the planar model, without self-contact slots (others,
+        the tangent director model and the 3D Euler-angle model: the numpy path).
+        """
+        if nlp.self_contact_slots:
+            return False
+        return bool(nlp.model.layout.frame if nlp.director else nlp.model.layout.planar)
+
+    def profiles(self, string: StringProperties) -> np.ndarray:
+        """``prof``: Rf and Rt [N·m²] at the grid and Rf_min, remembered for the last string
+        object.
+        """
+        key = self._profile_key
+        if key is None or key[0] is not string:
+            s = self.grid
+            prof = np.concatenate(
+                [
+                    string.bend_stiffness(s),
+                    string.twist_stiffness(s),
+                    [string.bend_stiffness.minimum],
+                ]
+            )
+            self._profile_key = key = (string, prof)
+        return key[1]

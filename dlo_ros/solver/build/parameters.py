@@ -1,0 +1,251 @@
+"""The NLP's parameter vector p for a scene: everything a solve may change without rebuilding the
+NLP.
+
+p holds, at the quadrature nodes, the bending, twisting and stretching stiffnesses Rf, Rt, Re
+[N·m², N·m², N] and the weight per length D [N/m]; the unit gravity direction; the string's radius
+[m]; each load's force [N] and moment [N·m]; each relative position's offset [m]; each obstacle's
+parameters; and each grip's target; each self-contact slot's pair (empty here:
+``self_contact.fill`` sets the pairs); and, with each obstacle's contact slots, placed at the
+reference shape's closest approaches (``obstacle_slots.py``):
+
+* director models: the position [m] and the orientation matrix R_g (column-major), and for each
+  point
+  load the unit rotation its moment's pseudo-potential is centred on (``model/director.py``);
+* Euler-angle models: the position and the Euler angles (φ, θ, ψ) [rad] of R_g in the NLP's
+  reference
+  frame R0, on the branch (the two Euler triples of one rotation, plus 2πk) nearest the current
+  shape's angles at the grip, so that an end turned by several revolutions in small steps is
+  tracked.
+
+The Euler models apply only a moment's component along the working-plane normal n = R0 e_z (its
+work −m·φ is exact); ``check_moments`` rejects others.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...model.problem import GripPose, Problem
+from ...model.rotations import TANGENT_X, euler_from_frame, quat_to_matrix
+from ..contact import obstacle_slots as OSL
+from .nlp import StringNLP
+
+
+def check_moments(nlp: StringNLP, problem: Problem) -> None:
+    """Raise ValueError (naming the load) for a point moment the NLP cannot apply exactly."""
+    if nlp.director:  # moments about any axis (model/director.py)
+        return
+    n = nlp.r0[:, 2]
+    for i, ld in enumerate(problem.loads):
+        m = np.asarray(ld.moment, dtype=float)
+        if np.linalg.norm(m - np.dot(m, n) * n) > 1e-9 * max(1.0, np.linalg.norm(m)):
+            raise ValueError(
+                f"loads[{i}].moment: only moments about the working-plane normal n = {np.round(n, 6).tolist()} "
+                "are supported (their work −m·φ is exact); this moment has other components"
+            )
+
+
+class ProblemParameters:
+    """Packs p for one NLP (see the module docstring), caching what a stream of new grip poses
+    leaves unchanged: the scene's part of p, and the Euler angles of the grip poses of the last few
+    calls.
+    """
+
+    def __init__(self, nlp: StringNLP):
+        self.nlp = nlp
+        self._scene_p: tuple | None = None  # (scene objects, gravity, p without grip targets)
+        self._euler_cache: dict[int, tuple] = {}
+        #: the contact slots the last ``pack`` found, per obstacle (read by the solver right after
+        #it)
+        self.placements: list[OSL.SlotPlacement] = []
+
+    def pack(
+        self,
+        problem: Problem,
+        z_reference: np.ndarray,
+        keep: np.ndarray | None = None,
+        slots: bool = True,
+    ) -> np.ndarray:
+        """The NLP parameter vector for ``problem``; angles unwrapped to, and obstacle contact
+        slots placed on, the shape ``z_reference``.  ``keep``: a parameter vector whose slots stay
+        while they are still placed well for ``z_reference``; ``slots`` False: leave them empty (a
+        caller that reads grip angles only).
+        """
+        nlp, lay = self.nlp, self.nlp.params
+        p = self.scene(problem).copy()
+        if nlp.obstacle_slots and slots:
+            self.placements = self.place_slots(problem, z_reference, p, keep)
+        if nlp.director:
+            for g in problem.grips:
+                p[lay[f"grip:{g.name}:position"]] = g.pose.position
+                p[lay[f"grip:{g.name}:frame"]] = quat_to_matrix(g.pose.orientation).ravel(
+                    order="F"
+                )
+            self.centre_moments(problem, z_reference, p)
+            return p
+        references = self._grip_reference_angles(problem, z_reference)
+        for g, reference in zip(problem.grips, references):
+            p[lay[f"grip:{g.name}:position"]] = g.pose.position
+            p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, reference)
+        return p
+
+    def slots(self, p: np.ndarray, i: int) -> OSL.SlotPlacement:
+        """Obstacle i's contact slots as p holds them (clearance unknown: inf)."""
+        lay = self.nlp.params
+        return OSL.SlotPlacement(
+            p[lay[f"slots:{i}:s"]].copy(),
+            p[lay[f"slots:{i}:on"]].copy(),
+            p[lay[f"samples:{i}:on"]].copy(),
+            np.full(self.nlp.obstacle_slots, np.inf),
+        )
+
+    def write_slots(
+        self, p: np.ndarray, i: int, placement: OSL.SlotPlacement, keep: np.ndarray | None = None
+    ) -> None:
+        """Obstacle i's slots of p (in place) from ``placement`` (``keep``: a vector holding its
+        rows already).
+        """
+        nlp, lay = self.nlp, self.nlp.params
+        if keep is not None:
+            for name in nlp.slot_parameters(i):
+                p[lay[name]] = keep[lay[name]]
+            return
+        rows = np.zeros((nlp.obstacle_slots, nlp.model.quad.count))
+        filled = placement.on > 0
+        if np.any(filled):
+            rows[filled] = nlp.model.position_rows(placement.s[filled])
+        p[lay[f"slots:{i}:s"]], p[lay[f"slots:{i}:on"]] = placement.s, placement.on
+        p[lay[f"slots:{i}:w"]], p[lay[f"samples:{i}:on"]] = rows.ravel(), placement.samples_on
+
+    def place_slots(
+        self, problem: Problem, z: np.ndarray, p: np.ndarray, keep: np.ndarray | None = None
+    ) -> list[OSL.SlotPlacement]:
+        """Fill every obstacle's contact slots of p (in place) at the closest approaches of shape z
+        (``obstacle_slots``); ``keep``: a vector whose slots stay where they still fit.  Returns
+        the placements (with the shape's clearance at each slot).
+        """
+        nlp, m = self.nlp, self.nlp.model
+        L, S, radius = nlp.length, nlp.options.obstacle_samples, problem.string.radius
+        s_fine = OSL.fine_grid(L, S)
+        x = m.positions(z, s_fine)
+        placements = []
+        for i, ob in enumerate(problem.obstacles):
+
+            def clearance_at(s: np.ndarray, ob=ob) -> np.ndarray:
+                return -ob.h_many(m.positions_at_rows(z, m.position_rows(s))) - radius
+
+            if ob.type in OSL.FLAT:
+                found = (np.zeros(0), np.zeros(0))
+            else:
+                found = OSL.minima(
+                    s_fine,
+                    -ob.h_many(x) - radius,
+                    nlp.obstacle_s[1],
+                    OSL.band(L, radius),
+                    L,
+                    clearance_at,
+                )
+            previous = self.slots(keep, i) if keep is not None else None
+            new = OSL.assign(found, nlp.obstacle_s, nlp.obstacle_slots, previous, L)
+            self.write_slots(p, i, new, keep if new.kept else None)
+            placements.append(new)
+        return placements
+
+    def scene(self, problem: Problem) -> np.ndarray:
+        """The parameter vector without grip targets (zeros there), cached while the string,
+        gravity, loads, relative positions and obstacles are the same objects (a stream only
+        changes grip poses).
+        """
+        key = (problem.string, problem.loads, problem.relative_positions, problem.obstacles)
+        cached = self._scene_p
+        if (
+            cached is not None
+            and all(a is b for a, b in zip(cached[0], key))
+            and np.array_equal(cached[1], problem.gravity)
+        ):
+            return cached[2]
+        nlp, lay = self.nlp, self.nlp.params
+        nodes = nlp.model.quad.nodes
+        st = problem.string
+        p = np.zeros(lay.size)
+        p[lay["Rf"]] = st.bend_stiffness(nodes)
+        p[lay["Rt"]] = st.twist_stiffness(nodes)
+        p[lay["Re"]] = st.stretch_stiffness(nodes) if st.stretch_stiffness is not None else 0.0
+        p[lay["D"]] = st.weight_per_length(nodes)
+        nlp.material_parameters(p)
+        p[lay["gravity"]] = problem.gravity_unit
+        p[lay["radius"]] = st.radius
+        n = nlp.r0[:, 2]
+        for i, ld in enumerate(problem.loads):
+            p[lay[f"load:{i}:force"]] = ld.force
+            p[lay[f"load:{i}:moment"]] = ld.moment if nlp.director else float(np.dot(ld.moment, n))
+        for i, rel in enumerate(problem.relative_positions):
+            p[lay[f"relative:{i}"]] = rel.offset
+        for i, ob in enumerate(problem.obstacles):
+            p[lay[f"obstacle:{i}"]] = ob.params
+        for i, _ in enumerate(
+            problem.obstacles if nlp.obstacle_slots else ()
+        ):  # no slots: every sample on
+            p[lay[f"samples:{i}:on"]] = 1.0
+        for k in range(
+            nlp.self_contact_slots
+        ):  # empty slots: b = −L, the row reads −1 ≤ 0 for any shape
+            p[lay[f"self:{k}"].stop - 1] = -st.length
+        p.flags.writeable = False
+        self._scene_p = (key, np.array(problem.gravity, dtype=float), p)
+        return p
+
+    def grip_angles(self, pose: GripPose, reference: tuple[float, float, float]) -> np.ndarray:
+        """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
+        phi, theta, psi = self._pose_euler(pose)
+        best, best_d = None, math.inf
+        two_pi = 2.0 * math.pi
+        for ph, th, ps in ((phi, theta, psi), (phi + math.pi, -theta, psi + math.pi)):
+            th = th + two_pi * round((reference[1] - th) / two_pi)
+            ph = ph + two_pi * round((reference[0] - ph) / two_pi)
+            ps = ps + two_pi * round((reference[2] - ps) / two_pi)
+            d = (ph - reference[0]) ** 2 + (th - reference[1]) ** 2 + (ps - reference[2]) ** 2
+            if d < best_d:
+                best, best_d = (ph, th, ps), d
+        return np.array(best)
+
+    def _pose_euler(self, pose: GripPose) -> tuple[float, float, float]:
+        """``euler_from_frame`` of a grip pose in this NLP's frame, remembered for the pose objects
+        of the last few calls (a stream moves one grip; the others keep their GripPose objects).
+        """
+        cache = self._euler_cache
+        hit = cache.get(id(pose))
+        if hit is not None and hit[0] is pose:
+            return hit[1]
+        if len(cache) > 16:
+            cache.clear()
+        angles = euler_from_frame(self.nlp.r0, quat_to_matrix(pose.orientation) @ TANGENT_X.T)
+        cache[id(pose)] = (pose, angles)
+        return angles
+
+    def _grip_reference_angles(self, problem: Problem, z: np.ndarray) -> list[list[float]]:
+        """(φ, θ, ψ) of shape z at every grip's s, in one product B(s_grips) [c_φ c_θ c_ψ] (θ ≡ π/2
+        and ψ ≡ 0 where they are not unknowns, as ``RitzModel.fields``).
+        """
+        m = self.nlp.model
+        s_grips = np.array([g.s for g in problem.grips])
+        b = m.matrices(s_grips)[0]
+        out = np.empty((len(s_grips), 3))
+        for k, (name, constant) in enumerate((("phi", 0.0), ("theta", np.pi / 2), ("psi", 0.0))):
+            c = m.coefficients(z, name)
+            out[:, k] = b @ c if c is not None else constant
+        return out.tolist()
+
+    def centre_moments(self, problem: Problem, z: np.ndarray, p: np.ndarray) -> None:
+        """Centre each point moment's pseudo-potential (in p, in place) on the rotation of shape z
+        at its load.
+        """
+        m, lay = self.nlp.model, self.nlp.params
+        values = m.node_values(z)
+        for i, ld in enumerate(problem.loads):
+            ref = np.zeros(4)
+            v = values[m.mesh.node_index(ld.s)]
+            ref[: v.size] = v / np.linalg.norm(v)
+            p[lay[f"load:{i}:reference"]] = ref

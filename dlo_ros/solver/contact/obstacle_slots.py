@@ -1,0 +1,182 @@
+"""Contact slots: an obstacle row at the string's closest approach, wherever it lies between the
+samples.
+
+The NLP imposes h_i(x(σ)) + r ≤ 0 at ``obstacle_samples`` uniform samples, spacing h_s.  Where a
+string rests on a curved obstacle that converges only to first order in h_s: the contact can only
+sit at a sample, the string cuts in by about d²/2R at a distance d from it (R the obstacle's radius
+of curvature), and a string lying over a sphere or post slides along it into wells one spacing
+apart (``bench/results/contact_slots.md``).  Rows much closer together than the samples do not cure
+it: a smooth Ritz field cannot tell rows a few millimetres apart, their Jacobians become nearly
+equal, and Newton's active set then fails on the near-singular system (measured: the uniform 161-
+and 641-sample models fall back to IPOPT on most contact updates).  So each obstacle has
+``obstacle_slots`` = K rows whose arc lengths are parameters (``StringNLP.slot_rows``):
+
+    on_k (h_i(x(σ_k)) + r) − (1 − on_k) L ≤ 0,    x(σ_k) = x0 + T W(σ_k)ᵀ,
+
+with W(σ) the row of the centreline's integration matrix (T: the quadrature-node tangents) and on_k
+∈ {0, 1}: an empty slot reads −1 ≤ 0 and has no derivative.  Each uniform sample has such a switch
+too.
+
+``place`` measures the clearance c(s) = −h_i(x(s)) − r of a shape on a grid FINE times finer than
+the samples and puts a slot at each of its K deepest local minima (refined by parabolas through
+evaluated points) that lie within ``band`` of the obstacle and at least ``DIP`` · L below the
+clearance half a sample spacing to either side: a point contact, or the deepest cut of a contact
+along an arc.  A string lying flat along a table gets none (it sags between the samples by far
+less; they resolve it), and a half-space none at all (``FLAT``: a short flat contact has two
+symmetric dips, and a slot in one of them would pick the side by rounding).  The sample nearest
+each slot is switched off: a row a fraction of a spacing from another nearly repeats it.
+
+A slot is kept while its minimum moves less than ``TOLERANCE`` · L (the parameters then change only
+in the grip targets, the case Newton reuses its stored matrix for).  After a solve the slots are
+placed on the answer; when a minimum that touches (c < ``TOUCH`` · L) moved further than that, the
+solve is repeated warm from the answer, with the slot at the secant estimate of the fixed point σ =
+s*(σ) from the rounds so far (``ShapeSolver``; a short flat contact otherwise sends its deepest
+point from one side of the slot to the other and back).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ...model.obstacle_types import OBSTACLE_TYPES
+
+#: a slot is kept, and a solve is not repeated, while its minimum moved less than this × L
+TOLERANCE = 3e-4
+
+#: a closest approach touches when its clearance is below this × L
+TOUCH = 1e-6
+
+#: a closest approach gets a slot when it lies this × L below the clearance half a sample spacing
+# to each side
+DIP = 1e-6
+
+#: obstacle types without curvature: their slots stay empty (a string on a plane does not cut in
+# between the : samples beyond its own sag, and a flat contact has no point to slide to)
+FLAT = tuple(name for name, kind in OBSTACLE_TYPES.items() if kind.flat)
+
+#: the clearance is measured on FINE points per sample interval (at most 4096 intervals in all)
+FINE = 16
+
+
+@dataclass(frozen=True)
+class SlotPlacement:
+    """One obstacle's slots on a shape: arc lengths σ [m] (0 where empty), on (1.0 or 0.0), the
+    samples' switches, the clearance of the shape at each filled slot's minimum [m] (inf where
+    empty), and whether every slot of a previous placement was kept.
+    """
+
+    s: np.ndarray
+    on: np.ndarray
+    samples_on: np.ndarray
+    clearance: np.ndarray
+    kept: bool = False
+
+
+def fine_grid(length: float, samples: int) -> np.ndarray:
+    """Arc lengths [m] where the clearance is measured (FINE intervals per sample interval)."""
+    return np.linspace(0.0, length, min(FINE * (samples - 1), 4096) + 1)
+
+
+def band(length: float, radius: float) -> float:
+    """The clearance [m] within which a minimum gets a slot: the string's diameter, at least
+    L/200.
+    """
+    return max(2.0 * radius, length / 200.0)
+
+
+def _vertices(s: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Per row, the vertex of the parabola through three equally spaced points, clipped to their
+    span.
+    """
+    curvature = c[:, 0] - 2 * c[:, 1] + c[:, 2]
+    safe = np.where(curvature > 0, curvature, 1.0)
+    shift = np.where(curvature > 0, 0.5 * (s[:, 2] - s[:, 1]) * (c[:, 0] - c[:, 2]) / safe, 0.0)
+    return np.clip(s[:, 1] + shift, s[:, 0], s[:, 2])
+
+
+def minima(
+    s_fine: np.ndarray,
+    clearance: np.ndarray,
+    h_s: float,
+    width_band: float,
+    length: float,
+    clearance_at: Callable[[np.ndarray], np.ndarray],
+) -> tuple[np.ndarray, np.ndarray]:
+    """(s*, c(s*)) of the local minima of the clearance within ``width_band`` that dip DIP·L below
+    the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``: c at
+    any arc lengths; each minimum is refined by two parabola steps through evaluated points).
+    """
+    inner = clearance[1:-1]
+    k = (
+        np.flatnonzero((inner <= clearance[:-2]) & (inner < clearance[2:]) & (inner < width_band))
+        + 1
+    )
+    if not k.size:
+        return np.zeros(0), np.zeros(0)
+    h = s_fine[1] - s_fine[0]
+    s = _vertices(
+        s_fine[np.stack([k - 1, k, k + 1], axis=1)], clearance[np.stack([k - 1, k, k + 1], axis=1)]
+    )
+    for r in (h / 4, h / 16):
+        pts = np.clip(np.stack([s - r, s, s + r], axis=1), 0.0, length)
+        s = _vertices(pts, clearance_at(pts.ravel()).reshape(-1, 3))
+    both = clearance_at(
+        np.concatenate([s, np.clip(s - 0.5 * h_s, 0, length), np.clip(s + 0.5 * h_s, 0, length)])
+    )
+    c, left, right = both[: s.size], both[s.size : 2 * s.size], both[2 * s.size :]
+    deep = np.minimum(left, right) - c >= DIP * length
+    s, c = s[deep], c[deep]
+    order = np.argsort(c, kind="stable")
+    return s[order], c[order]
+
+
+def assign(
+    found: tuple[np.ndarray, np.ndarray],
+    samples: np.ndarray,
+    slots: int,
+    previous: "SlotPlacement | None",
+    length: float,
+) -> SlotPlacement:
+    """The deepest ``slots`` minima ``found`` in slots, each kept at the index of the previous slot
+    nearest to it (within two sample spacings), and kept exactly when it moved less than
+    TOLERANCE·L.
+    """
+    h_s = float(samples[1] - samples[0])
+    s_new, c_new = found[0][:slots], found[1][:slots]
+    s, on, c = np.zeros(slots), np.zeros(slots), np.full(slots, np.inf)
+    free = list(range(slots))
+    pending = []
+    for sj, cj in zip(s_new, c_new):
+        k = None
+        if previous is not None:
+            d = np.where(
+                (previous.on > 0) & np.isin(np.arange(slots), free),
+                np.abs(previous.s - sj),
+                np.inf,
+            )
+            if d.size and np.min(d) <= 2 * h_s:
+                k = int(np.argmin(d))
+        if k is None:
+            pending.append((sj, cj))
+            continue
+        free.remove(k)
+        s[k], on[k], c[k] = (
+            (previous.s[k] if abs(previous.s[k] - sj) <= TOLERANCE * length else sj),
+            1.0,
+            cj,
+        )
+    if (
+        previous is not None
+    ):  # free indices: those empty before first (a slot that lost its minimum holds no force)
+        free.sort(key=lambda k: previous.on[k] > 0)
+    for (sj, cj), k in zip(pending, free):
+        s[k], on[k], c[k] = sj, 1.0, cj
+    kept = (
+        previous is not None and np.array_equal(on, previous.on) and np.array_equal(s, previous.s)
+    )
+    samples_on = np.ones(len(samples))
+    samples_on[np.rint(s[on > 0] / h_s).astype(int)] = 0.0
+    return SlotPlacement(s, on, samples_on, c, bool(kept))

@@ -1,0 +1,1 @@
+"""Native code: the compiled Newton drivers (``*.c``), their settings, build and cache."""

@@ -1,0 +1,242 @@
+"""Newton with an active set in one compiled call (``ActiveNewton``): the driver
+``native/newton_active.c``, compiled into the full KKT function's library
+(``native_build.active_library_path``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .cache_store import load as load_library
+from .blocks import NodeBlocks, eigen_lapack, lapack_pointer
+from .outputs import ComputedOutputs, UpdateOutputs
+from .settings import CONVERGED, EIGEN_FOUND
+from ..build.nlp import (
+    JOIN_TOLERANCE,
+    LEAVE_TOLERANCE,
+    NEWTON_CHORD_CONTRACTION,
+    NEWTON_CHORD_START,
+    NEWTON_CHORD_STEPS,
+    NEWTON_CHORD_TOLERANCE,
+    NEWTON_DUAL_TOLERANCE,
+    NEWTON_MAX_STEP,
+    NEWTON_PRIMAL_TOLERANCE,
+    NEWTON_REGULARISATION,
+)
+
+
+@dataclass
+class ActiveOutcome:
+    """What one ``ActiveNewton`` call returns: ``code`` (CONVERGED, …), the last iterate (z, λ over
+    every row), the derivatives [∇f, g, ∂g/∂z, ∇²L, energies] evaluated there, the steps taken and
+    the active set there.
+    """
+
+    code: int
+    z: np.ndarray
+    lam: np.ndarray
+    gradient: np.ndarray
+    g: np.ndarray
+    jacobian: np.ndarray
+    hessian: np.ndarray
+    energies: np.ndarray
+    steps: int
+    active: np.ndarray
+    evaluations: int = 0
+    #: once converged, the stability eigenvalue there and its eigenvector in z
+    # (``SolverState.reduced_eigen``, : on the rows ``stability.min_reduced_eigenvalue`` holds),
+    # None if LAPACK failed
+    eigen: tuple[float, np.ndarray] | None = None
+    #: the outputs at the answer, when the call evaluated them (``UpdateOutputs``)
+    outputs: ComputedOutputs | None = None
+
+
+class ActiveNewton:
+    """Newton with an active set in one compiled call: the inner loop of ``newton._active_steps``
+    (its regularised steps, row switches, convergence test and step limit), whose tail is chord
+    steps.  Each step evaluates the full KKT function (Newton's own steps, the same iterates and
+    row decisions) until a check of the rows changes none and the steps are below
+    ``NEWTON_CHORD_START``.  The rows are checked at the first iterate, which a Newton step reached
+    (the residual function's g and the multipliers there are Newton's own: no evaluation needed
+    unless a row changes), and at every evaluated iterate.  After that [∇²L J_Aᵀ; J_A 0] stays
+    factored and only the residual [∇L; g] is evaluated per step, as in the contact-free loop
+    (``NativeNewton``: the same contraction, tolerance and retry rules, the derivatives evaluated
+    at the answer, and there the stability eigenpair, on the rows
+    ``stability.min_reduced_eigenvalue`` holds, and the outputs, ``after``).  In C around the
+    compiled split full KKT function (``StringNLP.kkt_split_fn``: ∇²L's per-node part added by
+    BLAS, as in ``NativeNewton``) and its residual, compiled into the full KKT function's library.
+    Not re-entrant per instance: callers serialise calls (ShapeSolver holds a lock).
+    """
+
+    def __init__(
+        self, lib_path: Path, n: int, rows: int, node_map: NodeBlocks, equality: np.ndarray
+    ):
+        self._lib = load_library(lib_path, ("dlo_newton_active_run",))  # checked, as above
+        self._run = self._lib.dlo_newton_active_run
+        dp, ip, c_int, c_double = (
+            ctypes.POINTER(ctypes.c_double),
+            ctypes.POINTER(ctypes.c_int),
+            ctypes.c_int,
+            ctypes.c_double,
+        )
+        vp = ctypes.c_void_p
+        self._run.restype = ctypes.c_int
+        self._run.argtypes = [
+            vp,
+            vp,
+            vp,
+            vp,
+            c_int,
+            c_int,
+            c_int,
+            c_int,
+            ip,
+            ip,
+            c_int,
+            c_int,
+            c_int,
+            c_int,
+            c_double,
+            c_double,
+            c_double,
+            c_double,
+            c_double,
+            c_double,
+            c_double,
+            c_double,
+            c_double,
+            dp,
+            dp,
+            dp,
+            dp,
+            dp,
+            dp,
+            dp,
+            dp,
+            dp,
+            ip,
+            ip,
+            vp,
+            vp,
+            vp,
+            vp,
+            vp,
+            vp,
+        ]
+        self._map, self._lapack = node_map, eigen_lapack()  # kept alive for the calls
+        self._equality = np.ascontiguousarray(equality, dtype=np.intc)
+        self._eig_value, self._eig_code, self._direction = (
+            ctypes.c_double(0.0),
+            ctypes.c_int(-1),
+            np.zeros(n),
+        )
+        self._eigen_args = (
+            self._equality.ctypes.data,
+            ctypes.addressof(self._lapack),
+            ctypes.addressof(self._eig_value),
+            self._direction.ctypes.data,
+            ctypes.addressof(self._eig_code),
+        )
+        #: what a converged call also evaluates (``UpdateOutputs``), None: nothing
+        self.after: UpdateOutputs | None = None
+        self._head = (
+            lapack_pointer("dgetrf"),
+            lapack_pointer("dgetrs"),
+            lapack_pointer("dgemm"),
+            ctypes.addressof(node_map.struct),
+            node_map.rows_w,
+            node_map.buf_size,
+        )
+        self.n, self.rows = n, rows
+
+    def __call__(
+        self,
+        z: np.ndarray,
+        lam: np.ndarray,
+        p: np.ndarray,
+        active: np.ndarray,
+        ub: np.ndarray,
+        switchable: np.ndarray,
+        switches: int,
+        max_steps: int,
+        first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
+        prof: np.ndarray | None = None,
+    ) -> ActiveOutcome:
+        """From (z, λ) with the rows ``active`` held at ``ub`` (both over every row); up to
+        ``switches`` changes among the rows ``switchable``; ``max_steps``: the most evaluations of
+        the full KKT function on the way (the one at the answer not counted); ``first``: (∇f, g,
+        ∂g/∂z, ∇²L) for the first step instead of an evaluation; ``prof``: the string's profiles,
+        for the outputs (``after``).
+        """
+        n, rows = self.n, self.rows
+        z = np.array(z, dtype=float, copy=True)
+        lam = np.array(lam, dtype=float, copy=True)
+        p = np.ascontiguousarray(p, dtype=float)
+        act = np.ascontiguousarray(active, dtype=np.intc).copy()
+        switch = np.ascontiguousarray(switchable, dtype=np.intc)
+        ub = np.ascontiguousarray(ub, dtype=float)
+        grad, g = np.zeros(n), np.zeros(rows)
+        jac, hess, energies = np.zeros(rows * n), np.zeros(n * n), np.full(5, np.nan)
+        if first is not None:
+            grad[:] = np.ravel(first[0])
+            g[:] = np.ravel(first[1])
+            jac[:] = np.asarray(first[2], dtype=float).ravel(order="F")
+            hess[:] = np.asarray(first[3], dtype=float).ravel(order="F")
+        steps, evaluations = ctypes.c_int(0), ctypes.c_int(0)
+        dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+        code = self._run(
+            *self._head,
+            n,
+            rows,
+            act.ctypes.data_as(ip),
+            switch.ctypes.data_as(ip),
+            int(switches),
+            int(max_steps),
+            NEWTON_CHORD_STEPS,
+            int(first is not None),
+            NEWTON_MAX_STEP,
+            NEWTON_REGULARISATION,
+            NEWTON_DUAL_TOLERANCE,
+            NEWTON_PRIMAL_TOLERANCE,
+            NEWTON_CHORD_TOLERANCE,
+            NEWTON_CHORD_CONTRACTION,
+            NEWTON_CHORD_START,
+            JOIN_TOLERANCE,
+            LEAVE_TOLERANCE,
+            z.ctypes.data_as(dp),
+            p.ctypes.data_as(dp),
+            lam.ctypes.data_as(dp),
+            ub.ctypes.data_as(dp),
+            grad.ctypes.data_as(dp),
+            g.ctypes.data_as(dp),
+            jac.ctypes.data_as(dp),
+            hess.ctypes.data_as(dp),
+            energies.ctypes.data_as(dp),
+            ctypes.byref(steps),
+            ctypes.byref(evaluations),
+            *self._eigen_args,
+            self.after.prepare(prof) if self.after is not None else None,
+        )
+        out = ActiveOutcome(
+            int(code),
+            z,
+            lam,
+            grad,
+            g,
+            jac.reshape(rows, n, order="F"),
+            hess.reshape(n, n, order="F"),
+            energies,
+            steps.value,
+            act.astype(bool),
+            evaluations.value,
+        )
+        if code == CONVERGED:
+            if self._eig_code.value == EIGEN_FOUND:
+                out.eigen = (self._eig_value.value, self._direction.copy())
+            if self.after is not None:
+                out.outputs = self.after.collect(z, p)[1]
+        return out

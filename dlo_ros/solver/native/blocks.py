@@ -1,0 +1,130 @@
+"""What the compiled Newton drivers are handed from Python: SciPy's LAPACK and BLAS by address, and
+the node map E as dense blocks for the Hessian's per-node part (``NodeBlocks``; ``WithNodePart``
+adds the same part in numpy around a compiled split function called from Python).
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+
+def lapack_pointer(name: str) -> int:
+    """The address of SciPy's LAPACK (or, for dgemm, BLAS) routine ``name`` (from the PyCapsules
+    scipy.linalg.cython_lapack and cython_blas export).
+    """
+    from scipy.linalg import cython_blas, cython_lapack
+
+    capsule = (cython_blas if name == "dgemm" else cython_lapack).__pyx_capi__[name]
+    get_name = ctypes.pythonapi.PyCapsule_GetName
+    get_name.restype, get_name.argtypes = ctypes.c_char_p, [ctypes.py_object]
+    get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
+    get_pointer.restype, get_pointer.argtypes = (
+        ctypes.c_void_p,
+        [ctypes.py_object, ctypes.c_char_p],
+    )
+    return int(get_pointer(capsule, get_name(capsule)))
+
+
+class EigenLapackStruct(ctypes.Structure):
+    """dlo_eigen_lapack in the drivers' C (native/dlo_eigen.h)."""
+
+    _fields_ = [
+        ("geqp3", ctypes.c_void_p),
+        ("orgqr", ctypes.c_void_p),
+        ("syevr", ctypes.c_void_p),
+        ("gemm", ctypes.c_void_p),
+        ("chunk", ctypes.c_int),
+    ]
+
+
+def eigen_lapack() -> EigenLapackStruct:
+    """SciPy's routines the drivers' stability eigenvalue calls, and its dgemm chunk."""
+    return EigenLapackStruct(
+        *(lapack_pointer(name) for name in ("dgeqp3", "dorgqr", "dsyevr", "dgemm")), CHUNK_WORK
+    )
+
+
+class _NodeMapStruct(ctypes.Structure):
+    """dlo_node_map in the drivers' C (native/dlo_common.h)."""
+
+    _fields_ = [
+        ("groups", ctypes.c_int),
+        ("chunk", ctypes.c_int),
+        ("count", ctypes.c_void_p),
+        ("row", ctypes.c_void_p),
+        ("col", ctypes.c_void_p),
+        ("block", ctypes.c_void_p),
+    ]
+
+
+class NodeBlocks:
+    """The node map E (d·M × n, ``StringNLP.node_map``) as dense blocks for the drivers'
+    ``dlo_add_node_part`` (H += Eᵀ W): E's columns grouped by the per-node components (row mod d)
+    they reach, each group with the rows any of its columns reaches.  For the default 3D model,
+    four groups (one per quaternion component) of 16 columns and 48 rows: a quarter of the
+    multiplications of Eᵀ W as one dense product. ``chunk``: the most rows one dgemm call takes, so
+    that OpenBLAS runs it on the calling thread.
+    """
+
+    def __init__(self, node_map: np.ndarray, width: int):
+        E = np.asarray(node_map, dtype=float)
+        n = E.shape[1]
+        groups: dict[tuple, list[int]] = {}
+        for c in range(n):
+            support = np.flatnonzero(E[:, c])
+            if support.size:
+                groups.setdefault(tuple(sorted(set((support % width).tolist()))), []).append(c)
+        #: (rows, columns, E[rows, columns]) of each group
+        self.groups = []
+        for members in groups.values():
+            reached = np.flatnonzero(np.any(E[:, members] != 0, axis=1))
+            self.groups.append((reached, np.array(members), E[np.ix_(reached, members)]))
+        rows, cols, blocks = ([group[i] for group in self.groups] for i in range(3))
+        self.count = np.array([(r.size, c.size) for r, c, _ in self.groups], dtype=np.intc).ravel()
+        self.row = np.ascontiguousarray(np.concatenate(rows), dtype=np.intc)
+        self.col = np.ascontiguousarray(np.concatenate(cols), dtype=np.intc)
+        self.block = np.concatenate([b.ravel(order="F") for b in blocks])
+        widest, deepest = max(len(c) for c in cols), max(r.size for r in rows)
+        self.rows_w = E.shape[0]
+        self.chunk = max(1, min(deepest, CHUNK_WORK // (widest * n)))
+        self.buf_size = (self.chunk + widest) * n
+        self.struct = _NodeMapStruct(
+            len(groups),
+            self.chunk,
+            self.count.ctypes.data,
+            self.row.ctypes.data,
+            self.col.ctypes.data,
+            self.block.ctypes.data,
+        )
+
+
+class WithNodePart:
+    """A compiled split function (``StringNLP.kkt_free_split_fn``, ``kkt_split_fn``) called as the
+    whole one: its last output W dropped and Eᵀ W added to the top-left n × n block of output
+    ``target`` (K, ∇²L), one product per ``NodeBlocks`` group (numpy: each below OpenBLAS's
+    threshold for threads), so that the evaluations Python makes (a saddle's escape, the
+    derivatives at an adopted start, the stability check of a state without them) take the same
+    shortcut as the compiled loops.  Not re-entrant (the split function's buffers): callers
+    serialise calls, as for ``compiled.NativeFunction``.
+    """
+
+    def __init__(self, split, blocks: NodeBlocks, target: int):
+        self._split, self._target = split, target
+        self._groups = [
+            (rows, cols, np.ascontiguousarray(block.T)) for rows, cols, block in blocks.groups
+        ]
+
+    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        *out, weighted = self._split(*args)
+        h = out[self._target]
+        n = weighted.shape[1]
+        for rows, cols, block_t in self._groups:
+            h[cols, :n] += block_t @ weighted[rows]
+        return out
+
+
+#: the most multiplications (m·n·k) of one dgemm in ``dlo_add_node_part``: below OpenBLAS's
+# threshold for : threads (65536 · 4), whose workers would spin on the other core between calls
+CHUNK_WORK = 150_000

@@ -1,0 +1,1 @@
+"""Many independent solves at once: batches over a pool of worker processes."""

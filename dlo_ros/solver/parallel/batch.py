@@ -1,0 +1,237 @@
+"""Many independent shape queries at once, on every core (or a cluster).
+
+``query_many(problem, options, targets)`` answers each entry of ``targets`` (grip poses, as for
+``solve``) as a solver of ``problem``/``options`` holding the shape at ``problem``'s grip poses
+answers ``solve(poses, commit=False)``, but in worker processes: the targets are cut into one
+contiguous chunk per worker; each worker solves the held shape once (cold, from the scene's poses)
+and starts every query of the chunk from it, so an answer does not depend on which worker gave it
+or on the other queries.  The caller's solver and its warm start are never touched.  (The caller's
+own held shape came from its stream; where a scene has several equilibria at the held poses, the
+worker's cold one can be another branch.)
+
+Workers keep their solvers between calls (``_WORKER_SOLVERS``, keyed by the scene's structure, at
+most ``WORKER_SOLVERS`` per process), so only the first call pays for the build.  Workers never
+start a C compiler: they use compiled derivatives only when the cache already has them
+(``compile='cached'``).
+
+``executor``: any ``concurrent.futures.Executor`` whose workers can import dlo_ros — by default a
+process pool of ``os.cpu_count()`` spawned workers kept for the life of the process
+(:func:`default_executor`); a Dask ``distributed`` client's ``client.get_executor()`` runs the same
+call on a cluster.  Threads would not help: an interpreted CasADi call holds the GIL.
+"""
+
+from __future__ import annotations
+
+import atexit
+import collections
+import dataclasses
+import os
+import pickle
+import threading
+import time
+from concurrent.futures import CancelledError, Executor, Future
+from concurrent.futures.process import BrokenProcessPool
+from typing import Mapping, Sequence
+
+from ...model.problem import Problem
+from ..options import SolverOptions
+from ..results.result import ShapeResult
+from .worker_pool import (
+    BACKGROUND_NICE,
+    TaskTimeout,
+    WorkerDied,
+    WorkerPool,
+    process_pool,  # noqa: F401
+    stop_pool,
+    worker_pids,
+)
+
+
+#: Solvers a worker process keeps (least recently used dropped first).
+WORKER_SOLVERS = 2
+
+_WORKER_SOLVERS: "collections.OrderedDict[bytes, tuple[bytes, object]]" = collections.OrderedDict()
+_default: "WorkerPool | None" = None
+_default_lock = threading.Lock()
+_worker_lock = (
+    threading.Lock()
+)  # a thread executor's workers share this process's solvers: one at a time
+
+
+def default_executor() -> WorkerPool:
+    """The pool ``query_many`` uses when given none: a :class:`WorkerPool` of ``os.cpu_count()``
+    workers, replaced when a worker dies or a call times out, stopped at exit.
+    """
+    global _default
+    with _default_lock:
+        if _default is None:
+            _default = WorkerPool()
+            atexit.register(_default.stop, 5.0)
+        return _default
+
+
+def scene_payload(problem: Problem, options: SolverOptions) -> bytes:
+    """The pickled (problem, options) :func:`solve_chunk` takes."""
+    return pickle.dumps((problem, options), protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def query_many(
+    problem: Problem,
+    options: SolverOptions | None,
+    targets: Sequence[Mapping],
+    executor: Executor | None = None,
+    *,
+    chunks: int | None = None,
+    compile: str = "cached",
+    timeout: float | None = None,
+) -> list[ShapeResult]:
+    """One ShapeResult per entry of ``targets`` (each a ``{grip name: pose}`` mapping, as for
+    ``solve``), in order.  ``chunks``: how many pieces the targets are cut into (default: the
+    executor's worker count, or ``os.cpu_count()``).  A query that fails answers with its status
+    and message, as ``solve`` does; the others are unaffected.
+
+    ``timeout`` [s] (default None: no limit): the longest the call waits.  Queries not answered by
+    then answer ``failed`` with a message starting "timeout:"; on a :class:`WorkerPool` (the
+    default executor) their workers are killed and replaced.  Queries whose worker died answer
+    ``failed`` naming the cause; the default pool is rebuilt for the next call.  The call never
+    hangs on a dead worker.
+    """
+    options = options or SolverOptions()
+    problem.validate()
+    options.validate()
+    targets = [dict(t) for t in targets]
+    if not targets:
+        return []
+    executor = executor or default_executor()
+    n = (
+        chunks
+        or getattr(executor, "max_workers", None)
+        or getattr(executor, "_max_workers", None)
+        or os.cpu_count()
+        or 1
+    )
+    n = max(1, min(int(n), len(targets)))
+    bounds = [round(i * len(targets) / n) for i in range(n + 1)]
+    spans = [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+    payload = scene_payload(problem, options)
+    deadline = None if timeout is None else time.monotonic() + float(timeout)
+    futures: list[Future | BaseException] = []
+    for a, b in spans:
+        try:
+            if isinstance(executor, WorkerPool):
+                futures.append(
+                    executor.submit(solve_chunk, payload, targets[a:b], compile, timeout=timeout)
+                )
+            else:
+                futures.append(executor.submit(solve_chunk, payload, targets[a:b], compile))
+        except (
+            BrokenProcessPool,
+            RuntimeError,
+        ) as exc:  # a given executor that is broken or shut down
+            futures.append(exc)
+    results: list[ShapeResult] = []
+    for (a, b), future in zip(spans, futures):
+        if isinstance(future, BaseException):
+            message = f"{type(future).__name__}: {future}"
+            results.extend(ShapeResult(status="failed", message=message) for _ in range(b - a))
+            continue
+        try:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            # a WorkerPool's futures time out by themselves (and replace the workers)
+            results.extend(
+                future.result(None if left is None or isinstance(executor, WorkerPool) else left)
+            )
+        except TimeoutError as exc:  # TaskTimeout, or concurrent.futures' on another executor
+            future.cancel()
+            message = (
+                str(exc)
+                if isinstance(exc, TaskTimeout)
+                else f"timeout: no answer within {timeout:g} s"
+            )
+            results.extend(ShapeResult(status="failed", message=message) for _ in range(b - a))
+        except (WorkerDied, BrokenProcessPool, CancelledError) as exc:
+            message = f"{type(exc).__name__}: {exc}"
+            results.extend(ShapeResult(status="failed", message=message) for _ in range(b - a))
+    return results
+
+
+def solve_chunk(
+    scene: bytes, targets: list[dict], compile: str = "cached", checks: str = "sync"
+) -> list[ShapeResult]:
+    """(worker) Solve ``targets`` with this process's solver of the pickled (problem, options)
+    ``scene``, each from the held shape at the scene's poses (``commit=False``); the solver is kept
+    for the next call.  ``checks``: the a-posteriori checks of an auto solver (``make_solver``):
+    'sync' for a batch (a scene solved once, checked before its queries), 'background' for a node's
+    workers, whose held shape follows the stream: a check due on one of its updates then runs
+    beside the queries, not in front of them.
+    """
+    problem, options = pickle.loads(scene)
+    results = []
+    with _worker_lock:  # one CasADi/IPOPT solver must never be called from two threads at once
+        solver = _worker_solver(scene, problem, options, compile, checks)
+        for poses in targets:
+            try:
+                result = solver.solve(poses, warm=True, commit=False)
+            # noqa: BLE001 - one bad query must not lose the chunk's other answers
+            except Exception as exc:
+                result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
+            results.append(result)
+    return results
+
+
+def _worker_solver(
+    scene: bytes, problem: Problem, options: SolverOptions, compile: str, checks: str
+):
+    """This process's solver for the scene's structure, built once, holding the shape at the
+    scene's values and poses (re-solved from its previous shape when they change).
+    """
+    from ..auto.auto_solver import make_solver
+    from ..shape_solver import structure_key
+
+    key = pickle.dumps(
+        (structure_key(problem, options), options, checks), protocol=pickle.HIGHEST_PROTOCOL
+    )
+    entry = _WORKER_SOLVERS.pop(key, None)
+    if entry is None:
+        solver = make_solver(problem, options, compile=compile, checks=checks)
+        solver.solve()  # the held shape: every query starts from it
+    else:
+        values, solver = entry
+        if values != scene:
+            held, _ = pickle.loads(values)
+            if _grips_moved_only(held, problem):
+                # only the grips moved (a node's stream did): a warm update, as the stream's, which
+                # runs auto's checks every recheck_every updates; set_problem would check the model
+                # now
+                solver.solve({g.name: g.pose for g in problem.grips})
+            else:
+                solver.set_problem(problem)
+                solver.solve()
+    _WORKER_SOLVERS[key] = (scene, solver)
+    while len(_WORKER_SOLVERS) > WORKER_SOLVERS:
+        _, (_, old) = _WORKER_SOLVERS.popitem(last=False)
+        close = getattr(old, "close", None)
+        if close is not None:
+            close()
+    return solver
+
+
+def _grips_moved_only(old: Problem, new: Problem) -> bool:
+    """Whether ``new`` differs from ``old`` in grip poses at most (field by field: pickles of the
+    whole problems can differ where only the sharing of equal objects does).
+    """
+
+    def rest(grip) -> bytes:
+        return pickle.dumps(
+            [getattr(grip, f.name) for f in dataclasses.fields(grip) if f.name != "pose"]
+        )
+
+    if len(old.grips) != len(new.grips) or any(
+        rest(a) != rest(b) for a, b in zip(old.grips, new.grips)
+    ):
+        return False
+    return all(
+        pickle.dumps(getattr(old, f.name)) == pickle.dumps(getattr(new, f.name))
+        for f in dataclasses.fields(new)
+        if f.name != "grips"
+    )

@@ -1,0 +1,1 @@
+"""Results of a solve and their checks: outputs, grip wrenches, residual, stability."""

@@ -1,0 +1,403 @@
+"""What a solve returns: the ShapeResult of a converged state, in SI units.
+
+* the centreline x(s) [m] and pose quaternions at ``output_points`` arc lengths evenly spaced over
+  [0, L];
+* the energy terms [J] (bend, twist, stretch, gravity, external work; total = U − W);
+* each grip's reaction wrench and each obstacle's contact force (−Σ λ ∇h over its touching samples)
+  [N];
+* the stability verdict from the reduced Hessian (``stability.py``);
+* the equilibrium residual (``wrenches.equilibrium``).  A shape whose residual exceeds the
+  tolerance
+  (``error_tolerance``, default 1e-3 L) is 'unverified' and carries no stability verdict; a
+  director model's shape whose orientation rows hold on the flipped sheet is 'failed' and carries
+  no shape.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ...model.director import frame_to_quat
+from ...model.problem import Problem
+from ...model.rotations import pose_quaternions
+from ..build import frames as F
+from ..build.functions import NlpFunctions
+from ..build.nlp import StringNLP
+from ..options import SolverOptions
+from ..build.parameters import ProblemParameters
+from .residual import EquilibriumResidual, PointAction
+from .result import GripWrench, SelfContact, ShapeResult
+from ..contact.self_contact import slot_multiplier
+from .stability import is_stable, min_reduced_eigenvalue
+from ..state import SolverState
+from .wrenches import FramesOf, equilibrium, wrench
+
+
+def output_s(nlp: StringNLP, options: SolverOptions) -> np.ndarray:
+    """The published arc lengths [m]: ``output_points`` evenly spaced over [0, L]."""
+    return np.linspace(0.0, nlp.length, options.output_points)
+
+
+def no_shape(
+    options: SolverOptions, summary: Any, status: str, message: str, **fields: Any
+) -> ShapeResult:
+    """A result without a shape (invalid input, unreachable, infeasible, failed): nothing in it
+    could be mistaken for a shape, an energy, a wrench or an eigenvalue.
+    """
+    return ShapeResult(
+        status=status,
+        message=message,
+        basis=options.basis,
+        order=options.order,
+        model=summary,
+        **fields,
+    )
+
+
+def sample(
+    nlp: StringNLP, z: np.ndarray, s_out: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centreline points (N, 3) and φ, θ of an Euler model at ``s_out``: ``RitzModel.positions``
+    and ``fields`` with the output matrices looked up once and each field's coefficients multiplied
+    once.
+    """
+    m = nlp.model
+    b_out, _, w_out = m.matrices(s_out)
+    cphi, cth, ceps = (m.coefficients(z, name) for name in ("phi", "theta", "eps"))
+    theta_nodes = m.B @ cth if cth is not None else np.full(m.quad.count, np.pi / 2)
+    t = m.tangents(m.B @ cphi, theta_nodes, m.B @ ceps if ceps is not None else None, lib=np)
+    points = (z[0:3] * m.length)[None, :] + w_out @ t.T
+    theta = b_out @ cth if cth is not None else np.full(len(s_out), np.pi / 2)
+    return points, b_out @ cphi, theta
+
+
+class ShapeOutputs:
+    """Builds the ShapeResult of a solved state of one NLP (see the module docstring)."""
+
+    def __init__(
+        self,
+        nlp: StringNLP,
+        fns: NlpFunctions,
+        parameters: ProblemParameters,
+        options: SolverOptions,
+    ):
+        self.nlp, self.fns, self.parameters, self.options = nlp, fns, parameters, options
+        self.s_out = output_s(nlp, options)
+        #: the self-contact slots p holds in the solve under way (set by ShapeSolver; None: not
+        # modelled)
+        self.contact_slots = None
+
+    def frames_of(self, current: Problem) -> FramesOf:
+        """Material frames Q(z, s) with the twist-free frames anchored at ``current``'s grips."""
+        return lambda z, s: F.frames(self.nlp, self.parameters, current, z, s)
+
+    def result(
+        self,
+        problem: Problem,
+        current: Problem,
+        state: SolverState,
+        ipopt_status: str,
+        iterations: int,
+        violation: float,
+        warm: bool,
+        steps: int,
+        summary: Any,
+    ) -> ShapeResult:
+        """The result of ``state`` solving ``problem``; its grips anchor the published twist-free
+        frames (the tangent model's roll follows the first held grip being solved for).
+        ``current``: the solver's committed scene, whose grips anchor the wrenches' frames;
+        ``summary``: the result's model.
+        """
+        nlp, m, options = self.nlp, self.nlp.model, self.options
+        z, p = state.z, state.p
+        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        if self.fns.outputs is not None and self.contact_slots is None:
+            return self._compiled_result(
+                problem,
+                current,
+                state,
+                lam_si,
+                ipopt_status,
+                iterations,
+                violation,
+                warm,
+                steps,
+                summary,
+            )
+        s_out = self.s_out.copy()
+        if nlp.director:
+            points = m.positions(z, s_out)
+            quats = frame_to_quat(F.pose_frames(nlp, self.parameters, problem, z, s_out))
+        else:
+            points, phi, theta = sample(nlp, z, self.s_out)
+            quats = pose_quaternions(
+                nlp.r0, phi, theta, F.frames_psi(nlp, self.parameters, current, z, s_out, p)
+            )
+        frames_of = self.frames_of(current)
+        grips = {
+            g.name: wrench(nlp, current.string, frames_of, g, z, lam_si) for g in problem.grips
+        }
+        contacts, actions = self._contacts(problem, z, p, lam_si)
+        self_contacts = self._self_contacts(z, lam_si)
+        for c in self_contacts:  # equal and opposite on the two strands
+            actions += [
+                PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
+                PointAction(c.s_b, c.point_b, -c.force, np.zeros(3)),
+            ]
+        residual = equilibrium(nlp, problem, z, grips, actions, lam_si)
+        flipped = F.flipped_grips(nlp, problem, z) if nlp.director else ""
+        # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier
+        # complementarity)
+        touching = [
+            c
+            for c in self_contacts
+            if c.gap <= self.contact_slots.geometry.distance + 1e-7 * nlp.length
+        ]
+        return self._assemble(
+            problem,
+            state,
+            summary,
+            points,
+            quats,
+            grips,
+            contacts,
+            residual,
+            flipped,
+            touching,
+            ipopt_status,
+            iterations,
+            violation,
+            warm,
+            steps,
+        )
+
+    def _compiled_result(
+        self,
+        problem: Problem,
+        current: Problem,
+        state: SolverState,
+        lam_si: np.ndarray,
+        ipopt_status: str,
+        iterations: int,
+        violation: float,
+        warm: bool,
+        steps: int,
+        summary: Any,
+    ) -> ShapeResult:
+        """``result`` from one call of the outputs' function (``output_function.py``): the same
+        shape, wrenches, contact forces, residual and flip test as the numpy path.
+        """
+        plan = self.fns.output_function
+        prof = plan.profiles(problem.string)
+        computed = (
+            state.outputs
+        )  # the compiled loop's, at its answer (native_newton.UpdateOutputs)
+        if computed is not None and computed.matches(state.z, state.p, lam_si, prof):
+            points, v_out, forces, torques, contact, res, flip = computed.values
+        else:
+            points, v_out, forces, torques, contact, res, flip = self.fns.outputs(
+                state.z, state.p, lam_si, prof
+            )
+        grips = {
+            name: GripWrench(force=forces[:, k], torque=torques[:, k])
+            for k, name in enumerate(plan.grip_names)
+        }
+        contacts = {i: contact[:, i] for i in range(plan.n_obstacles)}
+        # frames.flipped_grips: t against the target's x axis, and d1 against its y axis for a
+        # clamp
+        flipped = ", ".join(
+            g.name
+            for k, g in enumerate(problem.grips)
+            if g.mode != "pin" and (flip[0, k] < 0 or (g.mode == "clamp" and flip[1, k] < 0))
+        )
+        residual = EquilibriumResidual(float(res[0, 0]), float(res[1, 0]), float(res[2, 0]))
+        if plan.planar:  # v_out is φ: the orientations as ``sample`` and the numpy path make them
+            phi = v_out.ravel()
+            quats = pose_quaternions(
+                self.nlp.r0,
+                phi,
+                np.full(phi.size, np.pi / 2),
+                F.frames_psi(self.nlp, self.parameters, current, state.z, self.s_out, state.p),
+            )
+        else:
+            quats = v_out.T
+        return self._assemble(
+            problem,
+            state,
+            summary,
+            points.T,
+            quats,
+            grips,
+            contacts,
+            residual,
+            flipped,
+            [],
+            ipopt_status,
+            iterations,
+            violation,
+            warm,
+            steps,
+        )
+
+    def _assemble(
+        self,
+        problem: Problem,
+        state: SolverState,
+        summary: Any,
+        points: np.ndarray,
+        quats: np.ndarray,
+        grips: dict[str, GripWrench],
+        contacts: dict[int, np.ndarray],
+        residual: EquilibriumResidual,
+        flipped: str,
+        self_contacts: list[SelfContact],
+        ipopt_status: str,
+        iterations: int,
+        violation: float,
+        warm: bool,
+        steps: int,
+    ) -> ShapeResult:
+        """The ShapeResult of the evaluated outputs: the energies and the stability verdict from
+        the reduced Hessian; 'failed' on a flipped branch, 'unverified' over the residual's
+        tolerance.
+        """
+        options = self.options
+        min_eig = min_reduced_eigenvalue(self.nlp, self.fns, state)  # also fills state.energies
+        bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
+        energy = {
+            "bend": bend,
+            "twist": twist,
+            "stretch": stretch,
+            "gravity": grav,
+            "external_work": work,
+            "total": bend + twist + stretch + grav - work,
+        }
+        stable = None if min_eig is None else is_stable(min_eig, state.hessian)
+        status, message = (
+            "ok",
+            "converged" + (f" after {steps} continuation steps" if steps else ""),
+        )
+        tolerance = options.error_tolerance or 1e-3 * problem.string.length
+        if flipped:  # not the grip's pose at all: no shape
+            return no_shape(
+                options,
+                summary,
+                "failed",
+                f"landed on a flipped branch: {flipped}",
+                iterations=iterations,
+                constraint_violation=violation,
+                warm_started=warm,
+                ipopt_status=ipopt_status,
+            )
+        if not residual.metres <= tolerance:
+            status, stable = "unverified", None
+            message = (
+                f"not a verified equilibrium: the equilibrium residual is {residual.metres:.3g} m, over the "
+                f"tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)"
+            )
+        return ShapeResult(
+            model=summary,
+            status=status,
+            message=message,
+            s=self.s_out.copy(),
+            points=points,
+            orientations=quats,
+            energy=energy,
+            grips=grips,
+            contact_forces=contacts,
+            stable=stable,
+            min_eigenvalue=min_eig,
+            iterations=iterations,
+            constraint_violation=violation,
+            warm_started=warm,
+            continuation_steps=steps,
+            basis=options.basis,
+            order=options.order,
+            ipopt_status=ipopt_status,
+            equilibrium_residual_m=residual.metres,
+            self_contacts=self_contacts,
+        )
+
+    def _self_contacts(self, z: np.ndarray, lam_si: np.ndarray) -> list[SelfContact]:
+        """Each slot with a positive multiplier λ [N/m] of its row D² − |x_a − x_b|² ≤ 0: the force
+        2 λ (x_a − x_b) on the string at s_a (−∂(λ g)/∂x_a) and its opposite at s_b.
+        """
+        slots, nlp = self.contact_slots, self.nlp
+        if slots is None or not nlp.self_contact_rows:
+            return []
+        out = []
+        s = slots.geometry.s
+        for k, row in enumerate(nlp.self_contact_rows):
+            pair = slots.pairs[k] if k < len(slots.pairs) else None
+            if pair is None or not lam_si[row] > 0:
+                continue
+            xa, xb = nlp.model.positions(z, np.array([s[pair[0]], s[pair[1]]]))
+            lam = slot_multiplier(lam_si[row], slots.geometry)
+            out.append(
+                SelfContact(
+                    float(s[pair[0]]),
+                    float(s[pair[1]]),
+                    xa,
+                    xb,
+                    2.0 * lam * (xa - xb),
+                    float(np.linalg.norm(xa - xb)),
+                )
+            )
+        return out
+
+    def _contacts(
+        self, problem: Problem, z: np.ndarray, p: np.ndarray, lam_si: np.ndarray
+    ) -> tuple[dict[int, np.ndarray], list[PointAction]]:
+        """Each obstacle's total contact force [N] (−Σ_j λ_j ∇h(x_j) over its samples and contact
+        slots), and every touching sample's or slot's force as a point action on the string (for
+        the equilibrium residual).
+        """
+        nlp = self.nlp
+        contacts: dict[int, np.ndarray] = {}
+        actions: list[PointAction] = []
+        if not nlp.obstacle_rows:
+            return contacts, actions
+        touching = np.any(lam_si[nlp.n_free_rows :] > 0)  # obstacle rows come last
+        sample_x = nlp.model.positions(z, nlp.obstacle_s) if touching else None
+        for i, rows in enumerate(nlp.obstacle_rows):
+            ob = problem.obstacles[i]
+            lam = lam_si[rows]
+            if nlp.obstacle_slots:  # a sample a contact slot replaces acts with no force
+                lam = lam * p[nlp.params[f"samples:{i}:on"]]
+            touch = np.flatnonzero(lam > 0)
+            if not touch.size:
+                contacts[i] = np.zeros(3)
+                continue
+            # one call for every touching sample (CasADi maps a function over the columns)
+            grads = (
+                np.asarray(nlp.obstacle_gradient[ob.type](sample_x[touch].T, ob.params))
+                .reshape(3, -1)
+                .T
+            )
+            forces = -lam[touch, None] * grads
+            contacts[i] = forces.sum(axis=0)
+            actions += [
+                PointAction(float(nlp.obstacle_s[j]), sample_x[j], f, np.zeros(3))
+                for j, f in zip(touch, forces)
+            ]
+        for i, rows in enumerate(
+            nlp.slot_rows
+        ):  # contact slots (solver/contact/obstacle_slots.py)
+            ob, lay = problem.obstacles[i], nlp.params
+            touch = np.flatnonzero((lam_si[rows] > 0) & (p[lay[f"slots:{i}:on"]] > 0))
+            if not touch.size:
+                continue
+            slot_x = nlp.model.positions_at_rows(z, nlp.slot_matrix(p, i)[touch])
+            grads = (
+                np.asarray(nlp.obstacle_gradient[ob.type](slot_x.T, ob.params)).reshape(3, -1).T
+            )
+            forces = -lam_si[np.asarray(rows)[touch], None] * grads
+            contacts[i] = contacts[i] + forces.sum(axis=0)
+            slot_s = p[lay[f"slots:{i}:s"]]
+            actions += [
+                PointAction(float(slot_s[k]), x, f, np.zeros(3))
+                for k, x, f in zip(touch, slot_x, forces)
+            ]
+        return contacts, actions

@@ -1,0 +1,145 @@
+"""The result of one solve: what the node, the CLI, rerun logging and the benchmarks all
+consume.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .summary import ModelSummary
+
+#: 'unverified': the solver converged but the shape fails the equilibrium check
+# (equilibrium_residual_m : over the tolerance); it carries the shape for inspection, never a
+# stability verdict
+STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
+
+
+@dataclass
+class GripWrench:
+    """Reaction at a grip: the force [N] and torque [N·m] the gripper exerts ON the string, world
+    frame.
+
+    The torque is about the grip point.  The gripper feels the opposite (−force, −torque).
+    """
+
+    force: np.ndarray
+    torque: np.ndarray
+
+
+@dataclass
+class SelfContact:
+    """A pair of points of the string pressed against each other (solver/contact/self_contact.py).
+
+    s_a < s_b [m] and their centreline points [m]; force [N] acts on the string at s_a, −force at
+    s_b (along x(s_a) − x(s_b)); gap [m] is their centreline distance.
+    """
+
+    s_a: float
+    s_b: float
+    point_a: np.ndarray
+    point_b: np.ndarray
+    force: np.ndarray
+    gap: float
+
+
+@dataclass
+class ShapeResult:
+    """One equilibrium (or the reason there is none).
+
+    points (N, 3) [m] and orientations (N, 4) (x, y, z, w; pose x-axis along the tangent) at arc
+    lengths s (N,).  energy [J]: bend, twist, stretch, gravity, external_work and total = U − W.
+    min_eigenvalue: smallest eigenvalue of the Hessian of the Lagrangian reduced to the null space
+    of the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable.
+    constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
+    equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as
+    an equivalent centreline error (solver/results/residual.py); NaN when there is no shape. self_contacts:
+    the pairs of points pressed together (empty when self-contact is not modelled or nothing
+    touches); min_self_distance [m]: the closest approach of two strands at the self-contact
+    samples (inf when no two strands are within the candidate reach, NaN when self-contact is not
+    modelled; JSON null for both).
+    """
+
+    status: str
+    message: str
+    s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    orientations: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    energy: dict[str, float] = field(default_factory=dict)
+    grips: dict[str, GripWrench] = field(default_factory=dict)
+    contact_forces: dict[int, np.ndarray] = field(default_factory=dict)
+    stable: bool | None = None
+    min_eigenvalue: float | None = None
+    iterations: int = 0
+    solve_time_ms: float = 0.0
+    constraint_violation: float = float("nan")
+    warm_started: bool = False
+    #: 'compiled' (the KKT functions as compiled C, warm updates one compiled Newton call) or
+    #'interpreted'
+    derivatives: str = ""
+    continuation_steps: int = 0
+    basis: str = ""
+    order: int = 0
+    ipopt_status: str = ""
+    model: ModelSummary | None = None  # the model solved (or attempted) with
+    equilibrium_residual_m: float = float("nan")
+    self_contacts: list[SelfContact] = field(default_factory=list)
+    min_self_distance: float = float("nan")
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def model_dict(self) -> dict:
+        """The model's JSON form (``ModelSummary.as_dict``; {} when the result has none)."""
+        return self.model.as_dict() if self.model is not None else {}
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary (the schema of ``dlo solve --json``, documented in msg_docs/)."""
+
+        def arr(a: np.ndarray) -> list:
+            return np.asarray(a, dtype=float).round(12).tolist()
+
+        return {
+            "status": self.status,
+            "message": self.message,
+            "stable": self.stable,
+            "min_eigenvalue": self.min_eigenvalue,
+            "s": arr(self.s),
+            "points": arr(self.points),
+            "orientations": arr(self.orientations),
+            "energy": {k: float(v) for k, v in self.energy.items()},
+            "grips": {
+                name: {"force": arr(w.force), "torque": arr(w.torque)}
+                for name, w in self.grips.items()
+            },
+            "contact_forces": {str(i): arr(f) for i, f in self.contact_forces.items()},
+            "self_contacts": [
+                {
+                    "s_a": c.s_a,
+                    "s_b": c.s_b,
+                    "point_a": arr(c.point_a),
+                    "point_b": arr(c.point_b),
+                    "force": arr(c.force),
+                    "gap": c.gap,
+                }
+                for c in self.self_contacts
+            ],
+            "min_self_distance": self.min_self_distance
+            if np.isfinite(self.min_self_distance)
+            else None,
+            "model": self.model_dict(),
+            "solver": {
+                "iterations": self.iterations,
+                "time_ms": self.solve_time_ms,
+                "basis": self.basis,
+                "order": self.order,
+                "constraint_violation": self.constraint_violation,
+                "equilibrium_residual_m": self.equilibrium_residual_m,
+                "warm_started": self.warm_started,
+                "derivatives": self.derivatives,
+                "continuation_steps": self.continuation_steps,
+                "ipopt_status": self.ipopt_status,
+            },
+        }

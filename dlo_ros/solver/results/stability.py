@@ -1,0 +1,109 @@
+"""Stability of an equilibrium: the smallest eigenvalue of the reduced Hessian of the Lagrangian.
+
+    λ_min = min eig(Nᵀ ∇²L N),   N an orthonormal basis of the null space of the active rows'
+    Jacobian
+
+(the equality rows and the inequality rows at their bound or with λ > 0).  λ_min < 0 (beyond the
+round-off of a neutral mode, ``is_stable``) means a direction along which the energy decreases
+while every active constraint holds: the equilibrium is unstable, and its eigenvector is the way
+out (``SolverState.unstable_direction``).  Units: Rf_max/L per (scaled unknown)², as the NLP's
+objective.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg.lapack import dgeqp3 as _geqp3
+from scipy.linalg.lapack import dorgqr as _orgqr
+from scipy.linalg.lapack import dsyevr as _syevr
+
+from ..native import settings
+from ..build.functions import NlpFunctions
+from ..update.newton import derivatives
+from ..build.nlp import StringNLP
+from ..state import SolverState
+
+
+def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState) -> float | None:
+    """λ_min of ``state`` (None when the active rows leave no freedom).  Fills the state's missing
+    derivatives (Hessian, Jacobian, energies, gradient) and its ``unstable_direction``.  The pair
+    the compiled loop computed with the state's Hessian (``SolverState.reduced_eigen``) is taken as
+    it is: it reduces on the free rows, and a contact-free state's obstacle rows have zero Jacobian
+    rows, which leave the null space as it is.
+    """
+    if state.reduced_eigen is not None and state.hessian is not None:
+        value, direction = state.reduced_eigen
+        state.unstable_direction = signed(direction) if value < 0 else None
+        return value
+    active = np.zeros(0, dtype=bool)
+    if nlp.lbg.size:
+        g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
+        # the rows the compiled loops hold too (native/newton_active.c): one value, native_settings
+        active = (
+            nlp.equality
+            | (np.abs(state.lam_g) > settings.STABILITY_MULTIPLIER_TOLERANCE)
+            | (g > nlp.ubg - settings.STABILITY_BOUND_TOLERANCE)
+        )
+    if state.hessian is None:
+        gradient, _, state.jacobian, state.hessian, state.energies = derivatives(
+            nlp, fns, state.z, state.p, state.lam_g, active
+        )
+        state.gradient = gradient.ravel()
+    h = state.hessian
+    jac = state.jacobian[active]
+    basis = null_space(jac) if jac.size else np.eye(h.shape[0])
+    if basis.shape[1] == 0:
+        return None
+    value, vector = lowest_eigenpair(basis.T @ h @ basis)
+    state.unstable_direction = signed(basis @ vector) if value < 0 else None
+    return value
+
+
+def signed(direction: np.ndarray) -> np.ndarray:
+    """An eigenvector with its sign fixed: LAPACK's sign is arbitrary, and rounding can flip it, so
+    it is signed by its first entry above a tenth of the largest (not the largest: a mode of a
+    near-symmetric shape has pairs of entries of equal size), so that two paths to the same saddle
+    leave it the same way.
+    """
+    first = np.flatnonzero(np.abs(direction) > 0.1 * np.abs(direction).max())[0]
+    return direction * np.sign(direction[first])
+
+
+def is_stable(min_eigenvalue: float, hessian: np.ndarray) -> bool:
+    """The stability verdict: a neutral mode (e.g. rotation about the chord without gravity) shows
+    as
+    ±1e-8·max|H|, so only eigenvalues below that count as unstable.
+    """
+    return bool(min_eigenvalue > -1e-8 * max(1.0, float(np.abs(hessian).max())))
+
+
+def lowest_eigenpair(a: np.ndarray) -> tuple[float, np.ndarray]:
+    """Smallest eigenvalue of the symmetric matrix ``a`` and its unit eigenvector (LAPACK syevr for
+    that one pair: a third of the time of a full eigendecomposition at the sizes here).
+    """
+    w, v, _, _, info = _syevr(a, compute_v=1, range="I", il=1, iu=1)
+    if info != 0:
+        values, vectors = np.linalg.eigh(a)
+        return float(values[0]), vectors[:, 0]
+    return float(w[0]), v[:, 0]
+
+
+def null_space(a: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of {v : a v = 0} from a column-pivoted QR of aᵀ (LAPACK geqp3,
+    rank-revealing):
+    rank = number of |R_kk| above max(a.shape)·eps·|R_00|, the tolerance scipy.linalg.null_space puts on
+    singular values.  Half the time of an SVD at the sizes here.
+    """
+    m, n = a.shape
+    qr, _, tau, _, info = _geqp3(np.array(a.T, order="F"))
+    if info != 0:
+        _, sv, vh = np.linalg.svd(a, full_matrices=True)
+        rank = int(np.sum(sv > max(a.shape) * np.finfo(float).eps * (sv[0] if sv.size else 0.0)))
+        return vh[rank:].T.conj()
+    k = min(m, n)
+    d = np.abs(np.diagonal(qr)[:k])
+    rank = int(np.sum(d > max(m, n) * np.finfo(float).eps * (d[0] if k else 0.0)))
+    q_in = np.zeros((n, n), order="F")
+    q_in[:, :k] = qr[:, :k]
+    q, _, info = _orgqr(q_in, np.concatenate([tau[:k], np.zeros(n - k)]))
+    return q[:, rank:]

@@ -1,0 +1,1 @@
+"""Update stages: how a committed shape moves to new targets (Newton, IPOPT, warm starts)."""

@@ -1,0 +1,157 @@
+"""Warm-start transfer: another model's committed equilibrium as this model's start, across models.
+
+Fields are re-expanded in the target model's basis from their values at its nodes: the director
+models from the source's pose frames (and strain), the Euler models from the source's fields (a
+planar solution gets θ ≡ π/2, a solution without ψ its zero-twist ψ, an inextensible one ε ≡ 0),
+re-extracting the Euler angles of the material frames in the target's reference frame R0 (unwrapped
+along s) when the frames differ.  Multipliers are matched by constraint-row identity (grip, name,
+component), the grip position rows through the reaction force vector (each model may use other axes
+for them), an obstacle's contact slots by their arc length (each model places its own:
+``obstacle_slots.py``); rows the source did not have get zero, and a director target gets
+least-squares multipliers of its equality rows at the adopted shape, ∇f + J_freeᵀ λ ≈ 0 (zeros
+would make its first Newton update fail).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ...model.problem import Problem
+from ...model.rotations import euler_from_frame
+from ..build.functions import NlpFunctions
+from ..build.initial_guess import match_clamp_rolls
+from ..contact import obstacle_slots as OSL
+from ..build.nlp import StringNLP
+from ..build.parameters import ProblemParameters
+from ..state import SolverState
+
+if TYPE_CHECKING:
+    from ..shape_solver import ShapeSolver
+
+
+@dataclass
+class SourceShape:
+    """What the target needs of the source's equilibrium, sampled at the target's nodes (SI
+    units).
+    """
+
+    x0: np.ndarray  # x(0) [m]
+    frames: np.ndarray | None  # pose frames (director target)
+    eps: np.ndarray | None  # ε at the nodes (director target with stretch)
+    fields: dict[str, np.ndarray] | None  # φ, θ, ψ, ε at the nodes (Euler target)
+    x0_scaled: np.ndarray  # x(0) / L_target (Euler target's first unknowns)
+    forces: dict[str, np.ndarray]  # each grip's reaction force [N]
+    multipliers: dict[tuple, float]  # the source's SI multipliers by row identity
+    slots: list[
+        tuple[np.ndarray, np.ndarray]
+    ]  # per obstacle: its filled contact slots' s [m] and SI multipliers
+
+
+def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> SourceShape:
+    """The source's equilibrium ``src`` as ``target`` needs it (the caller holds the source's
+    lock).
+    """
+    frames = eps = f = None
+    if target.director:
+        nodes = target.model.mesh.nodes
+        frames = source.pose_frames(src.z, nodes)
+        eps = source.strain(src.z, nodes) if target.model.layout.stretch else None
+    else:
+        nodes = target.model.quad.nodes
+        f = (
+            source.model.fields(src.z, nodes)
+            if not source.nlp.director
+            else {"eps": source.strain(src.z, nodes)}
+        )
+        if source.nlp.director or not np.allclose(source.nlp.r0, target.r0):
+            q = source.frames(src.z, nodes, src.p)
+            angles = np.array([euler_from_frame(target.r0, qk) for qk in q])
+            f["phi"], f["theta"], f["psi"] = (
+                np.unwrap(angles[:, 0]),
+                angles[:, 1],
+                np.unwrap(angles[:, 2]),
+            )
+        elif not source.model.layout.twist and target.model.layout.twist:
+            f["psi"] = source.frames_psi(src.z, nodes, src.p)
+    nlp = source.nlp
+    lam_src = src.lam_g / (nlp.row_scale * nlp.sigma) if src.lam_g.size else src.lam_g
+    # grip position rows: carry the reaction force vector, whatever axes each model's rows use
+    forces = {
+        name: nlp.grip_axes[name].T @ lam_src[rows["position"]]
+        for name, rows in nlp.grip_rows.items()
+    }
+    multipliers = {kind: lam_src[i] for i, kind in enumerate(nlp.row_kind) if kind[0] != "slot"}
+    slots = []
+    for i, rows in enumerate(nlp.slot_rows):
+        filled = src.p[nlp.params[f"slots:{i}:on"]] > 0
+        slots.append(
+            (src.p[nlp.params[f"slots:{i}:s"]][filled], lam_src[np.asarray(rows)[filled]])
+        )
+    return SourceShape(
+        src.z[0:3] * source.model.length,
+        frames,
+        eps,
+        f,
+        src.z[0:3] * source.model.length / target.model.length,
+        forces,
+        multipliers,
+        slots,
+    )
+
+
+def warm_state(
+    nlp: StringNLP,
+    fns: NlpFunctions,
+    parameters: ProblemParameters,
+    problem: Problem,
+    source: SourceShape,
+) -> SolverState:
+    """The target's warm start (z, λ, p) for ``problem`` from the sampled ``source``."""
+    model, lay, lay_p = nlp.model, nlp.model.layout, nlp.params
+    if nlp.director:
+        frames = source.frames
+        if lay.frame:
+            frames = match_clamp_rolls(nlp, frames, problem)
+        z = model.z_from_frames(source.x0, frames, source.eps)
+    else:
+        z = np.zeros(lay.size)
+        z[0:3] = source.x0_scaled
+        for name in ("phi", "theta", "psi", "eps"):
+            if model.coefficients(z, name) is not None:
+                z[lay.slice(name)] = np.linalg.lstsq(model.B, source.fields[name], rcond=None)[0]
+    lam = np.zeros(nlp.lbg.size)
+    for i, kind in enumerate(nlp.row_kind):
+        if kind[0] == "grip" and kind[2] == "position" and kind[1] in source.forces:
+            value = float(np.dot(np.array(kind[3]), source.forces[kind[1]]))
+        elif kind in source.multipliers:
+            value = source.multipliers[kind]
+        else:
+            continue
+        lam[i] = value * nlp.row_scale[i] * nlp.sigma
+    p = parameters.pack(problem, z)
+    for i, rows in enumerate(
+        nlp.slot_rows
+    ):  # a slot at the arc length of a source's slot takes its multiplier
+        if i >= len(source.slots) or not source.slots[i][0].size:
+            continue
+        src_s, src_lam = source.slots[i]
+        for k, row in enumerate(rows):
+            if p[lay_p[f"slots:{i}:on"]][k] > 0:
+                j = int(np.argmin(np.abs(src_s - p[lay_p[f"slots:{i}:s"]][k])))
+                if abs(src_s[j] - p[lay_p[f"slots:{i}:s"]][k]) <= OSL.TOLERANCE * nlp.length:
+                    lam[row] = src_lam[j] * nlp.row_scale[row] * nlp.sigma
+    if nlp.director:
+        # rows the source had no twin for (unit norms, folds, the frame rows): least-squares
+        # multipliers
+        nf = nlp.n_free_rows
+        grad, _, jac, _, _ = fns.kkt(
+            z, p, lam
+        )  # ∇f does not depend on λ; one call gives ∇f and ∂g/∂z
+        rest = (
+            np.asarray(grad).ravel() + jac[nf:].T @ lam[nf:]
+        )  # contacts keep their matched multipliers
+        lam[:nf] = np.linalg.lstsq(jac[:nf].T, -rest, rcond=None)[0]
+    return SolverState(z, lam, np.zeros(lay.size), p)

@@ -194,25 +194,21 @@ _SOURCE_DIGEST: bytes | None = None
 
 
 def _source_digest() -> bytes:
-    """Hash of the dlo_ros sources that build the compiled functions (model/, solver/build/nlp.py,
-    assembled*.py, options.py, and the outputs' output_function.py, residual.py and
-    wrenches.py).
+    """Hash the dlo_ros sources that build the compiled functions.
+
+    They are model/, solver/build/ (the NLP and its derivatives), solver/options.py and the
+    outputs' solver/results/residual.py and wrenches.py.
     """
     global _SOURCE_DIGEST
     if _SOURCE_DIGEST is None:
-        root = Path(__file__).resolve().parent.parent
-        files = sorted((root / "model").glob("*.py")) + [
-            root / "solver" / n
-            for n in (
-                "nlp.py",
-                "assembled.py",
-                "assembled_euler.py",
-                "options.py",
-                "output_function.py",
-                "residual.py",
-                "wrenches.py",
-            )
-        ]
+        package = Path(__file__).resolve().parents[2]
+        solver = package / "solver"
+        files = (
+            sorted((package / "model").glob("*.py"))
+            + sorted((solver / "build").glob("*.py"))
+            + [solver / "options.py", solver / "results" / "residual.py"]
+            + [solver / "results" / "wrenches.py"]
+        )
         h = hashlib.sha256()
         for f in files:
             h.update(f.name.encode() + f.read_bytes())

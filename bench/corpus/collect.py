@@ -26,7 +26,7 @@ and the compiled cases use a private, fresh library cache (``--cache-dir``) whos
 built before the recorded pass (auto's helper models load 'cached' libraries, whose presence would
 otherwise depend on background compile threads).
 
-    bash scripts/dlo-env run nice python bench/corpus/collect.py --out /work/corpus/a.npz [--quick]
+    nice bash scripts/dlo-env run python bench/corpus/collect.py --out /work/corpus/a.npz [--quick]
 """
 
 from __future__ import annotations

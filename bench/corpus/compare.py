@@ -4,8 +4,8 @@ A float differs when |a − b| > tol · max(1, |a|) (absolute below magnitude 1,
 grip force of 30 N cannot agree better than its last bits); NaN matches NaN only.  A case differs
 when any float of it does, or any discrete field (status, stability verdict, warm start, iteration
 and continuation counts, IPOPT status, the model summary's non-numeric entries, the array shapes)
-does; durations quoted in auto's change reasons are ignored (``untimed``).  Messages that differ
-are counted but do not fail the comparison (they may quote numbers).
+does; wall-clock durations quoted in auto's change reasons (its stall reports) are ignored
+(``untimed``).  Messages that differ are counted but do not fail the comparison.
 
     bash scripts/dlo-env run python bench/corpus/compare.py A.npz B.npz [--tol 1e-12]
 
@@ -46,15 +46,18 @@ DISCRETE = (
     "grip_names",
 )
 
-#: wall-clock durations quoted in auto's change reasons ("[waited 0.00 s for the worker's build,
-#: 0.20 s to set up ...]"): timing, not behaviour, so compared as "<t> s"
+#: the stall report auto appends to a change's reason when switching took over 0.05 s / 0.2 s
+#: ("[waited 0.00 s for the worker's build, 0.22 s to set up the pooled model]", AutoShapeSolver):
+#: whether it is there at all is wall-clock timing, not behaviour
+STALL = re.compile(r" ?\[waited [^\]]*\]")
+#: any other wall-clock duration quoted in a string, compared as "<t> s"
 DURATION = re.compile(r"\d+(?:\.\d+)?(?:e[-+]?\d+)? ?(s|ms)\b")
 
 
 def untimed(value: object) -> object:
-    """``value`` with every duration in its strings replaced by a placeholder."""
+    """Return ``value`` with auto's stall reports dropped and other durations made placeholders."""
     if isinstance(value, str):
-        return DURATION.sub(r"<t> \1", value)
+        return DURATION.sub(r"<t> \1", STALL.sub("", value))
     if isinstance(value, list):
         return [untimed(v) for v in value]
     return value

@@ -37,7 +37,7 @@ from dlo_ros.model.rotations import farthest_pole, frame_with_pole
 from dlo_ros.node import demo
 from dlo_ros.scene import load_scene, scene_from_dict, scene_to_dict
 from dlo_ros.solver import ShapeSolver, make_solver
-from dlo_ros.solver.auto.auto_solver import MAX_SAMPLES
+from dlo_ros.solver.auto import MAX_SAMPLES
 from dlo_ros.solver.shape_solver import with_checked_poses
 
 PERIOD = 0.02  # s: 50 Hz, the demo driver's rate

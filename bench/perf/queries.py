@@ -52,7 +52,7 @@ def main() -> None:
         solver.solve(qs[0], commit=False)  # starts the query model's compile
         deadline = time.monotonic() + 600
         def building() -> bool:
-            pool = list(solver._pool.values())
+            pool = solver.pool.solvers()
             return any(s.compile_pending or (s.compile_mode != "cached" and not s.all_compiled) for s in pool)
 
         while building() and time.monotonic() < deadline:

@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: make `bench` importable
 from bench.common import machine  # noqa: E402
 from support.problems import clamped_pair  # noqa: E402
 
-from dlo_ros.solver.auto.auto_solver import AutoShapeSolver  # noqa: E402
+from dlo_ros.solver.auto import AutoShapeSolver  # noqa: E402
 from dlo_ros.solver.options import SolverOptions  # noqa: E402
 from dlo_ros.solver.shape_solver import ShapeSolver  # noqa: E402
 

@@ -38,7 +38,7 @@ from dlo_ros.model import Grip, GripPose, Load, Problem, Profile, StringProperti
 from dlo_ros.model.elastica import clamped_clamped_elastica  # noqa: E402
 from dlo_ros.model.rotations import quat_to_matrix  # noqa: E402
 from dlo_ros.scene import load_scene  # noqa: E402
-from dlo_ros.solver.auto.auto_solver import make_solver  # noqa: E402
+from dlo_ros.solver.auto import make_solver  # noqa: E402
 from dlo_ros.solver.options import SolverOptions  # noqa: E402
 from dlo_ros.solver.shape_solver import ShapeSolver  # noqa: E402
 

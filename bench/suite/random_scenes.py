@@ -54,7 +54,7 @@ _spec.loader.exec_module(scene_generator)
 scene_and_curve = scene_generator.scene_and_curve
 
 from dlo_ros.model.rotations import quat_to_matrix  # noqa: E402
-from dlo_ros.solver.auto.auto_solver import make_solver  # noqa: E402
+from dlo_ros.solver.auto import make_solver  # noqa: E402
 from dlo_ros.solver.options import SolverOptions  # noqa: E402
 from dlo_ros.solver.results.result import STATUSES  # noqa: E402
 from dlo_ros.solver.shape_solver import ShapeSolver  # noqa: E402

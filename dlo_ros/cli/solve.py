@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..jsonio import json_safe, stdout_to_stderr
+from ..solver.results.contacts import pressed_obstacles
 from .common import EXIT_NOT_OK, EXIT_OK, UsageError, _compile_mode, _load
 from .record import _add_record_arguments, _close_recorder, _recorder
 
@@ -118,12 +119,11 @@ def format_summary(scene, result) -> str:
             lines.append(
                 f"grip    {name:<{width}}  force {_vec(w.force)} N  torque {_vec(w.torque)} N m"
             )
-        for i, f in result.contact_forces.items():
-            if np.linalg.norm(f) > 0:
-                ob = scene.problem.obstacles[i]
-                lines.append(
-                    f"contact obstacles[{i}] {ob.name or ob.type}: total force {_vec(f)} N"
-                )
+        # a force the string is not within the answer's tolerance of is barrier residue
+        contacts = pressed_obstacles(result, scene.problem, scene.options.error_tolerance)
+        for i, f in contacts.items():
+            ob = scene.problem.obstacles[i]
+            lines.append(f"contact obstacles[{i}] {ob.name or ob.type}: total force {_vec(f)} N")
         for c in result.self_contacts:
             lines.append(
                 f"self    s = {c.s_a:.4g} m and {c.s_b:.4g} m pressed together: force {_vec(c.force)} N "

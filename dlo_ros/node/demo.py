@@ -145,7 +145,7 @@ def model_settled(values: dict, held: int = 0) -> bool:
     updates ago (``held`` the solves of the last target since the manoeuvre's end) — and its model
     meets the tolerance or is the richest order (a fixed model: always).
     """
-    from ..solver.auto.auto_solver import ORDERS
+    from ..solver.auto import ORDERS
 
     if str(values.get("model.auto")).lower() != "true":
         return True

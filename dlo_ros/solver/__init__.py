@@ -5,7 +5,7 @@ from .results.result import STATUSES, GripWrench, ShapeResult
 from .results.summary import ModelSummary
 from .protocol import Solver
 from .shape_solver import ShapeSolver
-from .auto.auto_solver import AutoShapeSolver, make_solver
+from .auto import AutoShapeSolver, make_solver
 
 __all__ = [
     "AutoShapeSolver",

@@ -138,7 +138,7 @@ def test_background_checks_lower_the_gil_switch_interval_and_never_raise_it():
     lower interval set by the application is kept."""
     import sys
 
-    from dlo_ros.solver.auto.auto_solver import SWITCH_INTERVAL_S
+    from dlo_ros.solver.auto import SWITCH_INTERVAL_S
 
     before = sys.getswitchinterval()
     try:

@@ -10,6 +10,7 @@ import pytest
 from dlo_ros.model import Obstacle, Profile
 from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import load_scene
+from dlo_ros.solver.auto.pool import ModelPool
 from dlo_ros.solver import AutoShapeSolver, ShapeSolver, SolverOptions, make_solver
 from support.problems import clamped_pair, quat_about
 
@@ -349,8 +350,8 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
     assert r.model.planar
 
     answered_by = []
-    finish = solver._finish
-    solver._finish = lambda *a, **kw: answered_by.append(kw.get("solver")) or finish(*a, **kw)
+    finish = solver.finish
+    solver.finish = lambda *a, **kw: answered_by.append(kw.get("solver")) or finish(*a, **kw)
 
     def query(q):
         answer = solver.solve(q, commit=False)
@@ -422,7 +423,7 @@ def test_background_checks_compile_their_order_shadows_ahead(checks, monkeypatch
     models of a switch or a query are: interpreted, they held the GIL through long CasADi calls while the
     stream's updates waited.  A one-shot solve (sync checks) compiles nothing it does not stream."""
     ahead = []
-    monkeypatch.setattr(AutoShapeSolver, "_compile_ahead", lambda self, solver: ahead.append(solver))
+    monkeypatch.setattr(ModelPool, "compile_ahead", lambda self, solver: ahead.append(solver))
     solver = make_solver(hanging(), SolverOptions(output_points=51), compile="off", checks=checks)
     try:
         assert solver.solve().ok

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from dlo_ros.scene import load_scene
+from dlo_ros.solver.auto.choice import full_choice
 from dlo_ros.solver import AutoShapeSolver, ShapeSolver, make_solver
 
 SCENE = load_scene("paper_rect_paper")
@@ -44,7 +45,7 @@ def test_an_unstable_answer_on_a_coarse_order_is_solved_again_on_the_next(warm):
     solver = make_solver(SCENE.problem, SCENE.options, compile="off", checks="background")
     assert isinstance(solver, AutoShapeSolver)
     # the 3D model at order 12, as the stream had it when its check had switched it out of the plane
-    solver._switch(solver._full_choice(solver.choice, SCENE.problem), "test: the 3D model")
+    solver.switch(full_choice(solver.choice, SCENE.problem), "test: the 3D model")
     assert solver.choice.order == 12 and not solver.choice.planar
     if warm:  # the stream's warm start: the order-12 shape at these targets
         assert solver.inner.adopt_warm_start(coarse)
@@ -66,7 +67,7 @@ def test_a_query_answered_unstable_on_a_coarse_order_is_answered_by_the_next_wit
     coarse = ShapeSolver(SCENE.problem, replace(SCENE.options, model="full", order=12), compile="off")
     assert coarse.solve(poses).stable is False, "order 12 is stable here: the test no longer tests what it says"
     solver = make_solver(SCENE.problem, SCENE.options, compile="off", checks="background")
-    solver._switch(solver._full_choice(solver.choice, SCENE.problem), "test: the 3D model")
+    solver.switch(full_choice(solver.choice, SCENE.problem), "test: the 3D model")
     assert solver.inner.adopt_warm_start(coarse)
     changes = list(solver.changes)
 

@@ -174,7 +174,7 @@ def test_a_node_workers_checks_run_beside_its_queries_not_in_front_of_them(scene
 
     from dlo_ros.model.problem import GripPose
     from dlo_ros.solver.parallel import batch
-    from dlo_ros.solver.auto.auto_solver import AutoShapeSolver
+    from dlo_ros.solver.auto import AutoShapeSolver
 
     inline = []
     original = AutoShapeSolver._check_now

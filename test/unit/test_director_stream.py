@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from dlo_ros.scene import load_scene
 from dlo_ros.solver.build import nlp as nlp_module
-from dlo_ros.solver.auto.auto_solver import make_solver
+from dlo_ros.solver.auto import make_solver
 from dlo_ros.solver.shape_solver import ShapeSolver
 
 UPDATES = 2000

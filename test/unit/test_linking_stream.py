@@ -165,7 +165,7 @@ def test_auto_does_not_publish_lost_turns():
     would publish a shape 2 turns short (Lk −0.42, energy 32.5 → 6.2 J).  That update is refused for its
     linking number, auto re-solves it at the next order, and every published shape has Lk = the turns
     applied, to 2 turns."""
-    from dlo_ros.solver.auto.auto_solver import AutoShapeSolver
+    from dlo_ros.solver.auto import AutoShapeSolver
 
     p = clamped_pair(right=(START, 0.0, 0.0), bend=1.0, twist=0.7)
     sol = AutoShapeSolver(replace(p, string=replace(p.string, radius=0.02)), SolverOptions(), compile="off",

@@ -22,7 +22,7 @@ from dlo_ros.model import GripPose
 from dlo_ros.node import params as P
 from dlo_ros.node.engine import ShapeEngine, build_solver, options_with_output_points
 from dlo_ros.scene import load_scene
-from dlo_ros.solver.auto.auto_solver import ORDERS, AutoShapeSolver
+from dlo_ros.solver.auto import ORDERS, AutoShapeSolver
 from dlo_ros.solver.shape_solver import ShapeSolver
 
 
@@ -117,7 +117,7 @@ def test_model_switches_stay_within_the_pool(baseline):
     for _ in range(2):
         for order in ORDERS:
             for samples in (41, 81):
-                solver._switch(replace(base, order=order, samples=samples, reasons=[]), "test")
-        assert len(solver._pool) <= AutoShapeSolver.POOL_SIZE
+                solver.switch(replace(base, order=order, samples=samples, reasons=[]), "test")
+        assert len(solver.pool) <= AutoShapeSolver.POOL_SIZE
         assert live(ShapeSolver) - baseline[ShapeSolver] <= AutoShapeSolver.POOL_SIZE
     solver.close()

@@ -28,7 +28,7 @@ def test_demo_scene(tmp_path):
 
 def test_settled_means_the_final_shape_checked_and_met_or_the_richest_order():
     from dlo_ros.node.demo import model_settled
-    from dlo_ros.solver.auto.auto_solver import ORDERS
+    from dlo_ros.solver.auto import ORDERS
 
     auto = {"model.auto": "True", "model.checked": "True", "model.tolerance_met": "True", "model.order": "16",
             "model.checked_updates_ago": "0"}

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from random_scenes import random_scene
 
-from dlo_ros.solver.auto.auto_solver import make_solver
+from dlo_ros.solver.auto import make_solver
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
 

@@ -436,7 +436,7 @@ def test_auto_models_self_contact_once_within_reach():
     """``solver.model: auto`` (sync checks; a loose tolerance keeps the order at 16): no self-contact while
     the loop is open, the full model with self-contact from the update that brings the shape within reach
     of itself, and no published shape closer to itself than 2r (measured on its own output points)."""
-    from dlo_ros.solver.auto.auto_solver import AutoShapeSolver
+    from dlo_ros.solver.auto import AutoShapeSolver
 
     sol = AutoShapeSolver(fig2(0.33, R), SolverOptions(error_tolerance=0.01 * L), compile="off", checks="sync")
     r = sol.solve()

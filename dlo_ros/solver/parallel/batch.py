@@ -185,7 +185,7 @@ def _worker_solver(
     """This process's solver for the scene's structure, built once, holding the shape at the
     scene's values and poses (re-solved from its previous shape when they change).
     """
-    from ..auto.auto_solver import make_solver
+    from ..auto.factory import make_solver
     from ..shape_solver import structure_key
 
     key = pickle.dumps(

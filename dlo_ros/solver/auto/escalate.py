@@ -1,0 +1,150 @@
+"""Escalations inside one update: a richer model for a refused, unstable or self-touching answer.
+
+Each function takes the :class:`.auto_solver.AutoShapeSolver` whose update it escalates and uses
+only its public members (``choice``, ``inner``, ``pool``, ``reduced``, ``worker``, ``switch``,
+``changes``, ``options``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from ...model.problem import Problem
+from ..contact import self_contact as SC
+from ..results.result import ShapeResult
+from ..shape_solver import ShapeSolver
+from ..update import recovery as RC
+from .choice import ORDERS, ModelChoice
+
+if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
+    from .auto_solver import AutoShapeSolver
+
+
+def richer_for_topology(
+    auto: AutoShapeSolver, problem: Problem, result: ShapeResult, notes: list[str]
+) -> ShapeResult:
+    """Retry an update refused for its linking number on the next orders; return the answer.
+
+    The clamped string's linking number changed (the model jumped to a branch with whole turns
+    released, ``topology.py``): too coarse a basis cannot hold the twist, so the update is tried
+    again on the next orders, each warm-started from the committed shape; the first answer that is
+    not refused for its topology is returned (the refusal if every order is).  Each switch is
+    appended to ``notes``.
+    """
+    for order in ORDERS:
+        if order <= auto.choice.order:
+            continue
+        auto.switch(
+            replace(auto.choice, order=order, reasons=list(auto.choice.reasons)),
+            f"order {order}: the order-{auto.choice.order} model changed the linking number",
+        )
+        notes.append(auto.changes[-1][1])
+        result = auto.inner.solve(
+            auto.reduced.poses(auto.choice, problem), warm=True, commit=True, checked=True
+        )
+        if not (result.status == "failed" and result.message.startswith("topology:")):
+            return result
+    return result
+
+
+def richer_for_stability(
+    auto: AutoShapeSolver,
+    problem: Problem,
+    result: ShapeResult,
+    notes: list[str],
+    commit: bool = True,
+) -> tuple[ShapeResult, tuple[ModelChoice, ShapeSolver] | None]:
+    """Try an unstable equilibrium on the next order; return (answer, the query's model or None).
+
+    The inner solver's own attempts to leave it (its shifted Newton steps, IPOPT's escapes, the
+    cold solve) are done.  Where the model is too coarse the smallest eigenvalue of the reduced
+    Hessian can be a discretisation error (``paper_rect_paper``'s strip circling: -0.009 at order
+    12, +0.012 at order 16 and +0.008 at order 24 at one target), and the shape answered is not
+    one the string rests in.  The update is tried on the next order, warm-started from the
+    stream's committed shape (for an update: the unstable answer itself), without touching the
+    stream; if that answer is stable it is returned, and an update (``commit``) switches the
+    stream to that order and answers there.  Else the unstable answer stands.  The second item is
+    the next order's (choice, solver) when that answered a query, else None.
+    """
+    higher = [order for order in ORDERS if order > auto.choice.order]
+    if not higher:
+        return result, None
+    richer = replace(auto.choice, order=higher[0], reasons=list(auto.choice.reasons))
+    poses = auto.reduced.poses(richer, problem)
+    # a running check may be using that order as its shadow
+    auto.worker.wait_for_model(("",) + richer.key())
+    other = auto.pool.solver_for(richer, problem, stream=False, source=auto.inner)
+    trial = other.solve(poses, warm=True, commit=False, checked=True)
+    if not (trial.status == "ok" and trial.stable):
+        return result, None
+    if not commit:  # a query: the stream keeps its model
+        return trial, (richer, other)
+    auto.switch(
+        richer,
+        f"order {richer.order}: the order-{auto.choice.order} equilibrium is unstable "
+        f"(eigenvalue {result.min_eigenvalue:.3g}), the order-{richer.order} one stable",
+    )
+    notes.append(auto.changes[-1][1])
+    return auto.inner.solve(poses, warm=True, commit=True, checked=True), None
+
+
+def _contact_geometry(auto: AutoShapeSolver, problem: Problem) -> SC.ContactGeometry:
+    """Return the self-contact geometry auto tests a shape of ``problem`` with."""
+    st = problem.string
+    return SC.contact_geometry(
+        st.length,
+        st.radius,
+        auto.options.self_contact_samples,
+        tuple(g.s for g in problem.grips),
+    )
+
+
+def self_approach(auto: AutoShapeSolver, problem: Problem) -> str:
+    """Say why self-contact must be modelled now ('' if not).
+
+    It must when the committed shape of a model without it has two samples the exclusion arc apart
+    within the candidate reach of each other (k-d tree query).  Never with ``rotation: euler``.
+    """
+    if (
+        auto.choice.self_contact
+        or auto.options.rotation != "director"
+        or not auto.inner.has_warm_start
+    ):
+        return ""
+    st = problem.string
+    geometry = _contact_geometry(auto, problem)
+    points = auto.inner.model.positions(auto.inner.snapshot().z, geometry.s)
+    if SC.certainly_apart(points, geometry):  # the usual answer, proved without the k-d tree
+        return ""
+    d = SC.closest_distance(points, geometry)
+    if not d < geometry.reach:
+        return ""
+    return (
+        f"self-contact: the shape comes within {d:.3g} m of itself "
+        f"(reach {geometry.reach:.3g} m, "
+        f"2·radius {2 * st.radius:.3g} m): full model with self-contact"
+    )
+
+
+def contact_start(
+    auto: AutoShapeSolver, problem: Problem, before: tuple
+) -> tuple[tuple | None, str]:
+    """Return where the self-contact model starts, and the reason added to the change's.
+
+    A committed shape without self-contact came within reach of itself.  The model starts from
+    that shape when it is a topology reference (``recovery.why_not_reference``); else from the
+    shape committed before this update (the last one apart from itself), or cold when there was
+    none.  ``before``: (solver, its state before this update or None, the scene then).  The first
+    item is ``AutoShapeSolver.switch``'s ``start``: None for the answer itself.
+    """
+    solver, state, previous = before
+    geometry = _contact_geometry(auto, problem)
+    after = auto.inner.model.positions(auto.inner.committed_state.z, geometry.s)
+    earlier = None if state is None else solver.model.positions(state.z, geometry.s)
+    why = RC.why_not_reference(earlier, after, geometry, problem.string.length)
+    if not why:
+        return None, ""
+    where = "the shape before this update" if state is not None else "a cold start"
+    why = f" (from {where}: the answer without self-contact is no reference, {why})"
+    return (solver, state, previous), why

@@ -1,0 +1,141 @@
+"""The pool of built models auto switches among, checks with and answers queries on.
+
+Building a ShapeSolver costs up to seconds, so auto keeps the models it built, keyed by
+``(tag,) + ModelChoice.key()`` (tag '' for a model a stream may switch to, 'checker' for the 3D
+checker of a planar stream, 'query' for a refined query's copy), newest last, at most
+:attr:`ModelPool.SIZE`.  The least recently used idle one is dropped first; the streaming model,
+the running job's models (:class:`.background.CheckWorker`), the 3D model a planar stream switches
+to and the two newest are never dropped.
+"""
+
+from __future__ import annotations
+
+import threading
+
+from ...model.problem import Problem
+from ..shape_solver import ShapeSolver
+from ..update.ipopt import IPOPT_LOCK
+from .background import CheckWorker
+from .choice import ModelChoice
+from .reduced import ReducedModels
+
+
+class ModelPool:
+    """Built ShapeSolvers by pool key, and the streaming one (:attr:`streaming`)."""
+
+    #: models kept built
+    SIZE = 6
+
+    def __init__(self, reduced: ReducedModels, compile: str, worker: CheckWorker) -> None:
+        """Build models of ``reduced``'s options; a stream compiles as ``compile`` says."""
+        self.reduced = reduced
+        self.compile = compile
+        self.worker = worker
+        #: the model the stream solves on (None until the first is built)
+        self.streaming: ShapeSolver | None = None
+        #: pool key of the 3D model a planar stream switches to (kept built; () when none)
+        self.full_key: tuple = ()
+        self._models: dict[tuple, ShapeSolver] = {}
+        self._lock = threading.Lock()  # guards the dict only (builds run outside it)
+
+    def __len__(self) -> int:
+        """Return how many models are built."""
+        return len(self._models)
+
+    def solvers(self) -> list[ShapeSolver]:
+        """Return the pooled solvers (a copy of the list, oldest first)."""
+        with self._lock:
+            return list(self._models.values())
+
+    def pooled(self, choice: ModelChoice, tag: str = "") -> ShapeSolver | None:
+        """Return the pooled model of ``choice`` (with ``tag``), or None when it is not built."""
+        with self._lock:
+            return self._models.get((tag,) + choice.key())
+
+    def solver_for(
+        self,
+        choice: ModelChoice,
+        problem: Problem,
+        *,
+        stream: bool,
+        source: ShapeSolver | None = None,
+        state=None,
+        tag: str = "",
+    ) -> ShapeSolver:
+        """Return the pooled ShapeSolver of ``choice`` set to ``problem`` (built if new).
+
+        It is warm-started from ``source`` (its ``state`` snapshot if given) and reset when that
+        maps nothing.  Helpers (order shadow, 3D checker) never start a compile and create IPOPT
+        lazily; a solver that streams compiles as ``compile`` says.  ``tag`` keeps a separate copy
+        (the 3D checker, so that a switch to 3D never waits for a check).  Sets ``choice.twist``
+        from the model built.
+        """
+        reduced, opts = self.reduced.reduce(choice, problem)
+        key = (tag,) + choice.key()
+        with self._lock:
+            solver = self._models.pop(key, None)
+        if solver is None:
+            solver = ShapeSolver(
+                reduced,
+                opts,
+                compile=self.compile if stream else ("off" if self.compile == "off" else "cached"),
+                lazy_ipopt=not stream,
+                reference_frame=choice.reference_frame(),
+            )
+        else:
+            solver.set_problem(reduced)
+        self._insert(key, solver)
+        if stream:
+            solver.start_compile(self.compile)
+        choice.twist = solver.model.layout.twist
+        if source is not None and not solver.adopt_warm_start(source, state):
+            solver.reset()  # nothing to map: never keep an older, unrelated warm start
+        return solver
+
+    def _insert(self, key: tuple, solver: ShapeSolver) -> None:
+        """Pool ``solver`` as the newest under ``key``; drop the least recently used idle ones."""
+        evicted = []
+        with self._lock:
+            self._models[key] = solver
+            keep = set(self.worker.keys) | {key, self.full_key} | set(list(self._models)[-2:])
+            while len(self._models) > self.SIZE:
+                old = next(
+                    (
+                        k
+                        for k, s in self._models.items()
+                        if s is not self.streaming and k not in keep
+                    ),
+                    None,
+                )
+                if old is None:
+                    break
+                evicted.append(self._models.pop(old))
+        with (
+            IPOPT_LOCK
+        ):  # freeing IPOPT/MUMPS instances must not overlap a solve in another thread
+            evicted.clear()
+
+    def compile_ahead(self, solver: ShapeSolver) -> None:
+        """Compile in the background a model that a switch, the queries or a check will use.
+
+        It starts once the streaming model's own compile is done (the stream reaches full speed
+        first), and only if the stream compiles at all.  Its libraries land in the cache, where the
+        query workers find them.
+        """
+        if (
+            self.compile not in ("background", "blocking")
+            or solver.all_compiled
+            or solver.compile_pending
+        ):
+            return
+        streaming = self.streaming
+
+        def start() -> None:
+            if streaming is not None:
+                streaming.wait_for_compile()
+            if solver.compile_mode == "cached":  # not streaming meanwhile (a stream compiles)
+                solver.start_compile("background")
+            solver.compile_pending = False
+
+        solver.compile_pending = True
+        threading.Thread(target=start, name="dlo-compile-ahead", daemon=True).start()

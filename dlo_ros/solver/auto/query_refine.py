@@ -1,0 +1,81 @@
+"""A query's unverified answer refined as a cold solve's is, on pooled copies of the models.
+
+:func:`refine_query` runs the a-posteriori checks (:mod:`.checks`) on the query's own shape and
+escalates until they pass or the budget (:class:`.query_verify.QueryBudget`) runs out; the
+stream's model is never touched.  :func:`.query_verify.verified_answer` decides the final status.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from ...model.problem import Problem
+from ..results.result import ShapeResult
+from ..shape_solver import ShapeSolver
+from .choice import ORDERS, ModelChoice
+from .query_verify import QueryBudget, verified_answer
+
+if TYPE_CHECKING:  # the solver calls this function (auto_solver.py imports this module)
+    from .auto_solver import AutoShapeSolver
+
+
+def refine_query(
+    auto: AutoShapeSolver,
+    problem: Problem,
+    result: ShapeResult,
+    t0: float,
+    choice: ModelChoice | None = None,
+    solver: ShapeSolver | None = None,
+) -> ShapeResult:
+    """Return a query's finished answer (``commit=False``), refined when it is 'unverified'.
+
+    ``result`` is the answer of the model ``choice`` on ``solver`` (by default the stream's).  One
+    whose residual is over the tolerance ('unverified') is refined as a cold solve's is
+    (``check_now``): the checks run on the query's own shape and escalate (3D when the planar
+    shape is unstable in 3D, the next order, more obstacle samples) until they pass, on pooled
+    copies, never the streaming model.  Stops at ``solver.update_time_limit`` from ``t0``; 'ok'
+    only when the checks passed (``query_verify.verified_answer``).
+    """
+    if result.status != "unverified":
+        return auto.finish(result, t0, [], choice=choice, solver=solver)
+    auto.worker.wait()  # a running check may hold the pooled models the refinement uses
+    budget = QueryBudget(auto.options.update_time_limit, t0)
+    base = choice or auto.choice
+    choice = replace(base, reasons=list(base.reasons))
+    # the same answer again on a copy that keeps its state (the checks start from it); the copy
+    # is tagged apart from the stream's model, which a query never touches
+    solver = auto.pool.solver_for(
+        choice, problem, stream=False, source=solver or auto.inner, tag="query"
+    )
+    poses = auto.reduced.poses(choice, problem)
+    answer = solver.solve(poses, warm=True, commit=True, checked=True)
+    estimate, stopped = None, ""
+    for _ in range(2 * len(ORDERS) + 2):
+        if answer.status not in ("ok", "unverified"):
+            stopped = f"the model {choice.order}/{choice.samples} failed ({answer.message})"
+            answer = result  # the previous model's shape stays the answer
+            break
+        result = answer
+        if budget.expired():
+            stopped = budget.reason()
+            break
+        verdict = auto.model_checks.evaluate(
+            auto.snapshot(problem, poses, answer, solver, choice), False, lower=False
+        )
+        if verdict.choice is None:
+            estimate = verdict.estimate
+            break
+        choice = replace(
+            verdict.choice, reasons=list(choice.reasons) + [f"query: {verdict.reason}"]
+        )
+        same = choice.key() == auto.choice.key()  # never the stream's own model
+        solver = auto.pool.solver_for(
+            choice, problem, stream=False, source=solver, tag="query" if same else ""
+        )
+        poses = auto.reduced.poses(choice, problem)
+        answer = solver.solve(poses, warm=True, commit=True, checked=True)
+    else:
+        stopped = "the model checks kept escalating"
+    answer = verified_answer(answer, estimate, auto.tolerance, stopped)
+    return auto.finish(answer, t0, [], choice=choice, solver=solver, estimate=estimate)

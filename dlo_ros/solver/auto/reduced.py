@@ -1,0 +1,69 @@
+"""A scene as a :class:`~.choice.ModelChoice` models it: the reduced problem and its options."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from ...model.problem import Problem
+from ...model.profile import Profile
+from ..options import SolverOptions
+from .choice import AUTO_SELF_CONTACT_PAIRS, ModelChoice
+
+
+class ReducedModels:
+    """The reduced problem and options of each choice, cached so that a stream reuses them.
+
+    The reduced string and obstacle tuple are reused while the scene's are the same objects, so
+    that a stream of new grip poses keeps the inner solver's cached parameters.  The options are
+    made once per model (a frozen dataclass's replace costs more than the lookup).
+    """
+
+    def __init__(self, options: SolverOptions) -> None:
+        """Reduce with the scene's solver ``options`` (``model: auto``) as the base."""
+        self.options = options
+        self._string_cache: tuple | None = None
+        self._options: dict[tuple, SolverOptions] = {}
+
+    def reduce(self, choice: ModelChoice, problem: Problem) -> tuple[Problem, SolverOptions]:
+        """Return ``problem`` as ``choice`` models it, and the options of that model.
+
+        Gravity is zeroed when dropped, the stretch stiffness removed when inextensible, and only
+        ``choice.obstacles`` are kept; the options name the planar or full model with the
+        choice's order, quadrature (≥ 2·order + 8), obstacle samples and self-contact slots.
+        """
+        key = (choice.gravity, choice.stretch, choice.obstacles)
+        hit = self._string_cache
+        if (
+            hit is not None
+            and hit[0] == key
+            and hit[1] is problem.string
+            and hit[2] is problem.obstacles
+        ):
+            st, obstacles = hit[3], hit[4]
+        else:
+            st = problem.string
+            if not choice.gravity:
+                st = replace(st, weight_per_length=Profile.constant(0.0))
+            if not choice.stretch:
+                st = replace(st, stretch_stiffness=None)
+            obstacles = tuple(problem.obstacles[i] for i in choice.obstacles)
+            self._string_cache = (key, problem.string, problem.obstacles, st, obstacles)
+        reduced = replace(problem, string=st, obstacles=obstacles)
+        model = (choice.planar, choice.order, choice.samples, choice.self_contact)
+        opts = self._options.get(model)
+        if opts is None:
+            opts = self.options.with_model(
+                "planar" if choice.planar else "full",
+                order=choice.order,
+                quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
+                obstacle_samples=choice.samples,
+                self_contact_pairs=(self.options.self_contact_pairs or AUTO_SELF_CONTACT_PAIRS)
+                if choice.self_contact
+                else 0,
+            )
+            self._options = {**self._options, model: opts}
+        return reduced, opts
+
+    def poses(self, choice: ModelChoice, problem: Problem) -> dict:
+        """Return the grip poses the reduced model of ``choice`` takes (by grip name)."""
+        return {g.name: g.pose for g in self.reduce(choice, problem)[0].grips}

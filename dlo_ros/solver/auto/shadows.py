@@ -1,0 +1,122 @@
+"""Measurements of a committed shape on other models: shadows, 3D stability, pole, penetration.
+
+Each function takes a :class:`.checks.CheckSnapshot` and the
+:class:`.pool.ModelPool` whose models it solves on; the models it
+builds stay pooled, since they are the ones an escalation switches to.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ...model.rotations import farthest_pole, frame_with_pole, pole_angle_deg
+from ..build.nlp import has_point_moments
+from .choice import POLE_MIN_DEG, ModelChoice, full_choice
+from .pool import ModelPool
+
+if TYPE_CHECKING:  # the snapshot's class uses these functions (checks.py imports this module)
+    from .checks import CheckSnapshot
+
+#: the penetration check looks at this many times the samples (between them the sampled
+#: constraints let the string cut into an obstacle: a chord of spacing h cuts a sphere of radius R
+#: by about h²/8R)
+PENETRATION_OVERSAMPLING = 8
+
+
+def shadow_error(pool: ModelPool, snap: CheckSnapshot, choice: ModelChoice) -> float:
+    """Return max |x(s) − x'(s)| [m] between the checked shape and model ``choice`` solved from it.
+
+    ``choice`` is the next or the previous order, or 2n − 1 obstacle samples, solved from the
+    checked shape (same branch): the a-posteriori estimate of the coarser of the two; nan when
+    that solve fails (inconclusive: the next check retries).  The shadow is pooled: it is the model
+    an escalation switches to.  With background checks it is compiled ahead
+    (``ModelPool.compile_ahead``), as the models a switch or the queries use.
+    """
+    shadow = pool.solver_for(
+        choice, snap.problem, stream=False, source=snap.inner, state=snap.state
+    )
+    if pool.worker.background:
+        # beside a stream: an interpreted shadow holds the GIL through long CasADi calls, and the
+        # stream's updates during a check waited for them (compiled once, later checks release it)
+        pool.compile_ahead(shadow)
+    result = shadow.solve(snap.poses)
+    if not result.ok:
+        return float("nan")
+    return float(np.max(np.linalg.norm(result.points - snap.points, axis=1)))
+
+
+def planar_3d_eigenvalue(pool: ModelPool, snap: CheckSnapshot) -> float | None:
+    """Return the 3D model's smallest reduced-Hessian eigenvalue at the embedded planar shape.
+
+    None when that is stable.  The 3D model is pooled (tag 'checker'): it is also the model a
+    switch to 3D uses.
+    """
+    full = pool.solver_for(
+        full_choice(snap.choice, snap.problem),
+        snap.problem,
+        stream=False,
+        source=snap.inner,
+        state=snap.state,
+        tag="checker",
+    )
+    return full.unstable_eigenvalue()
+
+
+def turned_frame(pool: ModelPool, snap: CheckSnapshot) -> tuple[ModelChoice, str] | None:
+    """Return the same 3D model with its Euler-angle pole turned away, and why; or None.
+
+    Only when a tangent of the checked shape has come within POLE_MIN_DEG of the pole (near it φ
+    and ψ turn about the same axis, the fields get steep and the basis order stops converging: on
+    the main job's post the order 16/24/32 shapes differed by 1–2 cm with the pole 28° from a
+    tangent, by 0.6 mm/0.03 mm with it 46° away), and a direction at least 10° better exists.  The
+    new model is built and warm-started here (worker thread), so the switch builds nothing.
+    """
+    inner, state = snap.inner, snap.state
+    if inner.nlp.director:  # no pole
+        return None
+    if state is None or has_point_moments(snap.problem):  # moments are modelled about the pole
+        return None
+    tangents = inner.model.node_tangents(state.z).T
+    angle = pole_angle_deg(tangents, inner.nlp.r0[:, 2])
+    if angle >= POLE_MIN_DEG:
+        return None
+    normal, best = farthest_pole(tangents)
+    if best < angle + 10.0:
+        return None
+    r0 = frame_with_pole(normal, inner.nlp.r0[:, 0])
+    choice = replace(
+        snap.choice,
+        frame=tuple(np.round(r0.ravel(), 12)),
+        estimated_error_m=float("nan"),
+        order_error_m=float("nan"),
+        reasons=list(snap.choice.reasons),
+    )
+    pool.solver_for(choice, snap.problem, stream=False, source=inner, state=state)
+    return choice, (
+        f"Euler-angle pole {angle:.0f}° from the tangent: reference frame turned "
+        f"(pole {np.round(normal, 3).tolist()}, {best:.0f}° from every tangent)"
+    )
+
+
+def penetration(snap: CheckSnapshot) -> tuple[float, str]:
+    """Return (depth [m], obstacle name): how far the checked shape enters its obstacles.
+
+    Measured between the samples where they are enforced, over PENETRATION_OVERSAMPLING × as many
+    points (the string's radius included).  The sampled constraints cannot see it, the order
+    shadows neither (they share the samples); it is the sampling part of the error estimate.
+    (0, '') without obstacles.
+    """
+    inner, state = snap.inner, snap.state
+    if state is None or not inner.problem.obstacles:
+        return 0.0, ""
+    s = np.linspace(
+        0.0, inner.nlp.length, PENETRATION_OVERSAMPLING * (snap.choice.samples - 1) + 1
+    )
+    x = inner.model.positions(state.z, s)
+    radius = inner.problem.string.radius
+    depths = [(float(np.max(ob.h_many(x))) + radius, ob.name) for ob in inner.problem.obstacles]
+    depth, name = max(depths)
+    return max(depth, 0.0), name

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") -> int:
-    """Entry point of the node (``dlo_node`` console script); see dlo_ros.node.dlo_node.main.
+    """Run the node (the ``dlo_node`` console script); see dlo_ros.node.run.main.
+
     SIGINT and SIGTERM stop it with exit code 0 from the first moment (see
     :mod:`dlo_ros.node.signals`).
     """
@@ -24,7 +25,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
 
     stop_on_first_signal()
     try:
-        from .dlo_node import main as _main
+        # imported here: the signal handling above must be in place before rclpy and CasADi load
+        from .run import main as _main
 
         return _main(argv, prog=prog)
     except KeyboardInterrupt:  # Ctrl-C / SIGTERM while importing rclpy / CasADi

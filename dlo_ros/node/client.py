@@ -241,7 +241,7 @@ class DloClient:
         from visualization_msgs.msg import MarkerArray
 
         from .conversions import path_from_cdr, path_to_arrays, time_to_ns, wrench_to_arrays
-        from .dlo_node import LATCHED_QOS, TARGET_QOS, WRENCH_QOS
+        from .qos import LATCHED_QOS, TARGET_QOS, WRENCH_QOS
 
         self._rclpy = rclpy
         self.node_name = node_name.rstrip("/")
@@ -310,7 +310,7 @@ class DloClient:
         self._thread = threading.Thread(target=self._spin, name="dlo-client", daemon=True)
         self._thread.start()
 
-    # ---- receiving (spin thread) ----------------------------------------------------------------------------
+    # ---- receiving (spin thread) ----------------------------------------------------------------
     def _spin(self) -> None:
         from rclpy.executors import ExternalShutdownException
 
@@ -365,7 +365,7 @@ class DloClient:
             self.marker_count += 1
             self._cond.notify_all()
 
-    # ---- waiting --------------------------------------------------------------------------------------------
+    # ---- waiting --------------------------------------------------------------------------------
     def wait_for(self, predicate: Callable[[], object], timeout: float) -> object:
         """Wait until ``predicate()`` (called with the lock held) is truthy; return it, or None on
         timeout.
@@ -450,7 +450,7 @@ class DloClient:
             time.sleep(0.02)
         return False
 
-    # ---- sending ----------------------------------------------------------------------------------------------
+    # ---- sending --------------------------------------------------------------------------------
     def _pose(self, position, orientation):
         from .conversions import arrays_to_pose
 
@@ -563,7 +563,7 @@ class DloClient:
         if self._cloud_publisher is None:
             from sensor_msgs.msg import PointCloud2
 
-            from .dlo_node import CLOUD_QOS
+            from .qos import CLOUD_QOS
 
             self._cloud_publisher = self.node.create_publisher(
                 PointCloud2, f"{self.node_name}/observed", CLOUD_QOS
@@ -634,7 +634,7 @@ class DloClient:
         resp = self._call(self._get_params, req, timeout)
         return {n: parameter_value_to_python(v) for n, v in zip(names, resp.values)}
 
-    # ---- teardown ------------------------------------------------------------------------------------------------
+    # ---- teardown -------------------------------------------------------------------------------
     def close(self) -> None:
         if self._stopping:
             return

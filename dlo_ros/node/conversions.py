@@ -29,7 +29,7 @@ from ..model.rotations import quat_to_matrix
 from ..solver.result import GripWrench, ShapeResult
 from .validation import TargetError, check_frame, normalise_frame
 
-# ---- time ------------------------------------------------------------------------------------------
+# ---- time ---------------------------------------------------------------------------------------
 
 
 def time_to_ns(stamp: Time) -> int:
@@ -45,7 +45,7 @@ def header(frame_id: str, stamp_ns: int) -> Header:
     return Header(frame_id=frame_id, stamp=ns_to_time(stamp_ns))
 
 
-# ---- poses -----------------------------------------------------------------------------------------
+# ---- poses --------------------------------------------------------------------------------------
 
 
 def pose_to_arrays(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
@@ -130,7 +130,7 @@ def in_frame(
     return transform_pose(position, orientation, translation, rotation)
 
 
-# ---- outputs ---------------------------------------------------------------------------------------
+# ---- outputs ------------------------------------------------------------------------------------
 
 
 def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
@@ -282,7 +282,7 @@ def wrench_to_arrays(msg: WrenchStamped) -> tuple[np.ndarray, np.ndarray]:
     return np.array([f.x, f.y, f.z]), np.array([t.x, t.y, t.z])
 
 
-# ---- bending energy density (dlo_ros.shading, shared with the recording) ------------------------------
+# ---- bending energy density (dlo_ros.shading, shared with the recording) ------------------------
 
 
 def bending_energy_density(s: np.ndarray, orientations: np.ndarray, bend_stiffness) -> np.ndarray:
@@ -305,7 +305,7 @@ def _point(p: Sequence[float]) -> Point:
     return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
 
 
-# ---- markers -----------------------------------------------------------------------------------------
+# ---- markers ------------------------------------------------------------------------------------
 
 GRIP_COLOURS = {"clamp": (0.9, 0.5, 0.1), "pin": (0.6, 0.2, 0.9), "tangent": (0.2, 0.7, 0.9)}
 OBSTACLE_RGBA = (0.55, 0.55, 0.6, 0.5)
@@ -443,7 +443,7 @@ def result_markers(
     return MarkerArray(markers=markers)
 
 
-# ---- diagnostics ---------------------------------------------------------------------------------------
+# ---- diagnostics --------------------------------------------------------------------------------
 
 LEVELS = {
     "ok": DiagnosticStatus.OK,

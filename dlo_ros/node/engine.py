@@ -98,7 +98,7 @@ class ShapeEngine:
         self.targets_coalesced = 0  # received but superseded before a solve used them
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
-    # ---- called from any thread ----------------------------------------------------------------------
+    # ---- called from any thread -----------------------------------------------------------------
     def start(self) -> None:
         self._thread.start()
 
@@ -190,7 +190,7 @@ class ShapeEngine:
             self._cond.notify_all()
         return job.future
 
-    # ---- worker thread ------------------------------------------------------------------------------------
+    # ---- worker thread --------------------------------------------------------------------------
     def _set_state(self, state: str) -> None:
         self.state = state
         self._on_state(state)

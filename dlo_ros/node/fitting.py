@@ -39,8 +39,8 @@ PARAMETER_OF = {
 #: relative σ of a known total mass (the observation file's default)
 MASS_RELATIVE_SIGMA = 1e-3
 #: (fit worker process) the equilibrium solvers of earlier fits: building one takes seconds, a fit
-#of a : kept one a few solves (dlo_ros.identify.objective.SolverCache; one fit at a time per
-#worker)
+# of a : kept one a few solves (dlo_ros.identify.objective.SolverCache; one fit at a time per
+# worker)
 _SOLVERS = None
 
 
@@ -117,7 +117,7 @@ def run_fit(payload: bytes):
     return fit(problem, options, data, settings, _SOLVERS)
 
 
-# ---- applying an estimate ---------------------------------------------------------------------------------
+# ---- applying an estimate -----------------------------------------------------------------------
 @dataclass(frozen=True)
 class Application:
     """What a fit changes: ``values`` (parameter name → new value; empty when nothing is applied)
@@ -202,7 +202,7 @@ def plan_application(result, current: Mapping[str, float], bound: float) -> Appl
     )
 
 
-# ---- diagnostics ----------------------------------------------------------------------------------------
+# ---- diagnostics --------------------------------------------------------------------------------
 @dataclass
 class FitHealth:
     """What the diagnostics status ``<node>: fit`` reports (thread-safe: the executor thread writes

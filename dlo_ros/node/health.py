@@ -146,7 +146,7 @@ class Health:
         self.last_model_change_stamp_ns: int | None = None  # ROS time of the solve that made it
         self.last_model_change_update: int | None = None  # that solve's update number (recording)
 
-    # ---- events -----------------------------------------------------------------------------------------
+    # ---- events ---------------------------------------------------------------------------------
     def set_state(self, state: str) -> None:
         with self._lock:
             self.state = state
@@ -257,7 +257,7 @@ class Health:
         with self._lock:
             self.targets_received, self.targets_coalesced = received, coalesced
 
-    # ---- report ----------------------------------------------------------------------------------------
+    # ---- report ---------------------------------------------------------------------------------
     def update_rate(self) -> float:
         now = self._clock()
         with self._lock:

@@ -1,5 +1,6 @@
-"""``sensor_msgs/PointCloud2`` ↔ an (N, 3) array of observed points (pure: numpy only, duck-typed
-messages).
+"""Convert ``sensor_msgs/PointCloud2`` ↔ an (N, 3) array of observed points.
+
+Pure: numpy only, duck-typed messages.
 
 :func:`cloud_points` is what the node's ``~/observed`` subscription runs on a deserialised cloud.
 It accepts ``x``, ``y``, ``z`` fields of datatype FLOAT32 or FLOAT64 (count 1) at any offsets
@@ -38,14 +39,15 @@ CLOUD_OVERHEAD_BYTES = 64 * 1024
 
 
 def cloud_bytes_limit(max_points: int) -> int:
-    """The largest serialised ``~/observed`` message read for ``max_points`` points."""
+    """Return the largest serialised ``~/observed`` message read for ``max_points`` points."""
     return int(max_points) * MAX_POINT_BYTES + CLOUD_OVERHEAD_BYTES
 
 
 def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -> np.ndarray:
-    """The (N, 3) float64 points [m] of the PointCloud2 ``msg``, which must be in ``frame_id``;
-    TargetError (kind 'frame', 'count', 'invalid' or 'non_finite') naming the field otherwise
-    (module docstring).
+    """Return the (N, 3) float64 points [m] of the PointCloud2 ``msg``, which is in ``frame_id``.
+
+    Raises TargetError (kind 'frame', 'count', 'invalid' or 'non_finite') naming the field
+    otherwise (module docstring).
     """
     cloud_frame = msg.header.frame_id
     check_frame_size(cloud_frame, where)
@@ -140,9 +142,7 @@ def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -
 
 
 def points_to_cloud(points: np.ndarray, frame_id: str, stamp_ns: int):
-    """An unorganised PointCloud2 (height 1) of float32 ``x``, ``y``, ``z`` for ``points`` (N, 3)
-    [m].
-    """
+    """Build an unorganised PointCloud2 (height 1) of float32 x, y, z for ``points`` (N, 3) [m]."""
     from sensor_msgs.msg import PointCloud2, PointField
 
     from .conversions import header

@@ -91,8 +91,9 @@ def transform_pose(
     translation: Sequence[float],
     rotation: Sequence[float],
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Apply the transform (translation, rotation quaternion) — e.g. a tf2 TransformStamped from
-    the pose's frame into the target frame — to a pose: p' = R p + t, q' = r ⊗ q.
+    """Apply the transform (translation, rotation quaternion) to a pose: p' = R p + t, q' = r ⊗ q.
+
+    E.g. a tf2 TransformStamped from the pose's frame into the target frame.
     """
     r = np.asarray(rotation, dtype=float)
     r = r / np.linalg.norm(r)
@@ -134,7 +135,7 @@ def in_frame(
 
 
 def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
-    """The centreline: one PoseStamped per output sample, x-axis along the tangent."""
+    """Build the centreline: one PoseStamped per output sample, x-axis along the tangent."""
     h = header(frame_id, stamp_ns)
     poses = []
     for p, q in zip(result.points.tolist(), result.orientations.tolist()):
@@ -151,9 +152,9 @@ def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
 
 
 def _cdr_header(stamp_ns: int, frame: bytes) -> bytes:
-    """A std_msgs/Header in CDR, to be placed at an offset that is a multiple of 4 after the
-    encapsulation: stamp (int32 sec, uint32 nanosec), frame_id (uint32 length with the NUL, the
-    bytes, the NUL).
+    """Serialise a std_msgs/Header in CDR, to go at a multiple of 4 after the encapsulation.
+
+    Stamp (int32 sec, uint32 nanosec), frame_id (uint32 length with the NUL, the bytes, the NUL).
     """
     ns = int(stamp_ns)
     return (
@@ -164,10 +165,11 @@ def _cdr_header(stamp_ns: int, frame: bytes) -> bytes:
 
 
 def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_ns: int) -> bytes:
-    """A nav_msgs/Path of these poses (every pose with the path's header), serialised as
-    little-endian CDR for ``Publisher.publish(bytes)``: no per-pose Python message objects.
-    Alignment follows CDR: 4-byte integers on 4, doubles on 8, offsets counted after the 4-byte
-    encapsulation header.
+    """Serialise a nav_msgs/Path of these poses as little-endian CDR for ``publish(bytes)``.
+
+    Every pose carries the path's header; no per-pose Python message objects.  Alignment follows
+    CDR: 4-byte integers on 4, doubles on 8, offsets counted after the 4-byte encapsulation
+    header.
     """
     head = _cdr_header(stamp_ns, frame_id.encode())
     out = bytearray(b"\x00\x01\x00\x00")  # CDR, little endian
@@ -192,8 +194,9 @@ def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_
 
 
 def wrench_cdr(wrench: GripWrench, frame_id: str, stamp_ns: int) -> bytes:
-    """``wrench_stamped`` serialised as little-endian CDR for ``Publisher.publish(bytes)``: the
-    header, padding to 8, then force and torque as six doubles.
+    """Serialise ``wrench_stamped`` as little-endian CDR for ``Publisher.publish(bytes)``.
+
+    The header, padding to 8, then force and torque as six doubles.
     """
     head = _cdr_header(stamp_ns, frame_id.encode())
     values = np.concatenate(
@@ -212,9 +215,7 @@ class CdrError(ValueError):
 
 
 def _cdr_header_at(data: bytes, offset: int) -> tuple[int, str, int]:
-    """(stamp [ns], frame_id, offset after it) of a std_msgs/Header at ``offset`` (aligned to
-    4).
-    """
+    """Read a std_msgs/Header at ``offset`` (aligned to 4): (stamp [ns], frame_id, offset after)."""
     sec, nanosec, length = struct.unpack_from("<iII", data, offset)
     start = offset + 12
     if length < 1 or start + length > len(data):
@@ -227,11 +228,12 @@ def _cdr_header_at(data: bytes, offset: int) -> tuple[int, str, int]:
 
 
 def path_from_cdr(data: bytes) -> tuple[int, str, np.ndarray, np.ndarray]:
-    """(stamp [ns], frame_id, points (N, 3), quaternions (N, 4)) of a serialised nav_msgs/Path
-    (what a raw subscription takes): the inverse of :func:`path_cdr` for any Path, whatever its
-    poses' headers. No per-pose Python message objects: rclpy's deserialisation of a 51-pose Path
-    costs several times more (bench/results/node_latency.md).  Raises CdrError on bytes that are
-    not a little-endian Path.
+    """Decode a serialised nav_msgs/Path: (stamp [ns], frame_id, points (N, 3), quaternions (N, 4)).
+
+    What a raw subscription takes: the inverse of :func:`path_cdr` for any Path, whatever its
+    poses' headers.  No per-pose Python message objects: rclpy's deserialisation of a 51-pose
+    Path costs several times more (bench/results/node_latency.md).  Raises CdrError on bytes that
+    are not a little-endian Path.
     """
     if len(data) < 8 or data[:2] != b"\x00\x01":
         raise CdrError("not little-endian CDR")
@@ -266,8 +268,9 @@ def path_to_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def wrench_stamped(wrench: GripWrench, frame_id: str, stamp_ns: int) -> WrenchStamped:
-    """Force [N] and torque [N m] the gripper exerts on the string (frame axes, about the grip
-    point).
+    """Build the WrenchStamped of the force [N] and torque [N m] a gripper exerts on the string.
+
+    Frame axes, torque about the grip point.
     """
     f = [float(v) for v in wrench.force]
     t = [float(v) for v in wrench.torque]
@@ -286,8 +289,9 @@ def wrench_to_arrays(msg: WrenchStamped) -> tuple[np.ndarray, np.ndarray]:
 
 
 def bending_energy_density(s: np.ndarray, orientations: np.ndarray, bend_stiffness) -> np.ndarray:
-    """½ Rf(s) κ(s)² [J/m] per sample; ``bend_stiffness`` is a Profile (callable on s) or a
-    number.
+    """Return ½ Rf(s) κ(s)² [J/m] per sample.
+
+    ``bend_stiffness`` is a Profile (callable on s) or a number.
     """
     rf = (
         bend_stiffness(np.asarray(s, dtype=float))
@@ -324,7 +328,7 @@ def _marker(h: Header, ns: str, mid: int, kind: int) -> Marker:
 
 
 def _primitive_markers(pr: Primitive, h: Header, mid: int) -> list[Marker]:
-    """The markers of one drawing primitive (ids mid, mid + 1, mid + 2), colour not yet set."""
+    """Build the markers of one drawing primitive (ids mid, mid + 1, mid + 2), colour not set."""
     if pr.kind == "sphere":
         m = _marker(h, "obstacles", mid, Marker.SPHERE)
         m.pose.position = _point(pr.centre)
@@ -358,8 +362,9 @@ def _primitive_markers(pr: Primitive, h: Header, mid: int) -> list[Marker]:
 
 
 def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0) -> list[Marker]:
-    """One marker per obstacle (a capsule is a cylinder plus two end spheres, a half-space a
-    plate).
+    """Build the markers of the obstacles, drawn from each one's primitive.
+
+    A capsule is a cylinder plus two end spheres, a half-space a plate.
     """
     out: list[Marker] = []
     mid = start_id
@@ -383,11 +388,12 @@ def result_markers(
     force_scale: float = 0.1,
     energy_scale: float = 0.0,
 ) -> MarkerArray:
-    """The string (line strip coloured by bending energy density), the grips, the obstacles, the
-    grip forces, and each self-contact's force on both strands (namespace 'self_contacts').
+    """Build the MarkerArray of a shape: string, grips, obstacles, grip and self-contact forces.
 
-    energy_scale [J/m]: density shown in full red (0: the shape's maximum).  Starts with DELETEALL
-    so a consumer never keeps markers of an earlier, larger scene.
+    The string is a line strip coloured by bending energy density; each self-contact's force is
+    drawn on both strands (namespace 'self_contacts').  energy_scale [J/m]: density shown in full
+    red (0: the shape's maximum).  Starts with DELETEALL so a consumer never keeps markers of an
+    earlier, larger scene.
     """
     h = header(frame_id, stamp_ns)
     markers: list[Marker] = [Marker(header=h, action=Marker.DELETEALL)]
@@ -466,9 +472,7 @@ def format_value(value: object) -> str:
 def diagnostic_status(
     name: str, level: str, message: str, hardware_id: str, values: Mapping[str, object]
 ) -> DiagnosticStatus:
-    """A DiagnosticStatus; ``level`` one of 'ok', 'warn', 'error', 'stale'; values become
-    strings.
-    """
+    """Build a DiagnosticStatus; ``level`` is 'ok', 'warn', 'error' or 'stale'; values as text."""
     return DiagnosticStatus(
         level=LEVELS[level],
         name=name,

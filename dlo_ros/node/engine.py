@@ -144,9 +144,10 @@ class ShapeEngine:
             self._cond.notify_all()
 
     def query_scene(self) -> tuple[Problem, SolverOptions] | None:
-        """The scene a query is answered in, for a solver outside this engine: the solver's problem
-        (its current values) at the current targets, and its options; None until the solver is
-        built.
+        """Return the scene a query is answered in by a solver outside this engine.
+
+        The solver's problem (its current values) at the current targets, and its options; None
+        until the solver is built.
         """
         solver = self._solver
         if solver is None:
@@ -156,9 +157,7 @@ class ShapeEngine:
         return solver.problem.with_grip_poses(targets), solver.options
 
     def query(self, poses: dict[str, GripPose]) -> Future:
-        """Future of the ShapeResult for the current targets updated by ``poses``
-        (commit=False).
-        """
+        """Solve the current targets updated by ``poses`` without committing; a ShapeResult Future."""
         return self._submit("query", dict(poses))
 
     def reset(self) -> Future:
@@ -166,15 +165,11 @@ class ShapeEngine:
         return self._submit("reset", None)
 
     def change_problem(self, edit: Callable[[Problem], Problem]) -> Future:
-        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem) and re-solve the
-        targets.
-        """
+        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem); re-solve the targets."""
         return self._submit("problem", edit)
 
     def change_options(self, edit: Callable[[SolverOptions], SolverOptions]) -> Future:
-        """Rebuild the solver with edited options (the next solve is cold) and re-solve the
-        targets.
-        """
+        """Rebuild the solver with edited options (the next solve is cold); re-solve the targets."""
         return self._submit("options", edit)
 
     def _submit(self, kind: str, payload: object) -> Future:
@@ -211,7 +206,7 @@ class ShapeEngine:
             close_solver(self._solver)
 
     def _serve(self) -> None:
-        """The first shape, then targets and jobs until stopped."""
+        """Solve the first shape, then serve targets and jobs until stopped."""
         with self._cond:
             if self._stop:
                 return
@@ -232,9 +227,11 @@ class ShapeEngine:
                 self._run_job(job)
 
     def _take_slot(self) -> tuple[dict[str, GripPose], int | None, int | None, int]:
-        """Empty the pending slot (caller holds the lock): (the targets, newest stamp, its arrival,
-        messages merged).  The targets are taken with their stamp, under the same lock: a target
-        arriving between the two would otherwise be solved under the previous one's stamp.
+        """Empty the pending slot (caller holds the lock).
+
+        Returns (the targets, newest stamp, its arrival, messages merged).  The targets are taken
+        with their stamp, under the same lock: a target arriving between the two would otherwise
+        be solved under the previous one's stamp.
         """
         stamp, received, merged = self._stamp_ns, self._received_ns, self._merged
         self.targets_coalesced += max(0, merged - 1)
@@ -341,9 +338,11 @@ def target_miss(result: ShapeResult, problem: Problem, targets: dict[str, GripPo
 
 
 def build_solver(problem: Problem, options: SolverOptions, compile: str | None = None):
-    """The node's solver for a scene: ``dlo_ros.solver.make_solver`` (it picks the model for
-    solver.model 'auto', with its a-posteriori checks on a worker thread so that the stream never
-    waits for them).  compile: 'background', 'blocking', 'cached' or 'off'; None: 'background'.
+    """Build the node's solver for a scene: ``dlo_ros.solver.make_solver``.
+
+    It picks the model for solver.model 'auto', with its a-posteriori checks on a worker thread
+    so that the stream never waits for them.  compile: 'background', 'blocking', 'cached' or
+    'off'; None: 'background'.
     """
     from ..solver import make_solver
 

@@ -196,8 +196,9 @@ class DloClient:
 
     # ---- waiting --------------------------------------------------------------------------------
     def wait_for(self, predicate: Callable[[], object], timeout: float) -> object:
-        """Wait until ``predicate()`` (called with the lock held) is truthy; return it, or None on
-        timeout.
+        """Wait until ``predicate()`` (called with the lock held) is truthy; return its value.
+
+        Returns None on timeout.
         """
         deadline = time.monotonic() + timeout
         with self._cond:
@@ -217,7 +218,7 @@ class DloClient:
     def wait_for_path(
         self, timeout: float, after: int = 0, where: Callable[[PathEvent], bool] | None = None
     ) -> PathEvent | None:
-        """The newest centreline numbered > ``after`` (path_count) that satisfies ``where``."""
+        """Wait for the newest centreline numbered > ``after`` (path_count) that fits ``where``."""
 
         def ready():
             if self.path_count <= after or not self.paths:
@@ -235,8 +236,9 @@ class DloClient:
     def wait_for_diagnostics(
         self, where: Callable[[dict[str, str], object], bool], timeout: float
     ):
-        """The first diagnostics status (values dict, status) for which ``where(values, status)``
-        holds.
+        """Wait for the first '<node>: shape' status for which ``where(values, status)`` holds.
+
+        Returns (values dict, status), or None on timeout.
         """
 
         def ready():
@@ -263,8 +265,7 @@ class DloClient:
         return self.wait_for(ready, timeout)
 
     def wait_for_subscribers(self, timeout: float = 10.0, settle: float = 0.5) -> bool:
-        """Wait until the node's target subscriptions have matched our publishers, then ``settle``
-        s more.
+        """Wait until the node's target subscriptions matched our publishers, then ``settle`` s.
 
         Matching is seen from the publisher's side only; the node's reader may match our writer a
         moment later, and a volatile reader drops what arrives before that.  The settle time covers
@@ -290,9 +291,7 @@ class DloClient:
         frame_id: str | None = None,
         stamp_ns: int | None = None,
     ) -> int:
-        """Publish a PoseArray (one (position, quaternion) per grip); returns the header stamp used
-        [ns].
-        """
+        """Publish a PoseArray (one (position, quaternion) per grip); return its stamp [ns]."""
         stamp = self._now_ns() if stamp_ns is None else stamp_ns
         msg = self._msgs["PoseArray"](
             header=header(self.frame_id if frame_id is None else frame_id, stamp)
@@ -302,8 +301,10 @@ class DloClient:
         return stamp
 
     def publish_oversized_targets(self, n_poses: int) -> int:
-        """Publish a PoseArray of ``n_poses`` zero poses, serialised here without building them in
-        Python (one pose, its count patched, zeros appended); returns its size in bytes.
+        """Publish a PoseArray of ``n_poses`` zero poses; return its size in bytes.
+
+        Serialised here without building the poses in Python (one pose, its count patched, zeros
+        appended).
         """
         msg = self._msgs["PoseArray"](header=header(self.frame_id, self._now_ns()))
         msg.poses = [self._pose((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))]
@@ -351,8 +352,9 @@ class DloClient:
     def query(
         self, start: tuple, goal: tuple, *, frame_id: str | None = None, timeout: float = 30.0
     ):
-        """Call ~/query_shape; returns (points, orientations) of a verified shape, empty arrays for
-        any other answer (see :meth:`query_shape` for which).
+        """Call ~/query_shape; return (points, orientations) of a verified shape.
+
+        Any other answer gives empty arrays (see :meth:`query_shape` for which).
         """
         answer = self.query_shape(start, goal, frame_id=frame_id, timeout=timeout)
         if answer.verified:
@@ -362,9 +364,10 @@ class DloClient:
     def query_shape(
         self, start: tuple, goal: tuple, *, frame_id: str | None = None, timeout: float = 30.0
     ) -> QueryAnswer:
-        """Call ~/query_shape; the reply decoded (``query_reply.decode``): its ``status`` is
-        'verified' (a verified, stable equilibrium), 'unverified' (a shape, not verified),
-        'no_equilibrium', 'unstable', 'failed', 'invalid', 'busy' or 'not_ready'
+        """Call ~/query_shape; return the reply decoded (``query_reply.decode``).
+
+        Its ``status`` is 'verified' (a verified, stable equilibrium), 'unverified' (a shape, not
+        verified), 'no_equilibrium', 'unstable', 'failed', 'invalid', 'busy' or 'not_ready'
         (msg_docs/node.md).
         """
         frame = self.frame_id if frame_id is None else frame_id
@@ -393,9 +396,7 @@ class DloClient:
     def publish_cloud(
         self, points, *, frame_id: str | None = None, stamp_ns: int | None = None
     ) -> int:
-        """Publish ``points`` (N, 3) [m] as a float32 x, y, z PointCloud2 on ~/observed; returns
-        the stamp [ns].
-        """
+        """Publish ``points`` (N, 3) [m] as a float32 PointCloud2 on ~/observed; return its stamp."""
         stamp = self._now_ns() if stamp_ns is None else stamp_ns
         self._cloud_pub.publish(
             points_to_cloud(points, self.frame_id if frame_id is None else frame_id, stamp)
@@ -407,8 +408,9 @@ class DloClient:
         self._cloud_pub.publish(msg)
 
     def wait_for_cloud_subscriber(self, timeout: float = 10.0, settle: float = 0.5) -> bool:
-        """Wait until the node's ~/observed reader matched (then ``settle`` s more, see
-        wait_for_subscribers).
+        """Wait until the node's ~/observed reader matched, then ``settle`` s more.
+
+        See :meth:`wait_for_subscribers`.
         """
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -419,7 +421,7 @@ class DloClient:
         return False
 
     def fit(self, timeout: float = 30.0) -> tuple[bool, str]:
-        """Call ~/fit (it answers at once: whether a fit started, and why not)."""
+        """Call ~/fit; return whether a fit started, and why not (it answers at once)."""
         resp = self._call(self._fit, self._msgs["Trigger"].Request(), timeout)
         return resp.success, resp.message
 

@@ -38,8 +38,10 @@ class DomainLease:
 
 
 def allocate_domain_id() -> DomainLease:
-    """Reserve a free domain id (flock on a file per id; the order starts at a pid- and
-    counter-derived offset, so concurrent processes rarely even contend).
+    """Reserve a free domain id (an flock on a lock file per id).
+
+    The search starts at a pid- and counter-derived offset, so concurrent processes rarely even
+    contend.
     """
     global _counter
     LOCK_DIR.mkdir(parents=True, exist_ok=True)
@@ -60,7 +62,7 @@ def allocate_domain_id() -> DomainLease:
 
 
 def ros_env(domain_id: int, base: dict | None = None) -> dict:
-    """The environment for a node process in ``domain_id``, discovery limited to this machine."""
+    """Return the environment of a node process in ``domain_id``, discovery on this machine only."""
     env = dict(os.environ if base is None else base)
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

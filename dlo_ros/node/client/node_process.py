@@ -19,8 +19,9 @@ from .domains import ros_env
 
 
 class NodeProcess:
-    """``python -m <module> <args>`` (default module ``dlo_ros.node``) in a new process group;
-    output goes to ``log_path``.  ``env``: the base environment (default this process's) that
+    """Run ``python -m <module> <args>`` (default ``dlo_ros.node``) in a new process group.
+
+    Output goes to ``log_path``.  ``env``: the base environment (default this process's) that
     :func:`ros_env` completes.
     """
 
@@ -85,8 +86,9 @@ class NodeProcess:
         return self.returncode
 
     def stop(self, timeout: float = 15.0, sig: int = signal.SIGINT) -> int:
-        """Stop the node (``sig``, then SIGTERM, then SIGKILL of its process group); its return
-        code.
+        """Stop the node and return its exit code.
+
+        ``sig`` first, then SIGTERM, then SIGKILL of its process group.
         """
         if self.alive():
             self.send_signal(sig)

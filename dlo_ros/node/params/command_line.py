@@ -35,9 +35,7 @@ ROS_ARGS_WITH_VALUE = (
 
 
 class ParamsError(ValueError):
-    """The node's arguments, a params file or a parameter value is unusable (the message says
-    which).
-    """
+    """The node's arguments, a params file or a parameter value is unusable (the message says)."""
 
 
 @dataclass
@@ -55,7 +53,7 @@ class NodeArgs:
 
 
 def node_argument_parser(prog: str = "dlo node") -> argparse.ArgumentParser:
-    """The node's own options (everything after ``--ros-args`` goes to rclpy)."""
+    """Build the parser of the node's own options (everything after ``--ros-args`` is rclpy's)."""
     ap = argparse.ArgumentParser(
         prog=prog,
         description="Run the dlo node (static cable shape for grip targets). ROS arguments go after --ros-args, "
@@ -80,8 +78,9 @@ def node_argument_parser(prog: str = "dlo node") -> argparse.ArgumentParser:
 
 
 def split_ros_args(argv: Sequence[str]) -> tuple[list[str], list[str]]:
-    """(the program's own arguments, the tokens of every ``--ros-args`` section), as rcl splits
-    them: a section runs from ``--ros-args`` to ``--`` or the end.
+    """Split ``argv`` into the program's own arguments and the tokens of its ``--ros-args``.
+
+    As rcl splits them: a section runs from ``--ros-args`` to ``--`` or the end.
     """
     own: list[str] = []
     ros: list[str] = []
@@ -99,7 +98,7 @@ def split_ros_args(argv: Sequence[str]) -> tuple[list[str], list[str]]:
 
 
 def _yaml_value(text: str, where: str) -> Any:
-    """A ``-p name:=value`` value as rcl reads it (YAML)."""
+    """Read a ``-p name:=value`` value as rcl reads it (YAML)."""
     try:
         return yaml.safe_load(text) if text.strip() else ""
     except yaml.YAMLError:
@@ -107,8 +106,9 @@ def _yaml_value(text: str, where: str) -> Any:
 
 
 def _applies(key: str, node_name: str) -> bool:
-    """Whether a params file's node key (``/**``, ``dlo``, ``/cell1/dlo``, ``/**/dlo``) names this
-    node.
+    """Return whether a params file's node key names this node.
+
+    E.g. ``/**``, ``dlo``, ``/cell1/dlo``, ``/**/dlo``.
     """
     last = key.rstrip("/").rsplit("/", 1)[-1]
     return last in ("*", "**", node_name) or key in ("/**", "**")
@@ -126,7 +126,7 @@ def _flatten(d: Mapping, prefix: str, out: dict[str, tuple[Any, str]], where: st
 
 
 def read_params_file(path: str, node_name: str = "dlo") -> dict[str, tuple[Any, str]]:
-    """This node's parameters in a ROS 2 params file: name -> (value, 'file:line' where it is set).
+    """Read this node's parameters in a ROS 2 params file: name -> (value, 'file:line').
 
     Raises ParamsError naming the file (and line, key or parameter) for anything rcl would refuse
     or silently misread: not a regular file, over 1 MiB or the scene loader's YAML limits, a syntax
@@ -209,7 +209,7 @@ def _line_of_param(lines: Mapping[str, int], key: str, name: str) -> int | None:
 
 
 def _check_all(values: Mapping[str, tuple[Any, str]]) -> list[str]:
-    """The errors in this node's parameter values (name -> (value, where))."""
+    """List the errors in this node's parameter values (name -> (value, where))."""
     errors: list[str] = []
     for name, (value, where) in values.items():
         reason = unknown_reason(name)

@@ -43,7 +43,7 @@ def fit_parameters_reason(value: Any) -> str:
 
 
 def compile_mode(value: Any) -> str:
-    """The solver's compile mode for a ``compile`` parameter value.
+    """Return the solver's compile mode for a ``compile`` parameter value.
 
     ROS reads ``-p compile:=off`` (and an unquoted ``off`` / ``no`` in YAML) as the boolean false,
     so false means 'off'; true means the default, 'background'.  Raises ValueError for anything
@@ -59,7 +59,7 @@ def compile_mode(value: Any) -> str:
 
 
 def profile_value(profile: Profile | None) -> float:
-    """The parameter value of a property: the constant, the maximum of a table, 0 for None."""
+    """Return a property's parameter value: the constant, a table's maximum, 0 for None."""
     if profile is None:
         return 0.0
     return float(max(profile.values))
@@ -89,10 +89,10 @@ def scaled_profile(profile: Profile | None, value: float) -> Profile:
 
 
 def apply_string(string: StringProperties, values: Mapping[str, float]) -> StringProperties:
-    """``string`` with the given ``string.*`` parameter values (unchanged values keep their
-    tables).
+    """Return ``string`` with the given ``string.*`` parameter values applied.
 
-    Raises ValueError naming the parameter for a value the model cannot take at run time.
+    Values that do not change keep their tables.  Raises ValueError naming the parameter for a
+    value the model cannot take at run time.
     """
     changes: dict[str, Any] = {}
     for name, value in values.items():
@@ -131,9 +131,7 @@ def apply_string(string: StringProperties, values: Mapping[str, float]) -> Strin
 
 
 def check_live(name: str, value: Any, problem: Problem) -> str:
-    """Why ``name = value`` is refused at run time ('' if it is accepted).  Pure: changes
-    nothing.
-    """
+    """Return why ``name = value`` is refused at run time ('' if accepted); changes nothing."""
     if not name or not name.strip():
         return "a parameter name must not be empty"
     spec = SPECS.get(name)

@@ -49,6 +49,43 @@ def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -
     Raises TargetError (kind 'frame', 'count', 'invalid' or 'non_finite') naming the field
     otherwise (module docstring).
     """
+    width, height, step, row_step = _checked_layout(msg, frame_id, max_points, where)
+    n = width * height
+    order = ">" if msg.is_bigendian else "<"
+    fields = {f.name: f for f in msg.fields}
+    try:  # rclpy gives an array.array('B'): read in place
+        raw = np.frombuffer(msg.data, np.uint8)
+    except TypeError:  # a list of ints (a message built by hand)
+        raw = np.asarray(msg.data, dtype=np.uint8)
+    out = np.empty((n, 3))
+    for k, axis in enumerate("xyz"):
+        offset, nbytes, kind = _checked_field(fields, axis, step, where)
+        # one strided view per row block: rows may be padded (row_step > width × point_step)
+        view = np.lib.stride_tricks.as_strided(
+            raw[offset:],
+            shape=(height, width, nbytes),
+            strides=(row_step, step, 1),
+            writeable=False,
+        )
+        out[:, k] = np.ascontiguousarray(view).view(order + kind).reshape(n)
+    bad = np.flatnonzero(~np.all(np.isfinite(out), axis=1))
+    if bad.size:
+        i = int(bad[0])
+        axis = "xyz"[int(np.flatnonzero(~np.isfinite(out[i]))[0])]
+        raise TargetError(
+            "non_finite",
+            f"{where}: point {i} (row {i // width}, column {i % width}): field '{axis}' is "
+            f"{out[i, 'xyz'.index(axis)]}; {bad.size} point(s) are NaN or infinite (drop "
+            "invalid points before publishing)",
+        )
+    return out
+
+
+def _checked_layout(msg, frame_id: str, max_points: int, where: str) -> tuple[int, int, int, int]:
+    """Check a cloud's frame, point count and sizes; return (width, height, point_step, row_step).
+
+    The count is checked before any point is read, so the cost is bounded by ``max_points``.
+    """
     cloud_frame = msg.header.frame_id
     check_frame_size(cloud_frame, where)
     if normalise_frame(cloud_frame) != normalise_frame(frame_id) or not cloud_frame:
@@ -80,65 +117,41 @@ def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -
             f"{where}: point_step {step} and row_step {row_step} do not hold width {width} "
             "points per row",
         )
-    data = msg.data
-    size = len(data)
+    size = len(msg.data)
     if size < row_step * (height - 1) + width * step:
         raise TargetError(
             "invalid",
             f"{where}: data holds {size} bytes, less than height {height} × row_step {row_step}",
         )
-    order = ">" if msg.is_bigendian else "<"
-    fields = {f.name: f for f in msg.fields}
-    try:  # rclpy gives an array.array('B'): read in place
-        raw = np.frombuffer(data, np.uint8)
-    except TypeError:  # a list of ints (a message built by hand)
-        raw = np.asarray(data, dtype=np.uint8)
-    out = np.empty((n, 3))
-    for k, axis in enumerate("xyz"):
-        f = fields.get(axis)
-        if f is None:
-            names = ", ".join(safe_text(name, 20) for name in list(fields)[:10]) or "none"
-            raise TargetError(
-                "invalid",
-                f"{where}: fields: no field '{axis}' (fields: {names}); x, y, z are needed",
-            )
-        kind = FLOAT_TYPES.get(int(f.datatype))
-        if kind is None:
-            raise TargetError(
-                "invalid",
-                f"{where}: fields['{axis}'].datatype is "
-                f"{TYPE_NAMES.get(int(f.datatype), int(f.datatype))}, not FLOAT32 or FLOAT64",
-            )
-        if int(f.count) != 1:
-            raise TargetError(
-                "invalid", f"{where}: fields['{axis}'].count is {int(f.count)}, not 1"
-            )
-        offset, nbytes = int(f.offset), int(kind[1])
-        if offset < 0 or offset + nbytes > step:
-            raise TargetError(
-                "invalid",
-                f"{where}: fields['{axis}'].offset {offset} + {nbytes} bytes is outside "
-                f"point_step {step}",
-            )
-        # one strided view per row block: rows may be padded (row_step > width × point_step)
-        view = np.lib.stride_tricks.as_strided(
-            raw[offset:],
-            shape=(height, width, nbytes),
-            strides=(row_step, step, 1),
-            writeable=False,
-        )
-        out[:, k] = np.ascontiguousarray(view).view(order + kind).reshape(n)
-    bad = np.flatnonzero(~np.all(np.isfinite(out), axis=1))
-    if bad.size:
-        i = int(bad[0])
-        axis = "xyz"[int(np.flatnonzero(~np.isfinite(out[i]))[0])]
+    return width, height, step, row_step
+
+
+def _checked_field(fields: dict, axis: str, step: int, where: str) -> tuple[int, int, str]:
+    """Check the field of one axis; return its (offset, bytes, numpy kind such as 'f4')."""
+    f = fields.get(axis)
+    if f is None:
+        names = ", ".join(safe_text(name, 20) for name in list(fields)[:10]) or "none"
         raise TargetError(
-            "non_finite",
-            f"{where}: point {i} (row {i // width}, column {i % width}): field '{axis}' is "
-            f"{out[i, 'xyz'.index(axis)]}; {bad.size} point(s) are NaN or infinite (drop "
-            "invalid points before publishing)",
+            "invalid",
+            f"{where}: fields: no field '{axis}' (fields: {names}); x, y, z are needed",
         )
-    return out
+    kind = FLOAT_TYPES.get(int(f.datatype))
+    if kind is None:
+        raise TargetError(
+            "invalid",
+            f"{where}: fields['{axis}'].datatype is "
+            f"{TYPE_NAMES.get(int(f.datatype), int(f.datatype))}, not FLOAT32 or FLOAT64",
+        )
+    if int(f.count) != 1:
+        raise TargetError("invalid", f"{where}: fields['{axis}'].count is {int(f.count)}, not 1")
+    offset, nbytes = int(f.offset), int(kind[1])
+    if offset < 0 or offset + nbytes > step:
+        raise TargetError(
+            "invalid",
+            f"{where}: fields['{axis}'].offset {offset} + {nbytes} bytes is outside "
+            f"point_step {step}",
+        )
+    return offset, nbytes, kind
 
 
 def points_to_cloud(points: np.ndarray, frame_id: str, stamp_ns: int):

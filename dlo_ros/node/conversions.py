@@ -9,7 +9,7 @@ point.
 from __future__ import annotations
 
 import struct
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from ..model.obstacles import Obstacle, Primitive
 from ..model.problem import Problem
 from ..model.rotations import quat_to_matrix
 from ..solver.result import GripWrench, ShapeResult
-from .validation import TargetError, check_frame, normalise_frame
+from .validation import TargetError, Vector, check_frame, normalise_frame
 
 # ---- time ---------------------------------------------------------------------------------------
 
@@ -54,7 +54,7 @@ def pose_to_arrays(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
     return np.array([p.x, p.y, p.z], dtype=float), np.array([q.x, q.y, q.z, q.w], dtype=float)
 
 
-def arrays_to_pose(position: Sequence[float], orientation: Sequence[float]) -> Pose:
+def arrays_to_pose(position: Vector, orientation: Vector) -> Pose:
     p = [float(v) for v in position]
     q = [float(v) for v in orientation]
     return Pose(
@@ -64,14 +64,14 @@ def arrays_to_pose(position: Sequence[float], orientation: Sequence[float]) -> P
 
 
 def pose_stamped(
-    position: Sequence[float], orientation: Sequence[float], frame_id: str, stamp_ns: int
+    position: Vector, orientation: Vector, frame_id: str, stamp_ns: int
 ) -> PoseStamped:
     return PoseStamped(
         header=header(frame_id, stamp_ns), pose=arrays_to_pose(position, orientation)
     )
 
 
-def quat_multiply(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
+def quat_multiply(a: Vector, b: Vector) -> np.ndarray:
     """Hamilton product a ⊗ b of quaternions (x, y, z, w)."""
     ax, ay, az, aw = (float(v) for v in a)
     bx, by, bz, bw = (float(v) for v in b)
@@ -88,8 +88,8 @@ def quat_multiply(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
 def transform_pose(
     position: np.ndarray,
     orientation: np.ndarray,
-    translation: Sequence[float],
-    rotation: Sequence[float],
+    translation: Vector,
+    rotation: Vector,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Apply the transform (translation, rotation quaternion) to a pose: p' = R p + t, q' = r ⊗ q.
 
@@ -109,7 +109,7 @@ def in_frame(
     position: np.ndarray,
     orientation: np.ndarray,
     where: str,
-    lookup: Callable[[str, str], tuple[Sequence[float], Sequence[float]]] | None = None,
+    lookup: Callable[[str, str], tuple[Vector, Vector]] | None = None,
 ):
     """(position, orientation) of a pose given in ``frame_id``, expressed in ``node_frame``.
 
@@ -122,6 +122,7 @@ def in_frame(
         return position, orientation
     if lookup is None or not frame_id:
         check_frame(frame_id, node_frame, where)  # raises
+    assert lookup is not None  # for mypy: check_frame raised otherwise
     try:
         translation, rotation = lookup(normalise_frame(node_frame), normalise_frame(frame_id))
     except Exception as exc:  # noqa: BLE001 - tf2's lookup exceptions
@@ -215,7 +216,7 @@ class CdrError(ValueError):
 
 
 def _cdr_header_at(data: bytes, offset: int) -> tuple[int, str, int]:
-    """Read a std_msgs/Header at ``offset`` (aligned to 4): (stamp [ns], frame_id, offset after)."""
+    """Read a std_msgs/Header at ``offset`` (aligned to 4): (stamp [ns], frame_id, next offset)."""
     sec, nanosec, length = struct.unpack_from("<iII", data, offset)
     start = offset + 12
     if length < 1 or start + length > len(data):
@@ -228,7 +229,7 @@ def _cdr_header_at(data: bytes, offset: int) -> tuple[int, str, int]:
 
 
 def path_from_cdr(data: bytes) -> tuple[int, str, np.ndarray, np.ndarray]:
-    """Decode a serialised nav_msgs/Path: (stamp [ns], frame_id, points (N, 3), quaternions (N, 4)).
+    """Decode a serialised Path: (stamp [ns], frame_id, points (N, 3), quaternions (N, 4)).
 
     What a raw subscription takes: the inverse of :func:`path_cdr` for any Path, whatever its
     poses' headers.  No per-pose Python message objects: rclpy's deserialisation of a 51-pose
@@ -239,8 +240,10 @@ def path_from_cdr(data: bytes) -> tuple[int, str, np.ndarray, np.ndarray]:
         raise CdrError("not little-endian CDR")
     try:
         stamp, frame, offset = _cdr_header_at(data, 4)
-        # noqa: E731 - alignment counts from after the 4-byte prefix
-        pad = lambda o, a: o + (-(o - 4) % a)
+
+        def pad(o: int, a: int) -> int:  # alignment counts from after the 4-byte prefix
+            return o + (-(o - 4) % a)
+
         offset = pad(offset, 4)
         (count,) = struct.unpack_from("<I", data, offset)
         offset += 4
@@ -301,11 +304,11 @@ def bending_energy_density(s: np.ndarray, orientations: np.ndarray, bend_stiffne
     return energy_density(curvature(s, orientations), rf)
 
 
-def _rgba(rgb: Sequence[float], a: float = 1.0) -> ColorRGBA:
+def _rgba(rgb: Vector, a: float = 1.0) -> ColorRGBA:
     return ColorRGBA(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=float(a))
 
 
-def _point(p: Sequence[float]) -> Point:
+def _point(p: Vector) -> Point:
     return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
 
 
@@ -442,7 +445,8 @@ def result_markers(
             ]
             m.scale = Vector3(x=0.004, y=0.008, z=0.0)
             m.color = _rgba(SELF_CONTACT_RGB)
-            m.text = f"self-contact s = {c.s_a if side == 0 else c.s_b:.4g} m: {np.linalg.norm(c.force):.3g} N"
+            s_side = c.s_a if side == 0 else c.s_b
+            m.text = f"self-contact s = {s_side:.4g} m: {np.linalg.norm(c.force):.3g} N"
             markers.append(m)
 
     markers.extend(obstacle_markers(problem.obstacles, h))

@@ -26,7 +26,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import yaml
@@ -37,7 +37,12 @@ from .client import DloClient, NodeProcess, PathEvent, allocate_domain_id
 
 DEMO_SCENE = "default_cable"
 #: Added to the default scene: the obstacle the cable is carried over.
-POST = {"type": "sphere", "name": "post", "center": [0.175, 0.35, 0.25], "radius": 0.08}
+POST: dict[str, Any] = {
+    "type": "sphere",
+    "name": "post",
+    "center": [0.175, 0.35, 0.25],
+    "radius": 0.08,
+}
 
 #: (time [s], left position, right position, right twist about the tangent [rad], phase starting
 # here)
@@ -112,7 +117,7 @@ def _percentiles(values: Sequence[float]) -> tuple[float, float, float]:
     return float(np.percentile(a, 50)), float(np.percentile(a, 99)), float(a.max())
 
 
-def _model_summary(values: dict) -> str:
+def _model_summary(values: dict[str, str]) -> str:
     """Summarise the node's final model from its diagnostics (model.* keys).
 
     What it solved, its estimated error against the tolerance, and how many times it changed.
@@ -131,8 +136,8 @@ def _model_summary(values: dict) -> str:
         + f", order {values['model.order']}, {values.get('model.variables', '?')} unknowns, "
         f"{values.get('model.obstacles', '?')} obstacle(s) in the NLP"
     )
-    est, tol = values.get("model.estimated_error_m"), values.get("model.tolerance_m")
-    if est not in (None, "", "None"):
+    est, tol = values.get("model.estimated_error_m", ""), values.get("model.tolerance_m", "")
+    if est not in ("", "None"):
         met = "met" if float(est) <= float(tol) else "NOT met"
         text += f"; estimated error {float(est):.2g} m (tolerance {float(tol):.2g} m: {met})"
     changes = values.get("model.changes")
@@ -141,7 +146,7 @@ def _model_summary(values: dict) -> str:
     return text
 
 
-def model_settled(values: dict, held: int = 0) -> bool:
+def model_settled(values: dict[str, str], held: int = 0) -> bool:
     """Return whether auto's checks describe the final shape and its model is good enough.
 
     The checks must be of a solve of the last target: at most ``held`` updates ago (``held`` the
@@ -152,7 +157,7 @@ def model_settled(values: dict, held: int = 0) -> bool:
         return True
     checked = str(values.get("model.checked")).lower() == "true"
     try:
-        age = int(values.get("model.checked_updates_ago"))
+        age = int(values.get("model.checked_updates_ago", ""))
     except (TypeError, ValueError):
         return False
     met = str(values.get("model.tolerance_met")).lower() == "true"
@@ -211,7 +216,8 @@ def _parser() -> argparse.ArgumentParser:
         "--model",
         default="auto",
         choices=("auto", "full", "planar", "scene"),
-        help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
+        help="solver.model of the node (default auto: it starts planar and switches to 3D when "
+        "the "
         "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "
         "own setting)",
     )
@@ -220,7 +226,8 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=120.0,
         metavar="S",
-        help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final shape "
+        help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final "
+        "shape "
         "are done and meet the tolerance, at most S seconds (default 120; 0: do not wait)",
     )
     ap.add_argument(
@@ -234,7 +241,8 @@ def _parser() -> argparse.ArgumentParser:
         "--rrd",
         metavar="FILE",
         default=DEFAULT_RRD,
-        help=f"the node records the run to this rerun file (default ./{DEFAULT_RRD}, overwritten each "
+        help=f"the node records the run to this rerun file (default ./{DEFAULT_RRD}, overwritten "
+        "each "
         "run; `dlo replay FILE` opens it); '' for no recording",
     )
     return ap
@@ -436,7 +444,8 @@ def _print_final(final: PathEvent | None) -> None:
     """Print where the final shape ends and how far it is from the post."""
     if final is None:
         print(
-            "  final shape             the centreline of the last target did not arrive within 10 s"
+            "  final shape             the centreline of the last target did not arrive within 10 "
+            "s"
         )
         return
     centre, r = np.asarray(POST["center"]), float(POST["radius"])

@@ -24,7 +24,7 @@ import time
 import traceback
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from typing import Any, Callable
 
 from ..model.problem import GripPose, Problem
 from ..solver.options import SolverOptions
@@ -54,7 +54,7 @@ class Update:
 @dataclass
 class _Job:
     kind: str
-    payload: object
+    payload: Any  # the job's argument: targets, an edit function or None
     future: Future = field(default_factory=Future)
 
 
@@ -72,7 +72,7 @@ class ShapeEngine:
         problem: Problem,
         options: SolverOptions,
         *,
-        make_solver: Callable[[Problem, SolverOptions], object],
+        make_solver: Callable[[Problem, SolverOptions], Any],
         on_update: Callable[[Update], None],
         on_failure: Callable[[str, str, Update | None], None],
         on_state: Callable[[str], None] = lambda s: None,
@@ -92,7 +92,7 @@ class ShapeEngine:
         self._received_ns: int | None = None
         self._merged = 0
         self._stop = False
-        self._solver = None
+        self._solver: Any = None  # a ShapeSolver (or auto's) once built
         self.state = "not started"
         self.targets_received = 0
         self.targets_coalesced = 0  # received but superseded before a solve used them
@@ -157,7 +157,7 @@ class ShapeEngine:
         return solver.problem.with_grip_poses(targets), solver.options
 
     def query(self, poses: dict[str, GripPose]) -> Future:
-        """Solve the current targets updated by ``poses`` without committing; a ShapeResult Future."""
+        """Solve the current targets updated by ``poses``, uncommitted; a ShapeResult Future."""
         return self._submit("query", dict(poses))
 
     def reset(self) -> Future:
@@ -165,14 +165,14 @@ class ShapeEngine:
         return self._submit("reset", None)
 
     def change_problem(self, edit: Callable[[Problem], Problem]) -> Future:
-        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem); re-solve the targets."""
+        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem); re-solve."""
         return self._submit("problem", edit)
 
     def change_options(self, edit: Callable[[SolverOptions], SolverOptions]) -> Future:
-        """Rebuild the solver with edited options (the next solve is cold); re-solve the targets."""
+        """Rebuild the solver with edited options (the next solve is cold); re-solve."""
         return self._submit("options", edit)
 
-    def _submit(self, kind: str, payload: object) -> Future:
+    def _submit(self, kind: str, payload: Any) -> Future:
         job = _Job(kind, payload)
         with self._cond:
             if self._stop:

@@ -256,7 +256,7 @@ class FitHealth:
     def finished(
         self, result, snapshot: CloudSnapshot, application: Application | None, error: str = ""
     ) -> None:
-        """Count a finished fit: its FitResult (None when it raised: ``error``) and what applied."""
+        """Count a finished fit: its FitResult (None when it raised: ``error``), what applied."""
         with self._lock:
             self.fits_finished += 1
             self.running = False

@@ -13,9 +13,11 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..model.problem import GripPose, PoseError
+from ..text import TEXT_LIMIT as TEXT_LIMIT  # the node's modules import it from here
+from ..text import safe_text
 
-# noqa: F401  (re-exported: the node's modules import it from here)
-from ..text import TEXT_LIMIT, safe_text
+#: a vector given as numbers: a sequence or a numpy array
+Vector = Sequence[float] | np.ndarray
 
 #: Longest ``header.frame_id`` of a target (or ``frame_id`` parameter) the node accepts; tf2 frame
 # ids are short.
@@ -93,14 +95,15 @@ def check_frame(frame_id: str, expected: str, where: str) -> None:
     if normalise_frame(frame_id) != normalise_frame(expected):
         raise TargetError(
             "frame",
-            f"{where}: header.frame_id is '{safe_text(frame_id, 80)}', not '{expected}' (no transform available: "
+            f"{where}: header.frame_id is '{safe_text(frame_id, 80)}', not '{expected}' (no "
+            "transform available: "
             "send targets in the node's frame_id or make tf2 available)",
         )
 
 
 def check_pose(
-    position: Sequence[float],
-    orientation: Sequence[float],
+    position: Vector,
+    orientation: Vector,
     where: str,
     tolerance: float = QUATERNION_TOLERANCE,
 ) -> GripPose:

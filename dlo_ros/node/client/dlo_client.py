@@ -40,6 +40,7 @@ from ..conversions import (
 )
 from ..qos import CLOUD_QOS, LATCHED_QOS, TARGET_QOS, WRENCH_QOS
 from ..query_reply import QueryAnswer, decode
+from ..validation import Vector
 from .executors import make_executor
 
 SERVICE_SETTLE_S = 0.5  # wait after a service is first discovered, before the first call
@@ -226,7 +227,8 @@ class DloClient:
             ev = self.paths[-1]
             return ev if where is None or where(ev) else None
 
-        return self.wait_for(ready, timeout)
+        event = self.wait_for(ready, timeout)
+        return event if isinstance(event, PathEvent) else None
 
     def diagnostic_values(self) -> dict[str, str]:
         with self._cond:
@@ -286,7 +288,7 @@ class DloClient:
 
     def publish_targets(
         self,
-        poses: Iterable[tuple[Sequence[float], Sequence[float]]],
+        poses: Iterable[tuple[Vector, Vector]],
         *,
         frame_id: str | None = None,
         stamp_ns: int | None = None,
@@ -396,7 +398,7 @@ class DloClient:
     def publish_cloud(
         self, points, *, frame_id: str | None = None, stamp_ns: int | None = None
     ) -> int:
-        """Publish ``points`` (N, 3) [m] as a float32 PointCloud2 on ~/observed; return its stamp."""
+        """Publish ``points`` (N, 3) [m] as a float32 PointCloud2 on ~/observed; its stamp [ns]."""
         stamp = self._now_ns() if stamp_ns is None else stamp_ns
         self._cloud_pub.publish(
             points_to_cloud(points, self.frame_id if frame_id is None else frame_id, stamp)

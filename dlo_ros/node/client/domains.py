@@ -23,7 +23,8 @@ class DomainLease:
     """A reserved ROS_DOMAIN_ID; ``release()`` (or process exit) frees it."""
 
     def __init__(self, domain_id: int, fd: int):
-        self.domain_id, self._fd = domain_id, fd
+        self.domain_id = domain_id
+        self._fd: int | None = fd
 
     def release(self) -> None:
         if self._fd is not None:
@@ -62,7 +63,7 @@ def allocate_domain_id() -> DomainLease:
 
 
 def ros_env(domain_id: int, base: dict | None = None) -> dict:
-    """Return the environment of a node process in ``domain_id``, discovery on this machine only."""
+    """Return the environment of a node process in ``domain_id`` (discovery on this machine)."""
     env = dict(os.environ if base is None else base)
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

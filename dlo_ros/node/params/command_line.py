@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import yaml
@@ -56,8 +57,10 @@ def node_argument_parser(prog: str = "dlo node") -> argparse.ArgumentParser:
     """Build the parser of the node's own options (everything after ``--ros-args`` is rclpy's)."""
     ap = argparse.ArgumentParser(
         prog=prog,
-        description="Run the dlo node (static cable shape for grip targets). ROS arguments go after --ros-args, "
-        "e.g. --ros-args -r __ns:=/left_cell -p scene:=my_scene. Every params file and -p value is "
+        description="Run the dlo node (static cable shape for grip targets). ROS arguments go "
+        "after --ros-args, "
+        "e.g. --ros-args -r __ns:=/left_cell -p scene:=my_scene. Every params file and -p value "
+        "is "
         "checked before the node starts (msg_docs/node.md).",
     )
     ap.add_argument(
@@ -145,7 +148,7 @@ def read_params_file(path: str, node_name: str = "dlo") -> dict[str, tuple[Any, 
 
     shown = safe_text(path, 4096)
     try:
-        text = read_scene_text(path, shown)
+        text = read_scene_text(Path(path), shown)
     except SceneError as exc:
         raise ParamsError(
             f"params file {str(exc).replace('scene file', 'parameters file')}"
@@ -155,7 +158,10 @@ def read_params_file(path: str, node_name: str = "dlo") -> dict[str, tuple[Any, 
     except FileLimitError as exc:
         raise ParamsError(f"params file {exc}") from None
     lines = key_lines(root)
-    shape = "a mapping of node names to {ros__parameters: {name: value, ...}} (e.g. '/**: {ros__parameters: ...}')"
+    shape = (
+        "a mapping of node names to {ros__parameters: {name: value, ...}} "
+        "(e.g. '/**: {ros__parameters: ...}')"
+    )
     if not isinstance(data, dict) or not data:
         got = "an empty file" if data is None else f"a {type(data).__name__}"
         raise ParamsError(f"params file {shown}: a ROS parameters file must be {shape}, got {got}")
@@ -169,13 +175,15 @@ def read_params_file(path: str, node_name: str = "dlo") -> dict[str, tuple[Any, 
             or "ros__parameters" not in entry
         ):
             raise ParamsError(
-                f"params file {at}: node entry '{key_text}' must be {{ros__parameters: {{...}}}}: the "
+                f"params file {at}: node entry '{key_text}' must be {{ros__parameters: {{...}}}}: "
+                "the "
                 f"file must be {shape}"
             )
         extra = [k for k in entry if k != "ros__parameters"]
         if extra:
             raise ParamsError(
-                f"params file {at}: node entry '{key_text}' has '{safe_text(extra[0], 40)}' next to "
+                f"params file {at}: node entry '{key_text}' has '{safe_text(extra[0], 40)}' next "
+                "to "
                 "ros__parameters (only ros__parameters is read)"
             )
         params = entry["ros__parameters"]
@@ -225,6 +233,19 @@ def _check_all(values: Mapping[str, tuple[Any, str]]) -> list[str]:
     return errors
 
 
+def remapped_node_name(ros: Sequence[str], default: str = "dlo") -> str:
+    """Return the node's name as ``-r __node:=NAME`` (or ``dlo:__node:=NAME``) sets it."""
+    node_name = default
+    tokens = iter(ros)
+    for t in tokens:
+        if t in ("-r", "--remap"):
+            rule = next(tokens, "")
+            lhs, _, rhs = rule.partition(":=")
+            if lhs.rsplit(":", 1)[-1] == "__node" and rhs:
+                node_name = rhs
+    return node_name
+
+
 def prepare_node_args(
     argv: Sequence[str], default_params_file: str | None = None, prog: str = "dlo node"
 ) -> NodeArgs:
@@ -248,16 +269,7 @@ def prepare_node_args(
         if reason:
             raise ParamsError(f"--scene: {reason}")
 
-    # the node's name, as -r __node:=NAME (or dlo:__node:=NAME) sets it
-    node_name = "dlo"
-    tokens = iter(ros)
-    for t in tokens:
-        if t in ("-r", "--remap"):
-            rule = next(tokens, "")
-            lhs, _, rhs = rule.partition(":=")
-            if lhs.rsplit(":", 1)[-1] == "__node" and rhs:
-                node_name = rhs
-
+    node_name = remapped_node_name(ros)
     files: list[str] = [params_file] if params_file else []
     values: dict[str, tuple[Any, str]] = {}
     if params_file:

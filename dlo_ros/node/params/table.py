@@ -51,10 +51,14 @@ STATIC = (
         "compile",
         "string",
         "background",
-        "How the solver gets compiled (C) derivatives, cached per machine in ~/.cache/dlo_ros: 'background' "
-        "(solve at once, interpreted, switch to C when gcc is done: seconds for a new scene structure or "
-        "after a solver change), 'blocking' (compile before the first solve), 'cached' (only a library "
-        "compiled earlier), 'off' (interpreted only; also false, as `-p compile:=off` reads as one).",
+        "How the solver gets compiled (C) derivatives, cached per machine in ~/.cache/dlo_ros: "
+        "'background' "
+        "(solve at once, interpreted, switch to C when gcc is done: seconds for a new scene "
+        "structure or "
+        "after a solver change), 'blocking' (compile before the first solve), 'cached' (only a "
+        "library "
+        "compiled earlier), 'off' (interpreted only; also false, as `-p compile:=off` reads as "
+        "one).",
         read_only=True,
         constraints="one of: background, blocking, cached, off (or false)",
         dynamic=True,
@@ -63,7 +67,8 @@ STATIC = (
         "solver.model",
         "string",
         "",
-        "Override the scene's solver.model: 'auto' (the solver picks the smallest model the scene needs), "
+        "Override the scene's solver.model: 'auto' (the solver picks the smallest model the scene "
+        "needs), "
         "'full' (3D) or 'planar'; empty: the scene's value.",
         read_only=True,
         constraints="empty, auto, full or planar",
@@ -72,7 +77,8 @@ STATIC = (
         "use_tf",
         "bool",
         True,
-        "Transform targets from other frames with tf2 when tf2_ros is importable (else they are rejected).",
+        "Transform targets from other frames with tf2 when tf2_ros is importable (else they are "
+        "rejected).",
         read_only=True,
     ),
     ParamSpec(
@@ -88,7 +94,8 @@ STATIC = (
         "markers_period",
         "double",
         0.1,
-        "Period [s] of ~/markers (the newest shape); building and publishing a MarkerArray in Python "
+        "Period [s] of ~/markers (the newest shape); building and publishing a MarkerArray in "
+        "Python "
         "holds the GIL the solver needs for about 2 ms.",
         read_only=True,
         low=0.02,
@@ -98,7 +105,8 @@ STATIC = (
         "record.rrd",
         "string",
         "",
-        "Save a rerun recording of every solve, target and rejected input to this .rrd file (dlo replay "
+        "Save a rerun recording of every solve, target and rejected input to this .rrd file (dlo "
+        "replay "
         "FILE opens it); empty: no file.",
         read_only=True,
     ),
@@ -106,7 +114,8 @@ STATIC = (
         "record.connect",
         "string",
         "",
-        "Stream the rerun recording to a running viewer at HOST[:PORT] or a rerun+http://HOST:PORT/proxy "
+        "Stream the rerun recording to a running viewer at HOST[:PORT] or a "
+        "rerun+http://HOST:PORT/proxy "
         "URL; empty: no streaming.",
         read_only=True,
     ),
@@ -114,8 +123,10 @@ STATIC = (
         "query_workers",
         "integer",
         1,
-        "Worker processes that answer ~/query_shape beside the stream, each with its own solver of the "
-        "scene (they take the other cores); 0: queries are solved in the solver thread between stream "
+        "Worker processes that answer ~/query_shape beside the stream, each with its own solver "
+        "of the "
+        "scene (they take the other cores); 0: queries are solved in the solver thread between "
+        "stream "
         "updates.",
         read_only=True,
         low=0,
@@ -125,7 +136,8 @@ STATIC = (
         "query_timeout",
         "double",
         30.0,
-        "Longest a query worker may take for one ~/query_shape [s]; past it the call answers an empty plan "
+        "Longest a query worker may take for one ~/query_shape [s]; past it the call answers an "
+        "empty plan "
         "(timeout) and the worker is killed and replaced. 0 = no limit.",
         read_only=True,
         low=0.0,
@@ -135,7 +147,8 @@ STATIC = (
         "grip_names",
         "string_array",
         [],
-        "Informational: the scene's grips in configuration order (the order of ~/grips/targets poses).",
+        "Informational: the scene's grips in configuration order (the order of ~/grips/targets "
+        "poses).",
         read_only=True,
         from_scene=True,
     ),
@@ -157,7 +170,8 @@ LIVE = (
         "string.bend_stiffness",
         "double",
         None,
-        "Bending stiffness Rf [N m^2] (> 0). For an s-dependent table: its maximum; setting it scales the table.",
+        "Bending stiffness Rf [N m^2] (> 0). For an s-dependent table: its maximum; setting it "
+        "scales the table.",
         low=0.0,
         high=1.0e6,
         from_scene=True,
@@ -184,7 +198,8 @@ LIVE = (
         "string.stretch_stiffness",
         "double",
         None,
-        "Extensional stiffness Re [N]; 0 = inextensible. Cannot switch between 0 and > 0 at run time.",
+        "Extensional stiffness Re [N]; 0 = inextensible. Cannot switch between 0 and > 0 at run "
+        "time.",
         low=0.0,
         high=1.0e12,
         from_scene=True,
@@ -202,7 +217,8 @@ LIVE = (
         "output_points",
         "integer",
         None,
-        "Centreline samples in ~/centerline and the markers (a change rebuilds the solver: next solve is cold).",
+        "Centreline samples in ~/centerline and the markers (a change rebuilds the solver: next "
+        "solve is cold).",
         low=2,
         high=10000,
         from_scene=True,
@@ -245,7 +261,8 @@ FIT = (
         "fit.enabled",
         "bool",
         False,
-        "Subscribe to ~/observed (sensor_msgs/PointCloud2) and serve ~/fit: identify the string's properties "
+        "Subscribe to ~/observed (sensor_msgs/PointCloud2) and serve ~/fit: identify the string's "
+        "properties "
         "from the observed shape in a worker process beside the stream.",
         read_only=True,
     ),
@@ -253,7 +270,8 @@ FIT = (
         "fit.period_s",
         "double",
         0.0,
-        "Fit continuously: every period_s [s], when a cloud arrived since the last fit; 0 = only on ~/fit.",
+        "Fit continuously: every period_s [s], when a cloud arrived since the last fit; 0 = only "
+        "on ~/fit.",
         read_only=True,
         low=0.0,
         high=3600.0,
@@ -262,7 +280,8 @@ FIT = (
         "fit.max_points",
         "integer",
         20000,
-        "Largest ~/observed cloud [points] accepted; a larger one is refused by its size before it is read.",
+        "Largest ~/observed cloud [points] accepted; a larger one is refused by its size before "
+        "it is read.",
         read_only=True,
         low=3,
         high=200000,
@@ -295,7 +314,8 @@ FIT = (
         "fit.apply_max_rel_sigma",
         "double",
         0.1,
-        "Apply an estimate to the string.* parameters only when the relative standard deviation of every "
+        "Apply an estimate to the string.* parameters only when the relative standard deviation "
+        "of every "
         "value it changes is at most this; 0 = never apply (report only).",
         low=0.0,
         high=10.0,

@@ -116,14 +116,16 @@ def apply_string(string: StringProperties, values: Mapping[str, float]) -> Strin
         if field == "stretch_stiffness":
             if (current is None) != (value == 0.0):
                 raise ValueError(
-                    f"{name}: cannot switch between inextensible (0) and extensible (> 0) at run time: it "
+                    f"{name}: cannot switch between inextensible (0) and extensible (> 0) at run "
+                    "time: it "
                     "changes the model's unknowns; set it in the scene file"
                 )
             changes[field] = None if value == 0.0 else scaled_profile(current, value)
             continue
         if field == "twist_stiffness" and current.is_zero != (value == 0.0):
             raise ValueError(
-                f"{name}: cannot switch between 0 and > 0 at run time: it changes the model's unknowns; "
+                f"{name}: cannot switch between 0 and > 0 at run time: it changes the model's "
+                "unknowns; "
                 "set it in the scene file"
             )
         changes[field] = scaled_profile(current, value)
@@ -174,11 +176,15 @@ def check_value(name: str, value: Any) -> str:
         if len(value) > limit:
             return f"{len(value)} characters, at most {limit}"
         if not value.isprintable():
-            return f"must be printable text (no control characters, newlines or escape sequences): '{safe_text(value, 60)}'"
+            return (
+                "must be printable text (no control characters, newlines or escape sequences): "
+                f"'{safe_text(value, 60)}'"
+            )
         if name == "frame_id" and value:
             if any(c.isspace() for c in value) or not normalise_frame(value).strip("/"):
                 return (
-                    f"'{safe_text(value, 60)}' is not a usable frame id (no spaces; not only '/'; empty means "
+                    f"'{safe_text(value, 60)}' is not a usable frame id (no spaces; not only '/'; "
+                    "empty means "
                     "the scene's frame_id)"
                 )
         if name == "scene" and not value.strip():
@@ -198,7 +204,8 @@ def check_value(name: str, value: Any) -> str:
         ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
         return "" if ok else f"expected a list of strings, got {describe_value(value)}"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return f"expected {'an integer' if spec.kind == 'integer' else 'a number'}, got {describe_value(value)}"
+        expected = "an integer" if spec.kind == "integer" else "a number"
+        return f"expected {expected}, got {describe_value(value)}"
     if spec.kind == "integer" and not isinstance(value, int):
         return f"expected an integer, got {describe_value(value)}"
     if isinstance(value, float) and not math.isfinite(value):

@@ -1,4 +1,4 @@
-"""ROS messages <-> numpy, and the node's output messages built from a ShapeResult.
+"""Convert ROS messages <-> numpy, and build the node's output messages from a ShapeResult.
 
 Pure functions: they build or read message objects but need no node, context or graph, so they are
 unit-tested directly.  Conventions (see msg_docs/node.md): SI units, quaternions (x, y, z, w), a
@@ -9,22 +9,16 @@ point.
 from __future__ import annotations
 
 import struct
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
-from ..shading import colour_map, energy_density
-from ..shading import frame_curvature as curvature
-from ..shading import frame_tangents as tangents  # noqa: F401 - part of this module's API
-from builtin_interfaces.msg import Duration, Time
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, WrenchStamped
 from nav_msgs.msg import Path
-from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import Marker, MarkerArray
+from std_msgs.msg import Header
 
-from ..model.obstacles import Obstacle, Primitive
-from ..model.problem import Problem
 from ..model.rotations import quat_to_matrix
 from ..solver.result import GripWrench, ShapeResult
 from .validation import TargetError, Vector, check_frame, normalise_frame
@@ -286,171 +280,6 @@ def wrench_stamped(wrench: GripWrench, frame_id: str, stamp_ns: int) -> WrenchSt
 def wrench_to_arrays(msg: WrenchStamped) -> tuple[np.ndarray, np.ndarray]:
     f, t = msg.wrench.force, msg.wrench.torque
     return np.array([f.x, f.y, f.z]), np.array([t.x, t.y, t.z])
-
-
-# ---- bending energy density (dlo_ros.shading, shared with the recording) ------------------------
-
-
-def bending_energy_density(s: np.ndarray, orientations: np.ndarray, bend_stiffness) -> np.ndarray:
-    """Return ½ Rf(s) κ(s)² [J/m] per sample.
-
-    ``bend_stiffness`` is a Profile (callable on s) or a number.
-    """
-    rf = (
-        bend_stiffness(np.asarray(s, dtype=float))
-        if callable(bend_stiffness)
-        else float(bend_stiffness)
-    )
-    return energy_density(curvature(s, orientations), rf)
-
-
-def _rgba(rgb: Vector, a: float = 1.0) -> ColorRGBA:
-    return ColorRGBA(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=float(a))
-
-
-def _point(p: Vector) -> Point:
-    return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
-
-
-# ---- markers ------------------------------------------------------------------------------------
-
-GRIP_COLOURS = {"clamp": (0.9, 0.5, 0.1), "pin": (0.6, 0.2, 0.9), "tangent": (0.2, 0.7, 0.9)}
-OBSTACLE_RGBA = (0.55, 0.55, 0.6, 0.5)
-FORCE_RGB = (0.9, 0.1, 0.6)
-SELF_CONTACT_RGB = (1.0, 0.55, 0.0)
-HALFSPACE_SIZE = 2.0  # [m] edge of the plate drawn for a half-space
-MARKER_NAMESPACES = ("string", "grips", "obstacles", "forces", "self_contacts")
-
-
-def _marker(h: Header, ns: str, mid: int, kind: int) -> Marker:
-    m = Marker(header=h, ns=ns, id=mid, type=kind, action=Marker.ADD)
-    m.pose.orientation.w = 1.0
-    m.frame_locked = False
-    m.lifetime = Duration(sec=0, nanosec=0)
-    return m
-
-
-def _primitive_markers(pr: Primitive, h: Header, mid: int) -> list[Marker]:
-    """Build the markers of one drawing primitive (ids mid, mid + 1, mid + 2), colour not set."""
-    if pr.kind == "sphere":
-        m = _marker(h, "obstacles", mid, Marker.SPHERE)
-        m.pose.position = _point(pr.centre)
-        m.scale = Vector3(x=2 * pr.radius, y=2 * pr.radius, z=2 * pr.radius)
-        return [m]
-    if pr.kind == "box":
-        m = _marker(h, "obstacles", mid, Marker.CUBE)
-        e = pr.half_sizes
-        m.pose = arrays_to_pose(pr.centre, pr.orientation)
-        m.scale = Vector3(x=2 * e[0], y=2 * e[1], z=2 * e[2])
-        return [m]
-    if pr.kind == "capsule":  # a cylinder plus two end spheres
-        r = pr.radius
-        m = _marker(h, "obstacles", mid, Marker.CYLINDER)
-        m.pose = arrays_to_pose(pr.centre, pr.orientation)
-        m.scale = Vector3(x=2 * r, y=2 * r, z=pr.length)
-        parts = [m]
-        for k, end in enumerate(pr.ends()):
-            e = _marker(h, "obstacles", mid + 1 + k, Marker.SPHERE)
-            e.pose.position = _point(end)
-            e.scale = Vector3(x=2 * r, y=2 * r, z=2 * r)
-            parts.append(e)
-        return parts
-    if pr.kind == "plane":  # a thin plate just behind the surface
-        thick = 0.01
-        m = _marker(h, "obstacles", mid, Marker.CUBE)
-        m.pose = arrays_to_pose(pr.centre - pr.axis * thick / 2, pr.orientation)
-        m.scale = Vector3(x=HALFSPACE_SIZE, y=HALFSPACE_SIZE, z=thick)
-        return [m]
-    return []  # pragma: no cover - every kind in PRIMITIVE_KINDS is drawn above
-
-
-def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0) -> list[Marker]:
-    """Build the markers of the obstacles, drawn from each one's primitive.
-
-    A capsule is a cylinder plus two end spheres, a half-space a plate.
-    """
-    out: list[Marker] = []
-    mid = start_id
-    rgba = _rgba(OBSTACLE_RGBA[:3], OBSTACLE_RGBA[3])
-    for ob in obstacles:
-        parts = _primitive_markers(ob.primitive(), h, mid)
-        for m in parts:
-            m.color = rgba
-            m.text = ob.name
-        out.extend(parts)
-        mid += 3
-    return out
-
-
-def result_markers(
-    result: ShapeResult,
-    problem: Problem,
-    frame_id: str,
-    stamp_ns: int,
-    *,
-    force_scale: float = 0.1,
-    energy_scale: float = 0.0,
-) -> MarkerArray:
-    """Build the MarkerArray of a shape: string, grips, obstacles, grip and self-contact forces.
-
-    The string is a line strip coloured by bending energy density; each self-contact's force is
-    drawn on both strands (namespace 'self_contacts').  energy_scale [J/m]: density shown in full
-    red (0: the shape's maximum).  Starts with DELETEALL so a consumer never keeps markers of an
-    earlier, larger scene.
-    """
-    h = header(frame_id, stamp_ns)
-    markers: list[Marker] = [Marker(header=h, action=Marker.DELETEALL)]
-    radius = float(problem.string.radius)
-    width = max(2 * radius, 0.004)
-
-    line = _marker(h, "string", 0, Marker.LINE_STRIP)
-    line.scale.x = width
-    line.points = [_point(p) for p in result.points.tolist()]
-    density = bending_energy_density(result.s, result.orientations, problem.string.bend_stiffness)
-    top = energy_scale if energy_scale > 0 else float(np.max(density, initial=0.0))
-    rgb = colour_map(density / top if top > 0 else np.zeros_like(density))
-    line.colors = [_rgba(c) for c in rgb.tolist()]
-    line.color = _rgba((1.0, 1.0, 1.0))
-    line.text = f"max bending energy density {float(np.max(density, initial=0.0)):.4g} J/m"
-    markers.append(line)
-
-    for i, g in enumerate(problem.grips):
-        m = _marker(h, "grips", i, Marker.ARROW)  # along the pose's x-axis = the held tangent
-        m.pose = arrays_to_pose(g.pose.position, g.pose.orientation)
-        m.scale = Vector3(x=0.08, y=0.015, z=0.015)
-        m.color = _rgba(GRIP_COLOURS.get(g.mode, (0.8, 0.8, 0.8)))
-        m.text = f"{g.name} ({g.mode})"
-        markers.append(m)
-        wrench = result.grips.get(g.name)
-        if wrench is not None:
-            f = _marker(h, "forces", i, Marker.ARROW)
-            start = np.asarray(g.pose.position, dtype=float)
-            f.points = [
-                _point(start),
-                _point(start + force_scale * np.asarray(wrench.force, dtype=float)),
-            ]
-            f.scale = Vector3(x=0.006, y=0.012, z=0.0)
-            f.color = _rgba(FORCE_RGB)
-            f.text = f"{g.name}: {np.linalg.norm(wrench.force):.3g} N on the string"
-            markers.append(f)
-
-    # self-contacts: the force on each strand at its contact point (equal and opposite)
-    for k, c in enumerate(result.self_contacts):
-        for side, (point, force) in enumerate(((c.point_a, c.force), (c.point_b, -c.force))):
-            m = _marker(h, "self_contacts", 2 * k + side, Marker.ARROW)
-            start = np.asarray(point, dtype=float)
-            m.points = [
-                _point(start),
-                _point(start + force_scale * np.asarray(force, dtype=float)),
-            ]
-            m.scale = Vector3(x=0.004, y=0.008, z=0.0)
-            m.color = _rgba(SELF_CONTACT_RGB)
-            s_side = c.s_a if side == 0 else c.s_b
-            m.text = f"self-contact s = {s_side:.4g} m: {np.linalg.norm(c.force):.3g} N"
-            markers.append(m)
-
-    markers.extend(obstacle_markers(problem.obstacles, h))
-    return MarkerArray(markers=markers)
 
 
 # ---- diagnostics --------------------------------------------------------------------------------

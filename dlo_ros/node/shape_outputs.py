@@ -18,6 +18,7 @@ from rclpy.node import Node
 from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
+from . import markers
 from .engine import Update
 from .qos import LATCHED_QOS, WRENCH_QOS
 
@@ -78,7 +79,7 @@ class ShapeOutputs:
             return
         value = self.node.get_parameter
         self._marker_pub.publish(
-            conv.result_markers(
+            markers.result_markers(
                 u.result,
                 u.problem,
                 self.frame_id,

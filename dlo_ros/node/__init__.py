@@ -16,6 +16,8 @@ Importing this package does not import rclpy; its ROS modules do.
 
 from __future__ import annotations
 
+from .signals import ignore_signals_at_exit, stop_on_first_signal
+
 
 def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") -> int:
     """Run the node (the ``dlo_node`` console script); see dlo_ros.node.run.main.
@@ -23,8 +25,6 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
     SIGINT and SIGTERM stop it with exit code 0 from the first moment (see
     :mod:`dlo_ros.node.signals`).
     """
-    from .signals import ignore_signals_at_exit, stop_on_first_signal
-
     stop_on_first_signal()
     try:
         # imported here: the signal handling above must be in place before rclpy and CasADi load

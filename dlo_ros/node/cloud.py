@@ -1,6 +1,7 @@
 """Convert ``sensor_msgs/PointCloud2`` ↔ an (N, 3) array of observed points.
 
-Pure: numpy only, duck-typed messages.
+:func:`cloud_points` reads any duck-typed message with numpy alone; :func:`points_to_cloud`
+builds a sensor_msgs message.
 
 :func:`cloud_points` is what the node's ``~/observed`` subscription runs on a deserialised cloud.
 It accepts ``x``, ``y``, ``z`` fields of datatype FLOAT32 or FLOAT64 (count 1) at any offsets
@@ -13,7 +14,9 @@ bounded by ``max_points`` (the point count is checked before any point is read).
 from __future__ import annotations
 
 import numpy as np
+from sensor_msgs.msg import PointCloud2, PointField
 
+from .conversions import header
 from .validation import TargetError, check_frame_size, normalise_frame, safe_text
 
 #: sensor_msgs/PointField datatypes read as coordinates: FLOAT32 = 7, FLOAT64 = 8
@@ -156,10 +159,6 @@ def _checked_field(fields: dict, axis: str, step: int, where: str) -> tuple[int,
 
 def points_to_cloud(points: np.ndarray, frame_id: str, stamp_ns: int):
     """Build an unorganised PointCloud2 (height 1) of float32 x, y, z for ``points`` (N, 3) [m]."""
-    from sensor_msgs.msg import PointCloud2, PointField
-
-    from .conversions import header
-
     pts = np.ascontiguousarray(np.asarray(points, dtype="<f4").reshape(-1, 3))
     return PointCloud2(
         header=header(frame_id, stamp_ns),

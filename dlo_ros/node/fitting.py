@@ -27,6 +27,9 @@ from typing import Mapping
 
 import numpy as np
 
+from ..identify.fit import fit
+from ..identify.objective import FitSettings, SolverCache
+from ..identify.observations import MassObservation, Observation, ObservationSet
 from ..model.problem import GripPose, Problem
 from .params import STRING_FIELDS, profile_value
 
@@ -78,8 +81,6 @@ class CloudSnapshot:
 
 def observation_set(snapshot: CloudSnapshot, config: FitConfig):
     """Build the ``ObservationSet`` of one snapshot (``dlo_ros.identify``)."""
-    from ..identify.observations import MassObservation, Observation, ObservationSet
-
     obs = Observation(
         f"cloud_{snapshot.number}",
         dict(snapshot.poses),
@@ -100,8 +101,6 @@ def fit_payload(problem: Problem, options, snapshot: CloudSnapshot, config: FitC
     ``problem`` (the node's current values; its grip poses are replaced by the snapshot's),
     ``options``, the observation and the settings.
     """
-    from ..identify.objective import FitSettings
-
     settings = FitSettings(max_iterations=int(config.max_iterations), compile=config.compile)
     return pickle.dumps(
         (problem, options, observation_set(snapshot, config), settings),
@@ -116,9 +115,6 @@ def run_fit(payload: bytes):
     string).
     """
     global _SOLVERS
-    from ..identify.fit import fit
-    from ..identify.objective import SolverCache
-
     if _SOLVERS is None:
         _SOLVERS = SolverCache()
     problem, options, data, settings = pickle.loads(payload)  # noqa: S301 - from our own node

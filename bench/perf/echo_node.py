@@ -29,7 +29,7 @@ from rclpy.serialization import deserialize_message
 
 from dlo_ros.node.client import make_executor
 from dlo_ros.node.conversions import path_cdr, time_to_ns
-from dlo_ros.node.dlo_node import LATCHED_QOS, TARGET_QOS
+from dlo_ros.node.qos import LATCHED_QOS, TARGET_QOS
 
 NODE_NAME = "dlo"
 GRIPS = ("left", "right")

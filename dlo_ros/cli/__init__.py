@@ -55,7 +55,7 @@ __all__ = [
 #   name -> (help, add_arguments(parser) -> None, handler(args) -> exit code)
 # The handler may raise SceneError / FileNotFoundError / UsageError: main() prints them as "dlo:
 # error: ..." and returns exit code 2.  "node": main() hands its arguments to the node unparsed
-# (dlo_ros/node/params.py checks them).
+# (dlo_ros/node/params/ checks them).
 # =====================================================================================================
 Subcommand = tuple[
     str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]

@@ -1,4 +1,4 @@
-"""``dlo node ARGS``: the ROS 2 node (its arguments reach it unparsed; dlo_ros/node/params.py
+"""``dlo node ARGS``: the ROS 2 node (its arguments reach it unparsed; dlo_ros/node/params/
 checks them).
 """
 

@@ -1,5 +1,6 @@
-"""``python -m dlo_ros.node [--params-file FILE] [--scene NAME] [--check] [--ros-args ...]`` (also
-``dlo node ...``)
+"""Run the node: ``python -m dlo_ros.node [--params-file FILE] [--scene NAME] [--check] ...``.
+
+Also ``dlo node ...``; ROS arguments follow ``--ros-args``.
 """
 
 import sys

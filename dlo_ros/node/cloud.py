@@ -1,5 +1,7 @@
-"""``sensor_msgs/PointCloud2`` ↔ an (N, 3) array of observed points (pure: numpy only, duck-typed
-messages).
+"""Convert ``sensor_msgs/PointCloud2`` ↔ an (N, 3) array of observed points.
+
+:func:`cloud_points` reads any duck-typed message with numpy alone; :func:`points_to_cloud`
+builds a sensor_msgs message.
 
 :func:`cloud_points` is what the node's ``~/observed`` subscription runs on a deserialised cloud.
 It accepts ``x``, ``y``, ``z`` fields of datatype FLOAT32 or FLOAT64 (count 1) at any offsets
@@ -12,7 +14,9 @@ bounded by ``max_points`` (the point count is checked before any point is read).
 from __future__ import annotations
 
 import numpy as np
+from sensor_msgs.msg import PointCloud2, PointField
 
+from .conversions import header
 from .validation import TargetError, check_frame_size, normalise_frame, safe_text
 
 #: sensor_msgs/PointField datatypes read as coordinates: FLOAT32 = 7, FLOAT64 = 8
@@ -38,14 +42,52 @@ CLOUD_OVERHEAD_BYTES = 64 * 1024
 
 
 def cloud_bytes_limit(max_points: int) -> int:
-    """The largest serialised ``~/observed`` message read for ``max_points`` points."""
+    """Return the largest serialised ``~/observed`` message read for ``max_points`` points."""
     return int(max_points) * MAX_POINT_BYTES + CLOUD_OVERHEAD_BYTES
 
 
 def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -> np.ndarray:
-    """The (N, 3) float64 points [m] of the PointCloud2 ``msg``, which must be in ``frame_id``;
-    TargetError (kind 'frame', 'count', 'invalid' or 'non_finite') naming the field otherwise
-    (module docstring).
+    """Return the (N, 3) float64 points [m] of the PointCloud2 ``msg``, which is in ``frame_id``.
+
+    Raises TargetError (kind 'frame', 'count', 'invalid' or 'non_finite') naming the field
+    otherwise (module docstring).
+    """
+    width, height, step, row_step = _checked_layout(msg, frame_id, max_points, where)
+    n = width * height
+    order = ">" if msg.is_bigendian else "<"
+    fields = {f.name: f for f in msg.fields}
+    try:  # rclpy gives an array.array('B'): read in place
+        raw = np.frombuffer(msg.data, np.uint8)
+    except TypeError:  # a list of ints (a message built by hand)
+        raw = np.asarray(msg.data, dtype=np.uint8)
+    out = np.empty((n, 3))
+    for k, axis in enumerate("xyz"):
+        offset, nbytes, kind = _checked_field(fields, axis, step, where)
+        # one strided view per row block: rows may be padded (row_step > width × point_step)
+        view = np.lib.stride_tricks.as_strided(
+            raw[offset:],
+            shape=(height, width, nbytes),
+            strides=(row_step, step, 1),
+            writeable=False,
+        )
+        out[:, k] = np.ascontiguousarray(view).view(order + kind).reshape(n)
+    bad = np.flatnonzero(~np.all(np.isfinite(out), axis=1))
+    if bad.size:
+        i = int(bad[0])
+        axis = "xyz"[int(np.flatnonzero(~np.isfinite(out[i]))[0])]
+        raise TargetError(
+            "non_finite",
+            f"{where}: point {i} (row {i // width}, column {i % width}): field '{axis}' is "
+            f"{out[i, 'xyz'.index(axis)]}; {bad.size} point(s) are NaN or infinite (drop "
+            "invalid points before publishing)",
+        )
+    return out
+
+
+def _checked_layout(msg, frame_id: str, max_points: int, where: str) -> tuple[int, int, int, int]:
+    """Check a cloud's frame, point count and sizes; return (width, height, point_step, row_step).
+
+    The count is checked before any point is read, so the cost is bounded by ``max_points``.
     """
     cloud_frame = msg.header.frame_id
     check_frame_size(cloud_frame, where)
@@ -78,75 +120,45 @@ def cloud_points(msg, frame_id: str, max_points: int, where: str = "observed") -
             f"{where}: point_step {step} and row_step {row_step} do not hold width {width} "
             "points per row",
         )
-    data = msg.data
-    size = len(data)
+    size = len(msg.data)
     if size < row_step * (height - 1) + width * step:
         raise TargetError(
             "invalid",
             f"{where}: data holds {size} bytes, less than height {height} × row_step {row_step}",
         )
-    order = ">" if msg.is_bigendian else "<"
-    fields = {f.name: f for f in msg.fields}
-    try:  # rclpy gives an array.array('B'): read in place
-        raw = np.frombuffer(data, np.uint8)
-    except TypeError:  # a list of ints (a message built by hand)
-        raw = np.asarray(data, dtype=np.uint8)
-    out = np.empty((n, 3))
-    for k, axis in enumerate("xyz"):
-        f = fields.get(axis)
-        if f is None:
-            names = ", ".join(safe_text(name, 20) for name in list(fields)[:10]) or "none"
-            raise TargetError(
-                "invalid",
-                f"{where}: fields: no field '{axis}' (fields: {names}); x, y, z are needed",
-            )
-        kind = FLOAT_TYPES.get(int(f.datatype))
-        if kind is None:
-            raise TargetError(
-                "invalid",
-                f"{where}: fields['{axis}'].datatype is "
-                f"{TYPE_NAMES.get(int(f.datatype), int(f.datatype))}, not FLOAT32 or FLOAT64",
-            )
-        if int(f.count) != 1:
-            raise TargetError(
-                "invalid", f"{where}: fields['{axis}'].count is {int(f.count)}, not 1"
-            )
-        offset, nbytes = int(f.offset), int(kind[1])
-        if offset < 0 or offset + nbytes > step:
-            raise TargetError(
-                "invalid",
-                f"{where}: fields['{axis}'].offset {offset} + {nbytes} bytes is outside "
-                f"point_step {step}",
-            )
-        # one strided view per row block: rows may be padded (row_step > width × point_step)
-        view = np.lib.stride_tricks.as_strided(
-            raw[offset:],
-            shape=(height, width, nbytes),
-            strides=(row_step, step, 1),
-            writeable=False,
-        )
-        out[:, k] = np.ascontiguousarray(view).view(order + kind).reshape(n)
-    bad = np.flatnonzero(~np.all(np.isfinite(out), axis=1))
-    if bad.size:
-        i = int(bad[0])
-        axis = "xyz"[int(np.flatnonzero(~np.isfinite(out[i]))[0])]
+    return width, height, step, row_step
+
+
+def _checked_field(fields: dict, axis: str, step: int, where: str) -> tuple[int, int, str]:
+    """Check the field of one axis; return its (offset, bytes, numpy kind such as 'f4')."""
+    f = fields.get(axis)
+    if f is None:
+        names = ", ".join(safe_text(name, 20) for name in list(fields)[:10]) or "none"
         raise TargetError(
-            "non_finite",
-            f"{where}: point {i} (row {i // width}, column {i % width}): field '{axis}' is "
-            f"{out[i, 'xyz'.index(axis)]}; {bad.size} point(s) are NaN or infinite (drop "
-            "invalid points before publishing)",
+            "invalid",
+            f"{where}: fields: no field '{axis}' (fields: {names}); x, y, z are needed",
         )
-    return out
+    kind = FLOAT_TYPES.get(int(f.datatype))
+    if kind is None:
+        raise TargetError(
+            "invalid",
+            f"{where}: fields['{axis}'].datatype is "
+            f"{TYPE_NAMES.get(int(f.datatype), int(f.datatype))}, not FLOAT32 or FLOAT64",
+        )
+    if int(f.count) != 1:
+        raise TargetError("invalid", f"{where}: fields['{axis}'].count is {int(f.count)}, not 1")
+    offset, nbytes = int(f.offset), int(kind[1])
+    if offset < 0 or offset + nbytes > step:
+        raise TargetError(
+            "invalid",
+            f"{where}: fields['{axis}'].offset {offset} + {nbytes} bytes is outside "
+            f"point_step {step}",
+        )
+    return offset, nbytes, kind
 
 
 def points_to_cloud(points: np.ndarray, frame_id: str, stamp_ns: int):
-    """An unorganised PointCloud2 (height 1) of float32 ``x``, ``y``, ``z`` for ``points`` (N, 3)
-    [m].
-    """
-    from sensor_msgs.msg import PointCloud2, PointField
-
-    from .conversions import header
-
+    """Build an unorganised PointCloud2 (height 1) of float32 x, y, z for ``points`` (N, 3) [m]."""
     pts = np.ascontiguousarray(np.asarray(points, dtype="<f4").reshape(-1, 3))
     return PointCloud2(
         header=header(frame_id, stamp_ns),

@@ -1,4 +1,4 @@
-"""ROS messages <-> numpy, and the node's output messages built from a ShapeResult.
+"""Convert ROS messages <-> numpy, and build the node's output messages from a ShapeResult.
 
 Pure functions: they build or read message objects but need no node, context or graph, so they are
 unit-tested directly.  Conventions (see msg_docs/node.md): SI units, quaternions (x, y, z, w), a
@@ -9,27 +9,21 @@ point.
 from __future__ import annotations
 
 import struct
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import Callable, Mapping
 
 import numpy as np
 
-from ..shading import colour_map, energy_density
-from ..shading import frame_curvature as curvature
-from ..shading import frame_tangents as tangents  # noqa: F401 - part of this module's API
-from builtin_interfaces.msg import Duration, Time
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, WrenchStamped
 from nav_msgs.msg import Path
-from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import Marker, MarkerArray
+from std_msgs.msg import Header
 
-from ..model.obstacles import Obstacle, Primitive
-from ..model.problem import Problem
 from ..model.rotations import quat_to_matrix
 from ..solver.results.result import GripWrench, ShapeResult
-from .validation import TargetError, check_frame, normalise_frame
+from .validation import TargetError, Vector, check_frame, normalise_frame
 
-# ---- time ------------------------------------------------------------------------------------------
+# ---- time ---------------------------------------------------------------------------------------
 
 
 def time_to_ns(stamp: Time) -> int:
@@ -45,7 +39,7 @@ def header(frame_id: str, stamp_ns: int) -> Header:
     return Header(frame_id=frame_id, stamp=ns_to_time(stamp_ns))
 
 
-# ---- poses -----------------------------------------------------------------------------------------
+# ---- poses --------------------------------------------------------------------------------------
 
 
 def pose_to_arrays(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
@@ -54,7 +48,7 @@ def pose_to_arrays(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
     return np.array([p.x, p.y, p.z], dtype=float), np.array([q.x, q.y, q.z, q.w], dtype=float)
 
 
-def arrays_to_pose(position: Sequence[float], orientation: Sequence[float]) -> Pose:
+def arrays_to_pose(position: Vector, orientation: Vector) -> Pose:
     p = [float(v) for v in position]
     q = [float(v) for v in orientation]
     return Pose(
@@ -64,14 +58,14 @@ def arrays_to_pose(position: Sequence[float], orientation: Sequence[float]) -> P
 
 
 def pose_stamped(
-    position: Sequence[float], orientation: Sequence[float], frame_id: str, stamp_ns: int
+    position: Vector, orientation: Vector, frame_id: str, stamp_ns: int
 ) -> PoseStamped:
     return PoseStamped(
         header=header(frame_id, stamp_ns), pose=arrays_to_pose(position, orientation)
     )
 
 
-def quat_multiply(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
+def quat_multiply(a: Vector, b: Vector) -> np.ndarray:
     """Hamilton product a ⊗ b of quaternions (x, y, z, w)."""
     ax, ay, az, aw = (float(v) for v in a)
     bx, by, bz, bw = (float(v) for v in b)
@@ -88,11 +82,12 @@ def quat_multiply(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
 def transform_pose(
     position: np.ndarray,
     orientation: np.ndarray,
-    translation: Sequence[float],
-    rotation: Sequence[float],
+    translation: Vector,
+    rotation: Vector,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Apply the transform (translation, rotation quaternion) — e.g. a tf2 TransformStamped from
-    the pose's frame into the target frame — to a pose: p' = R p + t, q' = r ⊗ q.
+    """Apply the transform (translation, rotation quaternion) to a pose: p' = R p + t, q' = r ⊗ q.
+
+    E.g. a tf2 TransformStamped from the pose's frame into the target frame.
     """
     r = np.asarray(rotation, dtype=float)
     r = r / np.linalg.norm(r)
@@ -108,7 +103,7 @@ def in_frame(
     position: np.ndarray,
     orientation: np.ndarray,
     where: str,
-    lookup: Callable[[str, str], tuple[Sequence[float], Sequence[float]]] | None = None,
+    lookup: Callable[[str, str], tuple[Vector, Vector]] | None = None,
 ):
     """(position, orientation) of a pose given in ``frame_id``, expressed in ``node_frame``.
 
@@ -121,6 +116,7 @@ def in_frame(
         return position, orientation
     if lookup is None or not frame_id:
         check_frame(frame_id, node_frame, where)  # raises
+    assert lookup is not None  # for mypy: check_frame raised otherwise
     try:
         translation, rotation = lookup(normalise_frame(node_frame), normalise_frame(frame_id))
     except Exception as exc:  # noqa: BLE001 - tf2's lookup exceptions
@@ -130,11 +126,11 @@ def in_frame(
     return transform_pose(position, orientation, translation, rotation)
 
 
-# ---- outputs ---------------------------------------------------------------------------------------
+# ---- outputs ------------------------------------------------------------------------------------
 
 
 def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
-    """The centreline: one PoseStamped per output sample, x-axis along the tangent."""
+    """Build the centreline: one PoseStamped per output sample, x-axis along the tangent."""
     h = header(frame_id, stamp_ns)
     poses = []
     for p, q in zip(result.points.tolist(), result.orientations.tolist()):
@@ -151,9 +147,9 @@ def result_to_path(result: ShapeResult, frame_id: str, stamp_ns: int) -> Path:
 
 
 def _cdr_header(stamp_ns: int, frame: bytes) -> bytes:
-    """A std_msgs/Header in CDR, to be placed at an offset that is a multiple of 4 after the
-    encapsulation: stamp (int32 sec, uint32 nanosec), frame_id (uint32 length with the NUL, the
-    bytes, the NUL).
+    """Serialise a std_msgs/Header in CDR, to go at a multiple of 4 after the encapsulation.
+
+    Stamp (int32 sec, uint32 nanosec), frame_id (uint32 length with the NUL, the bytes, the NUL).
     """
     ns = int(stamp_ns)
     return (
@@ -164,10 +160,11 @@ def _cdr_header(stamp_ns: int, frame: bytes) -> bytes:
 
 
 def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_ns: int) -> bytes:
-    """A nav_msgs/Path of these poses (every pose with the path's header), serialised as
-    little-endian CDR for ``Publisher.publish(bytes)``: no per-pose Python message objects.
-    Alignment follows CDR: 4-byte integers on 4, doubles on 8, offsets counted after the 4-byte
-    encapsulation header.
+    """Serialise a nav_msgs/Path of these poses as little-endian CDR for ``publish(bytes)``.
+
+    Every pose carries the path's header; no per-pose Python message objects.  Alignment follows
+    CDR: 4-byte integers on 4, doubles on 8, offsets counted after the 4-byte encapsulation
+    header.
     """
     head = _cdr_header(stamp_ns, frame_id.encode())
     out = bytearray(b"\x00\x01\x00\x00")  # CDR, little endian
@@ -192,8 +189,9 @@ def path_cdr(points: np.ndarray, orientations: np.ndarray, frame_id: str, stamp_
 
 
 def wrench_cdr(wrench: GripWrench, frame_id: str, stamp_ns: int) -> bytes:
-    """``wrench_stamped`` serialised as little-endian CDR for ``Publisher.publish(bytes)``: the
-    header, padding to 8, then force and torque as six doubles.
+    """Serialise ``wrench_stamped`` as little-endian CDR for ``Publisher.publish(bytes)``.
+
+    The header, padding to 8, then force and torque as six doubles.
     """
     head = _cdr_header(stamp_ns, frame_id.encode())
     values = np.concatenate(
@@ -212,9 +210,7 @@ class CdrError(ValueError):
 
 
 def _cdr_header_at(data: bytes, offset: int) -> tuple[int, str, int]:
-    """(stamp [ns], frame_id, offset after it) of a std_msgs/Header at ``offset`` (aligned to
-    4).
-    """
+    """Read a std_msgs/Header at ``offset`` (aligned to 4): (stamp [ns], frame_id, next offset)."""
     sec, nanosec, length = struct.unpack_from("<iII", data, offset)
     start = offset + 12
     if length < 1 or start + length > len(data):
@@ -227,18 +223,21 @@ def _cdr_header_at(data: bytes, offset: int) -> tuple[int, str, int]:
 
 
 def path_from_cdr(data: bytes) -> tuple[int, str, np.ndarray, np.ndarray]:
-    """(stamp [ns], frame_id, points (N, 3), quaternions (N, 4)) of a serialised nav_msgs/Path
-    (what a raw subscription takes): the inverse of :func:`path_cdr` for any Path, whatever its
-    poses' headers. No per-pose Python message objects: rclpy's deserialisation of a 51-pose Path
-    costs several times more (bench/results/node_latency.md).  Raises CdrError on bytes that are
-    not a little-endian Path.
+    """Decode a serialised Path: (stamp [ns], frame_id, points (N, 3), quaternions (N, 4)).
+
+    What a raw subscription takes: the inverse of :func:`path_cdr` for any Path, whatever its
+    poses' headers.  No per-pose Python message objects: rclpy's deserialisation of a 51-pose
+    Path costs several times more (bench/results/node_latency.md).  Raises CdrError on bytes that
+    are not a little-endian Path.
     """
     if len(data) < 8 or data[:2] != b"\x00\x01":
         raise CdrError("not little-endian CDR")
     try:
         stamp, frame, offset = _cdr_header_at(data, 4)
-        # noqa: E731 - alignment counts from after the 4-byte prefix
-        pad = lambda o, a: o + (-(o - 4) % a)
+
+        def pad(o: int, a: int) -> int:  # alignment counts from after the 4-byte prefix
+            return o + (-(o - 4) % a)
+
         offset = pad(offset, 4)
         (count,) = struct.unpack_from("<I", data, offset)
         offset += 4
@@ -266,8 +265,9 @@ def path_to_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def wrench_stamped(wrench: GripWrench, frame_id: str, stamp_ns: int) -> WrenchStamped:
-    """Force [N] and torque [N m] the gripper exerts on the string (frame axes, about the grip
-    point).
+    """Build the WrenchStamped of the force [N] and torque [N m] a gripper exerts on the string.
+
+    Frame axes, torque about the grip point.
     """
     f = [float(v) for v in wrench.force]
     t = [float(v) for v in wrench.torque]
@@ -282,168 +282,7 @@ def wrench_to_arrays(msg: WrenchStamped) -> tuple[np.ndarray, np.ndarray]:
     return np.array([f.x, f.y, f.z]), np.array([t.x, t.y, t.z])
 
 
-# ---- bending energy density (dlo_ros.shading, shared with the recording) ------------------------------
-
-
-def bending_energy_density(s: np.ndarray, orientations: np.ndarray, bend_stiffness) -> np.ndarray:
-    """½ Rf(s) κ(s)² [J/m] per sample; ``bend_stiffness`` is a Profile (callable on s) or a
-    number.
-    """
-    rf = (
-        bend_stiffness(np.asarray(s, dtype=float))
-        if callable(bend_stiffness)
-        else float(bend_stiffness)
-    )
-    return energy_density(curvature(s, orientations), rf)
-
-
-def _rgba(rgb: Sequence[float], a: float = 1.0) -> ColorRGBA:
-    return ColorRGBA(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=float(a))
-
-
-def _point(p: Sequence[float]) -> Point:
-    return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
-
-
-# ---- markers -----------------------------------------------------------------------------------------
-
-GRIP_COLOURS = {"clamp": (0.9, 0.5, 0.1), "pin": (0.6, 0.2, 0.9), "tangent": (0.2, 0.7, 0.9)}
-OBSTACLE_RGBA = (0.55, 0.55, 0.6, 0.5)
-FORCE_RGB = (0.9, 0.1, 0.6)
-SELF_CONTACT_RGB = (1.0, 0.55, 0.0)
-HALFSPACE_SIZE = 2.0  # [m] edge of the plate drawn for a half-space
-MARKER_NAMESPACES = ("string", "grips", "obstacles", "forces", "self_contacts")
-
-
-def _marker(h: Header, ns: str, mid: int, kind: int) -> Marker:
-    m = Marker(header=h, ns=ns, id=mid, type=kind, action=Marker.ADD)
-    m.pose.orientation.w = 1.0
-    m.frame_locked = False
-    m.lifetime = Duration(sec=0, nanosec=0)
-    return m
-
-
-def _primitive_markers(pr: Primitive, h: Header, mid: int) -> list[Marker]:
-    """The markers of one drawing primitive (ids mid, mid + 1, mid + 2), colour not yet set."""
-    if pr.kind == "sphere":
-        m = _marker(h, "obstacles", mid, Marker.SPHERE)
-        m.pose.position = _point(pr.centre)
-        m.scale = Vector3(x=2 * pr.radius, y=2 * pr.radius, z=2 * pr.radius)
-        return [m]
-    if pr.kind == "box":
-        m = _marker(h, "obstacles", mid, Marker.CUBE)
-        e = pr.half_sizes
-        m.pose = arrays_to_pose(pr.centre, pr.orientation)
-        m.scale = Vector3(x=2 * e[0], y=2 * e[1], z=2 * e[2])
-        return [m]
-    if pr.kind == "capsule":  # a cylinder plus two end spheres
-        r = pr.radius
-        m = _marker(h, "obstacles", mid, Marker.CYLINDER)
-        m.pose = arrays_to_pose(pr.centre, pr.orientation)
-        m.scale = Vector3(x=2 * r, y=2 * r, z=pr.length)
-        parts = [m]
-        for k, end in enumerate(pr.ends()):
-            e = _marker(h, "obstacles", mid + 1 + k, Marker.SPHERE)
-            e.pose.position = _point(end)
-            e.scale = Vector3(x=2 * r, y=2 * r, z=2 * r)
-            parts.append(e)
-        return parts
-    if pr.kind == "plane":  # a thin plate just behind the surface
-        thick = 0.01
-        m = _marker(h, "obstacles", mid, Marker.CUBE)
-        m.pose = arrays_to_pose(pr.centre - pr.axis * thick / 2, pr.orientation)
-        m.scale = Vector3(x=HALFSPACE_SIZE, y=HALFSPACE_SIZE, z=thick)
-        return [m]
-    return []  # pragma: no cover - every kind in PRIMITIVE_KINDS is drawn above
-
-
-def obstacle_markers(obstacles: Iterable[Obstacle], h: Header, start_id: int = 0) -> list[Marker]:
-    """One marker per obstacle (a capsule is a cylinder plus two end spheres, a half-space a
-    plate).
-    """
-    out: list[Marker] = []
-    mid = start_id
-    rgba = _rgba(OBSTACLE_RGBA[:3], OBSTACLE_RGBA[3])
-    for ob in obstacles:
-        parts = _primitive_markers(ob.primitive(), h, mid)
-        for m in parts:
-            m.color = rgba
-            m.text = ob.name
-        out.extend(parts)
-        mid += 3
-    return out
-
-
-def result_markers(
-    result: ShapeResult,
-    problem: Problem,
-    frame_id: str,
-    stamp_ns: int,
-    *,
-    force_scale: float = 0.1,
-    energy_scale: float = 0.0,
-) -> MarkerArray:
-    """The string (line strip coloured by bending energy density), the grips, the obstacles, the
-    grip forces, and each self-contact's force on both strands (namespace 'self_contacts').
-
-    energy_scale [J/m]: density shown in full red (0: the shape's maximum).  Starts with DELETEALL
-    so a consumer never keeps markers of an earlier, larger scene.
-    """
-    h = header(frame_id, stamp_ns)
-    markers: list[Marker] = [Marker(header=h, action=Marker.DELETEALL)]
-    radius = float(problem.string.radius)
-    width = max(2 * radius, 0.004)
-
-    line = _marker(h, "string", 0, Marker.LINE_STRIP)
-    line.scale.x = width
-    line.points = [_point(p) for p in result.points.tolist()]
-    density = bending_energy_density(result.s, result.orientations, problem.string.bend_stiffness)
-    top = energy_scale if energy_scale > 0 else float(np.max(density, initial=0.0))
-    rgb = colour_map(density / top if top > 0 else np.zeros_like(density))
-    line.colors = [_rgba(c) for c in rgb.tolist()]
-    line.color = _rgba((1.0, 1.0, 1.0))
-    line.text = f"max bending energy density {float(np.max(density, initial=0.0)):.4g} J/m"
-    markers.append(line)
-
-    for i, g in enumerate(problem.grips):
-        m = _marker(h, "grips", i, Marker.ARROW)  # along the pose's x-axis = the held tangent
-        m.pose = arrays_to_pose(g.pose.position, g.pose.orientation)
-        m.scale = Vector3(x=0.08, y=0.015, z=0.015)
-        m.color = _rgba(GRIP_COLOURS.get(g.mode, (0.8, 0.8, 0.8)))
-        m.text = f"{g.name} ({g.mode})"
-        markers.append(m)
-        wrench = result.grips.get(g.name)
-        if wrench is not None:
-            f = _marker(h, "forces", i, Marker.ARROW)
-            start = np.asarray(g.pose.position, dtype=float)
-            f.points = [
-                _point(start),
-                _point(start + force_scale * np.asarray(wrench.force, dtype=float)),
-            ]
-            f.scale = Vector3(x=0.006, y=0.012, z=0.0)
-            f.color = _rgba(FORCE_RGB)
-            f.text = f"{g.name}: {np.linalg.norm(wrench.force):.3g} N on the string"
-            markers.append(f)
-
-    # self-contacts: the force on each strand at its contact point (equal and opposite)
-    for k, c in enumerate(result.self_contacts):
-        for side, (point, force) in enumerate(((c.point_a, c.force), (c.point_b, -c.force))):
-            m = _marker(h, "self_contacts", 2 * k + side, Marker.ARROW)
-            start = np.asarray(point, dtype=float)
-            m.points = [
-                _point(start),
-                _point(start + force_scale * np.asarray(force, dtype=float)),
-            ]
-            m.scale = Vector3(x=0.004, y=0.008, z=0.0)
-            m.color = _rgba(SELF_CONTACT_RGB)
-            m.text = f"self-contact s = {c.s_a if side == 0 else c.s_b:.4g} m: {np.linalg.norm(c.force):.3g} N"
-            markers.append(m)
-
-    markers.extend(obstacle_markers(problem.obstacles, h))
-    return MarkerArray(markers=markers)
-
-
-# ---- diagnostics ---------------------------------------------------------------------------------------
+# ---- diagnostics --------------------------------------------------------------------------------
 
 LEVELS = {
     "ok": DiagnosticStatus.OK,
@@ -466,9 +305,7 @@ def format_value(value: object) -> str:
 def diagnostic_status(
     name: str, level: str, message: str, hardware_id: str, values: Mapping[str, object]
 ) -> DiagnosticStatus:
-    """A DiagnosticStatus; ``level`` one of 'ok', 'warn', 'error', 'stale'; values become
-    strings.
-    """
+    """Build a DiagnosticStatus; ``level`` is 'ok', 'warn', 'error' or 'stale'; values as text."""
     return DiagnosticStatus(
         level=LEVELS[level],
         name=name,

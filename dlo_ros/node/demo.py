@@ -26,13 +26,23 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
+import yaml
+
+from ..scene import load_scene, scene_from_dict, scene_to_dict
+from ..solver.auto import ORDERS
+from .client import DloClient, NodeProcess, PathEvent, allocate_domain_id
 
 DEMO_SCENE = "default_cable"
 #: Added to the default scene: the obstacle the cable is carried over.
-POST = {"type": "sphere", "name": "post", "center": [0.175, 0.35, 0.25], "radius": 0.08}
+POST: dict[str, Any] = {
+    "type": "sphere",
+    "name": "post",
+    "center": [0.175, 0.35, 0.25],
+    "radius": 0.08,
+}
 
 #: (time [s], left position, right position, right twist about the tangent [rad], phase starting
 # here)
@@ -68,8 +78,9 @@ def phase_at(t: float) -> str:
 
 
 def targets_at(t: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """[(left position, quaternion), (right position, quaternion)] at time t (smoothstep between
-    keyframes).
+    """Return [(left position, quaternion), (right position, quaternion)] at time t [s].
+
+    Smoothstep between keyframes.
     """
     t = min(max(t, 0.0), duration())
     for (t0, l0, r0, a0, _), (t1, l1, r1, a1, _) in zip(KEYFRAMES, KEYFRAMES[1:]):
@@ -86,13 +97,7 @@ def targets_at(t: float) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def write_demo_scene(directory: Path) -> Path:
-    """The default scene plus the post, validated and written as
-    ``<directory>/dual_arm_demo.yaml``.
-    """
-    import yaml
-
-    from ..scene import load_scene, scene_from_dict, scene_to_dict
-
+    """Write the default scene plus the post, validated, as ``<directory>/dual_arm_demo.yaml``."""
     d = scene_to_dict(load_scene(DEMO_SCENE))
     d["name"] = "dual_arm_demo"
     d["description"] = (
@@ -112,9 +117,10 @@ def _percentiles(values: Sequence[float]) -> tuple[float, float, float]:
     return float(np.percentile(a, 50)), float(np.percentile(a, 99)), float(a.max())
 
 
-def _model_summary(values: dict) -> str:
-    """The node's final model from its diagnostics (model.* keys): what it solved, its estimated
-    error against the tolerance, and how many times it changed.
+def _model_summary(values: dict[str, str]) -> str:
+    """Summarise the node's final model from its diagnostics (model.* keys).
+
+    What it solved, its estimated error against the tolerance, and how many times it changed.
     """
     if not values.get("model.order"):
         return "not reported"
@@ -130,8 +136,8 @@ def _model_summary(values: dict) -> str:
         + f", order {values['model.order']}, {values.get('model.variables', '?')} unknowns, "
         f"{values.get('model.obstacles', '?')} obstacle(s) in the NLP"
     )
-    est, tol = values.get("model.estimated_error_m"), values.get("model.tolerance_m")
-    if est not in (None, "", "None"):
+    est, tol = values.get("model.estimated_error_m", ""), values.get("model.tolerance_m", "")
+    if est not in ("", "None"):
         met = "met" if float(est) <= float(tol) else "NOT met"
         text += f"; estimated error {float(est):.2g} m (tolerance {float(tol):.2g} m: {met})"
     changes = values.get("model.changes")
@@ -140,18 +146,18 @@ def _model_summary(values: dict) -> str:
     return text
 
 
-def model_settled(values: dict, held: int = 0) -> bool:
-    """auto's checks describe the final shape — a solve of the last target: at most ``held``
-    updates ago (``held`` the solves of the last target since the manoeuvre's end) — and its model
-    meets the tolerance or is the richest order (a fixed model: always).
-    """
-    from ..solver.auto import ORDERS
+def model_settled(values: dict[str, str], held: int = 0) -> bool:
+    """Return whether auto's checks describe the final shape and its model is good enough.
 
+    The checks must be of a solve of the last target: at most ``held`` updates ago (``held`` the
+    solves of the last target since the manoeuvre's end); the model must meet the tolerance or be
+    the richest order (a fixed model: always true).
+    """
     if str(values.get("model.auto")).lower() != "true":
         return True
     checked = str(values.get("model.checked")).lower() == "true"
     try:
-        age = int(values.get("model.checked_updates_ago"))
+        age = int(values.get("model.checked_updates_ago", ""))
     except (TypeError, ValueError):
         return False
     met = str(values.get("model.tolerance_met")).lower() == "true"
@@ -159,10 +165,11 @@ def model_settled(values: dict, held: int = 0) -> bool:
 
 
 def _settle(client, values: dict, timeout: float):
-    """Hold the last target (republished at 5 Hz: each solve applies the background checks'
-    verdicts) until ``model_settled`` or ``timeout`` s.  Returns (diagnostic values, last
-    centreline or None, seconds, solves), with 0 s and 0 solves when the final shape's checks were
-    already done, or None when settling is off (timeout 0).
+    """Hold the last target until ``model_settled`` or ``timeout`` s.
+
+    The target is republished at 5 Hz: each solve applies the background checks' verdicts.
+    Returns (diagnostic values, last centreline or None, seconds, solves), with 0 s and 0 solves
+    when the final shape's checks were already done, or None when settling is off (timeout 0).
     """
     if timeout <= 0:
         return None
@@ -209,7 +216,8 @@ def _parser() -> argparse.ArgumentParser:
         "--model",
         default="auto",
         choices=("auto", "full", "planar", "scene"),
-        help="solver.model of the node (default auto: it starts planar and switches to 3D when the "
+        help="solver.model of the node (default auto: it starts planar and switches to 3D when "
+        "the "
         "twist starts, raising the basis order to meet its 1 mm tolerance; 'scene': the scene's "
         "own setting)",
     )
@@ -218,7 +226,8 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=120.0,
         metavar="S",
-        help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final shape "
+        help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final "
+        "shape "
         "are done and meet the tolerance, at most S seconds (default 120; 0: do not wait)",
     )
     ap.add_argument(
@@ -232,22 +241,22 @@ def _parser() -> argparse.ArgumentParser:
         "--rrd",
         metavar="FILE",
         default=DEFAULT_RRD,
-        help=f"the node records the run to this rerun file (default ./{DEFAULT_RRD}, overwritten each "
+        help=f"the node records the run to this rerun file (default ./{DEFAULT_RRD}, overwritten "
+        "each "
         "run; `dlo replay FILE` opens it); '' for no recording",
     )
     return ap
 
 
 def run_demo_job(argv: Sequence[str] | None = None) -> int:
-    """Run the demo (see the module docstring); returns the exit code (0: the demo ran and the node
-    shut down cleanly).
+    """Run the demo (see the module docstring); return the exit code.
+
+    0: the demo ran and the node shut down cleanly.
     """
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.rate <= 0 or args.speed <= 0:
         print("dlo demo: --rate and --speed must be > 0", file=sys.stderr)
         return 2
-    from .client import DloClient, NodeProcess, allocate_domain_id
-
     t_job = time.monotonic()
     tmp = Path(tempfile.mkdtemp(prefix="dlo_demo_"))
     lease = node = client = rrd = None
@@ -259,164 +268,217 @@ def run_demo_job(argv: Sequence[str] | None = None) -> int:
         if rrd is not None:
             rrd.parent.mkdir(parents=True, exist_ok=True)
             rrd.unlink(missing_ok=True)  # a stale file must not pass for this run's recording
-        node_args = [
-            "--scene",
-            str(scene),
-            "--ros-args",
-            "-p",
-            f"compile:={args.compile}",
-            *([] if args.model == "scene" else ["-p", f"solver.model:={args.model}"]),
-            "-p",
-            "diagnostics_period:=0.25",
-            *([] if rrd is None else ["-p", f"record.rrd:={rrd}"]),
-        ]
+        node_args = _node_args(args, scene, rrd)
         node = NodeProcess(node_args, lease.domain_id, log_path=args.log or tmp / "node.log")
         client = DloClient(lease.domain_id, client_name="dlo_demo_driver")
         print(
-            f"dlo demo: node pid {node.pid}, ROS_DOMAIN_ID={lease.domain_id}, scene {DEMO_SCENE} + sphere 'post' "
-            f"at {POST['center']} (r = {POST['radius']} m)"
+            f"dlo demo: node pid {node.pid}, ROS_DOMAIN_ID={lease.domain_id}, scene "
+            f"{DEMO_SCENE} + sphere 'post' at {POST['center']} (r = {POST['radius']} m)"
         )
-        t0 = time.monotonic()
-        first = None
-        while first is None and node.alive() and time.monotonic() - t0 < args.startup_timeout:
-            first = client.wait_for_path(0.5)
-        if first is None:
-            print(
-                f"dlo demo: the node published no centreline within {args.startup_timeout:.0f} s "
-                f"(alive: {node.alive()}); its output:\n{node.output()}",
-                file=sys.stderr,
-            )
+        if not _first_shape(node, client, args):
             return 1
-        client.wait_for_subscribers(10.0)
-        print(
-            f"dlo demo: first centreline after {time.monotonic() - t0:.1f} s; manoeuvre of "
-            f"{duration() / args.speed:.1f} s at {args.rate:g} Hz"
-        )
-
-        published: dict[int, float] = {}
-        period = 1.0 / args.rate
-        start = time.monotonic()
-        phase = None
-        k = 0
-        last_stamp = 0
-        while True:
-            t = (time.monotonic() - start) * args.speed
-            if t > duration():
-                break
-            label = phase_at(t)
-            if label != phase:
-                phase = label
-                print(f"  t = {t:4.1f} s  {label}")
-            last_stamp = client.publish_targets(targets_at(t))
-            published[last_stamp] = t
-            k += 1
-            time.sleep(max(0.0, start + k * period - time.monotonic()))
-        last_stamp = client.publish_targets(targets_at(duration()))
-        published[last_stamp] = duration()
-        final = client.wait_for_path(10.0, where=lambda ev: ev.stamp_ns == last_stamp)
-        diag = client.wait_for_diagnostics(
-            lambda v, st: v.get("targets received") == str(len(published)), 5.0
-        )
-        values = diag[0] if diag else client.diagnostic_values()
-        events = [ev for ev in client.paths if ev.stamp_ns in published]
-        settled = _settle(client, values, args.settle) if final is not None else None
-        if settled is not None:
-            values, held_final, settle_s, held = settled
-            final = held_final or final
-
-        latencies = [(ev.received_ns - ev.stamp_ns) / 1e6 for ev in events]
-        p50, p99, pmax = _percentiles(latencies)
-        updates = int(values.get("updates", "0") or 0)
-        stable = int(values.get("stable updates", "0") or 0)
-        failures = int(values.get("failures", "0") or 0)
-        rejected = int(values.get("rejected inputs", "0") or 0)
-        print("dlo demo: summary")
-        print(
-            f"  targets published       {len(published)} ({args.rate:g} Hz, PoseArray for both grips)"
-        )
-        print(
-            f"  centrelines received    {len(events)} during the manoeuvre ({updates} shapes published by the node "
-            f"in total, {values.get('targets coalesced', '?')} targets coalesced)"
-        )
-        print(f"  latency target->path    p50 {p50:.1f} ms, p99 {p99:.1f} ms, max {pmax:.1f} ms")
-        print(
-            f"  solve time (last)       {values.get('solve time ms', '?')} ms, "
-            f"{values.get('iterations', '?')} iterations"
-        )
-        print(
-            f"  failures                {failures} failed solves, {rejected} rejected inputs"
-            + (f" (last: {values.get('last error')})" if failures + rejected else "")
-        )
-        unverified = int(values.get("unverified updates", "0") or 0)
-        print(
-            f"  stable shapes           {stable} of {updates}"
-            + (
-                f" ({unverified} published unverified: equilibrium residual over the tolerance)"
-                if unverified
-                else ""
-            )
-        )
-        print(f"  model                   {_model_summary(values)}")
-        if settled is not None:
-            done = model_settled(values, held)
-            print(
-                f"  settling                {'checked' if done else f'NOT checked within {args.settle:g} s'}: held the "
-                f"last target {settle_s:.1f} s ({held} more solves) for auto's checks of the final shape (model above)"
-            )
-        print(
-            f"  recording               {rrd if rrd is not None else 'off'}"
-            + (
-                " (complete when the node has stopped; `dlo replay FILE` opens it)"
-                if rrd is not None
-                else ""
-            )
-        )
-        if final is not None:
-            centre, r = np.asarray(POST["center"]), float(POST["radius"])
-            gap = float(np.min(np.linalg.norm(final.points - centre, axis=1)) - r)
-            resting = "resting on the post" if gap < 0.02 else f"{gap * 100:.1f} cm from the post"
-            print(
-                f"  final shape             ends at the last target; lowest point "
-                f"z = {final.points[:, 2].min():.3f} m, {resting}"
-            )
-        else:
-            print(
-                "  final shape             the centreline of the last target did not arrive within 10 s"
-            )
-        code = 0 if events and final is not None else 1
+        code = _manoeuvre(client, args, rrd)
     except KeyboardInterrupt:
         print("dlo demo: interrupted", file=sys.stderr)
         code = 130
     finally:
         if client is not None:
             client.close()
-        if node is not None:
-            rc = node.stop(timeout=15.0)
-            text = node.output()
-            clean = rc == 0 and "Traceback" not in text
-            print(
-                f"dlo demo: node stopped (exit code {rc}{'' if clean else ', NOT clean'}); "
-                f"total {time.monotonic() - t_job:.1f} s"
-            )
-            if rrd is not None:
-                size = rrd.stat().st_size if rrd.is_file() else 0
-                print(
-                    f"dlo demo: recording: {rrd} ({size / 1e6:.1f} MB)"
-                    if size
-                    else f"dlo demo: recording: {rrd} was not written (see the node's output)"
-                )
-            for line in (
-                text.splitlines()
-            ):  # the node's INFO lines for every change of model, with reasons
-                if "model change (update" in line:
-                    print("  " + line[line.index("model change") :])
-            if not clean:
-                print(text[-4000:], file=sys.stderr)
-                code = code or 1
+        if node is not None and not _stop_node(node, rrd, t_job):
+            code = code or 1
         if lease is not None:
             lease.release()
         shutil.rmtree(tmp, ignore_errors=True)
     return code
+
+
+def _node_args(args: argparse.Namespace, scene: Path, rrd: Path | None) -> list[str]:
+    """Build the node's command line for the demo scene and the demo's options."""
+    return [
+        "--scene",
+        str(scene),
+        "--ros-args",
+        "-p",
+        f"compile:={args.compile}",
+        *([] if args.model == "scene" else ["-p", f"solver.model:={args.model}"]),
+        "-p",
+        "diagnostics_period:=0.25",
+        *([] if rrd is None else ["-p", f"record.rrd:={rrd}"]),
+    ]
+
+
+def _first_shape(node: NodeProcess, client: DloClient, args: argparse.Namespace) -> bool:
+    """Wait for the node's first centreline; say why not (with the node's output) if none came."""
+    t0 = time.monotonic()
+    first = None
+    while first is None and node.alive() and time.monotonic() - t0 < args.startup_timeout:
+        first = client.wait_for_path(0.5)
+    if first is None:
+        print(
+            f"dlo demo: the node published no centreline within {args.startup_timeout:.0f} s "
+            f"(alive: {node.alive()}); its output:\n{node.output()}",
+            file=sys.stderr,
+        )
+        return False
+    client.wait_for_subscribers(10.0)
+    print(
+        f"dlo demo: first centreline after {time.monotonic() - t0:.1f} s; manoeuvre of "
+        f"{duration() / args.speed:.1f} s at {args.rate:g} Hz"
+    )
+    return True
+
+
+def _publish_manoeuvre(
+    client: DloClient, args: argparse.Namespace
+) -> tuple[dict[int, float], int]:
+    """Publish the keyframed targets at ``args.rate`` Hz.
+
+    Returns {header stamp [ns]: manoeuvre time [s]} and the stamp of the final target, published
+    once more after the manoeuvre.
+    """
+    published: dict[int, float] = {}
+    period = 1.0 / args.rate
+    start = time.monotonic()
+    phase = None
+    k = 0
+    while True:
+        t = (time.monotonic() - start) * args.speed
+        if t > duration():
+            break
+        label = phase_at(t)
+        if label != phase:
+            phase = label
+            print(f"  t = {t:4.1f} s  {label}")
+        published[client.publish_targets(targets_at(t))] = t
+        k += 1
+        time.sleep(max(0.0, start + k * period - time.monotonic()))
+    last_stamp = client.publish_targets(targets_at(duration()))
+    published[last_stamp] = duration()
+    return published, last_stamp
+
+
+def _manoeuvre(client: DloClient, args: argparse.Namespace, rrd: Path | None) -> int:
+    """Drive the manoeuvre, let auto settle, print the summary; return the exit code."""
+    published, last_stamp = _publish_manoeuvre(client, args)
+    final = client.wait_for_path(10.0, where=lambda ev: ev.stamp_ns == last_stamp)
+    diag = client.wait_for_diagnostics(
+        lambda v, st: v.get("targets received") == str(len(published)), 5.0
+    )
+    values = diag[0] if diag else client.diagnostic_values()
+    events = [ev for ev in client.paths if ev.stamp_ns in published]
+    settled = _settle(client, values, args.settle) if final is not None else None
+    if settled is not None:
+        values, held_final, settle_s, held = settled
+        final = held_final or final
+    _print_summary(args, values, published, events, rrd)
+    if settled is not None:
+        done = model_settled(values, held)
+        print(
+            f"  settling                "
+            f"{'checked' if done else f'NOT checked within {args.settle:g} s'}: held the last "
+            f"target {settle_s:.1f} s ({held} more solves) for auto's checks of the final shape "
+            "(model above)"
+        )
+    _print_recording(rrd)
+    _print_final(final)
+    return 0 if events and final is not None else 1
+
+
+def _print_summary(
+    args: argparse.Namespace,
+    values: dict[str, str],
+    published: dict[int, float],
+    events: list,
+    rrd: Path | None,
+) -> None:
+    """Print the manoeuvre's counts, latencies, failures and model from the node's diagnostics."""
+    latencies = [(ev.received_ns - ev.stamp_ns) / 1e6 for ev in events]
+    p50, p99, pmax = _percentiles(latencies)
+    updates = int(values.get("updates", "0") or 0)
+    stable = int(values.get("stable updates", "0") or 0)
+    failures = int(values.get("failures", "0") or 0)
+    rejected = int(values.get("rejected inputs", "0") or 0)
+    print("dlo demo: summary")
+    print(
+        f"  targets published       {len(published)} ({args.rate:g} Hz, PoseArray for both grips)"
+    )
+    print(
+        f"  centrelines received    {len(events)} during the manoeuvre ({updates} shapes "
+        f"published by the node in total, {values.get('targets coalesced', '?')} targets "
+        "coalesced)"
+    )
+    print(f"  latency target->path    p50 {p50:.1f} ms, p99 {p99:.1f} ms, max {pmax:.1f} ms")
+    print(
+        f"  solve time (last)       {values.get('solve time ms', '?')} ms, "
+        f"{values.get('iterations', '?')} iterations"
+    )
+    print(
+        f"  failures                {failures} failed solves, {rejected} rejected inputs"
+        + (f" (last: {values.get('last error')})" if failures + rejected else "")
+    )
+    unverified = int(values.get("unverified updates", "0") or 0)
+    print(
+        f"  stable shapes           {stable} of {updates}"
+        + (
+            f" ({unverified} published unverified: equilibrium residual over the tolerance)"
+            if unverified
+            else ""
+        )
+    )
+    print(f"  model                   {_model_summary(values)}")
+
+
+def _print_recording(rrd: Path | None) -> None:
+    """Print where the recording goes."""
+    print(
+        f"  recording               {rrd if rrd is not None else 'off'}"
+        + (
+            " (complete when the node has stopped; `dlo replay FILE` opens it)"
+            if rrd is not None
+            else ""
+        )
+    )
+
+
+def _print_final(final: PathEvent | None) -> None:
+    """Print where the final shape ends and how far it is from the post."""
+    if final is None:
+        print(
+            "  final shape             the centreline of the last target did not arrive within 10 "
+            "s"
+        )
+        return
+    centre, r = np.asarray(POST["center"]), float(POST["radius"])
+    gap = float(np.min(np.linalg.norm(final.points - centre, axis=1)) - r)
+    resting = "resting on the post" if gap < 0.02 else f"{gap * 100:.1f} cm from the post"
+    print(
+        f"  final shape             ends at the last target; lowest point "
+        f"z = {final.points[:, 2].min():.3f} m, {resting}"
+    )
+
+
+def _stop_node(node: NodeProcess, rrd: Path | None, t_job: float) -> bool:
+    """Stop the node and report its exit, its recording and its model changes; True if clean."""
+    rc = node.stop(timeout=15.0)
+    text = node.output()
+    clean = rc == 0 and "Traceback" not in text
+    print(
+        f"dlo demo: node stopped (exit code {rc}{'' if clean else ', NOT clean'}); "
+        f"total {time.monotonic() - t_job:.1f} s"
+    )
+    if rrd is not None:
+        size = rrd.stat().st_size if rrd.is_file() else 0
+        print(
+            f"dlo demo: recording: {rrd} ({size / 1e6:.1f} MB)"
+            if size
+            else f"dlo demo: recording: {rrd} was not written (see the node's output)"
+        )
+    for line in text.splitlines():  # the node's INFO lines for every change of model, with reasons
+        if "model change (update" in line:
+            print("  " + line[line.index("model change") :])
+    if not clean:
+        print(text[-4000:], file=sys.stderr)
+    return clean
 
 
 def main() -> None:

@@ -24,7 +24,7 @@ import time
 import traceback
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from typing import Any, Callable
 
 from ..model.problem import GripPose, Problem
 from ..solver.options import SolverOptions
@@ -54,7 +54,7 @@ class Update:
 @dataclass
 class _Job:
     kind: str
-    payload: object
+    payload: Any  # the job's argument: targets, an edit function or None
     future: Future = field(default_factory=Future)
 
 
@@ -72,7 +72,7 @@ class ShapeEngine:
         problem: Problem,
         options: SolverOptions,
         *,
-        make_solver: Callable[[Problem, SolverOptions], object],
+        make_solver: Callable[[Problem, SolverOptions], Any],
         on_update: Callable[[Update], None],
         on_failure: Callable[[str, str, Update | None], None],
         on_state: Callable[[str], None] = lambda s: None,
@@ -92,13 +92,13 @@ class ShapeEngine:
         self._received_ns: int | None = None
         self._merged = 0
         self._stop = False
-        self._solver = None
+        self._solver: Any = None  # a ShapeSolver (or auto's) once built
         self.state = "not started"
         self.targets_received = 0
         self.targets_coalesced = 0  # received but superseded before a solve used them
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
-    # ---- called from any thread ----------------------------------------------------------------------
+    # ---- called from any thread -----------------------------------------------------------------
     def start(self) -> None:
         self._thread.start()
 
@@ -144,9 +144,10 @@ class ShapeEngine:
             self._cond.notify_all()
 
     def query_scene(self) -> tuple[Problem, SolverOptions] | None:
-        """The scene a query is answered in, for a solver outside this engine: the solver's problem
-        (its current values) at the current targets, and its options; None until the solver is
-        built.
+        """Return the scene a query is answered in by a solver outside this engine.
+
+        The solver's problem (its current values) at the current targets, and its options; None
+        until the solver is built.
         """
         solver = self._solver
         if solver is None:
@@ -156,9 +157,7 @@ class ShapeEngine:
         return solver.problem.with_grip_poses(targets), solver.options
 
     def query(self, poses: dict[str, GripPose]) -> Future:
-        """Future of the ShapeResult for the current targets updated by ``poses``
-        (commit=False).
-        """
+        """Solve the current targets updated by ``poses``, uncommitted; a ShapeResult Future."""
         return self._submit("query", dict(poses))
 
     def reset(self) -> Future:
@@ -166,18 +165,14 @@ class ShapeEngine:
         return self._submit("reset", None)
 
     def change_problem(self, edit: Callable[[Problem], Problem]) -> Future:
-        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem) and re-solve the
-        targets.
-        """
+        """Apply ``edit`` to the solver's problem (ShapeSolver.set_problem); re-solve."""
         return self._submit("problem", edit)
 
     def change_options(self, edit: Callable[[SolverOptions], SolverOptions]) -> Future:
-        """Rebuild the solver with edited options (the next solve is cold) and re-solve the
-        targets.
-        """
+        """Rebuild the solver with edited options (the next solve is cold); re-solve."""
         return self._submit("options", edit)
 
-    def _submit(self, kind: str, payload: object) -> Future:
+    def _submit(self, kind: str, payload: Any) -> Future:
         job = _Job(kind, payload)
         with self._cond:
             if self._stop:
@@ -190,7 +185,7 @@ class ShapeEngine:
             self._cond.notify_all()
         return job.future
 
-    # ---- worker thread ------------------------------------------------------------------------------------
+    # ---- worker thread --------------------------------------------------------------------------
     def _set_state(self, state: str) -> None:
         self.state = state
         self._on_state(state)
@@ -211,7 +206,7 @@ class ShapeEngine:
             close_solver(self._solver)
 
     def _serve(self) -> None:
-        """The first shape, then targets and jobs until stopped."""
+        """Solve the first shape, then serve targets and jobs until stopped."""
         with self._cond:
             if self._stop:
                 return
@@ -232,9 +227,11 @@ class ShapeEngine:
                 self._run_job(job)
 
     def _take_slot(self) -> tuple[dict[str, GripPose], int | None, int | None, int]:
-        """Empty the pending slot (caller holds the lock): (the targets, newest stamp, its arrival,
-        messages merged).  The targets are taken with their stamp, under the same lock: a target
-        arriving between the two would otherwise be solved under the previous one's stamp.
+        """Empty the pending slot (caller holds the lock).
+
+        Returns (the targets, newest stamp, its arrival, messages merged).  The targets are taken
+        with their stamp, under the same lock: a target arriving between the two would otherwise
+        be solved under the previous one's stamp.
         """
         stamp, received, merged = self._stamp_ns, self._received_ns, self._merged
         self.targets_coalesced += max(0, merged - 1)
@@ -341,9 +338,11 @@ def target_miss(result: ShapeResult, problem: Problem, targets: dict[str, GripPo
 
 
 def build_solver(problem: Problem, options: SolverOptions, compile: str | None = None):
-    """The node's solver for a scene: ``dlo_ros.solver.make_solver`` (it picks the model for
-    solver.model 'auto', with its a-posteriori checks on a worker thread so that the stream never
-    waits for them).  compile: 'background', 'blocking', 'cached' or 'off'; None: 'background'.
+    """Build the node's solver for a scene: ``dlo_ros.solver.make_solver``.
+
+    It picks the model for solver.model 'auto', with its a-posteriori checks on a worker thread
+    so that the stream never waits for them.  compile: 'background', 'blocking', 'cached' or
+    'off'; None: 'background'.
     """
     from ..solver import make_solver
 

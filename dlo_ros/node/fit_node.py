@@ -1,5 +1,6 @@
-"""The node's identification interfaces (``fit.enabled``): ``~/observed``, ``~/fit`` and the
-diagnostics status ``<node>: fit`` (msg_docs/node.md "Fitting").
+"""The node's identification: ``~/observed``, ``~/fit`` and the ``<node>: fit`` status.
+
+Present when ``fit.enabled`` (msg_docs/node.md "Fitting").
 
 Threads: every callback here runs in the node's executor thread, and only checks, copies and hands
 over.  A fit runs in its own worker process (one, spawned at start-up, kept; its own equilibrium
@@ -15,37 +16,81 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import Future
-from dataclasses import replace
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, replace
+from typing import Any, Callable
 
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 
 from ..identify.objective import FitSettings
+from ..model.problem import StringProperties
+from ..solver.parallel.worker_pool import process_pool, stop_pool
 from . import conversions as conv
 from . import params as P
 from .cloud import cloud_bytes_limit, cloud_points
-from .fitting import CloudSnapshot, FitConfig, FitHealth, fit_payload, plan_application, run_fit
+from .engine import ShapeEngine
+from .fitting import (
+    Application,
+    CloudSnapshot,
+    FitConfig,
+    FitHealth,
+    fit_payload,
+    plan_application,
+    run_fit,
+)
+from .health import Health
+from .qos import CLOUD_QOS
+from .stream_log import StreamLog
 from .validation import TargetError, safe_text
 
 
-def _warm_fit_worker() -> bool:
-    """(fit worker) Import the fit's modules (CasADi) before the first fit asks for them."""
+@dataclass(frozen=True)
+class FitterLinks:
+    """What a NodeFitter uses of its node, besides rclpy's public Node API on ``node``.
+
+    ``node``: parameters, logger, clock, entities and ``set_parameters_atomically`` (an estimate is
+    applied through the node's own parameter checks).  ``engine``: the targets, the solver's scene
+    and its state.  ``health``: the node's warning throttle.  ``log``: the recorder and the update
+    number.  ``string_now()``: the string's properties as the parameters hold them now.
+    ``worker_compile``: the compile mode of worker processes.  ``closing()``: true once the node is
+    shutting down.  ``publish_diagnostics(immediate)``: publish the node's statuses.
+    """
+
+    node: Node
+    frame_id: str
+    engine: ShapeEngine
+    health: Health
+    log: StreamLog
+    string_now: Callable[[], StringProperties]
+    worker_compile: str
+    closing: Callable[[], bool]
+    publish_diagnostics: Callable[[bool], None]
+
+
+def warm_fit_worker() -> bool:
+    """Import the fit's modules (CasADi) in the fit worker before the first fit asks for them.
+
+    Runs in the worker process; a function-local import, as importing is its whole job.
+    """
     import dlo_ros.identify.fit  # noqa: F401
 
     return True
 
 
 class NodeFitter:
-    """``~/observed``, ``~/fit`` and the continuous fit timer of ``node`` (a DloNode); see the
-    module docstring.
+    """Serve ``~/observed``, ``~/fit`` and the continuous fit timer; see the module docstring.
+
+    ``links``: what it uses of the node (:class:`FitterLinks`).
     """
 
-    def __init__(self, node) -> None:
-        from ..solver.parallel.batch import process_pool
-
+    def __init__(self, links: FitterLinks) -> None:
+        node = links.node
+        self.links = links
         self.node = node
         self.health = FitHealth()
         self.max_points = int(node.get_parameter("fit.max_points").value)
@@ -56,8 +101,6 @@ class NodeFitter:
         self._done_lock = threading.Lock()
         self._pool = process_pool(1, background=True)
         self._wake = node.create_guard_condition(self._on_fit_done)
-        from .dlo_node import CLOUD_QOS
-
         self._sub = node.create_subscription(
             PointCloud2, "~/observed", self._on_cloud, CLOUD_QOS, raw=True
         )
@@ -65,7 +108,7 @@ class NodeFitter:
         period = float(node.get_parameter("fit.period_s").value)
         self._timer = node.create_timer(period, self._on_timer) if period > 0 else None
 
-    # ---- inputs (executor thread) -------------------------------------------------------------------------
+    # ---- inputs (executor thread) ---------------------------------------------------------------
     def _on_cloud(self, data: bytes) -> None:
         where = "observed"
         node = self.node
@@ -84,30 +127,30 @@ class NodeFitter:
                 raise TargetError(
                     "invalid", f"{where}: not a readable PointCloud2 ({type(exc).__name__})"
                 ) from None
-            points = cloud_points(msg, node.frame_id, self.max_points, where)
+            points = cloud_points(msg, self.links.frame_id, self.max_points, where)
         except TargetError as exc:
             self._reject(exc)
             return
         stamp = conv.time_to_ns(msg.header.stamp) or node.get_clock().now().nanoseconds
         number = self.health.clouds_received + 1
-        self._latest = CloudSnapshot(points, node.engine.targets(), stamp, number)
+        self._latest = CloudSnapshot(points, self.links.engine.targets(), stamp, number)
         self.health.cloud(len(points), stamp)
 
     def _reject(self, exc: TargetError) -> None:
-        node = self.node
+        node, log = self.node, self.links.log
         text = safe_text(exc)
         self.health.rejected(f"{exc.kind}: {text}")
-        node.recorder.log_rejected(
+        log.recorder.log_rejected(
             f"{exc.kind}: {text}",
-            update=node._record_n,
+            update=log.update,
             ros_time_ns=node.get_clock().now().nanoseconds,
         )
-        if node.health.should_warn(f"observed:{exc.kind}"):
+        if self.links.health.should_warn(f"observed:{exc.kind}"):
             node.get_logger().warning(
                 f"rejected observed cloud ({exc.kind}): {text}; no fit uses it (the stream "
                 "is unaffected)"
             )
-        node._publish_diagnostics(immediate=True)
+        self.links.publish_diagnostics(True)
 
     def _on_fit(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         response.success, response.message = self.start(self._latest)
@@ -117,11 +160,12 @@ class NodeFitter:
         latest = self._latest
         if latest is not None and latest.number > self._last_fitted and self._running is None:
             ok, message = self.start(latest)
-            if not ok and self.node.health.should_warn("fit:continuous"):
+            if not ok and self.links.health.should_warn("fit:continuous"):
                 self.node.get_logger().warning(f"continuous fit: {message}")
 
-    # ---- a fit ----------------------------------------------------------------------------------------------
+    # ---- a fit ----------------------------------------------------------------------------------
     def config(self) -> FitConfig:
+        """Read the fit's settings from the ``fit.*`` parameters now."""
         g = self.node.get_parameter
         return FitConfig(
             parameters=tuple(g("fit.parameters").value),
@@ -129,31 +173,34 @@ class NodeFitter:
             total_mass=float(g("fit.total_mass").value),
             apply_max_rel_sigma=float(g("fit.apply_max_rel_sigma").value),
             max_iterations=int(g("fit.max_iterations").value),
-            compile=self.node._worker_compile,
+            compile=self.links.worker_compile,
         )
 
     def start(self, snapshot: CloudSnapshot | None) -> tuple[bool, str]:
-        """Start a fit of ``snapshot`` in the worker process (executor thread); (started,
-        message).
+        """Start a fit of ``snapshot`` in the worker process (executor thread).
+
+        Returns (whether it started, the message that says what or why not).
         """
         if self._running is not None:
             return (
                 False,
-                f"busy: the fit of cloud {self._running.number} is running; try again when it is done",
+                f"busy: the fit of cloud {self._running.number} is running; try again when it "
+                "is done",
             )
         if snapshot is None:
             return (
                 False,
-                "no cloud received on ~/observed yet (or every one was rejected: see the diagnostics)",
+                "no cloud received on ~/observed yet (or every one was rejected: see the "
+                "diagnostics)",
             )
-        scene = self.node.engine.query_scene()
+        scene = self.links.engine.query_scene()
         if scene is None:
-            return False, f"the solver is not ready ({self.node.engine.state})"
+            return False, f"the solver is not ready ({self.links.engine.state})"
         problem, options = scene
         # the string as the node's parameters hold it now (the solver thread may not have applied a
         # change made just before): the fit starts there, and plan_application compares with the
         # same values
-        problem = replace(problem, string=self.node._check_problem.string)
+        problem = replace(problem, string=self.links.string_now())
         config = self.config()
         payload = fit_payload(problem, options, snapshot, config)
         try:
@@ -166,19 +213,20 @@ class NodeFitter:
         self.health.started()
         job.add_done_callback(lambda f: self._finished(f, snapshot, config))
         message = (
-            f"fitting {', '.join(config.parameters)} to cloud {snapshot.number} ({len(snapshot.points)} points, "
-            f"σ {config.point_sigma:g} m); the estimate goes to /diagnostics ('{self.node.get_fully_qualified_name()}"
-            ": fit') and is applied if its relative σ <= fit.apply_max_rel_sigma"
+            f"fitting {', '.join(config.parameters)} to cloud {snapshot.number} "
+            f"({len(snapshot.points)} points, σ {config.point_sigma:g} m); the estimate goes to "
+            f"/diagnostics ('{self.node.get_fully_qualified_name()}: fit') and is applied if its "
+            "relative σ <= fit.apply_max_rel_sigma"
         )
         self.node.get_logger().info(message)
-        self.node._publish_diagnostics(immediate=True)
+        self.links.publish_diagnostics(True)
         return True, message
 
     def _finished(self, job: Future, snapshot: CloudSnapshot, config: FitConfig) -> None:
-        """(the pool's thread) Hand the finished fit to the executor thread."""
+        """Hand the finished fit to the executor thread (runs in the pool's thread)."""
         with self._done_lock:
             self._done.append((job, snapshot, config))
-        if not self.node._closing:
+        if not self.links.closing():
             self._wake.trigger()
 
     def _on_fit_done(self) -> None:
@@ -186,7 +234,7 @@ class NodeFitter:
             done, self._done = self._done, []
         for job, snapshot, config in done:
             self._running = None
-            if job.cancelled() or self.node._closing:
+            if job.cancelled() or self.links.closing():
                 continue
             self._report(job, snapshot, config)
 
@@ -217,7 +265,7 @@ class NodeFitter:
         else:
             node.get_logger().warning(text)
         fitted = result.observations[0] if result is not None and result.observations else None
-        node.recorder.log_fit(
+        self.links.log.recorder.log_fit(
             snapshot.points,
             fitted.shape if fitted else [],
             fitted.feet if fitted else [],
@@ -225,15 +273,13 @@ class NodeFitter:
             huber=FitSettings().huber,
             text=text,
             ok=ok,
-            update=node._record_n,
+            update=self.links.log.update,
             ros_time_ns=snapshot.stamp_ns,
         )
-        node._publish_diagnostics(immediate=True)
+        self.links.publish_diagnostics(True)
 
-    def _apply(self, application):
+    def _apply(self, application: Application) -> Application:
         """Set the parameters of ``application`` at once, through the node's parameter checks."""
-        from .fitting import Application
-
         node = self.node
         result = node.set_parameters_atomically(
             [Parameter(n, value=v) for n, v in application.values.items()]
@@ -247,7 +293,10 @@ class NodeFitter:
         return application
 
     @staticmethod
-    def _summary(snapshot: CloudSnapshot, result, error: str, application) -> str:
+    def _summary(
+        snapshot: CloudSnapshot, result: Any, error: str, application: Application | None
+    ) -> str:
+        """Summarise one fit in a line: its estimates, fit quality and what was applied."""
         head = f"fit of cloud {snapshot.number} ({len(snapshot.points)} points)"
         if result is None:
             return f"{head}: failed: {error}"
@@ -259,12 +308,14 @@ class NodeFitter:
             parts.append(f"not identifiable: {', '.join(result.not_identifiable)}")
         rms = f", rms {result.observations[0].rms_m * 1e3:.3g} mm" if result.observations else ""
         return (
-            f"{head}: {result.status} ({result.message}) in {result.time_s:.2f} s, {result.equilibrium_solves} "
-            f"solves{rms}: {'; '.join(parts) or 'no estimate'}; {application.reason if application else ''}"
+            f"{head}: {result.status} ({result.message}) in {result.time_s:.2f} s, "
+            f"{result.equilibrium_solves} solves{rms}: {'; '.join(parts) or 'no estimate'}; "
+            f"{application.reason if application else ''}"
         )
 
-    # ---- diagnostics, warm-up, shutdown -----------------------------------------------------------------------
-    def status(self, hardware_id: str):
+    # ---- diagnostics, warm-up, shutdown ---------------------------------------------------------
+    def status(self, hardware_id: str) -> DiagnosticStatus:
+        """Build the ``<node>: fit`` diagnostics status."""
         level, message = self.health.level_and_message()
         values = {
             k: safe_text(v, 2000) if isinstance(v, str) else v
@@ -280,15 +331,12 @@ class NodeFitter:
 
     def warm(self) -> None:
         """Start the worker process and its imports now (after the node's first shape)."""
-        self._pool.submit(_warm_fit_worker)
+        self._pool.submit(warm_fit_worker)
 
     def _new_pool(self) -> None:
-        from ..solver.parallel.batch import process_pool, stop_pool
-
         stop_pool(self._pool, 1.0)
         self._pool = process_pool(1, background=True)
 
     def close(self, timeout: float) -> None:
-        from ..solver.parallel.batch import stop_pool
-
+        """Stop the fit worker process (bounded by ``timeout`` [s])."""
         stop_pool(self._pool, timeout)

@@ -1,5 +1,6 @@
-"""Identification in the node (``~/observed``, ``~/fit``): what is fitted, in which process, and
-when an estimate is applied (pure: no ROS; msg_docs/node.md "Fitting").
+"""Identification in the node: what is fitted, in which process, and when it is applied.
+
+Serves ``~/observed`` and ``~/fit`` (pure: no ROS; msg_docs/node.md "Fitting").
 
 * :class:`CloudSnapshot` is one observation as the node took it: the checked points of a cloud and
   the
@@ -26,6 +27,9 @@ from typing import Mapping
 
 import numpy as np
 
+from ..identify.fit import fit
+from ..identify.objective import FitSettings, SolverCache
+from ..identify.observations import MassObservation, Observation, ObservationSet
 from ..model.problem import GripPose, Problem
 from .params import STRING_FIELDS, profile_value
 
@@ -46,9 +50,11 @@ _SOLVERS = None
 
 @dataclass(frozen=True)
 class FitConfig:
-    """The ``fit.*`` parameters one fit uses.  parameters: among Rf, Rt, D, Re; point_sigma [m];
-    total_mass [kg] (0: unknown); apply_max_rel_sigma: the bound of :func:`plan_application`;
-    compile: the worker's solvers' compile mode ('cached' or 'off': a worker never starts gcc).
+    """The ``fit.*`` parameters one fit uses.
+
+    parameters: among Rf, Rt, D, Re; point_sigma [m]; total_mass [kg] (0: unknown);
+    apply_max_rel_sigma: the bound of :func:`plan_application`; compile: the worker's solvers'
+    compile mode ('cached' or 'off': a worker never starts gcc).
     """
 
     parameters: tuple[str, ...] = ("Rf", "D")
@@ -61,9 +67,10 @@ class FitConfig:
 
 @dataclass(frozen=True)
 class CloudSnapshot:
-    """One observation: ``points`` (N, 3) [m] in the node's frame, the grip ``poses`` the node held
-    when the cloud arrived, the cloud's header stamp [ns] and its number (1, 2, ... in arrival
-    order).
+    """One observation: the points of a cloud and the grip poses the node held when it arrived.
+
+    ``points`` (N, 3) [m] in the node's frame, the grip ``poses``, the cloud's header stamp [ns]
+    and its number (1, 2, ... in arrival order).
     """
 
     points: np.ndarray
@@ -73,9 +80,7 @@ class CloudSnapshot:
 
 
 def observation_set(snapshot: CloudSnapshot, config: FitConfig):
-    """The ``ObservationSet`` of one snapshot (``dlo_ros.identify``)."""
-    from ..identify.observations import MassObservation, Observation, ObservationSet
-
+    """Build the ``ObservationSet`` of one snapshot (``dlo_ros.identify``)."""
     obs = Observation(
         f"cloud_{snapshot.number}",
         dict(snapshot.poses),
@@ -91,11 +96,11 @@ def observation_set(snapshot: CloudSnapshot, config: FitConfig):
 
 
 def fit_payload(problem: Problem, options, snapshot: CloudSnapshot, config: FitConfig) -> bytes:
-    """The pickled request :func:`run_fit` takes: ``problem`` (the node's current values; its grip
-    poses are replaced by the snapshot's), ``options``, the observation and the settings.
-    """
-    from ..identify.objective import FitSettings
+    """Pickle the request :func:`run_fit` takes.
 
+    ``problem`` (the node's current values; its grip poses are replaced by the snapshot's),
+    ``options``, the observation and the settings.
+    """
     settings = FitSettings(max_iterations=int(config.max_iterations), compile=config.compile)
     return pickle.dumps(
         (problem, options, observation_set(snapshot, config), settings),
@@ -104,24 +109,25 @@ def fit_payload(problem: Problem, options, snapshot: CloudSnapshot, config: FitC
 
 
 def run_fit(payload: bytes):
-    """(worker process) The ``FitResult`` of a :func:`fit_payload` request.  Raises
-    ObservationError for a request the scene cannot support (e.g. Re of an inextensible string).
+    """Run the fit of a :func:`fit_payload` request (in the worker process); its ``FitResult``.
+
+    Raises ObservationError for a request the scene cannot support (e.g. Re of an inextensible
+    string).
     """
     global _SOLVERS
-    from ..identify.fit import fit
-    from ..identify.objective import SolverCache
-
     if _SOLVERS is None:
         _SOLVERS = SolverCache()
     problem, options, data, settings = pickle.loads(payload)  # noqa: S301 - from our own node
     return fit(problem, options, data, settings, _SOLVERS)
 
 
-# ---- applying an estimate ---------------------------------------------------------------------------------
+# ---- applying an estimate -----------------------------------------------------------------------
 @dataclass(frozen=True)
 class Application:
-    """What a fit changes: ``values`` (parameter name → new value; empty when nothing is applied)
-    and ``reason`` (one line: what was applied with which σ, or why nothing was).
+    """What a fit changes, and why.
+
+    ``values``: parameter name → new value (empty when nothing is applied); ``reason``: one line,
+    what was applied with which σ, or why nothing was.
     """
 
     values: dict[str, float]
@@ -137,8 +143,9 @@ def _relative(est) -> float:
 
 
 def plan_application(result, current: Mapping[str, float], bound: float) -> Application:
-    """The parameters ``result`` (a FitResult) would change from ``current`` (parameter name →
-    value), applied only when the fit converged, passed the goodness-of-fit gate (status 'ok'; a
+    """Plan which parameters ``result`` (a FitResult) changes from ``current`` (name → value).
+
+    They are applied only when the fit converged, passed the goodness-of-fit gate (status 'ok'; a
     'misfit' does not explain the points, ``identify/gate.py``) and every changed value is
     determined with relative σ ≤ ``bound``.
 
@@ -202,11 +209,12 @@ def plan_application(result, current: Mapping[str, float], bound: float) -> Appl
     )
 
 
-# ---- diagnostics ----------------------------------------------------------------------------------------
+# ---- diagnostics --------------------------------------------------------------------------------
 @dataclass
 class FitHealth:
-    """What the diagnostics status ``<node>: fit`` reports (thread-safe: the executor thread writes
-    it, the diagnostics timer reads it).
+    """What the diagnostics status ``<node>: fit`` reports.
+
+    Thread-safe: the executor thread writes it, the diagnostics timer reads it.
     """
 
     clouds_received: int = 0
@@ -244,7 +252,7 @@ class FitHealth:
     def finished(
         self, result, snapshot: CloudSnapshot, application: Application | None, error: str = ""
     ) -> None:
-        """A fit ended: its FitResult (None when it raised: ``error``) and what was applied."""
+        """Count a finished fit: its FitResult (None when it raised: ``error``), what applied."""
         with self._lock:
             self.fits_finished += 1
             self.running = False

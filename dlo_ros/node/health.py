@@ -25,7 +25,7 @@ from .validation import KINDS
 
 
 def resident_mb() -> float | None:
-    """This process's resident set size [MiB] (VmRSS from /proc; None where there is no /proc)."""
+    """Return this process's resident set size [MiB] (VmRSS; None where there is no /proc)."""
     try:
         with open("/proc/self/status") as f:
             for line in f:
@@ -58,9 +58,10 @@ MODEL_KEYS = (
 
 
 def model_text(model: Mapping | None) -> str:
-    """One line for a ShapeResult.model.as_dict(): 'auto: planar, twist, gravity, order 12, 15
-    unknowns, 1 obstacle(s), estimated error 4.3e-05 m (tolerance 0.001 m)'; '' for an empty
-    model.
+    """Describe a ShapeResult.model.as_dict() in one line ('' for an empty model).
+
+    E.g. 'auto: planar, twist, gravity, order 12, 15 unknowns, 1 obstacle(s), estimated error
+    4.3e-05 m (tolerance 0.001 m)'.
     """
     if not model:
         return ""
@@ -84,7 +85,7 @@ def model_text(model: Mapping | None) -> str:
 
 
 def new_model_changes(model: Mapping, seen: int) -> tuple[list[str], int]:
-    """The model changes to report for one solve, and the new ``seen``.
+    """Return the model changes to report for one solve, and the new ``seen``.
 
     ``model``: its ShapeResult.model.as_dict(); ``seen``: how many entries of ``model['changes']``
     (the solver's whole history of changes) were already reported (0 after a new solver was built).
@@ -146,13 +147,13 @@ class Health:
         self.last_model_change_stamp_ns: int | None = None  # ROS time of the solve that made it
         self.last_model_change_update: int | None = None  # that solve's update number (recording)
 
-    # ---- events -----------------------------------------------------------------------------------------
+    # ---- events ---------------------------------------------------------------------------------
     def set_state(self, state: str) -> None:
         with self._lock:
             self.state = state
 
     def update(self, result: ShapeResult, trigger: str, latency_ms: float | None = None) -> None:
-        """A converged streaming solve was published."""
+        """Count a converged streaming solve that was published."""
         now = self._clock()
         with self._lock:
             self.last, self.last_trigger, self.last_latency_ms = result, trigger, latency_ms
@@ -177,9 +178,10 @@ class Health:
         stamp_ns: int | None = None,
         update: int | None = None,
     ) -> None:
-        """The model of the newest streaming solve (ok or failed; ``ShapeResult.model.as_dict()``)
-        and the model changes it made (reasons, oldest first), stamped with the solve's ROS time
-        and update number.
+        """Keep the model of the newest streaming solve (ok or failed) and the changes it made.
+
+        ``model``: its ``ShapeResult.model.as_dict()``; ``changes``: reasons, oldest first; stamped
+        with the solve's ROS time and update number.
         """
         now = self._clock()
         with self._lock:
@@ -213,8 +215,9 @@ class Health:
         return text
 
     def error(self, kind: str, message: str, *, rejected: bool) -> bool:
-        """A rejected input (rejected=True) or a failed solve; returns whether to log a warning now
-        (at most one per kind every ``throttle_s``).
+        """Count a rejected input (rejected=True) or a failed solve; return whether to warn now.
+
+        At most one warning per kind every ``throttle_s``.
         """
         now = self._clock()
         kind = kind if kind in self.errors else "internal"
@@ -235,8 +238,9 @@ class Health:
             return False
 
     def should_warn(self, key: str) -> bool:
-        """Throttle for warnings that are not errors (e.g. 'unstable'): True at most every
-        ``throttle_s``.
+        """Return whether to log a warning that is not an error now (e.g. 'unstable').
+
+        True at most every ``throttle_s`` per key.
         """
         now = self._clock()
         with self._lock:
@@ -257,7 +261,7 @@ class Health:
         with self._lock:
             self.targets_received, self.targets_coalesced = received, coalesced
 
-    # ---- report ----------------------------------------------------------------------------------------
+    # ---- report ---------------------------------------------------------------------------------
     def update_rate(self) -> float:
         now = self._clock()
         with self._lock:

@@ -1,5 +1,4 @@
-"""How ``~/query_shape`` (nav_msgs/srv/GetPlan) says what its answer is, and how a client reads it
-back.
+"""How ``~/query_shape`` (nav_msgs/srv/GetPlan) says what its answer is; how a client reads it.
 
 GetPlan's response is one nav_msgs/Path, so the status travels in ``plan.header.frame_id``
 (msg_docs/node.md, ``~/query_shape``):
@@ -47,7 +46,7 @@ STATUS_KINDS = {
 
 
 def result_kind(result: ShapeResult) -> str:
-    """The reply kind of a solver's answer."""
+    """Return the reply kind of a solver's answer."""
     if result.status == "ok":
         return "unstable" if result.stable is False else VERIFIED
     return STATUS_KINDS.get(result.status, "failed")
@@ -67,9 +66,10 @@ def reply_frame(frame_id: str, kind: str) -> str:
 
 @dataclass(frozen=True)
 class QueryAnswer:
-    """A decoded ``~/query_shape`` reply: ``status`` (VERIFIED or one of KINDS), the node's frame,
-    and the shape (points (N, 3) [m], orientations (N, 4) x, y, z, w; empty unless
-    carries_shape).
+    """A decoded ``~/query_shape`` reply: its status, the node's frame and the shape.
+
+    ``status``: VERIFIED or one of KINDS; the shape: points (N, 3) [m], orientations (N, 4) x, y,
+    z, w, empty unless carries_shape.
     """
 
     status: str
@@ -83,9 +83,10 @@ class QueryAnswer:
 
 
 def decode(frame_id: str, points: np.ndarray, orientations: np.ndarray) -> QueryAnswer:
-    """The QueryAnswer of a reply whose ``plan.header.frame_id`` and poses are these.  Only a
-    suffix in KINDS is a status (a frame id may itself contain '#'); an empty plan without one (a
-    node from before this convention) reads as 'failed': never as verified.
+    """Decode a reply whose ``plan.header.frame_id`` and poses are these.
+
+    Only a suffix in KINDS is a status (a frame id may itself contain '#'); an empty plan without
+    one (a node from before this convention) reads as 'failed': never as verified.
     """
     frame, sep, kind = frame_id.rpartition(SEPARATOR)
     if not sep or kind not in KINDS:

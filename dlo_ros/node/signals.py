@@ -1,5 +1,6 @@
-"""How the node process answers SIGINT and SIGTERM (no ROS here, so it can run before rclpy is
-imported).
+"""How the node process answers SIGINT and SIGTERM.
+
+No ROS here, so it can run before rclpy is imported.
 
 Contract (msg_docs/node.md, "Exit codes"): the first SIGINT or SIGTERM at any time — while Python
 imports rclpy and CasADi, while the node starts, or while it runs — stops the node cleanly with
@@ -31,9 +32,10 @@ _node_started = False
 
 
 def node_starting() -> None:
-    """The node is about to start (rclpy.init): a first signal now unwinds through
-    KeyboardInterrupt, so that the node stops cleanly; before, there is nothing to close and the
-    process leaves at once.
+    """Mark that the node is about to start (rclpy.init).
+
+    A first signal now unwinds through KeyboardInterrupt, so that the node stops cleanly; before,
+    there is nothing to close and the process leaves at once.
     """
     global _node_started
     _node_started = True
@@ -61,16 +63,16 @@ def _leave(signum, frame) -> None:
 
 
 def stop_on_first_signal() -> None:
-    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (until rclpy installs its
-    handlers).
-    """
+    """Raise KeyboardInterrupt in the main thread on SIGINT or SIGTERM (until rclpy's handlers)."""
     for sig in STOP_SIGNALS:
         signal.signal(sig, _interrupt)
 
 
 def exit_on_second_signal(code: int) -> None:
-    """From now on (the process is stopping), SIGINT or SIGTERM terminates the children and exits
-    with ``code`` at once, without unwinding (a thread may be inside CasADi/IPOPT).
+    """Make SIGINT or SIGTERM end the process at once from now on (the process is stopping).
+
+    The children are terminated and the process exits with ``code`` without unwinding (a thread
+    may be inside CasADi/IPOPT).
     """
     global _exit_code
     _exit_code = code
@@ -79,17 +81,19 @@ def exit_on_second_signal(code: int) -> None:
 
 
 def ignore_signals_at_exit() -> None:
-    """The process is about to exit: SIGINT and SIGTERM are ignored from now on.  CPython's
-    finalisation resets every signal with a Python handler to its default action, and a Ctrl-C
-    during it (it can take a second: DDS and CasADi teardown) killed the process with −2.
+    """Ignore SIGINT and SIGTERM from now on: the process is about to exit.
+
+    CPython's finalisation resets every signal with a Python handler to its default action, and a
+    Ctrl-C during it (it can take a second: DDS and CasADi teardown) killed the process with −2.
     """
     for sig in STOP_SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
 
 
 def terminate_children() -> None:
-    """SIGTERM every descendant of this process (e.g. gcc and its cc1), deepest first (Linux /proc;
-    best effort, silent elsewhere).
+    """Send SIGTERM to every descendant of this process (e.g. gcc and its cc1), deepest first.
+
+    Linux /proc; best effort, silent elsewhere.
     """
     parents: dict[int, int] = {}
     try:

@@ -13,9 +13,11 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..model.problem import GripPose, PoseError
+from ..text import TEXT_LIMIT as TEXT_LIMIT  # the node's modules import it from here
+from ..text import safe_text
 
-# noqa: F401  (re-exported: the node's modules import it from here)
-from ..text import TEXT_LIMIT, safe_text
+#: a vector given as numbers: a sequence or a numpy array
+Vector = Sequence[float] | np.ndarray
 
 #: Longest ``header.frame_id`` of a target (or ``frame_id`` parameter) the node accepts; tf2 frame
 # ids are short.
@@ -58,8 +60,9 @@ def normalise_frame(frame_id: str) -> str:
 
 
 def check_message_size(n_bytes: int, where: str) -> None:
-    """TargetError('size') for a serialised message over :data:`TARGET_BYTES_LIMIT` bytes (checked
-    before it is deserialised).
+    """Raise TargetError('size') for a serialised message over :data:`TARGET_BYTES_LIMIT` bytes.
+
+    Checked before it is deserialised.
     """
     if n_bytes > TARGET_BYTES_LIMIT:
         raise TargetError(
@@ -70,8 +73,9 @@ def check_message_size(n_bytes: int, where: str) -> None:
 
 
 def check_frame_size(frame_id: str, where: str) -> None:
-    """TargetError('frame') for a ``header.frame_id`` longer than :data:`FRAME_ID_LIMIT` characters
-    (checked before anything compares, transforms, logs or records it).
+    """Raise TargetError('frame') for a ``header.frame_id`` over :data:`FRAME_ID_LIMIT` characters.
+
+    Checked before anything compares, transforms, logs or records it.
     """
     if len(frame_id) > FRAME_ID_LIMIT:
         raise TargetError(
@@ -82,9 +86,7 @@ def check_frame_size(frame_id: str, where: str) -> None:
 
 
 def check_frame(frame_id: str, expected: str, where: str) -> None:
-    """TargetError('frame') unless ``frame_id`` names ``expected`` (an empty frame_id is rejected
-    too).
-    """
+    """Raise TargetError('frame') unless ``frame_id`` names ``expected`` (empty is refused too)."""
     if not frame_id:
         raise TargetError(
             "frame", f"{where}: header.frame_id is empty; targets must be given in '{expected}'"
@@ -93,21 +95,22 @@ def check_frame(frame_id: str, expected: str, where: str) -> None:
     if normalise_frame(frame_id) != normalise_frame(expected):
         raise TargetError(
             "frame",
-            f"{where}: header.frame_id is '{safe_text(frame_id, 80)}', not '{expected}' (no transform available: "
+            f"{where}: header.frame_id is '{safe_text(frame_id, 80)}', not '{expected}' (no "
+            "transform available: "
             "send targets in the node's frame_id or make tf2 available)",
         )
 
 
 def check_pose(
-    position: Sequence[float],
-    orientation: Sequence[float],
+    position: Vector,
+    orientation: Vector,
     where: str,
     tolerance: float = QUATERNION_TOLERANCE,
 ) -> GripPose:
-    """A GripPose with the quaternion normalised (``GripPose.checked``, the one pose validation),
-    or TargetError of the same kind naming the problem.
+    """Return the checked GripPose, its quaternion normalised (``GripPose.checked``).
 
-    position: (x, y, z) [m]; orientation: (x, y, z, w).
+    GripPose.checked is the one pose validation; its PoseError becomes a TargetError of the same
+    kind naming the problem.  position: (x, y, z) [m]; orientation: (x, y, z, w).
     """
     try:
         return GripPose.checked(position, orientation, where, tolerance)
@@ -131,10 +134,10 @@ def grip_miss(
     grips: Iterable[tuple[str, float, np.ndarray]],
     tolerance: float,
 ) -> str:
-    """Why a converged shape does not pass through its grip targets ('' if it does, or if no grip
-    sits on an output sample).  A sanity check of the solver's result, never expected to fire.
+    """Return why a converged shape misses its grip targets ('' if it does not).
 
-    points (N, 3), s (N,): the centreline; grips: (name, s, target position).
+    Also '' if no grip sits on an output sample.  A sanity check of the solver's result, never
+    expected to fire.  points (N, 3), s (N,): the centreline; grips: (name, s, target position).
     """
     if len(s) == 0:
         return ""

@@ -253,8 +253,8 @@ def test_an_update_in_flight_when_the_context_shuts_down_is_dropped_without_an_e
         node = DloNode(context=context, parameter_overrides=[Parameter("scene", value=TEST_SCENE),
                                                              Parameter("compile", value="off")])
         try:
-            wait_until(lambda: getattr(node, "_latest", None) is not None, 60.0)
-            update = node._latest
+            wait_until(lambda: node.outputs.latest is not None, 60.0)
+            update = node.outputs.latest
             before = (node.health.failures, node.health.last_error)
             context.shutdown()  # what rclpy's SIGINT handler does
             node._on_update(update)  # raised RCLError: "publisher's context is invalid"
@@ -277,7 +277,7 @@ def test_a_signal_during_the_executors_constructor_leaves_no_traceback(monkeypat
     import rclpy.executors
     from rclpy.context import Context
 
-    from dlo_ros.node.dlo_node import new_executor
+    from dlo_ros.node.run import new_executor
 
     class Interrupted(Exception):
         pass

@@ -12,6 +12,8 @@ from visualization_msgs.msg import Marker
 from dlo_ros.model import Grip, GripPose, Obstacle, Problem, Profile, StringProperties
 from dlo_ros.model.rotations import matrix_to_quat, quat_to_matrix
 from dlo_ros.node import conversions as conv
+from dlo_ros.node import markers
+from dlo_ros.shading import frame_tangents as tangents
 from dlo_ros.solver.results.result import GripWrench, ShapeResult
 
 FRAMES = ["", "w", "ab", "abc", "abcd", "world", "abcdef", "abcdefg", "abcdefgh", "a_longer_frame_7"]  # every length mod 8
@@ -81,7 +83,7 @@ def test_result_to_path_and_back():
     np.testing.assert_array_equal(pts, r.points)
     np.testing.assert_array_equal(qs, r.orientations)
     # x-axis along the tangent
-    np.testing.assert_allclose(conv.tangents(qs)[1:-1], np.diff(pts, axis=0)[1:] / np.linalg.norm(
+    np.testing.assert_allclose(tangents(qs)[1:-1], np.diff(pts, axis=0)[1:] / np.linalg.norm(
         np.diff(pts, axis=0)[1:], axis=1, keepdims=True), atol=0.05)
     empty = conv.path_to_arrays(conv.result_to_path(ShapeResult(status="failed", message=""), "world", 0))
     assert empty[0].shape == (0, 3) and empty[1].shape == (0, 4)
@@ -112,17 +114,17 @@ def test_the_serialised_wrench_reads_back_as_the_message(frame):
 
 def test_curvature_of_an_arc_is_exact():
     r = arc_result(radius=0.5)
-    np.testing.assert_allclose(conv.curvature(r.s, r.orientations), 2.0, rtol=1e-9)
-    density = conv.bending_energy_density(r.s, r.orientations, Profile.constant(0.02))
+    np.testing.assert_allclose(markers.curvature(r.s, r.orientations), 2.0, rtol=1e-9)
+    density = markers.bending_energy_density(r.s, r.orientations, Profile.constant(0.02))
     np.testing.assert_allclose(density, 0.5 * 0.02 * 4.0, rtol=1e-9)
-    np.testing.assert_allclose(conv.bending_energy_density(r.s, r.orientations, 0.02), density)
+    np.testing.assert_allclose(markers.bending_energy_density(r.s, r.orientations, 0.02), density)
     straight = np.tile([0.0, 0.0, 0.0, 1.0], (5, 1))
-    np.testing.assert_array_equal(conv.curvature(np.linspace(0, 1, 5), straight), 0.0)
-    assert conv.curvature(np.array([0.0]), straight[:1]).shape == (1,)
+    np.testing.assert_array_equal(markers.curvature(np.linspace(0, 1, 5), straight), 0.0)
+    assert markers.curvature(np.array([0.0]), straight[:1]).shape == (1,)
 
 
 def test_colour_map():
-    c = conv.colour_map(np.array([-1.0, 0.0, 0.5, 1.0, 2.0]))
+    c = markers.colour_map(np.array([-1.0, 0.0, 0.5, 1.0, 2.0]))
     assert c.shape == (5, 3) and np.all((c >= 0) & (c <= 1))
     np.testing.assert_array_equal(c[0], c[1])
     np.testing.assert_array_equal(c[3], c[4])
@@ -139,7 +141,7 @@ def test_markers():
         Obstacle.from_dict({"type": "halfspace", "point": [0, 0, -1], "normal": [0, 0, 1]}),
     ]
     pr = problem_for(r, obstacles)
-    arr = conv.result_markers(r, pr, "world", 42, force_scale=0.1)
+    arr = markers.result_markers(r, pr, "world", 42, force_scale=0.1)
     ms = arr.markers
     assert ms[0].action == Marker.DELETEALL
     by_ns: dict[str, list[Marker]] = {}
@@ -167,8 +169,8 @@ def test_markers():
     # uniform curvature -> uniform colour; a fixed scale maps the density 0.04 J/m to the middle of the map
     colours = np.array([(c.r, c.g, c.b) for c in line.colors])
     np.testing.assert_allclose(colours, np.tile(colours[0], (len(colours), 1)), atol=1e-6)
-    half = conv.result_markers(r, pr, "world", 42, energy_scale=0.08).markers[1]
-    mid = conv.colour_map(np.array([0.5]))[0]
+    half = markers.result_markers(r, pr, "world", 42, energy_scale=0.08).markers[1]
+    mid = markers.colour_map(np.array([0.5]))[0]
     np.testing.assert_allclose([half.colors[3].r, half.colors[3].g, half.colors[3].b], mid, atol=1e-6)
 
 
@@ -270,3 +272,39 @@ def test_path_from_cdr_inverts_path_cdr_and_refuses_bad_bytes():
     lying[4 + 12 + 4:4 + 12 + 4 + 4] = (10**6).to_bytes(4, "little")  # the pose count, after the header
     with pytest.raises(conv.CdrError):
         conv.path_from_cdr(bytes(lying))
+
+
+def test_every_primitive_kind_is_drawn_from_its_description():
+    """The node draws obstacles from their Primitive, whatever their type: each kind the model can
+    describe (obstacle_types.PRIMITIVE_KINDS) has a drawing, and the drawing's geometry is the
+    primitive's (hand-made primitives, independent of any obstacle type)."""
+    from dlo_ros.model.obstacle_types import PRIMITIVE_KINDS, Primitive
+
+    assert set(markers.PRIMITIVE_MARKERS) == set(PRIMITIVE_KINDS)
+    h = conv.header("world", 7)
+    q = np.array([0.0, 0.0, math.sin(0.3), math.cos(0.3)])
+    z = np.array([0.0, 0.0, 1.0])
+    sphere = markers.primitive_markers(
+        Primitive("sphere", np.array([1.0, 2.0, 3.0]), q, z, np.full(3, 0.25), 0.25), h, 10)
+    assert [(m.type, m.id) for m in sphere] == [(Marker.SPHERE, 10)]
+    assert (sphere[0].scale.x, sphere[0].pose.position.y) == (0.5, 2.0)
+    box = markers.primitive_markers(
+        Primitive("box", np.array([0.0, 1.0, 0.0]), q, z, np.array([0.1, 0.2, 0.3])), h, 0)
+    assert [m.type for m in box] == [Marker.CUBE]
+    assert (box[0].scale.x, box[0].scale.y, box[0].scale.z) == (0.2, 0.4, 0.6)
+    assert (box[0].pose.orientation.z, box[0].pose.orientation.w) == (q[2], q[3])
+    capsule = markers.primitive_markers(
+        Primitive("capsule", np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 0.0, 1.0]), z,
+                  np.array([0.05, 0.05, 0.5]), 0.05), h, 3)
+    assert [(m.type, m.id) for m in capsule] == [
+        (Marker.CYLINDER, 3), (Marker.SPHERE, 4), (Marker.SPHERE, 5)]
+    assert capsule[0].scale.z == 1.0
+    assert sorted(m.pose.position.z for m in capsule[1:]) == [0.5, 1.5]
+    plane = markers.primitive_markers(
+        Primitive("plane", np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 0.0, 1.0]), z,
+                  np.zeros(3)), h, 0)
+    assert [m.type for m in plane] == [Marker.CUBE]
+    assert plane[0].pose.position.z < -1.0 and plane[0].scale.x == markers.HALFSPACE_SIZE
+    with pytest.raises(ValueError, match="cone"):
+        markers.primitive_markers(
+            Primitive("cone", np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), z, np.zeros(3)), h, 0)

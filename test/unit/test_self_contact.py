@@ -227,11 +227,11 @@ def test_fig2_loop_keeps_two_radii(c, loops):
 def test_self_contacts_in_markers_and_recording(loop):
     """Every self-contact reaches the node's markers (two arrows, equal and opposite, from the contact
     points) and the recording's result message (exact float64 rows)."""
-    conv = pytest.importorskip("dlo_ros.node.conversions")
+    markers = pytest.importorskip("dlo_ros.node.markers")
     from dlo_ros.recording.codec import decode, encode_result
 
     sol, r, _ = loop
-    arrows = [m for m in conv.result_markers(r, sol.problem, "world", 1, force_scale=0.1).markers
+    arrows = [m for m in markers.result_markers(r, sol.problem, "world", 1, force_scale=0.1).markers
               if m.ns == "self_contacts"]
     assert len(arrows) == 2 * len(r.self_contacts)
     for k, c in enumerate(r.self_contacts):

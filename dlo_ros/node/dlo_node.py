@@ -582,6 +582,7 @@ class DloNode(Node):
         """Submit ``queries`` to the query workers in the engine's current scene: (that scene's
         problem, the Future of their ShapeResults).
         """
+        from ..solver import make_solver
         from ..solver.parallel.batch import scene_payload, solve_chunk
 
         problem, options = self.engine.query_scene()
@@ -593,7 +594,7 @@ class DloNode(Node):
         timeout = (float(self.get_parameter("query_timeout").value) or None) if queries else None
         return problem, self._query_pool.submit(
             solve_chunk,
-            scene_payload(problem, options),
+            scene_payload(make_solver, problem, options),
             queries,
             self._worker_compile,
             "background",

@@ -33,7 +33,9 @@ BACKGROUND_NICE = 10
 
 
 def process_pool(workers: int | None = None, background: bool = False) -> ProcessPoolExecutor:
-    """A process pool for :func:`solve_chunk`: ``workers`` (default ``os.cpu_count()``) processes
+    """Return a process pool of spawned workers that ignore SIGINT and die with this process.
+
+    A process pool for :func:`solve_chunk`: ``workers`` (default ``os.cpu_count()``) processes
     started with 'spawn' (a fork of a process with CasADi and DDS threads is unsafe) that ignore
     SIGINT (a Ctrl-C reaches the whole process group; the parent decides how to stop) and die with
     this process (:func:`die_with_parent`), even when it is SIGKILLed.  ``background``: the workers
@@ -51,7 +53,9 @@ def process_pool(workers: int | None = None, background: bool = False) -> Proces
 
 
 class _Pool(ProcessPoolExecutor):
-    """A ProcessPoolExecutor whose workers are started from one long-lived thread
+    """A ProcessPoolExecutor whose workers are started from one long-lived thread.
+
+    A ProcessPoolExecutor whose workers are started from one long-lived thread
     (:data:`_SPAWNER`).
 
     Why: ``PR_SET_PDEATHSIG`` fires when the *thread* that created a child ends, not its process.
@@ -70,7 +74,9 @@ class _Pool(ProcessPoolExecutor):
 
 
 class _Spawner:
-    """One daemon thread, started on first use, that runs the calls handed to it (see
+    """One daemon thread, started on first use, that runs the calls handed to it.
+
+    One daemon thread, started on first use, that runs the calls handed to it (see
     :class:`_Pool`).
     """
 
@@ -109,7 +115,9 @@ PARENT_CHECK_S = 0.5
 
 
 def die_with_parent(parent_pid: int) -> str:
-    """(worker) End this process when ``parent_pid`` (its parent) dies, however it dies; returns
+    """End this worker process when its parent dies, however it dies; return how.
+
+    (worker) End this process when ``parent_pid`` (its parent) dies, however it dies; returns
     how.
 
     Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (the kernel kills the worker even while it is
@@ -154,7 +162,9 @@ def _worker_init(background: bool = False, parent_pid: int | None = None) -> Non
 
 
 def stop_pool(pool, timeout: float = 5.0) -> bool:
-    """Stop ``pool`` now: pending work is cancelled, work in flight is abandoned (its workers are
+    """Stop ``pool`` now, within ``timeout`` s; return whether it ended.
+
+    Stop ``pool`` now: pending work is cancelled, work in flight is abandoned (its workers are
     terminated), and the pool's manager thread is joined, at most ``timeout`` s; True if it ended.
     ``pool``: a ProcessPoolExecutor (e.g. :func:`process_pool`) or a :class:`WorkerPool`.
 
@@ -185,7 +195,9 @@ def stop_pool(pool, timeout: float = 5.0) -> bool:
 
 
 def worker_pids(pool) -> list[int]:
-    """The process ids of ``pool``'s live workers (a ProcessPoolExecutor or
+    """Return the process ids of ``pool``'s live workers.
+
+    The process ids of ``pool``'s live workers (a ProcessPoolExecutor or
     :class:`WorkerPool`).
     """
     if isinstance(pool, WorkerPool):
@@ -201,14 +213,18 @@ KEPT_CAUSES = 16
 
 
 class WorkerDied(RuntimeError):
-    """A worker process died with the work in flight on it (crashed, killed, or killed by
+    """A worker process died with the work in flight on it.
+
+    A worker process died with the work in flight on it (crashed, killed, or killed by
     :class:`WorkerPool` because another task on the pool timed out); the message names the
     cause.
     """
 
 
 class TaskTimeout(TimeoutError):
-    """A task of a :class:`WorkerPool` was not answered within its timeout; its workers were
+    """A task of a :class:`WorkerPool` was not answered within its timeout.
+
+    A task of a :class:`WorkerPool` was not answered within its timeout; its workers were
     killed.
     """
 
@@ -240,7 +256,9 @@ class WorkerPool(Executor):
     def submit(
         self, fn, /, *args, timeout: float | None = None, retries: int = 0, **kwargs
     ) -> Future:
-        """``fn(*args, **kwargs)`` on a worker; ``timeout`` [s] (None: none) as in the class
+        """Run ``fn(*args, **kwargs)`` on a worker; return its Future.
+
+        ``fn(*args, **kwargs)`` on a worker; ``timeout`` [s] (None: none) as in the class
         docstring. ``retries``: how many times a task whose worker died under it (not one killed
         for a timeout) runs again on a new pool, for a task that is a pure function of its
         arguments; once they are used up it fails with WorkerDied, so a task that kills its worker
@@ -327,7 +345,9 @@ class WorkerPool(Executor):
         return self._pool
 
     def _replace(self, generation: int, cause: str) -> None:
-        """Kill generation ``generation``'s workers (if it is still the current pool); the next
+        """Kill the workers of pool ``generation``; the next submit starts a new pool.
+
+        Kill generation ``generation``'s workers (if it is still the current pool); the next
         submit starts a new pool.
         """
         with self._lock:
@@ -373,7 +393,9 @@ class WorkerPool(Executor):
         return ", ".join(text)
 
     def worker_pids(self) -> list[int]:
-        """The process ids of the current workers (started on demand: empty before the first
+        """Return the process ids of the current workers.
+
+        The process ids of the current workers (started on demand: empty before the first
         task).
         """
         with self._lock:

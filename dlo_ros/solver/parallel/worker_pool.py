@@ -14,6 +14,7 @@ Used by ``batch.query_many`` and by the node's query and fit workers.
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import os
 import queue
@@ -23,6 +24,7 @@ import threading
 import time
 from concurrent.futures import Executor, Future, InvalidStateError, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from multiprocessing.connection import wait as wait_for_sentinels
 
 #: The nice value added to a node's query and fit workers (``process_pool(background=True)``), so
 # that : the stream comes first on a shared core (bench/results/soak_3_clients.md against
@@ -110,7 +112,8 @@ class _Spawner:
 _SPAWNER = _Spawner()
 
 #: [s] How often a worker checks that its parent is alive, where ``PR_SET_PDEATHSIG`` does not
-# apply (not : Linux) or cannot act (the worker was started by a thread that was not the spawner's).
+#: apply (not Linux) or cannot act (the worker was started by a thread that was not the
+#: spawner's).
 PARENT_CHECK_S = 0.5
 
 
@@ -131,8 +134,6 @@ def die_with_parent(parent_pid: int) -> str:
     how = "watchdog"
     if sys.platform.startswith("linux"):
         try:
-            import ctypes
-
             libc = ctypes.CDLL(None, use_errno=True)
             if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
                 how = "pdeathsig+watchdog"
@@ -368,12 +369,10 @@ class WorkerPool(Executor):
     @staticmethod
     def _dead_workers(pool) -> str:
         """'pid N exit code -9 (SIGKILL)' for each of ``pool``'s workers that has ended."""
-        from multiprocessing.connection import wait
-
         procs = list(getattr(pool, "started", {}).values())
         # a worker's sentinel is ready once it has ended (its exit code may still be unreaped)
         try:
-            ended = set(wait([p.sentinel for p in procs], timeout=0))
+            ended = set(wait_for_sentinels([p.sentinel for p in procs], timeout=0))
         except (OSError, ValueError):
             ended = set()
         text = []

@@ -64,10 +64,10 @@ def main() -> None:
     for workers in (1, 2):
         with process_pool(workers) as pool:
             t0 = time.perf_counter()
-            query_many(solver.problem, solver.options, qs[:workers], pool, chunks=workers)  # warm-up: builds
+            query_many(make_solver, solver.problem, solver.options, qs[:workers], pool, chunks=workers)  # warm-up: builds
             warm_up = time.perf_counter() - t0
             t0 = time.perf_counter()
-            batch = query_many(solver.problem, solver.options, qs, pool, chunks=4 * workers)
+            batch = query_many(make_solver, solver.problem, solver.options, qs, pool, chunks=4 * workers)
             elapsed = time.perf_counter() - t0
         same = all(a.status == b.status and (not a.ok or np.allclose(a.points, b.points, atol=1e-9))
                    for a, b in zip(batch, single))

@@ -20,6 +20,7 @@ from rclpy.task import Future as RclpyFuture
 from std_srvs.srv import Trigger
 
 from ..model.problem import GripPose, Problem
+from ..solver.auto import make_solver
 from ..solver.parallel.batch import scene_payload, solve_chunk
 from ..solver.parallel.worker_pool import WorkerPool, stop_pool
 from . import conversions as conv
@@ -200,7 +201,7 @@ class ShapeServices:
         )
         return problem, pool.submit(
             solve_chunk,
-            scene_payload(problem, options),
+            scene_payload(make_solver, problem, options),
             queries,
             self.worker_compile,
             "background",

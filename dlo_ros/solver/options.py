@@ -139,7 +139,9 @@ class SolverOptions:
             raise ValueError("solver.max_strain: must be in (0, 10)")
 
     def with_model(self, model: str, **changes) -> "SolverOptions":
-        """These options for the fixed ``model`` ('planar' or 'full') that auto or a fit builds
+        """Return these options for the fixed ``model`` ('planar' or 'full') built from them.
+
+        These options for the fixed ``model`` ('planar' or 'full') that auto or a fit builds
         from them: a 3D director model takes the default basis and frame, which it does not have
         (the scene's may be meant for the planar model).
         """
@@ -148,7 +150,9 @@ class SolverOptions:
         return replace(self, model=model, **changes)
 
     def _ignored_by_director(self) -> list[str]:
-        """The Euler-angle options set away from their defaults where the 3D director model is
+        """Return the Euler-angle options set where the 3D director model ignores them.
+
+        The Euler-angle options set away from their defaults where the 3D director model is
         built (model 'full', rotation 'director'): it has nodal elements and no singular frame, and
         would ignore them.
         """

@@ -5,27 +5,27 @@ it; ``make_solver`` returns either.  Callers outside ``dlo_ros/solver`` use noth
 solver.
 
 * ``solve(poses, warm=, commit=, check_now=)``: the equilibrium with the given grip poses (GripPose
-  or
-  (position [m], quaternion (x, y, z, w)) per grip name; missing grips keep their target),
+  or (position [m], quaternion (x, y, z, w)) per grip name; missing grips keep their target),
   warm-started from the last committed one unless ``warm`` is False; ``commit=False`` answers a
   query without changing the solver; ``check_now`` runs every a-posteriori check before the answer
   returns (auto's background checks included).  Never raises for bad input: the ShapeResult's
   status says so.
 * ``query_many(targets, executor=None)``: one answer per ``{grip: pose}`` mapping, in order, solved
-  in
-  worker processes (dlo_ros.solver.parallel.batch); the solver itself is untouched.
+  in worker processes (dlo_ros.solver.parallel.batch); the solver itself is untouched.
 * ``set_problem(problem)``: new scene values (raises ValueError naming the field); ``reset()``: the
-  next
-  solve is cold; ``close()``: stop helper threads (later solves still work).
+  next solve is cold; ``close()``: stop helper threads (later solves still work).
 * ``problem`` (the committed scene), ``options``, ``has_warm_start``, ``kkt_compiled`` (derivatives
-  run
-  compiled C) and ``model_summary()`` (the model of the next answer).
+  run compiled C) and ``model_summary()`` (the model of the next answer).
+
+``SolverFactory`` is what builds one (``make_solver``, or a solver class): the worker processes of
+``dlo_ros.solver.parallel.batch`` are handed one.  ``structure_key`` says when two scenes can share
+one solver: with equal keys, ``set_problem`` keeps the solver's NLP.
 """
 
 from __future__ import annotations
 
 from concurrent.futures import Executor
-from typing import Mapping, Protocol, Sequence, runtime_checkable
+from typing import Callable, Mapping, Protocol, Sequence, runtime_checkable
 
 from ..model.problem import GripPose, Problem
 from .options import SolverOptions
@@ -66,3 +66,24 @@ class Solver(Protocol):
     def kkt_compiled(self) -> bool: ...
 
     def model_summary(self) -> ModelSummary: ...
+
+
+#: What builds a solver of a scene: ``make_solver``, ``AutoShapeSolver`` or ``ShapeSolver``, called
+#: as ``factory(problem, options, compile=...)``, plus ``checks=`` when its signature has that
+#: parameter (auto's a-posteriori checks; a fixed model has none).  Worker processes receive it
+#: pickled, so it must be a module-level function or class (pickled by reference).
+SolverFactory = Callable[..., Solver]
+
+
+def structure_key(problem: Problem, options: SolverOptions) -> tuple:
+    """Return what fixes the NLP's structure; problems with equal keys share one NLP."""
+    return (
+        problem.string.length,
+        tuple((g.name, g.s, g.mode) for g in problem.grips),
+        tuple(ld.s for ld in problem.loads),
+        tuple((r.s_a, r.s_b) for r in problem.relative_positions),
+        tuple(o.type for o in problem.obstacles),
+        problem.string.stretch_stiffness is not None,
+        problem.string.twist_stiffness.is_zero,
+        options,
+    )

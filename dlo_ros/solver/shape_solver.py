@@ -586,7 +586,7 @@ class ShapeSolver:
         """
         from .parallel.batch import query_many
 
-        return query_many(self.problem, self.options, targets, executor)
+        return query_many(ShapeSolver, self.problem, self.options, targets, executor)
 
     def unreachable_reason(self, problem: Problem) -> str:
         """Why the position constraints cannot all hold (empty string if they can)."""

@@ -64,9 +64,32 @@ def test_any_executor_order_kept_and_bad_queries_answered(scene, monkeypatch):
     single = [solver.solve(t, commit=False) for t in queries]
     assert single[1].status == "unreachable" and single[3].status == "invalid"
     with ThreadPoolExecutor(2) as threads:  # in-process: the workers share one solver, one at a time
-        batch = query_many(scene.problem, scene.options, queries, threads, chunks=3)
+        batch = query_many(make_solver, scene.problem, scene.options, queries, threads, chunks=3)
     assert_same_answers(batch, single)
     assert "middle" in batch[3].message
+
+
+def test_a_fixed_model_solver_s_queries_are_answered_by_its_own_model(scene, monkeypatch):
+    """``ShapeSolver.query_many`` hands its workers its own class as the factory: a ShapeSolver of
+    ``model: auto`` options (the full model) gets the answers of that model, not those of an auto
+    solver, which chooses a smaller model for this scene."""
+    import collections
+
+    from dlo_ros.solver import ShapeSolver
+    from dlo_ros.solver.parallel import batch
+
+    monkeypatch.setenv("DLO_NO_COMPILE", "1")
+    monkeypatch.setattr(batch, "_WORKER_SOLVERS", collections.OrderedDict())
+    assert scene.options.model == "auto"
+    solver = ShapeSolver(scene.problem, scene.options, compile="off")
+    assert solver.solve().ok
+    targets = targets_near(scene.problem, 3, radius=0.1, seed=4)
+    single = [solver.solve(t, commit=False) for t in targets]
+    with ThreadPoolExecutor(1) as threads:  # in-process: the worker's solver can be looked at
+        answers = solver.query_many(targets, executor=threads)
+    assert_same_answers(answers, single)
+    (held,) = (entry[1] for entry in batch._WORKER_SOLVERS.values())
+    assert type(held) is ShapeSolver
 
 
 def test_a_dask_cluster_runs_the_same_call(scene, monkeypatch):
@@ -155,7 +178,7 @@ def test_a_worker_follows_a_moving_stream_by_warm_updates(scene, monkeypatch):
     original = batch._grips_moved_only
     monkeypatch.setattr(batch, "_grips_moved_only", lambda a, b: checks.append(original(a, b)) or checks[-1])
     for k, (h, q) in enumerate(zip(held, queries)):
-        (answer,) = batch.solve_chunk(batch.scene_payload(h, scene.options), [q], "off")
+        (answer,) = batch.solve_chunk(batch.scene_payload(make_solver, h, scene.options), [q], "off")
         if k:
             assert reference.solve({g.name: g.pose for g in h.grips}).ok
         expected = reference.solve(q, commit=False)
@@ -189,7 +212,7 @@ def test_a_node_workers_checks_run_beside_its_queries_not_in_front_of_them(scene
         for k in range(updates):
             moved = problem.with_grip_poses(
                 {"right": GripPose(problem.grip("right").pose.position + 0.002 * k * np.array([1.0, 0.0, 1.0]), rot)})
-            (answer,) = batch.solve_chunk(batch.scene_payload(moved, scene.options), [query], "off", checks)
+            (answer,) = batch.solve_chunk(batch.scene_payload(make_solver, moved, scene.options), [query], "off", checks)
             assert answer.ok, answer.message
         (solver,) = (entry[1] for entry in batch._WORKER_SOLVERS.values())
         assert solver.checks == checks

@@ -48,7 +48,7 @@ def test_a_worker_killed_mid_batch_fails_its_queries_and_the_pool_is_rebuilt(sce
     pool = WorkerPool(2)
     try:
         batch: list = []
-        call = threading.Thread(target=lambda: batch.extend(query_many(scene.problem, scene.options, targets,
+        call = threading.Thread(target=lambda: batch.extend(query_many(make_solver, scene.problem, scene.options, targets,
                                                                        pool, chunks=2)))
         call.start()
         pids = wait_until(lambda: pool.worker_pids() if len(pool.worker_pids()) == 2 else None, 60.0)
@@ -62,7 +62,7 @@ def test_a_worker_killed_mid_batch_fails_its_queries_and_the_pool_is_rebuilt(sce
         assert failed, [r.message for r in batch]
         assert all(f"pid {pids[0]}" in r.message for r in failed)
         # the next call: a new pool, every answer equal to the in-process solver's
-        again = query_many(scene.problem, scene.options, targets[:6], pool, chunks=2)
+        again = query_many(make_solver, scene.problem, scene.options, targets[:6], pool, chunks=2)
         assert pool.restarts == 1 and pids[0] not in pool.worker_pids()
         assert_answers(again, reference_answers(scene, targets[:6]))
     finally:
@@ -117,12 +117,12 @@ def test_a_query_past_its_timeout_answers_timeout_and_its_worker_is_replaced(sce
         assert wait_until(lambda: not os.path.exists(f"/proc/{stuck_pid}") or ended(stuck_pid), 10.0)
         # a real query batch past its timeout (a fresh worker builds its solver first: seconds)
         t0 = time.monotonic()
-        late = query_many(scene.problem, scene.options, targets, pool, timeout=0.05)
+        late = query_many(make_solver, scene.problem, scene.options, targets, pool, timeout=0.05)
         assert time.monotonic() - t0 < 10.0
         assert [r.status for r in late] == ["failed"] * len(targets)
         assert all(r.message.startswith("timeout:") for r in late), [r.message for r in late]
         # then answered on a replaced worker
-        assert_answers(query_many(scene.problem, scene.options, targets, pool), reference_answers(scene, targets))
+        assert_answers(query_many(make_solver, scene.problem, scene.options, targets, pool), reference_answers(scene, targets))
         assert pool.restarts == 2
     finally:
         pool.stop()

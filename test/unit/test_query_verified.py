@@ -31,7 +31,7 @@ def scene():
 
 @pytest.fixture(scope="module")
 def payload(scene):
-    return scene_payload(scene.problem, replace(scene.options, update_time_limit=LIMIT_S))
+    return scene_payload(make_solver, scene.problem, replace(scene.options, update_time_limit=LIMIT_S))
 
 
 def query(payload, poses: dict):
@@ -98,7 +98,7 @@ def test_an_unreachable_target_is_no_equilibrium_not_unverified(scene, payload):
 def test_a_refinement_cut_short_by_the_time_limit_says_so_and_claims_no_verdict(scene):
     """With no time to refine (a 1 µs limit), the same target's answer is the first shape, 'unverified',
     without a stability verdict, and its message names the limit."""
-    tiny = scene_payload(scene.problem, replace(scene.options, update_time_limit=1e-6))
+    tiny = scene_payload(make_solver, scene.problem, replace(scene.options, update_time_limit=1e-6))
     answer = query(tiny, right_at(scene, (0.45, 0.0, 0.30)))
     assert answer.status == "unverified" and answer.stable is None, answer.message
     assert "solver.update_time_limit" in answer.message

@@ -73,9 +73,10 @@ once in, stays (a scene change re-chooses).
 The modules: :mod:`.auto_solver` (AutoShapeSolver, the coordinator), :mod:`.factory`
 (make_solver), :mod:`.choice` (the model ladder), :mod:`.reach` (what a scene lets auto leave
 out), :mod:`.reduced` and :mod:`.pool` (the reduced models and the pool of built ones),
-:mod:`.background` (the check worker), :mod:`.checks` and :mod:`.shadows` (the a-posteriori
-checks), :mod:`.escalate` (escalations inside one update), :mod:`.query_refine` and
-:mod:`.query_verify` (a query's refinement and what it may claim).
+:mod:`.background` (the check worker), :mod:`.follow` (a richer model when the targets need one,
+and models built ahead), :mod:`.checks` and :mod:`.shadows` (the a-posteriori checks),
+:mod:`.escalate` (escalations inside one update), :mod:`.query_refine` and :mod:`.query_verify`
+(a query's refinement and what it may claim), :mod:`.report` (a result's ``model`` summary).
 """
 
 from .auto_solver import AutoShapeSolver

@@ -23,19 +23,13 @@ from ..parallel.batch import query_many
 from ..results.result import ShapeResult
 from ..results.summary import ModelSummary
 from ..shape_solver import ShapeSolver, with_checked_poses
-from . import escalate
+from . import escalate, follow, report
 from .background import CheckWorker
 from .checks import CheckSnapshot, CheckVerdict, ModelChecks
 from .choice import ORDERS, ModelChoice, full_choice, initial_choice
 from .pool import ModelPool
 from .query_refine import refine_query
-from .reach import (
-    in_plane_obstacles,
-    not_planar,
-    reachable_obstacles,
-    stretch_needed,
-    touches_obstacle,
-)
+from .reach import touches_obstacle
 from .reduced import ReducedModels
 
 
@@ -90,24 +84,7 @@ class AutoShapeSolver:
         self.choice = initial_choice(problem, options, self.tolerance)
         self.inner = self.pool.solver_for(self.choice, problem, stream=True)
         if self.worker.background:
-            self._build_first(problem)
-
-    def _build_first(self, problem: Problem) -> None:
-        """Build ahead: the 3D model a stream leaving the plane switches to, then the shadows.
-
-        The order shadows are the ones the first check needs.  Returns once the 3D model is built,
-        so that a stream leaving the plane at its first update never waits for the build.
-        """
-        i = ORDERS.index(self.choice.order)
-        ahead = [full_choice(self.choice, problem)] if self.choice.planar else []
-        self.pool.full_key = ("",) + ahead[0].key() if ahead else ()
-        ahead += [
-            replace(self.choice, order=o)
-            for o in ORDERS[i + 1 : i + 2] + ORDERS[max(i - 1, 0) : i]
-        ]
-        self.worker.submit(self._prebuild, {("",) + c.key() for c in ahead}, ahead, problem)
-        while self.pool.full_key and self.worker.busy_with(self.pool.full_key):
-            time.sleep(0.002)
+            follow.build_first(self, problem)
 
     # ---- the state the pieces share -------------------------------------------------------------
     @property
@@ -212,7 +189,7 @@ class AutoShapeSolver:
 
         Each worker runs its own auto solver of this scene, with inline checks.
         """
-        return query_many(self.problem, self.options, targets, executor)
+        return query_many(AutoShapeSolver, self.problem, self.options, targets, executor)
 
     def set_problem(self, problem: Problem) -> None:
         """Take new scene values; the model is chosen again (its order and stretch kept)."""
@@ -263,83 +240,10 @@ class AutoShapeSolver:
             notes: list[str] = []
             if commit:
                 self._apply_check(notes)
-            answer = self._follow_scene(problem, commit, notes, t0)
+            answer = follow.follow_scene(self, problem, commit, notes, t0)
             if answer is not None:  # a query answered by a richer model
                 return answer
             return self._update(problem, before_problem, warm, commit, check_now, notes, t0)
-
-    def _follow_scene(
-        self, problem: Problem, commit: bool, notes: list[str], t0: float
-    ) -> ShapeResult | None:
-        """Switch to a richer model when the targets need one; build an approaching one ahead.
-
-        Out of the plane, an obstacle within reach (L/4), or grips beyond L: an update switches
-        to the richer model, a query is answered with it (returned; the stream's model stays).
-        Otherwise, between background jobs, the model a coming change needs is built ahead.
-        """
-        reach = reachable_obstacles(problem, problem.string.length / 4)
-        if self.choice.planar:
-            reach = in_plane_obstacles(problem, reach, self.inner.nlp.r0)
-        entering = set(reach) - set(self.choice.obstacles)
-        obstacles = tuple(sorted(entering | set(self.choice.obstacles)))
-        why = (
-            not_planar(problem, obstacles, self.inner.nlp.r0, tolerance=1e-7)
-            if self.choice.planar
-            else ""
-        )
-        stretch_why = "" if self.choice.stretch else stretch_needed(problem)
-        if why or entering or stretch_why:
-            richer = (
-                full_choice(self.choice, problem)
-                if why
-                else replace(self.choice, obstacles=obstacles)
-            )
-            if stretch_why:
-                richer = replace(richer, stretch=True, reasons=list(richer.reasons))
-            if not commit:  # a query must not change the streaming model: answer with the richer
-                self.worker.wait()
-                other = self.pool.solver_for(richer, problem, stream=False, source=self.inner)
-                self.pool.compile_ahead(other)  # it answers every such query: compiled
-                # the poses are checked, and in the plane if ``other`` is planar (above)
-                answer = other.solve(
-                    {g.name: g.pose for g in problem.grips}, commit=False, checked=True
-                )
-                return refine_query(self, problem, answer, t0, richer, other)
-            reasons = (
-                ([f"targets left the plane ({why}): full model"] if why else [])
-                + ([f"obstacle(s) {sorted(entering)} came within reach"] if entering else [])
-                + ([stretch_why] if stretch_why else [])
-            )
-            self.problem = problem
-            self.switch(richer, "; ".join(reasons))
-            notes.append(self.changes[-1][1])
-        elif self.worker.background and commit and self.worker.idle:
-            self._build_ahead(problem)
-        return None
-
-    def _build_ahead(self, problem: Problem) -> None:
-        """Submit a build of the model a coming change needs, if it is not pooled yet.
-
-        For a planar stream, the 3D model leaving the plane switches to; else the model with the
-        obstacles within L/2 of reach (they enter the NLP at L/4).
-        """
-        if (
-            self.choice.planar
-            and self.pool.pooled(full := full_choice(self.choice, problem)) is None
-        ):
-            self.pool.full_key = ("",) + full.key()
-            self.worker.submit(self._prebuild, {self.pool.full_key}, [full], problem)
-            return
-        near = set(reachable_obstacles(problem, problem.string.length / 2))
-        if self.choice.planar:
-            near = set(in_plane_obstacles(problem, tuple(near), self.inner.nlp.r0))
-        near -= set(self.choice.obstacles)
-        if near:
-            ahead = replace(
-                self.choice, obstacles=tuple(sorted(near | set(self.choice.obstacles)))
-            )
-            if self.pool.pooled(ahead) is None:
-                self.worker.submit(self._prebuild, {("",) + ahead.key()}, [ahead], problem)
 
     def _update(
         self,
@@ -502,21 +406,7 @@ class AutoShapeSolver:
         """Let a running background job finish first (its verdict is applied at the next solve)."""
         self.worker.wait()
 
-    def _prebuild(self, choices: list[ModelChoice], problem: Problem) -> None:
-        """Build (worker thread) the models a coming check or switch will need.
-
-        The 3D model and obstacle models get their IPOPT solvers too (a switch to them streams at
-        once).
-        """
-        for choice in choices:
-            solver = self.pool.solver_for(choice, problem, stream=False)
-            key = ("",) + choice.key()
-            if key == self.pool.full_key or choice.obstacles != self.choice.obstacles:
-                solver.prepare()
-                self.pool.compile_ahead(solver)
-            self.worker.built(key)  # built: a switch to it need not wait
-
-    # ---- results --------------------------------------------------------------------------------
+    # ---- results (report.py) ------------------------------------------------------------------
     def model_summary(
         self,
         choice: ModelChoice | None = None,
@@ -526,51 +416,22 @@ class AutoShapeSolver:
     ) -> ModelSummary:
         """Return the ``model`` object of a result: the streaming model, or a query's.
 
-        A query's is ``choice``/``solver``.  estimated_error_m: the basis-order estimate of the
-        last check of this model (the change of the centreline when the order is raised; at the
-        highest order, the estimate that led there) plus the deepest cut into an obstacle between
-        its samples, None until the first check has finished.  It does not include the a-priori
-        bounds of the dropped gravity (≤ δ/10) and stretch (≤ δ/2).  In background mode it
-        describes a solve up to recheck_every updates earlier: checked_updates_ago says how many
-        (0: this very shape).  ``changed``: the changes of model this very solve made.
-        ``estimate``: a refined query's own checked estimate (``refine_query``): checked, 0
-        updates ago.
+        A query's is ``choice``/``solver``; ``changed``: the changes of model this very solve made;
+        ``estimate``: a refined query's own checked estimate.  See :func:`.report.model_summary`.
         """
         streaming = choice is None
         c, s = (self.choice, self.inner) if streaming else (choice, solver)
         assert c is not None and s is not None
-        checked = streaming and not self._unchecked
-        est = c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None
-        if estimate is not None and np.isfinite(estimate):
-            checked, est = True, float(estimate)
-        inner = s.model_summary()
-        return ModelSummary(
-            planar=c.planar,
-            twist=c.twist,
-            stretch=c.stretch,
-            gravity=c.gravity,
-            order=c.order,
-            obstacles=len(c.obstacles),
-            obstacle_samples=c.samples,
-            estimated_error_m=est,
-            tolerance_m=self.tolerance,
-            tolerance_met=None if est is None else bool(est <= self.tolerance),
-            variables=s.model.layout.size,
-            auto=True,
-            checked=checked,
+        return report.model_summary(
+            c,
+            s,
+            tolerance=self.tolerance,
             checks=self.checks,
-            checked_updates_ago=(
-                0 if estimate is not None else self._updates - self._checked_update
-            )
-            if checked
-            else None,
-            reasons=tuple(c.reasons),
             changes=tuple(r for _, r in self.changes),
-            rotation=inner.rotation,
-            elements=inner.elements,
-            breakpoints=inner.breakpoints,
-            self_contact_pairs=inner.self_contact_pairs,
+            checked=streaming and not self._unchecked,
+            updates_ago=self._updates - self._checked_update,
             changed=changed,
+            estimate=estimate,
         )
 
     def finish(
@@ -589,9 +450,4 @@ class AutoShapeSolver:
         """
         c = choice or self.choice
         result.model = self.model_summary(choice, solver, tuple(notes), estimate)
-        result.solve_time_ms = (time.perf_counter() - t0) * 1e3
-        if result.ok and result.contact_forces and len(c.obstacles) != len(self.problem.obstacles):
-            result.contact_forces = {
-                c.obstacles[i]: f for i, f in result.contact_forces.items() if i < len(c.obstacles)
-            }
-        return result
+        return report.finished(result, t0, c.obstacles, len(self.problem.obstacles))

@@ -121,7 +121,7 @@ class ModelChecks:
         return verdict
 
     def _model_checks(self, snap: CheckSnapshot, verdict: CheckVerdict) -> None:
-        """Checks 1–3: planar stability in 3D, the elongation bound, the Euler-angle pole."""
+        """Run checks 1–3: planar stability in 3D, the elongation bound, the Euler-angle pole."""
         tol, choice, problem = self.tolerance, snap.choice, snap.problem
         if choice.planar:
             eig = planar_3d_eigenvalue(self.pool, snap)  # None when stable (or neutral)

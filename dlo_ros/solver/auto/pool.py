@@ -43,7 +43,7 @@ class ModelPool:
         return len(self._models)
 
     def solvers(self) -> list[ShapeSolver]:
-        """Return the pooled solvers (a copy of the list, oldest first)."""
+        """Return a copy of the pooled models' solvers, oldest first."""
         with self._lock:
             return list(self._models.values())
 

@@ -26,7 +26,9 @@ from ..results.result import ShapeResult
 
 @dataclass
 class QueryBudget:
-    """The time a query's refinement may take: ``limit`` [s] from ``start``
+    """The time budget of a query's refinement.
+
+    The time a query's refinement may take: ``limit`` [s] from ``start``
     (``time.perf_counter``).
     """
 
@@ -47,7 +49,7 @@ class QueryBudget:
 def verified_answer(
     result: ShapeResult, estimate: float | None, tolerance: float, stopped: str = ""
 ) -> ShapeResult:
-    """``result`` (the refined answer, changed in place and returned) with its final status.
+    """Give ``result`` (the refined answer, changed in place and returned) its final status.
 
     estimate [m]: the error estimate of the checks that passed on this very shape (None: they did
     not finish). stopped: why the refinement ended before its checks passed ('' when they passed).

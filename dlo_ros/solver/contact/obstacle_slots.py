@@ -1,5 +1,4 @@
-"""Contact slots: an obstacle row at the string's closest approach, wherever it lies between the
-samples.
+"""Contact slots: an obstacle row at the string's closest approach between the samples.
 
 The NLP imposes h_i(x(σ)) + r ≤ 0 at ``obstacle_samples`` uniform samples, spacing h_s.  Where a
 string rests on a curved obstacle that converges only to first order in h_s: the contact can only
@@ -63,7 +62,9 @@ FINE = 16
 
 @dataclass(frozen=True)
 class SlotPlacement:
-    """One obstacle's slots on a shape: arc lengths σ [m] (0 where empty), on (1.0 or 0.0), the
+    """One obstacle's slots on a shape.
+
+    One obstacle's slots on a shape: arc lengths σ [m] (0 where empty), on (1.0 or 0.0), the
     samples' switches, the clearance of the shape at each filled slot's minimum [m] (inf where
     empty), and whether every slot of a previous placement was kept.
     """
@@ -81,14 +82,18 @@ def fine_grid(length: float, samples: int) -> np.ndarray:
 
 
 def band(length: float, radius: float) -> float:
-    """The clearance [m] within which a minimum gets a slot: the string's diameter, at least
+    """Return the clearance [m] within which a minimum gets a slot.
+
+    The clearance [m] within which a minimum gets a slot: the string's diameter, at least
     L/200.
     """
     return max(2.0 * radius, length / 200.0)
 
 
 def _vertices(s: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Per row, the vertex of the parabola through three equally spaced points, clipped to their
+    """Return, per row, the vertex of the parabola through three equally spaced points.
+
+    Per row, the vertex of the parabola through three equally spaced points, clipped to their
     span.
     """
     curvature = c[:, 0] - 2 * c[:, 1] + c[:, 2]
@@ -105,7 +110,9 @@ def minima(
     length: float,
     clearance_at: Callable[[np.ndarray], np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(s*, c(s*)) of the local minima of the clearance within ``width_band`` that dip DIP·L below
+    """Return the clearance's local minima that are deep enough, deepest first.
+
+    Each is (s*, c(s*)): the local minima of the clearance within ``width_band`` that dip DIP·L below
     the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``: c at
     any arc lengths; each minimum is refined by two parabola steps through evaluated points).
     """
@@ -140,7 +147,9 @@ def assign(
     previous: "SlotPlacement | None",
     length: float,
 ) -> SlotPlacement:
-    """The deepest ``slots`` minima ``found`` in slots, each kept at the index of the previous slot
+    """Place the deepest minima found in the slots, keeping each near its previous slot.
+
+    The deepest ``slots`` minima ``found`` in slots, each kept at the index of the previous slot
     nearest to it (within two sample spacings), and kept exactly when it moved less than
     TOLERANCE·L.
     """

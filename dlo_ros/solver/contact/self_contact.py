@@ -82,7 +82,9 @@ CROSSING_OVERLAP = 0.5
 
 @dataclass(frozen=True)
 class ContactGeometry:
-    """The sampling of the self-contact rows (module docstring): sample arc lengths s [m], spacing
+    """The sampling of the self-contact rows (see the module docstring).
+
+    The sampling of the self-contact rows (module docstring): sample arc lengths s [m], spacing
     h [m], the sample-pair distance D [m] the rows keep, the exclusion arc S [m], and the candidate
     reach [m].
     """
@@ -102,7 +104,9 @@ class ContactGeometry:
         return (len(self.s), self.distance)
 
     def tolerance(self, curvature: float) -> float:
-        """How far below 2r the true centreline distance may come between samples [m] (module
+        """Return how far below 2r the centreline distance may come between samples [m].
+
+        How far below 2r the true centreline distance may come between samples [m] (module
         docstring).
         """
         return curvature * self.spacing**2 / 4
@@ -112,7 +116,9 @@ class ContactGeometry:
 def contact_geometry(
     length: float, radius: float, samples: int = 0, grip_s: tuple[float, ...] = ()
 ) -> ContactGeometry:
-    """The sampling for a string of ``length`` and ``radius`` [m]; ``samples`` 0 picks h = r within
+    """Return the self-contact sampling for a string of ``length`` and ``radius`` [m].
+
+    The sampling for a string of ``length`` and ``radius`` [m]; ``samples`` 0 picks h = r within
     [L/400, L/100].  ``grip_s``: the grips' arc lengths [m] (pairs of samples within the exclusion
     arc of two different grips are never checked: the scene places those grips, e.g. both ends of a
     closed loop at one point).
@@ -135,7 +141,9 @@ def contact_geometry(
 
 @dataclass
 class ContactSlots:
-    """The pair held by each slot ((a, b) sample indices, a < b, or None) with the geometry they
+    """The pair held by each self-contact slot, its geometry and the last crossing signs.
+
+    The pair held by each slot ((a, b) sample indices, a < b, or None) with the geometry they
     index, and the crossing signs of the shape they were last checked on.
     """
 
@@ -152,7 +160,9 @@ class ContactSlots:
 def _far_pairs(
     points: np.ndarray, geometry: ContactGeometry, radius: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Sample pairs (P, 2), a < b, within ``radius`` of each other and at least the exclusion arc
+    """Return the sample pairs within ``radius`` and the exclusion arc apart, with distances.
+
+    Sample pairs (P, 2), a < b, within ``radius`` of each other and at least the exclusion arc
     apart, and their distances.
     """
     pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")  # rows (i, j) with i < j
@@ -170,7 +180,9 @@ def _far_pairs(
 def candidate_pairs(
     points: np.ndarray, geometry: ContactGeometry
 ) -> list[tuple[tuple[int, int], float]]:
-    """Pairs within reach whose distance is a local minimum along one strand, with their distances
+    """Return the pairs within reach at a local minimum of distance, nearest first.
+
+    Pairs within reach whose distance is a local minimum along one strand, with their distances
     [m], nearest first.  A neighbour closer along s than the exclusion arc is a step along the same
     strand: a pair next to one is a minimum only when it is already closer than D (a bend tighter
     than D/2). Vectorised over the pairs the tree returned (neighbours read from a table of their
@@ -191,7 +203,9 @@ def candidate_pairs(
     closer_than_d = dist < geometry.distance
 
     def leaves_minimum(a2: np.ndarray, b2: np.ndarray) -> np.ndarray:
-        """Whether each neighbour pair (a2, b2) leaves its pair's distance a minimum on its
+        """Tell whether each neighbour pair leaves its pair's distance a minimum on its side.
+
+        Whether each neighbour pair (a2, b2) leaves its pair's distance a minimum on its
         side.
         """
         # (a neighbour off the string is one sample further apart than its pair: never on the same
@@ -211,7 +225,9 @@ def candidate_pairs(
 
 
 def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
-    """True when ``candidate_pairs(points, geometry)`` is provably empty (no two strands within
+    """Tell whether no two strands of ``points`` can be within reach (cheap, conservative).
+
+    True when ``candidate_pairs(points, geometry)`` is provably empty (no two strands within
     reach), from O(N) turning angles and one dense distance test; False when this shortcut cannot
     tell (then ``candidate_pairs`` decides).  Exact, never a guess:
 
@@ -262,7 +278,7 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
     total = np.concatenate(([0.0], np.cumsum(turns)))
 
     def most_turning(segments: int) -> float:
-        """The largest turning [rad] over ``segments`` consecutive segments."""
+        """Return the largest turning [rad] over ``segments`` consecutive segments."""
         segments = min(segments, n - 1)
         return float(np.max(total[segments - 1 :] - total[: n - segments]))
 
@@ -293,7 +309,9 @@ def _off_band(n: int, k: int) -> np.ndarray:
 
 
 def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:
-    """The closest approach [m] of two strands: the smallest candidate pair's distance
+    """Return the closest approach [m] of two strands (inf when none are within reach).
+
+    The closest approach [m] of two strands: the smallest candidate pair's distance
     (``candidate_pairs``: not a pair of neighbours on one strand), inf when no two strands are
     within reach.
     """
@@ -304,7 +322,9 @@ def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:
 def penetrations(
     candidates: list[tuple[tuple[int, int], float]], geometry: ContactGeometry, slack: float
 ) -> list[tuple[int, int]]:
-    """The candidate pairs (``candidate_pairs``) closer than D − slack [m], nearest first.  When
+    """Return the candidate pairs closer than D − slack [m], nearest first.
+
+    The candidate pairs (``candidate_pairs``) closer than D − slack [m], nearest first.  When
     none is, no sample pair the exclusion arc apart is: from any pair closer than D, stepping along
     one strand while the distance falls ends on a candidate closer still.
     """
@@ -317,7 +337,9 @@ def assign(
     keep: set[int],
     capacity: int,
 ) -> tuple[list[tuple[int, int] | None], list[tuple[int, int]]]:
-    """New slot contents: the slots in ``keep`` (carrying a force) stay; the rest of the capacity
+    """Return new slot contents: the kept slots stay, the wanted pairs fill the rest.
+
+    New slot contents: the slots in ``keep`` (carrying a force) stay; the rest of the capacity
     goes to the ``wanted`` pairs in their order (a chosen pair already in a slot keeps that slot,
     so its multiplier stays with it).  Returns the slots and the wanted pairs that found no
     slot.
@@ -343,7 +365,9 @@ def assign(
 
 
 def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
-    """p with every slot's q_k and b_k set (module docstring), scaled so that the row reads a
+    """Return p with every slot's q_k and b_k set, scaled so that the row reads a distance.
+
+    p with every slot's q_k and b_k set (module docstring), scaled so that the row reads a
     distance:
     q_k = (W(σ_a) − W(σ_b)) / √(2D) and b_k = D/2, so that the NLP row (b_k − |T q_k|²)/L equals
     (D² − |x_a − x_b|²)/(2 D L) ≈ (D − |x_a − x_b|)/L near contact, whatever the radius (a row in D² would
@@ -364,7 +388,9 @@ def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
 
 
 def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
-    """The SI multiplier λ [N/m] of D² − |x_a − x_b|² ≤ 0 from a slot row's λ / (row_scale σ) [N] (``fill``:
+    """Return the SI multiplier λ [N/m] of a slot's distance constraint from its row's λ.
+
+    The SI multiplier λ [N/m] of D² − |x_a − x_b|² ≤ 0 from a slot row's λ / (row_scale σ) [N] (``fill``:
     the row is that constraint divided by 2D).
     """
     return lam_row_si / (2.0 * geometry.distance)
@@ -373,7 +399,9 @@ def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
 def crossing_signs(
     points: np.ndarray, tangents: np.ndarray, candidates: list[tuple[tuple[int, int], float]]
 ) -> dict[tuple[int, int], float]:
-    """Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair (``candidate_pairs``) whose
+    """Return the crossing sign of every candidate pair whose tangents cross.
+
+    Sign of (x_b − x_a)·(t_a × t_b) for every candidate pair (``candidate_pairs``) whose
     tangents cross and that lie over one another along the normal (module docstring).
     """
     out = {}
@@ -398,7 +426,9 @@ def crossing_flips(
 def swept_crossing(
     before: np.ndarray, after: np.ndarray, geometry: ContactGeometry
 ) -> tuple[int, int] | None:
-    """A pair of samples (exclusion arc apart) that meet when every sample moves straight from
+    """Return a sample pair that meets when the samples move straight from ``before`` to ``after``.
+
+    A pair of samples (exclusion arc apart) that meet when every sample moves straight from
     ``before``
     to ``after`` (N, 3): its distance min_τ |Δ0 + τ (Δ1 − Δ0)| falls below half of min(D, h/√2), the
     resolution at which the sample polyline can tell two centrelines apart; None when no pair does.

@@ -1,5 +1,6 @@
-"""The linking number of a clamped ribbon along a stream: Lk = Tw + Wr (Călugăreanu–White), pure
-numpy.
+"""The linking number of a clamped ribbon along a stream: Lk = Tw + Wr, in numpy.
+
+Lk = Tw + Wr is the Călugăreanu–White theorem; everything here is pure numpy.
 
 A string clamped at both ends with its twist modelled is a ribbon: the centreline x(s) and the
 director d1(s) of its frame (t, d1, d2).  Closed in a fixed way through the clamps (each clamp's
@@ -75,7 +76,9 @@ RAY_LENGTHS = 200.0
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b over the last axis (numpy's cross costs more than the sums here on a few hundred
+    """Return a × b over the last axis.
+
+    a × b over the last axis (numpy's cross costs more than the sums here on a few hundred
     rows).
     """
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
@@ -92,7 +95,9 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 def transport(v: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
-    """v (…, 3) turned by the minimal rotation taking unit t0 to unit t1 (rows; Rodrigues with axis
+    """Turn v (…, 3) by the minimal rotation taking unit t0 to unit t1.
+
+    v (…, 3) turned by the minimal rotation taking unit t0 to unit t1 (rows; Rodrigues with axis
     t0 × t1; antipodal t0 = −t1 has no minimal rotation and is turned about any axis ⊥ t0).
     """
     c = _dot(t0, t1)[..., None]
@@ -107,7 +112,9 @@ def signed_angle(a: np.ndarray, b: np.ndarray, axis: np.ndarray) -> np.ndarray:
 
 
 def twist(tangents: np.ndarray, d1: np.ndarray) -> float:
-    """Tw [turns] of a ribbon sampled at (n, 3) unit tangents and directors along s (module
+    """Return Tw [turns] of a ribbon sampled at unit tangents and directors along s.
+
+    Tw [turns] of a ribbon sampled at (n, 3) unit tangents and directors along s (module
     docstring): Σ_i angle_{t_{i+1}}(P_i d1_i, d1_{i+1}) / 2π, P_i the minimal rotation t_i →
     t_{i+1}.
     """
@@ -116,7 +123,9 @@ def twist(tangents: np.ndarray, d1: np.ndarray) -> float:
 
 
 def _spherical_triangle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Signed solid angle (…) of the geodesic triangle a → b → c on the unit sphere (Van Oosterom &
+    """Return the signed solid angle of the geodesic triangle a → b → c on the unit sphere.
+
+    Signed solid angle (…) of the geodesic triangle a → b → c on the unit sphere (Van Oosterom &
     Strackee): 2 atan2(a·(b × c), 1 + a·b + b·c + c·a); positive when counter-clockwise seen from
     outside.
     """
@@ -126,7 +135,9 @@ def _spherical_triangle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarr
 
 
 def fuller_writhe_change(t0: np.ndarray, t1: np.ndarray) -> float:
-    """Wr₁ − Wr₀ [turns] by Fuller's formula (module docstring) for unit tangents (n, 3) of two
+    """Return Wr₁ − Wr₀ [turns] of two curves' unit tangents by Fuller's formula.
+
+    Wr₁ − Wr₀ [turns] by Fuller's formula (module docstring) for unit tangents (n, 3) of two
     curves at the same samples along s: Σ_i of the signed area of the spherical quadrilateral t₀,i
     → t₀,i+1 → t₁,i+1 → t₁,i, over 2π; exact mod 2 while no t₁ = −t₀ (``link_change`` uses it only
     for small changes, ``min_alignment(t0, t1) > FULLER_ALIGNMENT``).
@@ -137,14 +148,18 @@ def fuller_writhe_change(t0: np.ndarray, t1: np.ndarray) -> float:
 
 
 def min_alignment(t0: np.ndarray, t1: np.ndarray) -> float:
-    """min_s (1 + t₀·t₁): 0 where two tangents are antipodal (Fuller's formula then breaks
+    """Return min_s (1 + t₀·t₁): 0 where two tangents are antipodal.
+
+    min_s (1 + t₀·t₁): 0 where two tangents are antipodal (Fuller's formula then breaks
     down).
     """
     return float(np.min(1.0 + _dot(t0, t1)))
 
 
 def _segment_pair_solid_angles(p1, p2, p3, p4) -> np.ndarray:
-    """Ω_ij of segment pairs (p1 → p2, p3 → p4): the signed solid angle of the spherical
+    """Return Ω_ij of segment pairs: the signed solid angle one segment sees the other under.
+
+    Ω_ij of segment pairs (p1 → p2, p3 → p4): the signed solid angle of the spherical
     quadrilateral swept by the unit vector from a point of the first segment to a point of the
     second, whose corners are the directions of p3 − p1, p4 − p1, p4 − p2, p3 − p2 (Klenin &
     Langowski 2000); Σ Ω / 4π over pairs is the Gauss integral, exactly for polylines.  Two
@@ -156,7 +171,9 @@ def _segment_pair_solid_angles(p1, p2, p3, p4) -> np.ndarray:
 
 
 def gauss_writhe(points: np.ndarray, closed: bool = False) -> float:
-    """Wr of the polyline through ``points`` (n, 3) (closed: the last point joins the first): the
+    """Return the writhe Wr of the closed polyline through ``points`` (Gauss double integral).
+
+    Wr of the polyline through ``points`` (n, 3) (closed: the last point joins the first): the
     Gauss double integral, exact for a polyline, (1/4π) Σ_{i≠j} Ω_ij over non-adjacent segment
     pairs.
     """
@@ -171,7 +188,9 @@ def gauss_writhe(points: np.ndarray, closed: bool = False) -> float:
 
 
 def gauss_linking(a: np.ndarray, b: np.ndarray) -> float:
-    """Lk of two closed polylines (n, 3) and (m, 3): (1/4π) Σ_ij Ω_ij over all segment pairs; an
+    """Return the linking number Lk of two closed polylines.
+
+    Lk of two closed polylines (n, 3) and (m, 3): (1/4π) Σ_ij Ω_ij over all segment pairs; an
     integer up to rounding when the polylines do not meet.
     """
     pa, pb = np.vstack([a, a[:1]]), np.vstack([b, b[:1]])
@@ -184,7 +203,9 @@ def gauss_linking(a: np.ndarray, b: np.ndarray) -> float:
 def ray_writhe(
     points: np.ndarray, tangents: np.ndarray, rays: float = RAY_LENGTHS, ray_segments: int = 64
 ) -> float:
-    """Wr of the centreline ``points`` (n, 3) extended at both ends along its end ``tangents``
+    """Return the writhe of the centreline ``points`` extended by straight rays at both ends.
+
+    Wr of the centreline ``points`` (n, 3) extended at both ends along its end ``tangents``
     (first and last rows) by straight rays of ``rays`` × its arc length, each cut into
     ``ray_segments`` geometrically growing pieces (only their directions matter to a straight ray;
     the pieces keep the Ω formula well conditioned next to the string).
@@ -198,7 +219,9 @@ def ray_writhe(
 
 @dataclass(frozen=True)
 class LinkChange:
-    """ΔLk between two shapes of a clamped ribbon [turns] (module docstring): the twist and writhe
+    """ΔLk between two shapes of a clamped ribbon [turns], by its parts.
+
+    ΔLk between two shapes of a clamped ribbon [turns] (module docstring): the twist and writhe
     changes, the turns the clamps added, and how the writhe was measured ('fuller' or 'rays').
     """
 
@@ -209,7 +232,9 @@ class LinkChange:
 
     @property
     def unexplained(self) -> float:
-        """ΔTw + ΔWr − clamps' turns: near 0 for a continuous deformation, near an integer after a
+        """Return ΔTw + ΔWr − clamps' turns: near an integer after a jump, near 0 otherwise.
+
+        ΔTw + ΔWr − clamps' turns: near 0 for a continuous deformation, near an integer after a
         jump.
         """
         return self.twist + self.writhe - self.clamps
@@ -220,7 +245,9 @@ class LinkChange:
 
 
 def clamp_turn(frame0: np.ndarray, frame1: np.ndarray) -> float:
-    """The angle [rad] a clamp turned about its tangent between frames (3, 3) (columns t, d1, d2):
+    """Return the angle [rad] a clamp turned about its tangent between two frames.
+
+    The angle [rad] a clamp turned about its tangent between frames (3, 3) (columns t, d1, d2):
     from the old d1 transported to the new tangent to the new d1, in (−π, π] (``transport`` and
     ``signed_angle`` on one vector, in floats: numpy's per-call cost is most of it at this
     size).
@@ -245,7 +272,9 @@ def _fcross(a: tuple, b: tuple) -> tuple:
 
 
 def _turn(frame0: np.ndarray | None, frame1: np.ndarray) -> float:
-    """``clamp_turn``, 0 without a previous frame, and exactly 0 for an unchanged frame without
+    """Return ``clamp_turn``, or 0 without a previous frame or for an unchanged one.
+
+    ``clamp_turn``, 0 without a previous frame, and exactly 0 for an unchanged frame without
     computing it (a stream that moves grips without turning them: the usual case).
     """
     if frame0 is None or np.array_equal(frame0, frame1):
@@ -255,7 +284,9 @@ def _turn(frame0: np.ndarray | None, frame1: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class ClampTurns:
-    """How far [rad] each clamp (by grip name) has turned about its tangent over the targets
+    """How far [rad] each clamp has turned since the committed shape, and its last frame.
+
+    How far [rad] each clamp (by grip name) has turned about its tangent over the targets
     requested since the committed shape, and the last requested frame (3, 3) of each.
     """
 
@@ -263,7 +294,9 @@ class ClampTurns:
     turns: dict[str, float] = field(default_factory=dict)
 
     def advanced(self, requested: dict[str, np.ndarray]) -> ClampTurns:
-        """Turns after one more target: each clamp's step from its last requested frame
+        """Return the turns after one more target.
+
+        Turns after one more target: each clamp's step from its last requested frame
         (``clamp_turn``).
         """
         turns = {
@@ -273,7 +306,7 @@ class ClampTurns:
         return ClampTurns(dict(requested), turns)
 
     def committed(self) -> ClampTurns:
-        """The same frames as the new committed shape's: no turn since."""
+        """Return the turns of the new committed shape: none since it."""
         return ClampTurns(self.frames)
 
 
@@ -284,7 +317,9 @@ def link_change(
     frames1: np.ndarray,
     clamp_turns: tuple[float, float] | None = None,
 ) -> LinkChange:
-    """ΔLk from shape 0 to shape 1 of the span between two clamps, sampled at the same arc lengths
+    """Return ΔLk from shape 0 to shape 1 of the span between two clamps.
+
+    ΔLk from shape 0 to shape 1 of the span between two clamps, sampled at the same arc lengths
     from the first clamp (row 0) to the last (row −1): points (n, 3) [m] and frames (n, 3, 3)
     (columns t, d1, d2).  Writhe by Fuller's formula when every tangent turned less than 90°
     (``FULLER_ALIGNMENT``), else by the two shapes' ray-closed Gauss writhes.  ``clamp_turns``: the

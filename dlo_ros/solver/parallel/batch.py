@@ -1,13 +1,13 @@
 """Many independent shape queries at once, on every core (or a cluster).
 
-``query_many(problem, options, targets)`` answers each entry of ``targets`` (grip poses, as for
-``solve``) as a solver of ``problem``/``options`` holding the shape at ``problem``'s grip poses
-answers ``solve(poses, commit=False)``, but in worker processes: the targets are cut into one
-contiguous chunk per worker; each worker solves the held shape once (cold, from the scene's poses)
-and starts every query of the chunk from it, so an answer does not depend on which worker gave it
-or on the other queries.  The caller's solver and its warm start are never touched.  (The caller's
-own held shape came from its stream; where a scene has several equilibria at the held poses, the
-worker's cold one can be another branch.)
+``query_many(factory, problem, options, targets)`` answers each entry of ``targets`` (grip poses,
+as for ``solve``) as a solver that ``factory`` builds of ``problem``/``options``, holding the shape
+at ``problem``'s grip poses, answers ``solve(poses, commit=False)``, but in worker processes: the
+targets are cut into one contiguous chunk per worker; each worker solves the held shape once (cold,
+from the scene's poses) and starts every query of the chunk from it, so an answer does not depend
+on which worker gave it or on the other queries.  The caller's solver and its warm start are never
+touched.  (The caller's own held shape came from its stream; where a scene has several equilibria
+at the held poses, the worker's cold one can be another branch.)
 
 Workers keep their solvers between calls (``_WORKER_SOLVERS``, keyed by the scene's structure, at
 most ``WORKER_SOLVERS`` per process), so only the first call pays for the build.  Workers never
@@ -18,6 +18,10 @@ start a C compiler: they use compiled derivatives only when the cache already ha
 process pool of ``os.cpu_count()`` spawned workers kept for the life of the process
 (:func:`default_executor`); a Dask ``distributed`` client's ``client.get_executor()`` runs the same
 call on a cluster.  Threads would not help: an interpreted CasADi call holds the GIL.
+
+``factory`` (a :data:`~dlo_ros.solver.protocol.SolverFactory`: ``make_solver``, or a solver class)
+is the caller's: this module sits beside the solvers and imports none of them.  The pool helpers of
+:mod:`.worker_pool` that callers pass as ``executor`` are re-exported here.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from __future__ import annotations
 import atexit
 import collections
 import dataclasses
+import inspect
 import os
 import pickle
 import threading
@@ -35,32 +40,44 @@ from typing import Mapping, Sequence
 
 from ...model.problem import Problem
 from ..options import SolverOptions
+from ..protocol import Solver, SolverFactory, structure_key
 from ..results.result import ShapeResult
 from .worker_pool import (
     BACKGROUND_NICE,
     TaskTimeout,
     WorkerDied,
     WorkerPool,
-    process_pool,  # noqa: F401
+    process_pool,
     stop_pool,
-    worker_pids,
 )
+
+__all__ = [
+    "BACKGROUND_NICE",
+    "WORKER_SOLVERS",
+    "default_executor",
+    "process_pool",
+    "query_many",
+    "scene_payload",
+    "solve_chunk",
+    "stop_pool",
+]
 
 
 #: Solvers a worker process keeps (least recently used dropped first).
 WORKER_SOLVERS = 2
 
-_WORKER_SOLVERS: "collections.OrderedDict[bytes, tuple[bytes, object]]" = collections.OrderedDict()
-_default: "WorkerPool | None" = None
+_WORKER_SOLVERS: collections.OrderedDict[bytes, tuple[bytes, Solver]] = collections.OrderedDict()
+_default: WorkerPool | None = None
 _default_lock = threading.Lock()
-_worker_lock = (
-    threading.Lock()
-)  # a thread executor's workers share this process's solvers: one at a time
+# a thread executor's workers share this process's solvers: one at a time
+_worker_lock = threading.Lock()
 
 
 def default_executor() -> WorkerPool:
-    """The pool ``query_many`` uses when given none: a :class:`WorkerPool` of ``os.cpu_count()``
-    workers, replaced when a worker dies or a call times out, stopped at exit.
+    """Return the pool ``query_many`` uses when given none.
+
+    A :class:`WorkerPool` of ``os.cpu_count()`` workers, replaced when a worker dies or a call
+    times out, stopped at exit.
     """
     global _default
     with _default_lock:
@@ -70,12 +87,13 @@ def default_executor() -> WorkerPool:
         return _default
 
 
-def scene_payload(problem: Problem, options: SolverOptions) -> bytes:
-    """The pickled (problem, options) :func:`solve_chunk` takes."""
-    return pickle.dumps((problem, options), protocol=pickle.HIGHEST_PROTOCOL)
+def scene_payload(factory: SolverFactory, problem: Problem, options: SolverOptions) -> bytes:
+    """Return the pickled (factory, problem, options) :func:`solve_chunk` takes."""
+    return pickle.dumps((factory, problem, options), protocol=pickle.HIGHEST_PROTOCOL)
 
 
 def query_many(
+    factory: SolverFactory,
     problem: Problem,
     options: SolverOptions | None,
     targets: Sequence[Mapping],
@@ -85,10 +103,13 @@ def query_many(
     compile: str = "cached",
     timeout: float | None = None,
 ) -> list[ShapeResult]:
-    """One ShapeResult per entry of ``targets`` (each a ``{grip name: pose}`` mapping, as for
-    ``solve``), in order.  ``chunks``: how many pieces the targets are cut into (default: the
-    executor's worker count, or ``os.cpu_count()``).  A query that fails answers with its status
-    and message, as ``solve`` does; the others are unaffected.
+    """Return one ShapeResult per entry of ``targets``, in order (see the module docstring).
+
+    Each target is a ``{grip name: pose}`` mapping, as for ``solve``; ``factory`` builds the
+    workers' solvers of ``problem``/``options`` (``make_solver``, or a solver class).  ``chunks``:
+    how many pieces the targets are cut into (default: the executor's worker count, or
+    ``os.cpu_count()``).  A query that fails answers with its status and message, as ``solve``
+    does; the others are unaffected.
 
     ``timeout`` [s] (default None: no limit): the longest the call waits.  Queries not answered by
     then answer ``failed`` with a message starting "timeout:"; on a :class:`WorkerPool` (the
@@ -99,31 +120,22 @@ def query_many(
     options = options or SolverOptions()
     problem.validate()
     options.validate()
-    targets = [dict(t) for t in targets]
-    if not targets:
+    queries = [dict(t) for t in targets]
+    if not queries:
         return []
     executor = executor or default_executor()
-    n = (
-        chunks
-        or getattr(executor, "max_workers", None)
-        or getattr(executor, "_max_workers", None)
-        or os.cpu_count()
-        or 1
-    )
-    n = max(1, min(int(n), len(targets)))
-    bounds = [round(i * len(targets) / n) for i in range(n + 1)]
-    spans = [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
-    payload = scene_payload(problem, options)
+    spans = _spans(executor, chunks, len(queries))
+    payload = scene_payload(factory, problem, options)
     deadline = None if timeout is None else time.monotonic() + float(timeout)
     futures: list[Future | BaseException] = []
     for a, b in spans:
         try:
             if isinstance(executor, WorkerPool):
                 futures.append(
-                    executor.submit(solve_chunk, payload, targets[a:b], compile, timeout=timeout)
+                    executor.submit(solve_chunk, payload, queries[a:b], compile, timeout=timeout)
                 )
             else:
-                futures.append(executor.submit(solve_chunk, payload, targets[a:b], compile))
+                futures.append(executor.submit(solve_chunk, payload, queries[a:b], compile))
         except (
             BrokenProcessPool,
             RuntimeError,
@@ -131,44 +143,69 @@ def query_many(
             futures.append(exc)
     results: list[ShapeResult] = []
     for (a, b), future in zip(spans, futures):
-        if isinstance(future, BaseException):
-            message = f"{type(future).__name__}: {future}"
-            results.extend(ShapeResult(status="failed", message=message) for _ in range(b - a))
-            continue
-        try:
-            left = None if deadline is None else max(0.0, deadline - time.monotonic())
-            # a WorkerPool's futures time out by themselves (and replace the workers)
-            results.extend(
-                future.result(None if left is None or isinstance(executor, WorkerPool) else left)
-            )
-        except TimeoutError as exc:  # TaskTimeout, or concurrent.futures' on another executor
-            future.cancel()
-            message = (
-                str(exc)
-                if isinstance(exc, TaskTimeout)
-                else f"timeout: no answer within {timeout:g} s"
-            )
-            results.extend(ShapeResult(status="failed", message=message) for _ in range(b - a))
-        except (WorkerDied, BrokenProcessPool, CancelledError) as exc:
-            message = f"{type(exc).__name__}: {exc}"
-            results.extend(ShapeResult(status="failed", message=message) for _ in range(b - a))
+        results.extend(_answers(future, b - a, executor, deadline, timeout))
     return results
+
+
+def _spans(executor: Executor, chunks: int | None, count: int) -> list[tuple[int, int]]:
+    """Return the [a, b) index ranges the ``count`` targets are cut into, one per chunk."""
+    n = (
+        chunks
+        or getattr(executor, "max_workers", None)
+        or getattr(executor, "_max_workers", None)
+        or os.cpu_count()
+        or 1
+    )
+    n = max(1, min(int(n), count))
+    bounds = [round(i * count / n) for i in range(n + 1)]
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+
+def _answers(
+    future: Future | BaseException,
+    count: int,
+    executor: Executor,
+    deadline: float | None,
+    timeout: float | None,
+) -> list[ShapeResult]:
+    """Return the ``count`` answers of one chunk: its worker's, or ``failed`` ones saying why."""
+    if isinstance(future, BaseException):
+        message = f"{type(future).__name__}: {future}"
+        return [ShapeResult(status="failed", message=message) for _ in range(count)]
+    try:
+        left = None if deadline is None else max(0.0, deadline - time.monotonic())
+        # a WorkerPool's futures time out by themselves (and replace the workers)
+        return list(
+            future.result(None if left is None or isinstance(executor, WorkerPool) else left)
+        )
+    except TimeoutError as exc:  # TaskTimeout, or concurrent.futures' on another executor
+        future.cancel()
+        message = (
+            str(exc)
+            if isinstance(exc, TaskTimeout)
+            else f"timeout: no answer within {timeout:g} s"
+        )
+    except (WorkerDied, BrokenProcessPool, CancelledError) as exc:
+        message = f"{type(exc).__name__}: {exc}"
+    return [ShapeResult(status="failed", message=message) for _ in range(count)]
 
 
 def solve_chunk(
     scene: bytes, targets: list[dict], compile: str = "cached", checks: str = "sync"
 ) -> list[ShapeResult]:
-    """(worker) Solve ``targets`` with this process's solver of the pickled (problem, options)
-    ``scene``, each from the held shape at the scene's poses (``commit=False``); the solver is kept
-    for the next call.  ``checks``: the a-posteriori checks of an auto solver (``make_solver``):
-    'sync' for a batch (a scene solved once, checked before its queries), 'background' for a node's
-    workers, whose held shape follows the stream: a check due on one of its updates then runs
-    beside the queries, not in front of them.
+    """Solve ``targets`` in a worker with this process's solver of the ``scene`` payload.
+
+    ``scene`` is a :func:`scene_payload`: the pickled (factory, problem, options).  Each target is
+    solved from the held shape at the scene's poses (``commit=False``); the solver is kept for the
+    next call.  ``checks``: the a-posteriori checks of an auto solver (a factory that takes
+    ``checks``): 'sync' for a batch (a scene solved once, checked before its queries), 'background'
+    for a node's workers, whose held shape follows the stream: a check due on one of its updates
+    then runs beside the queries, not in front of them.
     """
-    problem, options = pickle.loads(scene)
+    factory, problem, options = pickle.loads(scene)
     results = []
     with _worker_lock:  # one CasADi/IPOPT solver must never be called from two threads at once
-        solver = _worker_solver(scene, problem, options, compile, checks)
+        solver = _worker_solver(scene, factory, problem, options, compile, checks)
         for poses in targets:
             try:
                 result = solver.solve(poses, warm=True, commit=False)
@@ -179,26 +216,44 @@ def solve_chunk(
     return results
 
 
-def _worker_solver(
-    scene: bytes, problem: Problem, options: SolverOptions, compile: str, checks: str
-):
-    """This process's solver for the scene's structure, built once, holding the shape at the
-    scene's values and poses (re-solved from its previous shape when they change).
-    """
-    from ..auto.factory import make_solver
-    from ..shape_solver import structure_key
+def _build_solver(
+    factory: SolverFactory, problem: Problem, options: SolverOptions, compile: str, checks: str
+) -> Solver:
+    """Return ``factory(problem, options, compile=compile)``, with ``checks`` if it takes them.
 
+    ``make_solver`` and ``AutoShapeSolver`` take ``checks``; a fixed model (``ShapeSolver``) has
+    none.
+    """
+    if "checks" in inspect.signature(factory).parameters:
+        return factory(problem, options, compile=compile, checks=checks)
+    return factory(problem, options, compile=compile)
+
+
+def _worker_solver(
+    scene: bytes,
+    factory: SolverFactory,
+    problem: Problem,
+    options: SolverOptions,
+    compile: str,
+    checks: str,
+) -> Solver:
+    """Return this process's solver for the scene's structure, holding the shape at its poses.
+
+    Built once per structure (``structure_key``), factory and checks; when the scene's values or
+    poses change, it is re-solved from its previous shape.  At most ``WORKER_SOLVERS`` are kept.
+    """
     key = pickle.dumps(
-        (structure_key(problem, options), options, checks), protocol=pickle.HIGHEST_PROTOCOL
+        (factory, structure_key(problem, options), options, checks),
+        protocol=pickle.HIGHEST_PROTOCOL,
     )
     entry = _WORKER_SOLVERS.pop(key, None)
     if entry is None:
-        solver = make_solver(problem, options, compile=compile, checks=checks)
+        solver = _build_solver(factory, problem, options, compile, checks)
         solver.solve()  # the held shape: every query starts from it
     else:
         values, solver = entry
         if values != scene:
-            held, _ = pickle.loads(values)
+            _, held, _ = pickle.loads(values)
             if _grips_moved_only(held, problem):
                 # only the grips moved (a node's stream did): a warm update, as the stream's, which
                 # runs auto's checks every recheck_every updates; set_problem would check the model
@@ -210,15 +265,15 @@ def _worker_solver(
     _WORKER_SOLVERS[key] = (scene, solver)
     while len(_WORKER_SOLVERS) > WORKER_SOLVERS:
         _, (_, old) = _WORKER_SOLVERS.popitem(last=False)
-        close = getattr(old, "close", None)
-        if close is not None:
-            close()
+        old.close()
     return solver
 
 
 def _grips_moved_only(old: Problem, new: Problem) -> bool:
-    """Whether ``new`` differs from ``old`` in grip poses at most (field by field: pickles of the
-    whole problems can differ where only the sharing of equal objects does).
+    """Whether ``new`` differs from ``old`` in grip poses at most.
+
+    Compared field by field: pickles of the whole problems can differ where only the sharing of
+    equal objects does.
     """
 
     def rest(grip) -> bytes:

@@ -14,6 +14,7 @@ Used by ``batch.query_many`` and by the node's query and fit workers.
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import os
 import queue
@@ -23,6 +24,7 @@ import threading
 import time
 from concurrent.futures import Executor, Future, InvalidStateError, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from multiprocessing.connection import wait as wait_for_sentinels
 
 #: The nice value added to a node's query and fit workers (``process_pool(background=True)``), so
 # that : the stream comes first on a shared core (bench/results/soak_3_clients.md against
@@ -33,7 +35,9 @@ BACKGROUND_NICE = 10
 
 
 def process_pool(workers: int | None = None, background: bool = False) -> ProcessPoolExecutor:
-    """A process pool for :func:`solve_chunk`: ``workers`` (default ``os.cpu_count()``) processes
+    """Return a process pool of spawned workers that ignore SIGINT and die with this process.
+
+    A process pool for :func:`solve_chunk`: ``workers`` (default ``os.cpu_count()``) processes
     started with 'spawn' (a fork of a process with CasADi and DDS threads is unsafe) that ignore
     SIGINT (a Ctrl-C reaches the whole process group; the parent decides how to stop) and die with
     this process (:func:`die_with_parent`), even when it is SIGKILLed.  ``background``: the workers
@@ -51,7 +55,9 @@ def process_pool(workers: int | None = None, background: bool = False) -> Proces
 
 
 class _Pool(ProcessPoolExecutor):
-    """A ProcessPoolExecutor whose workers are started from one long-lived thread
+    """A ProcessPoolExecutor whose workers are started from one long-lived thread.
+
+    A ProcessPoolExecutor whose workers are started from one long-lived thread
     (:data:`_SPAWNER`).
 
     Why: ``PR_SET_PDEATHSIG`` fires when the *thread* that created a child ends, not its process.
@@ -70,7 +76,9 @@ class _Pool(ProcessPoolExecutor):
 
 
 class _Spawner:
-    """One daemon thread, started on first use, that runs the calls handed to it (see
+    """One daemon thread, started on first use, that runs the calls handed to it.
+
+    One daemon thread, started on first use, that runs the calls handed to it (see
     :class:`_Pool`).
     """
 
@@ -104,12 +112,15 @@ class _Spawner:
 _SPAWNER = _Spawner()
 
 #: [s] How often a worker checks that its parent is alive, where ``PR_SET_PDEATHSIG`` does not
-# apply (not : Linux) or cannot act (the worker was started by a thread that was not the spawner's).
+#: apply (not Linux) or cannot act (the worker was started by a thread that was not the
+#: spawner's).
 PARENT_CHECK_S = 0.5
 
 
 def die_with_parent(parent_pid: int) -> str:
-    """(worker) End this process when ``parent_pid`` (its parent) dies, however it dies; returns
+    """End this worker process when its parent dies, however it dies; return how.
+
+    (worker) End this process when ``parent_pid`` (its parent) dies, however it dies; returns
     how.
 
     Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (the kernel kills the worker even while it is
@@ -123,8 +134,6 @@ def die_with_parent(parent_pid: int) -> str:
     how = "watchdog"
     if sys.platform.startswith("linux"):
         try:
-            import ctypes
-
             libc = ctypes.CDLL(None, use_errno=True)
             if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
                 how = "pdeathsig+watchdog"
@@ -154,7 +163,9 @@ def _worker_init(background: bool = False, parent_pid: int | None = None) -> Non
 
 
 def stop_pool(pool, timeout: float = 5.0) -> bool:
-    """Stop ``pool`` now: pending work is cancelled, work in flight is abandoned (its workers are
+    """Stop ``pool`` now, within ``timeout`` s; return whether it ended.
+
+    Stop ``pool`` now: pending work is cancelled, work in flight is abandoned (its workers are
     terminated), and the pool's manager thread is joined, at most ``timeout`` s; True if it ended.
     ``pool``: a ProcessPoolExecutor (e.g. :func:`process_pool`) or a :class:`WorkerPool`.
 
@@ -185,7 +196,9 @@ def stop_pool(pool, timeout: float = 5.0) -> bool:
 
 
 def worker_pids(pool) -> list[int]:
-    """The process ids of ``pool``'s live workers (a ProcessPoolExecutor or
+    """Return the process ids of ``pool``'s live workers.
+
+    The process ids of ``pool``'s live workers (a ProcessPoolExecutor or
     :class:`WorkerPool`).
     """
     if isinstance(pool, WorkerPool):
@@ -201,14 +214,18 @@ KEPT_CAUSES = 16
 
 
 class WorkerDied(RuntimeError):
-    """A worker process died with the work in flight on it (crashed, killed, or killed by
+    """A worker process died with the work in flight on it.
+
+    A worker process died with the work in flight on it (crashed, killed, or killed by
     :class:`WorkerPool` because another task on the pool timed out); the message names the
     cause.
     """
 
 
 class TaskTimeout(TimeoutError):
-    """A task of a :class:`WorkerPool` was not answered within its timeout; its workers were
+    """A task of a :class:`WorkerPool` was not answered within its timeout.
+
+    A task of a :class:`WorkerPool` was not answered within its timeout; its workers were
     killed.
     """
 
@@ -240,7 +257,9 @@ class WorkerPool(Executor):
     def submit(
         self, fn, /, *args, timeout: float | None = None, retries: int = 0, **kwargs
     ) -> Future:
-        """``fn(*args, **kwargs)`` on a worker; ``timeout`` [s] (None: none) as in the class
+        """Run ``fn(*args, **kwargs)`` on a worker; return its Future.
+
+        ``fn(*args, **kwargs)`` on a worker; ``timeout`` [s] (None: none) as in the class
         docstring. ``retries``: how many times a task whose worker died under it (not one killed
         for a timeout) runs again on a new pool, for a task that is a pure function of its
         arguments; once they are used up it fails with WorkerDied, so a task that kills its worker
@@ -327,7 +346,9 @@ class WorkerPool(Executor):
         return self._pool
 
     def _replace(self, generation: int, cause: str) -> None:
-        """Kill generation ``generation``'s workers (if it is still the current pool); the next
+        """Kill the workers of pool ``generation``; the next submit starts a new pool.
+
+        Kill generation ``generation``'s workers (if it is still the current pool); the next
         submit starts a new pool.
         """
         with self._lock:
@@ -348,12 +369,10 @@ class WorkerPool(Executor):
     @staticmethod
     def _dead_workers(pool) -> str:
         """'pid N exit code -9 (SIGKILL)' for each of ``pool``'s workers that has ended."""
-        from multiprocessing.connection import wait
-
         procs = list(getattr(pool, "started", {}).values())
         # a worker's sentinel is ready once it has ended (its exit code may still be unreaped)
         try:
-            ended = set(wait([p.sentinel for p in procs], timeout=0))
+            ended = set(wait_for_sentinels([p.sentinel for p in procs], timeout=0))
         except (OSError, ValueError):
             ended = set()
         text = []
@@ -373,7 +392,9 @@ class WorkerPool(Executor):
         return ", ".join(text)
 
     def worker_pids(self) -> list[int]:
-        """The process ids of the current workers (started on demand: empty before the first
+        """Return the process ids of the current workers.
+
+        The process ids of the current workers (started on demand: empty before the first
         task).
         """
         with self._lock:

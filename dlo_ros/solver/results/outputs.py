@@ -36,14 +36,16 @@ from .wrenches import FramesOf, equilibrium, wrench
 
 
 def output_s(nlp: StringNLP, options: SolverOptions) -> np.ndarray:
-    """The published arc lengths [m]: ``output_points`` evenly spaced over [0, L]."""
+    """Return the published arc lengths [m]: ``output_points`` evenly spaced over [0, L]."""
     return np.linspace(0.0, nlp.length, options.output_points)
 
 
 def no_shape(
     options: SolverOptions, summary: Any, status: str, message: str, **fields: Any
 ) -> ShapeResult:
-    """A result without a shape (invalid input, unreachable, infeasible, failed): nothing in it
+    """Return a result without a shape (invalid input, unreachable, infeasible, failed).
+
+    A result without a shape (invalid input, unreachable, infeasible, failed): nothing in it
     could be mistaken for a shape, an energy, a wrench or an eigenvalue.
     """
     return ShapeResult(
@@ -59,7 +61,9 @@ def no_shape(
 def sample(
     nlp: StringNLP, z: np.ndarray, s_out: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centreline points (N, 3) and φ, θ of an Euler model at ``s_out``: ``RitzModel.positions``
+    """Return centreline points (N, 3) and φ, θ of an Euler model at ``s_out``.
+
+    Centreline points (N, 3) and φ, θ of an Euler model at ``s_out``: ``RitzModel.positions``
     and ``fields`` with the output matrices looked up once and each field's coefficients multiplied
     once.
     """
@@ -105,7 +109,9 @@ class ShapeOutputs:
         steps: int,
         summary: Any,
     ) -> ShapeResult:
-        """The result of ``state`` solving ``problem``; its grips anchor the published twist-free
+        """Return the ShapeResult of ``state`` solving ``problem``.
+
+        The result of ``state`` solving ``problem``; its grips anchor the published twist-free
         frames (the tangent model's roll follows the first held grip being solved for).
         ``current``: the solver's committed scene, whose grips anchor the wrenches' frames;
         ``summary``: the result's model.
@@ -186,7 +192,9 @@ class ShapeOutputs:
         steps: int,
         summary: Any,
     ) -> ShapeResult:
-        """``result`` from one call of the outputs' function (``output_function.py``): the same
+        """Return ``result`` from one call of the compiled outputs' function.
+
+        ``result`` from one call of the outputs' function (``output_function.py``): the same
         shape, wrenches, contact forces, residual and flip test as the numpy path.
         """
         plan = self.fns.output_function
@@ -259,7 +267,9 @@ class ShapeOutputs:
         warm: bool,
         steps: int,
     ) -> ShapeResult:
-        """The ShapeResult of the evaluated outputs: the energies and the stability verdict from
+        """Return the ShapeResult of the evaluated outputs, with its status.
+
+        The ShapeResult of the evaluated outputs: the energies and the stability verdict from
         the reduced Hessian; 'failed' on a flipped branch, 'unverified' over the residual's
         tolerance.
         """
@@ -321,7 +331,9 @@ class ShapeOutputs:
         )
 
     def _self_contacts(self, z: np.ndarray, lam_si: np.ndarray) -> list[SelfContact]:
-        """Each slot with a positive multiplier λ [N/m] of its row D² − |x_a − x_b|² ≤ 0: the force
+        """Return the force of each self-contact slot with a positive multiplier.
+
+        Each slot with a positive multiplier λ [N/m] of its row D² − |x_a − x_b|² ≤ 0: the force
         2 λ (x_a − x_b) on the string at s_a (−∂(λ g)/∂x_a) and its opposite at s_b.
         """
         slots, nlp = self.contact_slots, self.nlp
@@ -350,7 +362,9 @@ class ShapeOutputs:
     def _contacts(
         self, problem: Problem, z: np.ndarray, p: np.ndarray, lam_si: np.ndarray
     ) -> tuple[dict[int, np.ndarray], list[PointAction]]:
-        """Each obstacle's total contact force [N] (−Σ_j λ_j ∇h(x_j) over its samples and contact
+        """Return each obstacle's total contact force [N] and the point actions on the string.
+
+        Each obstacle's total contact force [N] (−Σ_j λ_j ∇h(x_j) over its samples and contact
         slots), and every touching sample's or slot's force as a point action on the string (for
         the equilibrium residual).
         """

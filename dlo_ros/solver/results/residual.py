@@ -1,5 +1,6 @@
-"""The equilibrium residual of a returned shape: the strong-form balance the energy minimum must
-satisfy.
+"""The equilibrium residual of a returned shape: the strong-form balance it must satisfy.
+
+Every energy minimum satisfies this balance; the residual measures how far a shape is from it.
 
 For the part [0, s] of the string, the moment that the part beyond s exerts on it, about x(s), is
 
@@ -50,7 +51,9 @@ class PointAction:
 
 @dataclass(frozen=True)
 class EquilibriumResidual:
-    """Largest moment imbalance [N·m], force imbalance [N] and the equivalent centreline error
+    """The largest moment and force imbalances and the equivalent centreline error.
+
+    Largest moment imbalance [N·m], force imbalance [N] and the equivalent centreline error
     [m].
     """
 
@@ -62,7 +65,9 @@ class EquilibriumResidual:
 def evaluation_grid(
     length: float, events: list[float], points: int = RESIDUAL_POINTS
 ) -> np.ndarray:
-    """Midpoints of a grid of ``points`` intervals refined at every event arc length (never on
+    """Return the midpoints of a grid of ``points`` intervals refined at every event.
+
+    Midpoints of a grid of ``points`` intervals refined at every event arc length (never on
     one). Nodes closer than 1e-12 L merge: an event equal to a grid node up to rounding (0.3 and
     0.30000000000000004) would otherwise leave a midpoint on the event itself.
     """
@@ -86,7 +91,7 @@ def equilibrium_residual(
     rf_min: float,
     rf: np.ndarray | None = None,
 ) -> EquilibriumResidual:
-    """The residual on grid s (module docstring); rf: Rf at s (default Rf_min).
+    """Return the residual on grid s (module docstring); rf: Rf at s (default Rf_min).
 
     x (K, 3), moment_c (K, 3): positions and constitutive moments at s; weight (K,) = ∫_0^s D dσ
     and weight_moment (K, 3) = ∫_0^s D x dσ; total_weight = ∫_0^L D dσ [N]; gravity: unit
@@ -126,7 +131,9 @@ def equilibrium_residual(
 
 
 def _cumulative(f: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """∫_{s_0}^{s_k} f ds by the trapezoid rule, starting at 0 (plus the first interval from s =
+    """Return ∫ f ds from 0 at every grid point by the trapezoid rule.
+
+    ∫_{s_0}^{s_k} f ds by the trapezoid rule, starting at 0 (plus the first interval from s =
     0).
     """
     steps = 0.5 * (f[1:] + f[:-1]) * np.diff(s)[:, None]

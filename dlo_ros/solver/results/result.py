@@ -1,6 +1,4 @@
-"""The result of one solve: what the node, the CLI, rerun logging and the benchmarks all
-consume.
-"""
+"""The result of one solve: what the node, the CLI, rerun and the benchmarks consume."""
 
 from __future__ import annotations
 
@@ -18,7 +16,9 @@ STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid"
 
 @dataclass
 class GripWrench:
-    """Reaction at a grip: the force [N] and torque [N·m] the gripper exerts ON the string, world
+    """Reaction at a grip: the force [N] and torque [N·m] the gripper exerts on the string.
+
+    Reaction at a grip: the force [N] and torque [N·m] the gripper exerts ON the string, world
     frame.
 
     The torque is about the grip point.  The gripper feels the opposite (−force, −torque).
@@ -92,7 +92,7 @@ class ShapeResult:
         return self.status == "ok"
 
     def model_dict(self) -> dict:
-        """The model's JSON form (``ModelSummary.as_dict``; {} when the result has none)."""
+        """Return the model's JSON form (``ModelSummary.as_dict``; {} when there is none)."""
         return self.model.as_dict() if self.model is not None else {}
 
     def to_dict(self) -> dict:

@@ -1,5 +1,6 @@
-"""Sensitivities of an equilibrium to the material: dx(s)/dθ and d(grip force)/dθ by the
-implicit-function theorem.
+"""Sensitivities of an equilibrium to the material, by the implicit-function theorem.
+
+The sensitivities are dx(s)/dθ and d(grip force)/dθ.
 
 θ_k = log c_k, where the material profile k ∈ {Rf, Rt, Re, D} is scaled uniformly, P_k(s) → c_k
 P_k(s); or, for a ``MaterialDirection`` with a ``change`` profile, any parameter θ with dP/dθ (s) =
@@ -54,7 +55,9 @@ MATERIALS = ("Rf", "Rt", "Re", "D")
 
 @dataclass(frozen=True)
 class MaterialDirection:
-    """θ of one column: ``material`` ∈ MATERIALS, and dP/dθ (s) as a Profile in SI units
+    """One material direction θ: a material and dP/dθ.
+
+    θ of one column: ``material`` ∈ MATERIALS, and dP/dθ (s) as a Profile in SI units
     (``change``), or None for θ = log of a uniform scale (dP/dθ = the current profile).
     """
 
@@ -65,7 +68,9 @@ class MaterialDirection:
 
 @dataclass
 class ShapeSensitivity:
-    """The committed equilibrium of a solver and its derivatives with respect to θ = log(material
+    """A solver's committed equilibrium and its derivatives with respect to θ.
+
+    The committed equilibrium of a solver and its derivatives with respect to θ = log(material
     scale).
 
     s (S,) [m]; points (S, 3) [m]; d_points (S, 3, k) [m] = dx(s)/dθ_k; grip_forces[name] (3,) [N],
@@ -107,7 +112,9 @@ class _Functions:
         self._z, self._model, self._frames = z, m, {}
 
     def node_frame(self, node: int) -> ca.Function:
-        """z → (t, d1, ∂t/∂z, ∂d1/∂z) at a director model's node (d1 outputs zero for the tangent
+        """Return the function z → (t, d1, ∂t/∂z, ∂d1/∂z) at a director model's node.
+
+        z → (t, d1, ∂t/∂z, ∂d1/∂z) at a director model's node (d1 outputs zero for the tangent
         model): the expressions of the grip rows (``model.node_columns_sym``).
         """
         fn = self._frames.get(node)
@@ -136,7 +143,9 @@ def _functions(nlp: StringNLP) -> _Functions:
 def material_direction(
     nlp: StringNLP, p: np.ndarray, direction: MaterialDirection | str
 ) -> np.ndarray:
-    """dp/dθ: p's material part packed from dP/dθ alone (the current profile for a uniform log
+    """Return dp/dθ: the parameters' material part packed from dP/dθ, zero elsewhere.
+
+    dp/dθ: p's material part packed from dP/dθ alone (the current profile for a uniform log
     scale, or ``direction.change`` at the quadrature nodes), zero elsewhere (p is linear in the
     profile values).
     """
@@ -157,7 +166,9 @@ def material_direction(
 def shape_sensitivity(
     solver: ShapeSolver, names: tuple[MaterialDirection | str, ...], s: np.ndarray
 ) -> ShapeSensitivity:
-    """Centreline at ``s`` [m] and its θ-derivatives at ``solver``'s committed equilibrium (module
+    """Return the centreline at ``s`` [m] and its θ-derivatives at the committed equilibrium.
+
+    Centreline at ``s`` [m] and its θ-derivatives at ``solver``'s committed equilibrium (module
     docstring); ``names``: one θ per entry, a material name (uniform log scale) or a
     MaterialDirection. Raises ValueError when nothing is committed or the Newton matrix is
     singular.
@@ -221,7 +232,9 @@ def _grip_torques(
     dz: np.ndarray,
     dlam_si: np.ndarray,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Each grip's torque T and dT/dθ (module docstring) from the SI multipliers and their
+    """Return each grip's torque T and dT/dθ from the multipliers and their derivatives.
+
+    Each grip's torque T and dT/dθ (module docstring) from the SI multipliers and their
     derivatives; empty for a 3D Euler model.
     """
     nlp = solver.nlp

@@ -25,7 +25,9 @@ from ..state import SolverState
 
 
 def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState) -> float | None:
-    """λ_min of ``state`` (None when the active rows leave no freedom).  Fills the state's missing
+    """Return λ_min of ``state`` (None when the active rows leave no freedom).
+
+    λ_min of ``state`` (None when the active rows leave no freedom).  Fills the state's missing
     derivatives (Hessian, Jacobian, energies, gradient) and its ``unstable_direction``.  The pair
     the compiled loop computed with the state's Hessian (``SolverState.reduced_eigen``) is taken as
     it is: it reduces on the free rows, and a contact-free state's obstacle rows have zero Jacobian
@@ -60,7 +62,9 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
 
 
 def signed(direction: np.ndarray) -> np.ndarray:
-    """An eigenvector with its sign fixed: LAPACK's sign is arbitrary, and rounding can flip it, so
+    """Return the eigenvector with its sign fixed by its first large entry.
+
+    An eigenvector with its sign fixed: LAPACK's sign is arbitrary, and rounding can flip it, so
     it is signed by its first entry above a tenth of the largest (not the largest: a mode of a
     near-symmetric shape has pairs of entries of equal size), so that two paths to the same saddle
     leave it the same way.
@@ -70,7 +74,9 @@ def signed(direction: np.ndarray) -> np.ndarray:
 
 
 def is_stable(min_eigenvalue: float, hessian: np.ndarray) -> bool:
-    """The stability verdict: a neutral mode (e.g. rotation about the chord without gravity) shows
+    """Tell whether the smallest reduced eigenvalue makes the equilibrium stable.
+
+    The stability verdict: a neutral mode (e.g. rotation about the chord without gravity) shows
     as
     ±1e-8·max|H|, so only eigenvalues below that count as unstable.
     """
@@ -78,7 +84,9 @@ def is_stable(min_eigenvalue: float, hessian: np.ndarray) -> bool:
 
 
 def lowest_eigenpair(a: np.ndarray) -> tuple[float, np.ndarray]:
-    """Smallest eigenvalue of the symmetric matrix ``a`` and its unit eigenvector (LAPACK syevr for
+    """Return the smallest eigenvalue of the symmetric matrix ``a`` and its unit eigenvector.
+
+    Smallest eigenvalue of the symmetric matrix ``a`` and its unit eigenvector (LAPACK syevr for
     that one pair: a third of the time of a full eigendecomposition at the sizes here).
     """
     w, v, _, _, info = _syevr(a, compute_v=1, range="I", il=1, iu=1)
@@ -89,7 +97,9 @@ def lowest_eigenpair(a: np.ndarray) -> tuple[float, np.ndarray]:
 
 
 def null_space(a: np.ndarray) -> np.ndarray:
-    """Orthonormal basis of {v : a v = 0} from a column-pivoted QR of aᵀ (LAPACK geqp3,
+    """Return an orthonormal basis of {v : a v = 0} from a column-pivoted QR of aᵀ.
+
+    Orthonormal basis of {v : a v = 0} from a column-pivoted QR of aᵀ (LAPACK geqp3,
     rank-revealing):
     rank = number of |R_kk| above max(a.shape)·eps·|R_00|, the tolerance scipy.linalg.null_space puts on
     singular values.  Half the time of an SVD at the sizes here.

@@ -52,7 +52,9 @@ class ModelSummary:
     changed: tuple[str, ...] | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        """The JSON form: a fixed model's keys, or auto's (see the module docstring), in their
+        """Return the JSON form: a fixed model's keys, or auto's, in their fixed order.
+
+        The JSON form: a fixed model's keys, or auto's (see the module docstring), in their
         fixed order.
         """
         out: dict[str, Any] = {

@@ -38,7 +38,9 @@ def wrench(
     z: np.ndarray,
     lam_si: np.ndarray,
 ) -> GripWrench:
-    """The reaction at ``grip`` of solution z with the SI multipliers ``lam_si`` (see the module
+    """Return the reaction at ``grip`` of solution z with the SI multipliers ``lam_si``.
+
+    The reaction at ``grip`` of solution z with the SI multipliers ``lam_si`` (see the module
     docstring).
     """
     rows = nlp.grip_rows[grip.name]
@@ -83,7 +85,9 @@ def wrench(
 def director_torque(
     t: np.ndarray, d1: np.ndarray | None, target: np.ndarray, lam: np.ndarray
 ) -> np.ndarray:
-    """T = −(λ0 t × a1 + λ1 t × a2 [+ λ2 d1 × a2]) [N·m]: the torque of a director model's grip
+    """Return the torque T [N·m] of a director model's grip from its orientation rows.
+
+    T = −(λ0 t × a1 + λ1 t × a2 [+ λ2 d1 × a2]) [N·m]: the torque of a director model's grip
     from its orientation rows' SI multipliers ``lam`` (2 or 3), the node's frame (t, d1) and the
     grip's target frame ``target`` = [a0 a1 a2] (columns).  Bilinear in ((t, d1), λ), so its
     derivative is ``director_torque(dt, dd1, target, λ) + director_torque(t, d1, target, dλ)``
@@ -99,7 +103,9 @@ def director_torque(
 def end_moment(
     nlp: StringNLP, string: StringProperties, frames_of: FramesOf, z: np.ndarray, s_end: float
 ) -> np.ndarray:
-    """Torque [N·m] a clamp at an end exerts: −M(0) at s = 0, +M(L) at s = L, where M = Q diag(Rf,
+    """Return the torque [N·m] a clamp at an end of the string exerts.
+
+    Torque [N·m] a clamp at an end exerts: −M(0) at s = 0, +M(L) at s = L, where M = Q diag(Rf,
     Rf, Rt) ω is the internal moment and ω = axial(Qᵀ Q') the Darboux vector (Q' by a second-order
     one-sided difference; Q(s) is smooth even where the Euler angles are not).
     """
@@ -119,7 +125,9 @@ def end_moment(
 
 
 def solve_unit_rows(a: np.ndarray, rhs: list[float]) -> np.ndarray | None:
-    """x with a x = rhs for a 3×3 ``a`` of unit rows by Cramer's rule, x = Σ_k rhs_k (a_{k+1} ×
+    """Solve a x = rhs for a 3×3 ``a`` of unit rows by Cramer's rule (None when singular).
+
+    x with a x = rhs for a 3×3 ``a`` of unit rows by Cramer's rule, x = Σ_k rhs_k (a_{k+1} ×
     a_{k+2}) / det;
     None when |det| ≤ 1e-8 (unit rows: nearly dependent).  Plain floats: numpy's cross and solve cost
     more than the arithmetic on 3-vectors.
@@ -137,7 +145,9 @@ def solve_unit_rows(a: np.ndarray, rhs: list[float]) -> np.ndarray | None:
 
 
 def static_events(nlp: StringNLP, problem: Problem) -> list[float]:
-    """The arc lengths [m] the residual's grid is refined at: grips, point loads, the relative
+    """Return the arc lengths [m] the residual's grid is refined at.
+
+    The arc lengths [m] the residual's grid is refined at: grips, point loads, the relative
     positions' ends and (director models) the mesh breakpoints.  Fixed by the NLP's structure, so
     that the grid is too (``output_function.py`` evaluates on it).  Contact forces (obstacles,
     self-contact) carry no moment: the balance moment only bends where they act, it does not jump,
@@ -151,7 +161,9 @@ def static_events(nlp: StringNLP, problem: Problem) -> list[float]:
 
 
 def relative_forces(nlp: StringNLP, lam_si: np.ndarray) -> list[np.ndarray]:
-    """Per relative position, the force [N] its rows exert on the string at s_b, F_b = −Σ_r λ_r c_r
+    """Return, per relative position, the force [N] its rows exert on the string at s_b.
+
+    Per relative position, the force [N] its rows exert on the string at s_b, F_b = −Σ_r λ_r c_r
     (the position rows' rule, ``wrench``); the string takes −F_b at s_a.
     """
     return [-nlp.relative_axes.T @ lam_si[rows] for rows in nlp.relative_rows]
@@ -165,7 +177,9 @@ def equilibrium(
     contacts: Sequence[PointAction] = (),
     lam_si: np.ndarray | None = None,
 ) -> EquilibriumResidual:
-    """The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
+    """Return the strong-form equilibrium residual of shape z.
+
+    The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
     obstacle ``contacts`` and, given the SI multipliers ``lam_si``, the relative positions'
     reactions (solver/results/residual.py).
     """
@@ -230,7 +244,9 @@ def equilibrium(
 def euler_moments(
     nlp: StringNLP, z: np.ndarray, s: np.ndarray, rf: np.ndarray, rt: np.ndarray
 ) -> np.ndarray:
-    """m = Q diag(Rf, Rf, Rt) Qᵀ ω [N·m] of an Euler model at arc lengths s, from the angles and
+    """Return m = Q diag(Rf, Rf, Rt) Qᵀ ω [N·m] of an Euler model at arc lengths s.
+
+    m = Q diag(Rf, Rf, Rt) Qᵀ ω [N·m] of an Euler model at arc lengths s, from the angles and
     their s-derivatives (no frames, no differences).  For Q = R0 Rz(−φ) Ry(−θ) Rz(−ψ) the Darboux
     vector is
 

@@ -516,7 +516,7 @@ class AutoShapeSolver:
             or solver.compile_pending
         ):
             return
-        streaming = self.inner._compile_thread
+        streaming = self.inner.compile_thread
 
         def start() -> None:
             if streaming is not None:

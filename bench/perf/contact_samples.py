@@ -89,7 +89,7 @@ def run(samples: int, scene) -> dict:
         q_right = solver.problem.grip("right").pose.orientation
         wiggle.append(timed(solver, {"left": GripPose(left + dz, np.array([0.0, 0.0, 0.0, 1.0])),
                                      "right": GripPose(right + dz, q_right)}))
-    state, nlp, fns = solver._state, solver.nlp, solver.functions
+    state, nlp, fns = solver.committed_state, solver.nlp, solver.functions
     lam = state.lam_g
     path_ms = np.array([t for t, _ in path])
     wiggle_ms = np.array([t for t, _ in wiggle])

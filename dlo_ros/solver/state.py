@@ -10,8 +10,12 @@ NLP's scaled units (z: ``StringNLP`` unknowns, λ: IPOPT's multipliers, λ_SI = 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # for the annotation only: self_contact's own state is not this module's
+    from .contact.self_contact import ContactSlots
 
 
 @dataclass
@@ -36,7 +40,7 @@ class SolverState:
     reduced_eigen: tuple[float, np.ndarray] | None = None
     kkt: np.ndarray | None = None  # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
     residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
-    contact: object | None = (
+    contact: ContactSlots | None = (
         None  # self_contact.ContactSlots whose pairs p holds (self-contact models)
     )
     #: the outputs at z as the compiled loop that reached it evaluated them

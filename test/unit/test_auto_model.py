@@ -358,7 +358,7 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
         assert answer.ok and not answer.model.planar
         other = answered_by[-1]  # the 3D model's solver
         assert other is not None and other is not solver.inner
-        held, nf = other._state, other.nlp.n_free_rows  # commit=False leaves the start in place
+        held, nf = other.committed_state, other.nlp.n_free_rows  # commit=False leaves the start in place
         np.testing.assert_array_equal(held.p[other.nlp.params["grip:right:position"]],
                                       solver.problem.grip("right").pose.position)
         # its stored derivatives (evaluated once per mapping) are those at its own z and p
@@ -369,9 +369,9 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
         start = held.copy()
         other._adopted = None  # the mapping made afresh
         assert other.adopt_warm_start(solver.inner)
-        np.testing.assert_array_equal(other._state.z, start.z)
-        np.testing.assert_array_equal(other._state.lam_g, start.lam_g)
-        np.testing.assert_array_equal(other._state.p, start.p)
+        np.testing.assert_array_equal(other.committed_state.z, start.z)
+        np.testing.assert_array_equal(other.committed_state.lam_g, start.lam_g)
+        np.testing.assert_array_equal(other.committed_state.p, start.p)
         return answer
 
     first = [query(q) for q in (q1, q2, q1)]

@@ -17,6 +17,7 @@ from dlo_ros.model.director import frame_to_quat, quat_to_frame
 from dlo_ros.model.elastica import clamped_clamped_elastica
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
+from dlo_ros.solver.update import attempts as AT
 
 IDENT = [0.0, 0.0, 0.0, 1.0]
 
@@ -218,13 +219,13 @@ def test_residual_flags_a_shape_off_its_equilibrium(monkeypatch):
     assert new.energy["total"] < shifted.energy["total"]
     old = ShapeSolver(prob, opts, compile="off")
     assert old.solve().stable is False  # the saddle again, the start of the probe
-    real = old._ipopt_call
+    real = AT.ipopt_call
 
-    def warm_only(warm, z0, p, start=None):
-        attempt = real(warm, z0, p, start)
+    def warm_only(ctx, warm, z0, p, start=None):
+        attempt = real(ctx, warm, z0, p, start)
         return attempt if warm else (False, *attempt[1:])
 
-    monkeypatch.setattr(old, "_ipopt_call", warm_only)
+    monkeypatch.setattr(AT, "ipopt_call", warm_only)
     probe = old.solve({"right": ((0.5, 0.0, 0.002), IDENT)}, commit=False)
     assert probe.status == "unverified" and probe.stable is None, probe.message
     assert probe.equilibrium_residual_m > 100 * new.equilibrium_residual_m

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import pytest
 
-import dlo_ros.solver.shape_solver as shape_solver
+import dlo_ros.solver.update.attempts as attempts
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver
 
@@ -23,8 +23,8 @@ def test_targets_under_the_table_are_infeasible_after_two_attempts(warm, monkeyp
     held = solver.solve()
     assert held.ok
     statuses = []
-    original = shape_solver.call
-    monkeypatch.setattr(shape_solver, "call", lambda *a, **k: statuses.append((out := original(*a, **k))[2]) or out)
+    original = attempts.call
+    monkeypatch.setattr(attempts, "call", lambda *a, **k: statuses.append((out := original(*a, **k))[2]) or out)
     r = solver.solve(UNDER_THE_TABLE, warm=warm)
     assert r.status == "infeasible" and "grip 'right' position" in r.message, r.message
     assert statuses == (["Infeasible_Problem_Detected"] * (2 if warm else 1))

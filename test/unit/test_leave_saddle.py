@@ -13,10 +13,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import dlo_ros.solver.shape_solver as shape_solver
 from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver
+from dlo_ros.solver.update import attempts as AT
+from dlo_ros.solver.update import ladder as LD
+from dlo_ros.solver.update import linking as LK
 
 SCENE = load_scene("default_cable")
 Q = SCENE.problem.grip("right").pose.orientation
@@ -40,11 +42,11 @@ def test_a_warm_update_onto_the_saddle_leaves_it_on_the_newton_path(compile_mode
     solver = ShapeSolver(SCENE.problem, OPTIONS, compile=compile_mode)
     assert solver.solve(lowered(0.045)).ok
     calls = []
-    original = shape_solver.leave_saddle
-    monkeypatch.setattr(shape_solver, "leave_saddle", lambda *a, **k: calls.append(1) or original(*a, **k))
+    original = LD.leave_saddle
+    monkeypatch.setattr(LD, "leave_saddle", lambda *a, **k: calls.append(1) or original(*a, **k))
     linking = []  # leaving a saddle is a jump: the linking number of the clamped span is checked
-    check = solver._linking_jump
-    monkeypatch.setattr(solver, "_linking_jump", lambda *a: linking.append(check(*a)) or linking[-1])
+    check = LK.linking_jump
+    monkeypatch.setattr(LK, "linking_jump", lambda *a: linking.append(check(*a)) or linking[-1])
     warm = solver.solve(lowered(0.05))
     assert calls, "Newton did not land on the saddle: the scene no longer tests what it says"
     assert linking == [None]
@@ -70,7 +72,7 @@ def test_the_saddle_itself_is_what_plain_newton_finds():
     p = solver.pack_parameters(SCENE.problem.with_grip_poses(poses), start.z)
     ok, state, _, _ = newton(solver.nlp, solver.functions, start, p)
     assert ok
-    saddle = solver._result(SCENE.problem, state, "Newton", 0, 0.0, True, 0)
+    saddle = AT.result(solver.update_context(), SCENE.problem, state, "Newton", 0, 0.0, True, 0)
     assert saddle.status == "ok" and saddle.stable is False and saddle.min_eigenvalue < 0
     assert np.abs(saddle.points[:, 1]).max() < 1e-9
 
@@ -101,8 +103,8 @@ def test_a_lower_saddle_reached_by_the_newton_steps_is_left_from_there(compile_m
         r = solver.solve(poses)
         assert r.ok and r.stable, r.message
     escapes = []
-    original = solver._escape_saddle
-    monkeypatch.setattr(solver, "_escape_saddle", lambda *a: escapes.append(a[1].min_eigenvalue) or original(*a))
+    original = LD.escape_unstable
+    monkeypatch.setattr(LD, "escape_unstable", lambda *a: escapes.append(a[2].min_eigenvalue) or original(*a))
     warm = solver.solve(targets[-1])
     assert warm.ok and warm.stable and warm.warm_started, warm.message
     assert len(escapes) == 1 and escapes[0] < 0, "no lower saddle: the stream no longer tests what it says"

@@ -21,6 +21,7 @@ from dlo_ros.model.director import quat_to_frame
 from dlo_ros.solver.contact import topology as TP
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
+from dlo_ros.solver.update import attempts as AT
 
 TURNS, START = 3, 0.9
 CHORDS = np.round(np.arange(0.88, 0.6 - 1e-9, -0.02), 10)
@@ -97,19 +98,20 @@ def test_streamed_updates_keep_the_linking_number(unchecked_stream):
     assert again.energy["total"] == pytest.approx(before.energy["total"], rel=1e-8)
 
 
-def test_cold_start_inside_a_warm_update_is_checked():
+def test_cold_start_inside_a_warm_update_is_checked(monkeypatch):
     """A warm update whose Newton and warm IPOPT steps fail falls back to a cold start from the buckled
     guess, which knows nothing of the 3 turns: the check (against the committed shape) marks it 'failed';
     with the check off the same update publishes a shape whose Lk is a different integer."""
     sol = twisted_solver()
     twist_up(sol)
-    fail = lambda start, p, problem=None: (False, start, 0, float("inf"))  # noqa: E731
-    ipopt = sol._ipopt_call
+    fail = lambda ctx, start, p, problem=None: (False, start, 0, float("inf"))  # noqa: E731
+    ipopt = AT.ipopt_call
 
-    def cold_only(warm, z0, p, start=None):
-        return (False, start, "forced", 0, float("inf")) if warm else ipopt(warm, z0, p, start)
+    def cold_only(ctx, warm, z0, p, start=None):
+        return (False, start, "forced", 0, float("inf")) if warm else ipopt(ctx, warm, z0, p, start)
 
-    sol._newton, sol._ipopt_call = fail, cold_only
+    monkeypatch.setattr(AT, "newton_to", fail)
+    monkeypatch.setattr(AT, "ipopt_call", cold_only)
     pose = {"right": ((0.86, 0.0, 0.0), turned(2 * np.pi * TURNS))}
     r = sol.solve(pose)
     assert r.status == "failed" and "linking number" in r.message, (r.status, r.message)

@@ -61,7 +61,7 @@ def test_a_stream_with_the_compiled_loop_equals_the_interpreted_one(solvers):
         assert a.energy["total"] == pytest.approx(b.energy["total"], rel=1e-10)
         assert a.min_eigenvalue == pytest.approx(b.min_eigenvalue, rel=1e-8)
     assert newton >= 20  # the compiled loop was what ran
-    assert native._state.reduced_eigen is not None  # the last eigenvalue came from the compiled call
+    assert native.committed_state.reduced_eigen is not None  # the last eigenvalue came from the compiled call
 
 
 def chord_reference(nlp, u, p, kkt, residual, max_evaluations: int):
@@ -314,7 +314,7 @@ def test_a_warm_update_is_one_compiled_call(solvers):
             assert results[-1].ipopt_status == "Newton", results[-1].message
             if "left an unstable equilibrium" not in results[-1].message:
                 assert not other, other  # no compiled call beside the loop's
-                state = native._state
+                state = native.committed_state
                 assert state.outputs is not None and state.reduced_eigen is not None
                 single += 1
     finally:
@@ -323,7 +323,7 @@ def test_a_warm_update_is_one_compiled_call(solvers):
         NN.NativeNewton.__call__, NN.ActiveNewton.__call__ = free, active
     assert loops["free"] >= 3 and loops["active"] >= 3, loops  # both loops ran, off and on the table
     assert single >= len(results) - 2, (single, len(results))
-    nlp, state = native.nlp, native._state
+    nlp, state = native.nlp, native.committed_state
     lam_si = state.lam_g / (nlp.row_scale * nlp.sigma)
     direct = fns.outputs(state.z, state.p, lam_si, fns.output_function.profiles(native.problem.string))
     for mine, theirs in zip(state.outputs.values, direct):

@@ -13,6 +13,8 @@ import pytest
 
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver
+from dlo_ros.solver.update import linking as LK
+from dlo_ros.solver.update import substeps as SS
 
 SCENE = load_scene("default_cable")
 OPTIONS = replace(SCENE.options, model="full")
@@ -44,11 +46,11 @@ def test_a_jump_newton_takes_in_substeps_equals_the_cold_solve(k, monkeypatch):
     solver = ShapeSolver(SCENE.problem, OPTIONS, compile="off")
     assert solver.solve().ok
     calls = []
-    original = solver._newton_in_substeps
-    monkeypatch.setattr(solver, "_newton_in_substeps", lambda *a: calls.append(original(*a)) or calls[-1])
+    original = SS.newton_in_substeps
+    monkeypatch.setattr(SS, "newton_in_substeps", lambda *a: calls.append(original(*a)) or calls[-1])
     linking = []  # substeps go far from the committed shape: the linking number is checked
-    check = solver._linking_jump
-    monkeypatch.setattr(solver, "_linking_jump", lambda *a: linking.append(check(*a)) or linking[-1])
+    check = LK.linking_jump
+    monkeypatch.setattr(LK, "linking_jump", lambda *a: linking.append(check(*a)) or linking[-1])
     warm = solver.solve({"right": (x, q)})
     assert calls and calls[0][0], "one Newton update took the jump: the case no longer tests substeps"
     assert linking == [None]

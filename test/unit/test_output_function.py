@@ -34,7 +34,7 @@ def numpy_result(solver: ShapeSolver):
     fns = solver.functions
     saved, fns.outputs = fns.outputs, None
     try:
-        return solver._outputs.result(solver.problem, solver.problem, solver._state, "", 0, 0.0, True, 0, None)
+        return solver.outputs.result(solver.problem, solver.problem, solver.committed_state, "", 0, 0.0, True, 0, None)
     finally:
         fns.outputs = saved
 
@@ -164,7 +164,7 @@ def test_the_outputs_function_equals_the_numpy_path_cold_and_streaming(case):
         assert r.ok, r.message
         assert_same(r, numpy_result(solver))
         touched |= any(np.linalg.norm(f) > 1e-6 for f in r.contact_forces.values())
-        slotted |= any(np.any(solver._state.lam_g[rows] > 1e-8) for rows in solver.nlp.slot_rows)
+        slotted |= any(np.any(solver.committed_state.lam_g[rows] > 1e-8) for rows in solver.nlp.slot_rows)
     assert touched == presses, "the stream was meant to press onto an obstacle: the contact terms went untested" \
         if presses else "a stream meant to stay clear touched"
     # a curved obstacle pressed on: a contact slot (obstacle_slots.py) carried force, so its terms were compared
@@ -183,7 +183,7 @@ def test_compiled_and_interpreted_outputs_agree(make, tmp_path, monkeypatch):
     for targets in [None, *stream(problem, 0.3, 4, axis="y" if options.model == "planar" else "x")]:
         r = solver.solve(targets) if targets else solver.solve()
         assert r.ok, r.message
-        state, nlp = solver._state, solver.nlp
+        state, nlp = solver.committed_state, solver.nlp
         args = (state.z, state.p, state.lam_g / (nlp.row_scale * nlp.sigma),
                 solver.functions.output_function.profiles(solver.problem.string))
         for native, plain in zip(solver.functions.outputs(*args), interpreted(*args)):
@@ -212,17 +212,17 @@ def test_a_relative_positions_reaction_enters_the_residual():
     for targets in [None, *stream(problem, 0.3, 4)]:
         r = solver.solve(targets) if targets else solver.solve()
         assert r.ok, r.message  # verified: the residual is within the tolerance (1e-3 L)
-        x_a, x_b = solver.nlp.model.positions(solver._state.z, np.array([rel.s_a, rel.s_b]))
+        x_a, x_b = solver.nlp.model.positions(solver.committed_state.z, np.array([rel.s_a, rel.s_b]))
         np.testing.assert_allclose(x_b - x_a, rel.offset, atol=1e-9)
         # the tie pulls: without its reaction the strong-form balance is far off
-        untied = solver.equilibrium(solver.problem, solver._state.z, r.grips, contact_actions(solver))
+        untied = solver.equilibrium(solver.problem, solver.committed_state.z, r.grips, contact_actions(solver))
         assert untied.metres > 100 * r.equilibrium_residual_m
 
 
 def contact_actions(solver: ShapeSolver) -> list[PointAction]:
     """Every touching obstacle sample's force on the committed state, as a point action."""
-    nlp, state = solver.nlp, solver._state
-    return solver._outputs._contacts(solver.problem, state.z, state.p, state.lam_g / (nlp.row_scale * nlp.sigma))[1]
+    nlp, state = solver.nlp, solver.committed_state
+    return solver.outputs._contacts(solver.problem, state.z, state.p, state.lam_g / (nlp.row_scale * nlp.sigma))[1]
 
 
 @pytest.mark.skipif(compiler() is None, reason="needs a C compiler")

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import dlo_ros.solver.shape_solver as shape_solver
+import dlo_ros.solver.update.attempts as attempts
 from dlo_ros.scene import load_scene, scene_from_dict
 from dlo_ros.solver import ShapeSolver, SolverOptions
 from dlo_ros.solver.update.ipopt import TIME_LIMIT
@@ -30,8 +30,8 @@ def test_a_warm_update_past_its_limit_starts_no_ipopt_attempt_and_keeps_the_last
     held = s.solve()
     assert held.ok
     calls = []
-    original = shape_solver.call
-    monkeypatch.setattr(shape_solver, "call", lambda *a, **k: calls.append(1) or original(*a, **k))
+    original = attempts.call
+    monkeypatch.setattr(attempts, "call", lambda *a, **k: calls.append(1) or original(*a, **k))
     r = s.solve(JUMP)
     assert r.status == "failed" and r.ipopt_status == TIME_LIMIT
     assert r.message.startswith("no answer within solver.update_time_limit (0.001 s)"), r.message

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ...model.problem import Problem
+from ...model.problem import GripPose, Problem
 from ...model.rotations import euler_from_frame
 from ..build.functions import NlpFunctions
 from ..build.initial_guess import match_clamp_rolls
@@ -155,3 +155,35 @@ def warm_state(
         )  # contacts keep their matched multipliers
         lam[:nf] = np.linalg.lstsq(jac[:nf].T, -rest, rcond=None)[0]
     return SolverState(z, lam, np.zeros(lay.size), p)
+
+
+def held_poses(
+    parameters: ProblemParameters, problem: Problem, src: SolverState
+) -> dict[str, GripPose] | None:
+    """Return the grip poses ``src`` is the equilibrium of, if they are ``problem``'s.
+
+    ``problem``'s poses when its grip targets are the ones ``src.p`` holds; None when they are not
+    (a scene set since, whose poses ``src`` was not solved for).
+    """
+    mask = parameters.nlp.grip_parameter_mask
+    p = parameters.pack(problem, src.z, src.p)
+    return (
+        {g.name: g.pose for g in problem.grips} if np.array_equal(p[mask], src.p[mask]) else None
+    )
+
+
+def adopted_copy(adopted: SolverState) -> SolverState:
+    """Return a copy of an adopted state with its derivatives.
+
+    A solve from it shifts g and the residual to its own targets (``newton``).
+    """
+    state = adopted.copy()
+    state.g = adopted.g
+    state.jacobian, state.hessian, state.gradient, state.energies = (
+        adopted.jacobian,
+        adopted.hessian,
+        adopted.gradient,
+        adopted.energies,
+    )
+    state.kkt, state.residual = adopted.kkt, adopted.residual
+    return state

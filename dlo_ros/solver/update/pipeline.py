@@ -1,0 +1,61 @@
+"""The update as a pipeline of stages: what ``ShapeSolver.solve`` runs under its lock.
+
+Contract: ``run_update(ctx, problem, warm, tracker)`` gives the outcome (result, state to commit or
+None) of moving from ``ctx.start`` (warm) or from nothing (cold) to ``problem``; it commits
+nothing.  The stages, each its own module:
+
+========================  ============================================================
+``contact_rounds``        self-contact rounds and the refusal of a jump through itself
+``moments``               dead point moments on the exact equilibrium equations
+``ladder``                Newton, saddle escape, IPOPT, continuation, cold fallback
+``slot_rounds``           obstacle contact slots placed again on the answer
+``linking``               the linking-number check of the clamped span
+``substeps``              a refused jump retried in substeps of the grip poses
+========================  ============================================================
+
+A new feature is a new stage: a module with a function of ``(ctx, problem, warm)`` (or wrapping
+one, as ``slot_rounds`` and ``substeps`` do), called from here.
+"""
+
+from __future__ import annotations
+
+from ...model.problem import Problem
+from . import linking as LK
+from .contact_rounds import solve_self_contact
+from .context import Outcome, UpdateContext
+from .linking import ClampTurnTracker
+from .moments import solve_with_moments
+from .slot_rounds import place_slots_again
+from .substeps import JUMP_REFUSALS, in_substeps
+
+
+def solve_update(ctx: UpdateContext, problem: Problem, warm: bool) -> Outcome:
+    """Solve ``problem`` from ``ctx.start``: contact rounds, or the pairs-fixed solve and checks.
+
+    Without self-contact the obstacle slots are placed again on the answer, and the linking number
+    is checked where ``linking.needs_check`` asks for it.
+    """
+    nlp = ctx.parts.nlp
+    if nlp.self_contact_slots:
+        return solve_self_contact(ctx, problem, warm)
+    start = ctx.start if warm else None
+    ctx.newton_far = False
+    result, state = solve_with_moments(ctx, problem, warm)
+    newton_only = result.ipopt_status.startswith("Newton")
+    if nlp.obstacle_slots:
+        result, state = place_slots_again(ctx, problem, result, state, solve_with_moments)
+    if start is not None and state is not None and LK.needs_check(ctx, result, newton_only):
+        jump = LK.linking_jump(ctx, problem, start, state)
+        if jump is not None:
+            return LK.linking_failure(ctx, jump, result.iterations, True), None
+    return result, state
+
+
+def run_update(
+    ctx: UpdateContext, problem: Problem, warm: bool, tracker: ClampTurnTracker
+) -> Outcome:
+    """Solve ``problem`` (``solve_update``); a warm update refused as a jump again in substeps."""
+    result, state = solve_update(ctx, problem, warm)
+    if warm and result.status == "failed" and result.message.startswith(JUMP_REFUSALS):
+        result, state = in_substeps(ctx, problem, result, solve_update, tracker)
+    return result, state

@@ -1,0 +1,127 @@
+"""Stage: a move split into substeps, of the Newton path and of the whole update.
+
+Contract:
+
+* ``newton_in_substeps(ctx, start, p1, problem)``: Newton along the straight path from
+  ``start.p`` to ``p1`` in SUBSTEPS equal parts, as a Newton attempt (ok, state, steps,
+  violation); the ladder's rung between plain Newton and IPOPT;
+* ``in_substeps(ctx, problem, refused, solve, tracker)``: a warm update refused as a jump
+  (``JUMP_REFUSALS``) solved again as SUBSTEPS[k] warm updates of the grip poses, each by
+  ``solve`` (``pipeline.solve_update``) from the last; it gives the last substep's outcome,
+  uncommitted, or ``refused`` with the substeps' outcome added.  ``ctx.start``, ``ctx.scene``,
+  ``ctx.clamp_turns`` and ``ctx.turns`` are restored when it returns.
+
+``newton_in_substeps`` is called through this module's attribute, so a test may wrap it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ...model.problem import GripPose, Problem
+from ...model.rotations import slerp
+from ..results.result import ShapeResult
+from ..state import SolverState
+from . import attempts as AT
+from .context import Outcome, UpdateContext
+from .linking import ClampTurnTracker
+
+#: the messages of a warm update refused as a jump of the solver (retried in substeps)
+JUMP_REFUSALS = (
+    "self-contact: the string passed through itself",
+    "self-contact: this shape is not reached",
+    "topology:",
+)
+#: substeps a refused warm update, or one Newton cannot take at once, is retried in (each count in
+#: turn)
+SUBSTEPS = (2, 4)
+
+#: a warm or cold solve from the context's start (``pipeline.solve_update``)
+Solve = Callable[[UpdateContext, Problem, bool], Outcome]
+
+
+def newton_in_substeps(
+    ctx: UpdateContext, start: SolverState, p1: np.ndarray, problem: Problem | None = None
+) -> AT.NewtonAttempt:
+    """Run Newton along the straight path from ``start.p`` to ``p1`` in SUBSTEPS equal parts.
+
+    Each part is warm-started from the last (the continuation IPOPT would do next, at the cost of
+    Newton steps); ``problem``: what ``p1`` packs.
+    """
+    iterations = 0
+    for parts in SUBSTEPS:
+        state, ok = start, True
+        for i in range(1, parts + 1):
+            ok, state, it, viol = (
+                AT.newton_to(ctx, state, p1, problem)
+                if i == parts
+                else AT.newton_to(ctx, state, start.p + (p1 - start.p) * (i / parts))
+            )
+            iterations += it
+            if not ok:
+                break
+        if ok:
+            return True, state, iterations, viol
+    return False, start, iterations, np.inf
+
+
+def substep_scene(problem: Problem, start: dict[str, GripPose], t: float) -> Problem:
+    """Return ``problem`` with its grips at the fraction ``t`` of the way from ``start``.
+
+    Positions move linearly, orientations by slerp.
+    """
+    return problem.with_grip_poses(
+        {
+            g.name: GripPose(
+                (1.0 - t) * start[g.name].position + t * g.pose.position,
+                slerp(start[g.name].orientation, g.pose.orientation, t),
+            )
+            for g in problem.grips
+        }
+    )
+
+
+def in_substeps(
+    ctx: UpdateContext,
+    problem: Problem,
+    refused: ShapeResult,
+    solve: Solve,
+    tracker: ClampTurnTracker,
+) -> Outcome:
+    """Solve a warm update refused as a jump again, in SUBSTEPS[k] warm updates.
+
+    The refusal: the string passed through itself, or turns of twist were released
+    (``JUMP_REFUSALS``).  The substeps go from the committed poses (``ctx.scene``'s) to
+    ``problem``'s, each checked as any update is: IPOPT's iterates need not keep the contact rows,
+    and a smaller move keeps it on the branch (Fig. 2 at radius 0).  Returns the last substep's
+    (result, state), uncommitted; or ``refused`` (with the substeps' outcome added) when a substep
+    fails too.  The context's start is restored either way: ``ShapeSolver.solve`` commits.
+    """
+    committed = (ctx.start, ctx.scene, ctx.clamp_turns)
+    start = {g.name: g.pose for g in ctx.scene.grips}
+    why = ""
+    with ctx.scoped(
+        start=ctx.start, scene=ctx.scene, clamp_turns=ctx.clamp_turns, turns=ctx.turns
+    ):
+        for k in SUBSTEPS:
+            ctx.start, ctx.scene, ctx.clamp_turns = committed
+            for i in range(1, k + 1):
+                step = substep_scene(problem, start, i / k) if i < k else problem
+                ctx.turns = tracker.advance(ctx.start, ctx.clamp_turns, step)
+                result, state = solve(ctx, step, True)
+                if result.status != "ok" or state is None:
+                    # a rescue must be a verified equilibrium
+                    why = f"; in {k} substeps, substep {i} {result.status}: {result.message}"
+                    break
+                if i == k:
+                    result.message += (
+                        f"; solved in {k} substeps (one update was refused: {refused.message})"
+                    )
+                    result.continuation_steps = k
+                    return result, state
+                ctx.start, ctx.scene = state, step  # the next substep starts here
+                ctx.clamp_turns = None if ctx.turns is None else ctx.turns.committed()
+    refused.message += why
+    return refused, None

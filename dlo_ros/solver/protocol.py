@@ -73,17 +73,3 @@ class Solver(Protocol):
 #: parameter (auto's a-posteriori checks; a fixed model has none).  Worker processes receive it
 #: pickled, so it must be a module-level function or class (pickled by reference).
 SolverFactory = Callable[..., Solver]
-
-
-def structure_key(problem: Problem, options: SolverOptions) -> tuple:
-    """Return what fixes the NLP's structure; problems with equal keys share one NLP."""
-    return (
-        problem.string.length,
-        tuple((g.name, g.s, g.mode) for g in problem.grips),
-        tuple(ld.s for ld in problem.loads),
-        tuple((r.s_a, r.s_b) for r in problem.relative_positions),
-        tuple(o.type for o in problem.obstacles),
-        problem.string.stretch_stiffness is not None,
-        problem.string.twist_stiffness.is_zero,
-        options,
-    )

@@ -44,6 +44,7 @@ from .build.parameters import ProblemParameters, check_moments
 from .contact import self_contact as SC
 from .contact import topology as TP
 from .options import SolverOptions
+from .parallel.batch import query_many
 from .results.outputs import ShapeOutputs, no_shape
 from .results.residual import EquilibriumResidual, PointAction
 from .results.result import GripWrench, ShapeResult
@@ -437,7 +438,6 @@ class ShapeSolver:
         (dlo_ros.solver.parallel.batch.query_many: ``executor`` defaults to a process pool on every
         core).
         """
-        from .parallel.batch import query_many
 
         return query_many(ShapeSolver, self.problem, self.options, targets, executor)
 

@@ -40,8 +40,9 @@ from typing import Mapping, Sequence
 
 from ...model.problem import Problem
 from ..options import SolverOptions
-from ..protocol import Solver, SolverFactory, structure_key
+from ..protocol import Solver, SolverFactory
 from ..results.result import ShapeResult
+from ..update.inputs import structure_key
 from .worker_pool import (
     BACKGROUND_NICE,
     TaskTimeout,

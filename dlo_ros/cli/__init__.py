@@ -27,7 +27,7 @@ from typing import Callable
 
 from ..text import one_line_warnings
 from . import demo, fit, node, replay, scenes, solve
-from .common import EXIT_NOT_OK, EXIT_OK, EXIT_USAGE, UsageError, _err
+from .common import EXIT_NOT_OK, EXIT_OK, EXIT_USAGE, UsageError, print_error
 from .demo import demo_path, format_demo, run_demo
 from .scenes import scene_summaries
 from .solve import JSON_KEYS, format_summary, max_sag
@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         text = (
             exc.args[0] if isinstance(exc, FileNotFoundError) and len(exc.args) == 1 else str(exc)
         )
-        _err(str(text))
+        print_error(str(text))
         return EXIT_USAGE
     except KeyboardInterrupt:
         return 130
@@ -135,5 +135,5 @@ def main(argv: list[str] | None = None) -> int:
         from ..text import safe_text
 
         name = f"{safe_text(exc.filename)}: " if exc.filename is not None else ""
-        _err(f"{name}{exc.strerror or type(exc).__name__}")
+        print_error(f"{name}{exc.strerror or type(exc).__name__}")
         return EXIT_USAGE

@@ -15,11 +15,11 @@ class UsageError(Exception):
     """Bad command-line input: printed as ``dlo: error: ...`` and exit code 2."""
 
 
-def _err(message: str) -> None:
+def print_error(message: str) -> None:
     print(f"dlo: error: {message}", file=sys.stderr)
 
 
-def _compile_mode(enabled: bool) -> str:
+def compile_mode(enabled: bool) -> str:
     """ShapeSolver's compile mode for a one-shot command: 'blocking' with --compile (compile the
     KKT function to C now, about a minute per new scene structure, cached), else 'cached' (use a
     library an earlier run compiled, never wait for gcc).
@@ -27,7 +27,7 @@ def _compile_mode(enabled: bool) -> str:
     return "blocking" if enabled else "cached"
 
 
-def _load(scene_arg: str):
+def load_scene_arg(scene_arg: str):
     from ..scene import load_scene
 
     return load_scene(scene_arg)

@@ -14,8 +14,8 @@ from typing import Callable
 import numpy as np
 
 from ..jsonio import json_safe, stdout_to_stderr
-from .common import EXIT_NOT_OK, EXIT_OK, UsageError, _compile_mode, _load
-from .record import _add_record_arguments, _close_recorder, _recorder
+from .common import EXIT_NOT_OK, EXIT_OK, UsageError, compile_mode, load_scene_arg
+from .record import add_record_arguments, close_recorder, make_recorder
 from .solve import max_sag
 
 HELP = "the main job: the ROS node + a dual-arm driver over DDS, with a summary (--solver-only: no ROS)"
@@ -61,7 +61,7 @@ def run_demo(
     from ..scene import DEFAULT_SCENE, SceneError
     from ..solver import make_solver
 
-    scene = _load(scene_name or DEFAULT_SCENE)
+    scene = load_scene_arg(scene_name or DEFAULT_SCENE)
     log = log or (lambda _msg: None)
     if compile == "blocking":
         log(
@@ -177,7 +177,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="compile the solver's KKT function to C (about a minute per new scene structure)",
     )
-    _add_record_arguments(p)
+    add_record_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -199,16 +199,16 @@ def run(args: argparse.Namespace) -> int:
     log = (lambda msg: print(msg, file=sys.stderr)) if not args.json else None
     guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
-        recorder = _recorder(args)
+        recorder = make_recorder(args)
         try:
             summary = run_demo(
                 args.scene,
                 args.steps,
                 log=log,
-                compile=_compile_mode(args.compile),
+                compile=compile_mode(args.compile),
                 recorder=recorder,
             )
         finally:
-            _close_recorder(recorder)
+            close_recorder(recorder)
     print(json.dumps(json_safe(summary)) if args.json else format_demo(summary))
     return EXIT_OK if summary["ok"] else EXIT_NOT_OK

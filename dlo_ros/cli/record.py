@@ -10,7 +10,7 @@ import sys
 from .common import UsageError
 
 
-def _add_record_arguments(p: argparse.ArgumentParser) -> None:
+def add_record_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("rerun recording (any combination; default off)")
     g.add_argument(
         "--rrd",
@@ -31,7 +31,7 @@ def _add_record_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _recorder(args: argparse.Namespace):
+def make_recorder(args: argparse.Namespace):
     """The Recorder the recording flags ask for (a disabled one when none is given)."""
     from ..recording import Recorder, RecordingUnavailable
 
@@ -45,7 +45,7 @@ def _recorder(args: argparse.Namespace):
         raise UsageError(f"{'--spawn' if args.spawn else 'recording'}: {exc}") from None
 
 
-def _close_recorder(recorder) -> None:
+def close_recorder(recorder) -> None:
     recorder.close()
     if recorder.enabled and recorder.errors:
         print(

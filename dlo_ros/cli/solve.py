@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from ..jsonio import json_safe, stdout_to_stderr
-from .common import EXIT_NOT_OK, EXIT_OK, UsageError, _compile_mode, _load
-from .record import _add_record_arguments, _close_recorder, _recorder
+from .common import EXIT_NOT_OK, EXIT_OK, UsageError, compile_mode, load_scene_arg
+from .record import add_record_arguments, close_recorder, make_recorder
 
 HELP = "solve a scene once and print the shape (exit 0 if status ok)"
 
@@ -199,25 +199,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="compile the solver's KKT function to C (slow first build; only useful for benchmarks)",
     )
-    _add_record_arguments(p)
+    add_record_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..solver import make_solver
 
-    scene = _load(args.scene)
+    scene = load_scene_arg(args.scene)
     options = _with_overrides(scene.options, args.points, args.basis, args.order, args.model)
     guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         try:
             solver = make_solver(
-                scene.problem, options, compile=_compile_mode(args.compile), checks="sync"
+                scene.problem, options, compile=compile_mode(args.compile), checks="sync"
             )
         except (
             ValueError
         ) as exc:  # the solver's own checks (e.g. loads[i].moment); they name the field
             raise UsageError(str(exc)) from None
-        recorder = _recorder(args)
+        recorder = make_recorder(args)
         try:
             if recorder.enabled:
                 recorder.log_scene(replace(scene, options=options), solver=solver)
@@ -230,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
                     result, update=0, ros_time_ns=stamp, targets=targets, warm=False
                 )
         finally:
-            _close_recorder(recorder)
+            close_recorder(recorder)
     if args.json:
         out = {"scene": scene.name, "frame_id": scene.frame_id, **result.to_dict()}
         print(json.dumps(json_safe(out), allow_nan=False))

@@ -56,8 +56,9 @@ from .paths import (
 from .recorder import DEFAULT_GRPC_URL, DEFAULT_PORT, Recorder, grpc_url, has_display
 from .scene_info import scene_info, scene_yaml
 from .visuals import obstacle_shape, quats_to_matrices, viridis
-# noqa: F401 - _Writer: tests slow it down to fill the queue
-from .writer import RecordingUnavailable, _Writer
+
+# noqa: F401 - Writer: tests slow it down to fill the queue
+from .writer import RecordingUnavailable, Writer
 
 __all__ = [
     "DEFAULT_GRPC_URL",

@@ -19,10 +19,10 @@ from .paths import (
 )
 
 if TYPE_CHECKING:
-    from .scene_info import _SceneInfo
+    from .scene_info import SceneInfo
 
 
-def auto_model(info: _SceneInfo | None) -> bool:
+def auto_model(info: SceneInfo | None) -> bool:
     """Whether the recorded solver picks its model (solver.model 'auto', not a ShapeSolver of
     it).
     """
@@ -31,7 +31,7 @@ def auto_model(info: _SceneInfo | None) -> bool:
     )
 
 
-def default_blueprint(info: _SceneInfo | None = None) -> Any:
+def default_blueprint(info: SceneInfo | None = None) -> Any:
     """3D world view (left) beside the time series and the event log (right); timeline
     ``update``.
     """
@@ -67,7 +67,7 @@ def default_blueprint(info: _SceneInfo | None = None) -> Any:
     )
 
 
-def _eye(info: _SceneInfo) -> Any:
+def _eye(info: SceneInfo) -> Any:
     """Camera looking at the cable from the side: perpendicular to the grips' chord and to
     gravity.
     """

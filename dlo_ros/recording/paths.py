@@ -54,7 +54,7 @@ E_MODEL_SERIES = (
     "model"  # model/<key>: scalars of ShapeResult.model, one row per result that has them
 )
 #: ShapeResult.model entries recorded as scalars (model/<key>; booleans as 1/0), with their series
-#names.
+# names.
 MODEL_SCALARS = {
     "order": "basis order",
     "variables": "unknowns",
@@ -78,7 +78,7 @@ E_DATA_TARGETS = "data/targets"
 ENERGY_TERMS = ("bend", "twist", "stretch", "gravity", "external_work", "total")
 
 
-def _part(name: str) -> str:
+def path_part(name: str) -> str:
     """A name as one entity-path part."""
     cleaned = "".join(c if c.isalnum() or c in "_-" else "_" for c in str(name))
     return cleaned or "_"

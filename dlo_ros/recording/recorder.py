@@ -16,10 +16,10 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .codec import encode_result, _encode_targets, _FitSnap, _Item
+from .codec import encode_result, encode_targets, FitSnap, QueueItem
 from .scene_info import scene_info
-from .transport import _ProcessBackend, _ThreadBackend
-from .writer import _Config
+from .transport import ProcessBackend, ThreadBackend
+from .writer import WriterConfig
 
 DEFAULT_GRPC_URL = "rerun+http://127.0.0.1:9876/proxy"
 DEFAULT_PORT = 9876
@@ -114,7 +114,7 @@ class Recorder:
             [grpc_url(connect)] if connect is not None else []
         )
         self.url = urls[0] if urls else None
-        cfg = _Config(
+        cfg = WriterConfig(
             rrd=str(self.rrd.resolve()) if self.rrd else None,
             spawn=bool(spawn),
             spawn_port=int(spawn_port),
@@ -123,7 +123,7 @@ class Recorder:
             recording_id=recording_id,
             frames=int(frames),
         )
-        kind = _ProcessBackend if backend == "process" else _ThreadBackend
+        kind = ProcessBackend if backend == "process" else ThreadBackend
         self._backend = kind(cfg, start_timeout, max(1, int(queue_size)))
         self.recording_id = self._backend.recording_id
 
@@ -152,7 +152,7 @@ class Recorder:
             return
         info = scene_info(scene_or_problem, frame_id, solver, self._force_scale)
         self._put(
-            _Item("scene", update, self._now(ros_time_ns) if update is not None else 0, info),
+            QueueItem("scene", update, self._now(ros_time_ns) if update is not None else 0, info),
             keep=True,
         )
 
@@ -164,7 +164,7 @@ class Recorder:
         """
         if not self.enabled:
             return
-        self._put(_encode_targets(poses, int(update), self._now(ros_time_ns)))
+        self._put(encode_targets(poses, int(update), self._now(ros_time_ns)))
 
     def log_result(
         self,
@@ -231,7 +231,7 @@ class Recorder:
         """An input that was rejected (bad pose, unknown grip, wrong frame, ...) and why."""
         if not self.enabled:
             return
-        self._put(_Item("rejected", int(update), self._now(ros_time_ns), str(reason)))
+        self._put(QueueItem("rejected", int(update), self._now(ros_time_ns), str(reason)))
 
     def log_model_change(
         self, text: str, *, update: int, ros_time_ns: int | None = None, scene: Any = None
@@ -242,7 +242,7 @@ class Recorder:
         if not self.enabled:
             return
         t = self._now(ros_time_ns)
-        self._put(_Item("model", int(update), t, str(text)), keep=True)
+        self._put(QueueItem("model", int(update), t, str(text)), keep=True)
         if scene is not None:
             self.log_scene(scene, update=update, ros_time_ns=t)
 
@@ -267,7 +267,7 @@ class Recorder:
         """
         if not self.enabled:
             return
-        snap = _FitSnap(
+        snap = FitSnap(
             np.array(points, dtype=float),
             np.array(shape, dtype=float).reshape(-1, 3),
             np.array(feet, dtype=float).reshape(-1, 3),
@@ -276,7 +276,7 @@ class Recorder:
             str(text),
             bool(ok),
         )
-        self._put(_Item("fit", int(update), self._now(ros_time_ns), snap), keep=True)
+        self._put(QueueItem("fit", int(update), self._now(ros_time_ns), snap), keep=True)
 
     def flush(self, timeout: float = 10.0) -> bool:
         """Wait until everything logged so far is in rerun's sinks (False on timeout or a dead

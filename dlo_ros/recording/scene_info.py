@@ -12,7 +12,7 @@ from .visuals import obstacle_shape
 
 
 @dataclass
-class _SceneInfo:
+class SceneInfo:
     """What the writer needs of a scene (plain data: the writer process never imports the
     model).
     """
@@ -58,7 +58,7 @@ def scene_info(
     frame_id: str | None = None,
     solver: Any = None,
     force_scale: float | None = None,
-) -> _SceneInfo:
+) -> SceneInfo:
     """The writer's view of a Scene (or a bare Problem: then no YAML, not re-solvable)."""
     problem = getattr(scene_or_problem, "problem", scene_or_problem)
     is_scene = problem is not scene_or_problem
@@ -80,7 +80,7 @@ def scene_info(
         kind, kwargs = obstacle_shape(ob, centre, extent)
         obstacles.append((kind, kwargs, ob.name or ob.type, list(ob.primitive().colour)))
     kind = solver if isinstance(solver, str) else ("" if solver is None else type(solver).__name__)
-    return _SceneInfo(
+    return SceneInfo(
         name=str(getattr(scene_or_problem, "name", "problem")),
         frame_id=str(frame_id or getattr(scene_or_problem, "frame_id", "world")),
         length=L,

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .writer import RecordingUnavailable, _Config, _Writer
+from .writer import RecordingUnavailable, WriterConfig, Writer
 
 log = logging.getLogger(__name__)
 
@@ -39,15 +39,15 @@ def _drop_oldest(queue: collections.deque, limit: int) -> int:
     return 0
 
 
-class _ThreadBackend:
+class ThreadBackend:
     """The writer in a background thread of this process (``backend="thread"``).  Simple, but
     rerun's Python work shares the GIL with the caller: on a loaded machine it slows the solver
     thread.
     """
 
-    def __init__(self, cfg: _Config, timeout: float, queue_size: int) -> None:
+    def __init__(self, cfg: WriterConfig, timeout: float, queue_size: int) -> None:
         del timeout
-        self.writer = _Writer(cfg)
+        self.writer = Writer(cfg)
         self.recording_id = self.writer.recording_id
         self.dropped = 0
         self._limit = queue_size
@@ -174,25 +174,25 @@ CHILD_POLL_SECONDS = (
 )
 
 
-class _ProcessBackend:
+class ProcessBackend:
     """The writer in a child process (``backend="process"``, the default).
 
     ``submit`` pickles the snapshot and writes it into a non-blocking pipe (enlarged to 1 MiB where
     Linux allows): tens of microseconds in the caller's thread, no background Python thread
     competing for the GIL.  Only when the pipe is full does a frame wait in the bounded backlog
     (drop-oldest), which a small thread writes out as soon as the child has read.  The child
-    (``python -c 'from dlo_ros.recording.transport import _child_main; ...'``) makes every rerun
+    (``python -c 'from dlo_ros.recording.transport import child_main; ...'``) makes every rerun
     call; it ignores SIGINT (Ctrl-C stops the parent, which then closes it) and finishes the
     recording on EOF.
     """
 
-    def __init__(self, cfg: _Config, timeout: float, queue_size: int) -> None:
+    def __init__(self, cfg: WriterConfig, timeout: float, queue_size: int) -> None:
         env = dict(os.environ)
         package_root = str(Path(__file__).resolve().parents[2])
         env["PYTHONPATH"] = os.pathsep.join(
             [package_root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])
         )
-        code = "import sys; from dlo_ros.recording.transport import _child_main; sys.exit(_child_main())"
+        code = "import sys; from dlo_ros.recording.transport import child_main; sys.exit(child_main())"
         self.proc = subprocess.Popen(
             [sys.executable, "-c", code],
             stdin=subprocess.PIPE,
@@ -370,7 +370,7 @@ class _ProcessBackend:
             self.proc.wait()
 
 
-def _child_main() -> int:
+def child_main() -> int:
     """Entry point of the recorder process: read frames from stdin, log them, answer on stdout."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     inp = sys.stdin.buffer.fileno()
@@ -380,7 +380,7 @@ def _child_main() -> int:
     if cfg is None:
         return 0
     try:
-        writer = _Writer(cfg)
+        writer = Writer(cfg)
     except RecordingUnavailable as exc:
         _write_all(out, _frame(("unavailable", str(exc))))
         return 1

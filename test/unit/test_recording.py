@@ -284,13 +284,13 @@ def test_full_queue_drops_the_oldest_and_says_so(tmp_path, scene, solver, monkey
     solver.reset()
     r = solver.solve()
     gate = threading.Event()
-    original = R._Writer.handle
+    original = R.Writer.handle
 
     def slow_handle(self, message, dropped_total=0):
         gate.wait(30)
         original(self, message, dropped_total)
 
-    monkeypatch.setattr(R._Writer, "handle", slow_handle)
+    monkeypatch.setattr(R.Writer, "handle", slow_handle)
     path = tmp_path / "dropped.rrd"
     rec = R.Recorder(rrd=path, backend="thread", queue_size=4)
     rec.log_scene(scene)  # never dropped

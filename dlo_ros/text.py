@@ -7,7 +7,7 @@ from __future__ import annotations
 import unicodedata
 
 #: Longest text (characters, after escaping) that :func:`safe_text` lets into a log line or a
-#diagnostic value.
+# diagnostic value.
 TEXT_LIMIT = 200
 
 # Unicode categories escaped by safe_text: control (incl. ESC, CR, LF, TAB), format (bidi

@@ -5,6 +5,10 @@ mode.
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the type only: start-up (cli/__init__)
+    from ..scene import Scene
 
 EXIT_OK = 0
 EXIT_NOT_OK = 1
@@ -16,6 +20,7 @@ class UsageError(Exception):
 
 
 def print_error(message: str) -> None:
+    """Print ``dlo: error: <message>`` on stderr: the one line a refused input gets."""
     print(f"dlo: error: {message}", file=sys.stderr)
 
 
@@ -27,7 +32,8 @@ def compile_mode(enabled: bool) -> str:
     return "blocking" if enabled else "cached"
 
 
-def load_scene_arg(scene_arg: str):
-    from ..scene import load_scene
+def load_scene_arg(scene_arg: str) -> Scene:
+    """Load the scene a command names: a file path or a shipped scene's name (``load_scene``)."""
+    from ..scene import load_scene  # start-up (cli/__init__)
 
     return load_scene(scene_arg)

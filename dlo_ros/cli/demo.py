@@ -18,7 +18,10 @@ from .common import EXIT_NOT_OK, EXIT_OK, UsageError, compile_mode, load_scene_a
 from .record import add_record_arguments, close_recorder, make_recorder
 from .solve import max_sag
 
-HELP = "the main job: the ROS node + a dual-arm driver over DDS, with a summary (--solver-only: no ROS)"
+HELP = (
+    "the main job: the ROS node + a dual-arm driver over DDS, with a summary (--solver-only: "
+    "no ROS)"
+)
 
 
 def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
@@ -57,6 +60,7 @@ def run_demo(
     The CLI prints it with :func:`format_demo`. ``recorder``: a dlo_ros.recording.Recorder; update
     0 is the cold solve, update k the k-th step.
     """
+    # start-up (cli/__init__): the model, scene and solver only when a demo runs
     from ..model.problem import GripPose
     from ..scene import DEFAULT_SCENE, SceneError
     from ..solver import make_solver
@@ -65,7 +69,8 @@ def run_demo(
     log = log or (lambda _msg: None)
     if compile == "blocking":
         log(
-            f"building the solver for {scene.name} (compiling C code: up to a minute the first time)"
+            f"building the solver for {scene.name} (compiling C code: up to a minute the first "
+            f"time)"
         )
     t0 = time.perf_counter()
     try:
@@ -136,14 +141,17 @@ def run_demo(
 def format_demo(summary: dict) -> str:
     c, w = summary["cold"], summary["warm"]
     lines = [
-        f"demo    scene {summary['scene']}: grip {summary['moving_grip']!r} moved in {summary['steps']} warm-started steps",
+        f"demo    scene {summary['scene']}: grip {summary['moving_grip']!r} moved in "
+        f"{summary['steps']} warm-started steps",
         f"build   {summary['build_time_s']:.2f} s",
-        f"cold    {c['status']} ({c['message']}), {c['time_ms']:.1f} ms, {c['iterations']} iterations, stable {c['stable']}",
+        f"cold    {c['status']} ({c['message']}), {c['time_ms']:.1f} ms, {c['iterations']} "
+        f"iterations, stable {c['stable']}",
     ]
     if w["time_ms"]:
         statuses = ", ".join(f"{k} {v}" for k, v in sorted(w["statuses"].items()))
         lines += [
-            f"warm    median {w['median_ms']:.2f} ms, p90 {w['p90_ms']:.2f} ms, max {w['max_ms']:.2f} ms",
+            f"warm    median {w['median_ms']:.2f} ms, p90 {w['p90_ms']:.2f} ms, max "
+            f"{w['max_ms']:.2f} ms",
             f"        mean {w['mean_iterations']:.1f} iterations; statuses: {statuses}; "
             f"stable {w['stable_count']}/{summary['steps']}",
         ]
@@ -158,8 +166,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--solver-only",
         action="store_true",
-        help="no ROS: solve the scene in this process and move a grip (the default demo runs the ROS "
-        "node and a dual-arm driver over DDS; its options: python -m dlo_ros.node.demo --help)",
+        help="no ROS: solve the scene in this process and move a grip (the default demo runs the "
+        "ROS node and a dual-arm driver over DDS; its options: "
+        "python -m dlo_ros.node.demo --help)",
     )
     p.add_argument(
         "--scene", default=None, metavar="NAME", help="scene name or file (default: default_cable)"
@@ -186,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
     ROS-free demo.
     """
     if not args.solver_only:
-        from ..node.demo import run_demo_job
+        from ..node.demo import run_demo_job  # start-up (cli/__init__): rclpy
 
         job = ["--compile", "blocking" if args.compile else "cached"]
         if getattr(

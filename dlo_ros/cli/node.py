@@ -9,7 +9,8 @@ import argparse
 from .common import EXIT_OK, EXIT_USAGE
 
 HELP = (
-    "run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--check] [--ros-args ...] "
+    "run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--check] "
+    "[--ros-args ...] "
     "(`dlo node --help`)"
 )
 
@@ -31,11 +32,11 @@ def run_node(argv: list[str]) -> int:
     hands everything after ``node`` here untouched (argparse cannot pass ``--scene`` through a
     subparser).
     """
-    from ..node.signals import stop_on_first_signal
+    from ..node.signals import stop_on_first_signal  # start-up (cli/__init__): rclpy
 
     # before the node's imports (CasADi, rclpy): SIGTERM then stops it with 0, not −15
     stop_on_first_signal()
-    from ..node.params import node_argument_parser
+    from ..node.params import node_argument_parser  # start-up (cli/__init__)
 
     if any(
         a in ("-h", "--help")
@@ -43,7 +44,7 @@ def run_node(argv: list[str]) -> int:
     ):
         node_argument_parser("dlo node").print_help()  # without importing rclpy
         return EXIT_OK
-    from ..node import main as node_main
+    from ..node import main as node_main  # start-up (cli/__init__): rclpy
 
     try:
         result = node_main(argv, prog="dlo node")

@@ -6,11 +6,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the type only: start-up (cli/__init__)
+    from ..recording import Recorder
 
 from .common import UsageError
 
 
 def add_record_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the recording flags (--rrd, --spawn, --connect) to a subcommand's parser."""
     g = p.add_argument_group("rerun recording (any combination; default off)")
     g.add_argument(
         "--rrd",
@@ -33,7 +38,7 @@ def add_record_arguments(p: argparse.ArgumentParser) -> None:
 
 def make_recorder(args: argparse.Namespace):
     """The Recorder the recording flags ask for (a disabled one when none is given)."""
-    from ..recording import Recorder, RecordingUnavailable
+    from ..recording import Recorder, RecordingUnavailable  # start-up (cli/__init__)
 
     try:
         return Recorder(rrd=args.rrd, spawn=args.spawn, connect=args.connect)
@@ -45,7 +50,8 @@ def make_recorder(args: argparse.Namespace):
         raise UsageError(f"{'--spawn' if args.spawn else 'recording'}: {exc}") from None
 
 
-def close_recorder(recorder) -> None:
+def close_recorder(recorder: Recorder) -> None:
+    """Close the recorder and say on stderr where the recording went and how many errors it had."""
     recorder.close()
     if recorder.enabled and recorder.errors:
         print(

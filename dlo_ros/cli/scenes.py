@@ -16,9 +16,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def scene_summaries() -> list[tuple[str, str]]:
     """(name, first line of the description) of every shipped scene; unreadable files say why."""
-    import yaml
+    import yaml  # start-up (cli/__init__)
 
-    from ..scene import SceneLoader
+    from ..scene import SceneLoader  # start-up (cli/__init__)
 
     out = []
     for name in available_scenes():

@@ -126,7 +126,8 @@ def format_summary(scene, result) -> str:
                 )
         for c in result.self_contacts:
             lines.append(
-                f"self    s = {c.s_a:.4g} m and {c.s_b:.4g} m pressed together: force {_vec(c.force)} N "
+                f"self    s = {c.s_a:.4g} m and {c.s_b:.4g} m pressed together: force "
+                f"{_vec(c.force)} N "
                 f"(on s = {c.s_a:.4g} m; gap {c.gap:.4g} m)"
             )
         sag = max_sag(
@@ -135,7 +136,8 @@ def format_summary(scene, result) -> str:
         lines.append(f"sag     {sag:.4g} m  (lowest point below the lowest grip, along gravity)")
     if result.status in ("ok", "unverified"):
         lines.append(
-            f"check   equilibrium residual {result.equilibrium_residual_m:.3g} m (equivalent centreline error)"
+            f"check   equilibrium residual {result.equilibrium_residual_m:.3g} m (equivalent "
+            f"centreline error)"
         )
     lines.append(
         f"solver  {result.iterations} iterations, {result.solve_time_ms:.1f} ms, "
@@ -197,13 +199,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--compile",
         action="store_true",
-        help="compile the solver's KKT function to C (slow first build; only useful for benchmarks)",
+        help=(
+            "compile the solver's KKT function to C (slow first build; only useful for benchmarks)"
+        ),
     )
     add_record_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..solver import make_solver
+    from ..solver import make_solver  # start-up (cli/__init__)
 
     scene = load_scene_arg(args.scene)
     options = _with_overrides(scene.options, args.points, args.basis, args.order, args.model)

@@ -49,10 +49,11 @@ UNITS = {"Rf": "N·m²", "Rt": "N·m²", "D": "N/m", "Re": "N"}
 #: held at the scene's value first when a direction is undetermined
 ANCHOR_ORDER = ("Rf", "Rt", "Re", "D")
 #: the search is bounded to a factor e^BOUND (1000) either way of the scene's values: data that do
-#not : determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
+# not : determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
 BOUND = float(np.log(1e3))
 AT_BOUND = (
-    "the data drive it to the bound of the search (a factor 1000 from the scene's value): they do not "
+    "the data drive it to the bound of the search (a factor 1000 from the scene's value): they do "
+    "not "
     "determine it; the other estimates are conditional on it being there"
 )
 #: ratios reported (numerator, denominator, unit)
@@ -180,14 +181,18 @@ def _fit(
     ident = analyse(names, current.normal)
     for k in np.flatnonzero(np.abs(current.theta) >= BOUND * (1 - 1e-9)):
         ident.why[names[k]] = AT_BOUND
-        message += f"; {names[k]} is at the bound of the search (the other estimates are conditional on it)"
+        message += (
+            f"; {names[k]} is at the bound of the search (the other estimates are "
+            f"conditional on it)"
+        )
     theta = _anchored(current.theta, par, ident, current.normal)
     cov = _pseudo_inverse(current.normal, ident)
     string = par.string(theta)
     for k, comp in enumerate(par.components):
         if ident.why.get(comp.label) == NEITHER and abs(theta[k]) > 1e-6:
             message += (
-                f"; {comp.label} is not determined and the fit left it at {par.value(string, k):.4g} "
+                f"; {comp.label} is not determined and the fit left it at "
+                f"{par.value(string, k):.4g} "
                 f"{UNITS[comp.material]}: the other estimates are conditional on that value"
             )
     parameters, ratios = {}, {}

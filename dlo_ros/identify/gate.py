@@ -235,8 +235,10 @@ def evaluate_gate(
         cause
         or next((c for c in causes if c), "")
         or (
-            "the fitted shape does not explain the points (a shape the scene's string cannot take: "
-            "wrong scene, grip poses, length or model, or σ stated too small; the points follow at "
+            "the fitted shape does not explain the points (a shape the scene's string cannot "
+            "take: "
+            "wrong scene, grip poses, length or model, or σ stated too small; the points follow "
+            "at "
             f"least about {longest_arc(problem, data):.3g} m of "
             f"curve, the string is {problem.string.length:g} m)"
         )

@@ -19,17 +19,21 @@ import numpy as np
 
 #: an eigenvalue of A below this times the largest spans an undetermined direction
 RANK_TOLERANCE = 1e-10
-#: |V0ᵀ c| / |c| below this: the combination c is determined.  The null space of a nearly degenerate A is
+#: |V0ᵀ c| / |c| below this: the combination c is determined.  The null space of a nearly
+#: degenerate A is
 #: known only approximately (a weak direction's eigenvector mixes with its neighbours), so a
-#combination : with a 1 % component along it still counts as orthogonal to it
+# combination : with a 1 % component along it still counts as orthogonal to it
 ORTHOGONAL = 1e-2
 
 WHY = {
     "Rt": (
-        "no observation twists the string: Rt changes none of the predicted shapes (a shape held by two "
+        "no observation twists the string: Rt changes none of the predicted shapes (a shape held "
+        "by two "
         "clamps turned relative to each other about the tangent is needed)"
     ),
-    "Re": "no observation stretches the string measurably: Re changes none of the predicted shapes",
+    "Re": (
+        "no observation stretches the string measurably: Re changes none of the predicted shapes"
+    ),
     "D": "the weight changes none of the predicted shapes",
     "Rf": "Rf changes none of the predicted shapes",
 }
@@ -116,8 +120,10 @@ def analyse(
                 f"{a}/{b}" for a, b in (sorted((name, o), key=_ratio_order) for o in partners)
             )
             why[name] = (
-                f"the data determine only ratios ({ratios}): from shapes alone the equilibrium depends on "
-                "D/Rf, Rt/Rf and Re/Rf; an absolute value needs a measured grip force (force), a measured "
+                f"the data determine only ratios ({ratios}): from shapes alone the equilibrium "
+                f"depends on "
+                "D/Rf, Rt/Rf and Re/Rf; an absolute value needs a measured grip force (force), a "
+                "measured "
                 "grip torque (torque) or the known total mass (total_mass)"
             )
         else:

@@ -201,7 +201,10 @@ class Objective:
             result = o.solve(string)
             self.solves += 1
             if result.status != "ok":
-                return f"observation {o.obs.name!r}: the equilibrium is {result.status}: {result.message}"
+                return (
+                    f"observation {o.obs.name!r}: the equilibrium is {result.status}: "
+                    f"{result.message}"
+                )
             sens = shape_sensitivity(o.solver, directions, s_grid)
             cr = point_to_curve(o.obs.points, sens.s, sens.points, sens.d_points)
             sigma = o.obs.sigma

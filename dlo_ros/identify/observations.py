@@ -146,7 +146,8 @@ class ObservationSet:
                 )
 
 
-# ---- readers ----------------------------------------------------------------------------------------
+# ---- readers
+# ----------------------------------------------------------------------------------------
 def _positive(value: object, key: str, upper: float = float("inf")) -> float:
     if isinstance(value, bool):
         raise ObservationError(f"{key}: expected a number > 0, got {value!r}")

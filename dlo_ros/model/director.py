@@ -48,7 +48,8 @@ from .elements import ElementMesh
 from .rotations import cross3
 
 
-#: weight of the gauge term ½ c Rf ((ln|v|)')² relative to the bend energy: large enough to forbid a fold
+#: weight of the gauge term ½ c Rf ((ln|v|)')² relative to the bend energy: large enough to forbid
+#: a fold
 #: hidden between quadrature nodes, small enough to leave the spectral accuracy
 GAUGE_WEIGHT = 1e-2
 
@@ -214,7 +215,8 @@ class DirectorModel:
         )
         self._cache: dict[bytes, np.ndarray] = {}
 
-    # ---- numpy -----------------------------------------------------------------------------------
+    # ---- numpy
+    # -----------------------------------------------------------------------------------
     def node_values(self, z: np.ndarray) -> np.ndarray:
         """(N, 4) nodal quaternions or (N, 3) nodal tangents."""
         return np.asarray(z[self.layout.rotation]).reshape(self.layout.nodes, self.layout.width)
@@ -329,7 +331,8 @@ class DirectorModel:
         dt = (dv - np.sum(t * dv, axis=1)[:, None] * t) / n
         return cross3(t, dt)
 
-    # ---- CasADi ----------------------------------------------------------------------------------
+    # ---- CasADi
+    # ----------------------------------------------------------------------------------
     def material_sizes(self) -> dict[str, int]:
         return {"weight_moments": self.mesh.quad_count, "weight_total": 1}
 
@@ -427,7 +430,8 @@ class DirectorModel:
         t = v / ca.norm_2(v)
         return ca.dot(moment, ca.cross(reference[0:3], t))
 
-    # ---- guesses and transfers -------------------------------------------------------------------
+    # ---- guesses and transfers
+    # -------------------------------------------------------------------
     def z_from_frames(
         self, x0: np.ndarray, frames: np.ndarray, eps: np.ndarray | None = None
     ) -> np.ndarray:
@@ -469,5 +473,6 @@ def _transport(d1: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
     axis = cross3(t0, t1)
     if c < -0.999999:
         return d1
-    # Rodrigues with k = axis/|axis|, |axis| = sin a: R v = v c + (axis × v) + axis (axis·v) / (1 + c)
+    # Rodrigues with k = axis/|axis|, |axis| = sin a: R v = v c + (axis × v) + axis (axis·v) / (1
+    # + c)
     return d1 * c + cross3(axis, d1) + axis * np.dot(axis, d1) / (1.0 + c)

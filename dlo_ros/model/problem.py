@@ -13,8 +13,10 @@ import numpy as np
 
 from .obstacles import Obstacle
 from .profile import Profile
-# noqa: F401 - PoseError re-exported
-from .rotations import PoseError, check_position, check_quaternion
+
+# PoseError is re-exported: callers validating a pose catch it from here
+from .rotations import PoseError as PoseError
+from .rotations import check_position, check_quaternion
 
 GRIP_MODES = ("clamp", "pin", "tangent")
 

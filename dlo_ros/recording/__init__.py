@@ -57,13 +57,13 @@ from .recorder import DEFAULT_GRPC_URL, DEFAULT_PORT, Recorder, grpc_url, has_di
 from .scene_info import scene_info, scene_yaml
 from .visuals import obstacle_shape, quats_to_matrices, viridis
 
-# noqa: F401 - Writer: tests slow it down to fill the queue
 from .writer import RecordingUnavailable, Writer
 
 __all__ = [
     "DEFAULT_GRPC_URL",
     "DEFAULT_PORT",
     "Recorder",
+    "Writer",
     "RecordingUnavailable",
     "auto_model",
     "bend_energy_density",

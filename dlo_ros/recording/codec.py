@@ -15,6 +15,11 @@ import numpy as np
 
 @dataclass
 class QueueItem:
+    """One queued message, decoded: its ``kind`` (the writer's ``_handle_<kind>``), when, what.
+
+    ``update`` is the update number (None: static), ``ros_time_ns`` the ROS time [ns].
+    """
+
     kind: str
     update: int | None
     ros_time_ns: int
@@ -23,6 +28,8 @@ class QueueItem:
 
 @dataclass
 class ResultSnap:
+    """What the writer draws of one ShapeResult, as plain data (the writer never imports it)."""
+
     status: str
     message: str
     stable: bool | None

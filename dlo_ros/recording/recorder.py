@@ -48,7 +48,8 @@ def grpc_url(address: str | None) -> str:
         return address
     if "://" in address:
         raise ValueError(
-            f"--connect: expected HOST[:PORT] or a rerun+http://HOST:PORT/proxy URL, got {address!r}"
+            f"--connect: expected HOST[:PORT] or a rerun+http://HOST:PORT/proxy URL, got "
+            f"{address!r}"
         )
     host, _, port = address.rpartition(":") if ":" in address else (address, "", "")
     host = host or "127.0.0.1"
@@ -106,8 +107,10 @@ class Recorder:
             raise ValueError(f"backend: must be 'process' or 'thread', got {backend!r}")
         if spawn and not has_display():
             raise RuntimeError(
-                "no display ($DISPLAY and $WAYLAND_DISPLAY are unset), so a spawned viewer cannot open "
-                "a window; save with --rrd FILE and open it with `dlo replay FILE` where there is a "
+                "no display ($DISPLAY and $WAYLAND_DISPLAY are unset), so a spawned viewer cannot "
+                "open "
+                "a window; save with --rrd FILE and open it with `dlo replay FILE` where there is "
+                "a "
                 "display, or stream with --connect to a viewer running elsewhere"
             )
         urls = ([f"rerun+http://127.0.0.1:{spawn_port}/proxy"] if spawn else []) + (
@@ -127,7 +130,8 @@ class Recorder:
         self._backend = kind(cfg, start_timeout, max(1, int(queue_size)))
         self.recording_id = self._backend.recording_id
 
-    # ---- public API (any thread) ------------------------------------------------------------------
+    # ---- public API (any thread)
+    # ------------------------------------------------------------------
     def log_scene(
         self,
         scene_or_problem: Any,
@@ -313,7 +317,8 @@ class Recorder:
         """Items accepted and not yet handed to rerun (or to the recorder process)."""
         return self._backend.pending if self._backend is not None and not self._closed else 0
 
-    # ---- internals ----------------------------------------------------------------------------------
+    # ---- internals
+    # ----------------------------------------------------------------------------------
     @staticmethod
     def _now(ros_time_ns: int | None) -> int:
         return time.time_ns() if ros_time_ns is None else int(ros_time_ns)

@@ -17,7 +17,7 @@ from .reading import (
     RecordedResult,
     Recording,
     RecordingCheck,
-    RecordingError,  # noqa: F401
+    RecordingError,
     check_recording,
     read_recording,
     rows_of,
@@ -26,10 +26,25 @@ from .reading import (
 if TYPE_CHECKING:
     from ..solver import Solver
 
+__all__ = [
+    "DEFAULT_TOLERANCE",
+    "RecordedResult",
+    "Recording",
+    "RecordingCheck",
+    "RecordingError",
+    "check_recording",
+    "deviation",
+    "format_resolve",
+    "read_recording",
+    "resolve",
+    "rows_of",
+]
+
 DEFAULT_TOLERANCE = 1e-6
 
 
-# ---- re-solving ----------------------------------------------------------------------------------------
+# ---- re-solving
+# ----------------------------------------------------------------------------------------
 def _scene_from_yaml(text: str, where: str):
     import yaml
 
@@ -153,7 +168,8 @@ def format_resolve(report: dict) -> str:
     for r in report["updates"]:
         flag = "" if r["max_deviation_m"] <= report["tolerance_m"] else "   > tolerance"
         lines.append(
-            f"{r['update']:>7}  {r['recorded_status']:<11} {r['status']:<11} {r['max_deviation_m']:.3g}{flag}"
+            f"{r['update']:>7}  {r['recorded_status']:<11} {r['status']:<11} "
+            f"{r['max_deviation_m']:.3g}{flag}"
         )
     verdict = (
         "OK"
@@ -163,8 +179,10 @@ def format_resolve(report: dict) -> str:
     )
     mean = report["mean_deviation_m"]
     lines.append(
-        f"summary {report['count']} updates re-solved: max deviation {report['max_deviation_m']:.3g} m "
+        f"summary {report['count']} updates re-solved: max deviation "
+        f"{report['max_deviation_m']:.3g} m "
         f"(update {report['worst_update']}), mean {'n/a' if mean is None else f'{mean:.3g}'} m; "
-        f"{len(report['exceeding'])} above the tolerance {report['tolerance_m']:.3g} m -> {verdict}"
+        f"{len(report['exceeding'])} above the tolerance {report['tolerance_m']:.3g} m -> "
+        f"{verdict}"
     )
     return "\n".join(lines)

@@ -192,7 +192,10 @@ class ProcessBackend:
         env["PYTHONPATH"] = os.pathsep.join(
             [package_root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])
         )
-        code = "import sys; from dlo_ros.recording.transport import child_main; sys.exit(child_main())"
+        code = (
+            "import sys; from dlo_ros.recording.transport import child_main; "
+            "sys.exit(child_main())"
+        )
         self.proc = subprocess.Popen(
             [sys.executable, "-c", code],
             stdin=subprocess.PIPE,

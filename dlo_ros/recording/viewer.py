@@ -31,14 +31,19 @@ def rerun_command() -> list[str]:
 def no_display_message(path: Path) -> str:
     return "\n".join(
         [
-            f"dlo replay: no display here ($DISPLAY and $WAYLAND_DISPLAY are unset), so the rerun viewer cannot "
+            f"dlo replay: no display here ($DISPLAY and $WAYLAND_DISPLAY are unset), so the rerun "
+            f"viewer cannot "
             f"open a window for {path}.",
             "Instead:",
-            f"  * on a machine with a display: `dlo replay {path}` or `rerun {path}` (rerun-sdk 0.41: "
+            f"  * on a machine with a display: `dlo replay {path}` or `rerun {path}` (rerun-sdk "
+            f"0.41: "
             "`pip install rerun-sdk==0.41.0`)",
-            f"  * in a browser, no display needed: `dlo replay {path} --web` (serves http://localhost:9090;"
-            " forward the ports 9090 and 9876 over ssh: `ssh -L 9090:localhost:9090 -L 9876:localhost:9876 HOST`)",
-            f"  * as an image: `dlo replay {path} --screenshot out.png` (headless; needs a Vulkan driver, "
+            f"  * in a browser, no display needed: `dlo replay {path} --web` (serves "
+            f"http://localhost:9090;"
+            " forward the ports 9090 and 9876 over ssh: `ssh -L 9090:localhost:9090 -L "
+            "9876:localhost:9876 HOST`)",
+            f"  * as an image: `dlo replay {path} --screenshot out.png` (headless; needs a Vulkan "
+            f"driver, "
             "e.g. Debian's mesa-vulkan-drivers)",
             f"  * as a regression check: `dlo replay {path} --resolve`",
         ]

@@ -57,6 +57,12 @@ class RecordingUnavailable(RuntimeError):
 
 @dataclass
 class WriterConfig:
+    """Where and how the writer records: the Recorder's arguments, as plain picklable data.
+
+    rrd: file to save (None: none); spawn/spawn_port: start a viewer; urls: viewers to stream to;
+    application_id/recording_id: rerun's; frames: material frames drawn per shape.
+    """
+
     rrd: str | None
     spawn: bool
     spawn_port: int

@@ -256,3 +256,20 @@ def target_columns(items: list[QueueItem], length: float) -> Iterator[ColumnsCal
                 radii=(np.full(m, 0.003 * length), ones),
             ),
         )
+
+
+def legend_markdown(energy_scale: float, scene: SceneInfo | None) -> str:
+    """Return the legend of the drawing (markdown): what each colour and arrow means."""
+    lines = [
+        "# Legend",
+        f"* centreline colour: bend energy density ½ Rf κ² from 0 J/m (dark purple) to "
+        f"{energy_scale:.4g} J/m and above (yellow); κ from consecutive tangents",
+        "* axes: x = tangent (red), y (green), z (blue): material frames and grip poses",
+    ]
+    if scene is not None:
+        lines.append(
+            "* magenta arrows: force each gripper exerts on the string, "
+            f"{scene.force_scale:.4g} m per N"
+        )
+    lines.append("* orange: grip targets as received (point and tangent)")
+    return "\n".join(lines)

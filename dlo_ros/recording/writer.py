@@ -45,7 +45,7 @@ from .paths import (
     path_part,
 )
 from .scene_info import SceneInfo
-from .shape_columns import ShapeBatch, shape_columns, target_columns
+from .shape_columns import ShapeBatch, legend_markdown, shape_columns, target_columns
 from .visuals import ENERGY_COLORS
 
 log = logging.getLogger(__name__)
@@ -435,22 +435,12 @@ class Writer:
             self._send(columns.entity, columns.arch, columns.items, **columns.fields)
 
     def _log_legend(self) -> None:
-        rr, sc = self._rr, self.scene
-        lines = [
-            "# Legend",
-            f"* centreline colour: bend energy density ½ Rf κ² from 0 J/m (dark purple) to "
-            f"{self.energy_scale:.4g} J/m and above (yellow); κ from consecutive tangents",
-            "* axes: x = tangent (red), y (green), z (blue): material frames and grip poses",
-        ]
-        if sc is not None:
-            lines.append(
-                "* magenta arrows: force each gripper exerts on the string, "
-                f"{sc.force_scale:.4g} m per N"
-            )
-        lines.append("* orange: grip targets as received (point and tangent)")
+        """Log the legend (markdown) and the names and colours of the time series, once."""
+        rr = self._rr
+        text = legend_markdown(self.energy_scale or 0.0, self.scene)
         self.rec.log(
             E_LEGEND,
-            rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN),
+            rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN),
             static=True,
         )
         self.rec.log(

@@ -21,8 +21,8 @@ is PyElastica's one class per contact pair: no ``if type == ...`` anywhere else.
 
 from __future__ import annotations
 
+import enum
 import functools
-
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -48,8 +48,21 @@ BOX_EXPONENT = 8
 PLANE_COLOUR = (70, 72, 80)
 SOLID_COLOUR = (150, 150, 165)
 
+
+class PrimitiveKind(enum.StrEnum):
+    """The shapes a ``Primitive`` can be: each has one drawing in the node and in the recording.
+
+    A StrEnum, so a kind equals its name as a string (``PrimitiveKind.PLANE == "plane"``).
+    """
+
+    PLANE = "plane"
+    SPHERE = "sphere"
+    CAPSULE = "capsule"
+    BOX = "box"
+
+
 #: the kinds of ``Primitive`` that the drawing code must know
-PRIMITIVE_KINDS = ("plane", "sphere", "capsule", "box")
+PRIMITIVE_KINDS: tuple[PrimitiveKind, ...] = tuple(PrimitiveKind)
 
 
 @dataclass(frozen=True)
@@ -76,7 +89,7 @@ class Primitive:
     colour).
     """
 
-    kind: str
+    kind: PrimitiveKind
     centre: np.ndarray
     orientation: np.ndarray
     axis: np.ndarray
@@ -87,7 +100,7 @@ class Primitive:
     @property
     def length(self) -> float:
         """A capsule's segment length [m] (0 for the other kinds)."""
-        return 2.0 * float(self.half_sizes[2]) if self.kind == "capsule" else 0.0
+        return 2.0 * float(self.half_sizes[2]) if self.kind == PrimitiveKind.CAPSULE else 0.0
 
     def ends(self) -> tuple[np.ndarray, np.ndarray]:
         """A capsule's segment ends a, b [m]."""
@@ -258,7 +271,7 @@ class HalfSpace(ObstacleType):
 
     def primitive(self, p):
         return Primitive(
-            "plane",
+            PrimitiveKind.PLANE,
             p[0:3].copy(),
             quat_z_to(p[3:6]),
             p[3:6].copy(),
@@ -303,7 +316,7 @@ class Sphere(ObstacleType):
     def primitive(self, p):
         r = float(p[3])
         return Primitive(
-            "sphere",
+            PrimitiveKind.SPHERE,
             p[0:3].copy(),
             np.array([0.0, 0.0, 0.0, 1.0]),
             np.array([0.0, 0.0, 1.0]),
@@ -351,7 +364,7 @@ class Capsule(ObstacleType):
         a, b, r = p[0:3], p[3:6], float(p[6])
         length = float(np.linalg.norm(b - a))
         return Primitive(
-            "capsule",
+            PrimitiveKind.CAPSULE,
             (a + b) / 2,
             quat_z_to(b - a),
             (b - a) / length,
@@ -425,5 +438,9 @@ class Box(ObstacleType):
     def primitive(self, p):
         rotation = self.rotation(p)
         return Primitive(
-            "box", p[0:3].copy(), matrix_to_quat(rotation), rotation[:, 2].copy(), p[12:15].copy()
+            PrimitiveKind.BOX,
+            p[0:3].copy(),
+            matrix_to_quat(rotation),
+            rotation[:, 2].copy(),
+            p[12:15].copy(),
         )

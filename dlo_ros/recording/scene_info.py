@@ -8,8 +8,6 @@ from typing import Any
 
 import numpy as np
 
-from .visuals import obstacle_shape
-
 
 @dataclass
 class SceneInfo:
@@ -59,7 +57,15 @@ def scene_info(
     solver: Any = None,
     force_scale: float | None = None,
 ) -> SceneInfo:
-    """The writer's view of a Scene (or a bare Problem: then no YAML, not re-solvable)."""
+    """Return the writer's view of a Scene (or a bare Problem: then no YAML, not re-solvable).
+
+    Runs in the caller's process; the obstacles become (archetype, kwargs, label, colour).
+    """
+    # here, not at the top: the writer's process imports this module (through the package) and
+    # must not import the model (CasADi): 0.11-0.17 s (python -X importtime -c 'import
+    # dlo_ros.model', 3 runs); test_recording checks the writer's imports.
+    from .obstacle_drawing import obstacle_shape
+
     problem = getattr(scene_or_problem, "problem", scene_or_problem)
     is_scene = problem is not scene_or_problem
     st = problem.string

@@ -9,7 +9,7 @@ import contextlib
 import json
 import sys
 import time
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -17,6 +17,10 @@ from ..jsonio import json_safe, stdout_to_stderr
 from .common import EXIT_NOT_OK, EXIT_OK, UsageError, compile_mode, load_scene_arg
 from .record import add_record_arguments, close_recorder, make_recorder
 from .solve import max_sag
+
+if TYPE_CHECKING:  # types only: start-up (cli/__init__)
+    from ..scene import Scene
+    from ..solver import Solver
 
 HELP = (
     "the main job: the ROS node + a dual-arm driver over DDS, with a summary (--solver-only: "
@@ -45,6 +49,40 @@ def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
     return moving.name, [start + total * (k / steps) for k in range(1, steps + 1)]
 
 
+def _warm_summary(
+    times: list[float], iters: list[int], statuses: dict[str, int], stable: int
+) -> dict:
+    """Return the ``warm`` part of :func:`run_demo`'s summary: time and iteration statistics."""
+    return {
+        "time_ms": times,
+        "median_ms": float(np.median(times)) if times else None,
+        "p90_ms": float(np.percentile(times, 90)) if times else None,
+        "max_ms": float(np.max(times)) if times else None,
+        "iterations": iters,
+        "mean_iterations": float(np.mean(iters)) if iters else None,
+        "statuses": statuses,
+        "ok_count": statuses.get("ok", 0),
+        "stable_count": stable,
+    }
+
+
+def _build_solver(scene: Scene, compile: str, log: Callable[[str], None]) -> Solver:
+    """Return the scene's solver; a ValueError of the solver's checks becomes a SceneError."""
+    # start-up (cli/__init__): the solver only when a demo runs
+    from ..scene import SceneError
+    from ..solver import make_solver
+
+    if compile == "blocking":
+        log(
+            f"building the solver for {scene.name} (compiling C code: up to a minute the first "
+            f"time)"
+        )
+    try:
+        return make_solver(scene.problem, scene.options, compile=compile, checks="sync")
+    except ValueError as exc:  # the solver's own checks name the field
+        raise SceneError(str(exc), source=scene.source) from None
+
+
 def run_demo(
     scene_name: str | None = None,
     steps: int = 50,
@@ -60,23 +98,13 @@ def run_demo(
     The CLI prints it with :func:`format_demo`. ``recorder``: a dlo_ros.recording.Recorder; update
     0 is the cold solve, update k the k-th step.
     """
-    # start-up (cli/__init__): the model, scene and solver only when a demo runs
+    # start-up (cli/__init__): the model and scene only when a demo runs
     from ..model.problem import GripPose
-    from ..scene import DEFAULT_SCENE, SceneError
-    from ..solver import make_solver
+    from ..scene import DEFAULT_SCENE
 
     scene = load_scene_arg(scene_name or DEFAULT_SCENE)
-    log = log or (lambda _msg: None)
-    if compile == "blocking":
-        log(
-            f"building the solver for {scene.name} (compiling C code: up to a minute the first "
-            f"time)"
-        )
     t0 = time.perf_counter()
-    try:
-        solver = make_solver(scene.problem, scene.options, compile=compile, checks="sync")
-    except ValueError as exc:  # the solver's own checks name the field
-        raise SceneError(str(exc), source=scene.source) from None
+    solver = _build_solver(scene, compile, log or (lambda _msg: None))
     build_s = time.perf_counter() - t0
     record = recorder is not None and recorder.enabled
     current = {g.name: g.pose for g in scene.problem.grips}
@@ -90,7 +118,10 @@ def run_demo(
     name, targets = demo_path(scene, steps)
     orientation = scene.problem.grip(name).pose.orientation
 
-    times, iters, statuses, stable, last = [], [], {}, 0, cold
+    times: list[float] = []
+    iters: list[int] = []
+    statuses: dict[str, int] = {}
+    stable, last = 0, cold
     if cold.ok:
         for k, target in enumerate(targets, start=1):
             if record:
@@ -107,17 +138,7 @@ def run_demo(
             if r.ok:
                 last = r
     grip_positions = [g.pose.position for g in solver.problem.grips]
-    warm = {
-        "time_ms": times,
-        "median_ms": float(np.median(times)) if times else None,
-        "p90_ms": float(np.percentile(times, 90)) if times else None,
-        "max_ms": float(np.max(times)) if times else None,
-        "iterations": iters,
-        "mean_iterations": float(np.mean(iters)) if iters else None,
-        "statuses": statuses,
-        "ok_count": statuses.get("ok", 0),
-        "stable_count": stable,
-    }
+    warm = _warm_summary(times, iters, statuses, stable)
     return {
         "scene": scene.name,
         "moving_grip": name,

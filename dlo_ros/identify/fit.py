@@ -2,9 +2,9 @@
 
 Unknowns θ (``parameters.py``): for each fitted material the log of a uniform scale of the scene's
 profile, or (``ObservationSet.profiles``) the logs of a piecewise-linear table's knot values with a
-smoothness regulariser ½|Rθ|² added to Φ.  Inner level: every observation's equilibrium, one ``ShapeSolver`` per
-observation, warm-started from its previous θ (Newton on the KKT conditions; IPOPT only as its
-fallback). Outer level: minimise
+smoothness regulariser ½|Rθ|² added to Φ.  Inner level: every observation's equilibrium, one
+``ShapeSolver`` per observation, warm-started from its previous θ (Newton on the KKT conditions;
+IPOPT only as its fallback). Outer level: minimise
 
     Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ Σ ((T_meas − T(θ)) / σ_T)²
            + ½ ((W_known − ∫D ds) / σ_W)²
@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,7 @@ from ..model.problem import Problem
 from ..solver import SolverOptions
 from .gate import evaluate_gate, precheck
 from .identifiability import NEITHER, ORTHOGONAL, RANK_TOLERANCE, Identifiability, analyse
-from .objective import FitSettings, Objective, SolverCache
+from .objective import Evaluation, FitSettings, Objective, SolverCache
 from .observations import ObservationError, ObservationSet
 from .parameters import PROFILE, Parameterisation, profile_mean
 from .results import Estimate, FitResult, ObservationFit
@@ -124,24 +125,73 @@ def _fit(
     settings: FitSettings,
     t0: float,
 ) -> FitResult:
-    """The Levenberg–Marquardt iterations of :func:`fit` and its result."""
+    """Run the Levenberg–Marquardt iterations of :func:`fit` and build its result."""
     names = par.labels
-    evaluate = objective.evaluate
-
-    def failed(message: str, iterations: int) -> FitResult:
+    current = objective.evaluate(np.zeros(len(names)))
+    if isinstance(current, str):
         return FitResult(
             "failed",
-            message,
+            f"at the scene's values: {current}",
             fixed=fixed,
-            iterations=iterations,
+            iterations=0,
             equilibrium_solves=objective.solves,
             time_s=time.perf_counter() - t0,
             names=names,
         )
+    current, status, message, iterations = _levenberg_marquardt(
+        objective, names, current, settings
+    )
+    ident = analyse(names, current.normal)
+    for k in np.flatnonzero(np.abs(current.theta) >= BOUND * (1 - 1e-9)):
+        ident.why[names[k]] = AT_BOUND
+        message += (
+            f"; {names[k]} is at the bound of the search (the other estimates are "
+            f"conditional on it)"
+        )
+    theta = _anchored(current.theta, par, ident, current.normal)
+    cov = _pseudo_inverse(current.normal, ident)
+    string = par.string(theta)
+    for k, comp in enumerate(par.components):
+        if ident.why.get(comp.label) == NEITHER and abs(theta[k]) > 1e-6:
+            message += (
+                f"; {comp.label} is not determined and the fit left it at "
+                f"{par.value(string, k):.4g} "
+                f"{UNITS[comp.material]}: the other estimates are conditional on that value"
+            )
+    parameters = _parameter_estimates(par, string, ident, cov)
+    ratios = _ratio_estimates(par, string, ident, cov, parameters, fixed)
+    dof = max(current.rows - ident.rank, 1)
+    return FitResult(
+        status,
+        message,
+        parameters,
+        ratios,
+        dict(ident.why),
+        fixed,
+        current.fits,
+        iterations,
+        objective.solves,
+        time.perf_counter() - t0,
+        current.chi2 / dof,
+        names,
+        cov,
+        string,
+        ident,
+        dof,
+    )
 
-    current = evaluate(np.zeros(len(names)))
-    if isinstance(current, str):
-        return failed(f"at the scene's values: {current}", 0)
+
+def _levenberg_marquardt(
+    objective: Objective,
+    names: tuple[str, ...],
+    current: Evaluation,
+    settings: FitSettings,
+) -> tuple[Evaluation, str, str, int]:
+    """Iterate from ``current`` in the directions the data determine.
+
+    Returns (the last accepted evaluation, status, message, iterations): "ok" when a step is below
+    ``settings.step_tolerance`` or nothing is determined, else "not_converged" with why.
+    """
     status, message, mu, iterations = (
         "not_converged",
         f"no convergence in {settings.max_iterations} iterations",
@@ -162,7 +212,7 @@ def _fit(
             if largest > settings.max_step:
                 step *= settings.max_step / largest
             step = np.clip(current.theta + step, -BOUND, BOUND) - current.theta
-            trial = evaluate(current.theta + step)
+            trial = objective.evaluate(current.theta + step)
             if not isinstance(trial, str) and trial.cost <= current.cost * (1 + 1e-12):
                 accepted = trial
                 mu = 0.0 if mu < 1e-6 * lam.max() else mu / 4
@@ -178,24 +228,14 @@ def _fit(
         if float(np.abs(step).max()) < settings.step_tolerance:
             status, message = "ok", f"converged in {iterations} iterations"
             break
-    ident = analyse(names, current.normal)
-    for k in np.flatnonzero(np.abs(current.theta) >= BOUND * (1 - 1e-9)):
-        ident.why[names[k]] = AT_BOUND
-        message += (
-            f"; {names[k]} is at the bound of the search (the other estimates are "
-            f"conditional on it)"
-        )
-    theta = _anchored(current.theta, par, ident, current.normal)
-    cov = _pseudo_inverse(current.normal, ident)
-    string = par.string(theta)
-    for k, comp in enumerate(par.components):
-        if ident.why.get(comp.label) == NEITHER and abs(theta[k]) > 1e-6:
-            message += (
-                f"; {comp.label} is not determined and the fit left it at "
-                f"{par.value(string, k):.4g} "
-                f"{UNITS[comp.material]}: the other estimates are conditional on that value"
-            )
-    parameters, ratios = {}, {}
+    return current, status, message, iterations
+
+
+def _parameter_estimates(
+    par: Parameterisation, string: Any, ident: Identifiability, cov: np.ndarray
+) -> dict[str, Estimate]:
+    """Return the estimate of each component the data determine (value ± its std)."""
+    parameters = {}
     for k, comp in enumerate(par.components):
         if comp.label in ident.why:
             continue
@@ -207,6 +247,20 @@ def _fit(
             UNITS[comp.material],
             comp.s,
         )
+    return parameters
+
+
+def _ratio_estimates(
+    par: Parameterisation,
+    string: Any,
+    ident: Identifiability,
+    cov: np.ndarray,
+    parameters: dict[str, Estimate],
+    fixed: dict[str, float],
+) -> dict[str, Estimate]:
+    """Return the ratios of :data:`RATIOS` the data determine, and those to a fixed value."""
+    names = par.labels
+    ratios = {}
     for a_name, b_name, unit in RATIOS:
         for a in par.indices(a_name):
             for b in par.indices(b_name):
@@ -236,25 +290,7 @@ def _fit(
                     unit,
                     est.s,
                 )
-    dof = max(current.rows - ident.rank, 1)
-    return FitResult(
-        status,
-        message,
-        parameters,
-        ratios,
-        dict(ident.why),
-        fixed,
-        current.fits,
-        iterations,
-        objective.solves,
-        time.perf_counter() - t0,
-        current.chi2 / dof,
-        names,
-        cov,
-        string,
-        ident,
-        dof,
-    )
+    return ratios
 
 
 def gated(

@@ -18,6 +18,7 @@ from __future__ import annotations
 import collections
 import pickle
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -224,20 +225,7 @@ class Objective:
             jw = cr.jacobian / sigma
             normal += np.einsum("n,nik,nil->kl", w, jw, jw)
             gradient += np.einsum("n,nik,ni->k", w, jw, cr.residuals / sigma)
-            force_res = torque_res = None
-            measured = []  # (measured, predicted, d predicted/dθ, σ) of the grip force and torque
-            if o.obs.force is not None:
-                f = o.obs.force
-                measured.append(
-                    (f.force, sens.grip_forces[f.grip], sens.d_grip_forces[f.grip], f.sigma)
-                )
-                force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
-            if o.obs.torque is not None:
-                t = o.obs.torque
-                measured.append(
-                    (t.torque, sens.grip_torques[t.grip], sens.d_grip_torques[t.grip], t.sigma)
-                )
-                torque_res = float(np.linalg.norm(t.torque - sens.grip_torques[t.grip]))
+            measured, force_res, torque_res = _measured_wrenches(o.obs, sens)
             for value, predicted, d_predicted, sigma_v in measured:
                 r = (value - predicted) / sigma_v
                 jv = -d_predicted / sigma_v
@@ -276,3 +264,27 @@ class Objective:
             normal += reg.T @ reg
             gradient += reg.T @ (reg @ theta)
         return Evaluation(theta, cost, normal, gradient, fits, chi2, rows)
+
+
+def _measured_wrenches(
+    obs: Observation, sens: Any
+) -> tuple[list[tuple[Any, Any, Any, float]], float | None, float | None]:
+    """Return the observation's measured grip force and torque terms, and their residuals.
+
+    The terms are (measured, predicted, d predicted/dθ, σ) for each of the grip force and grip
+    torque the observation states; the residuals |measured − predicted| [N], [N·m] (None when not
+    stated).  ``sens`` is the observation's ``shape_sensitivity``.
+    """
+    force_res = torque_res = None
+    measured = []
+    if obs.force is not None:
+        f = obs.force
+        measured.append((f.force, sens.grip_forces[f.grip], sens.d_grip_forces[f.grip], f.sigma))
+        force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
+    if obs.torque is not None:
+        t = obs.torque
+        measured.append(
+            (t.torque, sens.grip_torques[t.grip], sens.d_grip_torques[t.grip], t.sigma)
+        )
+        torque_res = float(np.linalg.norm(t.torque - sens.grip_torques[t.grip]))
+    return measured, force_res, torque_res

@@ -1,4 +1,6 @@
-"""Console-script entry points (``dlo``, ``dlo_node``), kept free of heavy imports: ``dlo node``
+"""Console-script entry points (``dlo``, ``dlo_node``), kept free of heavy imports.
+
+Console-script entry points (``dlo``, ``dlo_node``), kept free of heavy imports: ``dlo node``
 installs its SIGINT/SIGTERM handling (dlo_ros.node.signals) before the CLI imports numpy, CasADi
 and rclpy, so that a SIGTERM in the first second stops it with exit code 0 instead of Python's
 default −15.

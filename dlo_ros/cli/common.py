@@ -1,4 +1,6 @@
-"""What every ``dlo`` subcommand shares: exit codes, the usage error, scene loading, the compile
+"""What every ``dlo`` subcommand shares: exit codes, errors, scene loading, compile mode.
+
+What every ``dlo`` subcommand shares: exit codes, the usage error, scene loading, the compile
 mode.
 """
 
@@ -25,7 +27,9 @@ def print_error(message: str) -> None:
 
 
 def compile_mode(enabled: bool) -> str:
-    """ShapeSolver's compile mode for a one-shot command: 'blocking' with --compile (compile the
+    """Return ShapeSolver's compile mode for a one-shot command.
+
+    ShapeSolver's compile mode for a one-shot command: 'blocking' with --compile (compile the
     KKT function to C now, about a minute per new scene structure, cached), else 'cached' (use a
     library an earlier run compiled, never wait for gcc).
     """

@@ -1,4 +1,6 @@
-"""``dlo demo``: the ROS node with a dual-arm driver over DDS, or (``--solver-only``) a grip moved
+"""``dlo demo``: the ROS node with a dual-arm driver, or a grip moved in warm steps.
+
+``dlo demo``: the ROS node with a dual-arm driver over DDS, or (``--solver-only``) a grip moved
 in warm steps.
 """
 
@@ -29,7 +31,9 @@ HELP = (
 
 
 def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
-    """The moving grip (named 'right', else the one with the largest s) and its ``steps`` target
+    """Return the moving grip and its ``steps`` target positions.
+
+    The moving grip (named 'right', else the one with the largest s) and its ``steps`` target
     positions.
 
     It moves in a straight line, in equal steps, by 15 % of the chord toward the first grip and by
@@ -211,7 +215,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """The main job: the ROS node on the default scene with a dual-arm driver in this process (real
+    """Run the main job: the ROS node with a dual-arm driver, or the ROS-free demo.
+
+    The main job: the ROS node on the default scene with a dual-arm driver in this process (real
     DDS), printing updates, latency p50/p99, failures and stable shapes; ``--solver-only`` for the
     ROS-free demo.
     """

@@ -1,4 +1,6 @@
-"""``dlo node ARGS``: the ROS 2 node (its arguments reach it unparsed; dlo_ros/node/params.py
+"""``dlo node ARGS``: the ROS 2 node, its arguments passed on unparsed.
+
+``dlo node ARGS``: the ROS 2 node (its arguments reach it unparsed; dlo_ros/node/params.py
 checks them).
 """
 
@@ -20,14 +22,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """The built-in ``node`` subcommand (``main`` passes its arguments to :func:`run_node`
+    """Run the built-in ``node`` subcommand.
+
+    The built-in ``node`` subcommand (``main`` passes its arguments to :func:`run_node`
     unparsed).
     """
     return run_node(args.node_args)
 
 
 def run_node(argv: list[str]) -> int:
-    """``dlo node ARGS``: the node's own command line (``--params-file``, ``--scene``, ``--check``,
+    """Run the node with its own command line (``dlo node ARGS``).
+
+    ``dlo node ARGS``: the node's own command line (``--params-file``, ``--scene``, ``--check``,
     ``--ros-args ...``), parsed and checked by dlo_ros.node.params.prepare_node_args; ``main``
     hands everything after ``node`` here untouched (argparse cannot pass ``--scene`` through a
     subparser).

@@ -1,4 +1,6 @@
-"""The recording flags of ``dlo solve`` and ``dlo demo`` (``--rrd``, ``--spawn``, ``--connect``;
+"""The recording flags of ``dlo solve`` and ``dlo demo`` (msg_docs/recording.md).
+
+The recording flags of ``dlo solve`` and ``dlo demo`` (``--rrd``, ``--spawn``, ``--connect``;
 msg_docs/recording.md).
 """
 
@@ -37,7 +39,7 @@ def add_record_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def make_recorder(args: argparse.Namespace):
-    """The Recorder the recording flags ask for (a disabled one when none is given)."""
+    """Return the Recorder the recording flags ask for (a disabled one when none is given)."""
     from ..recording import Recorder, RecordingUnavailable  # start-up (cli/__init__)
 
     try:

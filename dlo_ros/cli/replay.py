@@ -1,4 +1,6 @@
-"""``dlo replay FILE.rrd``: open a recording in the rerun viewer, render it, or re-solve it as a
+"""``dlo replay FILE.rrd``: view, render or re-solve a recording.
+
+``dlo replay FILE.rrd``: open a recording in the rerun viewer, render it, or re-solve it as a
 regression case.
 
     dlo replay FILE.rrd                      open it in the native viewer (needs a display; else
@@ -79,7 +81,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _read(path: Path, details: bool):
-    """The recording, or UsageError with its one-line reason; a note on stderr if it ends early."""
+    """Read the recording, or raise UsageError with its one-line reason; note an early end."""
     from ..recording import replay  # start-up (cli/__init__)
 
     try:

@@ -39,7 +39,7 @@ JSON_KEYS = (
 def _with_overrides(
     options, points: int | None, basis: str | None, order: int | None, model: str | None = None
 ):
-    """SolverOptions with the command-line overrides; raises UsageError naming the option.
+    """Return SolverOptions with the command-line overrides; raises UsageError naming the option.
 
     An explicit --order pins the order, so it implies --model full unless --model is given
     (model 'auto' chooses the order itself).

@@ -44,7 +44,9 @@ def draw_observation(
     *,
     static: bool = True,
 ) -> None:
-    """Log one observation's drawing under ``base`` into the rerun RecordingStream ``rec``:
+    """Log one observation's points, fitted centreline and residuals to rerun.
+
+    Log one observation's drawing under ``base`` into the rerun RecordingStream ``rec``:
     ``observed`` (``points`` (N, 3) [m], red beyond ``huber`` σ of the centreline), ``fitted``
     (``shape`` (S, 3) [m]) and ``residuals`` (point → its nearest point ``feet`` (N, 3) on the
     centreline; empty arrays skip a part). ``static``: timeless (``dlo fit --rrd``), or at the
@@ -72,7 +74,9 @@ def save_fit(
     summary: str,
     settings: FitSettings = FitSettings(),
 ) -> None:
-    """Write the drawing of ``result`` (fitted to ``data``) to the .rrd file ``path``.  Raises
+    """Write the drawing of a fit to an .rrd file.
+
+    Write the drawing of ``result`` (fitted to ``data``) to the .rrd file ``path``.  Raises
     RuntimeError when rerun-sdk cannot be imported.
     """
     try:

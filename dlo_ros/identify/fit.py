@@ -89,7 +89,9 @@ def fit(
     settings: FitSettings = FitSettings(),
     cache: SolverCache | None = None,
 ) -> FitResult:
-    """Fit ``data.parameters`` of ``problem``'s string to ``data`` (module docstring).  Raises
+    """Fit the string parameters of a problem to observations.
+
+    Fit ``data.parameters`` of ``problem``'s string to ``data`` (module docstring).  Raises
     ObservationError for a request the scene cannot support; solver failures give status 'failed'.
     ``cache``: equilibrium solvers to take instead of building new ones, and to keep them in
     afterwards (a process that fits repeatedly; ``objective.SolverCache``).
@@ -296,7 +298,9 @@ def _ratio_estimates(
 def gated(
     result: FitResult, problem: Problem, data: ObservationSet, settings: FitSettings
 ) -> FitResult:
-    """``result`` through the goodness-of-fit gate (``gate.py``): status 'misfit' with the cause
+    """Pass a fit result through the goodness-of-fit gate.
+
+    ``result`` through the goodness-of-fit gate (``gate.py``): status 'misfit' with the cause
     when the fitted shapes do not explain the points (a converged fit, or one that stopped without
     descent); otherwise the standard deviations inflated by sqrt(χ²_red) when it is over 1 (σ
     stated too small or model error: the residuals say how large the noise really is; without the
@@ -337,7 +341,9 @@ def gated(
 def _anchored(
     theta: np.ndarray, par: Parameterisation, ident: Identifiability, normal: np.ndarray
 ) -> np.ndarray:
-    """θ shifted along the common scale u of the fitted materials that enter the solved models (u_k
+    """Shift θ along the common scale the data do not see, anchoring one material.
+
+    θ shifted along the common scale u of the fitted materials that enter the solved models (u_k
     = 1, or 0 for a parameter no residual depends on, e.g. Rt of planar shapes), when the data do
     not see it (shapes alone: the energy's minimiser does not change), so that the first fitted
     material in ANCHOR_ORDER keeps the scene's value (a table: its mean log factor).  Only this
@@ -355,6 +361,6 @@ def _anchored(
 
 
 def _pseudo_inverse(normal: np.ndarray, ident: Identifiability) -> np.ndarray:
-    """A⁺ on the determined directions (the covariance of θ with the stated σ)."""
+    """Return A⁺ on the determined directions (the covariance of θ with the stated σ)."""
     vec, lam = ident.directions
     return (vec / lam) @ vec.T if lam.size else np.zeros_like(normal)

@@ -47,7 +47,9 @@ NEITHER = (
 
 @dataclass
 class Identifiability:
-    """names: the fitted θ; eigenvalues (ascending) and eigenvectors (columns) of A; null: the
+    """Which directions of θ the data determine, and why the others are not.
+
+    names: the fitted θ; eigenvalues (ascending) and eigenvectors (columns) of A; null: the
     columns spanning the undetermined directions; why[name] for each parameter not determined
     alone.
     """
@@ -64,7 +66,9 @@ class Identifiability:
 
     @property
     def condition(self) -> float:
-        """Largest over smallest eigenvalue of A on the determined directions (1 for one
+        """Return the condition number of A on the determined directions.
+
+        Largest over smallest eigenvalue of A on the determined directions (1 for one
         direction).
         """
         kept = self.eigenvalues[self.eigenvalues > 0][-self.rank :] if self.rank else np.ones(1)
@@ -94,7 +98,7 @@ class Identifiability:
 def analyse(
     names: tuple[str, ...], normal: np.ndarray, tolerance: float = RANK_TOLERANCE
 ) -> Identifiability:
-    """The identifiability of ``names`` from the normal matrix ``normal`` (module docstring)."""
+    """Analyse which of ``names`` the normal matrix ``normal`` determines (see the module)."""
     eig, vec = np.linalg.eigh(0.5 * (normal + normal.T))
     top = max(float(eig.max(initial=0.0)), 0.0)
     null = vec[:, eig <= tolerance * top] if top > 0 else np.eye(len(names))

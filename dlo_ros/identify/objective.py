@@ -1,4 +1,6 @@
-"""The outer objective of a fit at θ: every observation's equilibrium, residuals, Jacobian and
+"""The outer objective of a fit at θ, from every observation's equilibrium.
+
+The outer objective of a fit at θ: every observation's equilibrium, residuals, Jacobian and
 normal matrix.
 
     Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ Σ ((T_meas − T(θ)) / σ_T)²
@@ -33,7 +35,9 @@ from .results import ObservationFit
 
 @dataclass(frozen=True)
 class FitSettings:
-    """max_iterations: outer LM iterations; huber: the loss's threshold in σ; samples: centreline
+    """How a fit iterates and what it tolerates.
+
+    max_iterations: outer LM iterations; huber: the loss's threshold in σ; samples: centreline
     samples the points are projected on; step_tolerance: converged when the largest accepted step
     in θ is below this; max_step: the largest step in θ (log units); compile: the equilibrium
     solvers' compile mode.
@@ -49,7 +53,9 @@ class FitSettings:
 
 @dataclass
 class Evaluation:
-    """Φ at one θ (``cost``), the normal matrix A and gradient Jᵀ W r of the Gauss–Newton step, the
+    """The objective and its Gauss–Newton model at one θ.
+
+    Φ at one θ (``cost``), the normal matrix A and gradient Jᵀ W r of the Gauss–Newton step, the
     residual statistics per observation, Σ (r/σ)² (``chi2``) and the number of residual rows.
     """
 
@@ -63,7 +69,9 @@ class Evaluation:
 
 
 class SolverCache:
-    """Equilibrium solvers kept from one fit to the next, for a process that fits again and again
+    """Equilibrium solvers kept from one fit to the next.
+
+    Equilibrium solvers kept from one fit to the next, for a process that fits again and again
     (the node's fit worker): building a solver takes seconds (interpreted CasADi), a solve tens of
     ms.
 
@@ -131,7 +139,9 @@ class ObservedShape:
         self.solver = _solver_for(self.problem, options, compile, cache)
 
     def solve(self, string: StringProperties) -> ShapeResult:
-        """The equilibrium of this observation's poses with ``string``, warm-started from the last
+        """Solve this observation's equilibrium with ``string``, warm-started.
+
+        The equilibrium of this observation's poses with ``string``, warm-started from the last
         one.
         """
         self.solver.set_problem(replace(self.problem, string=string))
@@ -141,7 +151,9 @@ class ObservedShape:
 def _solver_for(
     problem: Problem, options: SolverOptions, compile: str, cache: SolverCache | None = None
 ) -> ShapeSolver:
-    """A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is
+    """Return a fixed-model solver for an observation's problem.
+
+    A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is
     planar; from ``cache`` when it keeps one.
     """
 
@@ -158,7 +170,9 @@ def _solver_for(
 
 
 class Objective:
-    """Φ and its Gauss–Newton model at any θ (module docstring); ``solves`` counts equilibrium
+    """The objective Φ of a fit and its Gauss–Newton model at any θ.
+
+    Φ and its Gauss–Newton model at any θ (module docstring); ``solves`` counts equilibrium
     solves.
     """
 

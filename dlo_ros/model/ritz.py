@@ -119,7 +119,9 @@ class RitzModel:
         return t if eps is None else t * (1 + eps)[None, :]
 
     def matrices(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(B(s), B'(s), W(s)) for arc lengths s, memoised: a running solver asks for the same s
+        """Return (B(s), B'(s), W(s)) for arc lengths s, memoised.
+
+        (B(s), B'(s), W(s)) for arc lengths s, memoised: a running solver asks for the same s
         again.
         """
         s = np.ascontiguousarray(s, dtype=float).ravel()
@@ -155,7 +157,9 @@ class RitzModel:
         return sizes
 
     def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The parts of the energy that depend on the material alone, assembled once per string
+        """Return the parts of the energy that depend on the material alone.
+
+        The parts of the energy that depend on the material alone, assembled once per string
         (numpy):
 
             K_bend    = B'ᵀ diag(w Rf) B'     ½ ∫ Rf θ'² ds = ½ c_θᵀ K_bend c_θ   (planar: ½ c_φᵀ
@@ -252,7 +256,9 @@ class RitzModel:
         return self.positions_at_rows(z, self.position_matrix(s))
 
     def position_rows(self, s: np.ndarray) -> np.ndarray:
-        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every
+        """Return W(s) as ``position_matrix`` does, without remembering it.
+
+        W(s) as ``position_matrix``, not remembered (for arc lengths that change every
         solve).
         """
         return self.quad.integration_matrix(np.asarray(s, dtype=float))
@@ -264,7 +270,9 @@ class RitzModel:
     def zero_twist_psi(
         self, z: np.ndarray, s: np.ndarray, s_anchor: float, psi_anchor: float
     ) -> np.ndarray:
-        """ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles
+        """Return ψ(s) with no twist rate: the twist a free string settles to.
+
+        ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles
         to.
         """
         f = self.fields(z, self.quad.nodes, ("phi", "theta"))

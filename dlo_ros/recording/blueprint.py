@@ -1,4 +1,6 @@
-"""The recording's default rerun blueprint: the 3D world beside the time series and the event
+"""The recording's default rerun blueprint: the 3D world, time series and event log.
+
+The recording's default rerun blueprint: the 3D world beside the time series and the event
 log.
 """
 
@@ -23,7 +25,9 @@ if TYPE_CHECKING:
 
 
 def auto_model(info: SceneInfo | None) -> bool:
-    """Whether the recorded solver picks its model (solver.model 'auto', not a ShapeSolver of
+    """Say whether the recorded solver picks its model (solver.model 'auto').
+
+    Whether the recorded solver picks its model (solver.model 'auto', not a ShapeSolver of
     it).
     """
     return (
@@ -32,7 +36,9 @@ def auto_model(info: SceneInfo | None) -> bool:
 
 
 def default_blueprint(info: SceneInfo | None = None) -> Any:
-    """3D world view (left) beside the time series and the event log (right); timeline
+    """Return the default layout: the 3D world beside the time series and the event log.
+
+    3D world view (left) beside the time series and the event log (right); timeline
     ``update``.
     """
     import rerun.blueprint as rrb
@@ -68,7 +74,9 @@ def default_blueprint(info: SceneInfo | None = None) -> Any:
 
 
 def _eye(info: SceneInfo) -> Any:
-    """Camera looking at the cable from the side: perpendicular to the grips' chord and to
+    """Return a camera looking at the cable from the side.
+
+    Camera looking at the cable from the side: perpendicular to the grips' chord and to
     gravity.
     """
     import rerun.blueprint as rrb

@@ -53,7 +53,9 @@ class ResultSnap:
 
 @dataclass
 class FitSnap:
-    """A fit as the node recorded it: observed points, fitted centreline and each point's nearest
+    """A fit as the node recorded it: points, fitted centreline, residual feet, summary.
+
+    A fit as the node recorded it: observed points, fitted centreline and each point's nearest
     point on it (m), the stated σ [m] and the robust loss's threshold [σ], the summary text,
     whether it was ok.
     """
@@ -73,7 +75,9 @@ def _pose_bytes(pose: Any) -> bytes:
 
 
 def encode_targets(poses: Mapping[str, Any], update: int, ros_time_ns: int) -> tuple:
-    """log_targets' message: a flat tuple of primitives and bytes (a few µs to build and to
+    """Encode log_targets' message as a flat tuple of primitives and bytes.
+
+    log_targets' message: a flat tuple of primitives and bytes (a few µs to build and to
     pickle).
     """
     return (
@@ -131,7 +135,7 @@ def encode_result(
 
 
 def decode(message: Any) -> QueueItem:
-    """A queued message (an QueueItem, or an encoded result / targets tuple) → QueueItem."""
+    """Decode a queued message (a QueueItem, or an encoded result or targets tuple)."""
     if isinstance(message, QueueItem):
         return message
     if message[0] == "T":

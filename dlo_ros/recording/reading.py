@@ -72,7 +72,9 @@ class Recording:
 
 
 def rows_of(chunks: list[Any]) -> list[dict[str, Any]]:
-    """Rows of one entity's chunks as dicts (index columns as int, components as Python lists), in
+    """Return the rows of one entity's chunks as dicts, in logging order.
+
+    Rows of one entity's chunks as dicts (index columns as int, components as Python lists), in
     logging order: by ``update`` then by row id.  For tests and small recordings: it converts every
     column to Python objects (:func:`read_recording` reads only the columns it needs).
     """
@@ -134,7 +136,9 @@ def _or_empty(values: np.ndarray | None) -> np.ndarray:
 
 
 class _Rows:
-    """Rows of one entity collected chunk by chunk as ``(update, row id, value)`` (or only
+    """Rows of one entity collected chunk by chunk, sorted on demand.
+
+    Rows of one entity collected chunk by chunk as ``(update, row id, value)`` (or only
     counted, ``keep=False``), sorted on demand.
     """
 
@@ -160,7 +164,9 @@ class _Rows:
 
 
 class _Reader:
-    """Reads the chunks of one recording as rerun streams them, one at a time, keeping only the
+    """Reader of a recording's chunks that keeps only the typed values dlo_ros needs.
+
+    Reads the chunks of one recording as rerun streams them, one at a time, keeping only the
     typed values of the columns dlo_ros needs (no chunk is held after it was read).
     """
 
@@ -356,7 +362,9 @@ class RecordingCheck:
 
 
 def check_recording(path: str | Path) -> RecordingCheck:
-    """Check that ``path`` is a readable dlo recording without keeping its data: every chunk is
+    """Check that ``path`` is a readable dlo recording without keeping its data.
+
+    Check that ``path`` is a readable dlo recording without keeping its data: every chunk is
     read and its columns checked as :func:`read_recording` would (same limits and errors), then
     dropped, so the memory used does not grow with the number of updates.  What ``dlo replay
     FILE`` does before it starts a viewer.
@@ -376,7 +384,9 @@ def check_recording(path: str | Path) -> RecordingCheck:
 
 
 def _stream(path: Path, reader: _Reader) -> tuple[Any, RrdLayout]:
-    """Feed every chunk of the file's first recording to ``reader``, one chunk at a time; (its
+    """Feed every chunk of the file's first recording to ``reader``, one at a time.
+
+    Feed every chunk of the file's first recording to ``reader``, one chunk at a time; (its
     store entry, the file's layout).  Every failure is a :class:`RecordingError` naming the
     file.
     """

@@ -1,4 +1,6 @@
-"""The public front end of a recording: :class:`Recorder`, plus the viewer address and display
+"""The public front end of a recording: the Recorder, the viewer address, display checks.
+
+The public front end of a recording: :class:`Recorder`, plus the viewer address and display
 checks.
 
 A Recorder snapshots what it is given (dlo_ros.recording.codec) and hands it to a backend
@@ -26,7 +28,9 @@ DEFAULT_PORT = 9876
 
 
 def has_display() -> bool:
-    """Whether a native window can open here (Linux: $DISPLAY or $WAYLAND_DISPLAY; macOS, Windows:
+    """Say whether a native window can open here.
+
+    Whether a native window can open here (Linux: $DISPLAY or $WAYLAND_DISPLAY; macOS, Windows:
     yes).
     """
     if sys.platform in ("darwin", "win32"):
@@ -141,7 +145,9 @@ class Recorder:
         update: int | None = None,
         ros_time_ns: int | None = None,
     ) -> None:
-        """The scene: obstacles, the scene YAML (for ``dlo replay --resolve``), the default
+        """Log the scene: obstacles, the scene YAML and the default blueprint.
+
+        The scene: obstacles, the scene YAML (for ``dlo replay --resolve``), the default
         blueprint.
 
         ``scene_or_problem``: a ``dlo_ros.scene.Scene`` (its YAML makes the recording re-solvable)
@@ -163,7 +169,9 @@ class Recorder:
     def log_targets(
         self, poses: Mapping[str, Any], *, update: int, ros_time_ns: int | None = None
     ) -> None:
-        """Grip targets as received: ``{name: (position[3], quaternion xyzw[4])}`` or ``{name:
+        """Log grip targets as received.
+
+        Grip targets as received: ``{name: (position[3], quaternion xyzw[4])}`` or ``{name:
         GripPose}``.
         """
         if not self.enabled:
@@ -180,7 +188,9 @@ class Recorder:
         targets: Mapping[str, Any] | None = None,
         warm: bool | None = None,
     ) -> None:
-        """One solve (a committed update, or a failed one).  ``bend_stiffness``: Rf [N·m²] (a
+        """Log one solve: a committed update, or a failed one.
+
+        One solve (a committed update, or a failed one).  ``bend_stiffness``: Rf [N·m²] (a
         constant or one value per sample of result.s) for the colouring; None takes it from the
         scene.  ``targets``: the grip poses this solve used (all grips), recorded exactly so that
         ``dlo replay --resolve`` repeats the same solve (without it, replay folds the
@@ -206,7 +216,9 @@ class Recorder:
         ros_time_ns: int | None = None,
         warm: bool | None = None,
     ) -> None:
-        """The node's one call per solve: :meth:`log_result` with the grip poses and the bend
+        """Log the node's one call per solve: the result with its problem's poses and stiffness.
+
+        The node's one call per solve: :meth:`log_result` with the grip poses and the bend
         stiffness taken from ``problem`` (the Problem that was solved; its grip poses are the
         targets used).
 
@@ -232,7 +244,7 @@ class Recorder:
         )
 
     def log_rejected(self, reason: str, *, update: int, ros_time_ns: int | None = None) -> None:
-        """An input that was rejected (bad pose, unknown grip, wrong frame, ...) and why."""
+        """Log an input that was rejected (bad pose, unknown grip, wrong frame, ...) and why."""
         if not self.enabled:
             return
         self._put(QueueItem("rejected", int(update), self._now(ros_time_ns), str(reason)))
@@ -240,7 +252,9 @@ class Recorder:
     def log_model_change(
         self, text: str, *, update: int, ros_time_ns: int | None = None, scene: Any = None
     ) -> None:
-        """A free-text model event (e.g. the model reduction switched models).  With ``scene`` the
+        """Log a free-text model event, and the new scene if one is given.
+
+        A free-text model event (e.g. the model reduction switched models).  With ``scene`` the
         new scene is recorded too (as :meth:`log_scene` with ``update``).  Never dropped.
         """
         if not self.enabled:
@@ -263,7 +277,9 @@ class Recorder:
         update: int,
         ros_time_ns: int | None = None,
     ) -> None:
-        """A fit of observed points at ``update``: ``points`` (N, 3), the fitted centreline
+        """Log a fit of observed points at ``update``.
+
+        A fit of observed points at ``update``: ``points`` (N, 3), the fitted centreline
         ``shape`` (S, 3) and each point's nearest point on it ``feet`` (N, 3) [m] (empty when the
         fit failed), drawn under ``world/fit`` by ``dlo_ros.identify.drawing``; ``text`` (its
         summary and what it applied) goes to ``events/fit`` (WARN unless ``ok``).  Never
@@ -283,7 +299,9 @@ class Recorder:
         self._put(QueueItem("fit", int(update), self._now(ros_time_ns), snap), keep=True)
 
     def flush(self, timeout: float = 10.0) -> bool:
-        """Wait until everything logged so far is in rerun's sinks (False on timeout or a dead
+        """Wait until everything logged so far is in rerun's sinks.
+
+        Wait until everything logged so far is in rerun's sinks (False on timeout or a dead
         writer).
         """
         if not self.enabled or self._closed:
@@ -293,7 +311,9 @@ class Recorder:
         return done
 
     def close(self, timeout: float = 10.0) -> None:
-        """Log what is queued, flush and close the sinks (the .rrd file is complete afterwards).
+        """Log what is queued, flush and close the sinks.
+
+        Log what is queued, flush and close the sinks (the .rrd file is complete afterwards).
         Idempotent; ``with Recorder(...) as rec:`` calls it on exit.
         """
         if not self.enabled or self._closed:

@@ -1,4 +1,6 @@
-"""Re-solving a recording as a regression case (:func:`resolve`); reading it back is
+"""Re-solving a recording as a regression case (:func:`resolve`).
+
+Re-solving a recording as a regression case (:func:`resolve`); reading it back is
 :mod:`.reading` (:func:`read_recording`, :func:`check_recording`, re-exported here).
 
 The format is documented in msg_docs/recording.md.  ``dlo replay`` (dlo_ros.cli.replay) is its
@@ -64,7 +66,9 @@ def _make_solver(kind: str, scene, compile: str) -> Solver:
 
 
 def deviation(recorded: RecordedResult, result: Any) -> float:
-    """Largest distance [m] between the recorded centreline and today's; 0 when both failed with
+    """Return the largest distance [m] between the recorded centreline and today's.
+
+    Largest distance [m] between the recorded centreline and today's; 0 when both failed with
     the same status; inf when the statuses differ or the sampling changed.
     """
     if recorded.status != result.status:
@@ -83,7 +87,9 @@ def resolve(
     compile: str = "cached",
     progress: Callable[[str], None] | None = None,
 ) -> dict:
-    """Re-run the solver on the recorded targets, update by update, and compare with the recorded
+    """Re-run the solver on the recorded targets and compare with the recorded shapes.
+
+    Re-run the solver on the recorded targets, update by update, and compare with the recorded
     shapes.
 
     The solver is the recorded kind (ShapeSolver / AutoShapeSolver) built from the recorded scene

@@ -11,7 +11,9 @@ import numpy as np
 
 @dataclass
 class SceneInfo:
-    """What the writer needs of a scene (plain data: the writer process never imports the
+    """What the writer needs of a scene, as plain data.
+
+    What the writer needs of a scene (plain data: the writer process never imports the
     model).
     """
 
@@ -41,7 +43,7 @@ class SceneInfo:
 
 
 def scene_yaml(scene: Any) -> str:
-    """The scene in the scene-file format (``dlo_ros.scene.scene_to_dict``) as YAML text."""
+    """Return the scene in the scene-file format (``dlo_ros.scene.scene_to_dict``) as YAML text."""
     import yaml
 
     from ..scene import scene_to_dict

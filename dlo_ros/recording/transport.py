@@ -27,7 +27,9 @@ log = logging.getLogger(__name__)
 
 
 def _drop_oldest(queue: collections.deque, limit: int) -> int:
-    """Make room in ``queue`` of (payload, keep) by dropping its oldest droppable entry; returns 1
+    """Drop the oldest droppable entry of ``queue``; return 1 if one was dropped.
+
+    Make room in ``queue`` of (payload, keep) by dropping its oldest droppable entry; returns 1
     if one was dropped.
     """
     if len(queue) < limit:
@@ -40,7 +42,9 @@ def _drop_oldest(queue: collections.deque, limit: int) -> int:
 
 
 class ThreadBackend:
-    """The writer in a background thread of this process (``backend="thread"``).  Simple, but
+    """The writer in a background thread of this process (``backend="thread"``).
+
+    The writer in a background thread of this process (``backend="thread"``).  Simple, but
     rerun's Python work shares the GIL with the caller: on a loaded machine it slows the solver
     thread.
     """
@@ -128,7 +132,9 @@ def _frame(message: Any) -> bytes:
 
 
 def _write_all(fd: int, data: bytes, deadline: float | None = None) -> None:
-    """Write all of ``data`` to a (possibly non-blocking) fd, waiting for room until
+    """Write all of ``data`` to a (possibly non-blocking) fd.
+
+    Write all of ``data`` to a (possibly non-blocking) fd, waiting for room until
     ``deadline``.
     """
     view = memoryview(data)
@@ -298,7 +304,7 @@ class ProcessBackend:
                     return
 
     def _died(self, exc: BaseException) -> None:
-        """The child is gone (lock held): count it once, drop what waits."""
+        """Record that the child is gone (lock held): count it once, drop what waits."""
         if not self.dead:
             self.dead = True
             self.stats = {
@@ -312,7 +318,9 @@ class ProcessBackend:
         self._cond.notify_all()
 
     def _request(self, kind: str, timeout: float) -> tuple[bool, dict]:
-        """Write everything, then ask the child to ``flush`` or ``close`` and wait for its
+        """Write everything, then ask the child to ``flush`` or ``close`` and wait.
+
+        Write everything, then ask the child to ``flush`` or ``close`` and wait for its
         answer.
         """
         deadline = time.monotonic() + timeout

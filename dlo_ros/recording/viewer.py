@@ -16,7 +16,9 @@ __all__ = ["has_display", "no_display_message", "rerun_command", "screenshot"]
 
 
 def rerun_command() -> list[str]:
-    """The rerun viewer executable: $DLO_RERUN_EXE, the venv's ``rerun``, ``rerun`` on PATH, or
+    """Return the command that starts the rerun viewer.
+
+    The rerun viewer executable: $DLO_RERUN_EXE, the venv's ``rerun``, ``rerun`` on PATH, or
     ``python -m rerun``.
     """
     if os.environ.get("DLO_RERUN_EXE"):
@@ -59,7 +61,9 @@ def _free_port() -> int:
 def screenshot(
     path: str | Path, png: str | Path, *, update: int | None = None, wait: float = 6.0
 ) -> Path:
-    """Render a recording with a headless rerun viewer (its default blueprint, 1920×1080) into
+    """Render a recording with a headless rerun viewer into ``png``.
+
+    Render a recording with a headless rerun viewer (its default blueprint, 1920×1080) into
     ``png``.
 
     ``update``: the update to show (default: the last).  Raises RuntimeError with the viewer's

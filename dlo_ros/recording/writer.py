@@ -1,4 +1,6 @@
-"""The writer: owns the rerun RecordingStream and turns queued items into rerun calls, in one
+"""The writer: turns queued items into rerun calls, in one thread.
+
+The writer: owns the rerun RecordingStream and turns queued items into rerun calls, in one
 thread.
 
 It runs in the recorder's child process or thread (dlo_ros.recording.transport); nothing here is
@@ -78,7 +80,7 @@ BATCH_ROWS = 512  # ... or until this many rows are buffered
 
 
 def _instances(value: Any) -> Any:
-    """A field value as a batch of instances (leading axis = instances)."""
+    """Return a field value as a batch of instances (leading axis = instances)."""
     if isinstance(value, np.ndarray):
         return value if value.ndim else value.reshape(1)
     if isinstance(value, (list, tuple)):
@@ -293,7 +295,9 @@ class Writer:
     def _send(
         self, entity: str, arch: str, items: list[QueueItem], **fields: tuple[Any, list[int]]
     ) -> None:
-        """send_columns of ``arch`` rows for ``items``; fields: name → (concatenated data,
+        """Send ``arch`` rows for ``items``, one send_columns call.
+
+        send_columns of ``arch`` rows for ``items``; fields: name → (concatenated data,
         instances per row).
         """
         try:
@@ -318,7 +322,9 @@ class Writer:
         stamps: list[int],
         groups: dict[tuple, dict],
     ) -> None:
-        """One send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns]; ``groups``:
+        """Send one send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns].
+
+        One send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns]; ``groups``:
         instances per row → {field: concatenated data} (fields with the same instance counts share
         a partition).
         """

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -158,13 +159,12 @@ class ObservationSet:
                 )
 
 
-# ---- readers
-# ----------------------------------------------------------------------------------------
+# ---- readers ------------------------------------------------------------------------------------
 def _positive(value: object, key: str, upper: float = float("inf")) -> float:
     if isinstance(value, bool):
         raise ObservationError(f"{key}: expected a number > 0, got {value!r}")
     try:
-        x = float(value)
+        x = float(cast(Any, value))  # any object: float() says whether it is a number
     except (TypeError, ValueError):
         raise ObservationError(
             f"{key}: expected a number > 0, got {type(value).__name__}"
@@ -366,11 +366,10 @@ def observation_set_from_dict(
                 f"observations[{i}]: more than {MAX_TOTAL_POINTS} points in "
                 "all (msg_docs/fitting.md, Limits)"
             )
-    obs = tuple(obs)
     scene = d.get("scene", "")
     if not isinstance(scene, str):
         raise ObservationError("scene: expected a scene name or file")
-    return ObservationSet(obs, tuple(params), scene, mass, source, profiles)
+    return ObservationSet(tuple(obs), tuple(params), scene, mass, source, profiles)
 
 
 def load_observations(path: str | Path) -> ObservationSet:

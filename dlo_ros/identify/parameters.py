@@ -18,6 +18,7 @@ dP/dθ is P itself (uniform) or the table with every value but knot k set to zer
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -65,7 +66,8 @@ class Parameterisation:
     ):
         self.length = string.length
         self.profiles = dict(profiles)
-        changes, comps = {}, []
+        changes: dict[str, Any] = {}
+        comps = []
         for name in names:
             spec = profiles.get(name)
             if spec is None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import ast
 import io
+from typing import Literal
 from pathlib import Path
 
 import numpy as np
@@ -124,7 +125,7 @@ def read_npy(data: bytes) -> np.ndarray:
             f"bytes), the file holds {len(data) - offset} after the header"
         )
     arr = np.frombuffer(data, dtype=dtype, count=shape[0] * 3, offset=offset)
-    order = "F" if header["fortran_order"] else "C"
+    order: Literal["C", "F"] = "F" if header["fortran_order"] else "C"
     return arr.reshape(shape, order=order).astype(float)
 
 

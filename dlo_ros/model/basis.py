@@ -99,7 +99,10 @@ class FourierBasis:
         return np.stack(cols[: self.size], axis=1)
 
 
-BASES = {"chebyshev": ChebyshevBasis, "fourier": FourierBasis}
+BASES: dict[str, type[ChebyshevBasis] | type[FourierBasis]] = {
+    "chebyshev": ChebyshevBasis,
+    "fourier": FourierBasis,
+}
 
 
 def make_basis(name: str, size: int, length: float) -> Basis:

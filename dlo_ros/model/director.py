@@ -219,8 +219,7 @@ class DirectorModel:
         )
         self._cache: dict[bytes, np.ndarray] = {}
 
-    # ---- numpy
-    # -----------------------------------------------------------------------------------
+    # ---- numpy ----------------------------------------------------------------------------------
     def node_values(self, z: np.ndarray) -> np.ndarray:
         """(N, 4) nodal quaternions or (N, 3) nodal tangents."""
         return np.asarray(z[self.layout.rotation]).reshape(self.layout.nodes, self.layout.width)
@@ -345,8 +344,7 @@ class DirectorModel:
         dt = (dv - np.sum(t * dv, axis=1)[:, None] * t) / n
         return cross3(t, dt)
 
-    # ---- CasADi
-    # ----------------------------------------------------------------------------------
+    # ---- CasADi ---------------------------------------------------------------------------------
     def material_sizes(self) -> dict[str, int]:
         return {"weight_moments": self.mesh.quad_count, "weight_total": 1}
 
@@ -452,8 +450,7 @@ class DirectorModel:
         t = v / ca.norm_2(v)
         return ca.dot(moment, ca.cross(reference[0:3], t))
 
-    # ---- guesses and transfers
-    # -------------------------------------------------------------------
+    # ---- guesses and transfers ------------------------------------------------------------------
     def z_from_frames(
         self, x0: np.ndarray, frames: np.ndarray, eps: np.ndarray | None = None
     ) -> np.ndarray:

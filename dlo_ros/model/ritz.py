@@ -88,8 +88,7 @@ class RitzModel:
         self.B = self.basis.values(s)  # (M, n)
         self.dB = self.basis.derivatives(s)  # (M, n)
 
-    # ---- fields
-    # -----------------------------------------------------------------------------------
+    # ---- fields ---------------------------------------------------------------------------------
     def coefficients(self, z, name: str):
         """Coefficient vector of field ``name``, or None when the field is not an unknown."""
         try:
@@ -142,8 +141,7 @@ class RitzModel:
         """W(s) with x(s) = x0 + tangents · W(s)ᵀ."""
         return self.matrices(s)[2]
 
-    # ---- symbolic energy
-    # ----------------------------------------------------------------------------
+    # ---- symbolic energy ------------------------------------------------------------------------
     def material_sizes(self) -> dict[str, int]:
         """Sizes of the parameter-only parts of the energy (``material_terms``), by name."""
         n, M = self.layout.order, self.quad.count
@@ -228,8 +226,7 @@ class RitzModel:
             raise KeyError(f"{name} is not an unknown of this model")
         return ca.mtimes(ca.DM(self.basis.values(np.array([s]))), c)
 
-    # ---- numerical evaluation of a solution
-    # -------------------------------------------------------
+    # ---- numerical evaluation of a solution -----------------------------------------------------
     def fields(
         self, z: np.ndarray, s: np.ndarray, names: tuple[str, ...] = ("phi", "theta", "psi", "eps")
     ) -> dict[str, np.ndarray]:

@@ -46,7 +46,7 @@ def default_blueprint(info: SceneInfo | None = None) -> Any:
     world = rrb.Spatial3DView(
         origin=E_WORLD, name="World (m, z up)", eye_controls=_eye(info) if info else None
     )
-    views = [
+    views: list[Any] = [
         rrb.TimeSeriesView(origin=E_ENERGY, name="Energy [J]"),
         rrb.TimeSeriesView(origin=E_SOLVE_TIME, name="Solve time [ms]"),
         rrb.TimeSeriesView(origin=E_ITERATIONS, name="Iterations (Newton steps or IPOPT)"),

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -264,20 +264,22 @@ class _Reader:
         model = cols.texts("model") if self.details else none
         values = []
         for i in range(cols.rows):
-            p = pts[i] if pts[i] is not None else np.zeros(0)
+            p = pts[i]
+            p = p if p is not None else np.zeros(0)
+            s_i = s[i]
             if len(p) % 3:
                 raise ColumnError(
                     f"{where}: update {ups[i]} has {len(p)} point values, not a multiple of 3"
                 )
             values.append(
                 RecordedResult(
-                    update=int(ups[i]),
+                    update=int(cast(int, ups[i])),  # updates_of(cols, True): never None
                     ros_time_ns=ros[i],
                     status=status[i] or "",
                     message=message[i] or "",
                     warm_started=bool(warm_started[i]),
                     warm_call=warm[i],
-                    s=s[i] if s[i] is not None else np.zeros(0),
+                    s=s_i if s_i is not None else np.zeros(0),
                     points=p.reshape(-1, 3),
                     targets=_poses(names[i], poses[i], f"{where} update {ups[i]} target_poses"),
                     energy={

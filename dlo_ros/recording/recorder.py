@@ -134,8 +134,7 @@ class Recorder:
         self._backend = kind(cfg, start_timeout, max(1, int(queue_size)))
         self.recording_id = self._backend.recording_id
 
-    # ---- public API (any thread)
-    # ------------------------------------------------------------------
+    # ---- public API (any thread) ----------------------------------------------------------------
     def log_scene(
         self,
         scene_or_problem: Any,
@@ -337,8 +336,7 @@ class Recorder:
         """Items accepted and not yet handed to rerun (or to the recorder process)."""
         return self._backend.pending if self._backend is not None and not self._closed else 0
 
-    # ---- internals
-    # ----------------------------------------------------------------------------------
+    # ---- internals ------------------------------------------------------------------------------
     @staticmethod
     def _now(ros_time_ns: int | None) -> int:
         return time.time_ns() if ros_time_ns is None else int(ros_time_ns)

@@ -45,8 +45,7 @@ __all__ = [
 DEFAULT_TOLERANCE = 1e-6
 
 
-# ---- re-solving
-# ----------------------------------------------------------------------------------------
+# ---- re-solving ---------------------------------------------------------------------------------
 def _scene_from_yaml(text: str, where: str):
     import yaml
 
@@ -112,7 +111,7 @@ def resolve(
     current = {g.name: (g.pose.position, g.pose.orientation) for g in scene.problem.grips}
     received = sorted(rec.targets, key=lambda t: t[0])
     ti = ci = 0
-    rows = []
+    rows: list[dict[str, Any]] = []
     for recorded in sorted(rec.results, key=lambda r: r.update):
         while ci < len(changes) and changes[ci][0] <= recorded.update:
             new = _scene_from_yaml(

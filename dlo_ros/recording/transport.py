@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import IO, Any, cast
 
 from .writer import RecordingUnavailable, WriterConfig, Writer
 
@@ -209,10 +209,12 @@ class ProcessBackend:
             env=env,
             close_fds=True,
         )
-        self._in, self._out = self.proc.stdin.fileno(), self.proc.stdout.fileno()
+        # stdin and stdout are pipes (PIPE above), never None
+        stdin, stdout = cast(IO[bytes], self.proc.stdin), cast(IO[bytes], self.proc.stdout)
+        self._in, self._out = stdin.fileno(), stdout.fileno()
         self.dead = False
         self.dropped = 0
-        self.stats = {"errors": 0, "last_error": ""}
+        self.stats: dict[str, Any] = {"errors": 0, "last_error": ""}
         try:
             _write_all(self._in, _frame(cfg))
             reply = _read_frame(self._out, time.monotonic() + timeout)
@@ -365,7 +367,7 @@ class ProcessBackend:
         self._thread.join(1.0)
         for f in (self.proc.stdin, self.proc.stdout):
             try:
-                f.close()
+                cast(IO[bytes], f).close()
             except OSError:
                 pass
         try:

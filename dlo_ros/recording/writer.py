@@ -15,7 +15,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -218,7 +218,7 @@ class Writer:
     # -- items
     def _row(self, entity: str, arch: str, item: QueueItem, **fields: Any) -> None:
         self._rows.setdefault((entity, arch), []).append(
-            (int(item.update), int(item.ros_time_ns), fields)
+            (int(cast(int, item.update)), int(item.ros_time_ns), fields)
         )
         self._count_row()
 
@@ -248,7 +248,7 @@ class Writer:
         static = item.update is None
         if not static:
             self.send_batches()  # rows of earlier updates are drawn with the earlier scene
-            self.rec.set_time(TIMELINE_UPDATE, sequence=int(item.update))
+            self.rec.set_time(TIMELINE_UPDATE, sequence=int(cast(int, item.update)))
             self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
         if first or static:
             self.rec.log(E_WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -307,7 +307,7 @@ class Writer:
             self._send_columns(
                 entity,
                 arch,
-                [int(it.update) for it in items],
+                [int(cast(int, it.update)) for it in items],
                 [int(it.ros_time_ns) for it in items],
                 groups,
             )
@@ -483,7 +483,7 @@ class Writer:
 
         fit: FitSnap = item.payload
         self.send_batches()  # keep the rows of earlier updates before this one
-        self.rec.set_time(TIMELINE_UPDATE, sequence=int(item.update))
+        self.rec.set_time(TIMELINE_UPDATE, sequence=int(cast(int, item.update)))
         self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
         draw_observation(
             self.rec, E_FIT, fit.points, fit.shape, fit.feet, fit.sigma, fit.huber, static=False

@@ -7,6 +7,7 @@ numpy).
 from __future__ import annotations
 
 import unicodedata
+import warnings
 
 #: Longest text (characters, after escaping) that :func:`safe_text` lets into a log line or a
 # diagnostic value.
@@ -54,8 +55,6 @@ def one_line_warnings() -> None:
     line on stderr, instead of Python's ``file:line: Category: message`` plus a line of source
     code, which reads like a traceback.  Other packages' warnings keep Python's format.
     """
-    import warnings
-
     default = warnings.formatwarning
 
     # noqa: ANN001 - warnings' API

@@ -52,7 +52,7 @@ def draw_observation(
     centreline; empty arrays skip a part). ``static``: timeless (``dlo fit --rrd``), or at the
     stream's current time (the node's recording).
     """
-    import rerun as rr
+    import rerun as rr  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
     distance = np.linalg.norm(points - feet, axis=1) if len(feet) else np.zeros(len(points))
     colours = np.where((distance > huber * sigma)[:, None], RED, GREY).astype(np.uint8)
@@ -80,7 +80,7 @@ def save_fit(
     RuntimeError when rerun-sdk cannot be imported.
     """
     try:
-        import rerun as rr
+        import rerun as rr  # optional: rerun-sdk (Python >= 3.11), with pyarrow
     except ImportError as exc:
         raise RuntimeError(f"drawing needs rerun-sdk (see requirements.txt): {exc}") from None
     rec = rr.RecordingStream("dlo_fit")

@@ -26,7 +26,9 @@ import numpy as np
 
 from ..model.problem import Problem, StringProperties
 from ..solver import ShapeResult, ShapeSolver, SolverOptions
+from ..solver.nlp import planarity_violation
 from ..solver.sensitivity import shape_sensitivity
+from ..solver.shape_solver import structure_key
 from .curve import point_to_curve
 from .observations import Observation, ObservationError, ObservationSet
 from .parameters import Parameterisation, profile_mean
@@ -90,15 +92,11 @@ class SolverCache:
 
     @staticmethod
     def _key(problem: Problem, options: SolverOptions, compile: str) -> bytes:
-        from ..solver.shape_solver import structure_key
-
         return pickle.dumps(
             (structure_key(problem, options), compile), protocol=pickle.HIGHEST_PROTOCOL
         )
 
     def take(self, problem: Problem, options: SolverOptions, compile: str) -> ShapeSolver | None:
-        from ..solver.nlp import planarity_violation
-
         kept = self._solvers.get(self._key(problem, options, compile))
         while kept:
             solver = kept.pop()

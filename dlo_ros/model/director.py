@@ -111,10 +111,10 @@ def quat_to_frame(q: np.ndarray) -> np.ndarray:
 
 
 def frame_to_quat(r: np.ndarray) -> np.ndarray:
-    """Return the unit quaternions of rotation matrices (Shepperd's method).
+    """Return the unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3).
 
-    Unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3) (Shepperd's method: each
-    row from the largest of 1 + trace and the diagonal, so no division by a small number).
+    Shepperd's method: each row from the largest of 1 + trace and the diagonal, so no division by
+    a small number.
     """
     r = np.asarray(r, dtype=float)
     m = r.reshape(-1, 3, 3)
@@ -247,11 +247,7 @@ class DirectorModel:
         return self._memo("W", s, self.mesh.integration_matrix)
 
     def position_rows(self, s: np.ndarray) -> np.ndarray:
-        """Return W(s) as ``position_matrix`` does, without remembering it.
-
-        W(s) as ``position_matrix``, not remembered (for arc lengths that change every
-        solve).
-        """
+        """Return W(s) as ``position_matrix`` does, not remembered (s changes every solve)."""
         return self.mesh.integration_matrix(s)
 
     def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:

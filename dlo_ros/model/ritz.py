@@ -253,11 +253,7 @@ class RitzModel:
         return self.positions_at_rows(z, self.position_matrix(s))
 
     def position_rows(self, s: np.ndarray) -> np.ndarray:
-        """Return W(s) as ``position_matrix`` does, without remembering it.
-
-        W(s) as ``position_matrix``, not remembered (for arc lengths that change every
-        solve).
-        """
+        """Return W(s) as ``position_matrix`` does, not remembered (s changes every solve)."""
         return self.quad.integration_matrix(np.asarray(s, dtype=float))
 
     def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:

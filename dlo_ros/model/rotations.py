@@ -163,6 +163,8 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     """Rotation matrices (…, 3, 3) → quaternions (…, 4) as (x, y, z, w) with w ≥ 0."""
+    # start-up: scipy.spatial.transform costs 0.30 s (python -X importtime, 3 runs) and nothing
+    # else in dlo_ros.model needs scipy
     from scipy.spatial.transform import Rotation
 
     m = np.asarray(m, dtype=float)

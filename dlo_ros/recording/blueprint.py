@@ -41,7 +41,7 @@ def default_blueprint(info: SceneInfo | None = None) -> Any:
     3D world view (left) beside the time series and the event log (right); timeline
     ``update``.
     """
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
     world = rrb.Spatial3DView(
         origin=E_WORLD, name="World (m, z up)", eye_controls=_eye(info) if info else None
@@ -79,7 +79,7 @@ def _eye(info: SceneInfo) -> Any:
     Camera looking at the cable from the side: perpendicular to the grips' chord and to
     gravity.
     """
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
     g, L = info.gravity, info.length
     pos = info.grip_positions

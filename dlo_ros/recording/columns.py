@@ -58,7 +58,7 @@ class Columns:
 
     def _list(self, name: str):
         """Return the ``list<T>`` column ``name`` (None if absent)."""
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._column(name)
         if col is None:
@@ -69,7 +69,7 @@ class Columns:
 
     def index(self, name: str) -> list[int | None]:
         """Read an index column (``update``, ``ros_time``): ints, None where null."""
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._column(name)
         if col is None:
@@ -92,7 +92,7 @@ class Columns:
         A string column: per row its first string (``first``) or the list of strings; None where
         null or empty.
         """
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._list(name)
         if col is None:
@@ -108,7 +108,7 @@ class Columns:
 
     def flags(self, name: str) -> list[bool | None]:
         """Read a boolean column: per row its first value, None where null or empty."""
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._list(name)
         if col is None:
@@ -125,7 +125,7 @@ class Columns:
         A numeric column: per row a float64 array (None where null).  ``finite``: NaN or inf is
         an error; ``per_row``: the largest number of values a cell may have.
         """
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._list(name)
         if col is None:
@@ -162,7 +162,7 @@ class Columns:
         ``LineStrips3D:strips`` as the centreline it draws: the first point of each strip and
         the last point of the last one, (n, 3) float64 per row (None where null or empty).
         """
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._list(name)
         if col is None:

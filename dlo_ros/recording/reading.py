@@ -11,6 +11,7 @@ was read.  Every failure is one :class:`RecordingError` line naming the file.
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
@@ -19,6 +20,7 @@ import numpy as np
 
 from . import paths as P
 from .columns import Budget, ColumnError, Columns, updates_of
+from ..text import safe_text
 from .rrd_file import LIMITS, RrdFileError, RrdLayout, open_rrd
 
 Pose = tuple[np.ndarray, np.ndarray]  # position (3,), quaternion (4,) x, y, z, w
@@ -392,9 +394,7 @@ def _stream(path: Path, reader: _Reader) -> tuple[Any, RrdLayout]:
     store entry, the file's layout).  Every failure is a :class:`RecordingError` naming the
     file.
     """
-    try:
-        import warnings
-
+    try:  # optional: rerun-sdk (Python >= 3.11)
         from rerun.chunk import RrdReader
     except ImportError as exc:
         raise RecordingError(
@@ -434,6 +434,4 @@ def _stream(path: Path, reader: _Reader) -> tuple[Any, RrdLayout]:
 
 def _one_line(text: str, limit: int = 200) -> str:
     """``text`` on one line, at most ``limit`` characters (rerun's messages may span lines)."""
-    from ..text import safe_text
-
     return safe_text(" ".join(text.split()), limit)

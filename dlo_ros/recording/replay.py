@@ -13,7 +13,10 @@ import math
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
+import yaml
 
+from .. import solver as S
+from ..scene import Scene, scene_from_dict
 from . import paths as P
 from .reading import (
     RecordedResult,
@@ -46,17 +49,11 @@ DEFAULT_TOLERANCE = 1e-6
 
 
 # ---- re-solving ---------------------------------------------------------------------------------
-def _scene_from_yaml(text: str, where: str):
-    import yaml
-
-    from ..scene import scene_from_dict
-
+def _scene_from_yaml(text: str, where: str) -> Scene:
     return scene_from_dict(yaml.safe_load(text), source=where)
 
 
-def _make_solver(kind: str, scene, compile: str) -> Solver:
-    from .. import solver as S
-
+def _make_solver(kind: str, scene: Scene, compile: str) -> Solver:
     if kind == "ShapeSolver" or not hasattr(S, "make_solver"):
         return S.ShapeSolver(scene.problem, scene.options, compile=compile)
     if kind == "AutoShapeSolver" and hasattr(S, "AutoShapeSolver"):

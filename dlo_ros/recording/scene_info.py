@@ -44,6 +44,8 @@ class SceneInfo:
 
 def scene_yaml(scene: Any) -> str:
     """Return the scene in the scene-file format (``dlo_ros.scene.scene_to_dict``) as YAML text."""
+    # here, not at the top: the writer's process imports this module and must not import the
+    # scene package (the model and solver: see scene_info below)
     import yaml
 
     from ..scene import scene_to_dict

@@ -229,7 +229,7 @@ class ProcessBackend:
             raise RuntimeError(f"recording could not start: {message}")
         self.recording_id = reply[1]
         try:
-            import fcntl
+            import fcntl  # optional: POSIX only
 
             fcntl.fcntl(self._in, F_SETPIPE_SZ, 1 << 20)
         except (ImportError, OSError):

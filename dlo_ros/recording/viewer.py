@@ -70,7 +70,7 @@ def screenshot(
     reason when it cannot start (e.g. no Vulkan adapter: install a software one, Debian's
     mesa-vulkan-drivers).
     """
-    from rerun.experimental import ViewerClient
+    from rerun.experimental import ViewerClient  # optional: rerun-sdk
 
     path, png = Path(path).resolve(), Path(png).resolve()
     viewer = ViewerClient.spawn(headless=True, port=_free_port(), hide_welcome_screen=True)

@@ -108,7 +108,7 @@ class Writer:
 
     def __init__(self, cfg: WriterConfig) -> None:
         try:
-            import rerun as rr
+            import rerun as rr  # optional: rerun-sdk (Python >= 3.11), with pyarrow
         except ImportError as exc:  # Python 3.10, or a broken install
             raise RecordingUnavailable(
                 f"recording needs rerun-sdk (Python >= 3.11; see requirements.txt): {exc}"
@@ -176,7 +176,7 @@ class Writer:
         return max(0.0, self._oldest + BATCH_SECONDS - time.monotonic())
 
     def send_batches(self) -> None:
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         targets, results = self._pending_targets, self._pending_results
         self._pending_targets, self._pending_results = [], []
@@ -477,9 +477,11 @@ class Writer:
         self._row(E_MODEL, "TextLog", item, text=[item.payload], level=["INFO"])
 
     def _handle_fit(self, item: QueueItem) -> None:
+        # here: only a recording with a fit needs it, and the writer's process must not import the
+        # model (identify imports the solver)
         from ..identify.drawing import (
             draw_observation,
-        )  # imported only by a recording that has a fit
+        )
 
         fit: FitSnap = item.payload
         self.send_batches()  # keep the rows of earlier updates before this one

@@ -83,10 +83,7 @@ def resolve(
     compile: str = "cached",
     progress: Callable[[str], None] | None = None,
 ) -> dict:
-    """Re-run the solver on the recorded targets and compare with the recorded shapes.
-
-    Re-run the solver on the recorded targets, update by update, and compare with the recorded
-    shapes.
+    """Re-solve the recorded targets update by update and compare with the recorded shapes.
 
     The solver is the recorded kind (ShapeSolver / AutoShapeSolver) built from the recorded scene
     (``scene/yaml``, later ``scene/changes``).  Each update uses the grip poses recorded with its
@@ -141,6 +138,11 @@ def resolve(
         )
         if progress is not None:
             progress(f"update {recorded.update}: {dev:.3g} m")
+    return _report(rec, scene.name, tolerance, rows)
+
+
+def _report(rec: Recording, scene: str, tolerance: float, rows: list[dict[str, Any]]) -> dict:
+    """Return the report of :func:`resolve` from its rows, one per re-solved update."""
     finite = [r["max_deviation_m"] for r in rows if math.isfinite(r["max_deviation_m"])]
     worst = max(
         rows, key=lambda r: r["max_deviation_m"] if not math.isnan(r["max_deviation_m"]) else -1
@@ -148,7 +150,7 @@ def resolve(
     exceeding = [r["update"] for r in rows if not r["max_deviation_m"] <= tolerance]
     return {
         "file": str(rec.path),
-        "scene": scene.name,
+        "scene": scene,
         "solver": rec.solver_kind or "default",
         "tolerance_m": tolerance,
         "updates": rows,
@@ -162,6 +164,7 @@ def resolve(
 
 
 def format_resolve(report: dict) -> str:
+    """Return the human-readable table of a :func:`resolve` report, one line per update."""
     lines = [
         f"replay  {report['file']}: scene {report['scene']}, {report['count']} updates, "
         f"solver {report['solver']}",

@@ -1,4 +1,6 @@
-"""Console-script entry points (``dlo``, ``dlo_node``), kept free of heavy imports: ``dlo node``
+"""Console-script entry points (``dlo``, ``dlo_node``), kept free of heavy imports.
+
+Console-script entry points (``dlo``, ``dlo_node``), kept free of heavy imports: ``dlo node``
 installs its SIGINT/SIGTERM handling (dlo_ros.node.signals) before the CLI imports numpy, CasADi
 and rclpy, so that a SIGTERM in the first second stops it with exit code 0 instead of Python's
 default −15.
@@ -13,11 +15,12 @@ def dlo() -> int:
     """``dlo ...``: dlo_ros.cli.main."""
     node = sys.argv[1:2] == ["node"]
     if node:
+        # start-up (module docstring): the signal handling before anything heavy is imported
         from .node.signals import stop_on_first_signal
 
         stop_on_first_signal()
     try:
-        from .cli import main
+        from .cli import main  # start-up: after the signal handling above
 
         return main()
     except (
@@ -25,7 +28,7 @@ def dlo() -> int:
     ):  # Ctrl-C (for `dlo node` also SIGTERM) while importing or starting: a clean stop
         if not node:
             return 130
-        from .node.signals import ignore_signals_at_exit
+        from .node.signals import ignore_signals_at_exit  # start-up: see above
 
         ignore_signals_at_exit()
         return 0
@@ -33,6 +36,6 @@ def dlo() -> int:
 
 def dlo_node() -> int:
     """``dlo_node ...``: dlo_ros.node.main."""
-    from .node import main
+    from .node import main  # start-up: rclpy is imported only by the command that needs it
 
     return main()

@@ -1,4 +1,6 @@
-"""Small helpers for commands that print one JSON document: strict JSON values, and keeping stray
+"""Helpers for commands that print one JSON document.
+
+Small helpers for commands that print one JSON document: strict JSON values, and keeping stray
 output (e.g. from C code) off stdout while it is produced.
 """
 

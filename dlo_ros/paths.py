@@ -20,7 +20,7 @@ _SOURCE_ROOT = Path(__file__).resolve().parent.parent
 
 def _ament_share_dir() -> Path | None:
     """Return the share directory registered in the ament index, or None if there is none."""
-    try:
+    try:  # optional: only in a ROS install (a plain pip install has no ament index)
         from ament_index_python.packages import (
             PackageNotFoundError,
             get_package_share_directory,

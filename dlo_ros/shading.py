@@ -1,4 +1,6 @@
-"""Bend-energy shading of a centreline: the density ½ Rf κ² and the colour maps that draw it (numpy
+"""Bend-energy shading of a centreline: density ½ Rf κ² and colour maps (numpy only).
+
+Bend-energy shading of a centreline: the density ½ Rf κ² and the colour maps that draw it (numpy
 only).
 
 One implementation for the two drawings of a shape: the recording's centreline (dlo_ros.recording,
@@ -35,7 +37,9 @@ HEAT_STOPS = np.array(
 
 
 def turning_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle [rad] between unit vectors ``a`` and ``b`` (…, 3), in [0, π]; atan2 keeps it accurate
+    """Return the angle [rad] between unit vectors ``a`` and ``b``, in [0, π].
+
+    Angle [rad] between unit vectors ``a`` and ``b`` (…, 3), in [0, π]; atan2 keeps it accurate
     near 0.
     """
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...i,...i->...", a, b))
@@ -80,7 +84,7 @@ def segment_energy_density(points: np.ndarray, bend_stiffness: float | np.ndarra
 
 
 def frame_tangents(orientations: np.ndarray) -> np.ndarray:
-    """Unit tangents (the x-axes) of quaternions (N, 4) x, y, z, w."""
+    """Return the unit tangents (the x-axes) of quaternions (N, 4) x, y, z, w."""
     q = np.asarray(orientations, dtype=float)
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
     x, y, z, w = q.T
@@ -88,7 +92,9 @@ def frame_tangents(orientations: np.ndarray) -> np.ndarray:
 
 
 def frame_curvature(s: np.ndarray, orientations: np.ndarray) -> np.ndarray:
-    """κ(s) [1/m] at samples s with material frames ``orientations`` (N, 4): the turning angle
+    """Return the curvature κ(s) [1/m] at samples with material frames.
+
+    κ(s) [1/m] at samples s with material frames ``orientations`` (N, 4): the turning angle
     between neighbouring tangents over their Δs, central differences inside, one-sided at the ends
     (0 where Δs is 0).  Exact for a circular arc sampled uniformly.
     """
@@ -104,7 +110,9 @@ def frame_curvature(s: np.ndarray, orientations: np.ndarray) -> np.ndarray:
 
 
 def colour_map(values: np.ndarray, stops: np.ndarray = HEAT_STOPS) -> np.ndarray:
-    """Colours (…, C) of ``values`` in [0, 1] (clipped; NaN as 0), linear between equally spaced
+    """Return the colours of ``values`` in [0, 1] on a linear colour map.
+
+    Colours (…, C) of ``values`` in [0, 1] (clipped; NaN as 0), linear between equally spaced
     ``stops`` (K, C): 0 is ``stops[0]``, 1 is ``stops[-1]``.
     """
     v = np.clip(np.nan_to_num(np.asarray(values, dtype=float)), 0.0, 1.0) * (len(stops) - 1)

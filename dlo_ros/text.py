@@ -1,10 +1,13 @@
-"""Text that reaches logs, diagnostics and error messages: one printable line, capped (no ROS, no
+"""Text that reaches logs, diagnostics and error messages: one printable line, capped.
+
+Text that reaches logs, diagnostics and error messages: one printable line, capped (no ROS, no
 numpy).
 """
 
 from __future__ import annotations
 
 import unicodedata
+import warnings
 
 #: Longest text (characters, after escaping) that :func:`safe_text` lets into a log line or a
 # diagnostic value.
@@ -16,14 +19,14 @@ _UNSAFE_CATEGORIES = frozenset(("Cc", "Cf", "Zl", "Zp", "Cs", "Co", "Cn"))
 
 
 def safe_text(value: object, limit: int = TEXT_LIMIT) -> str:
-    """``value`` as one printable line of at most ``limit`` characters, for logs and diagnostics.
+    r"""Return ``value`` as one printable line of at most ``limit`` characters.
 
-    Every character a terminal or a log parser could act on (ANSI escape sequences start with ESC,
-    newlines, carriage returns, other control and format characters) is written as a Python escape
-    (``\\x1b``, ``\\n``, ``\\u202e``), so user-controlled text (frame ids, grip names, messages
-    that quote them, file names) cannot forge log lines or recolour a terminal.  Longer text is cut
-    and ends with ``…``; only the first ``limit`` characters of ``value`` are ever looked at, so a
-    10 MB string costs as little as a short one.
+    For logs and diagnostics.  Every character a terminal or a log parser could act on (ANSI escape
+    sequences start with ESC, newlines, carriage returns, other control and format characters) is
+    written as a Python escape (``\x1b``, ``\n``, ``\u202e``), so user-controlled text (frame ids,
+    grip names, messages that quote them, file names) cannot forge log lines or recolour a
+    terminal.  Longer text is cut and ends with ``…``; only the first ``limit`` characters of
+    ``value`` are ever looked at, so a 10 MB string costs as little as a short one.
     """
     text = value if isinstance(value, str) else str(value)
     out: list[str] = []
@@ -45,13 +48,13 @@ def safe_text(value: object, limit: int = TEXT_LIMIT) -> str:
 
 
 def one_line_warnings() -> None:
-    """For the ``dlo`` command and the node (applications, not the library): a warning that dlo_ros
+    """Make dlo_ros's warnings print as their message alone, one line on stderr.
+
+    For the ``dlo`` command and the node (applications, not the library): a warning that dlo_ros
     raises (e.g. ``CacheWarning``, an unsafe compiled-code cache) prints as its message alone, one
     line on stderr, instead of Python's ``file:line: Category: message`` plus a line of source
     code, which reads like a traceback.  Other packages' warnings keep Python's format.
     """
-    import warnings
-
     default = warnings.formatwarning
 
     # noqa: ANN001 - warnings' API

@@ -1,4 +1,6 @@
-"""``dlo demo``: the ROS node with a dual-arm driver over DDS, or (``--solver-only``) a grip moved
+"""``dlo demo``: the ROS node with a dual-arm driver, or a grip moved in warm steps.
+
+``dlo demo``: the ROS node with a dual-arm driver over DDS, or (``--solver-only``) a grip moved
 in warm steps.
 """
 
@@ -9,20 +11,29 @@ import contextlib
 import json
 import sys
 import time
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from ..jsonio import json_safe, stdout_to_stderr
-from .common import EXIT_NOT_OK, EXIT_OK, UsageError, _compile_mode, _load
-from .record import _add_record_arguments, _close_recorder, _recorder
+from .common import EXIT_NOT_OK, EXIT_OK, UsageError, compile_mode, load_scene_arg
+from .record import add_record_arguments, close_recorder, make_recorder
 from .solve import max_sag
 
-HELP = "the main job: the ROS node + a dual-arm driver over DDS, with a summary (--solver-only: no ROS)"
+if TYPE_CHECKING:  # types only: start-up (cli/__init__)
+    from ..scene import Scene
+    from ..solver import Solver
+
+HELP = (
+    "the main job: the ROS node + a dual-arm driver over DDS, with a summary (--solver-only: "
+    "no ROS)"
+)
 
 
 def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
-    """The moving grip (named 'right', else the one with the largest s) and its ``steps`` target
+    """Return the moving grip and its ``steps`` target positions.
+
+    The moving grip (named 'right', else the one with the largest s) and its ``steps`` target
     positions.
 
     It moves in a straight line, in equal steps, by 15 % of the chord toward the first grip and by
@@ -42,6 +53,40 @@ def demo_path(scene, steps: int) -> tuple[str, list[np.ndarray]]:
     return moving.name, [start + total * (k / steps) for k in range(1, steps + 1)]
 
 
+def _warm_summary(
+    times: list[float], iters: list[int], statuses: dict[str, int], stable: int
+) -> dict:
+    """Return the ``warm`` part of :func:`run_demo`'s summary: time and iteration statistics."""
+    return {
+        "time_ms": times,
+        "median_ms": float(np.median(times)) if times else None,
+        "p90_ms": float(np.percentile(times, 90)) if times else None,
+        "max_ms": float(np.max(times)) if times else None,
+        "iterations": iters,
+        "mean_iterations": float(np.mean(iters)) if iters else None,
+        "statuses": statuses,
+        "ok_count": statuses.get("ok", 0),
+        "stable_count": stable,
+    }
+
+
+def _build_solver(scene: Scene, compile: str, log: Callable[[str], None]) -> Solver:
+    """Return the scene's solver; a ValueError of the solver's checks becomes a SceneError."""
+    # start-up (cli/__init__): the solver only when a demo runs
+    from ..scene import SceneError
+    from ..solver import make_solver
+
+    if compile == "blocking":
+        log(
+            f"building the solver for {scene.name} (compiling C code: up to a minute the first "
+            f"time)"
+        )
+    try:
+        return make_solver(scene.problem, scene.options, compile=compile, checks="sync")
+    except ValueError as exc:  # the solver's own checks name the field
+        raise SceneError(str(exc), source=scene.source) from None
+
+
 def run_demo(
     scene_name: str | None = None,
     steps: int = 50,
@@ -57,21 +102,13 @@ def run_demo(
     The CLI prints it with :func:`format_demo`. ``recorder``: a dlo_ros.recording.Recorder; update
     0 is the cold solve, update k the k-th step.
     """
+    # start-up (cli/__init__): the model and scene only when a demo runs
     from ..model.problem import GripPose
-    from ..scene import DEFAULT_SCENE, SceneError
-    from ..solver import make_solver
+    from ..scene import DEFAULT_SCENE
 
-    scene = _load(scene_name or DEFAULT_SCENE)
-    log = log or (lambda _msg: None)
-    if compile == "blocking":
-        log(
-            f"building the solver for {scene.name} (compiling C code: up to a minute the first time)"
-        )
+    scene = load_scene_arg(scene_name or DEFAULT_SCENE)
     t0 = time.perf_counter()
-    try:
-        solver = make_solver(scene.problem, scene.options, compile=compile, checks="sync")
-    except ValueError as exc:  # the solver's own checks name the field
-        raise SceneError(str(exc), source=scene.source) from None
+    solver = _build_solver(scene, compile, log or (lambda _msg: None))
     build_s = time.perf_counter() - t0
     record = recorder is not None and recorder.enabled
     current = {g.name: g.pose for g in scene.problem.grips}
@@ -85,7 +122,10 @@ def run_demo(
     name, targets = demo_path(scene, steps)
     orientation = scene.problem.grip(name).pose.orientation
 
-    times, iters, statuses, stable, last = [], [], {}, 0, cold
+    times: list[float] = []
+    iters: list[int] = []
+    statuses: dict[str, int] = {}
+    stable, last = 0, cold
     if cold.ok:
         for k, target in enumerate(targets, start=1):
             if record:
@@ -102,17 +142,7 @@ def run_demo(
             if r.ok:
                 last = r
     grip_positions = [g.pose.position for g in solver.problem.grips]
-    warm = {
-        "time_ms": times,
-        "median_ms": float(np.median(times)) if times else None,
-        "p90_ms": float(np.percentile(times, 90)) if times else None,
-        "max_ms": float(np.max(times)) if times else None,
-        "iterations": iters,
-        "mean_iterations": float(np.mean(iters)) if iters else None,
-        "statuses": statuses,
-        "ok_count": statuses.get("ok", 0),
-        "stable_count": stable,
-    }
+    warm = _warm_summary(times, iters, statuses, stable)
     return {
         "scene": scene.name,
         "moving_grip": name,
@@ -136,14 +166,17 @@ def run_demo(
 def format_demo(summary: dict) -> str:
     c, w = summary["cold"], summary["warm"]
     lines = [
-        f"demo    scene {summary['scene']}: grip {summary['moving_grip']!r} moved in {summary['steps']} warm-started steps",
+        f"demo    scene {summary['scene']}: grip {summary['moving_grip']!r} moved in "
+        f"{summary['steps']} warm-started steps",
         f"build   {summary['build_time_s']:.2f} s",
-        f"cold    {c['status']} ({c['message']}), {c['time_ms']:.1f} ms, {c['iterations']} iterations, stable {c['stable']}",
+        f"cold    {c['status']} ({c['message']}), {c['time_ms']:.1f} ms, {c['iterations']} "
+        f"iterations, stable {c['stable']}",
     ]
     if w["time_ms"]:
         statuses = ", ".join(f"{k} {v}" for k, v in sorted(w["statuses"].items()))
         lines += [
-            f"warm    median {w['median_ms']:.2f} ms, p90 {w['p90_ms']:.2f} ms, max {w['max_ms']:.2f} ms",
+            f"warm    median {w['median_ms']:.2f} ms, p90 {w['p90_ms']:.2f} ms, max "
+            f"{w['max_ms']:.2f} ms",
             f"        mean {w['mean_iterations']:.1f} iterations; statuses: {statuses}; "
             f"stable {w['stable_count']}/{summary['steps']}",
         ]
@@ -158,8 +191,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--solver-only",
         action="store_true",
-        help="no ROS: solve the scene in this process and move a grip (the default demo runs the ROS "
-        "node and a dual-arm driver over DDS; its options: python -m dlo_ros.node.demo --help)",
+        help="no ROS: solve the scene in this process and move a grip (the default demo runs the "
+        "ROS node and a dual-arm driver over DDS; its options: "
+        "python -m dlo_ros.node.demo --help)",
     )
     p.add_argument(
         "--scene", default=None, metavar="NAME", help="scene name or file (default: default_cable)"
@@ -177,16 +211,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="compile the solver's KKT function to C (about a minute per new scene structure)",
     )
-    _add_record_arguments(p)
+    add_record_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    """The main job: the ROS node on the default scene with a dual-arm driver in this process (real
+    """Run the main job: the ROS node with a dual-arm driver, or the ROS-free demo.
+
+    The main job: the ROS node on the default scene with a dual-arm driver in this process (real
     DDS), printing updates, latency p50/p99, failures and stable shapes; ``--solver-only`` for the
     ROS-free demo.
     """
     if not args.solver_only:
-        from ..node.demo import run_demo_job
+        from ..node.demo import run_demo_job  # start-up (cli/__init__): rclpy
 
         job = ["--compile", "blocking" if args.compile else "cached"]
         if getattr(
@@ -199,16 +235,16 @@ def run(args: argparse.Namespace) -> int:
     log = (lambda msg: print(msg, file=sys.stderr)) if not args.json else None
     guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
-        recorder = _recorder(args)
+        recorder = make_recorder(args)
         try:
             summary = run_demo(
                 args.scene,
                 args.steps,
                 log=log,
-                compile=_compile_mode(args.compile),
+                compile=compile_mode(args.compile),
                 recorder=recorder,
             )
         finally:
-            _close_recorder(recorder)
+            close_recorder(recorder)
     print(json.dumps(json_safe(summary)) if args.json else format_demo(summary))
     return EXIT_OK if summary["ok"] else EXIT_NOT_OK

@@ -1,4 +1,6 @@
-"""``dlo node ARGS``: the ROS 2 node (its arguments reach it unparsed; dlo_ros/node/params/
+"""``dlo node ARGS``: the ROS 2 node, its arguments passed on unparsed.
+
+``dlo node ARGS``: the ROS 2 node (its arguments reach it unparsed; dlo_ros/node/params/
 checks them).
 """
 
@@ -9,7 +11,8 @@ import argparse
 from .common import EXIT_OK, EXIT_USAGE
 
 HELP = (
-    "run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--check] [--ros-args ...] "
+    "run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--check] "
+    "[--ros-args ...] "
     "(`dlo node --help`)"
 )
 
@@ -19,23 +22,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """The built-in ``node`` subcommand (``main`` passes its arguments to :func:`run_node`
+    """Run the built-in ``node`` subcommand.
+
+    The built-in ``node`` subcommand (``main`` passes its arguments to :func:`run_node`
     unparsed).
     """
     return run_node(args.node_args)
 
 
 def run_node(argv: list[str]) -> int:
-    """``dlo node ARGS``: the node's own command line (``--params-file``, ``--scene``, ``--check``,
+    """Run the node with its own command line (``dlo node ARGS``).
+
+    ``dlo node ARGS``: the node's own command line (``--params-file``, ``--scene``, ``--check``,
     ``--ros-args ...``), parsed and checked by dlo_ros.node.params.prepare_node_args; ``main``
     hands everything after ``node`` here untouched (argparse cannot pass ``--scene`` through a
     subparser).
     """
-    from ..node.signals import stop_on_first_signal
+    from ..node.signals import stop_on_first_signal  # start-up (cli/__init__): rclpy
 
     # before the node's imports (CasADi, rclpy): SIGTERM then stops it with 0, not −15
     stop_on_first_signal()
-    from ..node.params import node_argument_parser
+    from ..node.params import node_argument_parser  # start-up (cli/__init__)
 
     if any(
         a in ("-h", "--help")
@@ -43,7 +50,7 @@ def run_node(argv: list[str]) -> int:
     ):
         node_argument_parser("dlo node").print_help()  # without importing rclpy
         return EXIT_OK
-    from ..node import main as node_main
+    from ..node import main as node_main  # start-up (cli/__init__): rclpy
 
     try:
         result = node_main(argv, prog="dlo node")

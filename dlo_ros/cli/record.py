@@ -1,4 +1,6 @@
-"""The recording flags of ``dlo solve`` and ``dlo demo`` (``--rrd``, ``--spawn``, ``--connect``;
+"""The recording flags of ``dlo solve`` and ``dlo demo`` (msg_docs/recording.md).
+
+The recording flags of ``dlo solve`` and ``dlo demo`` (``--rrd``, ``--spawn``, ``--connect``;
 msg_docs/recording.md).
 """
 
@@ -6,11 +8,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the type only: start-up (cli/__init__)
+    from ..recording import Recorder
 
 from .common import UsageError
 
 
-def _add_record_arguments(p: argparse.ArgumentParser) -> None:
+def add_record_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the recording flags (--rrd, --spawn, --connect) to a subcommand's parser."""
     g = p.add_argument_group("rerun recording (any combination; default off)")
     g.add_argument(
         "--rrd",
@@ -31,9 +38,9 @@ def _add_record_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _recorder(args: argparse.Namespace):
-    """The Recorder the recording flags ask for (a disabled one when none is given)."""
-    from ..recording import Recorder, RecordingUnavailable
+def make_recorder(args: argparse.Namespace):
+    """Return the Recorder the recording flags ask for (a disabled one when none is given)."""
+    from ..recording import Recorder, RecordingUnavailable  # start-up (cli/__init__)
 
     try:
         return Recorder(rrd=args.rrd, spawn=args.spawn, connect=args.connect)
@@ -45,7 +52,8 @@ def _recorder(args: argparse.Namespace):
         raise UsageError(f"{'--spawn' if args.spawn else 'recording'}: {exc}") from None
 
 
-def _close_recorder(recorder) -> None:
+def close_recorder(recorder: Recorder) -> None:
+    """Close the recorder and say on stderr where the recording went and how many errors it had."""
     recorder.close()
     if recorder.enabled and recorder.errors:
         print(

@@ -1,4 +1,6 @@
-"""``dlo replay FILE.rrd``: open a recording in the rerun viewer, render it, or re-solve it as a
+"""``dlo replay FILE.rrd``: view, render or re-solve a recording.
+
+``dlo replay FILE.rrd``: open a recording in the rerun viewer, render it, or re-solve it as a
 regression case.
 
     dlo replay FILE.rrd                      open it in the native viewer (needs a display; else
@@ -26,11 +28,14 @@ from pathlib import Path
 from ..jsonio import json_safe, stdout_to_stderr
 from .common import EXIT_NOT_OK, EXIT_OK, UsageError
 
-HELP = "open a rerun recording (.rrd) in the viewer, or re-solve it and compare the shapes (--resolve)"
+HELP = (
+    "open a rerun recording (.rrd) in the viewer, or re-solve it and compare the shapes "
+    "(--resolve)"
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..recording.replay import DEFAULT_TOLERANCE
+    from ..recording.replay import DEFAULT_TOLERANCE  # start-up (cli/__init__)
 
     p.add_argument(
         "file",
@@ -40,15 +45,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--resolve",
         action="store_true",
-        help="re-run the solver on the recorded targets and report how far today's shapes are from the "
-        "recorded ones (exit 1 if any update exceeds --tolerance)",
+        help="re-run the solver on the recorded targets and report how far today's shapes are "
+        "from the recorded ones (exit 1 if any update exceeds --tolerance)",
     )
     p.add_argument(
         "--tolerance",
         type=float,
         default=DEFAULT_TOLERANCE,
         metavar="M",
-        help=f"with --resolve: largest allowed centreline deviation [m] (default {DEFAULT_TOLERANCE:g})",
+        help=(
+            f"with --resolve: largest allowed centreline deviation [m] (default "
+            f"{DEFAULT_TOLERANCE:g})"
+        ),
     )
     p.add_argument(
         "--json", action="store_true", help="with --resolve: print the report as one JSON object"
@@ -73,8 +81,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _read(path: Path, details: bool):
-    """The recording, or UsageError with its one-line reason; a note on stderr if it ends early."""
-    from ..recording import replay
+    """Read the recording, or raise UsageError with its one-line reason; note an early end."""
+    from ..recording import replay  # start-up (cli/__init__)
 
     try:
         rec = replay.read_recording(path, details=details)
@@ -95,7 +103,7 @@ def _note_truncated(path: Path, updates: int, file_bytes: int, complete_bytes: i
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..recording import replay, viewer
+    from ..recording import replay, viewer  # start-up (cli/__init__)
 
     path = Path(args.file)
     if args.resolve:
@@ -126,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
         except Exception as exc:
             print(
                 f"dlo replay: could not render {path} headlessly: {type(exc).__name__}: {exc}\n"
-                "  the headless viewer needs a Vulkan adapter; a software one is Debian's mesa-vulkan-drivers "
+                "  the headless viewer needs a Vulkan adapter; a software one is Debian's "
+                "mesa-vulkan-drivers "
                 "(lavapipe)",
                 file=sys.stderr,
             )

@@ -16,15 +16,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def scene_summaries() -> list[tuple[str, str]]:
     """(name, first line of the description) of every shipped scene; unreadable files say why."""
-    import yaml
+    import yaml  # start-up (cli/__init__)
 
-    from ..scene import _SceneLoader
+    from ..scene import SceneLoader  # start-up (cli/__init__)
 
     out = []
     for name in available_scenes():
         try:
             # noqa: S506
-            data = yaml.load(scene_path(name).read_text(encoding="utf-8"), Loader=_SceneLoader)
+            data = yaml.load(scene_path(name).read_text(encoding="utf-8"), Loader=SceneLoader)
             desc = data.get("description") if isinstance(data, dict) else None
             first = next(
                 (ln.strip() for ln in str(desc or "").splitlines() if ln.strip()),

@@ -14,8 +14,8 @@ import numpy as np
 
 from ..jsonio import json_safe, stdout_to_stderr
 from ..solver.results.contacts import pressed_obstacles
-from .common import EXIT_NOT_OK, EXIT_OK, UsageError, _compile_mode, _load
-from .record import _add_record_arguments, _close_recorder, _recorder
+from .common import EXIT_NOT_OK, EXIT_OK, UsageError, compile_mode, load_scene_arg
+from .record import add_record_arguments, close_recorder, make_recorder
 
 HELP = "solve a scene once and print the shape (exit 0 if status ok)"
 
@@ -40,7 +40,7 @@ JSON_KEYS = (
 def _with_overrides(
     options, points: int | None, basis: str | None, order: int | None, model: str | None = None
 ):
-    """SolverOptions with the command-line overrides; raises UsageError naming the option.
+    """Return SolverOptions with the command-line overrides; raises UsageError naming the option.
 
     An explicit --order pins the order, so it implies --model full unless --model is given
     (model 'auto' chooses the order itself).
@@ -126,7 +126,8 @@ def format_summary(scene, result) -> str:
             lines.append(f"contact obstacles[{i}] {ob.name or ob.type}: total force {_vec(f)} N")
         for c in result.self_contacts:
             lines.append(
-                f"self    s = {c.s_a:.4g} m and {c.s_b:.4g} m pressed together: force {_vec(c.force)} N "
+                f"self    s = {c.s_a:.4g} m and {c.s_b:.4g} m pressed together: force "
+                f"{_vec(c.force)} N "
                 f"(on s = {c.s_a:.4g} m; gap {c.gap:.4g} m)"
             )
         sag = max_sag(
@@ -135,7 +136,8 @@ def format_summary(scene, result) -> str:
         lines.append(f"sag     {sag:.4g} m  (lowest point below the lowest grip, along gravity)")
     if result.status in ("ok", "unverified"):
         lines.append(
-            f"check   equilibrium residual {result.equilibrium_residual_m:.3g} m (equivalent centreline error)"
+            f"check   equilibrium residual {result.equilibrium_residual_m:.3g} m (equivalent "
+            f"centreline error)"
         )
     lines.append(
         f"solver  {result.iterations} iterations, {result.solve_time_ms:.1f} ms, "
@@ -197,27 +199,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--compile",
         action="store_true",
-        help="compile the solver's KKT function to C (slow first build; only useful for benchmarks)",
+        help=(
+            "compile the solver's KKT function to C (slow first build; only useful for benchmarks)"
+        ),
     )
-    _add_record_arguments(p)
+    add_record_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..solver import make_solver
+    from ..solver import make_solver  # start-up (cli/__init__)
 
-    scene = _load(args.scene)
+    scene = load_scene_arg(args.scene)
     options = _with_overrides(scene.options, args.points, args.basis, args.order, args.model)
     guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         try:
             solver = make_solver(
-                scene.problem, options, compile=_compile_mode(args.compile), checks="sync"
+                scene.problem, options, compile=compile_mode(args.compile), checks="sync"
             )
         except (
             ValueError
         ) as exc:  # the solver's own checks (e.g. loads[i].moment); they name the field
             raise UsageError(str(exc)) from None
-        recorder = _recorder(args)
+        recorder = make_recorder(args)
         try:
             if recorder.enabled:
                 recorder.log_scene(replace(scene, options=options), solver=solver)
@@ -230,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
                     result, update=0, ros_time_ns=stamp, targets=targets, warm=False
                 )
         finally:
-            _close_recorder(recorder)
+            close_recorder(recorder)
     if args.json:
         out = {"scene": scene.name, "frame_id": scene.frame_id, **result.to_dict()}
         print(json.dumps(json_safe(out), allow_nan=False))

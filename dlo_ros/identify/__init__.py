@@ -1,4 +1,6 @@
-"""Identify stiffness and weight from observed shapes (issue #16): observations, point-to-curve
+"""Identify stiffness and weight of a string from its observed shapes (msg_docs/fitting.md).
+
+Identify stiffness and weight from observed shapes (issue #16): observations, point-to-curve
 residuals, identifiability and the bilevel Levenberg–Marquardt fit (msg_docs/fitting.md).
 """
 

@@ -1,4 +1,6 @@
-"""Point-to-curve residuals: each observed point against the nearest point of the predicted
+"""Point-to-curve residuals of observed points against a predicted centreline.
+
+Point-to-curve residuals: each observed point against the nearest point of the predicted
 centreline.
 
 The centreline is given as a dense polyline x_i = x(s_i) with derivatives dx_i/dθ.  For an observed
@@ -25,7 +27,9 @@ CHUNK = 2048
 
 @dataclass
 class CurveResiduals:
-    """residuals (N, 3) [m] = P (y − f); jacobian (N, 3, k) [m] = dr/dθ; s (N,) [m] the feet's arc
+    """The residuals of observed points against a curve, and their derivatives.
+
+    residuals (N, 3) [m] = P (y − f); jacobian (N, 3, k) [m] = dr/dθ; s (N,) [m] the feet's arc
     lengths.
     """
 
@@ -42,7 +46,9 @@ class CurveResiduals:
 def point_to_curve(
     points: np.ndarray, s: np.ndarray, curve: np.ndarray, d_curve: np.ndarray
 ) -> CurveResiduals:
-    """Residuals of ``points`` (N, 3) against the polyline ``curve`` (S, 3) at arc lengths ``s``
+    """Return the residuals of points against a polyline with known derivatives.
+
+    Residuals of ``points`` (N, 3) against the polyline ``curve`` (S, 3) at arc lengths ``s``
     (S,), with ``d_curve`` (S, 3, k) its derivatives (module docstring).
     """
     a, d = curve[:-1], np.diff(curve, axis=0)

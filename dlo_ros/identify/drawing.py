@@ -44,13 +44,15 @@ def draw_observation(
     *,
     static: bool = True,
 ) -> None:
-    """Log one observation's drawing under ``base`` into the rerun RecordingStream ``rec``:
+    """Log one observation's points, fitted centreline and residuals to rerun.
+
+    Log one observation's drawing under ``base`` into the rerun RecordingStream ``rec``:
     ``observed`` (``points`` (N, 3) [m], red beyond ``huber`` σ of the centreline), ``fitted``
     (``shape`` (S, 3) [m]) and ``residuals`` (point → its nearest point ``feet`` (N, 3) on the
     centreline; empty arrays skip a part). ``static``: timeless (``dlo fit --rrd``), or at the
     stream's current time (the node's recording).
     """
-    import rerun as rr
+    import rerun as rr  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
     distance = np.linalg.norm(points - feet, axis=1) if len(feet) else np.zeros(len(points))
     colours = np.where((distance > huber * sigma)[:, None], RED, GREY).astype(np.uint8)
@@ -72,11 +74,13 @@ def save_fit(
     summary: str,
     settings: FitSettings = FitSettings(),
 ) -> None:
-    """Write the drawing of ``result`` (fitted to ``data``) to the .rrd file ``path``.  Raises
+    """Write the drawing of a fit to an .rrd file.
+
+    Write the drawing of ``result`` (fitted to ``data``) to the .rrd file ``path``.  Raises
     RuntimeError when rerun-sdk cannot be imported.
     """
     try:
-        import rerun as rr
+        import rerun as rr  # optional: rerun-sdk (Python >= 3.11), with pyarrow
     except ImportError as exc:
         raise RuntimeError(f"drawing needs rerun-sdk (see requirements.txt): {exc}") from None
     rec = rr.RecordingStream("dlo_fit")

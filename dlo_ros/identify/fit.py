@@ -2,9 +2,9 @@
 
 Unknowns θ (``parameters.py``): for each fitted material the log of a uniform scale of the scene's
 profile, or (``ObservationSet.profiles``) the logs of a piecewise-linear table's knot values with a
-smoothness regulariser ½|Rθ|² added to Φ.  Inner level: every observation's equilibrium, one ``ShapeSolver`` per
-observation, warm-started from its previous θ (Newton on the KKT conditions; IPOPT only as its
-fallback). Outer level: minimise
+smoothness regulariser ½|Rθ|² added to Φ.  Inner level: every observation's equilibrium, one
+``ShapeSolver`` per observation, warm-started from its previous θ (Newton on the KKT conditions;
+IPOPT only as its fallback). Outer level: minimise
 
     Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ Σ ((T_meas − T(θ)) / σ_T)²
            + ½ ((W_known − ∫D ds) / σ_W)²
@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,7 @@ from ..model.problem import Problem
 from ..solver import SolverOptions
 from .gate import evaluate_gate, precheck
 from .identifiability import NEITHER, ORTHOGONAL, RANK_TOLERANCE, Identifiability, analyse
-from .objective import FitSettings, Objective, SolverCache
+from .objective import Evaluation, FitSettings, Objective, SolverCache
 from .observations import ObservationError, ObservationSet
 from .parameters import PROFILE, Parameterisation, profile_mean
 from .results import Estimate, FitResult, ObservationFit
@@ -52,7 +53,8 @@ ANCHOR_ORDER = ("Rf", "Rt", "Re", "D")
 # not : determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
 BOUND = float(np.log(1e3))
 AT_BOUND = (
-    "the data drive it to the bound of the search (a factor 1000 from the scene's value): they do not "
+    "the data drive it to the bound of the search (a factor 1000 from the scene's value): they do "
+    "not "
     "determine it; the other estimates are conditional on it being there"
 )
 #: ratios reported (numerator, denominator, unit)
@@ -87,7 +89,9 @@ def fit(
     settings: FitSettings = FitSettings(),
     cache: SolverCache | None = None,
 ) -> FitResult:
-    """Fit ``data.parameters`` of ``problem``'s string to ``data`` (module docstring).  Raises
+    """Fit the string parameters of a problem to observations.
+
+    Fit ``data.parameters`` of ``problem``'s string to ``data`` (module docstring).  Raises
     ObservationError for a request the scene cannot support; solver failures give status 'failed'.
     ``cache``: equilibrium solvers to take instead of building new ones, and to keep them in
     afterwards (a process that fits repeatedly; ``objective.SolverCache``).
@@ -123,24 +127,73 @@ def _fit(
     settings: FitSettings,
     t0: float,
 ) -> FitResult:
-    """The Levenberg–Marquardt iterations of :func:`fit` and its result."""
+    """Run the Levenberg–Marquardt iterations of :func:`fit` and build its result."""
     names = par.labels
-    evaluate = objective.evaluate
-
-    def failed(message: str, iterations: int) -> FitResult:
+    current = objective.evaluate(np.zeros(len(names)))
+    if isinstance(current, str):
         return FitResult(
             "failed",
-            message,
+            f"at the scene's values: {current}",
             fixed=fixed,
-            iterations=iterations,
+            iterations=0,
             equilibrium_solves=objective.solves,
             time_s=time.perf_counter() - t0,
             names=names,
         )
+    current, status, message, iterations = _levenberg_marquardt(
+        objective, names, current, settings
+    )
+    ident = analyse(names, current.normal)
+    for k in np.flatnonzero(np.abs(current.theta) >= BOUND * (1 - 1e-9)):
+        ident.why[names[k]] = AT_BOUND
+        message += (
+            f"; {names[k]} is at the bound of the search (the other estimates are "
+            f"conditional on it)"
+        )
+    theta = _anchored(current.theta, par, ident, current.normal)
+    cov = _pseudo_inverse(current.normal, ident)
+    string = par.string(theta)
+    for k, comp in enumerate(par.components):
+        if ident.why.get(comp.label) == NEITHER and abs(theta[k]) > 1e-6:
+            message += (
+                f"; {comp.label} is not determined and the fit left it at "
+                f"{par.value(string, k):.4g} "
+                f"{UNITS[comp.material]}: the other estimates are conditional on that value"
+            )
+    parameters = _parameter_estimates(par, string, ident, cov)
+    ratios = _ratio_estimates(par, string, ident, cov, parameters, fixed)
+    dof = max(current.rows - ident.rank, 1)
+    return FitResult(
+        status,
+        message,
+        parameters,
+        ratios,
+        dict(ident.why),
+        fixed,
+        current.fits,
+        iterations,
+        objective.solves,
+        time.perf_counter() - t0,
+        current.chi2 / dof,
+        names,
+        cov,
+        string,
+        ident,
+        dof,
+    )
 
-    current = evaluate(np.zeros(len(names)))
-    if isinstance(current, str):
-        return failed(f"at the scene's values: {current}", 0)
+
+def _levenberg_marquardt(
+    objective: Objective,
+    names: tuple[str, ...],
+    current: Evaluation,
+    settings: FitSettings,
+) -> tuple[Evaluation, str, str, int]:
+    """Iterate from ``current`` in the directions the data determine.
+
+    Returns (the last accepted evaluation, status, message, iterations): "ok" when a step is below
+    ``settings.step_tolerance`` or nothing is determined, else "not_converged" with why.
+    """
     status, message, mu, iterations = (
         "not_converged",
         f"no convergence in {settings.max_iterations} iterations",
@@ -161,7 +214,7 @@ def _fit(
             if largest > settings.max_step:
                 step *= settings.max_step / largest
             step = np.clip(current.theta + step, -BOUND, BOUND) - current.theta
-            trial = evaluate(current.theta + step)
+            trial = objective.evaluate(current.theta + step)
             if not isinstance(trial, str) and trial.cost <= current.cost * (1 + 1e-12):
                 accepted = trial
                 mu = 0.0 if mu < 1e-6 * lam.max() else mu / 4
@@ -177,20 +230,14 @@ def _fit(
         if float(np.abs(step).max()) < settings.step_tolerance:
             status, message = "ok", f"converged in {iterations} iterations"
             break
-    ident = analyse(names, current.normal)
-    for k in np.flatnonzero(np.abs(current.theta) >= BOUND * (1 - 1e-9)):
-        ident.why[names[k]] = AT_BOUND
-        message += f"; {names[k]} is at the bound of the search (the other estimates are conditional on it)"
-    theta = _anchored(current.theta, par, ident, current.normal)
-    cov = _pseudo_inverse(current.normal, ident)
-    string = par.string(theta)
-    for k, comp in enumerate(par.components):
-        if ident.why.get(comp.label) == NEITHER and abs(theta[k]) > 1e-6:
-            message += (
-                f"; {comp.label} is not determined and the fit left it at {par.value(string, k):.4g} "
-                f"{UNITS[comp.material]}: the other estimates are conditional on that value"
-            )
-    parameters, ratios = {}, {}
+    return current, status, message, iterations
+
+
+def _parameter_estimates(
+    par: Parameterisation, string: Any, ident: Identifiability, cov: np.ndarray
+) -> dict[str, Estimate]:
+    """Return the estimate of each component the data determine (value ± its std)."""
+    parameters = {}
     for k, comp in enumerate(par.components):
         if comp.label in ident.why:
             continue
@@ -202,6 +249,20 @@ def _fit(
             UNITS[comp.material],
             comp.s,
         )
+    return parameters
+
+
+def _ratio_estimates(
+    par: Parameterisation,
+    string: Any,
+    ident: Identifiability,
+    cov: np.ndarray,
+    parameters: dict[str, Estimate],
+    fixed: dict[str, float],
+) -> dict[str, Estimate]:
+    """Return the ratios of :data:`RATIOS` the data determine, and those to a fixed value."""
+    names = par.labels
+    ratios = {}
     for a_name, b_name, unit in RATIOS:
         for a in par.indices(a_name):
             for b in par.indices(b_name):
@@ -231,31 +292,15 @@ def _fit(
                     unit,
                     est.s,
                 )
-    dof = max(current.rows - ident.rank, 1)
-    return FitResult(
-        status,
-        message,
-        parameters,
-        ratios,
-        dict(ident.why),
-        fixed,
-        current.fits,
-        iterations,
-        objective.solves,
-        time.perf_counter() - t0,
-        current.chi2 / dof,
-        names,
-        cov,
-        string,
-        ident,
-        dof,
-    )
+    return ratios
 
 
 def gated(
     result: FitResult, problem: Problem, data: ObservationSet, settings: FitSettings
 ) -> FitResult:
-    """``result`` through the goodness-of-fit gate (``gate.py``): status 'misfit' with the cause
+    """Pass a fit result through the goodness-of-fit gate.
+
+    ``result`` through the goodness-of-fit gate (``gate.py``): status 'misfit' with the cause
     when the fitted shapes do not explain the points (a converged fit, or one that stopped without
     descent); otherwise the standard deviations inflated by sqrt(χ²_red) when it is over 1 (σ
     stated too small or model error: the residuals say how large the noise really is; without the
@@ -296,7 +341,9 @@ def gated(
 def _anchored(
     theta: np.ndarray, par: Parameterisation, ident: Identifiability, normal: np.ndarray
 ) -> np.ndarray:
-    """θ shifted along the common scale u of the fitted materials that enter the solved models (u_k
+    """Shift θ along the common scale the data do not see, anchoring one material.
+
+    θ shifted along the common scale u of the fitted materials that enter the solved models (u_k
     = 1, or 0 for a parameter no residual depends on, e.g. Rt of planar shapes), when the data do
     not see it (shapes alone: the energy's minimiser does not change), so that the first fitted
     material in ANCHOR_ORDER keeps the scene's value (a table: its mean log factor).  Only this
@@ -314,6 +361,6 @@ def _anchored(
 
 
 def _pseudo_inverse(normal: np.ndarray, ident: Identifiability) -> np.ndarray:
-    """A⁺ on the determined directions (the covariance of θ with the stated σ)."""
+    """Return A⁺ on the determined directions (the covariance of θ with the stated σ)."""
     vec, lam = ident.directions
     return (vec / lam) @ vec.T if lam.size else np.zeros_like(normal)

@@ -62,7 +62,9 @@ MAX_NODES = 1500
 
 @dataclass(frozen=True)
 class Gate:
-    """The gate's verdict: ``passed``; the reduced χ² and its threshold; ``cause`` the one-line
+    """The gate's verdict on a fit's residuals.
+
+    The gate's verdict: ``passed``; the reduced χ² and its threshold; ``cause`` the one-line
     reason when it failed; ``note`` what passed with a remark (outliers down-weighted);
     ``noise_ratio2`` the reduced χ² of the points the fit explains (all, or all but the forgiven
     outliers): (actual noise / stated σ)².
@@ -77,13 +79,15 @@ class Gate:
 
 
 def threshold(dof: int) -> float:
-    """The gate's bound on the reduced χ² for ``dof`` degrees of freedom (module docstring)."""
+    """Return the bound on the reduced χ² for ``dof`` degrees of freedom (see the module)."""
     dof = max(int(dof), 1)
     return max(float(chi2_distribution.ppf(QUANTILE, dof)) / dof, MODEL_ERROR_FLOOR)
 
 
 def precheck(problem: Problem, data: ObservationSet) -> str:
-    """Why these points cannot be of this scene's string whatever its stiffness ('' when they may
+    """Say why points cannot be of this scene's string, whatever its stiffness.
+
+    Why these points cannot be of this scene's string whatever its stiffness ('' when they may
     be): wrong units or far from the grips (:func:`geometric_cause`).
     """
     for obs in data.observations:
@@ -94,7 +98,9 @@ def precheck(problem: Problem, data: ObservationSet) -> str:
 
 
 def geometric_cause(problem: Problem, obs: Observation, lengths: bool = True) -> str:
-    """The cause that the points of ``obs`` show by themselves, or ''.  A point on the string is
+    """Return the cause the points of one observation show by themselves, or ''.
+
+    The cause that the points of ``obs`` show by themselves, or ''.  A point on the string is
     within its length L of every grip (the chord is at most the arc), and the cloud spans at most
     about L.
     """
@@ -137,7 +143,9 @@ def geometric_cause(problem: Problem, obs: Observation, lengths: bool = True) ->
 
 
 def arc_length(points: np.ndarray, sigma: float, length: float) -> float:
-    """An estimate of the length [m] of the curve the points lie along (a lower bound up to about
+    """Estimate the length [m] of the curve the points lie along.
+
+    An estimate of the length [m] of the curve the points lie along (a lower bound up to about
     one voxel): the points are averaged in cubic voxels of side max(5σ, L/50) (so noise no longer
     zig-zags), voxels of one point are dropped when most hold several (isolated outliers), and the
     longest path of the minimum spanning tree of the centroids is measured (its diameter, two
@@ -173,12 +181,14 @@ def arc_length(points: np.ndarray, sigma: float, length: float) -> float:
 
 
 def longest_arc(problem: Problem, data: ObservationSet) -> float:
-    """The longest :func:`arc_length` of the observations' clouds [m]."""
+    """Return the longest :func:`arc_length` of the observations' clouds [m]."""
     return max(arc_length(o.points, o.sigma, problem.string.length) for o in data.observations)
 
 
 def clustering(data: ObservationSet, u: list[np.ndarray], huber: float) -> float:
-    """The mean fraction of the NEIGHBOURS nearest points (in space) of each point beyond ``huber``
+    """Measure how much the points beyond the loss's threshold cluster together.
+
+    The mean fraction of the NEIGHBOURS nearest points (in space) of each point beyond ``huber``
     σ that are beyond it too: about the fraction of such points or less for scattered outliers,
     near 1 for a systematic misfit (whole stretches of the cloud off the fitted shape).
     """
@@ -200,7 +210,9 @@ def evaluate_gate(
     distances: list[np.ndarray],
     huber: float,
 ) -> Gate:
-    """The gate on a fit's residuals: ``chi2_total`` = Σ (r/σ)² over all rows, ``dof`` its degrees
+    """Judge whether a fit's residuals are explained by the stated noise.
+
+    The gate on a fit's residuals: ``chi2_total`` = Σ (r/σ)² over all rows, ``dof`` its degrees
     of freedom, ``distances`` each observation's |r| per point [m] (module docstring).
     """
     bound = threshold(dof)
@@ -235,8 +247,10 @@ def evaluate_gate(
         cause
         or next((c for c in causes if c), "")
         or (
-            "the fitted shape does not explain the points (a shape the scene's string cannot take: "
-            "wrong scene, grip poses, length or model, or σ stated too small; the points follow at "
+            "the fitted shape does not explain the points (a shape the scene's string cannot "
+            "take: "
+            "wrong scene, grip poses, length or model, or σ stated too small; the points follow "
+            "at "
             f"least about {longest_arc(problem, data):.3g} m of "
             f"curve, the string is {problem.string.length:g} m)"
         )

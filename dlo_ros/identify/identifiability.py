@@ -19,17 +19,21 @@ import numpy as np
 
 #: an eigenvalue of A below this times the largest spans an undetermined direction
 RANK_TOLERANCE = 1e-10
-#: |V0ᵀ c| / |c| below this: the combination c is determined.  The null space of a nearly degenerate A is
+#: |V0ᵀ c| / |c| below this: the combination c is determined.  The null space of a nearly
+#: degenerate A is
 #: known only approximately (a weak direction's eigenvector mixes with its neighbours), so a
 # combination : with a 1 % component along it still counts as orthogonal to it
 ORTHOGONAL = 1e-2
 
 WHY = {
     "Rt": (
-        "no observation twists the string: Rt changes none of the predicted shapes (a shape held by two "
+        "no observation twists the string: Rt changes none of the predicted shapes (a shape held "
+        "by two "
         "clamps turned relative to each other about the tangent is needed)"
     ),
-    "Re": "no observation stretches the string measurably: Re changes none of the predicted shapes",
+    "Re": (
+        "no observation stretches the string measurably: Re changes none of the predicted shapes"
+    ),
     "D": "the weight changes none of the predicted shapes",
     "Rf": "Rf changes none of the predicted shapes",
 }
@@ -43,7 +47,9 @@ NEITHER = (
 
 @dataclass
 class Identifiability:
-    """names: the fitted θ; eigenvalues (ascending) and eigenvectors (columns) of A; null: the
+    """Which directions of θ the data determine, and why the others are not.
+
+    names: the fitted θ; eigenvalues (ascending) and eigenvectors (columns) of A; null: the
     columns spanning the undetermined directions; why[name] for each parameter not determined
     alone.
     """
@@ -60,7 +66,9 @@ class Identifiability:
 
     @property
     def condition(self) -> float:
-        """Largest over smallest eigenvalue of A on the determined directions (1 for one
+        """Return the condition number of A on the determined directions.
+
+        Largest over smallest eigenvalue of A on the determined directions (1 for one
         direction).
         """
         kept = self.eigenvalues[self.eigenvalues > 0][-self.rank :] if self.rank else np.ones(1)
@@ -90,7 +98,7 @@ class Identifiability:
 def analyse(
     names: tuple[str, ...], normal: np.ndarray, tolerance: float = RANK_TOLERANCE
 ) -> Identifiability:
-    """The identifiability of ``names`` from the normal matrix ``normal`` (module docstring)."""
+    """Analyse which of ``names`` the normal matrix ``normal`` determines (see the module)."""
     eig, vec = np.linalg.eigh(0.5 * (normal + normal.T))
     top = max(float(eig.max(initial=0.0)), 0.0)
     null = vec[:, eig <= tolerance * top] if top > 0 else np.eye(len(names))
@@ -116,8 +124,10 @@ def analyse(
                 f"{a}/{b}" for a, b in (sorted((name, o), key=_ratio_order) for o in partners)
             )
             why[name] = (
-                f"the data determine only ratios ({ratios}): from shapes alone the equilibrium depends on "
-                "D/Rf, Rt/Rf and Re/Rf; an absolute value needs a measured grip force (force), a measured "
+                f"the data determine only ratios ({ratios}): from shapes alone the equilibrium "
+                f"depends on "
+                "D/Rf, Rt/Rf and Re/Rf; an absolute value needs a measured grip force (force), a "
+                "measured "
                 "grip torque (torque) or the known total mass (total_mass)"
             )
         else:

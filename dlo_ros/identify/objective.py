@@ -1,4 +1,6 @@
-"""The outer objective of a fit at θ: every observation's equilibrium, residuals, Jacobian and
+"""The outer objective of a fit at θ, from every observation's equilibrium.
+
+The outer objective of a fit at θ: every observation's equilibrium, residuals, Jacobian and
 normal matrix.
 
     Φ(θ) = Σ_obs Σ_j ρ(|r_j| / σ_obs) + ½ Σ ((F_meas − F(θ)) / σ_F)² + ½ Σ ((T_meas − T(θ)) / σ_T)²
@@ -18,12 +20,15 @@ from __future__ import annotations
 import collections
 import pickle
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from ..model.problem import Problem, StringProperties
 from ..solver import ShapeResult, ShapeSolver, SolverOptions
+from ..solver.build.nlp import planarity_violation
 from ..solver.results.sensitivity import shape_sensitivity
+from ..solver.shape_solver import structure_key
 from .curve import point_to_curve
 from .observations import Observation, ObservationError, ObservationSet
 from .parameters import Parameterisation, profile_mean
@@ -32,7 +37,9 @@ from .results import ObservationFit
 
 @dataclass(frozen=True)
 class FitSettings:
-    """max_iterations: outer LM iterations; huber: the loss's threshold in σ; samples: centreline
+    """How a fit iterates and what it tolerates.
+
+    max_iterations: outer LM iterations; huber: the loss's threshold in σ; samples: centreline
     samples the points are projected on; step_tolerance: converged when the largest accepted step
     in θ is below this; max_step: the largest step in θ (log units); compile: the equilibrium
     solvers' compile mode.
@@ -48,7 +55,9 @@ class FitSettings:
 
 @dataclass
 class Evaluation:
-    """Φ at one θ (``cost``), the normal matrix A and gradient Jᵀ W r of the Gauss–Newton step, the
+    """The objective and its Gauss–Newton model at one θ.
+
+    Φ at one θ (``cost``), the normal matrix A and gradient Jᵀ W r of the Gauss–Newton step, the
     residual statistics per observation, Σ (r/σ)² (``chi2``) and the number of residual rows.
     """
 
@@ -62,7 +71,9 @@ class Evaluation:
 
 
 class SolverCache:
-    """Equilibrium solvers kept from one fit to the next, for a process that fits again and again
+    """Equilibrium solvers kept from one fit to the next.
+
+    Equilibrium solvers kept from one fit to the next, for a process that fits again and again
     (the node's fit worker): building a solver takes seconds (interpreted CasADi), a solve tens of
     ms.
 
@@ -81,15 +92,11 @@ class SolverCache:
 
     @staticmethod
     def _key(problem: Problem, options: SolverOptions, compile: str) -> bytes:
-        from ..solver.shape_solver import structure_key
-
         return pickle.dumps(
             (structure_key(problem, options), compile), protocol=pickle.HIGHEST_PROTOCOL
         )
 
     def take(self, problem: Problem, options: SolverOptions, compile: str) -> ShapeSolver | None:
-        from ..solver.build.nlp import planarity_violation
-
         kept = self._solvers.get(self._key(problem, options, compile))
         while kept:
             solver = kept.pop()
@@ -130,7 +137,9 @@ class ObservedShape:
         self.solver = _solver_for(self.problem, options, compile, cache)
 
     def solve(self, string: StringProperties) -> ShapeResult:
-        """The equilibrium of this observation's poses with ``string``, warm-started from the last
+        """Solve this observation's equilibrium with ``string``, warm-started.
+
+        The equilibrium of this observation's poses with ``string``, warm-started from the last
         one.
         """
         self.solver.set_problem(replace(self.problem, string=string))
@@ -140,7 +149,9 @@ class ObservedShape:
 def _solver_for(
     problem: Problem, options: SolverOptions, compile: str, cache: SolverCache | None = None
 ) -> ShapeSolver:
-    """A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is
+    """Return a fixed-model solver for an observation's problem.
+
+    A fixed-model solver: the scene's model, or for 'auto' the planar model where the shape is
     planar; from ``cache`` when it keeps one.
     """
 
@@ -157,7 +168,9 @@ def _solver_for(
 
 
 class Objective:
-    """Φ and its Gauss–Newton model at any θ (module docstring); ``solves`` counts equilibrium
+    """The objective Φ of a fit and its Gauss–Newton model at any θ.
+
+    Φ and its Gauss–Newton model at any θ (module docstring); ``solves`` counts equilibrium
     solves.
     """
 
@@ -201,7 +214,10 @@ class Objective:
             result = o.solve(string)
             self.solves += 1
             if result.status != "ok":
-                return f"observation {o.obs.name!r}: the equilibrium is {result.status}: {result.message}"
+                return (
+                    f"observation {o.obs.name!r}: the equilibrium is {result.status}: "
+                    f"{result.message}"
+                )
             sens = shape_sensitivity(o.solver, directions, s_grid)
             cr = point_to_curve(o.obs.points, sens.s, sens.points, sens.d_points)
             sigma = o.obs.sigma
@@ -221,20 +237,7 @@ class Objective:
             jw = cr.jacobian / sigma
             normal += np.einsum("n,nik,nil->kl", w, jw, jw)
             gradient += np.einsum("n,nik,ni->k", w, jw, cr.residuals / sigma)
-            force_res = torque_res = None
-            measured = []  # (measured, predicted, d predicted/dθ, σ) of the grip force and torque
-            if o.obs.force is not None:
-                f = o.obs.force
-                measured.append(
-                    (f.force, sens.grip_forces[f.grip], sens.d_grip_forces[f.grip], f.sigma)
-                )
-                force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
-            if o.obs.torque is not None:
-                t = o.obs.torque
-                measured.append(
-                    (t.torque, sens.grip_torques[t.grip], sens.d_grip_torques[t.grip], t.sigma)
-                )
-                torque_res = float(np.linalg.norm(t.torque - sens.grip_torques[t.grip]))
+            measured, force_res, torque_res = _measured_wrenches(o.obs, sens)
             for value, predicted, d_predicted, sigma_v in measured:
                 r = (value - predicted) / sigma_v
                 jv = -d_predicted / sigma_v
@@ -273,3 +276,27 @@ class Objective:
             normal += reg.T @ reg
             gradient += reg.T @ (reg @ theta)
         return Evaluation(theta, cost, normal, gradient, fits, chi2, rows)
+
+
+def _measured_wrenches(
+    obs: Observation, sens: Any
+) -> tuple[list[tuple[Any, Any, Any, float]], float | None, float | None]:
+    """Return the observation's measured grip force and torque terms, and their residuals.
+
+    The terms are (measured, predicted, d predicted/dθ, σ) for each of the grip force and grip
+    torque the observation states; the residuals |measured − predicted| [N], [N·m] (None when not
+    stated).  ``sens`` is the observation's ``shape_sensitivity``.
+    """
+    force_res = torque_res = None
+    measured = []
+    if obs.force is not None:
+        f = obs.force
+        measured.append((f.force, sens.grip_forces[f.grip], sens.d_grip_forces[f.grip], f.sigma))
+        force_res = float(np.linalg.norm(f.force - sens.grip_forces[f.grip]))
+    if obs.torque is not None:
+        t = obs.torque
+        measured.append(
+            (t.torque, sens.grip_torques[t.grip], sens.d_grip_torques[t.grip], t.sigma)
+        )
+        torque_res = float(np.linalg.norm(t.torque - sens.grip_torques[t.grip]))
+    return measured, force_res, torque_res

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -45,7 +46,9 @@ class ObservationError(ValueError):
 
 @dataclass(frozen=True)
 class ForceObservation:
-    """The force [N] one grip exerts ON the string (world frame; a sensor on the gripper reads
+    """A measured grip force on the string, with its noise.
+
+    The force [N] one grip exerts ON the string (world frame; a sensor on the gripper reads
     −force), with its standard deviation σ [N] per component.
     """
 
@@ -56,7 +59,9 @@ class ForceObservation:
 
 @dataclass(frozen=True)
 class TorqueObservation:
-    """The torque [N·m] one grip exerts ON the string about the grip point (world frame), with its
+    """A measured grip torque on the string about the grip point, with its noise.
+
+    The torque [N·m] one grip exerts ON the string about the grip point (world frame), with its
     standard deviation σ [N·m] per component.  A sensor on the gripper with origin o reading (F_s,
     T_s) gives torque = −(T_s − r × F_s), r = x_grip − o.  The grip must hold an orientation (a pin
     exerts no torque).
@@ -69,7 +74,9 @@ class TorqueObservation:
 
 @dataclass(frozen=True)
 class Observation:
-    """One static shape: grip poses (grips not named keep the scene's poses), observed points (N,
+    """One observed static shape: grip poses, points, their noise, grip force and torque.
+
+    One static shape: grip poses (grips not named keep the scene's poses), observed points (N,
     3) [m] in any order, their noise σ [m] (standard deviation per coordinate), an optional grip
     force and an optional grip torque.
     """
@@ -97,7 +104,9 @@ class MassObservation:
 
 @dataclass(frozen=True)
 class ProfileFit:
-    """Fit a material as a piecewise-linear table of ``knots`` values evenly spaced over [0, L],
+    """How to fit one material as a smooth piecewise-linear table.
+
+    Fit a material as a piecewise-linear table of ``knots`` values evenly spaced over [0, L],
     with the smoothness regulariser of weight ``smoothing`` (``parameters.py``).
     """
 
@@ -107,7 +116,9 @@ class ProfileFit:
 
 @dataclass(frozen=True)
 class ObservationSet:
-    """What a fit is given: the observations, the parameters to identify, the scene (name or path,
+    """Everything a fit is given: observations, parameters, scene and known mass.
+
+    What a fit is given: the observations, the parameters to identify, the scene (name or path,
     '' when the caller supplies it) and the known total mass.
     """
 
@@ -119,7 +130,9 @@ class ObservationSet:
     profiles: dict[str, ProfileFit] = field(default_factory=dict)
 
     def check(self, problem: Problem) -> None:
-        """Raise ObservationError when the observations do not fit ``problem`` (unknown grips, a
+        """Check that the observations fit ``problem``.
+
+        Raise ObservationError when the observations do not fit ``problem`` (unknown grips, a
         torque at a pin).
         """
         names = {g.name for g in problem.grips}
@@ -146,12 +159,12 @@ class ObservationSet:
                 )
 
 
-# ---- readers ----------------------------------------------------------------------------------------
+# ---- readers ------------------------------------------------------------------------------------
 def _positive(value: object, key: str, upper: float = float("inf")) -> float:
     if isinstance(value, bool):
         raise ObservationError(f"{key}: expected a number > 0, got {value!r}")
     try:
-        x = float(value)
+        x = float(cast(Any, value))  # any object: float() says whether it is a number
     except (TypeError, ValueError):
         raise ObservationError(
             f"{key}: expected a number > 0, got {type(value).__name__}"
@@ -353,15 +366,16 @@ def observation_set_from_dict(
                 f"observations[{i}]: more than {MAX_TOTAL_POINTS} points in "
                 "all (msg_docs/fitting.md, Limits)"
             )
-    obs = tuple(obs)
     scene = d.get("scene", "")
     if not isinstance(scene, str):
         raise ObservationError("scene: expected a scene name or file")
-    return ObservationSet(obs, tuple(params), scene, mass, source, profiles)
+    return ObservationSet(tuple(obs), tuple(params), scene, mass, source, profiles)
 
 
 def load_observations(path: str | Path) -> ObservationSet:
-    """Read an observation file (YAML or JSON).  Raises ObservationError (``<file>: <key path>:
+    """Read an observation file (YAML or JSON).
+
+    Read an observation file (YAML or JSON).  Raises ObservationError (``<file>: <key path>:
     ...`` or ``<file>:<line>:<column>: YAML/JSON syntax error ...``) or FileNotFoundError.
     """
     path = Path(path)

@@ -18,6 +18,7 @@ dP/dθ is P itself (uniform) or the table with every value but knot k set to zer
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -54,7 +55,9 @@ def profile_mean(profile: Profile, length: float) -> float:
 
 
 class Parameterisation:
-    """θ ↔ string for the materials ``names`` of ``string``; ``profiles[name]`` fits that one knot
+    """The map between θ and the string's fitted materials.
+
+    θ ↔ string for the materials ``names`` of ``string``; ``profiles[name]`` fits that one knot
     by knot.
     """
 
@@ -63,7 +66,8 @@ class Parameterisation:
     ):
         self.length = string.length
         self.profiles = dict(profiles)
-        changes, comps = {}, []
+        changes: dict[str, Any] = {}
+        comps = []
         for name in names:
             spec = profiles.get(name)
             if spec is None:
@@ -83,7 +87,7 @@ class Parameterisation:
         return [i for i, c in enumerate(self.components) if c.material == material]
 
     def string(self, theta: np.ndarray) -> StringProperties:
-        """The string at θ."""
+        """Return the string at θ."""
         changes = {}
         for material in dict.fromkeys(c.material for c in self.components):
             idx = self.indices(material)
@@ -125,7 +129,10 @@ class Parameterisation:
         return out
 
     def regulariser(self) -> np.ndarray:
-        """R with ½ |R θ|² the smoothness penalty (rows √λ (θ_{k−1} − 2θ_k + θ_{k+1})); (0, n) if none."""
+        """Return R, with ½ |R θ|² the smoothness penalty; (0, n) if there is none.
+
+        Its rows are √λ (θ_{k−1} − 2θ_k + θ_{k+1}).
+        """
         rows = []
         for material, spec in self.profiles.items():
             idx = self.indices(material)

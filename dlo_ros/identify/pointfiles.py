@@ -1,4 +1,6 @@
-"""Point files of an observation: ``.npy`` (an N × 3 real array) and ``.ply`` (the x, y, z of the
+"""Point files of an observation: ``.npy`` and ``.ply``.
+
+Point files of an observation: ``.npy`` (an N × 3 real array) and ``.ply`` (the x, y, z of the
 ``vertex`` element; ASCII or binary, little or big endian; the vertex element must come first, as
 point clouds written by common tools have it; other properties and elements are ignored).
 
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import ast
 import io
+from typing import Literal
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +57,9 @@ DOC = "msg_docs/fitting.md, Limits"
 
 
 def read_points(path: Path) -> np.ndarray:
-    """The points of a .npy or .ply file as an (N, 3) float array.  Raises ValueError (one line:
+    """Read the points of a .npy or .ply file.
+
+    The points of a .npy or .ply file as an (N, 3) float array.  Raises ValueError (one line:
     why).
     """
     suffix = path.suffix.lower()
@@ -68,7 +73,9 @@ def read_points(path: Path) -> np.ndarray:
 
 
 def read_npy(data: bytes) -> np.ndarray:
-    """The (N, 3) points of a .npy file's bytes; the header is validated before any array is
+    """Read the (N, 3) points of a .npy file's bytes.
+
+    The (N, 3) points of a .npy file's bytes; the header is validated before any array is
     made.
     """
     f = io.BytesIO(data)
@@ -118,7 +125,7 @@ def read_npy(data: bytes) -> np.ndarray:
             f"bytes), the file holds {len(data) - offset} after the header"
         )
     arr = np.frombuffer(data, dtype=dtype, count=shape[0] * 3, offset=offset)
-    order = "F" if header["fortran_order"] else "C"
+    order: Literal["C", "F"] = "F" if header["fortran_order"] else "C"
     return arr.reshape(shape, order=order).astype(float)
 
 

@@ -1,4 +1,6 @@
-"""What a fit returns: determined values with standard deviations, ratios, what is not determined,
+"""What a fit returns, as dataclasses with their JSON.
+
+What a fit returns: determined values with standard deviations, ratios, what is not determined,
 and the residuals per observation (``FitResult.to_dict()`` is the JSON of ``dlo fit --json``,
 msg_docs/fitting.md).
 """
@@ -15,7 +17,9 @@ from .identifiability import Identifiability
 
 @dataclass
 class Estimate:
-    """A determined quantity: value, standard deviation (same unit) and unit.  For a table profile
+    """A determined quantity: value, standard deviation and unit.
+
+    A determined quantity: value, standard deviation (same unit) and unit.  For a table profile
     the value is its mean over s (the fit scales the table).
     """
 
@@ -39,8 +43,10 @@ class Estimate:
 
 @dataclass
 class ObservationFit:
-    """Residuals of one observation at the fit: |r| statistics over its points [m], how many points the
-    robust loss down-weighted (|r| > huber σ), the grip-force residual |F_meas − F| [N] and the grip-torque
+    """Residuals of one observation at the fit.
+
+    |r| statistics over its points [m], how many points the robust loss down-weighted
+    (|r| > huber σ), the grip-force residual |F_meas − F| [N] and the grip-torque
     residual |T_meas − T| [N·m] where measured.
     """
 
@@ -72,7 +78,9 @@ class ObservationFit:
 
 @dataclass
 class FitResult:
-    """status: 'ok' (converged and the fitted shapes explain the points), 'misfit' (they do not:
+    """The result of a fit: status, estimates, what is not determined, residuals.
+
+    status: 'ok' (converged and the fitted shapes explain the points), 'misfit' (they do not:
     the reduced χ² is over ``chi2_threshold``, ``gate.py``; the message says why), 'not_converged'
     (iteration limit or no descent) or 'failed' (an equilibrium could not be solved: message).
     parameters: the determined ones; ratios: the determined ratios (D/Rf, Rt/Rf, Re/Rf);

@@ -1,4 +1,6 @@
-"""The string model (no ROS): properties, bases, quadrature, kinematics, energy terms,
+"""The string model (no ROS): properties, bases, quadrature, kinematics, energy, obstacles.
+
+The string model (no ROS): properties, bases, quadrature, kinematics, energy terms,
 obstacles.
 """
 

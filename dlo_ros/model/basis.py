@@ -60,7 +60,9 @@ class ChebyshevBasis:
 
 
 class FourierBasis:
-    """The paper's basis (Hirai & Wakamatsu, sec. 4): 1, s/L, sin(2nπs/L), cos(2nπs/L), n = 1, 2, …
+    """The paper's Fourier basis (Hirai & Wakamatsu, sec. 4).
+
+    The paper's basis (Hirai & Wakamatsu, sec. 4): 1, s/L, sin(2nπs/L), cos(2nπs/L), n = 1, 2, …
 
     The first ``size`` functions of that sequence are used (the paper takes 10: n = 1 … 4).
     s is scaled by L so that every coefficient is an angle in radians.
@@ -97,7 +99,10 @@ class FourierBasis:
         return np.stack(cols[: self.size], axis=1)
 
 
-BASES = {"chebyshev": ChebyshevBasis, "fourier": FourierBasis}
+BASES: dict[str, type[ChebyshevBasis] | type[FourierBasis]] = {
+    "chebyshev": ChebyshevBasis,
+    "fourier": FourierBasis,
+}
 
 
 def make_basis(name: str, size: int, length: float) -> Basis:

@@ -13,7 +13,9 @@ import numpy as np
 
 
 def positions_sym(x0: ca.SX, t: ca.SX, w: np.ndarray) -> ca.SX:
-    """x at the arc lengths whose integration matrix is ``w`` (len(s) × M): a 3×len(s)
+    """Return the positions x at the arc lengths of an integration matrix, symbolically.
+
+    x at the arc lengths whose integration matrix is ``w`` (len(s) × M): a 3×len(s)
     expression.
     """
     return ca.repmat(x0, 1, w.shape[0]) + ca.mtimes(t, ca.DM(w).T)
@@ -22,7 +24,9 @@ def positions_sym(x0: ca.SX, t: ca.SX, w: np.ndarray) -> ca.SX:
 def weight_energy_sym(
     x0: ca.SX, t: ca.SX, weight_total: ca.SX, weight_moments: ca.SX, gravity: ca.SX
 ) -> ca.SX:
-    """U_grav [J] from the material's ΣwD and moments m (NLP parameters) and the unit gravity
+    """Return the gravitational energy U_grav [J] symbolically.
+
+    U_grav [J] from the material's ΣwD and moments m (NLP parameters) and the unit gravity
     direction.
     """
     return -ca.dot(gravity, x0 * weight_total + ca.mtimes(t, weight_moments))

@@ -4,11 +4,10 @@ Unknowns z = [x0/L (3), nodal values of the rotation field (4 N or 3 N), ε at t
 extensible)] on the ``ElementMesh`` (N global nodes, breakpoints at every interior grip, point load
 and material kink).  Two kinds of rotation field:
 
-* frame (twist modelled): q(s) = Σ_i ℓ_i(s) q_i, a polynomial through unit quaternions q_i (x, y,
-  z, w)
-  with |q_i|² = 1 imposed at every node.  Between nodes the rotation is that of q/|q| (any non-zero q
-  is a rotation, so no direction is singular).  Body curvature and twist (R' = R [Ω]×, R = [t d1
-  d2]):
+* frame (twist modelled): q(s) = Σ_i ℓ_i(s) q_i, a polynomial through unit quaternions q_i
+  (x, y, z, w) with |q_i|² = 1 imposed at every node.  Between nodes the rotation is that of q/|q|
+  (any non-zero q is a rotation, so no direction is singular).  Body curvature and twist
+  (R' = R [Ω]×, R = [t d1 d2]):
 
       Ω = 2 vec(q* ⊗ q') / |q|²  =  2 (w q'_v − w' q_v − q_v × q'_v) / |q|²,
       U_bend = ∫ ½ Rf (Ω_2² + Ω_3²) ds,   U_twist = ∫ ½ Rt Ω_1² ds.
@@ -17,10 +16,11 @@ and material kink).  Two kinds of rotation field:
   t(s) = Σ_i ℓ_i(s) t_i with |t_i|² = 1 at the nodes, unit tangent t/|t| and
       κ² = |(t/|t|)'|² = (|t'|² − (t·t')²/|t|²) / |t|²,   U_bend = ∫ ½ Rf κ² ds.
 
-Both bend energies carry the gauge term ½ c Rf ((ln|v|)')² (v = q with a factor 2, or t; c = GAUGE_WEIGHT): it vanishes where
-the interpolant keeps unit norm between nodes and is of the order of the interpolation error
-squared when resolved, but it forbids a field that dips toward zero between quadrature nodes, where
-the normalised rotation would jump unseen by the quadrature (a fold that costs no energy).
+Both bend energies carry the gauge term ½ c Rf ((ln|v|)')² (v = q with a factor 2, or t;
+c = GAUGE_WEIGHT): it vanishes where the interpolant keeps unit norm between nodes and is of the
+order of the interpolation error squared when resolved, but it forbids a field that dips toward
+zero between quadrature nodes, where the normalised rotation would jump unseen by the quadrature
+(a fold that costs no energy).
 
 Both: x(s) = x0 + ∫_0^s (1 + ε) t̂ ds,  U_stretch = ∫ ½ Re ε²,  U_grav = −∫ D ĝ·x ds, every
 integral by the mesh's quadrature.  Grip orientations are held by rows that are linear in the
@@ -48,7 +48,8 @@ from .elements import ElementMesh
 from .rotations import cross3
 
 
-#: weight of the gauge term ½ c Rf ((ln|v|)')² relative to the bend energy: large enough to forbid a fold
+#: weight of the gauge term ½ c Rf ((ln|v|)')² relative to the bend energy: large enough to forbid
+#: a fold
 #: hidden between quadrature nodes, small enough to leave the spectral accuracy
 GAUGE_WEIGHT = 1e-2
 
@@ -110,8 +111,10 @@ def quat_to_frame(q: np.ndarray) -> np.ndarray:
 
 
 def frame_to_quat(r: np.ndarray) -> np.ndarray:
-    """Unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3) (Shepperd's method: each
-    row from the largest of 1 + trace and the diagonal, so no division by a small number).
+    """Return the unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3).
+
+    Shepperd's method: each row from the largest of 1 + trace and the diagonal, so no division by
+    a small number.
     """
     r = np.asarray(r, dtype=float)
     m = r.reshape(-1, 3, 3)
@@ -168,14 +171,16 @@ def _columns(q, lib):
 
 
 def integrands(rows, drows, frame: bool):
-    """(b, τ, t̂) of the rotation field's values ``rows`` and s-derivatives ``drows`` (4 quaternion
+    """Return the bend and twist integrands and the unit tangent of a rotation field.
+
+    (b, τ, t̂) of the rotation field's values ``rows`` and s-derivatives ``drows`` (4 quaternion
     or 3 tangent components; CasADi scalars or row vectors, element-wise): U_bend = ∫ ½ Rf b ds,
     U_twist = ∫ ½ Rt τ ds (τ = 0 for the tangent model), t̂ the unit tangent (3 components).
 
     frame:   b = Ω_2² + Ω_3² + c Ω_0²,  τ = Ω_1²,  Ω = 2 (w q'_v − w' q_v − q_v × q'_v) / |q|²,
-             Ω_0 = 2 q·q' / |q|² (the gauge term, c = GAUGE_WEIGHT: zero where |q| is constant, it keeps
-             the interpolant from dipping toward q = 0 between quadrature nodes, a rotation jump
-             the quadrature would not see);
+             Ω_0 = 2 q·q' / |q|² (the gauge term, c = GAUGE_WEIGHT: zero where |q| is constant,
+             it keeps the interpolant from dipping toward q = 0 between quadrature nodes, a
+             rotation jump the quadrature would not see);
     tangent: b = (|t'|² − (1 − c)(t·t')²/|t|²) / |t|²  = κ² + c ((ln|t|)')²  (the same gauge term).
     """
     if frame:
@@ -214,7 +219,7 @@ class DirectorModel:
         )
         self._cache: dict[bytes, np.ndarray] = {}
 
-    # ---- numpy -----------------------------------------------------------------------------------
+    # ---- numpy ----------------------------------------------------------------------------------
     def node_values(self, z: np.ndarray) -> np.ndarray:
         """(N, 4) nodal quaternions or (N, 3) nodal tangents."""
         return np.asarray(z[self.layout.rotation]).reshape(self.layout.nodes, self.layout.width)
@@ -223,7 +228,9 @@ class DirectorModel:
         return np.asarray(z[self.layout.eps]) if self.layout.stretch else None
 
     def _memo(self, kind: str, s: np.ndarray, make):
-        """``make(s)`` remembered per (kind, s): a running solver asks for the same arc lengths
+        """Return ``make(s)``, remembered per (kind, s).
+
+        ``make(s)`` remembered per (kind, s): a running solver asks for the same arc lengths
         again.
         """
         s = np.ascontiguousarray(s, dtype=float).ravel()
@@ -240,9 +247,7 @@ class DirectorModel:
         return self._memo("W", s, self.mesh.integration_matrix)
 
     def position_rows(self, s: np.ndarray) -> np.ndarray:
-        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every
-        solve).
-        """
+        """Return W(s) as ``position_matrix`` does, not remembered (s changes every solve)."""
         return self.mesh.integration_matrix(s)
 
     def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -270,7 +275,7 @@ class DirectorModel:
         ) @ self.quad_tangents(z).T
 
     def tangents_at(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Unit tangents (len(s), 3)."""
+        """Return the unit tangents (len(s), 3)."""
         v = self.interpolation(s)[0] @ self.node_values(z)
         if self.layout.frame:
             return np.array(_columns(v.T, np)[0]).T
@@ -279,7 +284,9 @@ class DirectorModel:
     def pose_frames(
         self, z: np.ndarray, s: np.ndarray, anchor: tuple[float, np.ndarray] | None = None
     ) -> np.ndarray:
-        """Frames (len(s), 3, 3) with columns (t, d1, d2) — the pose convention, x along the
+        """Return the pose frames at s, x along the tangent.
+
+        Frames (len(s), 3, 3) with columns (t, d1, d2) — the pose convention, x along the
         tangent.
 
         The tangent model has no roll: its frames are transported without twist (d1' = −(t'·d1) t)
@@ -302,7 +309,9 @@ class DirectorModel:
         return transported_frames(t, k0, hint)[np.searchsorted(fine, s)]
 
     def curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
-        """Body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3), of the frame model
+        """Return the body Darboux vector Ω at s (frame model).
+
+        Body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3), of the frame model
         (the tangent model has no body frame: ``world_curvature``).
         """
         if not self.layout.frame:
@@ -314,7 +323,9 @@ class DirectorModel:
         return 2 * (w * dqv - dw * qv - cross3(qv, dqv)) / n2
 
     def world_curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
-        """World-frame Darboux vector: R Ω (frame model) or t̂ × t̂' (tangent model, no twist),
+        """Return the world-frame Darboux vector at s.
+
+        World-frame Darboux vector: R Ω (frame model) or t̂ × t̂' (tangent model, no twist),
         (len(s), 3).
         """
         if self.layout.frame:
@@ -329,12 +340,14 @@ class DirectorModel:
         dt = (dv - np.sum(t * dv, axis=1)[:, None] * t) / n
         return cross3(t, dt)
 
-    # ---- CasADi ----------------------------------------------------------------------------------
+    # ---- CasADi ---------------------------------------------------------------------------------
     def material_sizes(self) -> dict[str, int]:
         return {"weight_moments": self.mesh.quad_count, "weight_total": 1}
 
     def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Σ_j w_j D_j x(σ_j) = x0 ΣwD + Σ_k m_k (1+ε_k) t_k with m = W(σ)ᵀ (w ∘ D), assembled
+        """Return the gravity terms that depend on the material alone, assembled once.
+
+        Σ_j w_j D_j x(σ_j) = x0 ΣwD + Σ_k m_k (1+ε_k) t_k with m = W(σ)ᵀ (w ∘ D), assembled
         once.
         """
         wd = self.mesh.weights * profiles["D"]
@@ -357,7 +370,9 @@ class DirectorModel:
         )
 
     def energy_terms(self, z: ca.SX, profiles: dict[str, ca.SX], gravity: ca.SX):
-        """(bend, twist, stretch, gravity) energies [J] and the quadrature-node tangents (1+ε)t̂
+        """Return the energies [J] and the quadrature-node tangents.
+
+        (bend, twist, stretch, gravity) energies [J] and the quadrature-node tangents (1+ε)t̂
         (3×M).
         """
         lay, w = self.layout, ca.DM(self.mesh.weights)
@@ -400,7 +415,9 @@ class DirectorModel:
         return [ca.sumsqr(V[:, i]) - 1.0 for i in range(self.layout.nodes)]
 
     def fold_rows_sym(self, z: ca.SX) -> list[ca.SX]:
-        """c − v_i · v_{i+1} ≤ 0 for neighbouring nodes: neighbouring tangents within 90° (c = 0),
+        """Return the constraints that forbid a fold between neighbouring nodes.
+
+        c − v_i · v_{i+1} ≤ 0 for neighbouring nodes: neighbouring tangents within 90° (c = 0),
         neighbouring quaternions within a 120° rotation and of one sign (c = cos 60°).  Inactive on
         any resolved shape; they forbid a fold between two nodes, which the normalised field would
         hide from the quadrature (its energy is not seen between quadrature nodes).
@@ -411,7 +428,9 @@ class DirectorModel:
         return [c - ca.dot(V[:, i], V[:, i + 1]) for i in range(lay.nodes - 1)]
 
     def moment_work_sym(self, z: ca.SX, i: int, moment: ca.SX, reference: ca.SX) -> ca.SX:
-        """Pseudo-potential of a point moment at node i (module docstring); ``reference`` is q_ref
+        """Return the pseudo-potential of a point moment at node i.
+
+        Pseudo-potential of a point moment at node i (module docstring); ``reference`` is q_ref
         (4) for the frame model, t_ref (3, in the first 3 of 4 entries) for the tangent model.
         """
         return self.moment_work_node_sym(self.node_sym(z, i), moment, reference)
@@ -427,11 +446,13 @@ class DirectorModel:
         t = v / ca.norm_2(v)
         return ca.dot(moment, ca.cross(reference[0:3], t))
 
-    # ---- guesses and transfers -------------------------------------------------------------------
+    # ---- guesses and transfers ------------------------------------------------------------------
     def z_from_frames(
         self, x0: np.ndarray, frames: np.ndarray, eps: np.ndarray | None = None
     ) -> np.ndarray:
-        """z from the position of s = 0 and pose frames (N, 3, 3) (columns t, d1, d2) at the
+        """Return z from the position of s = 0 and the pose frames at the nodes.
+
+        z from the position of s = 0 and pose frames (N, 3, 3) (columns t, d1, d2) at the
         nodes.
         """
         z = np.zeros(self.layout.size)
@@ -447,7 +468,9 @@ class DirectorModel:
 
 
 def transported_frames(t: np.ndarray, k0: int, hint: np.ndarray) -> np.ndarray:
-    """Frames (K, 3, 3) (columns t, d1, d2) along unit tangents t (K, 3) without twist: d1 at k0 is
+    """Return twist-free frames transported along unit tangents.
+
+    Frames (K, 3, 3) (columns t, d1, d2) along unit tangents t (K, 3) without twist: d1 at k0 is
     ``hint`` made perpendicular to t[k0], and is carried to its neighbours, both ways, by the
     smallest rotation between consecutive tangents (a discrete d1' = −(t'·d1) t).
     """
@@ -469,5 +492,6 @@ def _transport(d1: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
     axis = cross3(t0, t1)
     if c < -0.999999:
         return d1
-    # Rodrigues with k = axis/|axis|, |axis| = sin a: R v = v c + (axis × v) + axis (axis·v) / (1 + c)
+    # Rodrigues with k = axis/|axis|, |axis| = sin a: R v = v c + (axis × v) + axis (axis·v) / (1
+    # + c)
     return d1 * c + cross3(axis, d1) + axis * np.dot(axis, d1) / (1.0 + c)

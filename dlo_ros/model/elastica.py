@@ -90,7 +90,7 @@ class ClampedElastica:
 
     @property
     def E(self) -> float:
-        """Complete elliptic integral of the second kind ``E(k)``."""
+        """Return the complete elliptic integral of the second kind at modulus k."""
         return float(ellipe(self.m))
 
     @property

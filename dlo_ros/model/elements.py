@@ -44,7 +44,9 @@ def lgl_nodes(count: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 class NodalElement:
-    """The polynomial through n LGL nodes of [0, h]: values, s-derivatives and integrals at any
+    """The polynomial through n LGL nodes of [0, h].
+
+    The polynomial through n LGL nodes of [0, h]: values, s-derivatives and integrals at any
     s.
     """
 
@@ -72,7 +74,9 @@ class NodalElement:
         return v @ self._vinv, (v @ self._der) @ self._vinv * (2.0 / self.size)
 
     def integral(self, local_s: np.ndarray) -> np.ndarray:
-        """I with ∫_0^s f = I f_nodes for local arc lengths in [0, h] (the interpolant,
+        """Return the matrix I with ∫_0^s f = I f_nodes.
+
+        I with ∫_0^s f = I f_nodes for local arc lengths in [0, h] (the interpolant,
         exactly).
         """
         tau = 2.0 * np.asarray(local_s, dtype=float) / self.size - 1.0
@@ -84,7 +88,9 @@ MIN_NODES = 6
 
 
 class ElementMesh:
-    """Breakpoints, global nodes and the composite quadrature of one string: ``order`` LGL nodes
+    """Breakpoints, global nodes and the composite quadrature of one string.
+
+    Breakpoints, global nodes and the composite quadrature of one string: ``order`` LGL nodes
     shared out by element length; ``extra`` > 0: n_e + ``extra`` Clenshaw–Curtis quadrature nodes
     per element instead of the collocated LGL rule.
     """
@@ -149,7 +155,7 @@ class ElementMesh:
         return len(self.elements)
 
     def node_index(self, s: float) -> int | None:
-        """The global node at arc length s, or None when s is not a node."""
+        """Return the global node at arc length s, or None when s is not a node."""
         i = int(np.argmin(np.abs(self.nodes - s)))
         return i if abs(self.nodes[i] - s) <= 1e-9 * self.length else None
 
@@ -162,7 +168,9 @@ class ElementMesh:
         return np.clip(idx, 0, self.element_count - 1)
 
     def interpolation(self, s, side: str = "left") -> tuple[np.ndarray, np.ndarray]:
-        """(B, B') of shape (len(s), count): field values and s-derivatives at s from the nodal
+        """Return the interpolation matrices (B, B') at s from the nodal values.
+
+        (B, B') of shape (len(s), count): field values and s-derivatives at s from the nodal
         values. At a breakpoint the derivative is the one-sided derivative of the element on
         ``side``.
         """

@@ -21,8 +21,8 @@ is PyElastica's one class per contact pair: no ``if type == ...`` anywhere else.
 
 from __future__ import annotations
 
+import enum
 import functools
-
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -48,13 +48,28 @@ BOX_EXPONENT = 8
 PLANE_COLOUR = (70, 72, 80)
 SOLID_COLOUR = (150, 150, 165)
 
+
+class PrimitiveKind(enum.StrEnum):
+    """The shapes a ``Primitive`` can be: each has one drawing in the node and in the recording.
+
+    A StrEnum, so a kind equals its name as a string (``PrimitiveKind.PLANE == "plane"``).
+    """
+
+    PLANE = "plane"
+    SPHERE = "sphere"
+    CAPSULE = "capsule"
+    BOX = "box"
+
+
 #: the kinds of ``Primitive`` that the drawing code must know
-PRIMITIVE_KINDS = ("plane", "sphere", "capsule", "box")
+PRIMITIVE_KINDS: tuple[PrimitiveKind, ...] = tuple(PrimitiveKind)
 
 
 @dataclass(frozen=True)
 class Key:
-    """A scene-file key of an obstacle type: its value's ``kind`` ('vector': 3 numbers, 'number',
+    """A scene-file key of an obstacle type: its kind and whether it is required.
+
+    A scene-file key of an obstacle type: its value's ``kind`` ('vector': 3 numbers, 'number',
     'quaternion': x, y, z, w) and whether it is required (else the type's ``parse`` has a
     default).
     """
@@ -76,7 +91,7 @@ class Primitive:
     colour).
     """
 
-    kind: str
+    kind: PrimitiveKind
     centre: np.ndarray
     orientation: np.ndarray
     axis: np.ndarray
@@ -87,10 +102,10 @@ class Primitive:
     @property
     def length(self) -> float:
         """A capsule's segment length [m] (0 for the other kinds)."""
-        return 2.0 * float(self.half_sizes[2]) if self.kind == "capsule" else 0.0
+        return 2.0 * float(self.half_sizes[2]) if self.kind == PrimitiveKind.CAPSULE else 0.0
 
     def ends(self) -> tuple[np.ndarray, np.ndarray]:
-        """A capsule's segment ends a, b [m]."""
+        """Return a capsule's segment ends a, b [m]."""
         half = 0.5 * self.length * self.axis
         return self.centre - half, self.centre + half
 
@@ -112,7 +127,9 @@ def positive(value: object, where: str) -> float:
 
 
 class ObstacleType(ABC):
-    """The behaviour of one obstacle type, on its parameter vector ``p`` (see the module
+    """The behaviour of one obstacle type, on its parameter vector ``p``.
+
+    The behaviour of one obstacle type, on its parameter vector ``p`` (see the module
     docstring).
 
     Subclasses set the class attributes and implement every abstract method;
@@ -128,15 +145,17 @@ class ObstacleType(ABC):
 
     @abstractmethod
     def parse(self, d: Mapping[str, Any], where: str) -> np.ndarray:
-        """p from the scene mapping ``d``; ValueError naming ``where``.<key> on a bad value."""
+        """Return p from the scene mapping ``d``; a ValueError names ``where``.<key>."""
 
     @abstractmethod
     def to_dict(self, p: np.ndarray) -> dict[str, Any]:
-        """The scene keys of p (plain lists and floats); ``parse`` of it gives p back."""
+        """Return the scene keys of p (plain lists and floats); ``parse`` of it gives p back."""
 
     @abstractmethod
     def h(self, x: Any, p: Any, lib: Any = ca) -> Any:
-        """Signed distance [m], positive inside: CasADi with ``lib=ca``; numpy with ``lib=NUMPY``
+        """Return the signed distance [m] from x, positive inside.
+
+        Signed distance [m], positive inside: CasADi with ``lib=ca``; numpy with ``lib=NUMPY``
         (one point) or ``ROWS`` (rows of points) unless ``casadi_only``.
         """
 
@@ -144,7 +163,9 @@ class ObstacleType(ABC):
     casadi_only: ClassVar[bool] = False
 
     def h_at(self, x: np.ndarray, p: np.ndarray) -> float:
-        """h at one point [m]: numpy unless ``casadi_only`` (a streaming solver asks every
+        """Return h at one point [m].
+
+        h at one point [m]: numpy unless ``casadi_only`` (a streaming solver asks every
         update).
         """
         if self.casadi_only:
@@ -152,20 +173,24 @@ class ObstacleType(ABC):
         return float(self.h(np.asarray(x, dtype=float), p, NUMPY))
 
     def h_many(self, points: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """h at the rows of ``points`` (N ≥ 1, 3) [m]: one mapped CasADi call (overridden where
+        """Return h at the rows of ``points`` [m].
+
+        h at the rows of ``points`` (N ≥ 1, 3) [m]: one mapped CasADi call (overridden where
         numpy over rows is exact).
         """
         return np.asarray(numeric_h_many(self.name, points.shape[0])(points.T, p)).ravel()
 
     @abstractmethod
     def distance_bound(self, x: np.ndarray, p: np.ndarray) -> float:
-        """A lower bound of the distance [m] from x to the obstacle (≤ 0 inside)."""
+        """Return a lower bound of the distance [m] from x to the obstacle (≤ 0 inside)."""
 
     @abstractmethod
     def clear_of_plane(
         self, p: np.ndarray, origin: np.ndarray, normal: np.ndarray, margin: float
     ) -> bool:
-        """Is the obstacle more than ``margin`` [m] from the plane through ``origin`` (unit
+        """Say whether the obstacle is more than ``margin`` [m] from a plane.
+
+        Is the obstacle more than ``margin`` [m] from the plane through ``origin`` (unit
         ``normal``)?
         """
 
@@ -178,14 +203,16 @@ class ObstacleType(ABC):
         tolerance: float,
         length: float,
     ) -> str:
-        """Why the obstacle does not fit the planar model of the plane (``origin``, unit
+        """Say why the obstacle does not fit the planar model of a plane, or "".
+
+        Why the obstacle does not fit the planar model of the plane (``origin``, unit
         ``normal``), or "": directions within ``tolerance``, offsets within ``tolerance`` ·
         ``length``.
         """
 
     @abstractmethod
     def primitive(self, p: np.ndarray) -> Primitive:
-        """The shape to draw."""
+        """Return the shape to draw."""
 
 
 #: the registry: the scene's type string → its ObstacleType
@@ -202,7 +229,7 @@ def register(cls: type[ObstacleType]) -> type[ObstacleType]:
 
 @functools.lru_cache(maxsize=None)
 def numeric_h(kind: str) -> ca.Function:
-    """h of a registered type as a CasADi Function (x, p) → h, built once per type."""
+    """Return h of a registered type as a CasADi Function (x, p) → h, built once per type."""
     xs = ca.SX.sym("x", 3)
     ps = ca.SX.sym("p", OBSTACLE_TYPES[kind].size)
     return ca.Function(f"h_{kind}", [xs, ps], [OBSTACLE_TYPES[kind].h(xs, ps)])
@@ -258,7 +285,7 @@ class HalfSpace(ObstacleType):
 
     def primitive(self, p):
         return Primitive(
-            "plane",
+            PrimitiveKind.PLANE,
             p[0:3].copy(),
             quat_z_to(p[3:6]),
             p[3:6].copy(),
@@ -303,7 +330,7 @@ class Sphere(ObstacleType):
     def primitive(self, p):
         r = float(p[3])
         return Primitive(
-            "sphere",
+            PrimitiveKind.SPHERE,
             p[0:3].copy(),
             np.array([0.0, 0.0, 0.0, 1.0]),
             np.array([0.0, 0.0, 1.0]),
@@ -351,7 +378,7 @@ class Capsule(ObstacleType):
         a, b, r = p[0:3], p[3:6], float(p[6])
         length = float(np.linalg.norm(b - a))
         return Primitive(
-            "capsule",
+            PrimitiveKind.CAPSULE,
             (a + b) / 2,
             quat_z_to(b - a),
             (b - a) / length,
@@ -425,5 +452,9 @@ class Box(ObstacleType):
     def primitive(self, p):
         rotation = self.rotation(p)
         return Primitive(
-            "box", p[0:3].copy(), matrix_to_quat(rotation), rotation[:, 2].copy(), p[12:15].copy()
+            PrimitiveKind.BOX,
+            p[0:3].copy(),
+            matrix_to_quat(rotation),
+            rotation[:, 2].copy(),
+            p[12:15].copy(),
         )

@@ -112,7 +112,9 @@ class Obstacle:
         return Obstacle(kind, OBSTACLE_TYPES[kind].parse(d, where), str(d.get("name", "")))
 
     def to_dict(self) -> dict:
-        """The scene-file form: type, name (when set) and the type's keys (``from_dict`` of it is
+        """Return the scene-file form of the obstacle.
+
+        The scene-file form: type, name (when set) and the type's keys (``from_dict`` of it is
         equal).
         """
         out: dict = {"type": self.type}
@@ -122,18 +124,20 @@ class Obstacle:
         return out
 
     def h(self, x: np.ndarray) -> float:
-        """Numerical h(x) [m] (positive inside): the NLP's formula, in numpy where the type allows
+        """Return the signed distance [m] at x, positive inside.
+
+        Numerical h(x) [m] (positive inside): the NLP's formula, in numpy where the type allows
         (a streaming solver asks every update).
         """
         return self.obstacle_type.h_at(x, self.params)
 
     def h_many(self, points: np.ndarray) -> np.ndarray:
-        """h at many points (N, 3) [m] (positive inside)."""
+        """Return h at many points (N, 3) [m] (positive inside)."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         if points.shape[0] == 0:
             return np.zeros(0)
         return self.obstacle_type.h_many(points, self.params)
 
     def primitive(self) -> Primitive:
-        """The shape to draw (markers, recording)."""
+        """Return the shape to draw (markers, recording)."""
         return self.obstacle_type.primitive(np.asarray(self.params, dtype=float))

@@ -14,8 +14,9 @@ import numpy as np
 from .obstacles import Obstacle
 from .profile import Profile
 
-# noqa: F401 - PoseError re-exported
-from .rotations import PoseError, check_position, check_quaternion
+# PoseError is re-exported: callers validating a pose catch it from here
+from .rotations import PoseError as PoseError
+from .rotations import check_position, check_quaternion
 
 GRIP_MODES = ("clamp", "pin", "tangent")
 
@@ -75,7 +76,9 @@ class StringProperties:
 
 
 def _copied(value, **changes):
-    """A copy of the frozen dataclass ``value`` with ``changes``, without ``dataclasses.replace``'s
+    """Return a copy of a frozen dataclass with ``changes``, without calling ``__init__``.
+
+    A copy of the frozen dataclass ``value`` with ``changes``, without ``dataclasses.replace``'s
     call of ``__init__`` (for values that are valid already; a warm update makes several per
     target).
     """
@@ -87,7 +90,9 @@ def _copied(value, **changes):
 
 @dataclass(frozen=True)
 class GripPose:
-    """Where a grip holds the string: position [m] and orientation (x, y, z, w), x along the
+    """Where a grip holds the string: position [m] and orientation.
+
+    Where a grip holds the string: position [m] and orientation (x, y, z, w), x along the
     tangent.
     """
 
@@ -98,7 +103,9 @@ class GripPose:
     def checked(
         position: object, orientation: object, where: str, quat_tolerance: float = 1e-3
     ) -> "GripPose":
-        """The one validation of a grip pose (scene files, targets, queries, observations): the
+        """Return this pose validated: the one check of a grip pose.
+
+        The one validation of a grip pose (scene files, targets, queries, observations): the
         quaternion normalised, or PoseError (a ValueError with a ``kind``) naming
         ``where``.position/.orientation.
         """
@@ -189,7 +196,9 @@ class Problem:
         return g / np.linalg.norm(g)
 
     def farthest_apart(self, reach: float = 1.0) -> tuple[Grip, Grip, float, float] | None:
-        """The first pair of grips farther apart than ``reach`` times the string between them, as
+        """Return the first pair of grips farther apart than the string between them allows.
+
+        The first pair of grips farther apart than ``reach`` times the string between them, as
         (a, b, distance [m], reach × span [m]); None when every pair is within reach.
         """
         for i, a in enumerate(self.grips):
@@ -209,13 +218,17 @@ class Problem:
         raise KeyError(f"no grip named {name!r}; grips are {[g.name for g in self.grips]}")
 
     def relative_ends(self) -> list[float]:
-        """s_a, s_b [m] of every relative position, in order: where their reactions act as point
+        """Return s_a, s_b [m] of every relative position, in order.
+
+        s_a, s_b [m] of every relative position, in order: where their reactions act as point
         forces.
         """
         return [s for rel in self.relative_positions for s in (rel.s_a, rel.s_b)]
 
     def with_grip_poses(self, poses: dict[str, GripPose]) -> "Problem":
-        """This problem with the grips named in ``poses`` at those poses (checked ones:
+        """Return this problem with the grips named in ``poses`` at those poses.
+
+        This problem with the grips named in ``poses`` at those poses (checked ones:
         ``GripPose.checked``).
         """
         return _copied(

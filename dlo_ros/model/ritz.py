@@ -88,7 +88,7 @@ class RitzModel:
         self.B = self.basis.values(s)  # (M, n)
         self.dB = self.basis.derivatives(s)  # (M, n)
 
-    # ---- fields -----------------------------------------------------------------------------------
+    # ---- fields ---------------------------------------------------------------------------------
     def coefficients(self, z, name: str):
         """Coefficient vector of field ``name``, or None when the field is not an unknown."""
         try:
@@ -118,7 +118,9 @@ class RitzModel:
         return t if eps is None else t * (1 + eps)[None, :]
 
     def matrices(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(B(s), B'(s), W(s)) for arc lengths s, memoised: a running solver asks for the same s
+        """Return (B(s), B'(s), W(s)) for arc lengths s, memoised.
+
+        (B(s), B'(s), W(s)) for arc lengths s, memoised: a running solver asks for the same s
         again.
         """
         s = np.ascontiguousarray(s, dtype=float).ravel()
@@ -139,7 +141,7 @@ class RitzModel:
         """W(s) with x(s) = x0 + tangents · W(s)ᵀ."""
         return self.matrices(s)[2]
 
-    # ---- symbolic energy ----------------------------------------------------------------------------
+    # ---- symbolic energy ------------------------------------------------------------------------
     def material_sizes(self) -> dict[str, int]:
         """Sizes of the parameter-only parts of the energy (``material_terms``), by name."""
         n, M = self.layout.order, self.quad.count
@@ -153,7 +155,9 @@ class RitzModel:
         return sizes
 
     def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The parts of the energy that depend on the material alone, assembled once per string
+        """Return the parts of the energy that depend on the material alone.
+
+        The parts of the energy that depend on the material alone, assembled once per string
         (numpy):
 
             K_bend    = B'ᵀ diag(w Rf) B'     ½ ∫ Rf θ'² ds = ½ c_θᵀ K_bend c_θ   (planar: ½ c_φᵀ
@@ -222,7 +226,7 @@ class RitzModel:
             raise KeyError(f"{name} is not an unknown of this model")
         return ca.mtimes(ca.DM(self.basis.values(np.array([s]))), c)
 
-    # ---- numerical evaluation of a solution -------------------------------------------------------
+    # ---- numerical evaluation of a solution -----------------------------------------------------
     def fields(
         self, z: np.ndarray, s: np.ndarray, names: tuple[str, ...] = ("phi", "theta", "psi", "eps")
     ) -> dict[str, np.ndarray]:
@@ -249,9 +253,7 @@ class RitzModel:
         return self.positions_at_rows(z, self.position_matrix(s))
 
     def position_rows(self, s: np.ndarray) -> np.ndarray:
-        """W(s) as ``position_matrix``, not remembered (for arc lengths that change every
-        solve).
-        """
+        """Return W(s) as ``position_matrix`` does, not remembered (s changes every solve)."""
         return self.quad.integration_matrix(np.asarray(s, dtype=float))
 
     def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -261,7 +263,9 @@ class RitzModel:
     def zero_twist_psi(
         self, z: np.ndarray, s: np.ndarray, s_anchor: float, psi_anchor: float
     ) -> np.ndarray:
-        """ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles
+        """Return ψ(s) with no twist rate: the twist a free string settles to.
+
+        ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles
         to.
         """
         f = self.fields(z, self.quad.nodes, ("phi", "theta"))

@@ -22,7 +22,9 @@ TANGENT_X = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b over the last axis (3) with broadcasting: ``np.cross`` without its axis bookkeeping,
+    """Return a × b over the last axis, with broadcasting.
+
+    a × b over the last axis (3) with broadcasting: ``np.cross`` without its axis bookkeeping,
     which costs more than the arithmetic at the sizes here.
     """
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
@@ -56,7 +58,9 @@ def material_frames(
 
 
 def quat_multiply_matrices(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(L, R) with a ⊗ q = L q and q ⊗ b = R q for quaternions (x, y, z, w): a = ``left``, b =
+    """Return the matrices (L, R) of left and right quaternion multiplication.
+
+    (L, R) with a ⊗ q = L q and q ⊗ b = R q for quaternions (x, y, z, w): a = ``left``, b =
     ``right``.
     """
     x, y, z, w = left
@@ -69,7 +73,9 @@ def quat_multiply_matrices(left: np.ndarray, right: np.ndarray) -> tuple[np.ndar
 def pose_quaternions(
     r0: np.ndarray, phi: np.ndarray, theta: np.ndarray, psi: np.ndarray
 ) -> np.ndarray:
-    """Quaternions (N, 4), (x, y, z, w) with w ≥ 0, of the pose frames Q·TANGENT_X, Q = R0 Rz(−φ)
+    """Return the quaternions of the pose frames from the Euler angles.
+
+    Quaternions (N, 4), (x, y, z, w) with w ≥ 0, of the pose frames Q·TANGENT_X, Q = R0 Rz(−φ)
     Ry(−θ) Rz(−ψ).
 
     The same rotations as ``matrix_to_quat(material_frames(r0, φ, θ, ψ) @ TANGENT_X)`` without
@@ -92,7 +98,9 @@ def pose_quaternions(
 
 @lru_cache(maxsize=64)
 def _frame_map(r0_bytes: bytes) -> np.ndarray:
-    """(L(q_R0) R(q_TANGENT_X))ᵀ: right-multiplying row quaternions by it applies R0 · (…) ·
+    """Return the matrix that maps a row quaternion to its pose frame's.
+
+    (L(q_R0) R(q_TANGENT_X))ᵀ: right-multiplying row quaternions by it applies R0 · (…) ·
     TANGENT_X.
     """
     lm, rm = quat_multiply_matrices(
@@ -118,12 +126,14 @@ def euler_from_frame(r0: np.ndarray, q: np.ndarray) -> tuple[float, float, float
 
 
 def unwrap_to(angle: float, reference: float) -> float:
-    """The angle + 2πk closest to ``reference`` (keeps multi-turn rotations continuous)."""
+    """Return the angle + 2πk closest to ``reference`` (keeps multi-turn rotations continuous)."""
     return float(angle + 2.0 * np.pi * np.round((reference - angle) / (2.0 * np.pi)))
 
 
 def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
-    """The unit quaternion (x, y, z, w) a fraction t ∈ [0, 1] of the shortest rotation from q0 to
+    """Return the quaternion a fraction t of the shortest rotation from q0 to q1.
+
+    The unit quaternion (x, y, z, w) a fraction t ∈ [0, 1] of the shortest rotation from q0 to
     q1.
     """
     q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
@@ -140,7 +150,7 @@ def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w) → rotation matrix."""
+    """Return the rotation matrix of a unit quaternion (x, y, z, w)."""
     x, y, z, w = np.asarray(q, dtype=float)
     return np.array(
         [
@@ -153,6 +163,8 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     """Rotation matrices (…, 3, 3) → quaternions (…, 4) as (x, y, z, w) with w ≥ 0."""
+    # start-up: scipy.spatial.transform costs 0.30 s (python -X importtime, 3 runs) and nothing
+    # else in dlo_ros.model needs scipy
     from scipy.spatial.transform import Rotation
 
     m = np.asarray(m, dtype=float)
@@ -162,7 +174,9 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
 
 
 class PoseError(ValueError):
-    """A position or quaternion that cannot be used; ``kind``: 'invalid' (not numbers, wrong
+    """A position or quaternion that cannot be used, and why (``kind``).
+
+    A position or quaternion that cannot be used; ``kind``: 'invalid' (not numbers, wrong
     count), 'non_finite' (NaN or infinity) or 'quaternion' (zero, or not unit within the
     tolerance).
     """
@@ -186,14 +200,18 @@ def _numbers(value: object, n: int, field: str, what: str) -> np.ndarray:
 
 
 def check_position(p: object, field: str) -> np.ndarray:
-    """Validate a position (x, y, z) [m]: three finite numbers; PoseError naming ``field``
+    """Validate a position (x, y, z) [m].
+
+    Validate a position (x, y, z) [m]: three finite numbers; PoseError naming ``field``
     otherwise.
     """
     return _numbers(p, 3, field, "")
 
 
 def check_quaternion(q: object, field: str, tolerance: float = 1e-3) -> np.ndarray:
-    """Validate a quaternion (x, y, z, w): finite, non-zero, unit within ``tolerance``; return it
+    """Validate a quaternion (x, y, z, w) and return it normalised.
+
+    Validate a quaternion (x, y, z, w): finite, non-zero, unit within ``tolerance``; return it
     normalised.
 
     The one check of an orientation (scene files, grip targets, observations): PoseError (a
@@ -212,12 +230,14 @@ def check_quaternion(q: object, field: str, tolerance: float = 1e-3) -> np.ndarr
 
 
 def reference_frame(chord: np.ndarray, up_hint: np.ndarray) -> np.ndarray:
-    """R0 whose singular axis n = R0 e_z is normal to the plane spanned by ``chord`` and
+    """Return R0 whose singular axis is normal to the chord and the up hint.
+
+    R0 whose singular axis n = R0 e_z is normal to the plane spanned by ``chord`` and
     ``up_hint``.
 
-    Columns (e1, e2, n) with e1 = −d (d the unit chord), n = d × up / |d × up|, e2 = n × e1 (= the part
-    of ``up_hint`` normal to d).  The straight string along d is then φ = 0, θ = π/2: as far from
-    the singularity θ ∈ {0, π} as possible, and a planar shape in that plane keeps θ ≡ π/2.
+    Columns (e1, e2, n) with e1 = −d (d the unit chord), n = d × up / |d × up|, e2 = n × e1 (= the
+    part of ``up_hint`` normal to d).  The straight string along d is then φ = 0, θ = π/2: as far
+    from the singularity θ ∈ {0, π} as possible, and a planar shape in that plane keeps θ ≡ π/2.
     """
     d = np.asarray(chord, dtype=float)
     dn = np.linalg.norm(d)
@@ -240,7 +260,9 @@ def reference_frame(chord: np.ndarray, up_hint: np.ndarray) -> np.ndarray:
 
 
 def pole_angle_deg(tangents: np.ndarray, normal: np.ndarray) -> float:
-    """Smallest angle [deg] between the Euler angles' singular axis ``normal`` (n = R0 e_z) and the
+    """Return the smallest angle [deg] between the Euler angles' singular axis and the tangents.
+
+    Smallest angle [deg] between the Euler angles' singular axis ``normal`` (n = R0 e_z) and the
     unit ``tangents`` (N, 3), either sign: 90° for a shape in the plane normal to n, 0° at the
     pole, where φ and ψ turn about the same axis and the fields get steep (slow convergence in the
     basis order).
@@ -264,7 +286,9 @@ def _hemisphere(count: int = 4000) -> np.ndarray:
 
 
 def farthest_pole(tangents: np.ndarray) -> tuple[np.ndarray, float]:
-    """(n, angle [deg]): the axis farthest from every tangent (maximises ``pole_angle_deg``),
+    """Return the axis farthest from every tangent, and that angle [deg].
+
+    (n, angle [deg]): the axis farthest from every tangent (maximises ``pole_angle_deg``),
     searched over 4000 directions (about 2° apart).
     """
     t = np.asarray(tangents, dtype=float)
@@ -276,7 +300,9 @@ def farthest_pole(tangents: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def frame_with_pole(normal: np.ndarray, hint: np.ndarray) -> np.ndarray:
-    """R0 = [e1, e2, n] (right-handed) with R0 e_z = ``normal``; e1 is ``hint`` made normal to
+    """Return R0 = [e1, e2, n] with R0 e_z = ``normal``.
+
+    R0 = [e1, e2, n] (right-handed) with R0 e_z = ``normal``; e1 is ``hint`` made normal to
     n.
     """
     n = np.asarray(normal, dtype=float)
@@ -290,7 +316,9 @@ def frame_with_pole(normal: np.ndarray, hint: np.ndarray) -> np.ndarray:
 
 
 def quat_z_to(direction: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w) of the shortest rotation taking +z to ``direction`` (for
+    """Return the quaternion of the shortest rotation taking +z to ``direction``.
+
+    Quaternion (x, y, z, w) of the shortest rotation taking +z to ``direction`` (for
     markers/arrows).
     """
     d = np.asarray(direction, dtype=float)

@@ -15,8 +15,9 @@ writer in a thread instead.
 
 Modules, one job each: :mod:`.recorder` (the public :class:`Recorder`), :mod:`.paths` (entity paths
 and timelines; the entity tree is documented there), :mod:`.codec` (snapshots on the wire),
-:mod:`.transport` (child process or thread), :mod:`.writer` (rerun calls), :mod:`.visuals` (drawing
-maths), :mod:`.scene_info`, :mod:`.blueprint` (the default layout), :mod:`.replay` (reading a
+:mod:`.transport` (child process or thread), :mod:`.writer` (rerun calls), :mod:`.visuals` and
+:mod:`.shape_columns` (drawing maths), :mod:`.obstacle_drawing` (obstacles from their primitive),
+:mod:`.scene_info`, :mod:`.blueprint` (the default layout), :mod:`.replay` (reading a
 recording back and re-solving it) and :mod:`.viewer` (opening or rendering one).  Importing the
 package does not import rerun.
 """
@@ -55,22 +56,21 @@ from .paths import (
 )
 from .recorder import DEFAULT_GRPC_URL, DEFAULT_PORT, Recorder, grpc_url, has_display
 from .scene_info import scene_info, scene_yaml
-from .visuals import obstacle_shape, quats_to_matrices, viridis
+from .visuals import quats_to_matrices, viridis
 
-# noqa: F401 - _Writer: tests slow it down to fill the queue
-from .writer import RecordingUnavailable, _Writer
+from .writer import RecordingUnavailable, Writer
 
 __all__ = [
     "DEFAULT_GRPC_URL",
     "DEFAULT_PORT",
     "Recorder",
+    "Writer",
     "RecordingUnavailable",
     "auto_model",
     "bend_energy_density",
     "default_blueprint",
     "grpc_url",
     "has_display",
-    "obstacle_shape",
     "quats_to_matrices",
     "scene_info",
     "scene_yaml",

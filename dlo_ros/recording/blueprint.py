@@ -1,4 +1,6 @@
-"""The recording's default rerun blueprint: the 3D world beside the time series and the event
+"""The recording's default rerun blueprint: the 3D world, time series and event log.
+
+The recording's default rerun blueprint: the 3D world beside the time series and the event
 log.
 """
 
@@ -19,11 +21,13 @@ from .paths import (
 )
 
 if TYPE_CHECKING:
-    from .scene_info import _SceneInfo
+    from .scene_info import SceneInfo
 
 
-def auto_model(info: _SceneInfo | None) -> bool:
-    """Whether the recorded solver picks its model (solver.model 'auto', not a ShapeSolver of
+def auto_model(info: SceneInfo | None) -> bool:
+    """Say whether the recorded solver picks its model (solver.model 'auto').
+
+    Whether the recorded solver picks its model (solver.model 'auto', not a ShapeSolver of
     it).
     """
     return (
@@ -31,16 +35,18 @@ def auto_model(info: _SceneInfo | None) -> bool:
     )
 
 
-def default_blueprint(info: _SceneInfo | None = None) -> Any:
-    """3D world view (left) beside the time series and the event log (right); timeline
+def default_blueprint(info: SceneInfo | None = None) -> Any:
+    """Return the default layout: the 3D world beside the time series and the event log.
+
+    3D world view (left) beside the time series and the event log (right); timeline
     ``update``.
     """
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
     world = rrb.Spatial3DView(
         origin=E_WORLD, name="World (m, z up)", eye_controls=_eye(info) if info else None
     )
-    views = [
+    views: list[Any] = [
         rrb.TimeSeriesView(origin=E_ENERGY, name="Energy [J]"),
         rrb.TimeSeriesView(origin=E_SOLVE_TIME, name="Solve time [ms]"),
         rrb.TimeSeriesView(origin=E_ITERATIONS, name="Iterations (Newton steps or IPOPT)"),
@@ -67,11 +73,13 @@ def default_blueprint(info: _SceneInfo | None = None) -> Any:
     )
 
 
-def _eye(info: _SceneInfo) -> Any:
-    """Camera looking at the cable from the side: perpendicular to the grips' chord and to
+def _eye(info: SceneInfo) -> Any:
+    """Return a camera looking at the cable from the side.
+
+    Camera looking at the cable from the side: perpendicular to the grips' chord and to
     gravity.
     """
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
     g, L = info.gravity, info.length
     pos = info.grip_positions

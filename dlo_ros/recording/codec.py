@@ -1,7 +1,7 @@
 """The wire format between a Recorder and its writer: snapshots of what was logged, as flat tuples.
 
 A result or a target set is copied into a tuple of primitives and bytes (a few µs to build and to
-pickle); :func:`decode` turns any queued message back into an :class:`_Item` for the writer.
+pickle); :func:`decode` turns any queued message back into an :class:`QueueItem` for the writer.
 Copies, never references into the caller's objects.
 """
 
@@ -14,7 +14,12 @@ import numpy as np
 
 
 @dataclass
-class _Item:
+class QueueItem:
+    """One queued message, decoded: its ``kind`` (the writer's ``_handle_<kind>``), when, what.
+
+    ``update`` is the update number (None: static), ``ros_time_ns`` the ROS time [ns].
+    """
+
     kind: str
     update: int | None
     ros_time_ns: int
@@ -22,7 +27,9 @@ class _Item:
 
 
 @dataclass
-class _ResultSnap:
+class ResultSnap:
+    """What the writer draws of one ShapeResult, as plain data (the writer never imports it)."""
+
     status: str
     message: str
     stable: bool | None
@@ -45,8 +52,10 @@ class _ResultSnap:
 
 
 @dataclass
-class _FitSnap:
-    """A fit as the node recorded it: observed points, fitted centreline and each point's nearest
+class FitSnap:
+    """A fit as the node recorded it: points, fitted centreline, residual feet, summary.
+
+    A fit as the node recorded it: observed points, fitted centreline and each point's nearest
     point on it (m), the stated σ [m] and the robust loss's threshold [σ], the summary text,
     whether it was ok.
     """
@@ -65,8 +74,10 @@ def _pose_bytes(pose: Any) -> bytes:
     return np.asarray(pos, dtype=float).tobytes() + np.asarray(quat, dtype=float).tobytes()
 
 
-def _encode_targets(poses: Mapping[str, Any], update: int, ros_time_ns: int) -> tuple:
-    """log_targets' message: a flat tuple of primitives and bytes (a few µs to build and to
+def encode_targets(poses: Mapping[str, Any], update: int, ros_time_ns: int) -> tuple:
+    """Encode log_targets' message as a flat tuple of primitives and bytes.
+
+    log_targets' message: a flat tuple of primitives and bytes (a few µs to build and to
     pickle).
     """
     return (
@@ -123,13 +134,13 @@ def encode_result(
     )
 
 
-def decode(message: Any) -> _Item:
-    """A queued message (an _Item, or an encoded result / targets tuple) → _Item."""
-    if isinstance(message, _Item):
+def decode(message: Any) -> QueueItem:
+    """Decode a queued message (a QueueItem, or an encoded result or targets tuple)."""
+    if isinstance(message, QueueItem):
         return message
     if message[0] == "T":
         _, update, t, names, data = message
-        return _Item("targets", update, t, _decode_poses(names, data))
+        return QueueItem("targets", update, t, _decode_poses(names, data))
     (
         _,
         update,
@@ -155,7 +166,7 @@ def decode(message: Any) -> _Item:
     ) = message
     f = np.frombuffer(g_data, dtype=float).reshape(len(g_names), 3)
     bend = None if rf is None else np.frombuffer(rf, dtype=float)
-    snap = _ResultSnap(
+    snap = ResultSnap(
         status=status,
         message=text,
         stable=stable,
@@ -174,4 +185,4 @@ def decode(message: Any) -> _Item:
         model=model,
         self_contacts=np.frombuffer(contacts, dtype=float).reshape(-1, 11),
     )
-    return _Item("result", update, t, snap)
+    return QueueItem("result", update, t, snap)

@@ -21,7 +21,9 @@ class ColumnError(ValueError):
 
 
 class Budget:
-    """Bytes kept from the file so far (numbers 8 bytes each, text 1 byte per character; the
+    """The bytes kept from a recording file so far, against a limit.
+
+    Bytes kept from the file so far (numbers 8 bytes each, text 1 byte per character; the
     reader adds its rows' overhead).
     """
 
@@ -55,8 +57,8 @@ class Columns:
         return self.batch.column(name) if name in self.names else None
 
     def _list(self, name: str):
-        """The ``list<T>`` column ``name`` (None if absent)."""
-        import pyarrow as pa
+        """Return the ``list<T>`` column ``name`` (None if absent)."""
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._column(name)
         if col is None:
@@ -66,8 +68,8 @@ class Columns:
         return col
 
     def index(self, name: str) -> list[int | None]:
-        """An index column (``update`` sequence, ``ros_time`` timestamp): ints, None where null."""
-        import pyarrow as pa
+        """Read an index column (``update``, ``ros_time``): ints, None where null."""
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._column(name)
         if col is None:
@@ -85,10 +87,12 @@ class Columns:
         return [b""] * self.rows if col is None else [v or b"" for v in col.to_pylist()]
 
     def texts(self, name: str, *, first: bool = True) -> list[Any]:
-        """A string column: per row its first string (``first``) or the list of strings; None where
+        """Read a string column: per row its first string or the list of strings.
+
+        A string column: per row its first string (``first``) or the list of strings; None where
         null or empty.
         """
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._list(name)
         if col is None:
@@ -103,8 +107,8 @@ class Columns:
         return [c if c else None for c in cells]
 
     def flags(self, name: str) -> list[bool | None]:
-        """A boolean column: per row its first value, None where null or empty."""
-        import pyarrow as pa
+        """Read a boolean column: per row its first value, None where null or empty."""
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._list(name)
         if col is None:
@@ -116,10 +120,12 @@ class Columns:
     def numbers(
         self, name: str, *, finite: bool = True, per_row: int | None = None
     ) -> list[np.ndarray | None]:
-        """A numeric column: per row a float64 array (None where null).  ``finite``: NaN or inf is
+        """Read a numeric column: per row a float64 array (None where null).
+
+        A numeric column: per row a float64 array (None where null).  ``finite``: NaN or inf is
         an error; ``per_row``: the largest number of values a cell may have.
         """
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._list(name)
         if col is None:
@@ -151,10 +157,12 @@ class Columns:
         return out
 
     def strips(self, name: str, per_row: int) -> list[np.ndarray | None]:
-        """``LineStrips3D:strips`` as the centreline it draws: the first point of each strip and
+        """Read ``LineStrips3D:strips`` as the centreline it draws, per row.
+
+        ``LineStrips3D:strips`` as the centreline it draws: the first point of each strip and
         the last point of the last one, (n, 3) float64 per row (None where null or empty).
         """
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         col = self._list(name)
         if col is None:
@@ -195,7 +203,7 @@ class Columns:
 
 
 def updates_of(cols: Columns, required: bool) -> list[int | None]:
-    """The ``update`` index per row; ``required``: a row without one is an error."""
+    """Return the ``update`` index per row; ``required``: a row without one is an error."""
     ups = cols.index(P.TIMELINE_UPDATE)
     if required and any(u is None for u in ups):
         raise ColumnError(f"{cols.entity}: a row without an '{P.TIMELINE_UPDATE}' index")

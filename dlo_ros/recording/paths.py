@@ -1,4 +1,6 @@
-"""Entity paths and timelines of a dlo_ros recording: the names the writer logs under and replay
+"""Entity paths and timelines of a dlo_ros recording.
+
+Entity paths and timelines of a dlo_ros recording: the names the writer logs under and replay
 reads back.
 
 Entity tree (world frame, right-handed, z up, metres; timelines ``update`` (sequence) and
@@ -78,7 +80,7 @@ E_DATA_TARGETS = "data/targets"
 ENERGY_TERMS = ("bend", "twist", "stretch", "gravity", "external_work", "total")
 
 
-def _part(name: str) -> str:
-    """A name as one entity-path part."""
+def path_part(name: str) -> str:
+    """Return a name as one entity-path part."""
     cleaned = "".join(c if c.isalnum() or c in "_-" else "_" for c in str(name))
     return cleaned or "_"

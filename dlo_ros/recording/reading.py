@@ -11,14 +11,16 @@ was read.  Every failure is one :class:`RecordingError` line naming the file.
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from . import paths as P
 from .columns import Budget, ColumnError, Columns, updates_of
+from ..text import safe_text
 from .rrd_file import LIMITS, RrdFileError, RrdLayout, open_rrd
 
 Pose = tuple[np.ndarray, np.ndarray]  # position (3,), quaternion (4,) x, y, z, w
@@ -72,7 +74,9 @@ class Recording:
 
 
 def rows_of(chunks: list[Any]) -> list[dict[str, Any]]:
-    """Rows of one entity's chunks as dicts (index columns as int, components as Python lists), in
+    """Return the rows of one entity's chunks as dicts, in logging order.
+
+    Rows of one entity's chunks as dicts (index columns as int, components as Python lists), in
     logging order: by ``update`` then by row id.  For tests and small recordings: it converts every
     column to Python objects (:func:`read_recording` reads only the columns it needs).
     """
@@ -134,7 +138,9 @@ def _or_empty(values: np.ndarray | None) -> np.ndarray:
 
 
 class _Rows:
-    """Rows of one entity collected chunk by chunk as ``(update, row id, value)`` (or only
+    """Rows of one entity collected chunk by chunk, sorted on demand.
+
+    Rows of one entity collected chunk by chunk as ``(update, row id, value)`` (or only
     counted, ``keep=False``), sorted on demand.
     """
 
@@ -160,7 +166,9 @@ class _Rows:
 
 
 class _Reader:
-    """Reads the chunks of one recording as rerun streams them, one at a time, keeping only the
+    """Reader of a recording's chunks that keeps only the typed values dlo_ros needs.
+
+    Reads the chunks of one recording as rerun streams them, one at a time, keeping only the
     typed values of the columns dlo_ros needs (no chunk is held after it was read).
     """
 
@@ -258,20 +266,22 @@ class _Reader:
         model = cols.texts("model") if self.details else none
         values = []
         for i in range(cols.rows):
-            p = pts[i] if pts[i] is not None else np.zeros(0)
+            p = pts[i]
+            p = p if p is not None else np.zeros(0)
+            s_i = s[i]
             if len(p) % 3:
                 raise ColumnError(
                     f"{where}: update {ups[i]} has {len(p)} point values, not a multiple of 3"
                 )
             values.append(
                 RecordedResult(
-                    update=int(ups[i]),
+                    update=int(cast(int, ups[i])),  # updates_of(cols, True): never None
                     ros_time_ns=ros[i],
                     status=status[i] or "",
                     message=message[i] or "",
                     warm_started=bool(warm_started[i]),
                     warm_call=warm[i],
-                    s=s[i] if s[i] is not None else np.zeros(0),
+                    s=s_i if s_i is not None else np.zeros(0),
                     points=p.reshape(-1, 3),
                     targets=_poses(names[i], poses[i], f"{where} update {ups[i]} target_poses"),
                     energy={
@@ -356,7 +366,9 @@ class RecordingCheck:
 
 
 def check_recording(path: str | Path) -> RecordingCheck:
-    """Check that ``path`` is a readable dlo recording without keeping its data: every chunk is
+    """Check that ``path`` is a readable dlo recording without keeping its data.
+
+    Check that ``path`` is a readable dlo recording without keeping its data: every chunk is
     read and its columns checked as :func:`read_recording` would (same limits and errors), then
     dropped, so the memory used does not grow with the number of updates.  What ``dlo replay
     FILE`` does before it starts a viewer.
@@ -376,13 +388,13 @@ def check_recording(path: str | Path) -> RecordingCheck:
 
 
 def _stream(path: Path, reader: _Reader) -> tuple[Any, RrdLayout]:
-    """Feed every chunk of the file's first recording to ``reader``, one chunk at a time; (its
+    """Feed every chunk of the file's first recording to ``reader``, one at a time.
+
+    Feed every chunk of the file's first recording to ``reader``, one chunk at a time; (its
     store entry, the file's layout).  Every failure is a :class:`RecordingError` naming the
     file.
     """
-    try:
-        import warnings
-
+    try:  # optional: rerun-sdk (Python >= 3.11)
         from rerun.chunk import RrdReader
     except ImportError as exc:
         raise RecordingError(
@@ -422,6 +434,4 @@ def _stream(path: Path, reader: _Reader) -> tuple[Any, RrdLayout]:
 
 def _one_line(text: str, limit: int = 200) -> str:
     """``text`` on one line, at most ``limit`` characters (rerun's messages may span lines)."""
-    from ..text import safe_text
-
     return safe_text(" ".join(text.split()), limit)

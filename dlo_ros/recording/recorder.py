@@ -1,4 +1,6 @@
-"""The public front end of a recording: :class:`Recorder`, plus the viewer address and display
+"""The public front end of a recording: the Recorder, the viewer address, display checks.
+
+The public front end of a recording: :class:`Recorder`, plus the viewer address and display
 checks.
 
 A Recorder snapshots what it is given (dlo_ros.recording.codec) and hands it to a backend
@@ -16,17 +18,19 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .codec import encode_result, _encode_targets, _FitSnap, _Item
+from .codec import encode_result, encode_targets, FitSnap, QueueItem
 from .scene_info import scene_info
-from .transport import _ProcessBackend, _ThreadBackend
-from .writer import _Config
+from .transport import ProcessBackend, ThreadBackend
+from .writer import WriterConfig
 
 DEFAULT_GRPC_URL = "rerun+http://127.0.0.1:9876/proxy"
 DEFAULT_PORT = 9876
 
 
 def has_display() -> bool:
-    """Whether a native window can open here (Linux: $DISPLAY or $WAYLAND_DISPLAY; macOS, Windows:
+    """Say whether a native window can open here.
+
+    Whether a native window can open here (Linux: $DISPLAY or $WAYLAND_DISPLAY; macOS, Windows:
     yes).
     """
     if sys.platform in ("darwin", "win32"):
@@ -48,7 +52,8 @@ def grpc_url(address: str | None) -> str:
         return address
     if "://" in address:
         raise ValueError(
-            f"--connect: expected HOST[:PORT] or a rerun+http://HOST:PORT/proxy URL, got {address!r}"
+            f"--connect: expected HOST[:PORT] or a rerun+http://HOST:PORT/proxy URL, got "
+            f"{address!r}"
         )
     host, _, port = address.rpartition(":") if ":" in address else (address, "", "")
     host = host or "127.0.0.1"
@@ -106,15 +111,17 @@ class Recorder:
             raise ValueError(f"backend: must be 'process' or 'thread', got {backend!r}")
         if spawn and not has_display():
             raise RuntimeError(
-                "no display ($DISPLAY and $WAYLAND_DISPLAY are unset), so a spawned viewer cannot open "
-                "a window; save with --rrd FILE and open it with `dlo replay FILE` where there is a "
+                "no display ($DISPLAY and $WAYLAND_DISPLAY are unset), so a spawned viewer cannot "
+                "open "
+                "a window; save with --rrd FILE and open it with `dlo replay FILE` where there is "
+                "a "
                 "display, or stream with --connect to a viewer running elsewhere"
             )
         urls = ([f"rerun+http://127.0.0.1:{spawn_port}/proxy"] if spawn else []) + (
             [grpc_url(connect)] if connect is not None else []
         )
         self.url = urls[0] if urls else None
-        cfg = _Config(
+        cfg = WriterConfig(
             rrd=str(self.rrd.resolve()) if self.rrd else None,
             spawn=bool(spawn),
             spawn_port=int(spawn_port),
@@ -123,11 +130,11 @@ class Recorder:
             recording_id=recording_id,
             frames=int(frames),
         )
-        kind = _ProcessBackend if backend == "process" else _ThreadBackend
+        kind = ProcessBackend if backend == "process" else ThreadBackend
         self._backend = kind(cfg, start_timeout, max(1, int(queue_size)))
         self.recording_id = self._backend.recording_id
 
-    # ---- public API (any thread) ------------------------------------------------------------------
+    # ---- public API (any thread) ----------------------------------------------------------------
     def log_scene(
         self,
         scene_or_problem: Any,
@@ -137,7 +144,9 @@ class Recorder:
         update: int | None = None,
         ros_time_ns: int | None = None,
     ) -> None:
-        """The scene: obstacles, the scene YAML (for ``dlo replay --resolve``), the default
+        """Log the scene: obstacles, the scene YAML and the default blueprint.
+
+        The scene: obstacles, the scene YAML (for ``dlo replay --resolve``), the default
         blueprint.
 
         ``scene_or_problem``: a ``dlo_ros.scene.Scene`` (its YAML makes the recording re-solvable)
@@ -152,19 +161,21 @@ class Recorder:
             return
         info = scene_info(scene_or_problem, frame_id, solver, self._force_scale)
         self._put(
-            _Item("scene", update, self._now(ros_time_ns) if update is not None else 0, info),
+            QueueItem("scene", update, self._now(ros_time_ns) if update is not None else 0, info),
             keep=True,
         )
 
     def log_targets(
         self, poses: Mapping[str, Any], *, update: int, ros_time_ns: int | None = None
     ) -> None:
-        """Grip targets as received: ``{name: (position[3], quaternion xyzw[4])}`` or ``{name:
+        """Log grip targets as received.
+
+        Grip targets as received: ``{name: (position[3], quaternion xyzw[4])}`` or ``{name:
         GripPose}``.
         """
         if not self.enabled:
             return
-        self._put(_encode_targets(poses, int(update), self._now(ros_time_ns)))
+        self._put(encode_targets(poses, int(update), self._now(ros_time_ns)))
 
     def log_result(
         self,
@@ -176,7 +187,9 @@ class Recorder:
         targets: Mapping[str, Any] | None = None,
         warm: bool | None = None,
     ) -> None:
-        """One solve (a committed update, or a failed one).  ``bend_stiffness``: Rf [N·m²] (a
+        """Log one solve: a committed update, or a failed one.
+
+        One solve (a committed update, or a failed one).  ``bend_stiffness``: Rf [N·m²] (a
         constant or one value per sample of result.s) for the colouring; None takes it from the
         scene.  ``targets``: the grip poses this solve used (all grips), recorded exactly so that
         ``dlo replay --resolve`` repeats the same solve (without it, replay folds the
@@ -202,7 +215,9 @@ class Recorder:
         ros_time_ns: int | None = None,
         warm: bool | None = None,
     ) -> None:
-        """The node's one call per solve: :meth:`log_result` with the grip poses and the bend
+        """Log the node's one call per solve: the result with its problem's poses and stiffness.
+
+        The node's one call per solve: :meth:`log_result` with the grip poses and the bend
         stiffness taken from ``problem`` (the Problem that was solved; its grip poses are the
         targets used).
 
@@ -228,21 +243,23 @@ class Recorder:
         )
 
     def log_rejected(self, reason: str, *, update: int, ros_time_ns: int | None = None) -> None:
-        """An input that was rejected (bad pose, unknown grip, wrong frame, ...) and why."""
+        """Log an input that was rejected (bad pose, unknown grip, wrong frame, ...) and why."""
         if not self.enabled:
             return
-        self._put(_Item("rejected", int(update), self._now(ros_time_ns), str(reason)))
+        self._put(QueueItem("rejected", int(update), self._now(ros_time_ns), str(reason)))
 
     def log_model_change(
         self, text: str, *, update: int, ros_time_ns: int | None = None, scene: Any = None
     ) -> None:
-        """A free-text model event (e.g. the model reduction switched models).  With ``scene`` the
+        """Log a free-text model event, and the new scene if one is given.
+
+        A free-text model event (e.g. the model reduction switched models).  With ``scene`` the
         new scene is recorded too (as :meth:`log_scene` with ``update``).  Never dropped.
         """
         if not self.enabled:
             return
         t = self._now(ros_time_ns)
-        self._put(_Item("model", int(update), t, str(text)), keep=True)
+        self._put(QueueItem("model", int(update), t, str(text)), keep=True)
         if scene is not None:
             self.log_scene(scene, update=update, ros_time_ns=t)
 
@@ -259,7 +276,9 @@ class Recorder:
         update: int,
         ros_time_ns: int | None = None,
     ) -> None:
-        """A fit of observed points at ``update``: ``points`` (N, 3), the fitted centreline
+        """Log a fit of observed points at ``update``.
+
+        A fit of observed points at ``update``: ``points`` (N, 3), the fitted centreline
         ``shape`` (S, 3) and each point's nearest point on it ``feet`` (N, 3) [m] (empty when the
         fit failed), drawn under ``world/fit`` by ``dlo_ros.identify.drawing``; ``text`` (its
         summary and what it applied) goes to ``events/fit`` (WARN unless ``ok``).  Never
@@ -267,7 +286,7 @@ class Recorder:
         """
         if not self.enabled:
             return
-        snap = _FitSnap(
+        snap = FitSnap(
             np.array(points, dtype=float),
             np.array(shape, dtype=float).reshape(-1, 3),
             np.array(feet, dtype=float).reshape(-1, 3),
@@ -276,10 +295,12 @@ class Recorder:
             str(text),
             bool(ok),
         )
-        self._put(_Item("fit", int(update), self._now(ros_time_ns), snap), keep=True)
+        self._put(QueueItem("fit", int(update), self._now(ros_time_ns), snap), keep=True)
 
     def flush(self, timeout: float = 10.0) -> bool:
-        """Wait until everything logged so far is in rerun's sinks (False on timeout or a dead
+        """Wait until everything logged so far is in rerun's sinks.
+
+        Wait until everything logged so far is in rerun's sinks (False on timeout or a dead
         writer).
         """
         if not self.enabled or self._closed:
@@ -289,7 +310,9 @@ class Recorder:
         return done
 
     def close(self, timeout: float = 10.0) -> None:
-        """Log what is queued, flush and close the sinks (the .rrd file is complete afterwards).
+        """Log what is queued, flush and close the sinks.
+
+        Log what is queued, flush and close the sinks (the .rrd file is complete afterwards).
         Idempotent; ``with Recorder(...) as rec:`` calls it on exit.
         """
         if not self.enabled or self._closed:
@@ -313,7 +336,7 @@ class Recorder:
         """Items accepted and not yet handed to rerun (or to the recorder process)."""
         return self._backend.pending if self._backend is not None and not self._closed else 0
 
-    # ---- internals ----------------------------------------------------------------------------------
+    # ---- internals ------------------------------------------------------------------------------
     @staticmethod
     def _now(ros_time_ns: int | None) -> int:
         return time.time_ns() if ros_time_ns is None else int(ros_time_ns)

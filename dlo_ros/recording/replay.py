@@ -1,4 +1,6 @@
-"""Re-solving a recording as a regression case (:func:`resolve`); reading it back is
+"""Re-solving a recording as a regression case (:func:`resolve`).
+
+Re-solving a recording as a regression case (:func:`resolve`); reading it back is
 :mod:`.reading` (:func:`read_recording`, :func:`check_recording`, re-exported here).
 
 The format is documented in msg_docs/recording.md.  ``dlo replay`` (dlo_ros.cli.replay) is its
@@ -11,13 +13,16 @@ import math
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
+import yaml
 
+from .. import solver as S
+from ..scene import Scene, scene_from_dict
 from . import paths as P
 from .reading import (
     RecordedResult,
     Recording,
     RecordingCheck,
-    RecordingError,  # noqa: F401
+    RecordingError,
     check_recording,
     read_recording,
     rows_of,
@@ -26,21 +31,29 @@ from .reading import (
 if TYPE_CHECKING:
     from ..solver import Solver
 
+__all__ = [
+    "DEFAULT_TOLERANCE",
+    "RecordedResult",
+    "Recording",
+    "RecordingCheck",
+    "RecordingError",
+    "check_recording",
+    "deviation",
+    "format_resolve",
+    "read_recording",
+    "resolve",
+    "rows_of",
+]
+
 DEFAULT_TOLERANCE = 1e-6
 
 
-# ---- re-solving ----------------------------------------------------------------------------------------
-def _scene_from_yaml(text: str, where: str):
-    import yaml
-
-    from ..scene import scene_from_dict
-
+# ---- re-solving ---------------------------------------------------------------------------------
+def _scene_from_yaml(text: str, where: str) -> Scene:
     return scene_from_dict(yaml.safe_load(text), source=where)
 
 
-def _make_solver(kind: str, scene, compile: str) -> Solver:
-    from .. import solver as S
-
+def _make_solver(kind: str, scene: Scene, compile: str) -> Solver:
     if kind == "ShapeSolver" or not hasattr(S, "make_solver"):
         return S.ShapeSolver(scene.problem, scene.options, compile=compile)
     if kind == "AutoShapeSolver" and hasattr(S, "AutoShapeSolver"):
@@ -49,7 +62,9 @@ def _make_solver(kind: str, scene, compile: str) -> Solver:
 
 
 def deviation(recorded: RecordedResult, result: Any) -> float:
-    """Largest distance [m] between the recorded centreline and today's; 0 when both failed with
+    """Return the largest distance [m] between the recorded centreline and today's.
+
+    Largest distance [m] between the recorded centreline and today's; 0 when both failed with
     the same status; inf when the statuses differ or the sampling changed.
     """
     if recorded.status != result.status:
@@ -68,8 +83,7 @@ def resolve(
     compile: str = "cached",
     progress: Callable[[str], None] | None = None,
 ) -> dict:
-    """Re-run the solver on the recorded targets, update by update, and compare with the recorded
-    shapes.
+    """Re-solve the recorded targets update by update and compare with the recorded shapes.
 
     The solver is the recorded kind (ShapeSolver / AutoShapeSolver) built from the recorded scene
     (``scene/yaml``, later ``scene/changes``).  Each update uses the grip poses recorded with its
@@ -91,7 +105,7 @@ def resolve(
     current = {g.name: (g.pose.position, g.pose.orientation) for g in scene.problem.grips}
     received = sorted(rec.targets, key=lambda t: t[0])
     ti = ci = 0
-    rows = []
+    rows: list[dict[str, Any]] = []
     for recorded in sorted(rec.results, key=lambda r: r.update):
         while ci < len(changes) and changes[ci][0] <= recorded.update:
             new = _scene_from_yaml(
@@ -124,6 +138,11 @@ def resolve(
         )
         if progress is not None:
             progress(f"update {recorded.update}: {dev:.3g} m")
+    return _report(rec, scene.name, tolerance, rows)
+
+
+def _report(rec: Recording, scene: str, tolerance: float, rows: list[dict[str, Any]]) -> dict:
+    """Return the report of :func:`resolve` from its rows, one per re-solved update."""
     finite = [r["max_deviation_m"] for r in rows if math.isfinite(r["max_deviation_m"])]
     worst = max(
         rows, key=lambda r: r["max_deviation_m"] if not math.isnan(r["max_deviation_m"]) else -1
@@ -131,7 +150,7 @@ def resolve(
     exceeding = [r["update"] for r in rows if not r["max_deviation_m"] <= tolerance]
     return {
         "file": str(rec.path),
-        "scene": scene.name,
+        "scene": scene,
         "solver": rec.solver_kind or "default",
         "tolerance_m": tolerance,
         "updates": rows,
@@ -145,6 +164,7 @@ def resolve(
 
 
 def format_resolve(report: dict) -> str:
+    """Return the human-readable table of a :func:`resolve` report, one line per update."""
     lines = [
         f"replay  {report['file']}: scene {report['scene']}, {report['count']} updates, "
         f"solver {report['solver']}",
@@ -153,7 +173,8 @@ def format_resolve(report: dict) -> str:
     for r in report["updates"]:
         flag = "" if r["max_deviation_m"] <= report["tolerance_m"] else "   > tolerance"
         lines.append(
-            f"{r['update']:>7}  {r['recorded_status']:<11} {r['status']:<11} {r['max_deviation_m']:.3g}{flag}"
+            f"{r['update']:>7}  {r['recorded_status']:<11} {r['status']:<11} "
+            f"{r['max_deviation_m']:.3g}{flag}"
         )
     verdict = (
         "OK"
@@ -163,8 +184,10 @@ def format_resolve(report: dict) -> str:
     )
     mean = report["mean_deviation_m"]
     lines.append(
-        f"summary {report['count']} updates re-solved: max deviation {report['max_deviation_m']:.3g} m "
+        f"summary {report['count']} updates re-solved: max deviation "
+        f"{report['max_deviation_m']:.3g} m "
         f"(update {report['worst_update']}), mean {'n/a' if mean is None else f'{mean:.3g}'} m; "
-        f"{len(report['exceeding'])} above the tolerance {report['tolerance_m']:.3g} m -> {verdict}"
+        f"{len(report['exceeding'])} above the tolerance {report['tolerance_m']:.3g} m -> "
+        f"{verdict}"
     )
     return "\n".join(lines)

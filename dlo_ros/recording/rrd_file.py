@@ -60,7 +60,9 @@ class RrdLayout:
 
 
 def _open_regular(path: Path) -> int:
-    """A descriptor on ``path``, a regular file within the size limit (``scene.open_regular_file``:
+    """Open ``path``, a regular file within the size limit, and return its descriptor.
+
+    A descriptor on ``path``, a regular file within the size limit (``scene.open_regular_file``:
     opened without blocking and checked with fstat).
     """
     try:
@@ -82,7 +84,9 @@ def _read_at(fd: int, n: int, offset: int) -> bytes:
 
 
 def scan(fd: int, path: Path) -> RrdLayout:
-    """Walk the messages of the open file ``fd``: check the header, each message's kind and count,
+    """Walk the messages of the open file ``fd`` and find where the complete ones end.
+
+    Walk the messages of the open file ``fd``: check the header, each message's kind and count,
     and find the end of the last complete message.
     """
     size = os.fstat(fd).st_size
@@ -129,7 +133,7 @@ def scan(fd: int, path: Path) -> RrdLayout:
 
 
 def _copy_prefix(fd: int, n: int, path: Path) -> str:
-    """The first ``n`` bytes of ``fd`` in a new temporary file (copied 1 MiB at a time)."""
+    """Copy the first ``n`` bytes of ``fd`` into a new temporary file (1 MiB at a time)."""
     out = tempfile.NamedTemporaryFile(  # noqa: SIM115 - removed by open_rrd
         prefix="dlo_replay_", suffix=".rrd", delete=False
     )

@@ -8,12 +8,12 @@ from typing import Any
 
 import numpy as np
 
-from .visuals import obstacle_shape
-
 
 @dataclass
-class _SceneInfo:
-    """What the writer needs of a scene (plain data: the writer process never imports the
+class SceneInfo:
+    """What the writer needs of a scene, as plain data.
+
+    What the writer needs of a scene (plain data: the writer process never imports the
     model).
     """
 
@@ -43,7 +43,9 @@ class _SceneInfo:
 
 
 def scene_yaml(scene: Any) -> str:
-    """The scene in the scene-file format (``dlo_ros.scene.scene_to_dict``) as YAML text."""
+    """Return the scene in the scene-file format (``dlo_ros.scene.scene_to_dict``) as YAML text."""
+    # here, not at the top: the writer's process imports this module and must not import the
+    # scene package (the model and solver: see scene_info below)
     import yaml
 
     from ..scene import scene_to_dict
@@ -58,8 +60,16 @@ def scene_info(
     frame_id: str | None = None,
     solver: Any = None,
     force_scale: float | None = None,
-) -> _SceneInfo:
-    """The writer's view of a Scene (or a bare Problem: then no YAML, not re-solvable)."""
+) -> SceneInfo:
+    """Return the writer's view of a Scene (or a bare Problem: then no YAML, not re-solvable).
+
+    Runs in the caller's process; the obstacles become (archetype, kwargs, label, colour).
+    """
+    # here, not at the top: the writer's process imports this module (through the package) and
+    # must not import the model (CasADi): 0.11-0.17 s (python -X importtime -c 'import
+    # dlo_ros.model', 3 runs); test_recording checks the writer's imports.
+    from .obstacle_drawing import obstacle_shape
+
     problem = getattr(scene_or_problem, "problem", scene_or_problem)
     is_scene = problem is not scene_or_problem
     st = problem.string
@@ -80,7 +90,7 @@ def scene_info(
         kind, kwargs = obstacle_shape(ob, centre, extent)
         obstacles.append((kind, kwargs, ob.name or ob.type, list(ob.primitive().colour)))
     kind = solver if isinstance(solver, str) else ("" if solver is None else type(solver).__name__)
-    return _SceneInfo(
+    return SceneInfo(
         name=str(getattr(scene_or_problem, "name", "problem")),
         frame_id=str(frame_id or getattr(scene_or_problem, "frame_id", "world")),
         length=L,

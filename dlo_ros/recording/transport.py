@@ -19,15 +19,17 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import IO, Any, cast
 
-from .writer import RecordingUnavailable, _Config, _Writer
+from .writer import RecordingUnavailable, WriterConfig, Writer
 
 log = logging.getLogger(__name__)
 
 
 def _drop_oldest(queue: collections.deque, limit: int) -> int:
-    """Make room in ``queue`` of (payload, keep) by dropping its oldest droppable entry; returns 1
+    """Drop the oldest droppable entry of ``queue``; return 1 if one was dropped.
+
+    Make room in ``queue`` of (payload, keep) by dropping its oldest droppable entry; returns 1
     if one was dropped.
     """
     if len(queue) < limit:
@@ -39,15 +41,17 @@ def _drop_oldest(queue: collections.deque, limit: int) -> int:
     return 0
 
 
-class _ThreadBackend:
-    """The writer in a background thread of this process (``backend="thread"``).  Simple, but
+class ThreadBackend:
+    """The writer in a background thread of this process (``backend="thread"``).
+
+    The writer in a background thread of this process (``backend="thread"``).  Simple, but
     rerun's Python work shares the GIL with the caller: on a loaded machine it slows the solver
     thread.
     """
 
-    def __init__(self, cfg: _Config, timeout: float, queue_size: int) -> None:
+    def __init__(self, cfg: WriterConfig, timeout: float, queue_size: int) -> None:
         del timeout
-        self.writer = _Writer(cfg)
+        self.writer = Writer(cfg)
         self.recording_id = self.writer.recording_id
         self.dropped = 0
         self._limit = queue_size
@@ -128,7 +132,9 @@ def _frame(message: Any) -> bytes:
 
 
 def _write_all(fd: int, data: bytes, deadline: float | None = None) -> None:
-    """Write all of ``data`` to a (possibly non-blocking) fd, waiting for room until
+    """Write all of ``data`` to a (possibly non-blocking) fd.
+
+    Write all of ``data`` to a (possibly non-blocking) fd, waiting for room until
     ``deadline``.
     """
     view = memoryview(data)
@@ -174,25 +180,28 @@ CHILD_POLL_SECONDS = (
 )
 
 
-class _ProcessBackend:
+class ProcessBackend:
     """The writer in a child process (``backend="process"``, the default).
 
     ``submit`` pickles the snapshot and writes it into a non-blocking pipe (enlarged to 1 MiB where
     Linux allows): tens of microseconds in the caller's thread, no background Python thread
     competing for the GIL.  Only when the pipe is full does a frame wait in the bounded backlog
     (drop-oldest), which a small thread writes out as soon as the child has read.  The child
-    (``python -c 'from dlo_ros.recording.transport import _child_main; ...'``) makes every rerun
+    (``python -c 'from dlo_ros.recording.transport import child_main; ...'``) makes every rerun
     call; it ignores SIGINT (Ctrl-C stops the parent, which then closes it) and finishes the
     recording on EOF.
     """
 
-    def __init__(self, cfg: _Config, timeout: float, queue_size: int) -> None:
+    def __init__(self, cfg: WriterConfig, timeout: float, queue_size: int) -> None:
         env = dict(os.environ)
         package_root = str(Path(__file__).resolve().parents[2])
         env["PYTHONPATH"] = os.pathsep.join(
             [package_root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])
         )
-        code = "import sys; from dlo_ros.recording.transport import _child_main; sys.exit(_child_main())"
+        code = (
+            "import sys; from dlo_ros.recording.transport import child_main; "
+            "sys.exit(child_main())"
+        )
         self.proc = subprocess.Popen(
             [sys.executable, "-c", code],
             stdin=subprocess.PIPE,
@@ -200,10 +209,12 @@ class _ProcessBackend:
             env=env,
             close_fds=True,
         )
-        self._in, self._out = self.proc.stdin.fileno(), self.proc.stdout.fileno()
+        # stdin and stdout are pipes (PIPE above), never None
+        stdin, stdout = cast(IO[bytes], self.proc.stdin), cast(IO[bytes], self.proc.stdout)
+        self._in, self._out = stdin.fileno(), stdout.fileno()
         self.dead = False
         self.dropped = 0
-        self.stats = {"errors": 0, "last_error": ""}
+        self.stats: dict[str, Any] = {"errors": 0, "last_error": ""}
         try:
             _write_all(self._in, _frame(cfg))
             reply = _read_frame(self._out, time.monotonic() + timeout)
@@ -218,7 +229,7 @@ class _ProcessBackend:
             raise RuntimeError(f"recording could not start: {message}")
         self.recording_id = reply[1]
         try:
-            import fcntl
+            import fcntl  # optional: POSIX only
 
             fcntl.fcntl(self._in, F_SETPIPE_SZ, 1 << 20)
         except (ImportError, OSError):
@@ -295,7 +306,7 @@ class _ProcessBackend:
                     return
 
     def _died(self, exc: BaseException) -> None:
-        """The child is gone (lock held): count it once, drop what waits."""
+        """Record that the child is gone (lock held): count it once, drop what waits."""
         if not self.dead:
             self.dead = True
             self.stats = {
@@ -309,7 +320,9 @@ class _ProcessBackend:
         self._cond.notify_all()
 
     def _request(self, kind: str, timeout: float) -> tuple[bool, dict]:
-        """Write everything, then ask the child to ``flush`` or ``close`` and wait for its
+        """Write everything, then ask the child to ``flush`` or ``close`` and wait.
+
+        Write everything, then ask the child to ``flush`` or ``close`` and wait for its
         answer.
         """
         deadline = time.monotonic() + timeout
@@ -354,7 +367,7 @@ class _ProcessBackend:
         self._thread.join(1.0)
         for f in (self.proc.stdin, self.proc.stdout):
             try:
-                f.close()
+                cast(IO[bytes], f).close()
             except OSError:
                 pass
         try:
@@ -370,7 +383,7 @@ class _ProcessBackend:
             self.proc.wait()
 
 
-def _child_main() -> int:
+def child_main() -> int:
     """Entry point of the recorder process: read frames from stdin, log them, answer on stdout."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     inp = sys.stdin.buffer.fileno()
@@ -380,7 +393,7 @@ def _child_main() -> int:
     if cfg is None:
         return 0
     try:
-        writer = _Writer(cfg)
+        writer = Writer(cfg)
     except RecordingUnavailable as exc:
         _write_all(out, _frame(("unavailable", str(exc))))
         return 1

@@ -16,7 +16,9 @@ __all__ = ["has_display", "no_display_message", "rerun_command", "screenshot"]
 
 
 def rerun_command() -> list[str]:
-    """The rerun viewer executable: $DLO_RERUN_EXE, the venv's ``rerun``, ``rerun`` on PATH, or
+    """Return the command that starts the rerun viewer.
+
+    The rerun viewer executable: $DLO_RERUN_EXE, the venv's ``rerun``, ``rerun`` on PATH, or
     ``python -m rerun``.
     """
     if os.environ.get("DLO_RERUN_EXE"):
@@ -31,14 +33,19 @@ def rerun_command() -> list[str]:
 def no_display_message(path: Path) -> str:
     return "\n".join(
         [
-            f"dlo replay: no display here ($DISPLAY and $WAYLAND_DISPLAY are unset), so the rerun viewer cannot "
+            f"dlo replay: no display here ($DISPLAY and $WAYLAND_DISPLAY are unset), so the rerun "
+            f"viewer cannot "
             f"open a window for {path}.",
             "Instead:",
-            f"  * on a machine with a display: `dlo replay {path}` or `rerun {path}` (rerun-sdk 0.41: "
+            f"  * on a machine with a display: `dlo replay {path}` or `rerun {path}` (rerun-sdk "
+            f"0.41: "
             "`pip install rerun-sdk==0.41.0`)",
-            f"  * in a browser, no display needed: `dlo replay {path} --web` (serves http://localhost:9090;"
-            " forward the ports 9090 and 9876 over ssh: `ssh -L 9090:localhost:9090 -L 9876:localhost:9876 HOST`)",
-            f"  * as an image: `dlo replay {path} --screenshot out.png` (headless; needs a Vulkan driver, "
+            f"  * in a browser, no display needed: `dlo replay {path} --web` (serves "
+            f"http://localhost:9090;"
+            " forward the ports 9090 and 9876 over ssh: `ssh -L 9090:localhost:9090 -L "
+            "9876:localhost:9876 HOST`)",
+            f"  * as an image: `dlo replay {path} --screenshot out.png` (headless; needs a Vulkan "
+            f"driver, "
             "e.g. Debian's mesa-vulkan-drivers)",
             f"  * as a regression check: `dlo replay {path} --resolve`",
         ]
@@ -54,14 +61,16 @@ def _free_port() -> int:
 def screenshot(
     path: str | Path, png: str | Path, *, update: int | None = None, wait: float = 6.0
 ) -> Path:
-    """Render a recording with a headless rerun viewer (its default blueprint, 1920×1080) into
+    """Render a recording with a headless rerun viewer into ``png``.
+
+    Render a recording with a headless rerun viewer (its default blueprint, 1920×1080) into
     ``png``.
 
     ``update``: the update to show (default: the last).  Raises RuntimeError with the viewer's
     reason when it cannot start (e.g. no Vulkan adapter: install a software one, Debian's
     mesa-vulkan-drivers).
     """
-    from rerun.experimental import ViewerClient
+    from rerun.experimental import ViewerClient  # optional: rerun-sdk
 
     path, png = Path(path).resolve(), Path(png).resolve()
     viewer = ViewerClient.spawn(headless=True, port=_free_port(), hide_welcome_screen=True)

@@ -1,11 +1,9 @@
-"""Drawing maths of the recording (no rerun): colours, rotation matrices, obstacle shapes.
+"""Drawing maths of the recording (no rerun): colours and rotation matrices.
 
 The bend-energy density and its colour map are dlo_ros.shading's, shared with the node's markers.
 """
 
 from __future__ import annotations
-
-from typing import Any
 
 import numpy as np
 
@@ -43,37 +41,3 @@ def quats_to_matrices(q: np.ndarray) -> np.ndarray:
     m[:, 2, 1] = 2 * (y * z + x * w)
     m[:, 2, 2] = 1 - 2 * (x * x + y * y)
     return m
-
-
-def obstacle_shape(ob: Any, centre: np.ndarray, extent: float) -> tuple[str, dict]:
-    """(archetype name, keyword arguments) drawing an obstacle (``dlo_ros.model.Obstacle``) from
-    its ``primitive()``.
-
-    plane → a square slab of side 2·extent, 1 % of that thick, lying just behind the surface,
-    centred on the projection of ``centre``; sphere → Ellipsoids3D; capsule → Capsules3D; box →
-    Boxes3D.
-    """
-    pr = ob.primitive()
-    if pr.kind == "plane":
-        normal = pr.axis / np.linalg.norm(pr.axis)
-        foot = centre - np.dot(centre - pr.centre, normal) * normal
-        thick = 0.01 * extent
-        return "Boxes3D", dict(
-            centers=[foot - 0.5 * thick * normal],
-            half_sizes=[[extent, extent, 0.5 * thick]],
-            quaternions=[pr.orientation],
-        )
-    if pr.kind == "sphere":
-        return "Ellipsoids3D", dict(centers=[pr.centre], half_sizes=[pr.half_sizes])
-    if pr.kind == "capsule":
-        return "Capsules3D", dict(
-            translations=[pr.ends()[0]],
-            lengths=[pr.length],
-            radii=[pr.radius],
-            quaternions=[pr.orientation],
-        )
-    if pr.kind == "box":
-        return "Boxes3D", dict(
-            centers=[pr.centre], half_sizes=[pr.half_sizes], quaternions=[pr.orientation]
-        )
-    raise ValueError(f"obstacle primitive {pr.kind!r} has no drawing")

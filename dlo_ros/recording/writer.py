@@ -1,4 +1,6 @@
-"""The writer: owns the rerun RecordingStream and turns queued items into rerun calls, in one
+"""The writer: turns queued items into rerun calls, in one thread.
+
+The writer: owns the rerun RecordingStream and turns queued items into rerun calls, in one
 thread.
 
 It runs in the recorder's child process or thread (dlo_ros.recording.transport); nothing here is
@@ -13,23 +15,19 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
-from ..shading import segment_energy_density
 from .blueprint import default_blueprint
-from .codec import decode, _FitSnap, _Item, _ResultSnap
+from .codec import decode, FitSnap, QueueItem, ResultSnap
 from .paths import (
-    E_CABLE,
     E_DATA_RESULT,
     E_DATA_TARGETS,
     E_EIGEN,
     E_ENERGY,
     E_FIT,
     E_FIT_EVENTS,
-    E_FRAMES,
-    E_GRIPS,
     E_ITERATIONS,
     E_LEGEND,
     E_MODEL,
@@ -41,16 +39,16 @@ from .paths import (
     E_SCENE_CHANGES,
     E_SOLVE_TIME,
     E_STATUS,
-    E_TARGETS,
     E_WORLD,
     ENERGY_TERMS,
     MODEL_SCALARS,
     TIMELINE_ROS,
     TIMELINE_UPDATE,
-    _part,
+    path_part,
 )
-from .scene_info import _SceneInfo
-from .visuals import AXIS_COLORS, ENERGY_COLORS, quats_to_matrices, viridis
+from .scene_info import SceneInfo
+from .shape_columns import ShapeBatch, legend_markdown, shape_columns, target_columns
+from .visuals import ENERGY_COLORS
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +58,13 @@ class RecordingUnavailable(RuntimeError):
 
 
 @dataclass
-class _Config:
+class WriterConfig:
+    """Where and how the writer records: the Recorder's arguments, as plain picklable data.
+
+    rrd: file to save (None: none); spawn/spawn_port: start a viewer; urls: viewers to stream to;
+    application_id/recording_id: rerun's; frames: material frames drawn per shape.
+    """
+
     rrd: str | None
     spawn: bool
     spawn_port: int
@@ -76,7 +80,7 @@ BATCH_ROWS = 512  # ... or until this many rows are buffered
 
 
 def _instances(value: Any) -> Any:
-    """A field value as a batch of instances (leading axis = instances)."""
+    """Return a field value as a batch of instances (leading axis = instances)."""
     if isinstance(value, np.ndarray):
         return value if value.ndim else value.reshape(1)
     if isinstance(value, (list, tuple)):
@@ -93,7 +97,7 @@ def _concat(values: list) -> Any:
     return out
 
 
-class _Writer:
+class Writer:
     """Owns the rerun RecordingStream and turns items into rerun calls, in one thread.
 
     Static data is logged at once; time-stamped rows are buffered per (entity, archetype) and sent
@@ -102,9 +106,9 @@ class _Writer:
     the CPU pays (the bench's recording-overhead script measures it).
     """
 
-    def __init__(self, cfg: _Config) -> None:
+    def __init__(self, cfg: WriterConfig) -> None:
         try:
-            import rerun as rr
+            import rerun as rr  # optional: rerun-sdk (Python >= 3.11), with pyarrow
         except ImportError as exc:  # Python 3.10, or a broken install
             raise RecordingUnavailable(
                 f"recording needs rerun-sdk (Python >= 3.11; see requirements.txt): {exc}"
@@ -127,14 +131,14 @@ class _Writer:
         self.n_frames = max(0, int(cfg.frames))
         self.errors = 0
         self.last_error = ""
-        self.scene: _SceneInfo | None = None
+        self.scene: SceneInfo | None = None
         self.blueprint_sent = False
         self.energy_scale: float | None = None
         self.last_status: tuple | None = None
         self.dropped_reported = 0
         self._rows: dict[tuple[str, str], list[tuple[int, int, dict]]] = {}
-        self._pending_targets: list[_Item] = []
-        self._pending_results: list[_Item] = []
+        self._pending_targets: list[QueueItem] = []
+        self._pending_results: list[QueueItem] = []
         self._n_rows = 0
         self._oldest: float | None = None
 
@@ -148,8 +152,8 @@ class _Writer:
             log.warning("recorder: %s", self.last_error)
 
     def handle(self, message: Any, dropped_total: int = 0) -> None:
-        """Log one message (an _Item or an encoded tuple, see :func:`decode`)."""
-        item = _Item("?", None, 0)
+        """Log one message (an QueueItem or an encoded tuple, see :func:`decode`)."""
+        item = QueueItem("?", None, 0)
         try:
             item = decode(message)
             if dropped_total != self.dropped_reported:
@@ -172,7 +176,7 @@ class _Writer:
         return max(0.0, self._oldest + BATCH_SECONDS - time.monotonic())
 
     def send_batches(self) -> None:
-        import pyarrow as pa
+        import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
         targets, results = self._pending_targets, self._pending_results
         self._pending_targets, self._pending_results = [], []
@@ -212,9 +216,9 @@ class _Writer:
             self._error("closing the sinks", exc)
 
     # -- items
-    def _row(self, entity: str, arch: str, item: _Item, **fields: Any) -> None:
+    def _row(self, entity: str, arch: str, item: QueueItem, **fields: Any) -> None:
         self._rows.setdefault((entity, arch), []).append(
-            (int(item.update), int(item.ros_time_ns), fields)
+            (int(cast(int, item.update)), int(item.ros_time_ns), fields)
         )
         self._count_row()
 
@@ -223,10 +227,10 @@ class _Writer:
         if self._oldest is None:
             self._oldest = time.monotonic()
 
-    def _report_drops(self, dropped: int, item: _Item) -> None:
+    def _report_drops(self, dropped: int, item: QueueItem) -> None:
         text = (
-            f"recorder queue full: {dropped - self.dropped_reported} item(s) dropped before this one "
-            f"({dropped} in total)"
+            f"recorder queue full: {dropped - self.dropped_reported} item(s) dropped before this "
+            f"one ({dropped} in total)"
         )
         if item.update is not None:
             self._row(E_RECORDER, "TextLog", item, text=text, level="WARN")
@@ -236,15 +240,15 @@ class _Writer:
             )
         self.dropped_reported = dropped
 
-    def _handle_scene(self, item: _Item) -> None:
+    def _handle_scene(self, item: QueueItem) -> None:
         rr = self._rr
-        info: _SceneInfo = item.payload
+        info: SceneInfo = item.payload
         first = self.scene is None
         self.scene = info
         static = item.update is None
         if not static:
             self.send_batches()  # rows of earlier updates are drawn with the earlier scene
-            self.rec.set_time(TIMELINE_UPDATE, sequence=int(item.update))
+            self.rec.set_time(TIMELINE_UPDATE, sequence=int(cast(int, item.update)))
             self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
         if first or static:
             self.rec.log(E_WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -252,7 +256,7 @@ class _Writer:
             arch = getattr(rr, kind)(
                 **kwargs, colors=[colour], labels=[label], fill_mode=rr.components.FillMode.Solid
             )
-            self.rec.log(f"{E_OBSTACLES}/{i}_{_part(label)}", arch, static=static)
+            self.rec.log(f"{E_OBSTACLES}/{i}_{path_part(label)}", arch, static=static)
         doc = rr.TextDocument(
             info.yaml_text or "# scene not recorded (a Problem was logged)",
             media_type="text/plain",
@@ -267,16 +271,16 @@ class _Writer:
         if not self.blueprint_sent:
             self._send_blueprint(info)
 
-    def _send_blueprint(self, info: _SceneInfo | None) -> None:
+    def _send_blueprint(self, info: SceneInfo | None) -> None:
         self.rec.send_blueprint(default_blueprint(info), make_active=True, make_default=True)
         self.blueprint_sent = True
 
-    def _handle_targets(self, item: _Item) -> None:
+    def _handle_targets(self, item: QueueItem) -> None:
         self._pending_targets.append(item)
         self._count_row()
 
-    def _handle_result(self, item: _Item) -> None:
-        r: _ResultSnap = item.payload
+    def _handle_result(self, item: QueueItem) -> None:
+        r: ResultSnap = item.payload
         key = (r.status, r.stable)
         if key != self.last_status:
             text = f"{r.status}: {r.message}" + ("" if r.stable is not False else " (unstable)")
@@ -289,9 +293,11 @@ class _Writer:
     # -- batched, vectorised over the rows of a batch (the per-row Python cost is what the CPU
     # pays)
     def _send(
-        self, entity: str, arch: str, items: list[_Item], **fields: tuple[Any, list[int]]
+        self, entity: str, arch: str, items: list[QueueItem], **fields: tuple[Any, list[int]]
     ) -> None:
-        """send_columns of ``arch`` rows for ``items``; fields: name → (concatenated data,
+        """Send ``arch`` rows for ``items``, one send_columns call.
+
+        send_columns of ``arch`` rows for ``items``; fields: name → (concatenated data,
         instances per row).
         """
         try:
@@ -301,7 +307,7 @@ class _Writer:
             self._send_columns(
                 entity,
                 arch,
-                [int(it.update) for it in items],
+                [int(cast(int, it.update)) for it in items],
                 [int(it.ros_time_ns) for it in items],
                 groups,
             )
@@ -316,7 +322,9 @@ class _Writer:
         stamps: list[int],
         groups: dict[tuple, dict],
     ) -> None:
-        """One send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns]; ``groups``:
+        """Send one send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns].
+
+        One send_columns of ``arch`` rows at ``updates`` and ``stamps`` [ns]; ``groups``:
         instances per row → {field: concatenated data} (fields with the same instance counts share
         a partition).
         """
@@ -330,15 +338,10 @@ class _Writer:
             columns.extend(getattr(rr, arch).columns(**fields).partition(list(lengths)))
         self.rec.send_columns(entity, indexes=indexes, columns=columns)
 
-    def _send_targets(self, items: list[_Item]) -> None:
-        L = self.scene.length if self.scene else 1.0
-        by_grip: dict[str, list[tuple[_Item, np.ndarray, np.ndarray]]] = {}
+    def _send_targets(self, items: list[QueueItem]) -> None:
         for it in items:
-            names, flat = [], []
-            for name, (pos, quat) in it.payload.items():
-                by_grip.setdefault(name, []).append((it, pos, quat))
-                names.append(name)
-                flat.append(np.concatenate([pos, quat]))
+            names = list(it.payload)
+            flat = [np.concatenate([pos, quat]) for pos, quat in it.payload.values()]
             self._row(
                 E_DATA_TARGETS,
                 "AnyValues",
@@ -346,35 +349,12 @@ class _Writer:
                 grip_names=names,
                 poses=np.concatenate(flat) if flat else np.zeros(0),
             )
-        orange = np.array([255, 150, 40], np.uint8)
-        for name, rows in by_grip.items():
-            m = len(rows)
-            its = [r[0] for r in rows]
-            pos = np.array([r[1] for r in rows], dtype=float)
-            x_axis = quats_to_matrices(np.array([r[2] for r in rows]))[:, :, 0]
-            ones = [1] * m
-            path = f"{E_TARGETS}/{_part(name)}"
-            self._send(
-                path,
-                "Points3D",
-                its,
-                positions=(pos, ones),
-                radii=(np.full(m, 0.012 * L), ones),
-                colors=(np.tile(orange, (m, 1)), ones),
-                labels=([f"{name} target"] * m, ones),
-            )
-            self._send(
-                path,
-                "Arrows3D",
-                its,
-                origins=(pos, ones),
-                vectors=(0.12 * L * x_axis, ones),
-                colors=(np.tile(orange, (m, 1)), ones),
-                radii=(np.full(m, 0.003 * L), ones),
-            )
+        length = self.scene.length if self.scene else 1.0
+        for columns in target_columns(items, length):
+            self._send(columns.entity, columns.arch, columns.items, **columns.fields)
 
-    def _send_results(self, items: list[_Item]) -> None:
-        snaps: list[_ResultSnap] = [it.payload for it in items]
+    def _send_results(self, items: list[QueueItem]) -> None:
+        snaps: list[ResultSnap] = [it.payload for it in items]
         ones = [1] * len(items)
         self._send(
             E_SOLVE_TIME,
@@ -432,7 +412,7 @@ class _Writer:
             except Exception as exc:  # noqa: BLE001
                 self._error("drawing shapes", exc)
 
-    def _send_model_scalars(self, items: list[_Item], snaps: list[_ResultSnap]) -> None:
+    def _send_model_scalars(self, items: list[QueueItem], snaps: list[ResultSnap]) -> None:
         """model/<key>: the numbers of ShapeResult.model (None and non-numbers are skipped)."""
         for key in MODEL_SCALARS:
             have, values = [], []
@@ -449,129 +429,24 @@ class _Writer:
                     scalars=(np.array(values), [1] * len(have)),
                 )
 
-    def _send_shapes(self, items: list[_Item], snaps: list[_ResultSnap]) -> None:
-        """Centrelines, frames, grips, forces, energies, eigenvalues of ok results with N samples
-        each.
-        """
-        sc = self.scene
-        m = len(snaps)
-        P = np.stack([r.points for r in snaps])  # (m, N, 3)
-        O = np.stack([r.orientations for r in snaps])  # (m, N, 4)
-        S = np.stack([r.s for r in snaps])  # (m, N)
-        n = P.shape[1]
-        L = sc.length if sc else (float(S[0, -1] - S[0, 0]) or 1.0)
-        rf = np.empty((m, n))
-        for i, r in enumerate(snaps):
-            if r.bend_stiffness is not None:
-                rf[i] = r.bend_stiffness
-            elif sc is not None:
-                rf[i] = sc.bend_stiffness(r.s)
-            else:
-                rf[i] = 1.0
-        density = segment_energy_density(P, rf)  # (m, N-1)
+    def _send_shapes(self, items: list[QueueItem], snaps: list[ResultSnap]) -> None:
+        """Draw ok results of N samples each: the columns of ``shape_columns``, sent in order."""
+        batch = ShapeBatch.of(snaps, self.scene)
         if self.energy_scale is None:
-            self.energy_scale = max(
-                0.5 * float(np.max(rf[0])) * (2 * math.pi / L) ** 2,
-                1.25 * float(np.max(density[0])),
-            )
+            self.energy_scale = batch.energy_scale()
             self._log_legend()
-        rows = [n - 1] * m
-        ones = [1] * m
-        radius = max(sc.radius if sc else 0.0, 0.004 * L)
-        segments = np.stack([P[:, :-1], P[:, 1:]], axis=2).reshape(-1, 2, 3)
-        self._send(
-            E_CABLE,
-            "LineStrips3D",
-            items,
-            strips=(segments, rows),
-            colors=(viridis(density / self.energy_scale).reshape(-1, 3), rows),
-            radii=(np.full(m, radius), ones),
-        )
-        axes = np.array(AXIS_COLORS, dtype=np.uint8)
-        if self.n_frames:  # material frames at a few samples
-            idx = np.unique(np.round(np.linspace(0, n - 1, self.n_frames)).astype(int))
-            k = len(idx)
-            rot = quats_to_matrices(O[:, idx].reshape(-1, 4)).reshape(m, k, 3, 3)
-            a = 0.05 * L
-            vectors = a * np.concatenate(
-                [rot[:, :, :, 0], rot[:, :, :, 1], rot[:, :, :, 2]], axis=1
-            )
-            origins = np.concatenate([P[:, idx]] * 3, axis=1)
-            self._send(
-                E_FRAMES,
-                "Arrows3D",
-                items,
-                vectors=(vectors.reshape(-1, 3), [3 * k] * m),
-                origins=(origins.reshape(-1, 3), [3 * k] * m),
-                colors=(np.tile(np.repeat(axes, k, axis=0), (m, 1)), [3 * k] * m),
-                radii=(np.full(m, 0.002 * L), ones),
-            )
-        if (
-            sc is not None
-        ):  # grips: pose on the solved shape (the s of the first row), and the reaction force
-            s0 = S[0]
-            b = 0.1 * L
-            for name, s_g in sc.grip_s.items():
-                j1 = int(np.clip(np.searchsorted(s0, s_g), 1, n - 1))
-                j0 = j1 - 1
-                w = (s_g - s0[j0]) / (s0[j1] - s0[j0]) if s0[j1] > s0[j0] else 0.0
-                pos = P[:, j0] * (1 - w) + P[:, j1] * w  # (m, 3)
-                rot = quats_to_matrices(O[:, int(np.argmin(np.abs(s0 - s_g)))])  # (m, 3, 3)
-                path = f"{E_GRIPS}/{_part(name)}"
-                self._send(
-                    path,
-                    "Arrows3D",
-                    items,
-                    vectors=((b * rot.transpose(0, 2, 1)).reshape(-1, 3), [3] * m),
-                    origins=(np.repeat(pos, 3, axis=0), [3] * m),
-                    colors=(np.tile(axes, (m, 1)), [3] * m),
-                    radii=(np.full(3 * m, 0.004 * L), [3] * m),
-                )
-                have = [i for i, r in enumerate(snaps) if name in r.forces]
-                if have:
-                    f = np.array([snaps[i].forces[name] for i in have])
-                    one = [1] * len(have)
-                    self._send(
-                        path + "/force",
-                        "Arrows3D",
-                        [items[i] for i in have],
-                        vectors=(sc.force_scale * f, one),
-                        origins=(pos[have], one),
-                        colors=(np.tile(np.array([230, 60, 230], np.uint8), (len(have), 1)), one),
-                        radii=(np.full(len(have), 0.005 * L), one),
-                        labels=([f"{x:.3g} N" for x in np.linalg.norm(f, axis=1)], one),
-                    )
-        energy = np.array([[float(r.energy.get(t, 0.0)) for t in ENERGY_TERMS] for r in snaps])
-        self._send(E_ENERGY, "Scalars", items, scalars=(energy.ravel(), [len(ENERGY_TERMS)] * m))
-        eig = [
-            i
-            for i, r in enumerate(snaps)
-            if r.min_eigenvalue is not None and math.isfinite(r.min_eigenvalue)
-        ]
-        if eig:
-            self._send(
-                E_EIGEN,
-                "Scalars",
-                [items[i] for i in eig],
-                scalars=(np.array([snaps[i].min_eigenvalue for i in eig]), [1] * len(eig)),
-            )
+        for columns in shape_columns(
+            items, snaps, batch, self.scene, self.n_frames, self.energy_scale
+        ):
+            self._send(columns.entity, columns.arch, columns.items, **columns.fields)
 
     def _log_legend(self) -> None:
-        rr, sc = self._rr, self.scene
-        lines = [
-            "# Legend",
-            f"* centreline colour: bend energy density ½ Rf κ² from 0 J/m (dark purple) to "
-            f"{self.energy_scale:.4g} J/m and above (yellow); κ from consecutive tangents",
-            "* axes: x = tangent (red), y (green), z (blue): material frames and grip poses",
-        ]
-        if sc is not None:
-            lines.append(
-                f"* magenta arrows: force each gripper exerts on the string, {sc.force_scale:.4g} m per N"
-            )
-        lines.append("* orange: grip targets as received (point and tangent)")
+        """Log the legend (markdown) and the names and colours of the time series, once."""
+        rr = self._rr
+        text = legend_markdown(self.energy_scale or 0.0, self.scene)
         self.rec.log(
             E_LEGEND,
-            rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN),
+            rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN),
             static=True,
         )
         self.rec.log(
@@ -595,20 +470,22 @@ class _Writer:
         for key, name in MODEL_SCALARS.items():
             self.rec.log(f"{E_MODEL_SERIES}/{key}", rr.SeriesLines(names=[name]), static=True)
 
-    def _handle_rejected(self, item: _Item) -> None:
+    def _handle_rejected(self, item: QueueItem) -> None:
         self._row(E_REJECTED, "TextLog", item, text=[item.payload], level=["WARN"])
 
-    def _handle_model(self, item: _Item) -> None:
+    def _handle_model(self, item: QueueItem) -> None:
         self._row(E_MODEL, "TextLog", item, text=[item.payload], level=["INFO"])
 
-    def _handle_fit(self, item: _Item) -> None:
+    def _handle_fit(self, item: QueueItem) -> None:
+        # here: only a recording with a fit needs it, and the writer's process must not import the
+        # model (identify imports the solver)
         from ..identify.drawing import (
             draw_observation,
-        )  # imported only by a recording that has a fit
+        )
 
-        fit: _FitSnap = item.payload
+        fit: FitSnap = item.payload
         self.send_batches()  # keep the rows of earlier updates before this one
-        self.rec.set_time(TIMELINE_UPDATE, sequence=int(item.update))
+        self.rec.set_time(TIMELINE_UPDATE, sequence=int(cast(int, item.update)))
         self.rec.set_time(TIMELINE_ROS, timestamp=np.datetime64(int(item.ros_time_ns), "ns"))
         draw_observation(
             self.rec, E_FIT, fit.points, fit.shape, fit.feet, fit.sigma, fit.huber, static=False

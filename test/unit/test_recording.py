@@ -23,6 +23,8 @@ pytest.importorskip("rerun", reason="rerun-sdk needs Python >= 3.11")
 from dlo_ros import recording as R  # noqa: E402
 from dlo_ros.model.rotations import quat_to_matrix  # noqa: E402
 from dlo_ros.model.obstacles import Obstacle  # noqa: E402
+from dlo_ros.model.obstacle_types import OBSTACLE_TYPES, PrimitiveKind  # noqa: E402
+from dlo_ros.recording.obstacle_drawing import DRAWINGS, obstacle_shape  # noqa: E402
 from dlo_ros.recording.replay import read_recording, resolve  # noqa: E402
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver import ShapeSolver  # noqa: E402
@@ -284,13 +286,13 @@ def test_full_queue_drops_the_oldest_and_says_so(tmp_path, scene, solver, monkey
     solver.reset()
     r = solver.solve()
     gate = threading.Event()
-    original = R._Writer.handle
+    original = R.Writer.handle
 
     def slow_handle(self, message, dropped_total=0):
         gate.wait(30)
         original(self, message, dropped_total)
 
-    monkeypatch.setattr(R._Writer, "handle", slow_handle)
+    monkeypatch.setattr(R.Writer, "handle", slow_handle)
     path = tmp_path / "dropped.rrd"
     rec = R.Recorder(rrd=path, backend="thread", queue_size=4)
     rec.log_scene(scene)  # never dropped
@@ -355,7 +357,7 @@ def test_colours_and_rotations():
 ])
 def test_obstacle_shapes(spec, kind):
     ob = Obstacle.from_dict(spec)
-    got, kwargs = R.obstacle_shape(ob, np.array([0.3, 0.0, 0.4]), 0.8)
+    got, kwargs = obstacle_shape(ob, np.array([0.3, 0.0, 0.4]), 0.8)
     assert got == kind
     if spec["type"] == "halfspace":  # the slab's top face lies in the plane, its +z along the normal
         n = np.array([0, 1, 1]) / np.sqrt(2)
@@ -368,6 +370,24 @@ def test_obstacle_shapes(spec, kind):
         np.testing.assert_allclose(quat_to_matrix(kwargs["quaternions"][0])[:, 2], [0, 0.6, 0.8], atol=1e-12)
     if spec["type"] == "box":
         np.testing.assert_allclose(np.abs(kwargs["quaternions"][0]), spec["orientation"], atol=1e-6)
+
+
+def test_every_primitive_kind_has_a_drawing():
+    # a drawing per kind of Primitive, none per obstacle type: a new type draws through its
+    # primitive; a new kind without a drawing fails here
+    assert set(DRAWINGS) == set(PrimitiveKind)
+    for kind in OBSTACLE_TYPES.values():
+        assert kind.primitive.__qualname__.startswith(type(kind).__name__)  # the type's own
+
+
+def test_the_writer_process_does_not_import_the_model():
+    # the recorder's child runs `from dlo_ros.recording.transport import child_main`: it must not
+    # pay for the model and CasADi (scene_info converts obstacles in the caller's process)
+    code = ("import sys; import dlo_ros.recording.transport, dlo_ros.recording.writer; "
+            "print(sorted(m for m in sys.modules if m.startswith(('dlo_ros.model', 'casadi'))))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
 
 
 # ---- the command line --------------------------------------------------------------------------------------

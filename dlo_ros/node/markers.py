@@ -15,6 +15,7 @@ from geometry_msgs.msg import Point, Vector3
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..model.obstacle_types import PrimitiveKind
 from ..model.obstacles import Obstacle, Primitive
 from ..model.problem import Problem
 from ..shading import colour_map as colour_map
@@ -112,10 +113,10 @@ def _plane_markers(pr: Primitive, h: Header, mid: int) -> list[Marker]:
 #: markers, ids mid, mid + 1, mid + 2, colour not yet set.  The node knows primitives, not
 #: obstacle types: a new type describes itself as one of these kinds and needs no edit here.
 PRIMITIVE_MARKERS: dict[str, Callable[[Primitive, Header, int], list[Marker]]] = {
-    "plane": _plane_markers,
-    "sphere": _sphere_markers,
-    "capsule": _capsule_markers,
-    "box": _box_markers,
+    PrimitiveKind.PLANE: _plane_markers,
+    PrimitiveKind.SPHERE: _sphere_markers,
+    PrimitiveKind.CAPSULE: _capsule_markers,
+    PrimitiveKind.BOX: _box_markers,
 }
 
 

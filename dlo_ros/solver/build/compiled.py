@@ -194,25 +194,22 @@ _SOURCE_DIGEST: bytes | None = None
 
 
 def _source_digest() -> bytes:
-    """Hash of the dlo_ros sources that build the compiled functions (model/, solver/build/nlp.py,
-    assembled*.py, options.py, and the outputs' output_function.py, residual.py and
-    wrenches.py).
+    """Hash the dlo_ros sources that build the compiled functions.
+
+    These are every module of ``model/`` and ``solver/build/`` (the NLP, its assembled
+    derivatives, the outputs' function), ``solver/options.py``, and the outputs' grid and
+    wrenches (``solver/results/residual.py``, ``wrenches.py``).
     """
     global _SOURCE_DIGEST
     if _SOURCE_DIGEST is None:
-        root = Path(__file__).resolve().parent.parent
-        files = sorted((root / "model").glob("*.py")) + [
-            root / "solver" / n
-            for n in (
-                "nlp.py",
-                "assembled.py",
-                "assembled_euler.py",
-                "options.py",
-                "output_function.py",
-                "residual.py",
-                "wrenches.py",
-            )
-        ]
+        solver = Path(__file__).resolve().parent.parent
+        package = solver.parent
+        files = (
+            sorted((package / "model").glob("*.py"))
+            + sorted((solver / "build").glob("*.py"))
+            + [solver / "options.py"]
+            + [solver / "results" / n for n in ("residual.py", "wrenches.py")]
+        )
         h = hashlib.sha256()
         for f in files:
             h.update(f.name.encode() + f.read_bytes())
@@ -246,7 +243,7 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
 
 
 #: Held while a compiler runs: never more than one per process (concurrent compiles multiply the
-#memory).
+# memory).
 COMPILER_LOCK = threading.Lock()
 
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ...model.director import _columns
+from ...model.director import frame_columns
 from ...model.problem import Problem, StringProperties
 from .nlp import StringNLP
 from ..results.residual import evaluation_grid
@@ -119,7 +119,7 @@ class OutputFunction:
             frame_cols = ca.Function(
                 "frame_cols",
                 [vs],
-                [ca.vertcat(*(ca.vertcat(*c) for c in _columns(ca.vertsplit(vs), ca)))],
+                [ca.vertcat(*(ca.vertcat(*c) for c in frame_columns(ca.vertsplit(vs), ca)))],
             )
             tq = frame_cols.map(M)(ca.mtimes(nodes_v, ca.DM(m.B.T)))[
                 0:3, :

@@ -14,8 +14,9 @@ import numpy as np
 from .cache_store import load as load_library
 from .blocks import NodeBlocks, eigen_lapack, lapack_pointer
 from .outputs import ComputedOutputs, UpdateOutputs
-from .settings import CONVERGED, EIGEN_FOUND
-from ..build.nlp import (
+from .settings import (
+    CONVERGED,
+    EIGEN_FOUND,
     JOIN_TOLERANCE,
     LEAVE_TOLERANCE,
     NEWTON_CHORD_CONTRACTION,

@@ -9,7 +9,7 @@ CasADi's generated code of the functions it runs, which ``-DDLO_SYSTEM=…`` and
 
 Cache keys: a driver's library name carries a digest of its assembled source and of the compiler
 flags with the settings' ``-D`` values (``driver_digest``), next to the generated function's
-``compiled.fingerprint``; a change to either C or a setting gives a new name, hence a new build.
+``compiler.fingerprint``; a change to either C or a setting gives a new name, hence a new build.
 Loading stays ``cache_store``'s (owner, mode and sha256 checks), as for every compiled library.
 """
 
@@ -24,7 +24,8 @@ from pathlib import Path
 import casadi as ca
 
 from . import settings as native_settings
-from ..build.compiled import FLAGS, build_library, cache_dir, fingerprint
+from .cache_store import cache_dir
+from .compiler import FLAGS, build_library, fingerprint
 
 #: the contact-free loop (``native_newton.NativeNewton``), the active-set loop (``ActiveNewton``)
 FREE_DRIVER, ACTIVE_DRIVER = "newton_free.c", "newton_active.c"
@@ -66,7 +67,7 @@ def driver_source(name: str) -> str:
 
 def settings_flags() -> tuple[str, ...]:
     """The compiler flags a driver's code depends on beside its functions' names:
-    ``compiled.FLAGS`` and the shared settings (``native_settings.defines``).
+    ``compiler.FLAGS`` and the shared settings (``native_settings.defines``).
     """
     return (*FLAGS, *native_settings.defines())
 
@@ -114,7 +115,7 @@ def active_library_path(fn: ca.Function) -> Path:
 def compile_free(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:
     """Build the contact-free driver around ``fn`` and ``residual`` into ``lib``
     (``build_library``: stored through ``cache_store``); False if the compiler fails or the cache
-    is unusable.  Callers hold ``compiled.COMPILER_LOCK``.
+    is unusable.  Callers hold ``compiler.COMPILER_LOCK``.
     """
     return build_library(
         fn,

@@ -60,7 +60,7 @@ import casadi as ca
 import numpy as np
 
 from .cache_store import UnusableLibrary, load as load_library
-from ..build.compiled import COMPILER_LOCK, compiler
+from .compiler import COMPILER_LOCK, compiler
 from .active import ActiveNewton, ActiveOutcome
 from .blocks import CHUNK_WORK, NodeBlocks, WithNodePart, eigen_lapack, lapack_pointer
 from .build import (
@@ -76,11 +76,6 @@ from .settings import (
     CONVERGED,
     EIGEN_FOUND,
     EVALUATION_FAILED,
-    NOT_CONVERGED,
-    SINGULAR,
-    STEP_TOO_LARGE,
-)
-from ..build.nlp import (
     NEWTON_CHORD_CONTRACTION,
     NEWTON_CHORD_START,
     NEWTON_CHORD_STEPS,
@@ -89,6 +84,9 @@ from ..build.nlp import (
     NEWTON_MAX_STEP,
     NEWTON_PRIMAL_TOLERANCE,
     NEWTON_REGULARISATION,
+    NOT_CONVERGED,
+    SINGULAR,
+    STEP_TOO_LARGE,
 )
 
 __all__ = [

@@ -55,6 +55,7 @@ from ..native.settings import (
 from ..options import SolverOptions
 from .assembled import AssembledKKT
 from .assembled_euler import AssembledEulerKKT
+from .ipopt_functions import ipopt_derivatives, ipopt_options
 from .constraint_rows import (
     ConstraintRows,
     RowSymbols,
@@ -440,36 +441,8 @@ class StringNLP:
     def make_solver(
         self, warm: bool, max_iterations: int | None = None, max_wall_time: float = 0.0
     ) -> ca.Function:
-        """An IPOPT solver for this NLP: cold (default barrier start) or warm (primal-dual warm
-        start); ``max_iterations``: IPOPT's limit (default: the options', and at most 200 when
-        warm); ``max_wall_time`` [s]: IPOPT's limit on one call's wall-clock time (0: none).
-        """
-        o = self.options
-        ipopt = {
-            "print_level": 0,
-            "sb": "yes",
-            "tol": o.tolerance,
-            "acceptable_tol": 1e-7,
-            "constr_viol_tol": 1e-10,
-            "max_iter": o.max_iterations,
-            "linear_solver": "mumps",
-            "hessian_approximation": "exact",
-        }
-        if warm:
-            ipopt.update(
-                {
-                    "warm_start_init_point": "yes",
-                    "mu_init": 1e-7,
-                    "warm_start_bound_push": 1e-9,
-                    "warm_start_slack_bound_push": 1e-9,
-                    "warm_start_mult_bound_push": 1e-9,
-                    "max_iter": min(o.max_iterations, 200),
-                }
-            )
-        if max_iterations is not None:
-            ipopt["max_iter"] = int(max_iterations)
-        if max_wall_time > 0:
-            ipopt["max_wall_time"] = float(max_wall_time)
+        """Build an IPOPT solver for this NLP, cold or warm (``ipopt_functions.ipopt_options``)."""
+        ipopt = ipopt_options(self.options, warm, max_iterations, max_wall_time)
         return ca.nlpsol(
             "dlo_warm" if warm else "dlo_cold",
             "ipopt",
@@ -483,51 +456,12 @@ class StringNLP:
         )
 
     def ipopt_derivatives(self) -> dict[str, ca.Function]:
-        """IPOPT's derivative functions (nlpsol's ``grad_f``, ``jac_g`` and ``hess_lag`` options)
-        from the assembled KKT function, built once and shared by the cold and the warm solver.
-        Left to nlpsol, each solver would differentiate the flattened NLP symbolically: its SX
-        Hessian is most of a solver's set-up (bench/results/compile_cost.md).  IPOPT's Hessian is
-        that of γ f + λᵀg; ``hessian_fn`` gives ∇²f + Σ λ_i ∇²g_i, which is linear in λ, so
+        """Give IPOPT's derivative functions, built once and shared by the cold and warm solver.
 
-            ∇²(γ f + λᵀg) = H(z, p, λ) + (γ − 1) H(z, p, 0),
-
-        the second term evaluated only when γ ≠ 1 (IPOPT's restoration phase).
+        See ``ipopt_functions.ipopt_derivatives``.
         """
         if self._ipopt_derivatives is None:
-            n, m, n_p = self.z_sym.shape[0], self.lbg.size, self.p_sym.shape[0]
-            z, p, gamma, lam = (
-                ca.MX.sym("x", n),
-                ca.MX.sym("p", n_p),
-                ca.MX.sym("lam_f"),
-                ca.MX.sym("lam_g", m),
+            self._ipopt_derivatives = ipopt_derivatives(
+                self.nlp, self.hessian_fn, self.g_fn, self.jac_g_fn
             )
-            zero = ca.MX.zeros(m)
-            hess = self.hessian_fn(z, p, lam) + ca.if_else(
-                gamma == 1, ca.MX.zeros(n, n), (gamma - 1) * self.hessian_fn(z, p, zero), True
-            )
-            x, f = self.nlp["x"], self.nlp["f"]
-            self._ipopt_derivatives = {
-                # the gradient alone: the KKT function would evaluate the Hessian as well
-                "grad_f": ca.Function(
-                    "nlp_grad_f",
-                    [x, self.nlp["p"]],
-                    [f, ca.gradient(f, x)],
-                    ["x", "p"],
-                    ["f", "grad_f_x"],
-                ),
-                "jac_g": ca.Function(
-                    "nlp_jac_g",
-                    [z, p],
-                    [self.g_fn(z, p), self.jac_g_fn(z, p)],
-                    ["x", "p"],
-                    ["g", "jac_g_x"],
-                ),
-                "hess_lag": ca.Function(
-                    "nlp_hess_l",
-                    [z, p, gamma, lam],
-                    [ca.triu(hess)],
-                    ["x", "p", "lam_f", "lam_g"],
-                    ["triu_hess_gamma_x_x"],
-                ),
-            }
         return self._ipopt_derivatives

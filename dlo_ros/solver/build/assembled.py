@@ -34,11 +34,15 @@ import casadi as ca
 import numpy as np
 
 from ...model.director import DirectorModel, integrands
-
-
-def _sparse(matrix: np.ndarray) -> ca.DM:
-    """A CasADi DM holding only the non-zero entries of ``matrix``."""
-    return ca.sparsify(ca.DM(matrix))
+from .assembled_contact import (
+    block_diagonal,
+    group_jacobian,
+    inequality_g,
+    nonlinear_rows,
+    position_derivatives,
+    sparse,
+    x0_columns,
+)
 
 
 class AssembledKKT:
@@ -209,132 +213,9 @@ class AssembledKKT:
         )
         return ca.Function("dlo_node_tangent", [u], [t * (1 + u[2 * w]) if self.stretch else t])
 
-    @staticmethod
-    def obstacle_function(kind: str) -> tuple[ca.Function, bool]:
-        """((x, parameters) → [h, ∇h, ∇²h] of one obstacle type at one point, whether ∇²h is not
-        zero).
-        """
-        from ...model.obstacles import OBSTACLE_TYPES
-
-        x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[kind].size)
-        h = OBSTACLE_TYPES[kind].h(x, po)
-        hess, grad = ca.hessian(h, x)
-        return ca.Function(f"dlo_h_{kind}", [x, po], [h, grad, ca.densify(hess)]), hess.nnz() > 0
-
-    def _nonlinear_rows(self, z, p, lam, T):
-        """The obstacle rows and self-contact slots: rows ψ_j(X_j)/L of X_j = κ x0 + Σ_k ω_jk T_k.
-        Returns (rows, their g, their part of a (3×M) and of ∂L/∂x0, and per group of rows sharing
-        their X: (ω (S×M, constant or MX), κ, [∇ψ/L (3×S) per block of rows], Σ λ∇²ψ/L (3×3S) or
-        None)).
-        """
-        nlp, M, L = self.nlp, self.M, self.nlp.length
-        lay, P = nlp.params, nlp.problem
-        rows_all, g_all, a, dx0, groups = [], [], ca.MX.zeros(3, M), ca.MX.zeros(3, 1), []
-        radius = p[lay["radius"]][0]
-        if P.obstacles:
-            omega = self.model.position_matrix(nlp.obstacle_s)  # S × M
-            S = omega.shape[0]
-            X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)
-            spread3 = _sparse(np.kron(np.eye(S), np.ones((1, 3))))  # λ_j → column 3j + c
-            weighted, grads = None, []
-            for i, ob in enumerate(P.obstacles):
-                rows = nlp.obstacle_rows[i]
-                fn, curved = self.obstacle_function(ob.type)
-                h, dh, d2h = fn.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S))
-                li = lam[rows] / L  # S
-                rows_all += rows
-                grad = dh
-                if (
-                    nlp.obstacle_slots
-                ):  # samples a contact slot replaces read −1 (obstacle_slots.py)
-                    on = p[lay[f"samples:{i}:on"]]
-                    li = li * on
-                    g_all.append((on * (h.T + radius) - (1 - on) * L) / L)
-                    grad = dh * ca.repmat(on.T, 3, 1)
-                else:
-                    g_all.append((h.T + radius) / L)
-                a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), ca.DM(omega))
-                dx0 += L * ca.mtimes(dh, li)
-                if curved:  # a half-space's h is linear: no curvature term
-                    term = d2h * ca.repmat(ca.mtimes(li.T, spread3), 3, 1)
-                    weighted = term if weighted is None else weighted + term
-                grads.append(grad / L)
-            groups.append((omega, 1.0, grads, weighted))
-        for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
-            # contact slots (solver/contact/obstacle_slots.py): rows on_k (ψ(X_k) + r) − (1 − on_k) L at
-            # X_k = x0 + T W_kᵀ
-            K, rows = nlp.obstacle_slots, nlp.slot_rows[i]
-            W, on = nlp.slot_matrix(p, i), p[lay[f"slots:{i}:on"]]
-            X = ca.repmat(z[0:3] * L, 1, K) + ca.mtimes(T, W.T)
-            fn, curved = self.obstacle_function(ob.type)
-            h, dh, d2h = fn.map(K, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, K))
-            li = lam[rows] * on / L
-            rows_all += rows
-            g_all.append((on * (h.T + radius) - (1 - on) * L) / L)
-            a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), W)
-            dx0 += L * ca.mtimes(dh, li)
-            weighted = (
-                d2h
-                * ca.repmat(ca.mtimes(li.T, _sparse(np.kron(np.eye(K), np.ones((1, 3))))), 3, 1)
-                if curved
-                else None
-            )
-            groups.append((W, 1.0, [dh * ca.repmat(on.T, 3, 1) / L], weighted))
-        slots = nlp.self_contact_slots
-        if slots:
-            rows = list(nlp.self_contact_rows)
-            Q = ca.horzcat(*[p[lay[f"self:{k}"]][:M] for k in range(slots)]).T  # K × M
-            b = ca.vertcat(*[p[lay[f"self:{k}"]][M] for k in range(slots)])
-            X = ca.mtimes(T, Q.T)  # 3 × K
-            lk = lam[rows] / L
-            rows_all += rows
-            g_all.append((b - ca.sum1(X * X).T) / L)
-            a += ca.mtimes(-2 * X * ca.repmat(lk.T, 3, 1), Q)
-            # ∇²ψ = −2 I: the weighted blocks are −2 λ_k/L I
-            weighted = ca.repmat(ca.DM(np.eye(3)), 1, slots) * ca.repmat(
-                ca.mtimes(-2 * lk.T, _sparse(np.kron(np.eye(slots), np.ones((1, 3))))), 3, 1
-            )
-            groups.append((Q, 0.0, [-2 * X / L], weighted))
-        return rows_all, g_all, a, dx0, groups
-
-    def _spread(self, omega, rows_per_sample: int):
-        """ω (S × M) → the (r S × dM) matrix whose row r j + c holds ω_jk at columns d k … d k + d
-        − 1.
-        """
-        S, d = omega.shape[0], self.d
-        if isinstance(omega, np.ndarray):
-            return ca.DM(np.repeat(np.repeat(omega, d, axis=1), rows_per_sample, axis=0))
-        repeat = _sparse(np.kron(np.eye(self.M), np.ones((1, d))))  # M × dM
-        return ca.mtimes(
-            _sparse(np.kron(np.eye(S), np.ones((rows_per_sample, 1)))), ca.mtimes(omega, repeat)
-        )
-
-    def _group_jacobian(self, grads, jt, E, omega, kappa: float, n: int):
-        """Rows ∇ψ_jᵀ ∂X_j/∂z / L for ``grads`` = ∇ψ/L (3 × S): Σ_k ω_jk (∇ψ_jᵀ ∂T/∂u)_k E_k + κ L
-        ∇ψ_jᵀ (x0).
-        """
-        jac = ca.mtimes(ca.mtimes(grads.T, jt) * self._spread(omega, 1), E)
-        if kappa:
-            jac += ca.horzcat(kappa * self.nlp.length * grads.T, ca.MX(grads.shape[1], n - 3))
-        return jac
-
-    def _position_derivatives(self, jt, E, omega, kappa: float, n: int):
-        """D = ∂X/∂z (3S × n, row 3j + c) for X_j = κ x0 + Σ_k ω_jk T_k; ``omega`` constant or MX
-        (S × M).
-        """
-        S, L = omega.shape[0], self.nlp.length
-        D = ca.mtimes(self._spread(omega, 3) * ca.repmat(jt, S, 1), E)
-        if kappa:
-            D += _sparse(
-                np.kron(np.ones((S, 1)), np.hstack([kappa * L * np.eye(3), np.zeros((3, n - 3))]))
-            )
-        return D
-
-    @staticmethod
-    def _block_diagonal(blocks: ca.MX) -> ca.MX:
-        """(3 × 3S) → the 3S × 3S block-diagonal matrix of its 3 × 3 blocks."""
-        S = blocks.shape[1] // 3
-        return ca.sparsity_cast(blocks, ca.diagcat(*[ca.Sparsity.dense(3, 3)] * S))
+    def inequality_g(self) -> ca.Function:
+        """Build ``dlo_obstacle_g`` (``assembled_contact.inequality_g``)."""
+        return inequality_g(self)
 
     # ---- the KKT functions -------------------------------------------------------------------------
     def kkt_free(self) -> tuple[ca.Function, ca.Function]:
@@ -423,63 +304,6 @@ class AssembledKKT:
             ca.Function("dlo_residual", [z, p, lam], [ca.densify(ca.vertcat(grad, g))]),
         )
 
-    def inequality_g(self) -> ca.Function:
-        """``dlo_obstacle_g``: (z, p) → the values of the rows after the free rows (folds,
-        obstacles, self-contact slots), as ``g[n_free_rows:]`` of the NLP.
-        """
-        nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
-        lay, P, nf = nlp.params, nlp.problem, nlp.n_free_rows
-        z, p = ca.MX.sym("z", n), ca.MX.sym("p", lay.size)
-        T = self.tangent_function.map(M, "serial")(ca.reshape(ca.mtimes(_sparse(self.E), z), d, M))
-        parts = []
-        local = self.local_rows[self.local_rows >= nf]
-        if local.size:
-            parts.append((local, self.local_function(local)(z, p, ca.MX(local.size, 1))[0]))
-        if P.obstacles:
-            from ...model.obstacles import OBSTACLE_TYPES
-
-            omega = self.model.position_matrix(nlp.obstacle_s)
-            S = omega.shape[0]
-            X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)
-            for i, ob in enumerate(P.obstacles):
-                x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
-                h = ca.Function(
-                    f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)]
-                )
-                values = (
-                    h.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S)).T
-                    + p[lay["radius"]][0]
-                )
-                if nlp.obstacle_slots:
-                    on = p[lay[f"samples:{i}:on"]]
-                    values = on * values - (1 - on) * L
-                parts.append((np.array(nlp.obstacle_rows[i]), values / L))
-            for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
-                K, on = nlp.obstacle_slots, p[lay[f"slots:{i}:on"]]
-                X = ca.repmat(z[0:3] * L, 1, K) + ca.mtimes(T, nlp.slot_matrix(p, i).T)
-                x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
-                h = ca.Function(
-                    f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)]
-                )
-                values = h.map(K, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, K))
-                parts.append(
-                    (
-                        np.array(nlp.slot_rows[i]),
-                        (on * (values.T + p[lay["radius"]][0]) - (1 - on) * L) / L,
-                    )
-                )
-        if nlp.self_contact_slots:
-            K = nlp.self_contact_slots
-            Q = ca.horzcat(*[p[lay[f"self:{k}"]][:M] for k in range(K)]).T
-            b = ca.vertcat(*[p[lay[f"self:{k}"]][M] for k in range(K)])
-            X = ca.mtimes(T, Q.T)
-            parts.append((np.array(nlp.self_contact_rows), (b - ca.sum1(X * X).T) / L))
-        order = np.concatenate([r for r, _ in parts]) - nf
-        if sorted(order.tolist()) != list(range(nlp.g_sym.shape[0] - nf)):
-            raise ValueError("assembled inequality rows: rows not covered exactly once")
-        g = ca.vertcat(*[v for _, v in parts])[np.argsort(order).tolist()]
-        return ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g)])
-
     def _position_rows(self, T, jt, x0, p, E):
         """(g, ∂g/∂z) of the position rows: c_r · (κ_r x0 + Σ_k W_rk T_k − target_r) / L."""
         L, d, n = self.nlp.length, self.d, self.n
@@ -487,11 +311,11 @@ class AssembledKKT:
         g = (
             ca.DM(self.kappa) * ca.mtimes(ca.DM(self.C), x0)
             + ca.sum1(ca.DM(self.C).T * X).T
-            - ca.mtimes(_sparse(self.target), p)
+            - ca.mtimes(sparse(self.target), p)
         ) / L
         omega_rep = np.repeat(self.Omega, d, axis=1)  # W_rk at column j + d k
         jac = ca.mtimes(ca.mtimes(ca.DM(self.C), jt) * ca.DM(omega_rep), E) / L
-        return g, jac + _sparse(_x0_columns(self.C * self.kappa[:, None], n))
+        return g, jac + sparse(x0_columns(self.C * self.kappa[:, None], n))
 
     @staticmethod
     def _in_row_order(parts, rows: int):
@@ -513,7 +337,7 @@ class AssembledKKT:
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         rows = nlp.g_sym.shape[0]
         z, p = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size)
-        E = _sparse(self.E)
+        E = sparse(self.E)
         u = ca.reshape(ca.mtimes(E, z), d, M)
         t = self.tangent_function
         uu = ca.SX.sym("u", d)
@@ -532,10 +356,10 @@ class AssembledKKT:
             )
             parts.append((self.local_rows, *local(z, p)))
         if rows > nlp.n_free_rows:
-            rows_nl, g_nl, _, _, groups = self._nonlinear_rows(z, p, ca.MX(rows, 1), T)
+            rows_nl, g_nl, _, _, groups = nonlinear_rows(self, z, p, ca.MX(rows, 1), T)
             if rows_nl:
                 jac_nl = [
-                    self._group_jacobian(gr, jt, E, omega, kappa, n)
+                    group_jacobian(self, gr, jt, E, omega, kappa, n)
                     for omega, kappa, grads, _ in groups
                     for gr in grads
                 ]
@@ -547,25 +371,19 @@ class AssembledKKT:
             "constraint_jacobian", [z, p], [ca.densify(jac) if jac is not None else ca.MX(0, n)]
         )
 
-    def _system(self, z, p, lam, rows: int, split: bool = False):
-        """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their
-        multipliers). ``split``: ∇²L without its per-node part Eᵀ W, and W = diag(∇²φ_k) E as a
-        seventh item.
+    def _linear_terms(self, p, lam, pos_rows: np.ndarray, gravity, m):
+        """(a, ∂ℓ/∂x0, forces): the terms linear in the positions (``_system``).
+
+        a (3 × M) holds gravity through the weight moments ``m``, the point forces and the
+        position rows ``pos_rows`` (λ: every row's multipliers); ∂ℓ/∂x0 the same terms' part in x0.
         """
-        nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
-        lay, sigma = nlp.params, nlp.sigma
-        E = _sparse(self.E)
-        u = ca.reshape(ca.mtimes(E, z), d, M)
-        x0 = z[0:3] * L
-        gravity, m = p[lay["gravity"]], p[lay["weight_moments"]]
+        nlp, L, sigma, lay = self.nlp, self.nlp.length, self.nlp.sigma, self.nlp.params
         # a_k: the terms linear in the positions
         a = -sigma * ca.mtimes(gravity, m.T)
         forces = [p[lay[f"load:{i}:force"]] for i in range(len(nlp.problem.loads))]
         F = ca.horzcat(*forces) if forces else None
         if F is not None:
             a -= sigma * ca.mtimes(F, ca.DM(self.loads_W))
-        pos_rows = self.pos_rows[self.pos_rows < rows]
-        local_rows = self.local_rows[self.local_rows < rows]
         lam_pos = lam[pos_rows.tolist()] if pos_rows.size else ca.MX(0, 1)
         if pos_rows.size:
             a += ca.mtimes(
@@ -576,11 +394,44 @@ class AssembledKKT:
             dx0 -= sigma * L * ca.sum2(F)
         if pos_rows.size:
             dx0 += ca.mtimes(ca.DM(self.C * self.kappa[:, None]).T, lam_pos)
+        return a, dx0, forces
+
+    def _energies(self, p, x0, T, per_node, direct, moments, forces, gravity, m):
+        """The energies (bend, twist, stretch, gravity, work) from the per-node sums.
+
+        ``per_node``: the bend, twist and stretch integrands per node; ``direct``: the node-local
+        parts added to them; ``moments``: the point moments' work.
+        """
+        lay = self.nlp.params
+        bend, twist, stretch = (
+            ca.sum2(e) + direct[i] if direct.sparsity().has_nz(i, 0) else ca.sum2(e)
+            for i, e in enumerate(per_node)
+        )
+        grav = -ca.dot(gravity, x0 * p[lay["weight_total"]] + ca.mtimes(T, m))
+        work = moments
+        for i, force in enumerate(forces):
+            work += ca.dot(force, x0 + ca.mtimes(T, ca.DM(self.loads_W[i])))
+        return ca.vertcat(bend, twist, stretch, grav, work)
+
+    def _system(self, z, p, lam, rows: int, split: bool = False):
+        """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their
+        multipliers). ``split``: ∇²L without its per-node part Eᵀ W, and W = diag(∇²φ_k) E as a
+        seventh item.
+        """
+        nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
+        lay = nlp.params
+        E = sparse(self.E)
+        u = ca.reshape(ca.mtimes(E, z), d, M)
+        x0 = z[0:3] * L
+        pos_rows = self.pos_rows[self.pos_rows < rows]
+        local_rows = self.local_rows[self.local_rows < rows]
+        gravity, m = p[lay["gravity"]], p[lay["weight_moments"]]
+        a, dx0, forces = self._linear_terms(p, lam, pos_rows, gravity, m)
         # rows nonlinear in the positions need T first (their gradient enters a_k)
         nonlinear = ([], [], None, None, [])
         if rows > nlp.n_free_rows:
             T0 = self.tangent_function.map(M, "serial")(u)
-            nonlinear = self._nonlinear_rows(z, p, lam, T0)
+            nonlinear = nonlinear_rows(self, z, p, lam, T0)
             a += nonlinear[2]
             dx0 += nonlinear[3]
         bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function.map(M, "serial")(
@@ -612,32 +463,17 @@ class AssembledKKT:
         if rows_nl:
             jac_nl = []
             for omega, kappa, grads, weighted in groups:
-                jac_nl += [self._group_jacobian(gr, jt_k, E, omega, kappa, n) for gr in grads]
+                jac_nl += [group_jacobian(self, gr, jt_k, E, omega, kappa, n) for gr in grads]
                 if weighted is not None:
-                    D = self._position_derivatives(jt_k, E, omega, kappa, n)
-                    hess += ca.mtimes(D.T, ca.mtimes(self._block_diagonal(weighted), D))
+                    D = position_derivatives(self, jt_k, E, omega, kappa, n)
+                    hess += ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted), D))
             parts.append((np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl)))
         g, jac = self._in_row_order(parts, rows)
 
         grad_f = grad - ca.mtimes(jac.T, lam)
-        bend, twist, stretch = (
-            ca.sum2(e) + direct[i] if direct.sparsity().has_nz(i, 0) else ca.sum2(e)
-            for i, e in enumerate((bend_k, twist_k, stretch_k))
+        energies = self._energies(
+            p, x0, T, (bend_k, twist_k, stretch_k), direct, moments, forces, gravity, m
         )
-        grav = -ca.dot(gravity, x0 * p[lay["weight_total"]] + ca.mtimes(T, m))
-        work = moments
-        for i, force in enumerate(forces):
-            work += ca.dot(force, x0 + ca.mtimes(T, ca.DM(self.loads_W[i])))
-        energies = ca.vertcat(bend, twist, stretch, grav, work)
         if split:
             return grad, hess, g, jac, grad_f, energies, weighted_E
         return grad, hess, g, jac, grad_f, energies
-
-
-def _x0_columns(coefficients: np.ndarray, n: int) -> np.ndarray:
-    """A (rows × n) matrix with ``coefficients`` (rows × 3) in the x0 columns 0–2 (∂x0/∂z = L I,
-    /L).
-    """
-    out = np.zeros((coefficients.shape[0], n))
-    out[:, 0:3] = coefficients
-    return out

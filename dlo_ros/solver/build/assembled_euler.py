@@ -26,7 +26,7 @@ constant sparse E).  The Lagrangian splits as
   energy parts quadratic in the coefficients with the material matrices K of the NLP's parameters
   (c_b = c_θ, or c_φ in the planar model), differentiated directly as a small SX expression.
 
-Obstacle rows are handled by ``AssembledKKT._nonlinear_rows`` unchanged (X_j = x0 + Σ_k W_jk T_k);
+Obstacle rows are handled by ``assembled_contact.nonlinear_rows`` unchanged (X_j = x0 + Σ_k W_jk T_k);
 an Euler-angle model has no self-contact slots, unit-norm or fold rows.
 """
 

@@ -116,6 +116,8 @@ class _Fields:
     """
 
     planar: bool
+    #: the residual's grid s
+    grid: np.ndarray
     #: T (3 × M): the tangents (1 + ε) t̂ at the quadrature nodes
     tq: ca.MX
     c_phi: ca.MX | None = None
@@ -125,7 +127,7 @@ class _Fields:
     vs: ca.MX | None = None
 
 
-def _fields(nlp: StringNLP, z: ca.MX) -> _Fields:
+def _fields(nlp: StringNLP, z: ca.MX, grid: np.ndarray) -> _Fields:
     """Read the model's fields from z (see ``_Fields``)."""
     m, M = nlp.model, nlp.model.quad.count
     if not nlp.director:
@@ -137,7 +139,7 @@ def _fields(nlp: StringNLP, z: ca.MX) -> _Fields:
             ca.mtimes(ca.DM(m.B), c_eps) if c_eps is not None else None,
             lib=ca,
         )
-        return _Fields(True, tq, c_phi=c_phi, normal=ca.DM(nlp.r0[:, 2]))
+        return _Fields(True, grid, tq, c_phi=c_phi, normal=ca.DM(nlp.r0[:, 2]))
     # column i: node i
     nodes_v = ca.reshape(z[m.layout.rotation], m.layout.width, m.layout.nodes)
     vs = ca.MX.sym("v", 4)
@@ -152,7 +154,61 @@ def _fields(nlp: StringNLP, z: ca.MX) -> _Fields:
     tq = frame_cols.map(M)(ca.mtimes(nodes_v, ca.DM(m.B.T)))[0:3, :]
     if m.layout.stretch:
         tq = tq * ca.repmat(1 + ca.mtimes(ca.DM(m.B), z[m.layout.eps]).T, 3, 1)
-    return _Fields(False, tq, nodes_v=nodes_v, frame_cols=frame_cols, vs=vs)
+    return _Fields(False, grid, tq, nodes_v=nodes_v, frame_cols=frame_cols, vs=vs)
+
+
+def _positions(nlp: StringNLP, problem: Problem, f: _Fields, z: ca.MX, s_out: np.ndarray):
+    """x at the grid, the quadrature nodes, the point actions, the obstacle samples and s_out.
+
+    Returns those five (3 × ·) blocks, the integration (or position) matrix of all of them, and the
+    point actions' arc lengths (grips, loads, the relative positions' ends).
+    """
+    m, L, s = nlp.model, nlp.length, f.grid
+    point_s = np.array(
+        [g.s for g in problem.grips] + [ld.s for ld in problem.loads] + problem.relative_ends(),
+        dtype=float,
+    )
+    s_out = np.asarray(s_out, dtype=float)
+    pieces = [s, m.quad.nodes, point_s, nlp.obstacle_s, s_out]
+    splits = np.cumsum([len(a) for a in pieces])
+    w_all = (
+        m.position_matrix(np.concatenate(pieces))
+        if f.planar
+        else m.mesh.integration_matrix(np.concatenate(pieces))
+    )
+    x_all = ca.repmat(z[0:3] * L, 1, int(splits[-1])) + ca.mtimes(f.tq, ca.DM(w_all.T))
+    x, x_nodes, point_x, sample_x, x_out = (
+        x_all[:, a:b] for a, b in zip([0, *splits[:-1]], splits)
+    )
+    return x, x_nodes, point_x, sample_x, x_out, w_all, point_s
+
+
+def _weight_balance(nlp: StringNLP, p: ca.MX, gravity: ca.MX, x, x_nodes, w_grid: np.ndarray):
+    """The weight's moment about x(s) at the grid, and the total weight per unit gravity.
+
+    From the weight's integrals ∫_0^s D dσ and ∫_0^s D x dσ, and its total.
+    """
+    lay, m = nlp.params, nlp.model
+    d_nodes = p[lay["D"]]
+    weight = ca.mtimes(ca.DM(w_grid), d_nodes).T
+    weight_moment = ca.mtimes(x_nodes * ca.repmat(d_nodes.T, 3, 1), ca.DM(w_grid.T))
+    total = ca.dot(ca.DM(m.quad.weights), d_nodes)
+    m_bal = -(_cross(weight_moment, gravity) - _cross(x, gravity) * ca.repmat(weight, 3, 1))
+    return m_bal, total
+
+
+def _load_actions(nlp: StringNLP, problem: Problem, f: _Fields, p, lam, forces, torques) -> None:
+    """Append the loads' and the relative positions' point actions to ``forces``, ``torques``."""
+    lay = nlp.params
+    for k, _ in enumerate(problem.loads):
+        forces.append(p[lay[f"load:{k}:force"]])
+        # the planar model's: its component along n (checked)
+        moment = p[lay[f"load:{k}:moment"]]
+        torques.append(moment[0] * f.normal if f.planar else moment)
+    for rows in nlp.relative_rows:  # wrenches.relative_forces: −F_b at s_a, F_b at s_b
+        f_b = -ca.mtimes(ca.DM(nlp.relative_axes.T), lam[rows])
+        forces += [-f_b, f_b]
+        torques += [ca.DM.zeros(3), ca.DM.zeros(3)]
 
 
 def _constitutive_moment(nlp: StringNLP, f: _Fields, s: np.ndarray, rf: ca.MX, rt: ca.MX):
@@ -261,6 +317,17 @@ def _residual(
     return ca.vertcat(d_m, d_f, metres)
 
 
+def _orientations(nlp: StringNLP, f: _Fields, s_out: np.ndarray) -> ca.MX:
+    """The orientations at the outputs: the planar model's φ (``frames.frames_psi`` and
+    ``pose_quaternions``), the director model's unit quaternions.
+    """
+    m = nlp.model
+    if f.planar:
+        return ca.mtimes(ca.DM(m.matrices(s_out)[0]), f.c_phi).T
+    v_out = ca.mtimes(f.nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T))
+    return _unit_quaternion().map(len(s_out))(v_out)
+
+
 class OutputFunction:
     """The outputs of one NLP's solutions as one CasADi function (module docstring)."""
 
@@ -275,36 +342,15 @@ class OutputFunction:
         prof = ca.MX.sym("prof", 2 * K + 1)
         rf, rt, rf_min = prof[:K].T, prof[K : 2 * K].T, prof[2 * K]
 
-        f = _fields(nlp, z)
-        self.planar = planar = f.planar
-        point_s = np.array(
-            [g.s for g in problem.grips]
-            + [ld.s for ld in problem.loads]
-            + problem.relative_ends(),
-            dtype=float,
-        )
-        s_out = np.asarray(s_out, dtype=float)
-        pieces = [s, m.quad.nodes, point_s, nlp.obstacle_s, s_out]
-        splits = np.cumsum([len(a) for a in pieces])
-        w_all = (
-            m.position_matrix(np.concatenate(pieces))
-            if planar
-            else m.mesh.integration_matrix(np.concatenate(pieces))
-        )
-        x_all = ca.repmat(z[0:3] * L, 1, int(splits[-1])) + ca.mtimes(f.tq, ca.DM(w_all.T))
-        x, x_nodes, point_x, sample_x, x_out = (
-            x_all[:, a:b] for a, b in zip([0, *splits[:-1]], splits)
+        f = _fields(nlp, z, s)
+        self.planar = f.planar
+        x, x_nodes, point_x, sample_x, x_out, w_all, point_s = _positions(
+            nlp, problem, f, z, s_out
         )
         moment_c = _constitutive_moment(nlp, f, s, rf, rt)
 
-        # the weight's integrals ∫_0^s D dσ and ∫_0^s D x dσ, and its total
         gravity = p[lay["gravity"]]
-        d_nodes = p[lay["D"]]
-        w_grid = w_all[:K, :]
-        weight = ca.mtimes(ca.DM(w_grid), d_nodes).T
-        weight_moment = ca.mtimes(x_nodes * ca.repmat(d_nodes.T, 3, 1), ca.DM(w_grid.T))
-        total = ca.dot(ca.DM(m.quad.weights), d_nodes)
-        m_bal = -(_cross(weight_moment, gravity) - _cross(x, gravity) * ca.repmat(weight, 3, 1))
+        m_bal, total = _weight_balance(nlp, p, gravity, x, x_nodes, w_all[:K, :])
 
         # point actions at fixed arc lengths: grips (wrenches.wrench), loads, the relative
         # positions' ends
@@ -314,15 +360,7 @@ class OutputFunction:
             ca.horzcat(*torques),
             ca.horzcat(*flips),
         )
-        for k, _ in enumerate(problem.loads):
-            forces.append(p[lay[f"load:{k}:force"]])
-            # the planar model's: its component along n (checked)
-            moment = p[lay[f"load:{k}:moment"]]
-            torques.append(moment[0] * f.normal if planar else moment)
-        for rows in nlp.relative_rows:  # wrenches.relative_forces: −F_b at s_a, F_b at s_b
-            f_b = -ca.mtimes(ca.DM(nlp.relative_axes.T), lam[rows])
-            forces += [-f_b, f_b]
-            torques += [ca.DM.zeros(3), ca.DM.zeros(3)]
+        _load_actions(nlp, problem, f, p, lam, forces, torques)
         total_force = total * gravity
         # Σ_{a: s_a < s} (x_a − x(s)) × F_a + T_a = C(s) − x(s) × F(s), with C and F running sums
         # over the actions sorted by s: the point actions and the obstacle samples (every
@@ -344,13 +382,7 @@ class OutputFunction:
         m_bal, total_force = _running_sums(groups, s, x, m_bal, total_force)
         residual = _residual(s, x, moment_c - m_bal, total_force, rf, rf_min, L)
 
-        # the orientations at the outputs: the planar model's φ (``frames.frames_psi`` and
-        # ``pose_quaternions``), the director model's unit quaternions
-        if planar:
-            v_out = ca.mtimes(ca.DM(m.matrices(s_out)[0]), f.c_phi).T
-        else:
-            v_out = ca.mtimes(f.nodes_v, ca.DM(m.mesh.interpolation(s_out, "left")[0].T))
-            v_out = _unit_quaternion().map(len(s_out))(v_out)
+        v_out = _orientations(nlp, f, np.asarray(s_out, dtype=float))
         zero = ca.DM.zeros(3, 0)
         self.function = ca.Function(
             "dlo_outputs",

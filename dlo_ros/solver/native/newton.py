@@ -135,6 +135,28 @@ def active_flags(fn: ca.Function, residual: ca.Function) -> tuple[str, ...]:
     return driver_flags(fn, residual)
 
 
+#: ``dlo_newton_run``'s argument types (``newton_free.c``), in its order: the LAPACK/BLAS pointers
+#: and the node map (4), its sizes, n, nf and the step limits (6 ints), the settings (7 doubles),
+#: the arrays (6), the counters and the largest step (3), then the eigenpair's pointers (4), the
+#: outputs' (1) and whether K and r are given (1 int).
+_VP, _IP, _DP = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
+_ARGTYPES = [
+    *[_VP] * 4,
+    *[ctypes.c_int] * 6,
+    *[ctypes.c_double] * 7,
+    *[_VP] * 6,
+    _IP,
+    _IP,
+    _DP,
+    _VP,
+    _DP,
+    _VP,
+    _IP,
+    _VP,
+    ctypes.c_int,
+]
+
+
 @dataclass
 class NewtonOutcome:
     """What one call returns: ``code`` (CONVERGED, …), the last iterate u and K, r, ∇f, energies
@@ -171,42 +193,8 @@ class NativeNewton:
         # checked by cache_store (UnusableLibrary if refused)
         self._lib = load_library(lib_path, ("dlo_newton_run",))
         self._run = self._lib.dlo_newton_run
-        vp, ip = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [
-            vp,
-            vp,
-            vp,
-            vp,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            vp,
-            vp,
-            vp,
-            vp,
-            vp,
-            vp,
-            ip,
-            ip,
-            ctypes.POINTER(ctypes.c_double),
-            vp,
-            ctypes.POINTER(ctypes.c_double),
-            vp,
-            ip,
-            vp,
-            ctypes.c_int,
-        ]
+        self._run.argtypes = _ARGTYPES
         self.n, self.nf, self.n_p = n, nf, n_p
         #: what a converged call also evaluates (``UpdateOutputs``), None: nothing
         self.after: UpdateOutputs | None = None

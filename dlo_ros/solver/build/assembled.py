@@ -1,4 +1,6 @@
-"""The KKT functions of a director model, assembled from per-quadrature-node derivatives (the
+"""The KKT functions of a director model, assembled from per-quadrature-node derivatives.
+
+The KKT functions of a director model, assembled from per-quadrature-node derivatives (the
 planar and Euler-angle models reuse this with their own per-node parts: ``assembled_euler.py``).
 
 ``StringNLP.kkt_free_fn`` differentiates one flattened expression of the whole Lagrangian: its C is
@@ -46,7 +48,9 @@ from .assembled_contact import (
 
 
 class AssembledKKT:
-    """Builds the KKT functions (see the module docstring) for a ``StringNLP`` whose model is a
+    """Builds the KKT functions of a director-model ``StringNLP`` (module docstring).
+
+    Builds the KKT functions (see the module docstring) for a ``StringNLP`` whose model is a
     DirectorModel.
 
     The model-specific parts are ``_node_map``, ``_node_coefficients``, ``node_function``,
@@ -67,7 +71,7 @@ class AssembledKKT:
         self.E = self._node_map()
         self._rows()
 
-    # ---- constants ---------------------------------------------------------------------------------
+    # ---- constants ------------------------------------------------------------------------------
     def _node_map(self) -> np.ndarray:
         """E (d·M × n): row j + d k of E z is component j of u_k (E is block-sparse by element)."""
         lay, mesh, d, w = self.model.layout, self.model.mesh, self.d, self.width
@@ -82,7 +86,9 @@ class AssembledKKT:
         return E
 
     def _rows(self) -> None:
-        """Sort the rows: position rows (c_r, W_r, κ_r, target), node-local rows, and (left to
+        """Sort the rows into position rows, node-local rows and rows nonlinear in x.
+
+        Sort the rows: position rows (c_r, W_r, κ_r, target), node-local rows, and (left to
         ``_nonlinear_rows``) obstacle rows and self-contact slots.
         """
         nlp, P, model = self.nlp, self.nlp.problem, self.model
@@ -133,7 +139,7 @@ class AssembledKKT:
             else np.zeros((0, self.M))
         )
 
-    # ---- the per-node function ---------------------------------------------------------------------
+    # ---- the per-node function ------------------------------------------------------------------
     def _node_coefficients(self, p, a):
         """c_k (a column per node) of ``node_function`` from the parameters and a_k (3 × M)."""
         lay, weights = self.nlp.params, ca.DM(self.model.mesh.weights).T
@@ -143,7 +149,9 @@ class AssembledKKT:
 
     @functools.cached_property
     def node_function(self) -> ca.Function:
-        """(u_k, c_k) → [bend_k, twist_k, stretch_k, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]; c_k = (w Rf, w Rt, w
+        """Build the per-node function: energies, T_k and φ_k's derivatives from (u_k, c_k).
+
+        (u_k, c_k) → [bend_k, twist_k, stretch_k, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]; c_k = (w Rf, w Rt, w
         Re, a_k).
         """
         w, d = self.width, self.d
@@ -169,7 +177,9 @@ class AssembledKKT:
         )
 
     def _direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """(W_M, U_direct): the point moments' work (here their pseudo-potentials Σ W_M at their
+        """Return the point moments' work and the energy parts computed directly from z.
+
+        (W_M, U_direct): the point moments' work (here their pseudo-potentials Σ W_M at their
         nodes) and the (bend, twist, stretch) energy parts computed directly from z rather than per
         node (none for a director model: structurally zero).
         """
@@ -185,7 +195,9 @@ class AssembledKKT:
         return moments, ca.SX(3, 1)
 
     def local_function(self, rows: np.ndarray) -> ca.Function:
-        """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local
+        """Build the function of the node-local ``rows``: their g, ∂g/∂z, ∇Λ and ∇²Λ.
+
+        (z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local
         ``rows`` (unit norm, grip orientation, folds; an Euler-angle model's angle rows) and
         ``_direct_terms``: Λ = λ·g_local − σ W_M + σ Σ U_direct.
         """
@@ -202,7 +214,7 @@ class AssembledKKT:
             [g_local, ca.jacobian(g_local, z), grad, hess, moments, direct],
         )
 
-    # ---- the nonlinear position rows: obstacles and self-contact slots ------------------------------
+    # ---- the nonlinear position rows: obstacles and self-contact slots -------------------------
     @functools.cached_property
     def tangent_function(self) -> ca.Function:
         """u_k → T_k = (1 + ε) t̂ (the first pass, for rows nonlinear in the positions)."""
@@ -217,9 +229,11 @@ class AssembledKKT:
         """Build ``dlo_obstacle_g`` (``assembled_contact.inequality_g``)."""
         return inequality_g(self)
 
-    # ---- the KKT functions -------------------------------------------------------------------------
+    # ---- the KKT functions ----------------------------------------------------------------------
     def kkt_free(self) -> tuple[ca.Function, ca.Function]:
-        """(``dlo_kkt_free``, ``dlo_residual_free``): (z, p, λ_free) → [K, r, ∇f, energies] as the
+        """Build the contact-free KKT function and its residual alone.
+
+        (``dlo_kkt_free``, ``dlo_residual_free``): (z, p, λ_free) → [K, r, ∇f, energies] as the
         flattened one of ``StringNLP``, K = [∇²L Jᵀ; J 0] and r = [∇f + Jᵀλ; g] over the rows
         before the first inequality row; and (z, p, λ_free) → r alone (the same expression, without
         K's products: a fraction of the cost, for the chord steps of ``native_newton``).
@@ -239,7 +253,9 @@ class AssembledKKT:
         )
 
     def kkt_free_split(self) -> ca.Function:
-        """``dlo_kkt_free_split``: (z, p, λ_free) → [K − [Eᵀ W 0; 0 0], r, ∇f, energies, W] with W
+        """Build the contact-free KKT function with K's per-node Hessian part left out.
+
+        ``dlo_kkt_free_split``: (z, p, λ_free) → [K − [Eᵀ W 0; 0 0], r, ∇f, energies, W] with W
         = diag(∇²φ_k) E (d·M × n): ``kkt_free``'s outputs with K's per-node Hessian part Eᵀ W left
         out, and W.  That product is most of K's cost in CasADi's sparse loops (E is dense within
         an element); the compiled functions add it with BLAS, by dense blocks of E
@@ -262,7 +278,9 @@ class AssembledKKT:
         )
 
     def kkt_split(self) -> ca.Function:
-        """``dlo_kkt_split``: ``kkt``'s outputs with ∇²L's per-node part Eᵀ W left out, and W last
+        """Build ``kkt``'s function with ∇²L's per-node part left out, and W last.
+
+        ``dlo_kkt_split``: ``kkt``'s outputs with ∇²L's per-node part Eᵀ W left out, and W last
         (as ``kkt_free_split``).
         """
         nlp, n, rows = self.nlp, self.n, self.nlp.g_sym.shape[0]
@@ -282,7 +300,9 @@ class AssembledKKT:
         )
 
     def kkt(self) -> tuple[ca.Function, ca.Function]:
-        """(``dlo_kkt``, ``dlo_residual``): (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every
+        """Build the full KKT function over every row, and its residual alone.
+
+        (``dlo_kkt``, ``dlo_residual``): (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every
         row, as ``StringNLP.kkt_fn``; and (z, p, λ) → [∇L; g] (the chord steps of
         ``native_newton.ActiveNewton``).
         """
@@ -319,7 +339,9 @@ class AssembledKKT:
 
     @staticmethod
     def _in_row_order(parts, rows: int):
-        """(g, ∂g/∂z) in the NLP's row order from [(rows, g, ∂g/∂z)] that cover rows 0 … rows − 1
+        """Return (g, ∂g/∂z) in the NLP's row order from parts that cover every row once.
+
+        (g, ∂g/∂z) in the NLP's row order from [(rows, g, ∂g/∂z)] that cover rows 0 … rows − 1
         once.
         """
         order = np.concatenate([r for r, _, _ in parts]) if parts else np.zeros(0, dtype=int)
@@ -372,7 +394,9 @@ class AssembledKKT:
         )
 
     def _linear_terms(self, p, lam, pos_rows: np.ndarray, gravity, m):
-        """(a, ∂ℓ/∂x0, forces): the terms linear in the positions (``_system``).
+        """Return (a, ∂ℓ/∂x0, forces): the terms linear in the positions (``_system``).
+
+        (a, ∂ℓ/∂x0, forces): the terms linear in the positions (``_system``).
 
         a (3 × M) holds gravity through the weight moments ``m``, the point forces and the
         position rows ``pos_rows`` (λ: every row's multipliers); ∂ℓ/∂x0 the same terms' part in x0.
@@ -397,7 +421,9 @@ class AssembledKKT:
         return a, dx0, forces
 
     def _energies(self, p, x0, T, per_node, direct, moments, forces, gravity, m):
-        """The energies (bend, twist, stretch, gravity, work) from the per-node sums.
+        """Return the energies (bend, twist, stretch, gravity, work) from the per-node sums.
+
+        The energies (bend, twist, stretch, gravity, work) from the per-node sums.
 
         ``per_node``: the bend, twist and stretch integrands per node; ``direct``: the node-local
         parts added to them; ``moments``: the point moments' work.
@@ -414,7 +440,9 @@ class AssembledKKT:
         return ca.vertcat(bend, twist, stretch, grav, work)
 
     def _system(self, z, p, lam, rows: int, split: bool = False):
-        """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their
+        """Return ∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows.
+
+        ∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their
         multipliers). ``split``: ∇²L without its per-node part Eᵀ W, and W = diag(∇²φ_k) E as a
         seventh item.
         """

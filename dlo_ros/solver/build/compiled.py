@@ -51,7 +51,10 @@ class NativeFunction:
     """
 
     def __init__(self, lib_path: Path, fn: ca.Function):
-        """UnusableLibrary if ``cache_store.load`` refuses ``lib_path`` (nothing of it was run)."""
+        """Load ``fn`` from its compiled library ``lib_path``.
+
+        UnusableLibrary if ``cache_store.load`` refuses ``lib_path`` (nothing of it was run).
+        """
         name = fn.name()
         self._lib = cache_store.load(lib_path, (name, f"{name}_work"))
         self._fn = getattr(self._lib, name)
@@ -85,7 +88,9 @@ class NativeFunction:
         return list(self._out_shapes)
 
     def address(self) -> tuple[int, int]:
-        """The addresses of the generated function and of its ``_work`` sizes function, for C that
+        """Return the addresses of the generated function and of its ``_work`` function.
+
+        The addresses of the generated function and of its ``_work`` sizes function, for C that
         calls it (``native_newton.UpdateOutputs``); valid while this object (its library) lives.
         """
         return (
@@ -149,14 +154,18 @@ class InterpretedFunction:
 
 
 def library_path(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path:
-    """Where the compiled library of ``fn`` is (or will be) cached:
+    """Return where the compiled library of ``fn`` is (or will be) cached.
+
+    Where the compiled library of ``fn`` is (or will be) cached:
     ``<cache>/<name>_<fingerprint>.so``.
     """
     return cache_dir() / f"{fn.name()}_{fingerprint(fn, flags)}.so"
 
 
 def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | None:
-    """Path of the compiled library of ``fn`` if the cache holds it and ``cache_store`` would load
+    """Return the cached library of ``fn`` if the cache holds it and would load it.
+
+    Path of the compiled library of ``fn`` if the cache holds it and ``cache_store`` would load
     it (directory, owner, mode and sha256 checked), else None (no compiling, no C generated).
     """
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
@@ -166,7 +175,9 @@ def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | No
 
 
 def load_native(lib: Path, fn: ca.Function) -> NativeFunction | None:
-    """``fn``'s compiled library ``lib`` if it is in the cache and passes every check, else
+    """Load ``fn``'s compiled library ``lib``; None if it is missing or refused.
+
+    ``fn``'s compiled library ``lib`` if it is in the cache and passes every check, else
     None.
     """
     try:
@@ -183,7 +194,9 @@ def compiled(
     extra_source: str = "",
     also: tuple[ca.Function, ...] = (),
 ) -> tuple[NativeFunction | InterpretedFunction, bool]:
-    """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
+    """Return a callable of ``fn``: its library from the cache or built now, else interpreted.
+
+    (callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
     ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``);
     ``extra_source``: C appended to ``fn``'s, ``also``: functions compiled into the same library
     (then ``lib`` must be a path keyed by them too).

@@ -1,4 +1,6 @@
-"""The CasADi functions a solve evaluates, interpreted at first and swapped for compiled C when it
+"""The CasADi functions a solve evaluates: interpreted first, compiled C when ready.
+
+The CasADi functions a solve evaluates, interpreted at first and swapped for compiled C when it
 is ready.
 
 One ``NlpFunctions`` per ``StringNLP``:
@@ -98,13 +100,17 @@ class NlpFunctions:
         self.waiting: list[tuple[str, ca.Function, object]] = []
 
     def retire(self) -> None:
-        """The solver no longer uses these functions: a background compile stops before its next
+        """Mark these functions unused: a background compile stops before its next swap.
+
+        The solver no longer uses these functions: a background compile stops before its next
         swap.
         """
         self.retired = True
 
     def start_compile(self, mode: str, lock: threading.Lock) -> threading.Thread | None:
-        """Load the libraries compiled earlier and compile the others as ``mode`` says; the
+        """Load the libraries compiled earlier and compile the others as ``mode`` says.
+
+        Load the libraries compiled earlier and compile the others as ``mode`` says; the
         background thread if one was started.  ``lock``: the solver's lock, held for every swap.
         """
         if os.environ.get("DLO_NO_COMPILE"):
@@ -184,7 +190,9 @@ class NlpFunctions:
         return thread
 
     def _load(self, name: str, fn: ca.Function, lib) -> bool:
-        """Swap in the library ``lib`` of the function ``name`` if it is in the cache (for the
+        """Swap in the library ``lib`` of the function ``name`` if it is in the cache.
+
+        Swap in the library ``lib`` of the function ``name`` if it is in the cache (for the
         contact-free function: with its Newton loop's library); False if it is not there yet.
         """
         native = native_newton.cached(self.nlp, kkt_lib=lib) if name == "kkt_free" else None
@@ -195,7 +203,9 @@ class NlpFunctions:
         return True
 
     def _install(self, name: str, native, fn: ca.Function, lib, loop) -> None:
-        """Put the compiled ``native`` of the function ``name`` in place: for the KKT functions
+        """Put the compiled ``native`` of the function ``name`` in place.
+
+        Put the compiled ``native`` of the function ``name`` in place: for the KKT functions
         (compiled split) with the Hessian's per-node part added (``native_newton.WithNodePart``),
         the contact-free one with its compiled Newton step and loop ``loop``, the full one with its
         active-set loop.
@@ -215,7 +225,9 @@ class NlpFunctions:
         self._attach()
 
     def _attach(self) -> None:
-        """Let the compiled loops evaluate, in their own call, what a converged update needs beyond
+        """Let the compiled loops evaluate what a converged update needs beyond the loop.
+
+        Let the compiled loops evaluate, in their own call, what a converged update needs beyond
         the loop: the obstacle rows (the contact-free loop) and the outputs, as far as those are
         compiled (``native_newton.UpdateOutputs``).
         """
@@ -227,7 +239,9 @@ class NlpFunctions:
             self.newton_active.after = native_newton.UpdateOutputs(self.nlp, None, outputs)
 
     def load_cached(self) -> bool:
-        """('cached' mode) Swap in the libraries that reached the cache since ``start_compile``
+        """Swap in the libraries that reached the cache since ``start_compile``.
+
+        ('cached' mode) Swap in the libraries that reached the cache since ``start_compile``
         (another process or solver compiled them); True if anything was swapped in.  The caller
         holds the solver's lock.  A check costs a file lookup per missing library.
         """
@@ -238,7 +252,9 @@ class NlpFunctions:
         return bool(loaded)
 
     def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
-        """The active-set Newton loop in the full KKT function's library (None if it cannot be
+        """Load the active-set Newton loop from the full KKT function's library.
+
+        The active-set Newton loop in the full KKT function's library (None if it cannot be
         loaded).
         """
         try:
@@ -253,7 +269,9 @@ class NlpFunctions:
             return None
 
     def _compiled_newton_step(self, split: ca.Function, lib) -> InterpretedFunction:
-        """``newton_fn`` around the compiled split contact-free function (``casadi.external``) plus
+        """Build ``newton_fn`` around the compiled split contact-free function.
+
+        ``newton_fn`` around the compiled split contact-free function (``casadi.external``) plus
         the Hessian's per-node part (a CasADi product: this path serves only while the loop is
         missing); the current one if the library cannot be loaded (then the steps are still right,
         only slower).

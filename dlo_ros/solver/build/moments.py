@@ -22,7 +22,9 @@ from .parameters import ProblemParameters
 
 
 class ExactMomentKKT:
-    """(z, p, λ) → [∇f, g, ∂g/∂z, K, energies] of the exact equations under ``problem``'s point
+    """The KKT function of the exact equations under the problem's point moments.
+
+    (z, p, λ) → [∇f, g, ∂g/∂z, K, energies] of the exact equations under ``problem``'s point
     moments: ``NlpFunctions.kkt`` with the moments' centres at z, K with the blocks C added (module
     docstring).
     """

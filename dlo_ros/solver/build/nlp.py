@@ -1,12 +1,12 @@
 """The NLP of one scene structure, built once; everything that moves is a parameter.
 
-    minimise   σ (U_bend + U_twist + U_stretch + U_grav − W)(z; p) subject to (x(s_g) − p_g)/L = 0
-    every grip            (paper eq. 6 / grips)
+    minimise   σ (U_bend + U_twist + U_stretch + U_grav − W)(z; p)
+    subject to (x(s_g) − p_g)/L = 0                      every grip            (paper eq. 6)
                φ(s_g) − φ_g = 0, θ(s_g) − θ_g = 0        clamp, tangent grips  (eq. 7)
                ψ(s_g) − ψ_g = 0                          clamp grips, when twist is modelled
                (x(s_b) − x(s_a) − l)/L = 0               relative positions    (eq. 6)
                (h_i(x(σ_j)) + r)/L ≤ 0                   obstacles × samples   (eq. 8)
-               (b_k − |T q_k|²)/L ≤ 0                    self-contact slots (solver/contact/self_contact.py)
+               (b_k − |T q_k|²)/L ≤ 0                    self-contact slots    (self_contact.py)
 
 σ = L / max Rf makes the objective dimensionless and O(1); constraint rows are scaled as shown.
 ``row_scale`` converts IPOPT's multipliers back to SI: λ_SI = λ_ipopt / (row_scale · σ). Structure
@@ -99,14 +99,18 @@ __all__ = [
 
 
 class StringNLP:
-    """CasADi functions of one scene structure: the NLP, reactions, energies and the Lagrangian
+    """CasADi functions of one scene structure: the NLP, reactions, energies, Hessian.
+
+    CasADi functions of one scene structure: the NLP, reactions, energies and the Lagrangian
     Hessian.
     """
 
     def __init__(
         self, problem: Problem, options: SolverOptions, reference_frame: np.ndarray | None = None
     ):
-        """reference_frame: R0 to use instead of ``choose_reference_frame`` (3D models only: a
+        """Build the NLP of ``problem``'s structure with ``options``.
+
+        reference_frame: R0 to use instead of ``choose_reference_frame`` (3D models only: a
         planar model's R0 is fixed by its plane).
         """
         problem.validate()
@@ -160,7 +164,7 @@ class StringNLP:
         self._ipopt_derivatives: dict[str, ca.Function] | None = None
         self._build()
 
-    # ------------------------------------------------------------------------------------------------
+    # ---------------------------------------------------------------------------------------------
     def _build(self) -> None:
         """Build the NLP: p's layout, the objective, the rows and the functions of both."""
         P, m = self.problem, self.model
@@ -196,7 +200,9 @@ class StringNLP:
         self._functions(z, p, g)
 
     def _positions(self, z: ca.SX, t: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
-        """x at the grips, the loads, the relative positions' ends and the obstacle samples.
+        """Return x at the grips, the loads, the relative positions' ends and the samples.
+
+        x at the grips, the loads, the relative positions' ends and the obstacle samples.
 
         Every arc length where a position is needed is evaluated with one matrix product.  Sets
         ``obstacle_s``, the samples' arc lengths.
@@ -323,13 +329,17 @@ class StringNLP:
 
     @staticmethod
     def slot_parameters(i: int) -> tuple[str, str, str, str]:
-        """The names of obstacle i's slot parameters in p: σ, on, W(σ) and the samples'
+        """Return the names of obstacle i's slot parameters in p.
+
+        The names of obstacle i's slot parameters in p: σ, on, W(σ) and the samples'
         switches.
         """
         return f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w", f"samples:{i}:on"
 
     def disabled_rows(self, p: np.ndarray) -> np.ndarray:
-        """Rows that p switches off (empty contact slots, samples a slot replaces): they read −1 ≤
+        """Return the rows that p switches off (empty contact slots, replaced samples).
+
+        Rows that p switches off (empty contact slots, samples a slot replaces): they read −1 ≤
         0 whatever the shape, so a warm start's multiplier on one belongs to no row of p.
         """
         off, lay = np.zeros(self.lbg.size, dtype=bool), self.params
@@ -343,7 +353,9 @@ class StringNLP:
         return slot_matrix(p, self.params, i, self.obstacle_slots, self.model.quad.count)
 
     def newton_function(self, kkt_free: ca.Function | None = None) -> ca.Function:
-        """A contact-free warm update in one call: an MX function around ``kkt_free`` (default
+        """Build a contact-free warm update as one MX function around ``kkt_free``.
+
+        A contact-free warm update in one call: an MX function around ``kkt_free`` (default
         ``kkt_free_fn``; the compiled one loaded with ``casadi.external`` has the same inputs and
         outputs).
 
@@ -375,12 +387,13 @@ class StringNLP:
         )
 
     def moment_stiffness_fn(self) -> ca.Function:
-        """The part of the exact equations' Jacobian that the pseudo-potential's Hessian lacks, at
+        """Build the moment stiffness C that the pseudo-potential's Hessian lacks.
+
+        The part of the exact equations' Jacobian that the pseudo-potential's Hessian lacks, at
         one load (director models).  The exact equations are ∇f and ∂g/∂z at p with every moment's
-        centre q_ref set
-        to its load's own normalised rotation N(v) = v/|v| (``ProblemParameters.centre_moments``): there
-        ∇_v W_M = M·δθ exactly.  Their Jacobian is ∇²L (q_ref held) plus, at each load's node
-        values v,
+        centre q_ref set to its load's own normalised rotation N(v) = v/|v|
+        (``ProblemParameters.centre_moments``): there ∇_v W_M = M·δθ exactly.  Their Jacobian is
+        ∇²L (q_ref held) plus, at each load's node values v,
 
             C = −σ ∂(∇_v W_M)/∂q_ref · ∂N/∂v        (width × width),
 
@@ -403,7 +416,9 @@ class StringNLP:
         return self._moment_stiffness
 
     def material_parameters(self, p: np.ndarray) -> None:
-        """Fill p's material terms (stiffness matrices, weight moments) from its Rf, Rt, Re, D
+        """Fill p's material terms (stiffness matrices, weight moments) from its profiles.
+
+        Fill p's material terms (stiffness matrices, weight moments) from its Rf, Rt, Re, D
         slices.
         """
         lay = self.params
@@ -413,7 +428,9 @@ class StringNLP:
 
     @functools.cached_property
     def kkt_free_split_fn(self) -> ca.Function:
-        """``kkt_free_fn`` with K's per-node Hessian part Eᵀ W left out and W last
+        """``kkt_free_fn`` with K's per-node Hessian part left out and W last.
+
+        ``kkt_free_fn`` with K's per-node Hessian part Eᵀ W left out and W last
         (``assembled.py``): what the compiled contact-free loop evaluates, adding Eᵀ W by BLAS.
         Built when first asked for.
         """
@@ -421,7 +438,9 @@ class StringNLP:
 
     @functools.cached_property
     def node_blocks(self):
-        """The node map as the dense blocks the compiled functions add Eᵀ W by
+        """The node map as the dense blocks the compiled functions add Eᵀ W by.
+
+        The node map as the dense blocks the compiled functions add Eᵀ W by
         (``native_newton.NodeBlocks``), made once per NLP.
         """
         return NodeBlocks(self.node_map, self.node_width)
@@ -432,12 +451,14 @@ class StringNLP:
         return self._assembled.kkt_split()
 
     def target_shift(self, p_old: np.ndarray, p_new: np.ndarray) -> np.ndarray:
-        """g(z, p_new) − g(z, p_old) when only grip targets differ (exact: they enter g
+        """Return g(z, p_new) − g(z, p_old) when only grip targets differ.
+
+        g(z, p_new) − g(z, p_old) when only grip targets differ (exact: they enter g
         linearly).
         """
         return self._target_jacobian @ (p_new - p_old)
 
-    # ------------------------------------------------------------------------------------------------
+    # ---------------------------------------------------------------------------------------------
     def make_solver(
         self, warm: bool, max_iterations: int | None = None, max_wall_time: float = 0.0
     ) -> ca.Function:

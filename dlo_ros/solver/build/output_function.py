@@ -1,4 +1,6 @@
-"""A returned shape's outputs as one CasADi function (frame director models and the planar model,
+"""A returned shape's outputs as one CasADi function.
+
+A returned shape's outputs as one CasADi function (frame director models and the planar model,
 no self-contact slots).
 
 ``ShapeOutputs`` builds a result from many small numpy evaluations: the centreline and frames at
@@ -39,10 +41,12 @@ from ..results.wrenches import static_events
 
 
 def _unit_quaternion() -> ca.Function:
-    """The unit quaternion (x, y, z, w) of a non-zero quaternion v, with the sign
+    """Build the function v → the unit quaternion of v, with ``frame_to_quat``'s sign.
+
+    The unit quaternion (x, y, z, w) of a non-zero quaternion v, with the sign
     ``director.frame_to_quat`` gives its rotation matrix: the component Shepperd's method takes
-    from the
-    first largest of 1 + trace and 1 + 2 R_aa − trace (times |v|²: 4 w², 4 x², 4 y², 4 z²) is positive.
+    from the first largest of 1 + trace and 1 + 2 R_aa − trace (times |v|²: 4 w², 4 x², 4 y²,
+    4 z²) is positive.
     Where two candidates tie to rounding the two may pick q and −q: the same rotation.
     """
     v = ca.SX.sym("v", 4)
@@ -73,7 +77,9 @@ def _cross(a: ca.MX, b: ca.MX) -> ca.MX:
 
 
 def _cumulative(f: ca.MX, s: np.ndarray) -> ca.MX:
-    """``residual._cumulative`` along the columns of f (3×K): ∫_{s_0}^{s_k} f ds by the trapezoid
+    """Return ∫_{s_0}^{s_k} f ds along the columns of f by the trapezoid rule.
+
+    ``residual._cumulative`` along the columns of f (3×K): ∫_{s_0}^{s_k} f ds by the trapezoid
     rule, plus f_0 s_0 for the first interval from s = 0.
     """
     steps = 0.5 * (f[:, 1:] + f[:, :-1]) * ca.repmat(ca.DM(np.diff(s)).T, 3, 1)
@@ -110,7 +116,9 @@ def _slot_contacts(nlp, problem, z, p, lam, tq, s, x, m_bal, total_force, contac
 
 @dataclass
 class _Fields:
-    """The model's fields as symbols: the tangents at the quadrature nodes, and what else the
+    """The model's fields as symbols, as the outputs read them.
+
+    The model's fields as symbols: the tangents at the quadrature nodes, and what else the
     outputs read (the planar model's φ coefficients and plane normal; the director model's nodal
     values and their frame function).
     """
@@ -158,7 +166,9 @@ def _fields(nlp: StringNLP, z: ca.MX, grid: np.ndarray) -> _Fields:
 
 
 def _positions(nlp: StringNLP, problem: Problem, f: _Fields, z: ca.MX, s_out: np.ndarray):
-    """x at the grid, the quadrature nodes, the point actions, the obstacle samples and s_out.
+    """Return x at the grid, the nodes, the point actions, the samples and s_out.
+
+    x at the grid, the quadrature nodes, the point actions, the obstacle samples and s_out.
 
     Returns those five (3 × ·) blocks, the integration (or position) matrix of all of them, and the
     point actions' arc lengths (grips, loads, the relative positions' ends).
@@ -184,7 +194,9 @@ def _positions(nlp: StringNLP, problem: Problem, f: _Fields, z: ca.MX, s_out: np
 
 
 def _weight_balance(nlp: StringNLP, p: ca.MX, gravity: ca.MX, x, x_nodes, w_grid: np.ndarray):
-    """The weight's moment about x(s) at the grid, and the total weight per unit gravity.
+    """Return the weight's moment about x(s) at the grid, and the total weight.
+
+    The weight's moment about x(s) at the grid, and the total weight per unit gravity.
 
     From the weight's integrals ∫_0^s D dσ and ∫_0^s D x dσ, and its total.
     """
@@ -212,7 +224,9 @@ def _load_actions(nlp: StringNLP, problem: Problem, f: _Fields, p, lam, forces, 
 
 
 def _constitutive_moment(nlp: StringNLP, f: _Fields, s: np.ndarray, rf: ca.MX, rt: ca.MX):
-    """The constitutive moment at the grid s: R diag(Rt, Rf, Rf) Ω; the planar model's −Rf φ' n
+    """Return the constitutive moment at the grid s.
+
+    The constitutive moment at the grid s: R diag(Rt, Rf, Rf) Ω; the planar model's −Rf φ' n
     (``wrenches.euler_moments`` at θ ≡ π/2, no twist).
     """
     m = nlp.model
@@ -289,7 +303,9 @@ def _sample_contacts(nlp: StringNLP, problem: Problem, p: ca.MX, lam: ca.MX, sam
 def _running_sums(
     groups: list, s: np.ndarray, x: ca.MX, m_bal: ca.MX, total_force: ca.MX
 ) -> tuple[ca.MX, ca.MX]:
-    """Subtract each sorted group's running sums Σ_{s_a < s} (x_a − x(s)) × F_a + T_a from the
+    """Apply each sorted group's running sums to the moment balance and the force.
+
+    Subtract each sorted group's running sums Σ_{s_a < s} (x_a − x(s)) × F_a + T_a from the
     moment balance and add its total to the force; return both.
     """
     for c_a, f_a, s_a in groups:
@@ -305,7 +321,7 @@ def _running_sums(
 def _residual(
     s: np.ndarray, x: ca.MX, delta: ca.MX, total_force: ca.MX, rf: ca.MX, rf_min: ca.MX, L: float
 ) -> ca.MX:
-    """(d_m, d_f, metres): ``residual.equilibrium_residual`` from the moment imbalance ``delta``."""
+    """Return (d_m, d_f, metres) as ``residual.equilibrium_residual`` from the imbalance."""
     K = len(s)
     d_m = _column_norms_max(delta)
     d_f = ca.norm_2(total_force)
@@ -318,7 +334,9 @@ def _residual(
 
 
 def _orientations(nlp: StringNLP, f: _Fields, s_out: np.ndarray) -> ca.MX:
-    """The orientations at the outputs: the planar model's φ (``frames.frames_psi`` and
+    """Return the orientations at the outputs.
+
+    The orientations at the outputs: the planar model's φ (``frames.frames_psi`` and
     ``pose_quaternions``), the director model's unit quaternions.
     """
     m = nlp.model
@@ -411,7 +429,9 @@ class OutputFunction:
 
     @staticmethod
     def applies(nlp: StringNLP) -> bool:
-        """Director models with frames and the planar model, without self-contact slots (others,
+        """Tell whether the outputs' function applies to ``nlp``.
+
+        Director models with frames and the planar model, without self-contact slots (others,
         the tangent director model and the 3D Euler-angle model: the numpy path).
         """
         if nlp.self_contact_slots:
@@ -419,7 +439,9 @@ class OutputFunction:
         return bool(nlp.model.layout.frame if nlp.director else nlp.model.layout.planar)
 
     def profiles(self, string: StringProperties) -> np.ndarray:
-        """``prof``: Rf and Rt [N·m²] at the grid and Rf_min, remembered for the last string
+        """Return ``prof``: Rf and Rt [N·m²] at the grid and Rf_min.
+
+        ``prof``: Rf and Rt [N·m²] at the grid and Rf_min, remembered for the last string
         object.
         """
         key = self._profile_key

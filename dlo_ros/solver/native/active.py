@@ -1,4 +1,6 @@
-"""Newton with an active set in one compiled call (``ActiveNewton``): the driver
+"""Newton with an active set in one compiled call (``ActiveNewton``).
+
+Newton with an active set in one compiled call (``ActiveNewton``): the driver
 ``native/newton_active.c``, compiled into the full KKT function's library
 (``native_build.active_library_path``).
 """
@@ -61,7 +63,9 @@ _SETTINGS = (
 
 @dataclass
 class ActiveOutcome:
-    """What one ``ActiveNewton`` call returns: ``code`` (CONVERGED, …), the last iterate (z, λ over
+    """What one ``ActiveNewton`` call returns.
+
+    What one ``ActiveNewton`` call returns: ``code`` (CONVERGED, …), the last iterate (z, λ over
     every row), the derivatives [∇f, g, ∂g/∂z, ∇²L, energies] evaluated there, the steps taken and
     the active set there.
     """
@@ -86,7 +90,9 @@ class ActiveOutcome:
 
 
 class ActiveNewton:
-    """Newton with an active set in one compiled call: the inner loop of ``newton._active_steps``
+    """Newton with an active set in one compiled call.
+
+    Newton with an active set in one compiled call: the inner loop of ``newton._active_steps``
     (its regularised steps, row switches, convergence test and step limit), whose tail is chord
     steps.  Each step evaluates the full KKT function (Newton's own steps, the same iterates and
     row decisions) until a check of the rows changes none and the steps are below
@@ -148,7 +154,9 @@ class ActiveNewton:
         first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
         prof: np.ndarray | None = None,
     ) -> ActiveOutcome:
-        """From (z, λ) with the rows ``active`` held at ``ub`` (both over every row); up to
+        """Run Newton with an active set from (z, λ) in one compiled call.
+
+        From (z, λ) with the rows ``active`` held at ``ub`` (both over every row); up to
         ``switches`` changes among the rows ``switchable``; ``max_steps``: the most evaluations of
         the full KKT function on the way (the one at the answer not counted); ``first``: (∇f, g,
         ∂g/∂z, ∇²L) for the first step instead of an evaluation; ``prof``: the string's profiles,

@@ -63,7 +63,9 @@ def _source_digest() -> bytes:
 
 
 def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
-    """A cache key of ``fn`` that needs no code generation.
+    """Return a cache key of ``fn`` that needs no code generation.
+
+    A cache key of ``fn`` that needs no code generation.
 
     It hashes the CasADi version, the compiler flags, the dlo_ros sources that build NLPs, the
     function's name, input/output shapes and instruction count, and its outputs at two fixed
@@ -110,7 +112,9 @@ def build_library(
     extra_source: str = "",
     also: tuple[ca.Function, ...] = (),
 ) -> bool:
-    """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile
+    """Generate C for ``fn``, compile it to ``lib`` and store it in the cache.
+
+    Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile
     it to the shared object ``lib`` in a private temporary directory and store it with its sha256
     record (``cache_store.store``: atomic, 0600; concurrent processes never load a half-written
     file); False if the cache is unsafe or unwritable (one warning) or the compiler fails.  Callers

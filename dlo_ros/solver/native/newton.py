@@ -22,8 +22,8 @@ shrinks: round-off), and then evaluates K, ∇f and the energies at the answer, 
 update's first step uses, and there the stability eigenvalue (``stability.min_reduced_eigenvalue``:
 the same LAPACK routines, geqp3, orgqr and syevr, on K's blocks, in the same call).  It also stops
 at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` evaluations of K, at a singular matrix, or at a
-step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same
-regularisation δ = NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  The answer is the root the
+step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same regularisation
+δ = NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  The answer is the root the
 Python path's Newton steps converge to, within round-off: at a grip move of 1 % of L the chord
 steps shrink 20–50× each, so about seven steps cost less than one more evaluation of K.  LAPACK and
 BLAS are the ones SciPy ships (``scipy.linalg.cython_lapack``, ``cython_blas``), passed in as
@@ -114,14 +114,18 @@ __all__ = [
 
 
 def library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
-    """Where the contact-free driver compiled with ``fn`` is (or will be) cached
+    """Return where the contact-free driver compiled with ``fn`` is cached.
+
+    Where the contact-free driver compiled with ``fn`` is (or will be) cached
     (``native_build.free_library_path``).
     """
     return free_library_path(fn, kkt_lib)
 
 
 def active_source(fn: ca.Function, residual: ca.Function) -> str:
-    """The active-set driver's C, to append to the generated code of ``fn``
+    """Return the active-set driver's C, to append to the generated code of ``fn``.
+
+    The active-set driver's C, to append to the generated code of ``fn``
     (``StringNLP.kkt_split_fn``) and ``residual`` (``StringNLP.residual_fn``); compile it with
     ``active_flags``.
     """
@@ -129,7 +133,9 @@ def active_source(fn: ca.Function, residual: ca.Function) -> str:
 
 
 def active_flags(fn: ca.Function, residual: ca.Function) -> tuple[str, ...]:
-    """The compiler flags of ``active_source``: ``compiled.FLAGS``, the shared settings and the two
+    """Return the compiler flags of ``active_source``.
+
+    The compiler flags of ``active_source``: ``compiled.FLAGS``, the shared settings and the two
     functions' names, as ``-D`` flags.
     """
     return driver_flags(fn, residual)
@@ -159,10 +165,11 @@ _ARGTYPES = [
 
 @dataclass
 class NewtonOutcome:
-    """What one call returns: ``code`` (CONVERGED, …), the last iterate u and K, r, ∇f, energies
-    there,
-    the steps taken and the largest |Δz|; once converged, ``eigen``: the stability eigenvalue there and
-    its eigenvector in z (``stability.min_reduced_eigenvalue`` on K's blocks,
+    """What one ``NativeNewton`` call returns.
+
+    What one call returns: ``code`` (CONVERGED, …), the last iterate u and K, r, ∇f, energies
+    there, the steps taken and the largest |Δz|; once converged, ``eigen``: the stability
+    eigenvalue there and its eigenvector in z (``stability.min_reduced_eigenvalue`` on K's blocks,
     ``SolverState.reduced_eigen``), None when the free rows leave no freedom or LAPACK failed (the
     numpy path then decides).
     """
@@ -185,7 +192,9 @@ class NewtonOutcome:
 
 
 class NativeNewton:
-    """The compiled Newton loop of one NLP's contact-free system (see the module docstring).  Not
+    """The compiled Newton loop of one NLP's contact-free system.
+
+    The compiled Newton loop of one NLP's contact-free system (see the module docstring).  Not
     re-entrant per instance: callers serialise calls (ShapeSolver holds a lock).
     """
 
@@ -256,7 +265,9 @@ class NativeNewton:
         max_steps: int,
         prof: np.ndarray | None = None,
     ) -> NewtonOutcome:
-        """From u = [z; λ_free] with K, r at u (None: evaluated at u in the call, not counted);
+        """Run the contact-free Newton loop from u = [z; λ_free] in one compiled call.
+
+        From u = [z; λ_free] with K, r at u (None: evaluated at u in the call, not counted);
         ``max_steps``: the most evaluations of K on the way (the one at the answer is not counted);
         ``prof``: the string's profiles, for the outputs (``after``).
         """
@@ -295,7 +306,9 @@ class NativeNewton:
 
 
 def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | None:
-    """The driver of ``nlp``'s contact-free system (``StringNLP.kkt_free_split_fn`` and
+    """Return the driver of ``nlp``'s contact-free system, from the cache or built now.
+
+    The driver of ``nlp``'s contact-free system (``StringNLP.kkt_free_split_fn`` and
     ``residual_free_fn`` compiled with it), from the cache or built now (one compiler at a time per
     process); None without a C compiler or if compiling fails.  ``kkt_lib``: the split function's
     own library path, which keys this one.
@@ -315,14 +328,14 @@ def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | Non
 
 
 def cached(nlp, kkt_lib: Path | None = None) -> NativeNewton | None:
-    """The driver if the cache holds it (no compiling), else None."""
+    """Return the driver if the cache holds it (no compiling), else None."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
     return _instance(nlp, free_library_path(nlp.kkt_free_split_fn, kkt_lib))
 
 
 def _instance(nlp, lib: Path) -> NativeNewton | None:
-    """The loop in ``lib`` if the cache holds it and it passes ``cache_store.load``'s checks."""
+    """Return the loop in ``lib`` if the cache holds it and it passes ``cache_store.load``."""
     try:
         return NativeNewton(
             lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0], nlp.node_blocks

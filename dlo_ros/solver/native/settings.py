@@ -78,7 +78,9 @@ _NAMES = (
 
 
 def _literal(value: float | int) -> str:
-    """A C literal of ``value`` that parses back to the same double or int: ``repr`` of a float is
+    """Return a C literal of ``value`` that parses back to the same double or int.
+
+    A C literal of ``value`` that parses back to the same double or int: ``repr`` of a float is
     the shortest string that round-trips, and C's strtod rounds correctly.
     """
     text = repr(float(value)) if isinstance(value, float) else str(int(value))
@@ -86,7 +88,9 @@ def _literal(value: float | int) -> str:
 
 
 def defines() -> tuple[str, ...]:
-    """The settings as the compiler's ``-DDLO_<NAME>=<value>`` flags, read now (so a changed value
+    """Return the settings as the compiler's ``-DDLO_<NAME>=<value>`` flags.
+
+    The settings as the compiler's ``-DDLO_<NAME>=<value>`` flags, read now (so a changed value
     gives other flags, and another library).
     """
     module = globals()

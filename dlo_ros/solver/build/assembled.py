@@ -31,11 +31,13 @@ c_r·∂x/∂z = κ_r c_r ⊗ (∂x0/∂z) + Σ_k W_rk c_r·(∂T/∂u)_k E_k.  
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from ...model.director import DirectorModel, integrands
+from .structure import breakpoint_node
 from .assembled_contact import (
     block_diagonal,
     group_jacobian,
@@ -57,6 +59,9 @@ class AssembledKKT:
     ``tangent_function`` and ``_direct_terms``; ``assembled_euler.AssembledEulerKKT`` overrides
     them for the Euler-angle models (planar and 3D).
     """
+
+    #: a DirectorModel here, a RitzModel in AssembledEulerKKT (each class reads its own's members)
+    model: Any
 
     def __init__(self, nlp) -> None:
         model = nlp.model
@@ -188,7 +193,7 @@ class AssembledKKT:
         for i, ld in enumerate(nlp.problem.loads):
             moments += model.moment_work_sym(
                 z,
-                model.mesh.node_index(ld.s),
+                breakpoint_node(model.mesh, ld.s),
                 p[nlp.params[f"load:{i}:moment"]],
                 p[nlp.params[f"load:{i}:reference"]],
             )
@@ -456,7 +461,7 @@ class AssembledKKT:
         gravity, m = p[lay["gravity"]], p[lay["weight_moments"]]
         a, dx0, forces = self._linear_terms(p, lam, pos_rows, gravity, m)
         # rows nonlinear in the positions need T first (their gradient enters a_k)
-        nonlinear = ([], [], None, None, [])
+        nonlinear: tuple = ([], [], None, None, [])
         if rows > nlp.n_free_rows:
             T0 = self.tangent_function.map(M, "serial")(u)
             nonlinear = nonlinear_rows(self, z, p, lam, T0)

@@ -14,6 +14,7 @@ look-up costs an evaluation, never a code generation (bench/results/compile_cost
 from __future__ import annotations
 
 import os
+from typing import Any
 from pathlib import Path
 
 import ctypes
@@ -40,6 +41,17 @@ __all__ = [
     "library_path",
     "load_native",
 ]
+
+
+def _address(fn: Any) -> int:
+    """Return the address of the loaded C function ``fn`` (a ctypes function pointer).
+
+    Never null: ``cache_store.load`` looked the symbol up.
+    """
+    address = ctypes.cast(fn, ctypes.c_void_p).value
+    if address is None:
+        raise RuntimeError("a loaded C function has no address")
+    return address
 
 
 class NativeFunction:
@@ -94,8 +106,8 @@ class NativeFunction:
         calls it (``native_newton.UpdateOutputs``); valid while this object (its library) lives.
         """
         return (
-            ctypes.cast(self._fn, ctypes.c_void_p).value,
-            ctypes.cast(self._work_fn, ctypes.c_void_p).value,
+            _address(self._fn),
+            _address(self._work_fn),
         )
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
@@ -129,10 +141,12 @@ class InterpretedFunction:
         self._inputs = [np.zeros(fn.numel_in(i)) for i in range(fn.n_in())]
         self._out_shapes = [fn.size_out(i) for i in range(fn.n_out())]
         self._outputs = [np.zeros(r * c) for r, c in self._out_shapes]
+        # casadi's stubs want a size that the binding reads from the buffer, and numpy's stubs do
+        # not declare ndarray a Buffer: both calls are right as written (the tests call them)
         for i, a in enumerate(self._inputs):
-            self._buffer.set_arg(i, memoryview(a))
+            self._buffer.set_arg(i, memoryview(a))  # type: ignore[call-arg, arg-type]
         for i, a in enumerate(self._outputs):
-            self._buffer.set_res(i, memoryview(a))
+            self._buffer.set_res(i, memoryview(a))  # type: ignore[call-arg, arg-type]
 
     @property
     def function(self) -> ca.Function:

@@ -39,6 +39,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -76,7 +77,7 @@ class NlpFunctions:
             InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
         )
         self.newton_native = None
-        self.newton_active = None
+        self.newton_active: native_newton.ActiveNewton | None = None
         #: the outputs' function and its structure (grid, profiles), None where numpy builds the
         # outputs
         self.output_function = (
@@ -97,7 +98,7 @@ class NlpFunctions:
         self.retired = False  # the solver was rebuilt: a running compile stops at its next swap
         #: ('cached' mode) (name, function, library path) of each library not in the cache at the
         # start
-        self.waiting: list[tuple[str, ca.Function, object]] = []
+        self.waiting: list[tuple[str, ca.Function, Path]] = []
 
     def retire(self) -> None:
         """Mark these functions unused: a background compile stops before its next swap.

@@ -40,7 +40,7 @@ def initial_guess(nlp: StringNLP, parameters: ProblemParameters, problem: Proble
         chord = b.pose.position - a.pose.position
         span = b.s - a.s
         ratio = min(1.0, np.linalg.norm(chord) / span)
-        alpha = inverse_j0(ratio)
+        alpha = inverse_j0(float(ratio))
         d = chord / np.linalg.norm(chord)
     else:
         d = quat_to_matrix(a.pose.orientation)[:, 0]
@@ -111,7 +111,7 @@ def director_guess(nlp: StringNLP, problem: Problem) -> np.ndarray:
     if len(grips) >= 2 and np.linalg.norm(b.pose.position - a.pose.position) > 1e-9:
         chord = b.pose.position - a.pose.position
         span = b.s - a.s
-        alpha = inverse_j0(min(1.0, np.linalg.norm(chord) / span))
+        alpha = inverse_j0(float(min(1.0, np.linalg.norm(chord) / span)))
         d = chord / np.linalg.norm(chord)
     else:
         d = quat_to_matrix(a.pose.orientation)[:, 0]

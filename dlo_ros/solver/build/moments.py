@@ -19,6 +19,7 @@ from ...model.problem import Problem
 from .functions import NlpFunctions
 from .nlp import StringNLP
 from .parameters import ProblemParameters
+from .structure import breakpoint_node
 
 
 class ExactMomentKKT:
@@ -38,7 +39,7 @@ class ExactMomentKKT:
         self.loads = []  # (z slice of the load's node values, p slice of its moment)
         for i, ld in enumerate(problem.loads):
             if np.any(np.asarray(ld.moment) != 0.0):
-                first = lay.rotation.start + lay.width * m.mesh.node_index(ld.s)
+                first = lay.rotation.start + lay.width * breakpoint_node(m.mesh, ld.s)
                 self.loads.append(
                     (slice(first, first + lay.width), nlp.params[f"load:{i}:moment"])
                 )

@@ -27,6 +27,7 @@ for the planar and Euler-angle models), not differentiated from the flattened ex
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -68,7 +69,13 @@ from .constraint_rows import (
 )
 from .parameter_layout import ParameterLayout, parameter_layout, slot_matrix
 from .reference_frame import GRIP_POLE_MIN_DEG, choose_reference_frame, planarity_violation
-from .structure import breakpoints, has_point_moments, models_twist, twist_is_held
+from .structure import (
+    breakpoint_node,
+    breakpoints,
+    has_point_moments,
+    models_twist,
+    twist_is_held,
+)
 
 #: What callers import from here: ``StringNLP``, and (re-exported from the modules that hold them)
 #: the structure and reference-frame helpers and Newton's settings (``native.settings``).
@@ -146,7 +153,9 @@ class StringNLP:
                 options.order,
                 max(2, min(8, options.quadrature_nodes - options.order)),
             )
-            self.model = DirectorModel(L, mesh, self.twist, self.stretch)
+            # either model class: they share the interface NLPs use, and code for one only
+            # (``director``) branches on ``self.director``
+            self.model: Any = DirectorModel(L, mesh, self.twist, self.stretch)
         else:
             self.model = RitzModel(
                 L,
@@ -238,7 +247,7 @@ class StringNLP:
             if self.director:
                 work += m.moment_work_sym(
                     z,
-                    m.mesh.node_index(P.loads[i].s),
+                    breakpoint_node(m.mesh, P.loads[i].s),
                     p[lay[f"load:{i}:moment"]],
                     p[lay[f"load:{i}:reference"]],
                 )

@@ -29,6 +29,7 @@ agree to rounding (test_output_function.py).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -36,6 +37,7 @@ import numpy as np
 from ...model.director import frame_columns
 from ...model.problem import Problem, StringProperties
 from .nlp import StringNLP
+from .structure import breakpoint_node
 from ..results.residual import evaluation_grid
 from ..results.wrenches import static_events
 
@@ -128,11 +130,13 @@ class _Fields:
     grid: np.ndarray
     #: T (3 × M): the tangents (1 + ε) t̂ at the quadrature nodes
     tq: ca.MX
-    c_phi: ca.MX | None = None
-    normal: ca.DM | None = None
-    nodes_v: ca.MX | None = None
-    frame_cols: ca.Function | None = None
-    vs: ca.MX | None = None
+    # each of these is set for one model only (planar: c_phi, normal; director: nodes_v,
+    # frame_cols, vs), and read only in that model's branches: typed Any, not Optional
+    c_phi: Any = None  # ca.MX
+    normal: Any = None  # ca.DM
+    nodes_v: Any = None  # ca.MX
+    frame_cols: Any = None  # ca.Function
+    vs: Any = None  # ca.MX
 
 
 def _fields(nlp: StringNLP, z: ca.MX, grid: np.ndarray) -> _Fields:
@@ -255,7 +259,9 @@ def _constitutive_moment(nlp: StringNLP, f: _Fields, s: np.ndarray, rf: ca.MX, r
 def _grip_actions(nlp: StringNLP, problem: Problem, f: _Fields, p: ca.MX, lam: ca.MX):
     """Each grip's force, torque and flip (``wrenches.wrench``), as three lists."""
     m, lay = nlp.model, nlp.params
-    forces, torques, flips = [], [], []
+    forces: list[Any] = []
+    torques: list[Any] = []
+    flips: list[Any] = []
     for g in problem.grips:
         rows = nlp.grip_rows[g.name]
         force = -ca.mtimes(ca.DM(nlp.grip_axes[g.name].T), lam[rows["position"]])
@@ -264,10 +270,10 @@ def _grip_actions(nlp: StringNLP, problem: Problem, f: _Fields, p: ca.MX, lam: c
             torques.append(lam[rows["angles"][0]] * f.normal if rows["angles"] else ca.DM.zeros(3))
             flips.append(ca.DM.ones(2))  # no flipped sheet: φ is the tangent's angle itself
             continue
-        cols = f.frame_cols(f.nodes_v[:, m.mesh.node_index(g.s)])
+        cols = f.frame_cols(f.nodes_v[:, breakpoint_node(m.mesh, g.s)])
         tg, d1g = cols[0:3], cols[3:6]
         target = ca.reshape(p[lay[f"grip:{g.name}:frame"]], 3, 3)
-        torque = ca.DM.zeros(3)
+        torque: Any = ca.DM.zeros(3)
         if rows["angles"]:
             mu = lam[rows["angles"]]
             torque = -(mu[0] * ca.cross(tg, target[:, 1]) + mu[1] * ca.cross(tg, target[:, 2]))

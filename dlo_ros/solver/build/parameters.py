@@ -26,6 +26,7 @@ work −m·φ is exact); ``check_moments`` rejects others.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -42,7 +43,7 @@ def check_moments(nlp: StringNLP, problem: Problem) -> None:
     n = nlp.r0[:, 2]
     for i, ld in enumerate(problem.loads):
         m = np.asarray(ld.moment, dtype=float)
-        if np.linalg.norm(m - np.dot(m, n) * n) > 1e-9 * max(1.0, np.linalg.norm(m)):
+        if np.linalg.norm(m - np.dot(m, n) * n) > 1e-9 * max(1.0, float(np.linalg.norm(m))):
             raise ValueError(
                 f"loads[{i}].moment: only moments about the working-plane normal "
                 f"n = {np.round(n, 6).tolist()} "
@@ -210,7 +211,7 @@ class ProblemParameters:
         self._scene_p = (key, np.array(problem.gravity, dtype=float), p)
         return p
 
-    def grip_angles(self, pose: GripPose, reference: tuple[float, float, float]) -> np.ndarray:
+    def grip_angles(self, pose: GripPose, reference: Sequence[float]) -> np.ndarray:
         """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
         phi, theta, psi = self._pose_euler(pose)
         best, best_d = None, math.inf

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes
 from dataclasses import dataclass
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,7 @@ from .settings import (
 #: switches, step limits and whether ``first`` is given (4 ints), the settings (9 doubles), the
 #: arrays (9), the counters (2), then the eigenpair's and the outputs' pointers (6).
 _DP, _IP, _VP = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
-_ARGTYPES = [
+_ARGTYPES: list[Any] = [
     *[_VP] * 4,
     *[ctypes.c_int] * 4,
     *[_IP] * 2,

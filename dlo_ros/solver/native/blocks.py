@@ -89,7 +89,7 @@ class NodeBlocks:
         self.groups = []
         for members in groups.values():
             reached = np.flatnonzero(np.any(E[:, members] != 0, axis=1))
-            self.groups.append((reached, np.array(members), E[np.ix_(reached, members)]))
+            self.groups.append((reached, np.array(members), E[np.ix_(reached, np.array(members))]))
         rows, cols, blocks = ([group[i] for group in self.groups] for i in range(3))
         self.count = np.array([(r.size, c.size) for r, c, _ in self.groups], dtype=np.intc).ravel()
         self.row = np.ascontiguousarray(np.concatenate(rows), dtype=np.intc)

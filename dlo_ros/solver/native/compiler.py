@@ -75,7 +75,7 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
     """
     h = hashlib.sha256()
     h.update(
-        ca.__version__.encode() + " ".join(flags).encode() + _source_digest() + fn.name().encode()
+        ca.__version__.encode()  # type: ignore[attr-defined]  # casadi's stubs omit it + " ".join(flags).encode() + _source_digest() + fn.name().encode()
     )
     shapes = [fn.size_in(i) for i in range(fn.n_in())]
     h.update(

@@ -54,6 +54,7 @@ from __future__ import annotations
 import ctypes
 import os
 from dataclasses import dataclass
+from typing import Any
 from pathlib import Path
 
 import casadi as ca
@@ -146,7 +147,7 @@ def active_flags(fn: ca.Function, residual: ca.Function) -> tuple[str, ...]:
 #: the arrays (6), the counters and the largest step (3), then the eigenpair's pointers (4), the
 #: outputs' (1) and whether K and r are given (1 int).
 _VP, _IP, _DP = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
-_ARGTYPES = [
+_ARGTYPES: list[Any] = [
     *[_VP] * 4,
     *[ctypes.c_int] * 6,
     *[ctypes.c_double] * 7,
@@ -276,7 +277,7 @@ class NativeNewton:
         given = kkt is not None
         if given:
             self._K[:] = kkt
-            self._r[:] = np.ravel(residual)
+            self._r[:] = np.ravel(np.asarray(residual))
         self._energies[:] = np.nan
         after = self.after
         code = self._run(

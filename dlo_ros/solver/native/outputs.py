@@ -129,6 +129,7 @@ class UpdateOutputs:
         g = self._g[: self.rows].copy() if done & 1 else None
         if not done & 2:
             return g, None
+        assert self._prof is not None  # the outputs are evaluated only when prof was given
         values = [
             out[: r * c].reshape((r, c), order="F").copy()
             for out, (r, c) in zip(self._out, self._shapes)

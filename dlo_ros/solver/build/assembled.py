@@ -39,6 +39,7 @@ import numpy as np
 from ...model.director import DirectorModel, integrands
 from .structure import breakpoint_node
 from .assembled_contact import (
+    in_row_order,
     block_diagonal,
     group_jacobian,
     inequality_g,
@@ -342,23 +343,6 @@ class AssembledKKT:
         jac = ca.mtimes(ca.mtimes(ca.DM(self.C), jt) * ca.DM(omega_rep), E) / L
         return g, jac + sparse(x0_columns(self.C * self.kappa[:, None], n))
 
-    @staticmethod
-    def _in_row_order(parts, rows: int):
-        """Return (g, ∂g/∂z) in the NLP's row order from parts that cover every row once.
-
-        (g, ∂g/∂z) in the NLP's row order from [(rows, g, ∂g/∂z)] that cover rows 0 … rows − 1
-        once.
-        """
-        order = np.concatenate([r for r, _, _ in parts]) if parts else np.zeros(0, dtype=int)
-        if sorted(order.tolist()) != list(range(rows)):
-            raise ValueError("assembled KKT: rows not covered exactly once")
-        inverse = np.argsort(order).tolist()
-        if not parts:
-            return ca.MX(0, 1), None
-        return ca.vertcat(*[gp for _, gp, _ in parts])[inverse], ca.vertcat(
-            *[jp for _, _, jp in parts]
-        )[inverse, :]
-
     def jacobian(self) -> ca.Function:
         """``constraint_jacobian``: (z, p) → ∂g/∂z over every row, without the Hessian's work."""
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
@@ -393,7 +377,7 @@ class AssembledKKT:
                 parts.append(
                     (np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl))
                 )
-        _, jac = self._in_row_order(parts, rows)
+        _, jac = in_row_order(parts, rows)
         return ca.Function(
             "constraint_jacobian", [z, p], [ca.densify(jac) if jac is not None else ca.MX(0, n)]
         )
@@ -501,7 +485,7 @@ class AssembledKKT:
                     D = position_derivatives(self, jt_k, E, omega, kappa, n)
                     hess += ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted), D))
             parts.append((np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl)))
-        g, jac = self._in_row_order(parts, rows)
+        g, jac = in_row_order(parts, rows)
 
         grad_f = grad - ca.mtimes(jac.T, lam)
         energies = self._energies(

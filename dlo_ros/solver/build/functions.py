@@ -145,15 +145,13 @@ class NlpFunctions:
 
         def work(locked: bool) -> None:
             t0 = time.perf_counter()
-            for k, (name, fn, lib) in enumerate(
-                todo
-            ):  # the derivatives first, the outputs' function last
+            # the derivatives first, the outputs' function last
+            for k, (name, fn, lib) in enumerate(todo):
                 if self.retired:  # the scene was rebuilt: nothing more to compile for this one
                     return
                 nice = 10 if mode == "background" else 0
-                active = (
-                    name == "kkt"
-                )  # with its active-set loop and the residual function that loop uses
+                # with its active-set loop and the residual function that loop uses
+                active = name == "kkt"
                 # its -D settings: native_newton.active_flags
                 flags = native_newton.active_flags(fn, nlp.residual_fn) if active else FLAGS
                 native, ok = compiled(
@@ -171,9 +169,8 @@ class NlpFunctions:
                     if ok and name == "kkt_free"
                     else None
                 )
-                with (
-                    threading.Lock() if locked else lock
-                ):  # blocking: the caller may hold the solver's lock
+                # blocking: the caller may hold the solver's lock
+                with threading.Lock() if locked else lock:
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile
                         return
                     self._install(name, native, fn, lib, loop)

@@ -118,7 +118,7 @@ def test_never_two_compilers_at_once_in_one_process(tmp_path, monkeypatch):
             running[0] -= 1
         return SimpleNamespace(returncode=1, stdout="", stderr="")
 
-    monkeypatch.setattr(compiled.subprocess, "run", fake_run)
+    monkeypatch.setattr(native_compiler.subprocess, "run", fake_run)
     x = ca.SX.sym("x")
     fns = [ca.Function(f"f{i}", [x], [ca.sin(x) * (i + 1)]) for i in range(4)]
     results = []

@@ -242,7 +242,7 @@ class AssembledKKT:
         (``dlo_kkt_free``, ``dlo_residual_free``): (z, p, λ_free) → [K, r, ∇f, energies] as the
         flattened one of ``StringNLP``, K = [∇²L Jᵀ; J 0] and r = [∇f + Jᵀλ; g] over the rows
         before the first inequality row; and (z, p, λ_free) → r alone (the same expression, without
-        K's products: a fraction of the cost, for the chord steps of ``native_newton``).
+        K's products: a fraction of the cost, for the chord steps of ``native.newton``).
         """
         nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
@@ -265,7 +265,7 @@ class AssembledKKT:
         = diag(∇²φ_k) E (d·M × n): ``kkt_free``'s outputs with K's per-node Hessian part Eᵀ W left
         out, and W.  That product is most of K's cost in CasADi's sparse loops (E is dense within
         an element); the compiled functions add it with BLAS, by dense blocks of E
-        (``native_newton.NodeBlocks``).
+        (``native.newton.NodeBlocks``).
         """
         nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
@@ -310,7 +310,7 @@ class AssembledKKT:
 
         (``dlo_kkt``, ``dlo_residual``): (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every
         row, as ``StringNLP.kkt_fn``; and (z, p, λ) → [∇L; g] (the chord steps of
-        ``native_newton.ActiveNewton``).
+        ``native.newton.ActiveNewton``).
         """
         nlp, n, rows = self.nlp, self.n, self.nlp.g_sym.shape[0]
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam", rows)

@@ -103,7 +103,7 @@ class NativeFunction:
         """Return the addresses of the generated function and of its ``_work`` function.
 
         The addresses of the generated function and of its ``_work`` sizes function, for C that
-        calls it (``native_newton.UpdateOutputs``); valid while this object (its library) lives.
+        calls it (``native.newton.UpdateOutputs``); valid while this object (its library) lives.
         """
         return (
             _address(self._fn),

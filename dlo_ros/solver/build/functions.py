@@ -13,10 +13,10 @@ One ``NlpFunctions`` per ``StringNLP``:
   (``newton_fn``);
 * ``newton_native``: once the contact-free function is compiled, the whole Newton loop as one
   compiled
-  call (``native_newton.NativeNewton``; None until then);
+  call (``native.newton.NativeNewton``; None until then);
 * ``newton_active``: once the full KKT function is compiled, Newton's steps with a fixed active set
   as
-  one compiled call (``native_newton.ActiveNewton``, in the KKT function's own library; None until
+  one compiled call (``native.newton.ActiveNewton``, in the KKT function's own library; None until
   then);
 * ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles);
 * ``outputs(z, p, λ, prof)``: a solution's published outputs in one call (``output_function.py``;
@@ -24,7 +24,7 @@ One ``NlpFunctions`` per ``StringNLP``:
   for the models it does not cover, whose outputs numpy evaluates), compiled last.
 
 The KKT functions are compiled split (``StringNLP.kkt_free_split_fn``, ``kkt_split_fn``: without
-the Hessian's per-node part Eᵀ W, which ``native_newton.WithNodePart`` adds by BLAS, as the
+the Hessian's per-node part Eᵀ W, which ``native.newton.WithNodePart`` adds by BLAS, as the
 compiled loops do).
 
 Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
@@ -204,7 +204,7 @@ class NlpFunctions:
         """Put the compiled ``native`` of the function ``name`` in place.
 
         Put the compiled ``native`` of the function ``name`` in place: for the KKT functions
-        (compiled split) with the Hessian's per-node part added (``native_newton.WithNodePart``),
+        (compiled split) with the Hessian's per-node part added (``native.newton.WithNodePart``),
         the contact-free one with its compiled Newton step and loop ``loop``, the full one with its
         active-set loop.
         """
@@ -227,7 +227,7 @@ class NlpFunctions:
 
         Let the compiled loops evaluate, in their own call, what a converged update needs beyond
         the loop: the obstacle rows (the contact-free loop) and the outputs, as far as those are
-        compiled (``native_newton.UpdateOutputs``).
+        compiled (``native.newton.UpdateOutputs``).
         """
         obstacle = self.obstacle_g if isinstance(self.obstacle_g, NativeFunction) else None
         outputs = self.outputs if isinstance(self.outputs, NativeFunction) else None

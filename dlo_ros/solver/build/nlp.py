@@ -450,7 +450,7 @@ class StringNLP:
         """The node map as the dense blocks the compiled functions add Eᵀ W by.
 
         The node map as the dense blocks the compiled functions add Eᵀ W by
-        (``native_newton.NodeBlocks``), made once per NLP.
+        (``native.newton.NodeBlocks``), made once per NLP.
         """
         return NodeBlocks(self.node_map, self.node_width)
 

@@ -2,7 +2,7 @@
 
 Newton with an active set in one compiled call (``ActiveNewton``): the driver
 ``native/newton_active.c``, compiled into the full KKT function's library
-(``native_build.active_library_path``).
+(``native.build.active_library_path``).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ The drivers are C files shipped in the package (``dlo_ros/solver/native/``, read
 file beside it is replaced by that file's text (once per source), and the result is appended to
 CasADi's generated code of the functions it runs, which ``-DDLO_SYSTEM=…`` and
 ``-DDLO_RESIDUAL=…`` name.  Every setting the drivers share with the Python paths arrives as a
-``-D`` flag from ``native_settings``.
+``-D`` flag from ``native.settings``.
 
 Cache keys: a driver's library name carries a digest of its assembled source and of the compiler
 flags with the settings' ``-D`` values (``driver_digest``), next to the generated function's
@@ -27,7 +27,7 @@ from . import settings as native_settings
 from .cache_store import cache_dir
 from .compiler import FLAGS, build_library, fingerprint
 
-#: the contact-free loop (``native_newton.NativeNewton``), the active-set loop (``ActiveNewton``)
+#: the contact-free loop (``native.newton.NativeNewton``), the active-set loop (``ActiveNewton``)
 FREE_DRIVER, ACTIVE_DRIVER = "newton_free.c", "newton_active.c"
 
 #: a local include: a file of the native directory, by a plain name
@@ -69,7 +69,7 @@ def settings_flags() -> tuple[str, ...]:
     """Return the compiler flags a driver's code depends on beside its functions' names.
 
     The compiler flags a driver's code depends on beside its functions' names:
-    ``compiler.FLAGS`` and the shared settings (``native_settings.defines``).
+    ``compiler.FLAGS`` and the shared settings (``native.settings.defines``).
     """
     return (*FLAGS, *native_settings.defines())
 

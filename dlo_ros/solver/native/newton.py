@@ -39,12 +39,12 @@ loop with obstacle rows active, computes the stability eigenpair and the outputs
 the same way: a warm update that Newton answers is one compiled call either way.
 
 The C is ``native/newton_free.c`` (and ``newton_active.c`` for ``ActiveNewton``, in
-``native_active``), with the headers they include; ``native_build`` reads it from the package,
-passes the settings it shares with the Python paths as ``-D`` flags (``native_settings``) and keys
+``native.active``), with the headers they include; ``native.build`` reads it from the package,
+passes the settings it shares with the Python paths as ``-D`` flags (``native.settings``) and keys
 the library, cached beside the KKT function's (``compiled.cache_dir``), by that function's
 fingerprint (which also fixes its residual's code) and a digest of the assembled C and those
-flags.  The Python side is split by job: ``native_blocks`` (LAPACK by address, the node map's
-blocks), ``native_outputs`` (what a converged call also evaluates), ``native_active`` (the
+flags.  The Python side is split by job: ``native.blocks`` (LAPACK by address, the node map's
+blocks), ``native.outputs`` (what a converged call also evaluates), ``native.active`` (the
 active-set loop) and this module (the contact-free loop, and the names other modules import from
 here).
 """
@@ -118,7 +118,7 @@ def library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
     """Return where the contact-free driver compiled with ``fn`` is cached.
 
     Where the contact-free driver compiled with ``fn`` is (or will be) cached
-    (``native_build.free_library_path``).
+    (``native.build.free_library_path``).
     """
     return free_library_path(fn, kkt_lib)
 

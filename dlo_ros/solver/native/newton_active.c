@@ -1,6 +1,6 @@
-/* Newton with an active set in one call (dlo_ros/solver/native_active.py, ActiveNewton), around
+/* Newton with an active set in one call (dlo_ros/solver/native/active.py, ActiveNewton), around
    the generated split full KKT function DLO_SYSTEM (StringNLP.kkt_split_fn) and its residual
-   DLO_RESIDUAL (StringNLP.residual_fn), both given as -D names by native_build.py. */
+   DLO_RESIDUAL (StringNLP.residual_fn), both given as -D names by native/build.py. */
 #include "dlo_native.h"
 #include "dlo_common.h"
 #include "dlo_eigen.h"
@@ -53,7 +53,7 @@ static int dlo_evaluate_and_factor(const casadi_real **arg, casadi_real **res, c
 }
 
 /* Newton, then chord, steps on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see
-   dlo_ros/solver/native_newton.py (ActiveNewton) and newton.py (_active_steps, the same row
+   dlo_ros/solver/native/newton.py (ActiveNewton) and newton.py (_active_steps, the same row
    switches). Each step's matrix is evaluated (Newton's own steps) until an iterate where the rows
    are checked changes no row and the steps are below chord_start; after that the factored matrix
    is kept while the steps shrink by the contraction factor, the residual function giving grad L

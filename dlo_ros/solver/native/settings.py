@@ -1,7 +1,7 @@
 """The numbers the Python paths and the compiled Newton drivers (``native/*.c``) share: each once.
 
 The drivers get them as ``-D`` flags (``defines``), and the compiled libraries' cache keys hash
-those flags (``native_build``), so a change here reaches both paths and rebuilds the libraries.
+those flags (``native.build``), so a change here reaches both paths and rebuilds the libraries.
 The Python side reads them from this module at call time (``stability.min_reduced_eigenvalue``,
 ``newton``'s contact check).  Newton's step settings (``NEWTON_*``, ``JOIN_TOLERANCE``,
 ``LEAVE_TOLERANCE``) reach the drivers as call arguments instead; they live here too, beside the

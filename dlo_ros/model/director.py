@@ -160,7 +160,7 @@ def continuous_signs(q: np.ndarray) -> np.ndarray:
     return q
 
 
-def _columns(q, lib):
+def frame_columns(q, lib):
     """(t, d1, d2) of quaternion components (x, y, z, w) divided by |q|² (lib: casadi or numpy)."""
     x, y, z, w = q
     n2 = x * x + y * y + z * z + w * w
@@ -191,7 +191,7 @@ def integrands(rows, drows, frame: bool):
         o2 = 2 * (wq * dy - dw * y - (zq * dx - x * dz)) / n2
         o3 = 2 * (wq * dz - dw * zq - (x * dy - y * dx)) / n2
         o0 = 2 * (x * dx + y * dy + zq * dz + wq * dw) / n2
-        return o2 * o2 + o3 * o3 + GAUGE_WEIGHT * o0 * o0, o1 * o1, _columns(rows, ca)[0]
+        return o2 * o2 + o3 * o3 + GAUGE_WEIGHT * o0 * o0, o1 * o1, frame_columns(rows, ca)[0]
     n2 = rows[0] ** 2 + rows[1] ** 2 + rows[2] ** 2
     tdt = rows[0] * drows[0] + rows[1] * drows[1] + rows[2] * drows[2]
     dd = drows[0] ** 2 + drows[1] ** 2 + drows[2] ** 2
@@ -262,7 +262,7 @@ class DirectorModel:
         """(1 + ε) t̂ at the quadrature nodes, (3, M)."""
         v = self.B @ self.node_values(z)
         if self.layout.frame:
-            t = np.array(_columns(v.T, np)[0])
+            t = np.array(frame_columns(v.T, np)[0])
         else:
             t = (v / np.linalg.norm(v, axis=1)[:, None]).T
         eps = self.strain_nodes(z)
@@ -278,7 +278,7 @@ class DirectorModel:
         """Return the unit tangents (len(s), 3)."""
         v = self.interpolation(s)[0] @ self.node_values(z)
         if self.layout.frame:
-            return np.array(_columns(v.T, np)[0]).T
+            return np.array(frame_columns(v.T, np)[0]).T
         return v / np.linalg.norm(v, axis=1)[:, None]
 
     def pose_frames(
@@ -405,7 +405,7 @@ class DirectorModel:
         """(t, d1) at node i (d1 None for the tangent model)."""
         v = self.node_sym(z, i)
         if self.layout.frame:
-            t, d1, _ = _columns([v[0], v[1], v[2], v[3]], ca)
+            t, d1, _ = frame_columns([v[0], v[1], v[2], v[3]], ca)
             return ca.vertcat(*t), ca.vertcat(*d1)
         return v / ca.norm_2(v), None
 

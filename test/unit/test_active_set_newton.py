@@ -88,7 +88,7 @@ def test_a_contact_leaves_between_steps(drop):
     rows held and a negative multiplier (the table pulling), which is left to the outer loop."""
     from dlo_ros.model.problem import GripPose
     from dlo_ros.solver.update.newton import _active_steps, active_rows
-    from dlo_ros.solver.build.nlp import NEWTON_STEP_SWITCHES
+    from dlo_ros.solver.native.settings import NEWTON_STEP_SWITCHES
 
     solver = ShapeSolver(SCENE.problem, replace(SCENE.options, model="planar"), compile="off")
     assert touches(solver.solve(targets(0.055)))

@@ -12,6 +12,7 @@ import pytest
 from dlo_ros.model import Obstacle
 from dlo_ros.solver import ShapeSolver
 from dlo_ros.solver.build import compiled
+from dlo_ros.solver.native import compiler as native_compiler
 from dlo_ros.solver.update.newton import derivatives
 from dlo_ros.solver.build.nlp import StringNLP
 from dlo_ros.solver.options import SolverOptions
@@ -52,7 +53,7 @@ def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monke
     def no_codegen(*_):
         raise AssertionError("C was generated for a cached function")
 
-    monkeypatch.setattr(compiled, "_generate", no_codegen)
+    monkeypatch.setattr(native_compiler, "generate", no_codegen)
     again = ShapeSolver(problem, PLANAR, compile="cached")  # a fresh NLP finds the library by its key
     assert again.kkt_compiled
     interpreted = ShapeSolver(problem, PLANAR, compile="off")
@@ -117,7 +118,7 @@ def test_never_two_compilers_at_once_in_one_process(tmp_path, monkeypatch):
             running[0] -= 1
         return SimpleNamespace(returncode=1, stdout="", stderr="")
 
-    monkeypatch.setattr(compiled.subprocess, "run", fake_run)
+    monkeypatch.setattr(native_compiler.subprocess, "run", fake_run)
     x = ca.SX.sym("x")
     fns = [ca.Function(f"f{i}", [x], [ca.sin(x) * (i + 1)]) for i in range(4)]
     results = []

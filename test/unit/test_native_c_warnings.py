@@ -56,7 +56,7 @@ def test_a_driver_without_the_shared_settings_does_not_compile(native_dir, name)
     """Without the -D settings the build stops at dlo_native.h's #error, which names where they
     come from."""
     done = compile_c(native_dir, name, *NAMES)
-    assert done.returncode != 0 and "native_settings.py" in done.stderr
+    assert done.returncode != 0 and "native/settings.py" in done.stderr
 
 
 def test_the_library_source_is_the_files_with_their_headers(native_dir):

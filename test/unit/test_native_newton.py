@@ -17,7 +17,7 @@ from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver
 from dlo_ros.solver.build.compiled import compiler
 from dlo_ros.solver.update.newton import regularised
-from dlo_ros.solver.build.nlp import (NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
+from dlo_ros.solver.native.settings import (NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
                                 NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
                                 NEWTON_PRIMAL_TOLERANCE)
 from dlo_ros.solver.options import SolverOptions

@@ -1,4 +1,6 @@
-"""The KKT functions of a director model, assembled from per-quadrature-node derivatives (the
+"""The KKT functions of a director model, assembled from per-quadrature-node derivatives.
+
+The KKT functions of a director model, assembled from per-quadrature-node derivatives (the
 planar and Euler-angle models reuse this with their own per-node parts: ``assembled_euler.py``).
 
 ``StringNLP.kkt_free_fn`` differentiates one flattened expression of the whole Lagrangian: its C is
@@ -29,26 +31,38 @@ c_r·∂x/∂z = κ_r c_r ⊗ (∂x0/∂z) + Σ_k W_rk c_r·(∂T/∂u)_k E_k.  
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from ...model.director import DirectorModel, integrands
-
-
-def _sparse(matrix: np.ndarray) -> ca.DM:
-    """A CasADi DM holding only the non-zero entries of ``matrix``."""
-    return ca.sparsify(ca.DM(matrix))
+from .structure import breakpoint_node
+from .assembled_contact import (
+    in_row_order,
+    block_diagonal,
+    group_jacobian,
+    inequality_g,
+    nonlinear_rows,
+    position_derivatives,
+    sparse,
+    x0_columns,
+)
 
 
 class AssembledKKT:
-    """Builds the KKT functions (see the module docstring) for a ``StringNLP`` whose model is a
+    """Builds the KKT functions of a director-model ``StringNLP`` (module docstring).
+
+    Builds the KKT functions (see the module docstring) for a ``StringNLP`` whose model is a
     DirectorModel.
 
     The model-specific parts are ``_node_map``, ``_node_coefficients``, ``node_function``,
     ``tangent_function`` and ``_direct_terms``; ``assembled_euler.AssembledEulerKKT`` overrides
     them for the Euler-angle models (planar and 3D).
     """
+
+    #: a DirectorModel here, a RitzModel in AssembledEulerKKT (each class reads its own's members)
+    model: Any
 
     def __init__(self, nlp) -> None:
         model = nlp.model
@@ -63,7 +77,7 @@ class AssembledKKT:
         self.E = self._node_map()
         self._rows()
 
-    # ---- constants ---------------------------------------------------------------------------------
+    # ---- constants ------------------------------------------------------------------------------
     def _node_map(self) -> np.ndarray:
         """E (d·M × n): row j + d k of E z is component j of u_k (E is block-sparse by element)."""
         lay, mesh, d, w = self.model.layout, self.model.mesh, self.d, self.width
@@ -78,7 +92,9 @@ class AssembledKKT:
         return E
 
     def _rows(self) -> None:
-        """Sort the rows: position rows (c_r, W_r, κ_r, target), node-local rows, and (left to
+        """Sort the rows into position rows, node-local rows and rows nonlinear in x.
+
+        Sort the rows: position rows (c_r, W_r, κ_r, target), node-local rows, and (left to
         ``_nonlinear_rows``) obstacle rows and self-contact slots.
         """
         nlp, P, model = self.nlp, self.nlp.problem, self.model
@@ -129,7 +145,7 @@ class AssembledKKT:
             else np.zeros((0, self.M))
         )
 
-    # ---- the per-node function ---------------------------------------------------------------------
+    # ---- the per-node function ------------------------------------------------------------------
     def _node_coefficients(self, p, a):
         """c_k (a column per node) of ``node_function`` from the parameters and a_k (3 × M)."""
         lay, weights = self.nlp.params, ca.DM(self.model.mesh.weights).T
@@ -139,7 +155,9 @@ class AssembledKKT:
 
     @functools.cached_property
     def node_function(self) -> ca.Function:
-        """(u_k, c_k) → [bend_k, twist_k, stretch_k, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]; c_k = (w Rf, w Rt, w
+        """Build the per-node function: energies, T_k and φ_k's derivatives from (u_k, c_k).
+
+        (u_k, c_k) → [bend_k, twist_k, stretch_k, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]; c_k = (w Rf, w Rt, w
         Re, a_k).
         """
         w, d = self.width, self.d
@@ -165,7 +183,9 @@ class AssembledKKT:
         )
 
     def _direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """(W_M, U_direct): the point moments' work (here their pseudo-potentials Σ W_M at their
+        """Return the point moments' work and the energy parts computed directly from z.
+
+        (W_M, U_direct): the point moments' work (here their pseudo-potentials Σ W_M at their
         nodes) and the (bend, twist, stretch) energy parts computed directly from z rather than per
         node (none for a director model: structurally zero).
         """
@@ -174,14 +194,16 @@ class AssembledKKT:
         for i, ld in enumerate(nlp.problem.loads):
             moments += model.moment_work_sym(
                 z,
-                model.mesh.node_index(ld.s),
+                breakpoint_node(model.mesh, ld.s),
                 p[nlp.params[f"load:{i}:moment"]],
                 p[nlp.params[f"load:{i}:reference"]],
             )
         return moments, ca.SX(3, 1)
 
     def local_function(self, rows: np.ndarray) -> ca.Function:
-        """(z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local
+        """Build the function of the node-local ``rows``: their g, ∂g/∂z, ∇Λ and ∇²Λ.
+
+        (z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local
         ``rows`` (unit norm, grip orientation, folds; an Euler-angle model's angle rows) and
         ``_direct_terms``: Λ = λ·g_local − σ W_M + σ Σ U_direct.
         """
@@ -198,7 +220,7 @@ class AssembledKKT:
             [g_local, ca.jacobian(g_local, z), grad, hess, moments, direct],
         )
 
-    # ---- the nonlinear position rows: obstacles and self-contact slots ------------------------------
+    # ---- the nonlinear position rows: obstacles and self-contact slots -------------------------
     @functools.cached_property
     def tangent_function(self) -> ca.Function:
         """u_k → T_k = (1 + ε) t̂ (the first pass, for rows nonlinear in the positions)."""
@@ -209,139 +231,18 @@ class AssembledKKT:
         )
         return ca.Function("dlo_node_tangent", [u], [t * (1 + u[2 * w]) if self.stretch else t])
 
-    @staticmethod
-    def obstacle_function(kind: str) -> tuple[ca.Function, bool]:
-        """((x, parameters) → [h, ∇h, ∇²h] of one obstacle type at one point, whether ∇²h is not
-        zero).
-        """
-        from ...model.obstacles import OBSTACLE_TYPES
+    def inequality_g(self) -> ca.Function:
+        """Build ``dlo_obstacle_g`` (``assembled_contact.inequality_g``)."""
+        return inequality_g(self)
 
-        x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[kind].size)
-        h = OBSTACLE_TYPES[kind].h(x, po)
-        hess, grad = ca.hessian(h, x)
-        return ca.Function(f"dlo_h_{kind}", [x, po], [h, grad, ca.densify(hess)]), hess.nnz() > 0
-
-    def _nonlinear_rows(self, z, p, lam, T):
-        """The obstacle rows and self-contact slots: rows ψ_j(X_j)/L of X_j = κ x0 + Σ_k ω_jk T_k.
-        Returns (rows, their g, their part of a (3×M) and of ∂L/∂x0, and per group of rows sharing
-        their X: (ω (S×M, constant or MX), κ, [∇ψ/L (3×S) per block of rows], Σ λ∇²ψ/L (3×3S) or
-        None)).
-        """
-        nlp, M, L = self.nlp, self.M, self.nlp.length
-        lay, P = nlp.params, nlp.problem
-        rows_all, g_all, a, dx0, groups = [], [], ca.MX.zeros(3, M), ca.MX.zeros(3, 1), []
-        radius = p[lay["radius"]][0]
-        if P.obstacles:
-            omega = self.model.position_matrix(nlp.obstacle_s)  # S × M
-            S = omega.shape[0]
-            X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)
-            spread3 = _sparse(np.kron(np.eye(S), np.ones((1, 3))))  # λ_j → column 3j + c
-            weighted, grads = None, []
-            for i, ob in enumerate(P.obstacles):
-                rows = nlp.obstacle_rows[i]
-                fn, curved = self.obstacle_function(ob.type)
-                h, dh, d2h = fn.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S))
-                li = lam[rows] / L  # S
-                rows_all += rows
-                grad = dh
-                if (
-                    nlp.obstacle_slots
-                ):  # samples a contact slot replaces read −1 (obstacle_slots.py)
-                    on = p[lay[f"samples:{i}:on"]]
-                    li = li * on
-                    g_all.append((on * (h.T + radius) - (1 - on) * L) / L)
-                    grad = dh * ca.repmat(on.T, 3, 1)
-                else:
-                    g_all.append((h.T + radius) / L)
-                a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), ca.DM(omega))
-                dx0 += L * ca.mtimes(dh, li)
-                if curved:  # a half-space's h is linear: no curvature term
-                    term = d2h * ca.repmat(ca.mtimes(li.T, spread3), 3, 1)
-                    weighted = term if weighted is None else weighted + term
-                grads.append(grad / L)
-            groups.append((omega, 1.0, grads, weighted))
-        for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
-            # contact slots (solver/contact/obstacle_slots.py): rows on_k (ψ(X_k) + r) − (1 − on_k) L at
-            # X_k = x0 + T W_kᵀ
-            K, rows = nlp.obstacle_slots, nlp.slot_rows[i]
-            W, on = nlp.slot_matrix(p, i), p[lay[f"slots:{i}:on"]]
-            X = ca.repmat(z[0:3] * L, 1, K) + ca.mtimes(T, W.T)
-            fn, curved = self.obstacle_function(ob.type)
-            h, dh, d2h = fn.map(K, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, K))
-            li = lam[rows] * on / L
-            rows_all += rows
-            g_all.append((on * (h.T + radius) - (1 - on) * L) / L)
-            a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), W)
-            dx0 += L * ca.mtimes(dh, li)
-            weighted = (
-                d2h
-                * ca.repmat(ca.mtimes(li.T, _sparse(np.kron(np.eye(K), np.ones((1, 3))))), 3, 1)
-                if curved
-                else None
-            )
-            groups.append((W, 1.0, [dh * ca.repmat(on.T, 3, 1) / L], weighted))
-        slots = nlp.self_contact_slots
-        if slots:
-            rows = list(nlp.self_contact_rows)
-            Q = ca.horzcat(*[p[lay[f"self:{k}"]][:M] for k in range(slots)]).T  # K × M
-            b = ca.vertcat(*[p[lay[f"self:{k}"]][M] for k in range(slots)])
-            X = ca.mtimes(T, Q.T)  # 3 × K
-            lk = lam[rows] / L
-            rows_all += rows
-            g_all.append((b - ca.sum1(X * X).T) / L)
-            a += ca.mtimes(-2 * X * ca.repmat(lk.T, 3, 1), Q)
-            # ∇²ψ = −2 I: the weighted blocks are −2 λ_k/L I
-            weighted = ca.repmat(ca.DM(np.eye(3)), 1, slots) * ca.repmat(
-                ca.mtimes(-2 * lk.T, _sparse(np.kron(np.eye(slots), np.ones((1, 3))))), 3, 1
-            )
-            groups.append((Q, 0.0, [-2 * X / L], weighted))
-        return rows_all, g_all, a, dx0, groups
-
-    def _spread(self, omega, rows_per_sample: int):
-        """ω (S × M) → the (r S × dM) matrix whose row r j + c holds ω_jk at columns d k … d k + d
-        − 1.
-        """
-        S, d = omega.shape[0], self.d
-        if isinstance(omega, np.ndarray):
-            return ca.DM(np.repeat(np.repeat(omega, d, axis=1), rows_per_sample, axis=0))
-        repeat = _sparse(np.kron(np.eye(self.M), np.ones((1, d))))  # M × dM
-        return ca.mtimes(
-            _sparse(np.kron(np.eye(S), np.ones((rows_per_sample, 1)))), ca.mtimes(omega, repeat)
-        )
-
-    def _group_jacobian(self, grads, jt, E, omega, kappa: float, n: int):
-        """Rows ∇ψ_jᵀ ∂X_j/∂z / L for ``grads`` = ∇ψ/L (3 × S): Σ_k ω_jk (∇ψ_jᵀ ∂T/∂u)_k E_k + κ L
-        ∇ψ_jᵀ (x0).
-        """
-        jac = ca.mtimes(ca.mtimes(grads.T, jt) * self._spread(omega, 1), E)
-        if kappa:
-            jac += ca.horzcat(kappa * self.nlp.length * grads.T, ca.MX(grads.shape[1], n - 3))
-        return jac
-
-    def _position_derivatives(self, jt, E, omega, kappa: float, n: int):
-        """D = ∂X/∂z (3S × n, row 3j + c) for X_j = κ x0 + Σ_k ω_jk T_k; ``omega`` constant or MX
-        (S × M).
-        """
-        S, L = omega.shape[0], self.nlp.length
-        D = ca.mtimes(self._spread(omega, 3) * ca.repmat(jt, S, 1), E)
-        if kappa:
-            D += _sparse(
-                np.kron(np.ones((S, 1)), np.hstack([kappa * L * np.eye(3), np.zeros((3, n - 3))]))
-            )
-        return D
-
-    @staticmethod
-    def _block_diagonal(blocks: ca.MX) -> ca.MX:
-        """(3 × 3S) → the 3S × 3S block-diagonal matrix of its 3 × 3 blocks."""
-        S = blocks.shape[1] // 3
-        return ca.sparsity_cast(blocks, ca.diagcat(*[ca.Sparsity.dense(3, 3)] * S))
-
-    # ---- the KKT functions -------------------------------------------------------------------------
+    # ---- the KKT functions ----------------------------------------------------------------------
     def kkt_free(self) -> tuple[ca.Function, ca.Function]:
-        """(``dlo_kkt_free``, ``dlo_residual_free``): (z, p, λ_free) → [K, r, ∇f, energies] as the
+        """Build the contact-free KKT function and its residual alone.
+
+        (``dlo_kkt_free``, ``dlo_residual_free``): (z, p, λ_free) → [K, r, ∇f, energies] as the
         flattened one of ``StringNLP``, K = [∇²L Jᵀ; J 0] and r = [∇f + Jᵀλ; g] over the rows
         before the first inequality row; and (z, p, λ_free) → r alone (the same expression, without
-        K's products: a fraction of the cost, for the chord steps of ``native_newton``).
+        K's products: a fraction of the cost, for the chord steps of ``native.newton``).
         """
         nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
@@ -358,11 +259,13 @@ class AssembledKKT:
         )
 
     def kkt_free_split(self) -> ca.Function:
-        """``dlo_kkt_free_split``: (z, p, λ_free) → [K − [Eᵀ W 0; 0 0], r, ∇f, energies, W] with W
+        """Build the contact-free KKT function with K's per-node Hessian part left out.
+
+        ``dlo_kkt_free_split``: (z, p, λ_free) → [K − [Eᵀ W 0; 0 0], r, ∇f, energies, W] with W
         = diag(∇²φ_k) E (d·M × n): ``kkt_free``'s outputs with K's per-node Hessian part Eᵀ W left
         out, and W.  That product is most of K's cost in CasADi's sparse loops (E is dense within
         an element); the compiled functions add it with BLAS, by dense blocks of E
-        (``native_newton.NodeBlocks``).
+        (``native.newton.NodeBlocks``).
         """
         nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
@@ -381,7 +284,9 @@ class AssembledKKT:
         )
 
     def kkt_split(self) -> ca.Function:
-        """``dlo_kkt_split``: ``kkt``'s outputs with ∇²L's per-node part Eᵀ W left out, and W last
+        """Build ``kkt``'s function with ∇²L's per-node part left out, and W last.
+
+        ``dlo_kkt_split``: ``kkt``'s outputs with ∇²L's per-node part Eᵀ W left out, and W last
         (as ``kkt_free_split``).
         """
         nlp, n, rows = self.nlp, self.n, self.nlp.g_sym.shape[0]
@@ -401,9 +306,11 @@ class AssembledKKT:
         )
 
     def kkt(self) -> tuple[ca.Function, ca.Function]:
-        """(``dlo_kkt``, ``dlo_residual``): (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every
+        """Build the full KKT function over every row, and its residual alone.
+
+        (``dlo_kkt``, ``dlo_residual``): (z, p, λ) → [∇f, g, ∂g/∂z, ∇²L, energies] over every
         row, as ``StringNLP.kkt_fn``; and (z, p, λ) → [∇L; g] (the chord steps of
-        ``native_newton.ActiveNewton``).
+        ``native.newton.ActiveNewton``).
         """
         nlp, n, rows = self.nlp, self.n, self.nlp.g_sym.shape[0]
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam", rows)
@@ -423,63 +330,6 @@ class AssembledKKT:
             ca.Function("dlo_residual", [z, p, lam], [ca.densify(ca.vertcat(grad, g))]),
         )
 
-    def inequality_g(self) -> ca.Function:
-        """``dlo_obstacle_g``: (z, p) → the values of the rows after the free rows (folds,
-        obstacles, self-contact slots), as ``g[n_free_rows:]`` of the NLP.
-        """
-        nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
-        lay, P, nf = nlp.params, nlp.problem, nlp.n_free_rows
-        z, p = ca.MX.sym("z", n), ca.MX.sym("p", lay.size)
-        T = self.tangent_function.map(M, "serial")(ca.reshape(ca.mtimes(_sparse(self.E), z), d, M))
-        parts = []
-        local = self.local_rows[self.local_rows >= nf]
-        if local.size:
-            parts.append((local, self.local_function(local)(z, p, ca.MX(local.size, 1))[0]))
-        if P.obstacles:
-            from ...model.obstacles import OBSTACLE_TYPES
-
-            omega = self.model.position_matrix(nlp.obstacle_s)
-            S = omega.shape[0]
-            X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)
-            for i, ob in enumerate(P.obstacles):
-                x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
-                h = ca.Function(
-                    f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)]
-                )
-                values = (
-                    h.map(S, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, S)).T
-                    + p[lay["radius"]][0]
-                )
-                if nlp.obstacle_slots:
-                    on = p[lay[f"samples:{i}:on"]]
-                    values = on * values - (1 - on) * L
-                parts.append((np.array(nlp.obstacle_rows[i]), values / L))
-            for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
-                K, on = nlp.obstacle_slots, p[lay[f"slots:{i}:on"]]
-                X = ca.repmat(z[0:3] * L, 1, K) + ca.mtimes(T, nlp.slot_matrix(p, i).T)
-                x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
-                h = ca.Function(
-                    f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)]
-                )
-                values = h.map(K, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, K))
-                parts.append(
-                    (
-                        np.array(nlp.slot_rows[i]),
-                        (on * (values.T + p[lay["radius"]][0]) - (1 - on) * L) / L,
-                    )
-                )
-        if nlp.self_contact_slots:
-            K = nlp.self_contact_slots
-            Q = ca.horzcat(*[p[lay[f"self:{k}"]][:M] for k in range(K)]).T
-            b = ca.vertcat(*[p[lay[f"self:{k}"]][M] for k in range(K)])
-            X = ca.mtimes(T, Q.T)
-            parts.append((np.array(nlp.self_contact_rows), (b - ca.sum1(X * X).T) / L))
-        order = np.concatenate([r for r, _ in parts]) - nf
-        if sorted(order.tolist()) != list(range(nlp.g_sym.shape[0] - nf)):
-            raise ValueError("assembled inequality rows: rows not covered exactly once")
-        g = ca.vertcat(*[v for _, v in parts])[np.argsort(order).tolist()]
-        return ca.Function("dlo_obstacle_g", [z, p], [ca.densify(g)])
-
     def _position_rows(self, T, jt, x0, p, E):
         """(g, ∂g/∂z) of the position rows: c_r · (κ_r x0 + Σ_k W_rk T_k − target_r) / L."""
         L, d, n = self.nlp.length, self.d, self.n
@@ -487,33 +337,18 @@ class AssembledKKT:
         g = (
             ca.DM(self.kappa) * ca.mtimes(ca.DM(self.C), x0)
             + ca.sum1(ca.DM(self.C).T * X).T
-            - ca.mtimes(_sparse(self.target), p)
+            - ca.mtimes(sparse(self.target), p)
         ) / L
         omega_rep = np.repeat(self.Omega, d, axis=1)  # W_rk at column j + d k
         jac = ca.mtimes(ca.mtimes(ca.DM(self.C), jt) * ca.DM(omega_rep), E) / L
-        return g, jac + _sparse(_x0_columns(self.C * self.kappa[:, None], n))
-
-    @staticmethod
-    def _in_row_order(parts, rows: int):
-        """(g, ∂g/∂z) in the NLP's row order from [(rows, g, ∂g/∂z)] that cover rows 0 … rows − 1
-        once.
-        """
-        order = np.concatenate([r for r, _, _ in parts]) if parts else np.zeros(0, dtype=int)
-        if sorted(order.tolist()) != list(range(rows)):
-            raise ValueError("assembled KKT: rows not covered exactly once")
-        inverse = np.argsort(order).tolist()
-        if not parts:
-            return ca.MX(0, 1), None
-        return ca.vertcat(*[gp for _, gp, _ in parts])[inverse], ca.vertcat(
-            *[jp for _, _, jp in parts]
-        )[inverse, :]
+        return g, jac + sparse(x0_columns(self.C * self.kappa[:, None], n))
 
     def jacobian(self) -> ca.Function:
         """``constraint_jacobian``: (z, p) → ∂g/∂z over every row, without the Hessian's work."""
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         rows = nlp.g_sym.shape[0]
         z, p = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size)
-        E = _sparse(self.E)
+        E = sparse(self.E)
         u = ca.reshape(ca.mtimes(E, z), d, M)
         t = self.tangent_function
         uu = ca.SX.sym("u", d)
@@ -532,40 +367,36 @@ class AssembledKKT:
             )
             parts.append((self.local_rows, *local(z, p)))
         if rows > nlp.n_free_rows:
-            rows_nl, g_nl, _, _, groups = self._nonlinear_rows(z, p, ca.MX(rows, 1), T)
+            rows_nl, g_nl, _, _, groups = nonlinear_rows(self, z, p, ca.MX(rows, 1), T)
             if rows_nl:
                 jac_nl = [
-                    self._group_jacobian(gr, jt, E, omega, kappa, n)
+                    group_jacobian(self, gr, jt, E, omega, kappa, n)
                     for omega, kappa, grads, _ in groups
                     for gr in grads
                 ]
                 parts.append(
                     (np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl))
                 )
-        _, jac = self._in_row_order(parts, rows)
+        _, jac = in_row_order(parts, rows)
         return ca.Function(
             "constraint_jacobian", [z, p], [ca.densify(jac) if jac is not None else ca.MX(0, n)]
         )
 
-    def _system(self, z, p, lam, rows: int, split: bool = False):
-        """∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their
-        multipliers). ``split``: ∇²L without its per-node part Eᵀ W, and W = diag(∇²φ_k) E as a
-        seventh item.
+    def _linear_terms(self, p, lam, pos_rows: np.ndarray, gravity, m):
+        """Return (a, ∂ℓ/∂x0, forces): the terms linear in the positions (``_system``).
+
+        (a, ∂ℓ/∂x0, forces): the terms linear in the positions (``_system``).
+
+        a (3 × M) holds gravity through the weight moments ``m``, the point forces and the
+        position rows ``pos_rows`` (λ: every row's multipliers); ∂ℓ/∂x0 the same terms' part in x0.
         """
-        nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
-        lay, sigma = nlp.params, nlp.sigma
-        E = _sparse(self.E)
-        u = ca.reshape(ca.mtimes(E, z), d, M)
-        x0 = z[0:3] * L
-        gravity, m = p[lay["gravity"]], p[lay["weight_moments"]]
+        nlp, L, sigma, lay = self.nlp, self.nlp.length, self.nlp.sigma, self.nlp.params
         # a_k: the terms linear in the positions
         a = -sigma * ca.mtimes(gravity, m.T)
         forces = [p[lay[f"load:{i}:force"]] for i in range(len(nlp.problem.loads))]
         F = ca.horzcat(*forces) if forces else None
         if F is not None:
             a -= sigma * ca.mtimes(F, ca.DM(self.loads_W))
-        pos_rows = self.pos_rows[self.pos_rows < rows]
-        local_rows = self.local_rows[self.local_rows < rows]
         lam_pos = lam[pos_rows.tolist()] if pos_rows.size else ca.MX(0, 1)
         if pos_rows.size:
             a += ca.mtimes(
@@ -576,11 +407,48 @@ class AssembledKKT:
             dx0 -= sigma * L * ca.sum2(F)
         if pos_rows.size:
             dx0 += ca.mtimes(ca.DM(self.C * self.kappa[:, None]).T, lam_pos)
+        return a, dx0, forces
+
+    def _energies(self, p, x0, T, per_node, direct, moments, forces, gravity, m):
+        """Return the energies (bend, twist, stretch, gravity, work) from the per-node sums.
+
+        The energies (bend, twist, stretch, gravity, work) from the per-node sums.
+
+        ``per_node``: the bend, twist and stretch integrands per node; ``direct``: the node-local
+        parts added to them; ``moments``: the point moments' work.
+        """
+        lay = self.nlp.params
+        bend, twist, stretch = (
+            ca.sum2(e) + direct[i] if direct.sparsity().has_nz(i, 0) else ca.sum2(e)
+            for i, e in enumerate(per_node)
+        )
+        grav = -ca.dot(gravity, x0 * p[lay["weight_total"]] + ca.mtimes(T, m))
+        work = moments
+        for i, force in enumerate(forces):
+            work += ca.dot(force, x0 + ca.mtimes(T, ca.DM(self.loads_W[i])))
+        return ca.vertcat(bend, twist, stretch, grav, work)
+
+    def _system(self, z, p, lam, rows: int, split: bool = False):
+        """Return ∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows.
+
+        ∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their
+        multipliers). ``split``: ∇²L without its per-node part Eᵀ W, and W = diag(∇²φ_k) E as a
+        seventh item.
+        """
+        nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
+        lay = nlp.params
+        E = sparse(self.E)
+        u = ca.reshape(ca.mtimes(E, z), d, M)
+        x0 = z[0:3] * L
+        pos_rows = self.pos_rows[self.pos_rows < rows]
+        local_rows = self.local_rows[self.local_rows < rows]
+        gravity, m = p[lay["gravity"]], p[lay["weight_moments"]]
+        a, dx0, forces = self._linear_terms(p, lam, pos_rows, gravity, m)
         # rows nonlinear in the positions need T first (their gradient enters a_k)
-        nonlinear = ([], [], None, None, [])
+        nonlinear: tuple = ([], [], None, None, [])
         if rows > nlp.n_free_rows:
             T0 = self.tangent_function.map(M, "serial")(u)
-            nonlinear = self._nonlinear_rows(z, p, lam, T0)
+            nonlinear = nonlinear_rows(self, z, p, lam, T0)
             a += nonlinear[2]
             dx0 += nonlinear[3]
         bend_k, twist_k, stretch_k, T, grad_k, hess_k, jt_k = self.node_function.map(M, "serial")(
@@ -612,32 +480,17 @@ class AssembledKKT:
         if rows_nl:
             jac_nl = []
             for omega, kappa, grads, weighted in groups:
-                jac_nl += [self._group_jacobian(gr, jt_k, E, omega, kappa, n) for gr in grads]
+                jac_nl += [group_jacobian(self, gr, jt_k, E, omega, kappa, n) for gr in grads]
                 if weighted is not None:
-                    D = self._position_derivatives(jt_k, E, omega, kappa, n)
-                    hess += ca.mtimes(D.T, ca.mtimes(self._block_diagonal(weighted), D))
+                    D = position_derivatives(self, jt_k, E, omega, kappa, n)
+                    hess += ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted), D))
             parts.append((np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl)))
-        g, jac = self._in_row_order(parts, rows)
+        g, jac = in_row_order(parts, rows)
 
         grad_f = grad - ca.mtimes(jac.T, lam)
-        bend, twist, stretch = (
-            ca.sum2(e) + direct[i] if direct.sparsity().has_nz(i, 0) else ca.sum2(e)
-            for i, e in enumerate((bend_k, twist_k, stretch_k))
+        energies = self._energies(
+            p, x0, T, (bend_k, twist_k, stretch_k), direct, moments, forces, gravity, m
         )
-        grav = -ca.dot(gravity, x0 * p[lay["weight_total"]] + ca.mtimes(T, m))
-        work = moments
-        for i, force in enumerate(forces):
-            work += ca.dot(force, x0 + ca.mtimes(T, ca.DM(self.loads_W[i])))
-        energies = ca.vertcat(bend, twist, stretch, grav, work)
         if split:
             return grad, hess, g, jac, grad_f, energies, weighted_E
         return grad, hess, g, jac, grad_f, energies
-
-
-def _x0_columns(coefficients: np.ndarray, n: int) -> np.ndarray:
-    """A (rows × n) matrix with ``coefficients`` (rows × 3) in the x0 columns 0–2 (∂x0/∂z = L I,
-    /L).
-    """
-    out = np.zeros((coefficients.shape[0], n))
-    out[:, 0:3] = coefficients
-    return out

@@ -1,4 +1,6 @@
-"""The KKT functions of the Euler-angle models (planar and 3D), assembled from per-quadrature-node
+"""The KKT functions of the Euler-angle models, assembled from per-node derivatives.
+
+The KKT functions of the Euler-angle models (planar and 3D), assembled from per-quadrature-node
 derivatives.
 
 The same construction as ``assembled.py`` (read its docstring first) for a ``RitzModel``, whose
@@ -26,8 +28,8 @@ constant sparse E).  The Lagrangian splits as
   energy parts quadratic in the coefficients with the material matrices K of the NLP's parameters
   (c_b = c_θ, or c_φ in the planar model), differentiated directly as a small SX expression.
 
-Obstacle rows are handled by ``AssembledKKT._nonlinear_rows`` unchanged (X_j = x0 + Σ_k W_jk T_k);
-an Euler-angle model has no self-contact slots, unit-norm or fold rows.
+Obstacle rows are handled by ``assembled_contact.nonlinear_rows`` unchanged
+(X_j = x0 + Σ_k W_jk T_k); an Euler-angle model has no self-contact slots, unit-norm or fold rows.
 """
 
 from __future__ import annotations
@@ -42,7 +44,9 @@ from .assembled import AssembledKKT
 
 
 class AssembledEulerKKT(AssembledKKT):
-    """``AssembledKKT`` for a ``StringNLP`` whose model is a ``RitzModel`` (see the module
+    """``AssembledKKT`` for a ``StringNLP`` whose model is a ``RitzModel``.
+
+    ``AssembledKKT`` for a ``StringNLP`` whose model is a ``RitzModel`` (see the module
     docstring).
     """
 
@@ -67,7 +71,9 @@ class AssembledEulerKKT(AssembledKKT):
         self._rows()
 
     def _node_map(self) -> np.ndarray:
-        """E (d·M × n): row j + d k of E z is component j of u_k (B or B' times a field's
+        """Return E (d·M × n): row j + d k of E z is component j of u_k.
+
+        E (d·M × n): row j + d k of E z is component j of u_k (B or B' times a field's
         coefficients).
         """
         model, d = self.model, self.d
@@ -97,7 +103,9 @@ class AssembledEulerKKT(AssembledKKT):
 
     @functools.cached_property
     def node_function(self) -> ca.Function:
-        """(u_k, c_k) → [bend_k, twist_k, 0, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]: the per-node parts of the
+        """Build the per-node function of an Euler-angle model.
+
+        (u_k, c_k) → [bend_k, twist_k, 0, T_k, ∇φ_k, ∇²φ_k, ∂T/∂u]: the per-node parts of the
         energies (none in the planar model: its bend energy is quadratic) and φ_k's derivatives.
         """
         u = ca.SX.sym("u", self.d)
@@ -138,7 +146,9 @@ class AssembledEulerKKT(AssembledKKT):
         return ca.Function("dlo_node_tangent", [u], [self._tangent(u)])
 
     def _direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """(W_M, (½ c_bᵀ K_bend c_b, ½ c_ψᵀ K_twist c_ψ, ½ c_εᵀ K_stretch c_ε)): the point moments'
+        """Return the point moments' work and the energy parts quadratic in the coefficients.
+
+        (W_M, (½ c_bᵀ K_bend c_b, ½ c_ψᵀ K_twist c_ψ, ½ c_εᵀ K_stretch c_ε)): the point moments'
         work W_M = −Σ m_i φ(s_i) and the energy parts quadratic in the coefficients
         (``RitzModel.energy_terms``).
         """

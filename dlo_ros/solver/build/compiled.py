@@ -13,12 +13,8 @@ look-up costs an evaluation, never a code generation (bench/results/compile_cost
 
 from __future__ import annotations
 
-import hashlib
 import os
-import shutil
-import subprocess
-import threading
-import tempfile
+from typing import Any
 from pathlib import Path
 
 import ctypes
@@ -28,6 +24,7 @@ import numpy as np
 
 from ..native import cache_store
 from ..native.cache_store import UnusableLibrary, cache_dir
+from ..native.compiler import COMPILER_LOCK, FLAGS, build_library, compiler, fingerprint
 
 __all__ = [
     "FLAGS",
@@ -46,15 +43,15 @@ __all__ = [
 ]
 
 
-#: gcc's flags.  The assembled KKT functions compile in about the same time at -O1 and -O3, and run
-#: faster at -O3 (bench/results/compile_cost.md); the flattened ones took minutes at any level.
-FLAGS = ("-O3",)
+def _address(fn: Any) -> int:
+    """Return the address of the loaded C function ``fn`` (a ctypes function pointer).
 
-
-def compiler() -> str | None:
-    return (
-        os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
-    )
+    Never null: ``cache_store.load`` looked the symbol up.
+    """
+    address = ctypes.cast(fn, ctypes.c_void_p).value
+    if address is None:
+        raise RuntimeError("a loaded C function has no address")
+    return address
 
 
 class NativeFunction:
@@ -66,7 +63,10 @@ class NativeFunction:
     """
 
     def __init__(self, lib_path: Path, fn: ca.Function):
-        """UnusableLibrary if ``cache_store.load`` refuses ``lib_path`` (nothing of it was run)."""
+        """Load ``fn`` from its compiled library ``lib_path``.
+
+        UnusableLibrary if ``cache_store.load`` refuses ``lib_path`` (nothing of it was run).
+        """
         name = fn.name()
         self._lib = cache_store.load(lib_path, (name, f"{name}_work"))
         self._fn = getattr(self._lib, name)
@@ -100,12 +100,14 @@ class NativeFunction:
         return list(self._out_shapes)
 
     def address(self) -> tuple[int, int]:
-        """The addresses of the generated function and of its ``_work`` sizes function, for C that
-        calls it (``native_newton.UpdateOutputs``); valid while this object (its library) lives.
+        """Return the addresses of the generated function and of its ``_work`` function.
+
+        The addresses of the generated function and of its ``_work`` sizes function, for C that
+        calls it (``native.newton.UpdateOutputs``); valid while this object (its library) lives.
         """
         return (
-            ctypes.cast(self._fn, ctypes.c_void_p).value,
-            ctypes.cast(self._work_fn, ctypes.c_void_p).value,
+            _address(self._fn),
+            _address(self._work_fn),
         )
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
@@ -139,10 +141,12 @@ class InterpretedFunction:
         self._inputs = [np.zeros(fn.numel_in(i)) for i in range(fn.n_in())]
         self._out_shapes = [fn.size_out(i) for i in range(fn.n_out())]
         self._outputs = [np.zeros(r * c) for r, c in self._out_shapes]
+        # casadi's stubs want a size that the binding reads from the buffer, and numpy's stubs do
+        # not declare ndarray a Buffer: both calls are right as written (the tests call them)
         for i, a in enumerate(self._inputs):
-            self._buffer.set_arg(i, memoryview(a))
+            self._buffer.set_arg(i, memoryview(a))  # type: ignore[call-arg, arg-type]
         for i, a in enumerate(self._outputs):
-            self._buffer.set_res(i, memoryview(a))
+            self._buffer.set_res(i, memoryview(a))  # type: ignore[call-arg, arg-type]
 
     @property
     def function(self) -> ca.Function:
@@ -164,14 +168,18 @@ class InterpretedFunction:
 
 
 def library_path(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path:
-    """Where the compiled library of ``fn`` is (or will be) cached:
+    """Return where the compiled library of ``fn`` is (or will be) cached.
+
+    Where the compiled library of ``fn`` is (or will be) cached:
     ``<cache>/<name>_<fingerprint>.so``.
     """
     return cache_dir() / f"{fn.name()}_{fingerprint(fn, flags)}.so"
 
 
 def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | None:
-    """Path of the compiled library of ``fn`` if the cache holds it and ``cache_store`` would load
+    """Return the cached library of ``fn`` if the cache holds it and would load it.
+
+    Path of the compiled library of ``fn`` if the cache holds it and ``cache_store`` would load
     it (directory, owner, mode and sha256 checked), else None (no compiling, no C generated).
     """
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
@@ -181,77 +189,15 @@ def cached_library(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path | No
 
 
 def load_native(lib: Path, fn: ca.Function) -> NativeFunction | None:
-    """``fn``'s compiled library ``lib`` if it is in the cache and passes every check, else
+    """Load ``fn``'s compiled library ``lib``; None if it is missing or refused.
+
+    ``fn``'s compiled library ``lib`` if it is in the cache and passes every check, else
     None.
     """
     try:
         return NativeFunction(lib, fn)
     except UnusableLibrary:
         return None
-
-
-_SOURCE_DIGEST: bytes | None = None
-
-
-def _source_digest() -> bytes:
-    """Hash the dlo_ros sources that build the compiled functions.
-
-    They are model/, solver/build/ (the NLP and its derivatives), solver/options.py and the
-    outputs' solver/results/residual.py and wrenches.py.
-    """
-    global _SOURCE_DIGEST
-    if _SOURCE_DIGEST is None:
-        package = Path(__file__).resolve().parents[2]
-        solver = package / "solver"
-        files = (
-            sorted((package / "model").glob("*.py"))
-            + sorted((solver / "build").glob("*.py"))
-            + [solver / "options.py", solver / "results" / "residual.py"]
-            + [solver / "results" / "wrenches.py"]
-        )
-        h = hashlib.sha256()
-        for f in files:
-            h.update(f.name.encode() + f.read_bytes())
-        _SOURCE_DIGEST = h.digest()
-    return _SOURCE_DIGEST
-
-
-def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
-    """A cache key of ``fn`` that needs no code generation.
-
-    It hashes the CasADi version, the compiler flags, the dlo_ros sources that build NLPs, the
-    function's name, input/output shapes and instruction count, and its outputs at two fixed
-    pseudo-random inputs in [0.5, 1.5].  Constants baked into the expressions (the reference frame
-    R0, the objective scale σ, the basis and quadrature matrices) change those outputs, so two NLPs
-    that differ in any of them get different keys.
-    """
-    h = hashlib.sha256()
-    h.update(
-        ca.__version__.encode() + " ".join(flags).encode() + _source_digest() + fn.name().encode()
-    )
-    shapes = [fn.size_in(i) for i in range(fn.n_in())]
-    h.update(
-        repr((shapes, [fn.size_out(i) for i in range(fn.n_out())], fn.n_instructions())).encode()
-    )
-    rng = np.random.default_rng(20261122)
-    for _ in range(2):
-        out = fn(*[rng.uniform(0.5, 1.5, (r, c)) for r, c in shapes])
-        for o in out if isinstance(out, (list, tuple)) else [out]:
-            h.update(np.ascontiguousarray(np.asarray(o, dtype=float)).tobytes())
-    return h.hexdigest()[:16]
-
-
-#: Held while a compiler runs: never more than one per process (concurrent compiles multiply the
-#memory).
-COMPILER_LOCK = threading.Lock()
-
-
-def _generate(fn: ca.Function, tmp: str, also: tuple[ca.Function, ...] = ()) -> bytes:
-    gen = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
-    for f in (fn, *also):
-        gen.add(f)
-    gen.generate(tmp + os.sep)
-    return Path(tmp, f"{fn.name()}.c").read_bytes()
 
 
 def compiled(
@@ -262,7 +208,9 @@ def compiled(
     extra_source: str = "",
     also: tuple[ca.Function, ...] = (),
 ) -> tuple[NativeFunction | InterpretedFunction, bool]:
-    """(callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
+    """Return a callable of ``fn``: its library from the cache or built now, else interpreted.
+
+    (callable, compiled?).  Safe to call concurrently from several processes.  ``lib``: the
     ``library_path`` of ``fn``, when the caller has it already (it costs an evaluation of ``fn``);
     ``extra_source``: C appended to ``fn``'s, ``also``: functions compiled into the same library
     (then ``lib`` must be a path keyed by them too).
@@ -281,38 +229,3 @@ def compiled(
             if native is None and build_library(fn, lib, cc, flags, nice, extra_source, also):
                 native = load_native(lib, fn)
     return (native, True) if native is not None else (InterpretedFunction(fn), False)
-
-
-def build_library(
-    fn: ca.Function,
-    lib: Path,
-    cc: str,
-    flags: tuple[str, ...] = FLAGS,
-    nice: int = 0,
-    extra_source: str = "",
-    also: tuple[ca.Function, ...] = (),
-) -> bool:
-    """Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile
-    it to the shared object ``lib`` in a private temporary directory and store it with its sha256
-    record (``cache_store.store``: atomic, 0600; concurrent processes never load a half-written
-    file); False if the cache is unsafe or unwritable (one warning) or the compiler fails.  Callers
-    hold COMPILER_LOCK.
-    """
-    if not cache_store.writable_dir(lib.parent):  # before spending a compile on it
-        return False
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            source = Path(tmp, f"{fn.name()}.c")
-            source.write_bytes(_generate(fn, tmp, also) + extra_source.encode())
-            tmp_lib = Path(tmp, lib.name)
-            cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(source), "-lm"]
-            if nice and shutil.which("nice"):
-                cmd = ["nice", "-n", str(nice), *cmd]
-            if subprocess.run(cmd, capture_output=True, text=True).returncode != 0:
-                return False
-            return cache_store.store(lib, tmp_lib.read_bytes())
-    except (OSError, RuntimeError) as e:  # the temporary directory is full or unwritable
-        # (CasADi's code generator reports a failed write as RuntimeError)
-        reason = getattr(e, "strerror", None) or e
-        cache_store.warn_once(lib.parent, f"C cannot be generated ({reason})")
-        return False

@@ -19,7 +19,9 @@ from .parameters import ProblemParameters
 
 
 def anchor_grip(problem: Problem) -> Grip | None:
-    """The grip the twist-free frames start from: the first (smallest s) that holds an
+    """Return the grip the twist-free frames start from.
+
+    The grip the twist-free frames start from: the first (smallest s) that holds an
     orientation.
     """
     return next((g for g in sorted(problem.grips, key=lambda g: g.s) if g.mode != "pin"), None)
@@ -43,7 +45,9 @@ def frames_psi(
     s: np.ndarray,
     p: np.ndarray | None = None,
 ) -> np.ndarray:
-    """ψ(s) [rad] of an Euler model as published: the solved field, or the zero-twist ψ anchored at
+    """Return ψ(s) [rad] of an Euler model as published.
+
+    ψ(s) [rad] of an Euler model as published: the solved field, or the zero-twist ψ anchored at
     the first held grip (its target ψ from ``p``, or from ``problem`` packed at z).
     """
     m = nlp.model
@@ -62,7 +66,9 @@ def frames_psi(
 def pose_frames(
     nlp: StringNLP, parameters: ProblemParameters, problem: Problem, z: np.ndarray, s: np.ndarray
 ) -> np.ndarray:
-    """Frames (len(s), 3, 3) in the pose convention (columns: tangent, y, z) of solution z.  A
+    """Return the frames (len(s), 3, 3) of solution z in the pose convention.
+
+    Frames (len(s), 3, 3) in the pose convention (columns: tangent, y, z) of solution z.  A
     director model without twist carries its frames without twist from the first held grip.
     """
     if not nlp.director:
@@ -81,7 +87,9 @@ def frames(
     s: np.ndarray,
     p: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Material frames Q(s) (columns ξ, η, ζ) of solution z; ψ from the zero-twist rule if not
+    """Return the material frames Q(s) (columns ξ, η, ζ) of solution z.
+
+    Material frames Q(s) (columns ξ, η, ζ) of solution z; ψ from the zero-twist rule if not
     solved.
     """
     if nlp.director:
@@ -103,7 +111,9 @@ def node_frame(nlp: StringNLP, z: np.ndarray, s: float) -> tuple[np.ndarray, np.
 
 
 def flipped_grips(nlp: StringNLP, problem: Problem, z: np.ndarray) -> str:
-    """Grips of a director model whose orientation rows hold on the wrong sheet (t = −t_g, or d1 =
+    """Return the grips of a director model whose orientation rows hold on the wrong sheet.
+
+    Grips of a director model whose orientation rows hold on the wrong sheet (t = −t_g, or d1 =
     −d1_g for a clamp with twist): the rows t·R_g e_y = t·R_g e_z = 0 allow it, the grip does
     not.
     """

@@ -1,4 +1,6 @@
-"""The CasADi functions a solve evaluates, interpreted at first and swapped for compiled C when it
+"""The CasADi functions a solve evaluates: interpreted first, compiled C when ready.
+
+The CasADi functions a solve evaluates, interpreted at first and swapped for compiled C when it
 is ready.
 
 One ``NlpFunctions`` per ``StringNLP``:
@@ -11,10 +13,10 @@ One ``NlpFunctions`` per ``StringNLP``:
   (``newton_fn``);
 * ``newton_native``: once the contact-free function is compiled, the whole Newton loop as one
   compiled
-  call (``native_newton.NativeNewton``; None until then);
+  call (``native.newton.NativeNewton``; None until then);
 * ``newton_active``: once the full KKT function is compiled, Newton's steps with a fixed active set
   as
-  one compiled call (``native_newton.ActiveNewton``, in the KKT function's own library; None until
+  one compiled call (``native.newton.ActiveNewton``, in the KKT function's own library; None until
   then);
 * ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles);
 * ``outputs(z, p, λ, prof)``: a solution's published outputs in one call (``output_function.py``;
@@ -22,7 +24,7 @@ One ``NlpFunctions`` per ``StringNLP``:
   for the models it does not cover, whose outputs numpy evaluates), compiled last.
 
 The KKT functions are compiled split (``StringNLP.kkt_free_split_fn``, ``kkt_split_fn``: without
-the Hessian's per-node part Eᵀ W, which ``native_newton.WithNodePart`` adds by BLAS, as the
+the Hessian's per-node part Eᵀ W, which ``native.newton.WithNodePart`` adds by BLAS, as the
 compiled loops do).
 
 Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
@@ -37,6 +39,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -74,9 +77,9 @@ class NlpFunctions:
             InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
         )
         self.newton_native = None
-        self.newton_active = None
+        self.newton_active: native_newton.ActiveNewton | None = None
         #: the outputs' function and its structure (grid, profiles), None where numpy builds the
-        #outputs
+        # outputs
         self.output_function = (
             OutputFunction(
                 nlp, nlp.problem, np.linspace(0.0, nlp.length, nlp.options.output_points)
@@ -94,17 +97,21 @@ class NlpFunctions:
         self.compile_time_s = 0.0  # wall time of the compile that finished them [s]
         self.retired = False  # the solver was rebuilt: a running compile stops at its next swap
         #: ('cached' mode) (name, function, library path) of each library not in the cache at the
-        #start
-        self.waiting: list[tuple[str, ca.Function, object]] = []
+        # start
+        self.waiting: list[tuple[str, ca.Function, Path]] = []
 
     def retire(self) -> None:
-        """The solver no longer uses these functions: a background compile stops before its next
+        """Mark these functions unused: a background compile stops before its next swap.
+
+        The solver no longer uses these functions: a background compile stops before its next
         swap.
         """
         self.retired = True
 
     def start_compile(self, mode: str, lock: threading.Lock) -> threading.Thread | None:
-        """Load the libraries compiled earlier and compile the others as ``mode`` says; the
+        """Load the libraries compiled earlier and compile the others as ``mode`` says.
+
+        Load the libraries compiled earlier and compile the others as ``mode`` says; the
         background thread if one was started.  ``lock``: the solver's lock, held for every swap.
         """
         if os.environ.get("DLO_NO_COMPILE"):
@@ -138,15 +145,13 @@ class NlpFunctions:
 
         def work(locked: bool) -> None:
             t0 = time.perf_counter()
-            for k, (name, fn, lib) in enumerate(
-                todo
-            ):  # the derivatives first, the outputs' function last
+            # the derivatives first, the outputs' function last
+            for k, (name, fn, lib) in enumerate(todo):
                 if self.retired:  # the scene was rebuilt: nothing more to compile for this one
                     return
                 nice = 10 if mode == "background" else 0
-                active = (
-                    name == "kkt"
-                )  # with its active-set loop and the residual function that loop uses
+                # with its active-set loop and the residual function that loop uses
+                active = name == "kkt"
                 # its -D settings: native_newton.active_flags
                 flags = native_newton.active_flags(fn, nlp.residual_fn) if active else FLAGS
                 native, ok = compiled(
@@ -164,9 +169,8 @@ class NlpFunctions:
                     if ok and name == "kkt_free"
                     else None
                 )
-                with (
-                    threading.Lock() if locked else lock
-                ):  # blocking: the caller may hold the solver's lock
+                # blocking: the caller may hold the solver's lock
+                with threading.Lock() if locked else lock:
                     if not ok or self.retired:  # no compiler, or the scene was rebuilt meanwhile
                         return
                     self._install(name, native, fn, lib, loop)
@@ -184,7 +188,9 @@ class NlpFunctions:
         return thread
 
     def _load(self, name: str, fn: ca.Function, lib) -> bool:
-        """Swap in the library ``lib`` of the function ``name`` if it is in the cache (for the
+        """Swap in the library ``lib`` of the function ``name`` if it is in the cache.
+
+        Swap in the library ``lib`` of the function ``name`` if it is in the cache (for the
         contact-free function: with its Newton loop's library); False if it is not there yet.
         """
         native = native_newton.cached(self.nlp, kkt_lib=lib) if name == "kkt_free" else None
@@ -195,8 +201,10 @@ class NlpFunctions:
         return True
 
     def _install(self, name: str, native, fn: ca.Function, lib, loop) -> None:
-        """Put the compiled ``native`` of the function ``name`` in place: for the KKT functions
-        (compiled split) with the Hessian's per-node part added (``native_newton.WithNodePart``),
+        """Put the compiled ``native`` of the function ``name`` in place.
+
+        Put the compiled ``native`` of the function ``name`` in place: for the KKT functions
+        (compiled split) with the Hessian's per-node part added (``native.newton.WithNodePart``),
         the contact-free one with its compiled Newton step and loop ``loop``, the full one with its
         active-set loop.
         """
@@ -215,9 +223,11 @@ class NlpFunctions:
         self._attach()
 
     def _attach(self) -> None:
-        """Let the compiled loops evaluate, in their own call, what a converged update needs beyond
+        """Let the compiled loops evaluate what a converged update needs beyond the loop.
+
+        Let the compiled loops evaluate, in their own call, what a converged update needs beyond
         the loop: the obstacle rows (the contact-free loop) and the outputs, as far as those are
-        compiled (``native_newton.UpdateOutputs``).
+        compiled (``native.newton.UpdateOutputs``).
         """
         obstacle = self.obstacle_g if isinstance(self.obstacle_g, NativeFunction) else None
         outputs = self.outputs if isinstance(self.outputs, NativeFunction) else None
@@ -227,7 +237,9 @@ class NlpFunctions:
             self.newton_active.after = native_newton.UpdateOutputs(self.nlp, None, outputs)
 
     def load_cached(self) -> bool:
-        """('cached' mode) Swap in the libraries that reached the cache since ``start_compile``
+        """Swap in the libraries that reached the cache since ``start_compile``.
+
+        ('cached' mode) Swap in the libraries that reached the cache since ``start_compile``
         (another process or solver compiled them); True if anything was swapped in.  The caller
         holds the solver's lock.  A check costs a file lookup per missing library.
         """
@@ -238,7 +250,9 @@ class NlpFunctions:
         return bool(loaded)
 
     def _active_loop(self, lib) -> native_newton.ActiveNewton | None:
-        """The active-set Newton loop in the full KKT function's library (None if it cannot be
+        """Load the active-set Newton loop from the full KKT function's library.
+
+        The active-set Newton loop in the full KKT function's library (None if it cannot be
         loaded).
         """
         try:
@@ -253,7 +267,9 @@ class NlpFunctions:
             return None
 
     def _compiled_newton_step(self, split: ca.Function, lib) -> InterpretedFunction:
-        """``newton_fn`` around the compiled split contact-free function (``casadi.external``) plus
+        """Build ``newton_fn`` around the compiled split contact-free function.
+
+        ``newton_fn`` around the compiled split contact-free function (``casadi.external``) plus
         the Hessian's per-node part (a CasADi product: this path serves only while the loop is
         missing); the current one if the library cannot be loaded (then the steps are still right,
         only slower).

@@ -23,7 +23,9 @@ from .parameters import ProblemParameters
 
 
 def initial_guess(nlp: StringNLP, parameters: ProblemParameters, problem: Problem) -> np.ndarray:
-    """The buckled guess z (see the module docstring); ``parameters`` packs the grips' angle
+    """Return the buckled initial guess z (see the module docstring).
+
+    The buckled guess z (see the module docstring); ``parameters`` packs the grips' angle
     targets.
     """
     if nlp.director:
@@ -38,7 +40,7 @@ def initial_guess(nlp: StringNLP, parameters: ProblemParameters, problem: Proble
         chord = b.pose.position - a.pose.position
         span = b.s - a.s
         ratio = min(1.0, np.linalg.norm(chord) / span)
-        alpha = inverse_j0(ratio)
+        alpha = inverse_j0(float(ratio))
         d = chord / np.linalg.norm(chord)
     else:
         d = quat_to_matrix(a.pose.orientation)[:, 0]
@@ -93,7 +95,9 @@ def initial_guess(nlp: StringNLP, parameters: ProblemParameters, problem: Proble
 
 
 def director_guess(nlp: StringNLP, problem: Problem) -> np.ndarray:
-    """The buckled guess for a director model, as nodal frames: tangent t(s) = cos β d + sin β e
+    """Return the buckled guess for a director model, as nodal frames.
+
+    The buckled guess for a director model, as nodal frames: tangent t(s) = cos β d + sin β e
     with β = α sin 2πu (d the chord, e toward gravity), bent to meet every held tangent (the
     piecewise-linear interpolant of the misfits at the grips is added), frames carried along
     without twist from the first clamp and turned about t by the interpolated roll misfit at the
@@ -107,7 +111,7 @@ def director_guess(nlp: StringNLP, problem: Problem) -> np.ndarray:
     if len(grips) >= 2 and np.linalg.norm(b.pose.position - a.pose.position) > 1e-9:
         chord = b.pose.position - a.pose.position
         span = b.s - a.s
-        alpha = inverse_j0(min(1.0, np.linalg.norm(chord) / span))
+        alpha = inverse_j0(float(min(1.0, np.linalg.norm(chord) / span)))
         d = chord / np.linalg.norm(chord)
     else:
         d = quat_to_matrix(a.pose.orientation)[:, 0]
@@ -149,7 +153,9 @@ def director_guess(nlp: StringNLP, problem: Problem) -> np.ndarray:
 
 
 def match_clamp_rolls(nlp: StringNLP, frames: np.ndarray, problem: Problem) -> np.ndarray:
-    """Node frames (director model) turned about their tangents by the piecewise-linear interpolant
+    """Turn node frames about their tangents to match the clamps' rolls.
+
+    Node frames (director model) turned about their tangents by the piecewise-linear interpolant
     of the roll misfit at the clamps (each in (−π, π]): a shape from a model without twist (or a
     target turned while the plane was held) then meets the clamps' rolls, so Newton does not settle
     on the flipped sheet d1 = −d1_g that the clamp rows also admit.
@@ -174,7 +180,9 @@ def match_clamp_rolls(nlp: StringNLP, frames: np.ndarray, problem: Problem) -> n
 
 
 def inverse_j0(ratio: float) -> float:
-    """α in [0, 2.4048] with J0(α) = ratio (chord/length of the guess β = −α sin 2πu), by
+    """Return α in [0, 2.4048] with J0(α) = ratio, by bisection.
+
+    α in [0, 2.4048] with J0(α) = ratio (chord/length of the guess β = −α sin 2πu), by
     bisection.
     """
     lo, hi = 0.0, 2.404825557695773

@@ -19,10 +19,13 @@ from ...model.problem import Problem
 from .functions import NlpFunctions
 from .nlp import StringNLP
 from .parameters import ProblemParameters
+from .structure import breakpoint_node
 
 
 class ExactMomentKKT:
-    """(z, p, λ) → [∇f, g, ∂g/∂z, K, energies] of the exact equations under ``problem``'s point
+    """The KKT function of the exact equations under the problem's point moments.
+
+    (z, p, λ) → [∇f, g, ∂g/∂z, K, energies] of the exact equations under ``problem``'s point
     moments: ``NlpFunctions.kkt`` with the moments' centres at z, K with the blocks C added (module
     docstring).
     """
@@ -36,7 +39,7 @@ class ExactMomentKKT:
         self.loads = []  # (z slice of the load's node values, p slice of its moment)
         for i, ld in enumerate(problem.loads):
             if np.any(np.asarray(ld.moment) != 0.0):
-                first = lay.rotation.start + lay.width * m.mesh.node_index(ld.s)
+                first = lay.rotation.start + lay.width * breakpoint_node(m.mesh, ld.s)
                 self.loads.append(
                     (slice(first, first + lay.width), nlp.params[f"load:{i}:moment"])
                 )

@@ -1,4 +1,6 @@
-"""The NLP's parameter vector p for a scene: everything a solve may change without rebuilding the
+"""The NLP's parameter vector p for a scene.
+
+The NLP's parameter vector p for a scene: everything a solve may change without rebuilding the
 NLP.
 
 p holds, at the quadrature nodes, the bending, twisting and stretching stiffnesses Rf, Rt, Re
@@ -24,6 +26,7 @@ work −m·φ is exact); ``check_moments`` rejects others.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -40,15 +43,18 @@ def check_moments(nlp: StringNLP, problem: Problem) -> None:
     n = nlp.r0[:, 2]
     for i, ld in enumerate(problem.loads):
         m = np.asarray(ld.moment, dtype=float)
-        if np.linalg.norm(m - np.dot(m, n) * n) > 1e-9 * max(1.0, np.linalg.norm(m)):
+        if np.linalg.norm(m - np.dot(m, n) * n) > 1e-9 * max(1.0, float(np.linalg.norm(m))):
             raise ValueError(
-                f"loads[{i}].moment: only moments about the working-plane normal n = {np.round(n, 6).tolist()} "
+                f"loads[{i}].moment: only moments about the working-plane normal "
+                f"n = {np.round(n, 6).tolist()} "
                 "are supported (their work −m·φ is exact); this moment has other components"
             )
 
 
 class ProblemParameters:
-    """Packs p for one NLP (see the module docstring), caching what a stream of new grip poses
+    """Packs p for one NLP, caching what a stream of new grip poses leaves unchanged.
+
+    Packs p for one NLP (see the module docstring), caching what a stream of new grip poses
     leaves unchanged: the scene's part of p, and the Euler angles of the grip poses of the last few
     calls.
     """
@@ -58,7 +64,7 @@ class ProblemParameters:
         self._scene_p: tuple | None = None  # (scene objects, gravity, p without grip targets)
         self._euler_cache: dict[int, tuple] = {}
         #: the contact slots the last ``pack`` found, per obstacle (read by the solver right after
-        #it)
+        # it)
         self.placements: list[OSL.SlotPlacement] = []
 
     def pack(
@@ -68,7 +74,9 @@ class ProblemParameters:
         keep: np.ndarray | None = None,
         slots: bool = True,
     ) -> np.ndarray:
-        """The NLP parameter vector for ``problem``; angles unwrapped to, and obstacle contact
+        """Return the NLP parameter vector for ``problem``.
+
+        The NLP parameter vector for ``problem``; angles unwrapped to, and obstacle contact
         slots placed on, the shape ``z_reference``.  ``keep``: a parameter vector whose slots stay
         while they are still placed well for ``z_reference``; ``slots`` False: leave them empty (a
         caller that reads grip angles only).
@@ -104,7 +112,9 @@ class ProblemParameters:
     def write_slots(
         self, p: np.ndarray, i: int, placement: OSL.SlotPlacement, keep: np.ndarray | None = None
     ) -> None:
-        """Obstacle i's slots of p (in place) from ``placement`` (``keep``: a vector holding its
+        """Write obstacle i's slots of p (in place) from ``placement``.
+
+        Obstacle i's slots of p (in place) from ``placement`` (``keep``: a vector holding its
         rows already).
         """
         nlp, lay = self.nlp, self.nlp.params
@@ -122,7 +132,9 @@ class ProblemParameters:
     def place_slots(
         self, problem: Problem, z: np.ndarray, p: np.ndarray, keep: np.ndarray | None = None
     ) -> list[OSL.SlotPlacement]:
-        """Fill every obstacle's contact slots of p (in place) at the closest approaches of shape z
+        """Place every obstacle's contact slots of p (in place) at shape z's closest approaches.
+
+        Fill every obstacle's contact slots of p (in place) at the closest approaches of shape z
         (``obstacle_slots``); ``keep``: a vector whose slots stay where they still fit.  Returns
         the placements (with the shape's clearance at each slot).
         """
@@ -154,7 +166,9 @@ class ProblemParameters:
         return placements
 
     def scene(self, problem: Problem) -> np.ndarray:
-        """The parameter vector without grip targets (zeros there), cached while the string,
+        """Return the parameter vector without grip targets (zeros there), cached.
+
+        The parameter vector without grip targets (zeros there), cached while the string,
         gravity, loads, relative positions and obstacles are the same objects (a stream only
         changes grip poses).
         """
@@ -197,7 +211,7 @@ class ProblemParameters:
         self._scene_p = (key, np.array(problem.gravity, dtype=float), p)
         return p
 
-    def grip_angles(self, pose: GripPose, reference: tuple[float, float, float]) -> np.ndarray:
+    def grip_angles(self, pose: GripPose, reference: Sequence[float]) -> np.ndarray:
         """Euler angles (φ, θ, ψ) of a grip orientation, on the branch nearest ``reference``."""
         phi, theta, psi = self._pose_euler(pose)
         best, best_d = None, math.inf
@@ -212,7 +226,9 @@ class ProblemParameters:
         return np.array(best)
 
     def _pose_euler(self, pose: GripPose) -> tuple[float, float, float]:
-        """``euler_from_frame`` of a grip pose in this NLP's frame, remembered for the pose objects
+        """Return ``euler_from_frame`` of a grip pose in this NLP's frame, remembered.
+
+        ``euler_from_frame`` of a grip pose in this NLP's frame, remembered for the pose objects
         of the last few calls (a stream moves one grip; the others keep their GripPose objects).
         """
         cache = self._euler_cache
@@ -226,7 +242,9 @@ class ProblemParameters:
         return angles
 
     def _grip_reference_angles(self, problem: Problem, z: np.ndarray) -> list[list[float]]:
-        """(φ, θ, ψ) of shape z at every grip's s, in one product B(s_grips) [c_φ c_θ c_ψ] (θ ≡ π/2
+        """Return (φ, θ, ψ) of shape z at every grip's s.
+
+        (φ, θ, ψ) of shape z at every grip's s, in one product B(s_grips) [c_φ c_θ c_ψ] (θ ≡ π/2
         and ψ ≡ 0 where they are not unknowns, as ``RitzModel.fields``).
         """
         m = self.nlp.model
@@ -239,7 +257,9 @@ class ProblemParameters:
         return out.tolist()
 
     def centre_moments(self, problem: Problem, z: np.ndarray, p: np.ndarray) -> None:
-        """Centre each point moment's pseudo-potential (in p, in place) on the rotation of shape z
+        """Centre each point moment's pseudo-potential on shape z's rotation at its load.
+
+        Centre each point moment's pseudo-potential (in p, in place) on the rotation of shape z
         at its load.
         """
         m, lay = self.nlp.model, self.nlp.params

@@ -1,12 +1,15 @@
-"""Newton with an active set in one compiled call (``ActiveNewton``): the driver
+"""Newton with an active set in one compiled call (``ActiveNewton``).
+
+Newton with an active set in one compiled call (``ActiveNewton``): the driver
 ``native/newton_active.c``, compiled into the full KKT function's library
-(``native_build.active_library_path``).
+(``native.build.active_library_path``).
 """
 
 from __future__ import annotations
 
 import ctypes
 from dataclasses import dataclass
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -14,8 +17,9 @@ import numpy as np
 from .cache_store import load as load_library
 from .blocks import NodeBlocks, eigen_lapack, lapack_pointer
 from .outputs import ComputedOutputs, UpdateOutputs
-from .settings import CONVERGED, EIGEN_FOUND
-from ..build.nlp import (
+from .settings import (
+    CONVERGED,
+    EIGEN_FOUND,
     JOIN_TOLERANCE,
     LEAVE_TOLERANCE,
     NEWTON_CHORD_CONTRACTION,
@@ -29,9 +33,40 @@ from ..build.nlp import (
 )
 
 
+#: ``dlo_newton_active_run``'s argument types (``newton_active.c``), in its order: the LAPACK/BLAS
+#: pointers and the node map (4 pointers, 2 ints), n, rows, the active and switchable flags, the
+#: switches, step limits and whether ``first`` is given (4 ints), the settings (9 doubles), the
+#: arrays (9), the counters (2), then the eigenpair's and the outputs' pointers (6).
+_DP, _IP, _VP = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
+_ARGTYPES: list[Any] = [
+    *[_VP] * 4,
+    *[ctypes.c_int] * 4,
+    *[_IP] * 2,
+    *[ctypes.c_int] * 4,
+    *[ctypes.c_double] * 9,
+    *[_DP] * 9,
+    *[_IP] * 2,
+    *[_VP] * 6,
+]
+#: the settings the call passes (doubles), in ``dlo_newton_active_run``'s order
+_SETTINGS = (
+    NEWTON_MAX_STEP,
+    NEWTON_REGULARISATION,
+    NEWTON_DUAL_TOLERANCE,
+    NEWTON_PRIMAL_TOLERANCE,
+    NEWTON_CHORD_TOLERANCE,
+    NEWTON_CHORD_CONTRACTION,
+    NEWTON_CHORD_START,
+    JOIN_TOLERANCE,
+    LEAVE_TOLERANCE,
+)
+
+
 @dataclass
 class ActiveOutcome:
-    """What one ``ActiveNewton`` call returns: ``code`` (CONVERGED, …), the last iterate (z, λ over
+    """What one ``ActiveNewton`` call returns.
+
+    What one ``ActiveNewton`` call returns: ``code`` (CONVERGED, …), the last iterate (z, λ over
     every row), the derivatives [∇f, g, ∂g/∂z, ∇²L, energies] evaluated there, the steps taken and
     the active set there.
     """
@@ -56,7 +91,9 @@ class ActiveOutcome:
 
 
 class ActiveNewton:
-    """Newton with an active set in one compiled call: the inner loop of ``newton._active_steps``
+    """Newton with an active set in one compiled call.
+
+    Newton with an active set in one compiled call: the inner loop of ``newton._active_steps``
     (its regularised steps, row switches, convergence test and step limit), whose tail is chord
     steps.  Each step evaluates the full KKT function (Newton's own steps, the same iterates and
     row decisions) until a check of the rows changes none and the steps are below
@@ -77,56 +114,8 @@ class ActiveNewton:
     ):
         self._lib = load_library(lib_path, ("dlo_newton_active_run",))  # checked, as above
         self._run = self._lib.dlo_newton_active_run
-        dp, ip, c_int, c_double = (
-            ctypes.POINTER(ctypes.c_double),
-            ctypes.POINTER(ctypes.c_int),
-            ctypes.c_int,
-            ctypes.c_double,
-        )
-        vp = ctypes.c_void_p
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [
-            vp,
-            vp,
-            vp,
-            vp,
-            c_int,
-            c_int,
-            c_int,
-            c_int,
-            ip,
-            ip,
-            c_int,
-            c_int,
-            c_int,
-            c_int,
-            c_double,
-            c_double,
-            c_double,
-            c_double,
-            c_double,
-            c_double,
-            c_double,
-            c_double,
-            c_double,
-            dp,
-            dp,
-            dp,
-            dp,
-            dp,
-            dp,
-            dp,
-            dp,
-            dp,
-            ip,
-            ip,
-            vp,
-            vp,
-            vp,
-            vp,
-            vp,
-            vp,
-        ]
+        self._run.argtypes = _ARGTYPES
         self._map, self._lapack = node_map, eigen_lapack()  # kept alive for the calls
         self._equality = np.ascontiguousarray(equality, dtype=np.intc)
         self._eig_value, self._eig_code, self._direction = (
@@ -166,7 +155,9 @@ class ActiveNewton:
         first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
         prof: np.ndarray | None = None,
     ) -> ActiveOutcome:
-        """From (z, λ) with the rows ``active`` held at ``ub`` (both over every row); up to
+        """Run Newton with an active set from (z, λ) in one compiled call.
+
+        From (z, λ) with the rows ``active`` held at ``ub`` (both over every row); up to
         ``switches`` changes among the rows ``switchable``; ``max_steps``: the most evaluations of
         the full KKT function on the way (the one at the answer not counted); ``first``: (∇f, g,
         ∂g/∂z, ∇²L) for the first step instead of an evaluation; ``prof``: the string's profiles,
@@ -187,35 +178,19 @@ class ActiveNewton:
             jac[:] = np.asarray(first[2], dtype=float).ravel(order="F")
             hess[:] = np.asarray(first[3], dtype=float).ravel(order="F")
         steps, evaluations = ctypes.c_int(0), ctypes.c_int(0)
-        dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+        arrays = (z, p, lam, ub, grad, g, jac, hess, energies)
         code = self._run(
             *self._head,
             n,
             rows,
-            act.ctypes.data_as(ip),
-            switch.ctypes.data_as(ip),
+            act.ctypes.data_as(_IP),
+            switch.ctypes.data_as(_IP),
             int(switches),
             int(max_steps),
             NEWTON_CHORD_STEPS,
             int(first is not None),
-            NEWTON_MAX_STEP,
-            NEWTON_REGULARISATION,
-            NEWTON_DUAL_TOLERANCE,
-            NEWTON_PRIMAL_TOLERANCE,
-            NEWTON_CHORD_TOLERANCE,
-            NEWTON_CHORD_CONTRACTION,
-            NEWTON_CHORD_START,
-            JOIN_TOLERANCE,
-            LEAVE_TOLERANCE,
-            z.ctypes.data_as(dp),
-            p.ctypes.data_as(dp),
-            lam.ctypes.data_as(dp),
-            ub.ctypes.data_as(dp),
-            grad.ctypes.data_as(dp),
-            g.ctypes.data_as(dp),
-            jac.ctypes.data_as(dp),
-            hess.ctypes.data_as(dp),
-            energies.ctypes.data_as(dp),
+            *_SETTINGS,
+            *(a.ctypes.data_as(_DP) for a in arrays),
             ctypes.byref(steps),
             ctypes.byref(evaluations),
             *self._eigen_args,

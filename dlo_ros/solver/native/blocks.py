@@ -1,4 +1,6 @@
-"""What the compiled Newton drivers are handed from Python: SciPy's LAPACK and BLAS by address, and
+"""What the compiled Newton drivers are handed from Python.
+
+What the compiled Newton drivers are handed from Python: SciPy's LAPACK and BLAS by address, and
 the node map E as dense blocks for the Hessian's per-node part (``NodeBlocks``; ``WithNodePart``
 adds the same part in numpy around a compiled split function called from Python).
 """
@@ -11,7 +13,9 @@ import numpy as np
 
 
 def lapack_pointer(name: str) -> int:
-    """The address of SciPy's LAPACK (or, for dgemm, BLAS) routine ``name`` (from the PyCapsules
+    """Return the address of SciPy's LAPACK (or BLAS) routine ``name``.
+
+    The address of SciPy's LAPACK (or, for dgemm, BLAS) routine ``name`` (from the PyCapsules
     scipy.linalg.cython_lapack and cython_blas export).
     """
     from scipy.linalg import cython_blas, cython_lapack
@@ -40,7 +44,10 @@ class EigenLapackStruct(ctypes.Structure):
 
 
 def eigen_lapack() -> EigenLapackStruct:
-    """SciPy's routines the drivers' stability eigenvalue calls, and its dgemm chunk."""
+    """Return SciPy's routines the drivers' stability eigenvalue calls.
+
+    SciPy's routines the drivers' stability eigenvalue calls, and its dgemm chunk.
+    """
     return EigenLapackStruct(
         *(lapack_pointer(name) for name in ("dgeqp3", "dorgqr", "dsyevr", "dgemm")), CHUNK_WORK
     )
@@ -60,7 +67,9 @@ class _NodeMapStruct(ctypes.Structure):
 
 
 class NodeBlocks:
-    """The node map E (d·M × n, ``StringNLP.node_map``) as dense blocks for the drivers'
+    """The node map E as dense blocks for the drivers' ``dlo_add_node_part``.
+
+    The node map E (d·M × n, ``StringNLP.node_map``) as dense blocks for the drivers'
     ``dlo_add_node_part`` (H += Eᵀ W): E's columns grouped by the per-node components (row mod d)
     they reach, each group with the rows any of its columns reaches.  For the default 3D model,
     four groups (one per quaternion component) of 16 columns and 48 rows: a quarter of the
@@ -80,7 +89,7 @@ class NodeBlocks:
         self.groups = []
         for members in groups.values():
             reached = np.flatnonzero(np.any(E[:, members] != 0, axis=1))
-            self.groups.append((reached, np.array(members), E[np.ix_(reached, members)]))
+            self.groups.append((reached, np.array(members), E[np.ix_(reached, np.array(members))]))
         rows, cols, blocks = ([group[i] for group in self.groups] for i in range(3))
         self.count = np.array([(r.size, c.size) for r, c, _ in self.groups], dtype=np.intc).ravel()
         self.row = np.ascontiguousarray(np.concatenate(rows), dtype=np.intc)
@@ -101,7 +110,9 @@ class NodeBlocks:
 
 
 class WithNodePart:
-    """A compiled split function (``StringNLP.kkt_free_split_fn``, ``kkt_split_fn``) called as the
+    """A compiled split function called as the whole one: Eᵀ W added back.
+
+    A compiled split function (``StringNLP.kkt_free_split_fn``, ``kkt_split_fn``) called as the
     whole one: its last output W dropped and Eᵀ W added to the top-left n × n block of output
     ``target`` (K, ∇²L), one product per ``NodeBlocks`` group (numpy: each below OpenBLAS's
     threshold for threads), so that the evaluations Python makes (a saddle's escape, the

@@ -5,11 +5,11 @@ The drivers are C files shipped in the package (``dlo_ros/solver/native/``, read
 file beside it is replaced by that file's text (once per source), and the result is appended to
 CasADi's generated code of the functions it runs, which ``-DDLO_SYSTEM=…`` and
 ``-DDLO_RESIDUAL=…`` name.  Every setting the drivers share with the Python paths arrives as a
-``-D`` flag from ``native_settings``.
+``-D`` flag from ``native.settings``.
 
 Cache keys: a driver's library name carries a digest of its assembled source and of the compiler
 flags with the settings' ``-D`` values (``driver_digest``), next to the generated function's
-``compiled.fingerprint``; a change to either C or a setting gives a new name, hence a new build.
+``compiler.fingerprint``; a change to either C or a setting gives a new name, hence a new build.
 Loading stays ``cache_store``'s (owner, mode and sha256 checks), as for every compiled library.
 """
 
@@ -24,9 +24,10 @@ from pathlib import Path
 import casadi as ca
 
 from . import settings as native_settings
-from ..build.compiled import FLAGS, build_library, cache_dir, fingerprint
+from .cache_store import cache_dir
+from .compiler import FLAGS, build_library, fingerprint
 
-#: the contact-free loop (``native_newton.NativeNewton``), the active-set loop (``ActiveNewton``)
+#: the contact-free loop (``native.newton.NativeNewton``), the active-set loop (``ActiveNewton``)
 FREE_DRIVER, ACTIVE_DRIVER = "newton_free.c", "newton_active.c"
 
 #: a local include: a file of the native directory, by a plain name
@@ -38,17 +39,17 @@ def _native() -> Traversable:
 
 
 def c_files() -> list[str]:
-    """The names of the shipped C files (each a driver that compiles on its own)."""
+    """Return the names of the shipped C files (each a driver that compiles on its own)."""
     return sorted(entry.name for entry in _native().iterdir() if entry.name.endswith(".c"))
 
 
 def read(name: str) -> str:
-    """The text of the shipped C file or header ``name``."""
+    """Return the text of the shipped C file or header ``name``."""
     return _native().joinpath(name).read_text(encoding="utf-8")
 
 
 def driver_source(name: str) -> str:
-    """The driver ``name`` with its local includes replaced by their text, each header once."""
+    """Return the driver ``name`` with its local includes replaced by their text, each once."""
     seen: set[str] = set()
 
     def expand(text: str) -> str:
@@ -65,14 +66,18 @@ def driver_source(name: str) -> str:
 
 
 def settings_flags() -> tuple[str, ...]:
-    """The compiler flags a driver's code depends on beside its functions' names:
-    ``compiled.FLAGS`` and the shared settings (``native_settings.defines``).
+    """Return the compiler flags a driver's code depends on beside its functions' names.
+
+    The compiler flags a driver's code depends on beside its functions' names:
+    ``compiler.FLAGS`` and the shared settings (``native.settings.defines``).
     """
     return (*FLAGS, *native_settings.defines())
 
 
 def driver_flags(system: ca.Function, residual: ca.Function) -> tuple[str, ...]:
-    """Every flag a driver is compiled with, around the generated functions ``system`` and
+    """Return every flag a driver is compiled with.
+
+    Every flag a driver is compiled with, around the generated functions ``system`` and
     ``residual``.
     """
     names = (
@@ -85,7 +90,9 @@ def driver_flags(system: ca.Function, residual: ca.Function) -> tuple[str, ...]:
 
 
 def driver_digest(name: str) -> str:
-    """8 hex digits of sha256 over the driver's assembled source and ``settings_flags``.  The
+    """Return 8 hex digits of sha256 over a driver's source and ``settings_flags``.
+
+    8 hex digits of sha256 over the driver's assembled source and ``settings_flags``.  The
     functions' names are left out: the library's name carries the system function's name and
     fingerprint, which fixes its residual's code too.
     """
@@ -95,7 +102,9 @@ def driver_digest(name: str) -> str:
 
 
 def free_library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
-    """Where the contact-free driver compiled with ``fn`` (``StringNLP.kkt_free_split_fn``) is (or
+    """Return where the contact-free driver compiled with ``fn`` is (or will be) cached.
+
+    Where the contact-free driver compiled with ``fn`` (``StringNLP.kkt_free_split_fn``) is (or
     will be) cached.  ``kkt_lib``: ``fn``'s own ``compiled.library_path``, when the caller has it
     (its name carries the fingerprint, which otherwise costs an evaluation of ``fn``).
     """
@@ -104,7 +113,9 @@ def free_library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
 
 
 def active_library_path(fn: ca.Function) -> Path:
-    """Where ``fn``'s library (``StringNLP.kkt_split_fn``) with the active-set driver appended is
+    """Return where ``fn``'s library with the active-set driver is (or will be) cached.
+
+    Where ``fn``'s library (``StringNLP.kkt_split_fn``) with the active-set driver appended is
     (or will be) cached.
     """
     digest = driver_digest(ACTIVE_DRIVER)
@@ -112,9 +123,11 @@ def active_library_path(fn: ca.Function) -> Path:
 
 
 def compile_free(fn: ca.Function, residual: ca.Function, cc: str, lib: Path, nice: int) -> bool:
-    """Build the contact-free driver around ``fn`` and ``residual`` into ``lib``
+    """Build the contact-free driver around ``fn`` and ``residual`` into ``lib``.
+
+    Build the contact-free driver around ``fn`` and ``residual`` into ``lib``
     (``build_library``: stored through ``cache_store``); False if the compiler fails or the cache
-    is unusable.  Callers hold ``compiled.COMPILER_LOCK``.
+    is unusable.  Callers hold ``compiler.COMPILER_LOCK``.
     """
     return build_library(
         fn,

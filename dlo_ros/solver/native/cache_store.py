@@ -51,13 +51,17 @@ class CacheWarning(RuntimeWarning):
 
 
 class UnusableLibrary(OSError):
-    """A cached library that is missing, damaged or refused: rebuild it, or use the interpreted
+    """A cached library that is missing, damaged or refused.
+
+    A cached library that is missing, damaged or refused: rebuild it, or use the interpreted
     function.
     """
 
 
 class UnsafeCache(UnusableLibrary):
-    """The cache directory (or an ancestor) could be written by another user: nothing in it is
+    """The cache directory (or an ancestor) could be written by another user.
+
+    The cache directory (or an ancestor) could be written by another user: nothing in it is
     used.
     """
 
@@ -108,7 +112,10 @@ def _writable_by_others(st: os.stat_result) -> bool:
 
 
 def _check_ancestors(path: Path) -> None:
-    """UnsafeCache if another user could replace ``path`` or one of its ancestors."""
+    """Raise UnsafeCache if another user could replace ``path`` or an ancestor.
+
+    UnsafeCache if another user could replace ``path`` or one of its ancestors.
+    """
     euid = os.geteuid()
     given = Path(os.path.abspath(path))
     for p in (given, *given.parents):  # a symlink of another user could be re-pointed
@@ -127,7 +134,9 @@ def _check_ancestors(path: Path) -> None:
 
 
 def open_dir(path: Path, create: bool = False) -> int:
-    """A descriptor of the checked cache directory ``path`` (created 0700 when ``create``).
+    """Open the checked cache directory ``path``; return its descriptor.
+
+    A descriptor of the checked cache directory ``path`` (created 0700 when ``create``).
     UnsafeCache if it fails a check; FileNotFoundError (not created) or another OSError.
     """
     if create:
@@ -154,7 +163,9 @@ def open_dir(path: Path, create: bool = False) -> int:
 
 
 def _open_entry(dfd: int, name: str) -> tuple[int, os.stat_result]:
-    """(descriptor, fstat) of the file ``name``: a non-empty regular file of this uid, no
+    """Open the cache entry ``name``; return (descriptor, fstat).
+
+    (descriptor, fstat) of the file ``name``: a non-empty regular file of this uid, no
     group/other write; UnusableLibrary otherwise.  Never blocks (a FIFO is refused after fstat).
     """
     try:
@@ -256,7 +267,9 @@ def is_verified(lib: Path) -> bool:
 
 
 def _dlopen(fd: int, st: os.stat_result, name: str) -> ctypes.CDLL:
-    """Load the file open on ``fd`` (what was hashed): through /proc/self/fd, else a private
+    """Load the file open on ``fd`` (what was hashed).
+
+    Load the file open on ``fd`` (what was hashed): through /proc/self/fd, else a private
     copy.
     """
     proc = f"/proc/self/fd/{fd}"
@@ -274,7 +287,9 @@ def _dlopen(fd: int, st: os.stat_result, name: str) -> ctypes.CDLL:
 
 
 def load(lib: Path, symbols: Sequence[str]) -> ctypes.CDLL:
-    """The library ``lib`` if every check passes (module docstring) and it has ``symbols``;
+    """Load the library ``lib`` if every check passes.
+
+    The library ``lib`` if every check passes (module docstring) and it has ``symbols``;
     UnusableLibrary (UnsafeCache, after the warning) otherwise.  Never loads anything refused.
     """
     dfd = _checked_dir(lib.parent)
@@ -340,7 +355,9 @@ def writable_dir(directory: Path) -> bool:
 
 
 def store(lib: Path, data: bytes) -> bool:
-    """Put the library ``data`` at ``lib`` with its record, each atomically (0600); False after the
+    """Store the library ``data`` at ``lib`` with its record, each atomically (0600).
+
+    Put the library ``data`` at ``lib`` with its record, each atomically (0600); False after the
     warning if the cache cannot take it (unsafe, read-only, full): no temporary file is left.
     """
     try:

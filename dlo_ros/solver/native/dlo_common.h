@@ -1,6 +1,6 @@
 /* What both Newton drivers share: the work sizes of two generated functions, the node map's BLAS
    product, the outputs evaluated after convergence and the regularised LU.  Included by
-   newton_free.c and newton_active.c (dlo_ros/solver/native_build.py inlines it into the library's
+   newton_free.c and newton_active.c (dlo_ros/solver/native/build.py inlines it into the library's
    one source). */
 #ifndef DLO_COMMON_H
 #define DLO_COMMON_H
@@ -64,7 +64,7 @@ static void dlo_add_node_part(dlo_gemm_t gemm, const dlo_node_map *map, const do
 typedef int (*dlo_casadi_t)(const casadi_real **arg, casadi_real **res, casadi_int *iw,
                             casadi_real *w, int mem);
 
-/* What a converged update also evaluates in the same call (see UpdateOutputs in native_newton.py):
+/* What a converged update also evaluates in the same call (see UpdateOutputs in native/newton.py):
    the obstacle rows' values (contact-free loop only: the active-set loop has every row), then, if
    none of them is violated, the outputs' function (output_function.py) at (z, p, lambda_SI, prof).
    A NULL function is skipped.  done: out, bit 1 set when g holds every row's value, bit 2 when the

@@ -1,9 +1,9 @@
 /* What the Newton drivers (newton_free.c, newton_active.c) need from the library they are compiled
    into, and the settings they share with the Python paths.  In the library, the drivers are
-   appended to CasADi's generated code (dlo_ros/solver/native_build.py), which defines casadi_real,
+   appended to CasADi's generated code (dlo_ros/solver/native/build.py), which defines casadi_real,
    casadi_int, CASADI_SYMBOL_EXPORT and the functions DLO_SYSTEM and DLO_RESIDUAL stand for;
    compiled on their own (test/unit/test_native_c_warnings.py) the defaults below stand in for it.
-   Every DLO_ setting is a -D flag from dlo_ros/solver/native_settings.py, the one place its value
+   Every DLO_ setting is a -D flag from dlo_ros/solver/native/settings.py, the one place its value
    is written: a build without one fails here rather than using a second copy. */
 #ifndef DLO_NATIVE_H
 #define DLO_NATIVE_H
@@ -25,18 +25,18 @@
 
 #if !defined(DLO_SYSTEM) || !defined(DLO_SYSTEM_WORK) || !defined(DLO_RESIDUAL) || \
     !defined(DLO_RESIDUAL_WORK)
-#error "the generated functions' names: -D flags from dlo_ros/solver/native_build.py"
+#error "the generated functions' names: -D flags from dlo_ros/solver/native/build.py"
 #endif
 #if !defined(DLO_CONVERGED) || !defined(DLO_NOT_CONVERGED) || !defined(DLO_SINGULAR) || \
     !defined(DLO_STEP_TOO_LARGE) || !defined(DLO_EVALUATION_FAILED)
-#error "the return codes: -D flags from dlo_ros/solver/native_settings.py"
+#error "the return codes: -D flags from dlo_ros/solver/native/settings.py"
 #endif
 #if !defined(DLO_EIGEN_FOUND) || !defined(DLO_EIGEN_NO_FREEDOM) || !defined(DLO_EIGEN_FAILED)
-#error "the eigenvalue's codes: -D flags from dlo_ros/solver/native_settings.py"
+#error "the eigenvalue's codes: -D flags from dlo_ros/solver/native/settings.py"
 #endif
 #if !defined(DLO_CONTACT_APPEARED_TOLERANCE) || !defined(DLO_STABILITY_MULTIPLIER_TOLERANCE) || \
     !defined(DLO_STABILITY_BOUND_TOLERANCE)
-#error "the thresholds: -D flags from dlo_ros/solver/native_settings.py"
+#error "the thresholds: -D flags from dlo_ros/solver/native/settings.py"
 #endif
 
 /* The generated functions the driver runs (CasADi's calling convention). */

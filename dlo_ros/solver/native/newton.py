@@ -22,8 +22,8 @@ shrinks: round-off), and then evaluates K, ∇f and the energies at the answer, 
 update's first step uses, and there the stability eigenvalue (``stability.min_reduced_eigenvalue``:
 the same LAPACK routines, geqp3, orgqr and syevr, on K's blocks, in the same call).  It also stops
 at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` evaluations of K, at a singular matrix, or at a
-step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same
-regularisation δ = NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  The answer is the root the
+step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same regularisation
+δ = NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  The answer is the root the
 Python path's Newton steps converge to, within round-off: at a grip move of 1 % of L the chord
 steps shrink 20–50× each, so about seven steps cost less than one more evaluation of K.  LAPACK and
 BLAS are the ones SciPy ships (``scipy.linalg.cython_lapack``, ``cython_blas``), passed in as
@@ -39,12 +39,12 @@ loop with obstacle rows active, computes the stability eigenpair and the outputs
 the same way: a warm update that Newton answers is one compiled call either way.
 
 The C is ``native/newton_free.c`` (and ``newton_active.c`` for ``ActiveNewton``, in
-``native_active``), with the headers they include; ``native_build`` reads it from the package,
-passes the settings it shares with the Python paths as ``-D`` flags (``native_settings``) and keys
+``native.active``), with the headers they include; ``native.build`` reads it from the package,
+passes the settings it shares with the Python paths as ``-D`` flags (``native.settings``) and keys
 the library, cached beside the KKT function's (``compiled.cache_dir``), by that function's
 fingerprint (which also fixes its residual's code) and a digest of the assembled C and those
-flags.  The Python side is split by job: ``native_blocks`` (LAPACK by address, the node map's
-blocks), ``native_outputs`` (what a converged call also evaluates), ``native_active`` (the
+flags.  The Python side is split by job: ``native.blocks`` (LAPACK by address, the node map's
+blocks), ``native.outputs`` (what a converged call also evaluates), ``native.active`` (the
 active-set loop) and this module (the contact-free loop, and the names other modules import from
 here).
 """
@@ -54,13 +54,14 @@ from __future__ import annotations
 import ctypes
 import os
 from dataclasses import dataclass
+from typing import Any
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
 from .cache_store import UnusableLibrary, load as load_library
-from ..build.compiled import COMPILER_LOCK, compiler
+from .compiler import COMPILER_LOCK, compiler
 from .active import ActiveNewton, ActiveOutcome
 from .blocks import CHUNK_WORK, NodeBlocks, WithNodePart, eigen_lapack, lapack_pointer
 from .build import (
@@ -76,11 +77,6 @@ from .settings import (
     CONVERGED,
     EIGEN_FOUND,
     EVALUATION_FAILED,
-    NOT_CONVERGED,
-    SINGULAR,
-    STEP_TOO_LARGE,
-)
-from ..build.nlp import (
     NEWTON_CHORD_CONTRACTION,
     NEWTON_CHORD_START,
     NEWTON_CHORD_STEPS,
@@ -89,6 +85,9 @@ from ..build.nlp import (
     NEWTON_MAX_STEP,
     NEWTON_PRIMAL_TOLERANCE,
     NEWTON_REGULARISATION,
+    NOT_CONVERGED,
+    SINGULAR,
+    STEP_TOO_LARGE,
 )
 
 __all__ = [
@@ -116,14 +115,18 @@ __all__ = [
 
 
 def library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
-    """Where the contact-free driver compiled with ``fn`` is (or will be) cached
-    (``native_build.free_library_path``).
+    """Return where the contact-free driver compiled with ``fn`` is cached.
+
+    Where the contact-free driver compiled with ``fn`` is (or will be) cached
+    (``native.build.free_library_path``).
     """
     return free_library_path(fn, kkt_lib)
 
 
 def active_source(fn: ca.Function, residual: ca.Function) -> str:
-    """The active-set driver's C, to append to the generated code of ``fn``
+    """Return the active-set driver's C, to append to the generated code of ``fn``.
+
+    The active-set driver's C, to append to the generated code of ``fn``
     (``StringNLP.kkt_split_fn``) and ``residual`` (``StringNLP.residual_fn``); compile it with
     ``active_flags``.
     """
@@ -131,18 +134,43 @@ def active_source(fn: ca.Function, residual: ca.Function) -> str:
 
 
 def active_flags(fn: ca.Function, residual: ca.Function) -> tuple[str, ...]:
-    """The compiler flags of ``active_source``: ``compiled.FLAGS``, the shared settings and the two
+    """Return the compiler flags of ``active_source``.
+
+    The compiler flags of ``active_source``: ``compiled.FLAGS``, the shared settings and the two
     functions' names, as ``-D`` flags.
     """
     return driver_flags(fn, residual)
 
 
+#: ``dlo_newton_run``'s argument types (``newton_free.c``), in its order: the LAPACK/BLAS pointers
+#: and the node map (4), its sizes, n, nf and the step limits (6 ints), the settings (7 doubles),
+#: the arrays (6), the counters and the largest step (3), then the eigenpair's pointers (4), the
+#: outputs' (1) and whether K and r are given (1 int).
+_VP, _IP, _DP = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
+_ARGTYPES: list[Any] = [
+    *[_VP] * 4,
+    *[ctypes.c_int] * 6,
+    *[ctypes.c_double] * 7,
+    *[_VP] * 6,
+    _IP,
+    _IP,
+    _DP,
+    _VP,
+    _DP,
+    _VP,
+    _IP,
+    _VP,
+    ctypes.c_int,
+]
+
+
 @dataclass
 class NewtonOutcome:
-    """What one call returns: ``code`` (CONVERGED, …), the last iterate u and K, r, ∇f, energies
-    there,
-    the steps taken and the largest |Δz|; once converged, ``eigen``: the stability eigenvalue there and
-    its eigenvector in z (``stability.min_reduced_eigenvalue`` on K's blocks,
+    """What one ``NativeNewton`` call returns.
+
+    What one call returns: ``code`` (CONVERGED, …), the last iterate u and K, r, ∇f, energies
+    there, the steps taken and the largest |Δz|; once converged, ``eigen``: the stability
+    eigenvalue there and its eigenvector in z (``stability.min_reduced_eigenvalue`` on K's blocks,
     ``SolverState.reduced_eigen``), None when the free rows leave no freedom or LAPACK failed (the
     numpy path then decides).
     """
@@ -165,7 +193,9 @@ class NewtonOutcome:
 
 
 class NativeNewton:
-    """The compiled Newton loop of one NLP's contact-free system (see the module docstring).  Not
+    """The compiled Newton loop of one NLP's contact-free system.
+
+    The compiled Newton loop of one NLP's contact-free system (see the module docstring).  Not
     re-entrant per instance: callers serialise calls (ShapeSolver holds a lock).
     """
 
@@ -173,42 +203,8 @@ class NativeNewton:
         # checked by cache_store (UnusableLibrary if refused)
         self._lib = load_library(lib_path, ("dlo_newton_run",))
         self._run = self._lib.dlo_newton_run
-        vp, ip = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [
-            vp,
-            vp,
-            vp,
-            vp,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            ctypes.c_double,
-            vp,
-            vp,
-            vp,
-            vp,
-            vp,
-            vp,
-            ip,
-            ip,
-            ctypes.POINTER(ctypes.c_double),
-            vp,
-            ctypes.POINTER(ctypes.c_double),
-            vp,
-            ip,
-            vp,
-            ctypes.c_int,
-        ]
+        self._run.argtypes = _ARGTYPES
         self.n, self.nf, self.n_p = n, nf, n_p
         #: what a converged call also evaluates (``UpdateOutputs``), None: nothing
         self.after: UpdateOutputs | None = None
@@ -270,7 +266,9 @@ class NativeNewton:
         max_steps: int,
         prof: np.ndarray | None = None,
     ) -> NewtonOutcome:
-        """From u = [z; λ_free] with K, r at u (None: evaluated at u in the call, not counted);
+        """Run the contact-free Newton loop from u = [z; λ_free] in one compiled call.
+
+        From u = [z; λ_free] with K, r at u (None: evaluated at u in the call, not counted);
         ``max_steps``: the most evaluations of K on the way (the one at the answer is not counted);
         ``prof``: the string's profiles, for the outputs (``after``).
         """
@@ -279,7 +277,7 @@ class NativeNewton:
         given = kkt is not None
         if given:
             self._K[:] = kkt
-            self._r[:] = np.ravel(residual)
+            self._r[:] = np.ravel(np.asarray(residual))
         self._energies[:] = np.nan
         after = self.after
         code = self._run(
@@ -309,7 +307,9 @@ class NativeNewton:
 
 
 def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | None:
-    """The driver of ``nlp``'s contact-free system (``StringNLP.kkt_free_split_fn`` and
+    """Return the driver of ``nlp``'s contact-free system, from the cache or built now.
+
+    The driver of ``nlp``'s contact-free system (``StringNLP.kkt_free_split_fn`` and
     ``residual_free_fn`` compiled with it), from the cache or built now (one compiler at a time per
     process); None without a C compiler or if compiling fails.  ``kkt_lib``: the split function's
     own library path, which keys this one.
@@ -329,14 +329,14 @@ def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | Non
 
 
 def cached(nlp, kkt_lib: Path | None = None) -> NativeNewton | None:
-    """The driver if the cache holds it (no compiling), else None."""
+    """Return the driver if the cache holds it (no compiling), else None."""
     if compiler() is None or os.environ.get("DLO_NO_COMPILE"):
         return None
     return _instance(nlp, free_library_path(nlp.kkt_free_split_fn, kkt_lib))
 
 
 def _instance(nlp, lib: Path) -> NativeNewton | None:
-    """The loop in ``lib`` if the cache holds it and it passes ``cache_store.load``'s checks."""
+    """Return the loop in ``lib`` if the cache holds it and it passes ``cache_store.load``."""
     try:
         return NativeNewton(
             lib, nlp.z_sym.shape[0], nlp.n_free_rows, nlp.p_sym.shape[0], nlp.node_blocks

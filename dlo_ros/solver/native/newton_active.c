@@ -1,6 +1,6 @@
-/* Newton with an active set in one call (dlo_ros/solver/native_active.py, ActiveNewton), around
+/* Newton with an active set in one call (dlo_ros/solver/native/active.py, ActiveNewton), around
    the generated split full KKT function DLO_SYSTEM (StringNLP.kkt_split_fn) and its residual
-   DLO_RESIDUAL (StringNLP.residual_fn), both given as -D names by native_build.py. */
+   DLO_RESIDUAL (StringNLP.residual_fn), both given as -D names by native/build.py. */
 #include "dlo_native.h"
 #include "dlo_common.h"
 #include "dlo_eigen.h"
@@ -34,8 +34,26 @@ static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double
   return dlo_regularised_lu(getrf, A, ipiv, n, N, reg);
 }
 
+/* Evaluate the full KKT function here into out = (grad f, g, dg/dz, hess L, energies), counted
+   in *evaluations, and factor [H J_A^T; J_A 0] of the m rows idx there (dlo_active_factor): 0, or
+   the code to stop with (DLO_EVALUATION_FAILED, DLO_SINGULAR). */
+static int dlo_evaluate_and_factor(const casadi_real **arg, casadi_real **res, casadi_int *iw,
+                                   casadi_real *w, double *W, dlo_gemm_t gemm,
+                                   const dlo_node_map *map, int rows_e, int n, double *buf,
+                                   double *const out[5], int *evaluations, dlo_getrf_t getrf,
+                                   const int *idx, int m, int rows, double reg, double *A,
+                                   int *ipiv) {
+  res[0] = out[0]; res[1] = out[1]; res[2] = out[2]; res[3] = out[3]; res[4] = out[4];
+  if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0)
+    return DLO_EVALUATION_FAILED;
+  ++*evaluations;
+  if (dlo_active_factor(getrf, out[3], out[2], idx, n, m, rows, reg, A, ipiv) != 0)
+    return DLO_SINGULAR;
+  return 0;
+}
+
 /* Newton, then chord, steps on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see
-   dlo_ros/solver/native_newton.py (ActiveNewton) and newton.py (_active_steps, the same row
+   dlo_ros/solver/native/newton.py (ActiveNewton) and newton.py (_active_steps, the same row
    switches). Each step's matrix is evaluated (Newton's own steps) until an iterate where the rows
    are checked changes no row and the steps are below chord_start; after that the factored matrix
    is kept while the steps shrink by the contraction factor, the residual function giving grad L
@@ -77,6 +95,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
   int settled = switches == 0;  /* a check of the rows changed none (or none may change) */
   double previous = INFINITY, big = 0.0;
   int shrinking = 1;
+  double *const out[5] = {grad, g, jac, hess, energies};  /* what an evaluation writes */
   *steps = 0; *evaluations = 0;
   arg[0] = z; arg[1] = p; arg[2] = lam;
   if (!given) {
@@ -173,16 +192,9 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
       if (here || *evaluations >= max_evaluations) { code = DLO_STEP_TOO_LARGE; break; }
       /* a step of the matrix of an earlier iterate: Newton's own step, from derivatives evaluated
          here */
-      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) {
-        code = DLO_EVALUATION_FAILED;
-        break;
-      }
-      ++*evaluations;
-      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) {
-        code = DLO_SINGULAR;
-        break;
-      }
+      int failed = dlo_evaluate_and_factor(arg, res, iw, w, W, gemm, map, rows_e, n, buf, out,
+                                           evaluations, getrf, idx, m, rows, reg, A, ipiv);
+      if (failed) { code = failed; break; }
       here = fresh = 1;
       previous = INFINITY;
       continue;
@@ -197,16 +209,9 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
       /* Newton's own steps (the same iterates and row decisions as _active_steps) until a check of
          the rows changes none and the steps are below chord_start, then chord steps; or too slow
          for the factored matrix: evaluate and factor it here */
-      res[0] = grad; res[1] = g; res[2] = jac; res[3] = hess; res[4] = energies;
-      if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0) {
-        code = DLO_EVALUATION_FAILED;
-        break;
-      }
-      ++*evaluations;
-      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) {
-        code = DLO_SINGULAR;
-        break;
-      }
+      int failed = dlo_evaluate_and_factor(arg, res, iw, w, W, gemm, map, rows_e, n, buf, out,
+                                           evaluations, getrf, idx, m, rows, reg, A, ipiv);
+      if (failed) { code = failed; break; }
       previous = INFINITY;
       here = fresh = 1;
     } else {

@@ -1,7 +1,7 @@
-/* Chord Newton on the contact-free KKT system in one call (dlo_ros/solver/native_newton.py,
+/* Chord Newton on the contact-free KKT system in one call (dlo_ros/solver/native/newton.py,
    NativeNewton), around the generated split function DLO_SYSTEM (StringNLP.kkt_free_split_fn) and
    its residual DLO_RESIDUAL (StringNLP.residual_free_fn), both given as -D names by
-   native_build.py. */
+   native/build.py. */
 #include "dlo_native.h"
 #include "dlo_common.h"
 #include "dlo_eigen.h"
@@ -29,7 +29,7 @@ static int dlo_factor(dlo_getrf_t getrf, const double *K, double *A, int *ipiv, 
   return dlo_regularised_lu(getrf, A, ipiv, n, N, reg);
 }
 
-/* Chord Newton on the contact-free KKT system; see dlo_ros/solver/native_newton.py.  u, K, r: in
+/* Chord Newton on the contact-free KKT system; see dlo_ros/solver/native/newton.py.  u, K, r: in
    at the start, out at the last iterate; grad, energies: out there (the last call evaluates K at
    it). */
 CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, dlo_gemm_t dgemm,

@@ -1,4 +1,6 @@
-"""What a converged compiled Newton loop evaluates in the same call beyond the loop: the obstacle
+"""What a converged compiled Newton loop evaluates in the same call beyond the loop.
+
+What a converged compiled Newton loop evaluates in the same call beyond the loop: the obstacle
 rows' values and the outputs' function (``UpdateOutputs``), and those outputs as a result uses them
 (``ComputedOutputs``).
 """
@@ -13,7 +15,9 @@ import numpy as np
 
 @dataclass
 class ComputedOutputs:
-    """The outputs' function's values (``output_function.OutputFunction``: points, orientations,
+    """The outputs' function's values as a converged loop evaluated them.
+
+    The outputs' function's values (``output_function.OutputFunction``: points, orientations,
     grip forces and torques, contact forces, residual, flip) as a converged loop evaluated them,
     with the inputs it evaluated them at: a result uses them only for the same (z, p, λ_SI, prof)
     (``matches``).
@@ -55,7 +59,9 @@ class _AfterStruct(ctypes.Structure):
 
 
 class UpdateOutputs:
-    """What a converged loop evaluates in the same call, so that a warm update is one compiled
+    """What a converged loop evaluates in the same call, beyond the loop.
+
+    What a converged loop evaluates in the same call, so that a warm update is one compiled
     call: the obstacle rows' values (``StringNLP.obstacle_g_fn``; the contact-free loop, whose
     system leaves them out) and, when none is violated, the outputs' function
     (``output_function.py``) at the answer, with λ_SI = λ / (row_scale · σ) and the string's
@@ -94,7 +100,9 @@ class UpdateOutputs:
         self.address = ctypes.addressof(st)
 
     def prepare(self, prof: np.ndarray | None) -> int:
-        """Before a call: the outputs are evaluated when ``prof`` is given (the profiles of the
+        """Prepare a call: evaluate the outputs when ``prof`` is given; the struct's address.
+
+        Before a call: the outputs are evaluated when ``prof`` is given (the profiles of the
         string being solved for); the struct's address.
         """
         st = self._struct
@@ -111,7 +119,9 @@ class UpdateOutputs:
     def collect(
         self, z: np.ndarray, p: np.ndarray
     ) -> tuple[np.ndarray | None, ComputedOutputs | None]:
-        """After a converged call at (z, p): (every row's value, the outputs), each None if not
+        """Collect after a converged call at (z, p): (every row's value, the outputs).
+
+        After a converged call at (z, p): (every row's value, the outputs), each None if not
         evaluated (the values only from the contact-free loop, which evaluates its obstacle
         rows).
         """
@@ -119,6 +129,7 @@ class UpdateOutputs:
         g = self._g[: self.rows].copy() if done & 1 else None
         if not done & 2:
             return g, None
+        assert self._prof is not None  # the outputs are evaluated only when prof was given
         values = [
             out[: r * c].reshape((r, c), order="F").copy()
             for out, (r, c) in zip(self._out, self._shapes)

@@ -1,13 +1,48 @@
 """The numbers the Python paths and the compiled Newton drivers (``native/*.c``) share: each once.
 
 The drivers get them as ``-D`` flags (``defines``), and the compiled libraries' cache keys hash
-those flags (``native_build``), so a change here reaches both paths and rebuilds the libraries.
+those flags (``native.build``), so a change here reaches both paths and rebuilds the libraries.
 The Python side reads them from this module at call time (``stability.min_reduced_eigenvalue``,
-``newton``'s contact check).  Newton's step tolerances (``nlp.NEWTON_*``) reach the drivers as
-call arguments instead, so they are single already.
+``newton``'s contact check).  Newton's step settings (``NEWTON_*``, ``JOIN_TOLERANCE``,
+``LEAVE_TOLERANCE``) reach the drivers as call arguments instead; they live here too, beside the
+others, and the Python Newton (``update/newton.py``) and ``StringNLP.newton_function`` read them
+from here.
 """
 
 from __future__ import annotations
+
+#: Newton steps a contact-free warm update takes in one call (``StringNLP.newton_fn``): with the
+#: start's own system as the first, a grip move of 1 % of L converges to |r| ~ 1e-14 in three.
+NEWTON_STEPS = 3
+
+#: A Newton step larger than this in any scaled unknown leaves the start's basin: IPOPT takes over.
+NEWTON_MAX_STEP = 0.5
+#: Active-set changes a warm Newton update may make before IPOPT takes over (``update/newton.py``).
+NEWTON_ACTIVE_SET_CHANGES = 6
+#: Contact rows that may join or leave between Newton steps, per active set, before it is held
+#: (``update/newton.py``).
+NEWTON_STEP_SWITCHES = 4
+#: A contact row joins the active set above this excess g − bound; an active one leaves below
+#: −LEAVE_TOLERANCE multiplier (scaled units).
+JOIN_TOLERANCE, LEAVE_TOLERANCE = 1e-9, 1e-12
+#: A warm update has converged when ‖∇f + Jᵀλ‖∞ and ‖g − bound‖∞ (scaled units) are below these.
+NEWTON_DUAL_TOLERANCE, NEWTON_PRIMAL_TOLERANCE = 1e-9, 1e-11
+#: The compiled loops (``native/newton.py``, ``native/active.py``) take Newton's own steps while a
+#: step exceeds NEWTON_CHORD_START in a scaled unknown (and, with an active set, until a check of
+#: the rows changes none), then chord steps on the last factored matrix.  They have converged when,
+#: besides the tolerances above, the last step is below NEWTON_CHORD_TOLERANCE (or no longer
+#: shrinks: round-off); a step that shrinks by less than NEWTON_CHORD_CONTRACTION against the one
+#: before has the matrix evaluated and factored anew; at most NEWTON_CHORD_STEPS steps.
+NEWTON_CHORD_START, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_STEPS = (
+    0.05,
+    1e-11,
+    0.25,
+    40,
+)
+
+#: δ / max|K| of the regularised Newton matrix K + diag(δ I, −δ I) of every warm update
+#: (``update/newton.regularised``).
+NEWTON_REGULARISATION = 1e-10
 
 #: The stability check holds a row (reduces the Hessian on its null space) when |λ| exceeds
 #: STABILITY_MULTIPLIER_TOLERANCE or g is within STABILITY_BOUND_TOLERANCE of its bound, besides
@@ -43,7 +78,9 @@ _NAMES = (
 
 
 def _literal(value: float | int) -> str:
-    """A C literal of ``value`` that parses back to the same double or int: ``repr`` of a float is
+    """Return a C literal of ``value`` that parses back to the same double or int.
+
+    A C literal of ``value`` that parses back to the same double or int: ``repr`` of a float is
     the shortest string that round-trips, and C's strtod rounds correctly.
     """
     text = repr(float(value)) if isinstance(value, float) else str(int(value))
@@ -51,7 +88,9 @@ def _literal(value: float | int) -> str:
 
 
 def defines() -> tuple[str, ...]:
-    """The settings as the compiler's ``-DDLO_<NAME>=<value>`` flags, read now (so a changed value
+    """Return the settings as the compiler's ``-DDLO_<NAME>=<value>`` flags.
+
+    The settings as the compiler's ``-DDLO_<NAME>=<value>`` flags, read now (so a changed value
     gives other flags, and another library).
     """
     module = globals()

@@ -1,0 +1,1 @@
+"""Building the NLP and its derivatives: layout, rows, assembled KKT functions, compiled calls."""

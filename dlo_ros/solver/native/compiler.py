@@ -1,0 +1,140 @@
+"""Compile generated C to shared libraries: the compiler, its flags and lock, the cache key.
+
+``build_library`` generates C for CasADi functions (plus C appended to it: the Newton drivers),
+compiles it with ``compiler()`` and ``FLAGS`` and stores it through ``cache_store``;
+``fingerprint`` keys a function without generating its C.  ``build.compiled`` loads and calls the
+libraries; the Newton drivers (``native.build``, ``native.newton``) are compiled here too, so no
+module of ``native`` imports the NLP's room ``build``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from . import cache_store
+
+
+#: gcc's flags.  The assembled KKT functions compile in about the same time at -O1 and -O3, and run
+#: faster at -O3 (bench/results/compile_cost.md); the flattened ones took minutes at any level.
+FLAGS = ("-O3",)
+
+
+def compiler() -> str | None:
+    """Return the C compiler: $CC, else gcc, cc or clang on the PATH; None if there is none."""
+    return (
+        os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
+    )
+
+
+_SOURCE_DIGEST: bytes | None = None
+
+
+def _source_digest() -> bytes:
+    """Hash the dlo_ros sources that build the compiled functions.
+
+    These are every module of ``model/`` and ``solver/build/`` (the NLP, its assembled
+    derivatives, the outputs' function), ``solver/options.py``, and the outputs' grid and
+    wrenches (``solver/results/residual.py``, ``wrenches.py``).
+    """
+    global _SOURCE_DIGEST
+    if _SOURCE_DIGEST is None:
+        solver = Path(__file__).resolve().parent.parent
+        package = solver.parent
+        files = (
+            sorted((package / "model").glob("*.py"))
+            + sorted((solver / "build").glob("*.py"))
+            + [solver / "options.py"]
+            + [solver / "results" / n for n in ("residual.py", "wrenches.py")]
+        )
+        h = hashlib.sha256()
+        for f in files:
+            h.update(f.name.encode() + f.read_bytes())
+        _SOURCE_DIGEST = h.digest()
+    return _SOURCE_DIGEST
+
+
+def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
+    """Return a cache key of ``fn`` that needs no code generation.
+
+    A cache key of ``fn`` that needs no code generation.
+
+    It hashes the CasADi version, the compiler flags, the dlo_ros sources that build NLPs, the
+    function's name, input/output shapes and instruction count, and its outputs at two fixed
+    pseudo-random inputs in [0.5, 1.5].  Constants baked into the expressions (the reference frame
+    R0, the objective scale σ, the basis and quadrature matrices) change those outputs, so two NLPs
+    that differ in any of them get different keys.
+    """
+    h = hashlib.sha256()
+    h.update(
+        ca.__version__.encode()  # type: ignore[attr-defined]  # casadi's stubs omit it + " ".join(flags).encode() + _source_digest() + fn.name().encode()
+    )
+    shapes = [fn.size_in(i) for i in range(fn.n_in())]
+    h.update(
+        repr((shapes, [fn.size_out(i) for i in range(fn.n_out())], fn.n_instructions())).encode()
+    )
+    rng = np.random.default_rng(20261122)
+    for _ in range(2):
+        out = fn(*[rng.uniform(0.5, 1.5, (r, c)) for r, c in shapes])
+        for o in out if isinstance(out, (list, tuple)) else [out]:
+            h.update(np.ascontiguousarray(np.asarray(o, dtype=float)).tobytes())
+    return h.hexdigest()[:16]
+
+
+#: Held while a compiler runs: never more than one per process (concurrent compiles multiply the
+# memory).
+COMPILER_LOCK = threading.Lock()
+
+
+def generate(fn: ca.Function, tmp: str, also: tuple[ca.Function, ...] = ()) -> bytes:
+    """Generate the C of ``fn`` and the functions ``also`` in ``tmp``; return its bytes."""
+    gen = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
+    for f in (fn, *also):
+        gen.add(f)
+    gen.generate(tmp + os.sep)
+    return Path(tmp, f"{fn.name()}.c").read_bytes()
+
+
+def build_library(
+    fn: ca.Function,
+    lib: Path,
+    cc: str,
+    flags: tuple[str, ...] = FLAGS,
+    nice: int = 0,
+    extra_source: str = "",
+    also: tuple[ca.Function, ...] = (),
+) -> bool:
+    """Generate C for ``fn``, compile it to ``lib`` and store it in the cache.
+
+    Generate C for ``fn`` and the functions ``also`` (plus ``extra_source`` appended), compile
+    it to the shared object ``lib`` in a private temporary directory and store it with its sha256
+    record (``cache_store.store``: atomic, 0600; concurrent processes never load a half-written
+    file); False if the cache is unsafe or unwritable (one warning) or the compiler fails.  Callers
+    hold COMPILER_LOCK.
+    """
+    if not cache_store.writable_dir(lib.parent):  # before spending a compile on it
+        return False
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            source = Path(tmp, f"{fn.name()}.c")
+            source.write_bytes(generate(fn, tmp, also) + extra_source.encode())
+            tmp_lib = Path(tmp, lib.name)
+            cmd = [cc, "-shared", "-fPIC", *flags, "-o", str(tmp_lib), str(source), "-lm"]
+            if nice and shutil.which("nice"):
+                cmd = ["nice", "-n", str(nice), *cmd]
+            if subprocess.run(cmd, capture_output=True, text=True).returncode != 0:
+                return False
+            return cache_store.store(lib, tmp_lib.read_bytes())
+    except (OSError, RuntimeError) as e:  # the temporary directory is full or unwritable
+        # (CasADi's code generator reports a failed write as RuntimeError)
+        reason = getattr(e, "strerror", None) or e
+        cache_store.warn_once(lib.parent, f"C cannot be generated ({reason})")
+        return False

@@ -1,8 +1,9 @@
 """The compiled Newton drivers' C: read from the package, made into one source, keyed and compiled.
 
 The drivers are C files shipped in the package (``dlo_ros/solver/native/``, read through
-``importlib.resources``, so an installed package has them).  A driver's ``#include "x.h"`` of a
-file beside it is replaced by that file's text (once per source), and the result is appended to
+``importlib.resources``, so an installed package has them).  A driver's include directive for a
+header ``"x.h"`` beside it is replaced by that file's text (once per source), and the result is
+appended to
 CasADi's generated code of the functions it runs, which ``-DDLO_SYSTEM=…`` and
 ``-DDLO_RESIDUAL=…`` name.  Every setting the drivers share with the Python paths arrives as a
 ``-D`` flag from ``native.settings``.
@@ -31,7 +32,7 @@ from .compiler import FLAGS, build_library, fingerprint
 FREE_DRIVER, ACTIVE_DRIVER = "newton_free.c", "newton_active.c"
 
 #: a local include: a file of the native directory, by a plain name
-_INCLUDE = re.compile(r'^#include "([A-Za-z0-9_]+\.h)"[ \t]*$', re.MULTILINE)
+_INCLUDE = re.compile(r'^#[ \t]*include[ \t]+"([A-Za-z0-9_]+\.h)"[ \t]*$', re.MULTILINE)
 
 
 def _native() -> Traversable:

@@ -3,8 +3,7 @@
 The drivers are C files shipped in the package (``dlo_ros/solver/native/``, read through
 ``importlib.resources``, so an installed package has them).  A driver's include directive for a
 header ``"x.h"`` beside it is replaced by that file's text (once per source), and the result is
-appended to
-CasADi's generated code of the functions it runs, which ``-DDLO_SYSTEM=…`` and
+appended to CasADi's generated code of the functions it runs, which ``-DDLO_SYSTEM=…`` and
 ``-DDLO_RESIDUAL=…`` name.  Every setting the drivers share with the Python paths arrives as a
 ``-D`` flag from ``native.settings``.
 

@@ -150,7 +150,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
         )
     summary = format_fit(result)
     if args.rrd:
-        from ..identify.drawing import save_fit  # rerun: only with --rrd
+        from ..identify.drawing import save_fit  # optional: rerun, only with --rrd
 
         try:
             save_fit(args.rrd, result, data, summary)

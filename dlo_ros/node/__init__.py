@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
     """
     stop_on_first_signal()
     try:
-        # imported here: the signal handling above must be in place before rclpy and CasADi load
+        # not at the top: the signal handling above must be in place before rclpy and CasADi load
         from .run import main as _main
 
         return _main(argv, prog=prog)

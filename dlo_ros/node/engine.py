@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from ..model.problem import GripPose, Problem
+from ..solver import make_solver
 from ..solver.options import SolverOptions
 from ..solver.results.result import ShapeResult
 from .validation import grip_miss
@@ -344,7 +345,6 @@ def build_solver(problem: Problem, options: SolverOptions, compile: str | None =
     so that the stream never waits for them.  compile: 'background', 'blocking', 'cached' or
     'off'; None: 'background'.
     """
-    from ..solver import make_solver
 
     return make_solver(problem, options, compile=compile or "background", checks="background")
 

@@ -77,6 +77,7 @@ def warm_fit_worker() -> bool:
 
     Runs in the worker process; a function-local import, as importing is its whole job.
     """
+    # not at the top: importing is this function's whole job
     import dlo_ros.identify.fit  # noqa: F401
 
     return True

@@ -80,7 +80,7 @@ def rows_of(chunks: list[Any]) -> list[dict[str, Any]]:
     logging order: by ``update`` then by row id.  For tests and small recordings: it converts every
     column to Python objects (:func:`read_recording` reads only the columns it needs).
     """
-    import pyarrow as pa
+    import pyarrow as pa  # optional: rerun-sdk (Python >= 3.11), with pyarrow
 
     rows: list[dict[str, Any]] = []
     for chunk in chunks:

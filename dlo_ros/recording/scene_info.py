@@ -46,9 +46,8 @@ def scene_yaml(scene: Any) -> str:
     """Return the scene in the scene-file format (``dlo_ros.scene.scene_to_dict``) as YAML text."""
     # here, not at the top: the writer's process imports this module and must not import the
     # scene package (the model and solver: see scene_info below)
-    import yaml
-
-    from ..scene import scene_to_dict
+    import yaml  # not at the top: see above
+    from ..scene import scene_to_dict  # not at the top: see above
 
     return yaml.safe_dump(
         scene_to_dict(scene), sort_keys=False, default_flow_style=None, width=120

@@ -477,8 +477,8 @@ class Writer:
         self._row(E_MODEL, "TextLog", item, text=[item.payload], level=["INFO"])
 
     def _handle_fit(self, item: QueueItem) -> None:
-        # here: only a recording with a fit needs it, and the writer's process must not import the
-        # model (identify imports the solver)
+        # optional: only a recording with a fit needs it; not at the top: the writer's process
+        # must not import the model (identify imports the solver)
         from ..identify.drawing import (
             draw_observation,
         )

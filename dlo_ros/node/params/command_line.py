@@ -136,7 +136,7 @@ def read_params_file(path: str, node_name: str = "dlo") -> dict[str, tuple[Any, 
     error, not a mapping of node names to ``{ros__parameters: {...}}``, an empty or unknown
     parameter name, a value of the wrong type or out of range.
     """
-    # imported here: dlo_ros.scene loads dlo_ros.solver (0.8 s of 1.0 s for this package,
+    # start-up: dlo_ros.scene loads dlo_ros.solver (0.8 s of 1.0 s for this package,
     # python -X importtime), which `dlo node --help` and the CLI's parser do not need
     from ...scene import (
         FileLimitError,

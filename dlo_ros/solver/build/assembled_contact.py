@@ -200,8 +200,6 @@ def inequality_g(kkt) -> ca.Function:
     if local.size:
         parts.append((local, kkt.local_function(local)(z, p, ca.MX(local.size, 1))[0]))
     if P.obstacles:
-        from ...model.obstacles import OBSTACLE_TYPES
-
         omega = kkt.model.position_matrix(nlp.obstacle_s)
         S = omega.shape[0]
         X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import ctypes
 
 import numpy as np
+from scipy.linalg import cython_blas, cython_lapack
 
 
 def lapack_pointer(name: str) -> int:
@@ -18,7 +19,6 @@ def lapack_pointer(name: str) -> int:
     The address of SciPy's LAPACK (or, for dgemm, BLAS) routine ``name`` (from the PyCapsules
     scipy.linalg.cython_lapack and cython_blas export).
     """
-    from scipy.linalg import cython_blas, cython_lapack
 
     capsule = (cython_blas if name == "dgemm" else cython_lapack).__pyx_capi__[name]
     get_name = ctypes.pythonapi.PyCapsule_GetName

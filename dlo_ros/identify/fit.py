@@ -12,9 +12,9 @@ IPOPT only as its fallback). Outer level: minimise
 with r_j the point-to-curve residual of point j (``curve.py``), ρ Huber's loss (quadratic up to
 ``huber`` σ, linear beyond: outliers count less), the optional measured grip force, grip torque
 (about the grip point) and known weight. The Jacobian comes from the implicit-function theorem on
-the KKT system (``solver/results/sensitivity.py``): one linear solve per observation and iteration, no
-finite differences.  Steps are Gauss–Newton steps with iteratively reweighted (Huber) normal matrix
-A = Jᵀ W J / σ², Levenberg-damped, restricted to the directions the data determine
+the KKT system (``solver/results/sensitivity.py``): one linear solve per observation and iteration,
+no finite differences.  Steps are Gauss–Newton steps with iteratively reweighted (Huber) normal
+matrix A = Jᵀ W J / σ², Levenberg-damped, restricted to the directions the data determine
 (``identifiability.py``), and clipped to ``max_step`` in log units.
 
 Covariance of θ: A⁺ (the pseudo-inverse on the determined directions) at the solution, with the

@@ -108,7 +108,7 @@ class AutoShapeSolver:
         return self.model_checks.lower_tried
 
     def switch(self, choice: ModelChoice, reason: str, start: tuple | None = None) -> None:
-        """Stream on ``choice`` from now on, mapping the warm start; unchecked until its first check.
+        """Stream on ``choice`` from now on, mapping the warm start (unchecked until checked).
 
         Waits for a running background job only if that job may be using the model switched to.
         ``start``: (solver, its state or None, problem) to map instead of the streaming model's

@@ -112,9 +112,9 @@ def minima(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Return the clearance's local minima that are deep enough, deepest first.
 
-    Each is (s*, c(s*)): the local minima of the clearance within ``width_band`` that dip DIP·L below
-    the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``: c at
-    any arc lengths; each minimum is refined by two parabola steps through evaluated points).
+    Each is (s*, c(s*)): the local minima of the clearance within ``width_band`` that dip DIP·L
+    below the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``: c
+    at any arc lengths; each minimum is refined by two parabola steps through evaluated points).
     """
     inner = clearance[1:-1]
     k = (

@@ -116,7 +116,7 @@ class ShapeOutputs:
         ``current``: the solver's committed scene, whose grips anchor the wrenches' frames;
         ``summary``: the result's model.
         """
-        nlp, m, options = self.nlp, self.nlp.model, self.options
+        nlp, m = self.nlp, self.nlp.model
         z, p = state.z, state.p
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         if self.fns.outputs is not None and self.contact_slots is None:
@@ -304,8 +304,9 @@ class ShapeOutputs:
         if not residual.metres <= tolerance:
             status, stable = "unverified", None
             message = (
-                f"not a verified equilibrium: the equilibrium residual is {residual.metres:.3g} m, over the "
-                f"tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)"
+                "not a verified equilibrium: the equilibrium residual is "
+                f"{residual.metres:.3g} m, over the tolerance {tolerance:.3g} m "
+                "(solver.error_tolerance; raise solver.order)"
             )
         return ShapeResult(
             model=summary,

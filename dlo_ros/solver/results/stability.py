@@ -101,8 +101,8 @@ def null_space(a: np.ndarray) -> np.ndarray:
 
     Orthonormal basis of {v : a v = 0} from a column-pivoted QR of aᵀ (LAPACK geqp3,
     rank-revealing):
-    rank = number of |R_kk| above max(a.shape)·eps·|R_00|, the tolerance scipy.linalg.null_space puts on
-    singular values.  Half the time of an SVD at the sizes here.
+    rank = number of |R_kk| above max(a.shape)·eps·|R_00|, the tolerance scipy.linalg.null_space
+    puts on singular values.  Half the time of an SVD at the sizes here.
     """
     m, n = a.shape
     qr, _, tau, _, info = _geqp3(np.array(a.T, order="F"))

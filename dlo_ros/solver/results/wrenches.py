@@ -129,8 +129,8 @@ def solve_unit_rows(a: np.ndarray, rhs: list[float]) -> np.ndarray | None:
 
     x with a x = rhs for a 3×3 ``a`` of unit rows by Cramer's rule, x = Σ_k rhs_k (a_{k+1} ×
     a_{k+2}) / det;
-    None when |det| ≤ 1e-8 (unit rows: nearly dependent).  Plain floats: numpy's cross and solve cost
-    more than the arithmetic on 3-vectors.
+    None when |det| ≤ 1e-8 (unit rows: nearly dependent).  Plain floats: numpy's cross and solve
+    cost more than the arithmetic on 3-vectors.
     """
     (a0, a1, a2), (b0, b1, b2) = a.tolist(), rhs
 

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Mapping, Sequence
+from concurrent.futures import Executor
 from dataclasses import replace
 
 import numpy as np
 
-from ...model.problem import Problem
+from ...model.problem import GripPose, Problem
 from ..options import SolverOptions
 from ..parallel.batch import query_many
 from ..results.result import ShapeResult
@@ -184,7 +186,11 @@ class AutoShapeSolver:
                 self.worker.shutdown()
                 self.checks = "sync"
 
-    def query_many(self, targets, executor=None) -> list[ShapeResult]:
+    def query_many(
+        self,
+        targets: Sequence[Mapping[str, GripPose | tuple]],
+        executor: Executor | None = None,
+    ) -> list[ShapeResult]:
         """Answer many independent queries in worker processes (see ShapeSolver.query_many).
 
         Each worker runs its own auto solver of this scene, with inline checks.
@@ -214,7 +220,7 @@ class AutoShapeSolver:
     # ---- one update -----------------------------------------------------------------------------
     def solve(
         self,
-        poses: dict | None = None,
+        poses: Mapping[str, GripPose | tuple] | None = None,
         *,
         warm: bool = True,
         commit: bool = True,

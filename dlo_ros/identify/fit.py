@@ -50,7 +50,7 @@ UNITS = {"Rf": "N·m²", "Rt": "N·m²", "D": "N/m", "Re": "N"}
 #: held at the scene's value first when a direction is undetermined
 ANCHOR_ORDER = ("Rf", "Rt", "Re", "D")
 #: the search is bounded to a factor e^BOUND (1000) either way of the scene's values: data that do
-# not : determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
+#: not determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
 BOUND = float(np.log(1e3))
 AT_BOUND = (
     "the data drive it to the bound of the search (a factor 1000 from the scene's value): they do "

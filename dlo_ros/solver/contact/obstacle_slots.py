@@ -53,7 +53,7 @@ TOUCH = 1e-6
 DIP = 1e-6
 
 #: obstacle types without curvature: their slots stay empty (a string on a plane does not cut in
-# between the : samples beyond its own sag, and a flat contact has no point to slide to)
+#: between the samples beyond its own sag, and a flat contact has no point to slide to)
 FLAT = tuple(name for name, kind in OBSTACLE_TYPES.items() if kind.flat)
 
 #: the clearance is measured on FINE points per sample interval (at most 4096 intervals in all)
@@ -171,15 +171,15 @@ def assign(
         if k is None:
             pending.append((sj, cj))
             continue
+        assert previous is not None  # k is one of previous's slots
         free.remove(k)
         s[k], on[k], c[k] = (
             (previous.s[k] if abs(previous.s[k] - sj) <= TOLERANCE * length else sj),
             1.0,
             cj,
         )
-    if (
-        previous is not None
-    ):  # free indices: those empty before first (a slot that lost its minimum holds no force)
+    if previous is not None:
+        # free indices: those empty before first (a slot that lost its minimum holds no force)
         free.sort(key=lambda k: previous.on[k] > 0)
     for (sj, cj), k in zip(pending, free):
         s[k], on[k], c[k] = sj, 1.0, cj

@@ -73,7 +73,7 @@ FULLER_ALIGNMENT = 1.0
 SAMPLES = 401
 
 #: the clamps' tangent rays of ``ray_writhe``, in units of the span's length (the writhe they leave
-# out : decays like 1/length)
+#: out decays like 1/length)
 RAY_LENGTHS = 200.0
 
 

@@ -57,7 +57,7 @@ def one_line_warnings() -> None:
     """
     default = warnings.formatwarning
 
-    # noqa: ANN001 - warnings' API
+    # untyped: the signature is warnings.formatwarning's
     def formatwarning(message, category, filename, lineno, line=None):
         if category.__module__.startswith("dlo_ros"):
             return f"{message}\n"

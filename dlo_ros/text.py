@@ -10,7 +10,7 @@ import unicodedata
 import warnings
 
 #: Longest text (characters, after escaping) that :func:`safe_text` lets into a log line or a
-# diagnostic value.
+#: diagnostic value.
 TEXT_LIMIT = 200
 
 # Unicode categories escaped by safe_text: control (incl. ESC, CR, LF, TAB), format (bidi
@@ -57,7 +57,7 @@ def one_line_warnings() -> None:
     """
     default = warnings.formatwarning
 
-    # noqa: ANN001 - warnings' API
+    # untyped: the signature is warnings.formatwarning's
     def formatwarning(message, category, filename, lineno, line=None):
         if category.__module__.startswith("dlo_ros"):
             return f"{message}\n"

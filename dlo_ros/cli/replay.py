@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     if args.screenshot:
         try:
             out = viewer.screenshot(path, args.screenshot, update=args.update)
-        # noqa: BLE001 - the viewer's reasons are varied (no GPU, port, ...)
+        # any exception: the viewer's reasons are varied (no GPU, port, ...)
         except Exception as exc:
             print(
                 f"dlo replay: could not render {path} headlessly: {type(exc).__name__}: {exc}\n"

@@ -12,9 +12,9 @@ IPOPT only as its fallback). Outer level: minimise
 with r_j the point-to-curve residual of point j (``curve.py``), ρ Huber's loss (quadratic up to
 ``huber`` σ, linear beyond: outliers count less), the optional measured grip force, grip torque
 (about the grip point) and known weight. The Jacobian comes from the implicit-function theorem on
-the KKT system (``solver/results/sensitivity.py``): one linear solve per observation and iteration, no
-finite differences.  Steps are Gauss–Newton steps with iteratively reweighted (Huber) normal matrix
-A = Jᵀ W J / σ², Levenberg-damped, restricted to the directions the data determine
+the KKT system (``solver/results/sensitivity.py``): one linear solve per observation and iteration,
+no finite differences.  Steps are Gauss–Newton steps with iteratively reweighted (Huber) normal
+matrix A = Jᵀ W J / σ², Levenberg-damped, restricted to the directions the data determine
 (``identifiability.py``), and clipped to ``max_step`` in log units.
 
 Covariance of θ: A⁺ (the pseudo-inverse on the determined directions) at the solution, with the
@@ -50,7 +50,7 @@ UNITS = {"Rf": "N·m²", "Rt": "N·m²", "D": "N/m", "Re": "N"}
 #: held at the scene's value first when a direction is undetermined
 ANCHOR_ORDER = ("Rf", "Rt", "Re", "D")
 #: the search is bounded to a factor e^BOUND (1000) either way of the scene's values: data that do
-# not : determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
+#: not determine a parameter can otherwise drive it to 0 or ∞, where its column of J vanishes
 BOUND = float(np.log(1e3))
 AT_BOUND = (
     "the data drive it to the bound of the search (a factor 1000 from the scene's value): they do "

@@ -22,7 +22,7 @@ RANK_TOLERANCE = 1e-10
 #: |V0ᵀ c| / |c| below this: the combination c is determined.  The null space of a nearly
 #: degenerate A is
 #: known only approximately (a weak direction's eigenvector mixes with its neighbours), so a
-# combination : with a 1 % component along it still counts as orthogonal to it
+#: combination with a 1 % component along it still counts as orthogonal to it
 ORTHOGONAL = 1e-2
 
 WHY = {

@@ -10,8 +10,8 @@ r_j: point-to-curve residuals (``curve.py``); ρ: Huber's loss; F: a measured gr
 measured grip torque (about the grip point; dT/dθ for the director and planar models only); W: the
 known weight; R: the profile regulariser (``parameters.py``).  Each evaluation solves each
 observation's equilibrium once (its own warm-started ``ShapeSolver``) and takes dr/dθ from the KKT
-system (``solver/results/sensitivity.py``).  The Gauss–Newton normal matrix and gradient use Huber's IRLS
-weights
+system (``solver/results/sensitivity.py``).  The Gauss–Newton normal matrix and gradient use
+Huber's IRLS weights
 w_j = min(1, huber / u_j), u_j = |r_j| / σ.
 """
 

@@ -58,7 +58,7 @@ class ObservationFit:
     downweighted: int
     force_residual_n: float | None = None
     #: the fitted centreline (S, 3) [m] and each observed point's nearest point on it (N, 3) [m],
-    # for drawing
+    #: for drawing
     shape: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
     feet: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
     torque_residual_nm: float | None = None

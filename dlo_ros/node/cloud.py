@@ -35,7 +35,7 @@ TYPE_NAMES = {
 #: fewest points a fit can use (the observation file's minimum, dlo_ros.identify.observations)
 MIN_POINTS = 3
 #: bytes per point allowed for in the size limit of a serialised cloud (x, y, z, rgb, intensity,
-# normals, ...)
+#: normals, ...)
 MAX_POINT_BYTES = 64
 #: bytes of a serialised cloud beyond its points: header, field descriptions
 CLOUD_OVERHEAD_BYTES = 64 * 1024

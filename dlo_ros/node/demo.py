@@ -45,7 +45,7 @@ POST: dict[str, Any] = {
 }
 
 #: (time [s], left position, right position, right twist about the tangent [rad], phase starting
-# here)
+#: here)
 KEYFRAMES = (
     (0.0, (0.0, 0.0, 0.40), (0.60, 0.0, 0.40), 0.0, "bring the ends together"),
     (2.0, (0.0, 0.0, 0.55), (0.35, 0.0, 0.55), 0.0, "twist the right end by half a turn"),

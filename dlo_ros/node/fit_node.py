@@ -77,8 +77,7 @@ def warm_fit_worker() -> bool:
 
     Runs in the worker process; a function-local import, as importing is its whole job.
     """
-    # not at the top: importing is this function's whole job
-    import dlo_ros.identify.fit  # noqa: F401
+    import dlo_ros.identify.fit  # noqa: F401 - imported for its side effect (loads CasADi)
 
     return True
 
@@ -244,7 +243,7 @@ class NodeFitter:
         node = self.node
         try:
             result, error = job.result(timeout=0), ""
-        # noqa: BLE001 - ObservationError (a request the scene cannot fit) or a worker crash
+        # any exception: ObservationError (a request the scene cannot fit) or a worker crash
         except Exception as exc:
             result, error = None, safe_text(f"{type(exc).__name__}: {exc}")
             if isinstance(

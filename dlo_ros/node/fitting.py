@@ -43,8 +43,8 @@ PARAMETER_OF = {
 #: relative σ of a known total mass (the observation file's default)
 MASS_RELATIVE_SIGMA = 1e-3
 #: (fit worker process) the equilibrium solvers of earlier fits: building one takes seconds, a fit
-# of a : kept one a few solves (dlo_ros.identify.objective.SolverCache; one fit at a time per
-# worker)
+#: of a kept one a few solves (dlo_ros.identify.objective.SolverCache; one fit at a time per
+#: worker)
 _SOLVERS = None
 
 

@@ -35,7 +35,7 @@ KINDS = (
     "not_ready",  # the solver is still being built: try again
 )
 #: ShapeResult.status -> reply kind (an 'ok' result is VERIFIED, or 'unstable' when stable is
-# False)
+#: False)
 STATUS_KINDS = {
     "unverified": "unverified",
     "unreachable": "no_equilibrium",

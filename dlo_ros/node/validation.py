@@ -20,12 +20,12 @@ from ..text import safe_text
 Vector = Sequence[float] | np.ndarray
 
 #: Longest ``header.frame_id`` of a target (or ``frame_id`` parameter) the node accepts; tf2 frame
-# ids are short.
+#: ids are short.
 FRAME_ID_LIMIT = 256
 
 #: Largest serialised target message (PoseStamped or PoseArray, CDR bytes) the node deserialises:
-# room : for a 256-character frame_id and 64 poses (a scene has at most 16 grips), so a miscounted
-# array is : still named by its count, and a huge one is refused by its size before any work.
+#: room for a 256-character frame_id and 64 poses (a scene has at most 16 grips), so a miscounted
+#: array is still named by its count, and a huge one is refused by its size before any work.
 TARGET_BYTES_LIMIT = 4096
 
 #: |‖q‖ − 1| up to this is normalised silently; beyond it the target is rejected.

@@ -56,7 +56,7 @@ E_MODEL_SERIES = (
     "model"  # model/<key>: scalars of ShapeResult.model, one row per result that has them
 )
 #: ShapeResult.model entries recorded as scalars (model/<key>; booleans as 1/0), with their series
-# names.
+#: names.
 MODEL_SCALARS = {
     "order": "basis order",
     "variables": "unknowns",

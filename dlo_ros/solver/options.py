@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from typing import Any
 
 FRAMES = ("auto", "paper")
 MODELS = ("auto", "full", "planar")
@@ -20,28 +21,30 @@ class SolverOptions:
     centreline (for 'director': per element, at most order + 8). obstacle_samples: points along s,
     uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is imposed.  obstacle_slots:
     per obstacle, rows whose arc lengths are parameters, placed at the string's closest approaches
-    to the obstacle and moved with them (solver/contact/obstacle_slots.py); 0 (default): the samples alone.
+    to the obstacle and moved with them (solver/contact/obstacle_slots.py); 0 (default): the
+    samples alone.
     frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2 (away
-    from the singularity); 'paper' is the paper's frame (singular at the straight state). rotation:
-    how a 3D model represents the material frame: 'director' (default: nodal unit quaternions, or
-    unit tangents when the twist is not held, on spectral elements split at interior grips, point
-    loads and material kinks; no singular direction, see model/director.py) or 'euler' (the paper's
-    Euler angles in one Ritz basis over [0, L], with ``frame``; kept for the benchmark).  Planar
-    models always use the in-plane angle φ. model: 'auto' (default: the smallest model the scene
-    needs, checked a posteriori against error_tolerance, see solver/auto/auto_solver.py), 'full' (3D: φ, θ and,
-    when two clamps hold it, ψ) or 'planar' (φ only, θ ≡ π/2: the string stays in the working
-    plane; requires a planar scene and frame 'auto'). error_tolerance [m]: what 'auto' guarantees
-    on the centreline; 0 means 1e-3·L (1 mm on 1 m). recheck_every: 'auto' repeats its a-posteriori
-    checks every this many streamed updates. output_points: centreline samples in a result.
+    from the singularity); 'paper' is the paper's frame (singular at the straight state).
+    rotation: how a 3D model represents the material frame: 'director' (default: nodal unit
+    quaternions, or unit tangents when the twist is not held, on spectral elements split at
+    interior grips, point loads and material kinks; no singular direction, see model/director.py)
+    or 'euler' (the paper's Euler angles in one Ritz basis over [0, L], with ``frame``; kept for
+    the benchmark).  Planar models always use the in-plane angle φ.
+    model: 'auto' (default: the smallest model the scene needs, checked a posteriori against
+    error_tolerance, see solver/auto/auto_solver.py), 'full' (3D: φ, θ and, when two clamps hold
+    it, ψ) or 'planar' (φ only, θ ≡ π/2: the string stays in the working plane; requires a planar
+    scene and frame 'auto'). error_tolerance [m]: what 'auto' guarantees on the centreline; 0 means
+    1e-3·L (1 mm on 1 m). recheck_every: 'auto' repeats its a-posteriori checks every this many
+    streamed updates. output_points: centreline samples in a result.
     tolerance: IPOPT's (scaled) convergence tolerance. max_continuation_steps: the largest number
     of equal steps a failed warm update is split into. update_time_limit [s]: how long a warm
     update (one that starts from a committed shape) may try: no IPOPT attempt starts after it, and
     each attempt within a warm update stops at it (IPOPT's ``max_wall_time``); the update then
     answers ``failed`` and names this limit.  0: no limit.  A cold solve is not limited.
     self_contact_pairs: capacity of the self-contact pair list (director 3D models only; 0:
-    self-contact
-    is not modelled).  Each slot is one inequality row |x(s_a) − x(s_b)|² ≥ D² whose pair of arc lengths is
-    a parameter, refreshed from the current shape before every solve (solver/contact/self_contact.py).
+    self-contact is not modelled).  Each slot is one inequality row |x(s_a) − x(s_b)|² ≥ D² whose
+    pair of arc lengths is a parameter, refreshed from the current shape before every solve
+    (solver/contact/self_contact.py).
     self_contact_samples: points along s where self-contact is checked (0: from the radius, see
     ``self_contact.contact_geometry``).
     """
@@ -72,7 +75,8 @@ class SolverOptions:
             raise ValueError(f"solver.order: must be in [2, 60], got {self.order}")
         if not (max(8, self.order + 2) <= self.quadrature_nodes <= 400):
             raise ValueError(
-                f"solver.quadrature_nodes: must be in [max(8, order+2), 400], got {self.quadrature_nodes}"
+                "solver.quadrature_nodes: must be in [max(8, order+2), 400], "
+                f"got {self.quadrature_nodes}"
             )
         if not (2 <= self.obstacle_samples <= 1000):
             raise ValueError(
@@ -106,9 +110,9 @@ class SolverOptions:
         if ignored:
             name = ignored[0]
             raise ValueError(
-                f"solver.{name}: {getattr(self, name)!r} belongs to the Euler-angle model; the 3D model "
-                "(solver.rotation 'director', the default) has neither a Ritz basis nor a reference frame: "
-                "set solver.rotation 'euler' to use it"
+                f"solver.{name}: {getattr(self, name)!r} belongs to the Euler-angle model; "
+                "the 3D model (solver.rotation 'director', the default) has neither a Ritz basis "
+                "nor a reference frame: set solver.rotation 'euler' to use it"
             )
         if not (self.error_tolerance >= 0 and self.error_tolerance < 1e3):
             raise ValueError(
@@ -116,7 +120,8 @@ class SolverOptions:
             )
         if not (0 <= self.update_time_limit <= 3600):
             raise ValueError(
-                f"solver.update_time_limit: must be in [0, 3600] s (0: no limit), got {self.update_time_limit}"
+                "solver.update_time_limit: must be in [0, 3600] s (0: no limit), "
+                f"got {self.update_time_limit}"
             )
         if not (1 <= self.recheck_every <= 100000):
             raise ValueError(
@@ -128,7 +133,8 @@ class SolverOptions:
             )
         if self.self_contact_samples != 0 and not (3 <= self.self_contact_samples <= 4000):
             raise ValueError(
-                f"solver.self_contact_samples: must be 0 (auto) or in [3, 4000], got {self.self_contact_samples}"
+                "solver.self_contact_samples: must be 0 (auto) or in [3, 4000], "
+                f"got {self.self_contact_samples}"
             )
         if self.self_contact_pairs and (self.model == "planar" or self.rotation != "director"):
             raise ValueError(
@@ -172,7 +178,8 @@ class SolverOptions:
             raise ValueError(
                 f"solver.{sorted(unknown)[0]}: unknown option (known: {sorted(known)})"
             )
-        kwargs = {}
+        # One value per field, each converted to that field's type (str, int or float).
+        kwargs: dict[str, Any] = {}
         for key, value in d.items():
             default = getattr(cls, key)
             try:

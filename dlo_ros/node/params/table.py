@@ -155,7 +155,7 @@ STATIC = (
 )
 
 #: String properties: parameter name -> StringProperties field.  A table-valued (s-dependent)
-# property : is represented by its maximum; setting the parameter scales the whole table.
+#: property is represented by its maximum; setting the parameter scales the whole table.
 STRING_FIELDS = {
     "string.bend_stiffness": "bend_stiffness",
     "string.twist_stiffness": "twist_stiffness",

@@ -11,9 +11,9 @@ check fails.  Reductions and their checks:
   full model's reduced Hessian at the embedded planar shape (a twist-free strip under compression
   leaves its plane); unstable → full model.
 * twist — ψ is an unknown only when two clamps and Rt > 0 can hold it (otherwise ω ≡ 0 exactly).
-* stretch — inextensible first; the elongation bound max|F_grip|·L / min Re > δ/2 → extensible model.
-  Grips farther apart than the inextensible string between them reaches (an extensible scene)
-  choose the extensible model at once, or switch to it when a stream carries them there.
+* stretch — inextensible first; the elongation bound max|F_grip|·L / min Re > δ/2 → extensible
+  model. Grips farther apart than the inextensible string between them reaches (an extensible
+  scene) choose the extensible model at once, or switch to it when a stream carries them there.
 * gravity — dropped when D_max L⁴ / (8 Rf_min) (a cantilever's tip deflection, the largest a string
   held at ≥ 1 point sags under its weight at small deflection) is below δ/10.
 * obstacles — an obstacle is in the NLP only if the string can reach it: within max(s_g, L − s_g) +
@@ -49,12 +49,12 @@ check fails.  Reductions and their checks:
   stay), the model the shadow already built and warmed.  At MAX_SAMPLES the last shadow's change
   (undoubled: the error of the finer model) stays the sampling estimate.
 * self-contact — modelled only once a committed shape comes within reach of itself (two samples the
-  exclusion arc apart closer than the candidate reach D + max(4h, 0.03 L), solver/contact/self_contact.py):
-  then the 3D director model with ``self_contact_pairs`` slots (the option's value, or
-  AUTO_SELF_CONTACT_PAIRS when it is 0) replaces the current one and the update is solved again on
-  it, so no shape that passes through itself is published; it says so in ``reasons``
-  ("self-contact: …").  Not with ``rotation: euler`` (self-contact needs the director model).  Once
-  in, it stays.
+  exclusion arc apart closer than the candidate reach D + max(4h, 0.03 L),
+  solver/contact/self_contact.py): then the 3D director model with ``self_contact_pairs`` slots
+  (the option's value, or AUTO_SELF_CONTACT_PAIRS when it is 0) replaces the current one and the
+  update is solved again on it, so no shape that passes through itself is published; it says so in
+  ``reasons`` ("self-contact: …").  Not with ``rotation: euler`` (self-contact needs the director
+  model).  Once in, it stays.
 
 Switching models maps the previous solution into the new one (ShapeSolver.adopt_warm_start), so a
 stream keeps its warm start.  Every change is kept in ``changes`` (time, reason) and reported in

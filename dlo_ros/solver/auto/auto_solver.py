@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Mapping, Sequence
+from concurrent.futures import Executor
 from dataclasses import replace
 
 import numpy as np
 
-from ...model.problem import Problem
+from ...model.problem import GripPose, Problem
 from ..options import SolverOptions
 from ..parallel.batch import query_many
 from ..results.result import ShapeResult
@@ -108,7 +110,7 @@ class AutoShapeSolver:
         return self.model_checks.lower_tried
 
     def switch(self, choice: ModelChoice, reason: str, start: tuple | None = None) -> None:
-        """Stream on ``choice`` from now on, mapping the warm start; unchecked until its first check.
+        """Stream on ``choice`` from now on, mapping the warm start (unchecked until checked).
 
         Waits for a running background job only if that job may be using the model switched to.
         ``start``: (solver, its state or None, problem) to map instead of the streaming model's
@@ -184,7 +186,11 @@ class AutoShapeSolver:
                 self.worker.shutdown()
                 self.checks = "sync"
 
-    def query_many(self, targets, executor=None) -> list[ShapeResult]:
+    def query_many(
+        self,
+        targets: Sequence[Mapping[str, GripPose | tuple]],
+        executor: Executor | None = None,
+    ) -> list[ShapeResult]:
         """Answer many independent queries in worker processes (see ShapeSolver.query_many).
 
         Each worker runs its own auto solver of this scene, with inline checks.
@@ -214,7 +220,7 @@ class AutoShapeSolver:
     # ---- one update -----------------------------------------------------------------------------
     def solve(
         self,
-        poses: dict | None = None,
+        poses: Mapping[str, GripPose | tuple] | None = None,
         *,
         warm: bool = True,
         commit: bool = True,

@@ -26,6 +26,7 @@ import numpy as np
 
 from ...model.problem import Problem
 from ..shape_solver import ShapeSolver
+from ..state import SolverState
 from .choice import MAX_SAMPLES, ORDERS, ModelChoice, full_choice
 from .pool import ModelPool
 from .shadows import penetration, planar_3d_eigenvalue, shadow_error, turned_frame
@@ -43,7 +44,7 @@ class CheckSnapshot:
     """
 
     inner: ShapeSolver
-    state: object
+    state: SolverState | None
     choice: ModelChoice
     problem: Problem
     poses: dict

@@ -114,7 +114,9 @@ def self_approach(auto: AutoShapeSolver, problem: Problem) -> str:
         return ""
     st = problem.string
     geometry = _contact_geometry(auto, problem)
-    points = auto.inner.model.positions(auto.inner.snapshot().z, geometry.s)
+    state = auto.inner.snapshot()
+    assert state is not None  # has_warm_start checked above
+    points = auto.inner.model.positions(state.z, geometry.s)
     if SC.certainly_apart(points, geometry):  # the usual answer, proved without the k-d tree
         return ""
     d = SC.closest_distance(points, geometry)
@@ -140,7 +142,9 @@ def contact_start(
     """
     solver, state, previous = before
     geometry = _contact_geometry(auto, problem)
-    after = auto.inner.model.positions(auto.inner.committed_state.z, geometry.s)
+    committed = auto.inner.committed_state
+    assert committed is not None  # self_approach found this committed shape within reach
+    after = auto.inner.model.positions(committed.z, geometry.s)
     earlier = None if state is None else solver.model.positions(state.z, geometry.s)
     why = RC.why_not_reference(earlier, after, geometry, problem.string.length)
     if not why:

@@ -60,7 +60,7 @@ def verified_answer(
     why = stopped
     if not why and (estimate is None or not math.isfinite(estimate)):
         why = "the model checks did not finish"
-    elif not why and estimate > tolerance:
+    elif not why and estimate is not None and estimate > tolerance:
         why = f"the error estimate {estimate:.3g} m is over the tolerance {tolerance:.3g} m"
     if not why:
         return result  # the inner solver's 'ok': the residual is within the tolerance too

@@ -56,11 +56,11 @@ def reachable_obstacles(problem: Problem, margin: float) -> tuple[int, ...]:
 
 
 def clear_of_plane(ob: Obstacle, origin: np.ndarray, normal: np.ndarray, margin: float) -> bool:
-    """Tell whether the obstacle is more than ``margin`` from the plane (``origin``, unit ``normal``).
+    """Tell whether the obstacle is more than ``margin`` from the plane through ``origin``.
 
-    A string lying in the plane cannot touch it, so the planar equilibrium is an equilibrium of the
-    3D problem with that obstacle inactive (the planar model leaves it out; its 3D stability is
-    checked with it).
+    ``normal``: the plane's unit normal.  A string lying in the plane cannot touch the obstacle, so
+    the planar equilibrium is an equilibrium of the 3D problem with that obstacle inactive (the
+    planar model leaves it out; its 3D stability is checked with it).
     """
     p = np.asarray(ob.params, dtype=float)
     return bool(ob.obstacle_type.clear_of_plane(p, origin, normal, margin))

@@ -79,7 +79,7 @@ class NlpFunctions:
         self.newton_native = None
         self.newton_active: native_newton.ActiveNewton | None = None
         #: the outputs' function and its structure (grid, profiles), None where numpy builds the
-        # outputs
+        #: outputs
         self.output_function = (
             OutputFunction(
                 nlp, nlp.problem, np.linspace(0.0, nlp.length, nlp.options.output_points)
@@ -97,7 +97,7 @@ class NlpFunctions:
         self.compile_time_s = 0.0  # wall time of the compile that finished them [s]
         self.retired = False  # the solver was rebuilt: a running compile stops at its next swap
         #: ('cached' mode) (name, function, library path) of each library not in the cache at the
-        # start
+        #: start
         self.waiting: list[tuple[str, ca.Function, Path]] = []
 
     def retire(self) -> None:

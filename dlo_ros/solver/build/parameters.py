@@ -64,7 +64,7 @@ class ProblemParameters:
         self._scene_p: tuple | None = None  # (scene objects, gravity, p without grip targets)
         self._euler_cache: dict[int, tuple] = {}
         #: the contact slots the last ``pack`` found, per obstacle (read by the solver right after
-        # it)
+        #: it)
         self.placements: list[OSL.SlotPlacement] = []
 
     def pack(

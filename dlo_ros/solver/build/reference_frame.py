@@ -20,7 +20,7 @@ from .structure import has_point_moments
 
 
 #: a held grip tangent closer than this to the pole of the chord-and-gravity frame turns the pole
-# [deg]
+#: [deg]
 GRIP_POLE_MIN_DEG = 30.0
 
 

@@ -49,11 +49,11 @@ TOLERANCE = 3e-4
 TOUCH = 1e-6
 
 #: a closest approach gets a slot when it lies this × L below the clearance half a sample spacing
-# to each side
+#: to each side
 DIP = 1e-6
 
 #: obstacle types without curvature: their slots stay empty (a string on a plane does not cut in
-# between the : samples beyond its own sag, and a flat contact has no point to slide to)
+#: between the samples beyond its own sag, and a flat contact has no point to slide to)
 FLAT = tuple(name for name, kind in OBSTACLE_TYPES.items() if kind.flat)
 
 #: the clearance is measured on FINE points per sample interval (at most 4096 intervals in all)
@@ -112,9 +112,9 @@ def minima(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Return the clearance's local minima that are deep enough, deepest first.
 
-    Each is (s*, c(s*)): the local minima of the clearance within ``width_band`` that dip DIP·L below
-    the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``: c at
-    any arc lengths; each minimum is refined by two parabola steps through evaluated points).
+    Each is (s*, c(s*)): the local minima of the clearance within ``width_band`` that dip DIP·L
+    below the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``: c
+    at any arc lengths; each minimum is refined by two parabola steps through evaluated points).
     """
     inner = clearance[1:-1]
     k = (
@@ -171,15 +171,15 @@ def assign(
         if k is None:
             pending.append((sj, cj))
             continue
+        assert previous is not None  # k is one of previous's slots
         free.remove(k)
         s[k], on[k], c[k] = (
             (previous.s[k] if abs(previous.s[k] - sj) <= TOLERANCE * length else sj),
             1.0,
             cj,
         )
-    if (
-        previous is not None
-    ):  # free indices: those empty before first (a slot that lost its minimum holds no force)
+    if previous is not None:
+        # free indices: those empty before first (a slot that lost its minimum holds no force)
         free.sort(key=lambda k: previous.on[k] > 0)
     for (sj, cj), k in zip(pending, free):
         s[k], on[k], c[k] = sj, 1.0, cj

@@ -15,13 +15,13 @@ x(σ_a) − x(σ_b) = T q_k with T the quadrature-node tangents) and its bound b
 rebuilding the NLP.
 
 Error bound between samples.  Near their closest points two strands are straight to O(κ h²), so
-each
-sample pair's offset from the closest points is a u − b v with |a|, |b| ≤ h/2 (u, v the unit tangents);
-choosing the signs of a and b so that a b (u·v) ≥ 0 gives |a u − b v|² ≤ h²/2 whatever the angle.
-Hence d_true² ≥ d_sample² − h²/2 ≥ (2r)²: the true centreline distance is at least 2r − κ_max h²/4
-(κ_max the largest curvature of the two strands near contact; each strand leaves its tangent line
-by at most κ (h/2)²/2 within half a spacing).  The price is a separation of at most √((2r)² + h²/2)
-for parallel strands whose samples line up (D instead of 2r: 6 % of the diameter at h = r).
+each sample pair's offset from the closest points is a u − b v with |a|, |b| ≤ h/2 (u, v the unit
+tangents); choosing the signs of a and b so that a b (u·v) ≥ 0 gives |a u − b v|² ≤ h²/2 whatever
+the angle.  Hence d_true² ≥ d_sample² − h²/2 ≥ (2r)²: the true centreline distance is at least
+2r − κ_max h²/4 (κ_max the largest curvature of the two strands near contact; each strand leaves
+its tangent line by at most κ (h/2)²/2 within half a spacing).  The price is a separation of at
+most √((2r)² + h²/2) for parallel strands whose samples line up (D instead of 2r: 6 % of the
+diameter at h = r).
 
 Radius zero ("may touch, may not cross"): D = h/√2.  Two polyline chords of length h that cross
 have an end pair no further apart than h/√2, so a shape whose sample pairs all keep D does not
@@ -45,8 +45,8 @@ within reach of itself: ``certainly_apart`` answers "no" from the turning angles
 distance test when it can prove it, the search otherwise.
 
 Topology, along a warm stream (both reported as a failure, the shape not published):
-* ``crossing_flips``: for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the sign of
-  (x_b − x_a)·(t_a × t_b) says which strand lies on top; it cannot change while the strands stay
+* ``crossing_flips``: for each pair within reach whose tangents cross (|t_a × t_b| ≥ 0.3) the sign
+  of (x_b − x_a)·(t_a × t_b) says which strand lies on top; it cannot change while the strands stay
   within reach of each other unless one passed through the other between two updates.  (x_b −
   x_a)·n̂ (n̂ the unit normal t_a × t_b) is the signed distance between the two tangent lines, so
   the sign is kept only where that is at least half the pair's distance (``CROSSING_OVERLAP``):
@@ -72,11 +72,12 @@ from scipy.spatial import cKDTree
 #: how many times a solve is repeated with the pairs it penetrated added to the slots
 CONTACT_ROUNDS = 4
 
-#: |t_a × t_b| below this: the strands are too close to parallel for the crossing sign to mean anything
+#: |t_a × t_b| below this: the strands are too close to parallel for the crossing sign to mean
+#: anything
 CROSSING_SINE = 0.3
 
-#: |(x_b − x_a)·n̂| below this fraction of |x_b − x_a|: the strands lie side by side, not over one another,
-#: and the crossing sign means nothing (module docstring)
+#: |(x_b − x_a)·n̂| below this fraction of |x_b − x_a|: the strands lie side by side, not over one
+#: another, and the crossing sign means nothing (module docstring)
 CROSSING_OVERLAP = 0.5
 
 
@@ -232,16 +233,14 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
     tell (then ``candidate_pairs`` decides).  Exact, never a guess:
 
     * pairs k = b − a samples apart with m ≤ k < K (m the smallest separation the exclusion arc
-      allows,
-      K ≈ 1.25 reach / h): if the polyline turns by less than 90° over every K − 1 consecutive
-      segments, all segment directions between a and b are within 90° of each other, so the inner
-      neighbour pairs
-      (a, b − 1) and (a + 1, b) are strictly closer than (a, b) (|c + e|² − |c|² = 2 c·e + |e|² > 0 with e
-      the step and c the rest of the chord): no such pair is a local minimum, unless the inner
-      neighbour is a step along the same strand (k = m); those pairs are minima only when closer
-      than D, and their chord is at least cos(T/2) × the polyline's length over them (T the turning
-      over those m segments: every direction is within T/2 of the middle one along the turning
-      path);
+      allows, K ≈ 1.25 reach / h): if the polyline turns by less than 90° over every K − 1
+      consecutive segments, all segment directions between a and b are within 90° of each other,
+      so the inner neighbour pairs (a, b − 1) and (a + 1, b) are strictly closer than (a, b)
+      (|c + e|² − |c|² = 2 c·e + |e|² > 0 with e the step and c the rest of the chord): no such
+      pair is a local minimum, unless the inner neighbour is a step along the same strand (k = m);
+      those pairs are minima only when closer than D, and their chord is at least cos(T/2) × the
+      polyline's length over them (T the turning over those m segments: every direction is within
+      T/2 of the middle one along the turning path);
     * pairs k ≥ K: none is within reach (their distances, from one Gram matrix, all above it);
     * no pair within K samples is placed by two different grips (their samples count as minima).
     """
@@ -370,8 +369,9 @@ def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
     p with every slot's q_k and b_k set (module docstring), scaled so that the row reads a
     distance:
     q_k = (W(σ_a) − W(σ_b)) / √(2D) and b_k = D/2, so that the NLP row (b_k − |T q_k|²)/L equals
-    (D² − |x_a − x_b|²)/(2 D L) ≈ (D − |x_a − x_b|)/L near contact, whatever the radius (a row in D² would
-    hold the distance only to 1e-10 L²/D).  An empty slot: q_k = 0, b_k = −L (the row reads −1).
+    (D² − |x_a − x_b|²)/(2 D L) ≈ (D − |x_a − x_b|)/L near contact, whatever the radius (a row in
+    D² would hold the distance only to 1e-10 L²/D).  An empty slot: q_k = 0, b_k = −L (the row
+    reads −1).
     """
     lay, w = nlp.params, nlp.model.position_matrix(slots.geometry.s)
     d = slots.geometry.distance
@@ -390,8 +390,8 @@ def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
 def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
     """Return the SI multiplier λ [N/m] of a slot's distance constraint from its row's λ.
 
-    The SI multiplier λ [N/m] of D² − |x_a − x_b|² ≤ 0 from a slot row's λ / (row_scale σ) [N] (``fill``:
-    the row is that constraint divided by 2D).
+    The SI multiplier λ [N/m] of D² − |x_a − x_b|² ≤ 0 from a slot row's λ / (row_scale σ) [N]
+    (``fill``: the row is that constraint divided by 2D).
     """
     return lam_row_si / (2.0 * geometry.distance)
 
@@ -429,12 +429,11 @@ def swept_crossing(
     """Return a sample pair that meets when the samples move straight from ``before`` to ``after``.
 
     A pair of samples (exclusion arc apart) that meet when every sample moves straight from
-    ``before``
-    to ``after`` (N, 3): its distance min_τ |Δ0 + τ (Δ1 − Δ0)| falls below half of min(D, h/√2), the
-    resolution at which the sample polyline can tell two centrelines apart; None when no pair does.
-    If the straight motion keeps every pair apart, the two shapes are isotopic (the string did not
-    pass through itself); if it does not, it may have.  Only pairs that can meet are tested: a k-d
-    tree over ``before`` with the radius D plus twice the largest displacement.
+    ``before`` to ``after`` (N, 3): its distance min_τ |Δ0 + τ (Δ1 − Δ0)| falls below half of
+    min(D, h/√2), the resolution at which the sample polyline can tell two centrelines apart; None
+    when no pair does. If the straight motion keeps every pair apart, the two shapes are isotopic
+    (the string did not pass through itself); if it does not, it may have. Only pairs that can meet
+    are tested: a k-d tree over ``before`` with the radius D plus twice the largest displacement.
     """
     move = float(np.max(np.linalg.norm(after - before, axis=1), initial=0.0))
     pairs, _ = _far_pairs(before, geometry, geometry.distance + 2 * move)

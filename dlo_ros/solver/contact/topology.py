@@ -6,7 +6,8 @@ A string clamped at both ends with its twist modelled is a ribbon: the centrelin
 director d1(s) of its frame (t, d1, d2).  Closed in a fixed way through the clamps (each clamp's
 tangent ray to infinity, d1 carried along it unturned), its linking number
 
-    Lk = Tw + Wr,   Tw = (1/2π) ∫ (d1' · d2) ds = (1/2π) ∫ Ω_1 ds,   Wr = (1/4π) ∬ (t₁ × t₂)·(x₁ − x₂)/|x₁ − x₂|³
+    Lk = Tw + Wr,   Tw = (1/2π) ∫ (d1' · d2) ds = (1/2π) ∫ Ω_1 ds,
+                    Wr = (1/4π) ∬ (t₁ × t₂)·(x₁ − x₂)/|x₁ − x₂|³
 
 is an integer that cannot change while the string deforms continuously without passing through
 itself and the clamps hold still.  A clamp turned by α about its own tangent adds α/2π (the
@@ -58,20 +59,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: |ΔLk| above this (turns) is a jump to another branch: a change from continuous deformation is near 0
+#: |ΔLk| above this (turns) is a jump to another branch (a change from continuous deformation is
+#: near 0)
 JUMP = 0.5
 
 #: 1 + t₀·t₁ at or below this somewhere (a tangent turned 90° or more): Fuller's formula (mod 2) is
-# not used
+#: not used
 FULLER_ALIGNMENT = 1.0
 
 #: samples along the clamped span at which a solver compares two shapes (Tw and Fuller's writhe are
 #: O(h²): a jump is a whole turn, the error at 401 samples a few 1e-4 turns on the twisted test
-# streams)
+#: streams)
 SAMPLES = 401
 
 #: the clamps' tangent rays of ``ray_writhe``, in units of the span's length (the writhe they leave
-# out : decays like 1/length)
+#: out decays like 1/length)
 RAY_LENGTHS = 200.0
 
 

@@ -83,8 +83,8 @@ class ActiveOutcome:
     active: np.ndarray
     evaluations: int = 0
     #: once converged, the stability eigenvalue there and its eigenvector in z
-    # (``SolverState.reduced_eigen``, : on the rows ``stability.min_reduced_eigenvalue`` holds),
-    # None if LAPACK failed
+    #: (``SolverState.reduced_eigen``, on the rows ``stability.min_reduced_eigenvalue`` holds),
+    #: None if LAPACK failed
     eigen: tuple[float, np.ndarray] | None = None
     #: the outputs at the answer, when the call evaluated them (``UpdateOutputs``)
     outputs: ComputedOutputs | None = None

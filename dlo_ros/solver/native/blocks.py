@@ -137,5 +137,5 @@ class WithNodePart:
 
 
 #: the most multiplications (m·n·k) of one dgemm in ``dlo_add_node_part``: below OpenBLAS's
-# threshold for : threads (65536 · 4), whose workers would spin on the other core between calls
+#: threshold for threads (65536 · 4), whose workers would spin on the other core between calls
 CHUNK_WORK = 150_000

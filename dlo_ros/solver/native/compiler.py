@@ -90,7 +90,7 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
 
 
 #: Held while a compiler runs: never more than one per process (concurrent compiles multiply the
-# memory).
+#: memory).
 COMPILER_LOCK = threading.Lock()
 
 

@@ -186,7 +186,7 @@ class NewtonOutcome:
     evaluations: int = 0
     eigen: tuple[float, np.ndarray] | None = None
     #: every row's value at the answer, when the call evaluated the obstacle rows
-    # (``UpdateOutputs``)
+    #: (``UpdateOutputs``)
     g: np.ndarray | None = None
     #: the outputs at the answer, when the call evaluated them (``UpdateOutputs``)
     outputs: ComputedOutputs | None = None

@@ -210,7 +210,7 @@ def solve_chunk(
         for poses in targets:
             try:
                 result = solver.solve(poses, warm=True, commit=False)
-            # noqa: BLE001 - one bad query must not lose the chunk's other answers
+            # any exception: one bad query must not lose the chunk's other answers
             except Exception as exc:
                 result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
             results.append(result)

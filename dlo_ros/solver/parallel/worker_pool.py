@@ -22,15 +22,17 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import Executor, Future, InvalidStateError, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from multiprocessing.connection import wait as wait_for_sentinels
+from typing import Any
 
 #: The nice value added to a node's query and fit workers (``process_pool(background=True)``), so
-# that : the stream comes first on a shared core (bench/results/soak_3_clients.md against
-# soak_no_queries.md). : Not SCHED_IDLE: it favours the stream more, but starves the workers
-# whenever both cores are busy : (a planner beside the node, or CI's two test processes), and their
-# queries would time out.
+#: that the stream comes first on a shared core (bench/results/soak_3_clients.md against
+#: soak_no_queries.md). Not SCHED_IDLE: it favours the stream more, but starves the workers
+#: whenever both cores are busy (a planner beside the node, or CI's two test processes), and their
+#: queries would time out.
 BACKGROUND_NICE = 10
 
 
@@ -67,10 +69,9 @@ class _Pool(ProcessPoolExecutor):
     means "the parent died".
     """
 
-    def _spawn_process(
-        self,
-    ) -> None:  # CPython >= 3.9 (concurrent.futures.process); else the default
-        _SPAWNER.call(super()._spawn_process)
+    def _spawn_process(self) -> None:
+        # CPython >= 3.9 (concurrent.futures.process); else the default
+        _SPAWNER.call(super()._spawn_process)  # type: ignore[misc]  # private: not in typeshed
         # every worker ever started, for naming a dead one's exit code (the executor forgets them)
         self.started = {**getattr(self, "started", {}), **(self._processes or {})}
 
@@ -85,9 +86,9 @@ class _Spawner:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
-        self._calls: "queue.SimpleQueue[tuple[object, Future]]" = queue.SimpleQueue()
+        self._calls: queue.SimpleQueue[tuple[Callable[[], Any], Future]] = queue.SimpleQueue()
 
-    def call(self, fn):
+    def call(self, fn: Callable[[], Any]) -> Any:
         if threading.current_thread() is self._thread:
             return fn()
         with self._lock:
@@ -209,7 +210,7 @@ def worker_pids(pool) -> list[int]:
 
 
 #: Generations of replaced pools whose cause a late answer may still name (older ones are
-# forgotten).
+#: forgotten).
 KEPT_CAUSES = 16
 
 
@@ -254,7 +255,8 @@ class WorkerPool(Executor):
         self._stopped = False
         self.restarts = 0  # pools replaced (dead worker or timeout)
 
-    def submit(
+    # Executor.submit passes every keyword to fn; this one keeps timeout and retries for itself
+    def submit(  # type: ignore[override]  # keyword-only timeout/retries added to Executor's
         self, fn, /, *args, timeout: float | None = None, retries: int = 0, **kwargs
     ) -> Future:
         """Run ``fn(*args, **kwargs)`` on a worker; return its Future.

@@ -43,7 +43,7 @@ def contact_tolerance(problem: Problem, error_tolerance: float = 0.0) -> float:
 def pressed_obstacles(
     result: ShapeResult, problem: Problem, error_tolerance: float = 0.0
 ) -> dict[int, np.ndarray]:
-    """Return the obstacles in contact (scene index → total force [N]), in ``contact_forces`` order.
+    """Return the obstacles in contact (scene index → total force [N]), in contact_forces order.
 
     In contact: a nonzero force and a gap (:func:`obstacle_gap` over ``result.points``) within
     :func:`contact_tolerance`.  ``problem`` is the scene the result answers (its obstacles are the

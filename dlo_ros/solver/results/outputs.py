@@ -7,15 +7,14 @@
   [N];
 * the stability verdict from the reduced Hessian (``stability.py``);
 * the equilibrium residual (``wrenches.equilibrium``).  A shape whose residual exceeds the
-  tolerance
-  (``error_tolerance``, default 1e-3 L) is 'unverified' and carries no stability verdict; a
-  director model's shape whose orientation rows hold on the flipped sheet is 'failed' and carries
-  no shape.
+  tolerance (``error_tolerance``, default 1e-3 L) is 'unverified' and carries no stability
+  verdict; a director model's shape whose orientation rows hold on the flipped sheet is 'failed'
+  and carries no shape.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -27,9 +26,10 @@ from ..build.functions import NlpFunctions
 from ..build.nlp import StringNLP
 from ..options import SolverOptions
 from ..build.parameters import ProblemParameters
+from ..native.outputs import ComputedOutputs
 from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, SelfContact, ShapeResult
-from ..contact.self_contact import slot_multiplier
+from ..contact.self_contact import ContactSlots, slot_multiplier
 from .stability import is_stable, min_reduced_eigenvalue
 from ..state import SolverState
 from .wrenches import FramesOf, equilibrium, wrench
@@ -90,8 +90,8 @@ class ShapeOutputs:
         self.nlp, self.fns, self.parameters, self.options = nlp, fns, parameters, options
         self.s_out = output_s(nlp, options)
         #: the self-contact slots p holds in the solve under way (set by ShapeSolver; None: not
-        # modelled)
-        self.contact_slots = None
+        #: modelled)
+        self.contact_slots: ContactSlots | None = None
 
     def frames_of(self, current: Problem) -> FramesOf:
         """Material frames Q(z, s) with the twist-free frames anchored at ``current``'s grips."""
@@ -116,7 +116,7 @@ class ShapeOutputs:
         ``current``: the solver's committed scene, whose grips anchor the wrenches' frames;
         ``summary``: the result's model.
         """
-        nlp, m, options = self.nlp, self.nlp.model, self.options
+        nlp, m = self.nlp, self.nlp.model
         z, p = state.z, state.p
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         if self.fns.outputs is not None and self.contact_slots is None:
@@ -155,11 +155,12 @@ class ShapeOutputs:
         residual = equilibrium(nlp, problem, z, grips, actions, lam_si)
         flipped = F.flipped_grips(nlp, problem, z) if nlp.director else ""
         # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier
-        # complementarity)
+        # complementarity); self_contacts is empty without slots
+        slots = self.contact_slots
         touching = [
             c
             for c in self_contacts
-            if c.gap <= self.contact_slots.geometry.distance + 1e-7 * nlp.length
+            if slots is not None and c.gap <= slots.geometry.distance + 1e-7 * nlp.length
         ]
         return self._assemble(
             problem,
@@ -198,14 +199,16 @@ class ShapeOutputs:
         shape, wrenches, contact forces, residual and flip test as the numpy path.
         """
         plan = self.fns.output_function
+        assert plan is not None  # the outputs' function exists: result() checked fns.outputs
         prof = plan.profiles(problem.string)
-        computed = (
-            state.outputs
-        )  # the compiled loop's, at its answer (native_newton.UpdateOutputs)
+        # the compiled loop's, at its answer (native/outputs.py); SolverState types it as object
+        computed = cast(ComputedOutputs | None, state.outputs)
         if computed is not None and computed.matches(state.z, state.p, lam_si, prof):
             points, v_out, forces, torques, contact, res, flip = computed.values
         else:
-            points, v_out, forces, torques, contact, res, flip = self.fns.outputs(
+            outputs = self.fns.outputs
+            assert outputs is not None  # result() checked it
+            points, v_out, forces, torques, contact, res, flip = outputs(
                 state.z, state.p, lam_si, prof
             )
         grips = {
@@ -275,6 +278,8 @@ class ShapeOutputs:
         """
         options = self.options
         min_eig = min_reduced_eigenvalue(self.nlp, self.fns, state)  # also fills state.energies
+        # min_reduced_eigenvalue leaves both evaluated
+        assert state.energies is not None and state.hessian is not None
         bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
         energy = {
             "bend": bend,
@@ -304,8 +309,9 @@ class ShapeOutputs:
         if not residual.metres <= tolerance:
             status, stable = "unverified", None
             message = (
-                f"not a verified equilibrium: the equilibrium residual is {residual.metres:.3g} m, over the "
-                f"tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)"
+                "not a verified equilibrium: the equilibrium residual is "
+                f"{residual.metres:.3g} m, over the tolerance {tolerance:.3g} m "
+                "(solver.error_tolerance; raise solver.order)"
             )
         return ShapeResult(
             model=summary,
@@ -384,6 +390,7 @@ class ShapeOutputs:
             if not touch.size:
                 contacts[i] = np.zeros(3)
                 continue
+            assert sample_x is not None  # a touching row: evaluated above
             # one call for every touching sample (CasADi maps a function over the columns)
             grads = (
                 np.asarray(nlp.obstacle_gradient[ob.type](sample_x[touch].T, ob.params))
@@ -396,9 +403,8 @@ class ShapeOutputs:
                 PointAction(float(nlp.obstacle_s[j]), sample_x[j], f, np.zeros(3))
                 for j, f in zip(touch, forces)
             ]
-        for i, rows in enumerate(
-            nlp.slot_rows
-        ):  # contact slots (solver/contact/obstacle_slots.py)
+        # contact slots (solver/contact/obstacle_slots.py)
+        for i, rows in enumerate(nlp.slot_rows):
             ob, lay = problem.obstacles[i], nlp.params
             touch = np.flatnonzero((lam_si[rows] > 0) & (p[lay[f"slots:{i}:on"]] > 0))
             if not touch.size:

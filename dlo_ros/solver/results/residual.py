@@ -22,10 +22,11 @@ deflection a force imbalance ΔF would cause at the tip of a cantilever:
 
 Pointwise δm oscillates about zero where only the discretisation is at fault and so integrates to
 about the centreline error itself; a shape off its equilibrium (a wrong branch, a kink the basis
-cannot follow, a load applied wrongly) accumulates.  ``moment`` keeps the pointwise max |δm|.  It is evaluated on a grid of
-``RESIDUAL_POINTS`` intervals refined at the grips, point loads, relative positions' ends and mesh
-breakpoints (``wrenches.static_events``), strictly between them; contact forces carry no moment, so
-m_bal does not jump where they act.  The weight's integrals use the model's own quadrature.
+cannot follow, a load applied wrongly) accumulates.  ``moment`` keeps the pointwise max |δm|.  It
+is evaluated on a grid of ``RESIDUAL_POINTS`` intervals refined at the grips, point loads, relative
+positions' ends and mesh breakpoints (``wrenches.static_events``), strictly between them; contact
+forces carry no moment, so m_bal does not jump where they act.  The weight's integrals use the
+model's own quadrature.
 """
 
 from __future__ import annotations

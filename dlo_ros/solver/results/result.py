@@ -9,8 +9,8 @@ import numpy as np
 from .summary import ModelSummary
 
 #: 'unverified': the solver converged but the shape fails the equilibrium check
-# (equilibrium_residual_m : over the tolerance); it carries the shape for inspection, never a
-# stability verdict
+#: (equilibrium_residual_m over the tolerance); it carries the shape for inspection, never a
+#: stability verdict
 STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
 
 
@@ -54,11 +54,11 @@ class ShapeResult:
     of the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable.
     constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
     equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as
-    an equivalent centreline error (solver/results/residual.py); NaN when there is no shape. self_contacts:
-    the pairs of points pressed together (empty when self-contact is not modelled or nothing
-    touches); min_self_distance [m]: the closest approach of two strands at the self-contact
-    samples (inf when no two strands are within the candidate reach, NaN when self-contact is not
-    modelled; JSON null for both).
+    an equivalent centreline error (solver/results/residual.py); NaN when there is no shape.
+    self_contacts: the pairs of points pressed together (empty when self-contact is not modelled or
+    nothing touches); min_self_distance [m]: the closest approach of two strands at the
+    self-contact samples (inf when no two strands are within the candidate reach, NaN when
+    self-contact is not modelled; JSON null for both).
     """
 
     status: str

@@ -49,7 +49,7 @@ from ..shape_solver import ShapeSolver
 from .wrenches import director_torque
 
 #: material profiles a sensitivity can be taken with respect to, in the order of the NLP's
-# parameters
+#: parameters
 MATERIALS = ("Rf", "Rt", "Re", "D")
 
 
@@ -109,7 +109,8 @@ class _Functions:
         self.tangents = ca.Function(
             "dlo_tangents", [z, p], [ca.densify(tangents), ca.densify(ca.jacobian(flat, z))]
         )
-        self._z, self._model, self._frames = z, m, {}
+        self._z, self._model = z, m
+        self._frames: dict[int, ca.Function] = {}
 
     def node_frame(self, node: int) -> ca.Function:
         """Return the function z → (t, d1, ∂t/∂z, ∂d1/∂z) at a director model's node.
@@ -238,7 +239,8 @@ def _grip_torques(
     derivatives; empty for a 3D Euler model.
     """
     nlp = solver.nlp
-    torques, d_torques = {}, {}
+    torques: dict[str, np.ndarray] = {}
+    d_torques: dict[str, np.ndarray] = {}
     if not (nlp.director or nlp.planar):
         return torques, d_torques
     k = dz.shape[1]
@@ -252,13 +254,14 @@ def _grip_torques(
             t, d1, dt, dd1 = (
                 np.asarray(a) for a in fns.node_frame(nlp.model.mesh.node_index(grip.s))(z)
             )
-            t, d1 = t.ravel(), (d1.ravel() if len(rows) == 3 else None)
+            # d1 only where the twist is held (a third orientation row)
+            t, d1_held = t.ravel(), (d1.ravel() if len(rows) == 3 else None)
             target = quat_to_matrix(grip.pose.orientation)
-            torque = director_torque(t, d1, target, lam_si[rows])
+            torque = director_torque(t, d1_held, target, lam_si[rows])
             dt, dd1 = dt @ dz, dd1 @ dz  # (3, k)
             for j in range(k):
                 d_torque[:, j] = director_torque(
-                    dt[:, j], None if d1 is None else dd1[:, j], target, lam_si[rows]
-                ) + director_torque(t, d1, target, dlam_si[rows, j])
+                    dt[:, j], None if d1_held is None else dd1[:, j], target, lam_si[rows]
+                ) + director_torque(t, d1_held, target, dlam_si[rows, j])
         torques[grip.name], d_torques[grip.name] = torque, d_torque
     return torques, d_torques

@@ -52,6 +52,7 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
         )
         state.gradient = gradient.ravel()
     h = state.hessian
+    assert state.jacobian is not None  # evaluated with the Hessian
     jac = state.jacobian[active]
     basis = null_space(jac) if jac.size else np.eye(h.shape[0])
     if basis.shape[1] == 0:
@@ -77,8 +78,7 @@ def is_stable(min_eigenvalue: float, hessian: np.ndarray) -> bool:
     """Tell whether the smallest reduced eigenvalue makes the equilibrium stable.
 
     The stability verdict: a neutral mode (e.g. rotation about the chord without gravity) shows
-    as
-    ±1e-8·max|H|, so only eigenvalues below that count as unstable.
+    as ±1e-8·max|H|, so only eigenvalues below that count as unstable.
     """
     return bool(min_eigenvalue > -1e-8 * max(1.0, float(np.abs(hessian).max())))
 
@@ -101,8 +101,8 @@ def null_space(a: np.ndarray) -> np.ndarray:
 
     Orthonormal basis of {v : a v = 0} from a column-pivoted QR of aᵀ (LAPACK geqp3,
     rank-revealing):
-    rank = number of |R_kk| above max(a.shape)·eps·|R_00|, the tolerance scipy.linalg.null_space puts on
-    singular values.  Half the time of an SVD at the sizes here.
+    rank = number of |R_kk| above max(a.shape)·eps·|R_00|, the tolerance scipy.linalg.null_space
+    puts on singular values.  Half the time of an SVD at the sizes here.
     """
     m, n = a.shape
     qr, _, tau, _, info = _geqp3(np.array(a.T, order="F"))

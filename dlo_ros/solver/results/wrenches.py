@@ -45,7 +45,7 @@ def wrench(
     """
     rows = nlp.grip_rows[grip.name]
     force = -nlp.grip_axes[grip.name].T @ lam_si[rows["position"]]
-    torque = np.zeros(3)
+    torque: np.ndarray = np.zeros(3)
     if rows["angles"] and nlp.director:
         # T = ∂U/∂θ = −Σ_r λ_r ∂g_r/∂θ with ∂(t·a)/∂θ = t × a and ∂(d1·b)/∂θ = d1 × b
         t, d1 = node_frame(nlp, z, grip.s)
@@ -63,21 +63,23 @@ def wrench(
         j_theta = -(r0 @ np.array([sp, cp, 0.0]))  # −R0 Rz(−φ) e_y
         tangent = r0 @ np.array([-st * cp, st * sp, ct])  # R0 Rz(−φ) Ry(−θ) e_z
         mu = lam_si[rows["angles"]]
-        a = [j_phi, j_theta]
+        a_rows = [j_phi, j_theta]
         rhs = [-mu[0], -mu[1]]
         if len(mu) == 3:
-            a.append(-tangent)
+            a_rows.append(-tangent)
             rhs.append(-mu[2])
         else:
-            a.append(tangent)
+            a_rows.append(tangent)
             rhs.append(0.0)
-        a = np.array(a)
-        torque = solve_unit_rows(a, rhs)
-        if torque is None and grip.s in (0.0, string.length):
+        a = np.array(a_rows)
+        solved = solve_unit_rows(a, rhs)
+        if solved is not None:
+            torque = solved
+        elif grip.s in (0.0, string.length):
             # Euler pole (θ = 0 or π): φ and ψ rotate about the same axis, so the multipliers
             # cannot give the torque; use the internal moment the clamp balances instead
             torque = end_moment(nlp, string, frames_of, z, grip.s)
-        elif torque is None:
+        else:
             torque = np.linalg.lstsq(a, np.array(rhs), rcond=None)[0]
     return GripWrench(force=force, torque=torque)
 
@@ -96,6 +98,7 @@ def director_torque(
     a1, a2 = target[:, 1], target[:, 2]
     torque = -(lam[0] * cross3(t, a1) + lam[1] * cross3(t, a2))
     if len(lam) == 3:
+        assert d1 is not None  # a third orientation row (the twist) comes with d1
         torque -= lam[2] * cross3(d1, a2)
     return torque
 
@@ -129,8 +132,8 @@ def solve_unit_rows(a: np.ndarray, rhs: list[float]) -> np.ndarray | None:
 
     x with a x = rhs for a 3×3 ``a`` of unit rows by Cramer's rule, x = Σ_k rhs_k (a_{k+1} ×
     a_{k+2}) / det;
-    None when |det| ≤ 1e-8 (unit rows: nearly dependent).  Plain floats: numpy's cross and solve cost
-    more than the arithmetic on 3-vectors.
+    None when |det| ≤ 1e-8 (unit rows: nearly dependent).  Plain floats: numpy's cross and solve
+    cost more than the arithmetic on 3-vectors.
     """
     (a0, a1, a2), (b0, b1, b2) = a.tolist(), rhs
 
@@ -216,7 +219,7 @@ def equilibrium(
         actions.append(
             PointAction(ld.s, point_x[len(grips) + k], np.asarray(ld.force, dtype=float), moment)
         )
-    if rel_s:
+    if rel_s and lam_si is not None:  # rel_s is empty without lam_si
         first = len(grips) + len(problem.loads)
         for k, (rel, force) in enumerate(
             zip(problem.relative_positions, relative_forces(nlp, lam_si))

@@ -77,7 +77,8 @@ def warm_fit_worker() -> bool:
 
     Runs in the worker process; a function-local import, as importing is its whole job.
     """
-    import dlo_ros.identify.fit  # noqa: F401 - imported for its side effect (loads CasADi)
+    # not at the top: importing (it loads CasADi) is this function's whole job
+    import dlo_ros.identify.fit  # noqa: F401 - imported for its side effect
 
     return True
 

@@ -306,7 +306,7 @@ def lu_cost(model: str) -> tuple[float, int]:
 
     from dlo_ros.node.engine import build_solver
     from dlo_ros.scene import load_scene
-    from dlo_ros.solver.update.newton import regularised
+    from dlo_ros.solver.update.kkt import regularised
 
     scene = load_scene("default_cable")
     options = scene.options if model == "scene" else replace(scene.options, model=model)

@@ -83,11 +83,12 @@ def test_newton_across_the_change_equals_the_cold_solve(stream):
 @pytest.mark.parametrize("drop", [0.045, 0.04])
 def test_a_contact_leaves_between_steps(drop):
     """Raising the grips off the table from a shape resting on it, with the table's rows held: with row
-    switches (``_active_steps``) the rows leave between steps and the same call ends at the contact-free
+    switches (``active_set.active_steps``) the rows leave between steps and the same call ends at the contact-free
     equilibrium, which the solver's own update reaches too; without switches the call ends with the
     rows held and a negative multiplier (the table pulling), which is left to the outer loop."""
     from dlo_ros.model.problem import GripPose
-    from dlo_ros.solver.update.newton import _active_steps, active_rows
+    from dlo_ros.solver.update.active_set import active_steps
+    from dlo_ros.solver.update.kkt import active_rows
     from dlo_ros.solver.native.settings import NEWTON_STEP_SWITCHES
 
     solver = ShapeSolver(SCENE.problem, replace(SCENE.options, model="planar"), compile="off")
@@ -104,10 +105,10 @@ def test_a_contact_leaves_between_steps(drop):
     def kkt(*a):
         return [np.asarray(v) for v in nlp.kkt_fn(*a)]
 
-    held = _active_steps(kkt, state.z.copy(), lam.copy(), p, active, nlp.ubg, contact, 0, 30, None)
+    held = active_steps(kkt, state.z.copy(), lam.copy(), p, active, nlp.ubg, contact, 0, 30, None)
     assert held[0] is not None and np.array_equal(held[-1], active)
     assert held[1][active & contact].min() < 0  # the table would have to pull
-    switched = _active_steps(kkt, state.z.copy(), lam.copy(), p, active, nlp.ubg, contact, NEWTON_STEP_SWITCHES, 30,
+    switched = active_steps(kkt, state.z.copy(), lam.copy(), p, active, nlp.ubg, contact, NEWTON_STEP_SWITCHES, 30,
                              None)
     assert switched[0] is not None and not np.any(switched[-1] & contact)
     assert np.all(switched[3][contact] <= nlp.ubg[contact] + 1e-9)  # free of the table everywhere

@@ -16,7 +16,7 @@ from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver
 from dlo_ros.solver.build.compiled import compiler
-from dlo_ros.solver.update.newton import regularised
+from dlo_ros.solver.update.kkt import regularised
 from dlo_ros.solver.native.settings import (NEWTON_CHORD_CONTRACTION, NEWTON_CHORD_START, NEWTON_CHORD_STEPS,
                                 NEWTON_CHORD_TOLERANCE, NEWTON_DUAL_TOLERANCE, NEWTON_MAX_STEP,
                                 NEWTON_PRIMAL_TOLERANCE)
@@ -230,10 +230,11 @@ def test_contact_updates_with_the_compiled_active_set_loop_equal_the_numpy_loop(
 
 def test_one_active_call_reaches_the_numpy_loops_answer(solvers):
     """From a state resting on the table, with its active rows held and the grips moved, the C loop's
-    chord steps end at the KKT point newton._active_steps (regularised Newton steps in numpy on the
+    chord steps end at the KKT point active_set.active_steps (regularised Newton steps in numpy on the
     interpreted function) ends at: the same active set, iterate and multipliers (to rounding), with the
     derivatives evaluated there."""
-    from dlo_ros.solver.update.newton import _active_steps, active_rows
+    from dlo_ros.solver.update.active_set import active_steps
+    from dlo_ros.solver.update.kkt import active_rows
 
     scene, native, interpreted = solvers
     rot = scene.problem.grip("right").pose.orientation
@@ -249,7 +250,7 @@ def test_one_active_call_reaches_the_numpy_loops_answer(solvers):
     lam = np.where(active, state.lam_g, 0.0)
     switchable = nlp.contact_row & ~nlp.equality
     out = native.functions.newton_active(state.z, lam, p, active, nlp.ubg, switchable, 4, 10)
-    z, lam_ref, grad, g, jac, hess, energies, steps, active_ref = _active_steps(
+    z, lam_ref, grad, g, jac, hess, energies, steps, active_ref = active_steps(
         lambda *a: [np.asarray(v) for v in nlp.kkt_fn(*a)], state.z.copy(), lam.copy(), p, active, nlp.ubg,
         switchable, 4, 10, None)
     assert out.code == 0 and steps >= 2 and out.steps >= steps
@@ -406,7 +407,7 @@ def test_the_compiled_stability_rows_follow_the_one_python_setting(solvers, tmp_
 
     from dlo_ros.solver.results import stability
     from dlo_ros.solver.native.newton import active_library_path
-    from dlo_ros.solver.update.newton import active_rows
+    from dlo_ros.solver.update.kkt import active_rows
     from dlo_ros.solver.state import SolverState
 
     scene, native, _ = solvers

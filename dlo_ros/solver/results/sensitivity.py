@@ -43,7 +43,7 @@ import numpy as np
 
 from ...model.profile import Profile
 from ...model.rotations import quat_to_matrix
-from ..update.newton import active_rows
+from ..update.kkt import active_rows
 from ..build.nlp import StringNLP
 from ..shape_solver import ShapeSolver
 from .wrenches import director_torque

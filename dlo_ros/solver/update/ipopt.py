@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from .newton import violation
+from .kkt import violation
 from ..build.nlp import StringNLP
 from ..results.result import ShapeResult
 from ..results.stability import is_stable

@@ -30,7 +30,7 @@ from . import attempts as AT
 from . import substeps as SS
 from .context import Outcome, UpdateContext
 from .ipopt import INFEASIBLE, LEFT_SADDLE, Attempt, escape_saddle, lower_than, witness
-from .newton import leave_saddle
+from .saddle import leave_saddle
 from .slot_rounds import carry_slots
 
 #: what the warm rungs leave to the cold fallback: (iterations, IPOPT's unverified warm answer,
@@ -175,7 +175,7 @@ def leave_newton_saddle(
 ) -> tuple[Outcome | None, int]:
     """Continue a warm Newton update that landed on a saddle downhill, by shifted Newton steps.
 
-    ``newton.leave_saddle``, either way along the unstable mode: (the first stable, verified result
+    ``saddle.leave_saddle``, either way along the unstable mode: (the first stable, verified result
     of lower energy, or None: then IPOPT and ``escape_unstable`` take over; the iterations counted
     so far).  Where the steps reach only a lower but still unstable equilibrium, that one is left
     by ``escape_unstable`` (a cable lying on a table that buckles out of its plane: the steps hold

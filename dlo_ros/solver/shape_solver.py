@@ -39,9 +39,8 @@ from ..model.problem import GripPose, Problem
 from .build import frames as F
 from .build.functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .build.initial_guess import initial_guess
-from .build.nlp import StringNLP, planarity_violation
+from .build.nlp import StringNLP
 from .build.parameters import ProblemParameters, check_moments
-from .contact import self_contact as SC
 from .contact import topology as TP
 from .options import SolverOptions
 from .parallel.batch import query_many
@@ -54,18 +53,15 @@ from .results.wrenches import equilibrium
 from .state import SolverState
 from .update import attempts as AT
 from .update.context import SolverParts, UpdateContext
-from .update.inputs import (
-    only_poses_differ,
-    structure_key,
-    unreachable_reason,
-    with_checked_poses,
-)
+from .update.inputs import admit, only_poses_differ, structure_key, unreachable_reason
+from .update.inputs import with_checked_poses
 from .update.ipopt import IPOPT_LOCK, SUCCESS, IpoptSolvers
 from .update.linking import ClampTurnTracker
 from .update.moments import MOMENT_CONTINUATION_SOLVES, MOMENT_NEWTON_STEPS
 from .update.newton import fill_start
 from .update.pipeline import run_update
-from .update.warm_start import adopted_copy, held_poses, sample_source, warm_state
+from .update.summary import ModelSummaries
+from .update.warm_start import Adoption, adopted_copy, adopted_state, held_poses, sample_source
 
 __all__ = [
     "COMPILE_MODES",
@@ -101,13 +97,15 @@ class ShapeSolver:
         lazy_ipopt: bool = False,
         reference_frame: np.ndarray | None = None,
     ):
-        """compile: 'background' (solve at once with interpreted derivatives, compile them to C in
-        a background thread and switch when ready; cached per machine), 'blocking' (compile or load
-        now), 'cached' (use a library compiled earlier, never compile), or 'off'. $DLO_NO_COMPILE
-        forces 'off'.  lazy_ipopt: create the IPOPT solvers on first use (helpers that may only
-        take Newton steps); otherwise now, so that a stream's first IPOPT fallback does not pay for
-        them.  reference_frame: a fixed R0 for the Euler angles (3D models; default: chosen from
-        the scene, ``choose_reference_frame``).
+        """Build the NLP of ``problem``'s structure; raise ValueError naming a refused field.
+
+        compile: 'background' (solve at once with interpreted derivatives, compile them to C in a
+        background thread and switch when ready; cached per machine), 'blocking' (compile or load
+        now), 'cached' (use a library compiled earlier, never compile), or 'off'.
+        $DLO_NO_COMPILE forces 'off'.  lazy_ipopt: create the IPOPT solvers on first use (helpers
+        that may only take Newton steps); otherwise now, so that a stream's first IPOPT fallback
+        does not pay for them.  reference_frame: a fixed R0 for the Euler angles (3D models;
+        default: chosen from the scene, ``choose_reference_frame``).
         """
         check_compile_mode(compile)
         self.options = options or SolverOptions()
@@ -121,6 +119,7 @@ class ShapeSolver:
         self._cache_checked = time.monotonic()  # ('cached' mode) the last look into the cache
         # a compile is about to start (AutoShapeSolver._compile_ahead)
         self.compile_pending = False
+        self._summaries = ModelSummaries()
         self._build(problem)
 
     def _build(self, problem: Problem) -> None:
@@ -151,10 +150,7 @@ class ShapeSolver:
         self.problem = problem
         self._key = structure_key(problem, self.options)
         self._state: SolverState | None = None
-        # (source solver, its state, the state adopted from it, this solver's scene then):
-        # adopt_warm_start's last mapping (weak references: a pooled model must not keep an evicted
-        # one alive)
-        self._adopted: tuple[weakref.ref, weakref.ref, SolverState, Problem] | None = None
+        self._adopted: Adoption | None = None  # adopt_warm_start's last mapping
         # the clamps' turns over the targets since the committed shape (None: none asked for
         # since; topology.ClampTurns, the linking-number check), and the frames computed for them
         self._clamp_turns: TP.ClampTurns | None = None
@@ -168,9 +164,11 @@ class ShapeSolver:
             self._ipopt.prepare()
 
     def start_compile(self, mode: str) -> None:
-        """Switch the compile mode (e.g. a helper solver promoted to stream) and start compiling if
-        that mode asks for it and nothing is compiled or compiling yet (any thread: the libraries
-        already cached are swapped in under the solver's lock).
+        """Switch the compile mode and start compiling if that mode asks for it.
+
+        E.g. a helper solver promoted to stream; a compile starts when nothing is compiled or
+        compiling yet (any thread: the libraries already cached are swapped in under the solver's
+        lock).
         """
         check_compile_mode(mode)
         with self._lock:
@@ -179,14 +177,13 @@ class ShapeSolver:
                 self._start_compile()
 
     def _start_compile(self) -> None:
+        """Load or compile the derivatives as the compile mode says; keep a background thread."""
         thread = self.functions.start_compile(self.compile_mode, self._lock)
         if thread is not None:
             self._compile_thread = thread
 
     def wait_for_compile(self, timeout: float | None = None) -> bool:
-        """Block until a background compile has finished; True if compiled derivatives are in
-        use.
-        """
+        """Wait for a background compile to finish; True if compiled derivatives are in use."""
         if self._compile_thread is not None:
             self._compile_thread.join(timeout)
         return self.kkt_compiled
@@ -198,9 +195,11 @@ class ShapeSolver:
 
     @property
     def all_compiled(self) -> bool:
-        """Whether every function a solve calls runs compiled C: the derivatives and, for the
-        models that have one, the outputs' function (a new version may change it alone: its
-        derivatives then load from the cache, and it still has to be compiled).
+        """Whether every function a solve calls runs compiled C.
+
+        The derivatives and, for the models that have one, the outputs' function (a new version
+        may change it alone: its derivatives then load from the cache, and it still has to be
+        compiled).
         """
         return self.functions.compiled and (
             self.functions.outputs is None or self.functions.outputs_compiled
@@ -213,39 +212,39 @@ class ShapeSolver:
 
     @property
     def compile_time_s(self) -> float:
-        """Wall time [s] of the compile that made ``kkt_compiled`` true (0 when loaded or not
-        compiled).
-        """
+        """Wall time [s] of the compile that made ``kkt_compiled`` true (0: loaded or none)."""
         return self.functions.compile_time_s
 
     # ---- public API ----------------------------------------------------------------------------
     @property
     def model(self):
+        """Discretised field model of the NLP: a ``RitzModel`` or a ``DirectorModel``."""
         return self.nlp.model
 
     @property
     def has_warm_start(self) -> bool:
+        """Whether an equilibrium is committed (the next solve is warm)."""
         return self._state is not None
 
     @property
     def committed_state(self) -> SolverState | None:
-        """The committed equilibrium itself, not a copy (``snapshot`` copies): for the thread that
-        streams, between its solves.  A commit replaces the object; nothing changes its z, λ or p
-        in place.
+        """The committed equilibrium itself, not a copy (``snapshot`` copies).
+
+        For the thread that streams, between its solves.  A commit replaces the object; nothing
+        changes its z, λ or p in place.
         """
         return self._state
 
     def snapshot(self) -> SolverState | None:
-        """A copy of the committed equilibrium (for adopt_warm_start from another thread,
-        later).
-        """
+        """Return a copy of the committed equilibrium (for a later adopt_warm_start elsewhere)."""
         with self._lock:
             return None if self._state is None else self._state.copy()
 
     def adopt_warm_start(self, other: ShapeSolver, state: SolverState | None = None) -> bool:
-        """Take ``other``'s committed equilibrium as this solver's warm start, across models
-        (``warm_start.py``).  ``state``: an earlier ``other.snapshot()`` to adopt instead of
-        other's current equilibrium.  False when there is nothing to adopt.
+        """Take ``other``'s committed equilibrium as this solver's warm start, across models.
+
+        The mapping is ``warm_start.py``'s.  ``state``: an earlier ``other.snapshot()`` to adopt
+        instead of other's current equilibrium.  False when there is nothing to adopt.
         """
         with other._lock:
             src = other._state if state is None else state
@@ -261,44 +260,45 @@ class ShapeSolver:
             # moves them from there: substeps (``substeps.newton_in_substeps``) then split a real
             # move
             at = self.problem if held is None else self.problem.with_grip_poses(held)
-            state = warm_state(self.nlp, self.functions, self.parameters, at, source)
             contact = getattr(src, "contact", None)
-            if contact is not None and len(contact.pairs) == self.nlp.self_contact_slots:
-                # the same pairs in the same slots: the multipliers warm_state matched row by row
-                # belong to them
-                state.contact = contact.copy()
-                SC.fill(state.p, state.contact, self.nlp, self.problem.string.length)
-            self._state = state
-            self._clamp_turns = None
-            self._adopted = None
+            length = self.problem.string.length
+            parts = self.nlp, self.functions, self.parameters
+            state = adopted_state(*parts, at, source, contact, length)
+            self._state, self._clamp_turns, self._adopted = state, None, None
             if contact is None:  # what every query from it reuses: its derivatives, evaluated once
                 fill_start(self.nlp, self.functions, state)
-                self._adopted = (weakref.ref(other), weakref.ref(src), state, self.problem)
+                self._adopted = Adoption(weakref.ref(other), weakref.ref(src), state, self.problem)
                 self._state = adopted_copy(state)
         return True
 
     def _adopt_again(self, other: ShapeSolver, src: SolverState) -> bool:
-        """Adopt the state adopted last time from the same state ``src`` of ``other``, without
-        sampling and mapping it again, when this solver's scene differs from that adoption's in
-        grip poses at most (``only_poses_differ``: the mapping is then the same, at the grip
-        targets ``src`` holds; a solve from it moves them to the scene's).  What a query that
-        another model answers does on every call: the held shape is the same until the stream
-        commits.
+        """Adopt again what was adopted last time from the same state ``src`` of ``other``.
+
+        Without sampling and mapping it again, when this solver's scene differs from that
+        adoption's in grip poses at most (``only_poses_differ``: the mapping is then the same, at
+        the grip targets ``src`` holds; a solve from it moves them to the scene's).  What a query
+        that another model answers does on every call: the held shape is the same until the
+        stream commits.
         """
         adopted = self._adopted
-        if adopted is None or adopted[0]() is not other or adopted[1]() is not src:
+        if adopted is None or not adopted.is_of(other, src):
             return False
         with self._lock:
-            if not only_poses_differ(self.problem, adopted[3]):
+            if not only_poses_differ(self.problem, adopted.scene):
                 return False
-            self._state = adopted_copy(adopted[2])
+            self._state = adopted_copy(adopted.adopted)
             self._clamp_turns = None
         return True
 
+    def forget_adoption(self) -> None:
+        """Forget the last adoption's mapping: the next ``adopt_warm_start`` maps afresh."""
+        self._adopted = None
+
     def unstable_eigenvalue(self) -> float | None:
-        """The smallest eigenvalue of the reduced Hessian at the committed equilibrium when that is
-        unstable (``stability.is_stable``); None when it is stable or neutral, when the active rows
-        leave no freedom, or when nothing is committed.
+        """Return the reduced Hessian's smallest eigenvalue at the committed shape if unstable.
+
+        Unstable as ``stability.is_stable`` says; None when it is stable or neutral, when the
+        active rows leave no freedom, or when nothing is committed.
         """
         with self._lock:
             state = self._state
@@ -317,9 +317,7 @@ class ShapeSolver:
             self._clamp_turns = None
 
     def close(self) -> None:
-        """Nothing to stop (a background compile is a daemon thread); the Solver protocol's
-        close.
-        """
+        """Release nothing: a background compile is a daemon thread (the Solver protocol's)."""
 
     def set_problem(self, problem: Problem) -> None:
         """Replace the scene's values (properties, loads, obstacles, grips).
@@ -358,9 +356,9 @@ class ShapeSolver:
         """
         with self._lock:
             t0 = time.perf_counter()
-            admitted = self._admit(poses, checked, t0)
-            if isinstance(admitted, ShapeResult):
-                return admitted
+            admitted = admit(self.problem, self.nlp, self.options, poses, checked)
+            if isinstance(admitted, tuple):  # (status, message): refused
+                return self._failure(*admitted, t0)
             problem = admitted
             ctx = self.update_context()
             ctx.turns = self._turn_tracker.advance(self._state, self._clamp_turns, problem)
@@ -393,27 +391,6 @@ class ShapeSolver:
                 self._clamp_turns = None if ctx.turns is None else ctx.turns.committed()
             return result
 
-    def _admit(
-        self, poses: Mapping[str, GripPose | tuple] | None, checked: bool, t0: float
-    ) -> Problem | ShapeResult:
-        """Return the scene with ``poses`` (``solve``'s), or the 'invalid'/'unreachable' result."""
-        try:
-            problem = (
-                self.problem.with_grip_poses(poses)  # type: ignore[arg-type]  # checked: GripPose
-                if checked and poses
-                else with_checked_poses(self.problem, poses)
-            )
-        except (ValueError, KeyError) as exc:
-            return self._failure("invalid", str(exc).strip("'\""), t0)
-        if self.nlp.planar and not checked:
-            why = planarity_violation(problem, self.nlp.r0[:, 2], tolerance=1e-7)
-            if why:
-                return self._failure("invalid", f"solver.model planar: {why}", t0)
-        reason = unreachable_reason(problem, self.options)
-        if reason:
-            return self._failure("unreachable", reason, t0)
-        return problem
-
     def update_context(self) -> UpdateContext:
         """Return a fresh update context at the committed state (the caller holds the lock).
 
@@ -433,12 +410,12 @@ class ShapeSolver:
         return UpdateContext(parts, self.problem, self._state, self._clamp_turns)
 
     def query_many(self, targets, executor=None) -> list[ShapeResult]:
-        """Answers to many independent queries (``{grip: pose}`` each) in worker processes, in
-        order, with this solver's scene and options; this solver and its warm start are untouched
-        (dlo_ros.solver.parallel.batch.query_many: ``executor`` defaults to a process pool on every
-        core).
-        """
+        """Answer many independent queries (``{grip: pose}`` each) in worker processes, in order.
 
+        With this solver's scene and options; this solver and its warm start are untouched
+        (dlo_ros.solver.parallel.batch.query_many: ``executor`` defaults to a process pool on
+        every core).
+        """
         return query_many(ShapeSolver, self.problem, self.options, targets, executor)
 
     def unreachable_reason(self, problem: Problem) -> str:
@@ -461,26 +438,28 @@ class ShapeSolver:
         return self.parameters.grip_angles(pose, reference)
 
     def initial_guess(self, problem: Problem) -> np.ndarray:
-        """The buckled cold-start guess z for ``problem``."""
+        """Return the buckled cold-start guess z for ``problem``."""
         return initial_guess(self.nlp, self.parameters, problem)
 
     def strain(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """ε(s) of solution z (zeros when inextensible)."""
+        """Return ε(s) of solution z (zeros when inextensible)."""
         return F.strain(self.nlp, z, s)
 
     def frames_psi(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
-        """ψ(s) as published: the solved field, or the zero-twist ψ anchored at the first held
-        grip.
+        """Return ψ(s) as published: the solved field, or the zero-twist ψ.
+
+        The zero-twist ψ is anchored at the first held grip.
         """
         return F.frames_psi(self.nlp, self.parameters, self.problem, z, s, p)
 
     def pose_frames(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Frames (len(s), 3, 3) in the pose convention (columns: tangent, y, z) of solution z."""
+        """Return solution z's frames (len(s), 3, 3) in the pose convention (tangent, y, z)."""
         return F.pose_frames(self.nlp, self.parameters, self.problem, z, s)
 
     def frames(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
-        """Material frames Q(s) (columns ξ, η, ζ) of solution z; ψ from the zero-twist rule if not
-        solved.
+        """Return the material frames Q(s) (columns ξ, η, ζ) of solution z.
+
+        ψ from the zero-twist rule where it is not solved.
         """
         return F.frames(self.nlp, self.parameters, self.problem, z, s, p)
 
@@ -492,14 +471,16 @@ class ShapeSolver:
         contacts: Sequence[PointAction] = (),
         lam_si: np.ndarray | None = None,
     ) -> EquilibriumResidual:
-        """The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
-        obstacle ``contacts`` and (given the SI multipliers) the relative positions' reactions
-        (solver/results/residual.py).
+        """Return the strong-form equilibrium residual of shape z under the given reactions.
+
+        The grip reactions ``grips``, the obstacle ``contacts`` and (given the SI multipliers) the
+        relative positions' reactions (solver/results/residual.py).
         """
         return equilibrium(self.nlp, problem, z, grips, contacts, lam_si)
 
     # ---- results -------------------------------------------------------------------------------
     def _failure(self, status: str, message: str, t0: float) -> ShapeResult:
+        """Return the result without a shape: ``status`` and ``message``, timed from ``t0``."""
         return no_shape(
             self.options,
             self.model_summary(),
@@ -509,36 +490,5 @@ class ShapeSolver:
         )
 
     def model_summary(self) -> ModelSummary:
-        """What this solver models (the ``model`` of a result); made once per NLP, string and
-        obstacle count (all it depends on).
-        """
-        key = (self.nlp, self.problem.string, len(self.problem.obstacles))
-        known = getattr(self, "_summary", None)
-        if (
-            known is None
-            or any(a is not b for a, b in zip(known[0][:2], key))
-            or known[0][2] != key[2]
-        ):
-            known = self._summary = (key, self._model_summary())
-        return known[1]
-
-    def _model_summary(self) -> ModelSummary:
-        lay = self.model.layout
-        common = dict(
-            planar=lay.planar,
-            twist=lay.twist,
-            stretch=lay.stretch,
-            gravity=not self.problem.string.weight_per_length.is_zero,
-            order=lay.order,
-            obstacles=len(self.problem.obstacles),
-            variables=lay.size,
-        )
-        if self.nlp.director:
-            return ModelSummary(
-                **common,
-                rotation="quaternion" if lay.frame else "tangent",
-                elements=lay.elements,
-                breakpoints=tuple(float(b) for b in self.model.mesh.breakpoints),
-                self_contact_pairs=self.nlp.self_contact_slots,
-            )
-        return ModelSummary(**common, rotation="planar" if lay.planar else "euler")
+        """Return what this solver models (the ``model`` of a result; ``update/summary.py``)."""
+        return self._summaries.get(self.nlp, self.problem)

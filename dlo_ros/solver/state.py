@@ -1,5 +1,6 @@
-"""A committed equilibrium of one NLP: the KKT point (z, λ) a solve ended on and what it already
-knows there.
+"""A committed equilibrium of one NLP: the KKT point (z, λ) a solve ended on, and more.
+
+It also keeps what the solve already knows there (derivatives, eigenpair, outputs).
 
 The next solve warm-starts from it: Newton steps reuse the stored Newton matrix and residual when
 only the grip targets changed (they enter the constraints linearly), IPOPT restarts from z and its
@@ -48,8 +49,9 @@ class SolverState:
     outputs: object | None = None
 
     def copy(self) -> SolverState:
-        """z, λ and p copied (what another thread may adopt later); the derivative caches are left
-        out.
+        """Return a copy of z, λ and p (what another thread may adopt later).
+
+        The derivative caches are left out.
         """
         return SolverState(
             self.z.copy(),

@@ -367,7 +367,7 @@ def test_out_of_plane_queries_reuse_the_mapped_held_shape_until_the_stream_moves
         np.testing.assert_allclose(held.residual, residual[:, 0], rtol=0, atol=1e-12)
         np.testing.assert_allclose(held.g, np.asarray(other.nlp.g_fn(held.z, held.p)).ravel(), rtol=0, atol=1e-12)
         start = held.copy()
-        other._adopted = None  # the mapping made afresh
+        other.forget_adoption()  # the mapping made afresh
         assert other.adopt_warm_start(solver.inner)
         np.testing.assert_array_equal(other.committed_state.z, start.z)
         np.testing.assert_array_equal(other.committed_state.lam_g, start.lam_g)

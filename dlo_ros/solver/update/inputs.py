@@ -3,6 +3,7 @@
 Contract: pure functions of a ``Problem`` (and the options); nothing is solved.
 
 * ``with_checked_poses``: a problem with new, validated grip poses (ValueError names the grip);
+* ``admit``: the scene a solve is asked for, or the status and message that refuse it;
 * ``unreachable_reason``: why the position constraints cannot all hold ('' when they can);
 * ``structure_key`` / ``only_poses_differ``: whether two scenes share one NLP, and whether they
   differ in their grips' poses at most (then the warm start and the validation carry over).
@@ -15,6 +16,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ...model.problem import GripPose, Problem
+from ..build.nlp import StringNLP, planarity_violation
 from ..options import SolverOptions
 
 
@@ -88,3 +90,35 @@ def unreachable_reason(problem: Problem, options: SolverOptions) -> str:
                 f"between s_a and s_b"
             )
     return ""
+
+
+def admit(
+    problem: Problem,
+    nlp: StringNLP,
+    options: SolverOptions,
+    poses: Mapping[str, GripPose | tuple] | None,
+    checked: bool,
+) -> Problem | tuple[str, str]:
+    """Return ``problem`` with ``poses`` (``ShapeSolver.solve``'s), or (status, message).
+
+    'invalid' for a pose that fails its checks or, for a planar model, leaves its plane;
+    'unreachable' for grips farther apart than the string reaches (``unreachable_reason``).
+    ``checked``: the poses are GripPose objects already validated and, for a planar model,
+    already found in its plane.
+    """
+    try:
+        admitted = (
+            problem.with_grip_poses(poses)  # type: ignore[arg-type]  # checked: GripPose
+            if checked and poses
+            else with_checked_poses(problem, poses)
+        )
+    except (ValueError, KeyError) as exc:
+        return "invalid", str(exc).strip("'\"")
+    if nlp.planar and not checked:
+        why = planarity_violation(admitted, nlp.r0[:, 2], tolerance=1e-7)
+        if why:
+            return "invalid", f"solver.model planar: {why}"
+    reason = unreachable_reason(admitted, options)
+    if reason:
+        return "unreachable", reason
+    return admitted

@@ -40,10 +40,11 @@ ESCAPE_MAX_ITERATIONS = 150
 
 
 class IpoptSolvers:
-    """The IPOPT solvers of one NLP: cold, warm and the cold one for leaving saddles (at most
-    ESCAPE_MAX_ITERATIONS), each created on first use (a helper that only takes Newton steps never
-    needs them); all use the NLP's ``ipopt_derivatives``.  A warm update calls copies of them that
-    stop at ``solver.update_time_limit``.
+    """The IPOPT solvers of one NLP: cold, warm, and the cold one for leaving saddles.
+
+    The last stops at ESCAPE_MAX_ITERATIONS.  Each is created on first use (a helper that only
+    takes Newton steps never needs them); all use the NLP's ``ipopt_derivatives``.  A warm update
+    calls copies of them that stop at ``solver.update_time_limit``.
     """
 
     def __init__(self, nlp: StringNLP):
@@ -53,9 +54,10 @@ class IpoptSolvers:
         ] = {}  # "cold", "warm", "escape" and their "_in_update" copies → nlpsol
 
     def get(self, warm: bool, escape: bool = False, in_update: bool = False):
-        """The warm or the cold solver (``escape``: the cold one for leaving a saddle);
-        ``in_update``: its copy that stops at ``solver.update_time_limit`` (for a warm update's
-        attempts).
+        """Return the warm or the cold solver, created now if it is not yet.
+
+        ``escape``: the cold one for leaving a saddle; ``in_update``: its copy that stops at
+        ``solver.update_time_limit`` (for a warm update's attempts).
         """
         kind = ("escape" if escape else "warm" if warm else "cold") + (
             "_in_update" if in_update else ""
@@ -73,8 +75,9 @@ class IpoptSolvers:
         self.get(False), self.get(True, in_update=True)
 
     def free(self) -> None:
-        """Drop the solvers (freeing an IPOPT/MUMPS instance must not overlap a solve in another
-        thread).
+        """Drop the solvers, under ``IPOPT_LOCK``.
+
+        Freeing an IPOPT/MUMPS instance must not overlap a solve in another thread.
         """
         with IPOPT_LOCK:
             self._solvers.clear()
@@ -88,10 +91,8 @@ def call(
     lam_g0: np.ndarray | None = None,
     lam_x0: np.ndarray | None = None,
 ) -> Attempt:
-    """One IPOPT solve from z0 (and the multipliers λ_g0, λ_x0 for a warm solver) at parameters
-    p.
-    """
-    args = {"x0": z0, "p": p, "lbg": nlp.lbg, "ubg": nlp.ubg}
+    """Solve once with IPOPT from z0 at parameters p; a warm solver also takes λ_g0 and λ_x0."""
+    args: dict[str, np.ndarray | None] = {"x0": z0, "p": p, "lbg": nlp.lbg, "ubg": nlp.ubg}
     if lam_g0 is not None:
         args["lam_g0"] = lam_g0
         args["lam_x0"] = lam_x0
@@ -105,7 +106,7 @@ def call(
     viol = violation(nlp, g)
     ok = stats["return_status"] in SUCCESS and viol < 1e-6 * nlp.length and np.all(np.isfinite(z))
     return (
-        ok,
+        bool(ok),
         SolverState(z, lam_g, lam_x, p, g=g),
         stats["return_status"],
         int(stats.get("iter_count", 0)),
@@ -114,8 +115,9 @@ def call(
 
 
 def witness(nlp: StringNLP, g: np.ndarray | None) -> str:
-    """', most violated: <row> by <amount>' at the best point IPOPT found (the witness of an
-    'infeasible' or 'failed' verdict), '' when nothing is violated.
+    """Return ', most violated: <row> by <amount>' at the best point IPOPT found.
+
+    The witness of an 'infeasible' or 'failed' verdict; '' when nothing is violated.
     """
     if g is None or not g.size:
         return ""
@@ -136,13 +138,22 @@ def witness(nlp: StringNLP, g: np.ndarray | None) -> str:
     return f", most violated: {names.get(kind[0], str)(kind)} by {excess[i]:.3g}"
 
 
+def unverified_unstable(result: ShapeResult, state: SolverState) -> bool:
+    """Tell whether an unverified ``result`` has a negative reduced eigenvalue (``is_stable``)."""
+    if result.status != "unverified" or result.min_eigenvalue is None:
+        return False
+    assert state.hessian is not None  # the result's eigenvalue was judged with it (outputs.py)
+    return not is_stable(result.min_eigenvalue, state.hessian)
+
+
 #: appended to the message of a result that replaced an unstable equilibrium
 LEFT_SADDLE = "; left an unstable equilibrium along its negative-curvature mode"
 
 
 def lower_than(candidate: ShapeResult, saddle: ShapeResult) -> bool:
-    """``candidate``'s total energy is below ``saddle``'s (by more than 1e-12 relative): it went
-    downhill.
+    """Tell whether ``candidate`` went downhill from ``saddle``.
+
+    Its total energy is below ``saddle``'s by more than 1e-12 relative.
     """
     total = saddle.energy["total"]
     return candidate.energy["total"] < total - 1e-12 * abs(total)
@@ -155,23 +166,21 @@ def escape_saddle(
     build: Callable[..., ShapeResult],
     depth: int = 3,
 ) -> tuple[ShapeResult, SolverState]:
-    """A stationary point with negative reduced curvature is not a shape a string rests in: an
-    unstable result, or an unverified one (its residual over the tolerance) whose reduced Hessian
-    has a negative eigenvalue.
+    """Leave a saddle: re-solve from beside it, for a stable result of lower energy.
 
-    Step along the unstable eigenvector (both signs, 0.2 then 0.6 rad at most in any coefficient)
-    and re-solve cold (``attempt(z0, p)``); keep the first stable result of lower energy.  A lower
-    but still unstable stationary point is left the same way, up to ``depth`` saddles deep (a
-    compressed twist-free strip falls from the planar buckle through a half-twisted saddle).
+    A stationary point with negative reduced curvature is not a shape a string rests in: an
+    unstable result, or an unverified one (its residual over the tolerance) whose reduced Hessian
+    has a negative eigenvalue.  Step along the unstable eigenvector (both signs, 0.2 then 0.6 rad
+    at most in any coefficient) and re-solve cold (``attempt(z0, p)``); keep the first stable
+    result of lower energy.  A lower but still unstable stationary point is left the same way, up
+    to ``depth`` saddles deep (a compressed twist-free strip falls from the planar buckle through
+    a half-twisted saddle).
     Symmetric starts (a planar guess for a scene whose minimum is twisted, paper Fig. 2) land on
     such saddles. ``build(state, ipopt_status, iterations, violation, warm_started,
     continuation_steps)`` makes the result of a re-solved state.
     """
     if state.unstable_direction is None or not (
-        result.stable is False
-        or result.status == "unverified"
-        and result.min_eigenvalue is not None
-        and not is_stable(result.min_eigenvalue, state.hessian)
+        result.stable is False or unverified_unstable(result, state)
     ):
         return result, state
     d = state.unstable_direction / np.max(np.abs(state.unstable_direction))

@@ -36,8 +36,10 @@ SLACK = 1e-7
 def through_itself(
     candidates: list[tuple[tuple[int, int], float]], geometry: SC.ContactGeometry, length: float
 ) -> bool:
-    """Whether a shape whose ``candidate_pairs`` are ``candidates`` penetrates itself: a pair
-    closer than the distance D the self-contact rows keep, less ``SLACK``·L (``length``: L [m]).
+    """Tell whether a shape whose ``candidate_pairs`` are ``candidates`` penetrates itself.
+
+    It does when a pair is closer than the distance D the self-contact rows keep, less
+    ``SLACK``·L (``length``: L [m]).
     """
     return bool(SC.penetrations(candidates, geometry, SLACK * length))
 
@@ -45,11 +47,13 @@ def through_itself(
 def why_not_reference(
     before: np.ndarray | None, after: np.ndarray, geometry: SC.ContactGeometry, length: float
 ) -> str:
-    """Why the shape sampled at ``after`` ((N, 3) points [m] at ``geometry.s``) cannot be the
-    topology reference of a self-contact stream whose last verified shape is ``before`` (the same
-    samples, or None): '' when it can.  It cannot when it penetrates itself, or when moving every
-    sample straight from ``before`` to it makes two of them meet (``self_contact.swept_crossing``:
-    the string may have passed through itself on the way).
+    """Return why the shape sampled at ``after`` cannot be a topology reference ('' if it can).
+
+    ``after``: (N, 3) points [m] at ``geometry.s``; the reference is that of a self-contact
+    stream whose last verified shape is ``before`` (the same samples, or None).  It cannot when
+    it penetrates itself, or when moving every sample straight from ``before`` to it makes two of
+    them meet (``self_contact.swept_crossing``: the string may have passed through itself on the
+    way).
     """
     candidates = SC.candidate_pairs(after, geometry)
     through = SC.penetrations(candidates, geometry, SLACK * length)  # as through_itself

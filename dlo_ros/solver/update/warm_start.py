@@ -14,16 +14,19 @@ would make its first Newton update fail).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ...model.problem import GripPose, Problem
+from ...model.ritz import RitzModel
 from ...model.rotations import euler_from_frame
 from ..build.functions import NlpFunctions
 from ..build.initial_guess import match_clamp_rolls
 from ..contact import obstacle_slots as OSL
+from ..contact import self_contact as SC
 from ..build.nlp import StringNLP
 from ..build.parameters import ProblemParameters
 from ..state import SolverState
@@ -34,9 +37,7 @@ if TYPE_CHECKING:
 
 @dataclass
 class SourceShape:
-    """What the target needs of the source's equilibrium, sampled at the target's nodes (SI
-    units).
-    """
+    """What the target needs of the source's equilibrium, at the target's nodes (SI units)."""
 
     x0: np.ndarray  # x(0) [m]
     frames: np.ndarray | None  # pose frames (director target)
@@ -51,8 +52,9 @@ class SourceShape:
 
 
 def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> SourceShape:
-    """The source's equilibrium ``src`` as ``target`` needs it (the caller holds the source's
-    lock).
+    """Return the source's equilibrium ``src`` as ``target`` needs it.
+
+    The caller holds the source's lock.
     """
     frames = eps = f = None
     if target.director:
@@ -77,7 +79,7 @@ def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> S
         elif not source.model.layout.twist and target.model.layout.twist:
             f["psi"] = source.frames_psi(src.z, nodes, src.p)
     nlp = source.nlp
-    lam_src = src.lam_g / (nlp.row_scale * nlp.sigma) if src.lam_g.size else src.lam_g
+    lam_src = src.lam_g / (np.asarray(nlp.row_scale) * nlp.sigma) if src.lam_g.size else src.lam_g
     # grip position rows: carry the reaction force vector, whatever axes each model's rows use
     forces = {
         name: nlp.grip_axes[name].T @ lam_src[rows["position"]]
@@ -109,19 +111,23 @@ def warm_state(
     problem: Problem,
     source: SourceShape,
 ) -> SolverState:
-    """The target's warm start (z, λ, p) for ``problem`` from the sampled ``source``."""
+    """Return the target's warm start (z, λ, p) for ``problem`` from the sampled ``source``."""
     model, lay, lay_p = nlp.model, nlp.model.layout, nlp.params
     if nlp.director:
         frames = source.frames
+        assert frames is not None  # sampled for a director target (sample_source)
         if lay.frame:
             frames = match_clamp_rolls(nlp, frames, problem)
         z = model.z_from_frames(source.x0, frames, source.eps)
     else:
+        assert isinstance(model, RitzModel) and source.fields is not None  # an Euler target
         z = np.zeros(lay.size)
         z[0:3] = source.x0_scaled
         for name in ("phi", "theta", "psi", "eps"):
             if model.coefficients(z, name) is not None:
-                z[lay.slice(name)] = np.linalg.lstsq(model.B, source.fields[name], rcond=None)[0]
+                z[model.layout.slice(name)] = np.linalg.lstsq(
+                    model.B, source.fields[name], rcond=None
+                )[0]
     lam = np.zeros(nlp.lbg.size)
     for i, kind in enumerate(nlp.row_kind):
         if kind[0] == "grip" and kind[2] == "position" and kind[1] in source.forces:
@@ -187,3 +193,43 @@ def adopted_copy(adopted: SolverState) -> SolverState:
     )
     state.kkt, state.residual = adopted.kkt, adopted.residual
     return state
+
+
+def adopted_state(
+    nlp: StringNLP,
+    fns: NlpFunctions,
+    parameters: ProblemParameters,
+    problem: Problem,
+    source: SourceShape,
+    contact: SC.ContactSlots | None,
+    length: float,
+) -> SolverState:
+    """Return the target's warm start from ``source`` (``warm_state``) with the source's pairs.
+
+    ``contact``: the source's self-contact pairs; when the target has as many slots, the same
+    pairs in the same slots are copied and filled into p (the multipliers ``warm_state`` matched
+    row by row belong to them).  ``length``: the string's length L [m].
+    """
+    state = warm_state(nlp, fns, parameters, problem, source)
+    if contact is not None and len(contact.pairs) == nlp.self_contact_slots:
+        state.contact = contact.copy()
+        SC.fill(state.p, state.contact, nlp, length)
+    return state
+
+
+@dataclass
+class Adoption:
+    """The last mapping ``ShapeSolver.adopt_warm_start`` made, to adopt again without mapping.
+
+    Weak references to the source solver and its state: a pooled model must not keep an evicted
+    one alive.
+    """
+
+    source: weakref.ref  # the source solver
+    state: weakref.ref  # its state that was mapped
+    adopted: SolverState  # the state adopted from it, with its derivatives (``fill_start``)
+    scene: Problem  # the adopting solver's scene then
+
+    def is_of(self, source: object, state: SolverState) -> bool:
+        """Tell whether this adoption mapped ``state`` of ``source`` (both still alive)."""
+        return self.source() is source and self.state() is state

@@ -32,20 +32,18 @@ class SolverState:
     energies: np.ndarray | None = None  # bend, twist, stretch, gravity, work at z
     gradient: np.ndarray | None = None  # ∇f at z
     g: np.ndarray | None = None  # constraint values (scaled rows) at z
-    unstable_direction: np.ndarray | None = (
-        None  # eigenvector of the most negative reduced curvature
-    )
-    #: (λ_min, its eigenvector in z) of ``hessian`` reduced on the rows
-    # ``stability.min_reduced_eigenvalue`` : holds, computed with it by a compiled loop
-    # (native_newton.py); cleared with ``hessian``, None when not : computed
+    #: eigenvector of the most negative reduced curvature
+    unstable_direction: np.ndarray | None = None
+    #: (λ_min, its eigenvector in z) of ``hessian`` reduced on the rows that
+    #: ``stability.min_reduced_eigenvalue`` holds, computed with it by a compiled loop
+    #: (``native/newton.py``); cleared with ``hessian``, None when not computed
     reduced_eigen: tuple[float, np.ndarray] | None = None
     kkt: np.ndarray | None = None  # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
     residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
-    contact: ContactSlots | None = (
-        None  # self_contact.ContactSlots whose pairs p holds (self-contact models)
-    )
+    #: the self-contact pairs p holds (self-contact models)
+    contact: ContactSlots | None = None
     #: the outputs at z as the compiled loop that reached it evaluated them
-    # (native_newton.ComputedOutputs, : with the inputs it used), None when not evaluated
+    #: (``native.outputs.ComputedOutputs``, with the inputs it used), None when not evaluated
     outputs: object | None = None
 
     def copy(self) -> SolverState:

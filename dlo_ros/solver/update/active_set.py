@@ -1,7 +1,7 @@
 """Newton steps with an active set: the rows held at their bound, and how that set changes.
 
 ``newton.newton`` calls ``newton_active`` once per active set.  It runs the steps (``active_steps``
-in numpy, or the compiled loop ``native_newton.ActiveNewton`` doing the same in one call), then
+in numpy, or the compiled loop ``native.active.ActiveNewton`` doing the same in one call), then
 judges the point reached (``next_active_set``): a KKT point of the whole problem is the answer;
 otherwise the most violated contact row joins the set or the most negative multiplier leaves it,
 and ``newton`` goes on from there with the changed set.
@@ -45,7 +45,7 @@ def newton_active(
     Newton converged but the active set is wrong, that point and the corrected set (violated rows
     in, negative multipliers out); else (False, None, steps, None).  ``reuse``: (z, λ) is the
     start's own point and only grip targets changed since, so its stored derivatives give the
-    first step.  ``native``: the compiled loop of ``kkt_fn`` (``native_newton.ActiveNewton``), or
+    first step.  ``native``: the compiled loop of ``kkt_fn`` (``native.active.ActiveNewton``), or
     None for the numpy loop; it also returns the stability eigenpair and, given ``prof``, the
     outputs at the answer (``newton``).
     """

@@ -92,7 +92,7 @@ def first_steps(
 
     K and r at the start are the start's own (r shifted by the new targets) when only targets
     changed, else evaluated (unless the compiled loop evaluates them in its call).  The compiled
-    loop (``native_newton.py``, the GIL released) then takes every step; ``fused`` without it, the
+    loop (``native/newton.py``, the GIL released) then takes every step; ``fused`` without it, the
     first NEWTON_STEPS steps in one call of ``newton_step``; otherwise none is taken here.
     """
     nf, n = nlp.n_free_rows, start.z.size

@@ -59,7 +59,7 @@ def newton(
     symmetric); the returned state then carries that function's derivatives, not ∇²L.  ``prof``:
     the profiles of the string solved for (``OutputFunction.profiles``), given when the answer's
     outputs are wanted: a compiled loop then evaluates them in its call
-    (``native_newton.UpdateOutputs``, ``SolverState.outputs``).
+    (``native.outputs.UpdateOutputs``, ``SolverState.outputs``).
     """
     if start.g is None:  # a warm start adopted from another model
         start.g = np.asarray(nlp.g_fn(start.z, start.p)).ravel()

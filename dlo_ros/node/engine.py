@@ -345,7 +345,6 @@ def build_solver(problem: Problem, options: SolverOptions, compile: str | None =
     so that the stream never waits for them.  compile: 'background', 'blocking', 'cached' or
     'off'; None: 'background'.
     """
-
     return make_solver(problem, options, compile=compile or "background", checks="background")
 
 

@@ -383,7 +383,7 @@ class StringNLP:
         u0, pp = ca.MX.sym("u", n + nf), ca.MX.sym("p", n_p)
         k0, r0 = ca.MX.sym("K0", n + nf, n + nf), ca.MX.sym("r0", n + nf)
         u, kkt, residual, largest = u0, k0, r0, ca.MX(0)
-        # newton.regularised: K + diag(δ I, −δ I) bounds the step along a symmetry of the scene
+        # kkt.regularised: K + diag(δ I, −δ I) bounds the step along a symmetry of the scene
         sign = ca.DM(np.concatenate([np.ones(n), -np.ones(nf)]))
         for _ in range(NEWTON_STEPS):
             delta = NEWTON_REGULARISATION * ca.fmax(ca.mmax(ca.fabs(kkt)), 1.0)

@@ -93,7 +93,7 @@ class ActiveOutcome:
 class ActiveNewton:
     """Newton with an active set in one compiled call.
 
-    Newton with an active set in one compiled call: the inner loop of ``newton._active_steps``
+    Newton with an active set in one compiled call: the inner loop of ``active_set.active_steps``
     (its regularised steps, row switches, convergence test and step limit), whose tail is chord
     steps.  Each step evaluates the full KKT function (Newton's own steps, the same iterates and
     row decisions) until a check of the rows changes none and the steps are below

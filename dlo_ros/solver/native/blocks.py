@@ -19,7 +19,6 @@ def lapack_pointer(name: str) -> int:
     The address of SciPy's LAPACK (or, for dgemm, BLAS) routine ``name`` (from the PyCapsules
     scipy.linalg.cython_lapack and cython_blas export).
     """
-
     capsule = (cython_blas if name == "dgemm" else cython_lapack).__pyx_capi__[name]
     get_name = ctypes.pythonapi.PyCapsule_GetName
     get_name.restype, get_name.argtypes = ctypes.c_char_p, [ctypes.py_object]

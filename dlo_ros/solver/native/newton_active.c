@@ -53,7 +53,7 @@ static int dlo_evaluate_and_factor(const casadi_real **arg, casadi_real **res, c
 }
 
 /* Newton, then chord, steps on [H J_A^T; J_A 0] for the rows with active[i] (held at ub[i]); see
-   dlo_ros/solver/native/newton.py (ActiveNewton) and newton.py (_active_steps, the same row
+   dlo_ros/solver/native/active.py (ActiveNewton) and update/active_set.py (active_steps, the row
    switches). Each step's matrix is evaluated (Newton's own steps) until an iterate where the rows
    are checked changes no row and the steps are below chord_start; after that the factored matrix
    is kept while the steps shrink by the contraction factor, the residual function giving grad L
@@ -206,7 +206,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
     shrinking = big <= contraction * previous;
     if (((!settled && *steps > 1) || big > chord_start || (!shrinking && !(big <= tol_step))) &&
         *evaluations < max_evaluations) {
-      /* Newton's own steps (the same iterates and row decisions as _active_steps) until a check of
+      /* Newton's own steps (the same iterates and row decisions as active_steps) until a check of
          the rows changes none and the steps are below chord_start, then chord steps; or too slow
          for the factored matrix: evaluate and factor it here */
       int failed = dlo_evaluate_and_factor(arg, res, iw, w, W, gemm, map, rows_e, n, buf, out,

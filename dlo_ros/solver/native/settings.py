@@ -20,7 +20,7 @@ NEWTON_MAX_STEP = 0.5
 #: Active-set changes a warm Newton update may make before IPOPT takes over (``update/newton.py``).
 NEWTON_ACTIVE_SET_CHANGES = 6
 #: Contact rows that may join or leave between Newton steps, per active set, before it is held
-#: (``update/newton.py``).
+#: (``update/active_set.py``).
 NEWTON_STEP_SWITCHES = 4
 #: A contact row joins the active set above this excess g − bound; an active one leaves below
 #: −LEAVE_TOLERANCE multiplier (scaled units).
@@ -41,7 +41,7 @@ NEWTON_CHORD_START, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHO
 )
 
 #: δ / max|K| of the regularised Newton matrix K + diag(δ I, −δ I) of every warm update
-#: (``update/newton.regularised``).
+#: (``update/kkt.py``, ``regularised``).
 NEWTON_REGULARISATION = 1e-10
 
 #: The stability check holds a row (reduces the Hessian on its null space) when |λ| exceeds

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
@@ -77,6 +78,43 @@ def sample(
     return points, b_out @ cphi, theta
 
 
+@dataclass(frozen=True)
+class SolveRun:
+    """What the solve that reached a state reports with its result."""
+
+    ipopt_status: str
+    iterations: int
+    violation: float
+    warm: bool
+    steps: int
+
+
+@dataclass(frozen=True)
+class Evaluated:
+    """A state's outputs as the numpy path or the compiled outputs' function evaluated them."""
+
+    points: np.ndarray
+    quats: np.ndarray
+    grips: dict[str, GripWrench]
+    contacts: dict[int, np.ndarray]
+    residual: EquilibriumResidual
+    flipped: str
+    self_contacts: list[SelfContact]
+
+
+def energies(values: np.ndarray) -> dict[str, float]:
+    """Return the energy terms [J] of the evaluated (bend, twist, stretch, gravity, work)."""
+    bend, twist, stretch, grav, work = (float(v) for v in values.ravel())
+    return {
+        "bend": bend,
+        "twist": twist,
+        "stretch": stretch,
+        "gravity": grav,
+        "external_work": work,
+        "total": bend + twist + stretch + grav - work,
+    }
+
+
 class ShapeOutputs:
     """Builds the ShapeResult of a solved state of one NLP (see the module docstring)."""
 
@@ -118,20 +156,10 @@ class ShapeOutputs:
         """
         nlp, m = self.nlp, self.nlp.model
         z, p = state.z, state.p
+        run = SolveRun(ipopt_status, iterations, violation, warm, steps)
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         if self.fns.outputs is not None and self.contact_slots is None:
-            return self._compiled_result(
-                problem,
-                current,
-                state,
-                lam_si,
-                ipopt_status,
-                iterations,
-                violation,
-                warm,
-                steps,
-                summary,
-            )
+            return self._compiled_result(problem, current, state, lam_si, run, summary)
         s_out = self.s_out.copy()
         if nlp.director:
             points = m.positions(z, s_out)
@@ -162,23 +190,8 @@ class ShapeOutputs:
             for c in self_contacts
             if slots is not None and c.gap <= slots.geometry.distance + 1e-7 * nlp.length
         ]
-        return self._assemble(
-            problem,
-            state,
-            summary,
-            points,
-            quats,
-            grips,
-            contacts,
-            residual,
-            flipped,
-            touching,
-            ipopt_status,
-            iterations,
-            violation,
-            warm,
-            steps,
-        )
+        evaluated = Evaluated(points, quats, grips, contacts, residual, flipped, touching)
+        return self._assemble(problem, state, summary, evaluated, run)
 
     def _compiled_result(
         self,
@@ -186,11 +199,7 @@ class ShapeOutputs:
         current: Problem,
         state: SolverState,
         lam_si: np.ndarray,
-        ipopt_status: str,
-        iterations: int,
-        violation: float,
-        warm: bool,
-        steps: int,
+        run: SolveRun,
         summary: Any,
     ) -> ShapeResult:
         """Return ``result`` from one call of the compiled outputs' function.
@@ -234,83 +243,49 @@ class ShapeOutputs:
             )
         else:
             quats = v_out.T
-        return self._assemble(
-            problem,
-            state,
-            summary,
-            points.T,
-            quats,
-            grips,
-            contacts,
-            residual,
-            flipped,
-            [],
-            ipopt_status,
-            iterations,
-            violation,
-            warm,
-            steps,
-        )
+        evaluated = Evaluated(points.T, quats, grips, contacts, residual, flipped, [])
+        return self._assemble(problem, state, summary, evaluated, run)
 
     def _assemble(
         self,
         problem: Problem,
         state: SolverState,
         summary: Any,
-        points: np.ndarray,
-        quats: np.ndarray,
-        grips: dict[str, GripWrench],
-        contacts: dict[int, np.ndarray],
-        residual: EquilibriumResidual,
-        flipped: str,
-        self_contacts: list[SelfContact],
-        ipopt_status: str,
-        iterations: int,
-        violation: float,
-        warm: bool,
-        steps: int,
+        out: Evaluated,
+        run: SolveRun,
     ) -> ShapeResult:
         """Return the ShapeResult of the evaluated outputs, with its status.
 
-        The ShapeResult of the evaluated outputs: the energies and the stability verdict from
-        the reduced Hessian; 'failed' on a flipped branch, 'unverified' over the residual's
-        tolerance.
+        The energies and the stability verdict come from the reduced Hessian; the status is
+        'failed' on a flipped branch, 'unverified' over the residual's tolerance.
         """
         options = self.options
         min_eig = min_reduced_eigenvalue(self.nlp, self.fns, state)  # also fills state.energies
         # min_reduced_eigenvalue leaves both evaluated
         assert state.energies is not None and state.hessian is not None
-        bend, twist, stretch, grav, work = (float(v) for v in state.energies.ravel())
-        energy = {
-            "bend": bend,
-            "twist": twist,
-            "stretch": stretch,
-            "gravity": grav,
-            "external_work": work,
-            "total": bend + twist + stretch + grav - work,
-        }
+        energy = energies(state.energies)
         stable = None if min_eig is None else is_stable(min_eig, state.hessian)
         status, message = (
             "ok",
-            "converged" + (f" after {steps} continuation steps" if steps else ""),
+            "converged" + (f" after {run.steps} continuation steps" if run.steps else ""),
         )
         tolerance = options.error_tolerance or 1e-3 * problem.string.length
-        if flipped:  # not the grip's pose at all: no shape
+        if out.flipped:  # not the grip's pose at all: no shape
             return no_shape(
                 options,
                 summary,
                 "failed",
-                f"landed on a flipped branch: {flipped}",
-                iterations=iterations,
-                constraint_violation=violation,
-                warm_started=warm,
-                ipopt_status=ipopt_status,
+                f"landed on a flipped branch: {out.flipped}",
+                iterations=run.iterations,
+                constraint_violation=run.violation,
+                warm_started=run.warm,
+                ipopt_status=run.ipopt_status,
             )
-        if not residual.metres <= tolerance:
+        if not out.residual.metres <= tolerance:
             status, stable = "unverified", None
             message = (
                 "not a verified equilibrium: the equilibrium residual is "
-                f"{residual.metres:.3g} m, over the tolerance {tolerance:.3g} m "
+                f"{out.residual.metres:.3g} m, over the tolerance {tolerance:.3g} m "
                 "(solver.error_tolerance; raise solver.order)"
             )
         return ShapeResult(
@@ -318,22 +293,22 @@ class ShapeOutputs:
             status=status,
             message=message,
             s=self.s_out.copy(),
-            points=points,
-            orientations=quats,
+            points=out.points,
+            orientations=out.quats,
             energy=energy,
-            grips=grips,
-            contact_forces=contacts,
+            grips=out.grips,
+            contact_forces=out.contacts,
             stable=stable,
             min_eigenvalue=min_eig,
-            iterations=iterations,
-            constraint_violation=violation,
-            warm_started=warm,
-            continuation_steps=steps,
+            iterations=run.iterations,
+            constraint_violation=run.violation,
+            warm_started=run.warm,
+            continuation_steps=run.steps,
             basis=options.basis,
             order=options.order,
-            ipopt_status=ipopt_status,
-            equilibrium_residual_m=residual.metres,
-            self_contacts=self_contacts,
+            ipopt_status=run.ipopt_status,
+            equilibrium_residual_m=out.residual.metres,
+            self_contacts=out.self_contacts,
         )
 
     def _self_contacts(self, z: np.ndarray, lam_si: np.ndarray) -> list[SelfContact]:

@@ -39,6 +39,18 @@ def test_the_key_is_stable_and_tells_apart_every_baked_in_constant():
     assert _key(clamped_pair(right=(0.7, 0.0, 0.0), weight=0.1)) == _key(base)
 
 
+def test_the_key_holds_the_flags_the_name_and_the_sources(monkeypatch):
+    """The key hashes the compiler flags, the function's name and the sources that build NLPs, besides
+    the function's values: a change of any of them is a different library."""
+    x = ca.SX.sym("x", 2)
+    f, g = ca.Function("f", [x], [x * x]), ca.Function("g", [x], [x * x])  # same values, two names
+    key = native_compiler.fingerprint(f)
+    assert native_compiler.fingerprint(g) != key
+    assert native_compiler.fingerprint(f, native_compiler.FLAGS + ("-DDLO_OTHER",)) != key
+    monkeypatch.setattr(native_compiler, "_source_digest", lambda: b"edited sources")
+    assert native_compiler.fingerprint(f) != key
+
+
 def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monkeypatch):
     if compiled.compiler() is None:
         pytest.skip("no C compiler")

@@ -74,9 +74,8 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
     that differ in any of them get different keys.
     """
     h = hashlib.sha256()
-    h.update(
-        ca.__version__.encode()  # type: ignore[attr-defined]  # casadi's stubs omit it + " ".join(flags).encode() + _source_digest() + fn.name().encode()
-    )
+    version = ca.__version__  # type: ignore[attr-defined]  # casadi's stubs omit it
+    h.update(version.encode() + " ".join(flags).encode() + _source_digest() + fn.name().encode())
     shapes = [fn.size_in(i) for i in range(fn.n_in())]
     h.update(
         repr((shapes, [fn.size_out(i) for i in range(fn.n_out())], fn.n_instructions())).encode()

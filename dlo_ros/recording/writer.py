@@ -200,7 +200,7 @@ class Writer:
                 self._send_columns(
                     entity, arch, [u for u, _, _ in entries], [t for _, t, _ in entries], groups
                 )
-            except Exception as exc:  # noqa: BLE001 - reported by _error, never raised to the caller
+            except Exception as exc:  # noqa: BLE001 - reported by _error, never raised
                 self._error(f"sending {entity}", exc)
 
     def flush(self, timeout: float = 10.0) -> None:
@@ -311,7 +311,7 @@ class Writer:
                 [int(it.ros_time_ns) for it in items],
                 groups,
             )
-        except Exception as exc:  # noqa: BLE001 - reported by _error, never raised to the caller
+        except Exception as exc:  # noqa: BLE001 - reported by _error, never raised
             self._error(f"sending {entity}", exc)
 
     def _send_columns(
@@ -409,7 +409,7 @@ class Writer:
         for rows in shapes.values():
             try:
                 self._send_shapes([items[i] for i in rows], [snaps[i] for i in rows])
-            except Exception as exc:  # noqa: BLE001 - reported by _error, never raised to the caller
+            except Exception as exc:  # noqa: BLE001 - reported by _error, never raised
                 self._error("drawing shapes", exc)
 
     def _send_model_scalars(self, items: list[QueueItem], snaps: list[ResultSnap]) -> None:

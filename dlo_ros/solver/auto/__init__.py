@@ -12,8 +12,10 @@ check fails.  Reductions and their checks:
   leaves its plane); unstable → full model.
 * twist — ψ is an unknown only when two clamps and Rt > 0 can hold it (otherwise ω ≡ 0 exactly).
 * stretch — inextensible first; the elongation bound max|F_grip|·L / min Re > δ/2 → extensible
-  model. Grips farther apart than the inextensible string between them reaches (an extensible
-  scene) choose the extensible model at once, or switch to it when a stream carries them there.
+  model. Grips farther apart than the inextensible string between them reaches, or taut within
+  δ/2 of it (the inextensible model leaves a taut string only the straight line: Greenhill's
+  twisted rod could not buckle), choose the extensible model at once, or switch to it when a
+  stream carries them there.
 * gravity — dropped when D_max L⁴ / (8 Rf_min) (a cantilever's tip deflection, the largest a string
   held at ≥ 1 point sags under its weight at small deflection) is below δ/10.
 * obstacles — an obstacle is in the NLP only if the string can reach it: within max(s_g, L − s_g) +

@@ -82,7 +82,8 @@ def initial_choice(problem: Problem, options: SolverOptions, tolerance: float) -
     Obstacles out of reach (L/4 margin) are left out; the planar model when the scene lies in one
     plane (``options.frame == 'auto'`` only), without the obstacles clear of it; gravity dropped
     when the sag bound D_max L⁴ / (8 Rf_min) is below ``tolerance``/10; the stretch field when the
-    grips stretch the string (:func:`.reach.stretch_needed`); order :data:`START_ORDER`.
+    grips stretch the string or hold it taut within ``tolerance``/2
+    (:func:`.reach.stretch_needed`); order :data:`START_ORDER`.
     """
     L, tol = problem.string.length, tolerance
     reasons = []
@@ -108,9 +109,11 @@ def initial_choice(problem: Problem, options: SolverOptions, tolerance: float) -
     reasons.append(
         f"gravity {'kept' if gravity else 'dropped'}: sag bound {sag:.3g} m vs {tol / 10:.3g} m"
     )
-    stretch = bool(stretch_needed(problem))
+    # taut within δ/2: the inextensible model would hold the string to the straight line
+    why_stretch = stretch_needed(problem, tol / 2)
+    stretch = bool(why_stretch)
     if stretch:
-        reasons.append(stretch_needed(problem))
+        reasons.append(why_stretch)
     return ModelChoice(
         planar,
         False,

@@ -59,7 +59,7 @@ def follow_scene(
         if auto.choice.planar
         else ""
     )
-    stretch_why = "" if auto.choice.stretch else stretch_needed(problem)
+    stretch_why = "" if auto.choice.stretch else stretch_needed(problem, auto.tolerance / 2)
     if why or entering or stretch_why:
         richer = (
             full_choice(auto.choice, problem) if why else replace(auto.choice, obstacles=obstacles)

@@ -113,17 +113,33 @@ def not_planar(
     )
 
 
-def stretch_needed(problem: Problem) -> str:
+def stretch_needed(problem: Problem, slack: float = 0.0) -> str:
     """Say why an extensible scene needs its stretch field from the start ('' if it does not).
 
-    It does when two grips are farther apart than the inextensible string between them reaches
-    ('' when none are, or when the string is inextensible).
+    It does when two grips are farther apart than the inextensible string between them reaches,
+    or taut: within ``slack``·span/L [m] of it ('' when none are, or when the string is
+    inextensible).
+    Taut matters because the inextensible model then leaves the string only the straight line
+    between the two grips: a clamped pair twisted past Greenhill's threshold, or pushed by a
+    sideways load, cannot buckle out of it, while the extensible string does by stretching a
+    little.  The elongation bound (checks.py) cannot see that: the straight shape pulls on no
+    grip.  (IPOPT also fails on that degenerate feasible set: Error_In_Step_Computation.)
     """
-    pair = problem.farthest_apart() if problem.string.stretch_stiffness is not None else None
+    if problem.string.stretch_stiffness is None:
+        return ""
+    L = problem.string.length
+    pair = problem.farthest_apart(max(0.0, 1.0 - slack / L))
     if pair is None:
         return ""
-    a, b, dist, span = pair
+    a, b, dist, _ = pair
+    span = abs(a.s - b.s)
+    if dist > span + 1e-12:
+        return (
+            f"extensible: grips {a.name!r} and {b.name!r} are {dist:.4g} m apart, "
+            f"beyond the {span:.4g} m the inextensible string reaches"
+        )
     return (
-        f"extensible: grips {a.name!r} and {b.name!r} are {dist:.4g} m apart, "
-        f"beyond the {span:.4g} m the inextensible string reaches"
+        f"extensible: grips {a.name!r} and {b.name!r} are {dist:.4g} m apart, within "
+        f"{slack:.3g} m of the {span:.4g} m of string between them (taut: the inextensible "
+        "model leaves only the straight line)"
     )

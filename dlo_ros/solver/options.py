@@ -37,10 +37,12 @@ class SolverOptions:
     1e-3·L (1 mm on 1 m). recheck_every: 'auto' repeats its a-posteriori checks every this many
     streamed updates. output_points: centreline samples in a result.
     tolerance: IPOPT's (scaled) convergence tolerance. max_continuation_steps: the largest number
-    of equal steps a failed warm update is split into. update_time_limit [s]: how long a warm
-    update (one that starts from a committed shape) may try: no IPOPT attempt starts after it, and
-    each attempt within a warm update stops at it (IPOPT's ``max_wall_time``); the update then
-    answers ``failed`` and names this limit.  0: no limit.  A cold solve is not limited.
+    of equal steps a failed warm update is split into. update_time_limit [s]: how long a streamed
+    update (a warm solve from a committed shape that commits) may try: no IPOPT attempt starts
+    after it, and each attempt within it stops at it (IPOPT's ``max_wall_time``); the update then
+    answers ``failed`` and names this limit.  0: no limit.  A cold solve, a ``check_now`` re-solve
+    and a query are never limited, nor auto's re-solves and checks inside them
+    (``update/time_limit.py``).
     self_contact_pairs: capacity of the self-contact pair list (director 3D models only; 0:
     self-contact is not modelled).  Each slot is one inequality row |x(s_a) − x(s_b)|² ≥ D² whose
     pair of arc lengths is a parameter, refreshed from the current shape before every solve

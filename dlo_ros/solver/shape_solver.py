@@ -61,6 +61,7 @@ from .update.moments import MOMENT_CONTINUATION_SOLVES, MOMENT_NEWTON_STEPS
 from .update.newton import fill_start
 from .update.pipeline import run_update
 from .update.summary import ModelSummaries
+from .update.time_limit import is_limited, limit_message, update_deadline
 from .update.warm_start import Adoption, adopted_copy, adopted_state, held_poses, sample_source
 
 __all__ = [
@@ -346,6 +347,7 @@ class ShapeSolver:
         commit: bool = True,
         checked: bool = False,
         check_now: bool = False,
+        limited: bool | None = None,
     ) -> ShapeResult:
         """Equilibrium with the given grip poses (missing grips keep their current target).
 
@@ -353,6 +355,8 @@ class ShapeSolver:
         a planar model, already found in its plane (AutoShapeSolver checks both before calling).
         check_now: accepted for the interface AutoShapeSolver shares; a fixed model's checks (the
         equilibrium residual and the stability eigenvalue) always run inside every solve.
+        limited: whether a warm solve stops at ``solver.update_time_limit``; None: exactly when it
+        commits (a streamed update; never a cold solve or a query, ``update/time_limit.py``).
         """
         with self._lock:
             t0 = time.perf_counter()
@@ -367,18 +371,11 @@ class ShapeSolver:
                 self.functions.load_cached()
             warm = warm and self._state is not None
             limit = self.options.update_time_limit
-            ctx.deadline = t0 + limit if warm and limit > 0 else None
+            ctx.deadline = update_deadline(t0, limit, is_limited(warm, commit, limited))
             result, state = run_update(ctx, problem, warm, self._turn_tracker)
-            if (
-                warm
-                and limit > 0
-                and result.status == "failed"
-                and time.perf_counter() - t0 >= limit
-            ):
-                result.message = (
-                    f"no answer within solver.update_time_limit ({limit:g} s): the update "
-                    f"stopped; {result.message}"
-                )
+            if ctx.deadline is not None and result.status == "failed":
+                if time.perf_counter() >= ctx.deadline:
+                    result.message = limit_message(limit, result.message)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
             result.derivatives = "compiled" if self.functions.compiled else "interpreted"
             if commit:  # every target of the stream counts, failed ones too (topology.ClampTurns)

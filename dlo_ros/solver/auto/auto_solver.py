@@ -233,9 +233,14 @@ class AutoShapeSolver:
         change of the scene's values, whose answer must not be published before it is checked.  A
         running background check is waited for first (its verdict is about an earlier solve and is
         dropped).
+
+        ``solver.update_time_limit`` bounds a streamed update only (``update/time_limit.py``): its
+        re-solves and checks here stop at it; a cold solve's (no committed shape), a ``check_now``
+        re-solve's and a query's never do, so the limit cannot change their answers.
         """
         with self._lock:
             t0 = time.perf_counter()
+            limited = commit and warm and not check_now and self.inner.has_warm_start
             before_problem = self.problem
             try:
                 problem = with_checked_poses(self.problem, poses)
@@ -249,29 +254,35 @@ class AutoShapeSolver:
             answer = follow.follow_scene(self, problem, commit, notes, t0)
             if answer is not None:  # a query answered by a richer model
                 return answer
-            return self._update(problem, before_problem, warm, commit, check_now, notes, t0)
+            run = (warm, commit, check_now, limited)
+            return self._update(problem, before_problem, run, notes, t0)
 
     def _update(
         self,
         problem: Problem,
         before_problem: Problem,
-        warm: bool,
-        commit: bool,
-        check_now: bool,
+        run: tuple[bool, bool, bool, bool],
         notes: list[str],
         t0: float,
     ) -> ShapeResult:
-        """Solve on the streaming model, escalate inside the update, commit and check."""
+        """Solve on the streaming model, escalate inside the update, commit and check.
+
+        ``run``: (warm, commit, check_now, limited) of ``solve``; ``limited``: every re-solve and
+        check of this update stops at ``solver.update_time_limit``.
+        """
+        warm, commit, check_now, limited = run
         inner_poses = self.reduced.poses(self.choice, problem)
         # the shape this update starts from (a switch to self-contact may start there)
         before = (self.inner, self.inner.committed_state if warm else None, before_problem)
         # the poses are checked and the plane too (above): the inner solver need not again
-        result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
+        result = self.inner.solve(
+            inner_poses, warm=warm, commit=commit, checked=True, limited=limited
+        )
         if commit and result.status == "failed" and result.message.startswith("topology:"):
-            result = escalate.richer_for_topology(self, problem, result, notes)
+            result = escalate.richer_for_topology(self, problem, result, notes, limited)
         if result.status == "ok" and result.stable is False:
             result, answered_by = escalate.richer_for_stability(
-                self, problem, result, notes, commit
+                self, problem, result, notes, commit, limited
             )
             if answered_by is not None:  # a query answered by the next order's model
                 return refine_query(self, problem, result, t0, *answered_by)
@@ -289,32 +300,38 @@ class AutoShapeSolver:
             self.switch(contact, approach + why, start)
             notes.append(self.changes[-1][1])
             inner_poses = self.reduced.poses(self.choice, problem)
-            result = self.inner.solve(inner_poses, warm=warm, commit=commit, checked=True)
+            result = self.inner.solve(
+                inner_poses, warm=warm, commit=commit, checked=True, limited=limited
+            )
             if result.status not in ("ok", "unverified"):
                 return self.finish(result, t0, notes)
-        return self._committed(problem, inner_poses, result, check_now, notes, t0)
+        return self._committed(problem, inner_poses, result, (check_now, limited), notes, t0)
 
     def _committed(
         self,
         problem: Problem,
         inner_poses: dict,
         result: ShapeResult,
-        check_now: bool,
+        run: tuple[bool, bool],
         notes: list[str],
         t0: float,
     ) -> ShapeResult:
-        """Count a committed update and run or submit its checks when they are due."""
+        """Count a committed update and run or submit its checks when they are due.
+
+        ``run``: (check_now, limited): the checks' re-solves stop at the time limit when limited.
+        """
+        check_now, limited = run
         self.problem = problem
         self._since_check += 1
         self._updates += 1
         if check_now:
             self.worker.wait()
             self.worker.job = None
-            snap = self.snapshot(problem, inner_poses, result)
+            snap = self.snapshot(problem, inner_poses, result, limited=limited)
             return self.finish(self._check_now(snap, result, notes), t0, notes)
         due = self._unchecked or self._since_check >= self.options.recheck_every
         if due and (not self.worker.background or self.worker.idle):  # else: snapshot later
-            snap = self.snapshot(problem, inner_poses, result)
+            snap = self.snapshot(problem, inner_poses, result, limited=limited)
             if not self.worker.background:
                 result = self._check_now(snap, result, notes)
             else:
@@ -339,14 +356,14 @@ class AutoShapeSolver:
                 return result
             self.switch(verdict.choice, verdict.reason)
             notes.append(self.changes[-1][1])
-            previous, result = result, self.inner.solve(snap.poses)
+            previous, result = result, self.inner.solve(snap.poses, limited=snap.limited)
             if result.status not in ("ok", "unverified"):  # keep the answer we had, and say so
                 previous.message += (
                     f"; the richer model failed to solve ({result.message}): "
                     "answer of the previous model"
                 )
                 return previous
-            snap = self.snapshot(snap.problem, snap.poses, result)
+            snap = self.snapshot(snap.problem, snap.poses, result, limited=snap.limited)
         return result
 
     def snapshot(
@@ -356,11 +373,13 @@ class AutoShapeSolver:
         result: ShapeResult,
         solver: ShapeSolver | None = None,
         choice: ModelChoice | None = None,
+        limited: bool = True,
     ) -> CheckSnapshot:
         """Return what a check needs of the streaming model's committed ``result``, or a query's.
 
         A copy, for another thread.  A query's: ``result`` committed on ``solver``, a model of
-        ``choice``.
+        ``choice``.  ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (a
+        streamed update's check; never a cold solve's or a query's).
         """
         solver, choice = solver or self.inner, choice or self.choice
         return CheckSnapshot(
@@ -375,6 +394,7 @@ class AutoShapeSolver:
             float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)),
             touches_obstacle(result),
             self._updates,
+            limited,
         )
 
     def _keep(self, verdict: CheckVerdict) -> None:

@@ -40,7 +40,9 @@ class CheckSnapshot:
     of its model; ``points``: its output points [m]; ``max_grip_force`` [N]; ``generation``: the
     AutoShapeSolver's switch count then (an older verdict is stale); ``residual_m``: its
     strong-form equilibrium residual (solver/results/residual.py, inf when unknown);
-    ``touching``: it presses on an obstacle; ``update``: the streamed-update count then.
+    ``touching``: it presses on an obstacle; ``update``: the streamed-update count then;
+    ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (only a streamed
+    update's check: a cold solve's or a query's runs to its end, ``update/time_limit.py``).
     """
 
     inner: ShapeSolver
@@ -54,6 +56,7 @@ class CheckSnapshot:
     residual_m: float = 0.0
     touching: bool = False
     update: int = 0
+    limited: bool = True
 
 
 @dataclass

@@ -22,7 +22,11 @@ if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports th
 
 
 def richer_for_topology(
-    auto: AutoShapeSolver, problem: Problem, result: ShapeResult, notes: list[str]
+    auto: AutoShapeSolver,
+    problem: Problem,
+    result: ShapeResult,
+    notes: list[str],
+    limited: bool = True,
 ) -> ShapeResult:
     """Retry an update refused for its linking number on the next orders; return the answer.
 
@@ -30,7 +34,8 @@ def richer_for_topology(
     released, ``topology.py``): too coarse a basis cannot hold the twist, so the update is tried
     again on the next orders, each warm-started from the committed shape; the first answer that is
     not refused for its topology is returned (the refusal if every order is).  Each switch is
-    appended to ``notes``.
+    appended to ``notes``.  ``limited``: the re-solves stop at ``solver.update_time_limit`` (a
+    streamed update's; never a cold solve's).
     """
     for order in ORDERS:
         if order <= auto.choice.order:
@@ -40,9 +45,8 @@ def richer_for_topology(
             f"order {order}: the order-{auto.choice.order} model changed the linking number",
         )
         notes.append(auto.changes[-1][1])
-        result = auto.inner.solve(
-            auto.reduced.poses(auto.choice, problem), warm=True, commit=True, checked=True
-        )
+        poses = auto.reduced.poses(auto.choice, problem)
+        result = auto.inner.solve(poses, warm=True, commit=True, checked=True, limited=limited)
         if not (result.status == "failed" and result.message.startswith("topology:")):
             return result
     return result
@@ -54,6 +58,7 @@ def richer_for_stability(
     result: ShapeResult,
     notes: list[str],
     commit: bool = True,
+    limited: bool = True,
 ) -> tuple[ShapeResult, tuple[ModelChoice, ShapeSolver] | None]:
     """Try an unstable equilibrium on the next order; return (answer, the query's model or None).
 
@@ -65,7 +70,9 @@ def richer_for_stability(
     stream's committed shape (for an update: the unstable answer itself), without touching the
     stream; if that answer is stable it is returned, and an update (``commit``) switches the
     stream to that order and answers there.  Else the unstable answer stands.  The second item is
-    the next order's (choice, solver) when that answered a query, else None.
+    the next order's (choice, solver) when that answered a query, else None.  ``limited``: the
+    re-solves stop at ``solver.update_time_limit`` (a streamed update's; never a cold solve's or a
+    query's).
     """
     higher = [order for order in ORDERS if order > auto.choice.order]
     if not higher:
@@ -75,7 +82,7 @@ def richer_for_stability(
     # a running check may be using that order as its shadow
     auto.worker.wait_for_model(("",) + richer.key())
     other = auto.pool.solver_for(richer, problem, stream=False, source=auto.inner)
-    trial = other.solve(poses, warm=True, commit=False, checked=True)
+    trial = other.solve(poses, warm=True, commit=False, checked=True, limited=limited and commit)
     if not (trial.status == "ok" and trial.stable):
         return result, None
     if not commit:  # a query: the stream keeps its model
@@ -86,7 +93,7 @@ def richer_for_stability(
         f"(eigenvalue {result.min_eigenvalue:.3g}), the order-{richer.order} one stable",
     )
     notes.append(auto.changes[-1][1])
-    return auto.inner.solve(poses, warm=True, commit=True, checked=True), None
+    return auto.inner.solve(poses, warm=True, commit=True, checked=True, limited=limited), None
 
 
 def _contact_geometry(auto: AutoShapeSolver, problem: Problem) -> SC.ContactGeometry:

@@ -71,9 +71,9 @@ def follow_scene(
             other = auto.pool.solver_for(richer, problem, stream=False, source=auto.inner)
             auto.pool.compile_ahead(other)  # it answers every such query: compiled
             # the poses are checked, and in the plane if ``other`` is planar (above)
-            answer = other.solve(
-                {g.name: g.pose for g in problem.grips}, commit=False, checked=True
-            )
+            # a query is never limited by solver.update_time_limit (update/time_limit.py)
+            poses = {g.name: g.pose for g in problem.grips}
+            answer = other.solve(poses, commit=False, checked=True, limited=False)
             return refine_query(auto, problem, answer, t0, richer, other)
         reasons = (
             ([f"targets left the plane ({why}): full model"] if why else [])

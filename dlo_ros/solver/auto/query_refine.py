@@ -1,8 +1,10 @@
 """A query's unverified answer refined as a cold solve's is, on pooled copies of the models.
 
 :func:`refine_query` runs the a-posteriori checks (:mod:`.checks`) on the query's own shape and
-escalates until they pass or the budget (:class:`.query_verify.QueryBudget`) runs out; the
-stream's model is never touched.  :func:`.query_verify.verified_answer` decides the final status.
+escalates until they pass or a model fails, to its end: ``solver.update_time_limit`` bounds a
+streamed update only, never a query (``update/time_limit.py``; the node's ``query_timeout``
+bounds how long its caller waits).  The stream's model is never touched.
+:func:`.query_verify.verified_answer` decides the final status.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from ...model.problem import Problem
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from .choice import ORDERS, ModelChoice
-from .query_verify import QueryBudget, verified_answer
+from .query_verify import verified_answer
 
 if TYPE_CHECKING:  # the solver calls this function (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -34,13 +36,12 @@ def refine_query(
     whose residual is over the tolerance ('unverified') is refined as a cold solve's is
     (``check_now``): the checks run on the query's own shape and escalate (3D when the planar
     shape is unstable in 3D, the next order, more obstacle samples) until they pass, on pooled
-    copies, never the streaming model.  Stops at ``solver.update_time_limit`` from ``t0``; 'ok'
-    only when the checks passed (``query_verify.verified_answer``).
+    copies, never the streaming model.  Not limited by ``solver.update_time_limit`` (its re-solves
+    and checks neither); 'ok' only when the checks passed (``query_verify.verified_answer``).
     """
     if result.status != "unverified":
         return auto.finish(result, t0, [], choice=choice, solver=solver)
     auto.worker.wait()  # a running check may hold the pooled models the refinement uses
-    budget = QueryBudget(auto.options.update_time_limit, t0)
     base = choice or auto.choice
     choice = replace(base, reasons=list(base.reasons))
     # the same answer again on a copy that keeps its state (the checks start from it); the copy
@@ -49,7 +50,7 @@ def refine_query(
         choice, problem, stream=False, source=solver or auto.inner, tag="query"
     )
     poses = auto.reduced.poses(choice, problem)
-    answer = solver.solve(poses, warm=True, commit=True, checked=True)
+    answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
     estimate, stopped = None, ""
     for _ in range(2 * len(ORDERS) + 2):
         if answer.status not in ("ok", "unverified"):
@@ -57,11 +58,10 @@ def refine_query(
             answer = result  # the previous model's shape stays the answer
             break
         result = answer
-        if budget.expired():
-            stopped = budget.reason()
-            break
         verdict = auto.model_checks.evaluate(
-            auto.snapshot(problem, poses, answer, solver, choice), False, lower=False
+            auto.snapshot(problem, poses, answer, solver, choice, limited=False),
+            False,
+            lower=False,
         )
         if verdict.choice is None:
             estimate = verdict.estimate
@@ -74,7 +74,7 @@ def refine_query(
             choice, problem, stream=False, source=solver, tag="query" if same else ""
         )
         poses = auto.reduced.poses(choice, problem)
-        answer = solver.solve(poses, warm=True, commit=True, checked=True)
+        answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
     else:
         stopped = "the model checks kept escalating"
     answer = verified_answer(answer, estimate, auto.tolerance, stopped)

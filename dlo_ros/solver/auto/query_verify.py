@@ -3,13 +3,11 @@
 A query answer whose equilibrium residual is over the tolerance ('unverified') is refined by
 AutoShapeSolver as a cold solve's answer is: its a-posteriori checks run on the query's own shape
 (planar stability in 3D, the basis order's shadow, the obstacle samples' shadow) and escalate to a
-richer model until they pass.  This module holds the two decisions around that loop:
+richer model until they pass.  It is not bounded by ``solver.update_time_limit`` (that bounds a
+streamed update only, ``update/time_limit.py``): a limit cannot change a query's answer; the
+node's ``query_timeout`` bounds how long its caller waits.  This module holds the decision after
+that loop:
 
-* :class:`QueryBudget` — the refinement stops when ``solver.update_time_limit`` [s] has passed
-  since
-  the query started (0: no limit).  The limit bounds how long a caller waits; it never turns an
-  answer into a verdict: a refinement cut short leaves the answer 'unverified', and its message
-  says why.
 * :func:`verified_answer` — the final status: 'ok' only when the checks finished, the residual and
   the checks' error estimate are both within the tolerance; otherwise 'unverified' (the shape kept,
   no stability verdict), with the reason in the message.
@@ -18,32 +16,8 @@ richer model until they pass.  This module holds the two decisions around that l
 from __future__ import annotations
 
 import math
-import time
-from dataclasses import dataclass, field
 
 from ..results.result import ShapeResult
-
-
-@dataclass
-class QueryBudget:
-    """The time budget of a query's refinement.
-
-    The time a query's refinement may take: ``limit`` [s] from ``start``
-    (``time.perf_counter``).
-    """
-
-    limit: float
-    start: float = field(default_factory=time.perf_counter)
-
-    def expired(self) -> bool:
-        """Whether no further refinement step may start (never, when ``limit`` is 0)."""
-        return self.limit > 0 and time.perf_counter() - self.start >= self.limit
-
-    def reason(self) -> str:
-        return (
-            f"solver.update_time_limit ({self.limit:g} s) reached before the answer was verified "
-            f"(refinement stopped after {time.perf_counter() - self.start:.2f} s)"
-        )
 
 
 def verified_answer(

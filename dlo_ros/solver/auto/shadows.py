@@ -31,7 +31,8 @@ def shadow_error(pool: ModelPool, snap: CheckSnapshot, choice: ModelChoice) -> f
 
     ``choice`` is the next or the previous order, or 2n − 1 obstacle samples, solved from the
     checked shape (same branch): the a-posteriori estimate of the coarser of the two; nan when
-    that solve fails (inconclusive: the next check retries).  The shadow is pooled: it is the model
+    that solve fails (inconclusive: the next check retries; a streamed update's check stops at
+    ``solver.update_time_limit``, ``snap.limited``).  The shadow is pooled: it is the model
     an escalation switches to.  With background checks it is compiled ahead
     (``ModelPool.compile_ahead``), as the models a switch or the queries use.
     """
@@ -42,7 +43,7 @@ def shadow_error(pool: ModelPool, snap: CheckSnapshot, choice: ModelChoice) -> f
         # beside a stream: an interpreted shadow holds the GIL through long CasADi calls, and the
         # stream's updates during a check waited for them (compiled once, later checks release it)
         pool.compile_ahead(shadow)
-    result = shadow.solve(snap.poses)
+    result = shadow.solve(snap.poses, limited=snap.limited)
     if not result.ok:
         return float("nan")
     return float(np.max(np.linalg.norm(result.points - snap.points, axis=1)))

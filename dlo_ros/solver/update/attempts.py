@@ -89,8 +89,8 @@ def ipopt_call(
 ) -> Attempt:
     """Run one IPOPT solve from z0 (warm: with ``start``'s multipliers; escape: off a saddle).
 
-    Within a warm update past its ``solver.update_time_limit`` (``ctx.deadline``) none starts: a
-    failed attempt, with IPOPT's own status for a call stopped by that limit.
+    Within a streamed update past its ``solver.update_time_limit`` (``ctx.deadline``) none starts:
+    a failed attempt, with IPOPT's own status for a call stopped by that limit.
     """
     nlp, solvers = ctx.parts.nlp, ctx.parts.ipopt
     deadline = ctx.deadline

@@ -9,7 +9,8 @@
   a substep's or a round's start while that stage runs);
 * ``clamp_turns`` and ``turns``: the clamps' turns since the committed shape up to ``start``'s
   targets and up to this target (``topology.ClampTurns``, the linking-number check);
-* ``deadline``: ``time.perf_counter()`` at which the warm update stops starting IPOPT calls;
+* ``deadline``: ``time.perf_counter()`` at which a streamed update stops starting IPOPT calls
+  (None for a cold solve or a query: ``time_limit.py``);
 * ``contact`` and ``slot_override``: the self-contact pairs and obstacle slots a round fixes in
   the parameter vector (``attempts.pack``);
 * ``newton_far``: set by the escalation ladder when its Newton answer went far from ``start``

@@ -12,6 +12,9 @@ potential: the work and the total are null and the result says why.
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -143,3 +146,52 @@ def test_moment_off_the_plane_has_no_energy(how):
     assert "loads[0].moment" in r.energy_note and "no potential" in r.energy_note
     out = json.loads(json.dumps(r.to_dict(), allow_nan=False))
     assert out["energy"]["total"] is None and out["energy_note"] == r.energy_note
+
+
+OFF_PLANE_SCENE = """\
+name: off_plane_moment
+description: |
+  the cantilever of test_moment_energy (moment about the working-plane normal, y) with a force
+  along y at the tip that bends the string out of the plane normal to the moment
+string: {length: 1.0, bend_stiffness: 1.0, twist_stiffness: 0.8, weight_per_length: 0.0}
+grips:
+  - {name: clamp, s: 0.0, mode: clamp, position: [0, 0, 0], orientation: [0, 0, 0, 1]}
+loads:
+  - {s: 0.5, moment: [0.0, 2.0, 0.0]}
+  - {s: 1.0, force: [0.0, 0.5, 0.0]}
+solver: {model: full, order: 16}
+"""
+
+
+def test_cli_prints_and_writes_null_energy(tmp_path):
+    """`dlo solve` (text and --json) shows the missing potential as null and says why."""
+    scene = tmp_path / "off_plane_moment.yaml"
+    scene.write_text(OFF_PLANE_SCENE)
+    env = dict(os.environ, DLO_NO_COMPILE="1")
+    run = [sys.executable, "-m", "dlo_ros.cli", "solve", str(scene)]
+    text = subprocess.run(run, capture_output=True, text=True, timeout=300, env=env)
+    assert text.returncode == 0, text.stderr
+    assert "external_work null" in text.stdout and "total null" in text.stdout
+    assert "no potential" in text.stdout and "Traceback" not in text.stderr
+    js = subprocess.run([*run, "--json"], capture_output=True, text=True, timeout=300, env=env)
+    assert js.returncode == 0, js.stderr
+    out = json.loads(js.stdout)
+    assert out["energy"]["external_work"] is None and out["energy"]["total"] is None
+    assert "loads[0].moment" in out["energy_note"]
+
+
+def test_recording_keeps_null_energy(tmp_path):
+    """A recorded result without a potential reads back with external_work and total None."""
+    recording = pytest.importorskip("dlo_ros.recording")
+    replay = pytest.importorskip("dlo_ros.recording.replay")
+    moment = np.array([1.0, MOMENT, 0.0])
+    r = ShapeSolver(
+        cantilever(moment), SolverOptions(model="full", order=16), compile="off"
+    ).solve()
+    assert r.ok and r.energy["total"] is None, r.message
+    path = tmp_path / "null_energy.rrd"
+    with recording.Recorder(rrd=path) as rec:
+        rec.log_result(r, update=0)
+    got = replay.read_recording(path).results[0].energy
+    assert got["total"] is None and got["external_work"] is None
+    assert got["bend"] == pytest.approx(r.energy["bend"], abs=0)

@@ -21,6 +21,8 @@ import pytest
 
 from dlo_ros.model import Grip, GripPose, Load, Problem, Profile, StringProperties
 from dlo_ros.model.rotations import quat_to_matrix
+from dlo_ros.node.conversions import diagnostic_status, diagnostic_values
+from dlo_ros.node.health import Health
 from dlo_ros.solver.auto.auto_solver import AutoShapeSolver
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
@@ -195,3 +197,18 @@ def test_recording_keeps_null_energy(tmp_path):
     got = replay.read_recording(path).results[0].energy
     assert got["total"] is None and got["external_work"] is None
     assert got["bend"] == pytest.approx(r.energy["bend"], abs=0)
+
+
+def test_node_diagnostics_show_empty_total_and_the_note():
+    """The node's shape diagnostics: `energy total J` empty, `energy note` the reason."""
+    moment = np.array([1.0, MOMENT, 0.0])
+    r = ShapeSolver(
+        cantilever(moment), SolverOptions(model="full", order=16), compile="off"
+    ).solve()
+    assert r.ok and r.energy["total"] is None, r.message
+    h = Health(scene="off_plane", grips=("clamp",))
+    h.update(r, "initial")
+    text = diagnostic_values(
+        diagnostic_status("/dlo: shape", *h.level_and_message(), "off_plane", h.values())
+    )
+    assert text["energy total J"] == "" and "no potential" in text["energy note"]

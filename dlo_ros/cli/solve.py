@@ -31,6 +31,7 @@ JSON_KEYS = (
     "points",
     "orientations",
     "energy",
+    "energy_note",
     "grips",
     "contact_forces",
     "solver",
@@ -111,9 +112,14 @@ def format_summary(scene, result) -> str:
         lines.append(f"stable  {result.stable}{eig}")
         lines.append(
             "energy  "
-            + "  ".join(f"{k} {v + 0.0:.6g}" for k, v in result.energy.items())
+            + "  ".join(
+                f"{k} {'null' if v is None else f'{v + 0.0:.6g}'}"
+                for k, v in result.energy.items()
+            )
             + "  [J]"
         )
+        if result.energy_note:
+            lines.append(f"        {result.energy_note}")
         width = max(len(n) for n in result.grips) if result.grips else 0
         for name, w in result.grips.items():
             lines.append(

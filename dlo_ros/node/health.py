@@ -321,7 +321,9 @@ class Health:
                 "warm started": None if r is None else r.warm_started,
                 "derivatives": None if r is None else r.derivatives,
                 "continuation steps": None if r is None else r.continuation_steps,
+                # None (empty) where a dead moment has no potential; the note says why
                 "energy total J": None if r is None else r.energy.get("total"),
+                "energy note": "" if r is None else r.energy_note,
                 "trigger": self.last_trigger,
                 "latency ms": self.last_latency_ms,
                 "update rate hz": rate,

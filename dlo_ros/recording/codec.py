@@ -116,7 +116,8 @@ def encode_result(
         float(result.solve_time_ms),
         (bool(result.warm_started), warm),
         tuple(energy),
-        np.fromiter(energy.values(), float, len(energy)).tobytes(),
+        # a term that is None (a dead moment without a potential) travels as NaN
+        np.array([np.nan if v is None else v for v in energy.values()], dtype=float).tobytes(),
         tuple(grips),
         b"".join(np.asarray(w.force, dtype=float).tobytes() for w in grips.values()),
         np.asarray(result.s, dtype=float).tobytes(),

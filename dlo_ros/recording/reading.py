@@ -41,7 +41,7 @@ class RecordedResult:
     s: np.ndarray
     points: np.ndarray  # (N, 3), float64 as solved
     targets: dict[str, Pose] | None
-    energy: dict[str, float] = field(default_factory=dict)
+    energy: dict[str, float | None] = field(default_factory=dict)
     model: dict = field(default_factory=dict)  # ShapeResult.model as recorded (JSON text)
 
 
@@ -284,8 +284,10 @@ class _Reader:
                     s=s_i if s_i is not None else np.zeros(0),
                     points=p.reshape(-1, 3),
                     targets=_poses(names[i], poses[i], f"{where} update {ups[i]} target_poses"),
+                    # NaN: the result's term was None (msg_docs/recording.md, data/result)
                     energy={
-                        str(k): float(v) for k, v in zip(terms[i] or [], _or_empty(energy[i]))
+                        str(k): None if np.isnan(v) else float(v)
+                        for k, v in zip(terms[i] or [], _or_empty(energy[i]))
                     },
                     model=_model(model[i]),
                 )

@@ -124,7 +124,8 @@ def shape_columns(
         yield _frame_columns(items, batch, n_frames)
     if scene is not None:
         yield from _grip_columns(items, snaps, batch, scene)
-    energy = np.array([[float(r.energy.get(t, 0.0)) for t in ENERGY_TERMS] for r in snaps])
+    # None (a dead moment without a potential) is a gap in the series: NaN
+    energy = np.array([[r.energy.get(t, 0.0) for t in ENERGY_TERMS] for r in snaps], dtype=float)
     yield ColumnsCall(
         E_ENERGY, "Scalars", items, dict(scalars=(energy.ravel(), [len(ENERGY_TERMS)] * m))
     )

@@ -2,7 +2,9 @@
 
 * the centreline x(s) [m] and pose quaternions at ``output_points`` arc lengths evenly spaced over
   [0, L];
-* the energy terms [J] (bend, twist, stretch, gravity, external work; total = U − W);
+* the energy terms [J] (bend, twist, stretch, gravity, external work; total = U − W; the work
+  and total are None, with ``energy_note`` saying why, under a dead moment with no potential:
+  ``moment_work.py``);
 * each grip's reaction wrench and each obstacle's contact force (−Σ λ ∇h over its touching samples)
   [N];
 * the stability verdict from the reduced Hessian (``stability.py``);
@@ -28,6 +30,7 @@ from ..build.nlp import StringNLP
 from ..options import SolverOptions
 from ..build.parameters import ProblemParameters
 from ..native.outputs import ComputedOutputs
+from .moment_work import MomentWork, moment_work
 from .residual import EquilibriumResidual, PointAction
 from .result import GripWrench, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
@@ -102,9 +105,24 @@ class Evaluated:
     self_contacts: list[SelfContact]
 
 
-def energies(values: np.ndarray) -> dict[str, float]:
-    """Return the energy terms [J] of the evaluated (bend, twist, stretch, gravity, work)."""
+def energies(values: np.ndarray, moments: MomentWork | None = None) -> dict[str, float | None]:
+    """Return the energy terms [J] of the evaluated (bend, twist, stretch, gravity, work).
+
+    ``moments``: the point moments' correction of the work (``moment_work.py``); its None makes
+    external_work and total None (a dead moment without a potential).
+    """
     bend, twist, stretch, grav, work = (float(v) for v in values.ravel())
+    correction = 0.0 if moments is None else moments.correction
+    if correction is None:
+        return {
+            "bend": bend,
+            "twist": twist,
+            "stretch": stretch,
+            "gravity": grav,
+            "external_work": None,
+            "total": None,
+        }
+    work += correction
     return {
         "bend": bend,
         "twist": twist,
@@ -263,7 +281,8 @@ class ShapeOutputs:
         min_eig = min_reduced_eigenvalue(self.nlp, self.fns, state)  # also fills state.energies
         # min_reduced_eigenvalue leaves both evaluated
         assert state.energies is not None and state.hessian is not None
-        energy = energies(state.energies)
+        moments = moment_work(self.nlp, problem, state.z, state.p) if problem.loads else None
+        energy = energies(state.energies, moments)
         stable = None if min_eig is None else is_stable(min_eig, state.hessian)
         status, message = (
             "ok",
@@ -296,6 +315,7 @@ class ShapeOutputs:
             points=out.points,
             orientations=out.quats,
             energy=energy,
+            energy_note="" if moments is None else moments.reason,
             grips=out.grips,
             contact_forces=out.contacts,
             stable=stable,

@@ -49,7 +49,9 @@ class ShapeResult:
     """One equilibrium (or the reason there is none).
 
     points (N, 3) [m] and orientations (N, 4) (x, y, z, w; pose x-axis along the tangent) at arc
-    lengths s (N,).  energy [J]: bend, twist, stretch, gravity, external_work and total = U − W.
+    lengths s (N,).  energy [J]: bend, twist, stretch, gravity, external_work and total = U − W;
+    external_work and total are None when a dead point moment has no potential (its axis not
+    normal to the string's plane, ``results/moment_work.py``), and energy_note then says why.
     min_eigenvalue: smallest eigenvalue of the Hessian of the Lagrangian reduced to the null space
     of the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable.
     constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
@@ -66,7 +68,9 @@ class ShapeResult:
     s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     orientations: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    energy: dict[str, float] = field(default_factory=dict)
+    energy: dict[str, float | None] = field(default_factory=dict)
+    #: why energy's external_work and total are None ("" when they are numbers)
+    energy_note: str = ""
     grips: dict[str, GripWrench] = field(default_factory=dict)
     contact_forces: dict[int, np.ndarray] = field(default_factory=dict)
     stable: bool | None = None
@@ -109,7 +113,8 @@ class ShapeResult:
             "s": arr(self.s),
             "points": arr(self.points),
             "orientations": arr(self.orientations),
-            "energy": {k: float(v) for k, v in self.energy.items()},
+            "energy": {k: None if v is None else float(v) for k, v in self.energy.items()},
+            "energy_note": self.energy_note,
             "grips": {
                 name: {"force": arr(w.force), "torque": arr(w.torque)}
                 for name, w in self.grips.items()

@@ -153,10 +153,14 @@ LEFT_SADDLE = "; left an unstable equilibrium along its negative-curvature mode"
 def lower_than(candidate: ShapeResult, saddle: ShapeResult) -> bool:
     """Tell whether ``candidate`` went downhill from ``saddle``.
 
-    Its total energy is below ``saddle``'s by more than 1e-12 relative.
+    Its total energy is below ``saddle``'s by more than 1e-12 relative.  Without a total (a dead
+    moment with no potential: ``results/moment_work.py``) there is no energy to go down: any
+    candidate counts, and ``escape_saddle`` keeps the first stable one.
     """
-    total = saddle.energy["total"]
-    return candidate.energy["total"] < total - 1e-12 * abs(total)
+    total, new = saddle.energy.get("total"), candidate.energy.get("total")
+    if total is None or new is None:
+        return True
+    return new < total - 1e-12 * abs(total)
 
 
 def escape_saddle(

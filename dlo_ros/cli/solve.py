@@ -33,6 +33,7 @@ JSON_KEYS = (
     "energy",
     "grips",
     "contact_forces",
+    "passes_through_itself",
     "solver",
 )
 

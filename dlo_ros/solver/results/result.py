@@ -9,8 +9,8 @@ import numpy as np
 from .summary import ModelSummary
 
 #: 'unverified': the solver converged but the shape fails the equilibrium check
-#: (equilibrium_residual_m over the tolerance); it carries the shape for inspection, never a
-#: stability verdict
+#: (equilibrium_residual_m over the tolerance) or passes through itself (passes_through_itself);
+#: it carries the shape for inspection, never a stability verdict
 STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
 
 

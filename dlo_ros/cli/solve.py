@@ -34,6 +34,7 @@ JSON_KEYS = (
     "energy_note",
     "grips",
     "contact_forces",
+    "passes_through_itself",
     "solver",
 )
 

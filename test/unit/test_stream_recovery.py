@@ -153,7 +153,8 @@ def test_adopted_start_through_itself_is_not_a_reference():
     with blas_threads(1):
         assert free.solve().ok
         loop = free.solve(LOOP)
-    assert loop.status == "ok", loop.message
+    # a model without self-contact says its answer passes through itself (#37): kept, unverified
+    assert loop.status == "unverified" and loop.passes_through_itself, loop.message
     geometry = SC.contact_geometry(1.0, SCENE.problem.string.radius, 0, (0.0, 1.0))
     eight = free.model.positions(free.snapshot().z, geometry.s)
     closest = SC.closest_distance(eight, geometry)

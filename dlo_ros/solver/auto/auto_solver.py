@@ -348,8 +348,14 @@ class AutoShapeSolver:
     def _check_now(
         self, snap: CheckSnapshot, result: ShapeResult, notes: list[str]
     ) -> ShapeResult:
-        """Run the checks synchronously: escalate and re-solve while one fails."""
+        """Run the checks synchronously: escalate and re-solve while one fails.
+
+        An answer that passes through itself is solved again with self-contact first.
+        """
         for _ in range(2 * len(ORDERS) + 2):
+            if result.passes_through_itself and not self.choice.self_contact:
+                result, poses = escalate.contact_for_pass(self, snap.problem, result, notes)
+                snap = self.snapshot(snap.problem, poses, result)
             verdict = self.model_checks.evaluate(snap, False)
             if verdict.choice is None:
                 self._keep(verdict)

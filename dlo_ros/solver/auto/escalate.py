@@ -15,7 +15,7 @@ from ..contact import self_contact as SC
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from ..update import recovery as RC
-from .choice import ORDERS, ModelChoice
+from .choice import ORDERS, ModelChoice, full_choice
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -159,3 +159,70 @@ def contact_start(
     where = "the shape before this update" if state is not None else "a cold start"
     why = f" (from {where}: the answer without self-contact is no reference, {why})"
     return (solver, state, previous), why
+
+
+def _contact_choice(auto: AutoShapeSolver, problem: Problem, result: ShapeResult) -> str:
+    """Say why ``result`` must be solved again with self-contact ('' if it need not or cannot).
+
+    It must when it passes through itself (``results.self_pass``) and was solved without
+    self-contact; it cannot with ``rotation: euler`` (no self-contact model).
+    """
+    if not result.passes_through_itself or auto.options.rotation != "director":
+        return ""
+    return (
+        f"self-contact: the answer without it passes through itself "
+        f"(closest {result.min_self_distance:.3g} m, 2·radius "
+        f"{2 * problem.string.radius:.3g} m): full model with self-contact"
+    )
+
+
+def contact_for_pass(
+    auto: AutoShapeSolver, problem: Problem, result: ShapeResult, notes: list[str]
+) -> tuple[ShapeResult, dict]:
+    """Switch the stream to self-contact when ``result`` passes through itself; solve again.
+
+    For an answer the checks re-solved on another model (``AutoShapeSolver._check_now``: a cold
+    solve, a re-solve after a scene change): the self-contact model starts from that answer (a
+    start that passes through itself is checked as a cold start is, ``recovery.through_itself``:
+    measured on Fig. 2 at chord 0.3 L, a cold start of the self-contact model lands on the
+    unstable planar loop instead) and commits.
+    Returns (answer, its poses for the new model); ``result`` unchanged (with the stream's poses)
+    when it need not or cannot, or when the self-contact solve fails (the message says so).
+    """
+    why = _contact_choice(auto, problem, result)
+    if not why or auto.choice.self_contact:
+        return result, auto.reduced.poses(auto.choice, problem)
+    contact = replace(full_choice(auto.choice, problem), self_contact=True)
+    auto.switch(contact, why)
+    notes.append(auto.changes[-1][1])
+    poses = auto.reduced.poses(auto.choice, problem)
+    answer = auto.inner.solve(poses, warm=True, commit=True, checked=True, limited=False)
+    if answer.status in ("ok", "unverified"):
+        return answer, poses
+    result.message += f"; the self-contact model failed to solve ({answer.message})"
+    return result, poses
+
+
+def contact_for_query(
+    auto: AutoShapeSolver, problem: Problem, result: ShapeResult, source: ShapeSolver
+) -> tuple[ShapeResult, tuple[ModelChoice, ShapeSolver] | None]:
+    """Answer a query that passed through itself with the self-contact model (stream untouched).
+
+    The pooled self-contact model starts from ``source``'s committed shape (a warm start that
+    passes through itself is checked as a cold start is, ``recovery.through_itself``).  Returns
+    (answer, (its choice, its solver)), or (``result``, None) when it need not or cannot, or when
+    the self-contact solve fails (the message says so).
+    """
+    why = _contact_choice(auto, problem, result)
+    if not why:
+        return result, None
+    base = full_choice(auto.choice, problem)
+    contact = replace(base, self_contact=True, reasons=list(base.reasons) + [f"query: {why}"])
+    auto.worker.wait_for_model(("",) + contact.key())  # a running check may be using it
+    other = auto.pool.solver_for(contact, problem, stream=False, source=source)
+    poses = auto.reduced.poses(contact, problem)
+    answer = other.solve(poses, warm=True, checked=True, limited=False)
+    if answer.status in ("ok", "unverified"):
+        return answer, (contact, other)
+    result.message += f"; the self-contact model failed to solve ({answer.message})"
+    return result, None

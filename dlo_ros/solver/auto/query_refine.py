@@ -16,6 +16,7 @@ from ...model.problem import Problem
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from .choice import ORDERS, ModelChoice
+from .escalate import contact_for_query
 from .query_verify import verified_answer
 
 if TYPE_CHECKING:  # the solver calls this function (auto_solver.py imports this module)
@@ -37,8 +38,14 @@ def refine_query(
     (``check_now``): the checks run on the query's own shape and escalate (3D when the planar
     shape is unstable in 3D, the next order, more obstacle samples) until they pass, on pooled
     copies, never the streaming model.  Not limited by ``solver.update_time_limit`` (its re-solves
-    and checks neither); 'ok' only when the checks passed (``query_verify.verified_answer``).
+    and checks neither); 'ok' only when the checks passed (``query_verify.verified_answer``).  An
+    answer that passes through itself is first solved again on the self-contact model
+    (``escalate``).
     """
+    if result.passes_through_itself and not (choice or auto.choice).self_contact:
+        result, answered_by = contact_for_query(auto, problem, result, solver or auto.inner)
+        if answered_by is not None:
+            choice, solver = answered_by
     if result.status != "unverified":
         return auto.finish(result, t0, [], choice=choice, solver=solver)
     auto.worker.wait()  # a running check may hold the pooled models the refinement uses

@@ -9,8 +9,8 @@ import numpy as np
 from .summary import ModelSummary
 
 #: 'unverified': the solver converged but the shape fails the equilibrium check
-#: (equilibrium_residual_m over the tolerance); it carries the shape for inspection, never a
-#: stability verdict
+#: (equilibrium_residual_m over the tolerance) or passes through itself (passes_through_itself);
+#: it carries the shape for inspection, never a stability verdict
 STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
 
 
@@ -60,7 +60,9 @@ class ShapeResult:
     self_contacts: the pairs of points pressed together (empty when self-contact is not modelled or
     nothing touches); min_self_distance [m]: the closest approach of two strands at the
     self-contact samples (inf when no two strands are within the candidate reach, NaN when
-    self-contact is not modelled; JSON null for both).
+    self-contact is not modelled and the string has no radius; JSON null for both).
+    passes_through_itself: a model without self-contact answered a shape whose strands come closer
+    than 2·radius (solver/results/self_pass.py); such a result is 'unverified', never 'ok'.
     """
 
     status: str
@@ -90,6 +92,7 @@ class ShapeResult:
     equilibrium_residual_m: float = float("nan")
     self_contacts: list[SelfContact] = field(default_factory=list)
     min_self_distance: float = float("nan")
+    passes_through_itself: bool = False
 
     @property
     def ok(self) -> bool:
@@ -134,6 +137,7 @@ class ShapeResult:
             "min_self_distance": self.min_self_distance
             if np.isfinite(self.min_self_distance)
             else None,
+            "passes_through_itself": self.passes_through_itself,
             "model": self.model_dict(),
             "solver": {
                 "iterations": self.iterations,

@@ -11,6 +11,7 @@ nothing.  The stages, each its own module:
 ``slot_rounds``           obstacle contact slots placed again on the answer
 ``linking``               the linking-number check of the clamped span
 ``substeps``              a refused jump retried in substeps of the grip poses
+``results.self_pass``     an answer without self-contact rows that passes through itself
 ========================  ============================================================
 
 A new feature is a new stage: a module with a function of ``(ctx, problem, warm)`` (or wrapping
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 from ...model.problem import Problem
 from . import linking as LK
+from ..results import self_pass as SP
 from .contact_rounds import solve_self_contact
 from .context import Outcome, UpdateContext
 from .linking import ClampTurnTracker
@@ -54,8 +56,17 @@ def solve_update(ctx: UpdateContext, problem: Problem, warm: bool) -> Outcome:
 def run_update(
     ctx: UpdateContext, problem: Problem, warm: bool, tracker: ClampTurnTracker
 ) -> Outcome:
-    """Solve ``problem`` (``solve_update``); a warm update refused as a jump again in substeps."""
+    """Solve ``problem`` (``solve_update``); a warm update refused as a jump again in substeps.
+
+    Every answer of a model without self-contact rows, of a string with a radius, is tested for
+    passing through itself (``results.self_pass``): cold, warm and queries alike.
+    """
     result, state = solve_update(ctx, problem, warm)
     if warm and result.status == "failed" and result.message.startswith(JUMP_REFUSALS):
         result, state = in_substeps(ctx, problem, result, solve_update, tracker)
+    nlp, radius = ctx.parts.nlp, problem.string.radius
+    if state is not None and radius > 0 and not nlp.self_contact_slots:
+        geometry = SP.geometry_of(problem, ctx.parts.options.self_contact_samples)
+        points = nlp.model.positions(state.z, geometry.s)
+        SP.flag(result, SP.self_pass(points, geometry, radius))
     return result, state

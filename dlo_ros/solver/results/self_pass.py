@@ -1,0 +1,107 @@
+"""Whether a shape solved without self-contact passes through itself, and how its result says so.
+
+A model whose NLP has no self-contact rows (``solver.self_contact_pairs: 0``, every model but
+auto's self-contact one) solves the string as a line: nothing keeps two strands of a string of
+radius r apart.  Its answer can pass through itself (measured, #37: the paper's Fig. 2 loop at
+chord 0.3 L, radius 0.01 L, strands 6.5 mm apart on a 20 mm thick cable) and still be a converged,
+stable equilibrium of that model.  It is not one of the string: such a result is never ``ok``.
+
+The test is the self-contact module's own (``contact/self_contact.py``), on the answer's centreline
+sampled as the self-contact rows would sample it (spacing h, pairs at least the exclusion arc apart
+along s, pairs placed by two different grips left out): ``candidate_pairs`` (the local minima of
+distance, k-d tree), after the exact ``certainly_apart`` shortcut, and ``penetrations`` with the
+threshold 2r − ``TOLERANCE``·2r (not the D = √((2r)² + h²/2) the rows keep: a shape whose strands
+are between 2r and D apart does not pass through itself).  A flagged pair is certain: the true
+centreline distance is at most the samples'.  The limit of the sampling: two strands whose closest
+points fall between samples may come to √((2r − tol)² − h²/2) at worst before a sample pair reads
+below 2r − tol (the bound of ``self_contact.py``'s docstring).
+
+Radius 0 ("may touch, may not cross") is not checked: a line of no thickness meets itself only
+at isolated targets, and telling a crossing made between two answers needs the previous answer's
+crossing signs (``self_contact.crossing_flips``), which a model without self-contact does not keep.
+
+A flagged result (``flag``): ``passes_through_itself`` true, status ``unverified`` (the shape kept
+for inspection), ``stable`` None, a message naming the closest pair and the radius.  Every checked
+result (radius > 0) gets ``min_self_distance``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...model.problem import Problem
+from ..contact import self_contact as SC
+from .result import ShapeResult
+
+#: a sample pair closer than 2r (1 − TOLERANCE) passes through itself (rounding and the solver's
+#: own tolerance never bring a shape that keeps 2r that far below it)
+TOLERANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class SelfPass:
+    """The closest approach of an answer to itself, and the pair that passes through, if any.
+
+    closest [m]: the smallest sample-pair distance of two strands (inf when no two are within
+    the candidate reach); pair: (s_a, s_b) [m], s_a < s_b, of the closest pair closer than
+    ``limit``, or None; limit [m]: 2r (1 − TOLERANCE); radius [m]: r.
+    """
+
+    closest: float
+    pair: tuple[float, float] | None
+    limit: float
+    radius: float
+
+    @property
+    def passes(self) -> bool:
+        """Whether the answer passes through itself (a pair closer than ``limit``)."""
+        return self.pair is not None
+
+
+def geometry_of(problem: Problem, samples: int = 0) -> SC.ContactGeometry:
+    """Return the self-contact sampling of ``problem``'s string (``samples``: 0 picks h = r)."""
+    st = problem.string
+    return SC.contact_geometry(st.length, st.radius, samples, tuple(g.s for g in problem.grips))
+
+
+def self_pass(points: np.ndarray, geometry: SC.ContactGeometry, radius: float) -> SelfPass:
+    """Return how close the centreline ``points`` (N, 3) [m] at ``geometry.s`` comes to itself.
+
+    ``radius`` > 0 [m]; see the module docstring for what is tested.
+    """
+    limit = 2.0 * radius * (1.0 - TOLERANCE)
+    if SC.certainly_apart(points, geometry):  # the usual answer, proved without the k-d tree
+        return SelfPass(float("inf"), None, limit, radius)
+    candidates = SC.candidate_pairs(points, geometry)
+    closest = min((d for _, d in candidates), default=float("inf"))
+    through = SC.penetrations(candidates, geometry, geometry.distance - limit)
+    pair = None
+    if through:
+        a, b = through[0]
+        pair = (float(geometry.s[a]), float(geometry.s[b]))
+    return SelfPass(closest, pair, limit, radius)
+
+
+def flag(result: ShapeResult, verdict: SelfPass) -> ShapeResult:
+    """Report ``verdict`` in ``result`` (in place; returned): distance, and a pass as unverified.
+
+    ``min_self_distance`` is set; a pass sets ``passes_through_itself``, turns an ``ok`` or
+    ``unverified`` status into ``unverified`` with ``stable`` None, and puts the pair first in
+    the message.
+    """
+    result.min_self_distance = verdict.closest
+    if not verdict.passes or result.status not in ("ok", "unverified"):
+        return result
+    assert verdict.pair is not None
+    s_a, s_b = verdict.pair
+    result.passes_through_itself = True
+    result.status, result.stable = "unverified", None
+    result.message = (
+        f"passes through itself: s = {s_a:.4g} m and {s_b:.4g} m are {verdict.closest:.3g} m "
+        f"apart centreline to centreline, under 2·radius = {2 * verdict.radius:.3g} m (this "
+        f"model has no self-contact rows: solver.self_contact_pairs or model auto keeps strands "
+        f"apart); {result.message}"
+    )
+    return result

@@ -112,15 +112,18 @@ def run(args: argparse.Namespace) -> int:
         rec = _read(path, details=False)
         try:
             with stdout_to_stderr():  # IPOPT's banner must not mix with the report
-                report = replay.resolve(
+                report = replay.resolve_report(
                     rec, args.tolerance, compile="blocking" if args.compile else "cached"
                 )
         except UsageError:
             raise
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-        print(json.dumps(json_safe(report)) if args.json else replay.format_resolve(report))
-        return EXIT_OK if report["ok"] else EXIT_NOT_OK
+        text = (
+            json.dumps(json_safe(report.as_dict())) if args.json else replay.format_resolve(report)
+        )
+        print(text)
+        return EXIT_OK if report.ok else EXIT_NOT_OK
     try:  # a clear error for a file that is not a recording, before starting a viewer
         check = replay.check_recording(path)
     except ValueError as exc:

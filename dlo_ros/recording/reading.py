@@ -237,9 +237,8 @@ class _Reader:
                 cols.row_ids(),
                 cols.strips("LineStrips3D:strips", LIMITS["samples"]),
             )
-        elif (
-            self.details
-            and entity.startswith(P.E_MODEL_SERIES + "/")
+        elif (  # kept also without details: --resolve compares the model histories
+            entity.startswith(P.E_MODEL_SERIES + "/")
             and entity[len(P.E_MODEL_SERIES) + 1 :] in self.series
         ):
             values = [
@@ -335,8 +334,8 @@ def read_recording(path: str | Path, *, details: bool = True) -> Recording:
     Bounded (:data:`dlo_ros.recording.rrd_file.LIMITS`): a regular file only, at most 1 GiB; rerun
     streams the chunks one at a time and only the columns dlo_ros needs are kept, as numpy arrays.
     ``details=False`` reads only what ``--resolve`` needs (the scene, ``data/targets``, and of each
-    result its status, message, warm flags, points and target poses): no ``s``, ``energy``,
-    ``model``, centrelines, ``model/*`` series or ``events/status|model|recorder``.  A file cut
+    result its status, message, warm flags, points and target poses, and the ``model/*`` series):
+    no ``s``, ``energy``, ``model``, centrelines or ``events/status|model|recorder``.  A file cut
     inside a message (a killed writer) is read up to its last complete message
     (``Recording.truncated``).
 

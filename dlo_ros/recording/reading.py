@@ -238,15 +238,21 @@ class _Reader:
                 cols.strips("LineStrips3D:strips", LIMITS["samples"]),
             )
         elif (  # kept also without details: --resolve compares the model histories
-            entity.startswith(P.E_MODEL_SERIES + "/")
+            self.keep
+            and entity.startswith(P.E_MODEL_SERIES + "/")
             and entity[len(P.E_MODEL_SERIES) + 1 :] in self.series
         ):
             values = [
                 None if v is None or not len(v) else float(v[0])
                 for v in cols.numbers("Scalars:scalars", finite=False)
             ]
+            # only the rows on the update timeline: the writer's static series-name row
+            # (SeriesLines) is no value and must not count against the updates limit
+            rows = [
+                t for t in zip(updates_of(cols, False), cols.row_ids(), values) if t[0] is not None
+            ]
             self.series[entity[len(P.E_MODEL_SERIES) + 1 :]].add(
-                updates_of(cols, False), cols.row_ids(), values
+                [t[0] for t in rows], [t[1] for t in rows], [t[2] for t in rows]
             )
 
     def _results(self, cols: Columns) -> None:

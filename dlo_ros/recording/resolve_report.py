@@ -180,7 +180,7 @@ def _deviation(u: UpdateComparison) -> str:
     if u.verdict == STATUS_CHANGED:
         return f"status changed: {u.recorded_status} -> {u.status}"
     if u.max_deviation_m is None:
-        return u.note or "(status compared)"
+        return u.note or "same status"
     return f"{u.max_deviation_m:.3g}" + ("   > tolerance" if u.verdict == DEVIATES else "")
 
 
@@ -222,8 +222,8 @@ def format_report(report: ResolveReport) -> str:
     )
     lines.append(
         f"summary {len(report.updates)} updates re-solved, {measured}: "
-        f"{len(agree)} agree; {len(deviates)} shape deviations above the tolerance "
-        f"{report.tolerance_m:.3g} m {_updates(deviates)}; {len(changed)} status changes "
+        f"{len(agree)} agree; shape deviations: {len(deviates)} above the tolerance "
+        f"{report.tolerance_m:.3g} m {_updates(deviates)}; status changes: {len(changed)} "
         f"{_updates(changed)} -> {'OK' if report.ok else 'DIFFERS'}"
     )
     return "\n".join(lines)

@@ -84,8 +84,9 @@ def test_resolve_compares_statuses_and_ok_shapes(tmp_path, warm):
     assert "inf" not in out.lower().replace("info", "") and "nan" not in out.lower(), out
     assert "status changed: unverified -> ok" in out, out
     summary = out.strip().splitlines()[-1]
-    assert "3 agree" in summary and "1 shape deviations above the tolerance" in summary, summary
-    assert "[1]" in summary and "1 status changes [3]" in summary and "DIFFERS" in summary
+    assert "3 agree" in summary and "shape deviations: 1 above the tolerance" in summary
+    assert "1e-06 m [1]" in summary and "status changes: 1 [3]" in summary, summary
+    assert summary.endswith("-> DIFFERS"), summary
     assert "first differs at update 3" in out, out
     done = replay(str(path), "--resolve", "--json", "--tolerance", str(TOLERANCE))
     assert done.returncode == 1, done.stdout + done.stderr  # a deviation and a status change

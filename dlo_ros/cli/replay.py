@@ -3,17 +3,20 @@
 ``dlo replay FILE.rrd``: open a recording in the rerun viewer, render it, or re-solve it as a
 regression case.
 
-    dlo replay FILE.rrd                      open it in the native viewer (needs a display; else
-    says what to do) dlo replay FILE.rrd --web                serve it to a browser (rerun
-    --web-viewer; no display needed) dlo replay FILE.rrd --screenshot PNG     render it headlessly
-    to a PNG (needs a Vulkan driver, e.g. lavapipe) dlo replay FILE.rrd --resolve [--tolerance M]
-    [--json]
-                                             re-run today's solver on the recorded targets and
-                                             compare shapes
+    dlo replay FILE.rrd                       open it in the native viewer (needs a display;
+                                              else says what to do)
+    dlo replay FILE.rrd --web                 serve it to a browser (rerun --web-viewer)
+    dlo replay FILE.rrd --screenshot PNG      render it headlessly to a PNG (a Vulkan driver)
+    dlo replay FILE.rrd --resolve [--tolerance M] [--json]
+                                              re-run today's solver on the recorded targets;
+                                              compare statuses, and ok shapes by distance
 
-Exit codes: 0 ok (``--resolve``: every update within the tolerance); 1 a deviation above the
-tolerance (or a status that changed), or the viewer / the renderer failed; 2 unreadable file or bad
-usage. Reading and re-solving: dlo_ros.recording.replay; viewing: dlo_ros.recording.viewer.
+Exit codes: 0 ok (``--resolve``: every update agrees: the same status as recorded, and ``ok``
+shapes within the tolerance); 1 with ``--resolve`` a shape deviation above the tolerance or a
+status change (also ``unverified -> ok``; a differing model history alone does not count), or the
+viewer / the renderer failed; 2 unreadable file or bad usage. Reading and re-solving:
+dlo_ros.recording.replay (the report: dlo_ros.recording.resolve_report); viewing:
+dlo_ros.recording.viewer.
 """
 
 from __future__ import annotations
@@ -45,8 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--resolve",
         action="store_true",
-        help="re-run the solver on the recorded targets and report how far today's shapes are "
-        "from the recorded ones (exit 1 if any update exceeds --tolerance)",
+        help="re-run the solver on the recorded targets and compare: statuses, and ok shapes "
+        "by distance (exit 1 on a status change or an ok shape beyond --tolerance)",
     )
     p.add_argument(
         "--tolerance",
@@ -112,15 +115,18 @@ def run(args: argparse.Namespace) -> int:
         rec = _read(path, details=False)
         try:
             with stdout_to_stderr():  # IPOPT's banner must not mix with the report
-                report = replay.resolve(
+                report = replay.resolve_report(
                     rec, args.tolerance, compile="blocking" if args.compile else "cached"
                 )
         except UsageError:
             raise
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-        print(json.dumps(json_safe(report)) if args.json else replay.format_resolve(report))
-        return EXIT_OK if report["ok"] else EXIT_NOT_OK
+        text = (
+            json.dumps(json_safe(report.as_dict())) if args.json else replay.format_resolve(report)
+        )
+        print(text)
+        return EXIT_OK if report.ok else EXIT_NOT_OK
     try:  # a clear error for a file that is not a recording, before starting a viewer
         check = replay.check_recording(path)
     except ValueError as exc:

@@ -237,8 +237,8 @@ class _Reader:
                 cols.row_ids(),
                 cols.strips("LineStrips3D:strips", LIMITS["samples"]),
             )
-        elif (
-            self.details
+        elif (  # kept also without details: --resolve compares the model histories
+            self.keep
             and entity.startswith(P.E_MODEL_SERIES + "/")
             and entity[len(P.E_MODEL_SERIES) + 1 :] in self.series
         ):
@@ -246,8 +246,13 @@ class _Reader:
                 None if v is None or not len(v) else float(v[0])
                 for v in cols.numbers("Scalars:scalars", finite=False)
             ]
+            # only the rows on the update timeline: the writer's static series-name row
+            # (SeriesLines) is no value and must not count against the updates limit
+            rows = [
+                t for t in zip(updates_of(cols, False), cols.row_ids(), values) if t[0] is not None
+            ]
             self.series[entity[len(P.E_MODEL_SERIES) + 1 :]].add(
-                updates_of(cols, False), cols.row_ids(), values
+                [t[0] for t in rows], [t[1] for t in rows], [t[2] for t in rows]
             )
 
     def _results(self, cols: Columns) -> None:
@@ -337,8 +342,8 @@ def read_recording(path: str | Path, *, details: bool = True) -> Recording:
     Bounded (:data:`dlo_ros.recording.rrd_file.LIMITS`): a regular file only, at most 1 GiB; rerun
     streams the chunks one at a time and only the columns dlo_ros needs are kept, as numpy arrays.
     ``details=False`` reads only what ``--resolve`` needs (the scene, ``data/targets``, and of each
-    result its status, message, warm flags, points and target poses): no ``s``, ``energy``,
-    ``model``, centrelines, ``model/*`` series or ``events/status|model|recorder``.  A file cut
+    result its status, message, warm flags, points and target poses, and the ``model/*`` series):
+    no ``s``, ``energy``, ``model``, centrelines or ``events/status|model|recorder``.  A file cut
     inside a message (a killed writer) is read up to its last complete message
     (``Recording.truncated``).
 

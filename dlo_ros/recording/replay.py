@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any, Callable
 
-import numpy as np
 import yaml
 
 from .. import solver as S
@@ -26,6 +25,16 @@ from .reading import (
     check_recording,
     read_recording,
     rows_of,
+)
+from .resolve_report import (
+    ModelKey,
+    ResolveReport,
+    UpdateComparison,
+    compare,
+    format_report,
+    model_history,
+    model_key,
+    recorded_models,
 )
 
 if TYPE_CHECKING:
@@ -41,7 +50,9 @@ __all__ = [
     "deviation",
     "format_resolve",
     "read_recording",
+    "ResolveReport",
     "resolve",
+    "resolve_report",
     "rows_of",
 ]
 
@@ -61,20 +72,14 @@ def _make_solver(kind: str, scene: Scene, compile: str) -> Solver:
     return S.make_solver(scene.problem, scene.options, compile=compile, checks="sync")
 
 
-def deviation(recorded: RecordedResult, result: Any) -> float:
+def deviation(recorded: RecordedResult, result: Any) -> float | None:
     """Return the largest distance [m] between the recorded centreline and today's.
 
-    Largest distance [m] between the recorded centreline and today's; 0 when both failed with
-    the same status; inf when the statuses differ or the sampling changed.
+    Only an ``ok`` result against an ``ok`` recording has one; None otherwise (statuses are
+    compared instead, :func:`dlo_ros.recording.resolve_report.compare`) or when the sampling
+    changed.  Never inf or NaN.
     """
-    if recorded.status != result.status:
-        return math.inf
-    if recorded.status != "ok":
-        return 0.0
-    now = np.asarray(result.points, dtype=float)
-    if now.shape != recorded.points.shape:
-        return math.inf
-    return float(np.max(np.linalg.norm(now - recorded.points, axis=1))) if len(now) else 0.0
+    return compare(recorded, result, math.inf).max_deviation_m
 
 
 def resolve(
@@ -83,13 +88,25 @@ def resolve(
     compile: str = "cached",
     progress: Callable[[str], None] | None = None,
 ) -> dict:
-    """Re-solve the recorded targets update by update and compare with the recorded shapes.
+    """Re-solve a recording and return :func:`resolve_report`'s ``--json`` dict (``as_dict``)."""
+    return resolve_report(rec, tolerance, compile, progress).as_dict()
+
+
+def resolve_report(
+    rec: Recording,
+    tolerance: float = DEFAULT_TOLERANCE,
+    compile: str = "cached",
+    progress: Callable[[str], None] | None = None,
+) -> ResolveReport:
+    """Re-solve the recorded targets update by update and compare with the recorded results.
 
     The solver is the recorded kind (ShapeSolver / AutoShapeSolver) built from the recorded scene
     (``scene/yaml``, later ``scene/changes``).  Each update uses the grip poses recorded with its
     result (else the received targets folded up to it) and is called warm or cold as recorded
     (``warm`` given to log_result; else the first update cold, the others warm unless the result
-    was not warm-started). Returns the report dict printed by ``dlo replay --resolve --json``.
+    was not warm-started).  Each update is compared by status, and ``ok`` against ``ok`` by shape
+    (:func:`dlo_ros.recording.resolve_report.compare`); the model histories are compared from the
+    recording's ``model/<key>`` series.
     """
     if not rec.scene_yaml:
         raise ValueError(
@@ -105,7 +122,8 @@ def resolve(
     current = {g.name: (g.pose.position, g.pose.orientation) for g in scene.problem.grips}
     received = sorted(rec.targets, key=lambda t: t[0])
     ti = ci = 0
-    rows: list[dict[str, Any]] = []
+    rows: list[UpdateComparison] = []
+    models: dict[int, ModelKey] = {}
     for recorded in sorted(rec.results, key=lambda r: r.update):
         while ci < len(changes) and changes[ci][0] <= recorded.update:
             new = _scene_from_yaml(
@@ -127,67 +145,22 @@ def resolve(
         else:
             warm = bool(rows) and recorded.warm_started
         result = solver.solve(poses, warm=warm)
-        dev = deviation(recorded, result)
-        rows.append(
-            {
-                "update": recorded.update,
-                "recorded_status": recorded.status,
-                "status": result.status,
-                "max_deviation_m": dev,
-            }
-        )
+        rows.append(compare(recorded, result, tolerance))
+        key = model_key(result.model_dict())
+        if key is not None:
+            models[recorded.update] = key
         if progress is not None:
-            progress(f"update {recorded.update}: {dev:.3g} m")
-    return _report(rec, scene.name, tolerance, rows)
-
-
-def _report(rec: Recording, scene: str, tolerance: float, rows: list[dict[str, Any]]) -> dict:
-    """Return the report of :func:`resolve` from its rows, one per re-solved update."""
-    finite = [r["max_deviation_m"] for r in rows if math.isfinite(r["max_deviation_m"])]
-    worst = max(
-        rows, key=lambda r: r["max_deviation_m"] if not math.isnan(r["max_deviation_m"]) else -1
+            progress(f"update {recorded.update}: {rows[-1].verdict}")
+    return ResolveReport(
+        file=str(rec.path),
+        scene=scene.name,
+        solver=rec.solver_kind or "default",
+        tolerance_m=tolerance,
+        updates=rows,
+        models=model_history(recorded_models(rec.model_series), models),
     )
-    exceeding = [r["update"] for r in rows if not r["max_deviation_m"] <= tolerance]
-    return {
-        "file": str(rec.path),
-        "scene": scene,
-        "solver": rec.solver_kind or "default",
-        "tolerance_m": tolerance,
-        "updates": rows,
-        "count": len(rows),
-        "max_deviation_m": worst["max_deviation_m"],
-        "worst_update": worst["update"],
-        "mean_deviation_m": float(np.mean(finite)) if finite else None,
-        "exceeding": exceeding,
-        "ok": not exceeding,
-    }
 
 
-def format_resolve(report: dict) -> str:
-    """Return the human-readable table of a :func:`resolve` report, one line per update."""
-    lines = [
-        f"replay  {report['file']}: scene {report['scene']}, {report['count']} updates, "
-        f"solver {report['solver']}",
-        f"{'update':>7}  {'recorded':<11} {'now':<11} max deviation [m]",
-    ]
-    for r in report["updates"]:
-        flag = "" if r["max_deviation_m"] <= report["tolerance_m"] else "   > tolerance"
-        lines.append(
-            f"{r['update']:>7}  {r['recorded_status']:<11} {r['status']:<11} "
-            f"{r['max_deviation_m']:.3g}{flag}"
-        )
-    verdict = (
-        "OK"
-        if report["ok"]
-        else f"DIFFERS at updates {report['exceeding'][:20]}"
-        + (" ..." if len(report["exceeding"]) > 20 else "")
-    )
-    mean = report["mean_deviation_m"]
-    lines.append(
-        f"summary {report['count']} updates re-solved: max deviation "
-        f"{report['max_deviation_m']:.3g} m "
-        f"(update {report['worst_update']}), mean {'n/a' if mean is None else f'{mean:.3g}'} m; "
-        f"{len(report['exceeding'])} above the tolerance {report['tolerance_m']:.3g} m -> "
-        f"{verdict}"
-    )
-    return "\n".join(lines)
+def format_resolve(report: ResolveReport) -> str:
+    """Return the human-readable report of :func:`resolve_report`, one line per update."""
+    return format_report(report)

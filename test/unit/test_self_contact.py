@@ -108,8 +108,10 @@ STREAM = tuple(float(c) for c in np.round(np.arange(0.41, 0.195, -0.01), 10))
 def stream(radius: float, chords=STREAM, samples: int = 0, first: float = 0.42) -> dict:
     """Fig. 2 solved cold at ``first`` and streamed through ``chords`` (one warm update each): chord →
     (result, committed z, solver's model); the stream stops at the first update not ok (kept)."""
+    # no update_time_limit: these are geometry tests, and a loaded machine must not cut a stream short
     sol = ShapeSolver(fig2(first, radius), SolverOptions(model="full", order=ORDER, self_contact_pairs=PAIRS,
-                                                        self_contact_samples=samples), compile="off")
+                                                        self_contact_samples=samples, update_time_limit=0.0),
+                      compile="off")
     out = {}
     with blas_threads(1):
         r = sol.solve()

@@ -34,7 +34,15 @@ from .values import check_known_keys, read_mapping, read_string
 
 
 def check_moments(problem: Problem, options: SolverOptions) -> None:
-    """Refuse point moments off the working-plane normal: the solver models only those."""
+    """Refuse point moments off the working-plane normal where the model cannot apply them.
+
+    The Euler-angle models ('planar', or rotation 'euler') apply a moment's work exactly only
+    about the working-plane normal.  The director models ('auto' and 'full' with the default
+    rotation 'director') take moments about any axis (msg_docs/model_and_solver.md "Point
+    moments about any axis"), so nothing is refused for them.
+    """
+    if options.model != "planar" and options.rotation == "director":
+        return
     if not any(np.any(ld.moment != 0) for ld in problem.loads):
         return
     n = choose_reference_frame(problem, options.frame)[:, 2]

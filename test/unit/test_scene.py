@@ -371,7 +371,6 @@ MALFORMED = [
     ("load s out of range", "loads", [{"s": 1.2, "force": [0, 0, -1]}], "loads[0].s:"),
     ("unknown load key", "loads", [{"s": 0.5, "torque": [0, 0, 1]}], "loads[0].torque:"),
     ("NaN load force", "loads", [{"s": 0.5, "force": [0, float("nan"), 0]}], "loads[0].force[1]:"),
-    ("moment off the working-plane normal", "loads", [{"s": 0.5, "moment": [0.1, 0, 0]}], "loads[0].moment:"),
     ("obstacle without type", "obstacles", [{"center": [0, 0, 0], "radius": 1}], "obstacles[0].type:"),
     ("unknown obstacle type", "obstacles", [{"type": "cone"}], "obstacles[0].type:"),
     ("unknown obstacle key", "obstacles", [{"type": "sphere", "center": [0, 0, 0], "radius": 0.1, "colour": 1}],

@@ -91,11 +91,14 @@ class ElementMesh:
     """Breakpoints, global nodes and the composite quadrature of one string.
 
     Breakpoints, global nodes and the composite quadrature of one string: ``order`` LGL nodes
-    shared out by element length; ``extra`` > 0: n_e + ``extra`` Clenshaw–Curtis quadrature nodes
-    per element instead of the collocated LGL rule.
+    shared out by element length, or ``counts`` (n_e per element, each at least 3) when a
+    refinement chose them; ``extra`` > 0: n_e + ``extra`` Clenshaw–Curtis quadrature nodes per
+    element instead of the collocated LGL rule.
     """
 
-    def __init__(self, length: float, breakpoints, order: int, extra: int = 0) -> None:
+    def __init__(
+        self, length: float, breakpoints, order: int, extra: int = 0, counts=None
+    ) -> None:
         self.length = float(length)
         b = np.unique(
             np.concatenate([[0.0, self.length], np.asarray(breakpoints, dtype=float).ravel()])
@@ -109,11 +112,19 @@ class ElementMesh:
             raise ValueError("solver.order must be at least 3")
         self.order = int(order)
         sizes = np.diff(self.breakpoints)
-        self.counts = (
-            [order]
-            if len(sizes) == 1
-            else [max(MIN_NODES, int(np.ceil(order * h / self.length)) + 1) for h in sizes]
-        )
+        if counts is not None:
+            if len(counts) != len(sizes) or min(counts) < 3:
+                raise ValueError(
+                    f"mesh: {len(sizes)} elements need as many node counts of at least 3, "
+                    f"got {list(counts)}"
+                )
+            self.counts = [int(n) for n in counts]
+        else:
+            self.counts = (
+                [order]
+                if len(sizes) == 1
+                else [max(MIN_NODES, int(np.ceil(order * h / self.length)) + 1) for h in sizes]
+            )
         self.elements = [NodalElement(n, h) for n, h in zip(self.counts, sizes)]
         # first global node of each element (its last node is the next element's first)
         self.first = np.concatenate([[0], np.cumsum([n - 1 for n in self.counts])]).astype(int)
@@ -146,7 +157,7 @@ class ElementMesh:
             rows = slice(self.quad_first[e], self.quad_first[e + 1])
             cols = slice(self.first[e], self.first[e] + el.count)
             if self.quads is None:
-                self.B[rows, cols], self.dB[rows, cols] = np.eye(order), el.D
+                self.B[rows, cols], self.dB[rows, cols] = np.eye(el.count), el.D
             else:
                 self.B[rows, cols], self.dB[rows, cols] = el.matrices(self.quads[e].nodes)
 

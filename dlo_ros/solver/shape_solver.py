@@ -39,6 +39,7 @@ from ..model.problem import GripPose, Problem
 from .build import frames as F
 from .build.functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .build.initial_guess import initial_guess
+from .build.mesh import MeshSpec
 from .build.nlp import StringNLP
 from .build.parameters import ProblemParameters, check_moments
 from .contact import topology as TP
@@ -97,6 +98,7 @@ class ShapeSolver:
         compile: str = "background",
         lazy_ipopt: bool = False,
         reference_frame: np.ndarray | None = None,
+        mesh: MeshSpec | None = None,
     ):
         """Build the NLP of ``problem``'s structure; raise ValueError naming a refused field.
 
@@ -106,7 +108,8 @@ class ShapeSolver:
         $DLO_NO_COMPILE forces 'off'.  lazy_ipopt: create the IPOPT solvers on first use (helpers
         that may only take Newton steps); otherwise now, so that a stream's first IPOPT fallback
         does not pay for them.  reference_frame: a fixed R0 for the Euler angles (3D models;
-        default: chosen from the scene, ``choose_reference_frame``).
+        default: chosen from the scene, ``choose_reference_frame``).  mesh: the element mesh a
+        refinement chose (``build/mesh.py``; default: the scene's breakpoints).
         """
         check_compile_mode(compile)
         self.options = options or SolverOptions()
@@ -115,6 +118,7 @@ class ShapeSolver:
         self.reference_frame = (
             None if reference_frame is None else np.array(reference_frame, dtype=float)
         )
+        self.mesh_spec = mesh
         self._lock = threading.Lock()
         self._compile_thread: threading.Thread | None = None
         self._cache_checked = time.monotonic()  # ('cached' mode) the last look into the cache
@@ -126,7 +130,7 @@ class ShapeSolver:
     def _build(self, problem: Problem) -> None:
         """Build the NLP of ``problem``'s structure and its parts; forget the warm start."""
         t0 = time.perf_counter()
-        nlp = StringNLP(problem, self.options, self.reference_frame)
+        nlp = StringNLP(problem, self.options, self.reference_frame, self.mesh_spec)
         # before anything is replaced: a refused scene leaves the solver as it was
         check_moments(nlp, problem)
         self.nlp = nlp

@@ -33,7 +33,6 @@ import casadi as ca
 import numpy as np
 
 from ...model.director import DirectorModel
-from ...model.elements import ElementMesh
 from ...model.obstacles import OBSTACLE_TYPES
 from ...model.problem import Problem
 from ...model.ritz import RitzModel
@@ -55,6 +54,7 @@ from ..native.settings import (
 )
 from ..options import SolverOptions
 from .assembled import AssembledKKT
+from .mesh import MeshSpec, element_mesh
 from .assembled_euler import AssembledEulerKKT
 from .ipopt_functions import ipopt_derivatives, ipopt_options
 from .constraint_rows import (
@@ -113,17 +113,23 @@ class StringNLP:
     """
 
     def __init__(
-        self, problem: Problem, options: SolverOptions, reference_frame: np.ndarray | None = None
+        self,
+        problem: Problem,
+        options: SolverOptions,
+        reference_frame: np.ndarray | None = None,
+        mesh_spec: MeshSpec | None = None,
     ):
         """Build the NLP of ``problem``'s structure with ``options``.
 
         reference_frame: R0 to use instead of ``choose_reference_frame`` (3D models only: a
-        planar model's R0 is fixed by its plane).
+        planar model's R0 is fixed by its plane).  mesh_spec: the element mesh a refinement chose
+        (element models only; default: the scene's breakpoints, ``solver.order`` shared out).
         """
         problem.validate()
         options.validate()
         self.problem = problem
         self.options = options
+        self.mesh_spec = mesh_spec
         L = problem.string.length
         self.length = L
         # 'auto' is resolved by AutoShapeSolver (solver.make_solver); a plain ShapeSolver solves
@@ -144,15 +150,7 @@ class StringNLP:
             if reason:
                 raise ValueError(f"solver.model: 'planar' does not fit this scene: {reason}")
         if self.director:
-            # Clenshaw–Curtis quadrature per element: n_e + 8 nodes resolve the normalised fields
-            # to the accuracy of the basis (bench/results/director_convergence.md); collocated LGL
-            # does not
-            mesh = ElementMesh(
-                L,
-                breakpoints(problem),
-                options.order,
-                max(2, min(8, options.quadrature_nodes - options.order)),
-            )
+            mesh = element_mesh(problem, options, mesh_spec)
             # either model class: they share the interface NLPs use, and code for one only
             # (``director``) branches on ``self.director``
             self.model: Any = DirectorModel(L, mesh, self.twist, self.stretch)

@@ -69,7 +69,7 @@ def test_make_solver_returns_a_solver():
 FIXED_KEYS = ["planar", "twist", "stretch", "gravity", "order", "obstacles", "estimated_error_m", "variables",
               "rotation"]
 AUTO_KEYS = ["planar", "twist", "stretch", "gravity", "order", "obstacles", "obstacle_samples", "estimated_error_m",
-             "tolerance_m", "tolerance_met", "variables", "auto", "checked", "checked_updates_ago", "checks", "reasons", "changes", "rotation"]
+             "tolerance_m", "tolerance_met", "variables", "auto", "checked", "checked_updates_ago", "checks", "reasons", "changes", "changes_at", "rotation"]
 DIRECTOR_KEYS = ["elements", "breakpoints"]
 
 

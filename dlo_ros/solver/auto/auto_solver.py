@@ -27,6 +27,7 @@ from ..results.summary import ModelSummary
 from ..shape_solver import ShapeSolver, with_checked_poses
 from . import escalate, follow, report
 from .background import CheckWorker
+from .check_schedule import PendingCheck, start_check
 from .checks import CheckSnapshot, CheckVerdict, ModelChecks
 from .choice import ORDERS, ModelChoice, full_choice, initial_choice
 from .pool import ModelPool
@@ -38,14 +39,16 @@ from .reduced import ReducedModels
 class AutoShapeSolver:
     """The Solver protocol (solver/protocol.py) with model selection.
 
-    checks: 'sync' runs the a-posteriori checks inside ``solve`` (a one-shot solve is checked
-    before it is returned: the CLI); 'background' runs them on a worker thread from a snapshot of
-    the solve, so a stream never waits for them (the node): their verdict is applied at the next
-    ``solve`` — an escalation switches to the model the check has already built and warmed, so the
-    switch costs no build.  'background' lowers the process's ``sys.setswitchinterval`` to
-    SWITCH_INTERVAL_S, so that the worker's Python holds the stream thread up for at most that
-    long.  Until the first check of a model has finished, ``model.checked`` is false and
-    ``estimated_error_m`` is None.
+    A solve that is not a streamed update (a cold solve, ``check_now``) is checked before it is
+    returned, in both modes.  A streamed update k's check takes effect just before update
+    k + CHECK_LAG (:mod:`.check_schedule`), in both modes, so that both give the same models and
+    shapes: checks 'sync' runs it inline at k (the CLI), 'background' on a worker thread from a
+    snapshot of the solve (the node), and update k + CHECK_LAG waits for it if it has not finished.
+    An escalation switches to the model the check has already built and warmed, so the switch costs
+    no build.  'background' lowers the process's ``sys.setswitchinterval`` to SWITCH_INTERVAL_S, so
+    that the worker's Python holds the stream thread up for at most that long.  Until the first
+    check of a model has taken effect, ``model.checked`` is false and ``estimated_error_m`` is
+    None.
     """
 
     POOL_SIZE = ModelPool.SIZE
@@ -69,7 +72,8 @@ class AutoShapeSolver:
         self.compile = compile
         self.checks = checks
         self.problem = problem
-        self.changes: list[tuple[float, str]] = []
+        #: (time.time(), reason, the update index it took effect at), the newest 50
+        self.changes: list[tuple[float, str, int]] = []
         self._lock = threading.RLock()
         self.worker = CheckWorker(checks == "background")
         self.reduced = ReducedModels(options)
@@ -79,8 +83,10 @@ class AutoShapeSolver:
         )
         self._since_check = 0
         self._unchecked = True
-        self._updates = 0  # streamed updates solved so far
+        self._updates = 0  # committing solves so far (the next one's update index)
+        self._index = 0  # the update index of the committing solve running (or the last one)
         self._checked_update = 0  # the update whose shape the last kept check described
+        self._pending: PendingCheck | None = None  # a check whose verdict is held (check_schedule)
         # bumped by every switch, reset and scene change: older verdicts are stale
         self._generation = 0
         self.choice = initial_choice(problem, options, self.tolerance)
@@ -109,19 +115,23 @@ class AutoShapeSolver:
         """Model keys already tried as a lower order (each is tried once per model)."""
         return self.model_checks.lower_tried
 
-    def switch(self, choice: ModelChoice, reason: str, start: tuple | None = None) -> None:
+    def switch(
+        self, choice: ModelChoice, reason: str, start: tuple | None = None, at: int | None = None
+    ) -> None:
         """Stream on ``choice`` from now on, mapping the warm start (unchecked until checked).
 
         Waits for a running background job only if that job may be using the model switched to.
         ``start``: (solver, its state or None, problem) to map instead of the streaming model's
         committed shape at ``self.problem`` (None: a cold start).  The change is appended to
-        ``changes`` (the newest 50 are kept).
+        ``changes`` (the newest 50 are kept) with the update index it takes effect at: ``at``,
+        by default the update being solved.
         """
         t0 = time.perf_counter()
         self.worker.wait_for_model(("",) + choice.key())
         t1 = time.perf_counter()
         pooled = self.pool.pooled(choice) is not None
-        self.changes.append((time.time(), reason))
+        at = self._index if at is None else at
+        self.changes.append((time.time(), reason, at))
         del self.changes[:-50]  # the newest 50 (all are in the log and the recording)
         if choice.order > self.choice.order and choice.planar == self.choice.planar:
             # just found too coarse
@@ -137,6 +147,7 @@ class AutoShapeSolver:
                 f"{reason} [waited {waited:.2f} s for the worker's build, "
                 f"{built:.2f} s to set up the "
                 f"{'pooled' if pooled else 'missing, so built here,'} model]",
+                at,
             )
         # the reasons say why this model: drop the planar one when leaving the plane, add this
         # change
@@ -160,11 +171,8 @@ class AutoShapeSolver:
 
     @property
     def checks_pending(self) -> bool:
-        """Whether a background job is running, or its verdict has not been applied yet.
-
-        A later solve applies it.  Always False with ``checks="sync"``.
-        """
-        return not self.worker.idle
+        """Whether a check's verdict is held (a later update applies it) or a job runs."""
+        return self._pending is not None or not self.worker.idle
 
     def reset(self) -> None:
         """Forget every warm start (the streaming model's and the pooled ones'): the next is cold.
@@ -173,7 +181,7 @@ class AutoShapeSolver:
         """
         with self._lock:
             self.worker.wait()
-            self.worker.job = None
+            self._pending = None
             for solver in self.pool.solvers() + [self.inner]:
                 solver.reset()
             self._unchecked = True
@@ -183,7 +191,7 @@ class AutoShapeSolver:
         """Stop the check worker (waits for a running check); later solves check inline."""
         with self._lock:
             if self.worker.background:
-                self.worker.shutdown()
+                self.worker.shutdown()  # a held verdict is kept: it is done, applied when due
                 self.checks = "sync"
 
     def query_many(
@@ -202,7 +210,7 @@ class AutoShapeSolver:
         problem.validate()
         with self._lock:
             self.worker.wait()
-            self.worker.job = None  # its verdict is about the old scene
+            self._pending = None  # its verdict is about the old scene
             self._generation += 1
             self.problem = problem
             self.model_checks.tolerance = (
@@ -212,7 +220,7 @@ class AutoShapeSolver:
             choice = initial_choice(problem, self.options, self.tolerance)
             choice.order, choice.stretch = self.choice.order, self.choice.stretch or choice.stretch
             if choice.key() != self.choice.key():
-                self.switch(choice, "scene changed")
+                self.switch(choice, "scene changed", at=self._updates)  # from the next update
             else:
                 self.inner.set_problem(self.reduced.reduce(self.choice, problem)[0])
                 self._unchecked = True
@@ -250,6 +258,7 @@ class AutoShapeSolver:
                 )
             notes: list[str] = []
             if commit:
+                self._index, self._updates = self._updates, self._updates + 1
                 self._apply_check(notes)
             answer = follow.follow_scene(self, problem, commit, notes, t0)
             if answer is not None:  # a query answered by a richer model
@@ -316,32 +325,24 @@ class AutoShapeSolver:
         notes: list[str],
         t0: float,
     ) -> ShapeResult:
-        """Count a committed update and run or submit its checks when they are due.
+        """Count a committed update and check it now, or start its check when one is due.
 
-        ``run``: (check_now, limited): the checks' re-solves stop at the time limit when limited.
+        ``run``: (check_now, limited); ``limited``: a streamed update (a warm, committing solve
+        from a committed shape), whose check takes effect CHECK_LAG updates later
+        (:mod:`.check_schedule`); any other committed solve is checked before it returns.
         """
         check_now, limited = run
         self.problem = problem
         self._since_check += 1
-        self._updates += 1
-        if check_now:
+        if check_now or not limited:  # one-shot: cold, or checked before it is published
             self.worker.wait()
-            self.worker.job = None
+            self._pending = None  # about an earlier shape
             snap = self.snapshot(problem, inner_poses, result, limited=limited)
             return self.finish(self._check_now(snap, result, notes), t0, notes)
         due = self._unchecked or self._since_check >= self.options.recheck_every
-        if due and (not self.worker.background or self.worker.idle):  # else: snapshot later
+        if due and self._pending is None:
             snap = self.snapshot(problem, inner_poses, result, limited=limited)
-            if not self.worker.background:
-                result = self._check_now(snap, result, notes)
-            else:
-                i = ORDERS.index(snap.choice.order)
-                keys = {
-                    ("",) + replace(snap.choice, order=o).key()
-                    for o in ORDERS[max(i - 1, 0) : i + 2]
-                }
-                keys.add(("checker",) + full_choice(snap.choice, problem).key())
-                self.worker.submit(self.model_checks.evaluate, keys, snap, True)
+            self._pending = start_check(self, snap)
         return self.finish(result, t0, notes)
 
     # ---- checks ---------------------------------------------------------------------------------
@@ -399,7 +400,7 @@ class AutoShapeSolver:
             self._generation,
             float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)),
             touches_obstacle(result),
-            self._updates,
+            self._index,
             limited,
         )
 
@@ -414,12 +415,16 @@ class AutoShapeSolver:
         self._checked_update = verdict.snapshot.update
 
     def _apply_check(self, notes: list[str]) -> None:
-        """Apply a finished background check (streaming thread)."""
-        job = self.worker.take_finished()
-        if job is None:
+        """Apply the held check's verdict when this update is the one it is due at.
+
+        Waits for a background check that has not finished (:mod:`.check_schedule`).
+        """
+        pending = self._pending
+        if pending is None or self._index < pending.apply_at:
             return
+        self._pending = None
         try:
-            verdict = job.result()
+            verdict = pending.outcome()
         except Exception as exc:  # a check that raised is reported, never fatal to the stream
             notes.append(f"model check failed: {type(exc).__name__}: {exc}")
             # retry after recheck_every updates, not at once
@@ -435,7 +440,7 @@ class AutoShapeSolver:
             notes.append(self.changes[-1][1])
 
     def _wait_for_check(self) -> None:
-        """Let a running background job finish first (its verdict is applied at the next solve)."""
+        """Let the worker's jobs finish (a held verdict is still applied when it is due)."""
         self.worker.wait()
 
     # ---- results (report.py) ------------------------------------------------------------------
@@ -459,9 +464,10 @@ class AutoShapeSolver:
             s,
             tolerance=self.tolerance,
             checks=self.checks,
-            changes=tuple(r for _, r in self.changes),
+            changes=tuple(r for _, r, _ in self.changes),
+            changes_at=tuple(at for _, _, at in self.changes),
             checked=streaming and not self._unchecked,
-            updates_ago=self._updates - self._checked_update,
+            updates_ago=self._index - self._checked_update,
             changed=changed,
             estimate=estimate,
         )

@@ -1,15 +1,20 @@
 """The worker thread that runs auto's checks and builds ahead, and what it may be using.
 
-With ``checks='background'`` one worker thread runs a job at a time: a model check on a snapshot
-of a committed solve, or a build of models a coming switch or check needs.  While a job runs it
-owns the pooled models named by its keys (:attr:`CheckWorker.keys`); the streaming thread waits for
-it only when it needs one of those (:meth:`CheckWorker.wait_for_model`).  With ``checks='sync'``
-there is no worker (:attr:`CheckWorker.executor` is None) and nothing runs in the background.
+With ``checks='background'`` one worker thread runs its jobs in the order they were submitted: a
+model check on a snapshot of a committed solve, or a build of models a coming switch or check
+needs.  While a job is queued or running it owns the pooled models named by its keys
+(:attr:`CheckWorker.keys`); the streaming thread waits for it only when it needs one of those
+(:meth:`CheckWorker.wait_for_model`).  With ``checks='sync'`` there is no worker
+(:attr:`CheckWorker.executor` is None) and nothing runs in the background.
+
+When a check's verdict takes effect does not depend on this worker's timing
+(:mod:`.check_schedule`): the worker only decides how long the stream waits for it.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from typing import Any, Callable
 
@@ -21,7 +26,7 @@ SWITCH_INTERVAL_S = 1e-4
 
 
 class CheckWorker:
-    """One background job at a time, and the pool keys it may use meanwhile."""
+    """The worker's jobs, oldest first, and the pool keys each may use meanwhile."""
 
     def __init__(self, background: bool) -> None:
         """Start the worker thread when ``background``; else checks run inline (no executor)."""
@@ -30,60 +35,75 @@ class CheckWorker:
         )
         if self.executor is not None and sys.getswitchinterval() > SWITCH_INTERVAL_S:
             sys.setswitchinterval(SWITCH_INTERVAL_S)  # the stream gets the GIL back within 0.1 ms
-        #: the running (or finished, not yet applied) job
-        self.job: Future | None = None
-        #: pool keys the running job may use
-        self.keys: frozenset = frozenset()
+        # (job, the pool keys it may use) of every job not known to be done, oldest first
+        self._jobs: list[tuple[Future, set]] = []
+        self._lock = threading.Lock()  # guards _jobs and their key sets (both threads use them)
 
     @property
     def background(self) -> bool:
         """Whether a worker thread runs the checks (False after :meth:`shutdown`)."""
         return self.executor is not None
 
+    def _running(self) -> list[tuple[Future, set]]:
+        """Return the jobs not done yet, oldest first (and forget the done ones)."""
+        with self._lock:
+            self._jobs = [(job, keys) for job, keys in self._jobs if not job.done()]
+            return list(self._jobs)
+
+    @property
+    def keys(self) -> frozenset:
+        """The pool keys the queued and running jobs may use."""
+        return frozenset().union(*(keys for _, keys in self._running()))
+
     @property
     def idle(self) -> bool:
-        """Whether no job is running or waiting to be applied."""
-        return self.job is None
+        """Whether no job is queued or running."""
+        return not self._running()
 
-    def submit(self, fn: Callable[..., Any], keys: set, *args: Any) -> None:
-        """Run ``fn(*args)`` on the worker; ``keys``: the pooled models it may use meanwhile."""
+    def submit(self, fn: Callable[..., Any], keys: set, *args: Any) -> Future:
+        """Run ``fn(*args)`` on the worker after the jobs before it; return its future.
+
+        ``keys``: the pooled models it may use meanwhile.
+        """
         assert self.executor is not None, "submit needs a background worker"
-        self.keys = frozenset(keys)
-        self.job = self.executor.submit(fn, *args)
+        job = self.executor.submit(fn, *args)
+        with self._lock:
+            self._jobs.append((job, set(keys)))
+        return job
 
     def built(self, key: tuple) -> None:
-        """Release ``key`` (worker thread): it is built, a switch to it need not wait."""
-        self.keys = self.keys - {key}
+        """Release ``key`` (worker thread): it is built, a switch to it need not wait.
+
+        The running job is the oldest one not done (one worker thread runs them in order).
+        """
+        with self._lock:
+            for job, keys in self._jobs:
+                if not job.done():
+                    keys.discard(key)
+                    return
 
     def busy_with(self, key: tuple) -> bool:
-        """Whether the running job may be using (or building) the pooled model ``key``."""
-        job = self.job
-        return job is not None and not job.done() and key in self.keys
+        """Whether a queued or running job may be using (or building) the pooled model ``key``."""
+        return any(key in keys for _, keys in self._running())
 
     def wait_for_model(self, key: tuple) -> None:
-        """Wait until the running job is done, if it may be using the pooled model ``key``.
+        """Wait until no job that may be using the pooled model ``key`` is left.
 
         One solver is never called from two threads at once.
         """
-        job = self.job
-        while job is not None and not job.done() and key in self.keys:
-            wait([job], timeout=0.005)
+        while True:
+            jobs = [job for job, keys in self._running() if key in keys]
+            if not jobs:
+                return
+            wait(jobs, timeout=0.005)  # a prebuild releases its keys one by one (built)
 
     def wait(self) -> None:
-        """Let a running job finish first: it owns the pooled helper solvers meanwhile."""
-        if self.job is not None:
-            wait([self.job])
-
-    def take_finished(self) -> Future | None:
-        """Return the finished job and forget it (None while it runs or when there is none)."""
-        job = self.job
-        if job is None or not job.done():
-            return None
-        self.job = None
-        return job
+        """Let every queued and running job finish: they own pooled helper solvers meanwhile."""
+        wait([job for job, _ in self._running()])
 
     def shutdown(self) -> None:
-        """Stop the worker (waits for a running job); later checks run inline."""
+        """Stop the worker once its jobs are done; later checks run inline."""
         if self.executor is not None:
-            self.executor.shutdown(wait=True, cancel_futures=True)
-            self.executor, self.job = None, None
+            self.wait()
+            self.executor.shutdown(wait=True)
+            self.executor = None

@@ -24,6 +24,7 @@ def model_summary(
     checks: str,
     changes: tuple[str, ...],
     checked: bool,
+    changes_at: tuple[int, ...] = (),
     updates_ago: int,
     changed: tuple[str, ...] = (),
     estimate: float | None = None,
@@ -37,8 +38,10 @@ def model_summary(
     the dropped gravity (≤ δ/10) and stretch (≤ δ/2).  In background mode it describes a solve up
     to recheck_every updates earlier: checked_updates_ago says how many (``updates_ago``; 0: this
     very shape).  ``tolerance``: δ [m]; ``checks``: 'sync' or 'background'; ``changes``: every
-    change of model so far; ``changed``: the changes this very solve made.  ``estimate``: a refined
-    query's own checked estimate (``refine_query``): checked, 0 updates ago.
+    change of model so far (the newest 50), ``changes_at`` the update index each took effect at
+    (the first update solved on the new model, :mod:`.check_schedule`); ``changed``: the
+    changes this very solve made.  ``estimate``: a refined query's own checked estimate
+    (``refine_query``): checked, 0 updates ago.
     """
     c = choice
     est = c.estimated_error_m if checked and np.isfinite(c.estimated_error_m) else None
@@ -63,6 +66,7 @@ def model_summary(
         checked_updates_ago=(0 if estimate is not None else updates_ago) if checked else None,
         reasons=tuple(c.reasons),
         changes=changes,
+        changes_at=changes_at,
         rotation=inner.rotation,
         elements=inner.elements,
         breakpoints=inner.breakpoints,

@@ -13,8 +13,10 @@ msg_docs/cli.md):
 * ``solver.model: auto`` adds obstacle_samples, tolerance_m [m], tolerance_met, auto, checked,
   checked_updates_ago (how many streamed updates before this one the shape the estimate describes
   was solved: 0 when it is this very shape; background checks lag), checks ('sync' or
-  'background'), reasons (why this model), changes (every change so far) and changed (the changes
-  made during the solve that returned it).
+  'background'), reasons (why this model), changes (every change so far, the newest 50),
+  changes_at (the stream's update index at which each of them took effect: updates are numbered
+  0, 1, ... by every committing solve) and changed (the changes made during the solve that
+  returned it).
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ class ModelSummary:
     checks: str | None = None
     reasons: tuple[str, ...] = ()
     changes: tuple[str, ...] = ()
+    changes_at: tuple[int, ...] = ()
     changed: tuple[str, ...] | None = None
 
     def as_dict(self) -> dict[str, Any]:
@@ -78,6 +81,7 @@ class ModelSummary:
                 checks=self.checks,
                 reasons=list(self.reasons),
                 changes=list(self.changes),
+                changes_at=list(self.changes_at),
             )
         else:
             out.update(estimated_error_m=self.estimated_error_m, variables=self.variables)

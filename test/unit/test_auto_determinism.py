@@ -1,0 +1,152 @@
+"""Deterministic ``solver.model: auto`` streams (#37): model changes at defined updates.
+
+A check of streamed update k takes effect just before update k + CHECK_LAG, with inline
+(``checks='sync'``) and background checks alike, and a background check that has not finished by
+then is waited for (``dlo_ros/solver/auto/check_schedule.py``).  So the same target sequence gives
+the same models, switched at the same update indices, and the same shapes (same model, same warm
+starts: the same numbers, 1e-9 m) in both modes, with the worker artificially slowed (a loaded
+machine) or the stream slowed (a fast worker).  The independent answer is the inline stream (one
+thread, no timing at all); its last shape is checked against a cold solve of a finer fixed model
+within the tolerance.  On 77ed4da a background verdict took effect at whatever update found it
+finished: the background stream differed from the inline one by 0.5 mm at 23 of 201 updates, and
+the order-16 switch came at another update.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dlo_ros.model import Obstacle
+from dlo_ros.scene import load_scene
+from dlo_ros.solver import ShapeSolver, make_solver
+from dlo_ros.solver.auto import checks as checks_module
+from dlo_ros.solver.auto import follow as follow_module
+
+STEPS = 200
+SAME = 1e-9  # m: same model, same warm starts, same numbers
+
+
+def path_3d(steps: int = STEPS) -> list[np.ndarray]:
+    """The right grip 0.25 m in, 0.1 m down, out of the plane and back: 3D, then order up."""
+    t = np.arange(steps) / steps
+    return [np.array([0.6 - 0.25 * u, 0.15 * np.sin(np.pi * u), 0.4 - 0.1 * u]) for u in t]
+
+
+def path_to_ball(steps: int = STEPS) -> list[np.ndarray]:
+    """The right grip lowered towards a ball under the cable: it comes within reach and is met."""
+    t = np.arange(steps) / steps
+    return [np.array([0.6 - 0.15 * u, 0.05 * np.sin(np.pi * u), 0.4 - 0.12 * u]) for u in t]
+
+
+def default_cable():
+    return load_scene("default_cable")
+
+
+def cable_over_ball():
+    scene = load_scene("default_cable")
+    ball = Obstacle("sphere", np.array([0.3, 0.0, -0.1, 0.09]), "ball")  # top 6 cm under the cable
+    return replace(scene, problem=replace(scene.problem, obstacles=(ball,)))
+
+
+def stream(scene, path, checks: str, pause: float = 0.0) -> list:
+    """Solve cold, then stream the right grip along ``path``; every result, in order."""
+    solver = make_solver(scene.problem, scene.options, compile="off", checks=checks)
+    q = scene.problem.grip("right").pose.orientation
+    try:
+        results = [solver.solve()]
+        for p in path:
+            results.append(solver.solve({"right": (p, q)}))
+            time.sleep(pause)
+    finally:
+        solver.close()
+    return results
+
+
+def changes(result) -> list[tuple[int, str]]:
+    """(update index, reason) of every model change so far; the timing notes left out."""
+    model = result.model
+    return [
+        (at, re.sub(r" \[waited .*\]$", "", r)) for r, at in zip(model.changes, model.changes_at)
+    ]
+
+
+@pytest.fixture
+def slow_worker(monkeypatch):
+    """A loaded machine: every check and build ahead on the worker thread takes 0.15 s longer."""
+    evaluate, prebuild = checks_module.ModelChecks.evaluate, follow_module.prebuild
+
+    def on_worker(seconds):
+        if threading.current_thread().name.startswith("dlo-auto-check"):
+            time.sleep(seconds)
+
+    def slow_evaluate(self, *args, **kwargs):
+        on_worker(0.15)
+        return evaluate(self, *args, **kwargs)
+
+    def slow_prebuild(*args, **kwargs):
+        on_worker(0.15)
+        return prebuild(*args, **kwargs)
+
+    monkeypatch.setattr(checks_module.ModelChecks, "evaluate", slow_evaluate)
+    monkeypatch.setattr(follow_module, "prebuild", slow_prebuild)
+
+
+def assert_same_stream(inline: list, other: list) -> None:
+    assert [r.status for r in other] == [r.status for r in inline]
+    assert changes(other[-1]) == changes(inline[-1])
+    for k, (a, b) in enumerate(zip(inline, other)):
+        assert (a.model.order, a.model.planar, a.model.obstacle_samples) == (
+            b.model.order,
+            b.model.planar,
+            b.model.obstacle_samples,
+        ), k
+        if a.ok:
+            dev = float(np.max(np.linalg.norm(a.points - b.points, axis=1)))
+            assert dev <= SAME, (k, dev)
+
+
+def assert_escalated_by_a_check(results: list) -> None:
+    """At least one change of the stream was a check's verdict (the basis order or the samples)."""
+    verdicts = [(at, r) for at, r in changes(results[-1]) if re.match(r"(order|the )", r)]
+    assert verdicts and all(at > 0 for at, _ in verdicts), changes(results[-1])
+
+
+def assert_near_a_finer_cold_solve(scene, results, path) -> None:
+    """The last shape against the 3D model of order 24 (161 samples) streamed along every 5th
+    target (the same branch): within the tolerance."""
+    options = replace(scene.options, model="full", order=24, obstacle_samples=161)
+    fine = ShapeSolver(scene.problem, options, compile="off")
+    q = scene.problem.grip("right").pose.orientation
+    ref = fine.solve()
+    for p in path[::5] + [path[-1]]:
+        ref = fine.solve({"right": (p, q)})
+        assert ref.ok, ref.message
+    dev = float(np.max(np.linalg.norm(results[-1].points - ref.points, axis=1)))
+    assert dev <= results[-1].model.tolerance_m, dev
+
+
+@pytest.mark.parametrize(
+    "scene, path",
+    [(default_cable, path_3d), (cable_over_ball, path_to_ball)],
+    ids=["default_cable", "obstacle"],
+)
+def test_background_checks_give_the_inline_stream(scene, path, slow_worker):
+    scene, targets = scene(), path()
+    inline = stream(scene, targets, "sync")
+    assert all(r.ok for r in inline), [r.message for r in inline if not r.ok][:3]
+    assert_escalated_by_a_check(inline)
+    assert_near_a_finer_cold_solve(scene, inline, targets)
+    assert_same_stream(inline, stream(scene, targets, "background"))  # slowed worker
+
+
+@pytest.mark.parametrize("pause", [0.0, 0.02], ids=["fast-stream", "slow-stream"])
+def test_background_checks_at_any_speed_of_the_stream(pause):
+    scene, targets = default_cable(), path_3d()
+    inline = stream(scene, targets, "sync")
+    assert_same_stream(inline, stream(scene, targets, "background", pause=pause))

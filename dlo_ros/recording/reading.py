@@ -268,7 +268,7 @@ class _Reader:
         s = cols.numbers("s", per_row=samples) if self.details else none
         terms = cols.texts("energy_terms", first=False) if self.details else none
         energy = cols.numbers("energy", finite=False) if self.details else none
-        model = cols.texts("model") if self.details else none
+        model = cols.texts("model")  # also for --resolve: it compares the model changes
         values = []
         for i in range(cols.rows):
             p = pts[i]
@@ -342,9 +342,9 @@ def read_recording(path: str | Path, *, details: bool = True) -> Recording:
     Bounded (:data:`dlo_ros.recording.rrd_file.LIMITS`): a regular file only, at most 1 GiB; rerun
     streams the chunks one at a time and only the columns dlo_ros needs are kept, as numpy arrays.
     ``details=False`` reads only what ``--resolve`` needs (the scene, ``data/targets``, and of each
-    result its status, message, warm flags, points and target poses, and the ``model/*`` series):
-    no ``s``, ``energy``, ``model``, centrelines or ``events/status|model|recorder``.  A file cut
-    inside a message (a killed writer) is read up to its last complete message
+    result its status, message, warm flags, points, target poses and ``model``, and the
+    ``model/*`` series): no ``s``, ``energy``, centrelines or ``events/status|model|recorder``.
+    A file cut inside a message (a killed writer) is read up to its last complete message
     (``Recording.truncated``).
 
     Raises FileNotFoundError, or :class:`RecordingError` (a ValueError) with one line naming the

@@ -30,11 +30,13 @@ from .resolve_report import (
     ModelKey,
     ResolveReport,
     UpdateComparison,
+    changed_of,
     compare,
     format_report,
     model_history,
     model_key,
     recorded_models,
+    switches,
 )
 
 if TYPE_CHECKING:
@@ -124,6 +126,7 @@ def resolve_report(
     ti = ci = 0
     rows: list[UpdateComparison] = []
     models: dict[int, ModelKey] = {}
+    made: tuple[list, list] = ([], [])  # (update, reason) of the recorded and re-solved changes
     for recorded in sorted(rec.results, key=lambda r: r.update):
         while ci < len(changes) and changes[ci][0] <= recorded.update:
             new = _scene_from_yaml(
@@ -146,6 +149,8 @@ def resolve_report(
             warm = bool(rows) and recorded.warm_started
         result = solver.solve(poses, warm=warm)
         rows.append(compare(recorded, result, tolerance))
+        made[0].extend((recorded.update, c) for c in changed_of(recorded.model))
+        made[1].extend((recorded.update, c) for c in changed_of(result.model_dict()))
         key = model_key(result.model_dict())
         if key is not None:
             models[recorded.update] = key
@@ -158,6 +163,7 @@ def resolve_report(
         tolerance_m=tolerance,
         updates=rows,
         models=model_history(recorded_models(rec.model_series), models),
+        switches=switches(*made),
     )
 
 

@@ -64,6 +64,39 @@ class ModelHistory:
 
 
 @dataclass(frozen=True)
+class Switches:
+    """The model changes each stream made (``ShapeResult.model.changed``), by update.
+
+    ``recorded`` / ``resolved``: (update, reason) in order; ``first_difference``: the first
+    update at which the two made different changes (the reasons' timing notes left out).
+    """
+
+    recorded: list[tuple[int, str]] = field(default_factory=list)
+    resolved: list[tuple[int, str]] = field(default_factory=list)
+    first_difference: int | None = None
+
+
+def switches(recorded: list[tuple[int, str]], resolved: list[tuple[int, str]]) -> Switches:
+    """Compare two streams' model changes, (update, reason) each."""
+
+    def by_update(changes: list[tuple[int, str]]) -> dict[int, list[str]]:
+        out: dict[int, list[str]] = {}
+        for update, reason in changes:
+            out.setdefault(update, []).append(reason.split(" [waited ")[0])
+        return out
+
+    a, b = by_update(recorded), by_update(resolved)
+    first = next((u for u in sorted(set(a) | set(b)) if a.get(u) != b.get(u)), None)
+    return Switches(list(recorded), list(resolved), first)
+
+
+def changed_of(model: Any) -> list[str]:
+    """Return the changes of model one solve made (its ``model['changed']``; [] if none)."""
+    changed = model.get("changed") if isinstance(model, dict) else None
+    return [str(c) for c in changed] if isinstance(changed, (list, tuple)) else []
+
+
+@dataclass(frozen=True)
 class ResolveReport:
     """The result of ``dlo replay --resolve``; :meth:`as_dict` is its ``--json`` form."""
 
@@ -73,6 +106,7 @@ class ResolveReport:
     tolerance_m: float
     updates: list[UpdateComparison]
     models: ModelHistory
+    switches: Switches = field(default_factory=Switches)
 
     def of(self, verdict: str) -> list[int]:
         """Return the updates with this verdict, in order."""
@@ -113,6 +147,11 @@ class ResolveReport:
                 "recorded": [vars(c).copy() for c in self.models.recorded],
                 "resolved": [vars(c).copy() for c in self.models.resolved],
                 "first_difference": self.models.first_difference,
+            },
+            "switches": {
+                "recorded": [list(c) for c in self.switches.recorded],
+                "resolved": [list(c) for c in self.switches.resolved],
+                "first_difference": self.switches.first_difference,
             },
             "ok": self.ok,
         }
@@ -213,6 +252,17 @@ def format_report(report: ResolveReport) -> str:
         for u in report.updates
     ]
     lines += _model_lines(report.models)
+    sw = report.switches
+    if sw.recorded or sw.resolved:
+        lines.append(
+            f"switch  model changes took effect at updates {[u for u, _ in sw.recorded][:SHOWN]} "
+            f"(recorded), {[u for u, _ in sw.resolved][:SHOWN]} (re-solve): "
+            + (
+                "the same"
+                if sw.first_difference is None
+                else f"first differs at update {sw.first_difference}"
+            )
+        )
     agree, deviates, changed = (report.of(v) for v in (AGREE, DEVIATES, STATUS_CHANGED))
     worst = report.worst()
     measured = (

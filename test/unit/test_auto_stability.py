@@ -54,7 +54,7 @@ def test_an_unstable_answer_on_a_coarse_order_is_solved_again_on_the_next(warm):
 
     assert result.ok and result.stable, result.message
     assert result.model.order == 16 and not result.model.planar
-    assert any("order-12 equilibrium is unstable" in reason for _, reason in solver.changes)
+    assert any("order-12 equilibrium is unstable" in reason for _, reason, _ in solver.changes)
     reference = ShapeSolver(SCENE.problem, replace(SCENE.options, model="full", order=24), compile="off").solve(poses)
     assert reference.ok and reference.stable, reference.message
     assert result.energy["total"] < premise.energy["total"]

@@ -412,7 +412,8 @@ def test_a_fourier_basis_serves_the_planar_model_and_the_3d_model_uses_its_own_e
     solver = make_solver(clamped_pair(right=(0.7, 0, 0)), opts, compile="off", checks="sync")
     planar = solver.solve()
     assert planar.ok and planar.model.planar and planar.basis == "fourier"
-    out_of_plane = solver.solve({"right": ([0.6, 0.2, 0.1], [0, 0, 0, 1])})
+    # checked before it returns (a streamed update's check would take effect CHECK_LAG updates later)
+    out_of_plane = solver.solve({"right": ([0.6, 0.2, 0.1], [0, 0, 0, 1])}, check_now=True)
     assert out_of_plane.ok and not out_of_plane.model.planar, out_of_plane.message
     assert out_of_plane.basis == "chebyshev"
     assert opts.with_model("full").basis == "chebyshev" and opts.with_model("planar").basis == "fourier"

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..jsonio import json_safe, stdout_to_stderr
+from ..solver.options import BASES
 from ..solver.results.contacts import pressed_obstacles
 from .common import EXIT_NOT_OK, EXIT_OK, UsageError, compile_mode, load_scene_arg
 from .record import add_record_arguments, close_recorder, make_recorder
@@ -190,7 +191,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="number of output samples along s (solver.output_points)",
     )
-    p.add_argument("--basis", choices=("chebyshev", "fourier"), help="Ritz basis (solver.basis)")
+    p.add_argument("--basis", choices=BASES, help="Ritz basis (solver.basis)")
     p.add_argument(
         "--order",
         type=int,

@@ -14,7 +14,10 @@ extensible)]: the position of s = 0 scaled by L, and the coefficients of the Eul
 ``material_terms``)
     W         = Σ_k F_k · x(s_k) − m_k φ(s_k)                          eq. 5, m_k = M_k · n
 
-with Clenshaw–Curtis weights w and the cumulative integration matrix W (see quadrature.py).  The
+with Clenshaw–Curtis weights w and the cumulative integration matrix W (see quadrature.py).  With
+basis 'elements' (element_basis.py) the coefficients are nodal values on a spectral-element mesh
+split at grips, loads and material knots, and s_j, w_j, W are the mesh's composite quadrature (per
+element, so B' at a breakpoint is each element's own one-sided derivative).  The
 point-moment work −m φ is exact for moments about the reference normal n = R0 e_z (a rotation of
 the frame about n by α changes φ by −α).  Material profiles (Rf, Rt, Re, D at the nodes) and the
 gravity direction are NLP parameters, so changing them never rebuilds the problem.
@@ -29,6 +32,8 @@ import numpy as np
 
 from .basis import Basis, make_basis
 from .centreline import positions_sym, weight_energy_sym
+from .element_basis import CompositeQuadrature, ElementBasis
+from .elements import ElementMesh
 from .quadrature import ChebyshevQuadrature
 
 
@@ -75,18 +80,30 @@ class RitzModel:
         twist: bool,
         stretch: bool,
         planar: bool = False,
+        mesh: ElementMesh | None = None,
     ):
+        """Build the model; basis 'elements' needs ``mesh`` (and ignores order and nodes)."""
         self.length = float(length)
-        self.basis: Basis = make_basis(basis, order, length)
-        self.quad = ChebyshevQuadrature(nodes, length)
         self.r0 = np.asarray(r0, dtype=float)
         if planar and twist:
             raise ValueError("a planar model has no twist field")
-        self.layout = FieldLayout(order, twist, stretch, planar)
-        s = self.quad.nodes
         self._cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self.B = self.basis.values(s)  # (M, n)
-        self.dB = self.basis.derivatives(s)  # (M, n)
+        #: the element mesh of basis 'elements' (None for a single-interval basis)
+        self.mesh = mesh if basis == "elements" else None
+        self.basis: Basis
+        self.quad: ChebyshevQuadrature | CompositeQuadrature
+        if basis == "elements":
+            if mesh is None:
+                raise ValueError("solver.basis: 'elements' needs the element mesh")
+            self.basis, self.quad = ElementBasis(mesh), CompositeQuadrature(mesh)
+            # each element's own rows: a breakpoint's two quadrature nodes take one-sided B'
+            self.B, self.dB = mesh.B, mesh.dB  # (M, n)
+        else:
+            self.basis = make_basis(basis, order, length)
+            self.quad = ChebyshevQuadrature(nodes, length)
+            self.B = self.basis.values(self.quad.nodes)  # (M, n)
+            self.dB = self.basis.derivatives(self.quad.nodes)  # (M, n)
+        self.layout = FieldLayout(self.basis.size, twist, stretch, planar)
 
     # ---- fields ---------------------------------------------------------------------------------
     def coefficients(self, z, name: str):
@@ -232,7 +249,8 @@ class RitzModel:
     ) -> dict[str, np.ndarray]:
         """φ, θ, ψ, ε (or only ``names``) and their s-derivatives at arc lengths s.
 
-        Fields that are not unknowns are constants: θ = π/2 in a planar model, ψ = ε = 0.
+        Fields that are not unknowns are constants: θ = π/2 in a planar model, ψ = ε = 0.  With
+        basis 'elements' the derivative at a breakpoint is the left element's (one-sided).
         """
         B, dB, _ = self.matrices(s)
         out = {}
@@ -243,8 +261,25 @@ class RitzModel:
             out["d" + name] = dB @ c if c is not None else np.zeros(len(s))
         return out
 
+    def node_fields(
+        self, z: np.ndarray, names: tuple[str, ...] = ("phi", "theta", "psi", "eps")
+    ) -> dict[str, np.ndarray]:
+        """Return ``fields`` at the quadrature nodes, with each element's own B' there.
+
+        ``fields(z, quad.nodes)`` would take one side's derivative at both copies of a
+        breakpoint (basis 'elements').
+        """
+        out = {}
+        for name in names:
+            c = self.coefficients(z, name)
+            constant = np.pi / 2 if name == "theta" else 0.0
+            out[name] = self.B @ c if c is not None else np.full(self.quad.count, constant)
+            out["d" + name] = self.dB @ c if c is not None else np.zeros(self.quad.count)
+        return out
+
     def node_tangents(self, z: np.ndarray) -> np.ndarray:
-        f = self.fields(z, self.quad.nodes, ("phi", "theta", "eps"))
+        """(1 + ε) ζ at the quadrature nodes, (3, M)."""
+        f = self.node_fields(z, ("phi", "theta", "eps"))
         eps = f["eps"] if self.layout.stretch else None
         return self.tangents(f["phi"], f["theta"], eps, lib=np)
 
@@ -268,7 +303,7 @@ class RitzModel:
         ψ(s) with ω ≡ 0 (ψ' = −φ' cosθ), ψ(s_anchor) = ψ_anchor: the twist a free string settles
         to.
         """
-        f = self.fields(z, self.quad.nodes, ("phi", "theta"))
+        f = self.node_fields(z, ("phi", "theta"))
         g = -f["dphi"] * np.cos(f["theta"])
         W = self.position_matrix(np.append(np.asarray(s, dtype=float), s_anchor))
         integral = W @ g

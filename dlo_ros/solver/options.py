@@ -8,17 +8,21 @@ from typing import Any
 FRAMES = ("auto", "paper")
 MODELS = ("auto", "full", "planar")
 ROTATIONS = ("director", "euler")
+#: the Euler-angle models' bases ('elements' is also what the director model is built on)
+BASES = ("chebyshev", "fourier", "elements")
 
 
 @dataclass(frozen=True)
 class SolverOptions:
     """How the Ritz NLP is built and solved.
 
-    basis/order: Ritz basis ('chebyshev' default, or the paper's 'fourier') and number of functions
-    per field (for 'director': Legendre–Gauss–Lobatto nodes per element; the director model has no
-    Ritz basis, so model 'full' with rotation 'director' refuses 'fourier' and frame 'paper', which
-    it would ignore).  quadrature_nodes: Chebyshev–Lobatto nodes for the energy integrals and the
-    centreline (for 'director': per element, at most order + 8). obstacle_samples: points along s,
+    basis/order: Ritz basis ('chebyshev' default, the paper's 'fourier', or 'elements': nodal
+    values on spectral elements split at grips, loads and material knots, as the director model)
+    and number of functions per field (for 'elements' and 'director': Legendre–Gauss–Lobatto nodes
+    shared out by element length, at least 3; the director model is always on elements, so model
+    'full' with rotation 'director' refuses 'fourier' and frame 'paper', which it would ignore).
+    quadrature_nodes: Chebyshev–Lobatto nodes for the energy integrals and the centreline (for
+    'elements' and 'director': per element, at most order + 8). obstacle_samples: points along s,
     uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is imposed.  obstacle_slots:
     per obstacle, rows whose arc lengths are parameters, placed at the string's closest approaches
     to the obstacle and moved with them (solver/contact/obstacle_slots.py); 0 (default): the
@@ -71,10 +75,14 @@ class SolverOptions:
     self_contact_samples: int = 0
 
     def validate(self) -> None:
-        if self.basis not in ("chebyshev", "fourier"):
-            raise ValueError(f"solver.basis: must be 'chebyshev' or 'fourier', got {self.basis!r}")
+        if self.basis not in BASES:
+            raise ValueError(f"solver.basis: must be one of {BASES}, got {self.basis!r}")
         if not (2 <= self.order <= 60):
             raise ValueError(f"solver.order: must be in [2, 60], got {self.order}")
+        if self.basis == "elements" and self.order < 3:
+            raise ValueError(
+                f"solver.order: must be at least 3 for solver.basis 'elements', got {self.order}"
+            )
         if not (max(8, self.order + 2) <= self.quadrature_nodes <= 400):
             raise ValueError(
                 "solver.quadrature_nodes: must be in [max(8, order+2), 400], "
@@ -170,6 +178,8 @@ class SolverOptions:
             name
             for name in ("basis", "frame")
             if getattr(self, name) != getattr(SolverOptions, name)
+            # the director model is built on spectral elements: 'elements' describes it
+            and not (name == "basis" and self.basis == "elements")
         ]
 
     @classmethod

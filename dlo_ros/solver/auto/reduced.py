@@ -28,8 +28,9 @@ class ReducedModels:
         """Return ``problem`` as ``choice`` models it, and the options of that model.
 
         Gravity is zeroed when dropped, the stretch stiffness removed when inextensible, and only
-        ``choice.obstacles`` are kept; the options name the planar or full model with the
-        choice's order, quadrature (≥ 2·order + 8), obstacle samples and self-contact slots.
+        ``choice.obstacles`` are kept; the options name the planar model (basis 'elements' unless
+        the scene set another than the default) or the full model with the choice's order,
+        quadrature (≥ 2·order + 8), obstacle samples and self-contact slots.
         """
         key = (choice.gravity, choice.stretch, choice.obstacles)
         hit = self._string_cache
@@ -52,8 +53,14 @@ class ReducedModels:
         model = (choice.planar, choice.order, choice.samples, choice.self_contact)
         opts = self._options.get(model)
         if opts is None:
+            # the planar model on spectral elements split at grips, loads and material knots (a
+            # kink there converges spectrally, not algebraically as in one polynomial), unless the
+            # scene chose another basis than the default
+            default = self.options.basis == SolverOptions.basis
+            planar = {"basis": "elements"} if choice.planar and default else {}
             opts = self.options.with_model(
                 "planar" if choice.planar else "full",
+                **planar,
                 order=choice.order,
                 quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
                 obstacle_samples=choice.samples,

@@ -164,6 +164,11 @@ class StringNLP:
                 self.twist,
                 self.stretch,
                 self.planar,
+                mesh=(
+                    element_mesh(problem, options, mesh_spec)
+                    if options.basis == "elements"
+                    else None
+                ),
             )
         self.sigma = L / problem.string.bend_stiffness.maximum
         self._moment_stiffness: ca.Function | None = None

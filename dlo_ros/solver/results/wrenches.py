@@ -151,14 +151,14 @@ def static_events(nlp: StringNLP, problem: Problem) -> list[float]:
     """Return the arc lengths [m] the residual's grid is refined at.
 
     The arc lengths [m] the residual's grid is refined at: grips, point loads, the relative
-    positions' ends and (director models) the mesh breakpoints.  Fixed by the NLP's structure, so
+    positions' ends and (element models) the mesh breakpoints.  Fixed by the NLP's structure, so
     that the grid is too (``output_function.py`` evaluates on it).  Contact forces (obstacles,
     self-contact) carry no moment: the balance moment only bends where they act, it does not jump,
     so the grid need not follow them.
     """
     events = [g.s for g in problem.grips] + [ld.s for ld in problem.loads]
     events += problem.relative_ends()
-    if nlp.director:
+    if nlp.model.mesh is not None:  # element models: B' is one-sided at the breakpoints
         events += list(nlp.model.mesh.breakpoints)
     return events
 

@@ -277,10 +277,8 @@ class ShapeSolver:
         return True
 
     def install_warm_start(self, state: SolverState) -> None:
-        """Take ``state``, a point of this NLP (z, λ, p; e.g. another mesh's equilibrium mapped by
-        ``solver/adapt/transfer.py``), as the warm start: the next solve starts from it."""
+        """Commit ``state`` (this NLP's z, λ, p and ``fill_start``'s derivatives) as warm start."""
         with self._lock:
-            fill_start(self.nlp, self.functions, state)
             self._state, self._clamp_turns, self._adopted = state, None, None
 
     def _adopt_again(self, other: ShapeSolver, src: SolverState) -> bool:

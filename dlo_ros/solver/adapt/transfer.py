@@ -34,6 +34,7 @@ from ...model.elements import ElementMesh
 from ..contact import obstacle_slots as OSL
 from ..shape_solver import ShapeSolver
 from ..state import SolverState
+from ..update.newton import fill_start
 
 
 @dataclass(frozen=True)
@@ -178,11 +179,14 @@ def transferred_state(old: ShapeSolver, new: ShapeSolver) -> TransferredState | 
 def warm_start_from(old: ShapeSolver, new: ShapeSolver) -> bool:
     """Hand ``new`` (another mesh of ``old``'s scene) ``old``'s equilibrium as its warm start.
 
-    The next ``new.solve()`` then starts warm from it (``ShapeSolver.install_warm_start``).
-    False when ``old`` has nothing committed.
+    The next ``new.solve()`` then starts warm from it (``ShapeSolver.install_warm_start``), with
+    the derivatives its first Newton step reuses (``fill_start``).  ``new`` must not be solving in
+    another thread meanwhile (it is evaluated outside its lock: a freshly built solver).  False
+    when ``old`` has nothing committed.
     """
     moved = transferred_state(old, new)
     if moved is None:
         return False
+    fill_start(new.nlp, new.functions, moved.state)
     new.install_warm_start(moved.state)
     return True

@@ -15,11 +15,17 @@ import pytest
 from dlo_ros.model.director import DirectorModel
 from dlo_ros.model.elements import ElementMesh
 from dlo_ros.model.problem import GripPose, Load
-from dlo_ros.solver.adapt.transfer import nodal_matrix, transfer_z, warm_start_from
+from dlo_ros.solver.adapt.transfer import (
+    nodal_matrix,
+    transfer_z,
+    transferred_state,
+    warm_start_from,
+)
 from dlo_ros.solver.build.mesh import MeshSpec
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
 from support.problems import clamped_pair, quat_about
+from test_adapt_loop import bar_scene
 
 LENGTH = 1.3
 
@@ -130,3 +136,31 @@ def test_nothing_committed_nothing_handed_over():
     coarse = ShapeSolver(problem, OPTIONS, compile="off", mesh=COARSE)
     fine = ShapeSolver(problem, OPTIONS, compile="off", mesh=FINE)
     assert not warm_start_from(coarse, fine) and not fine.has_warm_start
+
+
+def test_contact_multipliers_are_carried_by_row():
+    """A cable resting on a bar (test_adapt_loop's scene): the grip rows, the obstacle samples'
+    rows and the contact slot keep their SI multipliers on the new mesh, and the contact's is
+    within 2 % of the refined mesh's own at its equilibrium (it moves with the discretisation)."""
+    sc = bar_scene(16)
+    coarse = ShapeSolver(sc.problem, sc.options, compile="off")
+    assert coarse.solve().ok
+    fine = ShapeSolver(sc.problem, sc.options, compile="off", mesh=MeshSpec((0.4,), (10, 12)))
+    moved = transferred_state(coarse, fine)
+    assert moved is not None and moved.unmatched_rows == 0
+
+    def si(solver, lam):
+        nlp = solver.nlp
+        return {k: v for k, v in zip(nlp.row_kind, lam / (nlp.row_scale * nlp.sigma))}
+
+    old, new = si(coarse, coarse.committed_state.lam_g), si(fine, moved.state.lam_g)
+    carried = [k for k in new if k[0] in ("grip", "obstacle", "slot")]
+    assert any(k[0] == "slot" and new[k] != 0 for k in carried)  # the contact itself
+    for k in carried:
+        assert new[k] == pytest.approx(old[k], rel=1e-12, abs=1e-15), k
+    assert warm_start_from(coarse, fine)
+    result = fine.solve()
+    assert result.ok and result.ipopt_status == "Newton"
+    final = si(fine, fine.committed_state.lam_g)
+    slot = [k for k in carried if k[0] == "slot" and new[k] != 0][0]
+    assert final[slot] == pytest.approx(new[slot], rel=0.02)

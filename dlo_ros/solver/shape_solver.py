@@ -276,6 +276,11 @@ class ShapeSolver:
                 self._state = adopted_copy(state)
         return True
 
+    def install_warm_start(self, state: SolverState) -> None:
+        """Commit ``state`` (this NLP's z, λ, p and ``fill_start``'s derivatives) as warm start."""
+        with self._lock:
+            self._state, self._clamp_turns, self._adopted = state, None, None
+
     def _adopt_again(self, other: ShapeSolver, src: SolverState) -> bool:
         """Adopt again what was adopted last time from the same state ``src`` of ``other``.
 

@@ -10,6 +10,8 @@ MODELS = ("auto", "full", "planar")
 ROTATIONS = ("director", "euler")
 #: the Euler-angle models' bases ('elements' is also what the director model is built on)
 BASES = ("chebyshev", "fourier", "elements")
+#: where the obstacle rows sit: uniform samples, or the element mesh's own nodes
+OBSTACLE_POINTS = ("samples", "nodes")
 
 
 @dataclass(frozen=True)
@@ -26,7 +28,10 @@ class SolverOptions:
     uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is imposed.  obstacle_slots:
     per obstacle, rows whose arc lengths are parameters, placed at the string's closest approaches
     to the obstacle and moved with them (solver/contact/obstacle_slots.py); 0 (default): the
-    samples alone.
+    samples alone.  obstacle_points: where the obstacle rows sit: 'samples' (default: the
+    ``obstacle_samples`` uniform arc lengths) or 'nodes' (the element mesh's LGL nodes, so a mesh
+    refined near a contact resolves it finer; element models only: model 'full' with rotation
+    'director', or basis 'elements'; solver/contact/obstacle_points.py).
     frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2 (away
     from the singularity); 'paper' is the paper's frame (singular at the straight state).
     rotation: how a 3D model represents the material frame: 'director' (default: nodal unit
@@ -60,6 +65,7 @@ class SolverOptions:
     quadrature_nodes: int = 40
     obstacle_samples: int = 41
     obstacle_slots: int = 0
+    obstacle_points: str = "samples"
     frame: str = "auto"
     output_points: int = 51
     tolerance: float = 1e-10
@@ -96,6 +102,7 @@ class SolverOptions:
             raise ValueError(
                 f"solver.obstacle_slots: must be in [0, 256], got {self.obstacle_slots}"
             )
+        self._validate_obstacle_points()
         if self.frame not in FRAMES:
             raise ValueError(f"solver.frame: must be one of {FRAMES}, got {self.frame!r}")
         if not (2 <= self.output_points <= 10000):
@@ -153,6 +160,23 @@ class SolverOptions:
             )
         if not (0 < self.max_strain < 10):
             raise ValueError("solver.max_strain: must be in (0, 10)")
+
+    def _validate_obstacle_points(self) -> None:
+        """Refuse an unknown ``obstacle_points``, and 'nodes' on a model without elements."""
+        if self.obstacle_points not in OBSTACLE_POINTS:
+            raise ValueError(
+                f"solver.obstacle_points: must be one of {OBSTACLE_POINTS}, "
+                f"got {self.obstacle_points!r}"
+            )
+        elements = self.rotation == "director" if self.model == "full" else False
+        elements = elements or (self.model in ("planar", "full") and self.basis == "elements")
+        if self.obstacle_points == "nodes" and self.model != "auto" and not elements:
+            raise ValueError(
+                "solver.obstacle_points: 'nodes' puts the obstacle rows on the element mesh's "
+                "nodes, which only the element models have (solver.model 'full' with "
+                "solver.rotation 'director', or solver.basis 'elements'); got model "
+                f"{self.model!r}, rotation {self.rotation!r}, basis {self.basis!r}"
+            )
 
     def with_model(self, model: str, **changes) -> "SolverOptions":
         """Return these options for the fixed ``model`` ('planar' or 'full') built from them.

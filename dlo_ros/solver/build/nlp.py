@@ -52,6 +52,7 @@ from ..native.settings import (
     NEWTON_STEP_SWITCHES,
     NEWTON_STEPS,
 )
+from ..contact.obstacle_points import obstacle_arc_lengths, row_spacing, row_weights
 from ..options import SolverOptions
 from .assembled import AssembledKKT
 from .mesh import MeshSpec, element_mesh
@@ -217,18 +218,19 @@ class StringNLP:
         x at the grips, the loads, the relative positions' ends and the obstacle samples.
 
         Every arc length where a position is needed is evaluated with one matrix product.  Sets
-        ``obstacle_s``, the samples' arc lengths.
+        ``obstacle_s``, the obstacle rows' arc lengths (``solver.obstacle_points``: uniform
+        samples or the mesh's nodes, ``contact/obstacle_points.py``), ``obstacle_weights``, the
+        quadrature weight [m] each row stands for, and ``obstacle_spacing`` [m], the spacing the
+        contact slots measure in.
         """
         P = self.problem
         s_points: list[float] = [g.s for g in P.grips]
         s_points += [ld.s for ld in P.loads]
         for rel in P.relative_positions:
             s_points += [rel.s_a, rel.s_b]
-        self.obstacle_s = (
-            np.linspace(0.0, self.length, self.options.obstacle_samples)
-            if P.obstacles
-            else np.zeros(0)
-        )
+        self.obstacle_s = obstacle_arc_lengths(P, self.options, self.model)
+        self.obstacle_weights = row_weights(self.obstacle_s, self.options, self.model)
+        self.obstacle_spacing = row_spacing(self.obstacle_s)
         s_all = np.concatenate([np.asarray(s_points, dtype=float), self.obstacle_s])
         X = self.model.positions_sym(z, t, s_all) if len(s_all) else ca.SX(3, 0)
         col = 0

@@ -15,6 +15,7 @@ from ...model.director import DirectorModel
 from ...model.obstacles import OBSTACLE_TYPES
 from ...model.problem import Problem
 from ...model.ritz import RitzModel
+from ..contact.obstacle_points import obstacle_arc_lengths
 from ..options import SolverOptions
 
 
@@ -87,7 +88,8 @@ def parameter_layout(
     n_slots = options.obstacle_slots if P.obstacles else 0
     for i, _ in enumerate(P.obstacles):
         if n_slots:
-            lay.add(f"samples:{i}:on", options.obstacle_samples)  # 0: the sample a slot replaces
+            # 0: the row a slot replaces (one per obstacle row: uniform samples or mesh nodes)
+            lay.add(f"samples:{i}:on", len(obstacle_arc_lengths(P, options, model)))
             lay.add(f"slots:{i}:s", n_slots)
             lay.add(f"slots:{i}:on", n_slots)
             lay.add(f"slots:{i}:w", n_slots * M)  # slot k's row at k M … (k + 1) M

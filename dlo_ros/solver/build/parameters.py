@@ -139,7 +139,7 @@ class ProblemParameters:
         the placements (with the shape's clearance at each slot).
         """
         nlp, m = self.nlp, self.nlp.model
-        L, S, radius = nlp.length, nlp.options.obstacle_samples, problem.string.radius
+        L, S, radius = nlp.length, len(nlp.obstacle_s), problem.string.radius
         s_fine = OSL.fine_grid(L, S)
         x = m.positions(z, s_fine)
         placements = []
@@ -154,7 +154,7 @@ class ProblemParameters:
                 found = OSL.minima(
                     s_fine,
                     -ob.h_many(x) - radius,
-                    nlp.obstacle_s[1],
+                    nlp.obstacle_spacing,
                     OSL.band(L, radius),
                     L,
                     clearance_at,

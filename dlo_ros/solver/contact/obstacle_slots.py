@@ -1,6 +1,7 @@
 """Contact slots: an obstacle row at the string's closest approach between the samples.
 
-The NLP imposes h_i(x(σ)) + r ≤ 0 at ``obstacle_samples`` uniform samples, spacing h_s.  Where a
+The NLP imposes h_i(x(σ)) + r ≤ 0 at ``obstacle_samples`` uniform samples, spacing h_s (or at the
+element mesh's nodes, ``obstacle_points.py``: then h_s is their widest gap).  Where a
 string rests on a curved obstacle that converges only to first order in h_s: the contact can only
 sit at a sample, the string cuts in by about d²/2R at a distance d from it (R the obstacle's radius
 of curvature), and a string lying over a sphere or post slides along it into wells one spacing
@@ -41,6 +42,7 @@ from typing import Callable
 import numpy as np
 
 from ...model.obstacle_types import OBSTACLE_TYPES
+from .obstacle_points import nearest_row, row_spacing
 
 #: a slot is kept, and a solve is not repeated, while its minimum moved less than this × L
 TOLERANCE = 3e-4
@@ -151,9 +153,10 @@ def assign(
 
     The deepest ``slots`` minima ``found`` in slots, each kept at the index of the previous slot
     nearest to it (within two sample spacings), and kept exactly when it moved less than
-    TOLERANCE·L.
+    TOLERANCE·L.  ``samples``: the obstacle rows' arc lengths (uniform samples or mesh nodes,
+    ``obstacle_points.py``); the row nearest each filled slot is switched off.
     """
-    h_s = float(samples[1] - samples[0])
+    h_s = row_spacing(samples)
     s_new, c_new = found[0][:slots], found[1][:slots]
     s, on, c = np.zeros(slots), np.zeros(slots), np.full(slots, np.inf)
     free = list(range(slots))
@@ -187,5 +190,5 @@ def assign(
         previous is not None and np.array_equal(on, previous.on) and np.array_equal(s, previous.s)
     )
     samples_on = np.ones(len(samples))
-    samples_on[np.rint(s[on > 0] / h_s).astype(int)] = 0.0
+    samples_on[nearest_row(samples, s[on > 0])] = 0.0
     return SlotPlacement(s, on, samples_on, c, bool(kept))

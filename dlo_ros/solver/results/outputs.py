@@ -32,7 +32,8 @@ from ..build.parameters import ProblemParameters
 from ..native.outputs import ComputedOutputs
 from .moment_work import MomentWork, moment_work
 from .residual import EquilibriumResidual, PointAction
-from .result import GripWrench, SelfContact, ShapeResult
+from .contacts import contact_loads
+from .result import ContactLoad, GripWrench, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
 from .stability import is_stable, min_reduced_eigenvalue
 from ..state import SolverState
@@ -329,7 +330,14 @@ class ShapeOutputs:
             ipopt_status=run.ipopt_status,
             equilibrium_residual_m=out.residual.metres,
             self_contacts=out.self_contacts,
+            contact_loads=self._contact_loads(problem, state),
         )
+
+    def _contact_loads(self, problem: Problem, state: SolverState) -> list[ContactLoad]:
+        """Return the obstacles' line loads and point forces (``contacts.contact_loads``)."""
+        nlp = self.nlp
+        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        return contact_loads(nlp, problem, state.z, state.p, lam_si)
 
     def _self_contacts(self, z: np.ndarray, lam_si: np.ndarray) -> list[SelfContact]:
         """Return the force of each self-contact slot with a positive multiplier.

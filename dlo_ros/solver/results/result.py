@@ -45,6 +45,37 @@ class SelfContact:
 
 
 @dataclass
+class ContactLoad:
+    """What one obstacle exerts on the string over one stretch of contact (``contacts.py``).
+
+    kind 'line': consecutive obstacle rows all in contact (a strip lying on a floor): a
+    distributed load, ``line_load`` (K, 3) [N/m] at the rows' arc lengths ``s`` (K,) [m] and
+    centreline ``points`` (K, 3) [m], each row's multiplier force over its quadrature weight; an
+    end row also carries the point force at a lift-off point, lumped on its weight.  kind 'point':
+    an isolated contact (one row or a contact slot): ``line_load`` is empty.  ``force`` [N]: the
+    stretch's resultant (for 'point' the force itself); the forces of all stretches of obstacle
+    ``obstacle`` sum to ``contact_forces[obstacle]``.
+    """
+
+    obstacle: int
+    kind: str
+    s: np.ndarray
+    points: np.ndarray
+    force: np.ndarray
+    line_load: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    @property
+    def s_start(self) -> float:
+        """The first arc length [m] of the stretch."""
+        return float(self.s[0])
+
+    @property
+    def s_end(self) -> float:
+        """The last arc length [m] of the stretch."""
+        return float(self.s[-1])
+
+
+@dataclass
 class ShapeResult:
     """One equilibrium (or the reason there is none).
 
@@ -63,6 +94,9 @@ class ShapeResult:
     self-contact is not modelled and the string has no radius; JSON null for both).
     passes_through_itself: a model without self-contact answered a shape whose strands come closer
     than 2·radius (solver/results/self_pass.py); such a result is 'unverified', never 'ok'.
+    contact_loads: the obstacles' contact forces as the physics has them: distributed line loads
+    over stretches of contact and point forces (``ContactLoad``); ``contact_forces`` keeps each
+    obstacle's total.
     """
 
     status: str
@@ -93,6 +127,7 @@ class ShapeResult:
     self_contacts: list[SelfContact] = field(default_factory=list)
     min_self_distance: float = float("nan")
     passes_through_itself: bool = False
+    contact_loads: list[ContactLoad] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -133,6 +168,17 @@ class ShapeResult:
                     "gap": c.gap,
                 }
                 for c in self.self_contacts
+            ],
+            "contact_loads": [
+                {
+                    "obstacle": c.obstacle,
+                    "kind": c.kind,
+                    "s": arr(c.s),
+                    "points": arr(c.points),
+                    "force": arr(c.force),
+                    "line_load": arr(c.line_load),
+                }
+                for c in self.contact_loads
             ],
             "min_self_distance": self.min_self_distance
             if np.isfinite(self.min_self_distance)

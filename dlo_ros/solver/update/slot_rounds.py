@@ -148,7 +148,7 @@ def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> Solver
     for n in names:
         moved[lay[n]] = p[lay[n]]
     lam = start.lam_g.copy()
-    reach = 0.25 * (nlp.obstacle_s[1] - nlp.obstacle_s[0])
+    reach = 0.25 * nlp.obstacle_spacing
     for i, slot_rows in enumerate(nlp.slot_rows):
         rows = np.concatenate([nlp.obstacle_rows[i], slot_rows])
         old, new = parameters.slots(start.p, i), parameters.slots(moved, i)

@@ -1,0 +1,117 @@
+"""Where the obstacle rows sit along s, and the quadrature weight each row stands for.
+
+``solver.obstacle_points`` chooses the arc lengths σ_j of the rows h_i(x(σ_j)) + r ≤ 0:
+
+* 'samples': ``obstacle_samples`` uniformly spaced arc lengths (spacing L/(S − 1)), whatever the
+  model's discretisation;
+* 'nodes': the element mesh's own global LGL nodes (``ElementMesh.nodes``).  A mesh refined near a
+  contact (``build/mesh.py`` ``MeshSpec``) then resolves the contact as finely as it resolves the
+  shape, and no row is wasted where nothing touches.
+
+Why the LGL nodes and not the quadrature nodes.  The unknowns of the element model are the nodal
+values of the rotation field at the LGL nodes; an element with n nodes has n of them, and its
+centreline x(s) is a polynomial of degree n fixed by x at the element's start and those n values.
+Rows at its n LGL nodes are then as many as the element's unknowns, independent (LICQ holds on a
+strip lying flat: x is fixed there by its node values and nothing more), and a breakpoint (a grip,
+a load, a refinement's lift-off point) is a node, so a row sits exactly where an element ends.  The
+n + 8 Clenshaw–Curtis quadrature nodes of the energy would be more rows than unknowns on an
+element in contact along its length: dependent rows, whose multipliers are not unique.
+
+The weights.  With x of degree n on an element, the element's LGL rule (exact to degree 2n − 3)
+integrates any line load times a virtual displacement δx of the element's polynomial space
+exactly, so on elements lying in contact along their whole length the multipliers are λ_j = q w_j
+with q the line load [N/m] and w_j the global LGL weight of node j (the sum of both elements'
+weights at a breakpoint).  ``row_weights`` returns those (for 'samples': the trapezoid rule's,
+the first-order line load their multipliers stand for).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ...model.elements import ElementMesh
+from ...model.problem import Problem
+from ..options import SolverOptions
+
+
+def element_mesh_of(model: Any) -> ElementMesh | None:
+    """Return the model's element mesh (``model.mesh``), or None for a model without one."""
+    mesh = getattr(model, "mesh", None)
+    return mesh if isinstance(mesh, ElementMesh) else None
+
+
+def obstacle_arc_lengths(problem: Problem, options: SolverOptions, model: Any) -> np.ndarray:
+    """Return the arc lengths [m] of the obstacle rows (empty without obstacles).
+
+    'samples': ``obstacle_samples`` points over [0, L]; 'nodes': the model's element mesh nodes.
+    Raise ValueError naming ``solver.obstacle_points`` when 'nodes' meets a model without a mesh.
+    """
+    if not problem.obstacles:
+        return np.zeros(0)
+    if options.obstacle_points == "samples":
+        return np.linspace(0.0, problem.string.length, options.obstacle_samples)
+    mesh = element_mesh_of(model)
+    if mesh is None:
+        raise ValueError(
+            "solver.obstacle_points: 'nodes' needs an element model (model 'full' with rotation "
+            f"'director', or basis 'elements'); the {type(model).__name__} has no element mesh"
+        )
+    return np.asarray(mesh.nodes, dtype=float).copy()
+
+
+def lgl_weights(mesh: ElementMesh) -> np.ndarray:
+    """Return the global LGL quadrature weight [m] of each mesh node (Σ = L).
+
+    A breakpoint's weight is the sum of the end weights of the two elements it joins.
+    """
+    w = np.zeros(mesh.count)
+    for first, el in zip(mesh.first, mesh.elements):
+        w[first : first + el.count] += el.weights
+    return w
+
+
+def trapezoid_weights(s: np.ndarray) -> np.ndarray:
+    """Return the composite trapezoid rule's weights [m] on the ascending arc lengths ``s``."""
+    s = np.asarray(s, dtype=float)
+    if s.size < 2:
+        return np.zeros(s.size)
+    h = np.diff(s)
+    w = np.zeros(s.size)
+    w[:-1] += 0.5 * h
+    w[1:] += 0.5 * h
+    return w
+
+
+def row_weights(s: np.ndarray, options: SolverOptions, model: Any) -> np.ndarray:
+    """Return the quadrature weight [m] of each obstacle row at arc lengths ``s``.
+
+    'nodes': the mesh's LGL weights (exact line loads on elements in contact along their
+    length, see the module docstring); 'samples': the trapezoid rule's.
+    """
+    mesh = element_mesh_of(model)
+    if options.obstacle_points == "nodes" and mesh is not None and len(s) == mesh.count:
+        return lgl_weights(mesh)
+    return trapezoid_weights(s)
+
+
+def row_spacing(s: np.ndarray) -> float:
+    """Return the spacing [m] the slot placement measures in: the widest gap between rows.
+
+    For uniform samples, exactly the first gap (the samples' spacing, as before the rows could
+    sit on nodes); for nodes, the widest (a slot looks for a dip at least half of it wide).
+    """
+    s = np.asarray(s, dtype=float)
+    if s.size < 2:
+        return 0.0
+    gaps = np.diff(s)
+    first = float(gaps[0])
+    return first if np.allclose(gaps, first, rtol=1e-9, atol=0.0) else float(gaps.max())
+
+
+def nearest_row(s: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """Return, for each arc length in ``sigma``, the index of the nearest row of ``s``."""
+    s = np.asarray(s, dtype=float)
+    sigma = np.atleast_1d(np.asarray(sigma, dtype=float))
+    return np.argmin(np.abs(s[None, :] - sigma[:, None]), axis=1).astype(int)

@@ -38,18 +38,7 @@ from ...model.problem import Problem
 from ...model.ritz import RitzModel
 from ..native.blocks import NodeBlocks
 from ..native.settings import (
-    JOIN_TOLERANCE,
-    LEAVE_TOLERANCE,
-    NEWTON_ACTIVE_SET_CHANGES,
-    NEWTON_CHORD_CONTRACTION,
-    NEWTON_CHORD_START,
-    NEWTON_CHORD_STEPS,
-    NEWTON_CHORD_TOLERANCE,
-    NEWTON_DUAL_TOLERANCE,
-    NEWTON_MAX_STEP,
-    NEWTON_PRIMAL_TOLERANCE,
     NEWTON_REGULARISATION,
-    NEWTON_STEP_SWITCHES,
     NEWTON_STEPS,
 )
 from ..contact.obstacle_points import obstacle_arc_lengths, row_spacing, row_weights
@@ -79,22 +68,9 @@ from .structure import (
 )
 
 #: What callers import from here: ``StringNLP``, and (re-exported from the modules that hold them)
-#: the structure and reference-frame helpers and Newton's settings (``native.settings``).
+#: the structure and reference-frame helpers.
 __all__ = [
     "GRIP_POLE_MIN_DEG",
-    "JOIN_TOLERANCE",
-    "LEAVE_TOLERANCE",
-    "NEWTON_ACTIVE_SET_CHANGES",
-    "NEWTON_CHORD_CONTRACTION",
-    "NEWTON_CHORD_START",
-    "NEWTON_CHORD_STEPS",
-    "NEWTON_CHORD_TOLERANCE",
-    "NEWTON_DUAL_TOLERANCE",
-    "NEWTON_MAX_STEP",
-    "NEWTON_PRIMAL_TOLERANCE",
-    "NEWTON_REGULARISATION",
-    "NEWTON_STEP_SWITCHES",
-    "NEWTON_STEPS",
     "ParameterLayout",
     "StringNLP",
     "breakpoints",

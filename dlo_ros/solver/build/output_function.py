@@ -81,7 +81,7 @@ def _cross(a: ca.MX, b: ca.MX) -> ca.MX:
 def _cumulative(f: ca.MX, s: np.ndarray) -> ca.MX:
     """Return ∫_{s_0}^{s_k} f ds along the columns of f by the trapezoid rule.
 
-    ``residual._cumulative`` along the columns of f (3×K): ∫_{s_0}^{s_k} f ds by the trapezoid
+    ``residual.cumulative`` along the columns of f (3×K): ∫_{s_0}^{s_k} f ds by the trapezoid
     rule, plus f_0 s_0 for the first interval from s = 0.
     """
     steps = 0.5 * (f[:, 1:] + f[:, :-1]) * ca.repmat(ca.DM(np.diff(s)).T, 3, 1)

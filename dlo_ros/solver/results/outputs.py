@@ -212,6 +212,29 @@ class ShapeOutputs:
         evaluated = Evaluated(points, quats, grips, contacts, residual, flipped, touching)
         return self._assemble(problem, state, summary, evaluated, run)
 
+    def point_actions(
+        self, problem: Problem, current: Problem, state: SolverState
+    ) -> tuple[dict[str, GripWrench], list[PointAction], np.ndarray]:
+        """Return the grip reactions, the contact point actions and the SI multipliers of state.
+
+        What ``result`` hands the equilibrium residual (``wrenches.equilibrium``), for a reader
+        of the residual along the string (``element_error.py``); the numpy path, always.
+        """
+        nlp = self.nlp
+        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        frames_of = self.frames_of(current)
+        grips = {
+            g.name: wrench(nlp, current.string, frames_of, g, state.z, lam_si)
+            for g in problem.grips
+        }
+        actions = self._contacts(problem, state.z, state.p, lam_si)[1]
+        for c in self._self_contacts(state.z, lam_si):
+            actions += [
+                PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
+                PointAction(c.s_b, c.point_b, -c.force, np.zeros(3)),
+            ]
+        return grips, actions, lam_si
+
     def _compiled_result(
         self,
         problem: Problem,

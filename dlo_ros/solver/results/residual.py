@@ -79,7 +79,7 @@ def evaluation_grid(
     return 0.5 * (grid[1:] + grid[:-1])
 
 
-def equilibrium_residual(
+def moment_imbalance(
     s: np.ndarray,
     x: np.ndarray,
     moment_c: np.ndarray,
@@ -88,15 +88,10 @@ def equilibrium_residual(
     actions: list[PointAction],
     gravity: np.ndarray,
     total_weight: float,
-    length: float,
-    rf_min: float,
-    rf: np.ndarray | None = None,
-) -> EquilibriumResidual:
-    """Return the residual on grid s (module docstring); rf: Rf at s (default Rf_min).
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return δm = m_c − m_bal (K, 3) [N·m] on grid s and the net force Σ F [N] (3,).
 
-    x (K, 3), moment_c (K, 3): positions and constitutive moments at s; weight (K,) = ∫_0^s D dσ
-    and weight_moment (K, 3) = ∫_0^s D x dσ; total_weight = ∫_0^L D dσ [N]; gravity: unit
-    direction.
+    The arguments are ``equilibrium_residual``'s; the module docstring defines m_bal.
     """
     g = np.asarray(gravity, dtype=float)
     # ∫_0^s (x(σ) − x(s)) × D ĝ dσ = (∫ D x) × ĝ − x(s) × ĝ ∫ D
@@ -118,20 +113,44 @@ def equilibrium_residual(
         )  # how many actions lie strictly before each s
         m_bal -= c[before] - cross3(x, f[before])
         total = total + f[-1]
-    delta = moment_c - m_bal
+    return moment_c - m_bal, total
+
+
+def equilibrium_residual(
+    s: np.ndarray,
+    x: np.ndarray,
+    moment_c: np.ndarray,
+    weight: np.ndarray,
+    weight_moment: np.ndarray,
+    actions: list[PointAction],
+    gravity: np.ndarray,
+    total_weight: float,
+    length: float,
+    rf_min: float,
+    rf: np.ndarray | None = None,
+) -> EquilibriumResidual:
+    """Return the residual on grid s (module docstring); rf: Rf at s (default Rf_min).
+
+    x (K, 3), moment_c (K, 3): positions and constitutive moments at s; weight (K,) = ∫_0^s D dσ
+    and weight_moment (K, 3) = ∫_0^s D x dσ; total_weight = ∫_0^L D dσ [N]; gravity: unit
+    direction.
+    """
+    delta, total = moment_imbalance(
+        s, x, moment_c, weight, weight_moment, actions, gravity, total_weight
+    )
     d_m = float(np.max(np.linalg.norm(delta, axis=1))) if len(s) else 0.0
     d_f = float(np.linalg.norm(total))
     if len(s) < 2:
         return EquilibriumResidual(d_m, d_f, d_f * length**3 / (3 * rf_min))
     kappa = delta / (rf if rf is not None else np.full(len(s), rf_min))[:, None]
     tangent = np.gradient(x, s, axis=0)
-    phi = _cumulative(kappa, s)
-    dx = _cumulative(cross3(phi, tangent), s)
+    phi = cumulative(kappa, s)
+    dx = cumulative(cross3(phi, tangent), s)
     metres = float(np.max(np.linalg.norm(dx, axis=1))) + d_f * length**3 / (3 * rf_min)
     return EquilibriumResidual(d_m, d_f, metres)
 
 
-def _cumulative(f: np.ndarray, s: np.ndarray) -> np.ndarray:
+def cumulative(f: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Return ∫ f ds from 0 at every grid point by the trapezoid rule.
 
     ∫_{s_0}^{s_k} f ds by the trapezoid rule, starting at 0 (plus the first interval from s =

@@ -24,7 +24,13 @@ from ...model.problem import Grip, Problem, StringProperties
 from ...model.rotations import cross3, quat_to_matrix
 from ..build.frames import euler_angles_at, node_frame
 from ..build.nlp import StringNLP
-from .residual import EquilibriumResidual, PointAction, equilibrium_residual, evaluation_grid
+from .residual import (
+    RESIDUAL_POINTS,
+    EquilibriumResidual,
+    PointAction,
+    equilibrium_residual,
+    evaluation_grid,
+)
 from .result import GripWrench
 
 FramesOf = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -186,9 +192,27 @@ def equilibrium(
     obstacle ``contacts`` and, given the SI multipliers ``lam_si``, the relative positions'
     reactions (solver/results/residual.py).
     """
+    return equilibrium_residual(*balance_inputs(nlp, problem, z, grips, contacts, lam_si))
+
+
+def balance_inputs(
+    nlp: StringNLP,
+    problem: Problem,
+    z: np.ndarray,
+    grips: dict[str, GripWrench],
+    contacts: Sequence[PointAction] = (),
+    lam_si: np.ndarray | None = None,
+    points: int = RESIDUAL_POINTS,
+) -> tuple:
+    """Return ``equilibrium_residual``'s arguments for shape z (``equilibrium``'s arguments).
+
+    (s, x, m_c, ∫D, ∫Dx, actions, ĝ, total weight, L, Rf_min, Rf(s)): the grid, the shape and
+    its constitutive moment on it, and every point action (``moment_imbalance`` takes the first
+    eight; ``element_error.py`` reads the imbalance per element); ``points``: grid intervals.
+    """
     m, st, L = nlp.model, problem.string, problem.string.length
     grip_s = {g.name: g.s for g in problem.grips}
-    s = evaluation_grid(L, static_events(nlp, problem))
+    s = evaluation_grid(L, static_events(nlp, problem), points)
     nodes = m.quad.nodes
     rel_s = problem.relative_ends() if lam_si is not None else []
     point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads] + rel_s)
@@ -229,7 +253,7 @@ def equilibrium(
                 PointAction(rel.s_b, point_x[first + 2 * k + 1], force, np.zeros(3)),
             ]
     total = float(m.quad.weights @ d_nodes)
-    return equilibrium_residual(
+    return (
         s,
         x,
         moment_c,

@@ -166,7 +166,8 @@ def test_auto_does_not_publish_lost_turns():
     clamp turned in 30° steps to 2 turns: at 1.58 turns order 8's warm update fails and its cold fallback
     would publish a shape 2 turns short (Lk −0.42, energy 32.5 → 6.2 J).  That update is refused for its
     linking number, auto re-solves it at the next order, and every published shape has Lk = the turns
-    applied, to 2 turns."""
+    applied, to 2 turns.  (Auto on element meshes stays above order 8 here: the property is what is
+    tested; the refusal itself on order 8: test_known_failure_reproduced and the tests after it.)"""
     from dlo_ros.solver.auto import AutoShapeSolver
 
     p = clamped_pair(right=(START, 0.0, 0.0), bend=1.0, twist=0.7)
@@ -177,6 +178,7 @@ def test_auto_does_not_publish_lost_turns():
         r = sol.solve({"right": ((START, 0.0, 0.0), turned(np.radians(30 * k)))})
         assert r.ok, (30 * k, r.message)
         assert linking(r) == pytest.approx(30 * k / 360, abs=1e-2), (30 * k, linking(r), r.ipopt_status)
+    # With the element mesh (#37) auto no longer lowers this scene to order 8, where the lost-turn
+    # update arose; when a model does change the linking number, the update is re-solved richer
     escalations = [why for _, why, _ in sol.changes if "changed the linking number" in why]
-    assert escalations, "order 8 followed the twist to 2 turns: the lost-turn case no longer arises here"
-    assert r.model.order > 8
+    assert not escalations or r.model.order > 8, sol.changes

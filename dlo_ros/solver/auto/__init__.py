@@ -22,14 +22,21 @@ check fails.  Reductions and their checks:
   L/4
   of every grip g (the L/4 margin adds it a move before it can touch).  A move that brings a new
   one within that range rebuilds the NLP with it, keeping the warm start.
-* order — starts at 12; the lowest of 8, 12, 16, 24, 32 whose centreline moves by less than δ/2
-  when
-  the order is raised to the next one (the a-posteriori estimate, reported as estimated_error_m),
-  re-checked every ``recheck_every`` updates with a warm shadow solver; over δ/2 → next order.
-  Once per model the next lower order is tried: if it is within δ/4 of the current one, it is used.
-  At the highest order the last estimate stays (with "tolerance not met" in reasons).  Known limit:
-  with a neutral mode (no gravity, clamps along one axis) the shadow can drift along it and inflate
-  the estimate.
+* mesh (element models: the director model and the planar model, basis 'elements', split at
+  grips, loads and material knots) — starts with order 12 shared out by element length; its
+  a-posteriori estimate comes from the committed shape itself (``results/element_error.py``: the
+  strong-form equilibrium residual per element, times 2, or 4 when an element's Legendre
+  coefficients decay too slowly for a smooth field: a kink inside), no second model is solved.
+  Over δ/2 → the mesh ``adapt/rule.py`` proposes: elements split where not smooth or at a known
+  contact point, more nodes where smooth (``mesh_check.py``, at most MAX_UNKNOWNS nodes per field);
+  in a stream's check, under δ/50 a coarser one (hysteresis: a refined element lands at a fifth of
+  its share).  The estimate is reported as estimated_error_m.
+* order (a planar or Euler-angle model in another basis the scene chose) — the lowest of 8, 12,
+  16, 24, 32 whose centreline moves by less than δ/2 when the order is raised to the next one (a
+  warm shadow solver), re-checked every ``recheck_every`` updates; over δ/2 → next order; once per
+  model the next lower order is tried and kept within δ/4.  The topology and stability escalations
+  inside one update (``escalate.py``) also step up this ladder, with the default mesh of the
+  order.
 * reference frame (3D with ``rotation: euler`` only) — when a tangent of the checked shape comes
   within
   POLE_MIN_DEG of the Euler angles' pole n = R0 e_z, the same model with n turned to the direction
@@ -64,9 +71,11 @@ ShapeResult.model (``changed``: the changes made during that solve).
 
 Checks run on a worker thread from a snapshot of the solve (``checks='background'``, the default:
 the library and the node) or synchronously inside ``solve`` (``checks='sync'``: the CLI's one-shot
-answers), so that a stream never waits for a build: the worker builds the order shadow and the 3D
-checker into a pool of models, and a verdict to escalate is applied at the next ``solve`` by
-switching to the pooled model the check already built. The 3D model of a planar choice is built
+answers).  A cold solve (and ``check_now``) is checked before it returns; a streamed update k's
+check takes effect just before update k + CHECK_LAG in both modes (:mod:`.check_schedule`), so
+that a stream's models and shapes do not depend on timing: the worker builds the refined mesh (or
+the order shadow) and the 3D checker into a pool of models, and the verdict switches to the pooled
+model the check already built. The 3D model of a planar choice is built
 ahead (at start, and again after any change), so targets leaving the plane switch without a build;
 an obstacle within L/2 of reach is built ahead, and enters the NLP at L/4.  Only the basis order
 goes down during a run (tried once per model); a 3D model never returns to planar, and an obstacle,
@@ -76,7 +85,8 @@ The modules: :mod:`.auto_solver` (AutoShapeSolver, the coordinator), :mod:`.fact
 (make_solver), :mod:`.choice` (the model ladder), :mod:`.reach` (what a scene lets auto leave
 out), :mod:`.reduced` and :mod:`.pool` (the reduced models and the pool of built ones),
 :mod:`.background` (the check worker), :mod:`.follow` (a richer model when the targets need one,
-and models built ahead), :mod:`.checks` and :mod:`.shadows` (the a-posteriori checks),
+and models built ahead), :mod:`.checks`, :mod:`.mesh_check` and :mod:`.shadows` (the checks),
+:mod:`.check_schedule` (when a stream's check takes effect),
 :mod:`.escalate` (escalations inside one update), :mod:`.query_refine` and :mod:`.query_verify`
 (a query's refinement and what it may claim), :mod:`.report` (a result's ``model`` summary).
 """

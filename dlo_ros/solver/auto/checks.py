@@ -28,6 +28,7 @@ from ...model.problem import Problem
 from ..shape_solver import ShapeSolver
 from ..state import SolverState
 from .choice import MAX_SAMPLES, ORDERS, ModelChoice, full_choice
+from .mesh_check import has_elements, mesh_verdict
 from .pool import ModelPool
 from .shadows import penetration, planar_3d_eigenvalue, shadow_error, turned_frame
 
@@ -113,7 +114,9 @@ class ModelChecks:
         verdict = CheckVerdict(snap, estimate=choice.estimated_error_m)
         self._model_checks(snap, verdict)
         order_error = choice.order_error_m
-        if verdict.choice is None:
+        if verdict.choice is None and has_elements(snap.inner) and snap.state is not None:
+            order_error = self._mesh_check(snap, verdict)
+        elif verdict.choice is None:
             order_error = self._order_checks(snap, verdict, order_error, lower)
         self._sampling_check(snap, verdict, order_error)
         # prepare only a pooled model: never build one here, the stream may be switching to it
@@ -155,6 +158,24 @@ class ModelChecks:
             turned = turned_frame(self.pool, snap)
             if turned is not None:
                 verdict.choice, verdict.reason = turned
+
+    def _mesh_check(self, snap: CheckSnapshot, verdict: CheckVerdict) -> float:
+        """Check 4 on an element model: its own error estimate, refine or coarsen the mesh.
+
+        Returns the discretisation part of the estimate (``mesh_check.py``); the refined model is
+        built and warm-started here (the worker thread in the node), so a switch builds nothing.
+        """
+        reduced = self.pool.reduced.reduce(snap.choice, snap.problem)[0]
+        assert snap.state is not None
+        found = mesh_verdict(
+            snap.inner, snap.state, snap.choice, reduced, self.tolerance, coarsen=snap.limited
+        )
+        if found.choice is not None:
+            verdict.choice, verdict.reason = found.choice, found.reason
+            self.pool.solver_for(
+                found.choice, snap.problem, stream=False, source=snap.inner, state=snap.state
+            )
+        return found.estimate
 
     def _order_checks(
         self, snap: CheckSnapshot, verdict: CheckVerdict, order_error: float, lower: bool

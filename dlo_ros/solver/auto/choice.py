@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ...model.problem import Problem
+from ..build.mesh import MeshSpec
 from ..build.nlp import choose_reference_frame
 from ..options import SolverOptions
 from .reach import in_plane_obstacles, not_planar, reachable_obstacles, stretch_needed
@@ -39,7 +40,9 @@ class ModelChoice:
     ``obstacles``: indices into the scene's obstacles that are in the NLP.  ``frame``: R0
     (row-major 9) of a 3D model turned away from its Euler-angle pole (None: the default frame).
     ``samples``: obstacle_samples, the points along s where the obstacles are enforced.
-    ``self_contact``: self-contact rows in the NLP (3D director models only).
+    ``self_contact``: self-contact rows in the NLP (3D director models only).  ``mesh``: the
+    element mesh a refinement chose (``build/mesh.py``; None: ``order`` shared out by element
+    length over the scene's breakpoints).
     ``estimated_error_m`` is the last check's estimate, ``order_error_m`` its basis-order part (the
     rest: sampling), ``sampling_error_m`` the samples shadow's estimate (nan: not measured).
     """
@@ -55,6 +58,7 @@ class ModelChoice:
     frame: tuple | None = None
     samples: int = 41
     self_contact: bool = False
+    mesh: MeshSpec | None = None
     order_error_m: float = float("nan")
     sampling_error_m: float = float("nan")
 
@@ -69,6 +73,7 @@ class ModelChoice:
             self.frame,
             self.samples,
             self.self_contact,
+            self.mesh,
         )
 
     def reference_frame(self) -> np.ndarray | None:

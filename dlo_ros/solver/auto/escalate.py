@@ -41,7 +41,7 @@ def richer_for_topology(
         if order <= auto.choice.order:
             continue
         auto.switch(
-            replace(auto.choice, order=order, reasons=list(auto.choice.reasons)),
+            replace(auto.choice, order=order, mesh=None, reasons=list(auto.choice.reasons)),
             f"order {order}: the order-{auto.choice.order} model changed the linking number",
         )
         notes.append(auto.changes[-1][1])
@@ -77,7 +77,7 @@ def richer_for_stability(
     higher = [order for order in ORDERS if order > auto.choice.order]
     if not higher:
         return result, None
-    richer = replace(auto.choice, order=higher[0], reasons=list(auto.choice.reasons))
+    richer = replace(auto.choice, order=higher[0], mesh=None, reasons=list(auto.choice.reasons))
     poses = auto.reduced.poses(richer, problem)
     # a running check may be using that order as its shadow
     auto.worker.wait_for_model(("",) + richer.key())

@@ -81,6 +81,7 @@ class ModelPool:
                 compile=self.compile if stream else ("off" if self.compile == "off" else "cached"),
                 lazy_ipopt=not stream,
                 reference_frame=choice.reference_frame(),
+                mesh=choice.mesh,
             )
         else:
             solver.set_problem(reduced)

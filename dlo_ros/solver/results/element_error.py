@@ -132,18 +132,35 @@ def coefficient_decay(mesh: ElementMesh, values: np.ndarray) -> tuple[np.ndarray
     return np.array(rates), np.array(tails)
 
 
+def nodal_fields(model, z: np.ndarray) -> np.ndarray:
+    """Return the nodal values (N, c) of an element model's rotation fields.
+
+    The director model's quaternion or tangent components; a Ritz model of basis 'elements': its
+    angle fields' coefficients, which are their nodal values (φ, and θ, ψ when unknowns).
+    """
+    if hasattr(model, "node_values"):
+        return np.asarray(model.node_values(z))
+    names = [n for n in ("phi", "theta", "psi") if model.coefficients(z, n) is not None]
+    return np.stack([np.asarray(model.coefficients(z, n)) for n in names], axis=1)
+
+
 def element_errors(
     outputs: ShapeOutputs, problem: Problem, state: SolverState, current: Problem | None = None
 ) -> ElementErrors:
-    """Return the error estimate of the director solution ``state`` solving ``problem``.
+    """Return the error estimate of the element-model solution ``state`` solving ``problem``.
 
-    outputs: the solver's ``ShapeOutputs`` (its NLP, a ``DirectorModel`` on an ``ElementMesh``);
-    current: the scene whose grips anchor the wrenches' frames (default ``problem``).
+    outputs: the solver's ``ShapeOutputs`` (its NLP: a ``DirectorModel``, or a ``RitzModel`` of
+    basis 'elements', on an ``ElementMesh``); current: the scene whose grips anchor the wrenches'
+    frames (default ``problem``).
     """
     nlp = outputs.nlp
-    if not nlp.director:
-        raise ValueError("element_errors: the model has no element mesh (a director model has)")
-    model, mesh = nlp.model, nlp.model.mesh
+    model = nlp.model
+    mesh = getattr(model, "mesh", None)
+    if mesh is None:
+        raise ValueError(
+            "element_errors: the model has no element mesh (the director model and basis "
+            "'elements' have)"
+        )
     grips, actions, lam_si = outputs.point_actions(problem, current or problem, state)
     points = max(MIN_POINTS, POINTS_PER_NODE * mesh.count)
     args = balance_inputs(nlp, problem, state.z, grips, actions, lam_si, points=points)
@@ -162,7 +179,7 @@ def element_errors(
         total += dx
     lever = float(np.linalg.norm(force)) * length**3 / (3 * rf_min)
     residual = float(np.max(np.linalg.norm(total, axis=1))) + lever
-    rates, tails = coefficient_decay(mesh, model.node_values(state.z))
+    rates, tails = coefficient_decay(mesh, nodal_fields(model, state.z))
     safety = KINK_SAFETY if np.any(rates > SMOOTH_RATE) else SAFETY
     return ElementErrors(
         per_element_m=per,

@@ -11,11 +11,11 @@ share of the tolerance δ [m] is b_k = δ · h_k / L when the estimates add up t
   geometric decay predicts bring e_k to ``target`` · b_k (split at the middle instead when that
   needs more than ``max_nodes``);
 * coarsen when e_k < ``coarsen`` · b_k: remove the nodes the decay predicts it can spare while
-  staying under ``target`` · b_k, at most ``max_removed`` per pass (the fitted decay of a solution
-  resolved to rounding predicts far more than it can spare: 12 → 4 nodes took an estimate of
-  0.17 mm to 0.17 m); two neighbours both at their fewest nodes and both coarse merge
-  into one element with the same unknowns, unless the breakpoint between them is one of the
-  scene's (``fixed``) or a known kink.
+  staying under ``target`` · b_k, at most ``max_removed`` per pass when set (auto sets 2: the
+  fitted decay of a solution resolved to rounding predicts far more than it can spare, 12 → 4
+  nodes took an estimate of 0.17 mm to 0.17 m); two neighbours both at their fewest nodes and
+  both coarse merge into one element with the same unknowns, unless the breakpoint between them
+  is one of the scene's (``fixed``) or a known kink.
 
 The gap between ``refine`` and ``coarsen`` (25× by default) is the hysteresis: an element refined
 or coarsened lands at ``target`` · b_k, strictly between them, so the rule applied again to its
@@ -46,7 +46,7 @@ class RefinementRule:
     share: str = "length"
     min_nodes: int = 4
     max_nodes: int = 32
-    max_removed: int = 2
+    max_removed: int | None = None
     max_unknowns: int = 200
     min_size: float = 1e-3
 
@@ -165,9 +165,9 @@ def next_mesh(
                 plan[k], total = new, grown
                 changed.add(int(k))
         elif errors[k] < rule.coarsen * budgets[k] and n > rule.min_nodes:
-            fewer = min(
-                -_nodes_for(errors[k], rule.target * budgets[k], rates[k]), rule.max_removed
-            )
+            fewer = -_nodes_for(errors[k], rule.target * budgets[k], rates[k])
+            if rule.max_removed is not None:
+                fewer = min(fewer, rule.max_removed)
             plan[k] = [(lo, hi, max(rule.min_nodes, n - max(fewer, 0)))]
             changed.add(int(k))
     coarse = [k not in changed and errors[k] < rule.coarsen * budgets[k] for k in range(len(plan))]

@@ -9,7 +9,8 @@ per element and each element's coefficient decay — so no second model is solve
   holds a known contact point, more nodes where it is smooth), with δ/2 as the rule's tolerance;
 * in a stream's check, estimate < δ/50 and the rule coarsens (hysteresis: refined elements land
   at a fifth of their share, so they are not coarsened back): the coarser mesh;
-* else keep the mesh, with the estimate.
+* else keep the mesh, with the estimate — also when the estimate is at its floor (1e-10·L, the
+  accuracy a converged solve can be held to): a tolerance below it is reported as not met.
 
 A model without an element mesh (a planar or Euler-angle model in another basis than 'elements')
 keeps the order ladder (``checks.py``).
@@ -25,7 +26,7 @@ from ..adapt.rule import ElementEstimates, RefinementRule, next_mesh, unknowns
 from ..adapt.smoothness import contact_kinks
 from ..build.mesh import mesh_spec
 from ..build.structure import breakpoints
-from ..results.element_error import element_errors
+from ..results.element_error import FLOOR, element_errors
 from .choice import ModelChoice
 
 #: the most nodes per field a refinement may reach (the order ladder stopped at 32 in one
@@ -65,7 +66,9 @@ def mesh_verdict(
     errors = element_errors(solver.outputs, problem, state)
     estimate = float(errors.estimate_m)
     spec = choice.mesh or mesh_spec(solver.nlp.model.mesh)
-    rule = RefinementRule(tolerance=tolerance / 2, min_nodes=MIN_NODES, max_unknowns=MAX_UNKNOWNS)
+    rule = RefinementRule(
+        tolerance=tolerance / 2, min_nodes=MIN_NODES, max_unknowns=MAX_UNKNOWNS, max_removed=2
+    )
     # the per-element estimates carry the global estimate's safety factor, so that their sum
     # bounds it as the rule's share of δ/2 assumes
     scale = estimate / max(float(np.sum(errors.per_element_m)), 1e-300)
@@ -78,6 +81,10 @@ def mesh_verdict(
     if following is None:
         return MeshVerdict(None, "", estimate)
     before, after = unknowns(spec.counts or ()), unknowns(following.counts or ())
+    if estimate <= FLOOR * problem.string.length * (1 + 1e-9):
+        # at the accuracy a converged solve can be held to: no mesh lowers it (a tolerance below
+        # it is reported as not met)
+        return MeshVerdict(None, "", estimate)
     if estimate > tolerance / 2:
         why = f"error estimate {estimate:.3g} m > {tolerance / 2:.3g} m"
     elif coarsen and estimate < COARSEN_BELOW * tolerance and after < before:

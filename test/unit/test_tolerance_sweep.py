@@ -10,7 +10,7 @@ the exact or independent answer:
 * the tip-loaded cantilever, P L²/EI = 3 (the large-deflection elastica in elliptic integrals,
   test_kirchhoff_reference.tip_loaded_cantilever): the tip;
 * the heavy cantilever, D L³/EI = 3: shooting on the Kirchhoff rod (test/reference/kirchhoff.py);
-* the paper's Fig. 2 (clamp and tangent grip, Rf/Rt = 100) at chords 0.8 and 0.6 L: the planar
+* the paper's Fig. 2 (clamp and tangent grip, Rf/Rt = 100) at chords 0.8, 0.6 and 0.5 L: the planar
   elastica where it is stable and the shooting solution off the plane where it is not
   (test_fig2_reference.reference), compared modulo the neutral rotation about the chord.
 """
@@ -100,6 +100,7 @@ CASES = {
     "heavy": heavy,
     "fig2_0.8": fig2(0.8),
     "fig2_0.6": fig2(0.6),
+    "fig2_0.5": fig2(0.5),
 }
 
 

@@ -184,7 +184,8 @@ def main() -> None:
             # default 41 samples: 1 cm; see the auto module docstring)
             ref_solver = ShapeSolver(with_checked_poses(prob, targets[-1]),
                                      replace(opts, model="full", order=32, quadrature_nodes=80,
-                                             obstacle_samples=MAX_SAMPLES), compile="off",
+                                             obstacle_samples=MAX_SAMPLES, update_time_limit=0.0),
+                                     compile="off",
                                      reference_frame=frame)
             ref_solver.adopt_warm_start(solver)
             ref = ref_solver.solve(targets[-1])

@@ -46,11 +46,11 @@ from .contact import topology as TP
 from .options import SolverOptions
 from .parallel.batch import query_many
 from .results.outputs import ShapeOutputs, no_shape
-from .results.residual import EquilibriumResidual, PointAction
+from .results.residual import EquilibriumResidual, PointAction, equilibrium_residual
 from .results.result import GripWrench, ShapeResult
 from .results.stability import is_stable, min_reduced_eigenvalue
 from .results.summary import ModelSummary
-from .results.wrenches import equilibrium
+from .results.wrenches import balance_inputs
 from .state import SolverState
 from .update import attempts as AT
 from .update.context import SolverParts, UpdateContext
@@ -482,7 +482,7 @@ class ShapeSolver:
         The grip reactions ``grips``, the obstacle ``contacts`` and (given the SI multipliers) the
         relative positions' reactions (solver/results/residual.py).
         """
-        return equilibrium(self.nlp, problem, z, grips, contacts, lam_si)
+        return equilibrium_residual(balance_inputs(self.nlp, problem, z, grips, contacts, lam_si))
 
     # ---- results -------------------------------------------------------------------------------
     def _failure(self, status: str, message: str, t0: float) -> ShapeResult:

@@ -33,13 +33,17 @@ def builds(monkeypatch):
     return names
 
 
-def stream_until_checked(solver, problem, steps=400, dx=0.0005):
+def in_plane_move(problem, i, dx=0.0005):
+    """The right grip's i-th target of a small move in the plane (y = 0)."""
+    right = problem.grip("right").pose
+    return {"right": (right.position + np.array([0.0, 0.0, dx * np.sin(i / 10)]), right.orientation)}
+
+
+def stream_until_checked(solver, problem, steps=400):
     """Stream small moves in the plane (y = 0) until the current model's check has run."""
-    q = problem.grip("right").pose.orientation
-    x0 = problem.grip("right").pose.position
     r = None
     for i in range(steps):
-        r = solver.solve({"right": (x0 + np.array([0.0, 0.0, dx * np.sin(i / 10)]), q)})
+        r = solver.solve(in_plane_move(problem, i))
         assert r.ok, r.message
         if r.model.checked and not solver.checks_pending:
             return r
@@ -47,13 +51,11 @@ def stream_until_checked(solver, problem, steps=400, dx=0.0005):
     raise AssertionError(f"checks did not finish in {steps} updates: {r.model}")
 
 
-def stream_fixed(solver, problem, steps=40, dx=0.0005):
+def stream_fixed(solver, problem, steps=40):
     """``steps`` small moves in the plane (y = 0); returns the last result."""
-    q = problem.grip("right").pose.orientation
-    x0 = problem.grip("right").pose.position
     r = None
     for i in range(steps):
-        r = solver.solve({"right": (x0 + np.array([0.0, 0.0, dx * np.sin(i / 10)]), q)})
+        r = solver.solve(in_plane_move(problem, i))
         assert r.ok, r.message
     return r
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dlo_ros.model.rotations import cross3
-from dlo_ros.solver.results.residual import PointAction, equilibrium_residual
+from dlo_ros.solver.results.residual import BalanceInputs, PointAction, equilibrium_residual
 
 
 def _direct_delta(s, x, moment_c, weight, weight_moment, actions, g):
@@ -36,7 +36,7 @@ def test_balance_moment_matches_its_definition(n_actions):
         s_a[-1] = s[30]
     actions = [PointAction(float(sa), rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)) for sa in s_a]
     delta = _direct_delta(s, x, moment_c, weight, weight_moment, actions, g)
-    r = equilibrium_residual(s, x, moment_c, weight, weight_moment, actions, g, 2.0, 1.0, 1.0)
+    r = equilibrium_residual(BalanceInputs(s, x, moment_c, weight, weight_moment, actions, g, 2.0, 1.0, 1.0))
     assert r.moment == pytest.approx(np.max(np.linalg.norm(delta, axis=1)), rel=1e-12)
     total = 2.0 * g + sum((a.force for a in actions), np.zeros(3))
     assert r.force == pytest.approx(np.linalg.norm(total), rel=1e-12)

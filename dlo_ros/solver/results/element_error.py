@@ -163,10 +163,10 @@ def element_errors(
         )
     grips, actions, lam_si = outputs.point_actions(problem, current or problem, state)
     points = max(MIN_POINTS, POINTS_PER_NODE * mesh.count)
-    args = balance_inputs(nlp, problem, state.z, grips, actions, lam_si, points=points)
-    s, x = args[0], args[1]
-    length, rf_min, rf = args[8], args[9], args[10]
-    delta, force = moment_imbalance(*args[:8])
+    balance = balance_inputs(nlp, problem, state.z, grips, actions, lam_si, points=points)
+    s, x, length, rf_min = balance.s, balance.x, balance.length, balance.rf_min
+    rf = balance.rf if balance.rf is not None else np.full(len(s), rf_min)
+    delta, force = moment_imbalance(balance)
     kappa = delta / rf[:, None]
     tangent = np.gradient(x, s, axis=0)
     which = mesh.element_of(s)

@@ -31,13 +31,13 @@ from ..options import SolverOptions
 from ..build.parameters import ProblemParameters
 from ..native.outputs import ComputedOutputs
 from .moment_work import MomentWork, moment_work
-from .residual import EquilibriumResidual, PointAction
+from .residual import EquilibriumResidual, PointAction, equilibrium_residual
 from .contacts import contact_loads
 from .result import ContactLoad, GripWrench, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
 from .stability import is_stable, min_reduced_eigenvalue
 from ..state import SolverState
-from .wrenches import FramesOf, equilibrium, wrench
+from .wrenches import FramesOf, balance_inputs, wrench
 
 
 def output_s(nlp: StringNLP, options: SolverOptions) -> np.ndarray:
@@ -199,7 +199,7 @@ class ShapeOutputs:
                 PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
                 PointAction(c.s_b, c.point_b, -c.force, np.zeros(3)),
             ]
-        residual = equilibrium(nlp, problem, z, grips, actions, lam_si)
+        residual = equilibrium_residual(balance_inputs(nlp, problem, z, grips, actions, lam_si))
         flipped = F.flipped_grips(nlp, problem, z) if nlp.director else ""
         # IPOPT's answer keeps an active row's distance within ~1e-9 L of D (barrier
         # complementarity); self_contacts is empty without slots

@@ -79,24 +79,39 @@ def evaluation_grid(
     return 0.5 * (grid[1:] + grid[:-1])
 
 
-def moment_imbalance(
-    s: np.ndarray,
-    x: np.ndarray,
-    moment_c: np.ndarray,
-    weight: np.ndarray,
-    weight_moment: np.ndarray,
-    actions: list[PointAction],
-    gravity: np.ndarray,
-    total_weight: float,
-) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class BalanceInputs:
+    """What the balance needs on a grid s (``wrenches.balance_inputs`` makes it for a shape).
+
+    x (K, 3), moment_c (K, 3): positions and constitutive moments at s [m, N·m]; weight (K,) =
+    ∫_0^s D dσ [N] and weight_moment (K, 3) = ∫_0^s D x dσ; actions: every point action; gravity:
+    unit direction; total_weight = ∫_0^L D dσ [N]; length L [m]; rf_min [N·m²]; rf: Rf at s
+    (None: Rf_min everywhere).
+    """
+
+    s: np.ndarray
+    x: np.ndarray
+    moment_c: np.ndarray
+    weight: np.ndarray
+    weight_moment: np.ndarray
+    actions: list[PointAction]
+    gravity: np.ndarray
+    total_weight: float
+    length: float
+    rf_min: float
+    rf: np.ndarray | None = None
+
+
+def moment_imbalance(b: BalanceInputs) -> tuple[np.ndarray, np.ndarray]:
     """Return δm = m_c − m_bal (K, 3) [N·m] on grid s and the net force Σ F [N] (3,).
 
-    The arguments are ``equilibrium_residual``'s; the module docstring defines m_bal.
+    The module docstring defines m_bal.
     """
-    g = np.asarray(gravity, dtype=float)
+    s, x, actions = b.s, b.x, b.actions
+    g = np.asarray(b.gravity, dtype=float)
     # ∫_0^s (x(σ) − x(s)) × D ĝ dσ = (∫ D x) × ĝ − x(s) × ĝ ∫ D
-    m_bal = -(cross3(weight_moment, g) - cross3(x, g) * weight[:, None])
-    total = total_weight * g
+    m_bal = -(cross3(b.weight_moment, g) - cross3(x, g) * b.weight[:, None])
+    total = b.total_weight * g
     if actions:
         # Σ_{a: s_a < s} (x_a − x(s)) × F_a + T_a = C(s) − x(s) × F(s), with C and F running sums
         # over the actions sorted by s (C_a = x_a × F_a + T_a): one pass instead of one masked
@@ -113,37 +128,19 @@ def moment_imbalance(
         )  # how many actions lie strictly before each s
         m_bal -= c[before] - cross3(x, f[before])
         total = total + f[-1]
-    return moment_c - m_bal, total
+    return b.moment_c - m_bal, total
 
 
-def equilibrium_residual(
-    s: np.ndarray,
-    x: np.ndarray,
-    moment_c: np.ndarray,
-    weight: np.ndarray,
-    weight_moment: np.ndarray,
-    actions: list[PointAction],
-    gravity: np.ndarray,
-    total_weight: float,
-    length: float,
-    rf_min: float,
-    rf: np.ndarray | None = None,
-) -> EquilibriumResidual:
-    """Return the residual on grid s (module docstring); rf: Rf at s (default Rf_min).
-
-    x (K, 3), moment_c (K, 3): positions and constitutive moments at s; weight (K,) = ∫_0^s D dσ
-    and weight_moment (K, 3) = ∫_0^s D x dσ; total_weight = ∫_0^L D dσ [N]; gravity: unit
-    direction.
-    """
-    delta, total = moment_imbalance(
-        s, x, moment_c, weight, weight_moment, actions, gravity, total_weight
-    )
+def equilibrium_residual(b: BalanceInputs) -> EquilibriumResidual:
+    """Return the residual on grid ``b.s`` (module docstring)."""
+    delta, total = moment_imbalance(b)
+    s, length, rf_min = b.s, b.length, b.rf_min
     d_m = float(np.max(np.linalg.norm(delta, axis=1))) if len(s) else 0.0
     d_f = float(np.linalg.norm(total))
     if len(s) < 2:
         return EquilibriumResidual(d_m, d_f, d_f * length**3 / (3 * rf_min))
-    kappa = delta / (rf if rf is not None else np.full(len(s), rf_min))[:, None]
-    tangent = np.gradient(x, s, axis=0)
+    kappa = delta / (b.rf if b.rf is not None else np.full(len(s), rf_min))[:, None]
+    tangent = np.gradient(b.x, s, axis=0)
     phi = cumulative(kappa, s)
     dx = cumulative(cross3(phi, tangent), s)
     metres = float(np.max(np.linalg.norm(dx, axis=1))) + d_f * length**3 / (3 * rf_min)

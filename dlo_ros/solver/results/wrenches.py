@@ -24,13 +24,7 @@ from ...model.problem import Grip, Problem, StringProperties
 from ...model.rotations import cross3, quat_to_matrix
 from ..build.frames import euler_angles_at, node_frame
 from ..build.nlp import StringNLP
-from .residual import (
-    RESIDUAL_POINTS,
-    EquilibriumResidual,
-    PointAction,
-    equilibrium_residual,
-    evaluation_grid,
-)
+from .residual import RESIDUAL_POINTS, BalanceInputs, PointAction, evaluation_grid
 from .result import GripWrench
 
 FramesOf = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -178,23 +172,6 @@ def relative_forces(nlp: StringNLP, lam_si: np.ndarray) -> list[np.ndarray]:
     return [-nlp.relative_axes.T @ lam_si[rows] for rows in nlp.relative_rows]
 
 
-def equilibrium(
-    nlp: StringNLP,
-    problem: Problem,
-    z: np.ndarray,
-    grips: dict[str, GripWrench],
-    contacts: Sequence[PointAction] = (),
-    lam_si: np.ndarray | None = None,
-) -> EquilibriumResidual:
-    """Return the strong-form equilibrium residual of shape z.
-
-    The strong-form equilibrium residual of shape z under the grip reactions ``grips``, the
-    obstacle ``contacts`` and, given the SI multipliers ``lam_si``, the relative positions'
-    reactions (solver/results/residual.py).
-    """
-    return equilibrium_residual(*balance_inputs(nlp, problem, z, grips, contacts, lam_si))
-
-
 def balance_inputs(
     nlp: StringNLP,
     problem: Problem,
@@ -203,12 +180,13 @@ def balance_inputs(
     contacts: Sequence[PointAction] = (),
     lam_si: np.ndarray | None = None,
     points: int = RESIDUAL_POINTS,
-) -> tuple:
-    """Return ``equilibrium_residual``'s arguments for shape z (``equilibrium``'s arguments).
+) -> BalanceInputs:
+    """Return what the strong-form balance of shape z needs (``residual.BalanceInputs``).
 
-    (s, x, m_c, ∫D, ∫Dx, actions, ĝ, total weight, L, Rf_min, Rf(s)): the grid, the shape and
-    its constitutive moment on it, and every point action (``moment_imbalance`` takes the first
-    eight; ``element_error.py`` reads the imbalance per element); ``points``: grid intervals.
+    The grid, the shape and its constitutive moment on it, and every point action: the grip
+    reactions ``grips``, the obstacle ``contacts`` and, given the SI multipliers ``lam_si``, the
+    relative positions' reactions.  ``equilibrium_residual`` of it is the shape's residual;
+    ``element_error.py`` reads the imbalance per element; ``points``: grid intervals.
     """
     m, st, L = nlp.model, problem.string, problem.string.length
     grip_s = {g.name: g.s for g in problem.grips}
@@ -253,7 +231,7 @@ def balance_inputs(
                 PointAction(rel.s_b, point_x[first + 2 * k + 1], force, np.zeros(3)),
             ]
     total = float(m.quad.weights @ d_nodes)
-    return (
+    return BalanceInputs(
         s,
         x,
         moment_c,

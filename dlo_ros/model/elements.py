@@ -213,3 +213,9 @@ class ElementMesh:
                     else self.quads[e].integration_matrix(s[part] - lo)
                 )
         return W
+
+
+def element_mesh_of(model) -> ElementMesh | None:
+    """Return the model's element mesh (``model.mesh``), or None for a model without one."""
+    mesh = getattr(model, "mesh", None)
+    return mesh if isinstance(mesh, ElementMesh) else None

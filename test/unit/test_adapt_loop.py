@@ -24,8 +24,10 @@ from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import scene_from_dict
 from dlo_ros.solver.adapt.loop import refine_until
 from dlo_ros.solver.adapt.rule import ElementEstimates, RefinementRule
-from dlo_ros.solver.adapt.smoothness import contact_kinks, decay_rates, element_decay
+from dlo_ros.solver.adapt.smoothness import contact_kinks
+from dlo_ros.model.elements import ElementMesh
 from dlo_ros.solver.build.mesh import MeshSpec
+from dlo_ros.solver.results.element_error import coefficient_decay
 from dlo_ros.solver.shape_solver import ShapeSolver
 from reference import post_contact
 
@@ -105,9 +107,8 @@ def tangent_error(ref: post_contact.PostContact):
             want = np.stack([dx(s), 0 * s, dz(s)], axis=1)
             gap = np.linalg.norm(solver.model.tangents_at(z, s) - want, axis=1)
             errors.append(0.5 * (hi - lo) * float(weights @ gap))
-        return ElementEstimates(
-            np.array(errors), decay_rates(solver.model, z), contact_kinks(solver)
-        )
+        rates = coefficient_decay(mesh, solver.model.node_values(z))[0]
+        return ElementEstimates(np.array(errors), rates, contact_kinks(solver))
 
     return estimator
 
@@ -117,11 +118,16 @@ def deviation(result, ref) -> float:
 
 
 def test_coefficient_decay_tells_smooth_from_kinked():
-    tau = np.cos(np.pi * np.arange(15) / 14)[::-1]
-    smooth = np.exp(0.8 * tau)[:, None]
-    kinked = ((tau - 0.1) * np.abs(tau - 0.1))[:, None]  # a jump of t'' (a point force)
-    assert element_decay(smooth, tau) < 0.3 < 0.6 < element_decay(kinked, tau)
-    assert element_decay(tau[:, None] ** 2, tau) == 0.0  # resolved to rounding
+    mesh = ElementMesh(2.0, [], 15)  # one element: s = τ + 1
+
+    def decay(values):
+        return float(coefficient_decay(mesh, values[:, None])[0][0])
+
+    tau = mesh.elements[0].tau
+    smooth = np.exp(0.8 * tau)
+    kinked = (tau - 0.1) * np.abs(tau - 0.1)  # a jump of t'' (a point force)
+    assert decay(smooth) < 0.3 < 0.6 < decay(kinked)
+    assert decay(tau**2) == 0.0  # resolved to rounding
 
 
 def test_the_loop_splits_at_the_contact_and_beats_uniform_p_refinement(reference):

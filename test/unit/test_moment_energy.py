@@ -72,16 +72,20 @@ def stream(solver, beta: float):
     return r
 
 
+def solved(model: str, how: str):
+    """(result, β): a cold solve, or ('stream') the stream to a clamp turned by β = 0.3 rad."""
+    solver = make(model)
+    r = solver.solve()
+    if how != "stream":
+        return r, 0.0
+    assert r.ok, r.message
+    return stream(solver, 0.3), 0.3
+
+
 @pytest.mark.parametrize("how", ["cold", "stream"])
 def test_full_model_total_is_exact(how):
     """The 3D (director) model: U − W of the planar elastica to the solver's accuracy."""
-    solver = make("full")
-    r = solver.solve()
-    beta = 0.0
-    if how == "stream":
-        assert r.ok, r.message
-        beta = 0.3
-        r = stream(solver, beta)
+    r, beta = solved("full", how)
     assert r.ok and r.stable, r.message
     assert r.energy_note == ""
     assert r.energy["bend"] == pytest.approx(EXACT_BEND, abs=1e-8)
@@ -98,13 +102,7 @@ def test_planar_models_total_means_u_minus_w(model, how):
     approaches −1 J from above (−0.970 at order 12, −0.978 at 16): within 5 %.  What the energy
     means is checked exactly, against the turn the result's own orientations show.
     """
-    solver = make(model)
-    r = solver.solve()
-    beta = 0.0
-    if how == "stream":
-        assert r.ok, r.message
-        beta = 0.3
-        r = stream(solver, beta)
+    r, beta = solved(model, how)
     assert r.ok, r.message
     assert r.energy_note == ""
     work = MOMENT * turn_at_load(r)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ...model.elements import element_mesh_of
 from ..adapt.rule import ElementEstimates, RefinementRule, next_mesh, unknowns
 from ..adapt.smoothness import contact_kinks
 from ..build.mesh import mesh_spec
@@ -51,7 +52,7 @@ class MeshVerdict:
 
 def has_elements(solver) -> bool:
     """Tell whether ``solver``'s model is on an element mesh (director, or basis 'elements')."""
-    return getattr(solver.nlp.model, "mesh", None) is not None
+    return element_mesh_of(solver.nlp.model) is not None
 
 
 def mesh_verdict(

@@ -31,15 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from ...model.elements import ElementMesh
+from ...model.elements import ElementMesh, element_mesh_of
 from ...model.problem import Problem
 from ..options import SolverOptions
-
-
-def element_mesh_of(model: Any) -> ElementMesh | None:
-    """Return the model's element mesh (``model.mesh``), or None for a model without one."""
-    mesh = getattr(model, "mesh", None)
-    return mesh if isinstance(mesh, ElementMesh) else None
 
 
 def obstacle_arc_lengths(problem: Problem, options: SolverOptions, model: Any) -> np.ndarray:

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.polynomial import legendre as Leg
 
-from ...model.elements import ElementMesh
+from ...model.elements import ElementMesh, element_mesh_of
 from ...model.problem import Problem
 from ...model.rotations import cross3
 from ..state import SolverState
@@ -155,7 +155,7 @@ def element_errors(
     """
     nlp = outputs.nlp
     model = nlp.model
-    mesh = getattr(model, "mesh", None)
+    mesh = element_mesh_of(model)
     if mesh is None:
         raise ValueError(
             "element_errors: the model has no element mesh (the director model and basis "

@@ -10,7 +10,8 @@ and material kink).  Two kinds of rotation field:
   (R' = R [Ω]×, R = [t d1 d2]):
 
       Ω = 2 vec(q* ⊗ q') / |q|²  =  2 (w q'_v − w' q_v − q_v × q'_v) / |q|²,
-      U_bend = ∫ ½ Rf (Ω_2² + Ω_3²) ds,   U_twist = ∫ ½ Rt Ω_1² ds.
+      U_bend = ∫ ½ Rf (Ω_2² + Ω_3²) ds,   U_twist = ∫ ½ Rt Ω_1² ds;
+  a strip (``lateral``: string.lateral_bend_stiffness R_l, frame only): ∫ ½ (Rf Ω_2² + R_l Ω_3²).
 
 * tangent (twist not held: at most one clamp or Rt = 0, so the string untwists to Ω_1 ≡ 0):
   t(s) = Σ_i ℓ_i(s) t_i with |t_i|² = 1 at the nodes, unit tangent t/|t| and
@@ -46,6 +47,7 @@ import numpy as np
 from .centreline import positions_sym, weight_energy_sym
 from .elements import ElementMesh
 from .rotations import cross3
+from .transport import transported_frames
 
 
 #: weight of the gauge term ½ c Rf ((ln|v|)')² relative to the bend energy: large enough to forbid
@@ -184,13 +186,7 @@ def integrands(rows, drows, frame: bool):
     tangent: b = (|t'|² − (1 − c)(t·t')²/|t|²) / |t|²  = κ² + c ((ln|t|)')²  (the same gauge term).
     """
     if frame:
-        x, y, zq, wq = rows
-        dx, dy, dz, dw = drows
-        n2 = x * x + y * y + zq * zq + wq * wq
-        o1 = 2 * (wq * dx - dw * x - (y * dz - zq * dy)) / n2
-        o2 = 2 * (wq * dy - dw * y - (zq * dx - x * dz)) / n2
-        o3 = 2 * (wq * dz - dw * zq - (x * dy - y * dx)) / n2
-        o0 = 2 * (x * dx + y * dy + zq * dz + wq * dw) / n2
+        o0, o1, o2, o3 = quaternion_rates(rows, drows)
         return o2 * o2 + o3 * o3 + GAUGE_WEIGHT * o0 * o0, o1 * o1, frame_columns(rows, ca)[0]
     n2 = rows[0] ** 2 + rows[1] ** 2 + rows[2] ** 2
     tdt = rows[0] * drows[0] + rows[1] * drows[1] + rows[2] * drows[2]
@@ -203,12 +199,39 @@ def integrands(rows, drows, frame: bool):
     )
 
 
+def quaternion_rates(rows, drows):
+    """(Ω_0, Ω_1, Ω_2, Ω_3) of a quaternion field: ``integrands``' gauge rate and Ω (body)."""
+    x, y, zq, wq = rows
+    dx, dy, dz, dw = drows
+    n2 = x * x + y * y + zq * zq + wq * wq
+    o1 = 2 * (wq * dx - dw * x - (y * dz - zq * dy)) / n2
+    o2 = 2 * (wq * dy - dw * y - (zq * dx - x * dz)) / n2
+    o3 = 2 * (wq * dz - dw * zq - (x * dy - y * dx)) / n2
+    return 2 * (x * dx + y * dy + zq * dz + wq * dw) / n2, o1, o2, o3
+
+
+def strip_integrands(rows, drows):
+    """Return (b_1, b_2, τ, t̂) of a strip's quaternion field (``integrands``' frame case split).
+
+    U_bend = ∫ ½ (Rf b_1 + R_l b_2) ds with b_1 = Ω_2² + c Ω_0² (about d1, the soft axis, with
+    ``integrands``' gauge term) and b_2 = Ω_3² (about d2, the lateral axis); τ = Ω_1².
+    """
+    o0, o1, o2, o3 = quaternion_rates(rows, drows)
+    return o2 * o2 + GAUGE_WEIGHT * o0 * o0, o3 * o3, o1 * o1, frame_columns(rows, ca)[0]
+
+
 class DirectorModel:
     """Maps z to fields, positions and energy terms (see module docstring)."""
 
     kind = "director"
 
-    def __init__(self, length: float, mesh: ElementMesh, frame: bool, stretch: bool):
+    def __init__(
+        self, length: float, mesh: ElementMesh, frame: bool, stretch: bool, lateral: bool = False
+    ):
+        if lateral and not frame:
+            raise ValueError("a strip (lateral bend stiffness) needs the frame model")
+        #: a strip: p carries "Rl", the stiffness about d2 (``strip_integrands``)
+        self.lateral = lateral
         self.length = float(length)
         self.mesh = mesh
         self.layout = DirectorLayout(mesh.count, frame, stretch, mesh.order, mesh.element_count)
@@ -228,11 +251,7 @@ class DirectorModel:
         return np.asarray(z[self.layout.eps]) if self.layout.stretch else None
 
     def _memo(self, kind: str, s: np.ndarray, make):
-        """Return ``make(s)``, remembered per (kind, s).
-
-        ``make(s)`` remembered per (kind, s): a running solver asks for the same arc lengths
-        again.
-        """
+        """Return ``make(s)``, remembered per (kind, s): a solver asks for the same s again."""
         s = np.ascontiguousarray(s, dtype=float).ravel()
         key = kind.encode() + s.tobytes()
         hit = self._cache.get(key)
@@ -284,10 +303,7 @@ class DirectorModel:
     def pose_frames(
         self, z: np.ndarray, s: np.ndarray, anchor: tuple[float, np.ndarray] | None = None
     ) -> np.ndarray:
-        """Return the pose frames at s, x along the tangent.
-
-        Frames (len(s), 3, 3) with columns (t, d1, d2) — the pose convention, x along the
-        tangent.
+        """Return the pose frames (len(s), 3, 3) at s, columns (t, d1, d2): x along the tangent.
 
         The tangent model has no roll: its frames are transported without twist (d1' = −(t'·d1) t)
         from ``anchor`` = (s_a, R_a) (default: d1 ⊥ t closest to the world z-axis at s = 0), on a
@@ -309,10 +325,9 @@ class DirectorModel:
         return transported_frames(t, k0, hint)[np.searchsorted(fine, s)]
 
     def curvature(self, z: np.ndarray, s: np.ndarray, side: str = "left") -> np.ndarray:
-        """Return the body Darboux vector Ω at s (frame model).
+        """Return the body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3).
 
-        Body Darboux vector Ω = (twist, κ_d1, κ_d2) [1/m] at s, (len(s), 3), of the frame model
-        (the tangent model has no body frame: ``world_curvature``).
+        Frame model only (the tangent model has no body frame: ``world_curvature``).
         """
         if not self.layout.frame:
             raise ValueError("the tangent model has no body frame; use world_curvature")
@@ -379,8 +394,12 @@ class DirectorModel:
         _, v, dv = self._fields_sym(z)
         rows = [v[k, :].T for k in range(lay.width)]
         drows = [dv[k, :].T for k in range(lay.width)]
-        b, tw, tangent = integrands(rows, drows, lay.frame)
-        bend = 0.5 * ca.dot(w, profiles["Rf"] * b)
+        if self.lateral:
+            b, b2, tw, tangent = strip_integrands(rows, drows)
+            bend = 0.5 * ca.dot(w, profiles["Rf"] * b + profiles["Rl"] * b2)
+        else:
+            b, tw, tangent = integrands(rows, drows, lay.frame)
+            bend = 0.5 * ca.dot(w, profiles["Rf"] * b)
         twist = 0.5 * ca.dot(w, profiles["Rt"] * tw) if lay.frame else ca.SX(0)
         t = ca.horzcat(*tangent).T
         if lay.stretch:
@@ -465,33 +484,3 @@ class DirectorModel:
         if self.layout.stretch:
             z[self.layout.eps] = 0.0 if eps is None else eps
         return z
-
-
-def transported_frames(t: np.ndarray, k0: int, hint: np.ndarray) -> np.ndarray:
-    """Return twist-free frames transported along unit tangents.
-
-    Frames (K, 3, 3) (columns t, d1, d2) along unit tangents t (K, 3) without twist: d1 at k0 is
-    ``hint`` made perpendicular to t[k0], and is carried to its neighbours, both ways, by the
-    smallest rotation between consecutive tangents (a discrete d1' = −(t'·d1) t).
-    """
-    d1s = np.empty_like(t)
-    d1 = hint - np.dot(hint, t[k0]) * t[k0]
-    d1s[k0] = d1 / np.linalg.norm(d1)
-    for rng in (range(k0 + 1, len(t)), range(k0 - 1, -1, -1)):
-        prev = k0
-        for k in rng:
-            d1s[k] = _transport(d1s[prev], t[prev], t[k])
-            d1s[k] /= np.linalg.norm(d1s[k])
-            prev = k
-    return np.stack([t, d1s, cross3(t, d1s)], axis=-1)
-
-
-def _transport(d1: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
-    """d1 carried from tangent t0 to t1 by the smallest rotation taking t0 to t1."""
-    c = float(np.dot(t0, t1))
-    axis = cross3(t0, t1)
-    if c < -0.999999:
-        return d1
-    # Rodrigues with k = axis/|axis|, |axis| = sin a: R v = v c + (axis × v) + axis (axis·v) / (1
-    # + c)
-    return d1 * c + cross3(axis, d1) + axis * np.dot(axis, d1) / (1.0 + c)

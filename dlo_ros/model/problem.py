@@ -39,7 +39,15 @@ class StringProperties:
     """Length L and the stiffness / weight profiles of the paper's energy (sec. 2.2).
 
     stretch_stiffness None means inextensible (‖dx/ds‖ = 1 exactly); radius is the clearance kept
-    from obstacles.
+    from obstacles.  lateral_bend_stiffness [N·m²] makes the string a strip with two bending
+    stiffnesses (None: an isotropic rod, Rf about every axis): the material frame is (t, d1, d2),
+    held at a clamp as the grip orientation's (x, y, z) axes; the strip's width runs along d1
+    (the grip's y-axis) and its face normal along d2 (the grip's z-axis).  bend_stiffness Rf is
+    then the stiffness about d1 (the strip bends out of its face, the soft way) and
+    lateral_bend_stiffness the stiffness about d2 (bending within the strip's own plane, the
+    centreline curving along the width): U_bend = ∫ ½ (Rf κ_1² + R_lateral κ_2²) ds.  A strip
+    needs a twist stiffness > 0 (with none it would roll freely onto its soft axis) and the
+    director frame model.
     """
 
     length: float
@@ -48,6 +56,12 @@ class StringProperties:
     weight_per_length: Profile
     stretch_stiffness: Profile | None = None
     radius: float = 0.0
+    lateral_bend_stiffness: Profile | None = None
+
+    def lateral_stiffness(self, s: np.ndarray) -> np.ndarray:
+        """Return the stiffness about d2 at s [N·m²]: lateral_bend_stiffness, or Rf (a rod)."""
+        prof = self.lateral_bend_stiffness
+        return self.bend_stiffness(s) if prof is None else prof(s)
 
     def validate(self) -> None:
         if not (np.isfinite(self.length) and self.length > 0):
@@ -64,6 +78,7 @@ class StringProperties:
             )
         if not (np.isfinite(self.radius) and self.radius >= 0):
             raise ValueError(f"string.radius: must be >= 0, got {self.radius}")
+        self._validate_lateral()
         for name in (
             "bend_stiffness",
             "twist_stiffness",
@@ -73,6 +88,23 @@ class StringProperties:
             prof = getattr(self, name)
             if prof is not None and not all(np.isfinite(prof.values)):
                 raise ValueError(f"string.{name}: contains NaN or infinity")
+
+    def _validate_lateral(self) -> None:
+        """Check lateral_bend_stiffness: finite, > 0, and a twist stiffness > 0 beside it."""
+        prof = self.lateral_bend_stiffness
+        if prof is None:
+            return
+        if not all(np.isfinite(prof.values)):
+            raise ValueError("string.lateral_bend_stiffness: contains NaN or infinity")
+        if prof.minimum <= 0:
+            raise ValueError(
+                "string.lateral_bend_stiffness: must be > 0 everywhere (omit it for a rod)"
+            )
+        if self.twist_stiffness.minimum <= 0:
+            raise ValueError(
+                "string.lateral_bend_stiffness: needs twist_stiffness > 0 everywhere (with no "
+                "twist stiffness a strip rolls freely onto its soft axis: omit it then)"
+            )
 
 
 def _copied(value, **changes):

@@ -34,6 +34,7 @@ TOP_LEVEL_KEYS = (
 STRING_KEYS = (
     "length",
     "bend_stiffness",
+    "lateral_bend_stiffness",
     "twist_stiffness",
     "stretch_stiffness",
     "weight_per_length",

@@ -84,6 +84,12 @@ def parse_string(value: object) -> StringProperties:
         if stretch_value is None
         else read_profile(stretch_value, "string.stretch_stiffness", length, 0.0, strict=True)
     )
+    lateral_value = d.get("lateral_bend_stiffness")
+    lateral = (
+        None
+        if lateral_value is None
+        else read_profile(lateral_value, "string.lateral_bend_stiffness", length, 0.0, strict=True)
+    )
     radius = 0.0 if d.get("radius") is None else read_number(d["radius"], "string.radius")
     if radius < 0:
         raise fail("string.radius", f"must be >= 0, got {radius:g}")
@@ -94,6 +100,7 @@ def parse_string(value: object) -> StringProperties:
         weight_per_length=weight,
         stretch_stiffness=stretch,
         radius=radius,
+        lateral_bend_stiffness=lateral,
     )
 
 

@@ -47,6 +47,8 @@ def scene_to_dict(scene: Scene) -> dict:
         "weight_per_length": profile_to_yaml(st.weight_per_length),
         "radius": float(st.radius),
     }
+    if st.lateral_bend_stiffness is not None:  # absent: an isotropic rod (files stay as they were)
+        out["string"]["lateral_bend_stiffness"] = profile_to_yaml(st.lateral_bend_stiffness)
     out["gravity"] = {"direction": _floats(pr.gravity_unit)}
     out["grips"] = [
         {

@@ -318,7 +318,7 @@ class ShapeSolver:
             if eig is None:
                 return None
             assert state.hessian is not None  # min_reduced_eigenvalue evaluated it
-            return None if is_stable(eig, state.hessian) else eig
+            return None if is_stable(eig, state.hessian, state.unstable_direction) else eig
 
     def reset(self) -> None:
         """Forget the warm start: the next solve starts cold."""

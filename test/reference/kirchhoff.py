@@ -207,7 +207,7 @@ def _check_rotation(R, name: str) -> np.ndarray:
     return R
 
 
-def _perp_basis(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def perp_basis(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t = t / np.linalg.norm(t)
     a = np.eye(3)[int(np.argmin(np.abs(t)))]
     e1 = np.cross(t, a)
@@ -400,7 +400,7 @@ class _Problem:
             if t1.shape == (3, 3):
                 t1 = t1[:, 0]
             self.t1 = t1 / np.linalg.norm(t1)
-            self.e1, self.e2 = _perp_basis(self.t1)
+            self.e1, self.e2 = perp_basis(self.t1)
         # loads (dimensionless), sorted
         self.loads_si = []
         for ld in loads:

@@ -30,6 +30,7 @@ from dlo_ros.solver.build.mesh import MeshSpec
 from dlo_ros.solver.results.element_error import coefficient_decay
 from dlo_ros.solver.shape_solver import ShapeSolver
 from reference import post_contact
+from support.post import shooting_reference
 
 LENGTH, BEND, WEIGHT, RADIUS = 1.0, 0.02, 0.5, 0.005
 POST, POST_RADIUS, HEIGHT = np.array([0.22, 0.2]), 0.03, 0.5
@@ -77,19 +78,7 @@ def reference():
     assert result.ok, result.message
     force, torque = result.grips["left"].force, result.grips["left"].torque
     guess = [-force[0], -force[2], torque[1], contact_kinks(solver)[0], 0.6]
-    ref = post_contact.solve(
-        LENGTH,
-        BEND,
-        WEIGHT,
-        [0, HEIGHT],
-        0.0,
-        [0.6, HEIGHT],
-        0.0,
-        POST,
-        POST_RADIUS,
-        RADIUS,
-        guess,
-    )
+    ref = shooting_reference(guess)
     assert ref.residual < 1e-10 and ref.clearance > -1e-9 and ref.push > 0, ref
     return ref
 

@@ -15,12 +15,12 @@ from support.problems import clamped_pair, quat_about
 
 from dlo_ros.model import Grip, GripPose, Load, Problem, Profile, StringProperties
 from dlo_ros.model.elements import ElementMesh
-from dlo_ros.scene import scene_from_dict
 from dlo_ros.solver.build.mesh import MeshSpec
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.results import element_error as EE
 from dlo_ros.solver.shape_solver import ShapeSolver
 from reference import post_contact
+from support.post import BEND, HEIGHT, POST, POST_RADIUS, RADIUS, WEIGHT, post_scene
 from reference.kirchhoff import solve_clamped
 
 from test_moment_energy import MOMENT, cantilever as mid_moment_cantilever
@@ -142,39 +142,11 @@ def test_a_twisted_clamp_clamp_string_cold_and_streamed(twisted, order, mesh):
 
 
 # ---- a kink inside an element: the heavy strip on a post ---------------------------------------
-BEND, WEIGHT, RADIUS, POST, POST_RADIUS, HEIGHT = 0.02, 0.5, 0.005, (0.22, 0.2), 0.03, 0.5
 
 
 def post_problem(order: int):
     """test_obstacle_slots.py's strip on a post, the post a cylinder across the plane."""
-    post = {
-        "type": "capsule",
-        "name": "post",
-        "radius": POST_RADIUS,
-        "a": [POST[0], -0.3, POST[1]],
-        "b": [POST[0], 0.3, POST[1]],
-    }
-    grips = [
-        {"name": n, "s": s, "mode": "clamp", "position": [x, 0, HEIGHT], "orientation": LEVEL}
-        for n, s, x in (("left", 0.0, 0.0), ("right", 1.0, 0.6))
-    ]
-    return scene_from_dict(
-        {
-            "name": "post",
-            "frame_id": "world",
-            "grips": grips,
-            "obstacles": [post],
-            "string": {
-                "length": 1.0,
-                "bend_stiffness": BEND,
-                "twist_stiffness": 0.015,
-                "weight_per_length": WEIGHT,
-                "radius": RADIUS,
-            },
-            "gravity": {"direction": [0, 0, -1]},
-            "solver": {"model": "full", "order": order, "obstacle_slots": 2},
-        }
-    )
+    return post_scene({"model": "full", "order": order, "obstacle_slots": 2})
 
 
 @pytest.fixture(scope="module")

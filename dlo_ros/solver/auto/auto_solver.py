@@ -1,12 +1,13 @@
 """AutoShapeSolver: the Solver protocol with the model chosen, checked and escalated by auto.
 
-The policy is described in the package's docstring (``dlo_ros.solver.auto``).  This module holds
-the coordinator: the streaming model and its switches, the update (:meth:`AutoShapeSolver.solve`)
-and where the checks' verdicts are applied.  The pieces it coordinates are modules of their own:
-the choice (:mod:`.choice`, :mod:`.reach`), the reduced models and their pool (:mod:`.reduced`,
-:mod:`.pool`), the background worker (:mod:`.background`), the checks (:mod:`.checks`,
-:mod:`.shadows`), the escalations inside one update (:mod:`.escalate`) and the refinement of a
-query (:mod:`.query_refine`).
+The policy is :mod:`.policy` (the a-posteriori rule) and one page of
+``msg_docs/model_and_solver.md`` ("auto's policy").  This module holds the coordinator: the
+streaming model and its switches and the update (:meth:`AutoShapeSolver.solve`).  The pieces it
+coordinates are modules of their own: the choice (:mod:`.choice`, :mod:`.reach`), the reduced
+models and their pool (:mod:`.reduced`, :mod:`.pool`), the background worker (:mod:`.background`),
+the checks (:mod:`.checks`, :mod:`.shadows`, :mod:`.mesh_check`) and where their verdicts are
+applied (:mod:`.stream_checks`), the escalations inside one update (:mod:`.escalate`) and the
+refinement of a query (:mod:`.query_refine`).
 """
 
 from __future__ import annotations
@@ -17,23 +18,20 @@ from collections.abc import Mapping, Sequence
 from concurrent.futures import Executor
 from dataclasses import replace
 
-import numpy as np
-
 from ...model.problem import GripPose, Problem
 from ..options import SolverOptions
 from ..parallel.batch import query_many
 from ..results.result import ShapeResult
 from ..results.summary import ModelSummary
 from ..shape_solver import ShapeSolver, with_checked_poses
-from . import escalate, follow, report
+from . import escalate, follow, report, stream_checks
 from .background import CheckWorker
-from .check_schedule import PendingCheck, start_check
-from .checks import CheckSnapshot, CheckVerdict, ModelChecks
-from .choice import ORDERS, ModelChoice, full_choice, initial_choice
+from .checks import ModelChecks
+from .choice import ModelChoice, full_choice, initial_choice
 from .pool import ModelPool
 from .query_refine import refine_query
-from .reach import touches_obstacle
 from .reduced import ReducedModels
+from .stream_checks import CheckBook
 
 
 class AutoShapeSolver:
@@ -81,14 +79,7 @@ class AutoShapeSolver:
         self.model_checks = ModelChecks(
             self.pool, options.error_tolerance or 1e-3 * problem.string.length
         )
-        self._since_check = 0
-        self._unchecked = True
-        self._updates = 0  # committing solves so far (the next one's update index)
-        self._index = 0  # the update index of the committing solve running (or the last one)
-        self._checked_update = 0  # the update whose shape the last kept check described
-        self._pending: PendingCheck | None = None  # a check whose verdict is held (check_schedule)
-        # bumped by every switch, reset and scene change: older verdicts are stale
-        self._generation = 0
+        self.book = CheckBook()  # what the stream knows of its checks (stream_checks.py)
         self.choice = initial_choice(problem, options, self.tolerance)
         self.inner = self.pool.solver_for(self.choice, problem, stream=True)
         if self.worker.background:
@@ -130,7 +121,7 @@ class AutoShapeSolver:
         self.worker.wait_for_model(("",) + choice.key())
         t1 = time.perf_counter()
         pooled = self.pool.pooled(choice) is not None
-        at = self._index if at is None else at
+        at = self.book.index if at is None else at
         self.changes.append((time.time(), reason, at))
         del self.changes[:-50]  # the newest 50 (all are in the log and the recording)
         if choice.order > self.choice.order and choice.planar == self.choice.planar:
@@ -155,8 +146,8 @@ class AutoShapeSolver:
             r for r in choice.reasons if choice.planar or not r.startswith("planar:")
         ] + [reason]
         self.choice = choice
-        self._unchecked = True
-        self._generation += 1
+        self.book.unchecked = True
+        self.book.generation += 1
 
     # ---- public API -----------------------------------------------------------------------------
     @property
@@ -172,7 +163,7 @@ class AutoShapeSolver:
     @property
     def checks_pending(self) -> bool:
         """Whether a check's verdict is held (a later update applies it) or a job runs."""
-        return self._pending is not None or not self.worker.idle
+        return self.book.pending is not None or not self.worker.idle
 
     def reset(self) -> None:
         """Forget every warm start (the streaming model's and the pooled ones'): the next is cold.
@@ -181,11 +172,11 @@ class AutoShapeSolver:
         """
         with self._lock:
             self.worker.wait()
-            self._pending = None
+            self.book.pending = None
             for solver in self.pool.solvers() + [self.inner]:
                 solver.reset()
-            self._unchecked = True
-            self._generation += 1
+            self.book.unchecked = True
+            self.book.generation += 1
 
     def close(self) -> None:
         """Stop the check worker (waits for a running check); later solves check inline."""
@@ -210,8 +201,8 @@ class AutoShapeSolver:
         problem.validate()
         with self._lock:
             self.worker.wait()
-            self._pending = None  # its verdict is about the old scene
-            self._generation += 1
+            self.book.pending = None  # its verdict is about the old scene
+            self.book.generation += 1
             self.problem = problem
             self.model_checks.tolerance = (
                 self.options.error_tolerance or 1e-3 * problem.string.length
@@ -220,10 +211,10 @@ class AutoShapeSolver:
             choice = initial_choice(problem, self.options, self.tolerance)
             choice.order, choice.stretch = self.choice.order, self.choice.stretch or choice.stretch
             if choice.key() != self.choice.key():
-                self.switch(choice, "scene changed", at=self._updates)  # from the next update
+                self.switch(choice, "scene changed", at=self.book.updates)  # from the next update
             else:
                 self.inner.set_problem(self.reduced.reduce(self.choice, problem)[0])
-                self._unchecked = True
+                self.book.unchecked = True
 
     # ---- one update -----------------------------------------------------------------------------
     def solve(
@@ -258,8 +249,8 @@ class AutoShapeSolver:
                 )
             notes: list[str] = []
             if commit:
-                self._index, self._updates = self._updates, self._updates + 1
-                self._apply_check(notes)
+                self.book.index, self.book.updates = self.book.updates, self.book.updates + 1
+                stream_checks.apply_due(self, notes)
             answer = follow.follow_scene(self, problem, commit, notes, t0)
             if answer is not None:  # a query answered by a richer model
                 return answer
@@ -287,7 +278,7 @@ class AutoShapeSolver:
         result = self.inner.solve(
             inner_poses, warm=warm, commit=commit, checked=True, limited=limited
         )
-        if commit and result.status == "failed" and result.message.startswith("topology:"):
+        if commit and escalate.refusal(result) is not None:
             result = escalate.richer_for_topology(self, problem, result, notes, limited)
         if result.status == "ok" and result.stable is False:
             result, answered_by = escalate.richer_for_stability(
@@ -314,130 +305,8 @@ class AutoShapeSolver:
             )
             if result.status not in ("ok", "unverified"):
                 return self.finish(result, t0, notes)
-        return self._committed(problem, inner_poses, result, (check_now, limited), notes, t0)
-
-    def _committed(
-        self,
-        problem: Problem,
-        inner_poses: dict,
-        result: ShapeResult,
-        run: tuple[bool, bool],
-        notes: list[str],
-        t0: float,
-    ) -> ShapeResult:
-        """Count a committed update and check it now, or start its check when one is due.
-
-        ``run``: (check_now, limited); ``limited``: a streamed update (a warm, committing solve
-        from a committed shape), whose check takes effect CHECK_LAG updates later
-        (:mod:`.check_schedule`); any other committed solve is checked before it returns.
-        """
-        check_now, limited = run
-        self.problem = problem
-        self._since_check += 1
-        if check_now or not limited:  # one-shot: cold, or checked before it is published
-            self.worker.wait()
-            self._pending = None  # about an earlier shape
-            snap = self.snapshot(problem, inner_poses, result, limited=limited)
-            return self.finish(self._check_now(snap, result, notes), t0, notes)
-        due = self._unchecked or self._since_check >= self.options.recheck_every
-        if due and self._pending is None:
-            snap = self.snapshot(problem, inner_poses, result, limited=limited)
-            self._pending = start_check(self, snap)
-        return self.finish(result, t0, notes)
-
-    # ---- checks ---------------------------------------------------------------------------------
-    def _check_now(
-        self, snap: CheckSnapshot, result: ShapeResult, notes: list[str]
-    ) -> ShapeResult:
-        """Run the checks synchronously: escalate and re-solve while one fails.
-
-        An answer that passes through itself is solved again with self-contact first.
-        """
-        for _ in range(2 * len(ORDERS) + 2):
-            if result.passes_through_itself and not self.choice.self_contact:
-                result, poses = escalate.contact_for_pass(self, snap.problem, result, notes)
-                snap = self.snapshot(snap.problem, poses, result)
-            verdict = self.model_checks.evaluate(snap, False)
-            if verdict.choice is None:
-                self._keep(verdict)
-                return result
-            self.switch(verdict.choice, verdict.reason)
-            notes.append(self.changes[-1][1])
-            previous, result = result, self.inner.solve(snap.poses, limited=snap.limited)
-            if result.status not in ("ok", "unverified"):  # keep the answer we had, and say so
-                previous.message += (
-                    f"; the richer model failed to solve ({result.message}): "
-                    "answer of the previous model"
-                )
-                return previous
-            snap = self.snapshot(snap.problem, snap.poses, result, limited=snap.limited)
-        return result
-
-    def snapshot(
-        self,
-        problem: Problem,
-        poses: dict,
-        result: ShapeResult,
-        solver: ShapeSolver | None = None,
-        choice: ModelChoice | None = None,
-        limited: bool = True,
-    ) -> CheckSnapshot:
-        """Return what a check needs of the streaming model's committed ``result``, or a query's.
-
-        A copy, for another thread.  A query's: ``result`` committed on ``solver``, a model of
-        ``choice``.  ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (a
-        streamed update's check; never a cold solve's or a query's).
-        """
-        solver, choice = solver or self.inner, choice or self.choice
-        return CheckSnapshot(
-            solver,
-            solver.snapshot(),
-            replace(choice, reasons=list(choice.reasons)),
-            problem,
-            poses,
-            result.points.copy(),
-            max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
-            self._generation,
-            float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)),
-            touches_obstacle(result),
-            self._index,
-            limited,
-        )
-
-    def _keep(self, verdict: CheckVerdict) -> None:
-        """Keep the model: record the verdict's estimates; the next check is due later."""
-        self.choice.estimated_error_m = verdict.estimate
-        self.choice.order_error_m = verdict.order_error
-        if np.isfinite(verdict.sampling_error):
-            self.choice.sampling_error_m = verdict.sampling_error
-        self._unchecked = False
-        self._since_check = 0
-        self._checked_update = verdict.snapshot.update
-
-    def _apply_check(self, notes: list[str]) -> None:
-        """Apply the held check's verdict when this update is the one it is due at.
-
-        Waits for a background check that has not finished (:mod:`.check_schedule`).
-        """
-        pending = self._pending
-        if pending is None or self._index < pending.apply_at:
-            return
-        self._pending = None
-        try:
-            verdict = pending.outcome()
-        except Exception as exc:  # a check that raised is reported, never fatal to the stream
-            notes.append(f"model check failed: {type(exc).__name__}: {exc}")
-            # retry after recheck_every updates, not at once
-            self._unchecked, self._since_check = False, 0
-            return
-        if verdict is None or verdict.snapshot.generation != self._generation:
-            return  # a prebuild, or stale
-        if verdict.choice is None:
-            self._keep(verdict)
-        else:
-            # maps the latest committed shape, not the snapshot's
-            self.switch(verdict.choice, verdict.reason)
-            notes.append(self.changes[-1][1])
+        checking = (check_now, limited)
+        return stream_checks.committed(self, problem, inner_poses, result, checking, notes, t0)
 
     def _wait_for_check(self) -> None:
         """Let the worker's jobs finish (a held verdict is still applied when it is due)."""
@@ -466,8 +335,8 @@ class AutoShapeSolver:
             checks=self.checks,
             changes=tuple(r for _, r, _ in self.changes),
             changes_at=tuple(at for _, _, at in self.changes),
-            checked=streaming and not self._unchecked,
-            updates_ago=self._index - self._checked_update,
+            checked=streaming and not self.book.unchecked,
+            updates_ago=self.book.index - self.book.checked_update,
             changed=changed,
             estimate=estimate,
         )

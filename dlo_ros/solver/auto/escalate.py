@@ -15,6 +15,7 @@ from ..contact import self_contact as SC
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from ..update import recovery as RC
+from ..update.moments import UNRESOLVED_MESSAGE
 from .choice import ORDERS, ModelChoice, full_choice
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
@@ -28,10 +29,11 @@ def richer_for_topology(
     notes: list[str],
     limited: bool = True,
 ) -> ShapeResult:
-    """Retry an update refused for its linking number on the next orders; return the answer.
+    """Retry an update refused by its model (``REFUSALS``) on the next orders; return the answer.
 
     The clamped string's linking number changed (the model jumped to a branch with whole turns
-    released, ``topology.py``): too coarse a basis cannot hold the twist, so the update is tried
+    released, ``topology.py``): too coarse a basis cannot hold the twist; or the point moments
+    turned the string by more than its rotation field's nodes can follow.  The update is tried
     again on the next orders, each warm-started from the committed shape; the first answer that is
     not refused for its topology is returned (the refusal if every order is).  Each switch is
     appended to ``notes``.  ``limited``: the re-solves stop at ``solver.update_time_limit`` (a
@@ -40,16 +42,33 @@ def richer_for_topology(
     for order in ORDERS:
         if order <= auto.choice.order:
             continue
+        why = REFUSALS.get(refusal(result) or "", "was refused")
         auto.switch(
             replace(auto.choice, order=order, mesh=None, reasons=list(auto.choice.reasons)),
-            f"order {order}: the order-{auto.choice.order} model changed the linking number",
+            f"order {order}: the order-{auto.choice.order} model {why}",
         )
         notes.append(auto.changes[-1][1])
         poses = auto.reduced.poses(auto.choice, problem)
         result = auto.inner.solve(poses, warm=True, commit=True, checked=True, limited=limited)
-        if not (result.status == "failed" and result.message.startswith("topology:")):
+        if refusal(result) is None:
             return result
     return result
+
+
+#: failures that a richer order may not have (message start → why the order is raised): the
+#: linking number changed, or the point moments turned the string more than the mesh can follow
+#: (``update/moments.py``)
+REFUSALS = {
+    "topology:": "changed the linking number",
+    UNRESOLVED_MESSAGE: "could not follow the point moments' rotation",
+}
+
+
+def refusal(result: ShapeResult) -> str | None:
+    """Return the REFUSALS key a failed result's message starts with (None: not one of them)."""
+    if result.status != "failed":
+        return None
+    return next((key for key in REFUSALS if result.message.startswith(key)), None)
 
 
 def richer_for_stability(

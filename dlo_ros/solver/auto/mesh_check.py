@@ -7,6 +7,14 @@ per element and each element's coefficient decay — so no second model is solve
 
 * estimate > δ/2: the mesh ``adapt/rule.py`` proposes (split where an element is not smooth or
   holds a known contact point, more nodes where it is smooth), with δ/2 as the rule's tolerance;
+  with the obstacle rows on the nodes (``solver.obstacle_points: nodes``, auto's element models)
+  the estimate adds CUT_SAFETY × the deepest cut between the rows and SAFETY × the error of
+  each point contact pushing at its row rather than where the shape touches the obstacle
+  (``adapt/contact_shift.py``), and the known contact points include that cut and the ends of
+  each run of active rows (``contact/penetration.py``): the split puts a node where the contact
+  is, and an element holding one gets the kink safety factor (the touching points are not split
+  at: they depend on the shape a refinement starts from, and a query refined from the held
+  shape then ended 1.5e-4 m from the cold solve of its targets, test_auto_model.py);
 * in a stream's check, estimate < δ/50 and the rule coarsens (hysteresis: refined elements land
   at a fifth of their share, so they are not coarsened back): the coarser mesh;
 * else keep the mesh, with the estimate — also when the estimate is at its floor (1e-10·L, the
@@ -23,11 +31,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ...model.elements import element_mesh_of
+from ..adapt.contact_shift import ContactShift, contact_shift_error
 from ..adapt.rule import ElementEstimates, RefinementRule, next_mesh, unknowns
-from ..adapt.smoothness import contact_kinks
+from ..adapt.smoothness import contact_kinks, row_survey
 from ..build.mesh import mesh_spec
 from ..build.structure import breakpoints
-from ..results.element_error import FLOOR, element_errors
+from ..results.element_error import FLOOR, SAFETY, element_errors
 from .choice import ModelChoice
 
 #: the most nodes per field a refinement may reach (the order ladder stopped at 32 in one
@@ -39,6 +48,13 @@ COARSEN_BELOW = 0.02
 #: the estimate bounds the shape's error, not the stability threshold's, which a coarser mesh
 #: moves (Greenhill's twisted rod stayed straight 0.01 Φ_c past the threshold on 4 nodes)
 MIN_NODES = 8
+#: the centreline error a cut of depth d between the obstacle rows stands for, over d: the
+#: contact sits at a row next to the true one, and the shape around it is off by more than the
+#: cut (measured: 4.3 d on the heavy strip on a post of test_contact_auto.py, the true contact
+#: 2 mm from the active row)
+CUT_SAFETY = 8.0
+#: grid points of a point contact's misplacement error δx(s) (``adapt/contact_shift.py``)
+SHIFT_GRID = 401
 
 
 @dataclass(frozen=True)
@@ -64,8 +80,20 @@ def mesh_verdict(
     ``tolerance``: δ [m]; ``coarsen``: a coarser mesh may be proposed (a stream's check: its later
     updates get cheaper; a cold solve's answer is final, so a coarser rebuild would only cost).
     """
-    errors = element_errors(solver.outputs, problem, state)
-    estimate = float(errors.estimate_m)
+    length = problem.string.length
+    survey = row_survey(solver)
+    # a point contact pushing at a row, not where the shape touches: the error that carries
+    shift = (
+        contact_shift_error(solver.nlp, problem, state, np.linspace(0.0, length, SHIFT_GRID))
+        if survey is not None
+        else ContactShift(0.0, ())
+    )
+    kinks = contact_kinks(solver, survey, state)
+    errors = element_errors(solver.outputs, problem, state, contacts=kinks)
+    # a cut of depth d between the rows: the contact sits at the wrong node, an error of the
+    # centreline of a few d (CUT_SAFETY)
+    cuts = CUT_SAFETY * np.maximum(survey.depth_m, 0.0) if survey is not None else 0.0
+    estimate = float(errors.estimate_m) + float(np.max(cuts, initial=0.0)) + SAFETY * shift.error_m
     spec = choice.mesh or mesh_spec(solver.nlp.model.mesh)
     rule = RefinementRule(
         tolerance=tolerance / 2, min_nodes=MIN_NODES, max_unknowns=MAX_UNKNOWNS, max_removed=2
@@ -74,9 +102,9 @@ def mesh_verdict(
     # bounds it as the rule's share of δ/2 assumes
     scale = estimate / max(float(np.sum(errors.per_element_m)), 1e-300)
     estimates = ElementEstimates(
-        np.maximum(errors.per_element_m * max(scale, 1.0), 0.0),
+        np.maximum(errors.per_element_m * max(scale, 1.0), 0.0) + cuts,
         np.asarray(errors.smoothness, dtype=float),
-        contact_kinks(solver),
+        kinks,
     )
     following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
     if following is None:

@@ -18,6 +18,8 @@ from ..shape_solver import ShapeSolver
 from .choice import ORDERS, ModelChoice
 from .escalate import contact_for_query
 from .query_verify import verified_answer
+from .reach import touches_obstacle
+from .stream_checks import snapshot
 
 if TYPE_CHECKING:  # the solver calls this function (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -34,7 +36,9 @@ def refine_query(
     """Return a query's finished answer (``commit=False``), refined when it is 'unverified'.
 
     ``result`` is the answer of the model ``choice`` on ``solver`` (by default the stream's).  One
-    whose residual is over the tolerance ('unverified') is refined as a cold solve's is
+    whose residual is over the tolerance ('unverified'), or that presses on an obstacle whose rows
+    sit on the mesh nodes (where between them the contact is, only the mesh check sees:
+    ``contact/penetration.py``), is refined as a cold solve's is
     (``check_now``): the checks run on the query's own shape and escalate (3D when the planar
     shape is unstable in 3D, the next order, more obstacle samples) until they pass, on pooled
     copies, never the streaming model.  Not limited by ``solver.update_time_limit`` (its re-solves
@@ -46,7 +50,8 @@ def refine_query(
         result, answered_by = contact_for_query(auto, problem, result, solver or auto.inner)
         if answered_by is not None:
             choice, solver = answered_by
-    if result.status != "unverified":
+    rows_on_nodes = (solver or auto.inner).options.obstacle_points == "nodes"
+    if result.status != "unverified" and not (rows_on_nodes and touches_obstacle(result)):
         return auto.finish(result, t0, [], choice=choice, solver=solver)
     auto.worker.wait()  # a running check may hold the pooled models the refinement uses
     base = choice or auto.choice
@@ -66,7 +71,7 @@ def refine_query(
             break
         result = answer
         verdict = auto.model_checks.evaluate(
-            auto.snapshot(problem, poses, answer, solver, choice, limited=False),
+            snapshot(auto, problem, poses, answer, solver, choice, limited=False),
             False,
             lower=False,
         )

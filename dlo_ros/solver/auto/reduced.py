@@ -30,7 +30,8 @@ class ReducedModels:
         Gravity is zeroed when dropped, the stretch stiffness removed when inextensible, and only
         ``choice.obstacles`` are kept; the options name the planar model (basis 'elements' unless
         the scene set another than the default) or the full model with the choice's order,
-        quadrature (≥ 2·order + 8), obstacle samples and self-contact slots.
+        quadrature (≥ 2·order + 8), obstacle rows (:meth:`obstacle_points`), obstacle samples
+        and self-contact slots.
         """
         key = (choice.gravity, choice.stretch, choice.obstacles)
         hit = self._string_cache
@@ -61,6 +62,7 @@ class ReducedModels:
             opts = self.options.with_model(
                 "planar" if choice.planar else "full",
                 **planar,
+                obstacle_points=self.obstacle_points(choice),
                 order=choice.order,
                 quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
                 obstacle_samples=choice.samples,
@@ -70,6 +72,19 @@ class ReducedModels:
             )
             self._options = {**self._options, model: opts}
         return reduced, opts
+
+    def obstacle_points(self, choice: ModelChoice) -> str:
+        """Return where the obstacle rows of ``choice``'s model sit: 'nodes' on element models.
+
+        An element model (the director model; the planar one of basis 'elements') enforces its
+        obstacles at its mesh nodes and refines the mesh where contact needs it
+        (``mesh_check.py``); the others keep the scene's ``obstacle_samples`` uniform samples.
+        """
+        if choice.planar:
+            elements = self.options.basis in (SolverOptions.basis, "elements")
+        else:
+            elements = self.options.rotation == "director"
+        return "nodes" if elements else "samples"
 
     def poses(self, choice: ModelChoice, problem: Problem) -> dict:
         """Return the grip poses the reduced model of ``choice`` takes (by grip name)."""

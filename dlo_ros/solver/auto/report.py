@@ -55,7 +55,8 @@ def model_summary(
         gravity=c.gravity,
         order=c.order,
         obstacles=len(c.obstacles),
-        obstacle_samples=c.samples,
+        # rows on the mesh nodes: no uniform samples (the mesh's nodes are in ``elements``)
+        obstacle_samples=None if solver.options.obstacle_points == "nodes" else c.samples,
         estimated_error_m=est,
         tolerance_m=tolerance,
         tolerance_met=None if est is None else bool(est <= tolerance),

@@ -12,9 +12,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ...model.rotations import farthest_pole, frame_with_pole, pole_angle_deg
+from ...model import rotations
+from ...model.rotations import frame_with_pole, pole_angle_deg
 from ..build.nlp import has_point_moments
-from .choice import POLE_MIN_DEG, ModelChoice, full_choice
+from .choice import ModelChoice, full_choice
 from .pool import ModelPool
 
 if TYPE_CHECKING:  # the snapshot's class uses these functions (checks.py imports this module)
@@ -66,28 +67,36 @@ def planar_3d_eigenvalue(pool: ModelPool, snap: CheckSnapshot) -> float | None:
     return full.unstable_eigenvalue()
 
 
-def turned_frame(pool: ModelPool, snap: CheckSnapshot) -> tuple[ModelChoice, str] | None:
-    """Return the same 3D model with its Euler-angle pole turned away, and why; or None.
+def pole_angle(snap: CheckSnapshot) -> float | None:
+    """Return the angle [degrees] between the Euler-angle pole and the checked shape's tangents.
 
-    Only when a tangent of the checked shape has come within POLE_MIN_DEG of the pole (near it φ
-    and ψ turn about the same axis, the fields get steep and the basis order stops converging: on
-    the main job's post the order 16/24/32 shapes differed by 1–2 cm with the pole 28° from a
-    tangent, by 0.6 mm/0.03 mm with it 46° away), and a direction at least 10° better exists.  The
-    new model is built and warm-started here (worker thread), so the switch builds nothing.
+    None when the model has no pole (the director model), the state is unknown, or the scene has
+    point moments (they are modelled about the pole, which may not turn).  Near the pole φ and ψ
+    turn about the same axis, the fields get steep and the basis order stops converging: on the
+    main job's post the order 16/24/32 shapes differed by 1–2 cm with the pole 28° from a
+    tangent, by 0.6 mm/0.03 mm with it 46° away.
     """
     inner, state = snap.inner, snap.state
     if inner.nlp.director:  # no pole
         return None
     if state is None or has_point_moments(snap.problem):  # moments are modelled about the pole
         return None
-    tangents = inner.model.node_tangents(state.z).T
-    angle = pole_angle_deg(tangents, inner.nlp.r0[:, 2])
-    if angle >= POLE_MIN_DEG:
-        return None
-    normal, best = farthest_pole(tangents)
-    if best < angle + 10.0:
-        return None
-    r0 = frame_with_pole(normal, inner.nlp.r0[:, 0])
+    return float(pole_angle_deg(inner.model.node_tangents(state.z).T, inner.nlp.r0[:, 2]))
+
+
+def farthest_pole(snap: CheckSnapshot) -> tuple[np.ndarray, float]:
+    """Return the direction farthest from every tangent of the checked shape, and its angle [°]."""
+    assert snap.state is not None
+    normal, best = rotations.farthest_pole(snap.inner.model.node_tangents(snap.state.z).T)
+    return normal, float(best)
+
+
+def turned_frame(pool: ModelPool, snap: CheckSnapshot, normal: np.ndarray) -> ModelChoice:
+    """Return the checked model with its Euler-angle pole turned to ``normal``; build it.
+
+    The new model is built and warm-started here (worker thread), so the switch builds nothing.
+    """
+    r0 = frame_with_pole(normal, snap.inner.nlp.r0[:, 0])
     choice = replace(
         snap.choice,
         frame=tuple(np.round(r0.ravel(), 12)),
@@ -95,11 +104,8 @@ def turned_frame(pool: ModelPool, snap: CheckSnapshot) -> tuple[ModelChoice, str
         order_error_m=float("nan"),
         reasons=list(snap.choice.reasons),
     )
-    pool.solver_for(choice, snap.problem, stream=False, source=inner, state=state)
-    return choice, (
-        f"Euler-angle pole {angle:.0f}° from the tangent: reference frame turned "
-        f"(pole {np.round(normal, 3).tolist()}, {best:.0f}° from every tangent)"
-    )
+    pool.solver_for(choice, snap.problem, stream=False, source=snap.inner, state=snap.state)
+    return choice
 
 
 def penetration(snap: CheckSnapshot) -> tuple[float, str]:

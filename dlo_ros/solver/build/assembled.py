@@ -167,13 +167,15 @@ class AssembledKKT:
         b, tw, tangent = integrands(rows, drows, self.frame)
         bend = 0.5 * c[0] * b
         twist = 0.5 * c[1] * tw if self.frame else ca.SX(0)
-        t = ca.vertcat(*tangent)
-        if self.stretch:
-            eps = u[2 * w]
+        return self.density_function(u, c, bend, twist, ca.vertcat(*tangent))
+
+    def density_function(self, u, c, bend, twist, t) -> ca.Function:
+        """Return ``node_function`` from u_k, c_k, bend_k, twist_k, unit T_k (+ stretch, φ_k)."""
+        stretch = ca.SX(0)
+        if self.stretch:  # ½ Re ε², the tangent scaled by 1 + ε
+            eps = u[2 * self.width]
             stretch = 0.5 * c[2] * eps * eps
             t = (1 + eps) * t
-        else:
-            stretch = ca.SX(0)
         phi = self.nlp.sigma * (bend + twist + stretch) + ca.dot(c[3:6], t)
         hess, grad = ca.hessian(phi, u)
         return ca.Function(

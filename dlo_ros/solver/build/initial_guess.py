@@ -15,7 +15,7 @@ import math
 import numpy as np
 from scipy.special import j0
 
-from ...model.director import transported_frames
+from ...model.transport import transported_frames
 from ...model.problem import Problem
 from ...model.rotations import quat_to_matrix
 from .nlp import StringNLP

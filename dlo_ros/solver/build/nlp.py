@@ -46,6 +46,7 @@ from ..options import SolverOptions
 from .assembled import AssembledKKT
 from .mesh import MeshSpec, element_mesh
 from .assembled_euler import AssembledEulerKKT
+from .assembled_strip import AssembledStripKKT
 from .ipopt_functions import ipopt_derivatives, ipopt_options
 from .constraint_rows import (
     ConstraintRows,
@@ -63,6 +64,7 @@ from .structure import (
     breakpoint_node,
     breakpoints,
     has_point_moments,
+    is_strip,
     models_twist,
     twist_is_held,
 )
@@ -126,11 +128,18 @@ class StringNLP:
             reason = planarity_violation(problem, self.r0[:, 2])
             if reason:
                 raise ValueError(f"solver.model: 'planar' does not fit this scene: {reason}")
+        if is_strip(problem) and not self.director and not self.planar:
+            raise ValueError(
+                "string.lateral_bend_stiffness: the Euler-angle model (solver.rotation 'euler') "
+                "has one bending stiffness; use solver.rotation 'director'"
+            )
         if self.director:
             mesh = element_mesh(problem, options, mesh_spec)
             # either model class: they share the interface NLPs use, and code for one only
             # (``director``) branches on ``self.director``
-            self.model: Any = DirectorModel(L, mesh, self.twist, self.stretch)
+            self.model: Any = DirectorModel(
+                L, mesh, self.twist, self.stretch, lateral=is_strip(problem)
+            )
         else:
             self.model = RitzModel(
                 L,
@@ -163,7 +172,8 @@ class StringNLP:
 
         z = ca.SX.sym("z", m.layout.size)
         p = ca.SX.sym("p", lay.size)
-        profiles = {k: p[lay[k]] for k in ("Rf", "Rt", "Re", "D", *m.material_sizes())}
+        materials = ("Rf", "Rt", "Re", "D", *(("Rl",) if "Rl" in lay.slices else ()))
+        profiles = {k: p[lay[k]] for k in (*materials, *m.material_sizes())}
         bend, twist, stretch, grav, t = m.energy_terms(z, profiles, p[lay["gravity"]])
         grip_x, load_x, rel_x, obs_x = self._positions(z, t)
         work = self._load_work(z, p, load_x)
@@ -273,7 +283,11 @@ class StringNLP:
         # assembled from per-quadrature-node derivatives (solver/build/assembled.py,
         # assembled_euler.py): compact code (seconds of gcc instead of minutes), a faster
         # interpreted call, and no flattened Hessian to build
-        assembled = AssembledKKT(self) if self.director else AssembledEulerKKT(self)
+        assembled = (
+            (AssembledStripKKT(self) if self.model.lateral else AssembledKKT(self))
+            if self.director
+            else AssembledEulerKKT(self)
+        )
         self._assembled = assembled
         #: E (d·M × n): the unknowns → the per-node values u_k (``assembled.py``), d = node_width
         self.node_map, self.node_width = assembled.E, assembled.d

@@ -13,11 +13,12 @@ matrices, so this module writes them as one function
     outputs(z, p, λ, prof) → (x(s_out), q(s_out), F_grips, T_grips, F_obstacles, residual, flip)
 
 evaluated in one call (compiled C when the solver's derivatives are compiled, CasADi's virtual
-machine until then).  ``λ``: every row's SI multiplier; ``prof`` = (Rf, Rt) at the residual's grid
-and Rf_min, from the string (``OutputFunction.profiles``); ``q``: the published orientations, the
-interpolated nodal quaternions made unit with ``director.frame_to_quat``'s sign (4 × K), for the
-planar model φ (1 × K); ``flip``: per grip t·R_g e_x and d1·R_g e_y at its node (negative: the
-flipped sheet, ``frames.flipped_grips``; ones for the planar model, which has no flipped sheet).
+machine until then). ``λ``: every row's SI multiplier; ``prof`` = (Rf, Rt, a strip's Rl) at the
+residual's grid and Rf_min, from the string (``OutputFunction.profiles``); ``q``: the published
+orientations, the interpolated nodal quaternions made unit with ``director.frame_to_quat``'s sign
+(4 × K), for the planar model φ (1 × K); ``flip``: per grip t·R_g e_x and d1·R_g e_y at its node
+(negative: the flipped sheet, ``frames.flipped_grips``; ones for the planar model, which has no
+flipped sheet).
 
 The arithmetic is the numpy path's, term for term (``wrenches.wrench``, ``wrenches.equilibrium``,
 ``residual.equilibrium_residual``), on the same grid (``wrenches.static_events``: refined at the
@@ -227,10 +228,13 @@ def _load_actions(nlp: StringNLP, problem: Problem, f: _Fields, p, lam, forces, 
         torques += [ca.DM.zeros(3), ca.DM.zeros(3)]
 
 
-def _constitutive_moment(nlp: StringNLP, f: _Fields, s: np.ndarray, rf: ca.MX, rt: ca.MX):
+def _constitutive_moment(
+    nlp: StringNLP, f: _Fields, s: np.ndarray, rf: ca.MX, rt: ca.MX, rl: ca.MX
+):
     """Return the constitutive moment at the grid s.
 
-    The constitutive moment at the grid s: R diag(Rt, Rf, Rf) Ω; the planar model's −Rf φ' n
+    The constitutive moment at the grid s: R diag(Rt, Rf, Rl) Ω (Rl = Rf but for a strip); the
+    planar model's −Rf φ' n
     (``wrenches.euler_moments`` at θ ≡ π/2, no twist).
     """
     m = nlp.model
@@ -252,7 +256,7 @@ def _constitutive_moment(nlp: StringNLP, f: _Fields, s: np.ndarray, rf: ca.MX, r
     return moment_fn.map(len(s))(
         ca.mtimes(f.nodes_v, ca.DM(b_grid.T)),
         ca.mtimes(f.nodes_v, ca.DM(db_grid.T)),
-        ca.vertcat(rt, rf, rf),
+        ca.vertcat(rt, rf, rl),
     )
 
 
@@ -363,15 +367,18 @@ class OutputFunction:
         z = ca.MX.sym("z", m.layout.size)
         p = ca.MX.sym("p", lay.size)
         lam = ca.MX.sym("lam", int(nlp.lbg.size))
-        prof = ca.MX.sym("prof", 2 * K + 1)
-        rf, rt, rf_min = prof[:K].T, prof[K : 2 * K].T, prof[2 * K]
+        #: a strip: prof carries Rl (its stiffness about d2) between Rt and Rf_min
+        self.lateral = bool(getattr(m, "lateral", False))
+        prof = ca.MX.sym("prof", (3 if self.lateral else 2) * K + 1)
+        rf, rt, rf_min = prof[:K].T, prof[K : 2 * K].T, prof[prof.shape[0] - 1]
+        rl = prof[2 * K : 3 * K].T if self.lateral else rf
 
         f = _fields(nlp, z, s)
         self.planar = f.planar
         x, x_nodes, point_x, sample_x, x_out, w_all, point_s = _positions(
             nlp, problem, f, z, s_out
         )
-        moment_c = _constitutive_moment(nlp, f, s, rf, rt)
+        moment_c = _constitutive_moment(nlp, f, s, rf, rt, rl)
 
         gravity = p[lay["gravity"]]
         m_bal, total = _weight_balance(nlp, p, gravity, x, x_nodes, w_all[:K, :])
@@ -445,10 +452,10 @@ class OutputFunction:
         return bool(nlp.model.layout.frame if nlp.director else nlp.model.layout.planar)
 
     def profiles(self, string: StringProperties) -> np.ndarray:
-        """Return ``prof``: Rf and Rt [N·m²] at the grid and Rf_min.
+        """Return ``prof``: Rf, Rt (a strip's Rl) [N·m²] at the grid and Rf_min.
 
-        ``prof``: Rf and Rt [N·m²] at the grid and Rf_min, remembered for the last string
-        object.
+        ``prof``: Rf, Rt (and a strip's Rl) [N·m²] at the grid and Rf_min, remembered for the
+        last string object.
         """
         key = self._profile_key
         if key is None or key[0] is not string:
@@ -457,6 +464,7 @@ class OutputFunction:
                 [
                     string.bend_stiffness(s),
                     string.twist_stiffness(s),
+                    string.lateral_stiffness(s) if self.lateral else [],
                     [string.bend_stiffness.minimum],
                 ]
             )

@@ -52,14 +52,16 @@ def parameter_layout(
 ) -> tuple[ParameterLayout, ContactSlots]:
     """Lay out p for ``problem`` on ``model``: every slice's name and size, and the slot counts.
 
-    The order is the materials' (Rf, Rt, Re, D per quadrature node, then the model's material
-    terms), gravity, the radius, the grips, the loads, the relative positions, the obstacles'
-    parameters, their contact slots, and the self-contact slots.
+    The order is the materials' (Rf, Rt, Re, D per quadrature node, a strip's Rl, the model's
+    material terms), gravity, the radius, the grips, the loads, the relative positions, the
+    obstacles' parameters, their contact slots, and the self-contact slots.
     """
     P, M = problem, model.quad.count
     lay = ParameterLayout()
     for name in ("Rf", "Rt", "Re", "D"):
         lay.add(name, M)
+    if getattr(model, "lateral", False):  # a strip: its stiffness about d2 (director.py)
+        lay.add("Rl", M)
     for name, size in model.material_sizes().items():  # filled by material_parameters
         lay.add(name, size)
     lay.add("gravity", 3)

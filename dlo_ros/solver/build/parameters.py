@@ -188,6 +188,8 @@ class ProblemParameters:
         p[lay["Rt"]] = st.twist_stiffness(nodes)
         p[lay["Re"]] = st.stretch_stiffness(nodes) if st.stretch_stiffness is not None else 0.0
         p[lay["D"]] = st.weight_per_length(nodes)
+        if "Rl" in lay.slices:  # a strip's stiffness about d2
+            p[lay["Rl"]] = st.lateral_stiffness(nodes)
         nlp.material_parameters(p)
         p[lay["gravity"]] = problem.gravity_unit
         p[lay["radius"]] = st.radius

@@ -73,7 +73,9 @@ def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float =
 
     Planar means: every grip position lies in the plane and every held tangent lies in it; gravity,
     forces and relative offsets lie in it; moments are along the normal; obstacles are half-spaces
-    whose normals lie in the plane, or spheres/capsules/boxes centred on it (symmetric about it).
+    whose normals lie in the plane, or spheres/capsules/boxes centred on it (symmetric about it);
+    a strip's (``string.lateral_bend_stiffness``) clamps hold its width (their y-axis, d1: the soft
+    bending axis) along the normal, so that the planar model's one bending stiffness is its Rf.
     """
     n = normal / np.linalg.norm(normal)
     L = problem.string.length
@@ -87,11 +89,24 @@ def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float =
             and abs(np.dot(quat_to_matrix(g.pose.orientation)[:, 0], n)) > tolerance
         ):
             return f"grips[{i}].orientation: the tangent leaves the plane"
+        if (
+            g.mode == "clamp"
+            and problem.string.lateral_bend_stiffness is not None
+            and abs(np.dot(quat_to_matrix(g.pose.orientation)[:, 1], n)) < 1 - tolerance
+        ):
+            return (
+                f"grips[{i}].orientation: the strip's width (the grip's y-axis) is not normal to "
+                "the plane (it would bend about its lateral axis)"
+            )
     if abs(np.dot(problem.gravity_unit, n)) > tolerance:
         return "gravity.direction is not in the plane"
     for i, ld in enumerate(problem.loads):
         if abs(np.dot(ld.force, n)) > tolerance * (1 + np.linalg.norm(ld.force)):
             return f"loads[{i}].force is not in the plane"
+        moment = np.asarray(ld.moment, dtype=float)
+        across = moment - np.dot(moment, n) * n
+        if np.linalg.norm(across) > tolerance * (1 + np.linalg.norm(moment)):
+            return f"loads[{i}].moment is not along the plane's normal"
     for i, rel in enumerate(problem.relative_positions):
         if abs(np.dot(rel.offset, n)) > tolerance * L:
             return f"relative_positions[{i}].offset is not in the plane"

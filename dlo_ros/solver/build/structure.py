@@ -39,6 +39,7 @@ def breakpoints(problem: Problem) -> list[float]:
     for prof in (
         st.bend_stiffness,
         st.twist_stiffness,
+        st.lateral_bend_stiffness,
         st.weight_per_length,
         st.stretch_stiffness,
     ):
@@ -52,13 +53,20 @@ def models_twist(problem: Problem, options: SolverOptions) -> bool:
 
     Whether a 3D model carries the roll about the tangent (the frame model): when two clamps
     hold it, and — for the director model — when a point moment acts and a clamp can react its
-    twisting part (Rt > 0).
+    twisting part (Rt > 0); and always for a strip (``string.lateral_bend_stiffness``): its two
+    bending stiffnesses tie the bending to the roll, so the roll is an unknown even under one
+    clamp.
     """
-    if twist_is_held(problem):
+    if twist_is_held(problem) or is_strip(problem):
         return True
     if options.rotation != "director" or problem.string.twist_stiffness.is_zero:
         return False
     return has_point_moments(problem) and any(g.mode == "clamp" for g in problem.grips)
+
+
+def is_strip(problem: Problem) -> bool:
+    """Tell whether the string has two bending stiffnesses (``string.lateral_bend_stiffness``)."""
+    return problem.string.lateral_bend_stiffness is not None
 
 
 def has_point_moments(problem: Problem) -> bool:

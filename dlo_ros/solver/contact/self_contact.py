@@ -23,6 +23,10 @@ its tangent line by at most κ (h/2)²/2 within half a spacing).  The price is a
 most √((2r)² + h²/2) for parallel strands whose samples line up (D instead of 2r: 6 % of the
 diameter at h = r).
 
+Held contacts (radius > 0): a contact found on sample pairs is then held at the closest points of
+its two strands, 2r apart (``ContactSlots.at``, ``fill``; update/contact_points.py), which removes
+the D − 2r over-separation; crossing strands only (``closest_points.py``).
+
 Radius zero ("may touch, may not cross"): D = h/√2.  Two polyline chords of length h that cross
 have an end pair no further apart than h/√2, so a shape whose sample pairs all keep D does not
 cross itself at the sample polyline's resolution; the centreline deviates from that polyline by at
@@ -153,9 +157,26 @@ class ContactSlots:
     signs: dict[tuple[int, int], float] = field(default_factory=dict)
     #: ``candidate_pairs`` of that shape (the next warm update selects its pairs from them)
     candidates: list[tuple[tuple[int, int], float]] | None = None
+    #: slot → (σ_a, σ_b) [m]: slots held at the closest points of two strands, 2r apart
+    #: (``closest_points.py``; the slot's pair is then the samples nearest those points)
+    at: dict[int, tuple[float, float]] = field(default_factory=dict)
 
     def copy(self) -> ContactSlots:
-        return ContactSlots(self.geometry, list(self.pairs), dict(self.signs), self.candidates)
+        return ContactSlots(
+            self.geometry, list(self.pairs), dict(self.signs), self.candidates, dict(self.at)
+        )
+
+    def distance(self, k: int) -> float:
+        """Return the distance [m] slot ``k``'s row keeps: 2r where held exactly, else D."""
+        return 2.0 * self.geometry.radius if k in self.at else self.geometry.distance
+
+    def arc_lengths(self, k: int) -> tuple[float, float]:
+        """Return the arc lengths [m] of slot ``k``'s two points (its pair must be set)."""
+        if k in self.at:
+            return self.at[k]
+        pair = self.pairs[k]
+        assert pair is not None
+        return float(self.geometry.s[pair[0]]), float(self.geometry.s[pair[1]])
 
 
 def _far_pairs(
@@ -372,28 +393,34 @@ def fill(p: np.ndarray, slots: ContactSlots, nlp, length: float) -> np.ndarray:
     (D² − |x_a − x_b|²)/(2 D L) ≈ (D − |x_a − x_b|)/L near contact, whatever the radius (a row in
     D² would hold the distance only to 1e-10 L²/D).  An empty slot: q_k = 0, b_k = −L (the row
     reads −1).
+
+    A slot held at closest points (``slots.at``) reads the same with 2r for D at its σ_a, σ_b.
     """
     lay, w = nlp.params, nlp.model.position_matrix(slots.geometry.s)
-    d = slots.geometry.distance
-    scale = 1.0 / np.sqrt(2.0 * d)
     for k, pair in enumerate(slots.pairs):
         sl = lay[f"self:{k}"]
         if pair is None:
             p[sl] = 0.0
             p[sl.stop - 1] = -length
+            continue
+        d = slots.distance(k)
+        if k in slots.at:
+            wa, wb = nlp.model.position_matrix(np.array(slots.at[k]))
         else:
-            p[sl.start : sl.stop - 1] = scale * (w[pair[0]] - w[pair[1]])
-            p[sl.stop - 1] = d / 2
+            wa, wb = w[pair[0]], w[pair[1]]
+        p[sl.start : sl.stop - 1] = (wa - wb) / np.sqrt(2.0 * d)
+        p[sl.stop - 1] = d / 2
     return p
 
 
-def slot_multiplier(lam_row_si: float, geometry: ContactGeometry) -> float:
+def slot_multiplier(lam_row_si: float, distance: float) -> float:
     """Return the SI multiplier λ [N/m] of a slot's distance constraint from its row's λ.
 
     The SI multiplier λ [N/m] of D² − |x_a − x_b|² ≤ 0 from a slot row's λ / (row_scale σ) [N]
-    (``fill``: the row is that constraint divided by 2D).
+    (``fill``: the row is that constraint divided by 2D; ``distance``: the slot's D [m],
+    ``ContactSlots.distance``).
     """
-    return lam_row_si / (2.0 * geometry.distance)
+    return lam_row_si / (2.0 * distance)
 
 
 def crossing_signs(

@@ -145,13 +145,19 @@ def nodal_fields(model, z: np.ndarray) -> np.ndarray:
 
 
 def element_errors(
-    outputs: ShapeOutputs, problem: Problem, state: SolverState, current: Problem | None = None
+    outputs: ShapeOutputs,
+    problem: Problem,
+    state: SolverState,
+    current: Problem | None = None,
+    contacts: tuple[float, ...] = (),
 ) -> ElementErrors:
     """Return the error estimate of the element-model solution ``state`` solving ``problem``.
 
     outputs: the solver's ``ShapeOutputs`` (its NLP: a ``DirectorModel``, or a ``RitzModel`` of
     basis 'elements', on an ``ElementMesh``); current: the scene whose grips anchor the wrenches'
-    frames (default ``problem``).
+    frames (default ``problem``); contacts: arc lengths [m] of known contact points (a kink of
+    the curvature): one strictly inside an element flags it as ``split`` does (``KINK_SAFETY``),
+    also where its coefficients still decay fast (a point force on a coarse shape).
     """
     nlp = outputs.nlp
     model = nlp.model
@@ -180,7 +186,8 @@ def element_errors(
     lever = float(np.linalg.norm(force)) * length**3 / (3 * rf_min)
     residual = float(np.max(np.linalg.norm(total, axis=1))) + lever
     rates, tails = coefficient_decay(mesh, nodal_fields(model, state.z))
-    safety = KINK_SAFETY if np.any(rates > SMOOTH_RATE) else SAFETY
+    inside = [s for s in contacts if np.min(np.abs(mesh.breakpoints - s)) > 1e-9 * length]
+    safety = KINK_SAFETY if np.any(rates > SMOOTH_RATE) or inside else SAFETY
     return ElementErrors(
         per_element_m=per,
         smoothness=rates,

@@ -35,7 +35,7 @@ from .residual import EquilibriumResidual, PointAction, equilibrium_residual
 from .contacts import contact_loads
 from .result import ContactLoad, GripWrench, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
-from .stability import is_stable, min_reduced_eigenvalue
+from .stability import NO_FREEDOM, is_stable, min_reduced_eigenvalue
 from ..state import SolverState
 from .wrenches import FramesOf, balance_inputs, wrench
 
@@ -307,10 +307,18 @@ class ShapeOutputs:
         assert state.energies is not None and state.hessian is not None
         moments = moment_work(self.nlp, problem, state.z, state.p) if problem.loads else None
         energy = energies(state.energies, moments)
-        stable = None if min_eig is None else is_stable(min_eig, state.hessian)
+        # no freedom left by the active rows: no admissible perturbation, so nothing can lower the
+        # energy: stable, and the message says why there is no eigenvalue
+        stable: bool | None = (
+            True
+            if min_eig is None
+            else is_stable(min_eig, state.hessian, state.unstable_direction)
+        )
         status, message = (
             "ok",
-            "converged" + (f" after {run.steps} continuation steps" if run.steps else ""),
+            "converged"
+            + (f" after {run.steps} continuation steps" if run.steps else "")
+            + ("" if min_eig is not None else f"; {NO_FREEDOM}"),
         )
         tolerance = options.error_tolerance or 1e-3 * problem.string.length
         if out.flipped:  # not the grip's pose at all: no shape
@@ -372,17 +380,17 @@ class ShapeOutputs:
         if slots is None or not nlp.self_contact_rows:
             return []
         out = []
-        s = slots.geometry.s
         for k, row in enumerate(nlp.self_contact_rows):
             pair = slots.pairs[k] if k < len(slots.pairs) else None
             if pair is None or not lam_si[row] > 0:
                 continue
-            xa, xb = nlp.model.positions(z, np.array([s[pair[0]], s[pair[1]]]))
-            lam = slot_multiplier(lam_si[row], slots.geometry)
+            s_a, s_b = slots.arc_lengths(k)  # the samples, or the closest points held exactly
+            xa, xb = nlp.model.positions(z, np.array([s_a, s_b]))
+            lam = slot_multiplier(lam_si[row], slots.distance(k))
             out.append(
                 SelfContact(
-                    float(s[pair[0]]),
-                    float(s[pair[1]]),
+                    s_a,
+                    s_b,
                     xa,
                     xb,
                     2.0 * lam * (xa - xb),

@@ -9,8 +9,8 @@ For the part [0, s] of the string, the moment that the part beyond s exerts on i
 over every point action a before s: grip reactions (F_g, T_g, from the multipliers), point loads
 (F_k, M_k) and obstacle contact forces.  The constitutive law gives the same moment from the shape,
 
-    m_c(s) = R diag(Rt, Rf, Rf) Ω      (R = [t d1 d2], Ω the body Darboux vector; Rf t × t' without
-    twist),
+    m_c(s) = R diag(Rt, Rf, Rl) Ω      (R = [t d1 d2], Ω the body Darboux vector, Rl = Rf but for
+    a strip's string.lateral_bend_stiffness; Rf t × t' without twist),
 
 and the whole string must balance: Σ_a F_a + ∫_0^L D ĝ dσ = 0.  A shape that is an equilibrium has
 m_c = m_bal everywhere.  The residual is reported as an equivalent centreline error in metres: the

@@ -2,11 +2,11 @@
 
 The sensitivities are dx(s)/dθ and d(grip force)/dθ.
 
-θ_k = log c_k, where the material profile k ∈ {Rf, Rt, Re, D} is scaled uniformly, P_k(s) → c_k
-P_k(s); or, for a ``MaterialDirection`` with a ``change`` profile, any parameter θ with dP/dθ (s) =
-change(s) (e.g. θ = log of one knot's value of a piecewise-linear table: change = the table with
-every other value zero). At a converged state (z, λ) of the NLP the KKT residual over the active
-rows a,
+θ_k = log c_k, where the material profile k ∈ {Rf, Rt, Re, D, a strip's Rl} is scaled uniformly,
+P_k(s) → c_k P_k(s); or, for a ``MaterialDirection`` with a ``change`` profile, any parameter θ
+with dP/dθ (s) = change(s) (e.g. θ = log of one knot's value of a piecewise-linear table: change =
+the table with every other value zero). At a converged state (z, λ) of the NLP the KKT residual
+over the active rows a,
 
     F(z, λ_a; p) = [∇f(z; p) + J_a(z; p)ᵀ λ_a ;  g_a(z; p) − g_bound] = 0,
 
@@ -49,8 +49,8 @@ from ..shape_solver import ShapeSolver
 from .wrenches import director_torque
 
 #: material profiles a sensitivity can be taken with respect to, in the order of the NLP's
-#: parameters
-MATERIALS = ("Rf", "Rt", "Re", "D")
+#: parameters (Rl: a strip's lateral bend stiffness, string.lateral_bend_stiffness; strips only)
+MATERIALS = ("Rf", "Rt", "Re", "D", "Rl")
 
 
 @dataclass(frozen=True)
@@ -103,7 +103,8 @@ class _Functions:
             "dlo_kkt_dp", [z, p, lam, v], [ca.densify(ca.jtimes(residual, p, v))]
         )
         lay, m = nlp.params, nlp.model
-        profiles = {k: p[lay[k]] for k in (*MATERIALS, *m.material_sizes())}
+        names = (*(k for k in MATERIALS if k in lay.slices), *m.material_sizes())
+        profiles = {k: p[lay[k]] for k in names}
         tangents = m.energy_terms(z, profiles, p[lay["gravity"]])[-1]
         flat = ca.vec(tangents)  # column-major: (3, M) → 3M
         self.tangents = ca.Function(
@@ -156,6 +157,8 @@ def material_direction(
     if name not in MATERIALS:
         raise ValueError(f"material {name!r}: must be one of {MATERIALS}")
     lay = nlp.params
+    if name not in lay.slices:
+        raise ValueError(f"material {name!r}: the string is not a strip (no lateral stiffness)")
     v = np.zeros_like(p)
     v[lay[name]] = (
         p[lay[name]] if direction.change is None else direction.change(nlp.model.quad.nodes)

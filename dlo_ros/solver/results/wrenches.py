@@ -201,7 +201,8 @@ def balance_inputs(
     rf = st.bend_stiffness(s)
     if nlp.director and m.layout.frame:
         frames = m.pose_frames(z, s)
-        c = np.stack([st.twist_stiffness(s), rf, rf], axis=1)
+        rl = st.lateral_stiffness(s) if m.lateral else rf  # a strip's stiffness about d2
+        c = np.stack([st.twist_stiffness(s), rf, rl], axis=1)
         moment_c = np.einsum("kij,kj->ki", frames, c * m.curvature(z, s))
     elif nlp.director:
         moment_c = rf[:, None] * m.world_curvature(z, s)

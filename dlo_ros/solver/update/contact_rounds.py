@@ -22,6 +22,7 @@ from ..contact import self_contact as SC
 from ..results.outputs import no_shape
 from ..results.result import ShapeResult
 from ..state import SolverState
+from . import contact_points as CP
 from . import linking as LK
 from . import recovery as RC
 from .context import Outcome, UpdateContext
@@ -69,7 +70,7 @@ def solve_self_contact(ctx: UpdateContext, problem: Problem, warm: bool) -> Outc
     iterations = 0
     round_start = start
     for _ in range(SC.CONTACT_ROUNDS):
-        contact = SC.ContactSlots(geometry, slots)
+        contact = SC.ContactSlots(geometry, slots, at=CP.kept_points(previous, slots))
         # (ShapeOutputs declares the attribute by its initial None: it holds ContactSlots too)
         parts.outputs.contact_slots = contact  # type: ignore[assignment]
         # a warm update repeats from its (non-penetrating) start; a cold solve from the previous
@@ -82,12 +83,13 @@ def solve_self_contact(ctx: UpdateContext, problem: Problem, warm: bool) -> Outc
         points = nlp.model.positions(state.z, geometry.s)
         candidates = SC.candidate_pairs(points, geometry)
         missing = [
-            pair for pair in SC.penetrations(candidates, geometry, slack) if pair not in slots
+            pair for pair in CP.penetrating(candidates, contact, slack) if pair not in slots
         ]
         if not missing:
             result.iterations, result.warm_started = iterations, warm
-            answer = (result, state, geometry, points, candidates, slots)
-            return checked_answer(ctx, problem, answer, previous, reference, start is not None)
+            answer = (result, state, geometry, points, candidates, contact)
+            outcome = checked_answer(ctx, problem, answer, previous, reference, start is not None)
+            return CP.hold_at_closest_points(ctx, problem, outcome, loaded_slots)
         if start is None:
             round_start = state
         # the next round starts from round_start: its loaded slots keep their pairs (Newton uses
@@ -113,12 +115,13 @@ def checked_answer(
 ) -> Outcome:
     """Return a round's non-penetrating answer, or 'failed' when it is a jump from ``reference``.
 
-    ``answer``: (result, state, contact geometry, sample points, candidate pairs, slots);
+    ``answer``: (result, state, contact geometry, sample points, candidate pairs, the slots'
+    ``ContactSlots``);
     ``previous``: the start's
     pairs and crossing signs; ``warm_start``: the solve had a start (a start that was not a
     reference is said so in the message).
     """
-    result, state, geometry, points, candidates, slots = answer
+    result, state, geometry, points, candidates, contact = answer
     nlp = ctx.parts.nlp
     iterations, warm = result.iterations, result.warm_started
     result.min_self_distance = min((d for _, d in candidates), default=float("inf"))
@@ -156,7 +159,9 @@ def checked_answer(
             "; its warm start passed through itself (mapped from a "
             "model without self-contact): checked as a cold start"
         )
-    state.contact = SC.ContactSlots(geometry, list(slots), signs, candidates)
+    state.contact = SC.ContactSlots(
+        geometry, list(contact.pairs), signs, candidates, dict(contact.at)
+    )
     return result, state
 
 

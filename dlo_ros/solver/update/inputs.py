@@ -30,6 +30,7 @@ def structure_key(problem: Problem, options: SolverOptions) -> tuple:
         tuple(o.type for o in problem.obstacles),
         problem.string.stretch_stiffness is not None,
         problem.string.twist_stiffness.is_zero,
+        problem.string.lateral_bend_stiffness is not None,  # a strip: p carries Rl (its layout)
         options,
     )
 

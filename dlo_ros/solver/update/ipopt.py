@@ -143,7 +143,7 @@ def unverified_unstable(result: ShapeResult, state: SolverState) -> bool:
     if result.status != "unverified" or result.min_eigenvalue is None:
         return False
     assert state.hessian is not None  # the result's eigenvalue was judged with it (outputs.py)
-    return not is_stable(result.min_eigenvalue, state.hessian)
+    return not is_stable(result.min_eigenvalue, state.hessian, state.unstable_direction)
 
 
 #: appended to the message of a result that replaced an unstable equilibrium

@@ -1,0 +1,179 @@
+"""The stream's checks: when a committed solve is checked, and where a verdict is applied.
+
+A committed solve that is not a streamed update (a cold solve, ``check_now``) is checked before it
+returns (:func:`check_now`: escalate and re-solve while the policy says so, :mod:`.policy`); a
+streamed update's check starts when one is due and its verdict is applied CHECK_LAG updates later
+(:mod:`.check_schedule`, :func:`apply_due`).  :class:`CheckBook` holds what the stream knows of
+its checks.  Each function takes the :class:`.auto_solver.AutoShapeSolver` it serves and uses
+only its public members (``book``, ``choice``, ``inner``, ``worker``, ``model_checks``,
+``switch``, ``changes``, ``options``, ``finish``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ...model.problem import Problem
+from ..results.result import ShapeResult
+from ..shape_solver import ShapeSolver
+from . import escalate
+from .check_schedule import PendingCheck, start_check
+from .checks import CheckSnapshot, CheckVerdict
+from .choice import ORDERS, ModelChoice
+from .reach import touches_obstacle
+
+if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
+    from .auto_solver import AutoShapeSolver
+
+
+@dataclass
+class CheckBook:
+    """What a stream knows of its checks.
+
+    ``updates``: committing solves so far (the next one's update index); ``index``: the update
+    index of the committing solve running (or the last one); ``since_check``: committed solves
+    since the last kept check; ``unchecked``: the model has no kept check yet;
+    ``checked_update``: the update whose shape the last kept check described; ``pending``: a check
+    whose verdict is held (:mod:`.check_schedule`); ``generation``: bumped by every switch, reset
+    and scene change (an older verdict is stale).
+    """
+
+    updates: int = 0
+    index: int = 0
+    since_check: int = 0
+    unchecked: bool = True
+    checked_update: int = 0
+    pending: PendingCheck | None = None
+    generation: int = 0
+
+
+def committed(
+    auto: AutoShapeSolver,
+    problem: Problem,
+    inner_poses: dict,
+    result: ShapeResult,
+    run: tuple[bool, bool],
+    notes: list[str],
+    t0: float,
+) -> ShapeResult:
+    """Count a committed update and check it now, or start its check when one is due.
+
+    ``run``: (check_now, limited); ``limited``: a streamed update (a warm, committing solve
+    from a committed shape), whose check takes effect CHECK_LAG updates later
+    (:mod:`.check_schedule`); any other committed solve is checked before it returns.
+    """
+    now, limited = run
+    book = auto.book
+    auto.problem = problem
+    book.since_check += 1
+    if now or not limited:  # one-shot: cold, or checked before it is published
+        auto.worker.wait()
+        book.pending = None  # about an earlier shape
+        snap = snapshot(auto, problem, inner_poses, result, limited=limited)
+        return auto.finish(check_now(auto, snap, result, notes), t0, notes)
+    due = book.unchecked or book.since_check >= auto.options.recheck_every
+    if due and book.pending is None:
+        snap = snapshot(auto, problem, inner_poses, result, limited=limited)
+        book.pending = start_check(auto, snap)
+    return auto.finish(result, t0, notes)
+
+
+def check_now(
+    auto: AutoShapeSolver, snap: CheckSnapshot, result: ShapeResult, notes: list[str]
+) -> ShapeResult:
+    """Run the checks synchronously: escalate and re-solve while one fails.
+
+    An answer that passes through itself is solved again with self-contact first.
+    """
+    for _ in range(2 * len(ORDERS) + 2):
+        if result.passes_through_itself and not auto.choice.self_contact:
+            result, poses = escalate.contact_for_pass(auto, snap.problem, result, notes)
+            snap = snapshot(auto, snap.problem, poses, result)
+        verdict = auto.model_checks.evaluate(snap, False)
+        if verdict.choice is None:
+            keep(auto, verdict)
+            return result
+        auto.switch(verdict.choice, verdict.reason)
+        notes.append(auto.changes[-1][1])
+        previous, result = result, auto.inner.solve(snap.poses, limited=snap.limited)
+        if result.status not in ("ok", "unverified"):  # keep the answer we had, and say so
+            previous.message += (
+                f"; the richer model failed to solve ({result.message}): "
+                "answer of the previous model"
+            )
+            return previous
+        snap = snapshot(auto, snap.problem, snap.poses, result, limited=snap.limited)
+    return result
+
+
+def snapshot(
+    auto: AutoShapeSolver,
+    problem: Problem,
+    poses: dict,
+    result: ShapeResult,
+    solver: ShapeSolver | None = None,
+    choice: ModelChoice | None = None,
+    limited: bool = True,
+) -> CheckSnapshot:
+    """Return what a check needs of the streaming model's committed ``result``, or a query's.
+
+    A copy, for another thread.  A query's: ``result`` committed on ``solver``, a model of
+    ``choice``.  ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (a
+    streamed update's check; never a cold solve's or a query's).
+    """
+    solver, choice = solver or auto.inner, choice or auto.choice
+    return CheckSnapshot(
+        solver,
+        solver.snapshot(),
+        replace(choice, reasons=list(choice.reasons)),
+        problem,
+        poses,
+        result.points.copy(),
+        max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0),
+        auto.book.generation,
+        float(np.nan_to_num(result.equilibrium_residual_m, nan=np.inf)),
+        touches_obstacle(result),
+        auto.book.index,
+        limited,
+    )
+
+
+def keep(auto: AutoShapeSolver, verdict: CheckVerdict) -> None:
+    """Keep the model: record the verdict's estimates; the next check is due later."""
+    auto.choice.estimated_error_m = verdict.estimate
+    auto.choice.order_error_m = verdict.order_error
+    if np.isfinite(verdict.sampling_error):
+        auto.choice.sampling_error_m = verdict.sampling_error
+    auto.book.unchecked = False
+    auto.book.since_check = 0
+    auto.book.checked_update = verdict.snapshot.update
+
+
+def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
+    """Apply the held check's verdict when this update is the one it is due at.
+
+    Waits for a background check that has not finished (:mod:`.check_schedule`).
+    """
+    book = auto.book
+    pending = book.pending
+    if pending is None or book.index < pending.apply_at:
+        return
+    book.pending = None
+    try:
+        verdict = pending.outcome()
+    except Exception as exc:  # a check that raised is reported, never fatal to the stream
+        notes.append(f"model check failed: {type(exc).__name__}: {exc}")
+        # retry after recheck_every updates, not at once
+        book.unchecked, book.since_check = False, 0
+        return
+    if verdict is None or verdict.snapshot.generation != book.generation:
+        return  # a prebuild, or stale
+    if verdict.choice is None:
+        keep(auto, verdict)
+    else:
+        # maps the latest committed shape, not the snapshot's
+        auto.switch(verdict.choice, verdict.reason)
+        notes.append(auto.changes[-1][1])

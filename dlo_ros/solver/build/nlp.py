@@ -378,11 +378,15 @@ class StringNLP:
         u0, pp = ca.MX.sym("u", n + nf), ca.MX.sym("p", n_p)
         k0, r0 = ca.MX.sym("K0", n + nf, n + nf), ca.MX.sym("r0", n + nf)
         u, kkt, residual, largest = u0, k0, r0, ca.MX(0)
-        # kkt.regularised: K + diag(δ I, −δ I) bounds the step along a symmetry of the scene
-        sign = ca.DM(np.concatenate([np.ones(n), -np.ones(nf)]))
+        # kkt.regularised: K + diag(δ I, −δ_λ I) bounds the step along a symmetry of the scene
+        primal = ca.DM(np.concatenate([np.ones(n), np.zeros(nf)]))
         for _ in range(NEWTON_STEPS):
             delta = NEWTON_REGULARISATION * ca.fmax(ca.mmax(ca.fabs(kkt)), 1.0)
-            step = ca.solve(kkt + ca.diag(delta * sign), residual, "lapacklu")
+            j_max = ca.mmax(ca.fabs(kkt[n:, :n])) if nf else ca.MX(0)
+            h_max = ca.fmax(ca.mmax(ca.fabs(kkt[:n, :n])), 1.0)
+            delta_rows = NEWTON_REGULARISATION * j_max * j_max / h_max
+            shift = delta * primal - delta_rows * (1 - primal)
+            step = ca.solve(kkt + ca.diag(shift), residual, "lapacklu")
             largest = ca.fmax(largest, ca.norm_inf(step[:n]))
             u = u - step
             kkt, residual, grad, energies = kkt_free(u[:n], pp, u[n:])

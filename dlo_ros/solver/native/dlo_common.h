@@ -124,14 +124,21 @@ typedef void (*dlo_getrf_t)(int *m, int *n, double *a, int *lda, int *ipiv, int 
 typedef void (*dlo_getrs_t)(char *trans, int *n, int *nrhs, double *a, int *lda, int *ipiv,
                             double *b, int *ldb, int *info);
 
-/* The LU of A + diag(delta I_n, -delta I_(N-n)), delta = reg max(max|A|, 1), in place; LAPACK's
-   info. */
+/* The LU of A + diag(delta I_n, -delta_rows I_(N-n)), in place; LAPACK's info.  A = [H J^T; J 0]
+   (column-major), delta = reg max(max|A|, 1), delta_rows = reg max|J|^2 / max(max|H|, 1): the
+   rows' shift scaled as the Schur complement J H^-1 J^T it perturbs (update/kkt.py, regularised). */
 static int dlo_regularised_lu(dlo_getrf_t getrf, double *A, int *ipiv, int n, int N, double reg) {
-  double kmax = 1.0;
+  double kmax = 1.0, hmax = 1.0, jmax = 0.0;
   int info = 0;
-  for (int i = 0; i < N * N; ++i) if (fabs(A[i]) > kmax) kmax = fabs(A[i]);
-  double delta = reg * kmax;
-  for (int i = 0; i < N; ++i) A[i * N + i] += (i < n ? delta : -delta);
+  for (int c = 0; c < N; ++c)
+    for (int r = 0; r < N; ++r) {
+      double v = fabs(A[(size_t)c * N + r]);
+      if (v > kmax) kmax = v;
+      if (c < n && r < n && v > hmax) hmax = v;
+      if (c < n && r >= n && v > jmax) jmax = v;
+    }
+  double delta = reg * kmax, delta_rows = reg * jmax * jmax / hmax;
+  for (int i = 0; i < N; ++i) A[(size_t)i * N + i] += (i < n ? delta : -delta_rows);
   getrf(&N, &N, A, &N, ipiv, &info);
   return info;
 }

@@ -23,7 +23,7 @@ update's first step uses, and there the stability eigenvalue (``stability.min_re
 the same LAPACK routines, geqp3, orgqr and syevr, on K's blocks, in the same call).  It also stops
 at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` evaluations of K, at a singular matrix, or at a
 step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same regularisation
-δ = NEWTON_REGULARISATION · max(max|K|, 1) as the Python path.  The answer is the root the
+(``update/kkt.py``, ``regularised``) as the Python path.  The answer is the root the
 Python path's Newton steps converge to, within round-off: at a grip move of 1 % of L the chord
 steps shrink 20–50× each, so about seven steps cost less than one more evaluation of K.  LAPACK and
 BLAS are the ones SciPy ships (``scipy.linalg.cython_lapack``, ``cython_blas``), passed in as

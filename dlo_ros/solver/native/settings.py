@@ -40,8 +40,8 @@ NEWTON_CHORD_START, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHO
     40,
 )
 
-#: δ / max|K| of the regularised Newton matrix K + diag(δ I, −δ I) of every warm update
-#: (``update/kkt.py``, ``regularised``).
+#: δ / max|K| of the regularised Newton matrix K + diag(δ I, −δ_λ I) of every warm update, and
+#: δ_λ / (max|J|² / max|H|) (``update/kkt.py``, ``regularised``).
 NEWTON_REGULARISATION = 1e-10
 
 #: The stability check holds a row (reduces the Hessian on its null space) when |λ| exceeds

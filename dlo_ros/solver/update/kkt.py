@@ -20,19 +20,28 @@ from ..native.settings import NEWTON_REGULARISATION
 
 
 def regularised(kkt: np.ndarray, n: int) -> np.ndarray:
-    """Return K + diag(δ I_n, −δ I_m), δ = NEWTON_REGULARISATION · max|K|, as a new array.
+    """Return K + diag(δ I_n, −δ_λ I_m) for K = [H Jᵀ; J 0], as a new array.
+
+    δ = ε · max(max|K|, 1) and δ_λ = ε · max|J|² / max(max|H|, 1), ε = NEWTON_REGULARISATION.
 
     A scene with a continuous symmetry (both end tangents along the chord and no twist held: the
     shape may turn about the chord) has an exactly singular K at every equilibrium; LU then turns
-    the residual's rounding noise into an arbitrary step along the symmetry.  The shift bounds
+    the residual's rounding noise into an arbitrary step along the symmetry.  The shift δ bounds
     that step (≈ |r| / δ) and changes a step elsewhere by a factor 1 + O(δ / σ) for K's other
-    singular values σ: convergence stays quadratic until the residual reaches its floor.
+    singular values σ: convergence stays quadratic until the residual reaches its floor.  The rows'
+    shift δ_λ is scaled as the Schur complement J H⁻¹ Jᵀ it perturbs: it bounds the multipliers of
+    two identical rows, and leaves the primal residual δ_λ·Δλ after a step.  (With δ there too,
+    two contact rows 0.3 mm apart at the end of a short element, J_A's singular value 3.5e-3,
+    converged linearly at a rate of 0.6 per step and every such update fell back to IPOPT.)
     """
     out = np.array(kkt, dtype=float, copy=True)
     delta = NEWTON_REGULARISATION * max(float(np.abs(out).max(initial=0.0)), 1.0)
+    h_max = max(float(np.abs(out[:n, :n]).max(initial=0.0)), 1.0)
+    j_max = float(np.abs(out[n:, :n]).max(initial=0.0))
+    delta_rows = NEWTON_REGULARISATION * j_max * j_max / h_max
     idx = np.arange(out.shape[0])
     out[idx[:n], idx[:n]] += delta
-    out[idx[n:], idx[n:]] -= delta
+    out[idx[n:], idx[n:]] -= delta_rows
     return out
 
 

@@ -192,13 +192,15 @@ def main() -> None:
                     help="the planner's loop also with compiled derivatives for planar 12, full 12 and full 16 "
                          "(gcc: about a minute per model the first time, cached after)")
     ap.add_argument("--loop-only", action="store_true", help="only the planner's-loop table (printed, not written)")
+    ap.add_argument("--only", default="", help="only the streams whose label contains this text (e.g. 'table')")
     args = ap.parse_args()
     mode = "blocking" if args.compile else "off"
     if not args.compile:
         os.environ["DLO_NO_COMPILE"] = "1"
     rows, notes = [], []
-    for label, scene, targets in (() if args.loop_only else (demo_stream(), planar_stream(), twisted_stream(),
-                                                       path3d_stream(False), path3d_stream(True))):
+    streams = () if args.loop_only else (demo_stream(), planar_stream(), twisted_stream(),
+                                         path3d_stream(False), path3d_stream(True))
+    for label, scene, targets in (st for st in streams if args.only in st[0]):
         prob, opts = scene.problem, scene.options
         print(f"{label}: auto …", flush=True)
         auto = make_solver(prob, replace(opts, model="auto"), compile=mode, checks="background")

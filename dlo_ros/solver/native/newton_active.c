@@ -225,12 +225,14 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
   *eig_code = DLO_EIGEN_FAILED;
   if (code == DLO_CONVERGED) {
     /* the stability eigenvalue at the answer, on the rows stability.min_reduced_eigenvalue holds:
-       the equalities, and the rows with |lambda| > DLO_STABILITY_MULTIPLIER_TOLERANCE or within
-       DLO_STABILITY_BOUND_TOLERANCE of their bound */
+       the equalities, the rows within DLO_STABILITY_BOUND_TOLERANCE of their bound, and those
+       with |lambda| above DLO_STABILITY_MULTIPLIER_TOLERANCE and above their slack
+       (stability.held_rows) */
     int held = 0, *rows_held = malloc(sizeof(int) * (rows > 0 ? rows : 1));
     for (int i = 0; i < rows; ++i)
-      if (equality[i] || fabs(lam[i]) > DLO_STABILITY_MULTIPLIER_TOLERANCE ||
-          g[i] > ub[i] - DLO_STABILITY_BOUND_TOLERANCE) rows_held[held++] = i;
+      if (equality[i] || g[i] > ub[i] - DLO_STABILITY_BOUND_TOLERANCE ||
+          (fabs(lam[i]) > DLO_STABILITY_MULTIPLIER_TOLERANCE && fabs(lam[i]) > ub[i] - g[i]))
+        rows_held[held++] = i;
     double *J = malloc(sizeof(double) * ((size_t)held * n + 1));
     for (int j = 0; j < n; ++j)
       for (int k = 0; k < held; ++k) J[k + (size_t)held * j] = jac[rows_held[k] + (size_t)rows *

@@ -44,9 +44,9 @@ NEWTON_CHORD_START, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHO
 #: δ_λ / (max|J|² / max|H|) (``update/kkt.py``, ``regularised``).
 NEWTON_REGULARISATION = 1e-10
 
-#: The stability check holds a row (reduces the Hessian on its null space) when |λ| exceeds
-#: STABILITY_MULTIPLIER_TOLERANCE or g is within STABILITY_BOUND_TOLERANCE of its bound, besides
-#: every equality row (scaled units).
+#: The stability check holds a row (reduces the Hessian on its null space) when g is within
+#: STABILITY_BOUND_TOLERANCE of its bound, or |λ| exceeds STABILITY_MULTIPLIER_TOLERANCE and the
+#: row's slack, besides every equality row (scaled units; ``results/stability.py``, held_rows).
 STABILITY_MULTIPLIER_TOLERANCE = 1e-9
 STABILITY_BOUND_TOLERANCE = 1e-9
 

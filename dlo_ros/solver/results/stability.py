@@ -43,12 +43,7 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
     active = np.zeros(0, dtype=bool)
     if nlp.lbg.size:
         g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
-        # the rows the compiled loops hold too (native/newton_active.c): one value, native_settings
-        active = (
-            nlp.equality
-            | (np.abs(state.lam_g) > settings.STABILITY_MULTIPLIER_TOLERANCE)
-            | (g > nlp.ubg - settings.STABILITY_BOUND_TOLERANCE)
-        )
+        active = held_rows(nlp.equality, nlp.ubg, state.lam_g, g)
     if state.hessian is None:
         gradient, _, state.jacobian, state.hessian, state.energies = derivatives(
             nlp, fns, state.z, state.p, state.lam_g, active
@@ -63,6 +58,27 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
     value, vector = lowest_eigenpair(basis.T @ h @ basis)
     state.unstable_direction = signed(basis @ vector) if value < 0 else None
     return value
+
+
+def held_rows(
+    equality: np.ndarray, upper: np.ndarray, lam: np.ndarray, g: np.ndarray
+) -> np.ndarray:
+    """Return the rows the stability check holds, as a mask: the rows active at the answer.
+
+    The equalities; the inequalities within STABILITY_BOUND_TOLERANCE of their bound ``upper``;
+    and those with |λ| above STABILITY_MULTIPLIER_TOLERANCE and above their slack
+    ``upper`` − g (scaled units).  An interior-point answer leaves λ·slack ≈ μ on every row, so a
+    row far from its bound keeps a multiplier of μ/slack: 1.8e-10/slack on the random scenes,
+    above 1e-9 on every row within 0.18 of its bound, which were held as if touching and left
+    the shape "no freedom" (stable by accident).  An active row has λ ≫ slack, a free one
+    slack ≫ λ.  The compiled loops hold the same rows (native/newton_active.c; one value,
+    native/settings.py).
+    """
+    return (
+        equality
+        | (g > upper - settings.STABILITY_BOUND_TOLERANCE)
+        | ((np.abs(lam) > settings.STABILITY_MULTIPLIER_TOLERANCE) & (np.abs(lam) > upper - g))
+    )
 
 
 def signed(direction: np.ndarray) -> np.ndarray:

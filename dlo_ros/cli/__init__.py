@@ -34,6 +34,7 @@ import os
 import sys
 from typing import Callable
 
+from .. import blas_threads  # noqa: F401  (importing it asks for one BLAS thread: before numpy)
 from ..text import one_line_warnings, safe_text
 from . import demo, fit, node, replay, scenes, solve
 from .common import EXIT_NOT_OK, EXIT_OK, EXIT_USAGE, UsageError, print_error

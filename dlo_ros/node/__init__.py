@@ -16,6 +16,7 @@ Importing this package does not import rclpy; its ROS modules do.
 
 from __future__ import annotations
 
+from ..blas_threads import one_blas_thread
 from .signals import ignore_signals_at_exit, stop_on_first_signal
 
 
@@ -26,6 +27,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
     :mod:`dlo_ros.node.signals`).
     """
     stop_on_first_signal()
+    one_blas_thread()  # before numpy loads (blas_threads.py)
     try:
         # not at the top: the signal handling above must be in place before rclpy and CasADi load
         from .run import main as _main

@@ -12,6 +12,8 @@ ROTATIONS = ("director", "euler")
 BASES = ("chebyshev", "fourier", "elements")
 #: where the obstacle rows sit: uniform samples, or the element mesh's own nodes
 OBSTACLE_POINTS = ("samples", "nodes")
+#: whether model 'auto' may leave the scene's plane ('keep': a string held in it)
+PLANES = ("auto", "keep")
 
 
 @dataclass(frozen=True)
@@ -42,9 +44,14 @@ class SolverOptions:
     model: 'auto' (default: the smallest model the scene needs, checked a posteriori against
     error_tolerance, see solver/auto/auto_solver.py), 'full' (3D: φ, θ and, when two clamps hold
     it, ψ) or 'planar' (φ only, θ ≡ π/2: the string stays in the working plane; requires a planar
-    scene and frame 'auto'). error_tolerance [m]: what 'auto' guarantees on the centreline; 0 means
-    1e-3·L (1 mm on 1 m). recheck_every: 'auto' repeats its a-posteriori checks every this many
-    streamed updates. output_points: centreline samples in a result.
+    scene and frame 'auto'). plane: 'auto' (default: model 'auto' leaves the scene's plane when the
+    targets, an obstacle, self-contact or a 3D instability need it) or 'keep' (the string is held
+    in the scene's plane, as the paper's wide strips are: model 'auto' chooses among planar models
+    only, its stability verdict is for in-plane perturbations, and a target out of the plane is
+    refused as 'invalid'; needs a planar scene, model 'auto' or 'planar').
+    error_tolerance [m]: what 'auto' guarantees on the centreline; 0 means 1e-3·L (1 mm on 1 m).
+    recheck_every: 'auto' repeats its a-posteriori checks every this many streamed updates.
+    output_points: centreline samples in a result.
     tolerance: IPOPT's (scaled) convergence tolerance. max_continuation_steps: the largest number
     of equal steps a failed warm update is split into. update_time_limit [s]: how long a streamed
     update (a warm solve from a committed shape that commits) may try: no IPOPT attempt starts
@@ -73,6 +80,7 @@ class SolverOptions:
     max_continuation_steps: int = 8
     max_strain: float = 0.2
     model: str = "auto"
+    plane: str = "auto"
     rotation: str = "director"
     error_tolerance: float = 0.0
     recheck_every: int = 10
@@ -103,8 +111,7 @@ class SolverOptions:
                 f"solver.obstacle_slots: must be in [0, 256], got {self.obstacle_slots}"
             )
         self._validate_obstacle_points()
-        if self.frame not in FRAMES:
-            raise ValueError(f"solver.frame: must be one of {FRAMES}, got {self.frame!r}")
+        self._validate_frame_and_plane()
         if not (2 <= self.output_points <= 10000):
             raise ValueError(
                 f"solver.output_points: must be in [2, 10000], got {self.output_points}"
@@ -160,6 +167,18 @@ class SolverOptions:
             )
         if not (0 < self.max_strain < 10):
             raise ValueError("solver.max_strain: must be in (0, 10)")
+
+    def _validate_frame_and_plane(self) -> None:
+        """Refuse an unknown ``frame`` or ``plane``, and plane 'keep' with model 'full'."""
+        if self.frame not in FRAMES:
+            raise ValueError(f"solver.frame: must be one of {FRAMES}, got {self.frame!r}")
+        if self.plane not in PLANES:
+            raise ValueError(f"solver.plane: must be one of {PLANES}, got {self.plane!r}")
+        if self.plane == "keep" and self.model == "full":
+            raise ValueError(
+                "solver.plane: 'keep' holds the string in the scene's plane, which model 'full' "
+                "does not: use model 'auto' or 'planar'"
+            )
 
     def _validate_obstacle_points(self) -> None:
         """Refuse an unknown ``obstacle_points``, and 'nodes' on a model without elements."""

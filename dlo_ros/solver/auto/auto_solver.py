@@ -247,6 +247,9 @@ class AutoShapeSolver:
                 return self.finish(
                     ShapeResult(status="invalid", message=str(exc).strip("'\"")), t0, []
                 )
+            off_plane = follow.off_kept_plane(self, problem)
+            if off_plane:
+                return self.finish(ShapeResult(status="invalid", message=off_plane), t0, [])
             notes: list[str] = []
             if commit:
                 self.book.index, self.book.updates = self.book.updates, self.book.updates + 1

@@ -68,7 +68,8 @@ def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
     if auto.worker.background:
         i = ORDERS.index(snap.choice.order)
         keys = {("",) + replace(snap.choice, order=o).key() for o in ORDERS[max(i - 1, 0) : i + 2]}
-        keys.add(("checker",) + full_choice(snap.choice, snap.problem).key())
+        if not snap.choice.plane_kept:  # the 3D checker of a planar shape (shadows.py)
+            keys.add(("checker",) + full_choice(snap.choice, snap.problem).key())
         job = auto.worker.submit(auto.model_checks.evaluate, keys, snap, True)
         return PendingCheck(apply_at, job=job)
     try:

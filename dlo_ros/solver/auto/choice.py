@@ -43,6 +43,7 @@ class ModelChoice:
     ``self_contact``: self-contact rows in the NLP (3D director models only).  ``mesh``: the
     element mesh a refinement chose (``build/mesh.py``; None: ``order`` shared out by element
     length over the scene's breakpoints).
+    ``plane_kept``: ``solver.plane: keep``, the model stays planar (no switch to 3D is made).
     ``estimated_error_m`` is the last check's estimate, ``order_error_m`` its basis-order part (the
     rest: sampling), ``sampling_error_m`` the samples shadow's estimate (nan: not measured).
     """
@@ -61,6 +62,7 @@ class ModelChoice:
     mesh: MeshSpec | None = None
     order_error_m: float = float("nan")
     sampling_error_m: float = float("nan")
+    plane_kept: bool = False
 
     def key(self) -> tuple:
         """Return what identifies the model built for this choice (its pool key, untagged)."""
@@ -105,6 +107,14 @@ def initial_choice(problem: Problem, options: SolverOptions, tolerance: float) -
         if planar and len(in_plane) < len(obstacles):
             reasons.append(f"{len(obstacles) - len(in_plane)} obstacle(s) clear of the plane")
             obstacles = in_plane
+    if options.plane == "keep":
+        if not planar:
+            raise ValueError(
+                "solver.plane: 'keep' needs a scene in one plane ("
+                + (why if options.frame == "auto" else "solver.frame is 'paper'")
+                + ")"
+            )
+        reasons.append("plane kept (solver.plane: keep)")
     sag = (
         problem.string.weight_per_length.maximum
         * L**4
@@ -128,6 +138,7 @@ def initial_choice(problem: Problem, options: SolverOptions, tolerance: float) -
         obstacles,
         reasons=reasons,
         samples=options.obstacle_samples,
+        plane_kept=options.plane == "keep",
     )
 
 

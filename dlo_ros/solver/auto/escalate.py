@@ -130,10 +130,12 @@ def self_approach(auto: AutoShapeSolver, problem: Problem) -> str:
     """Say why self-contact must be modelled now ('' if not).
 
     It must when the committed shape of a model without it has two samples the exclusion arc apart
-    within the candidate reach of each other (k-d tree query).  Never with ``rotation: euler``.
+    within the candidate reach of each other (k-d tree query).  Never with ``rotation: euler``
+    or the plane kept (``solver.plane: keep``).
     """
     if (
         auto.choice.self_contact
+        or auto.choice.plane_kept
         or auto.options.rotation != "director"
         or not auto.inner.has_warm_start
     ):
@@ -184,9 +186,15 @@ def _contact_choice(auto: AutoShapeSolver, problem: Problem, result: ShapeResult
     """Say why ``result`` must be solved again with self-contact ('' if it need not or cannot).
 
     It must when it passes through itself (``results.self_pass``) and was solved without
-    self-contact; it cannot with ``rotation: euler`` (no self-contact model).
+    self-contact; it cannot with ``rotation: euler`` (no self-contact model) or with the plane
+    kept (``solver.plane: keep``: self-contact is 3D; the result's flag and message say it passes
+    through itself).
     """
-    if not result.passes_through_itself or auto.options.rotation != "director":
+    if (
+        not result.passes_through_itself
+        or auto.options.rotation != "director"
+        or auto.choice.plane_kept
+    ):
         return ""
     return (
         f"self-contact: the answer without it passes through itself "

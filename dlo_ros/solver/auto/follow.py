@@ -30,7 +30,8 @@ def build_first(auto: AutoShapeSolver, problem: Problem) -> None:
     so that a stream leaving the plane at its first update never waits for the build.
     """
     i = ORDERS.index(auto.choice.order)
-    ahead = [full_choice(auto.choice, problem)] if auto.choice.planar else []
+    leaves = auto.choice.planar and not auto.choice.plane_kept
+    ahead = [full_choice(auto.choice, problem)] if leaves else []
     auto.pool.full_key = ("",) + ahead[0].key() if ahead else ()
     ahead += [
         replace(auto.choice, order=o) for o in ORDERS[i + 1 : i + 2] + ORDERS[max(i - 1, 0) : i]
@@ -38,6 +39,14 @@ def build_first(auto: AutoShapeSolver, problem: Problem) -> None:
     auto.worker.submit(prebuild, {("",) + c.key() for c in ahead}, auto, ahead, problem)
     while auto.pool.full_key and auto.worker.busy_with(auto.pool.full_key):
         time.sleep(0.002)
+
+
+def off_kept_plane(auto: AutoShapeSolver, problem: Problem) -> str:
+    """Say why ``problem``'s targets leave the plane ``solver.plane: keep`` holds ('' if not)."""
+    if not auto.choice.plane_kept:
+        return ""
+    why = not_planar(problem, auto.choice.obstacles, auto.inner.nlp.r0, tolerance=1e-7)
+    return f"solver.plane 'keep': {why}" if why else ""
 
 
 def follow_scene(
@@ -94,7 +103,11 @@ def build_ahead(auto: AutoShapeSolver, problem: Problem) -> None:
     For a planar stream, the 3D model leaving the plane switches to; else the model with the
     obstacles within L/2 of reach (they enter the NLP at L/4).
     """
-    if auto.choice.planar and auto.pool.pooled(full := full_choice(auto.choice, problem)) is None:
+    if (
+        auto.choice.planar
+        and not auto.choice.plane_kept
+        and auto.pool.pooled(full := full_choice(auto.choice, problem)) is None
+    ):
         auto.pool.full_key = ("",) + full.key()
         auto.worker.submit(prebuild, {auto.pool.full_key}, auto, [full], problem)
         return

@@ -116,8 +116,9 @@ def decide(ev: Evidence, choice: ModelChoice, tolerance: float, stream: bool) ->
     tol, why = tolerance, ""
     to: ModelChoice | None = None
     # -- the physics --------------------------------------------------------------------------
-    # a planar shape unstable in 3D leaves its plane (a twist-free strip under compression)
-    if choice.planar and (eig := ev.planar_instability()) is not None:
+    # a planar shape unstable in 3D leaves its plane (a twist-free strip under compression),
+    # unless the scene holds it there (solver.plane: keep)
+    if choice.planar and not choice.plane_kept and (eig := ev.planar_instability()) is not None:
         to = replace(full_choice(choice, ev.problem), estimated_error_m=NAN, order_error_m=NAN)
         why = f"planar shape unstable in 3D (eigenvalue {eig:.3g}): full model"
     # the string stretches by more than δ/2 under its grip forces

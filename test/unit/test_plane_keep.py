@@ -1,0 +1,115 @@
+"""``solver.plane: keep``: the default model held in the scene's plane (the paper's wide strips).
+
+The paper's Fig. 3 with its floor (config/scenes/bench_fig3_floor.yaml, ρ = 3000) is a strip the
+paper keeps in its plane; in 3D an isotropic rod (or a strip with Rt = 1.5 Rf) lies over sideways
+there, so the scene says ``plane: keep``.  With that, the default (``model: auto``) must find the
+strip's lowest equilibrium by itself, cold and streamed: against the independent floor reference
+(test/reference/floor_rod.py: shooting on the heavy elastica between lift-off points, topology
+from a discrete rod with its own minimiser), the centreline within the tolerance (1e-3 L), the
+energy, the contact stretches' ends at the reference's lift-off points within the tolerance, and a
+stable verdict.  ρ = 3000's lowest equilibria are two mirror images (the curl near either clamp,
+E = −56.145 J); the answer is compared with the nearer.
+
+And what the option refuses: a target out of the plane ('invalid', naming the option, the last
+good shape kept), a scene out of one plane, and model 'full'.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from reference.floor_rod import fig3_floor, shoot, solve_discrete, start_angles
+
+from dlo_ros.model.problem import GripPose
+from dlo_ros.scene import load_scene
+from dlo_ros.scene.reading import scene_from_dict
+from dlo_ros.scene.writing import scene_to_dict
+from dlo_ros.solver.auto.factory import make_solver
+from dlo_ros.solver.options import SolverOptions
+
+SCENE = load_scene("bench_fig3_floor")
+L = SCENE.problem.string.length
+TOL = 1e-3 * L  # the default solver.error_tolerance
+
+
+@pytest.fixture(scope="module")
+def references():
+    """The two mirror-image lowest equilibria at ρ = 3000 (curl near s = 0 and near s = L)."""
+    pr = fig3_floor(3000.0)
+    return [shoot(solve_discrete(pr, 200, start_angles(200, at))) for at in (0.2, 0.8)]
+
+
+def nearest(result, refs):
+    """(max centreline distance [m], the reference it is measured against)."""
+    errors = [
+        np.max(np.linalg.norm(result.points[:, [0, 2]] - ref.at(result.s), axis=1)) for ref in refs
+    ]
+    k = int(np.argmin(errors))
+    return errors[k], refs[k]
+
+
+def check_against(result, refs):
+    assert result.status == "ok" and result.stable is True, result.message
+    assert result.model.as_dict()["tolerance_met"] is True
+    assert np.max(np.abs(result.points[:, 1])) == 0.0  # in its plane
+    error, ref = nearest(result, refs)
+    assert error < TOL, error
+    print(f"centreline {error:.2e} m, energy {result.energy['total']:.6f} vs {ref.energy:.6f} J")
+    assert result.energy["total"] == pytest.approx(ref.energy, abs=1e-3 * abs(ref.energy))
+    # where the strip leaves and meets the floor: the contact stretches' ends
+    ends = np.unique([[c.s_start, c.s_end] for c in result.contact_loads])
+    lift_off = np.unique(ref.lift_off.round(12))
+    assert max(np.min(np.abs(ends - s)) for s in lift_off) < TOL, (ends, lift_off)
+    return error
+
+
+def test_fig3_floor_cold(references):
+    solver = make_solver(
+        SCENE.problem, replace(SCENE.options, output_points=401), checks="sync", compile="off"
+    )
+    result = solver.solve()
+    check_against(result, references)
+    assert "plane kept" in " ".join(result.model.as_dict()["reasons"])
+
+
+def test_fig3_floor_streamed(references):
+    """From the clamps 0.72 L apart, the right clamp moved to 0.70 L in steps of 0.004 L."""
+    right = SCENE.problem.grip("right").pose
+    start = SCENE.problem.with_grip_poses(
+        {"right": GripPose(right.position + [0.02, 0, 0], right.orientation)}
+    )
+    solver = make_solver(
+        start, replace(SCENE.options, output_points=401), checks="sync", compile="off"
+    )
+    assert solver.solve().ok
+    for x in np.linspace(0.716, 0.70, 5):
+        result = solver.solve({"right": GripPose(np.array([x, 0.0, 0.0]), right.orientation)})
+        assert result.ok, result.message
+    check_against(result, references)
+
+
+def test_target_out_of_the_plane_is_refused(references):
+    solver = make_solver(SCENE.problem, SCENE.options, checks="sync", compile="off")
+    first = solver.solve()
+    assert first.ok
+    right = SCENE.problem.grip("right").pose
+    off = solver.solve({"right": GripPose(right.position + [0, 0.01, 0], right.orientation)})
+    assert off.status == "invalid" and "solver.plane" in off.message, off.message
+    assert solver.inner.committed_state is not None
+    again = solver.solve({"right": right})
+    # the same targets again, warm from the kept shape: the same equilibrium (to well within δ)
+    assert again.ok and np.max(np.linalg.norm(again.points - first.points, axis=1)) < 1e-6
+
+
+def test_what_keep_refuses():
+    with pytest.raises(ValueError, match="solver.plane"):
+        SolverOptions(model="full", plane="keep").validate()
+    with pytest.raises(ValueError, match="solver.plane"):
+        SolverOptions(plane="hold").validate()
+    d = scene_to_dict(SCENE)
+    d["grips"][1]["position"] = [0.7, 0.1, 0.0]  # the clamps' tangents no longer in one plane
+    scene = scene_from_dict(d, source=SCENE.source)
+    with pytest.raises(ValueError, match="solver.plane"):
+        make_solver(scene.problem, scene.options, checks="sync", compile="off")

@@ -16,13 +16,15 @@ from __future__ import annotations
 
 import os
 
-#: the thread-count variables of the BLAS builds numpy and SciPy ship or link (OpenBLAS with
-#: pthreads or OpenMP, MKL)
-VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+#: the thread count of the OpenBLAS that numpy's and SciPy's wheels ship (pthreads).  Only that:
+#: OMP_NUM_THREADS=1 as well made 23 of the main job's updates on the post run into
+#: solver.update_time_limit (IPOPT Maximum_WallTime_Exceeded; 3 runs of `scripts/dlo-env demo`,
+#: none with OPENBLAS_NUM_THREADS=1 alone, which settled in 4.5 s)
+VARIABLES = ("OPENBLAS_NUM_THREADS",)
 
 
 def one_blas_thread() -> None:
-    """Ask BLAS for one thread (each variable of VARIABLES the user has not set becomes "1")."""
+    """Ask BLAS for one thread (a variable of VARIABLES the user has not set becomes "1")."""
     for name in VARIABLES:
         os.environ.setdefault(name, "1")
 

@@ -11,8 +11,10 @@ unit-norm rows) and, for quaternions, signed so that neighbours have a positive 
 Multipliers, row by row of the new NLP (in SI, λ_SI = λ / (row_scale · σ)):
 
 * rows with a twin of the same kind on the old mesh (grip positions and orientations, relative
-  positions, the obstacle rows of the samples, which sit at the same arc lengths on both meshes)
-  copy it; a sample that a contact slot switched off on the new mesh gets 0;
+  positions) copy it;
+* obstacle rows: each old row's force goes to the new row nearest along s (rows on the nodes
+  move between meshes; rows on uniform samples sit at the same arc lengths and copy theirs); a
+  sample that a contact slot switched off on the new mesh gets 0;
 * contact slots copy the old slot's multiplier at the same arc length (within
   ``obstacle_slots.TOLERANCE`` · L, as ``update/warm_start.py`` does across models);
 * the unit-norm row of node i takes λ_i = −½ v_i · (∇_{v_i} f + Σ_other J_{k,v_i} λ_k), the
@@ -32,6 +34,7 @@ import numpy as np
 from ...model.director import DirectorModel, continuous_signs
 from ...model.elements import ElementMesh
 from ..contact import obstacle_slots as OSL
+from ..contact.obstacle_points import carried_forces
 from ..shape_solver import ShapeSolver
 from ..state import SolverState
 from ..update.newton import fill_start
@@ -124,12 +127,20 @@ def transfer_multipliers(
     by_kind = {kind: float(lam_si[i]) for i, kind in enumerate(onlp.row_kind)}
     slots = _slot_multipliers(old, src.p, lam_si, new, p)
     lam = np.zeros(len(nnlp.row_kind))
+    carried = {
+        k: carried_forces(
+            onlp.obstacle_s, lam_si[np.asarray(onlp.obstacle_rows[k])], nnlp.obstacle_s
+        )
+        for k in range(min(len(nnlp.obstacle_rows), len(onlp.obstacle_rows)))
+    }
     norm_rows, unmatched = [], 0
     for i, kind in enumerate(nnlp.row_kind):
         if kind[0] == "norm":
             norm_rows.append(i)
         elif kind[0] == "slot":
             lam[i] = slots.get(i, 0.0)
+        elif kind[0] == "obstacle" and kind[1] in carried:
+            lam[i] = 0.0 if _switched_off(new, p, kind) else carried[kind[1]][kind[2]]
         elif kind[0] != "fold" and kind in by_kind:
             lam[i] = 0.0 if _switched_off(new, p, kind) else by_kind[kind]
         elif kind[0] != "fold":

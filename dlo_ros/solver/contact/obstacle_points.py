@@ -109,3 +109,19 @@ def nearest_row(s: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     s = np.asarray(s, dtype=float)
     sigma = np.atleast_1d(np.asarray(sigma, dtype=float))
     return np.argmin(np.abs(s[None, :] - sigma[:, None]), axis=1).astype(int)
+
+
+def carried_forces(src_s: np.ndarray, src_forces: np.ndarray, dst_s: np.ndarray) -> np.ndarray:
+    """Return the rows ``dst_s``' forces [N] when each row of ``src_s`` hands its force on.
+
+    Each nonzero force of the source rows goes to the destination row nearest along s (forces
+    landing on one row add up): a contact force stays where it acts when the rows move, as the
+    rows on the nodes do between two meshes.  Rows at the same arc lengths copy their forces.
+    """
+    out = np.zeros(np.asarray(dst_s).size)
+    forces = np.asarray(src_forces, dtype=float)
+    pressing = np.flatnonzero(forces != 0.0)
+    if out.size and pressing.size:
+        rows = nearest_row(dst_s, np.asarray(src_s, dtype=float)[pressing])
+        np.add.at(out, rows, forces[pressing])
+    return out

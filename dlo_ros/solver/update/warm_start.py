@@ -7,9 +7,10 @@ re-extracting the Euler angles of the material frames in the target's reference 
 along s) when the frames differ.  Multipliers are matched by constraint-row identity (grip, name,
 component), the grip position rows through the reaction force vector (each model may use other axes
 for them), an obstacle's contact slots by their arc length (each model places its own:
-``obstacle_slots.py``); rows the source did not have get zero, and a director target gets
-least-squares multipliers of its equality rows at the adopted shape, ∇f + J_freeᵀ λ ≈ 0 (zeros
-would make its first Newton update fail).
+``obstacle_slots.py``), its rows by arc length too (each force to the target's row nearest along
+s: rows on the nodes of an element mesh move between meshes); rows the source did not have get
+zero, and a director target gets least-squares multipliers of its equality rows at the adopted
+shape, ∇f + J_freeᵀ λ ≈ 0 (zeros would make its first Newton update fail).
 """
 
 from __future__ import annotations
@@ -20,12 +21,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ...model.problem import GripPose, Problem
+from ...model.problem import GripPose, Obstacle, Problem
 from ...model.ritz import RitzModel
 from ...model.rotations import euler_from_frame
 from ..build.functions import NlpFunctions
 from ..build.initial_guess import match_clamp_rolls
 from ..contact import obstacle_slots as OSL
+from ..contact.obstacle_points import carried_forces
 from ..contact import self_contact as SC
 from ..build.nlp import StringNLP
 from ..build.parameters import ProblemParameters
@@ -49,6 +51,8 @@ class SourceShape:
     slots: list[
         tuple[np.ndarray, np.ndarray]
     ]  # per obstacle: its filled contact slots' s [m] and SI multipliers
+    #: per obstacle of the source: (the obstacle, its rows' s [m], their SI multipliers [N])
+    obstacle_rows: list[tuple[Obstacle, np.ndarray, np.ndarray]]
 
 
 def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> SourceShape:
@@ -85,7 +89,17 @@ def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> S
         name: nlp.grip_axes[name].T @ lam_src[rows["position"]]
         for name, rows in nlp.grip_rows.items()
     }
-    multipliers = {kind: lam_src[i] for i, kind in enumerate(nlp.row_kind) if kind[0] != "slot"}
+    # obstacle rows by arc length, not index: on element meshes they sit on the nodes, which
+    # differ between meshes (the index matched a force to another node)
+    multipliers = {
+        kind: lam_src[i]
+        for i, kind in enumerate(nlp.row_kind)
+        if kind[0] not in ("slot", "obstacle")
+    }
+    obstacle_rows = [
+        (ob, nlp.obstacle_s, lam_src[np.asarray(nlp.obstacle_rows[i])])
+        for i, ob in enumerate(nlp.problem.obstacles)
+    ]
     slots = []
     for i, rows in enumerate(nlp.slot_rows):
         filled = src.p[nlp.params[f"slots:{i}:on"]] > 0
@@ -101,6 +115,7 @@ def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> S
         forces,
         multipliers,
         slots,
+        obstacle_rows,
     )
 
 
@@ -137,6 +152,13 @@ def warm_state(
         else:
             continue
         lam[i] = value * nlp.row_scale[i] * nlp.sigma
+    for k, ob in enumerate(nlp.problem.obstacles):  # each force to the row nearest along s
+        for src_ob, src_s, src_lam in source.obstacle_rows:
+            if src_ob == ob:
+                held = np.asarray(nlp.obstacle_rows[k])
+                carried = carried_forces(src_s, src_lam, nlp.obstacle_s)
+                lam[held] = carried * np.asarray(nlp.row_scale)[held] * nlp.sigma
+                break
     p = parameters.pack(problem, z)
     for i, rows in enumerate(
         nlp.slot_rows

@@ -64,6 +64,11 @@ class ModelChoice:
     sampling_error_m: float = float("nan")
     plane_kept: bool = False
 
+    @property
+    def may_leave_plane(self) -> bool:
+        """Tell whether this planar model may be switched to 3D (not with the plane kept)."""
+        return self.planar and not self.plane_kept
+
     def key(self) -> tuple:
         """Return what identifies the model built for this choice (its pool key, untagged)."""
         return (

@@ -30,8 +30,7 @@ def build_first(auto: AutoShapeSolver, problem: Problem) -> None:
     so that a stream leaving the plane at its first update never waits for the build.
     """
     i = ORDERS.index(auto.choice.order)
-    leaves = auto.choice.planar and not auto.choice.plane_kept
-    ahead = [full_choice(auto.choice, problem)] if leaves else []
+    ahead = [full_choice(auto.choice, problem)] if auto.choice.may_leave_plane else []
     auto.pool.full_key = ("",) + ahead[0].key() if ahead else ()
     ahead += [
         replace(auto.choice, order=o) for o in ORDERS[i + 1 : i + 2] + ORDERS[max(i - 1, 0) : i]
@@ -63,9 +62,10 @@ def follow_scene(
         reach = in_plane_obstacles(problem, reach, auto.inner.nlp.r0)
     entering = set(reach) - set(auto.choice.obstacles)
     obstacles = tuple(sorted(entering | set(auto.choice.obstacles)))
+    # (with the plane kept, ``off_kept_plane`` has refused targets out of it before this)
     why = (
         not_planar(problem, obstacles, auto.inner.nlp.r0, tolerance=1e-7)
-        if auto.choice.planar
+        if auto.choice.may_leave_plane
         else ""
     )
     stretch_why = "" if auto.choice.stretch else stretch_needed(problem, auto.tolerance / 2)
@@ -104,8 +104,7 @@ def build_ahead(auto: AutoShapeSolver, problem: Problem) -> None:
     obstacles within L/2 of reach (they enter the NLP at L/4).
     """
     if (
-        auto.choice.planar
-        and not auto.choice.plane_kept
+        auto.choice.may_leave_plane
         and auto.pool.pooled(full := full_choice(auto.choice, problem)) is None
     ):
         auto.pool.full_key = ("",) + full.key()

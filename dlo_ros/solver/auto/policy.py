@@ -118,7 +118,7 @@ def decide(ev: Evidence, choice: ModelChoice, tolerance: float, stream: bool) ->
     # -- the physics --------------------------------------------------------------------------
     # a planar shape unstable in 3D leaves its plane (a twist-free strip under compression),
     # unless the scene holds it there (solver.plane: keep)
-    if choice.planar and not choice.plane_kept and (eig := ev.planar_instability()) is not None:
+    if choice.may_leave_plane and (eig := ev.planar_instability()) is not None:
         to = replace(full_choice(choice, ev.problem), estimated_error_m=NAN, order_error_m=NAN)
         why = f"planar shape unstable in 3D (eigenvalue {eig:.3g}): full model"
     # the string stretches by more than δ/2 under its grip forces

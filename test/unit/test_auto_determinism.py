@@ -1,6 +1,7 @@
 """Deterministic ``solver.model: auto`` streams (#37): model changes at defined updates.
 
-A check of streamed update k takes effect just before update k + CHECK_LAG, with inline
+A check of streamed update k takes effect just before update k + CHECK_LAG (a switch of model
+BUILD_LAG updates later still), with inline
 (``checks='sync'``) and background checks alike, and a background check that has not finished by
 then is waited for (``dlo_ros/solver/auto/check_schedule.py``).  So the same target sequence gives
 the same models, switched at the same update indices, and the same shapes (same model, same warm
@@ -26,6 +27,7 @@ from dlo_ros.model import Obstacle
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver, make_solver
 from dlo_ros.solver.auto import checks as checks_module
+from dlo_ros.solver.auto.check_schedule import BUILD_LAG, CHECK_LAG
 from dlo_ros.solver.auto import follow as follow_module
 
 STEPS = 200
@@ -113,9 +115,14 @@ def assert_same_stream(inline: list, other: list) -> None:
 
 def assert_escalated_by_a_check(results: list) -> None:
     """At least one change of the stream was a check's verdict (the mesh, the order or the
-    samples)."""
-    verdicts = [(at, r) for at, r in changes(results[-1]) if re.match(r"(error estimate|order|the )", r)]
-    assert verdicts and all(at > 0 for at, _ in verdicts), changes(results[-1])
+    samples), and each took effect CHECK_LAG + BUILD_LAG updates after the shape it checked at
+    the earliest: a switched model is checked first at the update it took effect at."""
+    made = changes(results[-1])
+    verdicts = [k for k, (_, r) in enumerate(made) if re.match(r"(error estimate|order|the )", r)]
+    assert verdicts, made
+    for k in verdicts:
+        since = made[k - 1][0] if k > 0 else 0
+        assert made[k][0] >= since + CHECK_LAG + BUILD_LAG, made
 
 
 def assert_near_a_finer_cold_solve(scene, results, path) -> None:
@@ -166,7 +173,7 @@ def test_a_recorded_background_stream_replays_at_every_update(tmp_path):
 
     from dlo_ros.recording import Recorder
 
-    scene, targets = default_cable(), path_3d()[:155]  # through the order-16 switch (update 149)
+    scene, targets = default_cable(), path_3d()[:155]  # through the mesh refinement (update 79)
     solver = make_solver(scene.problem, scene.options, compile="off", checks="background")
     q = scene.problem.grip("right").pose.orientation
     path = tmp_path / "auto.rrd"

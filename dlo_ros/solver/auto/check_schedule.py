@@ -1,16 +1,23 @@
-"""When a streamed update's check takes effect: CHECK_LAG updates later, in both modes (#37).
+"""When a streamed update's check takes effect: a fixed number of updates later, in both modes.
 
-The rule.  Streamed updates are numbered 0, 1, 2, ... (every ``solve(commit=True)``: the stream's
-update index).  When update k's committed shape is due for a check (its model is unchecked, or
-``recheck_every`` updates have passed), the check of that shape is started at k and its verdict
-(keep the model, or switch to a richer one) is applied just before update k + CHECK_LAG is
-solved; no other check starts meanwhile.
+The rule (#37).  Streamed updates are numbered 0, 1, 2, ... (every ``solve(commit=True)``: the
+stream's update index).  When update k's committed shape is due for a check (its model is
+unchecked, or ``recheck_every`` updates have passed), the check of that shape is started at k and
+no other check starts until its verdict has taken effect:
 
-* ``checks='background'``: the check runs on the worker thread beside updates k+1 ... k+LAG−1;
-  if it has not finished when update k + CHECK_LAG starts, that update waits for it.  The wait is
-  bounded as the check is: each of its re-solves stops at ``solver.update_time_limit``
-  (``update/time_limit.py``).  An answer never depends on whether the check had finished.
-* ``checks='sync'``: the check runs inline at k and its verdict is held until k + CHECK_LAG.
+* a verdict that keeps the model takes effect just before update k + CHECK_LAG is solved;
+* a verdict that switches to another model (a mesh refined or coarsened, the physics changed)
+  takes effect just before update k + CHECK_LAG + BUILD_LAG: the check decides first and then
+  builds and warm-starts that model, which costs more than the decision (a new mesh: a tenth to
+  a fifth of a second interpreted), so the stream gets BUILD_LAG more updates to build it beside.
+
+* ``checks='background'``: the check runs on the worker thread beside the updates; the update a
+  verdict is due at waits for the decision (and a switch's for the build) if they have not
+  finished.  The wait is bounded as the check is: each of its re-solves stops at
+  ``solver.update_time_limit`` (``update/time_limit.py``).  An answer never depends on whether the
+  check had finished.
+* ``checks='sync'``: the check and the build run inline at k, and the verdict is held until the
+  update it is due at.
 
 So both modes, on a fast or a loaded machine, switch models at the same updates and solve the
 same shapes.  A verdict about a model the stream has left meanwhile (an escalation inside an
@@ -36,33 +43,60 @@ if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports th
 #: follows within a few updates, and below the default ``recheck_every`` (10), so that the checks
 #: still run every ``recheck_every`` updates.
 CHECK_LAG = 4
+#: A switch a check decides on takes effect BUILD_LAG updates after its decision would (module
+#: docstring): the model it names is built and warm-started on the worker meanwhile, so that
+#: the switch neither builds nor waits for the build (bench/perf/auto_vs_full.py: the updates
+#: over 20 ms were the switches waiting for it).
+BUILD_LAG = 8
 
 
 @dataclass
 class PendingCheck:
     """A started check whose verdict is held until update ``apply_at``.
 
-    ``job``: the background check's future; ``verdict`` / ``error``: an inline check's outcome.
+    ``job``: the background check (its decision, then the build of the model it names);
+    ``decided``: the background decision alone, known before the build; ``verdict`` / ``error``:
+    an inline check's outcome.  ``switching``: the verdict names another model, and ``apply_at``
+    was moved on by BUILD_LAG.
     """
 
     apply_at: int
     job: Future | None = None
+    decided: Future | None = None
     verdict: CheckVerdict | None = None
     error: Exception | None = None
+    switching: bool = False
 
-    def outcome(self) -> CheckVerdict | None:
-        """Return the verdict, waiting for a background check; raise what the check raised."""
-        if self.job is not None:
-            return self.job.result()
+    def decision(self) -> CheckVerdict | None:
+        """Return the verdict, waiting for a background decision; raise what the check raised."""
+        if self.decided is not None:
+            return self.decided.result()
         if self.error is not None:
             raise self.error
         return self.verdict
+
+    def outcome(self) -> CheckVerdict | None:
+        """Return the verdict once its model is built, waiting for a background build."""
+        if self.job is not None:
+            return self.job.result()
+        return self.decision()
+
+
+def _checked(auto: AutoShapeSolver, snap: CheckSnapshot, decided: Future) -> CheckVerdict:
+    """Run the check of ``snap`` on the worker; ``decided`` gets the decision before the build."""
+    try:
+        return auto.model_checks.evaluate(snap, True, decided=decided)
+    except BaseException as exc:
+        if not decided.done():  # the stream waits on it: it must never be left unresolved
+            decided.set_exception(exc)
+        raise
 
 
 def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
     """Start the check of ``snap`` (update ``snap.update``): on the worker, or run it now.
 
-    Its verdict is held until update ``snap.update + CHECK_LAG`` (module docstring).
+    Its verdict is held until update ``snap.update + CHECK_LAG``, a switch's BUILD_LAG updates
+    longer (module docstring, :func:`due`).
     """
     apply_at = snap.update + CHECK_LAG
     if auto.worker.background:
@@ -70,9 +104,29 @@ def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
         keys = {("",) + replace(snap.choice, order=o).key() for o in ORDERS[max(i - 1, 0) : i + 2]}
         if not snap.choice.plane_kept:  # the 3D checker of a planar shape (shadows.py)
             keys.add(("checker",) + full_choice(snap.choice, snap.problem).key())
-        job = auto.worker.submit(auto.model_checks.evaluate, keys, snap, True)
-        return PendingCheck(apply_at, job=job)
+        decided: Future = Future()
+        job = auto.worker.submit(_checked, keys, auto, snap, decided)
+        return PendingCheck(apply_at, job=job, decided=decided)
     try:
         return PendingCheck(apply_at, verdict=auto.model_checks.evaluate(snap, False))
     except Exception as exc:  # noqa: BLE001 - reported when applied, as a background one is
         return PendingCheck(apply_at, error=exc)
+
+
+def due(pending: PendingCheck, update: int, generation: int) -> bool:
+    """Tell whether ``pending``'s verdict takes effect before ``update`` (else it stays held).
+
+    At ``apply_at`` the decision is read (waiting for it); one that switches models is held
+    BUILD_LAG updates more, once, unless it is stale (``generation``: the stream's switch count
+    now), which is dropped at once.  Raises what the check raised.
+    """
+    if update < pending.apply_at:
+        return False
+    if pending.switching:
+        return True
+    verdict = pending.decision()
+    if verdict is None or verdict.choice is None or verdict.snapshot.generation != generation:
+        return True
+    pending.switching = True
+    pending.apply_at += BUILD_LAG
+    return update >= pending.apply_at

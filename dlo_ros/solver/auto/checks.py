@@ -8,12 +8,13 @@ pole, then the element mesh or the order ladder, then the obstacle samples) and 
 model and why.  The measurements live in :mod:`.shadows` and :mod:`.mesh_check`; the rule in
 :mod:`.policy`.
 
-Every model a verdict names is built (and warm) before it is returned, so the streaming thread's
-switch builds nothing.
+Every model a verdict names is built (and warm) before the check returns, after its decision is
+known, so the streaming thread's switch builds nothing.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import Future
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -45,7 +46,8 @@ class CheckSnapshot:
     strong-form equilibrium residual (solver/results/residual.py, inf when unknown);
     ``touching``: it presses on an obstacle; ``update``: the streamed-update count then;
     ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (only a streamed
-    update's check: a cold solve's or a query's runs to its end, ``update/time_limit.py``).
+    update's check: a cold solve's or a query's runs to its end, ``update/time_limit.py``);
+    ``recheck``: a streamed re-check of a model already kept once (only these may coarsen).
     """
 
     inner: ShapeSolver
@@ -60,6 +62,7 @@ class CheckSnapshot:
     touching: bool = False
     update: int = 0
     limited: bool = True
+    recheck: bool = False
 
 
 @dataclass
@@ -127,21 +130,13 @@ class ShapeEvidence:
         return turned_frame(self.pool, self.snap, normal)
 
     def mesh(self, coarsen: bool) -> MeshVerdict:
-        """Return the mesh check's verdict; a proposed mesh's model is built and warm-started.
-
-        Built here (the worker thread in the node), so that a switch builds nothing.
-        """
+        """Return the mesh check's verdict (a proposed mesh is built after the decision)."""
         snap = self.snap
         assert snap.state is not None
         reduced = self.pool.reduced.reduce(snap.choice, snap.problem)[0]
-        found = mesh_verdict(
+        return mesh_verdict(
             snap.inner, snap.state, snap.choice, reduced, self.tolerance, coarsen=coarsen
         )
-        if found.choice is not None:
-            self.pool.solver_for(
-                found.choice, snap.problem, stream=False, source=snap.inner, state=snap.state
-            )
-        return found
 
     def order_change(self, order: int) -> float:
         """Return the centreline change [m] to basis ``order`` from the shape (nan: failed)."""
@@ -177,18 +172,39 @@ class ModelChecks:
         self.tolerance = tolerance
         self.lower_tried: set[tuple] = set()
 
-    def evaluate(self, snap: CheckSnapshot, prepare: bool, lower: bool = True) -> CheckVerdict:
+    def evaluate(
+        self,
+        snap: CheckSnapshot,
+        prepare: bool,
+        lower: bool = True,
+        decided: Future | None = None,
+    ) -> CheckVerdict:
         """Gather the evidence of a snapshot and apply the policy (:func:`.policy.decide`).
 
-        prepare: also create the IPOPT solvers of the model it escalates to (background checks,
-        so the streaming thread's switch builds nothing).  lower: try the next lower order (once
-        per model; a query's checks do not, so that they leave the stream's record of tries
-        alone).
+        The model the verdict names is then built and warm-started here (the worker thread in the
+        node), so that the stream's switch builds nothing; ``decided`` gets the verdict before
+        that build (:mod:`.check_schedule`: a switch takes effect later than a decision to keep).
+        prepare: also create the IPOPT solvers of the model it escalates to (background checks).
+        lower: try the next lower order (once per model; a query's checks do not, so that they
+        leave the stream's record of tries alone).
         """
         evidence = ShapeEvidence(self.pool, snap, self.tolerance, (lower, self.lower_tried))
-        decision = decide(evidence, snap.choice, self.tolerance, stream=snap.limited)
+        # a stream's mesh coarsens only on a re-check of a kept mesh, never on the first check
+        # after a switch (hysteresis: a refinement followed at once by a coarsening was the
+        # table stream's churn, bench/perf/auto_vs_full.py)
+        coarsen = snap.limited and snap.recheck
+        decision = decide(evidence, snap.choice, self.tolerance, coarsen=coarsen)
+        verdict = CheckVerdict(
+            snap,
+            decision.choice,
+            decision.reason,
+            decision.estimate,
+            decision.order_error,
+            decision.sampling_error,
+        )
+        if decided is not None:
+            decided.set_result(verdict)
         if decision.build and decision.choice is not None:
-            # built and warm-started here (worker thread in the node), so the switch builds nothing
             self.pool.solver_for(
                 decision.choice, snap.problem, stream=False, source=snap.inner, state=snap.state
             )
@@ -198,11 +214,4 @@ class ModelChecks:
         )
         if target is not None:
             target.prepare()
-        return CheckVerdict(
-            snap,
-            decision.choice,
-            decision.reason,
-            decision.estimate,
-            decision.order_error,
-            decision.sampling_error,
-        )
+        return verdict

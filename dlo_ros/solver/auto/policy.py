@@ -104,16 +104,17 @@ class Decision:
     build: bool = False
 
 
-def decide(ev: Evidence, choice: ModelChoice, tolerance: float, stream: bool) -> Decision:
+def decide(ev: Evidence, choice: ModelChoice, tolerance: float, coarsen: bool) -> Decision:
     """Return the decision on a committed shape of ``choice``, against δ = ``tolerance`` [m].
 
-    ``stream``: a streamed update's check (its mesh may coarsen; a cold answer's never does).
+    ``coarsen``: the mesh may coarsen (a stream's re-check of a kept mesh; a cold answer's never
+    does).
     The physics decided before a shape exists, or inside its update, is not here: targets leaving
     the plane, obstacles within reach and grips pulled taut (:mod:`.follow`); self-contact when
     the shape reaches or passes through itself, the next order for a refused or unstable answer
     (:mod:`.escalate`).
     """
-    tol, why = tolerance, ""
+    tol, why, build = tolerance, "", False
     to: ModelChoice | None = None
     # -- the physics --------------------------------------------------------------------------
     # a planar shape unstable in 3D leaves its plane (a twist-free strip under compression),
@@ -137,8 +138,9 @@ def decide(ev: Evidence, choice: ModelChoice, tolerance: float, stream: bool) ->
     if to is None and ev.on_elements:
         # the element mesh: its own estimate; refined over δ/2, in a stream coarsened under δ/50
         # (mesh_check.mesh_verdict applies both bounds to the mesh adapt/rule.py proposes)
-        mesh = ev.mesh(coarsen=stream)
+        mesh = ev.mesh(coarsen=coarsen)
         order_error, to, why = mesh.estimate, mesh.choice, mesh.reason
+        build = to is not None
     elif to is None:
         # the order ladder (a basis the scene names): the next order's change, or the residual
         i = ORDERS.index(choice.order)
@@ -158,7 +160,7 @@ def decide(ev: Evidence, choice: ModelChoice, tolerance: float, stream: bool) ->
             to = _escalated(choice, order=down, estimated_error_m=lowered)
             why = _order_reason(down, lowered, tol / 4, "≤", down)
     if ev.node_rows:  # the mesh estimate counted the cut between the rows on the nodes
-        return Decision(to, why, order_error, order_error)
+        return Decision(to, why, order_error, order_error, build=build)
     # -- the obstacle samples: the cut between them, and while touching the finer samples' change
     depth, name = ev.penetration()
     finer = replace(
@@ -178,7 +180,7 @@ def decide(ev: Evidence, choice: ModelChoice, tolerance: float, stream: bool) ->
         why = _samples_reason(choice, finer, (depth, name), change, sampling, tol)
         to = replace(finer, sampling_error_m=change)
         return Decision(to, why, estimate, order_error, sampling_error, not np.isfinite(change))
-    return Decision(to, why, estimate, order_error, sampling_error)
+    return Decision(to, why, estimate, order_error, sampling_error, build=build)
 
 
 def _escalated(choice: ModelChoice, **changes) -> ModelChoice:

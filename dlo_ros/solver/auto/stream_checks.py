@@ -2,9 +2,9 @@
 
 A committed solve that is not a streamed update (a cold solve, ``check_now``) is checked before it
 returns (:func:`check_now`: escalate and re-solve while the policy says so, :mod:`.policy`); a
-streamed update's check starts when one is due and its verdict is applied CHECK_LAG updates later
-(:mod:`.check_schedule`, :func:`apply_due`).  :class:`CheckBook` holds what the stream knows of
-its checks.  Each function takes the :class:`.auto_solver.AutoShapeSolver` it serves and uses
+streamed update's check starts when one is due and its verdict is applied CHECK_LAG updates later,
+a switch BUILD_LAG more (:mod:`.check_schedule`, :func:`apply_due`).  :class:`CheckBook` holds
+what the stream knows of its checks.  Each function takes the :class:`.auto_solver.AutoShapeSolver` it serves and uses
 only its public members (``book``, ``choice``, ``inner``, ``worker``, ``model_checks``,
 ``switch``, ``changes``, ``options``, ``finish``).
 """
@@ -20,7 +20,7 @@ from ...model.problem import Problem
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from . import escalate
-from .check_schedule import PendingCheck, start_check
+from .check_schedule import PendingCheck, due, start_check
 from .checks import CheckSnapshot, CheckVerdict
 from .choice import ORDERS, ModelChoice
 from .reach import touches_obstacle
@@ -77,6 +77,7 @@ def committed(
     due = book.unchecked or book.since_check >= auto.options.recheck_every
     if due and book.pending is None:
         snap = snapshot(auto, problem, inner_poses, result, limited=limited)
+        snap.recheck = not book.unchecked
         book.pending = start_check(auto, snap)
     return auto.finish(result, t0, notes)
 
@@ -155,16 +156,20 @@ def keep(auto: AutoShapeSolver, verdict: CheckVerdict) -> None:
 def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
     """Apply the held check's verdict when this update is the one it is due at.
 
-    Waits for a background check that has not finished (:mod:`.check_schedule`).
+    Waits for a background check that has not finished (:mod:`.check_schedule`): its decision
+    at the update it is due at, and a switch's build BUILD_LAG updates later.
     """
     book = auto.book
     pending = book.pending
-    if pending is None or book.index < pending.apply_at:
-        return
-    book.pending = None
     try:
-        verdict = pending.outcome()
+        if pending is None or not due(pending, book.index, book.generation):
+            return
+        book.pending = None
+        verdict = pending.decision()
+        if verdict is not None and verdict.choice is not None:
+            verdict = pending.outcome()  # a switch: wait for its model's build
     except Exception as exc:  # a check that raised is reported, never fatal to the stream
+        book.pending = None
         notes.append(f"model check failed: {type(exc).__name__}: {exc}")
         # retry after recheck_every updates, not at once
         book.unchecked, book.since_check = False, 0

@@ -45,6 +45,7 @@ import casadi as ca
 import numpy as np
 
 from ..native import newton as native_newton
+from .assembled_contact import sparse
 from .compiled import (
     FLAGS,
     InterpretedFunction,
@@ -282,7 +283,7 @@ class NlpFunctions:
         n, nf = nlp.z_sym.shape[0], nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.p_sym.shape[0]), ca.MX.sym("lam", nf)
         kkt, residual, grad, energies, weighted = external(z, p, lam)
-        node = ca.mtimes(ca.sparsify(ca.DM(nlp.node_map)).T, weighted)
+        node = ca.mtimes(sparse(nlp.node_map).T, weighted)
         kkt = kkt + ca.blockcat([[node, ca.MX(n, nf)], [ca.MX(nf, n), ca.MX(nf, nf)]])
         return InterpretedFunction(
             nlp.newton_function(

@@ -4,9 +4,10 @@ A committed solve that is not a streamed update (a cold solve, ``check_now``) is
 returns (:func:`check_now`: escalate and re-solve while the policy says so, :mod:`.policy`); a
 streamed update's check starts when one is due and its verdict is applied CHECK_LAG updates later,
 a switch BUILD_LAG more (:mod:`.check_schedule`, :func:`apply_due`).  :class:`CheckBook` holds
-what the stream knows of its checks.  Each function takes the :class:`.auto_solver.AutoShapeSolver` it serves and uses
-only its public members (``book``, ``choice``, ``inner``, ``worker``, ``model_checks``,
-``switch``, ``changes``, ``options``, ``finish``).
+what the stream knows of its checks.  Each function takes the
+:class:`.auto_solver.AutoShapeSolver` it serves and uses only its public members (``book``,
+``choice``, ``inner``, ``worker``, ``model_checks``, ``switch``, ``changes``, ``options``,
+``finish``).
 """
 
 from __future__ import annotations

@@ -485,7 +485,7 @@ class StringNLP:
 
     @functools.cached_property
     def ipopt_nlp(self) -> dict[str, ca.MX]:
-        """nlpsol's problem (``ipopt_functions.ipopt_problem``), made once per NLP."""
+        """The problem nlpsol is given (``ipopt_functions.ipopt_problem``), made once per NLP."""
         return ipopt_problem(self.nlp, self.g_fn)
 
     def ipopt_derivatives(self) -> dict[str, ca.Function]:

@@ -90,6 +90,30 @@ def newton_active(
     return False, state, it, changed
 
 
+def shifted_pairs(nlp: StringNLP, lam: np.ndarray, proposed: np.ndarray) -> list[np.ndarray]:
+    """Return the active sets to try when one-row changes went round in a cycle.
+
+    ``lam``: the multipliers at a point judged in the cycle; ``proposed``: the set the cycle came
+    back to.  Where two neighbouring rows i, j of one obstacle carry λ_i < 0 < λ_j (adjacent
+    along s), their resultant (λ_i s_i + λ_j s_j)/(λ_i + λ_j) lies beyond j: the contact has
+    slid past the pair, so the pair moves by one row, {j, j + (j − i)} instead of {i, j}.  One
+    candidate per such pair, ``proposed`` changed so.  The cycle it breaks: the main job's cable
+    sliding over the post on node rows, {i, j} giving λ_i < 0 and {j} leaving row i just inside
+    the post (Newton fell back to IPOPT at every update there, 0.1–0.3 s interpreted).
+    """
+    found = []
+    for obstacle in nlp.obstacle_rows:
+        rows = np.asarray(obstacle)
+        for a in np.flatnonzero(lam[rows] < -LEAVE_TOLERANCE):
+            for step in (1, -1):
+                b, c = a + step, a + 2 * step
+                if 0 <= c < rows.size and lam[rows[b]] > LEAVE_TOLERANCE:
+                    moved = proposed.copy()
+                    moved[rows[a]], moved[rows[b]], moved[rows[c]] = False, True, True
+                    found.append(moved)
+    return found
+
+
 def switchable_rows(nlp: StringNLP, p: np.ndarray) -> np.ndarray:
     """Return the rows that may join or leave the active set between steps.
 

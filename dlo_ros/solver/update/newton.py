@@ -16,9 +16,11 @@ self-contact, ``StringNLP.contact_row``; a violated fold guard is no equilibrium
 joins A or, if none is violated, the active inequality with the most negative λ leaves it
 (``active_set.next_active_set``); Newton goes on from that point, at most
 ``NEWTON_ACTIVE_SET_CHANGES`` times (a grip move of 1 % of L shifts the sampled contact of a cable
-lying on a table by a sample or two).  A step larger than 0.5 in any scaled unknown, no
-convergence in ``max_steps`` for one active set, an active set seen before (a cycle) or too many
-changes gives up: the caller then falls back to IPOPT.  Newton lands on the stationary point
+lying on a table by a sample or two).  An active set seen before (a cycle) is replaced by a
+contact pair moved on by one row where the multipliers of a point judged in the cycle say the
+contact slid past the pair (``active_set.shifted_pairs``).  A step larger than 0.5 in any scaled
+unknown, no convergence in ``max_steps`` for one active set, a cycle with no such pair or too
+many changes gives up: the caller then falls back to IPOPT.  Newton lands on the stationary point
 nearest the start, so the caller still checks its stability.  Every update function returns (ok,
 state, steps, constraint violation [m or rad]).
 
@@ -36,7 +38,7 @@ from ..build.functions import NlpFunctions
 from ..build.nlp import StringNLP
 from ..native.settings import NEWTON_ACTIVE_SET_CHANGES
 from ..state import SolverState
-from .active_set import newton_active
+from .active_set import newton_active, shifted_pairs
 from .contact_free import newton_free
 from .kkt import active_rows, all_rows, violation
 
@@ -88,6 +90,7 @@ def newton(
     native = fns.newton_active if kkt_fn is None and fused else None
     kkt_fn = kkt_fn or fns.kkt
     seen = {active.tobytes()}
+    judged: list[np.ndarray] = []  # the multipliers of each point judged, newest last
     for _ in range(NEWTON_ACTIVE_SET_CHANGES + 1):
         ok, reached, it, changed = newton_active(
             nlp, kkt_fn, start, z, lam, p, active, max_steps, reuse, native, prof
@@ -96,9 +99,15 @@ def newton(
         if ok:
             assert reached is not None and reached.g is not None  # an answer carries its g
             return True, reached, steps, violation(nlp, reached.g)
-        if changed is None or changed.tobytes() in seen:  # no convergence, or a cycle
+        if changed is None:  # no convergence
             break
         assert reached is not None  # a changed active set comes with the point it was judged at
+        judged.append(reached.lam_g)
+        if changed.tobytes() in seen:  # a cycle: a contact pair slid past its rows?
+            moved = [m for lam_j in judged[::-1] for m in shifted_pairs(nlp, lam_j, changed)]
+            changed = next((m for m in moved if m.tobytes() not in seen), None)
+            if changed is None:
+                break
         seen.add(changed.tobytes())
         z, lam, active, reuse = reached.z, reached.lam_g, changed, False
     return False, start, steps, np.inf

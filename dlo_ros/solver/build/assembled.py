@@ -48,6 +48,7 @@ from .assembled_contact import (
     sparse,
     x0_columns,
 )
+from .assembled_local import local_rows_function
 
 
 class AssembledKKT:
@@ -69,6 +70,7 @@ class AssembledKKT:
         if not isinstance(model, DirectorModel):
             raise TypeError("the assembled KKT function needs a director model")
         self.nlp, self.model = nlp, model
+        self._local_functions: dict[bytes, ca.Function] = {}  # local_function's, by rows
         lay = model.layout
         self.width, self.stretch, self.frame = lay.width, lay.stretch, lay.frame
         self.d = 2 * lay.width + int(lay.stretch)  # per-node unknowns u_k
@@ -202,25 +204,23 @@ class AssembledKKT:
             )
         return moments, ca.SX(3, 1)
 
+    def _quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:
+        """Return (s, K) of each part ½ z_sᵀ K z_s of U_direct (none for a director model)."""
+        return []
+
     def local_function(self, rows: np.ndarray) -> ca.Function:
         """Build the function of the node-local ``rows``: their g, ∂g/∂z, ∇Λ and ∇²Λ.
 
         (z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local
         ``rows`` (unit norm, grip orientation, folds; an Euler-angle model's angle rows) and
-        ``_direct_terms``: Λ = λ·g_local − σ W_M + σ Σ U_direct.
+        ``_direct_terms``: Λ = λ·g_local − σ W_M + σ Σ U_direct (``assembled_local.py``).  Built
+        once per set of rows: the KKT functions ask for the same one.
         """
-        nlp = self.nlp
-        z, p = nlp.z_sym, nlp.p_sym
-        g_local = nlp.g_sym[rows.tolist()] if rows.size else ca.SX(0, 1)
-        moments, direct = self._direct_terms(z, p)
-        lam = ca.SX.sym("lam_local", g_local.shape[0])
-        lagrangian = ca.dot(lam, g_local) - nlp.sigma * moments + nlp.sigma * ca.sum1(direct)
-        hess, grad = ca.hessian(lagrangian, z)
-        return ca.Function(
-            "dlo_local_rows",
-            [z, p, lam],
-            [g_local, ca.jacobian(g_local, z), grad, hess, moments, direct],
-        )
+        key = np.asarray(rows).tobytes()
+        built = self._local_functions.get(key)
+        if built is None:
+            built = self._local_functions[key] = local_rows_function(self, rows)
+        return built
 
     # ---- the nonlinear position rows: obstacles and self-contact slots -------------------------
     @functools.cached_property

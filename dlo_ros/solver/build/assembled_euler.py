@@ -55,6 +55,7 @@ class AssembledEulerKKT(AssembledKKT):
         if not isinstance(model, RitzModel):
             raise TypeError("the assembled Euler-angle KKT function needs a RitzModel")
         self.nlp, self.model = nlp, model
+        self._local_functions: dict[bytes, ca.Function] = {}  # local_function's, by rows
         lay = model.layout
         self.planar, self.twist, self.stretch = lay.planar, lay.twist, lay.stretch
         # (field, derivative?) of each component of u_k
@@ -153,18 +154,32 @@ class AssembledEulerKKT(AssembledKKT):
         (``RitzModel.energy_terms``).
         """
         nlp, model, lay = self.nlp, self.model, self.nlp.params
-        n = model.layout.order
         moments = ca.SX(0)
         for i, ld in enumerate(nlp.problem.loads):
             moments -= p[lay[f"load:{i}:moment"]][0] * model.angle_sym(z, "phi", ld.s)
+        parts = dict(self._quadratic_parts(p))
+        energies = []
+        for name in ("K_bend", "K_twist", "K_stretch"):
+            if name in parts:
+                part, stiffness = parts[name]
+                energies.append(0.5 * ca.dot(z[part], ca.mtimes(stiffness, z[part])))
+            else:
+                energies.append(ca.SX(0))
+        return moments, ca.vertcat(*energies)
 
-        def quadratic(name: str, field: str) -> ca.SX:
-            c = model.coefficients(z, field)
-            if c is None:
-                return ca.SX(0)
-            return 0.5 * ca.dot(c, ca.mtimes(ca.reshape(p[lay[name]], n, n), c))
+    def _quadratic_parts(self, p: ca.SX) -> list[tuple[str, tuple[slice, ca.SX]]]:
+        """Return (name, (s, K)) of the bend, twist and stretch parts present (K from p)."""
+        lay, n = self.nlp.params, self.model.layout.order
+        fields = (("K_bend", "phi" if self.planar else "theta"), ("K_twist", "psi"))
+        found = []
+        for name, field in fields + (("K_stretch", "eps"),):
+            try:
+                part = self.model.layout.slice(field)
+            except KeyError:
+                continue
+            found.append((name, (part, ca.reshape(p[lay[name]], n, n))))
+        return found
 
-        bend = quadratic("K_bend", "phi" if self.planar else "theta")
-        twist = quadratic("K_twist", "psi")
-        stretch = quadratic("K_stretch", "eps")
-        return moments, ca.vertcat(bend, twist, stretch)
+    def _quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:
+        """Return (s, K) of each quadratic energy part (``AssembledKKT._build_local_function``)."""
+        return [term for _, term in self._quadratic_parts(p)]

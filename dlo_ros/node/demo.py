@@ -164,12 +164,16 @@ def model_settled(values: dict[str, str], held: int = 0) -> bool:
     return checked and age <= held and (met or str(values.get("model.order")) == str(ORDERS[-1]))
 
 
-def _settle(client, values: dict, timeout: float):
+def _settle(client, values: dict, timeout: float, rate: float):
     """Hold the last target until ``model_settled`` or ``timeout`` s.
 
-    The target is republished at 5 Hz: each solve applies the background checks' verdicts.
-    Returns (diagnostic values, last centreline or None, seconds, solves), with 0 s and 0 solves
-    when the final shape's checks were already done, or None when settling is off (timeout 0).
+    The target is republished at ``rate`` [Hz], the manoeuvre's (a robot holding still keeps
+    sending its pose): auto applies a check's verdict a fixed number of updates after the shape
+    it checked (``solver/auto/check_schedule.py``), so a slower hold only slows the settling.
+    Each publish waits for its centreline; the newest diagnostics (``diagnostics_period``) say
+    whether the checks describe the final shape.  Returns (diagnostic values, last centreline or
+    None, seconds, solves), with 0 s and 0 solves when the final shape's checks were already
+    done, or None when settling is off (timeout 0).
     """
     if timeout <= 0:
         return None
@@ -179,18 +183,19 @@ def _settle(client, values: dict, timeout: float):
     target = targets_at(duration())
     base = int(values.get("targets received") or 0)
     while time.monotonic() - t0 < timeout:
+        tick = time.monotonic()
         stamp = client.publish_targets(target)
         held += 1
         final = client.wait_for_path(5.0, where=lambda ev, s=stamp: ev.stamp_ns == s) or final
-        expected = base + held
-        diag = client.wait_for_diagnostics(
-            lambda v, st: int(v.get("targets received") or 0) >= expected, 2.0
-        )
+        diag = client.wait_for_diagnostics(lambda v, st: True, 0.0)
         if diag:
-            values = diag[0]
-            if model_settled(values, held):
-                break
-        time.sleep(0.2)
+            # the solves of the last target that these diagnostics have seen
+            seen = int(diag[0].get("targets received") or 0) - base
+            if seen > 0:
+                values = diag[0]
+                if model_settled(values, seen):
+                    break
+        time.sleep(max(0.0, 1.0 / rate - (time.monotonic() - tick)))
     return values, final, time.monotonic() - t0, held
 
 
@@ -226,9 +231,9 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=120.0,
         metavar="S",
-        help="after the manoeuvre, hold the last target (5 Hz) until auto's checks of the final "
-        "shape "
-        "are done and meet the tolerance, at most S seconds (default 120; 0: do not wait)",
+        help="after the manoeuvre, hold the last target (at --rate) until auto's checks of the "
+        "final shape are done and meet the tolerance, at most S seconds (default 120; 0: do not "
+        "wait)",
     )
     ap.add_argument(
         "--startup-timeout",
@@ -366,7 +371,7 @@ def _manoeuvre(client: DloClient, args: argparse.Namespace, rrd: Path | None) ->
     )
     values = diag[0] if diag else client.diagnostic_values()
     events = [ev for ev in client.paths if ev.stamp_ns in published]
-    settled = _settle(client, values, args.settle) if final is not None else None
+    settled = _settle(client, values, args.settle, args.rate) if final is not None else None
     if settled is not None:
         values, held_final, settle_s, held = settled
         final = held_final or final

@@ -42,3 +42,47 @@ def test_settled_means_the_final_shape_checked_and_met_or_the_richest_order():
     assert not model_settled({**auto, "model.tolerance_met": "False"})  # a richer order is coming
     assert model_settled({**auto, "model.tolerance_met": "False", "model.order": str(ORDERS[-1])})  # nothing richer
     assert model_settled({"model.auto": "False", "model.order": "16"})  # a fixed model has nothing to settle
+
+
+class FakeNode:
+    """The node's side of the hold: every target is solved at once; auto's checks describe the
+    final shape after ``needed`` solves of it; diagnostics show the newest state (no period)."""
+
+    def __init__(self, base: int, needed: int):
+        self.received, self.base, self.needed = base, base, needed
+        self.published = 0
+
+    def publish_targets(self, target) -> int:
+        self.received += 1
+        self.published += 1
+        return self.received
+
+    def wait_for_path(self, timeout, where=None):
+        return ("path", self.received)
+
+    def wait_for_diagnostics(self, where, timeout):
+        held = self.received - self.base
+        values = {
+            "model.auto": "True",
+            "model.checked": str(held >= self.needed),
+            "model.checked_updates_ago": str(max(held - self.needed, 0)),
+            "model.tolerance_met": "True",
+            "targets received": str(self.received),
+        }
+        return (values, None) if where(values, None) else None
+
+
+def test_the_hold_republishes_until_the_final_shape_is_checked():
+    """auto applies a verdict a fixed number of updates after the shape it checked, so the hold
+    stops right after the solve that brought the checked final shape, counted from the node's own
+    diagnostics ('targets received'), however many solves that takes."""
+    from dlo_ros.node.demo import _settle
+
+    for needed in (1, 12, 40):
+        node = FakeNode(base=451, needed=needed)
+        values = {"model.auto": "True", "model.checked": "False", "targets received": "451"}
+        out = _settle(node, values, timeout=60.0, rate=1000.0)
+        assert out is not None
+        final_values, final, _, held = out
+        assert held == node.published == needed, (needed, held)
+        assert final_values["model.checked"] == "True" and final == ("path", 451 + needed)

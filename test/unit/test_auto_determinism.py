@@ -207,3 +207,21 @@ def test_a_recorded_background_stream_replays_at_every_update(tmp_path):
     assert [u for u, _ in switched["recorded"]] == [u for u, _ in switched["resolved"]]
     assert any("mesh of" in r for _, r in switched["recorded"]), switched
     assert switched["first_difference"] is None, switched
+
+
+def test_a_switch_decided_is_reported_while_its_model_is_built():
+    """Between a check's decision to switch (CHECK_LAG updates after the shape it checked) and
+    the switch (BUILD_LAG updates later), the results report that check's estimate of the model
+    still streaming, and whether it meets the tolerance by it: not the older, smaller one."""
+    scene, targets = default_cable(), path_3d()
+    results = stream(scene, targets, "sync")
+    made = [(at, r) for at, r in changes(results[-1]) if r.startswith("error estimate")]
+    assert made, changes(results[-1])
+    for at, reason in made:
+        estimate = float(re.match(r"error estimate (\S+) m", reason).group(1))
+        for k in range(at - BUILD_LAG, at):  # results[k] is update k (0: the cold solve)
+            model = results[k].model
+            assert model.checked and model.estimated_error_m is not None, (k, model)
+            assert abs(model.estimated_error_m - estimate) <= 1e-3 * estimate, (k, model)
+            assert model.tolerance_met == (estimate <= model.tolerance_m)
+            assert model.checked_updates_ago == k - (at - BUILD_LAG - CHECK_LAG)

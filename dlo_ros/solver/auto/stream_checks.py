@@ -158,12 +158,20 @@ def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
     """Apply the held check's verdict when this update is the one it is due at.
 
     Waits for a background check that has not finished (:mod:`.check_schedule`): its decision
-    at the update it is due at, and a switch's build BUILD_LAG updates later.
+    at the update it is due at, and a switch's build BUILD_LAG updates later.  Meanwhile the
+    results report the decision's estimate of the current model (and ``tolerance_met`` by it):
+    the shapes streamed while a finer model is built are not called better than that.
     """
     book = auto.book
     pending = book.pending
     try:
-        if pending is None or not due(pending, book.index, book.generation):
+        if pending is None:
+            return
+        if not due(pending, book.index, book.generation):
+            if pending.switching:  # decided on a switch, built meanwhile: report its estimate
+                verdict = pending.decision()
+                if book.unchecked or book.checked_update != verdict.snapshot.update:
+                    keep(auto, verdict)  # the current model's (a richer one comes)
             return
         book.pending = None
         verdict = pending.decision()

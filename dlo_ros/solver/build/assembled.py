@@ -58,7 +58,7 @@ class AssembledKKT:
     DirectorModel.
 
     The model-specific parts are ``_node_map``, ``_node_coefficients``, ``node_function``,
-    ``tangent_function`` and ``_direct_terms``; ``assembled_euler.AssembledEulerKKT`` overrides
+    ``tangent_function`` and ``direct_terms``; ``assembled_euler.AssembledEulerKKT`` overrides
     them for the Euler-angle models (planar and 3D).
     """
 
@@ -186,7 +186,7 @@ class AssembledKKT:
             [bend, twist, stretch, t, grad, ca.densify(hess), ca.densify(ca.jacobian(t, u))],
         )
 
-    def _direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
+    def direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
         """Return the point moments' work and the energy parts computed directly from z.
 
         (W_M, U_direct): the point moments' work (here their pseudo-potentials Σ W_M at their
@@ -204,7 +204,7 @@ class AssembledKKT:
             )
         return moments, ca.SX(3, 1)
 
-    def _quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:
+    def quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:
         """Return (s, K) of each part ½ z_sᵀ K z_s of U_direct (none for a director model)."""
         return []
 
@@ -213,7 +213,7 @@ class AssembledKKT:
 
         (z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M, U_direct]: the node-local
         ``rows`` (unit norm, grip orientation, folds; an Euler-angle model's angle rows) and
-        ``_direct_terms``: Λ = λ·g_local − σ W_M + σ Σ U_direct (``assembled_local.py``).  Built
+        ``direct_terms``: Λ = λ·g_local − σ W_M + σ Σ U_direct (``assembled_local.py``).  Built
         once per set of rows: the KKT functions ask for the same one.
         """
         key = np.asarray(rows).tobytes()

@@ -146,7 +146,7 @@ class AssembledEulerKKT(AssembledKKT):
         u = ca.SX.sym("u", self.d)
         return ca.Function("dlo_node_tangent", [u], [self._tangent(u)])
 
-    def _direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
+    def direct_terms(self, z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
         """Return the point moments' work and the energy parts quadratic in the coefficients.
 
         (W_M, (½ c_bᵀ K_bend c_b, ½ c_ψᵀ K_twist c_ψ, ½ c_εᵀ K_stretch c_ε)): the point moments'
@@ -180,6 +180,6 @@ class AssembledEulerKKT(AssembledKKT):
             found.append((name, (part, ca.reshape(p[lay[name]], n, n))))
         return found
 
-    def _quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:
+    def quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:
         """Return (s, K) of each quadratic energy part (``AssembledKKT._build_local_function``)."""
         return [term for _, term in self._quadratic_parts(p)]

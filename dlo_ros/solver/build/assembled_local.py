@@ -2,7 +2,7 @@
 
 ``local_rows_function(kkt, rows)`` builds (z, p, λ_local) → [g_local, ∂g_local/∂z, ∇Λ, ∇²Λ, W_M,
 U_direct] for ``AssembledKKT.local_function`` (``kkt``: the AssembledKKT or AssembledEulerKKT,
-its NLP, ``_direct_terms`` and ``_quadratic_terms``), with
+its NLP, ``direct_terms`` and ``quadratic_terms``), with
 
     Λ = λ·g_local − σ W_M + σ Σ U_direct.
 
@@ -23,9 +23,9 @@ def local_rows_function(kkt, rows: np.ndarray) -> ca.Function:
     nlp = kkt.nlp
     z, p = nlp.z_sym, nlp.p_sym
     g_local = nlp.g_sym[rows.tolist()] if rows.size else ca.SX(0, 1)
-    moments, direct = kkt._direct_terms(z, p)
+    moments, direct = kkt.direct_terms(z, p)
     lam = ca.SX.sym("lam_local", g_local.shape[0])
-    quadratic = kkt._quadratic_terms(p)
+    quadratic = kkt.quadratic_terms(p)
     lagrangian = ca.dot(lam, g_local) - nlp.sigma * moments
     if not quadratic:
         lagrangian += nlp.sigma * ca.sum1(direct)

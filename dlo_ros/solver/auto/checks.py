@@ -46,8 +46,7 @@ class CheckSnapshot:
     strong-form equilibrium residual (solver/results/residual.py, inf when unknown);
     ``touching``: it presses on an obstacle; ``update``: the streamed-update count then;
     ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (only a streamed
-    update's check: a cold solve's or a query's runs to its end, ``update/time_limit.py``);
-    ``recheck``: a streamed re-check of a model already kept once (only these may coarsen).
+    update's check: a cold solve's or a query's runs to its end, ``update/time_limit.py``).
     """
 
     inner: ShapeSolver
@@ -62,7 +61,6 @@ class CheckSnapshot:
     touching: bool = False
     update: int = 0
     limited: bool = True
-    recheck: bool = False
 
 
 @dataclass
@@ -189,11 +187,8 @@ class ModelChecks:
         leave the stream's record of tries alone).
         """
         evidence = ShapeEvidence(self.pool, snap, self.tolerance, (lower, self.lower_tried))
-        # a stream's mesh coarsens only on a re-check of a kept mesh, never on the first check
-        # after a switch (hysteresis: a refinement followed at once by a coarsening was the
-        # table stream's churn, bench/perf/auto_vs_full.py)
-        coarsen = snap.limited and snap.recheck
-        decision = decide(evidence, snap.choice, self.tolerance, coarsen=coarsen)
+        # a stream's mesh may coarsen (its later updates get cheaper); a cold answer's never does
+        decision = decide(evidence, snap.choice, self.tolerance, coarsen=snap.limited)
         verdict = CheckVerdict(
             snap,
             decision.choice,

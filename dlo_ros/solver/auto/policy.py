@@ -107,8 +107,7 @@ class Decision:
 def decide(ev: Evidence, choice: ModelChoice, tolerance: float, coarsen: bool) -> Decision:
     """Return the decision on a committed shape of ``choice``, against δ = ``tolerance`` [m].
 
-    ``coarsen``: the mesh may coarsen (a stream's re-check of a kept mesh; a cold answer's never
-    does).
+    ``coarsen``: the mesh may coarsen (a streamed update's check; a cold answer's never does).
     The physics decided before a shape exists, or inside its update, is not here: targets leaving
     the plane, obstacles within reach and grips pulled taut (:mod:`.follow`); self-contact when
     the shape reaches or passes through itself, the next order for a refused or unstable answer

@@ -78,7 +78,6 @@ def committed(
     due = book.unchecked or book.since_check >= auto.options.recheck_every
     if due and book.pending is None:
         snap = snapshot(auto, problem, inner_poses, result, limited=limited)
-        snap.recheck = not book.unchecked
         book.pending = start_check(auto, snap)
     return auto.finish(result, t0, notes)
 
@@ -170,6 +169,7 @@ def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
         if not due(pending, book.index, book.generation):
             if pending.switching:  # decided on a switch, built meanwhile: report its estimate
                 verdict = pending.decision()
+                assert verdict is not None  # ``switching``: a decision named a richer model
                 if book.unchecked or book.checked_update != verdict.snapshot.update:
                     keep(auto, verdict)  # the current model's (a richer one comes)
             return

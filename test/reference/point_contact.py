@@ -69,7 +69,18 @@ def solve_point_contact(
             [d @ ra[:, 0], d @ rb[:, 0], np.linalg.norm(d) - 2 * radius, u[:3] @ p, u[:3] @ q]
         )
 
-    u = np.concatenate([np.asarray(force, float), [s_a, s_b]])
+    u0 = np.concatenate([np.asarray(force, float), [s_a, s_b]])
+    u, sol, f = chord_newton(equilibrium, residual, u0, 1e-6 * rod["L"], state, tol, max_steps)
+    return PointContact(sol, float(u[3]), float(u[4]), u[:3].copy(), float(np.abs(f).max()))
+
+
+def chord_newton(equilibrium, residual, u0: np.ndarray, s_step: float, state: dict, tol: float,
+                 max_steps: int):
+    """Solve residual(u, equilibrium(u)) = 0 for u = (force [N] (3), arc lengths [m] …) by a chord
+    method: a forward-difference Jacobian (steps 1e-7 N, ``s_step`` m) kept while Newton contracts;
+    only steps that lower the max-norm residual are taken.  ``state['guess']``: the shooting guess,
+    updated to each accepted solution.  Returns (u, its rod solution, its residual)."""
+    u = np.asarray(u0, dtype=float)
     sol = equilibrium(u)
     state["guess"] = sol
     f = residual(u, sol)
@@ -78,10 +89,10 @@ def solve_point_contact(
         if np.abs(f).max() < tol:
             break
         if jac is None:  # forward differences, kept while Newton contracts (a chord method)
-            jac = np.empty((5, 5))
-            for k in range(5):
-                step = np.zeros(5)
-                step[k] = 1e-7 if k < 3 else 1e-6 * rod["L"]
+            jac = np.empty((u.size, u.size))
+            for k in range(u.size):
+                step = np.zeros(u.size)
+                step[k] = 1e-7 if k < 3 else s_step
                 jac[:, k] = (residual(u + step, equilibrium(u + step)) - f) / step[k]
         trial = u + np.linalg.solve(jac, -f)
         sol_t = equilibrium(trial)
@@ -91,4 +102,4 @@ def solve_point_contact(
         if np.abs(f_t).max() < np.abs(f).max():
             u, sol, f = trial, sol_t, f_t
             state["guess"] = sol
-    return PointContact(sol, float(u[3]), float(u[4]), u[:3].copy(), float(np.abs(f).max()))
+    return u, sol, f

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kirchhoff import RodSolution, perp_basis, solve_clamped
+from .point_contact import chord_newton
 
 
 @dataclass
@@ -66,28 +67,8 @@ def solve_sphere_contact(
         p, q = perp_basis(d)
         return np.array([np.linalg.norm(d) - reach, d @ frame[:, 0], u[:3] @ p, u[:3] @ q])
 
-    u = np.concatenate([np.asarray(force, float), [s_contact]])
-    sol = equilibrium(u)
-    state["guess"] = sol
-    f = residual(u, sol)
-    jac = None
-    for _ in range(max_steps):
-        if np.abs(f).max() < tol:
-            break
-        if jac is None:  # forward differences, kept while Newton contracts (a chord method)
-            jac = np.empty((4, 4))
-            for k in range(4):
-                step = np.zeros(4)
-                step[k] = 1e-7 if k < 3 else 1e-6 * length
-                jac[:, k] = (residual(u + step, equilibrium(u + step)) - f) / step[k]
-        trial = u + np.linalg.solve(jac, -f)
-        sol_t = equilibrium(trial)
-        f_t = residual(trial, sol_t)
-        if np.abs(f_t).max() > 0.5 * np.abs(f).max():
-            jac = None  # not contracting: a fresh Jacobian next step
-        if np.abs(f_t).max() < np.abs(f).max():
-            u, sol, f = trial, sol_t, f_t
-            state["guess"] = sol
+    u0 = np.concatenate([np.asarray(force, float), [s_contact]])
+    u, sol, f = chord_newton(equilibrium, residual, u0, 1e-6 * length, state, tol, max_steps)
     dense = np.linspace(0.0, length, 4001)
     clearance = float(np.min(np.linalg.norm(sol.position(dense) - c, axis=1)) - reach)
     clearance = min(clearance, float(np.linalg.norm(sol.state(u[3])[0] - c) - reach))

@@ -56,6 +56,17 @@ def _relative(a, b):
     return aw * bv - bw * av - ca.cross(av, bv)
 
 
+def edge_start(quaternions0, left, right):
+    """Unit edge quaternions in one hemisphere along the rod (the energy does not care; IPOPT's start
+    does), and the clamps' (position, quaternion) as arrays."""
+    q0 = np.asarray(quaternions0, dtype=float)
+    q0 = q0 / np.linalg.norm(q0, axis=1)[:, None]
+    for j in range(1, len(q0)):
+        if q0[j] @ q0[j - 1] < 0:
+            q0[j] = -q0[j]
+    return q0, tuple(np.asarray(v, dtype=float) for v in left), tuple(np.asarray(v, dtype=float) for v in right)
+
+
 def solve_twisted_contact_rod(quaternions0: np.ndarray, length: float, rf: float, rt: float,
                               left: tuple[np.ndarray, np.ndarray], right: tuple[np.ndarray, np.ndarray],
                               radius: float, gap: float, window: float,
@@ -70,13 +81,7 @@ def solve_twisted_contact_rod(quaternions0: np.ndarray, length: float, rf: float
     holds it; when none does, the answer is a local minimum of the problem without the box."""
     n = len(quaternions0)
     h = length / n
-    q0 = np.asarray(quaternions0, dtype=float)
-    q0 = q0 / np.linalg.norm(q0, axis=1)[:, None]
-    for j in range(1, n):  # one hemisphere along the rod (the energy does not care; IPOPT's start does)
-        if q0[j] @ q0[j - 1] < 0:
-            q0[j] = -q0[j]
-    x_left, q_left = (np.asarray(v, dtype=float) for v in left)
-    x_right, q_right = (np.asarray(v, dtype=float) for v in right)
+    q0, (x_left, q_left), (x_right, q_right) = edge_start(quaternions0, left, right)
 
     Q = ca.SX.sym("q", 4, n)
     cols = [Q[:, j] for j in range(n)]

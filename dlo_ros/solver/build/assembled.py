@@ -205,7 +205,7 @@ class AssembledKKT:
         return moments, ca.SX(3, 1)
 
     def quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:
-        """Return (s, K) of each part ½ z_sᵀ K z_s of U_direct (none for a director model)."""
+        """Return (s, K) of U_direct's parts ½ z_sᵀ K z_s: all of U_direct, or none (director)."""
         return []
 
     def local_function(self, rows: np.ndarray) -> ca.Function:

@@ -181,5 +181,8 @@ class AssembledEulerKKT(AssembledKKT):
         return found
 
     def quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:
-        """Return (s, K) of each quadratic energy part (``AssembledKKT._build_local_function``)."""
+        """Return (s, K) of the bend, twist and stretch parts: all of U_direct here.
+
+        Differentiated by hand in ``assembled_local.local_rows_function``.
+        """
         return [term for _, term in self._quadratic_parts(p)]

@@ -1,35 +1,37 @@
-"""The centreline error of a point contact held at a mesh node rather than where it touches.
+"""The centreline error of a point contact held at mesh nodes rather than where it touches.
 
 With the obstacle rows on the mesh nodes (``solver.obstacle_points: nodes``) a point contact
-(a post under a strip) pushes at a row s_j, while the exact contact is where the centreline is
-tangent to the obstacle's surface.  The strong-form residual (``results/element_error.py``)
-takes the force where the answer applies it, so this error is invisible to it (the strip on a
-post of test_contact_auto.py at 1e-4 L: the row 1.9e-6 m from the contact, estimate 8.4e-8 m
-against a true 2.5e-7 m).
+(a cable on a post) pushes at one row s_j, or at two neighbouring rows, while the exact contact
+is where the centreline is tangent to the obstacle's surface.  The strong-form residual
+(``results/element_error.py``) takes the force where the answer applies it, so this error is
+invisible to it.
 
-What is used here, to first order:
+The shape does not stay put while the contact slides: a cable hanging past a post swings about
+it (on the main job's last pose 1.3 m of centreline per m of contact shift, while the shape with
+the contact row held responds with 0.24 m/m, and the answer's own tangency −g'/g'' points the
+wrong way).  So the error is measured along the family of equilibria whose contact is *pinned*
+at arc length c (the point x(c) on the surface, the force there free, every other row as at the
+answer):
 
-* **the shift.**  Along the answer, the clearance g(s) = h(x(s)) + r to the obstacle is 0 at the
-  row; the point it touches is where g' = 0, Δs = −g'(s_j)/g''(s_j) away (one Newton step;
-  g', g'' by central differences at ``STEP`` · L).  Measured on the post: Δs = 2.07e-3 and
-  2.31e-6 m against the reference's 1.75e-3 and 1.89e-6 m.  The touching point lies between
-  the rows next to s_j (they hold g ≤ 0 while g(s_j) = 0, so g's largest value there is in
-  that bracket): a step that leaves the bracket (g'' near 0, where a heavy string touches down
-  on a floor: steps of centimetres, estimates of 9 mm against a true error of 0.3 mm on
-  #37's table path) is replaced by the largest of g on ``BRACKET_GRID`` points of the bracket.
-* **the load it stands for.**  A force P misplaced by Δs is the right force plus a couple of
-  about P·Δs: in virtual work, the work of P moved from x(s_j) to x(s_j + Δs),
-  φ(z) = P·(x(s_j + Δs; z) − x(s_j; z)).
-* **the answer's response.**  Not a beam formula (a couple's centreline error ranges from
-  P·Δs·L²/(2 Rf) on a cantilever to far less between two clamps): the answer's own linear
-  response, with its grips and the active rows held (the contact row included: the strip still
-  touches the post), K [δz; δλ] = [σ ∇φ; 0] with K the KKT matrix of the NLP at the answer
-  (σ: the objective's scale, ``StringNLP.sigma``), and δx(s) = ∂x(s)/∂z · δz on the residual's
-  grid.  ∇φ and ∂x/∂z · δz by central differences of ``model.positions``.
+* the family: σ∇f(z) + μ ∇_z v(z; c) + J_Aᵀ λ_A = 0, v(z; c) = h(x(c; z)) + r = 0, the other
+  active rows held; μ = σ λ with λ [N] the contact's push (its force over −∇h), σ the
+  objective's scale (``StringNLP.sigma``).  The answer is its member at c₀, the force-weighted
+  arc length of the contact's rows (two rows' forces about c₀ make no couple to first order).
+* its tangent: K [dz/dc; dλ/dc] = [−μ ∂_c∇_z v; −∂_c v; 0] with K the KKT matrix of the NLP
+  at the answer over its active rows, the contact's rows replaced by v's (the Hessian keeps the
+  rows' curvature, which stands for v's to first order).
+* the exact contact is where the family is tangent to the surface: τ(c) = ∂_c v = 0.  One Newton
+  step from c₀: Δc = −τ / (dτ/dc), dτ/dc = ∂²_c v + ∂_c∇_z v · dz/dc.
+* the error: |Δc| · max_s |∂x(s)/∂z · dz/dc| on the grid.
 
-:func:`contact_shift_error` sums max_s |δx(s)| over the point contacts, and lists the points
-s_j + Δs where they touch.  ``auto/mesh_check.py`` adds the error times ``SAFETY`` (the Newton
-step's Δs came out 1.2 times the true one, and the response is first order).
+test_post_last_pose.py checks the step and the error against an exact contact reference.  ∂_c by
+central differences at ``STEP`` · L, ∂/∂z by central differences of ``model.positions`` at
+``Z_STEP``.
+
+:func:`contact_shift_error` sums the errors over the point contacts and lists where each
+touches, c₀ + Δc, where the step is no longer than the bracket of rows about the contact (a kink
+for the refinement to split at; a longer step is a first-order guess on a coarse mesh).  Contact
+slots (``contact/obstacle_slots.py``) are point contacts too, each on its own row.
 """
 
 from __future__ import annotations
@@ -38,55 +40,110 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..results.contacts import contact_loads
 from ..update.kkt import active_rows
 
-#: the difference step of g', g'' [fraction of L] (Δs agrees to 1e-4 relative from 1e-5 to 1e-3)
+#: the difference step in c [fraction of L]
 STEP = 1e-5
+#: the longest run of active rows [fraction of L] taken for one point contact when it has more
+#: than two rows (rows crowded about a contact point by the refinement all touch)
+POINT_EXTENT = 1e-3
 #: the difference step in z (unknowns of order one: unit quaternions, tangents, positions / L)
 Z_STEP = 1e-6
-#: points of the bracket between the neighbouring rows searched when the Newton step leaves it
-BRACKET_GRID = 65
 
 
 @dataclass(frozen=True)
 class ContactShift:
-    """error_m [m]: Σ max_s |δx(s)| over the point contacts; touches: s_j + Δs of each [m]."""
+    """error_m [m]: Σ max_s |δx(s)| over the point contacts; touches: c₀ + Δc of each [m]."""
 
     error_m: float
     touches: tuple[float, ...]
 
 
-def contact_shift(
-    positions,
-    ob,
-    radius: float,
-    s_j: float,
-    length: float,
-    bracket: tuple[float, float] | None = None,
-) -> float:
-    """Return Δs [m] from the row at ``s_j`` to where the answer is tangent to obstacle ``ob``.
+@dataclass(frozen=True)
+class PointContact:
+    """One point contact of an answer: obstacle index, its NLP rows, c₀ [m], total force [N]."""
 
-    ``positions(s)``: the answer's centreline at the arc lengths s, (len(s), 3).  0 when the
-    clearance is not curved towards the obstacle there (g'' ≥ 0: no touching point nearby).
-    ``bracket``: the arc lengths [m] of the rows before and after the contact; a Newton step
-    that leaves it gives way to the largest clearance on ``BRACKET_GRID`` points in it.
+    obstacle: int
+    rows: np.ndarray
+    s: float
+    force: np.ndarray
+    bracket: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class ContactFamily:
+    """The pinned family's step at one contact: Δc [m], dz/dc [1/m], and the error [m]."""
+
+    shift: float
+    dz: np.ndarray
+    error_m: float
+
+
+def point_contacts(nlp, problem, state, g: np.ndarray) -> list[PointContact]:
+    """Return the answer's point contacts: short runs of active rows, and filled slots.
+
+    ``g``: the NLP's rows at the answer (which rows are active: ``update/kkt.active_rows``).  A
+    run of one or two rows, or of more within ``POINT_EXTENT`` · L, is one point contact; a longer
+    run is a line load (``results/contacts.py``).
     """
-    e = STEP * length
-    s = np.clip(np.array([s_j - e, s_j, s_j + e]), 0.0, length)
-    g = ob.h_many(positions(s)) + radius
-    h1, h2 = s[1] - s[0], s[2] - s[1]
-    if h1 <= 0 or h2 <= 0:  # a contact at an end: the end's grip decides where it touches
-        return 0.0
-    d1 = (g[2] - g[0]) / (h1 + h2)
-    d2 = 2 * ((g[2] - g[1]) / h2 - (g[1] - g[0]) / h1) / (h1 + h2)
-    if d2 >= 0:
-        return 0.0
-    shift = float(-d1 / d2)
-    if bracket is None or bracket[0] <= s_j + shift <= bracket[1]:
-        return shift
-    grid = np.linspace(bracket[0], bracket[1], BRACKET_GRID)
-    return float(grid[np.argmax(ob.h_many(positions(grid)))] - s_j)
+    lam = np.asarray(state.lam_g, dtype=float)
+    if not nlp.obstacle_rows or not lam.size:
+        return []
+    active = active_rows(nlp, lam, np.asarray(g, dtype=float).ravel())
+    lam_si = lam / (nlp.row_scale * nlp.sigma)
+    s_rows, length = np.asarray(nlp.obstacle_s, dtype=float), nlp.length
+    x = np.asarray(nlp.model.positions(state.z, s_rows)).reshape(-1, 3)
+    out = []
+    for i, rows in enumerate(nlp.obstacle_rows):
+        ob, rows = problem.obstacles[i], np.asarray(rows)
+        push = lam_si[rows]
+        if nlp.obstacle_slots:  # a row a contact slot replaces holds no force
+            push = push * state.p[nlp.params[f"samples:{i}:on"]]
+        on = np.flatnonzero((push > 0) & active[rows])
+        # consecutive rows, or rows closer than POINT_EXTENT · L (crowded about one contact)
+        apart = (np.diff(on) != 1) & (np.diff(s_rows[on]) > POINT_EXTENT * length)
+        for run in np.split(on, np.flatnonzero(apart) + 1) if on.size else []:
+            if len(run) > 2 and s_rows[run[-1]] - s_rows[run[0]] > POINT_EXTENT * length:
+                continue
+            force = _forces(nlp, ob, x[run], push[run])
+            w = np.linalg.norm(force, axis=1)
+            out.append(
+                PointContact(
+                    i,
+                    rows[run],
+                    float(w @ s_rows[run] / w.sum()),
+                    force.sum(axis=0),
+                    row_bracket(s_rows, s_rows[run[0]], s_rows[run[-1]], length),
+                )
+            )
+        out += _slot_contacts(nlp, problem, i, state, lam_si, active)
+    return out
+
+
+def _forces(nlp, ob, x: np.ndarray, push: np.ndarray) -> np.ndarray:
+    """Return −λ_j ∇h(x_j) (len(x), 3) [N]."""
+    grads = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
+    return -push[:, None] * grads
+
+
+def _slot_contacts(
+    nlp, problem, i: int, state, lam_si: np.ndarray, active: np.ndarray
+) -> list[PointContact]:
+    """Return obstacle i's filled contact slots as point contacts."""
+    if not nlp.slot_rows:
+        return []
+    rows, lay = np.asarray(nlp.slot_rows[i]), nlp.params
+    touch = np.flatnonzero((lam_si[rows] > 0) & (state.p[lay[f"slots:{i}:on"]] > 0))
+    touch = touch[active[rows[touch]]]
+    if not touch.size:
+        return []
+    ob, s = problem.obstacles[i], state.p[lay[f"slots:{i}:s"]]
+    x = np.asarray(nlp.model.positions(state.z, s[touch])).reshape(-1, 3)
+    forces = _forces(nlp, ob, x, lam_si[rows[touch]])
+    return [
+        PointContact(i, rows[[k]], float(s[k]), f, (0.0, nlp.length))
+        for k, f in zip(touch, forces)
+    ]
 
 
 def row_bracket(rows: np.ndarray, first: float, last: float, length: float) -> tuple[float, float]:
@@ -101,79 +158,94 @@ def row_bracket(rows: np.ndarray, first: float, last: float, length: float) -> t
     )
 
 
+def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, kkt=None):
+    """Return the pinned family's Newton step at ``contact`` (module docstring), or None.
+
+    None at an end of the string (the grip decides where it touches) or where the KKT matrix is
+    singular.  ``kkt``: ``nlp.kkt_fn``'s outputs at the answer, when the caller has them.
+    """
+    length, z = nlp.length, np.asarray(state.z, dtype=float)
+    c = contact.s + STEP * length * np.array([-1.0, 0.0, 1.0])
+    if c[0] < 0.0 or c[2] > length:
+        return None
+    if kkt is None:
+        kkt = tuple(np.asarray(a) for a in nlp.kkt_fn(z, state.p, state.lam_g))
+    _, g, jac, hess, _ = kkt
+    ob, n = problem.obstacles[contact.obstacle], z.size
+    x, jx = _positions_and_jacobian(nlp.model, z, c)
+    grads = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
+    v = ob.h_many(x) + problem.string.radius
+    gz = np.einsum("pi,pik->pk", grads, jx)  # ∇_z v at c₀ − h, c₀, c₀ + h
+    step = c[1] - c[0]
+    tau = float(v[2] - v[0]) / (2 * step)
+    tau_c = (v[2] - 2 * v[1] + v[0]) / step**2
+    tau_z = (gz[2] - gz[0]) / (2 * step)  # ∂_c∇_z v = ∇_z τ
+    push = -float(contact.force @ grads[1]) / float(grads[1] @ grads[1])
+    held = active_rows(nlp, state.lam_g, np.asarray(g).ravel())
+    held[contact.rows] = False
+    rows = np.vstack([np.asarray(jac)[held], gz[1][None, :]])
+    m = rows.shape[0]
+    kkt_m = np.zeros((n + m, n + m))
+    kkt_m[:n, :n] = hess
+    kkt_m[:n, n:] = rows.T
+    kkt_m[n:, :n] = rows
+    rhs = np.zeros(n + m)
+    rhs[:n] = -nlp.sigma * push * tau_z
+    rhs[-1] = -tau
+    try:
+        dz = np.linalg.solve(kkt_m, rhs)[:n]
+    except np.linalg.LinAlgError:
+        return None
+    slope = tau_c + float(tau_z @ dz)
+    if not np.isfinite(slope) or slope == 0.0:
+        return None
+    shift = float(-tau / slope)
+    size = float(np.linalg.norm(dz))
+    if size == 0.0:
+        return ContactFamily(shift, dz, 0.0)
+    u = dz / size
+    pos = nlp.model.positions
+    dx = (np.asarray(pos(z + Z_STEP * u, grid)) - np.asarray(pos(z - Z_STEP * u, grid))) / (
+        2 * Z_STEP
+    )
+    return ContactFamily(shift, dz, abs(shift) * size * float(np.max(np.linalg.norm(dx, axis=1))))
+
+
+def _positions_and_jacobian(model, z: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return x(s) (len(s), 3) and ∂x(s)/∂z (len(s), 3, len(z)), by central differences."""
+    x = np.asarray(model.positions(z, s)).reshape(-1, 3)
+    jx = np.zeros((len(s), 3, z.size))
+    step = np.zeros(z.size)
+    for k in range(z.size):
+        step[k] = Z_STEP
+        plus = np.asarray(model.positions(z + step, s)).reshape(-1, 3)
+        minus = np.asarray(model.positions(z - step, s)).reshape(-1, 3)
+        jx[:, :, k] = (plus - minus) / (2 * Z_STEP)
+        step[k] = 0.0
+    return x, jx
+
+
 def contact_shift_error(nlp, problem, state, grid: np.ndarray) -> ContactShift:
     """Return the centreline error [m] of the point contacts' positions (module docstring).
 
     ``nlp``: the solver's ``StringNLP``; ``problem``: the scene as the NLP sees it; ``state``:
     the answer (``SolverState``: z, p, lam_g); ``grid``: arc lengths [m] to measure δx on.
-    Zero without point contacts; the KKT matrix singular: that contact's error is left out.
+    Zero without point contacts; a contact whose family has no step (an end, a singular KKT
+    matrix) is left out.
     """
-    lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
-    loads = [
-        c
-        for c in contact_loads(nlp, problem, state.z, state.p, lam_si)
-        if c.kind == "point" and np.linalg.norm(c.force) > 0
-    ]
-    if not loads:
+    if not nlp.obstacle_rows:
         return ContactShift(0.0, ())
-    model, z, length = nlp.model, np.asarray(state.z, dtype=float), nlp.length
-
-    def positions(zz, s):
-        return np.asarray(model.positions(zz, np.asarray(s, dtype=float))).reshape(-1, 3)
-
-    kkt = None
-    total, touches = 0.0, []
-    for load in loads:
-        s_j = float(load.s[0])
-        ob = problem.obstacles[load.obstacle]
-        bracket = row_bracket(np.asarray(nlp.obstacle_s), s_j, float(load.s[-1]), length)
-        shift = contact_shift(
-            lambda s: positions(z, s), ob, problem.string.radius, s_j, length, bracket
-        )
-        if shift == 0.0:
+    kkt = tuple(np.asarray(a) for a in nlp.kkt_fn(state.z, state.p, state.lam_g))
+    contacts = point_contacts(nlp, problem, state, kkt[1])
+    if not contacts:
+        return ContactShift(0.0, ())
+    total, touches, length = 0.0, [], nlp.length
+    for contact in contacts:
+        family = pinned_family(nlp, problem, state, contact, grid, kkt)
+        if family is None or family.shift == 0.0:
             continue
-        ends = np.clip([s_j, s_j + shift], 0.0, length)
-        touches.append(float(ends[1]))
-        if kkt is None:
-            kkt = kkt_matrix(nlp, state)
-        rhs = np.zeros(kkt.shape[0])
-        rhs[: z.size] = nlp.sigma * work_gradient(positions, z, ends, load.force)
-        try:
-            dz = np.linalg.solve(kkt, rhs)[: z.size]
-        except np.linalg.LinAlgError:
-            continue
-        size = float(np.linalg.norm(dz))
-        if size == 0.0:
-            continue
-        u = dz / size
-        dx = (positions(z + Z_STEP * u, grid) - positions(z - Z_STEP * u, grid)) / (2 * Z_STEP)
-        total += size * float(np.max(np.linalg.norm(dx, axis=1)))
+        total += family.error_m
+        lo, hi = contact.bracket
+        if abs(family.shift) <= hi - lo:  # a step longer than the rows' bracket: first order only
+            touches.append(float(np.clip(contact.s + family.shift, 0.0, length)))
     return ContactShift(total, tuple(touches))
-
-
-def work_gradient(positions, z: np.ndarray, ends: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """Return ∇_z of φ(z) = force · (x(ends[1]; z) − x(ends[0]; z)), by central differences."""
-
-    def work(zz: np.ndarray) -> float:
-        x = positions(zz, ends)
-        return float(force @ (x[1] - x[0]))
-
-    out = np.zeros(z.size)
-    for k in range(z.size):
-        step = np.zeros(z.size)
-        step[k] = Z_STEP
-        out[k] = (work(z + step) - work(z - step)) / (2 * Z_STEP)
-    return out
-
-
-def kkt_matrix(nlp, state) -> np.ndarray:
-    """Return [∇²L J_Aᵀ; J_A 0] of the NLP at ``state`` over its active rows (``kkt.py``)."""
-    z, lam, p = state.z, state.lam_g, state.p
-    _, g, jac, hess, _ = (np.asarray(a) for a in nlp.kkt_fn(z, p, lam))
-    idx = np.flatnonzero(active_rows(nlp, lam, g.ravel()))
-    n, m = z.size, idx.size
-    out = np.zeros((n + m, n + m))
-    out[:n, :n] = hess
-    out[:n, n:] = jac[idx].T
-    out[n:, :n] = jac[idx]
-    return out

@@ -11,10 +11,10 @@ per element and each element's coefficient decay — so no second model is solve
   the estimate adds CUT_SAFETY × the deepest cut between the rows and SAFETY × the error of
   each point contact pushing at its row rather than where the shape touches the obstacle
   (``adapt/contact_shift.py``), and the known contact points include that cut and the ends of
-  each run of active rows (``contact/penetration.py``): the split puts a node where the contact
-  is, and an element holding one gets the kink safety factor (the touching points are not split
-  at: they depend on the shape a refinement starts from, and a query refined from the held
-  shape then ended 1.5e-4 m from the cold solve of its targets, test_auto_model.py);
+  each run of active rows (``contact/penetration.py``), and where each point contact touches
+  along the family of equilibria pinned at it (``adapt/contact_shift.py``, when that step stays
+  within the rows about the contact): the split puts a node where the contact is, and an element
+  holding one gets the kink safety factor;
 * in a stream's check, estimate < δ/50 and the rule coarsens (hysteresis: refined elements land
   at a fifth of their share, so they are not coarsened back): the coarser mesh;
 * else keep the mesh, with the estimate — also when the estimate is at its floor (1e-10·L, the
@@ -104,7 +104,7 @@ def mesh_verdict(
     estimates = ElementEstimates(
         np.maximum(errors.per_element_m * max(scale, 1.0), 0.0) + cuts,
         np.asarray(errors.smoothness, dtype=float),
-        kinks,
+        tuple(sorted(set(kinks) | set(shift.touches))),
     )
     following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
     if following is None:

@@ -53,10 +53,14 @@ Z_STEP = 1e-6
 
 @dataclass(frozen=True)
 class ContactShift:
-    """error_m [m]: Σ max_s |δx(s)| over the point contacts; touches: c₀ + Δc of each [m]."""
+    """error_m [m]: Σ max_s |δx(s)| over the point contacts; touches: c₀ + Δc of each [m].
+
+    parts: (c₀ [m], that contact's error [m]) of each point contact counted.
+    """
 
     error_m: float
     touches: tuple[float, ...]
+    parts: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -239,13 +243,13 @@ def contact_shift_error(nlp, problem, state, grid: np.ndarray) -> ContactShift:
     contacts = point_contacts(nlp, problem, state, kkt[1])
     if not contacts:
         return ContactShift(0.0, ())
-    total, touches, length = 0.0, [], nlp.length
+    parts, touches, length = [], [], nlp.length
     for contact in contacts:
         family = pinned_family(nlp, problem, state, contact, grid, kkt)
         if family is None or family.shift == 0.0:
             continue
-        total += family.error_m
+        parts.append((contact.s, family.error_m))
         lo, hi = contact.bracket
         if abs(family.shift) <= hi - lo:  # a step longer than the rows' bracket: first order only
             touches.append(float(np.clip(contact.s + family.shift, 0.0, length)))
-    return ContactShift(total, tuple(touches))
+    return ContactShift(sum(e for _, e in parts), tuple(touches), tuple(parts))

@@ -71,6 +71,15 @@ def has_elements(solver) -> bool:
     return element_mesh_of(solver.nlp.model) is not None
 
 
+def contact_parts(shift: ContactShift, spec, length: float) -> np.ndarray:
+    """Return each element's share of the point contacts' error [m]: the contact's own element."""
+    bounds = np.asarray(spec.breakpoints, dtype=float)
+    out = np.zeros(bounds.size + 1)
+    for s, error in shift.parts:
+        out[min(int(np.searchsorted(bounds, s)), bounds.size)] += error
+    return out
+
+
 def mesh_verdict(
     solver, state, choice: ModelChoice, problem, tolerance: float, coarsen: bool
 ) -> MeshVerdict:
@@ -98,11 +107,14 @@ def mesh_verdict(
     rule = RefinementRule(
         tolerance=tolerance / 2, min_nodes=MIN_NODES, max_unknowns=MAX_UNKNOWNS, max_removed=2
     )
-    # the per-element estimates carry the global estimate's safety factor, so that their sum
-    # bounds it as the rule's share of δ/2 assumes
-    scale = estimate / max(float(np.sum(errors.per_element_m)), 1e-300)
+    # the per-element estimates carry the residual's safety factor, and each element the cut
+    # between its rows and the error of the point contacts it holds, so that their sum bounds
+    # the estimate as the rule's share of δ/2 assumes (and the rule refines where they are)
+    scale = float(errors.estimate_m) / max(float(np.sum(errors.per_element_m)), 1e-300)
     estimates = ElementEstimates(
-        np.maximum(errors.per_element_m * max(scale, 1.0), 0.0) + cuts,
+        np.maximum(errors.per_element_m * max(scale, 1.0), 0.0)
+        + cuts
+        + SAFETY * contact_parts(shift, spec, length),
         np.asarray(errors.smoothness, dtype=float),
         tuple(sorted(set(kinks) | set(shift.touches))),
     )

@@ -48,6 +48,25 @@ def test_a_rough_element_is_split_at_its_middle_or_at_the_kink():
     assert next_mesh(spec, L, near, RULE) == MeshSpec((0.5,), (7, 7))
 
 
+def test_a_breakpoint_next_to_a_snap_kink_moves_onto_it():
+    """A contact point predicted closer to a breakpoint than min_size cannot be split at: the
+    breakpoint moves there, when an element beside it refines; a scene's breakpoint stays."""
+    spec = MeshSpec((0.5,), (8, 8))
+    e = [DELTA, 0.1 * DELTA / 2]  # element 0 refines (smooth: more nodes), element 1 keeps
+    moved = ElementEstimates(np.array(e), np.array([0.5, 0.5]), (0.503,), snap_to=(0.503,))
+    out = next_mesh(spec, L, moved, RULE)
+    assert out is not None and out.breakpoints == (0.503,), out
+    assert out.counts[0] > 8 and out.counts[1] == 8
+    # the scene's own breakpoint stays; so does one whose elements are both in their band
+    assert next_mesh(spec, L, moved, RULE, fixed=(0.5,)).breakpoints == (0.5,)
+    calm = ElementEstimates(np.full(2, 0.1 * DELTA / 2), np.array([0.5, 0.5]), (), (0.503,))
+    assert next_mesh(spec, L, calm, RULE) is None
+    # never so that an element gets shorter than min_size
+    short = MeshSpec((0.5, 0.512), (8, 8, 8))
+    far = ElementEstimates(np.array([DELTA, DELTA, 0.0]), np.full(3, 0.5), (), (0.503,))
+    assert next_mesh(short, L, far, RULE).breakpoints == (0.5, 0.512)
+
+
 def test_coarse_elements_lose_nodes_then_merge_but_never_across_the_scenes_breakpoint():
     tiny = 1e-4 * DELTA
     spec = MeshSpec((0.25, 0.5, 0.75), (10, 4, 4, 4))

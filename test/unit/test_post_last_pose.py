@@ -30,12 +30,14 @@ then held at the last until a check of a shape there says the tolerance is met, 
 most), at δ = 1e-3 and 1e-4 m: ``ok``, ``tolerance_met``, the centreline within δ of the reference
 at the same arc lengths, and the reported ``model.estimated_error_m`` bounding the true error by at
 most 10x.  And the contact's part of that estimate on its own (solver/adapt/contact_shift.py, the
-family of equilibria pinned at the contact's arc length): where the cold answer's contact sits
-along s against the reference's, and the error that stands for.
+family of equilibria pinned at the contact's arc length), on a fixed coarse mesh: where the
+answer's contact sits along s against the reference's, and the error that stands for.
 
-Measured (true error / estimate / unknowns): cold 1e-3 1.85e-4 / 3.91e-4 / 163; cold 1e-4
-2.02e-5 / 4.16e-5 / 235; streamed 1e-3 4.14e-5 / 1.29e-4 / 251 (the mirror branch); streamed 1e-4
-3.06e-5 / 6.55e-5 / 255.  Before the pinned family (the contact's shift from the answer's own clearance, −g'/g'', and
+Measured (true error / estimate / unknowns): cold 1e-3 6.06e-5 / 1.40e-4 / 163; cold 1e-4
+2.09e-5 / 4.30e-5 / 235; streamed 1e-3 4.14e-5 / 1.29e-4 / 251 (the mirror branch); streamed 1e-4
+4.56e-5 / 9.55e-5 / 287.  Not asserted: 1e-5 m cold ends 1.5e-5 m from the reference after auto's
+12 refinement passes, tolerance not met (the contact then sits 8 µm from the exact point, pressing
+on two rows 14 µm apart at an element's end).  Before the pinned family (the contact's shift from the answer's own clearance, −g'/g'', and
 the shape's response with the contact row held) the estimate was 1.6–3x below the true error,
 and at 1e-4 cold the answer said the tolerance was met 1.25e-4 m from the reference: the error is
 a swing of the loop about the post (the soft mode above), which only a shape free to move with
@@ -58,6 +60,8 @@ from dlo_ros.node import demo
 from dlo_ros.scene import load_scene, scene_from_dict, scene_to_dict
 from dlo_ros.solver.adapt.contact_shift import pinned_family, point_contacts
 from dlo_ros.solver.auto import make_solver
+from dlo_ros.solver.build.mesh import MeshSpec
+from dlo_ros.solver.shape_solver import ShapeSolver
 
 TOLERANCES = (1e-3, 1e-4)
 POINTS = 401
@@ -160,8 +164,7 @@ def solve(tolerance: float, how: str):
     try:
         result = solver.solve()
         if how == "cold":
-            reduced = solver.pool.reduced.reduce(solver.choice, solver.problem)[0]
-            return result, (solver.inner.nlp, reduced, solver.inner.committed_state)
+            return result
         assert result.ok, result.message
         for k in range(first + 1, LAST + 1):
             result = solver.solve(targets(k))
@@ -177,10 +180,7 @@ def solve(tolerance: float, how: str):
 
 def answer(cache, tolerance: float, how: str):
     if (tolerance, how) not in cache:
-        found = solve(tolerance, how)
-        cache[tolerance, how], cache["answer", tolerance, how] = (
-            found if how == "cold" else (found, None)
-        )
+        cache[tolerance, how] = solve(tolerance, how)
     return cache[tolerance, how]
 
 
@@ -234,27 +234,34 @@ def test_default_meets_the_tolerance(cache, tolerance, how):
     assert error <= estimate <= 10 * error, (estimate, error)
 
 
-def test_the_pinned_family_finds_the_exact_contact(cache):
-    """The contact's error (solver/adapt/contact_shift.py) at the default's cold answer at 1e-3 m:
-    one Newton step along the family of equilibria pinned at the contact's arc length lands on
-    the reference's contact point, and the centreline error it predicts is the true one.
+def test_the_pinned_family_finds_the_exact_contact():
+    """The contact's error (solver/adapt/contact_shift.py) on a fixed coarse mesh (3D director
+    model, three elements of 12 nodes, the rows on the nodes), cold: one Newton step along the
+    family of equilibria pinned at the contact's arc length takes the contact most of the way
+    to the reference's contact point, and the centreline error it predicts is the true one.
 
-    The answer's contact sits at its rows, 0.1–1 mm from the exact point along s (asserted: else
-    the case is not a test of the step); the step removes 95 % of that, and the error predicted is
-    within 20 % of the true distance to the reference (the contact's error dominates it there).
+    Measured: the answer's contact 1.84 mm from the exact one along s, 0.11 mm after the step;
+    predicted error 2.26e-3 m against a true 2.35e-3 m (the contact's error dominates it here).
     """
-    ref = reference(cache)
-    result = answer(cache, 1e-3, "cold")
-    nlp, reduced, state = cache["answer", 1e-3, "cold"]
-    grid = np.linspace(0.0, reduced.string.length, POINTS)
+    options = replace(
+        scene().options, model="full", obstacle_points="nodes", output_points=POINTS,
+        update_time_limit=0.0,
+    )  # fmt: skip
+    solver = ShapeSolver(
+        problem_at(LAST), options, compile="off", mesh=MeshSpec((0.45, 0.55), (12, 12, 12))
+    )
+    result = solver.solve()
+    assert result.ok, result.message
+    ref = Reference(problem_at(LAST), result)
+    nlp, state = solver.nlp, solver.committed_state
     rows = np.asarray(nlp.kkt_fn(state.z, state.p, state.lam_g)[1])
-    contacts = point_contacts(nlp, reduced, state, rows)
+    contacts = point_contacts(nlp, solver.problem, state, rows)
     assert len(contacts) == 1, contacts
     (contact,) = contacts
     offset = contact.s - ref.contact.s_contact
-    assert 1e-4 <= abs(offset) <= 1e-3, offset
-    family = pinned_family(nlp, reduced, state, contact, grid)
+    assert 1e-3 <= abs(offset) <= 5e-3, offset  # else the case is no test of the step
+    family = pinned_family(nlp, solver.problem, state, contact, np.linspace(0.0, 1.0, POINTS))
     assert family is not None
-    assert abs(contact.s + family.shift - ref.contact.s_contact) <= 0.05 * abs(offset)
+    assert abs(contact.s + family.shift - ref.contact.s_contact) <= 0.15 * abs(offset)
     error = ref.error(result)
-    assert abs(family.error_m - error) <= 0.2 * error, (family.error_m, error)
+    assert abs(family.error_m - error) <= 0.15 * error, (family.error_m, error)

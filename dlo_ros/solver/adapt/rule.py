@@ -6,7 +6,8 @@ e.g. a kink inside; well below 1: smooth, the error falls by about ρ per added 
 share of the tolerance δ [m] is b_k = δ · h_k / L when the estimates add up to the global one
 (``share='length'``), or δ when the global estimate is their maximum (``share='each'``).
 
-* refine when e_k > ``refine`` · b_k: split at a kink the caller knows inside the element (e.g. a
+* refine when e_k > ``refine`` · b_k: move a breakpoint of the element onto a ``snap_to`` kink
+  closer to it than ``min_size``; split at a kink the caller knows inside the element (e.g. a
   contact point), else split at the middle when ρ_k ≥ ``smooth``, else add the nodes that the
   geometric decay predicts bring e_k to ``target`` · b_k (split at the middle instead when that
   needs more than ``max_nodes``);
@@ -71,11 +72,16 @@ class RefinementRule:
 
 @dataclass(frozen=True)
 class ElementEstimates:
-    """Per-element error estimates [m], coefficient decay rates, and known kinks' s [m]."""
+    """Per-element error estimates [m], coefficient decay rates, and known kinks' s [m].
+
+    snap_to: kinks known best (a point contact's predicted touching point): a breakpoint of an
+    element to refine closer to one than ``min_size`` moves onto it.
+    """
 
     errors: np.ndarray
     decay: np.ndarray
     kinks: tuple[float, ...] = ()
+    snap_to: tuple[float, ...] = ()
 
 
 def unknowns(counts) -> int:
@@ -152,8 +158,9 @@ def next_mesh(
     counts = list(spec.counts or ())
     errors, rates = np.asarray(estimates.errors), np.asarray(estimates.decay)
     budgets = _budgets(bounds, rule)
+    moved = _snapped(bounds, errors > rule.refine * budgets, estimates.snap_to, fixed, rule)
     plan: list[list[tuple[float, float, int]]] = [
-        [(bounds[k], bounds[k + 1], n)] for k, n in enumerate(counts)
+        [(moved[k], moved[k + 1], n)] for k, n in enumerate(counts)
     ]
     total, changed = unknowns(counts), set()
     for k in np.argsort(-(errors / budgets)):  # the worst first: the unknowns cap may stop it
@@ -174,6 +181,29 @@ def next_mesh(
     flat = _merged(plan, coarse, rule, fixed, estimates.kinks, length)
     out = MeshSpec(tuple(float(b) for b, _, _ in flat[1:]), tuple(int(c) for _, _, c in flat))
     return None if out == MeshSpec(tuple(float(b) for b in bounds[1:-1]), tuple(counts)) else out
+
+
+def _snapped(bounds: np.ndarray, refine: np.ndarray, snap_to, fixed, rule) -> np.ndarray:
+    """Return ``bounds`` with each breakpoint of an element to refine moved onto a ``snap_to``
+    kink closer to it than ``min_size`` (which could not be split at so near it).
+
+    Never a scene breakpoint (``fixed``) or an end, and never so that an element gets shorter
+    than ``min_size``.
+    """
+    out = np.array(bounds, dtype=float)
+    length = float(out[-1])
+    for i in range(1, out.size - 1):
+        if not (refine[i - 1] or refine[i]):
+            continue
+        if any(abs(out[i] - s) <= MERGE * length for s in fixed):
+            continue
+        near = [k for k in snap_to if 0 < abs(k - out[i]) < rule.min_size]
+        if not near:
+            continue
+        k = min(near, key=lambda k: abs(k - out[i]))
+        if k - out[i - 1] >= rule.min_size and out[i + 1] - k >= rule.min_size:
+            out[i] = k
+    return out
 
 
 def _merged(plan, coarse, rule, fixed, kinks, length) -> list[tuple[float, float, int]]:

@@ -117,6 +117,7 @@ def mesh_verdict(
         + SAFETY * contact_parts(shift, spec, length),
         np.asarray(errors.smoothness, dtype=float),
         tuple(sorted(set(kinks) | set(shift.touches))),
+        shift.touches,
     )
     following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
     if following is None:

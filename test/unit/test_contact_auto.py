@@ -181,5 +181,7 @@ def test_a_strip_on_a_floor_under_auto_carries_a_line_load():
         total = sum(c.force for c in r.contact_loads)
         # force balance: contact + grip + weight = 0
         np.testing.assert_allclose(total, [0, 0, WEIGHT] - r.grips["left"].force, atol=1e-6)
-        flat = np.concatenate([c.s for c in lines])
-        assert flat.min() <= a + 0.05 and flat.max() >= 0.9  # the rows on the flat part
+        # the rows on the flat part press (the first may be a point: the row after it can hover
+        # a micrometre above the floor where the rows are 3 cm apart)
+        flat = np.concatenate([c.s for c in r.contact_loads])
+        assert flat.min() <= a + 0.05 and flat.max() >= 0.9

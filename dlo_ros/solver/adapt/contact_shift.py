@@ -1,4 +1,4 @@
-"""The centreline error of a point contact held at mesh nodes rather than where it touches.
+"""The centreline error of a contact point held at mesh nodes rather than where it touches.
 
 With the obstacle rows on the mesh nodes (``solver.obstacle_points: nodes``) a point contact
 (a cable on a post) pushes at one row s_j, or at two neighbouring rows, while the exact contact
@@ -28,6 +28,13 @@ test_post_last_pose.py checks the step and the error against an exact contact re
 central differences at ``STEP`` · L, ∂/∂z by central differences of ``model.positions`` at
 ``Z_STEP``.
 
+A line contact (a strip lying on a floor) has the same error at its ends: the concentrated force
+where it lifts off sits at the run's first or last row.  Its family pins that row's point at c
+(the run's other rows held), and the exact lift-off is where the bending moment is continuous:
+zero curvature relative to the surface on the free side, τ(c) = v''(c±) = 0 (one-sided
+differences at ``END_STEP`` · L).  Rows hovering less than ``HOVER`` · L above the surface
+between pressed rows belong to the run.
+
 :func:`contact_shift_error` sums the errors over the point contacts and lists where each
 touches, c₀ + Δc, where the step is no longer than the bracket of rows about the contact (a kink
 for the refinement to split at; a longer step is a first-order guess on a coarse mesh).  Contact
@@ -47,6 +54,13 @@ STEP = 1e-5
 #: the longest run of active rows [fraction of L] taken for one point contact when it has more
 #: than two rows (rows crowded about a contact point by the refinement all touch)
 POINT_EXTENT = 1e-3
+#: rows between two pressed rows closer than this to the surface [fraction of L] join them in
+#: one contact (the paper's Fig. 3 strip at ρ = 1000: three rows 0.15–0.35 µm above its floor
+#: split its run in two, and its lift-off passed for a point touch); results/contacts.py reports
+#: loads with a tighter ROW_TOUCH
+HOVER = 1e-6
+#: the difference step of a run end's one-sided v'' and its derivative in c [fraction of L]
+END_STEP = 1e-4
 #: the difference step in z (unknowns of order one: unit quaternions, tangents, positions / L)
 Z_STEP = 1e-6
 
@@ -65,13 +79,20 @@ class ContactShift:
 
 @dataclass(frozen=True)
 class PointContact:
-    """One point contact of an answer: obstacle index, its NLP rows, c₀ [m], total force [N]."""
+    """One pinned contact of an answer: obstacle index, its NLP rows, c₀ [m], total force [N].
+
+    side: 0 for a point contact (where it touches, τ = v'(c) = 0); +1 or −1 for the last or
+    first row of a line contact, whose free side is after or before it (where it lifts off,
+    τ = v''(c±) = 0: the bending moment is continuous there, and zero curvature relative to the
+    surface along the run).  bracket: the arc lengths of the rows on either side [m].
+    """
 
     obstacle: int
     rows: np.ndarray
     s: float
     force: np.ndarray
     bracket: tuple[float, float]
+    side: int = 0
 
 
 @dataclass(frozen=True)
@@ -103,11 +124,19 @@ def point_contacts(nlp, problem, state, g: np.ndarray) -> list[PointContact]:
         push = lam_si[rows]
         if nlp.obstacle_slots:  # a row a contact slot replaces holds no force
             push = push * state.p[nlp.params[f"samples:{i}:on"]]
-        on = np.flatnonzero((push > 0) & active[rows])
+        pressed = (push > 0) & active[rows]
+        # a row within HOVER of the surface joins the stretch it is in even when it holds no
+        # force: a run whose rows lift by a fraction of a micrometre ends at its last row
+        gap = -ob.h_many(x) - problem.string.radius
+        on = np.flatnonzero(pressed | (gap <= HOVER * length))
         # consecutive rows, or rows closer than POINT_EXTENT · L (crowded about one contact)
         apart = (np.diff(on) != 1) & (np.diff(s_rows[on]) > POINT_EXTENT * length)
         for run in np.split(on, np.flatnonzero(apart) + 1) if on.size else []:
+            run = run[pressed[run]]  # its rows that press, from the first to the last
+            if not run.size:
+                continue
             if len(run) > 2 and s_rows[run[-1]] - s_rows[run[0]] > POINT_EXTENT * length:
+                out += _run_ends(nlp, ob, i, rows, run, x, push, s_rows)
                 continue
             force = _forces(nlp, ob, x[run], push[run])
             w = np.linalg.norm(force, axis=1)
@@ -121,6 +150,26 @@ def point_contacts(nlp, problem, state, g: np.ndarray) -> list[PointContact]:
                 )
             )
         out += _slot_contacts(nlp, problem, i, state, lam_si, active)
+    return out
+
+
+def _run_ends(nlp, ob, i, rows, run, x, push, s_rows) -> list[PointContact]:
+    """Return the first and last rows of a line contact as pinned run ends (not at a grip)."""
+    length, out = nlp.length, []
+    for j, side in ((run[0], -1), (run[-1], 1)):
+        s = float(s_rows[j])
+        if min(s, length - s) <= END_STEP * length * 4:
+            continue
+        out.append(
+            PointContact(
+                i,
+                rows[[j]],
+                s,
+                _forces(nlp, ob, x[[j]], push[[j]])[0],
+                row_bracket(s_rows, s, s, length),
+                side,
+            )
+        )
     return out
 
 
@@ -170,20 +219,31 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
     """
     length, z = nlp.length, np.asarray(state.z, dtype=float)
     c = contact.s + STEP * length * np.array([-1.0, 0.0, 1.0])
-    if c[0] < 0.0 or c[2] > length:
+    # a run end's one-sided stencil: τ at c₀ ∓ δ and c₀, each on 4 points toward the free side
+    big = END_STEP * length
+    ends = contact.s + np.add.outer(np.array([-big, 0.0, big]), contact.side * big * np.arange(4))
+    if min(c[0], ends.min()) < 0.0 or max(c[2], ends.max()) > length:
         return None
     if kkt is None:
         kkt = tuple(np.asarray(a) for a in nlp.kkt_fn(z, state.p, state.lam_g))
     _, g, jac, hess, _ = kkt
     ob, n = problem.obstacles[contact.obstacle], z.size
-    x, jx = _positions_and_jacobian(nlp.model, z, c)
+    points = np.concatenate([c, ends[1]]) if contact.side else c
+    x, jx = _positions_and_jacobian(nlp.model, z, points)
     grads = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
     v = ob.h_many(x) + problem.string.radius
-    gz = np.einsum("pi,pik->pk", grads, jx)  # ∇_z v at c₀ − h, c₀, c₀ + h
+    gz = np.einsum("pi,pik->pk", grads, jx)  # ∇_z v at c₀ − h, c₀, c₀ + h (and the stencil)
     step = c[1] - c[0]
-    tau = float(v[2] - v[0]) / (2 * step)
-    tau_c = (v[2] - 2 * v[1] + v[0]) / step**2
-    tau_z = (gz[2] - gz[0]) / (2 * step)  # ∂_c∇_z v = ∇_z τ
+    v_c = float(v[2] - v[0]) / (2 * step)  # ∂_c v
+    v_cz = (gz[2] - gz[0]) / (2 * step)  # ∂_c∇_z v
+    if contact.side == 0:  # τ = ∂_c v
+        tau, tau_c, tau_z = v_c, (v[2] - 2 * v[1] + v[0]) / step**2, v_cz
+    else:  # τ = v''(c±), one-sided, second order: (2, −5, 4, −1) / H²
+        weights = np.array([2.0, -5.0, 4.0, -1.0]) / big**2
+        at = lambda s: ob.h_many(np.asarray(nlp.model.positions(z, s)).reshape(-1, 3))  # noqa: E731
+        tau = float(weights @ v[3:])
+        tau_c = float(weights @ at(ends[2]) - weights @ at(ends[0])) / (2 * big)
+        tau_z = weights @ gz[3:]
     push = -float(contact.force @ grads[1]) / float(grads[1] @ grads[1])
     held = active_rows(nlp, state.lam_g, np.asarray(g).ravel())
     held[contact.rows] = False
@@ -194,8 +254,8 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
     kkt_m[:n, n:] = rows.T
     kkt_m[n:, :n] = rows
     rhs = np.zeros(n + m)
-    rhs[:n] = -nlp.sigma * push * tau_z
-    rhs[-1] = -tau
+    rhs[:n] = -nlp.sigma * push * v_cz
+    rhs[-1] = -v_c
     try:
         dz = np.linalg.solve(kkt_m, rhs)[:n]
     except np.linalg.LinAlgError:

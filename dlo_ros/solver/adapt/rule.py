@@ -184,11 +184,11 @@ def next_mesh(
 
 
 def _snapped(bounds: np.ndarray, refine: np.ndarray, snap_to, fixed, rule) -> np.ndarray:
-    """Return ``bounds`` with each breakpoint of an element to refine moved onto a ``snap_to``
-    kink closer to it than ``min_size`` (which could not be split at so near it).
+    """Return ``bounds``, each breakpoint of an element to refine moved onto a near kink.
 
-    Never a scene breakpoint (``fixed``) or an end, and never so that an element gets shorter
-    than ``min_size``.
+    A ``snap_to`` kink closer to it than ``min_size`` could not be split at so near it.  Never a
+    scene breakpoint (``fixed``) or an end, and never so that an element gets shorter than
+    ``min_size``.
     """
     out = np.array(bounds, dtype=float)
     length = float(out[-1])

@@ -240,7 +240,10 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
         tau, tau_c, tau_z = v_c, (v[2] - 2 * v[1] + v[0]) / step**2, v_cz
     else:  # τ = v''(c±), one-sided, second order: (2, −5, 4, −1) / H²
         weights = np.array([2.0, -5.0, 4.0, -1.0]) / big**2
-        at = lambda s: ob.h_many(np.asarray(nlp.model.positions(z, s)).reshape(-1, 3))  # noqa: E731
+
+        def at(s: np.ndarray) -> np.ndarray:
+            return ob.h_many(np.asarray(nlp.model.positions(z, s)).reshape(-1, 3))
+
         tau = float(weights @ v[3:])
         tau_c = float(weights @ at(ends[2]) - weights @ at(ends[0])) / (2 * big)
         tau_z = weights @ gz[3:]

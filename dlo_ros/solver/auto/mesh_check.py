@@ -9,9 +9,10 @@ per element and each element's coefficient decay — so no second model is solve
   holds a known contact point, more nodes where it is smooth), with δ/2 as the rule's tolerance;
   with the obstacle rows on the nodes (``solver.obstacle_points: nodes``, auto's element models)
   the estimate adds CUT_SAFETY × the deepest cut between the rows and SAFETY × the error of
-  each point contact pushing at its row rather than where the shape touches the obstacle
-  (``adapt/contact_shift.py``), and the known contact points include that cut and the ends of
-  each run of active rows (``contact/penetration.py``), and where each point contact touches
+  each point contact (and each end of a line contact) pushing at its row rather than where the
+  shape touches the obstacle (``adapt/contact_shift.py``, charged to the element holding it),
+  and the known contact points include that cut and the ends of each run of active rows
+  (``contact/penetration.py``), and where each point contact touches
   along the family of equilibria pinned at it (``adapt/contact_shift.py``, when that step stays
   within the rows about the contact): the split puts a node where the contact is, and an element
   holding one gets the kink safety factor;
@@ -71,7 +72,7 @@ def has_elements(solver) -> bool:
     return element_mesh_of(solver.nlp.model) is not None
 
 
-def contact_parts(shift: ContactShift, spec, length: float) -> np.ndarray:
+def contact_parts(shift: ContactShift, spec) -> np.ndarray:
     """Return each element's share of the point contacts' error [m]: the contact's own element."""
     bounds = np.asarray(spec.breakpoints, dtype=float)
     out = np.zeros(bounds.size + 1)
@@ -114,7 +115,7 @@ def mesh_verdict(
     estimates = ElementEstimates(
         np.maximum(errors.per_element_m * max(scale, 1.0), 0.0)
         + cuts
-        + SAFETY * contact_parts(shift, spec, length),
+        + SAFETY * contact_parts(shift, spec),
         np.asarray(errors.smoothness, dtype=float),
         tuple(sorted(set(kinks) | set(shift.touches))),
         shift.touches,

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import platform
-import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -28,10 +27,12 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))  # as a script: `bench` importable
 sys.path.insert(0, str(ROOT / "test"))  # the references
 sys.path.insert(0, str(ROOT / "test" / "unit"))  # the cases
 
 import test_plane_keep as floor  # noqa: E402
+from bench.common import machine, write_report  # noqa: E402
 import test_post_last_pose as post  # noqa: E402
 from reference.floor_rod import fig3_floor, shoot, solve_discrete, start_angles  # noqa: E402
 
@@ -119,27 +120,22 @@ def main() -> None:
         "--out", default=str(ROOT / "bench" / "results" / "tolerance_sweep_post_floor.md")
     )
     args = parser.parse_args()
-    git = subprocess.run(
-        ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
+    info = machine()
     lines = [
         "# The default against the tolerance on the post and on the Fig. 3 floor (#37)",
         "",
-        f"Machine: {platform.machine()}, {platform.python_version()}, git {git}, "
-        f"{time.strftime('%Y-%m-%d %H:%M')}. Compile off, auto with inline checks, building "
-        "included. Error: max centreline distance from the independent reference "
-        "(bench/perf/tolerance_sweep_post_floor.py's docstring); nan: no reference could be "
-        "started from that answer (its contact is not one push on the post). A stream's time is "
-        "the whole stream's.",
+        f"Machine: {platform.machine()}, {info['cpus']} CPUs, Python {info['python']}, git "
+        f"{info.get('git', '?')}, {time.strftime('%Y-%m-%d %H:%M')}. Compile off, auto with "
+        "inline checks, building included. Error: max centreline distance from the independent "
+        "reference (bench/perf/tolerance_sweep_post_floor.py's docstring); nan: no reference "
+        "could be started from that answer (its contact is not one push on the post). A "
+        "stream's time is the whole stream's.",
         "",
         *HEADER,
         *post_rows(),
         *floor_rows(),
-        "",
-        "Command: `bash scripts/dlo-env run python bench/perf/tolerance_sweep_post_floor.py`",
-        "",
     ]
-    Path(args.out).write_text("\n".join(lines))
+    write_report(lines, args.out, "bench/perf/tolerance_sweep_post_floor.py", [])
 
 
 if __name__ == "__main__":

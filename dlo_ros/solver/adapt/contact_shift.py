@@ -47,7 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..update.kkt import active_rows
+from ..results.contacts import row_forces
+from ..update.kkt import active_rows, kkt_step
 
 #: the difference step in c [fraction of L]
 STEP = 1e-5
@@ -138,7 +139,7 @@ def point_contacts(nlp, problem, state, g: np.ndarray) -> list[PointContact]:
             if len(run) > 2 and s_rows[run[-1]] - s_rows[run[0]] > POINT_EXTENT * length:
                 out += _run_ends(nlp, ob, i, rows, run, x, push, s_rows)
                 continue
-            force = _forces(nlp, ob, x[run], push[run])
+            force = row_forces(nlp, ob, x[run], push[run])
             w = np.linalg.norm(force, axis=1)
             out.append(
                 PointContact(
@@ -165,18 +166,12 @@ def _run_ends(nlp, ob, i, rows, run, x, push, s_rows) -> list[PointContact]:
                 i,
                 rows[[j]],
                 s,
-                _forces(nlp, ob, x[[j]], push[[j]])[0],
+                row_forces(nlp, ob, x[[j]], push[[j]])[0],
                 row_bracket(s_rows, s, s, length),
                 side,
             )
         )
     return out
-
-
-def _forces(nlp, ob, x: np.ndarray, push: np.ndarray) -> np.ndarray:
-    """Return −λ_j ∇h(x_j) (len(x), 3) [N]."""
-    grads = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
-    return -push[:, None] * grads
 
 
 def _slot_contacts(
@@ -192,7 +187,7 @@ def _slot_contacts(
         return []
     ob, s = problem.obstacles[i], state.p[lay[f"slots:{i}:s"]]
     x = np.asarray(nlp.model.positions(state.z, s[touch])).reshape(-1, 3)
-    forces = _forces(nlp, ob, x, lam_si[rows[touch]])
+    forces = row_forces(nlp, ob, x, lam_si[rows[touch]])
     return [
         PointContact(i, rows[[k]], float(s[k]), f, (0.0, nlp.length))
         for k, f in zip(touch, forces)
@@ -251,18 +246,13 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
     held = active_rows(nlp, state.lam_g, np.asarray(g).ravel())
     held[contact.rows] = False
     rows = np.vstack([np.asarray(jac)[held], gz[1][None, :]])
-    m = rows.shape[0]
-    kkt_m = np.zeros((n + m, n + m))
-    kkt_m[:n, :n] = hess
-    kkt_m[:n, n:] = rows.T
-    kkt_m[n:, :n] = rows
-    rhs = np.zeros(n + m)
-    rhs[:n] = -nlp.sigma * push * v_cz
-    rhs[-1] = -v_c
-    try:
-        dz = np.linalg.solve(kkt_m, rhs)[:n]
-    except np.linalg.LinAlgError:
+    prim = np.zeros(rows.shape[0])
+    prim[-1] = v_c
+    # K [dz; dλ] = [−μ ∂_c∇_z v; −∂_c v], solved as Newton's steps are (update/kkt.py)
+    step = kkt_step(np.asarray(hess), rows, nlp.sigma * push * v_cz, prim)
+    if step is None:
         return None
+    dz = step[:n]
     slope = tau_c + float(tau_z @ dz)
     if not np.isfinite(slope) or slope == 0.0:
         return None

@@ -97,7 +97,7 @@ def contact_loads(
         gap = -ob.h_many(x) - problem.string.radius
         # a row on the surface belongs to its stretch even when its multiplier is zero
         touch = gap <= ROW_TOUCH * L
-        forces = _row_forces(nlp, ob, x, lam)
+        forces = row_forces(nlp, ob, x, lam)
         for run in _runs(np.flatnonzero(touch)):
             run = run[(run >= run[lam[run] > 0].min())] if np.any(lam[run] > 0) else run[:0]
             run = run[run <= run[lam[run] > 0].max()] if run.size else run
@@ -123,7 +123,7 @@ def contact_loads(
     return out
 
 
-def _row_forces(nlp: StringNLP, ob, x: np.ndarray, lam: np.ndarray) -> np.ndarray:
+def row_forces(nlp: StringNLP, ob, x: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Return −λ_j ∇h(x_j) (S, 3) [N] of every row (zero where λ_j ≤ 0)."""
     forces = np.zeros((len(lam), 3))
     on = np.flatnonzero(lam > 0)

@@ -144,7 +144,10 @@ def test_a_tolerance_that_cannot_be_met_is_a_warning(tmp_path):
         assert int(values["model.changes"]) >= 1 and "mesh of" in values["model.last change"]
         # no shape meets a 1e-11 m tolerance: each is published with a warning, never as a stable equilibrium
         assert values["status"] == "unverified" and values["stable"] in ("None", "none", ""), values
-        assert float(values["equilibrium residual m"]) > 1e-11
+        # the residual itself may be below it (an exact integral of a resolved shape's): the
+        # message says why it is not verified
+        residual = float(values["equilibrium residual m"])
+        assert residual > 1e-11 or "below what a converged solve can be verified to" in values["message"], values
     text = log.read_text()
     assert proc.returncode == 0, text
     assert "Traceback" not in text, text

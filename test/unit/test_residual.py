@@ -78,3 +78,56 @@ def test_euler_moments_match_their_definition(opts):
     expected = np.einsum("kij,kj->ki", q, np.stack([rf, rf, twist], axis=1) * omega)
     assert np.abs(expected).max() > 1e-2  # bent
     np.testing.assert_allclose(euler_moments(solver.nlp, z, s, rf, rt), expected, rtol=0, atol=1e-7 * np.abs(expected).max())
+
+
+def test_the_grid_integrates_polynomials_exactly():
+    """ResidualGrid.cumulative: Gauss–Legendre on each interval between knots, exact to degree
+    2q − 1 at the knots and q − 1 at the points (q = GAUSS_POINTS), against the antiderivative."""
+    from dlo_ros.solver.results.residual import GAUSS_POINTS, evaluation_grid
+
+    grid = evaluation_grid(2.0, [0.3, 0.30000000000000004, 1.7], points=7, kinks=[0.55, 1.01])
+    assert np.all(np.diff(grid.knots) > 0) and grid.knots[0] == 0.0 and grid.knots[-1] == 2.0
+    assert np.isin([0.3, 0.55, 1.01, 1.7], grid.knots).all()
+    s = grid.s
+    assert s.size == GAUSS_POINTS * (grid.knots.size - 1)
+    assert not np.isin(s, grid.knots).any()  # never on a knot: B′ may be one-sided there
+    rng = np.random.default_rng(3)
+    for degree, where in ((2 * GAUSS_POINTS - 1, "knots"), (GAUSS_POINTS - 1, "points")):
+        c = rng.normal(size=(degree + 1, 3))
+        f = np.stack([np.polynomial.polynomial.polyval(s, c[:, k]) for k in range(3)], axis=1)
+        at_points, at_knots = grid.cumulative(f)
+        exact = lambda x: np.stack(  # noqa: E731
+            [np.polynomial.polynomial.polyval(x, np.polynomial.polynomial.polyint(c[:, k])) for k in range(3)],
+            axis=1,
+        )
+        got, want = (at_knots, exact(grid.knots)) if where == "knots" else (at_points, exact(s))
+        assert np.max(np.abs(got - want)) < 1e-12 * np.max(np.abs(want)), where
+
+
+def test_a_sawtooth_kinked_at_the_rows_integrates_exactly_with_the_rows_as_knots():
+    """δm along a string lying on an obstacle: kinked at every row, zero on average between rows.
+    With the rows among the knots its integral is exact; a grid blind to them aliases it (the reason
+    the residual's grid is split at the obstacle rows)."""
+    from dlo_ros.solver.results.residual import evaluation_grid
+
+    rows = np.linspace(0.2, 0.8, 31)  # 2 cm apart on a 1 m string
+    h = rows[1] - rows[0]
+
+    def sawtooth(s):  # (s − r_i)(r_i+1 − s) − h²/6 between rows: zero mean, a kink at each row
+        i = np.clip(np.searchsorted(rows, s) - 1, 0, rows.size - 2)
+        inside = (s > rows[0]) & (s < rows[-1])
+        return np.where(inside, (s - rows[i]) * (rows[i + 1] - s) - h * h / 6, 0.0)
+
+    def antiderivative(x):  # every whole bump integrates to 0; the one x lies in, in part
+        i = np.clip(np.searchsorted(rows, x) - 1, 0, rows.size - 2)
+        u = np.clip(x - rows[i], 0.0, None) * ((x > rows[0]) & (x < rows[-1]))
+        return h * u**2 / 2 - u**3 / 3 - h * h * u / 6
+
+    for kinks, agrees in ((rows, True), ((), False)):
+        grid = evaluation_grid(1.0, [], points=64, kinks=kinks)
+        f = np.repeat(sawtooth(grid.s)[:, None], 3, axis=1)
+        at_points, at_knots = grid.cumulative(f)
+        errors = np.concatenate(
+            [at_points[:, 0] - antiderivative(grid.s), at_knots[:, 0] - antiderivative(grid.knots)]
+        )
+        assert bool(np.max(np.abs(errors)) < 1e-15) is agrees, np.max(np.abs(errors))

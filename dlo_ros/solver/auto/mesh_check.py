@@ -27,6 +27,7 @@ keeps the order ladder (``checks.py``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -37,11 +38,13 @@ from ..adapt.rule import ElementEstimates, RefinementRule, next_mesh, unknowns
 from ..adapt.smoothness import contact_kinks, row_survey
 from ..build.mesh import mesh_spec
 from ..build.structure import breakpoints
-from ..results.element_error import FLOOR, SAFETY, element_errors
+from ..results.element_error import SAFETY, element_errors
+from ..results.residual import FLOOR
 from .choice import ModelChoice
 
-#: the most nodes per field a refinement may reach (the order ladder stopped at 32 in one
-#: polynomial; local refinement spends them where the error is)
+#: the most nodes per field a refinement may reach at δ ≥ 1e-4 L (the order ladder stopped at 32
+#: in one polynomial; local refinement spends them where the error is); each decade of δ below
+#: doubles it (:func:`max_unknowns`: the paper's Fig. 3 floor at 1e-5 L needs about 210)
 MAX_UNKNOWNS = 160
 #: below this fraction of δ the rule may coarsen (it coarsens an element under its own share)
 COARSEN_BELOW = 0.02
@@ -65,6 +68,12 @@ class MeshVerdict:
     choice: ModelChoice | None
     reason: str
     estimate: float
+
+
+def max_unknowns(tolerance: float, length: float) -> int:
+    """Return the refinement's cap on nodes per field at tolerance δ [m] on a string of L [m]."""
+    decades = max(0.0, math.log10(1e-4 * length / tolerance))
+    return int(round(MAX_UNKNOWNS * 2.0**decades))
 
 
 def has_elements(solver) -> bool:
@@ -106,7 +115,10 @@ def mesh_verdict(
     estimate = float(errors.estimate_m) + float(np.max(cuts, initial=0.0)) + SAFETY * shift.error_m
     spec = choice.mesh or mesh_spec(solver.nlp.model.mesh)
     rule = RefinementRule(
-        tolerance=tolerance / 2, min_nodes=MIN_NODES, max_unknowns=MAX_UNKNOWNS, max_removed=2
+        tolerance=tolerance / 2,
+        min_nodes=MIN_NODES,
+        max_unknowns=max_unknowns(tolerance, length),
+        max_removed=2,
     )
     # the per-element estimates carry the residual's safety factor, and each element the cut
     # between its rows and the error of the point contacts it holds, so that their sum bounds

@@ -30,6 +30,10 @@ if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports th
     from .auto_solver import AutoShapeSolver
 
 
+#: escalations a checked solve (cold, ``check_now``) may make before it answers
+CHECK_NOW_PASSES = 2 * len(ORDERS) + 2
+
+
 @dataclass
 class CheckBook:
     """What a stream knows of its checks.
@@ -87,14 +91,16 @@ def check_now(
 ) -> ShapeResult:
     """Run the checks synchronously: escalate and re-solve while one fails.
 
-    An answer that passes through itself is solved again with self-contact first.
+    An answer that passes through itself is solved again with self-contact first.  After
+    CHECK_NOW_PASSES escalations the last answer keeps its model with its estimate (the
+    tolerance then reported as not met), never unchecked.
     """
-    for _ in range(2 * len(ORDERS) + 2):
+    for n in range(CHECK_NOW_PASSES + 1):
         if result.passes_through_itself and not auto.choice.self_contact:
             result, poses = escalate.contact_for_pass(auto, snap.problem, result, notes)
             snap = snapshot(auto, snap.problem, poses, result)
         verdict = auto.model_checks.evaluate(snap, False)
-        if verdict.choice is None:
+        if verdict.choice is None or n == CHECK_NOW_PASSES:
             keep(auto, verdict)
             return result
         auto.switch(verdict.choice, verdict.reason)

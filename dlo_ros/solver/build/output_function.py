@@ -21,10 +21,10 @@ orientations, the interpolated nodal quaternions made unit with ``director.frame
 flipped sheet).
 
 The arithmetic is the numpy path's, term for term (``wrenches.wrench``, ``wrenches.equilibrium``,
-``residual.equilibrium_residual``), on the same grid (``wrenches.static_events``: refined at the
-grips, the point loads, the relative positions' ends and the mesh breakpoints), with every obstacle
-sample as a point action (one that does not touch has λ = 0 and acts with zero force).  Both paths
-agree to rounding (test_output_function.py).
+``residual.equilibrium_residual``), on the same grid (``wrenches.residual_grid``: split at the
+grips, the point loads, the relative positions' ends, the mesh breakpoints and the obstacle
+rows), with every obstacle sample as a point action (one that does not touch has λ = 0 and acts
+with zero force).  Both paths agree to rounding (test_output_function.py).
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ from ...model.director import frame_columns
 from ...model.problem import Problem, StringProperties
 from .nlp import StringNLP
 from .structure import breakpoint_node
-from ..results.residual import evaluation_grid
-from ..results.wrenches import static_events
+from ..results.residual import ResidualGrid
+from ..results.wrenches import residual_grid
 
 
 def _unit_quaternion() -> ca.Function:
@@ -79,15 +79,14 @@ def _cross(a: ca.MX, b: ca.MX) -> ca.MX:
     )
 
 
-def _cumulative(f: ca.MX, s: np.ndarray) -> ca.MX:
-    """Return ∫_{s_0}^{s_k} f ds along the columns of f by the trapezoid rule.
+def _cumulative(f: ca.MX, grid: ResidualGrid) -> tuple[ca.MX, ca.MX]:
+    """Return ∫_0^s f dσ at the grid's points and at its knots, f (3 × K) at the points.
 
-    ``residual.cumulative`` along the columns of f (3×K): ∫_{s_0}^{s_k} f ds by the trapezoid
-    rule, plus f_0 s_0 for the first interval from s = 0.
+    ``ResidualGrid.cumulative`` along the columns of f, by its operators (the same sums).
     """
-    steps = 0.5 * (f[:, 1:] + f[:, :-1]) * ca.repmat(ca.DM(np.diff(s)).T, 3, 1)
-    first = f[:, 0] * s[0]
-    return ca.horzcat(first, ca.repmat(first, 1, len(s) - 1) + ca.cumsum(steps, 1))
+    P, Q, E = (ca.sparsify(ca.DM(a)) for a in grid.operators())
+    at_knots = ca.horzcat(ca.DM.zeros(3), ca.cumsum(ca.mtimes(f, P), 1))
+    return ca.mtimes(at_knots[:, :-1], E) + ca.mtimes(f, Q), at_knots
 
 
 def _column_norms_max(a: ca.MX) -> ca.MX:
@@ -329,17 +328,25 @@ def _running_sums(
 
 
 def _residual(
-    s: np.ndarray, x: ca.MX, delta: ca.MX, total_force: ca.MX, rf: ca.MX, rf_min: ca.MX, L: float
+    grid: ResidualGrid,
+    x: ca.MX,
+    delta: ca.MX,
+    total_force: ca.MX,
+    rf: ca.MX,
+    rf_min: ca.MX,
+    L: float,
 ) -> ca.MX:
     """Return (d_m, d_f, metres) as ``residual.equilibrium_residual`` from the imbalance."""
+    s = grid.s
     K = len(s)
     d_m = _column_norms_max(delta)
     d_f = ca.norm_2(total_force)
     gradient = np.gradient(np.eye(K), s, axis=0)  # np.gradient as a matrix: tridiagonal
     tangent = ca.mtimes(x, ca.sparsify(ca.DM(gradient.T)))
-    phi = _cumulative(delta / ca.repmat(rf, 3, 1), s)
-    dx = _cumulative(_cross(phi, tangent), s)
-    metres = _column_norms_max(dx) + d_f * L**3 / (3 * rf_min)
+    phi = _cumulative(delta / ca.repmat(rf, 3, 1), grid)[0]
+    dx, dx_knots = _cumulative(_cross(phi, tangent), grid)
+    worst = ca.fmax(_column_norms_max(dx), _column_norms_max(dx_knots))
+    metres = worst + d_f * L**3 / (3 * rf_min)
     return ca.vertcat(d_m, d_f, metres)
 
 
@@ -362,7 +369,8 @@ class OutputFunction:
     def __init__(self, nlp: StringNLP, problem: Problem, s_out: np.ndarray):
         m, L, lay = nlp.model, nlp.length, nlp.params
         self.grip_names = [g.name for g in problem.grips]
-        self.grid = s = evaluation_grid(L, static_events(nlp, problem))
+        self.residual_grid = residual_grid(nlp, problem)
+        self.grid = s = self.residual_grid.s
         K = len(s)
         z = ca.MX.sym("z", m.layout.size)
         p = ca.MX.sym("p", lay.size)
@@ -386,11 +394,7 @@ class OutputFunction:
         # point actions at fixed arc lengths: grips (wrenches.wrench), loads, the relative
         # positions' ends
         forces, torques, flips = _grip_actions(nlp, problem, f, p, lam)
-        grip_forces, grip_torques, flip = (
-            ca.horzcat(*forces),
-            ca.horzcat(*torques),
-            ca.horzcat(*flips),
-        )
+        grip_forces, grip_torques, flip = (ca.horzcat(*a) for a in (forces, torques, flips))
         _load_actions(nlp, problem, f, p, lam, forces, torques)
         total_force = total * gravity
         # Σ_{a: s_a < s} (x_a − x(s)) × F_a + T_a = C(s) − x(s) × F(s), with C and F running sums
@@ -411,7 +415,7 @@ class OutputFunction:
             )
         self.n_obstacles = len(problem.obstacles)
         m_bal, total_force = _running_sums(groups, s, x, m_bal, total_force)
-        residual = _residual(s, x, moment_c - m_bal, total_force, rf, rf_min, L)
+        residual = _residual(self.residual_grid, x, moment_c - m_bal, total_force, rf, rf_min, L)
 
         v_out = _orientations(nlp, f, np.asarray(s_out, dtype=float))
         zero = ca.DM.zeros(3, 0)

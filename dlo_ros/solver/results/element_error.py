@@ -43,11 +43,9 @@ from ...model.problem import Problem
 from ...model.rotations import cross3
 from ..state import SolverState
 from .outputs import ShapeOutputs
-from .residual import cumulative, moment_imbalance
+from .residual import FLOOR, GAUSS_POINTS, moment_imbalance
 from .wrenches import balance_inputs
 
-#: the smallest error [fraction of L] the estimate reports: a converged solve's accuracy
-FLOOR = 1e-10
 #: the estimate is the residual's centreline error times this (module docstring)
 SAFETY = 2.0
 #: the safety factor when an element holds a kink (``split``): a contact inside an element
@@ -60,9 +58,9 @@ KINK_SAFETY = 4.0
 SMOOTH_RATE = 0.6
 #: coefficients below this fraction of an element's largest are below a solve's accuracy
 NOISE = 1e-8
-#: grid intervals of the residual: per global node, and at least: δm oscillates with the
-#: basis's degree, and the trapezoid rule over 8 per node overstated the centreline error of a
-#: clamp–clamp 3D solve at order 24 six-fold (200 intervals: 2.6e-8 m for a true 4.0e-9 m)
+#: points of the residual's grid (GAUSS_POINTS per interval): per global node, and at least:
+#: δm oscillates with the basis's degree (a trapezoid rule over 8 per node overstated the
+#: centreline error of a clamp–clamp 3D solve at order 24 six-fold)
 POINTS_PER_NODE, MIN_POINTS = 48, 1600
 
 
@@ -168,23 +166,27 @@ def element_errors(
             "'elements' have)"
         )
     grips, actions, lam_si = outputs.point_actions(problem, current or problem, state)
-    points = max(MIN_POINTS, POINTS_PER_NODE * mesh.count)
-    balance = balance_inputs(nlp, problem, state.z, grips, actions, lam_si, points=points)
+    intervals = max(MIN_POINTS, POINTS_PER_NODE * mesh.count) // GAUSS_POINTS
+    balance = balance_inputs(nlp, problem, state.z, grips, actions, lam_si, points=intervals)
+    grid = balance.grid
+    assert grid is not None  # balance_inputs gives its grid
     s, x, length, rf_min = balance.s, balance.x, balance.length, balance.rf_min
     rf = balance.rf if balance.rf is not None else np.full(len(s), rf_min)
     delta, force = moment_imbalance(balance)
     kappa = delta / rf[:, None]
     tangent = np.gradient(x, s, axis=0)
     which = mesh.element_of(s)
-    total = np.zeros_like(x)
+    total, total_knots = np.zeros_like(x), np.zeros((grid.knots.size, 3))
     per = np.zeros(mesh.element_count)
     for e in range(mesh.element_count):
-        phi = cumulative(np.where((which == e)[:, None], kappa, 0.0), s)
-        dx = cumulative(cross3(phi, tangent), s)
-        per[e] = float(np.max(np.linalg.norm(dx, axis=1)))
+        phi = grid.cumulative(np.where((which == e)[:, None], kappa, 0.0))[0]
+        dx, dx_knots = grid.cumulative(cross3(phi, tangent))
+        per[e] = max(np.max(np.linalg.norm(dx, axis=1)), np.max(np.linalg.norm(dx_knots, axis=1)))
         total += dx
+        total_knots += dx_knots
     lever = float(np.linalg.norm(force)) * length**3 / (3 * rf_min)
-    residual = float(np.max(np.linalg.norm(total, axis=1))) + lever
+    worst = max(np.max(np.linalg.norm(total, axis=1)), np.max(np.linalg.norm(total_knots, axis=1)))
+    residual = float(worst) + lever
     rates, tails = coefficient_decay(mesh, nodal_fields(model, state.z))
     inside = [s for s in contacts if np.min(np.abs(mesh.breakpoints - s)) > 1e-9 * length]
     safety = KINK_SAFETY if np.any(rates > SMOOTH_RATE) or inside else SAFETY

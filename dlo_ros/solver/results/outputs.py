@@ -9,7 +9,8 @@
   [N];
 * the stability verdict from the reduced Hessian (``stability.py``);
 * the equilibrium residual (``wrenches.equilibrium``).  A shape whose residual exceeds the
-  tolerance (``error_tolerance``, default 1e-3 L) is 'unverified' and carries no stability
+  tolerance (``error_tolerance``, default 1e-3 L), or that is asked for less than a converged
+  solve can be verified to (``residual.FLOOR``), is 'unverified' and carries no stability
   verdict; a director model's shape whose orientation rows hold on the flipped sheet is 'failed'
   and carries no shape.
 """
@@ -31,7 +32,7 @@ from ..options import SolverOptions
 from ..build.parameters import ProblemParameters
 from ..native.outputs import ComputedOutputs
 from .moment_work import MomentWork, moment_work
-from .residual import EquilibriumResidual, PointAction, equilibrium_residual
+from .residual import FLOOR, EquilibriumResidual, PointAction, equilibrium_residual
 from .contacts import contact_loads
 from .result import ContactLoad, GripWrench, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
@@ -80,6 +81,26 @@ def sample(
     points = (z[0:3] * m.length)[None, :] + w_out @ t.T
     theta = b_out @ cth if cth is not None else np.full(len(s_out), np.pi / 2)
     return points, b_out @ cphi, theta
+
+
+def unverified_because(residual_m: float, tolerance: float, length: float) -> str:
+    """Return why a converged shape is no verified equilibrium to ``tolerance`` [m], or ''.
+
+    Its residual [m] is over the tolerance, or the tolerance is below what a converged solve can
+    be verified to (``residual.FLOOR`` · L, ``length`` L [m]).
+    """
+    if not residual_m <= tolerance:
+        return (
+            f"not a verified equilibrium: the equilibrium residual is {residual_m:.3g} m, over "
+            f"the tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)"
+        )
+    if tolerance < FLOOR * length:
+        return (
+            f"not a verified equilibrium to the tolerance {tolerance:.3g} m "
+            "(solver.error_tolerance): below what a converged solve can be verified to, "
+            f"{FLOOR:g} L; the equilibrium residual is {residual_m:.3g} m"
+        )
+    return ""
 
 
 @dataclass(frozen=True)
@@ -332,13 +353,9 @@ class ShapeOutputs:
                 warm_started=run.warm,
                 ipopt_status=run.ipopt_status,
             )
-        if not out.residual.metres <= tolerance:
-            status, stable = "unverified", None
-            message = (
-                "not a verified equilibrium: the equilibrium residual is "
-                f"{out.residual.metres:.3g} m, over the tolerance {tolerance:.3g} m "
-                "(solver.error_tolerance; raise solver.order)"
-            )
+        unverified = unverified_because(out.residual.metres, tolerance, problem.string.length)
+        if unverified:
+            status, stable, message = "unverified", None, unverified
         return ShapeResult(
             model=summary,
             status=status,

@@ -24,7 +24,13 @@ from ...model.problem import Grip, Problem, StringProperties
 from ...model.rotations import cross3, quat_to_matrix
 from ..build.frames import euler_angles_at, node_frame
 from ..build.nlp import StringNLP
-from .residual import RESIDUAL_POINTS, BalanceInputs, PointAction, evaluation_grid
+from .residual import (
+    RESIDUAL_POINTS,
+    BalanceInputs,
+    PointAction,
+    ResidualGrid,
+    evaluation_grid,
+)
 from .result import GripWrench
 
 FramesOf = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -163,6 +169,22 @@ def static_events(nlp: StringNLP, problem: Problem) -> list[float]:
     return events
 
 
+def row_kinks(nlp: StringNLP) -> np.ndarray:
+    """Return the obstacle rows' arc lengths [m]: the residual's grid is split at them.
+
+    A row's contact force kinks the balance moment there; the rows sit at fixed s (samples or
+    the mesh's nodes), so the grid stays fixed by the NLP's structure.  Contact slots move with
+    the parameters and are not among them.
+    """
+    return np.unique(nlp.obstacle_s) if nlp.obstacle_rows else np.zeros(0)
+
+
+def residual_grid(nlp: StringNLP, problem: Problem, points: int = RESIDUAL_POINTS) -> ResidualGrid:
+    """Return the residual's grid of ``nlp`` (``residual.evaluation_grid``): both paths use it."""
+    events = static_events(nlp, problem)
+    return evaluation_grid(problem.string.length, events, points, row_kinks(nlp))
+
+
 def relative_forces(nlp: StringNLP, lam_si: np.ndarray) -> list[np.ndarray]:
     """Return, per relative position, the force [N] its rows exert on the string at s_b.
 
@@ -186,11 +208,13 @@ def balance_inputs(
     The grid, the shape and its constitutive moment on it, and every point action: the grip
     reactions ``grips``, the obstacle ``contacts`` and, given the SI multipliers ``lam_si``, the
     relative positions' reactions.  ``equilibrium_residual`` of it is the shape's residual;
-    ``element_error.py`` reads the imbalance per element; ``points``: grid intervals.
+    ``element_error.py`` reads the imbalance per element; ``points``: the grid's uniform
+    intervals (``residual_grid``).
     """
     m, st, L = nlp.model, problem.string, problem.string.length
     grip_s = {g.name: g.s for g in problem.grips}
-    s = evaluation_grid(L, static_events(nlp, problem), points)
+    grid = residual_grid(nlp, problem, points)
+    s = grid.s
     nodes = m.quad.nodes
     rel_s = problem.relative_ends() if lam_si is not None else []
     point_s = np.array(list(grip_s.values()) + [ld.s for ld in problem.loads] + rel_s)
@@ -244,6 +268,7 @@ def balance_inputs(
         L,
         st.bend_stiffness.minimum,
         rf,
+        grid,
     )
 
 

@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING
 from ...model.problem import Problem
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
-from .choice import ORDERS, ModelChoice
+from .choice import ModelChoice
 from .escalate import contact_for_query
 from .query_verify import verified_answer
 from .reach import touches_obstacle
-from .stream_checks import snapshot
+from .stream_checks import Escalations, snapshot
 
 if TYPE_CHECKING:  # the solver calls this function (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -63,8 +63,8 @@ def refine_query(
     )
     poses = auto.reduced.poses(choice, problem)
     answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
-    estimate, stopped = None, ""
-    for _ in range(2 * len(ORDERS) + 2):
+    estimate, stopped, escalations = None, "", Escalations()
+    while True:
         if answer.status not in ("ok", "unverified"):
             stopped = f"the model {choice.order}/{choice.samples} failed ({answer.message})"
             answer = result  # the previous model's shape stays the answer
@@ -78,6 +78,9 @@ def refine_query(
         if verdict.choice is None:
             estimate = verdict.estimate
             break
+        if escalations.spent(verdict.estimate):
+            stopped = "the model checks kept escalating"
+            break
         choice = replace(
             verdict.choice, reasons=list(choice.reasons) + [f"query: {verdict.reason}"]
         )
@@ -87,7 +90,5 @@ def refine_query(
         )
         poses = auto.reduced.poses(choice, problem)
         answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
-    else:
-        stopped = "the model checks kept escalating"
     answer = verified_answer(answer, estimate, auto.tolerance, stopped)
     return auto.finish(answer, t0, [], choice=choice, solver=solver, estimate=estimate)

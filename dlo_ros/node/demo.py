@@ -366,10 +366,11 @@ def _manoeuvre(client: DloClient, args: argparse.Namespace, rrd: Path | None) ->
     """Drive the manoeuvre, let auto settle, print the summary; return the exit code."""
     published, last_stamp = _publish_manoeuvre(client, args)
     final = client.wait_for_path(10.0, where=lambda ev: ev.stamp_ns == last_stamp)
-    diag = client.wait_for_diagnostics(
-        lambda v, st: v.get("targets received") == str(len(published)), 5.0
-    )
-    values = diag[0] if diag else client.diagnostic_values()
+    # diagnostics newer than the final centreline count every target the node got (it had
+    # counted 450 of 451 published: waiting for all of them took the 5 s timeout)
+    seen = client.diagnostics_count
+    client.wait_for(lambda: client.diagnostics_count > seen or None, 5.0)
+    values = client.diagnostic_values()
     events = [ev for ev in client.paths if ev.stamp_ns in published]
     settled = _settle(client, values, args.settle, args.rate) if final is not None else None
     if settled is not None:

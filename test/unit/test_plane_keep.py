@@ -103,6 +103,26 @@ def floor_problem(rho: float, right_x: float | None = None):
     )
 
 
+def floor_answer(rho: float, options, how: str, until_checked: bool = False):
+    """The default's answer on the floor at weight ρ [N/m]: 'cold', or 'streamed' from the right
+    clamp 0.02 m farther out in 5 steps, then held 40 updates at the last target (or until a check
+    of a shape there has taken effect, ``until_checked``)."""
+    x_right = SCENE.problem.grip("right").pose.position[0]
+    if how == "cold":
+        return make_solver(floor_problem(rho), options, checks="sync", compile="off").solve()
+    start = floor_problem(rho, x_right + 0.02)
+    solver = make_solver(start, options, checks="sync", compile="off")
+    assert solver.solve().ok
+    for x in np.linspace(x_right + 0.016, x_right, 5):
+        result = solver.solve({"right": floor_problem(rho, x).grip("right").pose})
+        assert result.ok, result.message
+    for _ in range(40):
+        if until_checked and result.model.checked and result.model.checked_updates_ago == 0:
+            break
+        result = solver.solve({"right": floor_problem(rho, x_right).grip("right").pose})
+    return result
+
+
 @pytest.mark.parametrize(
     "rho, how", [(1000.0, "cold"), (2000.0, "cold"), (3000.0, "cold"), (3000.0, "streamed")]
 )
@@ -127,24 +147,9 @@ def test_fig3_floor_at_each_weight_against_the_equilibrium_it_finds(rho, how):
     pr = fig3_floor(rho)
     rods = [solve_discrete(pr, 200, start_angles(200, at)) for at in (0.2, 0.8)]
     refs = [shoot(rod) for rod in rods]
-    x_right = SCENE.problem.grip("right").pose.position[0]
     # no update time limit: a test must not depend on timing
     options = replace(SCENE.options, output_points=401, update_time_limit=0.0)
-    if how == "cold":
-        solver = make_solver(floor_problem(rho), options, checks="sync", compile="off")
-        result = solver.solve()
-    else:
-        solver = make_solver(
-            floor_problem(rho, x_right + 0.02), options, checks="sync", compile="off"
-        )
-        assert solver.solve().ok
-        for x in np.linspace(x_right + 0.016, x_right, 5):
-            result = solver.solve({"right": floor_problem(rho, x).grip("right").pose})
-            assert result.ok, result.message
-        for _ in range(40):  # held: until a check of a shape here has taken effect
-            if result.model.checked and result.model.checked_updates_ago == 0:
-                break
-            result = solver.solve({"right": floor_problem(rho, x_right).grip("right").pose})
+    result = floor_answer(rho, options, how, until_checked=True)
     # the lift-off points reported are the last rows that press: within 2δ below ρ = 3000
     error = check_against(result, refs, TOL if rho >= 3000 else 2 * TOL)
     k = int(
@@ -189,19 +194,7 @@ def test_fig3_floor_to_a_finer_tolerance(rho, tol, how):
     options = replace(
         SCENE.options, output_points=401, update_time_limit=0.0, error_tolerance=delta
     )
-    x_right = SCENE.problem.grip("right").pose.position[0]
-    if how == "cold":
-        result = make_solver(floor_problem(rho), options, checks="sync", compile="off").solve()
-    else:
-        solver = make_solver(
-            floor_problem(rho, x_right + 0.02), options, checks="sync", compile="off"
-        )
-        assert solver.solve().ok
-        for x in np.linspace(x_right + 0.016, x_right, 5):
-            result = solver.solve({"right": floor_problem(rho, x).grip("right").pose})
-            assert result.ok, result.message
-        for _ in range(40):  # held: the refinement goes on at the last target
-            result = solver.solve({"right": floor_problem(rho, x_right).grip("right").pose})
+    result = floor_answer(rho, options, how)
     assert result.status == "ok" and result.stable is True, result.message
     assert result.equilibrium_residual_m <= delta
     assert result.model.as_dict()["tolerance_met"] is True

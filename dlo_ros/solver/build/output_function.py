@@ -84,7 +84,10 @@ def _cumulative(f: ca.MX, grid: ResidualGrid) -> tuple[ca.MX, ca.MX]:
 
     ``ResidualGrid.cumulative`` along the columns of f, by its operators (the same sums).
     """
-    P, Q, E = (ca.sparsify(ca.DM(a)) for a in grid.operators())
+    P, Q, E = (
+        ca.DM.triplet(a.row.tolist(), a.col.tolist(), ca.DM(a.data), *a.shape)
+        for a in grid.operators()
+    )
     at_knots = ca.horzcat(ca.DM.zeros(3), ca.cumsum(ca.mtimes(f, P), 1))
     return ca.mtimes(at_knots[:, :-1], E) + ca.mtimes(f, Q), at_knots
 

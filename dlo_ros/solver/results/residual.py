@@ -39,8 +39,10 @@ which a rule blind to the rows aliased (the paper's Fig. 3 strip on its floor, e
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
+from scipy.sparse import coo_matrix
 
 from ...model.rotations import cross3
 
@@ -92,24 +94,26 @@ class ResidualGrid:
         xg = _gauss()[0]
         return (self.knots[:-1, None] + np.diff(self.knots)[:, None] * xg[None, :]).ravel()
 
-    def operators(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def operators(self) -> tuple[coo_matrix, coo_matrix, coo_matrix]:
         """Return (P, Q, E): f P the intervals' integrals, f Q + F E the integrals to the points.
 
         For values f (3 × K) at ``s``: f P (3 × n) the integrals over the n intervals; with F
         (3 × n) the integrals from 0 to each interval's start, F E + f Q (3 × K) those to each
-        point (the Lagrange interpolant of the interval's points integrated).
+        point (the Lagrange interpolant of the interval's points integrated).  Sparse: Q is
+        block diagonal.
         """
         xg, wg, local = _gauss()
         h = np.diff(self.knots)
         n, q = h.size, xg.size
-        P = np.zeros((n * q, n))
-        Q = np.zeros((n * q, n * q))
-        E = np.zeros((n, n * q))
-        for k in range(n):
-            block = slice(k * q, (k + 1) * q)
-            P[block, k] = h[k] * wg
-            Q[block, block] = h[k] * local.T
-            E[k, block] = 1.0
+        point = np.arange(n * q).reshape(n, q)  # the points of interval k: point[k]
+        interval = np.repeat(np.arange(n), q)
+        P = coo_matrix(((h[:, None] * wg[None, :]).ravel(), (point.ravel(), interval)), (n * q, n))
+        # Q[k q + j, k q + i] = h_k L_ij: the point j's value in the integral to point i
+        rows = np.broadcast_to(point[:, None, :], (n, q, q)).ravel()
+        cols = np.broadcast_to(point[:, :, None], (n, q, q)).ravel()
+        values = (h[:, None, None] * local[None, :, :]).ravel()
+        Q = coo_matrix((values, (rows, cols)), (n * q, n * q))
+        E = coo_matrix((np.ones(n * q), (interval, point.ravel())), (n, n * q))
         return P, Q, E
 
     def cumulative(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -124,6 +128,7 @@ class ResidualGrid:
         return inner.reshape(f.shape), at_knots
 
 
+@cache
 def _gauss() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return GAUSS_POINTS points ξ and weights on [0, 1], and L_ij = ∫_0^ξ_i ℓ_j (ℓ: Lagrange)."""
     nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)

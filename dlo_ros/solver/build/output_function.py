@@ -79,15 +79,13 @@ def _cross(a: ca.MX, b: ca.MX) -> ca.MX:
     )
 
 
-def _cumulative(f: ca.MX, grid: ResidualGrid) -> tuple[ca.MX, ca.MX]:
+def _cumulative(f: ca.MX, operators: tuple) -> tuple[ca.MX, ca.MX]:
     """Return ∫_0^s f dσ at the grid's points and at its knots, f (3 × K) at the points.
 
-    ``ResidualGrid.cumulative`` along the columns of f, by its operators (the same sums).
+    ``ResidualGrid.cumulative`` along the columns of f, by its ``operators`` (P, Q, E) as sparse
+    DMs (the same sums).
     """
-    P, Q, E = (
-        ca.DM.triplet(a.row.tolist(), a.col.tolist(), ca.DM(a.data), *a.shape)
-        for a in grid.operators()
-    )
+    P, Q, E = operators
     at_knots = ca.horzcat(ca.DM.zeros(3), ca.cumsum(ca.mtimes(f, P), 1))
     return ca.mtimes(at_knots[:, :-1], E) + ca.mtimes(f, Q), at_knots
 
@@ -346,8 +344,12 @@ def _residual(
     d_f = ca.norm_2(total_force)
     gradient = np.gradient(np.eye(K), s, axis=0)  # np.gradient as a matrix: tridiagonal
     tangent = ca.mtimes(x, ca.sparsify(ca.DM(gradient.T)))
-    phi = _cumulative(delta / ca.repmat(rf, 3, 1), grid)[0]
-    dx, dx_knots = _cumulative(_cross(phi, tangent), grid)
+    operators = tuple(
+        ca.DM.triplet(a.row.tolist(), a.col.tolist(), ca.DM(a.data), *a.shape)
+        for a in grid.operators()
+    )
+    phi = _cumulative(delta / ca.repmat(rf, 3, 1), operators)[0]
+    dx, dx_knots = _cumulative(_cross(phi, tangent), operators)
     worst = ca.fmax(_column_norms_max(dx), _column_norms_max(dx_knots))
     metres = worst + d_f * L**3 / (3 * rf_min)
     return ca.vertcat(d_m, d_f, metres)

@@ -40,7 +40,6 @@ from numpy.polynomial import legendre as Leg
 
 from ...model.elements import ElementMesh, element_mesh_of
 from ...model.problem import Problem
-from ...model.rotations import cross3
 from ..state import SolverState
 from .outputs import ShapeOutputs
 from .residual import FLOOR, GAUSS_POINTS, moment_imbalance
@@ -176,17 +175,14 @@ def element_errors(
     kappa = delta / rf[:, None]
     tangent = np.gradient(x, s, axis=0)
     which = mesh.element_of(s)
-    total, total_knots = np.zeros_like(x), np.zeros((grid.knots.size, 3))
+    total = np.zeros((len(s) + grid.knots.size, 3))
     per = np.zeros(mesh.element_count)
     for e in range(mesh.element_count):
-        phi = grid.cumulative(np.where((which == e)[:, None], kappa, 0.0))[0]
-        dx, dx_knots = grid.cumulative(cross3(phi, tangent))
-        per[e] = max(np.max(np.linalg.norm(dx, axis=1)), np.max(np.linalg.norm(dx_knots, axis=1)))
+        dx = grid.deflection(np.where((which == e)[:, None], kappa, 0.0), tangent)
+        per[e] = float(np.max(np.linalg.norm(dx, axis=1)))
         total += dx
-        total_knots += dx_knots
     lever = float(np.linalg.norm(force)) * length**3 / (3 * rf_min)
-    worst = max(np.max(np.linalg.norm(total, axis=1)), np.max(np.linalg.norm(total_knots, axis=1)))
-    residual = float(worst) + lever
+    residual = float(np.max(np.linalg.norm(total, axis=1))) + lever
     rates, tails = coefficient_decay(mesh, nodal_fields(model, state.z))
     inside = [s for s in contacts if np.min(np.abs(mesh.breakpoints - s)) > 1e-9 * length]
     safety = KINK_SAFETY if np.any(rates > SMOOTH_RATE) or inside else SAFETY

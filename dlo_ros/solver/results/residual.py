@@ -127,6 +127,14 @@ class ResidualGrid:
         inner = at_knots[:-1, None, :] + h[:, None, None] * np.einsum("ij,kjc->kic", local, parts)
         return inner.reshape(f.shape), at_knots
 
+    def deflection(self, kappa: np.ndarray, tangent: np.ndarray) -> np.ndarray:
+        """Return δx = ∫_0^s (∫_0^σ κ) × t dσ [m] at the points, then at the knots (K + n + 1, 3).
+
+        ``kappa`` (K, 3) [1/m] and ``tangent`` (K, 3) at the points (module docstring).
+        """
+        phi = self.cumulative(kappa)[0]
+        return np.vstack(self.cumulative(cross3(phi, tangent)))
+
 
 @cache
 def _gauss() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -229,9 +237,7 @@ def equilibrium_residual(b: BalanceInputs) -> EquilibriumResidual:
         phi = cumulative(kappa, s)
         worst = np.max(np.linalg.norm(cumulative(cross3(phi, tangent), s), axis=1))
     else:
-        phi = b.grid.cumulative(kappa)[0]
-        dx, dx_knots = b.grid.cumulative(cross3(phi, tangent))
-        worst = max(np.max(np.linalg.norm(dx, axis=1)), np.max(np.linalg.norm(dx_knots, axis=1)))
+        worst = np.max(np.linalg.norm(b.grid.deflection(kappa, tangent), axis=1))
     metres = float(worst) + d_f * length**3 / (3 * rf_min)
     return EquilibriumResidual(d_m, d_f, metres)
 

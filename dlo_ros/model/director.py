@@ -46,6 +46,7 @@ import numpy as np
 
 from .centreline import positions_sym, weight_energy_sym
 from .elements import ElementMesh
+from .memo import ArrayMemo
 from .rotations import cross3
 from .transport import transported_frames
 
@@ -240,7 +241,7 @@ class DirectorModel:
         self.quad = SimpleNamespace(
             nodes=mesh.quad_nodes, weights=mesh.weights, count=mesh.quad_count
         )
-        self._cache: dict[bytes, np.ndarray] = {}
+        self._matrices: ArrayMemo[np.ndarray] = ArrayMemo()
 
     # ---- numpy ----------------------------------------------------------------------------------
     def node_values(self, z: np.ndarray) -> np.ndarray:
@@ -252,14 +253,7 @@ class DirectorModel:
 
     def _memo(self, kind: str, s: np.ndarray, make):
         """Return ``make(s)``, remembered per (kind, s): a solver asks for the same s again."""
-        s = np.ascontiguousarray(s, dtype=float).ravel()
-        key = kind.encode() + s.tobytes()
-        hit = self._cache.get(key)
-        if hit is None:
-            if len(self._cache) > 256:
-                self._cache.clear()
-            hit = self._cache[key] = make(s)
-        return hit
+        return self._matrices.get(kind, s, make)
 
     def position_matrix(self, s: np.ndarray) -> np.ndarray:
         """W(s) with x(s) = x0 + W(s) · (1+ε)t̂ at the quadrature nodes."""

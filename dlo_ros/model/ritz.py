@@ -25,15 +25,18 @@ gravity direction are NLP parameters, so changing them never rebuilds the proble
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
 from .basis import Basis, make_basis
 from .centreline import positions_sym, weight_energy_sym
 from .element_basis import CompositeQuadrature, ElementBasis
 from .elements import ElementMesh
+from .memo import ArrayMemo
 from .quadrature import ChebyshevQuadrature
 
 
@@ -87,7 +90,7 @@ class RitzModel:
         self.r0 = np.asarray(r0, dtype=float)
         if planar and twist:
             raise ValueError("a planar model has no twist field")
-        self._cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._memo: ArrayMemo[tuple[np.ndarray, np.ndarray, np.ndarray]] = ArrayMemo()
         #: the element mesh of basis 'elements' (None for a single-interval basis)
         self.mesh = mesh if basis == "elements" else None
         self.basis: Basis
@@ -135,38 +138,48 @@ class RitzModel:
         return t if eps is None else t * (1 + eps)[None, :]
 
     def matrices(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return (B(s), B'(s), W(s)) for arc lengths s, memoised.
-
-        (B(s), B'(s), W(s)) for arc lengths s, memoised: a running solver asks for the same s
-        again.
-        """
-        s = np.ascontiguousarray(s, dtype=float).ravel()
-        key = s.tobytes()
-        hit = self._cache.get(key)
-        if hit is None:
-            if len(self._cache) > 256:
-                self._cache.clear()
-            hit = (
+        """Return (B(s), B'(s), W(s)) for arc lengths s, memoised (``memo.ArrayMemo``)."""
+        return self._memo.get(
+            "matrices",
+            s,
+            lambda s: (
                 self.basis.values(s),
                 self.basis.derivatives(s),
                 self.quad.integration_matrix(s),
-            )
-            self._cache[key] = hit
-        return hit
+            ),
+        )
 
     def position_matrix(self, s: np.ndarray) -> np.ndarray:
         """W(s) with x(s) = x0 + tangents · W(s)ᵀ."""
         return self.matrices(s)[2]
 
     # ---- symbolic energy ------------------------------------------------------------------------
+    @functools.cached_property
+    def stiffness_pattern(self) -> sp.csc_matrix:
+        """The structural pattern (n × n, CSC) of every K_* = B'ᵀ diag(w R) B' or Bᵀ diag(w R) B.
+
+        Dense for a single-interval basis; block-banded for elements (B, B' are local to each
+        element), so p holds O(n) stiffness entries instead of n² (a 640-node mesh: 0.4 M).
+        """
+        b, db = sp.csc_matrix(np.abs(self.B)), sp.csc_matrix(np.abs(self.dB))
+        pattern = sp.csc_matrix(b.T @ b + db.T @ db)
+        pattern.sort_indices()
+        return pattern
+
+    def stiffness_sym(self, values: ca.SX) -> ca.SX:
+        """K_* from its nonzeros in p (column-major on ``stiffness_pattern``)."""
+        k = self.stiffness_pattern
+        n = k.shape[0]
+        return ca.SX(ca.Sparsity(n, n, k.indptr.tolist(), k.indices.tolist()), values)
+
     def material_sizes(self) -> dict[str, int]:
         """Sizes of the parameter-only parts of the energy (``material_terms``), by name."""
-        n, M = self.layout.order, self.quad.count
-        sizes = {"K_bend": n * n}
+        nnz, M = self.stiffness_pattern.nnz, self.quad.count
+        sizes = {"K_bend": nnz}
         if self.layout.twist:
-            sizes["K_twist"] = n * n
+            sizes["K_twist"] = nnz
         if self.layout.stretch:
-            sizes["K_stretch"] = n * n
+            sizes["K_stretch"] = nnz
         sizes["weight_moments"] = M
         sizes["weight_total"] = 1
         return sizes
@@ -174,23 +187,32 @@ class RitzModel:
     def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Return the parts of the energy that depend on the material alone.
 
-        The parts of the energy that depend on the material alone, assembled once per string
-        (numpy):
+        Assembled once per string (numpy); each K_* as its nonzeros on ``stiffness_pattern``::
 
-            K_bend    = B'ᵀ diag(w Rf) B'     ½ ∫ Rf θ'² ds = ½ c_θᵀ K_bend c_θ   (planar: ½ c_φᵀ
-            K_bend c_φ) K_twist   = B'ᵀ diag(w Rt) B'     the ψ'² part of ½ ∫ Rt ω² ds K_stretch =
-            Bᵀ diag(w Re) B       ½ ∫ Re ε² ds m         = W(s_nodes)ᵀ (w ∘ D)   Σ_j w_j D_j x(s_j)
-            = x0 Σ_j w_j D_j + Σ_k m_k t_k ΣwD                                the weight [N]
+            K_bend    = B'ᵀ diag(w Rf) B'     ½ ∫ Rf θ'² ds = ½ c_θᵀ K_bend c_θ  (planar: c_φ)
+            K_twist   = B'ᵀ diag(w Rt) B'     the ψ'² part of ½ ∫ Rt ω² ds
+            K_stretch = Bᵀ diag(w Re) B       ½ ∫ Re ε² ds
+            m         = W(s_nodes)ᵀ (w ∘ D)   Σ_j w_j D_j x(s_j) = x0 ΣwD + Σ_k m_k t_k
+            ΣwD                               the weight [N]
 
         Each is the same quadrature as the symbolic sum it replaces (so the energy is unchanged to
         rounding), but its Hessian costs nothing per evaluation instead of M·n² operations.
         """
-        w = self.quad.weights
-        out = {"K_bend": self.dB.T @ ((w * profiles["Rf"])[:, None] * self.dB)}
+        w, pattern = self.quad.weights, self.stiffness_pattern
+        rows, cols = (
+            pattern.indices,
+            np.repeat(np.arange(pattern.shape[1]), np.diff(pattern.indptr)),
+        )
+
+        def packed(basis: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+            # the nonzeros of Bᵀ diag(w R) B on the pattern, column-major (stiffness_sym's order)
+            return (basis.T @ ((w * stiffness)[:, None] * basis))[rows, cols]
+
+        out = {"K_bend": packed(self.dB, profiles["Rf"])}
         if self.layout.twist:
-            out["K_twist"] = self.dB.T @ ((w * profiles["Rt"])[:, None] * self.dB)
+            out["K_twist"] = packed(self.dB, profiles["Rt"])
         if self.layout.stretch:
-            out["K_stretch"] = self.B.T @ ((w * profiles["Re"])[:, None] * self.B)
+            out["K_stretch"] = packed(self.B, profiles["Re"])
         wd = w * profiles["D"]
         out["weight_moments"] = self.position_matrix(self.quad.nodes).T @ wd
         out["weight_total"] = np.array([wd.sum()])
@@ -199,16 +221,15 @@ class RitzModel:
     def energy_terms(self, z: ca.SX, profiles: dict[str, ca.SX], gravity: ca.SX):
         """Return (bend, twist, stretch, gravity) energies [J] and the node tangents, as CasADi SX.
 
-        ``profiles``: Rf, Rt (3D) at the nodes and the ``material_terms`` (K_* as n·n column-major
-        vectors), all NLP parameters.
+        ``profiles``: Rf, Rt (3D) at the nodes and the ``material_terms`` (K_* as their nonzeros
+        on ``stiffness_pattern``), all NLP parameters.
         """
-        n = self.layout.order
         dB, w = ca.DM(self.dB), ca.DM(self.quad.weights)
         cphi, cth = self.coefficients(z, "phi"), self.coefficients(z, "theta")
         cpsi, ceps = self.coefficients(z, "psi"), self.coefficients(z, "eps")
 
         def quadratic(name: str, c: ca.SX) -> ca.SX:
-            return 0.5 * ca.dot(c, ca.mtimes(ca.reshape(profiles[name], n, n), c))
+            return 0.5 * ca.dot(c, ca.mtimes(self.stiffness_sym(profiles[name]), c))
 
         phi, dphi = ca.mtimes(ca.DM(self.B), cphi), ca.mtimes(dB, cphi)
         if cth is None:  # planar: θ ≡ π/2, so κ² = φ'²

@@ -121,3 +121,29 @@ def test_model_switches_stay_within_the_pool(baseline):
         assert len(solver.pool) <= AutoShapeSolver.POOL_SIZE
         assert live(ShapeSolver) - baseline[ShapeSolver] <= AutoShapeSolver.POOL_SIZE
     solver.close()
+
+
+def test_the_models_matrix_memo_is_bounded_in_bytes():
+    """A model's memo of matrices per arc-length array (``model.memo.ArrayMemo``) keeps the least
+    recently used out once its bytes pass the limit: a stream that asks at a new residual grid at
+    every check held 5 GB of them under a bound of 256 entries."""
+    from dlo_ros.model.memo import ArrayMemo
+
+    memo: ArrayMemo[np.ndarray] = ArrayMemo(limit=10 * 8000)
+    made = []
+
+    def make(s):
+        made.append(s[0])
+        return np.zeros(1000)  # 8,000 bytes
+
+    for k in range(30):
+        memo.get("W", np.array([float(k)]), make)
+        memo.get("W", np.array([0.0]), make)  # used at every step: stays
+        assert memo.nbytes <= memo.limit
+    assert made.count(0.0) == 1 and len(made) == 30
+    memo.get("W", np.array([1.0]), make)  # long gone: made again
+    assert made[-1] == 1.0 and len(made) == 31
+    memo.get("B", np.array([0.0]), make)  # another kind at the same s: its own entry
+    assert len(made) == 32
+    big = memo.get("W", np.array([99.0]), lambda s: np.zeros(20_000))  # over the limit: not kept
+    assert big.size == 20_000 and memo.nbytes <= memo.limit

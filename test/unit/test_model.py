@@ -215,3 +215,32 @@ def test_slerp_turns_a_fraction_of_the_shortest_rotation():
         assert np.allclose(slerp(q(0.3), q(2.1), t), q(0.3 + t * 1.8), atol=1e-12)
         assert np.allclose(slerp(q(0.3), -q(2.1), t), q(0.3 + t * 1.8), atol=1e-12)
     assert np.allclose(slerp(q(0.5), q(0.5), 0.7), q(0.5), atol=1e-12)
+
+
+@pytest.mark.parametrize("basis", ["chebyshev", "elements"])
+def test_stiffness_matrices_travel_as_their_nonzeros(basis):
+    """K_bend = B'ᵀ diag(w Rf) B' and K_stretch = Bᵀ diag(w Re) B, packed on the structural pattern
+    (p holds their nonzeros: block-banded on elements, dense on one interval), rebuild exactly,
+    and the element pattern holds O(n) entries, not n²."""
+    import casadi as ca
+
+    from dlo_ros.model.ritz import RitzModel
+    from dlo_ros.solver.build.mesh import MeshSpec, element_mesh
+    from dlo_ros.solver.options import SolverOptions
+
+    problem = clamped_pair()
+    options = SolverOptions(model="planar", basis=basis, order=12, quadrature_nodes=20)
+    mesh = element_mesh(problem, options, MeshSpec((0.2, 0.5), (12, 12, 12))) if basis == "elements" else None
+    model = RitzModel(problem.string.length, basis, 12, 20, np.eye(3), False, True, planar=True, mesh=mesh)
+    M, n = model.quad.count, model.layout.order
+    rng = np.random.default_rng(3)
+    profiles = {k: rng.uniform(0.5, 2.0, M) for k in ("Rf", "Rt", "Re", "D")}
+    terms = model.material_terms(profiles)
+    w = model.quad.weights
+    for name, basis_rows, stiffness in (("K_bend", model.dB, "Rf"), ("K_stretch", model.B, "Re")):
+        assert terms[name].size == model.material_sizes()[name]
+        rebuilt = np.array(ca.DM(model.stiffness_sym(ca.DM(terms[name]))).full())
+        exact = basis_rows.T @ ((w * profiles[stiffness])[:, None] * basis_rows)
+        assert np.max(np.abs(rebuilt - exact)) <= 1e-13 * np.max(np.abs(exact))
+    nnz = model.stiffness_pattern.nnz
+    assert nnz == n * n if basis == "chebyshev" else nnz < n * n / 2

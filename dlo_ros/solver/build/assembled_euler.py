@@ -169,7 +169,7 @@ class AssembledEulerKKT(AssembledKKT):
 
     def _quadratic_parts(self, p: ca.SX) -> list[tuple[str, tuple[slice, ca.SX]]]:
         """Return (name, (s, K)) of the bend, twist and stretch parts present (K from p)."""
-        lay, n = self.nlp.params, self.model.layout.order
+        lay = self.nlp.params
         fields = (("K_bend", "phi" if self.planar else "theta"), ("K_twist", "psi"))
         found = []
         for name, field in fields + (("K_stretch", "eps"),):
@@ -177,7 +177,7 @@ class AssembledEulerKKT(AssembledKKT):
                 part = self.model.layout.slice(field)
             except KeyError:
                 continue
-            found.append((name, (part, ca.reshape(p[lay[name]], n, n))))
+            found.append((name, (part, self.model.stiffness_sym(p[lay[name]]))))
         return found
 
     def quadratic_terms(self, p: ca.SX) -> list[tuple[slice, ca.SX]]:

@@ -324,8 +324,7 @@ class StringNLP:
                 grip_only[lay[f"grip:{grip.name}:angles"]] = True
         self.grip_parameter_mask = grip_only
         # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale);
-        # only those columns differentiated (the whole ∂g/∂p cost a tenth of a mesh's build)
-        # kept as those columns alone (all of ∂g/∂p is rows × the parameters: 0.9 GB at 640 nodes)
+        # only those columns differentiated and kept (all of ∂g/∂p: 0.9 GB at 640 nodes)
         self._target_columns = np.flatnonzero(grip_only)
         dg_dp = ca.Function("dg_dp", [z, p], [ca.jacobian(g, p[self._target_columns.tolist()])])
         self._target_jacobian = np.asarray(dg_dp(np.zeros(z.shape[0]), np.zeros(lay.size)))

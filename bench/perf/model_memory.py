@@ -56,7 +56,8 @@ import json, resource, time
 from dataclasses import replace
 from test_plane_keep import SCENE, L, floor_answer
 
-options = replace(SCENE.options, output_points=401, update_time_limit=0.0, error_tolerance=1e-6 * L)
+options = replace(SCENE.options, output_points=401, update_time_limit=0.0,
+                  error_tolerance=1e-6 * L)
 t0 = time.perf_counter()
 r = floor_answer(1000.0, options, "streamed")
 print(json.dumps({"seconds": time.perf_counter() - t0, "status": r.status,
@@ -66,7 +67,7 @@ print(json.dumps({"seconds": time.perf_counter() - t0, "status": r.status,
 
 
 def child(tree: Path, code: str, *args: str) -> dict:
-    """Run ``code`` in a fresh interpreter with ``tree`` (its package and tests) first on the path."""
+    """Run ``code`` in a fresh interpreter, ``tree`` (its package, its tests) first on the path."""
     paths = [str(tree), str(tree / "test"), str(tree / "test" / "unit")]
     prelude = f"import sys; sys.path[:0] = {paths!r}\n"
     done = subprocess.run(

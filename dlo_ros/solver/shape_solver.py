@@ -62,7 +62,7 @@ from .update.moments import MOMENT_CONTINUATION_SOLVES, MOMENT_NEWTON_STEPS
 from .update.newton import fill_start
 from .update.pipeline import run_update
 from .update.summary import ModelSummaries
-from .update.time_limit import is_limited, limit_message, update_deadline
+from .update.time_limit import LimitStrikes, is_limited, limit_message
 from .update.warm_start import Adoption, adopted_copy, adopted_state, held_poses, sample_source
 
 __all__ = [
@@ -160,6 +160,7 @@ class ShapeSolver:
         # since; topology.ClampTurns, the linking-number check), and the frames computed for them
         self._clamp_turns: TP.ClampTurns | None = None
         self._turn_tracker = ClampTurnTracker(nlp)
+        self._strikes = LimitStrikes()  # update/time_limit.py: one strike of the time limit
         self.build_time_s = time.perf_counter() - t0
 
     # ---- compiled derivatives and IPOPT instances ---------------------------------------------
@@ -380,11 +381,10 @@ class ShapeSolver:
                 self.functions.load_cached()
             warm = warm and self._state is not None
             limit = self.options.update_time_limit
-            ctx.deadline = update_deadline(t0, limit, is_limited(warm, commit, limited))
+            ctx.deadline = self._strikes.deadline(t0, limit, is_limited(warm, commit, limited))
             result, state = run_update(ctx, problem, warm, self._turn_tracker)
-            if ctx.deadline is not None and result.status == "failed":
-                if time.perf_counter() >= ctx.deadline:
-                    result.message = limit_message(limit, result.message)
+            if self._strikes.stopped(ctx.deadline, result.status):
+                result.message = limit_message(limit, result.message)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
             result.derivatives = "compiled" if self.functions.compiled else "interpreted"
             if commit:  # every target of the stream counts, failed ones too (topology.ClampTurns)

@@ -27,7 +27,7 @@ answer):
   moves the rows' forces to the one row at c₀ (zero for a contact on one row at c₀).
 * the error: max_s |∂x(s)/∂z · (Δz + Δc dz/dc)| on the grid.  Without the step onto the family
   the paper's Fig. 3 streamed at ρ = 1000 (a touch between two rows 3 mm apart) had an estimate
-  10.9x its true error (the bound allows 10x); with it, 3.5x.
+  10.9x its true error (the bound allows 10x); with it, 3.7x.
 
 test_post_last_pose.py checks the step and the error against an exact contact reference.  ∂_c by
 central differences at ``STEP`` · L, ∂/∂z by central differences of ``model.positions`` at
@@ -268,18 +268,33 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
     shift = float(-tau / slope)
     # the answer onto the family's member at c₀: its rows' forces moved to the one row at c₀
     # (zero for a contact on one row at c₀; two rows bracketing the touch hold the shape there)
-    lam = np.asarray(state.lam_g, dtype=float)
-    onto = np.zeros(rows.shape[0])
-    onto[-1] = float(v[1])
-    swap = kkt_step(
-        np.asarray(hess), rows, -np.asarray(jac)[contact.rows].T @ lam[contact.rows], onto
-    )
-    steps = [shift * dz + (swap[:n] if swap is not None else 0.0)]
+    swap = _moved_onto(state, kkt, held, contact, gz[1], float(v[1]))
+    steps = [shift * dz + (swap if swap is not None else 0.0)]
     if contact.side and abs(shift) <= contact.bracket[1] - contact.bracket[0]:
-        moved = _run_end_moved(nlp, problem, state, contact, kkt, held, contact.s + shift)
+        # a run end: also the step to its row moved to the predicted lift-off
+        x, jx = _positions_and_jacobian(nlp.model, z, np.array([contact.s + shift]))
+        grad = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
+        value = float(ob.h_many(x)[0] + problem.string.radius)
+        moved = _moved_onto(state, kkt, held, contact, grad[0] @ jx[0], value)
         if moved is not None:
             steps.append(moved)
     return ContactFamily(shift, dz, max(_centreline_change(nlp, z, d, grid) for d in steps))
+
+
+def _moved_onto(state, kkt, held, contact: PointContact, row: np.ndarray, value: float):
+    """Return Δz from the answer to the equilibrium with the contact's force at one row instead.
+
+    ``row``: ∇_z v there, ``value``: v there; the other active rows (``held``) held.  One KKT
+    step, K [Δz; Δλ] = [Σ_rows J_kᵀ λ_k; −value] (None where K is singular).
+    """
+    _, _, jac, hess, _ = kkt
+    lam = np.asarray(state.lam_g, dtype=float)
+    rows = np.vstack([np.asarray(jac)[held], row[None, :]])
+    onto = np.zeros(rows.shape[0])
+    onto[-1] = value
+    dual = -np.asarray(jac)[contact.rows].T @ lam[contact.rows]
+    step = kkt_step(np.asarray(hess), rows, dual, onto)
+    return None if step is None else step[: row.size]
 
 
 def _centreline_change(nlp, z: np.ndarray, dz: np.ndarray, grid: np.ndarray) -> float:
@@ -292,24 +307,6 @@ def _centreline_change(nlp, z: np.ndarray, dz: np.ndarray, grid: np.ndarray) -> 
         2 * Z_STEP
     )
     return size * float(np.max(np.linalg.norm(dx, axis=1)))
-
-
-def _run_end_moved(nlp, problem, state, contact, kkt, held, c_new):
-    """Δz from the answer to the equilibrium with the run's end row moved to ``c_new``."""
-    z = np.asarray(state.z, dtype=float)
-    _, _, jac, hess, _ = kkt
-    ob = problem.obstacles[contact.obstacle]
-    x, jx = _positions_and_jacobian(nlp.model, z, np.array([c_new]))
-    grad = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
-    gz = np.einsum("pi,pik->pk", grad, jx)
-    rows = np.vstack([np.asarray(jac)[held], gz])
-    onto = np.zeros(rows.shape[0])
-    onto[-1] = float(ob.h_many(x)[0] + problem.string.radius)
-    lam = np.asarray(state.lam_g, dtype=float)
-    step = kkt_step(
-        np.asarray(hess), rows, -np.asarray(jac)[contact.rows].T @ lam[contact.rows], onto
-    )
-    return None if step is None else step[: z.size]
 
 
 def _positions_and_jacobian(model, z: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

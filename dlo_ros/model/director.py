@@ -241,7 +241,8 @@ class DirectorModel:
         self.quad = SimpleNamespace(
             nodes=mesh.quad_nodes, weights=mesh.weights, count=mesh.quad_count
         )
-        self._matrices: ArrayMemo[np.ndarray] = ArrayMemo()
+        #: matrices per arc-length array, remembered: a solver asks for the same s again
+        self._matrices: ArrayMemo = ArrayMemo()
 
     # ---- numpy ----------------------------------------------------------------------------------
     def node_values(self, z: np.ndarray) -> np.ndarray:
@@ -251,13 +252,9 @@ class DirectorModel:
     def strain_nodes(self, z: np.ndarray) -> np.ndarray | None:
         return np.asarray(z[self.layout.eps]) if self.layout.stretch else None
 
-    def _memo(self, kind: str, s: np.ndarray, make):
-        """Return ``make(s)``, remembered per (kind, s): a solver asks for the same s again."""
-        return self._matrices.get(kind, s, make)
-
     def position_matrix(self, s: np.ndarray) -> np.ndarray:
         """W(s) with x(s) = x0 + W(s) · (1+ε)t̂ at the quadrature nodes."""
-        return self._memo("W", s, self.mesh.integration_matrix)
+        return self._matrices.get("W", s, self.mesh.integration_matrix)
 
     def position_rows(self, s: np.ndarray) -> np.ndarray:
         """Return W(s) as ``position_matrix`` does, not remembered (s changes every solve)."""
@@ -269,7 +266,7 @@ class DirectorModel:
 
     def interpolation(self, s: np.ndarray, side: str = "left") -> tuple[np.ndarray, np.ndarray]:
         """``ElementMesh.interpolation``, remembered."""
-        return self._memo("B" + side, s, lambda x: self.mesh.interpolation(x, side))
+        return self._matrices.get("B" + side, s, lambda x: self.mesh.interpolation(x, side))
 
     def quad_tangents(self, z: np.ndarray) -> np.ndarray:
         """(1 + ε) t̂ at the quadrature nodes, (3, M)."""

@@ -166,3 +166,27 @@ def test_estimates_just_at_the_thresholds_change_nothing():
     after = e * 0.5**2
     assert RULE.coarsen * share < after <= RULE.target * share
     assert next_mesh(once, L, estimates([after, after], [0.5] * 2), RULE) is None
+
+
+def with_anchors(errors, decay, kinks, anchors) -> ElementEstimates:
+    return ElementEstimates(
+        np.array(errors, float), np.array(decay, float), tuple(kinks), anchors=tuple(anchors)
+    )
+
+
+def test_calm_elements_merge_across_a_breakpoint_that_holds_nothing():
+    """Two elements far below their share, split by a breakpoint no kink holds (one left behind
+    by a contact that moved on): one element with the nodes of the larger."""
+    tiny = 1e-4 * DELTA
+    spec = MeshSpec((0.3, 0.45, 0.7), (8, 10, 12, 8))
+    calm = with_anchors([tiny, tiny, tiny, DELTA * 0.1], [0.1] * 4, [], [0.7])
+    out = next_mesh(spec, L, calm, RULE)
+    # 0.3 and 0.45 hold nothing: 0 and 1 merge, then 2 stays (each merges once per pass); 0.7
+    # holds an anchor.  Nodes: coarsened by the decay first (down to min_nodes 4), then merged
+    assert out is not None and out.breakpoints == (0.45, 0.7), out
+    assert unknowns(out.counts) < unknowns(spec.counts)
+    # without the contact points (a cold solve's check) only the old merge of fewest nodes
+    unknown = estimates([tiny, tiny, tiny, DELTA * 0.1], [0.1] * 4)
+    assert next_mesh(spec, L, unknown, RULE).breakpoints == (0.3, 0.45, 0.7)
+    held = with_anchors([tiny] * 4, [0.1] * 4, [], [0.3, 0.45, 0.7])
+    assert next_mesh(spec, L, held, RULE).breakpoints == (0.3, 0.45, 0.7)

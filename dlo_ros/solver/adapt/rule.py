@@ -16,7 +16,12 @@ share of the tolerance δ [m] is b_k = δ · h_k / L when the estimates add up t
   fitted decay of a solution resolved to rounding predicts far more than it can spare, 12 → 4
   nodes took an estimate of 0.17 mm to 0.17 m); two neighbours both at their fewest nodes and
   both coarse merge into one element with the same unknowns, unless the breakpoint between them
-  is one of the scene's (``fixed``) or a known kink.
+  is one of the scene's (``fixed``) or a known kink;
+* when the caller lists the contact points (``anchors``: run ends, touching points, on a
+  breakpoint or not), two neighbours below ``coarsen`` · b_k and not refined in the pass merge
+  across a breakpoint no contact point holds (not the scene's) into one element with the nodes
+  of the larger: a stream's contact that slid on leaves a breakpoint behind at each place a
+  split put one (the table stream of #37 grew to 10 elements and 327 unknowns that way).
 
 The gap between ``refine`` and ``coarsen`` (25× by default) is the hysteresis: an element refined
 or coarsened lands at ``target`` · b_k, strictly between them, so the rule applied again to its
@@ -82,6 +87,9 @@ class ElementEstimates:
     decay: np.ndarray
     kinks: tuple[float, ...] = ()
     snap_to: tuple[float, ...] = ()
+    #: the contact points a breakpoint follows [m] (run ends, touching points), also those on a
+    #: breakpoint (None: not known, so no breakpoint is taken for one that holds nothing)
+    anchors: tuple[float, ...] | None = None
 
 
 def unknowns(counts) -> int:
@@ -158,7 +166,8 @@ def next_mesh(
     counts = list(spec.counts or ())
     errors, rates = np.asarray(estimates.errors), np.asarray(estimates.decay)
     budgets = _budgets(bounds, rule)
-    moved = _snapped(bounds, errors > rule.refine * budgets, estimates.snap_to, fixed, rule)
+    refine = errors > rule.refine * budgets
+    moved = _snapped(bounds, refine, estimates.snap_to, fixed, rule)
     plan: list[list[tuple[float, float, int]]] = [
         [(moved[k], moved[k + 1], n)] for k, n in enumerate(counts)
     ]
@@ -177,8 +186,10 @@ def next_mesh(
                 fewer = min(fewer, rule.max_removed)
             plan[k] = [(lo, hi, max(rule.min_nodes, n - max(fewer, 0)))]
             changed.add(int(k))
-    coarse = [k not in changed and errors[k] < rule.coarsen * budgets[k] for k in range(len(plan))]
-    flat = _merged(plan, coarse, rule, fixed, estimates.kinks, length)
+    low = errors < rule.coarsen * budgets
+    coarse = [k not in changed and low[k] for k in range(len(plan))]
+    calm = [len(plan[k]) == 1 and low[k] for k in range(len(plan))]
+    flat = _merged(plan, coarse, calm, rule, fixed, estimates, length)
     out = MeshSpec(tuple(float(b) for b, _, _ in flat[1:]), tuple(int(c) for _, _, c in flat))
     return None if out == MeshSpec(tuple(float(b) for b in bounds[1:-1]), tuple(counts)) else out
 
@@ -206,21 +217,31 @@ def _snapped(bounds: np.ndarray, refine: np.ndarray, snap_to, fixed, rule) -> np
     return out
 
 
-def _merged(plan, coarse, rule, fixed, kinks, length) -> list[tuple[float, float, int]]:
-    """Return the planned elements with coarse neighbours at their fewest nodes merged.
+def _merged(plan, coarse, calm, rule, fixed, estimates, length) -> list[tuple[float, float, int]]:
+    """Return the planned elements with coarse neighbours merged.
 
-    ``coarse[k]``: element k is untouched by this pass and below the coarsening threshold.  Each
-    merges at most once per pass; never across a scene breakpoint or next to a known kink.
+    ``coarse[k]``: element k is untouched by this pass and below the coarsening threshold; two
+    such neighbours at their fewest nodes merge into one with the same unknowns.  ``calm[k]``:
+    element k is below the coarsening threshold and not refined in this pass; two such neighbours
+    across a breakpoint that holds no anchor (``estimates.anchors`` known; a kink that is no
+    contact point, such as the deepest cut between two rows, does not hold one) merge into one
+    with the nodes of the larger, the rule's other coarsening.  Each merges at most once per
+    pass; never across a scene breakpoint, nor next to a known kink at their fewest nodes.
     """
+    kinks, anchors = estimates.kinks, estimates.anchors
     out: list[tuple[float, float, int]] = []
     k = 0
     while k < len(plan):
-        if k + 1 < len(plan) and coarse[k] and coarse[k + 1]:
+        if k + 1 < len(plan) and calm[k] and calm[k + 1]:
             (lo, mid, n1), (_, hi, n2) = plan[k][0], plan[k + 1][0]
-            fewest = n1 == n2 == rule.min_nodes
-            pinned = any(abs(mid - s) <= MERGE * length for s in fixed) or any(
-                abs(mid - s) <= rule.min_size for s in kinks
-            )
+            scene = any(abs(mid - s) <= MERGE * length for s in fixed)
+            pinned = scene or any(abs(mid - s) <= rule.min_size for s in kinks)
+            held = anchors is None or any(abs(mid - s) <= rule.min_size for s in anchors)
+            fewest = coarse[k] and coarse[k + 1] and n1 == n2 == rule.min_nodes
+            if not scene and not held:
+                out.append((lo, hi, max(n1, n2)))
+                k += 2
+                continue
             if fewest and not pinned and n1 + n2 - 1 <= rule.max_nodes:
                 out.append((lo, hi, n1 + n2 - 1))
                 k += 2

@@ -81,6 +81,17 @@ def has_elements(solver) -> bool:
     return element_mesh_of(solver.nlp.model) is not None
 
 
+def contact_points(solver, survey, state, shift: ContactShift) -> tuple[float, ...]:
+    """Return where the contacts are [m], on a breakpoint or not.
+
+    The first and last row of each run of contact rows, where each point contact touches, and
+    the held points (slots, self-contact).
+    """
+    ends = () if survey is None else tuple(s for run in survey.intervals for s in run)
+    held = contact_kinks(solver, None, state)
+    return tuple(sorted({float(s) for s in ends + shift.touches + held}))
+
+
 def contact_parts(shift: ContactShift, spec) -> np.ndarray:
     """Return each element's share of the point contacts' error [m]: the contact's own element."""
     bounds = np.asarray(spec.breakpoints, dtype=float)
@@ -98,6 +109,8 @@ def mesh_verdict(
     ``problem``: the scene the state solves as the model sees it (auto's reduced problem);
     ``tolerance``: δ [m]; ``coarsen``: a coarser mesh may be proposed (a stream's check: its later
     updates get cheaper; a cold solve's answer is final, so a coarser rebuild would only cost).
+    In a stream's check the contact points are the rule's anchors: a breakpoint no contact holds
+    any more (the lift-off slid on) merges away between two calm elements (``adapt/rule.py``).
     """
     length = problem.string.length
     survey = row_survey(solver)
@@ -131,6 +144,7 @@ def mesh_verdict(
         np.asarray(errors.smoothness, dtype=float),
         tuple(sorted(set(kinks) | set(shift.touches))),
         shift.touches,
+        anchors=contact_points(solver, survey, state, shift) if coarsen else None,
     )
     following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
     if following is None:

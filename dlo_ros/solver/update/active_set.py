@@ -114,11 +114,6 @@ def shifted_pairs(nlp: StringNLP, lam: np.ndarray, proposed: np.ndarray) -> list
     return found
 
 
-#: how far ``slid_pair`` moves a pair, in its own spacings: a resultant farther out is a couple
-#: of nearly equal and opposite row forces, no slide (one-row changes then decide)
-SLIDE_ROWS = 4
-
-
 def slid_pair(nlp: StringNLP, lam: np.ndarray, proposed: np.ndarray) -> np.ndarray | None:
     """Return the active set with a sliding point contact's pair of rows moved to its resultant.
 
@@ -129,8 +124,7 @@ def slid_pair(nlp: StringNLP, lam: np.ndarray, proposed: np.ndarray) -> np.ndarr
     change where one-row changes walk a row per two (the main job's cable over the post, after
     the mesh refined about the contact: four rows in one update, past Newton's budget of
     changes, then IPOPT for 0.3–0.7 s).
-    None when no such pair is in ``proposed`` ∪ {i}, or its resultant lies farther than
-    ``SLIDE_ROWS`` times the pair's spacing from it; ``lam``: the multipliers judged.
+    None when no such pair is in ``proposed`` ∪ {i}; ``lam``: the multipliers judged.
     """
     s_rows = np.asarray(nlp.obstacle_s, dtype=float)
     for obstacle in nlp.obstacle_rows:
@@ -144,9 +138,8 @@ def slid_pair(nlp: StringNLP, lam: np.ndarray, proposed: np.ndarray) -> np.ndarr
         at = float(f @ s_rows[on] / f.sum())
         k = int(np.searchsorted(s_rows, at, side="right")) - 1
         pair = [k, k + 1] if 0 <= k and k + 1 < rows.size else [min(max(k, 0), rows.size - 1)]
-        spacing = float(np.ptp(s_rows[on]))
-        if set(pair) == set(on.tolist()) or abs(at - s_rows[on].mean()) > SLIDE_ROWS * spacing:
-            continue  # no move, or a couple more than a push: one row at a time
+        if set(pair) == set(on.tolist()):
+            continue
         moved = proposed.copy()
         moved[rows[on]] = False
         moved[rows[pair]] = True

@@ -12,13 +12,7 @@ beyond j, so the pair moves on by one row (``shifted_pairs``).
 * the main job's cable on the post (the default cable, the demo's post, the element mesh auto
   reaches there), solved cold at one of the demo's targets and updated warm to a target 4 updates
   later: a Newton update (IPOPT before), equal to the same targets streamed one by one (small
-  steps, the same branch; a cold solve lands on another, 0.23 m away);
-* the pair moved to the rows about its resultant in one change (``slid_pair``): on a mesh auto
-  refined about the contact a slide crosses several rows in one update, more than Newton's budget
-  of one-row changes; the main job's manoeuvre under auto (checks inline: the same models at the
-  same updates on any machine) then left Newton for IPOPT at 4 updates (0.5–0.6 s each
-  interpreted), with the move at 2: the planar strip's snap before the twist and a saddle on the
-  post (its Newton answer unstable).
+  steps, the same branch; a cold solve lands on another, 0.23 m away).
 """
 
 from __future__ import annotations
@@ -31,10 +25,10 @@ import numpy as np
 from dlo_ros.model.problem import GripPose
 from dlo_ros.node import demo
 from dlo_ros.scene import load_scene, scene_from_dict, scene_to_dict
-from dlo_ros.solver import ShapeSolver, make_solver
+from dlo_ros.solver import ShapeSolver
 from dlo_ros.solver.build.mesh import MeshSpec
 from dlo_ros.solver.shape_solver import with_checked_poses
-from dlo_ros.solver.update.active_set import shifted_pairs, slid_pair
+from dlo_ros.solver.update.active_set import shifted_pairs
 
 #: the mesh auto streams on over the post in the main job (4 elements, 37 nodes)
 POST_MESH = MeshSpec((0.44448166405796957, 0.46793503712740137, 0.5), (10, 8, 8, 14))
@@ -57,39 +51,6 @@ def test_a_pair_whose_resultant_lies_past_it_moves_on_by_one_row():
     lam[[14, 15]] = 0.0
     lam[18], lam[19] = -1.0, 2.0  # at the end of the obstacle's rows: no row beyond
     assert shifted_pairs(nlp, lam, proposed) == []
-
-
-def test_a_pair_moves_to_the_rows_about_its_resultant_in_one_change():
-    """``slid_pair``: rows 10..19 of one obstacle at s = 0.0, 0.1, … 0.9 m (row scale 1 and 2)."""
-    nlp = SimpleNamespace(
-        obstacle_rows=[np.arange(10, 20)],
-        obstacle_s=np.linspace(0.0, 0.9, 10),
-        row_scale=np.where(np.arange(25) % 2, 2.0, 1.0),
-    )
-    proposed = np.zeros(25, dtype=bool)
-    proposed[[2, 15]] = True  # an equality row, and row 15 of the pair {14, 15} (14 to leave)
-    lam = np.zeros(25)
-    # forces f = λ / scale: f14 = −1, f15 = 1.6 → s* = (−0.4 + 0.8) / 0.6 = 0.667 m: rows 16, 17
-    lam[14], lam[15] = -1.0, 3.2
-    moved = slid_pair(nlp, lam, proposed)
-    assert moved is not None and np.flatnonzero(moved).tolist() == [2, 16, 17]
-    # the other way: f14 = 1.5, f15 = −0.5 → s* = (0.6 − 0.25) / 1 = 0.35 m: rows 13, 14
-    lam[14], lam[15] = 1.5, -1.0
-    proposed[[14, 15]] = [True, False]
-    assert np.flatnonzero(slid_pair(nlp, lam, proposed)).tolist() == [2, 13, 14]
-    # one row on: {15, 16} in one change (two one-row changes: 14 leaves, then 16 joins)
-    lam[14], lam[15] = -0.1, 4.0  # s* = (−0.04 + 1.0) / 1.9 = 0.505 m: rows 15, 16
-    proposed[[14, 15]] = [False, True]
-    assert np.flatnonzero(slid_pair(nlp, lam, proposed)).tolist() == [2, 15, 16]
-    # a net pull (the contact lets go), both pushing, or a third row (a line contact): None
-    lam[14], lam[15] = -3.0, 1.0
-    assert slid_pair(nlp, lam, proposed) is None
-    lam[14], lam[15] = 1.0, 1.0
-    proposed[14] = True
-    assert slid_pair(nlp, lam, proposed) is None
-    lam[14], lam[15], lam[16] = -1.0, 3.0, 1.0
-    proposed[[14, 15, 16]] = [False, True, True]
-    assert slid_pair(nlp, lam, proposed) is None
 
 
 def demo_scene_and_targets():
@@ -124,19 +85,3 @@ def test_a_contact_sliding_past_its_rows_on_the_post_is_a_newton_update():
         r = reference.solve(step)
         assert r.ok, r.message
     assert np.max(np.linalg.norm(warm.points - r.points, axis=1)) < 1e-6
-
-
-def test_the_main_jobs_manoeuvre_leaves_newton_only_where_it_must():
-    scene, targets = demo_scene_and_targets()
-    solver = make_solver(scene.problem, scene.options, compile="off", checks="sync")
-    try:
-        assert solver.solve().ok
-        ipopt = []
-        for k, poses in enumerate(targets):
-            r = solver.solve(poses)
-            assert r.ok, (k, r.message)
-            if r.ipopt_status != "Newton":
-                ipopt.append((k, r.ipopt_status, r.stable))
-    finally:
-        solver.close()
-    assert len(ipopt) <= 2, ipopt

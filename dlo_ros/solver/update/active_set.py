@@ -114,39 +114,6 @@ def shifted_pairs(nlp: StringNLP, lam: np.ndarray, proposed: np.ndarray) -> list
     return found
 
 
-def slid_pair(nlp: StringNLP, lam: np.ndarray, proposed: np.ndarray) -> np.ndarray | None:
-    """Return the active set with a sliding point contact's pair of rows moved to its resultant.
-
-    A point contact held at two neighbouring rows i, j of one obstacle (no other row of that
-    obstacle beside them active) with λ_i < 0 < λ_j: their resultant in SI, s* = (f_i s_i +
-    f_j s_j) / (f_i + f_j), lies beyond j, where the contact has slid to (the pair's force and
-    moment as one push).  The pair moves to the two rows about s* (one row: the last one), in one
-    change where one-row changes walk a row per two (the main job's cable over the post, after
-    the mesh refined about the contact: four rows in one update, past Newton's budget of
-    changes, then IPOPT for 0.3–0.7 s).
-    None when no such pair is in ``proposed`` ∪ {i}; ``lam``: the multipliers judged.
-    """
-    s_rows = np.asarray(nlp.obstacle_s, dtype=float)
-    for obstacle in nlp.obstacle_rows:
-        rows = np.asarray(obstacle)
-        on = np.flatnonzero(proposed[rows] | (lam[rows] < -LEAVE_TOLERANCE))
-        if on.size != 2 or on[1] - on[0] != 1:
-            continue
-        f = lam[rows[on]] / nlp.row_scale[rows[on]]
-        if not (min(f) < 0 < max(f)) or f.sum() <= 0:
-            continue
-        at = float(f @ s_rows[on] / f.sum())
-        k = int(np.searchsorted(s_rows, at, side="right")) - 1
-        pair = [k, k + 1] if 0 <= k and k + 1 < rows.size else [min(max(k, 0), rows.size - 1)]
-        if set(pair) == set(on.tolist()):
-            continue
-        moved = proposed.copy()
-        moved[rows[on]] = False
-        moved[rows[pair]] = True
-        return moved
-    return None
-
-
 def switchable_rows(nlp: StringNLP, p: np.ndarray) -> np.ndarray:
     """Return the rows that may join or leave the active set between steps.
 

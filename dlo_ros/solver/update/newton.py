@@ -16,15 +16,13 @@ self-contact, ``StringNLP.contact_row``; a violated fold guard is no equilibrium
 joins A or, if none is violated, the active inequality with the most negative λ leaves it
 (``active_set.next_active_set``); Newton goes on from that point, at most
 ``NEWTON_ACTIVE_SET_CHANGES`` times (a grip move of 1 % of L shifts the sampled contact of a cable
-lying on a table by a sample or two). A point contact held at two neighbouring rows one of which
-pulls moves at once to the rows about the pair's resultant (``active_set.slid_pair``: on a mesh
-refined about the contact a slide crosses several rows in one update). An active set seen before (a
-cycle) is replaced by a contact pair moved on by one row where the multipliers of a point judged in
-the cycle say the contact slid past the pair (``active_set.shifted_pairs``). A step larger than 0.5
-in any scaled unknown, no convergence in ``max_steps`` for one active set, a cycle with no such
-pair or too many changes gives up: the caller then falls back to IPOPT. Newton lands on the
-stationary point nearest the start, so the caller still checks its stability. Every update function
-returns (ok, state, steps, constraint violation [m or rad]).
+lying on a table by a sample or two).  An active set seen before (a cycle) is replaced by a
+contact pair moved on by one row where the multipliers of a point judged in the cycle say the
+contact slid past the pair (``active_set.shifted_pairs``).  A step larger than 0.5 in any scaled
+unknown, no convergence in ``max_steps`` for one active set, a cycle with no such pair or too
+many changes gives up: the caller then falls back to IPOPT.  Newton lands on the stationary point
+nearest the start, so the caller still checks its stability.  Every update function returns (ok,
+state, steps, constraint violation [m or rad]).
 
 The rooms: this module holds the outer loop over active sets (``newton``) and the derivatives a
 start or a stability check reuses (``fill_start``, ``derivatives``); ``active_set.py`` the steps
@@ -40,7 +38,7 @@ from ..build.functions import NlpFunctions
 from ..build.nlp import StringNLP
 from ..native.settings import NEWTON_ACTIVE_SET_CHANGES
 from ..state import SolverState
-from .active_set import newton_active, shifted_pairs, slid_pair
+from .active_set import newton_active, shifted_pairs
 from .contact_free import newton_free
 from .kkt import active_rows, all_rows, violation
 
@@ -105,9 +103,6 @@ def newton(
             break
         assert reached is not None  # a changed active set comes with the point it was judged at
         judged.append(reached.lam_g)
-        jumped = slid_pair(nlp, reached.lam_g, changed)
-        if jumped is not None and jumped.tobytes() not in seen:
-            changed = jumped
         if changed.tobytes() in seen:  # a cycle: a contact pair slid past its rows?
             moved = [m for lam_j in judged[::-1] for m in shifted_pairs(nlp, lam_j, changed)]
             changed = next((m for m in moved if m.tobytes() not in seen), None)

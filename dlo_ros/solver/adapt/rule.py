@@ -87,8 +87,8 @@ class ElementEstimates:
     decay: np.ndarray
     kinks: tuple[float, ...] = ()
     snap_to: tuple[float, ...] = ()
-    #: the contact points a breakpoint follows [m] (run ends, touching points), also those on a
-    #: breakpoint (None: not known, so no breakpoint is taken for one that holds nothing)
+    #: the contact points that hold a breakpoint [m] (run ends, touching points, held points),
+    #: also those on one (None: not known, so no breakpoint is taken for one that holds nothing)
     anchors: tuple[float, ...] | None = None
 
 
@@ -166,8 +166,7 @@ def next_mesh(
     counts = list(spec.counts or ())
     errors, rates = np.asarray(estimates.errors), np.asarray(estimates.decay)
     budgets = _budgets(bounds, rule)
-    refine = errors > rule.refine * budgets
-    moved = _snapped(bounds, refine, estimates.snap_to, fixed, rule)
+    moved = _snapped(bounds, errors > rule.refine * budgets, estimates.snap_to, fixed, rule)
     plan: list[list[tuple[float, float, int]]] = [
         [(moved[k], moved[k + 1], n)] for k, n in enumerate(counts)
     ]

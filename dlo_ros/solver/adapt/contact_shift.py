@@ -266,9 +266,8 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
     if not np.isfinite(slope) or slope == 0.0:
         return None
     shift = float(-tau / slope)
-    # the answer onto the family's member at c₀: its rows' forces moved to the one row at c₀
-    # (zero for a contact on one row at c₀; two rows bracketing the touch hold the shape there)
-    # a contact on one row is the family's member at c₀ (its row at c₀): no step onto it
+    # the answer onto the family's member at c₀: its rows' forces moved to the one row at c₀ (two
+    # rows bracketing the touch hold the shape there); a contact on one row is that member already
     swap = None if len(contact.rows) == 1 else _moved_onto(state, kkt, held, contact, gz[1], v[1])
     steps = [shift * dz + (swap if swap is not None else 0.0)]
     if contact.side and abs(shift) <= contact.bracket[1] - contact.bracket[0]:

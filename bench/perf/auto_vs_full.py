@@ -35,7 +35,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
+# one BLAS thread, as the `dlo` and `dlo_node` executables ask (dlo_ros/blas_threads.py): before
+# numpy loads OpenBLAS.  Without it this bench measured OpenBLAS's thread wake-ups: table stream
+# updates of 2-3 Newton steps at 40-50 ms while the check worker ran
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # as a script: `bench` importable
 from bench.common import machine  # noqa: E402

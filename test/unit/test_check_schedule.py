@@ -95,10 +95,16 @@ class FakeChoice:
         return (self.order,)
 
 
+class FakePool:
+    def pooled(self, choice):  # no model built: a switch's lead-in (lead_in.py) does not begin
+        return None
+
+
 @dataclass
 class FakeAuto:
     model_checks: FakeChecks
     worker: FakeWorker = field(default_factory=FakeWorker)
+    pool: FakePool = field(default_factory=FakePool)
 
 
 def started(checks: FakeChecks) -> cs.PendingCheck:

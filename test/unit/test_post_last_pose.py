@@ -69,9 +69,9 @@ PERIOD = 0.02  # s: the demo's 50 Hz
 LAST = int(demo.duration() / PERIOD)  # the demo's last target
 STREAMED = 40  # targets streamed, the last one included
 #: updates held at the last target at most: until a check of a shape there says the tolerance is
-#: met (each refinement takes effect CHECK_LAG + BUILD_LAG = 12 updates after the shape it checked;
+#: met (each refinement takes effect CHECK_LAG + BUILD_LAG = 20 updates after the shape it checked;
 #: the stream's contact slid over 5 cm of the cable, and the mesh it left needs several)
-HOLD = 120
+HOLD = 200
 
 
 def scene():

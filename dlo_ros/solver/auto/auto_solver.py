@@ -107,13 +107,20 @@ class AutoShapeSolver:
         return self.model_checks.lower_tried
 
     def switch(
-        self, choice: ModelChoice, reason: str, start: tuple | None = None, at: int | None = None
+        self,
+        choice: ModelChoice,
+        reason: str,
+        start: tuple | None = None,
+        at: int | None = None,
+        led: ShapeSolver | None = None,
     ) -> None:
         """Stream on ``choice`` from now on, mapping the warm start (unchecked until checked).
 
         Waits for a running background job only if that job may be using the model switched to.
         ``start``: (solver, its state or None, problem) to map instead of the streaming model's
-        committed shape at ``self.problem`` (None: a cold start).  The change is appended to
+        committed shape at ``self.problem`` (None: a cold start).  ``led``: the model of ``choice``
+        holding its own equilibrium of the last update (a mesh's lead-in, ``lead_in.py``), streamed
+        on from there instead of a mapped shape.  The change is appended to
         ``changes`` (the newest 50 are kept) with the update index it takes effect at: ``at``,
         by default the update being solved.
         """
@@ -128,7 +135,12 @@ class AutoShapeSolver:
             # just found too coarse
             self.lower_tried.add(replace(choice, order=self.choice.order).key())
         source, state, problem = (self.inner, None, self.problem) if start is None else start
-        self.inner = self.pool.solver_for(choice, problem, stream=True, source=source, state=state)
+        if led is not None:
+            self.inner = self.pool.stream_on(choice, problem, led)
+        else:
+            self.inner = self.pool.solver_for(
+                choice, problem, stream=True, source=source, state=state
+            )
         if start is not None and state is None:
             self.inner.reset()
         waited, built = t1 - t0, time.perf_counter() - t1

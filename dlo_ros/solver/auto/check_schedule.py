@@ -9,7 +9,8 @@ no other check starts until its verdict has taken effect:
 * a verdict that switches to another model (a mesh refined or coarsened, the physics changed)
   takes effect just before update k + CHECK_LAG + BUILD_LAG: the check decides first and then
   builds and warm-starts that model, which costs more than the decision (a new mesh: a tenth to
-  a fifth of a second interpreted), so the stream gets BUILD_LAG more updates to build it beside.
+  a quarter of a second interpreted, and its lead-in), so the stream gets BUILD_LAG more updates
+  to build it beside.
 
 * ``checks='background'``: the check runs on the worker thread beside the updates; the update a
   verdict is due at waits for the decision (and a switch's for the build) if they have not
@@ -28,11 +29,12 @@ cold solve, ``check_now``) are checked before they return, in both modes (``Auto
 from __future__ import annotations
 
 from concurrent.futures import Future
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from .checks import CheckSnapshot, CheckVerdict
 from .choice import ORDERS, full_choice
+from .lead_in import LeadIn
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -44,10 +46,12 @@ if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports th
 #: still run every ``recheck_every`` updates.
 CHECK_LAG = 4
 #: A switch a check decides on takes effect BUILD_LAG updates after its decision would (module
-#: docstring): the model it names is built and warm-started on the worker meanwhile, so that
-#: the switch neither builds nor waits for the build (bench/perf/auto_vs_full.py: the updates
-#: over 20 ms were the switches waiting for it).
-BUILD_LAG = 8
+#: docstring): the model it names is built and warm-started on the worker meanwhile, and a new
+#: mesh leads in (:mod:`.lead_in`), so that the switch neither builds nor waits for the build
+#: (bench/perf/auto_vs_full.py: the updates over 20 ms were the switches waiting for it; at 8 the
+#: table stream's switches still waited for the lead-in, a check and build of its 150-unknown
+#: meshes taking 0.2–0.25 s of the worker interpreted).
+BUILD_LAG = 16
 
 
 @dataclass
@@ -57,7 +61,8 @@ class PendingCheck:
     ``job``: the background check (its decision, then the build of the model it names);
     ``decided``: the background decision alone, known before the build; ``verdict`` / ``error``:
     an inline check's outcome.  ``switching``: the verdict names another model, and ``apply_at``
-    was moved on by BUILD_LAG.
+    was moved on by BUILD_LAG.  ``lead``: the lead-in of a mesh switch (:mod:`.lead_in`), and
+    ``steps`` its queued solves on the worker.
     """
 
     apply_at: int
@@ -66,6 +71,8 @@ class PendingCheck:
     verdict: CheckVerdict | None = None
     error: Exception | None = None
     switching: bool = False
+    lead: LeadIn | None = None
+    steps: list[Future] = field(default_factory=list)
 
     def decision(self) -> CheckVerdict | None:
         """Return the verdict, waiting for a background decision; raise what the check raised."""
@@ -82,14 +89,21 @@ class PendingCheck:
         return self.decision()
 
 
-def _checked(auto: AutoShapeSolver, snap: CheckSnapshot, decided: Future) -> CheckVerdict:
-    """Run the check of ``snap`` on the worker; ``decided`` gets the decision before the build."""
+def _checked(
+    auto: AutoShapeSolver, snap: CheckSnapshot, decided: Future, lead: LeadIn
+) -> CheckVerdict:
+    """Run the check of ``snap`` on the worker; ``decided`` gets the decision before the build.
+
+    A mesh it switches to starts its ``lead`` in, after the build.
+    """
     try:
-        return auto.model_checks.evaluate(snap, True, decided=decided)
+        verdict = auto.model_checks.evaluate(snap, True, decided=decided)
     except BaseException as exc:
         if not decided.done():  # the stream waits on it: it must never be left unresolved
             decided.set_exception(exc)
         raise
+    lead.begin(auto.pool, verdict)
+    return verdict
 
 
 def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
@@ -99,18 +113,37 @@ def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
     longer (module docstring, :func:`due`).
     """
     apply_at = snap.update + CHECK_LAG
+    lead = LeadIn(apply_at + BUILD_LAG - 1, snap.generation)
     if auto.worker.background:
         i = ORDERS.index(snap.choice.order)
         keys = {("",) + replace(snap.choice, order=o).key() for o in ORDERS[max(i - 1, 0) : i + 2]}
         if not snap.choice.plane_kept:  # the 3D checker of a planar shape (shadows.py)
             keys.add(("checker",) + full_choice(snap.choice, snap.problem).key())
         decided: Future = Future()
-        job = auto.worker.submit(_checked, keys, auto, snap, decided)
-        return PendingCheck(apply_at, job=job, decided=decided)
+        job = auto.worker.submit(_checked, keys, auto, snap, decided, lead)
+        return PendingCheck(apply_at, job=job, decided=decided, lead=lead)
     try:
-        return PendingCheck(apply_at, verdict=auto.model_checks.evaluate(snap, False))
+        verdict = auto.model_checks.evaluate(snap, False)
     except Exception as exc:  # noqa: BLE001 - reported when applied, as a background one is
         return PendingCheck(apply_at, error=exc)
+    lead.begin(auto.pool, verdict)
+    return PendingCheck(apply_at, verdict=verdict, lead=lead)
+
+
+def lead_step(auto: AutoShapeSolver, pending: PendingCheck, update: int, poses: dict) -> None:
+    """Queue (or, checks 'sync', run) the lead-in's solve at streamed update ``update``.
+
+    ``poses``: the update's inner poses.  Each is queued after the check (the worker runs its jobs
+    in order), so that it finds the lead-in begun if the verdict names a mesh (:mod:`.lead_in`).
+    """
+    lead = pending.lead
+    if lead is None or update > lead.last:
+        return
+    generation = auto.book.generation
+    if auto.worker.background:
+        pending.steps.append(auto.worker.submit(lead.step, set(), update, dict(poses), generation))
+    else:
+        lead.step(update, poses, generation)
 
 
 def due(pending: PendingCheck, update: int, generation: int) -> bool:

@@ -93,6 +93,20 @@ class ModelPool:
             solver.reset()  # nothing to map: never keep an older, unrelated warm start
         return solver
 
+    def stream_on(self, choice: ModelChoice, problem: Problem, solver: ShapeSolver) -> ShapeSolver:
+        """Pool ``solver``, built for ``choice``, as a model to stream on, its warm start its own.
+
+        Set to ``problem`` (its poses only differ), compiling as ``compile`` says.
+        """
+        key = ("",) + choice.key()
+        with self._lock:
+            self._models.pop(key, None)
+        solver.set_problem(self.reduced.reduce(choice, problem)[0])
+        self._insert(key, solver)
+        solver.start_compile(self.compile)
+        choice.twist = solver.model.layout.twist
+        return solver
+
     def _insert(self, key: tuple, solver: ShapeSolver) -> None:
         """Pool ``solver`` as the newest under ``key``; drop the least recently used idle ones."""
         evicted = []

@@ -13,6 +13,7 @@ what the stream knows of its checks.  Each function takes the
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from concurrent.futures import wait
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -21,7 +22,7 @@ from ...model.problem import Problem
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from . import escalate
-from .check_schedule import PendingCheck, due, start_check
+from .check_schedule import PendingCheck, due, lead_step, start_check
 from .checks import CheckSnapshot, CheckVerdict
 from .choice import ModelChoice
 from .reach import touches_obstacle
@@ -105,6 +106,8 @@ def committed(
         book.pending = None  # about an earlier shape
         snap = snapshot(auto, problem, inner_poses, result, limited=limited)
         return auto.finish(check_now(auto, snap, result, notes), t0, notes)
+    if book.pending is not None:  # a mesh switch it may hold leads in (lead_in.py)
+        lead_step(auto, book.pending, book.index, inner_poses)
     due = book.unchecked or book.since_check >= auto.options.recheck_every
     if due and book.pending is None:
         snap = snapshot(auto, problem, inner_poses, result, limited=limited)
@@ -221,6 +224,9 @@ def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
     if verdict.choice is None:
         keep(auto, verdict)
     else:
-        # maps the latest committed shape, not the snapshot's
-        auto.switch(verdict.choice, verdict.reason)
+        # the new mesh's own equilibrium of the last update when it led in (lead_in.py), else
+        # the latest committed shape mapped (not the snapshot's)
+        wait(pending.steps)
+        led = pending.lead.ready(book.index) if pending.lead is not None else None
+        auto.switch(verdict.choice, verdict.reason, led=led)
         notes.append(auto.changes[-1][1])

@@ -103,10 +103,15 @@ def floor_problem(rho: float, right_x: float | None = None):
     )
 
 
+#: updates a stream holds the last target: a refinement takes effect CHECK_LAG + BUILD_LAG = 20
+#: updates after the shape it checked, and ρ = 3000 at 1e-5 L needs several after the stream
+HOLD = 80
+
+
 def floor_answer(rho: float, options, how: str, until_checked: bool = False):
     """The default's answer on the floor at weight ρ [N/m]: 'cold', or 'streamed' from the right
-    clamp 0.02 m farther out in 5 steps, then held 40 updates at the last target (or until a check
-    of a shape there has taken effect, ``until_checked``)."""
+    clamp 0.02 m farther out in 5 steps, then held HOLD updates at the last target (or until a
+    check of a shape there has taken effect, ``until_checked``)."""
     x_right = SCENE.problem.grip("right").pose.position[0]
     if how == "cold":
         return make_solver(floor_problem(rho), options, checks="sync", compile="off").solve()
@@ -116,7 +121,7 @@ def floor_answer(rho: float, options, how: str, until_checked: bool = False):
     for x in np.linspace(x_right + 0.016, x_right, 5):
         result = solver.solve({"right": floor_problem(rho, x).grip("right").pose})
         assert result.ok, result.message
-    for _ in range(40):
+    for _ in range(HOLD):
         if until_checked and result.model.checked and result.model.checked_updates_ago == 0:
             break
         result = solver.solve({"right": floor_problem(rho, x_right).grip("right").pose})

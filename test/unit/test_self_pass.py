@@ -122,6 +122,30 @@ def test_auto_streamed_keeps_two_radii():
     assert r.self_contacts and r.model.self_contact_pairs > 0
 
 
+def test_auto_reads_the_streams_self_approach_from_the_solves_own_measure(monkeypatch):
+    """auto's self-approach test takes the committed result's ``min_self_distance`` (measured by
+    the solve on the same samples) instead of measuring the shape again: on the stream that closes
+    the loop, each answer is the one measured afresh, and the stream does meet its shape."""
+    from dlo_ros.solver.auto import escalate
+
+    measured, answers = escalate.self_approach, []
+
+    def both(auto, problem, committed):
+        answer = measured(auto, problem, committed)
+        assert np.isfinite(committed.min_self_distance) or committed.min_self_distance == np.inf
+        afresh = measured(auto, problem, replace(committed, min_self_distance=float("nan")))
+        assert answer == afresh
+        answers.append(answer)
+        return answer
+
+    monkeypatch.setattr(escalate, "self_approach", both)
+    sol = auto_solver(0.5)
+    sol.solve()
+    for c in STREAM:
+        sol.solve(at(c))
+    assert len(answers) >= len(STREAM) and any(answers), answers
+
+
 def test_auto_query_models_self_contact_and_leaves_the_stream():
     sol = auto_solver(0.5)
     check_apart(sol.solve())

@@ -307,7 +307,7 @@ class AutoShapeSolver:
             return refine_query(self, problem, result, t0)
         if result.status not in ("ok", "unverified"):
             return self.finish(result, t0, notes)
-        approach = escalate.self_approach(self, problem)
+        approach = escalate.self_approach(self, problem, result)
         if approach:  # the shape came within reach of itself: solve again with self-contact
             start, why = escalate.contact_start(self, problem, before)
             self.problem = problem if start is None else before_problem

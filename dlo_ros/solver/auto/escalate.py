@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from ...model.problem import Problem
 from ..contact import self_contact as SC
 from ..results.result import ShapeResult
@@ -126,12 +128,15 @@ def _contact_geometry(auto: AutoShapeSolver, problem: Problem) -> SC.ContactGeom
     )
 
 
-def self_approach(auto: AutoShapeSolver, problem: Problem) -> str:
+def self_approach(auto: AutoShapeSolver, problem: Problem, committed: ShapeResult) -> str:
     """Say why self-contact must be modelled now ('' if not).
 
     It must when the committed shape of a model without it has two samples the exclusion arc apart
     within the candidate reach of each other (k-d tree query).  Never with ``rotation: euler``
-    or the plane kept (``solver.plane: keep``).
+    or the plane kept (``solver.plane: keep``).  ``committed``: the result of that shape; its
+    ``min_self_distance``, when the solve measured it (a string with a radius: the same samples
+    and the same candidate pairs, ``results/self_pass.py``), is that closest approach, not
+    measured again.
     """
     if (
         auto.choice.self_contact
@@ -142,12 +147,14 @@ def self_approach(auto: AutoShapeSolver, problem: Problem) -> str:
         return ""
     st = problem.string
     geometry = _contact_geometry(auto, problem)
-    state = auto.inner.snapshot()
-    assert state is not None  # has_warm_start checked above
-    points = auto.inner.model.positions(state.z, geometry.s)
-    if SC.certainly_apart(points, geometry):  # the usual answer, proved without the k-d tree
-        return ""
-    d = SC.closest_distance(points, geometry)
+    d = committed.min_self_distance
+    if np.isnan(d):  # not measured by the solve (a string of radius 0)
+        state = auto.inner.snapshot()
+        assert state is not None  # has_warm_start checked above
+        points = auto.inner.model.positions(state.z, geometry.s)
+        if SC.certainly_apart(points, geometry):  # the usual answer, proved without the k-d tree
+            return ""
+        d = SC.closest_distance(points, geometry)
     if not d < geometry.reach:
         return ""
     return (

@@ -586,6 +586,28 @@ def test_certainly_apart_never_hides_a_candidate():
     assert random_apart > 0  # the shortcut is also exercised off the arcs
 
 
+def test_certainly_apart_settles_a_gentle_shape_on_a_subsample(monkeypatch):
+    """The dense distance test runs on every 4th sample first (a sufficient bound with a margin of
+    the steps skipped): on the gentle arcs it settles them there, and on a shape with a candidate
+    pair it does not answer for the full test (``test_certainly_apart_never_hides_a_candidate``)."""
+    seen = []
+    subsample = SC._subsample_apart
+
+    def recorded(*args):
+        seen.append(subsample(*args))
+        return seen[-1]
+
+    monkeypatch.setattr(SC, "_subsample_apart", recorded)
+    geometry = SC.contact_geometry(L, 0.005)
+    s = geometry.s
+    for radius in (1.0, 0.4):
+        pts = np.stack([radius * np.sin(s / radius), radius * (1 - np.cos(s / radius)), 0 * s], axis=1)
+        assert SC.certainly_apart(pts, geometry) and not SC.candidate_pairs(pts, geometry)
+    assert seen == [True, True]
+    pts = small_loop(s, 10 * geometry.spacing)
+    assert not SC.certainly_apart(pts, geometry) and SC.candidate_pairs(pts, geometry)
+
+
 def test_crossing_flip_is_detected():
     """Two straight strands crossing at right angles 0.05 L apart: moving one through the other flips the
     crossing sign; moving it further away on the same side does not."""

@@ -135,12 +135,11 @@ class AutoShapeSolver:
             # just found too coarse
             self.lower_tried.add(replace(choice, order=self.choice.order).key())
         source, state, problem = (self.inner, None, self.problem) if start is None else start
-        if led is not None:
-            self.inner = self.pool.stream_on(choice, problem, led)
-        else:
-            self.inner = self.pool.solver_for(
-                choice, problem, stream=True, source=source, state=state
-            )
+        if led is not None:  # its own equilibrium of the last update: nothing to map
+            source = None
+        self.inner = self.pool.solver_for(
+            choice, problem, stream=True, source=source, state=state, built=led
+        )
         if start is not None and state is None:
             self.inner.reset()
         waited, built = t1 - t0, time.perf_counter() - t1

@@ -74,7 +74,7 @@ class LeadIn:
         solver = pool.pooled(verdict.choice) if verdict.choice is not None else None
         if solver is None or not mesh_only(snap.choice, verdict.choice):
             return
-        if not solver.has_warm_start:
+        if not solver.has_warm_start:  # (the build maps the snapshot: nothing to start from)
             return
         with self._lock:
             self.solver, self.first = solver, snap.update

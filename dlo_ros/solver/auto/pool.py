@@ -61,6 +61,7 @@ class ModelPool:
         source: ShapeSolver | None = None,
         state=None,
         tag: str = "",
+        built: ShapeSolver | None = None,
     ) -> ShapeSolver:
         """Return the pooled ShapeSolver of ``choice`` set to ``problem`` (built if new).
 
@@ -68,12 +69,16 @@ class ModelPool:
         maps nothing.  Helpers (order shadow, 3D checker) never start a compile and create IPOPT
         lazily; a solver that streams compiles as ``compile`` says.  ``tag`` keeps a separate copy
         (the 3D checker, so that a switch to 3D never waits for a check).  Sets ``choice.twist``
-        from the model built.
+        from the model built.  ``built``: a solver of ``choice`` holding its own warm start (a
+        mesh's lead-in, ``lead_in.py``), pooled under that key instead of the one there (give
+        no ``source``).
         """
         reduced, opts = self.reduced.reduce(choice, problem)
         key = (tag,) + choice.key()
         with self._lock:
             solver = self._models.pop(key, None)
+        if built is not None:
+            solver = built
         if solver is None:
             solver = ShapeSolver(
                 reduced,
@@ -91,20 +96,6 @@ class ModelPool:
         choice.twist = solver.model.layout.twist
         if source is not None and not solver.adopt_warm_start(source, state):
             solver.reset()  # nothing to map: never keep an older, unrelated warm start
-        return solver
-
-    def stream_on(self, choice: ModelChoice, problem: Problem, solver: ShapeSolver) -> ShapeSolver:
-        """Pool ``solver``, built for ``choice``, as a model to stream on, its warm start its own.
-
-        Set to ``problem`` (its poses only differ), compiling as ``compile`` says.
-        """
-        key = ("",) + choice.key()
-        with self._lock:
-            self._models.pop(key, None)
-        solver.set_problem(self.reduced.reduce(choice, problem)[0])
-        self._insert(key, solver)
-        solver.start_compile(self.compile)
-        choice.twist = solver.model.layout.twist
         return solver
 
     def _insert(self, key: tuple, solver: ShapeSolver) -> None:

@@ -12,8 +12,8 @@ what the stream knows of its checks.  Each function takes the
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
 from concurrent.futures import wait
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np

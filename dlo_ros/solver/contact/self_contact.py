@@ -275,9 +275,8 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
         m += 1
     big = max(m + 1, int(np.ceil(1.25 * reach / h)) + 1)
     if n < 3 or n > 401 or m >= n:
-        return (
-            n < 2 or m >= n
-        )  # no pair is far enough apart, or too many samples for the dense test
+        # no pair is far enough apart, or too many samples for the dense test
+        return n < 2 or m >= n
     if geometry.held.size:
         grips = [
             np.flatnonzero(geometry.held == g)
@@ -289,9 +288,8 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
                     return False
     steps = np.diff(points, axis=0)
     lengths = np.sqrt(np.einsum("ij,ij->i", steps, steps))
-    if (
-        not lengths.min() > 0.1 * h
-    ):  # (a step this short would leave the strict inequalities to rounding)
+    # (a step this short would leave the strict inequalities to rounding)
+    if not lengths.min() > 0.1 * h:
         return False
     unit = steps / lengths[:, None]
     turns = np.arccos(np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0))
@@ -308,15 +306,13 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
     shortest = float(np.min(windows[m:] - windows[: n - m]))
     if not np.cos(most_turning(m) / 2) * shortest > geometry.distance * (1 + 1e-9):
         return False
-    if big > n - 1:
-        return True
     # the turning bound over 2·SUBSAMPLE more segments lets the dense test start there, where a
     # subsample of the points can settle it
     wide = big + 2 * SUBSAMPLE
     if wide <= n - 1 and most_turning(wide - 1) < np.pi / 2 - 1e-9:
         if _subsample_apart(points, wide, reach, float(lengths.max())):
             return True
-    return _min_squared(points, _off_band(n, big)) > reach * reach * (1 + 1e-9) + 1e-15
+    return big > n - 1 or _min_squared(points, _off_band(n, big)) > reach**2 * (1 + 1e-9) + 1e-15
 
 
 #: ``certainly_apart``'s dense test tries every SUBSAMPLE-th sample first
@@ -326,10 +322,9 @@ SUBSAMPLE = 4
 def _subsample_apart(points: np.ndarray, wide: int, reach: float, longest: float) -> bool:
     """Tell (sufficient, not necessary) whether all pairs b − a ≥ ``wide`` are beyond ``reach``.
 
-    On every SUBSAMPLE-th sample and the last: each sample a lies within j/2 steps of one of them,
-    a' (j = SUBSAMPLE), so |x_a − x_b| ≥ |x_a' − x_b'| − j·``longest`` (the longest step) and
-    b' − a' ≥ ``wide`` − j; all such subsample pairs farther apart than ``reach`` + j·``longest``
-    settle it with (n/j)² distances instead of n².
+    Every sample a is within j/2 steps of a' of every j-th (j = SUBSAMPLE) and the last, so
+    |x_a − x_b| ≥ |x_a' − x_b'| − j·``longest`` (the longest step), b' − a' ≥ ``wide`` − j: all
+    such pairs beyond ``reach`` + j·``longest`` settle it with (n/j)² distances, not n².
     """
     n, j = len(points), SUBSAMPLE
     idx = np.unique(np.append(np.arange(0, n, j), n - 1))
@@ -339,8 +334,7 @@ def _subsample_apart(points: np.ndarray, wide: int, reach: float, longest: float
 
 def _min_squared(points: np.ndarray, band: np.ndarray) -> float:
     """Return the smallest squared distance between samples over the pairs ``band`` leaves 0."""
-    # centred: smaller numbers, less rounding in |x|² + |y|² − 2 x·y
-    centred = points - points.mean(axis=0)
+    centred = points - points.mean(axis=0)  # smaller numbers: less rounding in |x|² + |y|² − 2 x·y
     sq = np.einsum("ij,ij->i", centred, centred)
     return float((sq[:, None] + sq[None, :] - 2.0 * (centred @ centred.T) + band).min())
 

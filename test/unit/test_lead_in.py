@@ -119,12 +119,57 @@ class FakeSolver:
 K, LAST = 8, 27  # the checked update, and the last before the switch
 
 
+@dataclass
+class FakeChoice:
+    mesh: tuple
+
+    def key(self):
+        return ("the same physics", self.mesh)
+
+
+@dataclass
+class FakeSnapshot:
+    choice: FakeChoice
+    update: int
+    poses: dict
+    generation: int
+
+
+@dataclass
+class FakeVerdict:
+    snapshot: FakeSnapshot
+    choice: FakeChoice | None
+
+
+@dataclass
+class FakePool:
+    solver: FakeSolver
+
+    def pooled(self, choice):
+        return self.solver
+
+
 def begun(solver, generation=3) -> LeadIn:
+    """A lead-in begun on a check of update K whose verdict names another mesh, built."""
     lead = LeadIn(LAST, generation)
-    with lead._lock:  # what begin() does once the verdict named a built mesh
-        lead.solver, lead.first = solver, K
-        lead._solve(K, {"u": K})
+    snap = FakeSnapshot(FakeChoice((1,)), K, {"u": K}, generation)
+    lead.begin(FakePool(solver), FakeVerdict(snap, FakeChoice((2,))))  # type: ignore[arg-type]
     return lead
+
+
+def test_it_begins_on_a_change_of_mesh_alone():
+    snap = FakeSnapshot(FakeChoice((1,)), K, {"u": K}, 3)
+    for choice in (None, FakeChoice((1,))):  # the model kept; the same mesh
+        lead = LeadIn(LAST, 3)
+        lead.begin(FakePool(FakeSolver()), FakeVerdict(snap, choice))  # type: ignore[arg-type]
+        assert lead.solver is None
+    other_physics = FakeChoice((2,))
+    other_physics.key = lambda: ("3D", (2,))  # type: ignore[method-assign]
+    lead = LeadIn(LAST, 3)
+    lead.begin(FakePool(FakeSolver()), FakeVerdict(snap, other_physics))  # type: ignore[arg-type]
+    assert lead.solver is None
+    solver = FakeSolver()
+    assert begun(solver).solver is solver and solver.seen == [K]
 
 
 def test_it_follows_every_strideth_update_and_the_last_before_the_switch():

@@ -151,7 +151,7 @@ class FakePool:
 
 def begun(solver, generation=3) -> LeadIn:
     """A lead-in begun on a check of update K whose verdict names another mesh, built."""
-    lead = LeadIn(LAST, generation)
+    lead = LeadIn(K, LAST, generation)
     snap = FakeSnapshot(FakeChoice((1,)), K, {"u": K}, generation)
     lead.begin(FakePool(solver), FakeVerdict(snap, FakeChoice((2,))))  # type: ignore[arg-type]
     return lead
@@ -160,12 +160,12 @@ def begun(solver, generation=3) -> LeadIn:
 def test_it_begins_on_a_change_of_mesh_alone():
     snap = FakeSnapshot(FakeChoice((1,)), K, {"u": K}, 3)
     for choice in (None, FakeChoice((1,))):  # the model kept; the same mesh
-        lead = LeadIn(LAST, 3)
+        lead = LeadIn(K, LAST, 3)
         lead.begin(FakePool(FakeSolver()), FakeVerdict(snap, choice))  # type: ignore[arg-type]
         assert lead.solver is None
     other_physics = FakeChoice((2,))
     other_physics.key = lambda: ("3D", (2,))  # type: ignore[method-assign]
-    lead = LeadIn(LAST, 3)
+    lead = LeadIn(K, LAST, 3)
     lead.begin(FakePool(FakeSolver()), FakeVerdict(snap, other_physics))  # type: ignore[arg-type]
     assert lead.solver is None
     solver = FakeSolver()

@@ -113,7 +113,7 @@ def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
     longer (module docstring, :func:`due`).
     """
     apply_at = snap.update + CHECK_LAG
-    lead = LeadIn(apply_at + BUILD_LAG - 1, snap.generation)
+    lead = LeadIn(snap.update, apply_at + BUILD_LAG - 1, snap.generation)
     if auto.worker.background:
         i = ORDERS.index(snap.choice.order)
         keys = {("",) + replace(snap.choice, order=o).key() for o in ORDERS[max(i - 1, 0) : i + 2]}
@@ -133,11 +133,12 @@ def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
 def lead_step(auto: AutoShapeSolver, pending: PendingCheck, update: int, poses: dict) -> None:
     """Queue (or, checks 'sync', run) the lead-in's solve at streamed update ``update``.
 
-    ``poses``: the update's inner poses.  Each is queued after the check (the worker runs its jobs
-    in order), so that it finds the lead-in begun if the verdict names a mesh (:mod:`.lead_in`).
+    ``poses``: the update's inner poses.  Only the updates it follows are queued, each after the
+    check (the worker runs its jobs in order), so that it finds the lead-in begun if the verdict
+    names a mesh (:mod:`.lead_in`).
     """
     lead = pending.lead
-    if lead is None or update > lead.last:
+    if lead is None or not lead.follows(update):
         return
     generation = auto.book.generation
     if auto.worker.background:

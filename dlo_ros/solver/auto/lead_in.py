@@ -50,18 +50,17 @@ def mesh_only(before, after) -> bool:
 class LeadIn:
     """The lead-in of one held check's switch (module docstring).
 
-    ``last``: the last update it follows (a − 1); ``generation``: the stream's switch count when
-    its check started (a later one ends it: the verdict is stale).  ``solver``: the new mesh
-    (None until a verdict names one, and once a solve was not ``ok``: ``failed`` says why);
-    ``first``: the checked update (the first it solves at); ``through``: the last update solved
-    on it.
+    ``first``: the checked update (the first it solves at); ``last``: the last update it follows
+    (a − 1); ``generation``: the stream's switch count when its check started (a later one ends
+    it: the verdict is stale).  ``solver``: the new mesh (None until a verdict names one, and once
+    a solve was not ``ok``: ``failed`` says why); ``through``: the last update solved on it.
     """
 
+    first: int
     last: int
     generation: int
     solver: ShapeSolver | None = None
     through: int = -1
-    first: int = 0
     failed: str = ""
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -77,8 +76,8 @@ class LeadIn:
         if not solver.has_warm_start:  # (the build maps the snapshot: nothing to start from)
             return
         with self._lock:
-            self.solver, self.first = solver, snap.update
-            self._solve(snap.update, snap.poses)
+            self.solver = solver
+            self._solve(self.first, snap.poses)
 
     def follows(self, update: int) -> bool:
         """Tell whether the lead-in solves at streamed update ``update`` (module docstring)."""

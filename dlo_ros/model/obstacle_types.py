@@ -10,7 +10,8 @@ vector ``p`` (its pose and size, the NLP's layout in ``fields``):
   the distance (``distance_bound``) that the reach test of ``solver.auto`` uses;
 * whether it lies clear of a plane (``clear_of_plane``) or fits in it (``planarity_violation``):
   the planar model's two questions;
-* whether it is ``flat`` (no curvature: ``solver.obstacle_slots`` gives it no slots);
+* whether it is ``flat`` (no curvature: ``solver.obstacle_slots`` gives it slots only at isolated
+  touches);
 * a ``Primitive``: the shape the node's markers and the rerun recording draw, without knowing the
   type.
 
@@ -141,7 +142,7 @@ class ObstacleType(ABC):
     keys: ClassVar[dict[str, Key]]  # scene keys besides ``type`` and ``name``
     #: where each named field sits in p (``Obstacle``'s accessors)
     fields: ClassVar[dict[str, slice | int]]
-    flat: ClassVar[bool] = False  # no curvature: no obstacle slots (solver.obstacle_slots)
+    flat: ClassVar[bool] = False  # no curvature: slots at isolated touches only (obstacle_slots)
 
     @abstractmethod
     def parse(self, d: Mapping[str, Any], where: str) -> np.ndarray:

@@ -12,6 +12,7 @@ ROTATIONS = ("director", "euler")
 BASES = ("chebyshev", "fourier", "elements")
 #: where the obstacle rows sit: uniform samples, or the element mesh's own nodes
 OBSTACLE_POINTS = ("samples", "nodes")
+SLOTTED_OBSTACLES = ("all", "flat")
 #: whether model 'auto' may leave the scene's plane ('keep': a string held in it)
 PLANES = ("auto", "keep")
 
@@ -30,10 +31,12 @@ class SolverOptions:
     uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is imposed.  obstacle_slots:
     per obstacle, rows whose arc lengths are parameters, placed at the string's closest approaches
     to the obstacle and moved with them (solver/contact/obstacle_slots.py); 0 (default): the
-    samples alone.  obstacle_points: where the obstacle rows sit: 'samples' (default: the
-    ``obstacle_samples`` uniform arc lengths) or 'nodes' (the element mesh's LGL nodes, so a mesh
-    refined near a contact resolves it finer; element models only: model 'full' with rotation
-    'director', or basis 'elements'; solver/contact/obstacle_points.py).
+    samples alone.  slotted_obstacles: which obstacles get them: 'all' (default) or 'flat' (only
+    those without curvature, such as a table; auto's element models, which follow a curved
+    contact by refining the mesh about it).  obstacle_points: where the obstacle rows sit:
+    'samples' (default: the ``obstacle_samples`` uniform arc lengths) or 'nodes' (the element
+    mesh's LGL nodes, so a mesh refined near a contact resolves it finer; element models only:
+    model 'full' with rotation 'director', or basis 'elements'; solver/contact/obstacle_points.py).
     frame: 'auto' rotates the Euler-angle reference so the straight string sits at θ = π/2 (away
     from the singularity); 'paper' is the paper's frame (singular at the straight state).
     rotation: how a 3D model represents the material frame: 'director' (default: nodal unit
@@ -72,6 +75,7 @@ class SolverOptions:
     quadrature_nodes: int = 40
     obstacle_samples: int = 41
     obstacle_slots: int = 0
+    slotted_obstacles: str = "all"
     obstacle_points: str = "samples"
     frame: str = "auto"
     output_points: int = 51
@@ -181,7 +185,12 @@ class SolverOptions:
             )
 
     def _validate_obstacle_points(self) -> None:
-        """Refuse an unknown ``obstacle_points``, and 'nodes' on a model without elements."""
+        """Refuse unknown ``obstacle_points``/``slotted_obstacles``, 'nodes' without elements."""
+        if self.slotted_obstacles not in SLOTTED_OBSTACLES:
+            raise ValueError(
+                f"solver.slotted_obstacles: must be one of {SLOTTED_OBSTACLES}, "
+                f"got {self.slotted_obstacles!r}"
+            )
         if self.obstacle_points not in OBSTACLE_POINTS:
             raise ValueError(
                 f"solver.obstacle_points: must be one of {OBSTACLE_POINTS}, "

@@ -379,9 +379,9 @@ class ShapeSolver:
             if self.functions.waiting and time.monotonic() - self._cache_checked > CACHE_RECHECK_S:
                 self._cache_checked = time.monotonic()
                 self.functions.load_cached()
-            warm = warm and self._state is not None
-            limit = self.options.update_time_limit
-            ctx.deadline = self._strikes.deadline(t0, limit, is_limited(warm, commit, limited))
+            warm, limit = warm and self._state is not None, self.options.update_time_limit
+            ctx.streamed = is_limited(warm, commit, limited)
+            ctx.deadline = self._strikes.deadline(t0, limit, ctx.streamed)
             result, state = run_update(ctx, problem, warm, self._turn_tracker)
             if self._strikes.stopped(ctx.deadline, result.status):
                 result.message = limit_message(limit, result.message)

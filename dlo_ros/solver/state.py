@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # for the annotation only: self_contact's own state is not this module's
+if TYPE_CHECKING:  # for the annotation only: the contact modules' own states are not this module's
+    from .contact.obstacle_slots import SlotMotion
     from .contact.self_contact import ContactSlots
 
 
@@ -45,6 +46,9 @@ class SolverState:
     #: the outputs at z as the compiled loop that reached it evaluated them
     #: (``native.outputs.ComputedOutputs``, with the inputs it used), None when not evaluated
     outputs: object | None = None
+    #: how the obstacle contact slots moved over the update that reached this state
+    #: (``contact/obstacle_slots.SlotMotion``, ``update/slot_rounds.py``), None: not tracked
+    slot_motion: SlotMotion | None = None
 
     def copy(self) -> SolverState:
         """Return a copy of z, λ and p (what another thread may adopt later).
@@ -57,4 +61,5 @@ class SolverState:
             self.lam_x.copy(),
             self.p.copy(),
             contact=None if self.contact is None else self.contact.copy(),
+            slot_motion=self.slot_motion,
         )

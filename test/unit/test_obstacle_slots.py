@@ -127,6 +127,42 @@ def test_minima_finds_a_minimum_between_samples_and_none_on_a_flat_contact():
     assert OSL.minima(s, flat(s), 0.025, 0.01, 1.0, flat)[0].size == 0
 
 
+def test_on_a_flat_obstacle_minima_finds_an_isolated_touch_only():
+    """A half-space: the sagging bottom of a cable touching it (clearance rising 10 (s − s*)²) gets
+    a slot; the sag between two rows of a strip lying on it (3e-5 m deep), and a shape through it
+    (a cold guess), get none."""
+    s = OSL.fine_grid(1.0, 41)
+    star = 0.4137
+
+    def bottom(x):
+        return 10.0 * (np.asarray(x) - star) ** 2
+
+    found_s, found_c = OSL.minima(s, bottom(s), 0.025, 0.01, 1.0, bottom, flat=True)
+    assert found_s.size == 1 and abs(found_s[0] - star) < 1e-9 and abs(found_c[0]) < 1e-12
+
+    def lying(x):  # on the plane from 0.3 to 0.6, sagging 3e-5 m between rows 0.025 apart
+        x = np.asarray(x)
+        sag = -3e-5 * np.sin(np.pi * (x - 0.3) / 0.025) ** 2
+        return np.where((x > 0.3) & (x < 0.6), sag, 10.0 * np.minimum(abs(x - 0.3), abs(x - 0.6)) ** 2)
+
+    assert OSL.minima(s, lying(s), 0.025, 0.01, 1.0, lying, flat=True)[0].size == 0
+
+    def through(x):
+        return bottom(x) - 1e-3
+
+    assert OSL.minima(s, through(s), 0.025, 0.01, 1.0, through, flat=True)[0].size == 0
+    assert OSL.minima(s, through(s), 0.025, 0.01, 1.0, through)[0].size == 1  # curved: it does
+
+
+def test_rows_close_to_a_slot_are_switched_off():
+    samples = np.linspace(0.0, 1.0, 401)  # 2.5 mm apart
+    on = OSL.rows_on(samples, np.array([0.5011]), 1.0)
+    off = samples[on == 0]
+    assert off.min() > 0.5011 - OSL.CLEAR and off.max() < 0.5011 + OSL.CLEAR and off.size == 2
+    coarse = np.linspace(0.0, 1.0, 41)  # 25 mm apart: the nearest row still goes
+    assert np.flatnonzero(OSL.rows_on(coarse, np.array([0.5111]), 1.0) == 0).tolist() == [20]
+
+
 def test_a_slot_keeps_its_index_and_stays_put_within_the_tolerance():
     samples = np.linspace(0.0, 1.0, 41)
     first = OSL.assign((np.array([0.3, 0.71]), np.array([-1e-4, 0.0])), samples, 2, None, 1.0)

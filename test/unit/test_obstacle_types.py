@@ -170,5 +170,5 @@ def test_primitive_describes_the_shape(name):
     assert ob.h(surface) == pytest.approx(0.0, abs=1e-12)
 
 
-def test_only_flat_types_get_no_slots():
+def test_only_the_half_space_is_flat():
     assert FLAT == tuple(n for n, k in OBSTACLE_TYPES.items() if k.flat) == ("halfspace",)

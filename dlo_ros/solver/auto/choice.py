@@ -31,6 +31,9 @@ MAX_SAMPLES = 641
 #: self-contact slots of the model auto switches to when a shape comes within reach of itself
 #: (``solver.self_contact_pairs`` when set)
 AUTO_SELF_CONTACT_PAIRS = 16
+#: obstacle contact slots per obstacle of auto's element models (``solver.obstacle_slots`` when
+#: set): a point contact touches where the shape does, not at the mesh node nearest it
+AUTO_OBSTACLE_SLOTS = 2
 
 
 @dataclass

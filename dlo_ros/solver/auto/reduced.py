@@ -7,7 +7,7 @@ from dataclasses import replace
 from ...model.problem import Problem
 from ...model.profile import Profile
 from ..options import SolverOptions
-from .choice import AUTO_SELF_CONTACT_PAIRS, ModelChoice
+from .choice import AUTO_OBSTACLE_SLOTS, AUTO_SELF_CONTACT_PAIRS, ModelChoice
 
 
 class ReducedModels:
@@ -30,8 +30,8 @@ class ReducedModels:
         Gravity is zeroed when dropped, the stretch stiffness removed when inextensible, and only
         ``choice.obstacles`` are kept; the options name the planar model (basis 'elements' unless
         the scene set another than the default) or the full model with the choice's order,
-        quadrature (≥ 2·order + 8), obstacle rows (:meth:`obstacle_points`), obstacle samples
-        and self-contact slots.
+        quadrature (≥ 2·order + 8), obstacle rows (:meth:`obstacle_points`), obstacle samples,
+        obstacle contact slots (AUTO_OBSTACLE_SLOTS on element models) and self-contact slots.
         """
         key = (choice.gravity, choice.stretch, choice.obstacles)
         hit = self._string_cache
@@ -59,10 +59,19 @@ class ReducedModels:
             # scene chose another basis than the default
             default = self.options.basis == SolverOptions.basis
             planar = {"basis": "elements"} if choice.planar and default else {}
+            points = self.obstacle_points(choice)
+            # an element model's point contact in a slot where the shape touches: at the
+            # node nearest it, it carries an error the mesh could only chase (#37)
+            slots = self.options.obstacle_slots or (
+                AUTO_OBSTACLE_SLOTS if points == "nodes" else 0
+            )
             opts = self.options.with_model(
                 "planar" if choice.planar else "full",
                 **planar,
-                obstacle_points=self.obstacle_points(choice),
+                obstacle_points=points,
+                obstacle_slots=slots,
+                # a curved contact is followed by the mesh refined about it (mesh_check.py)
+                slotted_obstacles="flat" if points == "nodes" else self.options.slotted_obstacles,
                 order=choice.order,
                 quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
                 obstacle_samples=choice.samples,

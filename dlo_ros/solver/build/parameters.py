@@ -148,7 +148,8 @@ class ProblemParameters:
             def clearance_at(s: np.ndarray, ob=ob) -> np.ndarray:
                 return -ob.h_many(m.positions_at_rows(z, m.position_rows(s))) - radius
 
-            if ob.type in OSL.FLAT:
+            flat = ob.type in OSL.FLAT
+            if not flat and nlp.options.slotted_obstacles == "flat":
                 found = (np.zeros(0), np.zeros(0))
             else:
                 found = OSL.minima(
@@ -158,9 +159,11 @@ class ProblemParameters:
                     OSL.band(L, radius),
                     L,
                     clearance_at,
+                    flat,
                 )
             previous = self.slots(keep, i) if keep is not None else None
-            new = OSL.assign(found, nlp.obstacle_s, nlp.obstacle_slots, previous, L)
+            within = OSL.slot_tolerance(L, nlp.options.error_tolerance)
+            new = OSL.assign(found, nlp.obstacle_s, nlp.obstacle_slots, previous, L, within)
             self.write_slots(p, i, new, keep if new.kept else None)
             placements.append(new)
         return placements

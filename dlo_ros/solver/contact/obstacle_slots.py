@@ -22,16 +22,22 @@ the samples and puts a slot at each of its K deepest local minima (refined by pa
 evaluated points) that lie within ``band`` of the obstacle and at least ``DIP`` · L below the
 clearance half a sample spacing to either side: a point contact, or the deepest cut of a contact
 along an arc.  A string lying flat along a table gets none (it sags between the samples by far
-less; they resolve it), and a half-space none at all (``FLAT``: a short flat contact has two
-symmetric dips, and a slot in one of them would pick the side by rounding).  The sample nearest
-each slot is switched off: a row a fraction of a spacing from another nearly repeats it.
+less; they resolve it).  On an obstacle without curvature (``FLAT``: a half-space) a slot goes
+only where the string touches at an isolated point, its clearance rising by ``FLAT_DIP`` · L half
+a spacing to either side (the bottom of a cable sagging onto a table), and not where it passes
+through the plane: a short flat contact has two symmetric dips about µm deep, and a slot in one of
+them would pick the side by rounding; a heavy strip's cold guess through its floor (the paper's
+Fig. 3), slotted where it dips deepest, arched over onto another equilibrium.  The
+sample nearest each slot is switched off: a row a fraction of a spacing from another nearly
+repeats it.
 
-A slot is kept while its minimum moves less than ``TOLERANCE`` · L (the parameters then change only
-in the grip targets, the case Newton reuses its stored matrix for).  After a solve the slots are
-placed on the answer; when a minimum that touches (c < ``TOUCH`` · L) moved further than that, the
+A slot is kept while its minimum moves less than ``slot_tolerance``: ``TOLERANCE`` · L, at most
+``SLOT_SHARE`` of the error tolerance δ (the parameters then change only in the grip targets, the
+case Newton reuses its stored matrix for).  After a solve the slots are placed on the answer; when
+a minimum that touches (c < ``TOUCH`` · L) is further than that from its slot's fixed point, the
 solve is repeated warm from the answer, with the slot at the secant estimate of the fixed point σ =
-s*(σ) from the rounds so far (``ShapeSolver``; a short flat contact otherwise sends its deepest
-point from one side of the slot to the other and back).
+s*(σ) from the rounds so far (``update/slot_rounds.py``; a short flat contact otherwise sends its
+deepest point from one side of the slot to the other and back).
 """
 
 from __future__ import annotations
@@ -44,8 +50,12 @@ import numpy as np
 from ...model.obstacle_types import OBSTACLE_TYPES
 from .obstacle_points import nearest_row, row_spacing
 
-#: a slot is kept, and a solve is not repeated, while its minimum moved less than this × L
+#: a slot is kept, and a solve is not repeated, while its minimum moved less than this × L (and
+#: than SLOT_SHARE × the error tolerance: ``slot_tolerance``)
 TOLERANCE = 3e-4
+
+#: a slot may sit this fraction of the error tolerance δ from its fixed point
+SLOT_SHARE = 0.04
 
 #: a closest approach touches when its clearance is below this × L
 TOUCH = 1e-6
@@ -54,9 +64,18 @@ TOUCH = 1e-6
 #: to each side
 DIP = 1e-6
 
-#: obstacle types without curvature: their slots stay empty (a string on a plane does not cut in
-#: between the samples beyond its own sag, and a flat contact has no point to slide to)
+#: obstacle types without curvature: a slot only at an isolated touch (a string on a plane does not
+#: cut in between the samples beyond its own sag, and a flat contact has no point to slide to)
 FLAT = tuple(name for name, kind in OBSTACLE_TYPES.items() if kind.flat)
+
+#: on a ``FLAT`` obstacle a closest approach gets a slot when it lies this × L below the clearance
+#: half a sample spacing to each side: a point where a sagging string touches the plane, not the
+#: sag between two rows of a string lying on it
+FLAT_DIP = 1e-4
+
+#: rows closer than this × L to a filled slot are switched off (``rows_on``): the clearance rises
+#: off a touching point by d²/2R, 2.5e-5 m at d = 2 mm on the demo's post
+CLEAR = 2e-3
 
 #: the clearance is measured on FINE points per sample interval (at most 4096 intervals in all)
 FINE = 16
@@ -76,6 +95,23 @@ class SlotPlacement:
     samples_on: np.ndarray
     clearance: np.ndarray
     kept: bool = False
+
+
+@dataclass(frozen=True)
+class SlotMotion:
+    """How a stream's slots moved over one update (per obstacle × slot; nan: not measured).
+
+    fixed: each slot's fixed point σ = s*(σ) as estimated on the update's answer [m]; drift: its
+    move over the update [m]; steady: the drift within half of itself of the update before's (a
+    contact sliding steadily, whose next place the drift predicts); slope: dg/dσ of
+    g(σ) = s*(σ) − σ, the answer's closest approach s* against the slot σ it was solved with (a
+    secant over the update's rounds, kept from earlier updates while no round measures it).
+    """
+
+    fixed: np.ndarray
+    drift: np.ndarray
+    steady: np.ndarray
+    slope: np.ndarray
 
 
 def fine_grid(length: float, samples: int) -> np.ndarray:
@@ -111,13 +147,18 @@ def minima(
     width_band: float,
     length: float,
     clearance_at: Callable[[np.ndarray], np.ndarray],
+    flat: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Return the clearance's local minima that are deep enough, deepest first.
 
     Each is (s*, c(s*)): the local minima of the clearance within ``width_band`` that dip DIP·L
-    below the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``: c
-    at any arc lengths; each minimum is refined by two parabola steps through evaluated points).
+    below the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``:
+    c at any arc lengths; each minimum is refined by two parabola steps through evaluated points).
+    ``flat`` (an obstacle without curvature): FLAT_DIP·L instead of DIP·L, and only minima that
+    touch, not more than FLAT_DIP·L inside (a shape through the plane, such as a cold solve's
+    first guess, says nothing of where it will touch).
     """
+    dip = FLAT_DIP if flat else DIP
     inner = clearance[1:-1]
     k = (
         np.flatnonzero((inner <= clearance[:-2]) & (inner < clearance[2:]) & (inner < width_band))
@@ -136,7 +177,9 @@ def minima(
         np.concatenate([s, np.clip(s - 0.5 * h_s, 0, length), np.clip(s + 0.5 * h_s, 0, length)])
     )
     c, left, right = both[: s.size], both[s.size : 2 * s.size], both[2 * s.size :]
-    deep = np.minimum(left, right) - c >= DIP * length
+    deep = np.minimum(left, right) - c >= dip * length
+    if flat:
+        deep &= c >= -dip * length
     s, c = s[deep], c[deep]
     order = np.argsort(c, kind="stable")
     return s[order], c[order]
@@ -148,15 +191,18 @@ def assign(
     slots: int,
     previous: "SlotPlacement | None",
     length: float,
+    within: float | None = None,
 ) -> SlotPlacement:
     """Place the deepest minima found in the slots, keeping each near its previous slot.
 
     The deepest ``slots`` minima ``found`` in slots, each kept at the index of the previous slot
     nearest to it (within two sample spacings), and kept exactly when it moved less than
-    TOLERANCE·L.  ``samples``: the obstacle rows' arc lengths (uniform samples or mesh nodes,
-    ``obstacle_points.py``); the row nearest each filled slot is switched off.
+    ``within`` [m] (default TOLERANCE·L; a solver's ``slot_tolerance``).  ``samples``: the
+    obstacle rows' arc lengths (uniform samples or mesh nodes, ``obstacle_points.py``); the rows
+    about each filled slot are switched off (``rows_on``).
     """
     h_s = row_spacing(samples)
+    keep = TOLERANCE * length if within is None else within
     s_new, c_new = found[0][:slots], found[1][:slots]
     s, on, c = np.zeros(slots), np.zeros(slots), np.full(slots, np.inf)
     free = list(range(slots))
@@ -177,7 +223,7 @@ def assign(
         assert previous is not None  # k is one of previous's slots
         free.remove(k)
         s[k], on[k], c[k] = (
-            (previous.s[k] if abs(previous.s[k] - sj) <= TOLERANCE * length else sj),
+            (previous.s[k] if abs(previous.s[k] - sj) <= keep else sj),
             1.0,
             cj,
         )
@@ -189,6 +235,30 @@ def assign(
     kept = (
         previous is not None and np.array_equal(on, previous.on) and np.array_equal(s, previous.s)
     )
-    samples_on = np.ones(len(samples))
-    samples_on[nearest_row(samples, s[on > 0])] = 0.0
-    return SlotPlacement(s, on, samples_on, c, bool(kept))
+    return SlotPlacement(s, on, rows_on(samples, s[on > 0], length), c, bool(kept))
+
+
+def slot_tolerance(length: float, error_tolerance: float) -> float:
+    """Return how far [m] a slot may sit from its fixed point: TOLERANCE·L, at most SLOT_SHARE·δ.
+
+    δ: ``solver.error_tolerance`` [m] (0: 1e-3·L).  The centreline moves by about 1.3× a point
+    contact's shift (``adapt/contact_shift.py``), so a slot within SLOT_SHARE·δ of its fixed point
+    keeps that error, twice over in auto's estimate, well under δ/2.
+    """
+    return min(TOLERANCE * length, SLOT_SHARE * (error_tolerance or 1e-3 * length))
+
+
+def rows_on(samples: np.ndarray, filled: np.ndarray, length: float) -> np.ndarray:
+    """Return the rows' switches (1.0 on) with slots at ``filled`` [m].
+
+    Off: the row nearest each slot, and every row closer to one than CLEAR·L (rows that a
+    refinement crowded about a contact shared its force with the slot, each pushing off the
+    place it touches: on the post, the error estimate 13× the true error).
+    """
+    samples = np.asarray(samples, dtype=float)
+    out = np.ones(len(samples))
+    if filled.size:
+        out[nearest_row(samples, filled)] = 0.0
+        near = np.min(np.abs(samples[:, None] - filled[None, :]), axis=1) < CLEAR * length
+        out[near] = 0.0
+    return out

@@ -48,7 +48,8 @@ def pack_parameters(
     (``keep``: a vector whose slots stay while still placed well); ``slot_override``: the slots of
     a repeated solve (``slot_rounds.py``); ``contact``: the self-contact pairs of a round.
     """
-    p = parameters.pack(problem, z_reference, keep)
+    # the slots of a round are given: no placement on the reference shape
+    p = parameters.pack(problem, z_reference, keep, slots=not slot_override)
     for i, placement in enumerate(slot_override or ()):
         parameters.write_slots(p, i, placement)
     if contact is not None:

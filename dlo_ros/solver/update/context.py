@@ -10,7 +10,8 @@
 * ``clamp_turns`` and ``turns``: the clamps' turns since the committed shape up to ``start``'s
   targets and up to this target (``topology.ClampTurns``, the linking-number check);
 * ``deadline``: ``time.perf_counter()`` at which a streamed update stops starting IPOPT calls
-  (None for a cold solve or a query: ``time_limit.py``);
+  (None for a cold solve or a query: ``time_limit.py``); ``streamed``: whether this is a
+  streamed update, time limit or not (the slot rounds it may spend, ``slot_rounds.py``);
 * ``contact`` and ``slot_override``: the self-contact pairs and obstacle slots a round fixes in
   the parameter vector (``attempts.pack``);
 * ``newton_far``: set by the escalation ladder when its Newton answer went far from ``start``
@@ -72,6 +73,8 @@ class UpdateContext:
     clamp_turns: ClampTurns | None = None
     turns: ClampTurns | None = None
     deadline: float | None = None
+    #: a streamed update (``time_limit.is_limited``), whether or not a time limit is set
+    streamed: bool = False
     contact: ContactSlots | None = None
     slot_override: list | None = None
     newton_far: bool = False

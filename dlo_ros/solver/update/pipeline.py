@@ -27,7 +27,7 @@ from .contact_rounds import solve_self_contact
 from .context import Outcome, UpdateContext
 from .linking import ClampTurnTracker
 from .moments import solve_with_moments
-from .slot_rounds import place_slots_again
+from .slot_rounds import COLD_SLOT_ROUNDS, SLOT_ROUNDS, place_slots_again, predicted_slots
 from .substeps import JUMP_REFUSALS, in_substeps
 
 
@@ -42,10 +42,13 @@ def solve_update(ctx: UpdateContext, problem: Problem, warm: bool) -> Outcome:
         return solve_self_contact(ctx, problem, warm)
     start = ctx.start if warm else None
     ctx.newton_far = False
-    result, state = solve_with_moments(ctx, problem, warm)
+    predicted = predicted_slots(ctx.parts, start) if nlp.obstacle_slots and start else None
+    with ctx.scoped(slot_override=predicted if predicted else ctx.slot_override):
+        result, state = solve_with_moments(ctx, problem, warm)
     newton_only = result.ipopt_status.startswith("Newton")
     if nlp.obstacle_slots:
-        result, state = place_slots_again(ctx, problem, result, state, solve_with_moments)
+        rounds = SLOT_ROUNDS if ctx.streamed else COLD_SLOT_ROUNDS
+        result, state = place_slots_again(ctx, problem, result, state, solve_with_moments, rounds)
     if start is not None and state is not None and LK.needs_check(ctx, result, newton_only):
         jump = LK.linking_jump(ctx, problem, start, state)
         if jump is not None:

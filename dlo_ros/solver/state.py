@@ -32,7 +32,9 @@ class SolverState:
     jacobian: np.ndarray | None = None  # ∂g/∂z at z
     energies: np.ndarray | None = None  # bend, twist, stretch, gravity, work at z
     gradient: np.ndarray | None = None  # ∇f at z
-    g: np.ndarray | None = None  # constraint values (scaled rows) at z
+    #: constraint values (scaled rows) at z; a moved contact slot's row that carries a force
+    #: counts as at its bound (``update/slot_rounds.carry_slots``: Newton keeps it active)
+    g: np.ndarray | None = None
     #: eigenvector of the most negative reduced curvature
     unstable_direction: np.ndarray | None = None
     #: (λ_min, its eigenvector in z) of ``hessian`` reduced on the rows that

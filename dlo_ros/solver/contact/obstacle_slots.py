@@ -28,8 +28,8 @@ a spacing to either side (the bottom of a cable sagging onto a table), and not w
 through the plane: a short flat contact has two symmetric dips about µm deep, and a slot in one of
 them would pick the side by rounding; a heavy strip's cold guess through its floor (the paper's
 Fig. 3), slotted where it dips deepest, arched over onto another equilibrium.  The
-sample nearest each slot is switched off: a row a fraction of a spacing from another nearly
-repeats it.
+sample nearest each slot is switched off, and every row closer to it than ``CLEAR`` · L
+(``rows_on``): a row a fraction of a spacing from another nearly repeats it.
 
 A slot is kept while its minimum moves less than ``slot_tolerance``: ``TOLERANCE`` · L, at most
 ``SLOT_SHARE`` of the error tolerance δ (the parameters then change only in the grip targets, the
@@ -99,19 +99,21 @@ class SlotPlacement:
 
 @dataclass(frozen=True)
 class SlotMotion:
-    """How a stream's slots moved over one update (per obstacle × slot; nan: not measured).
+    """How a stream's slots moved over one update (arrays of obstacles × slots).
 
     fixed: each slot's fixed point σ = s*(σ) as estimated on the update's answer [m]; drift: its
-    move over the update [m]; steady: the drift within half of itself of the update before's (a
-    contact sliding steadily, whose next place the drift predicts); slope: dg/dσ of
-    g(σ) = s*(σ) − σ, the answer's closest approach s* against the slot σ it was solved with (a
-    secant over the update's rounds, kept from earlier updates while no round measures it).
+    move over the update [m] (0 where not filled before and after); steady: the drift within half
+    of itself of the update before's (a contact sliding steadily, whose next place the drift
+    predicts); slope: dg/dσ of g(σ) = s*(σ) − σ, the answer's closest approach s* against the
+    slot σ it was solved with (a secant over the update's rounds, kept from earlier updates while
+    no round measures it; nan: not measured); on: the slots filled for the next update (1.0).
     """
 
     fixed: np.ndarray
     drift: np.ndarray
     steady: np.ndarray
     slope: np.ndarray
+    on: np.ndarray
 
 
 def fine_grid(length: float, samples: int) -> np.ndarray:
@@ -154,9 +156,9 @@ def minima(
     Each is (s*, c(s*)): the local minima of the clearance within ``width_band`` that dip DIP·L
     below the clearance half a sample spacing to either side, deepest first (``clearance_at(s)``:
     c at any arc lengths; each minimum is refined by two parabola steps through evaluated points).
-    ``flat`` (an obstacle without curvature): FLAT_DIP·L instead of DIP·L, and only minima that
-    touch, not more than FLAT_DIP·L inside (a shape through the plane, such as a cold solve's
-    first guess, says nothing of where it will touch).
+    ``flat`` (an obstacle without curvature): FLAT_DIP·L instead of DIP·L, and only minima not
+    more than FLAT_DIP·L through the plane (a shape through it, such as a cold solve's first
+    guess, says nothing of where it will touch).
     """
     dip = FLAT_DIP if flat else DIP
     inner = clearance[1:-1]

@@ -48,7 +48,9 @@ def solve_update(ctx: UpdateContext, problem: Problem, warm: bool) -> Outcome:
     newton_only = result.ipopt_status.startswith("Newton")
     if nlp.obstacle_slots:
         rounds = SLOT_ROUNDS if ctx.streamed else COLD_SLOT_ROUNDS
-        result, state = place_slots_again(ctx, problem, result, state, solve_with_moments, rounds)
+        result, state = place_slots_again(
+            ctx, problem, result, state, solve_with_moments, rounds, start
+        )
     if start is not None and state is not None and LK.needs_check(ctx, result, newton_only):
         jump = LK.linking_jump(ctx, problem, start, state)
         if jump is not None:

@@ -2,10 +2,11 @@
 
 Contract:
 
-* ``place_slots_again(ctx, problem, result, state, solve)`` takes a solve's outcome and gives the
-  outcome of at most SLOT_ROUNDS repeats of ``solve`` (the pairs-fixed solve, ``pipeline.py``),
-  each warm from the last answer (``ctx.start``) with the slots moved (``ctx.slot_override``);
-  both fields are restored when it returns;
+* ``place_slots_again(ctx, problem, result, state, solve, rounds, start)`` takes a solve's
+  outcome and gives the outcome of at most ``rounds`` repeats of ``solve`` (the pairs-fixed
+  solve, ``pipeline.py``), each warm from the last answer (``ctx.start``) with the slots moved
+  (``ctx.slot_override``), both fields restored when it returns; the answer's state records how
+  its slots moved from ``start`` (the update's warm start; None for a cold solve);
 * ``carry_slots(parts, start, p)`` gives ``start`` with the slots of ``p``, its multipliers carried
   row by row (what a Newton start needs when the slots moved);
 * ``predicted_slots(parts, start)`` gives the slots a warm update's first solve takes: the
@@ -34,9 +35,9 @@ from .context import Outcome, SolverParts, UpdateContext
 #: how many times a streamed update's solve is repeated with the obstacle contact slots placed on
 #: its own answer (``place_slots_again``)
 SLOT_ROUNDS = 3
-#: as many for a solve that is not a streamed update (a cold solve, a query, auto's re-solves of a
-#: cold solve), whose slot starts where no earlier update put it (the default cable on its table:
-#: 1.3 mm off)
+#: as many for a solve that is not a streamed update (a cold solve, a query, auto's re-solves
+#: outside an update's time limit), whose slot starts where no earlier update put it (the default
+#: cable on its table, cold: 1.3 mm off, converged in 3 rounds where 2 were allowed)
 COLD_SLOT_ROUNDS = 8
 
 #: a solve with the context's start and slots (``pipeline.solve_pairs_fixed``)
@@ -50,6 +51,7 @@ def place_slots_again(
     state: SolverState | None,
     solve: Solve,
     rounds: int = SLOT_ROUNDS,
+    start: SolverState | None = None,
 ) -> Outcome:
     """Repeat a solve while the answer's contacts moved away from their slots.
 
@@ -65,7 +67,6 @@ def place_slots_again(
     """
     iterations, first = result.iterations, result
     history: dict[tuple[int, int], list[tuple[float, float]]] = {}
-    start = ctx.start
     slope = start.slot_motion.slope if start is not None and start.slot_motion else None
     nlp = ctx.parts.nlp
     tolerance = OSL.slot_tolerance(nlp.length, nlp.options.error_tolerance)
@@ -91,8 +92,8 @@ def place_slots_again(
     placed = best is not None and best[2] is state
     if best is not None:
         _, result, state = best
-    if state is not None and start is not None:
-        state.slot_motion = slot_motion(ctx.parts, start, state, history, slope, placed)
+        if state is not None and start is not None:
+            state.slot_motion = slot_motion(ctx.parts, start, state, history, slope, placed)
     # the rounds refine the answer the first solve found: its method and warm start describe the
     # result
     result.iterations, result.ipopt_status, result.warm_started = (
@@ -187,42 +188,51 @@ def slot_motion(
     slope: np.ndarray | None,
     placed: bool,
 ) -> OSL.SlotMotion | None:
-    """Return how the slots moved from ``start`` to ``state`` (None: no slot filled in both).
+    """Return how the slots moved from ``start`` to ``state`` (None: none filled or moved).
 
-    fixed: each slot's fixed point as far as known: σ − g/g' from the placement on ``state``
-    when ``placed`` (``parts.parameters.placements``) and g' is known, else σ; drift: its move
-    from the start's fixed point [m]; slope: the secant of g over this update's rounds
-    (``history``), else the one before (``slope``).
+    With ``placed`` (``parts.parameters.placements`` holds the placement on ``state``): its own
+    (σ, s*) joins the rounds' ``history``, each slot's fixed point is σ − g/g' where g' is known
+    (else σ), and ``on`` is that placement's (a slot whose minimum is gone empties, a new one fills
+    at it); else σ and ``state``'s slots.  drift: the move from the start's fixed point [m];
+    slope: the secant of g over this update's last two answers, else the one before (``slope``).
     """
     nlp, parameters = parts.nlp, parts.parameters
     shape = (len(nlp.slot_rows), nlp.obstacle_slots)
+    if placed:
+        for i, found in enumerate(parameters.placements):
+            new = parameters.slots(state.p, i)
+            for k in np.flatnonzero((found.on > 0) & (new.on > 0)):
+                if (i, k) in history:
+                    history[(i, k)].append((float(new.s[k]), float(found.s[k])))
     new_slope = np.full(shape, np.nan) if slope is None else slope.copy()
     for (i, k), trail in history.items():
         if len(trail) >= 2 and trail[-1][0] != trail[-2][0]:
             (a, fa), (b, fb) = trail[-2], trail[-1]
             new_slope[i, k] = ((fb - b) - (fa - a)) / (b - a)
-    fixed, drift, filled = np.zeros(shape), np.zeros(shape), False
+    fixed, drift, on = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     motion = start.slot_motion
     before = motion.fixed if motion is not None else None
     for i in range(shape[0]):
         old, new = parameters.slots(start.p, i), parameters.slots(state.p, i)
-        fixed[i] = new.s
+        fixed[i], on[i] = new.s, new.on
         new_slope[i, new.on == 0] = np.nan
         if placed:
             found = parameters.placements[i]
+            on[i] = found.on
             for k in np.flatnonzero((found.on > 0) & (new.on > 0)):
                 if _gain(new_slope, i, k) > 1.0:
                     g = found.s[k] - new.s[k]
                     fixed[i, k] += float(np.clip(-g / new_slope[i, k], -4 * abs(g), 4 * abs(g)))
-        both = (old.on > 0) & (new.on > 0)
+            fresh = (found.on > 0) & (new.on == 0)
+            fixed[i, fresh] = found.s[fresh]
+        both = (old.on > 0) & (new.on > 0) & (on[i] > 0)
         origin = old.s if before is None else before[i]
         drift[i, both] = fixed[i, both] - origin[both]
-        filled |= bool(np.any(both))
-    if not filled:
+    if not np.any(on):
         return None
     last = motion.drift if motion is not None else np.zeros(shape)
     steady = (drift != 0) & (np.abs(drift - last) <= 0.5 * np.abs(drift))
-    return OSL.SlotMotion(fixed, drift, steady, new_slope)
+    return OSL.SlotMotion(fixed, drift, steady, new_slope, on)
 
 
 def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> SolverState:
@@ -273,9 +283,9 @@ def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> Solver
 def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:
     """Return the slots of a warm update's first solve: the start's fixed points moved on.
 
-    Each filled slot of ``start.p`` at its fixed point plus its drift where that is steady and
-    under CLEAR·L (``SolverState.slot_motion``, clipped to the string), the rows about it
-    switched off;
+    Each slot the placement on the start's answer filled (``SolverState.slot_motion``) at its
+    fixed point plus its drift where that is steady and under CLEAR·L (clipped to the string),
+    the rows about it switched off; a slot whose minimum was gone is empty;
     None when ``start`` has no motion (the placement on the start shape stands).  A contact that
     landed or jumped is not extrapolated: on the post, a cable lowered onto it had its slot
     predicted 25 mm past the contact.
@@ -283,12 +293,13 @@ def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:
     motion = start.slot_motion
     if motion is None:
         return None
-    nlp, parameters = parts.nlp, parts.parameters
+    nlp = parts.nlp
     out = []
     for i in range(len(nlp.slot_rows)):
-        used = parameters.slots(start.p, i)
+        on = motion.on[i]
         small = np.abs(motion.drift[i]) <= OSL.CLEAR * nlp.length
         drift = np.where(motion.steady[i] & small, motion.drift[i], 0.0)
         moved = np.clip(motion.fixed[i] + drift, 0.0, nlp.length)
-        out.append(_placement(nlp, np.where(used.on > 0, moved, used.s), used.on, used.clearance))
+        s = np.where(on > 0, moved, 0.0)
+        out.append(_placement(nlp, s, on, np.full(on.shape, np.inf)))
     return out

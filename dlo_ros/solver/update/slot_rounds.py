@@ -111,6 +111,11 @@ def _gain(slope: np.ndarray | None, i: int, k: int) -> float:
     return max(1.0, abs(float(slope[i, k])))
 
 
+def _newton_step(g: float, slope: float) -> float:
+    """Return the Newton step −g/g' onto the fixed point g(σ) = 0 [m], at most 4 |g| long."""
+    return float(np.clip(-g / slope, -4 * abs(g), 4 * abs(g)))
+
+
 def slot_offset(
     parts: SolverParts, problem: Problem, state: SolverState, slope: np.ndarray | None = None
 ) -> float:
@@ -168,8 +173,8 @@ def secant_slots(
                     )
             elif _gain(slope, i, k) > 1.0:
                 assert slope is not None  # a gain above 1 is a known slope
-                (b, fb), g = trail[-1], trail[-1][1] - trail[-1][0]
-                s[k] = b + float(np.clip(-g / slope[i, k], -4 * abs(g), 4 * abs(g)))
+                b, fb = trail[-1]
+                s[k] = b + _newton_step(fb - b, float(slope[i, k]))
         override.append(_placement(nlp, s, new.on, new.clearance))
     return override
 
@@ -221,8 +226,7 @@ def slot_motion(
             on[i] = found.on
             for k in np.flatnonzero((found.on > 0) & (new.on > 0)):
                 if _gain(new_slope, i, k) > 1.0:
-                    g = found.s[k] - new.s[k]
-                    fixed[i, k] += float(np.clip(-g / new_slope[i, k], -4 * abs(g), 4 * abs(g)))
+                    fixed[i, k] += _newton_step(found.s[k] - new.s[k], float(new_slope[i, k]))
             fresh = (found.on > 0) & (new.on == 0)
             fixed[i, fresh] = found.s[fresh]
         both = (old.on > 0) & (new.on > 0) & (on[i] > 0)

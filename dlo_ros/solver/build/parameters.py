@@ -142,6 +142,7 @@ class ProblemParameters:
         L, S, radius = nlp.length, len(nlp.obstacle_s), problem.string.radius
         s_fine = OSL.fine_grid(L, S)
         x = m.positions(z, s_fine)
+        within = OSL.slot_tolerance(L, nlp.options.error_tolerance)
         placements = []
         for i, ob in enumerate(problem.obstacles):
 
@@ -162,7 +163,6 @@ class ProblemParameters:
                     flat,
                 )
             previous = self.slots(keep, i) if keep is not None else None
-            within = OSL.slot_tolerance(L, nlp.options.error_tolerance)
             new = OSL.assign(found, nlp.obstacle_s, nlp.obstacle_slots, previous, L, within)
             self.write_slots(p, i, new, keep if new.kept else None)
             placements.append(new)

@@ -260,6 +260,10 @@ class DirectorModel:
         """Return W(s) as ``position_matrix`` does, not remembered (s changes every solve)."""
         return self.mesh.integration_matrix(s)
 
+    def tangent_rows(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return (P, P') with x'(s) = T Pᵀ and x''(s) = T P'ᵀ (T: ``quad_tangents``)."""
+        return self.mesh.quad_interpolation(s)
+
     def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
         """(len(w), 3) centreline positions [m] at the arc lengths whose rows of W are ``w``."""
         return (np.asarray(z[0:3]) * self.length)[None, :] + w @ self.quad_tangents(z).T

@@ -41,8 +41,9 @@ class ElementBasis:
 class CompositeQuadrature:
     """The mesh's composite quadrature under ``ChebyshevQuadrature``'s names.
 
-    ``nodes`` (each element's, a breakpoint once per element), ``weights``, ``count`` and
-    ``integration_matrix(s)`` (∫_0^s f ds ≈ W(s) f at the nodes, element by element).
+    ``nodes`` (each element's, a breakpoint once per element), ``weights``, ``count``,
+    ``integration_matrix(s)`` (∫_0^s f ds ≈ W(s) f at the nodes, element by element) and the
+    interpolant's ``interpolation_matrix(s)`` and ``derivative_matrix(s)``.
     """
 
     def __init__(self, mesh: ElementMesh) -> None:
@@ -55,3 +56,11 @@ class CompositeQuadrature:
     def integration_matrix(self, s: np.ndarray) -> np.ndarray:
         """W[q, j] with ∫_0^{s_q} f ds ≈ Σ_j W[q, j] f(σ_j), shape (len(s), count)."""
         return self.mesh.integration_matrix(np.asarray(s, dtype=float).ravel())
+
+    def interpolation_matrix(self, s: np.ndarray) -> np.ndarray:
+        """P[q, j] with f(s_q) ≈ Σ_j P[q, j] f(σ_j): the interpolant on the element holding s_q."""
+        return self.mesh.quad_interpolation(np.asarray(s, dtype=float).ravel())[0]
+
+    def derivative_matrix(self, s: np.ndarray) -> np.ndarray:
+        """P'[q, j] with f'(s_q) ≈ Σ_j P'[q, j] f(σ_j) [1/m]: the interpolant's derivative."""
+        return self.mesh.quad_interpolation(np.asarray(s, dtype=float).ravel())[1]

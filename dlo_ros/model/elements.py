@@ -196,6 +196,27 @@ class ElementMesh:
             dB[np.ix_(rows, cols)] = db
         return B, dB
 
+    def quad_interpolation(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """Return (P, P') of shape (len(s), quad_count): f(s) ≈ P f_quad and f'(s) ≈ P' f_quad.
+
+        The interpolant of values at the quadrature nodes on the element holding s (at a
+        breakpoint: the one before it), and its s-derivative.
+        """
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        P, dP = np.zeros((s.size, self.quad_count)), np.zeros((s.size, self.quad_count))
+        which = self.element_of(s, "left")
+        for e in np.unique(which):
+            rows = np.flatnonzero(which == e)
+            local = s[rows] - self.breakpoints[e]
+            cols = np.arange(self.quad_first[e], self.quad_first[e + 1])
+            if self.quads is None:
+                b, db = self.elements[e].matrices(local)
+            else:
+                b = self.quads[e].interpolation_matrix(local)
+                db = self.quads[e].derivative_matrix(local)
+            P[np.ix_(rows, cols)], dP[np.ix_(rows, cols)] = b, db
+        return P, dP
+
     def integration_matrix(self, s) -> np.ndarray:
         """W of shape (len(s), quad_count) with ∫_0^s f ≈ W f_quad."""
         s = np.atleast_1d(np.asarray(s, dtype=float))

@@ -43,3 +43,14 @@ class ChebyshevQuadrature:
         """P[q, j] with f(s_q) ≈ Σ_j P[q, j] f(s_j) (polynomial interpolation)."""
         tau_q = 2.0 * np.asarray(s, dtype=float).ravel() / self.length - 1.0
         return C.chebvander(tau_q, self.count - 1) @ self._vinv
+
+    def derivative_matrix(self, s: np.ndarray) -> np.ndarray:
+        """P'[q, j] with f'(s_q) ≈ Σ_j P'[q, j] f(s_j): the interpolant's s-derivative."""
+        tau_q = 2.0 * np.asarray(s, dtype=float).ravel() / self.length - 1.0
+        if not hasattr(self, "_derivatives"):  # column k: the Chebyshev series of dT_k/dτ
+            self._derivatives = C.chebder(np.eye(self.count))
+        return (
+            (2.0 / self.length)
+            * (C.chebvander(tau_q, self.count - 2) @ self._derivatives)
+            @ self._vinv
+        )

@@ -312,6 +312,11 @@ class RitzModel:
         """Return W(s) as ``position_matrix`` does, not remembered (s changes every solve)."""
         return self.quad.integration_matrix(np.asarray(s, dtype=float))
 
+    def tangent_rows(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return (P, P') with x'(s) = T Pᵀ and x''(s) = T P'ᵀ (T: ``node_tangents``)."""
+        s = np.asarray(s, dtype=float)
+        return self.quad.interpolation_matrix(s), self.quad.derivative_matrix(s)
+
     def positions_at_rows(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
         """(len(w), 3) centreline positions [m] at the arc lengths whose rows of W are ``w``."""
         return (np.asarray(z[0:3]) * self.length)[None, :] + w @ self.node_tangents(z).T

@@ -119,7 +119,11 @@ def test_the_touch_is_where_the_cable_touches(streamed, k, how):
     # the touch is the slot's, within a few slot tolerances of the exact contact (measured up to
     # 2.5 × SLOT_SHARE · δ)
     assert load.kind == "point" and slots.on.sum() == 1
-    assert load.s_start == pytest.approx(float(slots.s[slots.on > 0][0]), abs=1e-12)
+    # the force acts at the closest approach of the slot's row (build/slot_envelope.py): the slot
+    # sits within its tolerance of it
+    sigma = float(slots.s[slots.on > 0][0])
+    length = at.string.length
+    assert abs(load.s_start - sigma) <= OSL.slot_tolerance(length, delta), (load.s_start, sigma)
     assert abs(load.s_start - ref.s_contact) <= 4 * OSL.SLOT_SHARE * delta
 
 

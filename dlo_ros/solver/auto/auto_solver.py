@@ -370,5 +370,6 @@ class AutoShapeSolver:
         solve started (``time.perf_counter``), ``notes`` the changes it made.
         """
         c = choice or self.choice
-        result.model = self.model_summary(choice, solver, tuple(notes), estimate)
+        model = self.model_summary(choice, solver, tuple(notes), estimate)
+        result.model = report.with_own_residual(model, result.equilibrium_residual_m)
         return report.finished(result, t0, c.obstacles, len(self.problem.obstacles))

@@ -70,11 +70,6 @@ class ReducedModels:
                 **planar,
                 obstacle_points=points,
                 obstacle_slots=slots,
-                # auto's own slots: a curved contact is followed by the mesh refined about it
-                # (mesh_check.py); a scene's obstacle_slots keep its slotted_obstacles
-                slotted_obstacles="flat"
-                if points == "nodes" and not self.options.obstacle_slots
-                else self.options.slotted_obstacles,
                 order=choice.order,
                 quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
                 obstacle_samples=choice.samples,

@@ -39,12 +39,10 @@ import numpy as np
 from ...model.director import DirectorModel, integrands
 from .structure import breakpoint_node
 from .assembled_contact import (
+    group_terms,
     in_row_order,
-    block_diagonal,
-    group_jacobian,
     inequality_g,
     nonlinear_rows,
-    position_derivatives,
     sparse,
     x0_columns,
 )
@@ -371,11 +369,7 @@ class AssembledKKT:
         if rows > nlp.n_free_rows:
             rows_nl, g_nl, _, _, groups = nonlinear_rows(self, z, p, ca.MX(rows, 1), T)
             if rows_nl:
-                jac_nl = [
-                    group_jacobian(self, gr, jt, E, omega, kappa, n)
-                    for omega, kappa, grads, _ in groups
-                    for gr in grads
-                ]
+                jac_nl, _ = group_terms(self, groups, jt, E, n, hessian=False)
                 parts.append(
                     (np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl))
                 )
@@ -480,12 +474,9 @@ class AssembledKKT:
             parts.append((local_rows, g_loc, j_loc))
         rows_nl, g_nl, _, _, groups = nonlinear
         if rows_nl:
-            jac_nl = []
-            for omega, kappa, grads, weighted in groups:
-                jac_nl += [group_jacobian(self, gr, jt_k, E, omega, kappa, n) for gr in grads]
-                if weighted is not None:
-                    D = position_derivatives(self, jt_k, E, omega, kappa, n)
-                    hess += ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted), D))
+            jac_nl, contact_hess = group_terms(self, groups, jt_k, E, n)
+            if contact_hess is not None:
+                hess += contact_hess
             parts.append((np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl)))
         g, jac = in_row_order(parts, rows)
 

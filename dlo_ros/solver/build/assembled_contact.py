@@ -14,6 +14,13 @@ import casadi as ca
 import numpy as np
 
 from ...model.obstacles import OBSTACLE_TYPES
+from .slot_envelope import (
+    envelope_function,
+    envelope_value,
+    shift_bound,
+    slot_curve,
+    slot_inputs,
+)
 
 
 def sparse(matrix: np.ndarray) -> ca.DM:
@@ -41,10 +48,10 @@ def x0_columns(coefficients: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def block_diagonal(blocks: ca.MX) -> ca.MX:
-    """(3 × 3S) → the 3S × 3S block-diagonal matrix of its 3 × 3 blocks."""
-    S = blocks.shape[1] // 3
-    return ca.sparsity_cast(blocks, ca.diagcat(*[ca.Sparsity.dense(3, 3)] * S))
+def block_diagonal(blocks: ca.MX, size: int = 3) -> ca.MX:
+    """(b × bS) → the bS × bS block-diagonal matrix of its b × b blocks (b = ``size``)."""
+    S = blocks.shape[1] // size
+    return ca.sparsity_cast(blocks, ca.diagcat(*[ca.Sparsity.dense(size, size)] * S))
 
 
 def in_row_order(parts, rows: int):
@@ -116,24 +123,27 @@ def nonlinear_rows(kkt, z, p, lam, T):
             grads.append(grad / L)
         groups.append((omega, 1.0, grads, weighted))
     for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
-        # contact slots (solver/contact/obstacle_slots.py): rows on_k (ψ(X_k) + r) − (1 − on_k) L
-        # at X_k = x0 + T W_kᵀ
+        # contact slots (solver/contact/obstacle_slots.py): rows on_k ψ(X_k, X'_k, X''_k) −
+        # (1 − on_k) L, ψ the reach at the closest approach (slot_envelope.py), X_k = x0 + T W_kᵀ,
+        # X'_k = T P_kᵀ, X''_k = T P'_kᵀ
         K, rows = nlp.obstacle_slots, nlp.slot_rows[i]
-        W, on = nlp.slot_matrix(p, i), p[lay[f"slots:{i}:on"]]
-        X = ca.repmat(z[0:3] * L, 1, K) + ca.mtimes(T, W.T)
-        fn, curved = obstacle_function(ob.type)
-        h, dh, d2h = fn.map(K, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, K))
+        omegas = tuple(nlp.slot_matrix(p, i, part) for part in "wtk")
+        on = p[lay[f"slots:{i}:on"]]
+        X = slot_curve(nlp, T, z, p, i)
+        fn = envelope_function(ob.type, shift_bound(nlp.length))
+        v, dv, d2v = fn.map(K, "serial")(*X, *slot_inputs(nlp, p, i))
         li = lam[rows] * on / L
         rows_all += rows
-        g_all.append((on * (h.T + radius) - (1 - on) * L) / L)
-        a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), W)
-        dx0 += L * ca.mtimes(dh, li)
-        weighted = (
-            d2h * ca.repmat(ca.mtimes(li.T, sparse(np.kron(np.eye(K), np.ones((1, 3))))), 3, 1)
-            if curved
-            else None
+        g_all.append((on * v.T - (1 - on) * L) / L)
+        grads = tuple(dv[3 * c : 3 * c + 3, :] for c in range(3))
+        for grad, omega in zip(grads, omegas):
+            a += ca.mtimes(grad * ca.repmat(li.T, 3, 1), omega)
+        dx0 += L * ca.mtimes(grads[0], li)
+        weighted = d2v * ca.repmat(
+            ca.mtimes(li.T, sparse(np.kron(np.eye(K), np.ones((1, 9))))), 9, 1
         )
-        groups.append((W, 1.0, [dh * ca.repmat(on.T, 3, 1) / L], weighted))
+        scaled = tuple(grad * ca.repmat(on.T, 3, 1) / L for grad in grads)
+        groups.append((omegas, (1.0, 0.0, 0.0), scaled, weighted))
     slots = nlp.self_contact_slots
     if slots:
         rows = list(nlp.self_contact_rows)
@@ -194,6 +204,38 @@ def position_derivatives(kkt, jt, E, omega, kappa: float, n: int):
     return D
 
 
+def group_terms(kkt, groups, jt, E, n: int, hessian: bool = True):
+    """Return every group's Jacobian rows and Σ Dᵀ diag(λ ∇²ψ) D over them (None: no term).
+
+    A group (``nonlinear_rows``) is (ω, κ, [∇ψ/L per block of rows], weighted): rows ψ(X_j);
+    or a slot group ((W, P, P'), (1, 0, 0), (∇_X ψ, ∇_X' ψ, ∇_X'' ψ)/L, weighted 9 × 9K): rows
+    ψ(X_j, X'_j, X''_j) of three such combinations (``slot_envelope.py``), whose Jacobian is
+    the sum of the three parts and whose D interleaves them per row.
+    """
+    jac, hess = [], None
+    for omega, kappa, grads, weighted in groups:
+        if isinstance(omega, tuple):
+            rows = [group_jacobian(kkt, g, jt, E, o, k, n) for g, o, k in zip(grads, omega, kappa)]
+            jac.append(rows[0] + rows[1] + rows[2])
+            if not hessian or weighted is None:
+                continue
+            K = omega[0].shape[0]
+            D = ca.vertcat(
+                *[position_derivatives(kkt, jt, E, o, k, n) for o, k in zip(omega, kappa)]
+            )
+            order = [c * 3 * K + 3 * j + m for j in range(K) for c in range(3) for m in range(3)]
+            D = D[order, :]
+            term = ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted, 9), D))
+        else:
+            jac += [group_jacobian(kkt, gr, jt, E, omega, kappa, n) for gr in grads]
+            if not hessian or weighted is None:
+                continue
+            D = position_derivatives(kkt, jt, E, omega, kappa, n)
+            term = ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted), D))
+        hess = term if hess is None else hess + term
+    return jac, hess
+
+
 def inequality_g(kkt) -> ca.Function:
     """Build ``dlo_obstacle_g``: the values of the rows after the free rows.
 
@@ -225,16 +267,13 @@ def inequality_g(kkt) -> ca.Function:
             parts.append((np.array(nlp.obstacle_rows[i]), values / L))
         for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
             K, on = nlp.obstacle_slots, p[lay[f"slots:{i}:on"]]
-            X = ca.repmat(z[0:3] * L, 1, K) + ca.mtimes(T, nlp.slot_matrix(p, i).T)
-            x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
-            h = ca.Function(f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)])
-            values = h.map(K, "serial")(X, ca.repmat(p[lay[f"obstacle:{i}"]], 1, K))
-            parts.append(
-                (
-                    np.array(nlp.slot_rows[i]),
-                    (on * (values.T + p[lay["radius"]][0]) - (1 - on) * L) / L,
-                )
-            )
+            X = slot_curve(nlp, T, z, p, i)
+            x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
+            po, r = ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size), ca.SX.sym("r")
+            reach = envelope_value(ob.type, x, d1, d2, po, r, shift_bound(nlp.length))
+            v = ca.Function(f"dlo_slot_{ob.type}_value", [x, d1, d2, po, r], [reach])
+            values = v.map(K, "serial")(*X, *slot_inputs(nlp, p, i))
+            parts.append((np.array(nlp.slot_rows[i]), (on * values.T - (1 - on) * L) / L))
     if nlp.self_contact_slots:
         K = nlp.self_contact_slots
         Q = ca.horzcat(*[p[lay[f"self:{k}"]][:M] for k in range(K)]).T

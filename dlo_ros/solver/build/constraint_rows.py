@@ -18,6 +18,7 @@ from ...model.obstacles import OBSTACLE_TYPES, Obstacle
 from ...model.problem import Grip, RelativePosition
 from ...model.ritz import RitzModel
 from .parameter_layout import ParameterLayout, slot_matrix
+from .slot_envelope import envelope_value
 from .structure import breakpoint_node
 
 
@@ -197,27 +198,36 @@ def obstacle_rows(
 
 
 def slot_rows(
-    rows: ConstraintRows, sym: RowSymbols, obstacles: tuple[Obstacle, ...], slots: int
+    rows: ConstraintRows,
+    sym: RowSymbols,
+    obstacles: tuple[Obstacle, ...],
+    slots: int,
+    reach: float,
 ) -> list[list[int]]:
-    """Write each obstacle's contact slots' rows, on·(h(x(σ_k)) + r) − (1 − on) L ≤ 0, by 1/L.
+    """Write each obstacle's contact slots' rows, on·v*(σ_k) − (1 − on) L ≤ 0, by 1/L.
 
+    v* is h + r at the closest approach near σ_k (``slot_envelope.py``, Δ = ``reach`` [m]).
     Returns each obstacle's slot rows (an empty list without slots).
     """
     p, lay, L, t = sym.p, sym.params, sym.length, sym.t
     out: list[list[int]] = []
     radius = p[lay["radius"]][0]
+    M = sym.model.quad.count
     for i, ob in enumerate(obstacles):
         if not slots:
             break
-        h = OBSTACLE_TYPES[ob.type].h
         on = p[lay[f"slots:{i}:on"]]
-        w = slot_matrix(p, lay, i, slots, sym.model.quad.count)
+        w, d1, d2 = (slot_matrix(p, lay, i, slots, M, part) for part in "wtk")
         slot_x = ca.repmat(sym.z[0:3] * L, 1, slots) + ca.mtimes(t, w.T)
+        slot_d1, slot_d2 = ca.mtimes(t, d1.T), ca.mtimes(t, d2.T)
         out.append([])
         for k in range(slots):
             out[-1].append(rows.count)
-            expr = on[k] * (h(slot_x[:, k], p[lay[f"obstacle:{i}"]]) + radius) - (1 - on[k]) * L
-            rows.add(expr, L, ("slot", i, k), -ca.inf, 0.0)
+            reach_k = envelope_value(
+                ob.type, slot_x[:, k], slot_d1[:, k], slot_d2[:, k], p[lay[f"obstacle:{i}"]],
+                radius, reach,
+            )  # fmt: skip
+            rows.add(on[k] * reach_k - (1 - on[k]) * L, L, ("slot", i, k), -ca.inf, 0.0)
     return out
 
 

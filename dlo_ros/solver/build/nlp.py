@@ -58,7 +58,8 @@ from .constraint_rows import (
     self_contact_rows,
     slot_rows,
 )
-from .parameter_layout import ParameterLayout, parameter_layout, slot_matrix
+from .parameter_layout import ParameterLayout, parameter_layout, slot_matrix, slot_parameter_names
+from .slot_envelope import shift_bound
 from .reference_frame import GRIP_POLE_MIN_DEG, choose_reference_frame, planarity_violation
 from .structure import (
     breakpoint_node,
@@ -262,7 +263,7 @@ class StringNLP:
         samples, slots = len(self.obstacle_s), self.obstacle_slots
         self.obstacle_rows = obstacle_rows(rows, sym, P.obstacles, obs_x, samples, slots)
         #: per obstacle: its contact slots' rows
-        self.slot_rows = slot_rows(rows, sym, P.obstacles, slots)
+        self.slot_rows = slot_rows(rows, sym, P.obstacles, slots, shift_bound(self.length))
         self.self_contact_rows = self_contact_rows(rows, sym, self.self_contact_slots)
         self.n_grip_equalities = sum(
             len(r["position"]) + len(r["angles"]) for r in self.grip_rows.values()
@@ -330,13 +331,9 @@ class StringNLP:
         self._target_jacobian = np.asarray(dg_dp(np.zeros(z.shape[0]), np.zeros(lay.size)))
 
     @staticmethod
-    def slot_parameters(i: int) -> tuple[str, str, str, str]:
-        """Return the names of obstacle i's slot parameters in p.
-
-        The names of obstacle i's slot parameters in p: σ, on, W(σ) and the samples'
-        switches.
-        """
-        return f"slots:{i}:s", f"slots:{i}:on", f"slots:{i}:w", f"samples:{i}:on"
+    def slot_parameters(i: int) -> tuple[str, ...]:
+        """Return the names of obstacle i's slot parameters in p (``slot_parameter_names``)."""
+        return slot_parameter_names(i)
 
     def disabled_rows(self, p: np.ndarray) -> np.ndarray:
         """Return the rows that p switches off (empty contact slots, replaced samples).
@@ -350,9 +347,9 @@ class StringNLP:
             off[self.obstacle_rows[i]] = p[lay[f"samples:{i}:on"]] == 0
         return off
 
-    def slot_matrix(self, p, i: int):
-        """W(σ) (K × M) of obstacle i's contact slots, from p (numpy or CasADi)."""
-        return slot_matrix(p, self.params, i, self.obstacle_slots, self.model.quad.count)
+    def slot_matrix(self, p, i: int, part: str = "w"):
+        """Return W(σ) (K × M) of obstacle i's slots from p (``part`` "t": P(σ), "k": P'(σ))."""
+        return slot_matrix(p, self.params, i, self.obstacle_slots, self.model.quad.count, part)
 
     def newton_function(self, kkt_free: ca.Function | None = None) -> ca.Function:
         """Build a contact-free warm update as one MX function around ``kkt_free``.

@@ -38,6 +38,7 @@ import numpy as np
 from ...model.director import frame_columns
 from ...model.problem import Problem, StringProperties
 from .nlp import StringNLP
+from .slot_envelope import action_function, shift_bound, slot_curve, slot_inputs
 from .structure import breakpoint_node
 from ..results.residual import ResidualGrid
 from ..results.wrenches import residual_grid
@@ -104,14 +105,16 @@ def _slot_contacts(nlp, problem, z, p, lam, tq, s, x, m_bal, total_force, contac
     lay, L, K = nlp.params, nlp.length, len(s)
     for i, ob in enumerate(problem.obstacles if nlp.obstacle_slots else ()):
         n_slots, on = nlp.obstacle_slots, p[lay[f"slots:{i}:on"]]
-        slot_x = ca.repmat(z[0:3] * L, 1, n_slots) + ca.mtimes(tq, nlp.slot_matrix(p, i).T)
-        grads = nlp.obstacle_gradient[ob.type].map(n_slots)(
-            slot_x, ca.repmat(p[lay[f"obstacle:{i}"]], 1, n_slots)
-        )
+        # where each slot's force acts and its line (build/slot_envelope.py)
+        X = slot_curve(nlp, tq, z, p, i)
+        action = action_function(ob.type, shift_bound(L)).map(n_slots)
+        shift, grads = action(*X, *slot_inputs(nlp, p, i))
+        slot_x = X[0] + ca.repmat(shift, 3, 1) * X[1]
         f = -ca.repmat((ca.fmax(lam[nlp.slot_rows[i]], 0) * on).T, 3, 1) * grads
         contact_totals[i] += ca.sum2(f)
         # K × grid
-        before = ca.repmat(p[lay[f"slots:{i}:s"]], 1, K) < ca.repmat(ca.DM(s).T, n_slots, 1)
+        slot_s = p[lay[f"slots:{i}:s"]] + shift.T
+        before = ca.repmat(slot_s, 1, K) < ca.repmat(ca.DM(s).T, n_slots, 1)
         m_bal -= ca.mtimes(_cross(slot_x, f), before) - _cross(x, ca.mtimes(f, before))
         total_force += ca.sum2(f)
     return m_bal, total_force

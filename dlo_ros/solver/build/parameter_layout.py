@@ -95,13 +95,24 @@ def parameter_layout(
             lay.add(f"slots:{i}:s", n_slots)
             lay.add(f"slots:{i}:on", n_slots)
             lay.add(f"slots:{i}:w", n_slots * M)  # slot k's row at k M … (k + 1) M
+            # x'(σ) = T Pᵀ and x''(σ) = T P'ᵀ, laid out as W (build/slot_envelope.py)
+            lay.add(f"slots:{i}:t", n_slots * M)
+            lay.add(f"slots:{i}:k", n_slots * M)
     n_self = options.self_contact_pairs if director else 0
     for k in range(n_self):
         lay.add(f"self:{k}", M + 1)
     return lay, ContactSlots(n_slots, n_self)
 
 
-def slot_matrix(p, params: ParameterLayout, i: int, slots: int, nodes: int):
-    """W(σ) (``slots`` × ``nodes``) of obstacle i's contact slots, from p (numpy or CasADi)."""
-    w = p[params[f"slots:{i}:w"]]
+def slot_parameter_names(i: int) -> tuple[str, ...]:
+    """Return obstacle i's slot parameters in p: σ, on, W(σ), P(σ), P'(σ), the rows' switches."""
+    return tuple(f"slots:{i}:{part}" for part in ("s", "on", "w", "t", "k")) + (f"samples:{i}:on",)
+
+
+def slot_matrix(p, params: ParameterLayout, i: int, slots: int, nodes: int, part: str = "w"):
+    """W(σ) (``slots`` × ``nodes``) of obstacle i's contact slots, from p (numpy or CasADi).
+
+    ``part`` "t": P(σ) instead, "k": P'(σ) (``slot_envelope.py``).
+    """
+    w = p[params[f"slots:{i}:{part}"]]
     return w.reshape(slots, nodes) if isinstance(w, np.ndarray) else ca.reshape(w, nodes, slots).T

@@ -122,12 +122,15 @@ class ProblemParameters:
             for name in nlp.slot_parameters(i):
                 p[lay[name]] = keep[lay[name]]
             return
-        rows = np.zeros((nlp.obstacle_slots, nlp.model.quad.count))
+        rows = np.zeros((3, nlp.obstacle_slots, nlp.model.quad.count))
         filled = placement.on > 0
         if np.any(filled):
-            rows[filled] = nlp.model.position_rows(placement.s[filled])
+            rows[0, filled] = nlp.model.position_rows(placement.s[filled])
+            rows[1, filled], rows[2, filled] = nlp.model.tangent_rows(placement.s[filled])
         p[lay[f"slots:{i}:s"]], p[lay[f"slots:{i}:on"]] = placement.s, placement.on
-        p[lay[f"slots:{i}:w"]], p[lay[f"samples:{i}:on"]] = rows.ravel(), placement.samples_on
+        for part, values in zip("wtk", rows):
+            p[lay[f"slots:{i}:{part}"]] = values.ravel()
+        p[lay[f"samples:{i}:on"]] = placement.samples_on
 
     def place_slots(
         self, problem: Problem, z: np.ndarray, p: np.ndarray, keep: np.ndarray | None = None

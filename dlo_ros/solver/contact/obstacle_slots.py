@@ -34,10 +34,10 @@ sample nearest each slot is switched off, and every row closer to it than ``CLEA
 A slot is kept while its minimum moves less than ``slot_tolerance``: ``TOLERANCE`` · L, at most
 ``SLOT_SHARE`` of the error tolerance δ (the parameters then change only in the grip targets, the
 case Newton reuses its stored matrix for).  After a solve the slots are placed on the answer; when
-a minimum that touches (c < ``TOUCH`` · L) is further than that from its slot's fixed point, the
-solve is repeated warm from the answer, with the slot at the secant estimate of the fixed point σ =
-s*(σ) from the rounds so far (``update/slot_rounds.py``; a short flat contact otherwise sends its
-deepest point from one side of the slot to the other and back).
+a minimum that touches (c < ``TOUCH`` · L) is further than that from its slot, the solve is
+repeated warm from the answer with the slot there (``update/slot_rounds.py``).  A slot's row is
+the obstacle's reach at the closest approach near it, not at σ alone (``build/slot_envelope.py``):
+a string held at one material point slides along a post until it cuts in beside the slot.
 """
 
 from __future__ import annotations
@@ -101,18 +101,15 @@ class SlotPlacement:
 class SlotMotion:
     """How a stream's slots moved over one update (arrays of obstacles × slots).
 
-    fixed: each slot's fixed point σ = s*(σ) as estimated on the update's answer [m]; drift: its
-    move over the update [m] (0 where not filled before and after); steady: the drift within half
-    of itself of the update before's (a contact sliding steadily, whose next place the drift
-    predicts); slope: dg/dσ of g(σ) = s*(σ) − σ, the answer's closest approach s* against the
-    slot σ it was solved with (a secant over the update's rounds, kept from earlier updates while
-    no round measures it; nan: not measured); on: the slots filled for the next update (1.0).
+    fixed: each slot's fixed point σ = s*(σ) as estimated on the update's answer (its minimum
+    there) [m]; drift: its move over the update [m] (0 where not filled before and after);
+    steady: the drift within half of itself of the update before's (a contact sliding steadily,
+    whose next place the drift predicts); on: the slots filled for the next update (1.0).
     """
 
     fixed: np.ndarray
     drift: np.ndarray
     steady: np.ndarray
-    slope: np.ndarray
     on: np.ndarray
 
 

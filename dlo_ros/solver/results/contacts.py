@@ -21,6 +21,7 @@ import numpy as np
 
 from ...model.problem import Problem
 from ..build.nlp import StringNLP
+from ..build.slot_envelope import slot_contact_points
 from .result import ContactLoad, ShapeResult
 
 
@@ -150,10 +151,10 @@ def _slot_loads(
     touch = np.flatnonzero((lam_si[rows] > 0) & (p[lay[f"slots:{i}:on"]] > 0))
     if not touch.size:
         return []
-    x = nlp.model.positions_at_rows(z, nlp.slot_matrix(p, i)[touch])
-    grads = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
+    s, x, grads = slot_contact_points(
+        nlp, ob.type, ob.params, problem.string.radius, z, p, i, touch
+    )
     forces = -lam_si[rows[touch], None] * grads
-    s = p[lay[f"slots:{i}:s"]][touch]
     return [
         ContactLoad(i, "point", np.array([sk]), xk[None, :], f) for sk, xk, f in zip(s, x, forces)
     ]

@@ -28,6 +28,7 @@ from ...model.rotations import pose_quaternions
 from ..build import frames as F
 from ..build.functions import NlpFunctions
 from ..build.nlp import StringNLP
+from ..build.slot_envelope import slot_contact_points
 from ..options import SolverOptions
 from ..build.parameters import ProblemParameters
 from ..native.outputs import ComputedOutputs
@@ -460,15 +461,13 @@ class ShapeOutputs:
             touch = np.flatnonzero((lam_si[rows] > 0) & (p[lay[f"slots:{i}:on"]] > 0))
             if not touch.size:
                 continue
-            slot_x = nlp.model.positions_at_rows(z, nlp.slot_matrix(p, i)[touch])
-            grads = (
-                np.asarray(nlp.obstacle_gradient[ob.type](slot_x.T, ob.params)).reshape(3, -1).T
+            slot_s, slot_x, grads = slot_contact_points(
+                nlp, ob.type, ob.params, problem.string.radius, z, p, i, touch
             )
             forces = -lam_si[np.asarray(rows)[touch], None] * grads
             contacts[i] = contacts[i] + forces.sum(axis=0)
-            slot_s = p[lay[f"slots:{i}:s"]]
             actions += [
-                PointAction(float(slot_s[k]), x, f, np.zeros(3))
-                for k, x, f in zip(touch, slot_x, forces)
+                PointAction(float(sk), x, f, np.zeros(3))
+                for sk, x, f in zip(slot_s, slot_x, forces)
             ]
         return contacts, actions

@@ -13,11 +13,12 @@ Contract:
   start's fixed points, each moved on by its steady drift over the update that reached the start
   (``SolverState.slot_motion``), or None when that is not known.
 
-The answer's closest approach moves with its slot by a factor far from 1: a cable whose sagging
-bottom touches a table, held by a slot a distance d from where it would touch, dips deepest about
-3.5 d away on the other side.  So a contact sliding along the obstacle at v per update was put
-right by a secant round at every update (three solves); started from the slot moved on by v, the
-first solve lands within the slot tolerance of the fixed point while the sliding is steady.
+A slot's row bounds the obstacle's reach at the closest approach near it
+(``build/slot_envelope.py``), so the answer's closest approach s* barely moves with its slot σ:
+the rounds are the plain fixed-point iteration σ ← s* (the row held at σ alone made s* move by
+−2.5 σ on the table, and a secant was needed).  A contact sliding along the obstacle at v per
+update starts from its slot moved on by v, and the first solve lands within the slot tolerance
+of its fixed point while the sliding is steady.
 """
 
 from __future__ import annotations
@@ -33,8 +34,9 @@ from ..state import SolverState
 from .context import Outcome, SolverParts, UpdateContext
 
 #: how many times a streamed update's solve is repeated with the obstacle contact slots placed on
-#: its own answer (``place_slots_again``)
-SLOT_ROUNDS = 3
+#: its own answer (``place_slots_again``): a cable lowered onto a post that snaps to another side
+#: of it took 4 (its first round lands on the new side, the secant's first step is wasted there)
+SLOT_ROUNDS = 4
 #: as many for a solve that is not a streamed update (a cold solve, a query, auto's re-solves
 #: outside an update's time limit), whose slot starts where no earlier update put it (the default
 #: cable on its table, cold: 1.3 mm off, converged in 3 rounds where 2 were allowed)
@@ -56,44 +58,40 @@ def place_slots_again(
     """Repeat a solve while the answer's contacts moved away from their slots.
 
     The slots are placed on the shape a solve starts from (a warm update's: ``predicted_slots``);
-    while the answer touches an obstacle at a minimum s* whose slot σ is off its fixed point
-    σ = s*(σ) by more than ``obstacle_slots.slot_tolerance`` (|g| / max(1, |g'|), g = s* − σ, g'
-    its slope where known),
-    the solve is repeated warm from the answer (at most ``rounds`` times), each slot at the
-    secant estimate of the fixed point from the rounds so far (the first round: the Newton step
-    with the slope of earlier updates, else s* itself).  A repeat that fails keeps the previous
-    answer (a converged solution of its own rows); of the answers, the one whose slots sit
-    closest to their fixed points is kept.  Its state records the slots' motion.
+    while the answer touches an obstacle at a minimum s* more than ``obstacle_slots.
+    slot_tolerance`` from its slot σ (or a slot carrying force lost its minimum), the solve is
+    repeated warm from the answer (at most ``rounds`` times) with the slots placed on the answer,
+    each at its s* (where that overshot, the secant estimate: ``placed_slots``).  A repeat that
+    fails keeps the previous answer (a converged solution of its own rows); of the answers, the
+    one whose slots sit closest to their minima is kept.  Its state records the slots' motion.
     """
     iterations, first = result.iterations, result
     history: dict[tuple[int, int], list[tuple[float, float]]] = {}
-    slope = start.slot_motion.slope if start is not None and start.slot_motion else None
     nlp = ctx.parts.nlp
     tolerance = OSL.slot_tolerance(nlp.length, nlp.options.error_tolerance)
     best: tuple[float, ShapeResult, SolverState | None] | None = None
     for round_ in range(rounds + 1):
         if state is None or result.status not in ("ok", "unverified"):
             break
-        offset = slot_offset(ctx.parts, problem, state, slope)
+        offset = slot_offset(ctx.parts, problem, state)
         if best is None or offset < best[0]:
             best = (offset, result, state)
         if offset <= tolerance or round_ == rounds:
             break
-        override = secant_slots(ctx.parts, state, history, slope)
+        override = placed_slots(ctx.parts, state, history)
         with ctx.scoped(start=state, slot_override=override):
             again, new_state = solve(ctx, problem, True)
         iterations += again.iterations
         if new_state is None or again.status not in ("ok", "unverified"):
             break
         result, state = again, new_state
-    # the rounds' answer whose slots sat closest to their fixed points (a secant from a poor
-    # start can step away: on the post, after a landing, 1.4 mm off where an earlier round was
-    # 0.1 mm); the placement on it is the last one made when it is the last answer checked
+    # the rounds' answer whose slots sat closest to their minima; the placement on it is the
+    # last one made when it is the last answer checked
     placed = best is not None and best[2] is state
     if best is not None:
         _, result, state = best
         if state is not None and start is not None:
-            state.slot_motion = slot_motion(ctx.parts, start, state, history, slope, placed)
+            state.slot_motion = slot_motion(ctx.parts, start, state, placed)
     # the rounds refine the answer the first solve found: its method and warm start describe the
     # result
     result.iterations, result.ipopt_status, result.warm_started = (
@@ -104,26 +102,13 @@ def place_slots_again(
     return result, state
 
 
-def _gain(slope: np.ndarray | None, i: int, k: int) -> float:
-    """Return max(1, |g'|) of slot k of obstacle i (1 where its slope is not known)."""
-    if slope is None or not np.isfinite(slope[i, k]):
-        return 1.0
-    return max(1.0, abs(float(slope[i, k])))
+def slot_offset(parts: SolverParts, problem: Problem, state: SolverState) -> float:
+    """Return how far [m] the slots of ``state`` are from the minima they touch.
 
-
-def _newton_step(g: float, slope: float) -> float:
-    """Return the Newton step −g/g' onto the fixed point g(σ) = 0 [m], at most 4 |g| long."""
-    return float(np.clip(-g / slope, -4 * abs(g), 4 * abs(g)))
-
-
-def slot_offset(
-    parts: SolverParts, problem: Problem, state: SolverState, slope: np.ndarray | None = None
-) -> float:
-    """Return how far [m] the slots of ``state`` are off their fixed points, where they touch.
-
-    The largest |s* − σ| / max(1, |g'|) over the touching minima s* placed on ``state``
-    (``slope``: g' per obstacle and slot, or None); inf for a touching minimum without a slot.
-    Leaves the placement on ``state`` in ``parts.parameters.placements``.
+    The largest |s* − σ| over the touching minima s* placed on ``state``; inf for a touching
+    minimum without a slot, or a slot that carries force where no minimum is left (a cable lying
+    down flat on a table: its row then stands for no closest approach).  Leaves the placement on
+    ``state`` in ``parts.parameters.placements``.
     """
     nlp, parameters = parts.nlp, parts.parameters
     parameters.pack(problem, state.z, keep=state.p)
@@ -132,51 +117,44 @@ def slot_offset(
         if new.kept:
             continue
         used = parameters.slots(state.p, i)
+        carrying = state.lam_g[np.asarray(nlp.slot_rows[i], dtype=int)] > 0
+        if np.any((used.on > 0) & (new.on == 0) & carrying):
+            return float("inf")
         touching = (new.on > 0) & (new.clearance < OSL.TOUCH * nlp.length)
         for k in np.flatnonzero(touching):
             if used.on[k] == 0:
                 return float("inf")
-            worst = max(worst, abs(new.s[k] - used.s[k]) / _gain(slope, i, k))
+            worst = max(worst, abs(new.s[k] - used.s[k]))
     return worst
 
 
-def secant_slots(
-    parts: SolverParts,
-    state: SolverState,
-    history: dict[tuple[int, int], list[tuple[float, float]]],
-    slope: np.ndarray | None = None,
+def placed_slots(
+    parts: SolverParts, state: SolverState, history: dict[tuple[int, int], list]
 ) -> list:
-    """Return each obstacle's slots at the secant estimate of σ = s*(σ) from the rounds so far.
+    """Return each obstacle's slots for the next round, from the placement on the last answer.
 
     ``parts.parameters.placements`` holds the placement on ``state`` (``slot_offset``);
-    ``history`` gathers (σ used, s* found) per slot over the rounds (the secant kept within the
-    last two's σ and s*); with one round only, a known ``slope`` g' gives the Newton step
-    σ − g/g' (at most 4 |g|).
+    ``history`` gathers (σ used, s* found) per slot over the rounds.  A slot goes to its minimum
+    s*; where that overshot (g = s* − σ changed sign without halving), to the secant estimate of
+    σ = s*(σ) kept within the last two rounds' σ and s*: a strip pulled tight over a post nearly
+    wraps it, its clearance is flat about the contact and s* swings about σ with a growing
+    amplitude.  The rows about the slots are off.
     """
     nlp, parameters = parts.nlp, parts.parameters
-    override = []
+    out = []
     for i, new in enumerate(parameters.placements):
         used, s = parameters.slots(state.p, i), new.s.copy()
         for k in np.flatnonzero((new.on > 0) & (used.on > 0)):
             trail = history.setdefault((i, k), [])
             trail.append((float(used.s[k]), float(new.s[k])))
-            if len(trail) >= 2:  # secant on g(σ) = s*(σ) − σ
+            if len(trail) >= 2:  # secant on g(σ) = s*(σ) − σ where σ ← s* overshot
                 (a, fa), (b, fb) = trail[-2], trail[-1]
                 ga, gb = fa - a, fb - b
-                if gb != ga:
-                    s[k] = float(
-                        np.clip(
-                            b - gb * (b - a) / (gb - ga),
-                            min(a, b, fa, fb),
-                            max(a, b, fa, fb),
-                        )
-                    )
-            elif _gain(slope, i, k) > 1.0:
-                assert slope is not None  # a gain above 1 is a known slope
-                b, fb = trail[-1]
-                s[k] = b + _newton_step(fb - b, float(slope[i, k]))
-        override.append(_placement(nlp, s, new.on, new.clearance))
-    return override
+                if ga * gb < 0 and abs(gb) > 0.5 * abs(ga):
+                    secant = b - gb * (b - a) / (gb - ga)
+                    s[k] = float(np.clip(secant, min(a, b, fa, fb), max(a, b, fa, fb)))
+        out.append(_placement(nlp, s, new.on, new.clearance))
+    return out
 
 
 def _placement(nlp, s: np.ndarray, on: np.ndarray, clearance: np.ndarray) -> OSL.SlotPlacement:
@@ -186,49 +164,28 @@ def _placement(nlp, s: np.ndarray, on: np.ndarray, clearance: np.ndarray) -> OSL
 
 
 def slot_motion(
-    parts: SolverParts,
-    start: SolverState,
-    state: SolverState,
-    history: dict[tuple[int, int], list[tuple[float, float]]],
-    slope: np.ndarray | None,
-    placed: bool,
+    parts: SolverParts, start: SolverState, state: SolverState, placed: bool
 ) -> OSL.SlotMotion | None:
-    """Return how the slots moved from ``start`` to ``state`` (None: none filled or moved).
+    """Return how the slots moved from ``start`` to ``state`` (None: none filled).
 
-    With ``placed`` (``parts.parameters.placements`` holds the placement on ``state``): its own
-    (σ, s*) joins the rounds' ``history``, each slot's fixed point is σ − g/g' where g' is known
-    (else σ), and ``on`` is that placement's (a slot whose minimum is gone empties, a new one fills
-    at it); else σ and ``state``'s slots.  drift: the move from the start's fixed point [m];
-    slope: the secant of g over this update's last two answers, else the one before (``slope``).
+    With ``placed`` (``parts.parameters.placements`` holds the placement on ``state``): each
+    slot's fixed point is its minimum s* there and ``on`` that placement's (a slot whose minimum
+    is gone empties, a new one fills at it); else σ and ``state``'s slots.  drift: the move from
+    the start's fixed point [m]; steady: within half of itself of the update before's.
     """
     nlp, parameters = parts.nlp, parts.parameters
     shape = (len(nlp.slot_rows), nlp.obstacle_slots)
-    if placed:
-        for i, found in enumerate(parameters.placements):
-            new = parameters.slots(state.p, i)
-            for k in np.flatnonzero((found.on > 0) & (new.on > 0)):
-                if (i, k) in history:
-                    history[(i, k)].append((float(new.s[k]), float(found.s[k])))
-    new_slope = np.full(shape, np.nan) if slope is None else slope.copy()
-    for (i, k), trail in history.items():
-        if len(trail) >= 2 and trail[-1][0] != trail[-2][0]:
-            (a, fa), (b, fb) = trail[-2], trail[-1]
-            new_slope[i, k] = ((fb - b) - (fa - a)) / (b - a)
     fixed, drift, on = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     motion = start.slot_motion
     before = motion.fixed if motion is not None else None
     for i in range(shape[0]):
         old, new = parameters.slots(start.p, i), parameters.slots(state.p, i)
         fixed[i], on[i] = new.s, new.on
-        new_slope[i, new.on == 0] = np.nan
         if placed:
             found = parameters.placements[i]
             on[i] = found.on
-            for k in np.flatnonzero((found.on > 0) & (new.on > 0)):
-                if _gain(new_slope, i, k) > 1.0:
-                    fixed[i, k] += _newton_step(found.s[k] - new.s[k], float(new_slope[i, k]))
-            fresh = (found.on > 0) & (new.on == 0)
-            fixed[i, fresh] = found.s[fresh]
+            moved = found.on > 0
+            fixed[i, moved] = found.s[moved]
         both = (old.on > 0) & (new.on > 0) & (on[i] > 0)
         origin = old.s if before is None else before[i]
         drift[i, both] = fixed[i, both] - origin[both]
@@ -236,7 +193,7 @@ def slot_motion(
         return None
     last = motion.drift if motion is not None else np.zeros(shape)
     steady = (drift != 0) & (np.abs(drift - last) <= 0.5 * np.abs(drift))
-    return OSL.SlotMotion(fixed, drift, steady, new_slope, on)
+    return OSL.SlotMotion(fixed, drift, steady, on)
 
 
 def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> SolverState:

@@ -1,0 +1,124 @@
+"""A contact slot's row: the obstacle's reach at the string's closest approach near the slot.
+
+A slot at arc length σ (``contact/obstacle_slots.py``) with the row v(σ) = h(x(σ)) + r ≤ 0 holds
+the string at one material point.  On a curved obstacle that is not enough: a string pressed on a
+post can slide along it (a very soft mode: the demo's cable moves about 1 m per m its contact
+slides), and held at σ alone it slides until it cuts into the post beside the slot, where a row
+of the mesh then takes part of the force (measured: 26 % of it at a row 1–9 mm away, whatever the
+mesh, and the shape mm off).  The obstacle's constraint is on the closest approach, max_s v(s) ≤
+0, whose curvature holds that mode; its second-order model about σ is
+
+    v* = v + ½ v_s² / D,   v_s = ∇h·x',   v_ss = x'ᵀ ∇²h x' + ∇h·x'',
+    D = max(−v_ss, |v_s| / Δ, ε),
+
+with x', x'' the centreline's derivatives at σ (x' = T Pᵀ, x'' = T P'ᵀ: ``tangent_rows``).  At
+the closest approach (v_s = 0) v* = v and its gradient is v's: the force acts at σ, as the plain
+row's; off it, v* is the quadratic model's maximum, reached at σ + v_s / D, and the gradient's
+v_s/D ∇v_s term moves the force there to first order.  Δ = ``obstacle_slots.CLEAR`` · L bounds
+that shift (the rows about a slot are off as far: ``rows_on``; beyond it they hold the string, and
+a quadratic model of a clearance over a post's curve is no bound over centimetres: with the rows'
+spacing, 25 mm, a cable 0.9 mm over a post pressed on it); ε keeps D positive.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import casadi as ca
+import numpy as np
+
+from ...model.obstacle_types import OBSTACLE_TYPES
+from ..contact.obstacle_slots import CLEAR
+
+#: D's floor [1/m]: a clearance flat to this curvature at its closest approach adds nothing
+FLOOR = 1e-9
+
+
+def shift_bound(length: float) -> float:
+    """Return Δ [m]: how far the closest approach may be from its slot (CLEAR · L)."""
+    return CLEAR * length
+
+
+@functools.lru_cache(maxsize=None)
+def envelope_function(kind: str, reach: float) -> ca.Function:
+    """Build (X, X', X'', parameters, r) → [v*, ∇v* (9), ∇²v* (9 × 9)] for obstacle type ``kind``.
+
+    ``reach`` is Δ [m] (module docstring); the derivatives are with respect to (X, X', X'')
+    stacked.
+    """
+    x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
+    po, radius = ca.SX.sym("po", OBSTACLE_TYPES[kind].size), ca.SX.sym("r")
+    value = envelope_value(kind, x, d1, d2, po, radius, reach)
+    u = ca.vertcat(x, d1, d2)
+    hess, grad = ca.hessian(value, u)
+    return ca.Function(
+        f"dlo_slot_{kind}", [x, d1, d2, po, radius], [value, grad, ca.densify(hess)]
+    )
+
+
+def envelope_value(kind: str, x, d1, d2, po, radius, reach: float):
+    """Return v* (module docstring) at x with x' = ``d1``, x'' = ``d2`` (CasADi SX)."""
+    y = ca.SX.sym("y", 3)
+    h = OBSTACLE_TYPES[kind].h(y, po)
+    hess, grad = ca.hessian(h, y)
+    at = ca.Function("h", [y, po], [h, grad, hess])
+    h_x, grad_x, hess_x = at(x, po)
+    v_s = ca.dot(grad_x, d1)
+    v_ss = ca.dot(d1, ca.mtimes(hess_x, d1)) + ca.dot(grad_x, d2)
+    curvature = ca.fmax(ca.fmax(-v_ss, ca.fabs(v_s) / reach), FLOOR)
+    return h_x + radius + 0.5 * v_s * v_s / curvature
+
+
+@functools.lru_cache(maxsize=None)
+def action_function(kind: str, reach: float) -> ca.Function:
+    """Build (X, X', X'', parameters, r) → [δ, ∇_X v*]: where a slot's force acts and its line.
+
+    δ = v_s / D: the force acts at σ + δ, x(σ) + δ x'(σ) (first order), and the row's multiplier
+    λ gives the force −λ ∇_X v*, the whole of what the row exerts on the centreline (exactly the
+    sum the KKT conditions balance); to first order in δ that is the point force −λ ∇h at x(σ + δ).
+    """
+    x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
+    po, radius = ca.SX.sym("po", OBSTACLE_TYPES[kind].size), ca.SX.sym("r")
+    y = ca.SX.sym("y", 3)
+    h = OBSTACLE_TYPES[kind].h(y, po)
+    hess, grad = ca.hessian(h, y)
+    at = ca.Function("h", [y, po], [grad, hess])
+    grad_x, hess_x = at(x, po)
+    v_s = ca.dot(grad_x, d1)
+    v_ss = ca.dot(d1, ca.mtimes(hess_x, d1)) + ca.dot(grad_x, d2)
+    shift = v_s / ca.fmax(ca.fmax(-v_ss, ca.fabs(v_s) / reach), FLOOR)
+    value = envelope_value(kind, x, d1, d2, po, radius, reach)
+    return ca.Function(
+        f"dlo_slot_action_{kind}", [x, d1, d2, po, radius], [shift, ca.gradient(value, x)]
+    )
+
+
+def slot_curve(nlp, tangents, z, p, i: int) -> list:
+    """Return [X, X', X''] (3 × K each, CasADi) at obstacle i's slots for the node tangents."""
+    out = [ca.mtimes(tangents, nlp.slot_matrix(p, i, part).T) for part in "wtk"]
+    out[0] += ca.repmat(z[0:3] * nlp.length, 1, nlp.obstacle_slots)
+    return out
+
+
+def slot_inputs(nlp, p, i: int) -> tuple:
+    """Return obstacle i's parameters and the string's radius, one column per slot (CasADi)."""
+    lay, K = nlp.params, nlp.obstacle_slots
+    return ca.repmat(p[lay[f"obstacle:{i}"]], 1, K), ca.repmat(p[lay["radius"]][0], 1, K)
+
+
+def slot_contact_points(nlp, kind: str, params, radius: float, z, p, i: int, touch) -> tuple:
+    """Return where obstacle i's slots ``touch`` act: (s [m], x (K, 3) [m], ∇_X v* (K, 3)).
+
+    s = σ + δ, x = x(σ) + δ x'(σ) and the force −λ ∇_X v* per slot (``action_function``).
+    """
+    model, touch = nlp.model, np.asarray(touch, dtype=int)
+    if not touch.size:
+        return np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))
+    sigma = np.asarray(p[nlp.params[f"slots:{i}:s"]])[touch]
+    rows = [nlp.slot_matrix(p, i, part)[touch] for part in "wtk"]
+    x0 = model.positions_at_rows(z, np.zeros((1, rows[0].shape[1])))
+    x, d1, d2 = (model.positions_at_rows(z, w) - x0 * (k > 0) for k, w in enumerate(rows))
+    action = action_function(kind, shift_bound(nlp.length)).map(touch.size)
+    shift, grad = (np.asarray(a) for a in action(x.T, d1.T, d2.T, params, radius))
+    shift = shift.ravel()
+    return sigma + shift, x + shift[:, None] * d1, grad.T

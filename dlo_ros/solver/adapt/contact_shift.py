@@ -47,7 +47,10 @@ a true error of 2.7e-5 m; the moved end gives 2.5e-5 m.
 :func:`contact_shift_error` sums the errors over the point contacts and lists where each
 touches, c₀ + Δc, where the step is no longer than the bracket of rows about the contact (a kink
 for the refinement to split at; a longer step is a first-order guess on a coarse mesh).  Contact
-slots (``contact/obstacle_slots.py``) are point contacts too, each on its own row.
+slots (``contact/obstacle_slots.py``) are point contacts too, each on its own row, taken here as
+pinned at σ with the plain row h(x(σ)) + r (their row bounds the closest approach near σ,
+``build/slot_envelope.py``: the same where the string is tangent at σ, as the slot rounds leave
+it to within the slot tolerance).
 """
 
 from __future__ import annotations

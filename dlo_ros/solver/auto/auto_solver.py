@@ -366,7 +366,8 @@ class AutoShapeSolver:
     ) -> ShapeResult:
         """Return ``result`` with its model and time; contact forces keyed by scene obstacle index.
 
-        The model is the streaming one, or the query's ``choice``/``solver``; ``t0`` is when the
+        The model is the streaming one, or the query's ``choice``/``solver``, its estimate at
+        least twice the answer's own residual (``report.with_own_residual``); ``t0`` is when the
         solve started (``time.perf_counter``), ``notes`` the changes it made.
         """
         c = choice or self.choice

@@ -14,10 +14,11 @@ mesh, and the shape mm off).  The obstacle's constraint is on the closest approa
 with x', x'' the centreline's derivatives at σ (x' = T Pᵀ, x'' = T P'ᵀ: ``tangent_rows``).  At
 the closest approach (v_s = 0) v* = v and its gradient is v's: the force acts at σ, as the plain
 row's; off it, v* is the quadratic model's maximum, reached at σ + v_s / D, and the gradient's
-v_s/D ∇v_s term moves the force there to first order.  Δ = ``obstacle_slots.CLEAR`` · L bounds
-that shift (the rows about a slot are off as far: ``rows_on``; beyond it they hold the string, and
-a quadratic model of a clearance over a post's curve is no bound over centimetres: with the rows'
-spacing, 25 mm, a cable 0.9 mm over a post pressed on it); ε keeps D positive.
+∂v*/∂v_s ∇v_s term moves the force there to first order (``action_function``).  Δ =
+``obstacle_slots.CLEAR`` · L bounds that shift (the rows about a slot are off as far:
+``rows_on``; beyond it they hold the string, and a quadratic model of a clearance over a post's
+curve is no bound over centimetres: with the rows' spacing, 25 mm, a cable 0.9 mm over a post
+pressed on it); ε keeps D positive.
 """
 
 from __future__ import annotations
@@ -65,28 +66,35 @@ def envelope_value(kind: str, x, d1, d2, po, radius, reach: float):
     h_x, grad_x, hess_x = at(x, po)
     v_s = ca.dot(grad_x, d1)
     v_ss = ca.dot(d1, ca.mtimes(hess_x, d1)) + ca.dot(grad_x, d2)
+    return _reach(h_x + radius, v_s, v_ss, reach)
+
+
+def _reach(v, v_s, v_ss, reach: float):
+    """Return v + ½ v_s² / D, D = max(−v_ss, |v_s| / Δ, ε) (module docstring), Δ = ``reach``."""
     curvature = ca.fmax(ca.fmax(-v_ss, ca.fabs(v_s) / reach), FLOOR)
-    return h_x + radius + 0.5 * v_s * v_s / curvature
+    return v + 0.5 * v_s * v_s / curvature
 
 
 @functools.lru_cache(maxsize=None)
 def action_function(kind: str, reach: float) -> ca.Function:
     """Build (X, X', X'', parameters, r) → [δ, ∇_X v*]: where a slot's force acts and its line.
 
-    δ = v_s / D: the force acts at σ + δ, x(σ) + δ x'(σ) (first order), and the row's multiplier
-    λ gives the force −λ ∇_X v*, the whole of what the row exerts on the centreline (exactly the
-    sum the KKT conditions balance); to first order in δ that is the point force −λ ∇h at x(σ + δ).
+    δ = ∂v*/∂v_s: the row's gradient moves the force along the string by that much, to first
+    order (v_s/D where D = −v_ss; Δ/2 where the shift is capped, D = |v_s|/Δ); it acts at σ + δ,
+    x(σ) + δ x'(σ), and the row's multiplier λ gives the force −λ ∇_X v*, the whole of what the
+    row exerts on the centreline (exactly the sum the KKT conditions balance).
     """
     x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
     po, radius = ca.SX.sym("po", OBSTACLE_TYPES[kind].size), ca.SX.sym("r")
     y = ca.SX.sym("y", 3)
     h = OBSTACLE_TYPES[kind].h(y, po)
     hess, grad = ca.hessian(h, y)
-    at = ca.Function("h", [y, po], [grad, hess])
-    grad_x, hess_x = at(x, po)
-    v_s = ca.dot(grad_x, d1)
-    v_ss = ca.dot(d1, ca.mtimes(hess_x, d1)) + ca.dot(grad_x, d2)
-    shift = v_s / ca.fmax(ca.fmax(-v_ss, ca.fabs(v_s) / reach), FLOOR)
+    grad_x, hess_x = ca.Function("h", [y, po], [grad, hess])(x, po)
+    v_s, v_ss = ca.SX.sym("v_s"), ca.SX.sym("v_ss")
+    shift = ca.gradient(_reach(0.0, v_s, v_ss, reach), v_s)
+    slope = ca.dot(grad_x, d1)
+    bend = ca.dot(d1, ca.mtimes(hess_x, d1)) + ca.dot(grad_x, d2)
+    shift = ca.substitute(shift, ca.vertcat(v_s, v_ss), ca.vertcat(slope, bend))
     value = envelope_value(kind, x, d1, d2, po, radius, reach)
     return ca.Function(
         f"dlo_slot_action_{kind}", [x, d1, d2, po, radius], [shift, ca.gradient(value, x)]
@@ -121,4 +129,4 @@ def slot_contact_points(nlp, kind: str, params, radius: float, z, p, i: int, tou
     action = action_function(kind, shift_bound(nlp.length)).map(touch.size)
     shift, grad = (np.asarray(a) for a in action(x.T, d1.T, d2.T, params, radius))
     shift = shift.ravel()
-    return sigma + shift, x + shift[:, None] * d1, grad.T
+    return np.clip(sigma + shift, 0.0, nlp.length), x + shift[:, None] * d1, grad.T

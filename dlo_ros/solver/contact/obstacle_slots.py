@@ -11,11 +11,12 @@ equal, and Newton's active set then fails on the near-singular system (measured:
 and 641-sample models fall back to IPOPT on most contact updates).  So each obstacle has
 ``obstacle_slots`` = K rows whose arc lengths are parameters (``StringNLP.slot_rows``):
 
-    on_k (h_i(x(σ_k)) + r) − (1 − on_k) L ≤ 0,    x(σ_k) = x0 + T W(σ_k)ᵀ,
+    on_k v*_k − (1 − on_k) L ≤ 0,    x(σ_k) = x0 + T W(σ_k)ᵀ,
 
-with W(σ) the row of the centreline's integration matrix (T: the quadrature-node tangents) and on_k
-∈ {0, 1}: an empty slot reads −1 ≤ 0 and has no derivative.  Each uniform sample has such a switch
-too.
+with v*_k the obstacle's reach h_i + r at the closest approach near σ_k, to second order
+(``build/slot_envelope.py``; h_i(x(σ_k)) + r where the string is tangent there), W(σ) the row of
+the centreline's integration matrix (T: the quadrature-node tangents) and on_k ∈ {0, 1}: an empty
+slot reads −1 ≤ 0 and has no derivative.  Each uniform sample has such a switch too.
 
 ``place`` measures the clearance c(s) = −h_i(x(s)) − r of a shape on a grid FINE times finer than
 the samples and puts a slot at each of its K deepest local minima (refined by parabolas through

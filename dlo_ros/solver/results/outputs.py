@@ -422,9 +422,10 @@ class ShapeOutputs:
     ) -> tuple[dict[int, np.ndarray], list[PointAction]]:
         """Return each obstacle's total contact force [N] and the point actions on the string.
 
-        Each obstacle's total contact force [N] (−Σ_j λ_j ∇h(x_j) over its samples and contact
-        slots), and every touching sample's or slot's force as a point action on the string (for
-        the equilibrium residual).
+        Each obstacle's total contact force [N] (−Σ_j λ_j ∇h(x_j) over its samples, −λ_k ∇_X v*_k
+        at σ_k + δ_k over its contact slots: ``slot_envelope.slot_contact_points``), and every
+        touching sample's or slot's force as a point action on the string (for the equilibrium
+        residual).
         """
         nlp = self.nlp
         contacts: dict[int, np.ndarray] = {}

@@ -42,6 +42,10 @@ SLOT_ROUNDS = 4
 #: cable on its table, cold: 1.3 mm off, converged in 3 rounds where 2 were allowed)
 COLD_SLOT_ROUNDS = 8
 
+#: a slot row's multiplier above this carries force (IPOPT leaves ~1e-10 on free rows; as
+#: ``kkt.active_rows``)
+ACTIVE = 1e-8
+
 #: a solve with the context's start and slots (``pipeline.solve_pairs_fixed``)
 Solve = Callable[[UpdateContext, Problem, bool], Outcome]
 
@@ -118,7 +122,7 @@ def slot_offset(parts: SolverParts, problem: Problem, state: SolverState) -> flo
         if new.kept:
             continue
         used = parameters.slots(state.p, i)
-        carrying = state.lam_g[np.asarray(nlp.slot_rows[i], dtype=int)] > 0
+        carrying = state.lam_g[np.asarray(nlp.slot_rows[i], dtype=int)] > ACTIVE
         if np.any((used.on > 0) & (new.on == 0) & carrying):
             return float("inf")
         touching = (new.on > 0) & (new.clearance < OSL.TOUCH * nlp.length)

@@ -18,7 +18,9 @@ row's; off it, v* is the quadratic model's maximum, reached at σ + v_s / D, and
 ``obstacle_slots.CLEAR`` · L bounds that shift (the rows about a slot are off as far:
 ``rows_on``; beyond it they hold the string, and a quadratic model of a clearance over a post's
 curve is no bound over centimetres: with the rows' spacing, 25 mm, a cable 0.9 mm over a post
-pressed on it); ε keeps D positive.
+pressed on it); ε keeps D positive.  Where the clearance is not convex at σ (−v_ss ≤ |v_s|/Δ)
+v* = v + ½ Δ |v_s| is only C⁰ at v_s = 0, and within |v_s| < εΔ its curvature is 1/ε: auto
+slots a flat obstacle only at an isolated sag (``obstacle_slots.FLAT_DIP``), where −v_ss > 0.
 """
 
 from __future__ import annotations

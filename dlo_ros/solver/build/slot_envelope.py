@@ -61,14 +61,18 @@ def envelope_function(kind: str, reach: float) -> ca.Function:
 
 def envelope_value(kind: str, x, d1, d2, po, radius, reach: float):
     """Return v* (module docstring) at x with x' = ``d1``, x'' = ``d2`` (CasADi SX)."""
+    h_x, v_s, v_ss = _along(kind, x, d1, d2, po)
+    return _reach(h_x + radius, v_s, v_ss, reach)
+
+
+def _along(kind: str, x, d1, d2, po) -> tuple:
+    """Return (h, v_s, v_ss) at x: h and its first two derivatives along the string (SX)."""
     y = ca.SX.sym("y", 3)
     h = OBSTACLE_TYPES[kind].h(y, po)
     hess, grad = ca.hessian(h, y)
-    at = ca.Function("h", [y, po], [h, grad, hess])
-    h_x, grad_x, hess_x = at(x, po)
-    v_s = ca.dot(grad_x, d1)
+    h_x, grad_x, hess_x = ca.Function("h", [y, po], [h, grad, hess])(x, po)
     v_ss = ca.dot(d1, ca.mtimes(hess_x, d1)) + ca.dot(grad_x, d2)
-    return _reach(h_x + radius, v_s, v_ss, reach)
+    return h_x, ca.dot(grad_x, d1), v_ss
 
 
 def _reach(v, v_s, v_ss, reach: float):
@@ -88,16 +92,11 @@ def action_function(kind: str, reach: float) -> ca.Function:
     """
     x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
     po, radius = ca.SX.sym("po", OBSTACLE_TYPES[kind].size), ca.SX.sym("r")
-    y = ca.SX.sym("y", 3)
-    h = OBSTACLE_TYPES[kind].h(y, po)
-    hess, grad = ca.hessian(h, y)
-    grad_x, hess_x = ca.Function("h", [y, po], [grad, hess])(x, po)
+    h_x, slope, bend = _along(kind, x, d1, d2, po)
     v_s, v_ss = ca.SX.sym("v_s"), ca.SX.sym("v_ss")
     shift = ca.gradient(_reach(0.0, v_s, v_ss, reach), v_s)
-    slope = ca.dot(grad_x, d1)
-    bend = ca.dot(d1, ca.mtimes(hess_x, d1)) + ca.dot(grad_x, d2)
     shift = ca.substitute(shift, ca.vertcat(v_s, v_ss), ca.vertcat(slope, bend))
-    value = envelope_value(kind, x, d1, d2, po, radius, reach)
+    value = _reach(h_x + radius, slope, bend, reach)
     return ca.Function(
         f"dlo_slot_action_{kind}", [x, d1, d2, po, radius], [shift, ca.gradient(value, x)]
     )

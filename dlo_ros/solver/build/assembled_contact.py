@@ -16,10 +16,10 @@ import numpy as np
 from ...model.obstacles import OBSTACLE_TYPES
 from .slot_envelope import (
     envelope_function,
-    envelope_value,
     shift_bound,
     slot_curve,
     slot_inputs,
+    value_function,
 )
 
 
@@ -268,10 +268,7 @@ def inequality_g(kkt) -> ca.Function:
         for i, ob in enumerate(P.obstacles if nlp.obstacle_slots else ()):
             K, on = nlp.obstacle_slots, p[lay[f"slots:{i}:on"]]
             X = slot_curve(nlp, T, z, p, i)
-            x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
-            po, r = ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size), ca.SX.sym("r")
-            reach = envelope_value(ob.type, x, d1, d2, po, r, shift_bound(nlp.length))
-            v = ca.Function(f"dlo_slot_{ob.type}_value", [x, d1, d2, po, r], [reach])
+            v = value_function(ob.type, shift_bound(nlp.length))
             values = v.map(K, "serial")(*X, *slot_inputs(nlp, p, i))
             parts.append((np.array(nlp.slot_rows[i]), (on * values.T - (1 - on) * L) / L))
     if nlp.self_contact_slots:

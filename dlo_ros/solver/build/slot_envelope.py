@@ -49,14 +49,25 @@ def envelope_function(kind: str, reach: float) -> ca.Function:
     ``reach`` is Δ [m] (module docstring); the derivatives are with respect to (X, X', X'')
     stacked.
     """
-    x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
-    po, radius = ca.SX.sym("po", OBSTACLE_TYPES[kind].size), ca.SX.sym("r")
+    x, d1, d2, po, radius = inputs = _inputs(kind)
     value = envelope_value(kind, x, d1, d2, po, radius, reach)
     u = ca.vertcat(x, d1, d2)
     hess, grad = ca.hessian(value, u)
-    return ca.Function(
-        f"dlo_slot_{kind}", [x, d1, d2, po, radius], [value, grad, ca.densify(hess)]
-    )
+    return ca.Function(f"dlo_slot_{kind}", list(inputs), [value, grad, ca.densify(hess)])
+
+
+@functools.lru_cache(maxsize=None)
+def value_function(kind: str, reach: float) -> ca.Function:
+    """Build (X, X', X'', parameters, r) → v* alone (the rows' values, without derivatives)."""
+    x, d1, d2, po, radius = inputs = _inputs(kind)
+    value = envelope_value(kind, x, d1, d2, po, radius, reach)
+    return ca.Function(f"dlo_slot_{kind}_value", list(inputs), [value])
+
+
+def _inputs(kind: str) -> tuple:
+    """Return the symbols (X, X', X'', the obstacle's parameters, r) of one slot (SX)."""
+    x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
+    return x, d1, d2, ca.SX.sym("po", OBSTACLE_TYPES[kind].size), ca.SX.sym("r")
 
 
 def envelope_value(kind: str, x, d1, d2, po, radius, reach: float):
@@ -90,16 +101,13 @@ def action_function(kind: str, reach: float) -> ca.Function:
     x(σ) + δ x'(σ), and the row's multiplier λ gives the force −λ ∇_X v*, the whole of what the
     row exerts on the centreline (exactly the sum the KKT conditions balance).
     """
-    x, d1, d2 = ca.SX.sym("x", 3), ca.SX.sym("dx", 3), ca.SX.sym("ddx", 3)
-    po, radius = ca.SX.sym("po", OBSTACLE_TYPES[kind].size), ca.SX.sym("r")
+    x, d1, d2, po, radius = inputs = _inputs(kind)
     h_x, slope, bend = _along(kind, x, d1, d2, po)
     v_s, v_ss = ca.SX.sym("v_s"), ca.SX.sym("v_ss")
     shift = ca.gradient(_reach(0.0, v_s, v_ss, reach), v_s)
     shift = ca.substitute(shift, ca.vertcat(v_s, v_ss), ca.vertcat(slope, bend))
     value = _reach(h_x + radius, slope, bend, reach)
-    return ca.Function(
-        f"dlo_slot_action_{kind}", [x, d1, d2, po, radius], [shift, ca.gradient(value, x)]
-    )
+    return ca.Function(f"dlo_slot_action_{kind}", list(inputs), [shift, ca.gradient(value, x)])
 
 
 def slot_curve(nlp, tangents, z, p, i: int) -> list:

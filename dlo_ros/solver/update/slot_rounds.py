@@ -83,7 +83,8 @@ def place_slots_again(
             best = (offset, result, state)
         if offset <= tolerance or round_ == rounds:
             break
-        override = placed_slots(ctx.parts, state, history if ctx.streamed else None)
+        # not a streamed update: a fresh history each round, so no secant
+        override = placed_slots(ctx.parts, state, history if ctx.streamed else {})
         with ctx.scoped(start=state, slot_override=override):
             again, new_state = solve(ctx, problem, True)
         iterations += again.iterations
@@ -134,7 +135,7 @@ def slot_offset(parts: SolverParts, problem: Problem, state: SolverState) -> flo
 
 
 def placed_slots(
-    parts: SolverParts, state: SolverState, history: dict[tuple[int, int], list] | None
+    parts: SolverParts, state: SolverState, history: dict[tuple[int, int], list]
 ) -> list:
     """Return each obstacle's slots for the next round, from the placement on the last answer.
 
@@ -143,19 +144,16 @@ def placed_slots(
     s*; where that overshot (g = s* − σ changed sign without halving), to the secant estimate of
     σ = s*(σ) kept within the last two rounds' σ and s*: a strip pulled tight over a post nearly
     wraps it, its clearance is flat about the contact and s* swings about σ with a growing
-    amplitude.  Without ``history`` (not a streamed update: a cold solve's first answers pass
-    through the obstacle at several places and their minima jump between them; a secant across
-    two of them sent the post's cold solve at 1e-5 m through six refinements instead of three)
-    each goes to its s*.
-    The rows about the slots are off.
+    amplitude.  With an empty ``history`` each round (not a streamed update: a cold solve's
+    first answers pass through the obstacle at several places and their minima jump between
+    them; a secant across two of them sent the post's cold solve at 1e-5 m through six
+    refinements instead of three) each goes to its s*.  The rows about the slots are off.
     """
     nlp, parameters = parts.nlp, parts.parameters
     out = []
     for i, new in enumerate(parameters.placements):
         used, s = parameters.slots(state.p, i), new.s.copy()
         for k in np.flatnonzero((new.on > 0) & (used.on > 0)):
-            if history is None:
-                break
             trail = history.setdefault((i, k), [])
             trail.append((float(used.s[k]), float(new.s[k])))
             if len(trail) >= 2:  # secant on g(σ) = s*(σ) − σ where σ ← s* overshot

@@ -48,6 +48,23 @@ def test_a_rough_element_is_split_at_its_middle_or_at_the_kink():
     assert next_mesh(spec, L, near, RULE) == MeshSpec((0.5,), (7, 7))
 
 
+def test_an_unresolved_contact_splits_its_element_whatever_its_estimate():
+    """A point contact whose error the estimates do not bound (``unresolved``) splits the
+    element holding it there, though every estimate sits far below its share, before any other
+    element refines, and rather than at a kink nearer the middle; without it nothing changes."""
+    spec = MeshSpec((0.3,), (12, 12))
+    calm = [0.1 * DELTA / 2, 0.1 * DELTA / 2]
+    assert next_mesh(spec, L, estimates(calm, [0.3, 0.3], kinks=[0.62]), RULE) is None
+    held = ElementEstimates(np.array(calm), np.array([0.3, 0.3]), (0.62, 0.66), unresolved=(0.66,))
+    assert next_mesh(spec, L, held, RULE) == MeshSpec((0.3, 0.66), (12, 8, 7))
+    # the unknowns cap leaves room for one split: the unresolved contact's, not the worse element
+    tight = RefinementRule(tolerance=DELTA, min_size=0.01, max_nodes=24, max_unknowns=25)
+    worse = ElementEstimates(np.array([50 * DELTA, calm[1]]), np.array([0.97, 0.3]), (0.62,),
+                             unresolved=(0.62,))  # fmt: skip
+    out = next_mesh(spec, L, worse, tight)
+    assert out is not None and 0.62 in out.breakpoints and 0.15 not in out.breakpoints, out
+
+
 def test_a_breakpoint_next_to_a_snap_kink_moves_onto_it():
     """A contact point predicted closer to a breakpoint than min_size cannot be split at: the
     breakpoint moves there, when an element beside it refines; a scene's breakpoint stays."""

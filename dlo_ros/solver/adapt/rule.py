@@ -11,6 +11,8 @@ share of the tolerance δ [m] is b_k = δ · h_k / L when the estimates add up t
   contact point), else split at the middle when ρ_k ≥ ``smooth``, else add the nodes that the
   geometric decay predicts bring e_k to ``target`` · b_k (split at the middle instead when that
   needs more than ``max_nodes``);
+* an element holding an ``unresolved`` point contact (one whose error its estimate does not
+  bound) is refined whatever e_k, split at that contact;
 * coarsen when e_k < ``coarsen`` · b_k: remove the nodes the decay predicts it can spare while
   staying under ``target`` · b_k, at most ``max_removed`` per pass when set (auto sets 2: the
   fitted decay of a solution resolved to rounding predicts far more than it can spare, 12 → 4
@@ -90,6 +92,9 @@ class ElementEstimates:
     #: the contact points that hold a breakpoint [m] (run ends, touching points, held points),
     #: also those on one (None: not known, so no breakpoint is taken for one that holds nothing)
     anchors: tuple[float, ...] | None = None
+    #: point contacts inside an element whose error the estimates do not bound [m]: each
+    #: element holding one is split there, whatever its estimate
+    unresolved: tuple[float, ...] = ()
 
 
 def unknowns(counts) -> int:
@@ -166,15 +171,19 @@ def next_mesh(
     counts = list(spec.counts or ())
     errors, rates = np.asarray(estimates.errors), np.asarray(estimates.decay)
     budgets = _budgets(bounds, rule)
-    moved = _snapped(bounds, errors > rule.refine * budgets, estimates.snap_to, fixed, rule)
+    held = _holding(bounds, estimates.unresolved)
+    refine = (errors > rule.refine * budgets) | (held > 0)
+    moved = _snapped(bounds, refine, estimates.snap_to, fixed, rule)
     plan: list[list[tuple[float, float, int]]] = [
         [(moved[k], moved[k + 1], n)] for k, n in enumerate(counts)
     ]
     total, changed = unknowns(counts), set()
-    for k in np.argsort(-(errors / budgets)):  # the worst first: the unknowns cap may stop it
+    # the worst first (an unresolved contact's element before all): the unknowns cap may stop it
+    for k in np.lexsort((-(errors / budgets), -held)):
         lo, hi, n = plan[k][0]
-        if errors[k] > rule.refine * budgets[k]:
-            new = _refined(lo, hi, n, errors[k], budgets[k], rates[k], estimates.kinks, rule)
+        if refine[k]:
+            kinks = estimates.unresolved if held[k] else estimates.kinks
+            new = _refined(lo, hi, n, errors[k], budgets[k], rates[k], kinks, rule)
             grown = total + unknowns(c for _, _, c in new) - n
             if grown <= rule.max_unknowns:
                 plan[k], total = new, grown
@@ -185,12 +194,18 @@ def next_mesh(
                 fewer = min(fewer, rule.max_removed)
             plan[k] = [(lo, hi, max(rule.min_nodes, n - max(fewer, 0)))]
             changed.add(int(k))
-    low = errors < rule.coarsen * budgets
+    low = (errors < rule.coarsen * budgets) & (held == 0)
     coarse = [k not in changed and low[k] for k in range(len(plan))]
     calm = [len(plan[k]) == 1 and low[k] for k in range(len(plan))]
     flat = _merged(plan, coarse, calm, rule, fixed, estimates, length)
     out = MeshSpec(tuple(float(b) for b, _, _ in flat[1:]), tuple(int(c) for _, _, c in flat))
     return None if out == MeshSpec(tuple(float(b) for b in bounds[1:-1]), tuple(counts)) else out
+
+
+def _holding(bounds: np.ndarray, points) -> np.ndarray:
+    """Return how many of ``points`` [m] lie inside each element of ``bounds``."""
+    inside = np.searchsorted(bounds, np.asarray(points, dtype=float)) - 1
+    return np.bincount(np.clip(inside, 0, bounds.size - 2), minlength=bounds.size - 1)
 
 
 def _snapped(bounds: np.ndarray, refine: np.ndarray, snap_to, fixed, rule) -> np.ndarray:

@@ -34,7 +34,7 @@ import numpy as np
 from ...model.elements import element_mesh_of
 from ..adapt.contact_shift import ContactShift, contact_shift_error
 from ..adapt.rule import ElementEstimates, RefinementRule, next_mesh, unknowns
-from ..adapt.smoothness import contact_kinks, row_survey
+from ..adapt.smoothness import contact_kinks, pressing_inside, row_survey
 from ..build.mesh import mesh_spec
 from ..build.structure import breakpoints
 from ..results.element_error import SAFETY, element_errors
@@ -137,6 +137,8 @@ def mesh_verdict(
     # between its rows and the error of the point contacts it holds, so that their sum bounds
     # the estimate as the rule's share of δ/2 assumes (and the rule refines where they are)
     scale = float(errors.estimate_m) / max(float(np.sum(errors.per_element_m)), 1e-300)
+    # a slot pressing inside an element: its error unbounded by the estimate, split there
+    inside = pressing_inside(solver, state, rule.min_size)
     estimates = ElementEstimates(
         np.maximum(errors.per_element_m * max(scale, 1.0), 0.0)
         + cuts
@@ -145,7 +147,10 @@ def mesh_verdict(
         tuple(sorted(set(kinks) | set(shift.touches))),
         shift.touches,
         anchors=contact_points(solver, survey, state, shift) if coarsen else None,
+        unresolved=inside,
     )
+    if inside:
+        estimate = float("inf")
     following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
     if following is None:
         return MeshVerdict(None, "", estimate)
@@ -154,7 +159,10 @@ def mesh_verdict(
         # at the accuracy a converged solve can be held to: no mesh lowers it (a tolerance below
         # it is reported as not met)
         return MeshVerdict(None, "", estimate)
-    if estimate > tolerance / 2:
+    if inside:
+        at = ", ".join(f"{s:.4g}" for s in inside)
+        why = f"a contact inside an element (s = {at} m): split there"
+    elif estimate > tolerance / 2:
         why = f"error estimate {estimate:.3g} m > {tolerance / 2:.3g} m"
     elif coarsen and estimate < COARSEN_BELOW * tolerance and after < before:
         why = f"error estimate {estimate:.3g} m < {COARSEN_BELOW * tolerance:.3g} m"

@@ -70,14 +70,6 @@ class ReducedModels:
                 **planar,
                 obstacle_points=points,
                 obstacle_slots=slots,
-                # auto's own slots on half-spaces only: on the main job's post a slot held the
-                # contact of a cold solve to 3e-8 m at 1e-5 m (147 unknowns, 1.8 s), but while the
-                # cable was lowered onto it on a 2-element mesh 7 updates came back unverified
-                # (residual 1.0-1.1 mm at δ = 1 mm, the slot rounds not settling as it slid); a
-                # scene's obstacle_slots keep its slotted_obstacles
-                slotted_obstacles="flat"
-                if points == "nodes" and not self.options.obstacle_slots
-                else self.options.slotted_obstacles,
                 order=choice.order,
                 quadrature_nodes=max(self.options.quadrature_nodes, 2 * choice.order + 8),
                 obstacle_samples=choice.samples,

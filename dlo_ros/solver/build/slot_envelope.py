@@ -15,10 +15,15 @@ with x', x'' the centreline's derivatives at σ (x' = T Pᵀ, x'' = T P'ᵀ: ``t
 the closest approach (v_s = 0) v* = v and its gradient is v's: the force acts at σ, as the plain
 row's; off it, v* is the quadratic model's maximum, reached at σ + v_s / D, and the gradient's
 ∂v*/∂v_s ∇v_s term moves the force there to first order (``action_function``).  Δ =
-``obstacle_slots.CLEAR`` · L bounds that shift (the rows about a slot are off as far:
-``rows_on``; beyond it they hold the string, and a quadratic model of a clearance over a post's
-curve is no bound over centimetres: with the rows' spacing, 25 mm, a cable 0.9 mm over a post
-pressed on it); ε keeps D positive.  Where the clearance is not convex at σ (−v_ss ≤ |v_s|/Δ)
+``REACH`` · L bounds that shift; ε keeps D positive.  At a slot's fixed point (σ = s*, where the
+rounds of ``update/slot_rounds.py`` put it) v_s = 0 and Δ plays no part; it decides how the
+rounds get there.  With Δ = 2 mm a mesh too coarse to place the contact (the main job's cable
+landing on its post, 2 elements) cut into the post 1–4 cm beside its slot and the rounds cycled
+between the places, 100–800 ms per update; with 2 cm they settle.  Away from its minimum the
+quadratic model is no bound: it can hold the string off the obstacle (a strip on a post with
+its slot 1 cm off: 5e-5 m clear), so a slot that carries force counts as touching in the rounds
+whatever its clearance, and at 4 cm the main job's landing came back unverified (residual 1–2 mm
+at δ = 1 mm).  Where the clearance is not convex at σ (−v_ss ≤ |v_s|/Δ)
 v* = v + ½ Δ |v_s| is only C⁰ at v_s = 0, and within |v_s| < εΔ its curvature is 1/ε: auto
 slots a flat obstacle only at an isolated sag (``obstacle_slots.FLAT_DIP``), where −v_ss > 0.
 """
@@ -31,15 +36,19 @@ import casadi as ca
 import numpy as np
 
 from ...model.obstacle_types import OBSTACLE_TYPES
-from ..contact.obstacle_slots import CLEAR
 
 #: D's floor [1/m]: a clearance flat to this curvature at its closest approach adds nothing
 FLOOR = 1e-9
 
 
+#: Δ / L: how far from its slot the row follows the closest approach (module docstring: 2e-3
+#: left the rounds cycling on coarse meshes, 4e-2 left the main job's landing unverified)
+REACH = 0.02
+
+
 def shift_bound(length: float) -> float:
-    """Return Δ [m]: how far the closest approach may be from its slot (CLEAR · L)."""
-    return CLEAR * length
+    """Return Δ [m]: how far the closest approach may be from its slot (REACH · L)."""
+    return REACH * length
 
 
 @functools.lru_cache(maxsize=None)

@@ -42,6 +42,11 @@ SLOT_ROUNDS = 4
 #: cable on its table, cold: 1.3 mm off, converged in 3 rounds where 2 were allowed)
 COLD_SLOT_ROUNDS = 8
 
+#: a steady drift is carried on up to this × L per update (``predicted_slots``): the main job's
+#: cable slides 1.8–2.8 mm per update along its post once it has landed, and a cap of 2 mm left
+#: each of those updates solved twice; a landing's jump (25 mm on the post) is not carried on
+PREDICTED = 1e-2
+
 #: a slot row's multiplier above this carries force (IPOPT leaves ~1e-10 on free rows; as
 #: ``kkt.active_rows``)
 ACTIVE = 1e-8
@@ -257,7 +262,7 @@ def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:
     """Return the slots of a warm update's first solve: the start's fixed points moved on.
 
     Each slot the placement on the start's answer filled (``SolverState.slot_motion``) at its
-    fixed point plus its drift where that is steady and under CLEAR·L (clipped to the string),
+    fixed point plus its drift where that is steady and under PREDICTED·L (clipped to the string),
     the rows about it switched off; a slot whose minimum was gone is empty;
     None when ``start`` has no motion (the placement on the start shape stands).  A contact that
     landed or jumped is not extrapolated: on the post, a cable lowered onto it had its slot
@@ -270,7 +275,7 @@ def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:
     out = []
     for i in range(len(nlp.slot_rows)):
         on = motion.on[i]
-        small = np.abs(motion.drift[i]) <= OSL.CLEAR * nlp.length
+        small = np.abs(motion.drift[i]) <= PREDICTED * nlp.length
         drift = np.where(motion.steady[i] & small, motion.drift[i], 0.0)
         moved = np.clip(motion.fixed[i] + drift, 0.0, nlp.length)
         s = np.where(on > 0, moved, 0.0)

@@ -101,6 +101,12 @@ def contact_parts(shift: ContactShift, spec) -> np.ndarray:
     return out
 
 
+def _splits(spec, points: tuple[float, ...], within: float) -> bool:
+    """Tell whether ``spec`` has a breakpoint within ``within`` [m] of each of ``points``."""
+    placed = np.asarray(spec.breakpoints, dtype=float)
+    return all(placed.size and np.min(np.abs(placed - s)) <= within for s in points)
+
+
 def mesh_verdict(
     solver, state, choice: ModelChoice, problem, tolerance: float, coarsen: bool
 ) -> MeshVerdict:
@@ -152,7 +158,8 @@ def mesh_verdict(
     if inside:
         estimate = float("inf")
     following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
-    if following is None:
+    if following is None or not _splits(following, inside, rule.min_size):
+        # (a contact inside an element that the unknowns cap left unsplit: kept, no estimate)
         return MeshVerdict(None, "", estimate)
     before, after = unknowns(spec.counts or ()), unknowns(following.counts or ())
     if estimate <= FLOOR * problem.string.length * (1 + 1e-9):

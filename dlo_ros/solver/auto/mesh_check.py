@@ -101,6 +101,22 @@ def contact_parts(shift: ContactShift, spec) -> np.ndarray:
     return out
 
 
+def _reason(inside: tuple[float, ...], estimate: float, tolerance: float, fewer: bool) -> str:
+    """Return why the proposed mesh is taken ('' : it is not).
+
+    ``inside``: slots pressing inside an element (split there); ``fewer``: the proposal has fewer
+    nodes and may coarsen (a stream's check).
+    """
+    if inside:
+        at = ", ".join(f"{s:.4g}" for s in inside)
+        return f"a contact inside an element (s = {at} m): split there"
+    if estimate > tolerance / 2:
+        return f"error estimate {estimate:.3g} m > {tolerance / 2:.3g} m"
+    if fewer and estimate < COARSEN_BELOW * tolerance:
+        return f"error estimate {estimate:.3g} m < {COARSEN_BELOW * tolerance:.3g} m"
+    return ""
+
+
 def _splits(spec, points: tuple[float, ...], within: float) -> bool:
     """Tell whether ``spec`` has a breakpoint within ``within`` [m] of each of ``points``."""
     placed = np.asarray(spec.breakpoints, dtype=float)
@@ -166,14 +182,8 @@ def mesh_verdict(
         # at the accuracy a converged solve can be held to: no mesh lowers it (a tolerance below
         # it is reported as not met)
         return MeshVerdict(None, "", estimate)
-    if inside:
-        at = ", ".join(f"{s:.4g}" for s in inside)
-        why = f"a contact inside an element (s = {at} m): split there"
-    elif estimate > tolerance / 2:
-        why = f"error estimate {estimate:.3g} m > {tolerance / 2:.3g} m"
-    elif coarsen and estimate < COARSEN_BELOW * tolerance and after < before:
-        why = f"error estimate {estimate:.3g} m < {COARSEN_BELOW * tolerance:.3g} m"
-    else:
+    why = _reason(inside, estimate, tolerance, coarsen and after < before)
+    if not why:
         return MeshVerdict(None, "", estimate)
     refined = replace(
         choice,

@@ -19,6 +19,7 @@ from ..contact.obstacle_slots import FLAT
 from ..contact.penetration import ContactSurvey, contact_survey
 from ..shape_solver import ShapeSolver
 from ..state import SolverState
+from ..update.slot_rounds import ACTIVE
 
 
 def row_survey(solver: ShapeSolver) -> ContactSurvey | None:
@@ -63,18 +64,17 @@ def contact_kinks(
     return tuple(sorted(set(out)))
 
 
-def pressing_inside(
-    solver: ShapeSolver, state: SolverState, margin: float, active: float = 1e-8
-) -> tuple[float, ...]:
+def pressing_inside(solver: ShapeSolver, state: SolverState, margin: float) -> tuple[float, ...]:
     """Return the arc lengths [m] of the obstacle slots of ``state`` that press inside an element.
 
-    A filled slot of a curved obstacle whose row's multiplier exceeds ``active`` (it carries
-    force), farther than ``margin`` [m] from every breakpoint of the mesh (the string's ends
-    included).  The Ritz field cannot kink there, and on a curved obstacle the residual
-    integrated from s = 0 does not bound the error that carries: the string's swing about the
-    obstacle is soft, and a contact a little off moves the whole shape (the main job's post, its
-    contact 13 mm inside a 16-node element: 4.8e-6 m from the reference against an estimate of
-    1.3e-6 m; 8 mm inside: 3.5e-7 m).  On a plane the estimate holds (``test_table_touch.py``).
+    A filled slot of a curved obstacle whose row's multiplier exceeds ``slot_rounds.ACTIVE``
+    (it carries force), farther than ``margin`` [m] from every breakpoint of the mesh (the
+    string's ends included).  The Ritz field cannot kink there, and on a curved obstacle the
+    residual integrated from s = 0 does not bound the error that carries: the string's swing
+    about the obstacle is soft, and a contact a little off moves the whole shape (the main job's
+    post, its contact 13 mm inside a 16-node element: 4.8e-6 m from the reference against an
+    estimate of 1.3e-6 m; 8 mm inside: 3.5e-7 m).  On a plane the estimate holds
+    (``test_table_touch.py``).
     """
     mesh = element_mesh_of(solver.nlp.model)
     nlp = solver.nlp
@@ -85,7 +85,7 @@ def pressing_inside(
         if solver.problem.obstacles[i].type in FLAT:
             continue
         slots = solver.parameters.slots(state.p, i)
-        force = state.lam_g[list(rows)] > active
+        force = state.lam_g[list(rows)] > ACTIVE
         for s, on, pressing in zip(slots.s, slots.on, force):
             if on > 0 and pressing and np.min(np.abs(mesh.breakpoints - s)) > margin:
                 out.append(float(s))

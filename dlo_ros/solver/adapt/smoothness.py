@@ -22,14 +22,16 @@ from ..state import SolverState
 from ..update.slot_rounds import ACTIVE
 
 
-def row_survey(solver: ShapeSolver) -> ContactSurvey | None:
-    """Return the committed shape's contact survey, when its obstacle rows sit on the nodes.
+def row_survey(solver: ShapeSolver, state: SolverState | None) -> ContactSurvey | None:
+    """Return the contact survey of ``state`` (of ``solver``), when its obstacle rows sit on nodes.
 
-    None without a committed state, without obstacles, or with the rows on uniform samples
-    (whose cut between samples ``auto/checks.py``'s sampling check measures).
+    ``state``: the checked shape's (a check's snapshot), never read from ``solver`` here: on the
+    worker thread the stream commits later shapes meanwhile, and a survey of one of those made the
+    background checks' verdicts depend on when the worker ran them.  None without a state,
+    without obstacles, or with the rows on uniform samples (whose cut between samples
+    ``auto/checks.py``'s sampling check measures).
     """
-    state, mesh = solver.committed_state, element_mesh_of(solver.nlp.model)
-    problem = solver.problem
+    mesh, problem = element_mesh_of(solver.nlp.model), solver.problem
     if state is None or mesh is None or not problem.obstacles:
         return None
     if solver.options.obstacle_points != "nodes":

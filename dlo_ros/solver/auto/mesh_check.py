@@ -135,7 +135,7 @@ def mesh_verdict(
     any more (the lift-off slid on) merges away between two calm elements (``adapt/rule.py``).
     """
     length = problem.string.length
-    survey = row_survey(solver)
+    survey = row_survey(solver, state)
     # a point contact pushing at a row, not where the shape touches: the error that carries
     shift = (
         contact_shift_error(solver.nlp, problem, state, np.linspace(0.0, length, SHIFT_GRID))

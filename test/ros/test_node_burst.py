@@ -61,9 +61,11 @@ def test_bursts_end_on_the_last_target_without_growing(node):
     received, coalesced = int(values["targets received"]), int(values["targets coalesced"])
     # The target reader keeps only the newest sample (depth 1): DDS replaces most of a burst before the
     # callback, and how many of those the callback sees, and the node then merges, depends on the solve
-    # time against the executor's intake (18 of 38 in one CI run, 2 tests at once).  The burst must
-    # engage the merging; the absence of a queue is asserted by the solve counts and the latency.
-    assert 0 < coalesced < received and values["failures"] == "0", values
+    # time against the executor's intake (18 of 38 in one CI run, 2 tests at once; 0 in another, where
+    # the loaded node took 3-6 samples of each burst).  So the merging itself is asserted without DDS
+    # (test_node_engine.py: a burst of 500); here the absence of a queue, by the solve counts and the
+    # latency, and that no update failed.
+    assert 0 <= coalesced < received and values["failures"] == "0", values
     assert max(latencies) < 3.0, latencies  # about one solve plus the last messages, not the burst
     # bursts 0-1 warm up (DDS buffers, allocator); afterwards RSS must stay flat
     growth = rss[-1] - rss[1]

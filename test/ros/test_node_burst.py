@@ -66,7 +66,9 @@ def test_bursts_end_on_the_last_target_without_growing(node):
     # (test_node_engine.py: a burst of 500); here the absence of a queue, by the solve counts and the
     # latency, and that no update failed.
     assert 0 <= coalesced < received and values["failures"] == "0", values
-    assert max(latencies) < 3.0, latencies  # about one solve plus the last messages, not the burst
+    # one solve plus the last messages, not the burst; a last sample DDS lost is resent at the
+    # writer's next heartbeat (Fast DDS: every 3 s), so up to about 3 s (2.4 s in a CI run)
+    assert max(latencies) < 4.0, latencies
     # bursts 0-1 warm up (DDS buffers, allocator); afterwards RSS must stay flat
     growth = rss[-1] - rss[1]
     assert growth < 3 * MIB, f"RSS grew by {growth / MIB:.1f} MiB over {len(rss) - 2} bursts: {rss}"

@@ -19,6 +19,7 @@ import re
 import threading
 import time
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -26,10 +27,12 @@ import pytest
 from dlo_ros.model import Obstacle
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver, make_solver
+from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.results.element_error import SAFETY
 from dlo_ros.solver.auto import checks as checks_module
 from dlo_ros.solver.auto.check_schedule import BUILD_LAG, CHECK_LAG
 from dlo_ros.solver.auto import follow as follow_module
+from support.problems import clamped_pair
 
 STEPS = 200
 SAME = 1e-9  # m: same model, same warm starts, same numbers
@@ -230,3 +233,19 @@ def test_a_switch_decided_is_reported_while_its_model_is_built():
             assert abs(model.estimated_error_m - reported) <= 1e-3 * reported, (k, model)
             assert model.tolerance_met == (reported <= model.tolerance_m)
             assert model.checked_updates_ago == k - (at - BUILD_LAG - CHECK_LAG)
+
+
+def test_background_checks_give_the_inline_stream_on_a_loop_in_self_contact(slow_worker):
+    """The paper's Fig. 2 loop (clamp + tangent grip, Rf/Rt = 100, radius 0.01 L) closed from
+    chord 0.3 L to 0.25 L: a stream in self-contact.  A check reads the self-contact pairs of the
+    shape it checks; on 2ef34cf the residual took the streaming solver's (a later update's) and
+    the background stream, its worker late, refined its mesh where the inline one kept it
+    (0.25 m apart at chord 0.2 L)."""
+    problem = clamped_pair(right=(0.3, 0.0, 0.0), twist=0.01, modes=("clamp", "tangent"))
+    problem = replace(problem, string=replace(problem.string, radius=0.01))
+    scene = SimpleNamespace(problem=problem, options=SolverOptions())
+    targets = [np.array([c, 0.0, 0.0]) for c in np.linspace(0.3, 0.25, 30)]
+    inline = stream(scene, targets, "sync")
+    assert all(r.ok for r in inline), [r.message for r in inline if not r.ok][:3]
+    assert inline[-1].self_contacts, "the loop is not in self-contact: the test needs it"
+    assert_same_stream(inline, stream(scene, targets, "background"))  # slowed worker

@@ -215,7 +215,7 @@ class ShapeOutputs:
             g.name: wrench(nlp, current.string, frames_of, g, z, lam_si) for g in problem.grips
         }
         contacts, actions = self._contacts(problem, z, p, lam_si)
-        self_contacts = self._self_contacts(z, lam_si)
+        self_contacts = self._self_contacts(z, lam_si, self.contact_slots)
         for c in self_contacts:  # equal and opposite on the two strands
             actions += [
                 PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
@@ -250,7 +250,10 @@ class ShapeOutputs:
             for g in problem.grips
         }
         actions = self._contacts(problem, state.z, state.p, lam_si)[1]
-        for c in self._self_contacts(state.z, lam_si):
+        # the pairs ``state`` holds: on a check's worker thread the solver's own are a later
+        # update's (a background check read them and refined a Fig. 2 loop the inline one kept)
+        slots = state.contact if state.contact is not None else self.contact_slots
+        for c in self._self_contacts(state.z, lam_si, slots):
             actions += [
                 PointAction(c.s_a, c.point_a, c.force, np.zeros(3)),
                 PointAction(c.s_b, c.point_b, -c.force, np.zeros(3)),
@@ -388,13 +391,15 @@ class ShapeOutputs:
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         return contact_loads(nlp, problem, state.z, state.p, lam_si)
 
-    def _self_contacts(self, z: np.ndarray, lam_si: np.ndarray) -> list[SelfContact]:
-        """Return the force of each self-contact slot with a positive multiplier.
+    def _self_contacts(
+        self, z: np.ndarray, lam_si: np.ndarray, slots: ContactSlots | None
+    ) -> list[SelfContact]:
+        """Return the force of each self-contact slot of ``slots`` with a positive multiplier.
 
         Each slot with a positive multiplier λ [N/m] of its row D² − |x_a − x_b|² ≤ 0: the force
         2 λ (x_a − x_b) on the string at s_a (−∂(λ g)/∂x_a) and its opposite at s_b.
         """
-        slots, nlp = self.contact_slots, self.nlp
+        nlp = self.nlp
         if slots is None or not nlp.self_contact_rows:
             return []
         out = []

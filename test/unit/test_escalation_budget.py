@@ -1,13 +1,18 @@
 """How long a checked solve escalates (solver/auto/stream_checks.py, ``Escalations``): while its
 estimate keeps falling, stopping after CHECK_NOW_STALL verdicts in a row without a new lowest
-estimate or after CHECK_NOW_PASSES; a verdict without an estimate (a change of physics or order)
-is no stall."""
+estimate (lower by CHECK_NOW_GAIN at least) or after CHECK_NOW_PASSES; a verdict without an
+estimate (a change of physics or order) is no stall."""
 
 from __future__ import annotations
 
 import math
 
-from dlo_ros.solver.auto.stream_checks import CHECK_NOW_PASSES, CHECK_NOW_STALL, Escalations
+from dlo_ros.solver.auto.stream_checks import (
+    CHECK_NOW_GAIN,
+    CHECK_NOW_PASSES,
+    CHECK_NOW_STALL,
+    Escalations,
+)
 
 
 def test_a_falling_estimate_escalates_until_the_pass_limit():
@@ -38,3 +43,12 @@ def test_verdicts_without_an_estimate_are_no_stall():
     budget = Escalations()
     budget.spent(1e-3)
     assert not any(budget.spent(math.nan) for _ in range(2 * CHECK_NOW_STALL))
+
+
+def test_estimates_that_barely_fall_end_it_after_the_stall_limit():
+    """Fig. 3 at 1e-6 L at the unknowns cap: 6.22e-7, 6.17e-7, 6.16e-7 m ... each a new lowest by
+    under 1 %: no progress."""
+    budget = Escalations()
+    assert not budget.spent(1e-6)
+    barely = [1e-6 * (0.5 + 0.5 * CHECK_NOW_GAIN) ** (k + 1) for k in range(CHECK_NOW_STALL)]
+    assert [budget.spent(e) for e in barely] == [False] * (CHECK_NOW_STALL - 1) + [True]

@@ -48,8 +48,12 @@ def newton_in_substeps(
     """Run Newton along the straight path from ``start.p`` to ``p1`` in SUBSTEPS equal parts.
 
     Each part is warm-started from the last (the continuation IPOPT would do next, at the cost of
-    Newton steps); ``problem``: what ``p1`` packs.
+    Newton steps); ``problem``: what ``p1`` packs.  No move (``p1`` is ``start.p``: a re-solve on a
+    new mesh from the shape mapped onto it) has nothing to split: each first part would be the
+    Newton that just failed (Fig. 3's floor cold: 0.13 s of its 1.1 s).
     """
+    if np.array_equal(p1, start.p):
+        return False, start, 0, np.inf
     iterations = 0
     for parts in SUBSTEPS:
         state, ok = start, True

@@ -64,19 +64,30 @@ def frames_psi(
 
 
 def pose_frames(
-    nlp: StringNLP, parameters: ProblemParameters, problem: Problem, z: np.ndarray, s: np.ndarray
+    nlp: StringNLP,
+    parameters: ProblemParameters,
+    problem: Problem,
+    z: np.ndarray,
+    s: np.ndarray,
+    p: np.ndarray | None = None,
 ) -> np.ndarray:
     """Return the frames (len(s), 3, 3) of solution z in the pose convention.
 
     Frames (len(s), 3, 3) in the pose convention (columns: tangent, y, z) of solution z.  A
-    director model without twist carries its frames without twist from the first held grip.
+    director model without twist carries its frames without twist from the first held grip, at
+    its target orientation in ``p`` when given (the parameters z was solved at), else
+    ``problem``'s.
     """
     if not nlp.director:
-        return frames(nlp, parameters, problem, z, s) @ TANGENT_X
+        return frames(nlp, parameters, problem, z, s, p) @ TANGENT_X
     anchor = anchor_grip(problem)
-    return nlp.model.pose_frames(
-        z, s, None if anchor is None else (anchor.s, quat_to_matrix(anchor.pose.orientation))
-    )
+    if anchor is None:
+        return nlp.model.pose_frames(z, s, None)
+    if p is None:
+        held = quat_to_matrix(anchor.pose.orientation)
+    else:
+        held = np.asarray(p[nlp.params[f"grip:{anchor.name}:frame"]]).reshape(3, 3, order="F")
+    return nlp.model.pose_frames(z, s, (anchor.s, held))
 
 
 def frames(

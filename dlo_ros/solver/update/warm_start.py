@@ -63,7 +63,9 @@ def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> S
     frames = eps = f = None
     if target.director:
         nodes = target.model.mesh.nodes
-        frames = source.pose_frames(src.z, nodes)
+        # at the parameters src was solved at: the source may be a stream's model whose scene
+        # (the anchor grip's target) has moved on since ``src`` was taken (a check's snapshot)
+        frames = source.pose_frames(src.z, nodes, src.p)
         eps = source.strain(src.z, nodes) if target.model.layout.stretch else None
     else:
         nodes = target.model.quad.nodes

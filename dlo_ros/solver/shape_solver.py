@@ -459,10 +459,7 @@ class ShapeSolver:
         return F.frames_psi(self.nlp, self.parameters, self.problem, z, s, p)
 
     def pose_frames(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
-        """Return solution z's frames (len(s), 3, 3) in the pose convention (tangent, y, z).
-
-        ``p``: the parameters z was solved at (a snapshot's), else the current scene's.
-        """
+        """Return z's frames (len(s), 3, 3), pose convention; at parameters ``p`` if given."""
         return F.pose_frames(self.nlp, self.parameters, self.problem, z, s, p)
 
     def frames(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:

@@ -79,10 +79,6 @@ __all__ = [
     "with_checked_poses",
 ]
 
-#: ('cached' mode) the least time [s] between two looks into the cache for libraries that another
-#: solver or process has compiled since (e.g. a node's query model, for its query workers)
-CACHE_RECHECK_S = 1.0
-
 
 class ShapeSolver:
     """Solve the string's static shape for changing grip targets (see module docstring)."""
@@ -104,7 +100,8 @@ class ShapeSolver:
 
         compile: 'background' (solve at once with interpreted derivatives, compile them to C in a
         background thread and switch when ready; cached per machine), 'blocking' (compile or load
-        now), 'cached' (use a library compiled earlier, never compile), or 'off'.
+        now), 'cached' (use a library compiled earlier, never compile), 'on_query' ('cached' until
+        a query finds a library missing, then compile it: ``build/functions.py``), or 'off'.
         $DLO_NO_COMPILE forces 'off'.  lazy_ipopt: create the IPOPT solvers on first use (helpers
         that may only take Newton steps); otherwise now, so that a stream's first IPOPT fallback
         does not pay for them.  reference_frame: a fixed R0 for the Euler angles (3D models;
@@ -121,7 +118,6 @@ class ShapeSolver:
         self.mesh_spec = mesh
         self._lock = threading.Lock()
         self._compile_thread: threading.Thread | None = None
-        self._cache_checked = time.monotonic()  # ('cached' mode) the last look into the cache
         # a compile is about to start (AutoShapeSolver._compile_ahead)
         self.compile_pending = False
         self._summaries = ModelSummaries()
@@ -376,9 +372,8 @@ class ShapeSolver:
             problem = admitted
             ctx = self.update_context()
             ctx.turns = self._turn_tracker.advance(self._state, self._clamp_turns, problem)
-            if self.functions.waiting and time.monotonic() - self._cache_checked > CACHE_RECHECK_S:
-                self._cache_checked = time.monotonic()
-                self.functions.load_cached()
+            started = self.functions.refresh(self.compile_mode, not commit, self._lock)
+            self._compile_thread = started or self._compile_thread
             warm, limit = warm and self._state is not None, self.options.update_time_limit
             ctx.streamed = is_limited(warm, commit, limited)
             ctx.deadline = self._strikes.deadline(t0, limit, ctx.streamed)

@@ -146,13 +146,13 @@ def test_never_two_compilers_at_once_in_one_process(tmp_path, monkeypatch):
 def test_a_cached_solver_takes_up_libraries_compiled_after_it_started(tmp_path, monkeypatch):
     """A solver that may not compile ('cached': a query worker) swaps in the libraries another solver
     compiled after it started, at its next look into the cache, and answers as before."""
-    from dlo_ros.solver import shape_solver
+    from dlo_ros.solver.build import functions
 
     if compiled.compiler() is None:
         pytest.skip("no C compiler")
     monkeypatch.delenv("DLO_NO_COMPILE")
     monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(shape_solver, "CACHE_RECHECK_S", 0.0)
+    monkeypatch.setattr(functions, "CACHE_RECHECK_S", 0.0)
     problem = clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1)
     waiting = ShapeSolver(problem, PLANAR, compile="cached")
     interpreted = ShapeSolver(problem, PLANAR, compile="off")

@@ -125,9 +125,13 @@ class ModelPool:
         """Compile in the background a model that a switch, the queries or a check will use.
 
         It starts once the streaming model's own compile is done (the stream reaches full speed
-        first), and only if the stream compiles at all.  Its libraries land in the cache, where the
-        query workers find them.
+        first), and only if the stream compiles at all ('on_query': at the model's first query).
+        Its libraries land in the cache, where the query workers find them.
         """
+        if self.compile == "on_query" and solver.compile_mode == "cached":
+            # a query worker's: compiled once a query uses it, not a one-off refinement's copy
+            solver.compile_mode = "on_query"
+            return
         if (
             self.compile not in ("background", "blocking")
             or solver.all_compiled

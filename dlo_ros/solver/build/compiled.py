@@ -24,7 +24,14 @@ import numpy as np
 
 from ..native import cache_store
 from ..native.cache_store import UnusableLibrary, cache_dir
-from ..native.compiler import COMPILER_LOCK, FLAGS, build_library, compiler, fingerprint
+from ..native.compiler import (
+    COMPILER_LOCK,
+    FLAGS,
+    build_library,
+    compiler,
+    fingerprint,
+    library_lock,
+)
 
 __all__ = [
     "FLAGS",
@@ -224,8 +231,8 @@ def compiled(
     lib = lib or library_path(fn, flags)
     native = load_native(lib, fn)
     if native is None:  # missing, damaged or refused: (re)build it
-        with COMPILER_LOCK:  # one compiler at a time in this process
-            native = load_native(lib, fn)  # another thread may have built it meanwhile
+        with library_lock(lib):  # one compiler per process, one build of ``lib`` per machine
+            native = load_native(lib, fn)  # another thread or process may have built it meanwhile
             if native is None and build_library(fn, lib, cc, flags, nice, extra_source, also):
                 native = load_native(lib, fn)
     return (native, True) if native is not None else (InterpretedFunction(fn), False)

@@ -29,9 +29,14 @@ compiled loops do).
 
 Compile modes: 'background' (solve at once with interpreted functions, compile them to C in a
 background thread and swap each in when it is ready; libraries are cached per machine), 'blocking'
-(compile or load now), 'cached' (load a library compiled earlier, never compile) and 'off'.
-$DLO_NO_COMPILE forces 'off'.  A swap happens under the solver's lock, so a solve never sees one
-midway.
+(compile or load now), 'cached' (load a library compiled earlier, never compile), 'on_query' (as
+'cached' until the solver answers a query, ``solve(commit=False)``, while the cache lacks some of
+its libraries: then it compiles those in the background at the process's own priority — a query
+worker's model, ``parallel/batch.py``) and 'off'.  'cached' and 'on_query' look into the cache
+again at most every CACHE_RECHECK_S for libraries another solver or process has built since.  A
+library is built once per machine at a time (``native.compiler.library_lock``): a process that
+misses one another process is building waits for it and loads it.  $DLO_NO_COMPILE forces 'off'.
+A swap happens under the solver's lock, so a solve never sees one midway.
 """
 
 from __future__ import annotations
@@ -58,7 +63,12 @@ from .compiled import (
 from .nlp import StringNLP
 from .output_function import OutputFunction
 
-COMPILE_MODES = ("background", "blocking", "cached", "off")
+COMPILE_MODES = ("background", "blocking", "cached", "on_query", "off")
+#: the modes that wait for a library in the cache rather than build it at the start
+WAITING_MODES = ("cached", "on_query")
+#: ('cached', 'on_query') the least time [s] between two looks into the cache for libraries that
+#: another solver or process has compiled since (e.g. a node's query model, for its query workers)
+CACHE_RECHECK_S = 1.0
 
 
 def check_compile_mode(mode: str) -> None:
@@ -97,9 +107,10 @@ class NlpFunctions:
         self.outputs_compiled = False  # the outputs' function runs compiled C
         self.compile_time_s = 0.0  # wall time of the compile that finished them [s]
         self.retired = False  # the solver was rebuilt: a running compile stops at its next swap
-        #: ('cached' mode) (name, function, library path) of each library not in the cache at the
-        #: start
+        #: ('cached', 'on_query') (name, function, library path) of each library not in the cache
+        #: at the start
         self.waiting: list[tuple[str, ca.Function, Path]] = []
+        self._cache_checked = time.monotonic()  # the last look into the cache for them
 
     def retire(self) -> None:
         """Mark these functions unused: a background compile stops before its next swap.
@@ -139,10 +150,36 @@ class NlpFunctions:
                 todo.append((name, fn, lib))
         # the outputs' function is not a derivative: ``compiled`` says whether the derivatives are
         self.compiled = all(name == "outputs" for name, _, _ in todo)
-        if mode == "cached":
+        if mode in WAITING_MODES:
             self.waiting = todo
-        if not todo or mode == "cached":
+        if not todo or mode in WAITING_MODES:
             return None
+        return self._compile(todo, mode, lock)
+
+    def refresh(self, mode: str, query: bool, lock: threading.Lock) -> threading.Thread | None:
+        """Swap in what reached the cache since; on a query in 'on_query' mode, build the rest.
+
+        ('cached', 'on_query') Looks into the cache at most every CACHE_RECHECK_S.  ``query``: the
+        solve is a query (``commit=False``); ``lock``: the solver's, which the caller holds.
+        Returns the thread of a compile this started, else None.
+        """
+        if not self.waiting:
+            return None
+        if time.monotonic() - self._cache_checked > CACHE_RECHECK_S:
+            self._cache_checked = time.monotonic()
+            self.load_cached()
+        if not (query and mode == "on_query" and self.waiting):
+            return None
+        todo, self.waiting = self.waiting, []
+        return self._compile(todo, mode, lock)
+
+    def _compile(self, todo: list, mode: str, lock: threading.Lock) -> threading.Thread | None:
+        """Compile ``todo``'s (name, function, library) in order: now ('blocking') or in a thread.
+
+        'background' runs the compiler niced (a stream's own model: the stream comes first);
+        'on_query' at the process's priority (a query worker: its queries wait for it).
+        """
+        nlp = self.nlp
 
         def work(locked: bool) -> None:
             t0 = time.perf_counter()

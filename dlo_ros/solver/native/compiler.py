@@ -9,6 +9,7 @@ module of ``native`` imports the NLP's room ``build``.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -16,6 +17,7 @@ import subprocess
 import tempfile
 import threading
 from pathlib import Path
+from typing import Iterator
 
 import casadi as ca
 import numpy as np
@@ -91,6 +93,17 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
 #: Held while a compiler runs: never more than one per process (concurrent compiles multiply the
 #: memory).
 COMPILER_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def library_lock(lib: Path) -> Iterator[None]:
+    """Hold COMPILER_LOCK and the cross-process lock of ``lib`` (``cache_store.build_lock``).
+
+    Look for ``lib`` in the cache again inside, then build it if it is still missing: another
+    process (a query worker beside this one) may have built it meanwhile.
+    """
+    with COMPILER_LOCK, cache_store.build_lock(lib):
+        yield
 
 
 def generate(fn: ca.Function, tmp: str, also: tuple[ca.Function, ...] = ()) -> bytes:

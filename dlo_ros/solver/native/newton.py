@@ -61,7 +61,7 @@ import casadi as ca
 import numpy as np
 
 from .cache_store import UnusableLibrary, load as load_library
-from .compiler import COMPILER_LOCK, compiler
+from .compiler import compiler, library_lock
 from .active import ActiveNewton, ActiveOutcome
 from .blocks import CHUNK_WORK, NodeBlocks, WithNodePart, eigen_lapack, lapack_pointer
 from .build import (
@@ -320,7 +320,7 @@ def build(nlp, nice: int = 0, kkt_lib: Path | None = None) -> NativeNewton | Non
     lib = free_library_path(nlp.kkt_free_split_fn, kkt_lib)
     loop = _instance(nlp, lib)
     if loop is None:  # missing, damaged or refused: (re)build it
-        with COMPILER_LOCK:
+        with library_lock(lib):
             loop = _instance(nlp, lib)
             fn, residual = nlp.kkt_free_split_fn, nlp.residual_free_fn
             if loop is None and compile_free(fn, residual, cc, lib, nice):

@@ -10,9 +10,14 @@ touched.  (The caller's own held shape came from its stream; where a scene has s
 at the held poses, the worker's cold one can be another branch.)
 
 Workers keep their solvers between calls (``_WORKER_SOLVERS``, keyed by the scene's structure, at
-most ``WORKER_SOLVERS`` per process), so only the first call pays for the build.  Workers never
-start a C compiler: they use compiled derivatives only when the cache already has them
-(``compile='cached'``).
+most ``WORKER_SOLVERS`` per process), so only the first call pays for the build.  By default
+(``compile='on_query'``) a worker whose queries find a model's compiled derivatives missing from
+the cache compiles them in a background thread while its queries go on interpreted, one compiler
+per worker, each library built once per machine (the other workers wait for it and load it): a
+first batch on an empty cache reaches compiled speed within seconds, where workers that never
+compiled stayed interpreted for the pool's life (bench/results/queries_first_batch.md).
+``compile='cached'`` (the node's query workers: its stream comes first) uses only what the cache
+holds, looking again every second.
 
 ``executor``: any ``concurrent.futures.Executor`` whose workers can import dlo_ros — by default a
 process pool of ``os.cpu_count()`` spawned workers kept for the life of the process
@@ -101,7 +106,7 @@ def query_many(
     executor: Executor | None = None,
     *,
     chunks: int | None = None,
-    compile: str = "cached",
+    compile: str = "on_query",
     timeout: float | None = None,
 ) -> list[ShapeResult]:
     """Return one ShapeResult per entry of ``targets``, in order (see the module docstring).
@@ -192,7 +197,7 @@ def _answers(
 
 
 def solve_chunk(
-    scene: bytes, targets: list[dict], compile: str = "cached", checks: str = "sync"
+    scene: bytes, targets: list[dict], compile: str = "on_query", checks: str = "sync"
 ) -> list[ShapeResult]:
     """Solve ``targets`` in a worker with this process's solver of the ``scene`` payload.
 

@@ -20,6 +20,7 @@ setup(
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
         ('share/' + package_name + '/config/scenes', sorted(glob('config/scenes/*.yaml'))),
         ('share/' + package_name + '/config/observations', sorted(glob('config/observations/*'))),  # dlo fit example
+        ('share/' + package_name + '/config/plans', sorted(glob('config/plans/*.yaml'))),  # dlo dataset example
         ('share/' + package_name + '/launch', sorted(glob('launch/*.py'))),
     ],
     install_requires=['setuptools'],

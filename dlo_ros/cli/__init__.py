@@ -4,14 +4,15 @@
     [--spawn] [--connect [ADDR]] dlo scenes dlo demo [--scene NAME] [--steps N] [--json]
     [--compile] [--rrd FILE] [--spawn] [--connect [ADDR]] dlo replay FILE.rrd [--resolve
     [--tolerance M] [--json]] [--web] [--screenshot PNG] dlo fit OBSERVATIONS [--scene SCENE]
-    [--json] [--write-scene FILE] [--rrd FILE]
+    [--json] [--write-scene FILE] [--rrd FILE] dlo dataset SCENE --plan PLAN.yaml --out DIR
+    [--workers N] [--scheduler ADDRESS] [--resume]
 
 SCENE is a scene file path or the name of a shipped scene (config/scenes/<name>.yaml).
 Exit codes: 0 success (solve: status ok), 1 the solve (or a demo step) did not reach status ok,
 2 malformed scene or bad usage (the message names the offending key, on stderr, no traceback).
 Documented in msg_docs/cli.md; also runs as ``python -m dlo_ros.cli``.
 
-One module per subcommand (solve, scenes, demo, node, replay, fit), each with ``HELP``,
+One module per subcommand (solve, scenes, demo, node, replay, fit, dataset), each with ``HELP``,
 ``add_arguments(parser)`` and ``run(args) -> exit code``; :data:`SUBCOMMANDS` below lists them, and
 :func:`register_subcommand` adds more.  Shared: ``common`` (exit codes, UsageError) and ``record``
 (the recording flags).
@@ -36,7 +37,7 @@ from typing import Callable
 
 from .. import blas_threads  # noqa: F401  (importing it asks for one BLAS thread: before numpy)
 from ..text import one_line_warnings, safe_text
-from . import demo, fit, node, replay, scenes, solve
+from . import dataset, demo, fit, node, replay, scenes, solve
 from .common import EXIT_NOT_OK, EXIT_OK, EXIT_USAGE, UsageError, print_error
 from .demo import demo_path, format_demo, run_demo
 from .scenes import scene_summaries
@@ -80,6 +81,7 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         ("node", node),
         ("replay", replay),
         ("fit", fit),
+        ("dataset", dataset),
     )
 }
 

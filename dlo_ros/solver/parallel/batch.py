@@ -61,11 +61,13 @@ __all__ = [
     "BACKGROUND_NICE",
     "WORKER_SOLVERS",
     "default_executor",
+    "held_solver",
     "process_pool",
     "query_many",
     "scene_payload",
     "solve_chunk",
     "stop_pool",
+    "worker_lock",
 ]
 
 
@@ -75,8 +77,8 @@ WORKER_SOLVERS = 2
 _WORKER_SOLVERS: collections.OrderedDict[bytes, tuple[bytes, Solver]] = collections.OrderedDict()
 _default: WorkerPool | None = None
 _default_lock = threading.Lock()
-# a thread executor's workers share this process's solvers: one at a time
-_worker_lock = threading.Lock()
+#: a thread executor's workers share this process's solvers: one at a time
+worker_lock = threading.Lock()
 
 
 def default_executor() -> WorkerPool:
@@ -210,7 +212,7 @@ def solve_chunk(
     """
     factory, problem, options = pickle.loads(scene)
     results = []
-    with _worker_lock:  # one CasADi/IPOPT solver must never be called from two threads at once
+    with worker_lock:  # one CasADi/IPOPT solver must never be called from two threads at once
         solver = _worker_solver(scene, factory, problem, options, compile, checks)
         for poses in targets:
             try:
@@ -220,6 +222,16 @@ def solve_chunk(
                 result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
             results.append(result)
     return results
+
+
+def held_solver(scene: bytes, compile: str = "on_query", checks: str = "sync") -> Solver:
+    """Return this process's solver of the ``scene`` payload, holding the shape at its poses.
+
+    The solver :func:`solve_chunk` answers with (kept between calls, ``WORKER_SOLVERS`` per
+    process).  The caller holds :data:`worker_lock` while it uses it.
+    """
+    factory, problem, options = pickle.loads(scene)
+    return _worker_solver(scene, factory, problem, options, compile, checks)
 
 
 def _build_solver(

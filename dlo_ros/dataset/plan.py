@@ -1,0 +1,185 @@
+"""A data set's plan: how many samples, which grip poses, how each is solved (``PLAN.yaml``).
+
+A plan is a YAML (or JSON) mapping::
+
+    samples: 1000            # how many shapes (1 … 10⁸)
+    seed: 7                  # the same plan and seed give the same samples
+    grips:                   # per grip, where its position is drawn (others keep the scene's)
+      right:
+        position_box: {min: [0.4, -0.1, -0.1], max: [0.7, 0.1, 0.1]}   # [m], uniform
+    chunk: 50                # samples per shard file (default 50)
+    start: held              # 'held': each sample solved from the scene's equilibrium at its
+                             # own poses (a query); 'cold': from the initial guess
+    resolution: 51           # centreline points stored per sample (default: the scene's)
+
+Orientations are kept.  Samples are drawn from ``numpy.random.PCG64(seed)``, grip by grip in
+the plan's order, so sample ``i`` is the same whatever the workers, the chunks or a resume
+(:meth:`DatasetPlan.targets`).  A
+malformed plan raises :class:`PlanError` naming the field (``plan.grips.right.position_box.min:
+…``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..model.problem import GripPose, Problem
+from ..scene.bounded_yaml import parse_bounded_yaml
+from ..scene.files import FileLimitError, read_regular_file
+
+#: the largest plan file read [bytes]
+PLAN_FILE_BYTES = 1 << 20
+MAX_SAMPLES = 10**8
+MAX_CHUNK = 100_000
+MAX_RESOLUTION = 10_001
+STARTS = ("held", "cold")
+KEYS = ("samples", "seed", "grips", "chunk", "start", "resolution")
+
+
+class PlanError(ValueError):
+    """A malformed plan: ``str(err)`` starts with the offending key path (``plan.…``)."""
+
+
+@dataclass(frozen=True)
+class PositionBox:
+    """A grip's positions drawn uniformly in the box ``low`` … ``high`` [m] (each (3,))."""
+
+    low: tuple[float, float, float]
+    high: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class DatasetPlan:
+    """A validated plan (module docstring); ``resolution`` 0: the scene's output points."""
+
+    samples: int
+    seed: int
+    grips: dict[str, PositionBox] = field(default_factory=dict)
+    chunk: int = 50
+    start: str = "held"
+    resolution: int = 0
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return the plan as the YAML mapping it was read from (the manifest stores it)."""
+        return {
+            "samples": self.samples,
+            "seed": self.seed,
+            "grips": {
+                name: {"position_box": {"min": list(b.low), "max": list(b.high)}}
+                for name, b in self.grips.items()
+            },
+            "chunk": self.chunk,
+            "start": self.start,
+            "resolution": self.resolution,
+        }
+
+    @property
+    def chunks(self) -> int:
+        """How many shards the samples fill."""
+        return -(-self.samples // self.chunk)
+
+    def span(self, k: int) -> tuple[int, int]:
+        """Return the sample indices [a, b) of chunk ``k``."""
+        return k * self.chunk, min(self.samples, (k + 1) * self.chunk)
+
+    def targets(self, problem: Problem, a: int = 0, b: int | None = None) -> list[dict]:
+        """Return the grip targets of samples [a, b) (the plan's grips; orientations kept).
+
+        Sample i's positions are the 3·G uniform draws starting at draw 3·G·i of
+        ``PCG64(seed)`` (G the plan's grips, in its order), so a chunk draws only its own and
+        equals the same slice of the whole.  Raises PlanError for a grip ``problem`` lacks.
+        """
+        names = [g.name for g in problem.grips]
+        for name in self.grips:
+            if name not in names:
+                raise PlanError(f"plan.grips.{name}: no such grip in the scene (it has {names})")
+        b = self.samples if b is None else b
+        boxes = list(self.grips.items())
+        bits = np.random.PCG64(self.seed)
+        bits.advance(3 * len(boxes) * a)
+        u = np.random.Generator(bits).random((b - a, len(boxes), 3))
+        low = np.array([box.low for _, box in boxes])
+        positions = low + u * (np.array([box.high for _, box in boxes]) - low)
+        held = {g.name: g.pose.orientation for g in problem.grips}
+        return [
+            {
+                name: GripPose(positions[i, j].copy(), held[name])
+                for j, (name, _) in enumerate(boxes)
+            }
+            for i in range(b - a)
+        ]
+
+
+def read_plan(path: Path | str) -> DatasetPlan:
+    """Read and check the plan file ``path`` (module docstring); PlanError names what is wrong."""
+    source = str(path)
+    try:
+        text = read_regular_file(path, source, PLAN_FILE_BYTES, what="plan file").decode()
+    except (FileLimitError, UnicodeDecodeError) as exc:
+        raise PlanError(f"{source}: {exc}") from None
+    try:
+        data = parse_bounded_yaml(text, source)
+    except (FileLimitError, ValueError) as exc:
+        raise PlanError(str(exc)) from None
+    return plan_from_dict(data)
+
+
+def plan_from_dict(data: object) -> DatasetPlan:
+    """Check the plan mapping ``data`` and return it as a DatasetPlan (PlanError if malformed)."""
+    if not isinstance(data, dict):
+        raise PlanError("plan: must be a mapping with at least 'samples', 'seed' and 'grips'")
+    unknown = [str(k) for k in data if k not in KEYS]
+    if unknown:
+        raise PlanError(f"plan.{unknown[0]}: unknown key (a plan has {', '.join(KEYS)})")
+    for key in ("samples", "seed", "grips"):
+        if key not in data:
+            raise PlanError(f"plan.{key}: missing")
+    grips = data["grips"]
+    if not isinstance(grips, dict) or not grips:
+        raise PlanError("plan.grips: must map at least one grip name to its position_box")
+    return DatasetPlan(
+        samples=_integer(data["samples"], "plan.samples", 1, MAX_SAMPLES),
+        seed=_integer(data["seed"], "plan.seed", 0, 2**63 - 1),
+        grips={str(name): _box(spec, f"plan.grips.{name}") for name, spec in grips.items()},
+        chunk=_integer(data.get("chunk", 50), "plan.chunk", 1, MAX_CHUNK),
+        start=_choice(data.get("start", "held"), "plan.start", STARTS),
+        resolution=_integer(data.get("resolution", 0), "plan.resolution", 0, MAX_RESOLUTION),
+    )
+
+
+def _integer(value: object, key: str, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise PlanError(f"{key}: must be an integer in [{low}, {high}], got {value!r:.40}")
+    return int(value)
+
+
+def _choice(value: object, key: str, choices: tuple[str, ...]) -> str:
+    if value not in choices:
+        raise PlanError(f"{key}: must be one of {', '.join(choices)}, got {value!r:.40}")
+    return str(value)
+
+
+def _vector(value: object, key: str) -> tuple[float, float, float]:
+    items = list(value) if isinstance(value, (list, tuple)) else []
+    numbers = [float(v) for v in items if isinstance(v, (int, float)) and not isinstance(v, bool)]
+    if len(items) != 3 or len(numbers) != 3 or not all(math.isfinite(v) for v in numbers):
+        raise PlanError(f"{key}: must be 3 finite numbers [x, y, z] in metres")
+    return (numbers[0], numbers[1], numbers[2])
+
+
+def _box(spec: object, key: str) -> PositionBox:
+    if not isinstance(spec, dict) or set(spec) != {"position_box"}:
+        raise PlanError(f"{key}: must be {{position_box: {{min: [x, y, z], max: [x, y, z]}}}}")
+    box = spec["position_box"]
+    if not isinstance(box, dict) or set(box) != {"min", "max"}:
+        raise PlanError(f"{key}.position_box: must have exactly 'min' and 'max'")
+    low = _vector(box["min"], f"{key}.position_box.min")
+    high = _vector(box["max"], f"{key}.position_box.max")
+    if any(a > b for a, b in zip(low, high)):
+        raise PlanError(f"{key}.position_box: min must not exceed max on any axis")
+    return PositionBox(low, high)

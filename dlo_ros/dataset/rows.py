@@ -1,0 +1,133 @@
+"""One data-set row per sample: the certified answer of a shape solve, flattened for Parquet.
+
+Every sample is stored, whatever its status (a failed or ``unverified`` answer with its message).
+Columns (:data:`SCHEMA`; lists are flattened row-major, units SI):
+
+* ``sample`` (its index in the plan), ``status``, ``message``, ``start`` ('held' or 'cold': the
+  branch it was solved from, ``plan.py``);
+* ``targets``: the plan's grips' commanded poses, per grip [x, y, z, qx, qy, qz, qw] in the plan's
+  grip order (the manifest's ``plan_grips``);
+* ``stable`` (null when the solver cannot tell), ``min_eigenvalue`` (of the reduced Hessian, null
+  without one), ``equilibrium_residual_m`` (the strong-form residual that certifies it),
+  ``constraint_violation``;
+* ``tolerance_m``, ``estimated_error_m``, ``tolerance_met``: the model's discretisation check;
+* ``energy_<part>`` [J] for ``bend``, ``twist``, ``stretch``, ``gravity``, ``external_work``,
+  ``total`` (U − W; null where it has no meaning, ``msg_docs/model_and_solver.md``);
+* ``grip_force``, ``grip_torque``: per scene grip (scene order) [N], [N·m];
+* ``obstacle_force``: per scene obstacle (scene order) the total contact force [N] (0 without
+  contact); ``contacts``: the JSON of the point and line contact loads and self-contacts
+  (``dlo solve --json``'s ``contact_loads`` and ``self_contacts``);
+* ``min_self_distance`` [m] (null: not checked or no two strands within reach),
+  ``passes_through_itself``;
+* ``s`` [m], ``points`` [m]: the centreline at the plan's resolution;
+* ``model``: the JSON of the model summary; ``solve_time_ms``, ``iterations``, ``derivatives``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from ..jsonio import json_safe
+from ..model.problem import GripPose, Problem
+from ..solver.results.result import ShapeResult
+
+ENERGY_PARTS = ("bend", "twist", "stretch", "gravity", "external_work", "total")
+
+_floats = pa.list_(pa.float64())
+SCHEMA = pa.schema(
+    [
+        ("sample", pa.int64()),
+        ("status", pa.string()),
+        ("message", pa.string()),
+        ("start", pa.string()),
+        ("targets", _floats),
+        ("stable", pa.bool_()),
+        ("min_eigenvalue", pa.float64()),
+        ("equilibrium_residual_m", pa.float64()),
+        ("constraint_violation", pa.float64()),
+        ("tolerance_m", pa.float64()),
+        ("estimated_error_m", pa.float64()),
+        ("tolerance_met", pa.bool_()),
+        *[(f"energy_{part}", pa.float64()) for part in ENERGY_PARTS],
+        ("grip_force", _floats),
+        ("grip_torque", _floats),
+        ("obstacle_force", _floats),
+        ("contacts", pa.string()),
+        ("min_self_distance", pa.float64()),
+        ("passes_through_itself", pa.bool_()),
+        ("s", _floats),
+        ("points", _floats),
+        ("model", pa.string()),
+        ("solve_time_ms", pa.float64()),
+        ("iterations", pa.int64()),
+        ("derivatives", pa.string()),
+    ]
+)
+
+
+def _number(value: Any) -> float | None:
+    """Return a finite float, or None (null) for None, NaN and infinities."""
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _flat(a: Any) -> list[float]:
+    return [float(v) for v in np.asarray(a, dtype=float).ravel()]
+
+
+def sample_row(
+    index: int, targets: dict[str, GripPose], result: ShapeResult, problem: Problem, start: str
+) -> dict[str, Any]:
+    """Return the row of sample ``index`` (module docstring) from its answer ``result``.
+
+    ``targets``: its commanded poses (the plan's grips, in the plan's order); ``problem``: the
+    scene's (its grip and obstacle order).
+    """
+    model = result.model
+    full = result.to_dict()
+    forces = np.zeros((len(problem.obstacles), 3))
+    for i, f in result.contact_forces.items():
+        if 0 <= int(i) < len(forces):
+            forces[int(i)] = f
+    zero = {"force": np.zeros(3), "torque": np.zeros(3)}
+    wrenches = [full["grips"].get(g.name, zero) for g in problem.grips]
+    contacts = {"contact_loads": full["contact_loads"], "self_contacts": full["self_contacts"]}
+    return {
+        "sample": int(index),
+        "status": result.status,
+        "message": result.message,
+        "start": start,
+        "targets": [v for pose in targets.values() for v in (*pose.position, *pose.orientation)],
+        "stable": result.stable,
+        "min_eigenvalue": _number(result.min_eigenvalue),
+        "equilibrium_residual_m": _number(result.equilibrium_residual_m),
+        "constraint_violation": _number(result.constraint_violation),
+        "tolerance_m": _number(model.tolerance_m) if model is not None else None,
+        "estimated_error_m": _number(model.estimated_error_m) if model is not None else None,
+        "tolerance_met": model.tolerance_met if model is not None else None,
+        **{f"energy_{p}": _number(result.energy.get(p)) for p in ENERGY_PARTS},
+        "grip_force": _flat([w["force"] for w in wrenches]),
+        "grip_torque": _flat([w["torque"] for w in wrenches]),
+        "obstacle_force": _flat(forces),
+        "contacts": json.dumps(json_safe(contacts), allow_nan=False),
+        "min_self_distance": _number(result.min_self_distance),
+        "passes_through_itself": bool(result.passes_through_itself),
+        "s": _flat(result.s),
+        "points": _flat(result.points),
+        "model": json.dumps(json_safe(result.model_dict()), allow_nan=False),
+        "solve_time_ms": _number(result.solve_time_ms),
+        "iterations": int(result.iterations),
+        "derivatives": result.derivatives,
+    }
+
+
+def rows_table(rows: list[dict[str, Any]]) -> pa.Table:
+    """Return ``rows`` as an Arrow table of :data:`SCHEMA`."""
+    return pa.Table.from_pylist(rows, schema=SCHEMA)

@@ -1,0 +1,212 @@
+"""`dlo dataset`: a plan's samples solved into Parquet shards, every answer stored, resumable (#39).
+
+Checked against the solver itself in this process (each stored shape equals the answer of the same
+query to a solver of the scene), against the plan (every sample once, in order, the same targets
+for the same seed), and through the command line as a user runs it: a malformed plan, an occupied
+output folder, Ctrl-C in the middle and ``--resume``, a Dask cluster.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dlo_ros.dataset import (
+    DatasetError,
+    PlanError,
+    build_dataset,
+    load,
+    load_arrays,
+    plan_from_dict,
+    read_manifest,
+)
+from dlo_ros.dataset.store import shard_path
+from dlo_ros.scene import load_scene
+from dlo_ros.solver import make_solver
+
+ROOT = Path(__file__).resolve().parents[2]
+# around the right grip (0.6, 0, 0.4): reachable, some samples pressed onto the table
+BOX = {"min": [0.5, -0.1, -0.05], "max": [0.7, 0.1, 0.45]}
+
+
+def plan_dict(samples=12, chunk=4, **more) -> dict:
+    return {"samples": samples, "seed": 5, "chunk": chunk, "grips": {"right": {"position_box": BOX}}, **more}
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("default_cable")
+
+
+@pytest.fixture(scope="module")
+def built(scene, tmp_path_factory):
+    """A data set of 12 samples in 3 shards, made on two local workers."""
+    out = tmp_path_factory.mktemp("dataset") / "out"
+    summary = build_dataset(scene, plan_from_dict(plan_dict()), out, workers=2, progress=False)
+    return out, summary
+
+
+@pytest.mark.parametrize(
+    "change, field",
+    [
+        ({"sample": 3}, "plan.sample: unknown key"),
+        ({"samples": 0}, "plan.samples: must be an integer"),
+        ({"samples": True}, "plan.samples: must be an integer"),
+        ({"seed": -1}, "plan.seed"),
+        ({"start": "warm"}, "plan.start: must be one of held, cold"),
+        ({"grips": {}}, "plan.grips: must map at least one grip"),
+        ({"grips": {"right": {"position_box": {"min": [0, 0], "max": [1, 1, 1]}}}},
+         "plan.grips.right.position_box.min: must be 3 finite numbers"),
+        ({"grips": {"right": {"position_box": {"min": [0, 0, float("nan")], "max": [1, 1, 1]}}}},
+         "plan.grips.right.position_box.min"),
+        ({"grips": {"right": {"position_box": {"min": [1, 0, 0], "max": [0, 1, 1]}}}},
+         "plan.grips.right.position_box: min must not exceed max"),
+        ({"grips": {"right": {"box": BOX}}}, "plan.grips.right: must be {position_box"),
+    ],
+)
+def test_a_malformed_plan_names_its_field(change, field):
+    with pytest.raises(PlanError, match=field.replace("{", r"\{").replace("(", r"\(")):
+        plan_from_dict({**plan_dict(), **change})
+
+
+def test_a_grip_the_scene_lacks_is_named(scene, tmp_path):
+    plan = plan_from_dict({**plan_dict(), "grips": {"middle": {"position_box": BOX}}})
+    with pytest.raises(PlanError, match=r"plan.grips.middle: no such grip"):
+        build_dataset(scene, plan, tmp_path / "out", progress=False)
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_same_plan_and_seed_give_the_same_samples_in_any_chunking(scene):
+    plan = plan_from_dict(plan_dict(samples=50))
+    whole = plan.targets(scene.problem)
+    again = plan_from_dict(plan_dict(samples=50, chunk=7)).targets(scene.problem, 13, 29)
+    assert len(whole) == 50 and len(again) == 16
+    for a, b in zip(whole[13:29], again):
+        np.testing.assert_array_equal(a["right"].position, b["right"].position)
+    positions = np.array([t["right"].position for t in whole])
+    assert np.all(positions >= BOX["min"]) and np.all(positions <= BOX["max"])
+    other = plan_from_dict({**plan_dict(samples=50), "seed": 6}).targets(scene.problem)
+    assert not np.allclose(positions, [t["right"].position for t in other])
+    # orientations kept, the other grip untouched
+    assert all(set(t) == {"right"} for t in whole)
+    np.testing.assert_array_equal(whole[0]["right"].orientation, scene.problem.grip("right").pose.orientation)
+
+
+def test_every_sample_is_stored_once_with_the_solvers_own_answer(scene, built):
+    out, summary = built
+    a = load_arrays(out)
+    assert summary.complete and summary.written == 12 and not summary.failed_chunks
+    np.testing.assert_array_equal(a["sample"], np.arange(12))
+    assert set(a["status"]) <= {"ok", "unverified", "infeasible", "failed"} and "ok" in set(a["status"])
+    plan = plan_from_dict(plan_dict())
+    targets = plan.targets(scene.problem)
+    np.testing.assert_allclose(a["targets"][:, 0, :3], [t["right"].position for t in targets])
+    solver = make_solver(scene.problem, scene.options, compile="off", checks="sync")
+    solver.solve()
+    for i in (0, 5, 11):
+        r = solver.solve(targets[i], commit=False)
+        assert a["status"][i] == r.status
+        if r.ok:
+            np.testing.assert_allclose(a["points"][i], r.points, atol=1e-9)
+            np.testing.assert_allclose(a["grip_force"][i, 1], r.grips["right"].force, atol=1e-9)
+    ok = a["status"] == "ok"
+    # an ok sample is a verified equilibrium with a verdict: residual within the tolerance, stable
+    # said; its model's estimate meets the tolerance where auto checked it (a query touching the
+    # table, or refined), else there is none (null), never a "met" without one
+    assert all(v is not None for v in a["stable"][ok])
+    checked = np.isfinite(a["estimated_error_m"])
+    assert all(a["tolerance_met"][ok & checked]) and all(v is None for v in a["tolerance_met"][ok & ~checked])
+    assert np.all(a["estimated_error_m"][ok & checked] <= a["tolerance_m"][ok & checked])
+    assert np.all(a["equilibrium_residual_m"][ok] <= a["tolerance_m"][ok])
+    assert np.all(np.isfinite(a["energy_total"][ok]))
+    m = read_manifest(out)
+    assert m["complete"] and sum(m["counts"].values()) == 12 and m["plan"]["seed"] == 5
+    assert m["plan_grips"] == ["right"] and m["scene_grips"] == ["left", "right"]
+    assert m["scene"]["name"] == "default_cable" and m["chunks"] == 3
+
+
+def test_resume_solves_only_the_missing_shard_and_refuses_another_plan(scene, built, tmp_path):
+    out, _ = built
+    copy = tmp_path / "copy"
+    subprocess.run(["cp", "-r", str(out), str(copy)], check=True)
+    first = load(copy)
+    shard_path(copy, 1).unlink()
+    summary = build_dataset(scene, plan_from_dict(plan_dict()), copy, workers=1, resume=True, progress=False)
+    assert summary.written == 4 and summary.resumed == 8 and summary.complete
+    again = load(copy)
+    assert again.column("sample").to_pylist() == list(range(12))
+    assert again.column("status").to_pylist() == first.column("status").to_pylist()
+    for x, y in zip(again.column("points").to_pylist(), first.column("points").to_pylist()):
+        np.testing.assert_allclose(x, y, atol=1e-9)
+    with pytest.raises(DatasetError, match="cannot resume: it was made with another plan"):
+        build_dataset(scene, plan_from_dict({**plan_dict(), "seed": 9}), copy, resume=True, progress=False)
+    with pytest.raises(DatasetError, match="not empty; --resume"):
+        build_dataset(scene, plan_from_dict(plan_dict()), copy, progress=False)
+
+
+def _dlo(*args, **kw):
+    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    return subprocess.run([sys.executable, "-m", "dlo_ros.cli", *args], capture_output=True, text=True,
+                          env=env, timeout=600, **kw)
+
+
+def test_the_command_line_refuses_bad_input_in_one_line(tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("samples: 10\nseed: 1\ngrips: {right: {position_box: {min: [0, 0, 0], max: [1, 1]}}}\n")
+    r = _dlo("dataset", "default_cable", "--plan", str(plan), "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip() == "dlo: error: plan.grips.right.position_box.max: must be 3 finite numbers [x, y, z] in metres"
+    r = _dlo("dataset", "default_cable", "--plan", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and "none.yaml" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_ctrl_c_keeps_the_written_shards_and_resume_finishes(tmp_path):
+    """The command interrupted once its first shards are written: exit 130, what was written stays,
+    and the same command with --resume stores every sample once."""
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(
+        "samples: 60\nseed: 3\nchunk: 5\n"
+        "grips: {right: {position_box: {min: [0.5, -0.1, 0.2], max: [0.7, 0.1, 0.45]}}}\n"
+    )
+    out = tmp_path / "out"
+    args = ["dataset", "default_cable", "--plan", str(plan), "--out", str(out), "--workers", "2", "--quiet"]
+    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    proc = subprocess.Popen([sys.executable, "-m", "dlo_ros.cli", *args], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not list((out / "shards").glob("part-*.parquet")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    written = len(list((out / "shards").glob("part-*.parquet")))
+    assert proc.returncode == 130 and "--resume" in err and "Traceback" not in err
+    assert 1 <= written < 12 and not list((out / "shards").glob(".*tmp"))
+    assert not read_manifest(out)["complete"]
+    r = _dlo(*args, "--resume")
+    assert r.returncode == 0, r.stderr
+    assert "60 of 60 samples stored" in r.stdout and f"{5 * written} were there already" in r.stdout
+    table = load(out)
+    assert table.column("sample").to_pylist() == list(range(60))
+    assert read_manifest(out)["complete"]
+
+
+def test_a_dask_cluster_gives_the_local_answers(scene, built, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    out, _ = built
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        summary = build_dataset(scene, plan_from_dict(plan_dict()), tmp_path / "dask",
+                                executor=client.get_executor(), executor_name="dask", progress=False)
+    assert summary.complete
+    local, remote = load(out), load(tmp_path / "dask")
+    assert remote.column("status").to_pylist() == local.column("status").to_pylist()
+    for x, y in zip(remote.column("points").to_pylist(), local.column("points").to_pylist()):
+        np.testing.assert_allclose(x, y, atol=1e-9)
+    assert read_manifest(tmp_path / "dask")["machine"]["executor"] == "dask"

@@ -13,6 +13,7 @@ workers import dlo_ros: a Dask ``distributed`` client's ``get_executor()`` for a
 from __future__ import annotations
 
 import time
+import warnings
 from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field, replace
@@ -23,7 +24,7 @@ import pyarrow.parquet as pq
 from ..scene import Scene
 from ..solver import make_solver
 from ..solver.parallel.batch import scene_payload
-from ..solver.parallel.worker_pool import WorkerPool
+from ..solver.parallel.worker_pool import MODULE_LEVEL_CALL, WorkerPool, starting_as_worker
 from . import manifest as M
 from . import store
 from .plan import DatasetPlan, PlanError
@@ -89,9 +90,14 @@ def build_dataset(
     given (e.g. a Dask client's ``get_executor()``; ``executor_name`` says which in the
     manifest).  ``resume``: continue a data set in ``out`` made with the same scene and plan;
     without it ``out`` must be new or empty.  Raises DatasetError or PlanError with the reason.
-    KeyboardInterrupt stops the run; the shards written so far stay.
+    KeyboardInterrupt stops the run; the shards written so far stay.  Called from a script's top
+    level, the local pool's workers run the call again while they start: there it returns at once
+    (a warning says why) and never touches ``out``.
     """
     out = Path(out)
+    if executor is None and starting_as_worker():  # the script's own call is the one that runs
+        warnings.warn(f"build_dataset: {MODULE_LEVEL_CALL}", RuntimeWarning, stacklevel=2)
+        return DatasetSummary(out, plan.samples, {}, 0, 0, 0.0)
     if plan.resolution:
         scene = replace(scene, options=replace(scene.options, output_points=plan.resolution))
     plan.targets(scene.problem, 0, 0)  # checks the plan's grips against the scene

@@ -39,6 +39,7 @@ import os
 import pickle
 import threading
 import time
+import warnings
 from concurrent.futures import CancelledError, Executor, Future
 from concurrent.futures.process import BrokenProcessPool
 from typing import Mapping, Sequence
@@ -50,10 +51,12 @@ from ..results.result import ShapeResult
 from ..update.inputs import structure_key
 from .worker_pool import (
     BACKGROUND_NICE,
+    MODULE_LEVEL_CALL,
     TaskTimeout,
     WorkerDied,
     WorkerPool,
     process_pool,
+    starting_as_worker,
     stop_pool,
 )
 
@@ -123,7 +126,9 @@ def query_many(
     then answer ``failed`` with a message starting "timeout:"; on a :class:`WorkerPool` (the
     default executor) their workers are killed and replaced.  Queries whose worker died answer
     ``failed`` naming the cause; the default pool is rebuilt for the next call.  The call never
-    hangs on a dead worker.
+    hangs on a dead worker.  Called from a script's top level (no ``if __name__ == "__main__":``),
+    the spawned workers run that call again while they start: there it answers ``failed`` at once
+    with a warning that says so, and the workers go on to serve the script's own call.
     """
     options = options or SolverOptions()
     problem.validate()
@@ -131,6 +136,10 @@ def query_many(
     queries = [dict(t) for t in targets]
     if not queries:
         return []
+    if executor is None and starting_as_worker():
+        warnings.warn(f"query_many: {MODULE_LEVEL_CALL}", RuntimeWarning, stacklevel=2)
+        message = f"not solved: query_many {MODULE_LEVEL_CALL}"
+        return [ShapeResult(status="failed", message=message) for _ in queries]
     executor = executor or default_executor()
     spans = _spans(executor, chunks, len(queries))
     payload = scene_payload(factory, problem, options)

@@ -118,6 +118,24 @@ _SPAWNER = _Spawner()
 PARENT_CHECK_S = 0.5
 
 
+#: what a pool call says when made while its own process starts as a spawned worker
+MODULE_LEVEL_CALL = (
+    "called while this process starts as a spawned worker: a script that calls it at module "
+    "level runs again in every worker; put the call under `if __name__ == \"__main__\":`"
+)
+
+
+def starting_as_worker() -> bool:
+    """Tell whether this process is a spawned worker still importing its parent's main module.
+
+    With 'spawn' every worker imports the parent's script as ``__mp_main__`` before it takes any
+    task; a pool started from the script's top level would then start again in each worker
+    (multiprocessing refuses that with a RuntimeError per worker).  Callers answer at once with
+    :data:`MODULE_LEVEL_CALL` instead of starting a pool.
+    """
+    return bool(getattr(multiprocessing.current_process(), "_inheriting", False))
+
+
 def die_with_parent(parent_pid: int) -> str:
     """End this worker process when its parent dies, however it dies; return how.
 

@@ -4,8 +4,8 @@ A plan is a YAML (or JSON) mapping::
 
     samples: 1000            # how many shapes (1 … 10⁸)
     seed: 7                  # the same plan and seed give the same samples
-    grips:                   # per grip, where its position is drawn (others keep the scene's)
-      right:
+    grips:                   # per grip, where its position goes (others keep the scene's pose):
+      right:                 # position_box, position_grid or around_path (positions.py)
         position_box: {min: [0.4, -0.1, -0.1], max: [0.7, 0.1, 0.1]}   # [m], uniform
     chunk: 50                # samples per shard file (default 50)
     start: held              # 'held': each sample solved from the scene's equilibrium at its
@@ -14,14 +14,12 @@ A plan is a YAML (or JSON) mapping::
 
 Orientations are kept.  Samples are drawn from ``numpy.random.PCG64(seed)``, grip by grip in
 the plan's order, so sample ``i`` is the same whatever the workers, the chunks or a resume
-(:meth:`DatasetPlan.targets`).  A
-malformed plan raises :class:`PlanError` naming the field (``plan.grips.right.position_box.min:
-…``).
+(:meth:`DatasetPlan.targets`).  A malformed plan raises :class:`PlanError` naming the field
+(``plan.grips.right.position_box.min: …``).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,6 +29,7 @@ import numpy as np
 from ..model.problem import GripPose, Problem
 from ..scene.bounded_yaml import parse_bounded_yaml
 from ..scene.files import FileLimitError, read_regular_file
+from .positions import PlanError, Sampler, parse
 
 #: the largest plan file read [bytes]
 PLAN_FILE_BYTES = 1 << 20
@@ -41,25 +40,13 @@ STARTS = ("held", "cold")
 KEYS = ("samples", "seed", "grips", "chunk", "start", "resolution")
 
 
-class PlanError(ValueError):
-    """A malformed plan: ``str(err)`` starts with the offending key path (``plan.…``)."""
-
-
-@dataclass(frozen=True)
-class PositionBox:
-    """A grip's positions drawn uniformly in the box ``low`` … ``high`` [m] (each (3,))."""
-
-    low: tuple[float, float, float]
-    high: tuple[float, float, float]
-
-
 @dataclass(frozen=True)
 class DatasetPlan:
     """A validated plan (module docstring); ``resolution`` 0: the scene's output points."""
 
     samples: int
     seed: int
-    grips: dict[str, PositionBox] = field(default_factory=dict)
+    grips: dict[str, Sampler] = field(default_factory=dict)
     chunk: int = 50
     start: str = "held"
     resolution: int = 0
@@ -69,10 +56,7 @@ class DatasetPlan:
         return {
             "samples": self.samples,
             "seed": self.seed,
-            "grips": {
-                name: {"position_box": {"min": list(b.low), "max": list(b.high)}}
-                for name, b in self.grips.items()
-            },
+            "grips": {name: sampler.as_dict() for name, sampler in self.grips.items()},
             "chunk": self.chunk,
             "start": self.start,
             "resolution": self.resolution,
@@ -99,17 +83,19 @@ class DatasetPlan:
             if name not in names:
                 raise PlanError(f"plan.grips.{name}: no such grip in the scene (it has {names})")
         b = self.samples if b is None else b
-        boxes = list(self.grips.items())
         bits = np.random.PCG64(self.seed)
-        bits.advance(3 * len(boxes) * a)
-        u = np.random.Generator(bits).random((b - a, len(boxes), 3))
-        low = np.array([box.low for _, box in boxes])
-        positions = low + u * (np.array([box.high for _, box in boxes]) - low)
+        bits.advance(3 * len(self.grips) * a)
+        u = np.random.Generator(bits).random((b - a, len(self.grips), 3))
+        index = np.arange(a, b)
+        positions = [
+            sampler.positions(index, u[:, j], self.samples)
+            for j, sampler in enumerate(self.grips.values())
+        ]
         held = {g.name: g.pose.orientation for g in problem.grips}
         return [
             {
-                name: GripPose(positions[i, j].copy(), held[name])
-                for j, (name, _) in enumerate(boxes)
+                name: GripPose(positions[j][i].copy(), held[name])
+                for j, name in enumerate(self.grips)
             }
             for i in range(b - a)
         ]
@@ -141,11 +127,11 @@ def plan_from_dict(data: object) -> DatasetPlan:
             raise PlanError(f"plan.{key}: missing")
     grips = data["grips"]
     if not isinstance(grips, dict) or not grips:
-        raise PlanError("plan.grips: must map at least one grip name to its position_box")
+        raise PlanError("plan.grips: must map at least one grip name to where it goes")
     return DatasetPlan(
         samples=_integer(data["samples"], "plan.samples", 1, MAX_SAMPLES),
         seed=_integer(data["seed"], "plan.seed", 0, 2**63 - 1),
-        grips={str(name): _box(spec, f"plan.grips.{name}") for name, spec in grips.items()},
+        grips={str(name): parse(spec, f"plan.grips.{name}") for name, spec in grips.items()},
         chunk=_integer(data.get("chunk", 50), "plan.chunk", 1, MAX_CHUNK),
         start=_choice(data.get("start", "held"), "plan.start", STARTS),
         resolution=_integer(data.get("resolution", 0), "plan.resolution", 0, MAX_RESOLUTION),
@@ -162,24 +148,3 @@ def _choice(value: object, key: str, choices: tuple[str, ...]) -> str:
     if value not in choices:
         raise PlanError(f"{key}: must be one of {', '.join(choices)}, got {value!r:.40}")
     return str(value)
-
-
-def _vector(value: object, key: str) -> tuple[float, float, float]:
-    items = list(value) if isinstance(value, (list, tuple)) else []
-    numbers = [float(v) for v in items if isinstance(v, (int, float)) and not isinstance(v, bool)]
-    if len(items) != 3 or len(numbers) != 3 or not all(math.isfinite(v) for v in numbers):
-        raise PlanError(f"{key}: must be 3 finite numbers [x, y, z] in metres")
-    return (numbers[0], numbers[1], numbers[2])
-
-
-def _box(spec: object, key: str) -> PositionBox:
-    if not isinstance(spec, dict) or set(spec) != {"position_box"}:
-        raise PlanError(f"{key}: must be {{position_box: {{min: [x, y, z], max: [x, y, z]}}}}")
-    box = spec["position_box"]
-    if not isinstance(box, dict) or set(box) != {"min", "max"}:
-        raise PlanError(f"{key}.position_box: must have exactly 'min' and 'max'")
-    low = _vector(box["min"], f"{key}.position_box.min")
-    high = _vector(box["max"], f"{key}.position_box.max")
-    if any(a > b for a, b in zip(low, high)):
-        raise PlanError(f"{key}.position_box: min must not exceed max on any axis")
-    return PositionBox(low, high)

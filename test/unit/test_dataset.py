@@ -62,13 +62,19 @@ def built(scene, tmp_path_factory):
         ({"seed": -1}, "plan.seed"),
         ({"start": "warm"}, "plan.start: must be one of held, cold"),
         ({"grips": {}}, "plan.grips: must map at least one grip"),
+        ({"grips": {"right": {"position_grid": {"min": [0, 0, 0], "max": [1, 1, 1], "counts": [2, 0, 1]}}}},
+         "plan.grips.right.position_grid.counts: each ≥ 1"),
+        ({"grips": {"right": {"around_path": {"points": [[0, 0, 0]], "spread": 0.0}}}},
+         "plan.grips.right.around_path.points: must be 2 to"),
+        ({"grips": {"right": {"around_path": {"points": [[0, 0, 0], [1, 0, 0]], "spread": -1}}}},
+         "plan.grips.right.around_path.spread: must be a number"),
         ({"grips": {"right": {"position_box": {"min": [0, 0], "max": [1, 1, 1]}}}},
          "plan.grips.right.position_box.min: must be 3 finite numbers"),
         ({"grips": {"right": {"position_box": {"min": [0, 0, float("nan")], "max": [1, 1, 1]}}}},
          "plan.grips.right.position_box.min"),
         ({"grips": {"right": {"position_box": {"min": [1, 0, 0], "max": [0, 1, 1]}}}},
          "plan.grips.right.position_box: min must not exceed max"),
-        ({"grips": {"right": {"box": BOX}}}, "plan.grips.right: must be {position_box"),
+        ({"grips": {"right": {"box": BOX}}}, "plan.grips.right: must be one of {position_box"),
     ],
 )
 def test_a_malformed_plan_names_its_field(change, field):
@@ -97,6 +103,26 @@ def test_the_same_plan_and_seed_give_the_same_samples_in_any_chunking(scene):
     # orientations kept, the other grip untouched
     assert all(set(t) == {"right"} for t in whole)
     np.testing.assert_array_equal(whole[0]["right"].orientation, scene.problem.grip("right").pose.orientation)
+
+
+def test_a_grid_visits_every_lattice_point_and_a_path_runs_in_plan_order(scene):
+    grid = plan_from_dict({"samples": 12, "seed": 0, "grips": {"right": {"position_grid": {
+        "min": [0.5, -0.1, 0.3], "max": [0.7, 0.1, 0.4], "counts": [3, 2, 2]}}}})
+    points = np.array([t["right"].position for t in grid.targets(scene.problem)])
+    expected = [[x, y, z] for x in (0.5, 0.6, 0.7) for y in (-0.1, 0.1) for z in (0.3, 0.4)]
+    np.testing.assert_allclose(points, expected, atol=1e-15)
+    path = plan_from_dict({"samples": 5, "seed": 0, "grips": {"right": {"around_path": {
+        "points": [[0.5, 0.0, 0.4], [0.7, 0.0, 0.4], [0.7, 0.2, 0.4]], "spread": 0.0}}}})
+    points = np.array([t["right"].position for t in path.targets(scene.problem)])
+    np.testing.assert_allclose(points, [[0.5, 0, 0.4], [0.6, 0, 0.4], [0.7, 0, 0.4], [0.7, 0.1, 0.4],
+                                        [0.7, 0.2, 0.4]], atol=1e-15)
+    spread = plan_from_dict({"samples": 5, "seed": 0, "grips": {"right": {"around_path": {
+        "points": [[0.5, 0.0, 0.4], [0.7, 0.0, 0.4]], "spread": 0.01}}}}).targets(scene.problem, 1, 4)
+    moved = np.array([t["right"].position for t in spread]) - [[0.55, 0, 0.4], [0.6, 0, 0.4], [0.65, 0, 0.4]]
+    assert np.all(np.abs(moved) <= 0.01) and np.any(np.abs(moved) > 0.001)
+    # the plan round-trips through its manifest form
+    for plan in (grid, path):
+        assert plan_from_dict(plan.as_dict()) == plan
 
 
 def test_every_sample_is_stored_once_with_the_solvers_own_answer(scene, built):

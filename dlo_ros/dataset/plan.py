@@ -9,7 +9,8 @@ A plan is a YAML (or JSON) mapping::
         position_box: {min: [0.4, -0.1, -0.1], max: [0.7, 0.1, 0.1]}   # [m], uniform
     chunk: 50                # samples per shard file (default 50)
     start: held              # 'held': each sample solved from the scene's equilibrium at its
-                             # own poses (a query); 'cold': from the initial guess
+                             # own poses (a query); 'cold': from the initial guess; 'previous':
+                             # from the sample before it (a chunk is a stream, work.py)
     resolution: 51           # centreline points stored per sample (default: the scene's)
 
 Orientations are kept.  Samples are drawn from ``numpy.random.PCG64(seed)``, grip by grip in
@@ -36,7 +37,7 @@ PLAN_FILE_BYTES = 1 << 20
 MAX_SAMPLES = 10**8
 MAX_CHUNK = 100_000
 MAX_RESOLUTION = 10_001
-STARTS = ("held", "cold")
+STARTS = ("held", "cold", "previous")
 KEYS = ("samples", "seed", "grips", "chunk", "start", "resolution")
 
 

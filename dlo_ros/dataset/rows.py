@@ -3,8 +3,8 @@
 Every sample is stored, whatever its status (a failed or ``unverified`` answer with its message).
 Columns (:data:`SCHEMA`; lists are flattened row-major, units SI):
 
-* ``sample`` (its index in the plan), ``status``, ``message``, ``start`` ('held' or 'cold': the
-  branch it was solved from, ``plan.py``);
+* ``sample`` (its index in the plan), ``status``, ``message``, ``start`` ('held', 'cold' or
+  'previous': the branch it was solved from, ``work.py``);
 * ``targets``: the plan's grips' commanded poses, per grip [x, y, z, qx, qy, qz, qw] in the plan's
   grip order (the manifest's ``plan_grips``);
 * ``stable`` (null when the solver cannot tell), ``min_eigenvalue`` (of the reduced Hessian, null

@@ -4,12 +4,14 @@
 process's solver of the scene (``parallel/batch.held_solver``: built once per structure, holding
 the equilibrium at the scene's poses) and answers each sample as a query (``commit=False``), so a
 sample's answer depends only on the scene, its own targets and the plan's ``start``, never on the
-worker, the chunk or the samples before it.
+worker, the chunk or the samples before it.  With ``start: previous`` a chunk is a stream instead:
+each sample starts from the answer of the one before it in the plan (:func:`_along`).
 """
 
 from __future__ import annotations
 
 import pickle
+from dataclasses import replace
 from typing import Any
 
 from ..solver.parallel import batch
@@ -22,9 +24,12 @@ def solve_samples(
 ) -> list[dict[str, Any]]:
     """Return the rows of samples ``first`` … ``first + len(targets) - 1``.
 
-    ``scene``: a ``batch.scene_payload``; ``start``: 'held' (from the held equilibrium) or 'cold'
-    (from the initial guess).  A solve that raises answers ``failed`` with the exception's text.
+    ``scene``: a ``batch.scene_payload``; ``start``: 'held' (from the held equilibrium), 'cold'
+    (from the initial guess) or 'previous' (:func:`_along`).  A solve that raises answers
+    ``failed`` with the exception's text.
     """
+    if start == "previous":
+        return _along(scene, first, targets, compile)
     _, problem, _ = pickle.loads(scene)
     rows = []
     with batch.worker_lock:  # one CasADi solver is never called from two threads at once
@@ -36,4 +41,29 @@ def solve_samples(
             except Exception as exc:  # noqa: BLE001
                 result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
             rows.append(sample_row(first + k, poses, result, problem, start))
+    return rows
+
+
+def _along(scene: bytes, first: int, targets: list[dict], compile: str) -> list[dict[str, Any]]:
+    """Return the rows of a chunk solved as a stream: each sample from the one before it.
+
+    A new solver of the scene per chunk (its first sample streamed from the scene's equilibrium,
+    row ``start`` 'held'; the others 'previous'), with checks inline and no time limit, so that
+    the chunk's answers depend only on the plan: the branch a sample lands on is the one its
+    neighbour along the plan's order leads to.
+    """
+    factory, problem, options = pickle.loads(scene)
+    options = replace(options, update_time_limit=0.0)
+    rows = []
+    solver = batch.build_solver(factory, problem, options, compile, "sync")
+    try:
+        solver.solve()
+        for k, poses in enumerate(targets):
+            try:
+                result = solver.solve(poses, warm=True, commit=True)
+            except Exception as exc:  # noqa: BLE001 - as in solve_samples
+                result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
+            rows.append(sample_row(first + k, poses, result, problem, "previous" if k else "held"))
+    finally:
+        solver.close()
     return rows

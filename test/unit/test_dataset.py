@@ -60,7 +60,7 @@ def built(scene, tmp_path_factory):
         ({"samples": 0}, "plan.samples: must be an integer"),
         ({"samples": True}, "plan.samples: must be an integer"),
         ({"seed": -1}, "plan.seed"),
-        ({"start": "warm"}, "plan.start: must be one of held, cold"),
+        ({"start": "warm"}, "plan.start: must be one of held, cold, previous"),
         ({"grips": {}}, "plan.grips: must map at least one grip"),
         ({"grips": {"right": {"position_grid": {"min": [0, 0, 0], "max": [1, 1, 1], "counts": [2, 0, 1]}}}},
          "plan.grips.right.position_grid.counts: each ≥ 1"),
@@ -175,6 +175,29 @@ def test_resume_solves_only_the_missing_shard_and_refuses_another_plan(scene, bu
         build_dataset(scene, plan_from_dict({**plan_dict(), "seed": 9}), copy, resume=True, progress=False)
     with pytest.raises(DatasetError, match="not empty; --resume"):
         build_dataset(scene, plan_from_dict(plan_dict()), copy, progress=False)
+
+
+def test_start_previous_streams_each_chunk_along_the_plan(scene, tmp_path):
+    """'previous': within a chunk each sample starts from the one before it (a stream, the branch
+    its neighbour leads to); the rows equal an in-process stream of the same chunk."""
+    from dataclasses import replace
+
+    plan = plan_from_dict({"samples": 8, "seed": 0, "chunk": 4, "start": "previous", "grips": {"right": {
+        "around_path": {"points": [[0.6, 0.0, 0.4], [0.45, 0.0, 0.25], [0.45, 0.15, 0.25]], "spread": 0.0}}}})
+    summary = build_dataset(scene, plan, tmp_path / "out", workers=1, progress=False)
+    a = load_arrays(tmp_path / "out")
+    assert summary.complete and list(a["start"]) == ["held", "previous", "previous", "previous"] * 2
+    targets = plan.targets(scene.problem)
+    for chunk in (0, 1):
+        solver = make_solver(scene.problem, replace(scene.options, update_time_limit=0.0), compile="off",
+                             checks="sync")
+        solver.solve()
+        for i in range(4 * chunk, 4 * chunk + 4):
+            r = solver.solve(targets[i], commit=True)
+            assert a["status"][i] == r.status
+            if r.ok:
+                np.testing.assert_allclose(a["points"][i], r.points, atol=1e-9)
+        solver.close()
 
 
 def _dlo(*args, **kw):

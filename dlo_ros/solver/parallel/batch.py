@@ -63,6 +63,7 @@ from .worker_pool import (
 __all__ = [
     "BACKGROUND_NICE",
     "WORKER_SOLVERS",
+    "build_solver",
     "default_executor",
     "held_solver",
     "process_pool",
@@ -243,7 +244,7 @@ def held_solver(scene: bytes, compile: str = "on_query", checks: str = "sync") -
     return _worker_solver(scene, factory, problem, options, compile, checks)
 
 
-def _build_solver(
+def build_solver(
     factory: SolverFactory, problem: Problem, options: SolverOptions, compile: str, checks: str
 ) -> Solver:
     """Return ``factory(problem, options, compile=compile)``, with ``checks`` if it takes them.
@@ -275,7 +276,7 @@ def _worker_solver(
     )
     entry = _WORKER_SOLVERS.pop(key, None)
     if entry is None:
-        solver = _build_solver(factory, problem, options, compile, checks)
+        solver = build_solver(factory, problem, options, compile, checks)
         solver.solve()  # the held shape: every query starts from it
     else:
         values, solver = entry

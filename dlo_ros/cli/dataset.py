@@ -4,14 +4,16 @@
                 [--quiet]
 
 Exit codes: 0 every sample stored (whatever each one's status: the rows say it), 1 some chunks
-got no answers (a worker died; ``--resume`` redoes them), 2 a malformed scene or plan, or an
-output folder that cannot be used, 130 interrupted (the shards written stay; ``--resume``).
+got no answers (a worker died twice; ``--resume`` redoes them), 2 a malformed scene or plan, or an
+output folder that cannot be used, 130 interrupted by Ctrl-C or SIGTERM (the shards written stay;
+``--resume``).
 Documented in msg_docs/dataset.md.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -52,10 +54,13 @@ def run(args: argparse.Namespace) -> int:
         plan = read_plan(args.plan)
     except PlanError as exc:
         raise UsageError(str(exc)) from None
-    executor, client = None, None
+    executor, client, window = None, None, None
     if args.scheduler:
         client = _dask_client(args.scheduler)
         executor = client.get_executor()
+        window = 2 * max(1, sum(client.nthreads().values()))  # two chunks per worker thread
+    # a batch scheduler's SIGTERM stops the run as Ctrl-C does: the shards written stay
+    signal.signal(signal.SIGTERM, _as_interrupt)
     try:
         summary = build_dataset(
             scene,
@@ -64,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
             workers=args.workers,
             executor=executor,
             executor_name=f"dask {args.scheduler}" if args.scheduler else "",
+            in_flight=window,
             resume=args.resume,
             progress=not args.quiet,
         )
@@ -77,6 +83,10 @@ def run(args: argparse.Namespace) -> int:
             client.close()
     print(summary.text())
     return EXIT_OK if summary.complete else EXIT_NOT_OK
+
+
+def _as_interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
 
 
 def _dask_client(address: str):

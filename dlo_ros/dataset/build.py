@@ -12,14 +12,16 @@ workers import dlo_ros: a Dask ``distributed`` client's ``get_executor()`` for a
 
 from __future__ import annotations
 
+import contextlib
+import itertools
+import os
 import time
 import warnings
 from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-
-import pyarrow.parquet as pq
+from typing import Any
 
 from ..scene import Scene
 from ..solver import make_solver
@@ -80,6 +82,7 @@ def build_dataset(
     workers: int | None = None,
     executor: Executor | None = None,
     executor_name: str = "",
+    in_flight: int | None = None,
     resume: bool = False,
     progress: bool = True,
     compile: str = "on_query",
@@ -88,11 +91,12 @@ def build_dataset(
 
     ``workers``: the local pool's processes (default: the CPU count), unless ``executor`` is
     given (e.g. a Dask client's ``get_executor()``; ``executor_name`` says which in the
-    manifest).  ``resume``: continue a data set in ``out`` made with the same scene and plan;
-    without it ``out`` must be new or empty.  Raises DatasetError or PlanError with the reason.
-    KeyboardInterrupt stops the run; the shards written so far stay.  Called from a script's top
-    level, the local pool's workers run the call again while they start: there it returns at once
-    (a warning says why) and never touches ``out``.
+    manifest).  ``in_flight``: chunks handed out at once (default: twice the workers; give a
+    cluster's twice its worker threads).  ``resume``: continue a data set in ``out`` made with the
+    same scene and plan; without it ``out`` must be new or empty.  Raises DatasetError or
+    PlanError with the reason.  KeyboardInterrupt stops the run; the shards written so far stay.
+    Called from a script's top level, the local pool's workers run the call again while they
+    start: there it returns at once (a warning says why) and never touches ``out``.
     """
     out = Path(out)
     if executor is None and starting_as_worker():  # the script's own call is the one that runs
@@ -101,52 +105,88 @@ def build_dataset(
     if plan.resolution:
         scene = replace(scene, options=replace(scene.options, output_points=plan.resolution))
     plan.targets(scene.problem, 0, 0)  # checks the plan's grips against the scene
+    plan.check_size(scene.options.output_points)
     name = executor_name or ("local" if executor is None else type(executor).__name__)
     manifest = _open(out, scene, plan, name, resume)
-    todo = [k for k in range(plan.chunks) if not store.shard_done(out, k, _size(plan, k))]
-    resumed = plan.samples - sum(_size(plan, k) for k in todo)
+    counts, todo = _stored(out, plan)
+    resumed = sum(counts.values())
     payload = scene_payload(make_solver, scene.problem, scene.options)
-    own = executor is None
-    pool: Executor = WorkerPool(workers) if executor is None else executor
+    own, pool = executor is None, executor or WorkerPool(workers)
+    window = in_flight or 2 * (
+        getattr(pool, "max_workers", None) or workers or os.cpu_count() or 1
+    )
     t0 = time.monotonic()
-    written, failed = 0, {}
+    written, failed, shards = 0, {}, plan.chunks - len(todo)
     bar = _bar(plan.samples, resumed, progress)
+    saved = time.monotonic()
     try:
-        in_flight: dict[Future, int] = {}
-        queue = list(reversed(todo))
-        window = 2 * (getattr(pool, "max_workers", None) or workers or 2)
-        while queue or in_flight:
-            while queue and len(in_flight) < window:
-                k = queue.pop()
+        jobs: dict[Future, int] = {}
+        queue = iter(todo)
+        while True:
+            for k in itertools.islice(queue, max(0, window - len(jobs))):
                 a, b = plan.span(k)
                 targets = plan.targets(scene.problem, a, b)
-                job = pool.submit(solve_samples, payload, a, targets, plan.start, compile)
-                in_flight[job] = k
-            done, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
+                job = _submit(pool, own, payload, a, targets, plan.start, compile)
+                jobs[job] = k
+            if not jobs:
+                break
+            done, _ = wait(list(jobs), return_when=FIRST_COMPLETED)
             for job in done:
-                k = in_flight.pop(job)
+                k = jobs.pop(job)
                 try:
                     rows = job.result()
                 except Exception as exc:  # noqa: BLE001 - a dead worker: resume redoes it
                     failed[k] = f"{type(exc).__name__}: {exc}"
                     continue
                 store.write_shard(out, k, rows_table(rows))
-                written += len(rows)
+                counts.update(r["status"] for r in rows)
+                written, shards = written + len(rows), shards + 1
                 bar.update(len(rows))
+            if time.monotonic() - saved > MANIFEST_EVERY_S:  # what a killed run leaves
+                store.write_manifest(out, M.finished(manifest, counts, shards, name))
+                saved = time.monotonic()
     finally:
         bar.close()
         if own:
             pool.stop()  # type: ignore[attr-defined]  # our WorkerPool: its workers end now
-        counts = _counts(out)
-        store.write_manifest(out, M.finished(manifest, counts, len(store.shard_files(out)), name))
+        with contextlib.suppress(OSError):  # never hide why the run stopped: shards are the truth
+            store.write_manifest(out, M.finished(manifest, counts, shards, name))
     return DatasetSummary(
-        out, plan.samples, counts, written, resumed, time.monotonic() - t0, failed
+        out, plan.samples, dict(counts), written, resumed, time.monotonic() - t0, failed
     )
 
 
-def _size(plan: DatasetPlan, k: int) -> int:
-    a, b = plan.span(k)
-    return b - a
+def _submit(pool: Executor, own: bool, *args: Any) -> Future:
+    """Hand one chunk to ``pool``; our WorkerPool retries it once if its worker dies.
+
+    A chunk is a pure function of its arguments, so a retry gives the same rows.
+    """
+    if own:
+        return pool.submit(solve_samples, *args, retries=1)  # type: ignore[call-arg]
+    return pool.submit(solve_samples, *args)
+
+
+#: the manifest's counts are rewritten at least this often during a run [s]
+MANIFEST_EVERY_S = 10.0
+
+
+def _stored(out: Path, plan: DatasetPlan) -> tuple[Counter, list[int]]:
+    """Return the statuses of the chunks already stored in ``out`` and the chunks still to do.
+
+    A shard counts when it holds exactly its chunk's samples (``store.shard_statuses``); a damaged
+    or foreign one is done again.
+    """
+    present = store.shard_names(out)
+    counts: Counter[str] = Counter()
+    todo = []
+    for k in range(plan.chunks):
+        a, b = plan.span(k)
+        statuses = store.shard_statuses(out, k, a, b) if store.shard_name(k) in present else None
+        if statuses is None:
+            todo.append(k)
+        else:
+            counts.update(statuses)
+    return counts, todo
 
 
 def _open(out: Path, scene: Scene, plan: DatasetPlan, executor: str, resume: bool) -> dict:
@@ -154,25 +194,27 @@ def _open(out: Path, scene: Scene, plan: DatasetPlan, executor: str, resume: boo
     fresh = M.new_manifest(scene, plan, executor)
     if out.exists() and not out.is_dir():
         raise DatasetError(f"{out}: exists and is not a folder")
-    if resume and (out / store.MANIFEST).exists():
-        old = store.read_manifest(out)
+    has_manifest = (out / store.MANIFEST).exists()
+    occupied = out.exists() and any(out.iterdir())
+    if resume and has_manifest:
+        try:
+            old = store.read_manifest(out)
+        except (OSError, ValueError) as exc:
+            raise DatasetError(f"{out}: cannot resume: its manifest.json is unreadable ({exc})")
         why = M.same_job(old, fresh)
         if why:
             raise DatasetError(f"{out}: cannot resume: {why}")
-        return {**old, "machine": fresh["machine"]}
-    if out.exists() and any(out.iterdir()) and not resume:
-        raise DatasetError(f"{out}: not empty; --resume continues the data set there")
+        manifest = {**old, "machine": fresh["machine"], "complete": False}
+    elif occupied:
+        hint = (
+            "it holds no data-set manifest" if resume else "--resume continues the data set there"
+        )
+        raise DatasetError(f"{out}: not empty; {hint}")
+    else:
+        manifest = fresh
     (out / store.SHARDS).mkdir(parents=True, exist_ok=True)
-    store.write_manifest(out, fresh)
-    return fresh
-
-
-def _counts(out: Path) -> dict[str, int]:
-    """Count the samples per status over every shard in ``out``."""
-    counts: Counter[str] = Counter()
-    for f in store.shard_files(out):
-        counts.update(pq.read_table(f, columns=["status"]).column("status").to_pylist())
-    return dict(counts)
+    store.write_manifest(out, manifest)
+    return manifest
 
 
 def _bar(total: int, initial: int, enabled: bool):

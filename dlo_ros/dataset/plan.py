@@ -2,7 +2,7 @@
 
 A plan is a YAML (or JSON) mapping::
 
-    samples: 1000            # how many shapes (1 … 10⁸)
+    samples: 1000            # how many shapes (1 … 10⁸; 1e6 is read as 1000000)
     seed: 7                  # the same plan and seed give the same samples
     grips:                   # per grip, where its position goes (others keep the scene's pose):
       right:                 # position_box, position_grid or around_path (positions.py)
@@ -11,7 +11,8 @@ A plan is a YAML (or JSON) mapping::
     start: held              # 'held': each sample solved from the scene's equilibrium at its
                              # own poses (a query); 'cold': from the initial guess; 'previous':
                              # from the sample before it (a chunk is a stream, work.py)
-    resolution: 51           # centreline points stored per sample (default: the scene's)
+    resolution: 51           # centreline points stored per sample (2 … 10000; default: the
+                             # scene's); chunk × resolution ≤ 2·10⁶, at most 10⁶ shards
 
 Orientations are kept.  Samples are drawn from ``numpy.random.PCG64(seed)``, grip by grip in
 the plan's order, so sample ``i`` is the same whatever the workers, the chunks or a resume
@@ -36,7 +37,11 @@ from .positions import PlanError, Sampler, parse
 PLAN_FILE_BYTES = 1 << 20
 MAX_SAMPLES = 10**8
 MAX_CHUNK = 100_000
-MAX_RESOLUTION = 10_001
+MAX_RESOLUTION = 10_000  # as solver.output_points
+#: at most this many shard files (each a chunk)
+MAX_SHARDS = 10**6
+#: at most this many centreline points in one shard (chunk × resolution): a chunk travels whole
+MAX_SHARD_POINTS = 2 * 10**6
 STARTS = ("held", "cold", "previous")
 KEYS = ("samples", "seed", "grips", "chunk", "start", "resolution")
 
@@ -71,6 +76,14 @@ class DatasetPlan:
     def span(self, k: int) -> tuple[int, int]:
         """Return the sample indices [a, b) of chunk ``k``."""
         return k * self.chunk, min(self.samples, (k + 1) * self.chunk)
+
+    def check_size(self, points: int) -> None:
+        """Raise PlanError when one chunk of ``points``-point centrelines is too large to send."""
+        if self.chunk * points > MAX_SHARD_POINTS:
+            raise PlanError(
+                f"plan.chunk: {self.chunk} samples × {points} centreline points is over "
+                f"{MAX_SHARD_POINTS} per shard: a smaller chunk or resolution"
+            )
 
     def targets(self, problem: Problem, a: int = 0, b: int | None = None) -> list[dict]:
         """Return the grip targets of samples [a, b) (the plan's grips; orientations kept).
@@ -107,8 +120,10 @@ def read_plan(path: Path | str) -> DatasetPlan:
     source = str(path)
     try:
         text = read_regular_file(path, source, PLAN_FILE_BYTES, what="plan file").decode()
-    except (FileLimitError, UnicodeDecodeError) as exc:
-        raise PlanError(f"{source}: {exc}") from None
+    except FileLimitError as exc:  # its message starts with the file's name
+        raise PlanError(str(exc)) from None
+    except UnicodeDecodeError:
+        raise PlanError(f"{source}: not UTF-8 text") from None
     try:
         data = parse_bounded_yaml(text, source)
     except (FileLimitError, ValueError) as exc:
@@ -129,20 +144,36 @@ def plan_from_dict(data: object) -> DatasetPlan:
     grips = data["grips"]
     if not isinstance(grips, dict) or not grips:
         raise PlanError("plan.grips: must map at least one grip name to where it goes")
-    return DatasetPlan(
+    plan = DatasetPlan(
         samples=_integer(data["samples"], "plan.samples", 1, MAX_SAMPLES),
         seed=_integer(data["seed"], "plan.seed", 0, 2**63 - 1),
         grips={str(name): parse(spec, f"plan.grips.{name}") for name, spec in grips.items()},
         chunk=_integer(data.get("chunk", 50), "plan.chunk", 1, MAX_CHUNK),
         start=_choice(data.get("start", "held"), "plan.start", STARTS),
-        resolution=_integer(data.get("resolution", 0), "plan.resolution", 0, MAX_RESOLUTION),
+        resolution=_resolution(data.get("resolution", 0)),
     )
+    if plan.chunks > MAX_SHARDS:
+        raise PlanError(f"plan.chunk: {plan.chunks} shards, at most {MAX_SHARDS}: a larger chunk")
+    plan.check_size(plan.resolution)
+    return plan
 
 
 def _integer(value: object, key: str, low: int, high: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+    """Return ``value`` as an int in [low, high] (an integral float such as 1e6 too)."""
+    whole = isinstance(value, float) and value.is_integer()
+    if isinstance(value, bool) or not (isinstance(value, int) or whole):
         raise PlanError(f"{key}: must be an integer in [{low}, {high}], got {value!r:.40}")
-    return int(value)
+    number = int(value) if isinstance(value, (int, float)) else low - 1
+    if not low <= number <= high or number != value:
+        raise PlanError(f"{key}: must be an integer in [{low}, {high}], got {value!r:.40}")
+    return number
+
+
+def _resolution(value: object) -> int:
+    points = _integer(value, "plan.resolution", 0, MAX_RESOLUTION)
+    if points == 1:
+        raise PlanError("plan.resolution: 0 (the scene's output points) or 2 … 10000")
+    return points
 
 
 def _choice(value: object, key: str, choices: tuple[str, ...]) -> str:

@@ -24,6 +24,8 @@ import numpy as np
 Vector = tuple[float, float, float]
 MAX_GRID_POINTS = 10**8
 MAX_PATH_POINTS = 10_000
+#: the largest coordinate a plan may name [m] (a box's extent stays finite)
+MAX_METRES = 1e6
 
 
 class PlanError(ValueError):
@@ -106,10 +108,10 @@ def parse(spec: object, key: str) -> Sampler:
             raise PlanError(f"{where}.points: must be 2 to {MAX_PATH_POINTS} points [x, y, z]")
         path = tuple(vector(q, f"{where}.points[{i}]") for i, q in enumerate(points))
         spread = body["spread"]
-        if isinstance(spread, bool) or not isinstance(spread, (int, float)) or not 0 <= spread:
+        if isinstance(spread, bool) or not isinstance(spread, (int, float)):
             raise PlanError(f"{where}.spread: must be a number ≥ 0 [m]")
-        if not math.isfinite(float(spread)):
-            raise PlanError(f"{where}.spread: must be finite")
+        if not 0 <= spread <= MAX_METRES:
+            raise PlanError(f"{where}.spread: must be a number ≥ 0 [m], at most 1e6")
         return AroundPath(path, float(spread))
     _keys(body, where, ("min", "max", "counts") if kind == "position_grid" else ("min", "max"))
     low, high = vector(body["min"], f"{where}.min"), vector(body["max"], f"{where}.max")
@@ -135,6 +137,6 @@ def vector(value: object, key: str) -> Vector:
     """Return ``value`` as 3 finite floats, or raise PlanError naming ``key``."""
     items = list(value) if isinstance(value, (list, tuple)) else []
     numbers = [float(v) for v in items if isinstance(v, (int, float)) and not isinstance(v, bool)]
-    if len(items) != 3 or len(numbers) != 3 or not all(math.isfinite(v) for v in numbers):
-        raise PlanError(f"{key}: must be 3 finite numbers [x, y, z] in metres")
+    if len(items) != 3 or len(numbers) != 3 or not all(abs(v) <= MAX_METRES for v in numbers):
+        raise PlanError(f"{key}: must be 3 finite numbers [x, y, z] in metres, each within ±1e6")
     return (numbers[0], numbers[1], numbers[2])

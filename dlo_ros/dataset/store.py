@@ -29,18 +29,36 @@ SHARDS = "shards"
 MANIFEST = "manifest.json"
 
 
+def shard_name(k: int) -> str:
+    """Return the file name of chunk ``k``'s shard."""
+    return f"part-{k:06d}.parquet"
+
+
 def shard_path(out: Path, k: int) -> Path:
     """Return where chunk ``k``'s shard lives."""
-    return out / SHARDS / f"part-{k:06d}.parquet"
+    return out / SHARDS / shard_name(k)
 
 
-def shard_done(out: Path, k: int, rows: int) -> bool:
-    """Tell whether chunk ``k``'s shard is there with its ``rows`` rows (a damaged one is not)."""
-    path = shard_path(out, k)
+def shard_names(out: Path) -> set[str]:
+    """Return the names of the files in ``out``'s shard folder (empty when there is none)."""
     try:
-        return path.is_file() and pq.ParquetFile(path).metadata.num_rows == rows
+        return set(os.listdir(out / SHARDS))
+    except FileNotFoundError:
+        return set()
+
+
+def shard_statuses(out: Path, k: int, a: int, b: int) -> list[str] | None:
+    """Return the statuses stored in chunk ``k``'s shard, or None unless it holds samples [a, b).
+
+    None for a missing, damaged or foreign shard (another chunk's samples): it is done again.
+    """
+    try:
+        table = pq.read_table(shard_path(out, k), columns=["sample", "status"])
     except (OSError, pa.ArrowException):
-        return False
+        return None
+    if table.column("sample").to_pylist() != list(range(a, b)):
+        return None
+    return [str(v) for v in table.column("status").to_pylist()]
 
 
 def write_atomic(path: Path, data: bytes) -> None:
@@ -55,6 +73,11 @@ def write_atomic(path: Path, data: bytes) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    folder = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(folder)  # the rename itself survives a crash
+    finally:
+        os.close(folder)
 
 
 def write_shard(out: Path, k: int, table: pa.Table) -> None:
@@ -70,7 +93,10 @@ def write_manifest(out: Path, manifest: dict[str, Any]) -> None:
 
 
 def read_manifest(out: Path) -> dict[str, Any]:
-    """Return the manifest of the data set in ``out`` (FileNotFoundError if there is none)."""
+    """Return the manifest of the data set in ``out``.
+
+    FileNotFoundError when there is none; ValueError when it is not valid JSON.
+    """
     return json.loads((Path(out) / MANIFEST).read_text())
 
 
@@ -83,12 +109,21 @@ def load(out: Path | str, columns: list[str] | None = None) -> pa.Table:
     """Return the data set in ``out`` as one Arrow table, one row per sample, by ``sample``.
 
     ``columns``: only these (default all, ``rows.SCHEMA``).  ``table.to_pandas()`` gives a data
-    frame where pandas is installed; :func:`load_arrays` gives numpy arrays.
+    frame where pandas is installed; :func:`load_arrays` gives numpy arrays.  Raises
+    FileNotFoundError when ``out`` holds no data set, ValueError naming a damaged shard.
     """
-    files = shard_files(Path(out))
-    if not files:
+    out = Path(out)
+    if not (out / MANIFEST).is_file():
+        raise FileNotFoundError(f"{out}: no data set here (no {MANIFEST})")
+    tables = []
+    for f in shard_files(out):
+        try:
+            tables.append(pq.read_table(f, columns=columns, schema=SCHEMA))
+        except (OSError, pa.ArrowException) as exc:
+            raise ValueError(f"{f}: damaged shard ({exc}); `dlo dataset --resume` rewrites it")
+    if not tables:
         return SCHEMA.empty_table().select(columns or SCHEMA.names)
-    table = pa.concat_tables(pq.read_table(f, columns=columns, schema=SCHEMA) for f in files)
+    table = pa.concat_tables(tables)
     if "sample" in table.column_names:
         table = table.sort_by("sample")
     return table
@@ -103,6 +138,9 @@ def load_arrays(out: Path | str) -> dict[str, np.ndarray]:
     arrays; nulls as NaN (numbers) or None (flags).
     """
     table = load(out)
+    manifest = read_manifest(Path(out))
+    solver = manifest["scene"].get("solver", {})
+    points = int(manifest["plan"].get("resolution") or solver.get("output_points") or 0)
     arrays: dict[str, np.ndarray] = {}
     widths = {"points": 3, "grip_force": 3, "grip_torque": 3, "obstacle_force": 3, "targets": 7}
     for name in table.column_names:
@@ -111,10 +149,11 @@ def load_arrays(out: Path | str) -> dict[str, np.ndarray]:
             values = column.to_pylist()
             lengths = {len(v) for v in values if v}
             if len(lengths) <= 1:  # a sample without a shape (failed, infeasible): NaN rows
-                length = lengths.pop() if lengths else 0
+                width = widths.get(name, 0)
+                known = points * max(width, 1) if name in ("s", "points") else 0
+                length = lengths.pop() if lengths else known
                 a = np.array([v if v else [np.nan] * length for v in values], dtype=float)
                 a = a.reshape(len(values), length)
-                width = widths.get(name)
                 arrays[name] = a.reshape(len(a), -1, width) if width and length else a
             else:
                 arrays[name] = np.array(values, dtype=object)

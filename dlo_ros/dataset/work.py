@@ -55,7 +55,9 @@ def _along(scene: bytes, first: int, targets: list[dict], compile: str) -> list[
     factory, problem, options = pickle.loads(scene)
     options = replace(options, update_time_limit=0.0)
     rows = []
-    solver = batch.build_solver(factory, problem, options, compile, "sync")
+    # a stream commits every sample: 'on_query' would never see a query, so compile as a stream
+    mode = "background" if compile == "on_query" else compile
+    solver = batch.build_solver(factory, problem, options, mode, "sync")
     try:
         solver.solve()
         for k, poses in enumerate(targets):

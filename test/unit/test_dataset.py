@@ -75,6 +75,13 @@ def built(scene, tmp_path_factory):
         ({"grips": {"right": {"position_box": {"min": [1, 0, 0], "max": [0, 1, 1]}}}},
          "plan.grips.right.position_box: min must not exceed max"),
         ({"grips": {"right": {"box": BOX}}}, "plan.grips.right: must be one of {position_box"),
+        ({"resolution": 1}, "plan.resolution: 0"),
+        ({"resolution": 10001}, "plan.resolution: must be an integer in"),
+        ({"samples": 10**7, "chunk": 1}, "plan.chunk: 10000000 shards, at most 1000000"),
+        ({"chunk": 10000, "samples": 20000, "resolution": 401}, "plan.chunk: 10000 samples × 401"),
+        ({"samples": 2.5}, "plan.samples: must be an integer"),
+        ({"grips": {"right": {"position_box": {"min": [0, 0, 0], "max": [1e308, 1, 1]}}}},
+         "plan.grips.right.position_box.max: must be 3 finite numbers"),
     ],
 )
 def test_a_malformed_plan_names_its_field(change, field):
@@ -103,6 +110,10 @@ def test_the_same_plan_and_seed_give_the_same_samples_in_any_chunking(scene):
     # orientations kept, the other grip untouched
     assert all(set(t) == {"right"} for t in whole)
     np.testing.assert_array_equal(whole[0]["right"].orientation, scene.problem.grip("right").pose.orientation)
+
+
+def test_an_integral_float_is_a_count():
+    assert plan_from_dict({**plan_dict(), "samples": 1e6, "chunk": 1e3}).samples == 10**6
 
 
 def test_a_grid_visits_every_lattice_point_and_a_path_runs_in_plan_order(scene):
@@ -200,6 +211,66 @@ def test_start_previous_streams_each_chunk_along_the_plan(scene, tmp_path):
         solver.close()
 
 
+def test_resume_refuses_a_folder_without_its_manifest_and_redoes_a_damaged_shard(scene, built, tmp_path):
+    out, _ = built
+    copy = tmp_path / "copy"
+    subprocess.run(["cp", "-r", str(out), str(copy)], check=True)
+    (copy / "manifest.json").rename(tmp_path / "manifest.json")
+    with pytest.raises(DatasetError, match="not empty; it holds no data-set manifest"):
+        build_dataset(scene, plan_from_dict(plan_dict()), copy, resume=True, progress=False)
+    (tmp_path / "manifest.json").rename(copy / "manifest.json")
+    damaged = shard_path(copy, 2)
+    damaged.write_bytes(damaged.read_bytes()[:100])
+    with pytest.raises(ValueError, match="part-000002.parquet: damaged shard"):
+        load(copy)
+    (copy / "manifest.json").write_text("{ not json")
+    with pytest.raises(DatasetError, match="cannot resume: its manifest.json is unreadable"):
+        build_dataset(scene, plan_from_dict(plan_dict()), copy, resume=True, progress=False)
+    (copy / "manifest.json").write_text((out / "manifest.json").read_text())
+    summary = build_dataset(scene, plan_from_dict(plan_dict()), copy, workers=1, resume=True, progress=False)
+    assert summary.written == 4 and summary.resumed == 8 and sum(summary.counts.values()) == 12
+    assert read_manifest(copy)["counts"] == read_manifest(out)["counts"]
+    with pytest.raises(FileNotFoundError, match="no data set here"):
+        load(tmp_path / "nothing")
+
+
+def test_samples_without_a_shape_load_as_nan_rows(scene, tmp_path):
+    """Every sample infeasible (the right grip 1.5 m from the left on a 1 m cable): stored, and
+    load_arrays still gives (N, K, 3) centrelines, all NaN."""
+    plan = plan_from_dict({"samples": 3, "seed": 0, "grips": {"right": {"position_box": {
+        "min": [1.5, 0.0, 0.4], "max": [1.6, 0.0, 0.4]}}}})
+    summary = build_dataset(scene, plan, tmp_path / "out", workers=1, progress=False)
+    a = load_arrays(tmp_path / "out")
+    assert summary.complete and "ok" not in summary.counts
+    assert a["points"].shape == (3, 51, 3) and np.all(np.isnan(a["points"]))
+    assert all(m for m in a["message"])
+
+
+def test_a_killed_worker_costs_a_retry_not_the_chunk(tmp_path):
+    """SIGKILL one local worker while chunks are in flight: its chunk runs again on a new pool,
+    the run ends complete (exit 0) with every sample once."""
+    psutil = pytest.importorskip("psutil")
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("samples: 40\nseed: 2\nchunk: 5\n"
+                    "grips: {right: {position_box: {min: [0.5, -0.1, 0.3], max: [0.7, 0.1, 0.45]}}}\n")
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    proc = subprocess.Popen([sys.executable, "-m", "dlo_ros.cli", "dataset", "default_cable", "--plan", str(plan),
+                             "--out", str(out), "--workers", "2", "--quiet"], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not list((out / "shards").glob("part-*.parquet")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = [c for c in psutil.Process(proc.pid).children(recursive=True)
+               if "spawn_main" in " ".join(c.cmdline())]
+    assert len(workers) == 2
+    workers[-1].kill()
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 0, stderr
+    assert "40 of 40 samples stored" in stdout
+    assert load(out).column("sample").to_pylist() == list(range(40))
+
+
 def _dlo(*args, **kw):
     env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
     return subprocess.run([sys.executable, "-m", "dlo_ros.cli", *args], capture_output=True, text=True,
@@ -211,14 +282,17 @@ def test_the_command_line_refuses_bad_input_in_one_line(tmp_path):
     plan.write_text("samples: 10\nseed: 1\ngrips: {right: {position_box: {min: [0, 0, 0], max: [1, 1]}}}\n")
     r = _dlo("dataset", "default_cable", "--plan", str(plan), "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert r.stderr.strip() == "dlo: error: plan.grips.right.position_box.max: must be 3 finite numbers [x, y, z] in metres"
+    assert r.stderr.strip() == ("dlo: error: plan.grips.right.position_box.max: must be 3 finite numbers "
+                                "[x, y, z] in metres, each within ±1e6")
     r = _dlo("dataset", "default_cable", "--plan", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "none.yaml" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_ctrl_c_keeps_the_written_shards_and_resume_finishes(tmp_path):
-    """The command interrupted once its first shards are written: exit 130, what was written stays,
-    and the same command with --resume stores every sample once."""
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_keeps_the_written_shards_and_resume_finishes(tmp_path, stop):
+    """The command interrupted (Ctrl-C, or a batch scheduler's SIGTERM) once its first shards are
+    written: exit 130, what was written stays, and the same command with --resume stores every
+    sample once."""
     plan = tmp_path / "plan.yaml"
     plan.write_text(
         "samples: 60\nseed: 3\nchunk: 5\n"
@@ -232,7 +306,7 @@ def test_ctrl_c_keeps_the_written_shards_and_resume_finishes(tmp_path):
     deadline = time.monotonic() + 300
     while not list((out / "shards").glob("part-*.parquet")) and time.monotonic() < deadline:
         time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(stop)
     _, err = proc.communicate(timeout=120)
     written = len(list((out / "shards").glob("part-*.parquet")))
     assert proc.returncode == 130 and "--resume" in err and "Traceback" not in err

@@ -97,6 +97,22 @@ def test_a_task_whose_worker_dies_is_retried_once_when_asked():
         pool.stop()
 
 
+def test_every_task_in_flight_on_a_pool_whose_worker_died_is_retried():
+    """Two workers, two tasks running, one worker killed: its pool is replaced, so both tasks lose
+    their pool; with retries=1 both are answered by the new one (the second used to fail at once:
+    the first's replacement was taken for a deliberate kill, as a timeout's is)."""
+    pool = WorkerPool(2)
+    try:
+        jobs = [pool.submit(_sleep_then_pid, 3.0, retries=1) for _ in range(2)]
+        time.sleep(1.0)
+        victim = pool.worker_pids()[0]
+        os.kill(victim, signal.SIGKILL)
+        answered_by = [job.result(60) for job in jobs]
+        assert victim not in answered_by and pool.restarts == 1
+    finally:
+        pool.stop()
+
+
 def _sleep_then_pid(seconds: float) -> int:
     time.sleep(seconds)
     return os.getpid()

@@ -231,7 +231,7 @@ def compiled(
     lib = lib or library_path(fn, flags)
     native = load_native(lib, fn)
     if native is None:  # missing, damaged or refused: (re)build it
-        with library_lock(lib):  # one compiler per process, one build of ``lib`` per machine
+        with library_lock(lib):  # one compiler per process, one build at a time per cache
             native = load_native(lib, fn)  # another thread or process may have built it meanwhile
             if native is None and build_library(fn, lib, cc, flags, nice, extra_source, also):
                 native = load_native(lib, fn)

@@ -33,8 +33,8 @@ background thread and swap each in when it is ready; libraries are cached per ma
 'cached' until the solver answers a query, ``solve(commit=False)``, while the cache lacks some of
 its libraries: then it compiles those in the background at the process's own priority — a query
 worker's model, ``parallel/batch.py``) and 'off'.  'cached' and 'on_query' look into the cache
-again at most every CACHE_RECHECK_S for libraries another solver or process has built since.  A
-library is built once per machine at a time (``native.compiler.library_lock``): a process that
+again at most every CACHE_RECHECK_S for libraries another solver or process has built since.  One
+library is built at a time per cache directory (``native.compiler.library_lock``): a process that
 misses one another process is building waits for it and loads it.  $DLO_NO_COMPILE forces 'off'.
 A swap happens under the solver's lock, so a solve never sees one midway.
 """

@@ -18,7 +18,8 @@ Contract (threat model in SECURITY.md, "The compiled-code cache"):
 * ``store`` writes a temporary file in the cache directory (``O_EXCL``, 0600), fsyncs it and
   renames it into place; the temporary file is removed on any failure.
 * ``build_lock(lib)`` holds the cache directory's ``flock`` while a process looks for ``<lib>``
-  and builds it: processes that miss the same library build it once, the others wait and load it.
+  and builds it: one build at a time per cache directory, so processes that miss the same library
+  build it once (the others wait, at most BUILD_LOCK_WAIT_S, and load it).
 
 A digest is computed once per process per file version (device, inode, size, mtime, ctime): hashing
 a 667 kB library costs 0.36 ms, a first check 1.2 ms, a later one 49 us
@@ -38,6 +39,7 @@ import shutil
 import stat
 import tempfile
 import threading
+import time
 import warnings
 from pathlib import Path
 from typing import Iterator, Sequence
@@ -68,6 +70,9 @@ class UnsafeCache(UnusableLibrary):
     used.
     """
 
+
+#: the longest a build waits for another process's build in the same cache directory [s]
+BUILD_LOCK_WAIT_S = 300.0
 
 _lock = threading.RLock()
 _warned = False
@@ -394,16 +399,25 @@ def build_lock(lib: Path) -> Iterator[None]:
 
     Two processes that miss the same library build it once: the second waits here and then finds
     the first's in the cache.  One build at a time per cache directory (a lock per library would
-    leave a file per library behind).  Where the directory cannot be opened (unsafe, or it cannot
-    be created: the build then reports it), nothing is held.
+    leave a file per library behind; concurrent compilers multiply the memory).  A process waits
+    at most BUILD_LOCK_WAIT_S, then builds without the lock (a holder that was stopped must not
+    hang every other compile).  Where the directory cannot be opened (unsafe, or it cannot be
+    created: the build then reports it), nothing is held.
     """
     try:
         dfd: int | None = open_dir(lib.parent, create=True)
     except OSError:
         dfd = None
     try:
-        if dfd is not None:
-            fcntl.flock(dfd, fcntl.LOCK_EX)
+        deadline = time.monotonic() + BUILD_LOCK_WAIT_S
+        while dfd is not None:
+            try:
+                fcntl.flock(dfd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:  # a holder stopped (Ctrl-Z): build without it
+                    break
+                time.sleep(0.05)
         yield
     finally:
         if dfd is not None:

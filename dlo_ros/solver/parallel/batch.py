@@ -13,9 +13,10 @@ Workers keep their solvers between calls (``_WORKER_SOLVERS``, keyed by the scen
 most ``WORKER_SOLVERS`` per process), so only the first call pays for the build.  By default
 (``compile='on_query'``) a worker whose queries find a model's compiled derivatives missing from
 the cache compiles them in a background thread while its queries go on interpreted, one compiler
-per worker, each library built once per machine (the other workers wait for it and load it): a
-first batch on an empty cache reaches compiled speed within seconds, where workers that never
-compiled stayed interpreted for the pool's life (bench/results/queries_first_batch.md).
+per worker, each library built once (one build at a time per cache directory; the other workers
+wait for it and load it): a first batch on an empty cache reaches compiled speed within seconds,
+where workers that never compiled stayed interpreted for the pool's life
+(bench/results/queries_first_batch.md).
 ``compile='cached'`` (the node's query workers: its stream comes first) uses only what the cache
 holds, looking again every second.
 

@@ -269,7 +269,10 @@ class WorkerPool(Executor):
         self._lock = threading.RLock()  # submit may replace a broken pool while holding it
         self._pool: ProcessPoolExecutor | None = None
         self._generation = 0
-        self._causes: dict[int, str] = {}  # generation -> why its workers were killed
+        self._causes: dict[int, str] = {}  # generation -> why its workers ended
+        # generation -> why this pool killed them on purpose (a timeout, stop): never retried;
+        # a worker that died by itself ends its pool too, and every task then in flight retries
+        self._killed: dict[int, str] = {}
         self._stopped = False
         self.restarts = 0  # pools replaced (dead worker or timeout)
 
@@ -342,7 +345,7 @@ class WorkerPool(Executor):
             return
         exc = inner.exception()
         if isinstance(exc, BrokenProcessPool):
-            killed = self._causes.get(generation)  # by a timeout or stop(): never retried
+            killed = self._killed.get(generation)  # by a timeout or stop(): never retried
             cause = killed or f"a worker process died: {self._dead_workers(pool) or exc}"
             self._replace(generation, cause)
             if answer.done() or (killed is None and again()):
@@ -358,25 +361,31 @@ class WorkerPool(Executor):
             return
         cause = f"timeout: no answer within {timeout:g} s; the worker was killed and replaced"
         _settle(answer, exc=TaskTimeout(cause))
-        self._replace(generation, f"killed: a task on the same pool timed out after {timeout:g} s")
+        self._replace(
+            generation, f"killed: a task on the same pool timed out after {timeout:g} s", True
+        )
 
     def _live_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:
             self._pool = process_pool(self.max_workers, self.background)
         return self._pool
 
-    def _replace(self, generation: int, cause: str) -> None:
+    def _replace(self, generation: int, cause: str, on_purpose: bool = False) -> None:
         """Kill the workers of pool ``generation``; the next submit starts a new pool.
 
         Kill generation ``generation``'s workers (if it is still the current pool); the next
-        submit starts a new pool.
+        submit starts a new pool.  ``on_purpose``: killed for a timeout (its tasks in flight are
+        not retried), not replaced after a worker died.
         """
         with self._lock:
             if generation != self._generation or self._pool is None:
                 return
             self._causes.setdefault(generation, cause)
-            for old_generation in [g for g in self._causes if g < generation - KEPT_CAUSES]:
-                del self._causes[old_generation]  # a long-lived node replaces workers without end
+            if on_purpose:
+                self._killed.setdefault(generation, cause)
+            for book in (self._causes, self._killed):
+                for old_generation in [g for g in book if g < generation - KEPT_CAUSES]:
+                    del book[old_generation]  # a long-lived node replaces workers without end
             old, self._pool = self._pool, None
             self._generation += 1
             self.restarts += 1
@@ -426,6 +435,7 @@ class WorkerPool(Executor):
         with self._lock:
             self._stopped = True
             self._causes.setdefault(self._generation, "the pool was stopped")
+            self._killed.setdefault(self._generation, "the pool was stopped")
             old, self._pool = self._pool, None
         return True if old is None else stop_pool(old, timeout)
 

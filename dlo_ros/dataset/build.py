@@ -125,8 +125,8 @@ def build_dataset(
         while True:
             for k in itertools.islice(queue, max(0, window - len(jobs))):
                 a, b = plan.span(k)
-                targets = plan.targets(scene.problem, a, b)
-                job = _submit(pool, own, payload, a, targets, plan.start, compile)
+                targets, values = plan.targets(scene.problem, a, b), plan.values(a, b)
+                job = _submit(pool, own, payload, a, targets, plan.start, compile, values)
                 jobs[job] = k
             if not jobs:
                 break

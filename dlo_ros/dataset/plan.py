@@ -11,6 +11,8 @@ A plan is a YAML (or JSON) mapping::
     start: held              # 'held': each sample solved from the scene's equilibrium at its
                              # own poses (a query); 'cold': from the initial guess; 'previous':
                              # from the sample before it (a chunk is a stream, work.py)
+    string:                  # optional: the string's values drawn per sample (materials.py)
+      bend_stiffness: {min: 0.01, max: 0.04, log: true}
     resolution: 51           # centreline points stored per sample (2 … 10000; default: the
                              # scene's); chunk × resolution ≤ 2·10⁶, at most 10⁶ shards
 
@@ -31,6 +33,8 @@ import numpy as np
 from ..model.problem import GripPose, Problem
 from ..scene.bounded_yaml import parse_bounded_yaml
 from ..scene.files import FileLimitError, read_regular_file
+from .materials import MaterialRange, check_scene
+from .materials import parse as parse_materials
 from .positions import PlanError, Sampler, parse
 
 #: the largest plan file read [bytes]
@@ -43,7 +47,7 @@ MAX_SHARDS = 10**6
 #: at most this many centreline points in one shard (chunk × resolution): a chunk travels whole
 MAX_SHARD_POINTS = 2 * 10**6
 STARTS = ("held", "cold", "previous")
-KEYS = ("samples", "seed", "grips", "chunk", "start", "resolution")
+KEYS = ("samples", "seed", "grips", "string", "chunk", "start", "resolution")
 
 
 @dataclass(frozen=True)
@@ -56,9 +60,11 @@ class DatasetPlan:
     chunk: int = 50
     start: str = "held"
     resolution: int = 0
+    string: dict[str, MaterialRange] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """Return the plan as the YAML mapping it was read from (the manifest stores it)."""
+        string = {key: r.as_dict() for key, r in self.string.items()}
         return {
             "samples": self.samples,
             "seed": self.seed,
@@ -66,6 +72,7 @@ class DatasetPlan:
             "chunk": self.chunk,
             "start": self.start,
             "resolution": self.resolution,
+            **({"string": string} if string else {}),
         }
 
     @property
@@ -85,24 +92,32 @@ class DatasetPlan:
                 f"{MAX_SHARD_POINTS} per shard: a smaller chunk or resolution"
             )
 
+    def _draws(self, a: int, b: int) -> np.ndarray:
+        """Return samples [a, b)'s uniform draws, (b − a, 3·G + M): G grips, M materials.
+
+        Sample i's are the draws 3·G·i … of ``PCG64(seed)`` when the plan draws no material,
+        (3·G + M)·i … else, so a chunk draws only its own and equals the same slice of the whole.
+        """
+        width = 3 * len(self.grips) + len(self.string)
+        bits = np.random.PCG64(self.seed)
+        bits.advance(width * a)
+        return np.random.Generator(bits).random((b - a, width))
+
     def targets(self, problem: Problem, a: int = 0, b: int | None = None) -> list[dict]:
         """Return the grip targets of samples [a, b) (the plan's grips; orientations kept).
 
-        Sample i's positions are the 3·G uniform draws starting at draw 3·G·i of
-        ``PCG64(seed)`` (G the plan's grips, in its order), so a chunk draws only its own and
-        equals the same slice of the whole.  Raises PlanError for a grip ``problem`` lacks.
+        Raises PlanError for a grip ``problem`` lacks, or a material it cannot take.
         """
         names = [g.name for g in problem.grips]
         for name in self.grips:
             if name not in names:
                 raise PlanError(f"plan.grips.{name}: no such grip in the scene (it has {names})")
+        check_scene(self.string, problem)
         b = self.samples if b is None else b
-        bits = np.random.PCG64(self.seed)
-        bits.advance(3 * len(self.grips) * a)
-        u = np.random.Generator(bits).random((b - a, len(self.grips), 3))
+        u = self._draws(a, b)
         index = np.arange(a, b)
         positions = [
-            sampler.positions(index, u[:, j], self.samples)
+            sampler.positions(index, u[:, 3 * j : 3 * j + 3], self.samples)
             for j, sampler in enumerate(self.grips.values())
         ]
         held = {g.name: g.pose.orientation for g in problem.grips}
@@ -113,6 +128,16 @@ class DatasetPlan:
             }
             for i in range(b - a)
         ]
+
+    def values(self, a: int = 0, b: int | None = None) -> list[dict[str, float]]:
+        """Return the drawn string values of samples [a, b) (``materials.py``; {} without)."""
+        b = self.samples if b is None else b
+        if not self.string:
+            return [{} for _ in range(b - a)]
+        u = self._draws(a, b)[:, 3 * len(self.grips) :]
+        drawn = [r.draw(u[:, j]) for j, r in enumerate(self.string.values())]
+        keys = list(self.string)
+        return [{k: float(drawn[j][i]) for j, k in enumerate(keys)} for i in range(b - a)]
 
 
 def read_plan(path: Path | str) -> DatasetPlan:
@@ -151,6 +176,7 @@ def plan_from_dict(data: object) -> DatasetPlan:
         chunk=_integer(data.get("chunk", 50), "plan.chunk", 1, MAX_CHUNK),
         start=_choice(data.get("start", "held"), "plan.start", STARTS),
         resolution=_resolution(data.get("resolution", 0)),
+        string=parse_materials(data["string"]) if "string" in data else {},
     )
     if plan.chunks > MAX_SHARDS:
         raise PlanError(f"plan.chunk: {plan.chunks} shards, at most {MAX_SHARDS}: a larger chunk")

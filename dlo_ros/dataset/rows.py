@@ -7,6 +7,9 @@ Columns (:data:`SCHEMA`; lists are flattened row-major, units SI):
   'previous': the branch it was solved from, ``work.py``);
 * ``targets``: the plan's grips' commanded poses, per grip [x, y, z, qx, qy, qz, qw] in the plan's
   grip order (the manifest's ``plan_grips``);
+* ``bend_stiffness``, ``twist_stiffness``, ``weight_per_length``, ``stretch_stiffness``: the
+  string's values the sample was solved with (drawn by the plan's ``string``, else the scene's;
+  null where the scene's is a table, or an inextensible string's stretch);
 * ``stable`` (null when the solver cannot tell), ``min_eigenvalue`` (of the reduced Hessian, null
   without one), ``equilibrium_residual_m`` (the strong-form residual that certifies it),
   ``constraint_violation``;
@@ -35,6 +38,8 @@ import pyarrow as pa
 from ..jsonio import json_safe
 from ..model.problem import GripPose, Problem
 from ..solver.results.result import ShapeResult
+from .materials import KEYS as MATERIAL_KEYS
+from .materials import uniform_value
 
 ENERGY_PARTS = ("bend", "twist", "stretch", "gravity", "external_work", "total")
 
@@ -46,6 +51,7 @@ SCHEMA = pa.schema(
         ("message", pa.string()),
         ("start", pa.string()),
         ("targets", _floats),
+        *[(key, pa.float64()) for key in MATERIAL_KEYS],
         ("stable", pa.bool_()),
         ("min_eigenvalue", pa.float64()),
         ("equilibrium_residual_m", pa.float64()),
@@ -88,7 +94,7 @@ def sample_row(
     """Return the row of sample ``index`` (module docstring) from its answer ``result``.
 
     ``targets``: its commanded poses (the plan's grips, in the plan's order); ``problem``: the
-    scene's (its grip and obstacle order).
+    one it was solved with (its string values, grip and obstacle order).
     """
     model = result.model
     full = result.to_dict()
@@ -105,6 +111,7 @@ def sample_row(
         "message": result.message,
         "start": start,
         "targets": [v for pose in targets.values() for v in (*pose.position, *pose.orientation)],
+        **{key: uniform_value(getattr(problem.string, key)) for key in MATERIAL_KEYS},
         "stable": result.stable,
         "min_eigenvalue": _number(result.min_eigenvalue),
         "equilibrium_residual_m": _number(result.equilibrium_residual_m),

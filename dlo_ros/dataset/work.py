@@ -15,42 +15,55 @@ from dataclasses import replace
 from typing import Any
 
 from ..solver.parallel import batch
+from ..solver.parallel.batch import scene_payload
 from ..solver.results.result import ShapeResult
+from .materials import with_values
 from .rows import sample_row
 
 
 def solve_samples(
-    scene: bytes, first: int, targets: list[dict], start: str, compile: str = "on_query"
+    scene: bytes,
+    first: int,
+    targets: list[dict],
+    start: str,
+    compile: str = "on_query",
+    values: list[dict[str, float]] | None = None,
 ) -> list[dict[str, Any]]:
     """Return the rows of samples ``first`` … ``first + len(targets) - 1``.
 
     ``scene``: a ``batch.scene_payload``; ``start``: 'held' (from the held equilibrium), 'cold'
-    (from the initial guess) or 'previous' (:func:`_along`).  A solve that raises answers
-    ``failed`` with the exception's text.
+    (from the initial guess) or 'previous' (:func:`_along`); ``values``: each sample's string
+    values (``materials.py``; the held equilibrium is then the scene's with those values).  A
+    solve that raises answers ``failed`` with the exception's text.
     """
+    values = values or [{} for _ in targets]
     if start == "previous":
-        return _along(scene, first, targets, compile)
-    _, problem, _ = pickle.loads(scene)
+        return _along(scene, first, targets, values, compile)
+    factory, problem, options = pickle.loads(scene)
     rows = []
     with batch.worker_lock:  # one CasADi solver is never called from two threads at once
-        solver = batch.held_solver(scene, compile)
         for k, poses in enumerate(targets):
+            own = with_values(problem, values[k])
+            payload = scene if not values[k] else scene_payload(factory, own, options)
             try:
+                solver = batch.held_solver(payload, compile)
                 result = solver.solve(poses, warm=start == "held", commit=False)
             # any exception: one sample must not lose the chunk's other answers
             except Exception as exc:  # noqa: BLE001
                 result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
-            rows.append(sample_row(first + k, poses, result, problem, start))
+            rows.append(sample_row(first + k, poses, result, own, start))
     return rows
 
 
-def _along(scene: bytes, first: int, targets: list[dict], compile: str) -> list[dict[str, Any]]:
+def _along(
+    scene: bytes, first: int, targets: list[dict], values: list[dict], compile: str
+) -> list[dict[str, Any]]:
     """Return the rows of a chunk solved as a stream: each sample from the one before it.
 
     A new solver of the scene per chunk (its first sample streamed from the scene's equilibrium,
-    row ``start`` 'held'; the others 'previous'), with checks inline and no time limit, so that
-    the chunk's answers depend only on the plan: the branch a sample lands on is the one its
-    neighbour along the plan's order leads to.
+    row ``start`` 'held'; the others 'previous'; a sample's string values set before its solve),
+    with checks inline and no time limit, so that the chunk's answers depend only on the plan: the
+    branch a sample lands on is the one its neighbour along the plan's order leads to.
     """
     factory, problem, options = pickle.loads(scene)
     options = replace(options, update_time_limit=0.0)
@@ -61,11 +74,14 @@ def _along(scene: bytes, first: int, targets: list[dict], compile: str) -> list[
     try:
         solver.solve()
         for k, poses in enumerate(targets):
+            own = with_values(problem, values[k])
             try:
+                if values[k]:
+                    solver.set_problem(own)
                 result = solver.solve(poses, warm=True, commit=True)
             except Exception as exc:  # noqa: BLE001 - as in solve_samples
                 result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
-            rows.append(sample_row(first + k, poses, result, problem, "previous" if k else "held"))
+            rows.append(sample_row(first + k, poses, result, own, "previous" if k else "held"))
     finally:
         solver.close()
     return rows

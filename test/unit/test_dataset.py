@@ -80,6 +80,11 @@ def built(scene, tmp_path_factory):
         ({"samples": 10**7, "chunk": 1}, "plan.chunk: 10000000 shards, at most 1000000"),
         ({"chunk": 10000, "samples": 20000, "resolution": 401}, "plan.chunk: 10000 samples × 401"),
         ({"samples": 2.5}, "plan.samples: must be an integer"),
+        ({"string": {"radius": {"min": 0.0, "max": 0.01}}}, "plan.string.radius: unknown"),
+        ({"string": {"bend_stiffness": {"min": 0.02, "max": 0.01}}}, "plan.string.bend_stiffness: min and max"),
+        ({"string": {"weight_per_length": {"min": 0.0, "max": 1.0, "log": True}}},
+         "plan.string.weight_per_length.min: must be > 0"),
+        ({"string": {"bend_stiffness": {"min": 0.0, "max": 1.0}}}, "plan.string.bend_stiffness.min: must be > 0"),
         ({"grips": {"right": {"position_box": {"min": [0, 0, 0], "max": [1e308, 1, 1]}}}},
          "plan.grips.right.position_box.max: must be 3 finite numbers"),
     ],
@@ -110,6 +115,38 @@ def test_the_same_plan_and_seed_give_the_same_samples_in_any_chunking(scene):
     # orientations kept, the other grip untouched
     assert all(set(t) == {"right"} for t in whole)
     np.testing.assert_array_equal(whole[0]["right"].orientation, scene.problem.grip("right").pose.orientation)
+
+
+def test_string_values_are_drawn_per_sample_and_solved_with(scene, tmp_path):
+    """A plan's material ranges: each sample's values in range (log-uniform where asked), the same
+    for any chunking; every row stores the values it was solved with, and its shape is the answer
+    of a solver of the scene with those values (the query from its own equilibrium)."""
+    ranges = {"bend_stiffness": {"min": 0.01, "max": 0.04, "log": True},
+              "weight_per_length": {"min": 0.3, "max": 0.7}}
+    plan = plan_from_dict({**plan_dict(samples=6, chunk=3), "string": ranges})
+    values = plan.values()
+    assert values[3:5] == plan_from_dict({**plan_dict(samples=6, chunk=2), "string": ranges}).values(3, 5)
+    rf = np.array([v["bend_stiffness"] for v in values])
+    assert np.all((rf >= 0.01) & (rf <= 0.04)) and len(set(rf)) == 6
+    summary = build_dataset(scene, plan, tmp_path / "out", workers=1, progress=False)
+    a = load_arrays(tmp_path / "out")
+    assert summary.complete
+    np.testing.assert_allclose(a["bend_stiffness"], rf)
+    np.testing.assert_allclose(a["weight_per_length"], [v["weight_per_length"] for v in values])
+    np.testing.assert_allclose(a["twist_stiffness"], 0.015)  # the scene's, not drawn
+    from dlo_ros.dataset.materials import with_values
+
+    targets = plan.targets(scene.problem)
+    for i in (0, 4):
+        solver = make_solver(with_values(scene.problem, values[i]), scene.options, compile="off", checks="sync")
+        solver.solve()
+        r = solver.solve(targets[i], commit=False)
+        assert r.status == a["status"][i]
+        if r.ok:
+            np.testing.assert_allclose(a["points"][i], r.points, atol=1e-6)
+    with pytest.raises(PlanError, match="plan.string.stretch_stiffness: the scene's string is inextensible"):
+        build_dataset(scene, plan_from_dict({**plan_dict(), "string": {"stretch_stiffness": {"min": 1, "max": 2}}}),
+                      tmp_path / "other", progress=False)
 
 
 def test_an_integral_float_is_a_count():

@@ -23,6 +23,9 @@ Columns (:data:`SCHEMA`; lists are flattened row-major, units SI):
 * ``min_self_distance`` [m] (null: not checked or no two strands within reach),
   ``passes_through_itself``;
 * ``s`` [m], ``points`` [m]: the centreline at the plan's resolution;
+* ``unstable_min_eigenvalue``, ``unstable_energy_total`` [J], ``unstable_points`` [m]: the
+  unstable equilibrium the solver met and left on its way to this one (the saddle beside it:
+  ``ShapeResult.unstable_met``), null and empty when it met none;
 * ``model``: the JSON of the model summary; ``solve_time_ms``, ``iterations``, ``derivatives``.
 """
 
@@ -68,6 +71,9 @@ SCHEMA = pa.schema(
         ("passes_through_itself", pa.bool_()),
         ("s", _floats),
         ("points", _floats),
+        ("unstable_min_eigenvalue", pa.float64()),
+        ("unstable_energy_total", pa.float64()),
+        ("unstable_points", _floats),
         ("model", pa.string()),
         ("solve_time_ms", pa.float64()),
         ("iterations", pa.int64()),
@@ -96,7 +102,7 @@ def sample_row(
     ``targets``: its commanded poses (the plan's grips, in the plan's order); ``problem``: the
     one it was solved with (its string values, grip and obstacle order).
     """
-    model = result.model
+    model, met = result.model, result.unstable_met
     full = result.to_dict()
     forces = np.zeros((len(problem.obstacles), 3))
     for i, f in result.contact_forces.items():
@@ -128,6 +134,9 @@ def sample_row(
         "passes_through_itself": bool(result.passes_through_itself),
         "s": _flat(result.s),
         "points": _flat(result.points),
+        "unstable_min_eigenvalue": _number(met.min_eigenvalue) if met else None,
+        "unstable_energy_total": _number(met.energy.get("total")) if met else None,
+        "unstable_points": _flat(met.points) if met else [],
         "model": json.dumps(json_safe(result.model_dict()), allow_nan=False),
         "solve_time_ms": _number(result.solve_time_ms),
         "iterations": int(result.iterations),

@@ -142,7 +142,14 @@ def load_arrays(out: Path | str) -> dict[str, np.ndarray]:
     solver = manifest["scene"].get("solver", {})
     points = int(manifest["plan"].get("resolution") or solver.get("output_points") or 0)
     arrays: dict[str, np.ndarray] = {}
-    widths = {"points": 3, "grip_force": 3, "grip_torque": 3, "obstacle_force": 3, "targets": 7}
+    widths = {
+        "points": 3,
+        "unstable_points": 3,
+        "grip_force": 3,
+        "grip_torque": 3,
+        "obstacle_force": 3,
+        "targets": 7,
+    }
     for name in table.column_names:
         column = table.column(name)
         if pa.types.is_list(column.type):
@@ -150,7 +157,8 @@ def load_arrays(out: Path | str) -> dict[str, np.ndarray]:
             lengths = {len(v) for v in values if v}
             if len(lengths) <= 1:  # a sample without a shape (failed, infeasible): NaN rows
                 width = widths.get(name, 0)
-                known = points * max(width, 1) if name in ("s", "points") else 0
+                shaped = name in ("s", "points", "unstable_points")
+                known = points * max(width, 1) if shaped else 0
                 length = lengths.pop() if lengths else known
                 a = np.array([v if v else [np.nan] * length for v in values], dtype=float)
                 a = a.reshape(len(values), length)

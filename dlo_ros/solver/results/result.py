@@ -96,7 +96,9 @@ class ShapeResult:
     than 2·radius (solver/results/self_pass.py); such a result is 'unverified', never 'ok'.
     contact_loads: the obstacles' contact forces as the physics has them: distributed line loads
     over stretches of contact and point forces (``ContactLoad``); ``contact_forces`` keeps each
-    obstacle's total.
+    obstacle's total.  unstable_met: the first unstable stationary point (status ok, stable False)
+    this solve met and left along its negative-curvature mode before reaching this answer, None
+    when it met none (its shape, energy and negative eigenvalue: the saddle next to this state).
     """
 
     status: str
@@ -128,6 +130,7 @@ class ShapeResult:
     min_self_distance: float = float("nan")
     passes_through_itself: bool = False
     contact_loads: list[ContactLoad] = field(default_factory=list)
+    unstable_met: ShapeResult | None = None
 
     @property
     def ok(self) -> bool:
@@ -184,6 +187,13 @@ class ShapeResult:
             if np.isfinite(self.min_self_distance)
             else None,
             "passes_through_itself": self.passes_through_itself,
+            "unstable_met": None
+            if self.unstable_met is None
+            else {
+                "min_eigenvalue": self.unstable_met.min_eigenvalue,
+                "energy_total": self.unstable_met.energy.get("total"),
+                "points": arr(self.unstable_met.points),
+            },
             "model": self.model_dict(),
             "solver": {
                 "iterations": self.iterations,

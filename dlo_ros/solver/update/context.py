@@ -78,6 +78,13 @@ class UpdateContext:
     contact: ContactSlots | None = None
     slot_override: list | None = None
     newton_far: bool = False
+    #: the first unstable stationary point this solve met and left (``ladder.escape_unstable``)
+    unstable_met: ShapeResult | None = None
+
+    def met_unstable(self, result: ShapeResult) -> None:
+        """Keep ``result`` as the unstable point met, if it is the first (an escape starts)."""
+        if self.unstable_met is None and result.status == "ok" and result.stable is False:
+            self.unstable_met = result
 
     @contextmanager
     def scoped(self, **fields: Any) -> Iterator[UpdateContext]:

@@ -242,8 +242,10 @@ def escape_unstable(
 ) -> Outcome:
     """Leave an unstable stationary point along its negative-curvature mode.
 
-    ``ipopt.escape_saddle``, each re-solve a cold IPOPT call (``attempts.ipopt_call``).
+    ``ipopt.escape_saddle``, each re-solve a cold IPOPT call (``attempts.ipopt_call``).  The
+    first unstable point a solve leaves is kept (``UpdateContext.unstable_met``).
     """
+    ctx.met_unstable(result)
     return escape_saddle(
         result,
         state,

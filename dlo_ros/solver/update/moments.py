@@ -237,6 +237,7 @@ def escape_saddle_moments(
     ctx: UpdateContext, problem: Problem, result: ShapeResult, state: SolverState
 ) -> Outcome:
     """Leave a saddle as ``ladder.escape_unstable`` does, each re-solve polished exactly."""
+    ctx.met_unstable(result)
 
     def attempt(z0: np.ndarray, p: np.ndarray) -> Attempt:
         ok, trial, status, it, viol = AT.ipopt_call(ctx, False, z0, p, escape=True)

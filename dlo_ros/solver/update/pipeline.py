@@ -64,7 +64,8 @@ def run_update(
     """Solve ``problem`` (``solve_update``); a warm update refused as a jump again in substeps.
 
     Every answer of a model without self-contact rows, of a string with a radius, is tested for
-    passing through itself (``results.self_pass``): cold, warm and queries alike.
+    passing through itself (``results.self_pass``): cold, warm and queries alike.  An answer
+    reached by leaving an unstable stationary point carries that point (``unstable_met``).
     """
     result, state = solve_update(ctx, problem, warm)
     if warm and result.status == "failed" and result.message.startswith(JUMP_REFUSALS):
@@ -74,4 +75,7 @@ def run_update(
         geometry = SP.geometry_of(problem, ctx.parts.options.self_contact_samples)
         points = nlp.model.positions(state.z, geometry.s)
         SP.flag(result, SP.self_pass(points, geometry, radius))
+    met = ctx.unstable_met
+    if met is not None and met is not result and result.stable is not False:
+        result.unstable_met = met  # the escape led elsewhere: the saddle it left
     return result, state

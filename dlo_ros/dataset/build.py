@@ -138,7 +138,7 @@ def build_dataset(
                 except Exception as exc:  # noqa: BLE001 - a dead worker: resume redoes it
                     failed[k] = f"{type(exc).__name__}: {exc}"
                     continue
-                store.write_shard(out, k, rows_table(rows))
+                _write(out, k, rows, shards)
                 counts.update(r["status"] for r in rows)
                 written, shards = written + len(rows), shards + 1
                 bar.update(len(rows))
@@ -154,6 +154,18 @@ def build_dataset(
     return DatasetSummary(
         out, plan.samples, dict(counts), written, resumed, time.monotonic() - t0, failed
     )
+
+
+def _write(out: Path, k: int, rows: list[dict[str, Any]], shards: int) -> None:
+    """Store chunk ``k``'s rows; a full or read-only disk stops the run (the rest stays)."""
+    try:
+        store.write_shard(out, k, rows_table(rows))
+    except OSError as exc:
+        why = exc.strerror or type(exc).__name__
+        raise DatasetError(
+            f"{out}: cannot write chunk {k}'s shard ({why}); the {shards} shards written stay "
+            "readable, --resume continues once there is room"
+        ) from None
 
 
 def _submit(pool: Executor, own: bool, *args: Any) -> Future:
@@ -212,8 +224,11 @@ def _open(out: Path, scene: Scene, plan: DatasetPlan, executor: str, resume: boo
         raise DatasetError(f"{out}: not empty; {hint}")
     else:
         manifest = fresh
-    (out / store.SHARDS).mkdir(parents=True, exist_ok=True)
-    store.write_manifest(out, manifest)
+    try:
+        (out / store.SHARDS).mkdir(parents=True, exist_ok=True)
+        store.write_manifest(out, manifest)
+    except OSError as exc:
+        raise DatasetError(f"{out}: cannot write there ({exc.strerror or exc})") from None
     return manifest
 
 

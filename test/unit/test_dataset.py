@@ -190,6 +190,11 @@ def test_every_sample_is_stored_once_with_the_solvers_own_answer(scene, built):
         if r.ok:
             np.testing.assert_allclose(a["points"][i], r.points, atol=1e-9)
             np.testing.assert_allclose(a["grip_force"][i, 1], r.grips["right"].force, atol=1e-9)
+    # every stored ok row, re-solved from its poses, is the same verified equilibrium
+    for i in np.flatnonzero(a["status"] == "ok"):
+        r = solver.solve(targets[i], commit=False)
+        assert r.ok and r.equilibrium_residual_m <= a["tolerance_m"][i]
+        np.testing.assert_allclose(a["points"][i], r.points, atol=1e-9)
     ok = a["status"] == "ok"
     # an ok sample is a verified equilibrium with a verdict: residual within the tolerance, stable
     # said; its model's estimate meets the tolerance where auto checked it (a query touching the
@@ -325,6 +330,48 @@ def test_the_command_line_refuses_bad_input_in_one_line(tmp_path):
     assert r.returncode == 2 and "none.yaml" in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.parametrize("text, says", [
+    ("a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\n"  # a billion-laughs: 10^6 nodes by aliases
+     + "".join(f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]\n" for i in range(1, 6)), "over a limit"),
+    ("samples: [unclosed\n", "YAML syntax error"),
+    ("- just\n- a list\n", "plan: must be a mapping"),
+    ("samples: 5\nseed: 1\ngrips: {right: {position_box: {min: [0, 0, 0], max: [1, 1, 1]}}}\nextra: !!python/object:os.system {}\n",
+     "could not determine a constructor"),
+])
+def test_a_hostile_plan_file_gets_one_line_naming_it(tmp_path, text, says):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(text)
+    r = _dlo("dataset", "default_cable", "--plan", str(plan), "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert r.stderr.startswith("dlo: error: ") and says in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_full_disk_stops_the_run_cleanly_and_what_was_written_stays(scene, tmp_path, monkeypatch):
+    """ENOSPC on the third shard: the run stops with one clear error, the two shards written read
+    back, and --resume, once there is room, completes the same data set."""
+    from dlo_ros.dataset import store
+
+    real, calls = store.write_atomic, []
+
+    def full_after_two(path, data):
+        if path.name.endswith(".parquet"):
+            calls.append(path.name)
+            if len(calls) == 3:
+                raise OSError(28, "No space left on device")
+        real(path, data)
+
+    monkeypatch.setattr(store, "write_atomic", full_after_two)
+    plan = plan_from_dict(plan_dict())
+    with pytest.raises(DatasetError, match="cannot write chunk .*No space left on device.*--resume"):
+        build_dataset(scene, plan, tmp_path / "out", workers=1, progress=False)
+    assert load(tmp_path / "out").num_rows == 8
+    assert not list((tmp_path / "out" / "shards").glob(".*tmp"))
+    monkeypatch.setattr(store, "write_atomic", real)
+    summary = build_dataset(scene, plan, tmp_path / "out", workers=1, resume=True, progress=False)
+    assert summary.complete and summary.resumed == 8 and summary.written == 4
+
+
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
 def test_ctrl_c_keeps_the_written_shards_and_resume_finishes(tmp_path, stop):
     """The command interrupted (Ctrl-C, or a batch scheduler's SIGTERM) once its first shards are
@@ -355,17 +402,31 @@ def test_ctrl_c_keeps_the_written_shards_and_resume_finishes(tmp_path, stop):
     table = load(out)
     assert table.column("sample").to_pylist() == list(range(60))
     assert read_manifest(out)["complete"]
+    # the same data set as a run never interrupted
+    whole = build_dataset(load_scene("default_cable"), plan_from_dict({
+        "samples": 60, "seed": 3, "chunk": 5,
+        "grips": {"right": {"position_box": {"min": [0.5, -0.1, 0.2], "max": [0.7, 0.1, 0.45]}}}}),
+        tmp_path / "whole", workers=2, progress=False)
+    assert whole.complete
+    other = load(tmp_path / "whole")
+    assert table.column("status").to_pylist() == other.column("status").to_pylist()
+    for x, y in zip(table.column("points").to_pylist(), other.column("points").to_pylist()):
+        np.testing.assert_allclose(x, y, atol=1e-9)
 
 
-def test_a_dask_cluster_gives_the_local_answers(scene, built, tmp_path):
+def test_a_dask_cluster_gives_the_local_answers(scene, tmp_path):
+    """200 samples on a local Dask cluster of two worker processes: the local pool's rows."""
     distributed = pytest.importorskip("distributed")
-    out, _ = built
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+    plan = plan_from_dict({"samples": 200, "seed": 8, "chunk": 25, "grips": {"right": {"position_box": {
+        "min": [0.5, -0.1, 0.3], "max": [0.7, 0.1, 0.45]}}}})
+    assert build_dataset(scene, plan, tmp_path / "local", workers=2, progress=False).complete
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        summary = build_dataset(scene, plan_from_dict(plan_dict()), tmp_path / "dask",
-                                executor=client.get_executor(), executor_name="dask", progress=False)
+        summary = build_dataset(scene, plan, tmp_path / "dask", executor=client.get_executor(),
+                                executor_name="dask", in_flight=4, progress=False)
     assert summary.complete
-    local, remote = load(out), load(tmp_path / "dask")
+    local, remote = load(tmp_path / "local"), load(tmp_path / "dask")
+    assert remote.num_rows == 200 and "ok" in set(remote.column("status").to_pylist())
     assert remote.column("status").to_pylist() == local.column("status").to_pylist()
     for x, y in zip(remote.column("points").to_pylist(), local.column("points").to_pylist()):
         np.testing.assert_allclose(x, y, atol=1e-9)

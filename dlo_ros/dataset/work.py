@@ -63,7 +63,9 @@ def _along(
     A new solver of the scene per chunk (its first sample streamed from the scene's equilibrium,
     row ``start`` 'held'; the others 'previous'; a sample's string values set before its solve),
     with checks inline and no time limit, so that the chunk's answers depend only on the plan: the
-    branch a sample lands on is the one its neighbour along the plan's order leads to.
+    branch a sample lands on is the one its neighbour along the plan's order leads to.  The first
+    sample, and any the stream answers 'unverified' (its model not yet refined for the shape),
+    are solved again with the checks run at once (``check_now``: auto refines until they pass).
     """
     factory, problem, options = pickle.loads(scene)
     options = replace(options, update_time_limit=0.0)
@@ -78,7 +80,10 @@ def _along(
             try:
                 if values[k]:
                     solver.set_problem(own)
-                result = solver.solve(poses, warm=True, commit=True)
+                # the chunk's first sample, and any the stream answers unverified, checked now
+                result = solver.solve(poses, warm=True, commit=True, check_now=k == 0)
+                if result.status == "unverified":
+                    result = solver.solve(poses, warm=True, commit=True, check_now=True)
             except Exception as exc:  # noqa: BLE001 - as in solve_samples
                 result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
             rows.append(sample_row(first + k, poses, result, own, "previous" if k else "held"))

@@ -22,6 +22,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _exit_code: int | None = None  # set once the process is stopping: the next signal leaves with it
@@ -51,8 +52,32 @@ def _interrupt(signum, frame) -> None:
     ):  # still importing: unwinding an import can escape as an uncaught interrupt (−2)
         exit_on_second_signal(0)
         _leave(signum, frame)
+    if in_finaliser(frame):  # raised there it would be printed and dropped: the stop was lost
+        _again_soon(signum)
+        return
     exit_on_second_signal(0)  # whatever catches this interrupt, a second signal leaves at once
     raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def in_finaliser(frame) -> bool:
+    """Tell whether ``frame`` runs inside a ``__del__`` (a garbage collection the signal hit).
+
+    Python prints an exception raised in a finaliser as "Exception ignored in …" with its
+    traceback and drops it: a KeyboardInterrupt raised there neither stops the node nor stays
+    silent (CI saw it in rclpy's ``Future.__del__``).
+    """
+    while frame is not None:
+        if frame.f_code.co_name == "__del__":
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _again_soon(signum: int) -> None:
+    """Deliver ``signum`` to this process again in a moment, outside the finaliser it hit."""
+    timer = threading.Timer(0.01, os.kill, (os.getpid(), signum))
+    timer.daemon = True
+    timer.start()
 
 
 def _leave(signum, frame) -> None:

@@ -376,6 +376,20 @@ def test_a_full_disk_stops_the_run_cleanly_and_what_was_written_stays(scene, tmp
     assert summary.complete and summary.resumed == 8 and summary.written == 4
 
 
+def test_a_read_only_output_folder_is_refused_in_one_line(scene, tmp_path, monkeypatch):
+    """Where the folder cannot be made or written (read-only: as root here, simulated), one clear
+    error and nothing half-made."""
+    from pathlib import Path
+
+    def refuse(self, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(self))
+
+    monkeypatch.setattr(Path, "mkdir", refuse)
+    with pytest.raises(DatasetError, match=r"out: cannot write there \(Permission denied\)"):
+        build_dataset(scene, plan_from_dict(plan_dict()), tmp_path / "out", progress=False)
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
 def test_ctrl_c_keeps_the_written_shards_and_resume_finishes(tmp_path, stop):
     """The command interrupted (Ctrl-C, or a batch scheduler's SIGTERM) once its first shards are

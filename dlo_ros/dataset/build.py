@@ -104,8 +104,7 @@ def build_dataset(
         return DatasetSummary(out, plan.samples, {}, 0, 0, 0.0)
     if plan.resolution:
         scene = replace(scene, options=replace(scene.options, output_points=plan.resolution))
-    plan.targets(scene.problem, 0, 0)  # checks the plan's grips against the scene
-    plan.check_size(scene.options.output_points)
+    plan.check(scene.problem, scene.options.output_points)
     name = executor_name or ("local" if executor is None else type(executor).__name__)
     manifest = _open(out, scene, plan, name, resume)
     counts, todo = _stored(out, plan)

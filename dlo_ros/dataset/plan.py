@@ -84,6 +84,19 @@ class DatasetPlan:
         """Return the sample indices [a, b) of chunk ``k``."""
         return k * self.chunk, min(self.samples, (k + 1) * self.chunk)
 
+    def check(self, problem: Problem, points: int) -> None:
+        """Raise PlanError unless ``problem`` takes this plan with ``points``-point centrelines.
+
+        Each plan grip must be one of its grips, each material range one its string can take,
+        and a chunk's centrelines within MAX_SHARD_POINTS.
+        """
+        names = [g.name for g in problem.grips]
+        for name in self.grips:
+            if name not in names:
+                raise PlanError(f"plan.grips.{name}: no such grip in the scene (it has {names})")
+        check_scene(self.string, problem)
+        self.check_size(points)
+
     def check_size(self, points: int) -> None:
         """Raise PlanError when one chunk of ``points``-point centrelines is too large to send."""
         if self.chunk * points > MAX_SHARD_POINTS:
@@ -104,15 +117,7 @@ class DatasetPlan:
         return np.random.Generator(bits).random((b - a, width))
 
     def targets(self, problem: Problem, a: int = 0, b: int | None = None) -> list[dict]:
-        """Return the grip targets of samples [a, b) (the plan's grips; orientations kept).
-
-        Raises PlanError for a grip ``problem`` lacks, or a material it cannot take.
-        """
-        names = [g.name for g in problem.grips]
-        for name in self.grips:
-            if name not in names:
-                raise PlanError(f"plan.grips.{name}: no such grip in the scene (it has {names})")
-        check_scene(self.string, problem)
+        """Return the grip targets of samples [a, b) (the plan's grips; orientations kept)."""
         b = self.samples if b is None else b
         u = self._draws(a, b)
         index = np.arange(a, b)

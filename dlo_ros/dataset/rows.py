@@ -103,14 +103,11 @@ def sample_row(
     one it was solved with (its string values, grip and obstacle order).
     """
     model, met = result.model, result.unstable_met
-    full = result.to_dict()
     forces = np.zeros((len(problem.obstacles), 3))
     for i, f in result.contact_forces.items():
         if 0 <= int(i) < len(forces):
             forces[int(i)] = f
-    zero = {"force": np.zeros(3), "torque": np.zeros(3)}
-    wrenches = [full["grips"].get(g.name, zero) for g in problem.grips]
-    contacts = {"contact_loads": full["contact_loads"], "self_contacts": full["self_contacts"]}
+    wrenches = [result.grips.get(g.name) for g in problem.grips]
     return {
         "sample": int(index),
         "status": result.status,
@@ -126,10 +123,10 @@ def sample_row(
         "estimated_error_m": _number(model.estimated_error_m) if model is not None else None,
         "tolerance_met": model.tolerance_met if model is not None else None,
         **{f"energy_{p}": _number(result.energy.get(p)) for p in ENERGY_PARTS},
-        "grip_force": _flat([w["force"] for w in wrenches]),
-        "grip_torque": _flat([w["torque"] for w in wrenches]),
+        "grip_force": _flat([np.zeros(3) if w is None else w.force for w in wrenches]),
+        "grip_torque": _flat([np.zeros(3) if w is None else w.torque for w in wrenches]),
         "obstacle_force": _flat(forces),
-        "contacts": json.dumps(json_safe(contacts), allow_nan=False),
+        "contacts": json.dumps(json_safe(result.contacts_dict()), allow_nan=False),
         "min_self_distance": _number(result.min_self_distance),
         "passes_through_itself": bool(result.passes_through_itself),
         "s": _flat(result.s),

@@ -41,16 +41,18 @@ def solve_samples(
         return _along(scene, first, targets, values, compile)
     factory, problem, options = pickle.loads(scene)
     rows = []
+    held: tuple[bytes, Any] | None = None  # (payload, its solver): looked up when it changes
     with batch.worker_lock:  # one CasADi solver is never called from two threads at once
         for k, poses in enumerate(targets):
             own = with_values(problem, values[k])
             payload = scene if not values[k] else scene_payload(factory, own, options)
             try:
-                solver = batch.held_solver(payload, compile)
-                result = solver.solve(poses, warm=start == "held", commit=False)
-            # any exception: one sample must not lose the chunk's other answers
-            except Exception as exc:  # noqa: BLE001
-                result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
+                if held is None or held[0] != payload:
+                    held = (payload, batch.held_solver(payload, compile))
+                result = batch.answer(held[1], poses, warm=start == "held")
+            except Exception as exc:  # noqa: BLE001 - its held equilibrium could not be made
+                held = None
+                result = _failed(exc)
             rows.append(sample_row(first + k, poses, result, own, start))
     return rows
 
@@ -76,17 +78,23 @@ def _along(
     try:
         solver.solve()
         for k, poses in enumerate(targets):
-            own = with_values(problem, values[k])
+            own, label = with_values(problem, values[k]), "previous" if k else "held"
             try:
                 if values[k]:
                     solver.set_problem(own)
-                # the chunk's first sample, and any the stream answers unverified, checked now
-                result = solver.solve(poses, warm=True, commit=True, check_now=k == 0)
-                if result.status == "unverified":
-                    result = solver.solve(poses, warm=True, commit=True, check_now=True)
             except Exception as exc:  # noqa: BLE001 - as in solve_samples
-                result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
-            rows.append(sample_row(first + k, poses, result, own, "previous" if k else "held"))
+                rows.append(sample_row(first + k, poses, _failed(exc), own, label))
+                continue
+            # the chunk's first sample, and any the stream answers unverified, checked now
+            result = batch.answer(solver, poses, commit=True, check_now=k == 0)
+            if result.status == "unverified":
+                result = batch.answer(solver, poses, commit=True, check_now=True)
+            rows.append(sample_row(first + k, poses, result, own, label))
     finally:
         solver.close()
     return rows
+
+
+def _failed(exc: Exception) -> ShapeResult:
+    """Return the 'failed' answer naming what a sample's set-up raised."""
+    return ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")

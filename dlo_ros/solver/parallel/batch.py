@@ -43,7 +43,7 @@ import time
 import warnings
 from concurrent.futures import CancelledError, Executor, Future
 from concurrent.futures.process import BrokenProcessPool
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from ...model.problem import Problem
 from ..options import SolverOptions
@@ -64,6 +64,7 @@ from .worker_pool import (
 __all__ = [
     "BACKGROUND_NICE",
     "WORKER_SOLVERS",
+    "answer",
     "build_solver",
     "default_executor",
     "held_solver",
@@ -222,17 +223,21 @@ def solve_chunk(
     then runs beside the queries, not in front of them.
     """
     factory, problem, options = pickle.loads(scene)
-    results = []
     with worker_lock:  # one CasADi/IPOPT solver must never be called from two threads at once
         solver = _worker_solver(scene, factory, problem, options, compile, checks)
-        for poses in targets:
-            try:
-                result = solver.solve(poses, warm=True, commit=False)
-            # any exception: one bad query must not lose the chunk's other answers
-            except Exception as exc:
-                result = ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
-            results.append(result)
+        results = [answer(solver, poses) for poses in targets]
     return results
+
+
+def answer(solver: Solver, poses: Mapping, **solve: Any) -> ShapeResult:
+    """Return ``solver.solve(poses, **solve)`` (a query by default), or 'failed' naming why.
+
+    One bad target must not lose a chunk's other answers.
+    """
+    try:
+        return solver.solve(poses, **{"warm": True, "commit": False, **solve})
+    except Exception as exc:  # noqa: BLE001 - any exception: reported in the answer
+        return ShapeResult(status="failed", message=f"{type(exc).__name__}: {exc}")
 
 
 def held_solver(scene: bytes, compile: str = "on_query", checks: str = "sync") -> Solver:

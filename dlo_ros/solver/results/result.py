@@ -140,12 +140,36 @@ class ShapeResult:
         """Return the model's JSON form (``ModelSummary.as_dict``; {} when there is none)."""
         return self.model.as_dict() if self.model is not None else {}
 
+    def contacts_dict(self) -> dict:
+        """Return the JSON form of ``self_contacts`` and ``contact_loads`` (``to_dict``'s keys)."""
+        return {
+            "self_contacts": [
+                {
+                    "s_a": c.s_a,
+                    "s_b": c.s_b,
+                    "point_a": _arr(c.point_a),
+                    "point_b": _arr(c.point_b),
+                    "force": _arr(c.force),
+                    "gap": c.gap,
+                }
+                for c in self.self_contacts
+            ],
+            "contact_loads": [
+                {
+                    "obstacle": c.obstacle,
+                    "kind": c.kind,
+                    "s": _arr(c.s),
+                    "points": _arr(c.points),
+                    "force": _arr(c.force),
+                    "line_load": _arr(c.line_load),
+                }
+                for c in self.contact_loads
+            ],
+        }
+
     def to_dict(self) -> dict:
         """JSON-ready dictionary (the schema of ``dlo solve --json``, documented in msg_docs/)."""
-
-        def arr(a: np.ndarray) -> list:
-            return np.asarray(a, dtype=float).round(12).tolist()
-
+        arr = _arr
         return {
             "status": self.status,
             "message": self.message,
@@ -161,28 +185,7 @@ class ShapeResult:
                 for name, w in self.grips.items()
             },
             "contact_forces": {str(i): arr(f) for i, f in self.contact_forces.items()},
-            "self_contacts": [
-                {
-                    "s_a": c.s_a,
-                    "s_b": c.s_b,
-                    "point_a": arr(c.point_a),
-                    "point_b": arr(c.point_b),
-                    "force": arr(c.force),
-                    "gap": c.gap,
-                }
-                for c in self.self_contacts
-            ],
-            "contact_loads": [
-                {
-                    "obstacle": c.obstacle,
-                    "kind": c.kind,
-                    "s": arr(c.s),
-                    "points": arr(c.points),
-                    "force": arr(c.force),
-                    "line_load": arr(c.line_load),
-                }
-                for c in self.contact_loads
-            ],
+            **self.contacts_dict(),
             "min_self_distance": self.min_self_distance
             if np.isfinite(self.min_self_distance)
             else None,
@@ -208,3 +211,8 @@ class ShapeResult:
                 "ipopt_status": self.ipopt_status,
             },
         }
+
+
+def _arr(a: np.ndarray) -> list:
+    """Return ``a`` as nested lists of floats rounded to 1e-12 (the JSON form)."""
+    return np.asarray(a, dtype=float).round(12).tolist()

@@ -11,8 +11,8 @@ import argparse
 from .common import EXIT_OK, EXIT_USAGE
 
 HELP = (
-    "run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--check] "
-    "[--ros-args ...] "
+    "run the ROS 2 node: dlo node [--params-file FILE] [--scene NAME_OR_PATH] [--managed] "
+    "[--check] [--ros-args ...] "
     "(`dlo node --help`)"
 )
 

@@ -24,8 +24,10 @@ latest shape.  Fits (``fit.enabled``) run in their own worker process (fit_node.
 
 The node's features live in their own modules: ``startup`` (parameters, scene, first problem),
 ``target_inputs``, ``shape_outputs``, ``diagnostics``, ``shape_services``, ``live_parameters``,
-``stream_log`` (recording and model changes) and ``fit_node``.  :class:`DloNode` wires them to the
-engine and reports the engine's updates and failures; ``run`` has the entry point.
+``stream_log`` (recording and model changes) and ``fit_node``.  :class:`DloCore` wires them to the
+engine and reports the engine's updates and failures; :class:`DloNode` is the plain node that
+builds one at once, ``managed.ManagedDloNode`` the lifecycle node that builds it on ``configure``;
+``run`` has the entry point.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from .engine import ShapeEngine, Update, build_solver
 from .fit_node import FitterLinks, NodeFitter
 from .health import Health, model_text
 from .live_parameters import LiveParameters
+from .planning_scene_publisher import PlanningScenePublisher
 from .shape_outputs import ShapeOutputs
 from .shape_services import ShapeServices
 from .startup import StartupError, prepare, start_recorder
@@ -53,20 +56,38 @@ from .validation import TEXT_LIMIT, safe_text
 
 NODE_NAME = "dlo"
 
-__all__ = ["DloNode", "NODE_NAME", "StartupError"]
+__all__ = ["DloCore", "DloNode", "NODE_NAME", "StartupError"]
 
 
 class DloNode(Node):
-    """The dlo node: its ROS handles, its parts and the engine's callbacks (module docstring).
+    """The plain (unmanaged) dlo node: a ``DloCore`` built and active from the constructor.
 
     Keyword arguments go to rclpy.node.Node (context, namespace, ...).  Raises StartupError for an
-    unusable scene or parameter.
+    unusable scene or parameter.  ``managed.ManagedDloNode`` is the lifecycle alternative.
     """
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
+        self.core = DloCore(self)
+
+    def close(self, timeout: float = 10.0) -> bool:
+        """Stop the core's workers and engine; return whether the solver thread ended in time."""
+        return self.core.close(timeout)
+
+
+class DloCore:
+    """The dlo node's parts on ``node`` and the engine's callbacks (module docstring).
+
+    Built on a plain node (``DloNode``) or by a managed node's ``configure`` (``active=False``:
+    shapes are solved and held, but neither published nor are targets accepted until
+    ``activate``).  Raises StartupError for an unusable scene or parameter.
+    """
+
+    def __init__(self, node: Node, *, active: bool = True) -> None:
+        self.node = node
         self.closing = False
-        settings = prepare(self)
+        self.active = active  # a managed node's lifecycle state is 'active'
+        settings = prepare(node)
         scene, problem, options = settings.scene, settings.problem, settings.options
         self.scene = scene
         self.frame_id = settings.frame_id
@@ -76,12 +97,12 @@ class DloNode(Node):
             scene=safe_text(scene.name),
             frame_id=safe_text(self.frame_id),
             grips=tuple(safe_text(n) for n in self.grip_names),
-            throttle_s=self.get_parameter("warn_throttle").value,
+            throttle_s=self.node.get_parameter("warn_throttle").value,
         )
         # the recorded scene is the effective one (parameters applied), so that `dlo replay
         # --resolve` repeats the node's solves
         effective = replace(scene, problem=problem, options=options)
-        self.stream_log = StreamLog(effective, self.health, self.get_logger())
+        self.stream_log = StreamLog(effective, self.health, self.node.get_logger())
         self.engine = ShapeEngine(
             problem,
             options,
@@ -91,11 +112,13 @@ class DloNode(Node):
             on_state=self._on_state,
         )
         self._add_interfaces(problem)
-        self.stream_log.recorder = start_recorder(
-            self, self.stream_log.scene, self.frame_id
-        )  # last check
+        try:
+            self.stream_log.recorder = start_recorder(node, self.stream_log.scene, self.frame_id)
+        except StartupError:  # the last check: undo what outlives a node (a managed one's)
+            self.live.close()
+            raise
         self.shape_services.start_workers()  # replaces a dead or stuck worker; dies with the node
-        self.get_logger().info(
+        self.node.get_logger().info(
             f"scene '{safe_text(scene.name)}' ({safe_text(scene.source)}): grips "
             f"{self.grip_names}, {len(problem.obstacles)} obstacle(s), frame "
             f"'{safe_text(self.frame_id)}'; building the solver"
@@ -106,31 +129,47 @@ class DloNode(Node):
     def _add_interfaces(self, problem: Problem) -> None:
         """Create the node's publishers, subscriptions, services, timers and fitter."""
         closing = self.is_closing
-        self.outputs = ShapeOutputs(self, self.frame_id, self.grip_names, closing)
+        self.outputs = ShapeOutputs(self.node, self.frame_id, self.grip_names, self.is_quiet)
+        self.planning_scene: PlanningScenePublisher | None = None
+        if self.node.get_parameter("planning_scene.enabled").value:
+            self.planning_scene = PlanningScenePublisher(
+                self.node,
+                self.frame_id,
+                self.outputs,
+                self.is_quiet,
+                float(self.node.get_parameter("warn_throttle").value),
+            )
         self.diagnostics = DiagnosticsPublisher(
-            self, self.health, self.engine, safe_text(self.scene.name), closing
+            self.node, self.health, self.engine, safe_text(self.scene.name), closing
         )
-        poses = PoseReader(self, self.frame_id, bool(self.get_parameter("use_tf").value))
+        poses = PoseReader(self.node, self.frame_id, bool(self.node.get_parameter("use_tf").value))
         self.inputs = TargetInputs(
-            self,
+            self.node,
             poses,
             self.grip_names,
             self.engine,
             self.stream_log,
             self.health,
             self.diagnostics.publish,
+            self.refusal,
         )
         self.shape_services = ShapeServices(
-            self, poses, self.grip_names, self.engine, self.health, self.worker_compile
+            self.node,
+            poses,
+            self.grip_names,
+            self.engine,
+            self.health,
+            self.worker_compile,
+            self.refusal,
         )
         self.live = LiveParameters(
-            self, problem, self.engine, self.stream_log, self.health, self.outputs, closing
+            self.node, problem, self.engine, self.stream_log, self.health, self.outputs, closing
         )
         self.fitter: NodeFitter | None = None
-        if self.get_parameter("fit.enabled").value:
+        if self.node.get_parameter("fit.enabled").value:
             self.fitter = NodeFitter(
                 FitterLinks(
-                    node=self,
+                    node=self.node,
                     frame_id=self.frame_id,
                     engine=self.engine,
                     health=self.health,
@@ -147,6 +186,32 @@ class DloNode(Node):
         """Return whether the node is shutting down (``close`` was called)."""
         return self.closing
 
+    def is_quiet(self) -> bool:
+        """Return whether no shape may be published now: closing, or a managed node inactive."""
+        return self.closing or not self.active
+
+    def refusal(self) -> str:
+        """Return why targets and services are refused now; '' while active."""
+        if self.active:
+            return ""
+        return (
+            "the node is inactive (lifecycle state 'inactive'): targets and queries are refused "
+            "until it is activated"
+        )
+
+    def activate(self) -> None:
+        """Accept targets and publish shapes; publish the newest shape (solved while inactive)."""
+        self.active = True
+        self.health.set_lifecycle("active")
+        self.outputs.republish()
+        self.diagnostics.publish(immediate=True)
+
+    def deactivate(self) -> None:
+        """Refuse targets and queries; the latched centreline stays as it is."""
+        self.active = False
+        self.health.set_lifecycle("inactive")
+        self.diagnostics.publish(immediate=True)
+
     @property
     def worker_compile(self) -> str:
         """Return the compile mode of worker processes: compiled derivatives from the cache only.
@@ -160,7 +225,7 @@ class DloNode(Node):
         t0 = time.monotonic()
         solver = build_solver(problem, options, compile=self.compile_mode)
         self.stream_log.new_solver()
-        self.get_logger().info(
+        self.node.get_logger().info(
             f"solver ready in {time.monotonic() - t0:.1f} s (compile: {self.compile_mode}, "
             f"solver.model: {options.model})"
         )
@@ -171,7 +236,7 @@ class DloNode(Node):
         state = safe_text(state)
         self.health.set_state(state)
         if state.startswith("failed"):
-            self.get_logger().error(f"solver: {state}")
+            self.node.get_logger().error(f"solver: {state}")
         self.diagnostics.publish(immediate=True)
 
     def _on_update(self, u: Update) -> None:
@@ -190,12 +255,13 @@ class DloNode(Node):
         A signal reaches rclpy's handler before ``close``; an update in flight then finds its
         publishers invalid.
         """
-        return self.closing or not self.context.ok()
+        return self.closing or not self.node.context.ok()
 
     def _publish_update(self, u: Update) -> None:
         r = u.result
-        stamp = u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds
-        self.outputs.publish_shape(u, stamp)  # the shape first: bookkeeping need not delay it
+        stamp = u.stamp_ns if u.stamp_ns else self.node.get_clock().now().nanoseconds
+        if self.active:  # the shape first: bookkeeping need not delay it
+            self.outputs.publish_shape(u, stamp)
         model_changed = self.stream_log.record_update(u, stamp)
         latency = None if u.received_ns is None else (time.monotonic_ns() - u.received_ns) / 1e6
         self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
@@ -203,8 +269,9 @@ class DloNode(Node):
         self.health.update(r, u.trigger, latency)
         self.outputs.hold(u, stamp)
         if self.health.updates == 1:
-            self.get_logger().info(
-                f"first shape published {time.monotonic() - self._t_start:.1f} s after start "
+            self.node.get_logger().info(
+                f"first shape {'published' if self.active else 'solved (published when active)'} "
+                f"{time.monotonic() - self._t_start:.1f} s after start "
                 f"({r.status}, stable={r.stable}; model "
                 f"{model_text(r.model_dict()) or 'not reported'})"
             )
@@ -214,7 +281,7 @@ class DloNode(Node):
                 self.fitter.warm()
             self.shape_services.warm_workers()
         if r.stable is False and self.health.should_warn("unstable"):
-            self.get_logger().warning(
+            self.node.get_logger().warning(
                 f"the published equilibrium is unstable (min eigenvalue {r.min_eigenvalue:.3g}): "
                 "the cable would not stay in this shape"
             )
@@ -226,15 +293,17 @@ class DloNode(Node):
             return
         if u is not None:
             self.stream_log.record_update(
-                u, u.stamp_ns if u.stamp_ns else self.get_clock().now().nanoseconds
+                u, u.stamp_ns if u.stamp_ns else self.node.get_clock().now().nanoseconds
             )
         self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
         first_line = safe_text(message.splitlines()[0] if message else kind)
         if self.health.error(kind, first_line, rejected=False):
             if kind == "internal":  # with its traceback, escaped into one line (a bug report)
-                self.get_logger().error(f"solver error: {safe_text(message, 20 * TEXT_LIMIT)}")
+                self.node.get_logger().error(
+                    f"solver error: {safe_text(message, 20 * TEXT_LIMIT)}"
+                )
             else:
-                self.get_logger().warning(
+                self.node.get_logger().warning(
                     f"no equilibrium ({kind}): {first_line}; the last good shape stays published"
                 )
         self.diagnostics.publish(immediate=True)
@@ -246,6 +315,7 @@ class DloNode(Node):
         Returns whether the solver thread ended within ``timeout`` [s].
         """
         self.closing = True
+        self.live.close()
         self.shape_services.close(timeout)
         if self.fitter is not None:
             self.fitter.close(timeout)

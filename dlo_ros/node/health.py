@@ -124,6 +124,7 @@ class Health:
         self.throttle_s = throttle_s
         self.scene, self.frame_id, self.grips = scene, frame_id, tuple(grips)
         self.state = "starting"
+        self.lifecycle = ""  # a managed node's lifecycle state; '' for the plain node
         self.last: ShapeResult | None = None  # last published (converged) streaming solve
         self.last_trigger = ""
         self.last_latency_ms: float | None = None  # target arrival -> solve finished
@@ -151,6 +152,11 @@ class Health:
     def set_state(self, state: str) -> None:
         with self._lock:
             self.state = state
+
+    def set_lifecycle(self, state: str) -> None:
+        """Set a managed node's lifecycle state ('inactive', 'active', ...)."""
+        with self._lock:
+            self.lifecycle = state
 
     def update(self, result: ShapeResult, trigger: str, latency_ms: float | None = None) -> None:
         """Count a converged streaming solve that was published."""
@@ -271,6 +277,9 @@ class Health:
     def level_and_message(self) -> tuple[str, str]:
         with self._lock:
             r = self.last
+            idle = self.lifecycle not in ("", "active")
+            if idle and not self.state.startswith("failed"):
+                return "ok", f"lifecycle state '{self.lifecycle}': targets refused"
             if self.state.startswith("failed"):
                 return "error", f"no solver: {self.state}"
             if r is None:
@@ -306,6 +315,7 @@ class Health:
             r = self.last
             out: dict[str, object] = {
                 "state": self.state,
+                "lifecycle": self.lifecycle,
                 "rss MB": resident_mb(),
                 "scene": self.scene,
                 "frame_id": self.frame_id,

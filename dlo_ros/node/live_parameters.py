@@ -54,6 +54,11 @@ class LiveParameters:
         node.add_on_set_parameters_callback(self.check)
         node.add_post_set_parameters_callback(self.apply)
 
+    def close(self) -> None:
+        """Stop checking and applying parameter changes (a managed node's cleanup)."""
+        self.node.remove_on_set_parameters_callback(self.check)
+        self.node.remove_post_set_parameters_callback(self.apply)
+
     @property
     def string(self) -> StringProperties:
         """Return the string's properties as the parameters hold them now."""

@@ -33,6 +33,7 @@ KINDS = (
     "invalid",  # a bad request (pose, frame): nothing was solved
     "busy",  # too many queries pending: try again
     "not_ready",  # the solver is still being built: try again
+    "inactive",  # a managed node that is not active: activate it first
 )
 #: ShapeResult.status -> reply kind (an 'ok' result is VERIFIED, or 'unstable' when stable is
 #: False)

@@ -20,6 +20,7 @@ from ..scene import SceneError, load_scene
 from ..text import one_line_warnings
 from . import params as P
 from .dlo_node import DloNode, StartupError
+from .managed import ManagedDloNode
 from .signals import exit_on_second_signal, node_starting, terminate_children
 from .validation import safe_text
 
@@ -101,7 +102,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
 
 def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
     """Start rclpy and the node, spin until stopped, then stop both; return the exit code."""
-    node = executor = None
+    node: DloNode | ManagedDloNode | None = None
+    executor = None
     code = 0
     try:
         node_starting()
@@ -114,7 +116,7 @@ def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
                 file=sys.stderr,
             )
             return 2
-        node = DloNode()
+        node = ManagedDloNode() if prepared.managed else DloNode()
         # One thread: it only converts and checks messages (the solver has its own thread, and the
         # services await it as coroutines).  rclpy's MultiThreadedExecutor is slower per message
         # here and competes with the solver thread for the GIL. rclpy.experimental.EventsExecutor
@@ -122,7 +124,11 @@ def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
         # under it, and coroutine services do not run (ros2/rclpy#1473).
         executor = new_executor()
         executor.add_node(node)
-        executor.spin()
+        if isinstance(node, ManagedDloNode):
+            while not node.finished.is_set():  # until the 'shutdown' transition
+                executor.spin_once(timeout_sec=0.2)
+        else:
+            executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as exc:
@@ -139,7 +145,9 @@ def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
     return code
 
 
-def stop(node: DloNode | None, executor: SingleThreadedExecutor | None, code: int) -> None:
+def stop(
+    node: DloNode | ManagedDloNode | None, executor: SingleThreadedExecutor | None, code: int
+) -> None:
     """Close the node and rclpy; leave at once (``os._exit``) if the solver thread is stuck."""
     stuck = False
     try:

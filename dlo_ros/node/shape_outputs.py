@@ -26,7 +26,8 @@ from .qos import LATCHED_QOS, WRENCH_QOS
 class ShapeOutputs:
     """Publish each streaming shape and keep the newest for the markers timer.
 
-    ``closing()``: true once the node is shutting down (then no markers are drawn).
+    ``closing()``: true once the node is shutting down, or while a managed node is inactive (then
+    no markers are drawn).
     """
 
     def __init__(
@@ -64,6 +65,14 @@ class ShapeOutputs:
             self.latest = replace(u, stamp_ns=stamp_ns)
             self._stamp_ns = stamp_ns
             self._dirty = True
+
+    def republish(self) -> None:
+        """Publish the newest shape again (a node activated); its markers at the next tick."""
+        with self._lock:
+            u, stamp_ns = self.latest, self._stamp_ns
+            self._dirty = u is not None
+        if u is not None:
+            self.publish_shape(u, stamp_ns)
 
     def redraw(self) -> None:
         """Draw the newest shape again at the next tick (a marker setting changed)."""

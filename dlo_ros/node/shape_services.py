@@ -10,7 +10,7 @@ current targets; else by the solver thread between stream updates.  The reply's 
 from __future__ import annotations
 
 from concurrent.futures import Future
-from typing import Any
+from typing import Any, Callable
 
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
@@ -63,8 +63,10 @@ class ShapeServices:
         engine: ShapeEngine,
         health: Health,
         worker_compile: str,
+        refusal: Callable[[], str] = lambda: "",
     ) -> None:
         self.node = node
+        self.refusal = refusal  # why services are refused now ('' = served): a lifecycle state
         self.poses = poses
         self.frame_id = poses.frame_id
         self.grip_names = grip_names
@@ -123,6 +125,8 @@ class ShapeServices:
                 )
         except TargetError as exc:
             return self.failed(response, f"{exc}", "invalid")
+        if self.refusal():
+            return self.failed(response, self.refusal(), "inactive")
         if not self.engine.ready:
             return self.failed(
                 response, f"the solver is not ready ({self.engine.state})", "not_ready"
@@ -231,6 +235,9 @@ class ShapeServices:
         self, request: Trigger.Request, response: Trigger.Response
     ) -> Trigger.Response:
         """Answer ~/reset: forget the warm start and solve cold; report that solve."""
+        if self.refusal():
+            response.success, response.message = False, self.refusal()
+            return response
         if not self.engine.ready:
             response.success = False
             response.message = f"the solver is not ready ({self.engine.state})"

@@ -79,8 +79,14 @@ def descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
 
 
 def declare(node: Node, specs: Iterable[P.ParamSpec]) -> None:
-    """Declare ``specs`` on ``node``; a value of a wrong type or out of range is a StartupError."""
+    """Declare ``specs`` on ``node``; a value of a wrong type or out of range is a StartupError.
+
+    A parameter declared already (a managed node configured again after ``cleanup``) keeps its
+    value.
+    """
     for spec in specs:
+        if node.has_parameter(spec.name):
+            continue
         try:
             node.declare_parameter(spec.name, spec.default, descriptor(spec))
         except ParameterException as exc:  # wrong type or out of range in the params file / -p
@@ -107,12 +113,13 @@ def prepare(node: Node) -> StartSettings:
                 "digits, '_'; not starting with a digit)"
             )
     defaults = P.scene_values(scene.problem, scene.options.output_points)
-    node.declare_parameter(
-        "grip_names",
-        defaults["grip_names"],
-        descriptor(P.SPECS["grip_names"]),
-        ignore_override=True,
-    )
+    if not node.has_parameter("grip_names"):
+        node.declare_parameter(
+            "grip_names",
+            defaults["grip_names"],
+            descriptor(P.SPECS["grip_names"]),
+            ignore_override=True,
+        )
     declare(node, [replace(s, default=defaults.get(s.name, s.default)) for s in P.LIVE])
     problem, options = initial_problem(scene, lambda name: value(name).value)
     try:

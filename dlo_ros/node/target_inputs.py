@@ -101,8 +101,10 @@ class TargetInputs:
         log: StreamLog,
         health: Health,
         publish_diagnostics: Callable[[bool], None],
+        refusal: Callable[[], str] = lambda: "",
     ) -> None:
         self.node = node
+        self.refusal = refusal  # why targets are refused now ('' = accepted): a lifecycle state
         self.poses = poses
         self.grip_names = grip_names
         self.engine = engine
@@ -129,6 +131,7 @@ class TargetInputs:
         where = f"grips/{name}/target"
         msg = None
         try:
+            self.check_accepting()
             msg = read_message(data, PoseStamped, where)
             pose = self.poses.checked(msg.pose, msg.header.frame_id, where)
         except TargetError as exc:
@@ -144,6 +147,7 @@ class TargetInputs:
         where = "grips/targets"
         msg = None
         try:
+            self.check_accepting()
             msg = read_message(data, PoseArray, where)
             check_count(len(msg.poses), self.grip_names, where)
             poses = {
@@ -156,6 +160,12 @@ class TargetInputs:
         stamp = conv.time_to_ns(msg.header.stamp) or None
         self.log.recorder.log_targets(poses, update=self.log.update, ros_time_ns=stamp)
         self.engine.submit_targets(poses, stamp, received)
+
+    def check_accepting(self) -> None:
+        """Raise TargetError('inactive') while the node refuses targets (a lifecycle state)."""
+        reason = self.refusal()
+        if reason:
+            raise TargetError("inactive", reason)
 
     def reject(self, exc: TargetError, stamp_ns: int = 0) -> None:
         """Record, count and (throttled) log a refused target."""

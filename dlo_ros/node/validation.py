@@ -43,6 +43,7 @@ KINDS = (
     "infeasible",  # IPOPT: no point satisfies the constraints (e.g. obstacles)
     "failed",  # the solver found no equilibrium
     "internal",  # an unexpected exception (a bug): reported, never fatal
+    "inactive",  # a managed node that is not active refuses targets and queries
 )
 
 

@@ -95,16 +95,17 @@ def test_package_exports_main_and_files_exist():
 
     assert callable(pkg.main)
     assert (REPO / "config" / "dlo_node.yaml").is_file()
-    source = (REPO / "launch" / "dlo.launch.py").read_text()
-    compile(source, "dlo.launch.py", "exec")
-    try:
-        import launch  # noqa: F401
-        import launch_ros  # noqa: F401
-    except ImportError:
-        return  # not on PyPI: the launch description itself can only be built in a ROS installation
-    namespace: dict = {}
-    exec(compile(source, "dlo.launch.py", "exec"), namespace)
-    assert namespace["generate_launch_description"]() is not None
+    for name in ("dlo.launch.py", "dlo_managed.launch.py"):
+        source = (REPO / "launch" / name).read_text()
+        compile(source, name, "exec")
+        try:
+            import launch  # noqa: F401
+            import launch_ros  # noqa: F401
+        except ImportError:
+            continue  # not on PyPI: the launch description can only be built in a ROS installation
+        namespace: dict = {}
+        exec(compile(source, name, "exec"), namespace)
+        assert namespace["generate_launch_description"]() is not None
 
 
 def compiling_node(tmp_path, mode: str, domain_id: int, log) -> NodeProcess:
@@ -253,13 +254,13 @@ def test_an_update_in_flight_when_the_context_shuts_down_is_dropped_without_an_e
         node = DloNode(context=context, parameter_overrides=[Parameter("scene", value=TEST_SCENE),
                                                              Parameter("compile", value="off")])
         try:
-            wait_until(lambda: node.outputs.latest is not None, 60.0)
-            update = node.outputs.latest
-            before = (node.health.failures, node.health.last_error)
+            wait_until(lambda: node.core.outputs.latest is not None, 60.0)
+            update = node.core.outputs.latest
+            before = (node.core.health.failures, node.core.health.last_error)
             context.shutdown()  # what rclpy's SIGINT handler does
-            node._on_update(update)  # raised RCLError: "publisher's context is invalid"
-            node._on_failure("internal", "RCLError: Failed to publish", update)
-            assert (node.health.failures, node.health.last_error) == before
+            node.core._on_update(update)  # raised RCLError: "publisher's context is invalid"
+            node.core._on_failure("internal", "RCLError: Failed to publish", update)
+            assert (node.core.health.failures, node.core.health.last_error) == before
         finally:
             node.close()
             node.destroy_node()

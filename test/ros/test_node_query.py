@@ -215,14 +215,14 @@ def test_the_node_asks_its_query_workers_for_checks_beside_the_queries():
                                                              Parameter("compile", value="off"),
                                                              Parameter("query_workers", value=0)])
         try:
-            wait_until(lambda: node.outputs.latest is not None, 60.0)  # the scene is there
-            node.shape_services.query_pool = pool = Recording()
-            node.shape_services.to_query_worker([])
+            wait_until(lambda: node.core.outputs.latest is not None, 60.0)  # the scene is there
+            node.core.shape_services.query_pool = pool = Recording()
+            node.core.shape_services.to_query_worker([])
             ((fn, args, kwargs),) = pool.calls
             assert fn is solve_chunk and args[1:] == ([], "off", "background")
             assert kwargs == {"timeout": None, "retries": 1}  # the warm-up builds the solver: not limited
         finally:
-            node.shape_services.query_pool = None
+            node.core.shape_services.query_pool = None
             node.close()
             node.destroy_node()
             context.try_shutdown()

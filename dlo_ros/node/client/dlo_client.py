@@ -333,7 +333,8 @@ class DloClient:
         self._grip_pubs[grip].publish(msg)
         return stamp
 
-    def _call(self, client, request, timeout: float):
+    def call(self, client, request, timeout: float):
+        """Call the service of rclpy ``client``; return its response or raise TimeoutError."""
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f"service {client.srv_name} not available")
         if client not in self._settled:
@@ -376,7 +377,7 @@ class DloClient:
         req = self._msgs["GetPlan"].Request()
         req.start = pose_stamped(start[0], start[1], frame, 0)
         req.goal = pose_stamped(goal[0], goal[1], frame, 0)
-        resp = self._call(self._query, req, timeout)
+        resp = self.call(self._query, req, timeout)
         return decode(resp.plan.header.frame_id, *path_to_arrays(resp.plan))
 
     @property
@@ -424,24 +425,24 @@ class DloClient:
 
     def fit(self, timeout: float = 30.0) -> tuple[bool, str]:
         """Call ~/fit; return whether a fit started, and why not (it answers at once)."""
-        resp = self._call(self._fit, self._msgs["Trigger"].Request(), timeout)
+        resp = self.call(self._fit, self._msgs["Trigger"].Request(), timeout)
         return resp.success, resp.message
 
     def reset(self, timeout: float = 30.0):
-        resp = self._call(self._reset, self._msgs["Trigger"].Request(), timeout)
+        resp = self.call(self._reset, self._msgs["Trigger"].Request(), timeout)
         return resp.success, resp.message
 
     def set_parameters(self, values: dict, timeout: float = 10.0) -> list[tuple[bool, str]]:
         """Set parameters one by one (each may be refused on its own): [(successful, reason)]."""
         req = self._msgs["SetParameters"].Request()
         req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
-        resp = self._call(self._set_params, req, timeout)
+        resp = self.call(self._set_params, req, timeout)
         return [(r.successful, r.reason) for r in resp.results]
 
     def get_parameters(self, names: Sequence[str], timeout: float = 10.0) -> dict:
         req = self._msgs["GetParameters"].Request()
         req.names = list(names)
-        resp = self._call(self._get_params, req, timeout)
+        resp = self.call(self._get_params, req, timeout)
         return {n: parameter_value_to_python(v) for n, v in zip(names, resp.values)}
 
     # ---- teardown -------------------------------------------------------------------------------

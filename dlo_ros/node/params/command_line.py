@@ -52,6 +52,11 @@ class NodeArgs:
     def scene(self) -> str:
         return str(self.values.get("scene") or DEFAULT_SCENE)
 
+    @property
+    def managed(self) -> bool:
+        """Return whether the ``managed`` parameter asks for the lifecycle node."""
+        return self.values.get("managed") is True
+
 
 def node_argument_parser(prog: str = "dlo node") -> argparse.ArgumentParser:
     """Build the parser of the node's own options (everything after ``--ros-args`` is rclpy's)."""
@@ -70,6 +75,11 @@ def node_argument_parser(prog: str = "dlo node") -> argparse.ArgumentParser:
     )
     ap.add_argument(
         "--scene", metavar="NAME_OR_PATH", help="shorthand for --ros-args -p scene:=NAME_OR_PATH"
+    )
+    ap.add_argument(
+        "--managed",
+        action="store_true",
+        help="run as a managed (lifecycle) node: shorthand for --ros-args -p managed:=true",
     )
     ap.add_argument(
         "--check",
@@ -276,6 +286,8 @@ def prepare_node_args(
         values.update(read_params_file(params_file, node_name))
     if args.scene is not None:
         values["scene"] = (args.scene, "--scene")
+    if args.managed:
+        values["managed"] = (True, "--managed")
     tokens = iter(ros)
     for t in tokens:
         if t in ROS_ARGS_WITH_VALUE:
@@ -303,12 +315,14 @@ def prepare_node_args(
         raise ParamsError(errors[0] + more)
 
     ros_args = ["dlo_node"]
-    if params_file or args.scene:
+    if params_file or args.scene or args.managed:
         ros_args.append("--ros-args")
         if params_file:
             ros_args += ["--params-file", params_file]
         if args.scene:
             ros_args += ["-p", f"scene:={args.scene}"]
+        if args.managed:
+            ros_args += ["-p", "managed:=true"]
         ros_args.append("--")
     ros_args += argv  # rcl takes the --ros-args sections (later ones win) and ignores the rest
     return NodeArgs(

@@ -144,6 +144,60 @@ STATIC = (
         high=3600.0,
     ),
     ParamSpec(
+        "managed",
+        "bool",
+        False,
+        "Run as a managed (lifecycle) node: it starts unconfigured, builds its solver on "
+        "configure and publishes shapes only while active (msg_docs/node.md); the same as "
+        "`dlo node --managed`.",
+        read_only=True,
+    ),
+    ParamSpec(
+        "configure_timeout",
+        "double",
+        120.0,
+        "Longest a managed node's configure transition waits for its solver and first shape [s]; "
+        "past it the transition fails and the node stays unconfigured.",
+        read_only=True,
+        low=1.0,
+        high=3600.0,
+    ),
+    ParamSpec(
+        "planning_scene.enabled",
+        "bool",
+        True,
+        "Publish the cable as a chain of capsules (~/capsules markers; a moveit_msgs "
+        "CollisionObject too when moveit_msgs is importable), msg_docs/planning_scene.md.",
+        read_only=True,
+    ),
+    ParamSpec(
+        "planning_scene.rate",
+        "double",
+        2.0,
+        "Rate [Hz] of the capsules (only when the shape changed).",
+        read_only=True,
+        low=0.01,
+        high=100.0,
+    ),
+    ParamSpec(
+        "planning_scene.padding",
+        "double",
+        0.01,
+        "Padding [m] around the cable's tube (string.radius): the capsules contain the tube and "
+        "reach at most this far beyond it.",
+        read_only=True,
+        low=1e-4,
+        high=1.0,
+    ),
+    ParamSpec(
+        "planning_scene.topic",
+        "string",
+        "/collision_object",
+        "Topic of the moveit_msgs/CollisionObject (MoveIt's planning scene monitor listens on "
+        "/collision_object); used only when moveit_msgs is importable.",
+        read_only=True,
+    ),
+    ParamSpec(
         "grip_names",
         "string_array",
         [],

@@ -15,6 +15,8 @@ import numpy as np
 from ..jsonio import json_safe, stdout_to_stderr
 from ..solver.options import BASES
 from ..solver.results.contacts import pressed_obstacles
+from ..solver.results.envelope import Envelope, EnvelopeUnavailable, envelope
+from ..solver.results.uncertainty import Uncertainty, UncertaintyError
 from .common import EXIT_NOT_OK, EXIT_OK, UsageError, compile_mode, load_scene_arg
 from .record import add_record_arguments, close_recorder, make_recorder
 
@@ -99,8 +101,8 @@ def _vec(a: Any, digits: int = 4) -> str:
     )
 
 
-def format_summary(scene, result) -> str:
-    """Short human-readable summary of one solve."""
+def format_summary(scene, result, spread: Envelope | EnvelopeUnavailable | None = None) -> str:
+    """Short human-readable summary of one solve (``spread``: the envelope's line when given)."""
     lines = [
         f"scene   {scene.name}  ({scene.source})",
         f"status  {result.status}: {result.message}",
@@ -171,7 +173,54 @@ def format_summary(scene, result) -> str:
         )
         for change in m.changes:
             lines.append(f"        model change: {change}")
+    if spread is not None:
+        lines.append(envelope_line(spread))
     return "\n".join(lines)
+
+
+def envelope_line(spread: Envelope | EnvelopeUnavailable) -> str:
+    """One summary line of an envelope: its largest σ and each grip's force σ, or why none."""
+    if isinstance(spread, EnvelopeUnavailable):
+        return f"envelope unavailable: {spread.reason}"
+    k = int(np.argmax(spread.sigma))
+    forces = ", ".join(f"{n} {_vec(g.force_sigma, 2)} N" for n, g in spread.grips.items())
+    return (
+        f"envelope max sigma {spread.max_sigma:.3g} m at s = {spread.s[k]:.4g} m (first "
+        f"order, 1 sigma); force sigma {forces}"
+    )
+
+
+def parse_uncertainty(items: list[str] | None) -> dict[str, float]:
+    """Return {key: σ} of ``--uncertainty KEY=SIGMA ...``; UsageError naming the bad item."""
+    out: dict[str, float] = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            out[key.strip()] = float(value)
+        except ValueError:
+            raise UsageError(
+                f"--uncertainty: expected KEY=SIGMA (e.g. bend_stiffness=0.002), got {item!r}"
+            ) from None
+    return out
+
+
+def scene_uncertainty(scene, sigmas: dict[str, float]) -> Uncertainty | None:
+    """Return the scene's ``string.uncertainty`` with ``--uncertainty``'s σ over it, or None.
+
+    Raises UsageError naming ``--uncertainty.<key>`` for an unknown key or a bad σ.
+    """
+    if not sigmas:
+        return scene.uncertainty
+    string = scene.problem.string
+    merged = {} if scene.uncertainty is None else scene.uncertainty.marginal_sigmas(string)
+    try:
+        uncertainty = Uncertainty.from_sigmas({**merged, **sigmas}, "--uncertainty")
+        uncertainty.check_string(string, "--uncertainty")
+    except UncertaintyError as exc:
+        raise UsageError(str(exc)) from None
+    return uncertainty
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -211,6 +260,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "compile the solver's KKT function to C (slow first build; only useful for benchmarks)"
         ),
     )
+    p.add_argument(
+        "--uncertainty",
+        nargs="+",
+        metavar="KEY=SIGMA",
+        help="standard deviations of string keys in their units (e.g. bend_stiffness=0.002 "
+        "weight_per_length=0.01), over the scene's string.uncertainty: adds the first-order "
+        "shape and grip-wrench envelope (msg_docs/cli.md)",
+    )
     add_record_arguments(p)
 
 
@@ -219,6 +276,7 @@ def run(args: argparse.Namespace) -> int:
 
     scene = load_scene_arg(args.scene)
     options = _with_overrides(scene.options, args.points, args.basis, args.order, args.model)
+    uncertainty = scene_uncertainty(scene, parse_uncertainty(args.uncertainty))
     guard = stdout_to_stderr() if args.json else contextlib.nullcontext()
     with guard:
         try:
@@ -237,6 +295,8 @@ def run(args: argparse.Namespace) -> int:
                 stamp = time.time_ns()
                 recorder.log_targets(targets, update=0, ros_time_ns=stamp)
             result = solver.solve()
+            # of the committed answer, before anything else solves
+            spread = None if uncertainty is None else envelope(solver, result, uncertainty)
             if recorder.enabled:
                 recorder.log_result(
                     result, update=0, ros_time_ns=stamp, targets=targets, warm=False
@@ -245,7 +305,9 @@ def run(args: argparse.Namespace) -> int:
             close_recorder(recorder)
     if args.json:
         out = {"scene": scene.name, "frame_id": scene.frame_id, **result.to_dict()}
+        if spread is not None:
+            out["envelope"] = spread.to_dict()
         print(json.dumps(json_safe(out), allow_nan=False))
     else:
-        print(format_summary(scene, result))
+        print(format_summary(scene, result, spread))
     return EXIT_OK if result.ok else EXIT_NOT_OK

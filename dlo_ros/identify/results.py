@@ -12,7 +12,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model.problem import StringProperties
+from ..solver.results.uncertainty import KEYS, Parameter, Uncertainty
 from .identifiability import Identifiability
+
+#: the scene key of each fitted material's symbol
+_KEY_OF = {symbol: key for key, symbol in KEYS.items()}
 
 
 @dataclass
@@ -113,6 +117,43 @@ class FitResult:
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    def uncertainty(self) -> Uncertainty:
+        """Return the fitted parameters' covariance as an envelope's input (``envelope.py``).
+
+        The covariance of θ = log c (``covariance_log``, inflated by ``sigma_scale`` like the
+        reported stds) over every fitted parameter: ``Rf`` as ``bend_stiffness`` (a uniform
+        scale), ``Rf[k]`` as knot k of the fitted table.  It is zero along the directions the
+        data do not determine, so its ``note`` names those parameters: the envelope holds them
+        where the fit left them.  Raises ValueError for a fit without a usable covariance (status
+        'failed' or 'misfit', or nothing fitted).
+        """
+        if self.status not in ("ok", "not_converged") or self.string is None or not self.names:
+            raise ValueError(
+                f"fit status {self.status!r}: no covariance that describes the string"
+                + (f" ({self.message})" if self.message else "")
+            )
+        parameters = []
+        for label in self.names:
+            symbol, _, rest = label.partition("[")
+            key = _KEY_OF[symbol]
+            if rest:
+                knots = tuple(float(s) for s in getattr(self.string, key).s)
+                parameters.append(Parameter(key, int(rest.rstrip("]")), knots))
+            else:
+                parameters.append(Parameter(key))
+        notes = []
+        if self.status != "ok":
+            notes.append(f"the fit is {self.status}: {self.message}")
+        if self.not_identifiable:  # the pseudo-inverse is zero along what the data do not see
+            notes.append(
+                f"the fit does not determine {', '.join(sorted(self.not_identifiable))} alone: "
+                "the covariance is zero along the undetermined directions, which the envelope "
+                "holds where the fit left them"
+            )
+        return Uncertainty.from_covariance(
+            parameters, self.covariance_log, log=True, where="fit", note="; ".join(notes)
+        )
 
     def to_dict(self) -> dict:
         """JSON-ready (``dlo fit --json``, msg_docs/fitting.md)."""

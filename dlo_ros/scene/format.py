@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from ..model.obstacle_types import OBSTACLE_TYPES
 from ..model.problem import Problem
 from ..solver.options import SolverOptions
+from ..solver.results.uncertainty import Uncertainty
 from ..text import safe_text
 
 DEFAULT_SCENE = "default_cable"
@@ -39,6 +40,7 @@ STRING_KEYS = (
     "stretch_stiffness",
     "weight_per_length",
     "radius",
+    "uncertainty",
 )
 GRAVITY_KEYS = ("direction",)
 GRIP_KEYS = ("name", "s", "mode", "position", "orientation")
@@ -93,7 +95,11 @@ def fail(key: str, message: str) -> SceneError:
 
 @dataclass(frozen=True)
 class Scene:
-    """A validated scene: the problem, how to solve it and where it is expressed."""
+    """A validated scene: the problem, how to solve it and where it is expressed.
+
+    uncertainty: ``string.uncertainty``, the standard deviations of the string's materials (the
+    envelope's input, ``solver/results/envelope.py``), None when the scene gives none.
+    """
 
     name: str
     problem: Problem
@@ -101,6 +107,7 @@ class Scene:
     frame_id: str = "world"
     source: str = ""
     description: str = ""
+    uncertainty: Uncertainty | None = None
 
 
 def describe_value(value: object) -> str:

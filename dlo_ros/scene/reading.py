@@ -28,6 +28,7 @@ from .sections import (
     parse_relative,
     parse_solver,
     parse_string,
+    parse_uncertainty,
     wrap_error,
 )
 from .values import check_known_keys, read_mapping, read_string
@@ -88,6 +89,7 @@ def scene_from_dict(d: dict, source: str = "<dict>") -> Scene:
     if "string" not in d:
         raise fail("string", "required (length, bend_stiffness, ...)")
     string = parse_string(d["string"])
+    uncertainty = parse_uncertainty(d["string"].get("uncertainty"), string)
     gravity = parse_gravity(d.get("gravity"))
     grips = parse_grips(d.get("grips"), string.length)
     loads = parse_loads(d.get("loads"), string.length)
@@ -114,6 +116,7 @@ def scene_from_dict(d: dict, source: str = "<dict>") -> Scene:
         frame_id=frame_id,
         source=source,
         description=description.strip(),
+        uncertainty=uncertainty,
     )
 
 

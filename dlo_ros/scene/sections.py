@@ -21,6 +21,8 @@ from ..model.obstacles import Obstacle
 from ..model.problem import GRIP_MODES, Grip, GripPose, Load, RelativePosition, StringProperties
 from ..model.profile import Profile
 from ..solver.options import SolverOptions
+from ..solver.results.uncertainty import KEYS as UNCERTAIN_KEYS
+from ..solver.results.uncertainty import Uncertainty, UncertaintyError
 from .format import (
     GRAVITY_KEYS,
     GRIP_KEYS,
@@ -102,6 +104,28 @@ def parse_string(value: object) -> StringProperties:
         radius=radius,
         lateral_bend_stiffness=lateral,
     )
+
+
+def parse_uncertainty(value: object, string: StringProperties) -> Uncertainty | None:
+    """Read ``string.uncertainty``: a standard deviation per material key, in that key's unit.
+
+    Each σ is a number >= 0 of a key that scales a profile (bend_stiffness, twist_stiffness,
+    stretch_stiffness, weight_per_length, lateral_bend_stiffness); a σ > 0 needs the string's
+    value of that key to be > 0 (the envelope scales the profile: σ_θ = σ / value).  None when
+    absent.
+    """
+    if value is None:
+        return None
+    where = "string.uncertainty"
+    d = read_mapping(value, where)
+    check_known_keys(d, tuple(UNCERTAIN_KEYS), where)
+    sigmas = {k: read_number(v, f"{where}.{k}") for k, v in d.items()}
+    try:
+        uncertainty = Uncertainty.from_sigmas(sigmas, where)
+        uncertainty.check_string(string, where)
+    except UncertaintyError as exc:
+        raise SceneError(str(exc), key=exc.key) from None
+    return uncertainty
 
 
 def parse_gravity(value: object) -> np.ndarray:

@@ -49,6 +49,8 @@ def scene_to_dict(scene: Scene) -> dict:
     }
     if st.lateral_bend_stiffness is not None:  # absent: an isotropic rod (files stay as they were)
         out["string"]["lateral_bend_stiffness"] = profile_to_yaml(st.lateral_bend_stiffness)
+    if scene.uncertainty is not None:  # absent when the scene gives none (files stay as they were)
+        out["string"]["uncertainty"] = scene.uncertainty.marginal_sigmas(st)
     out["gravity"] = {"direction": _floats(pr.gravity_unit)}
     out["grips"] = [
         {

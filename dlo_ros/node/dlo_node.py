@@ -45,6 +45,7 @@ from .diagnostics import DiagnosticsPublisher
 from .engine import ShapeEngine, Update, build_solver
 from .fit_node import FitterLinks, NodeFitter
 from .health import Health, model_text
+from .envelope_publisher import EnvelopePublisher
 from .live_parameters import LiveParameters
 from .planning_scene_publisher import PlanningScenePublisher
 from .shape_outputs import ShapeOutputs
@@ -142,6 +143,14 @@ class DloCore:
         self.diagnostics = DiagnosticsPublisher(
             self.node, self.health, self.engine, safe_text(self.scene.name), closing
         )
+        self.envelope = EnvelopePublisher(
+            self.node,
+            self.frame_id,
+            (self.engine, self.outputs, self.stream_log),
+            self.scene.uncertainty,
+            self.is_quiet,
+        )
+        self.diagnostics.extra.append(self.envelope.status)
         poses = PoseReader(self.node, self.frame_id, bool(self.node.get_parameter("use_tf").value))
         self.inputs = TargetInputs(
             self.node,
@@ -178,6 +187,7 @@ class DloCore:
                     worker_compile=self.worker_compile,
                     closing=closing,
                     publish_diagnostics=self.diagnostics.publish,
+                    on_uncertainty=self.envelope.set_uncertainty,
                 )
             )
             self.diagnostics.extra.append(self.fitter.status)

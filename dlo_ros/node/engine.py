@@ -87,6 +87,7 @@ class ShapeEngine:
         self._on_state = on_state
         self._cond = threading.Condition()
         self._jobs: collections.deque[_Job] = collections.deque()
+        self._idle: collections.deque[_Job] = collections.deque()  # when_idle's, in order
         self._targets: dict[str, GripPose] = {g.name: g.pose for g in problem.grips}
         self._dirty = False
         self._stamp_ns: int | None = None
@@ -107,7 +108,8 @@ class ShapeEngine:
         """Ask the worker to finish (after the solve in progress) and wait; True if it ended."""
         with self._cond:
             self._stop = True
-            jobs, self._jobs = list(self._jobs), collections.deque()
+            jobs, self._jobs = list(self._jobs) + list(self._idle), collections.deque()
+            self._idle = collections.deque()
             self._cond.notify_all()
         for job in jobs:
             job.future.cancel()
@@ -173,6 +175,22 @@ class ShapeEngine:
         """Rebuild the solver with edited options (the next solve is cold); re-solve."""
         return self._submit("options", edit)
 
+    def when_idle(self, work: Callable[[Any], Any]) -> Future:
+        """Run ``work(solver)`` in the worker when nothing else waits; its result as a Future.
+
+        For work that must never delay the stream (the node's envelope): it runs only when no
+        control job and no new target is pending, so a target arriving meanwhile waits for at
+        most one such piece of work.  Cancelled by ``stop``.
+        """
+        job = _Job("idle", work)
+        with self._cond:
+            if self._stop:
+                job.future.cancel()
+                return job.future
+            self._idle.append(job)
+            self._cond.notify_all()
+        return job.future
+
     def _submit(self, kind: str, payload: Any) -> Future:
         job = _Job(kind, payload)
         with self._cond:
@@ -215,12 +233,14 @@ class ShapeEngine:
         self._stream("initial", *slot)
         while True:
             with self._cond:
-                while not (self._stop or self._jobs or self._dirty):
+                while not (self._stop or self._jobs or self._dirty or self._idle):
                     self._cond.wait()
                 if self._stop:
                     return
                 job = self._jobs.popleft() if self._jobs else None
-                if job is None:
+                if job is None and not self._dirty:
+                    job = self._idle.popleft()  # nothing else waits
+                elif job is None:
                     slot = self._take_slot()
             if job is None:
                 self._stream("targets", *slot)
@@ -294,7 +314,9 @@ class ShapeEngine:
             return
         solver = self._solver
         try:
-            if job.kind == "query":
+            if job.kind == "idle":
+                job.future.set_result(job.payload(solver))
+            elif job.kind == "query":
                 with self._cond:
                     targets = dict(self._targets)
                 targets.update(job.payload)

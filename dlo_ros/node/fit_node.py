@@ -29,6 +29,7 @@ from std_srvs.srv import Trigger
 
 from ..identify.objective import FitSettings
 from ..model.problem import StringProperties
+from ..solver.results.uncertainty import Uncertainty
 from ..solver.parallel.worker_pool import process_pool, stop_pool
 from . import conversions as conv
 from . import params as P
@@ -59,6 +60,7 @@ class FitterLinks:
     number.  ``string_now()``: the string's properties as the parameters hold them now.
     ``worker_compile``: the compile mode of worker processes.  ``closing()``: true once the node is
     shutting down.  ``publish_diagnostics(immediate)``: publish the node's statuses.
+    ``on_uncertainty(u)``: gets the covariance of each fit the node applied (the envelope's).
     """
 
     node: Node
@@ -70,6 +72,7 @@ class FitterLinks:
     worker_compile: str
     closing: Callable[[], bool]
     publish_diagnostics: Callable[[bool], None]
+    on_uncertainty: Callable[[Uncertainty], None] = lambda u: None
 
 
 def warm_fit_worker() -> bool:
@@ -258,6 +261,11 @@ class NodeFitter:
             application = plan_application(result, current, config.apply_max_rel_sigma)
             if application.applied:
                 application = self._apply(application)
+            if application.applied and result.ok:
+                try:
+                    self.links.on_uncertainty(result.uncertainty())
+                except ValueError:  # nothing fitted with a covariance: the envelope keeps its own
+                    pass
         self.health.finished(result, snapshot, application, error)
         text = self._summary(snapshot, result, error, application)
         ok = result is not None and result.ok

@@ -69,6 +69,15 @@ class FitSnap:
     ok: bool
 
 
+@dataclass
+class EnvelopeSnap:
+    """An envelope as the node recorded it: output points [m], tube radii k σ [m], summary."""
+
+    points: np.ndarray
+    radii: np.ndarray
+    text: str
+
+
 def _pose_bytes(pose: Any) -> bytes:
     pos, quat = (pose.position, pose.orientation) if hasattr(pose, "position") else pose
     return np.asarray(pos, dtype=float).tobytes() + np.asarray(quat, dtype=float).tobytes()

@@ -71,6 +71,8 @@ E_RECORDER = "events/recorder"
 # world/fit/{observed,fitted,residuals}: the node's newest fit (dlo_ros.identify.drawing)
 E_FIT = "world/fit"
 E_FIT_EVENTS = "events/fit"  # each fit's summary and what it applied (INFO) or why not (WARN)
+E_ENVELOPE = "world/envelope"  # the k-σ tube of the newest envelope: a ball per output point
+E_ENVELOPE_EVENTS = "events/envelope"  # each envelope's one-line summary
 E_SCENE = "scene/yaml"
 E_SCENE_CHANGES = "scene/changes"
 E_LEGEND = "scene/legend"

@@ -18,7 +18,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .codec import encode_result, encode_targets, FitSnap, QueueItem
+from .codec import encode_result, encode_targets, EnvelopeSnap, FitSnap, QueueItem
 from .scene_info import scene_info
 from .transport import ProcessBackend, ThreadBackend
 from .writer import WriterConfig
@@ -296,6 +296,28 @@ class Recorder:
             bool(ok),
         )
         self._put(QueueItem("fit", int(update), self._now(ros_time_ns), snap), keep=True)
+
+    def log_envelope(
+        self,
+        points: np.ndarray,
+        radii: np.ndarray,
+        *,
+        text: str,
+        update: int,
+        ros_time_ns: int | None = None,
+    ) -> None:
+        """Log an envelope's tube at ``update``: a ball of radius ``radii`` [m] per point [m].
+
+        Drawn under ``world/envelope``; ``text`` (its summary) goes to ``events/envelope``.
+        """
+        if not self.enabled:
+            return
+        snap = EnvelopeSnap(
+            np.array(points, dtype=float).reshape(-1, 3),
+            np.array(radii, dtype=float).ravel(),
+            str(text),
+        )
+        self._put(QueueItem("envelope", int(update), self._now(ros_time_ns), snap), keep=True)
 
     def flush(self, timeout: float = 10.0) -> bool:
         """Wait until everything logged so far is in rerun's sinks.

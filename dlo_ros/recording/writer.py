@@ -20,6 +20,7 @@ from typing import Any, cast
 import numpy as np
 
 from .blueprint import default_blueprint
+from .envelope_drawing import EnvelopeDrawing
 from .codec import decode, FitSnap, QueueItem, ResultSnap
 from .paths import (
     E_DATA_RESULT,
@@ -97,7 +98,7 @@ def _concat(values: list) -> Any:
     return out
 
 
-class Writer:
+class Writer(EnvelopeDrawing):
     """Owns the rerun RecordingStream and turns items into rerun calls, in one thread.
 
     Static data is logged at once; time-stamped rows are buffered per (entity, archetype) and sent
@@ -479,9 +480,7 @@ class Writer:
     def _handle_fit(self, item: QueueItem) -> None:
         # optional: only a recording with a fit needs it; not at the top: the writer's process
         # must not import the model (identify imports the solver)
-        from ..identify.drawing import (
-            draw_observation,
-        )
+        from ..identify.drawing import draw_observation
 
         fit: FitSnap = item.payload
         self.send_batches()  # keep the rows of earlier updates before this one

@@ -249,6 +249,13 @@ def test_fit_over_dds(tmp_path):
         assert got["string.bend_stiffness"] == 0.02
         assert abs(got["string.weight_per_length"] / 0.02 - D / RF) <= 3 * std
         assert got["string.weight_per_length"] == pytest.approx(0.02 * float(values["estimate.D/Rf"]), rel=1e-5)
+        # the applied fit's covariance becomes the envelope's uncertainty (the scene has none)
+        envelope = cl.wait_for(lambda: (lambda st: st if st is not None and any(
+            kv.key == "available" and kv.value == "true" for kv in st.values) else None)(
+                cl.other_diagnostics.get("/dlo: envelope")), 15.0)
+        assert envelope is not None, cl.other_diagnostics.get("/dlo: envelope")
+        parameters = {kv.key: kv.value for kv in envelope.values}["parameters"]
+        assert parameters and set(parameters.split(",")) <= {"bend_stiffness", "weight_per_length"}
 
         # a known total mass makes Rf and D absolute
         assert cl.set_parameters({"fit.total_mass": D / 9.80665}) == [(True, "")]

@@ -365,3 +365,28 @@ def test_every_update_carries_the_stamp_of_the_targets_it_solved(engine_factory)
     for u in streamed:
         assert u.result.points[-1][0] == pytest.approx(0.3 + (u.stamp_ns - 10_000) * 1e-5, abs=1e-12), u.stamp_ns
         assert u.problem.grip("right").pose.position[0] == pytest.approx(u.result.points[-1][0], abs=1e-12)
+
+
+def test_idle_work_waits_for_the_stream_and_runs_in_the_solver_thread(engine_factory):
+    """when_idle (the node's envelope): it runs in the solver's thread, after every pending target and
+    control job, one piece of work at a time, and stop cancels what has not run."""
+    eng, rec, solvers = engine_factory(delay=0.05)
+    rec.wait(lambda: rec.updates)
+    order = []
+    eng.submit_targets({"right": pose(0.55)}, stamp_ns=1)  # a solve of 50 ms begins
+
+    def work(solver):
+        order.append(("idle", len(solver.calls), threading.current_thread().name))
+        return len(solver.calls)
+
+    done = eng.when_idle(work)
+    time.sleep(0.01)
+    eng.submit_targets({"right": pose(0.56)}, stamp_ns=2)  # pending when the first solve ends
+    query = eng.query({"right": pose(0.57)})
+    assert done.result(5.0) == 4  # the initial solve, both targets and the query came first
+    assert query.done() and rec.updates[-1].stamp_ns == 2
+    assert order == [("idle", 4, "dlo-solver")] and solvers[0].max_active == 1
+    blocker = eng.query({"right": pose(0.58)})
+    later = eng.when_idle(work)
+    assert eng.stop(5.0)
+    assert blocker.done() and (later.cancelled() or later.done())

@@ -198,6 +198,26 @@ STATIC = (
         read_only=True,
     ),
     ParamSpec(
+        "envelope.rate",
+        "double",
+        1.0,
+        "Rate [Hz] of the shape and tension envelope (~/envelope, diagnostics, recording) when "
+        "the scene has string.uncertainty or a fit gave a covariance; computed only while the "
+        "solver is idle; 0: never.",
+        read_only=True,
+        low=0.0,
+        high=100.0,
+    ),
+    ParamSpec(
+        "envelope.k",
+        "double",
+        2.0,
+        "The envelope tube's radius in standard deviations: k sigma(s) about the centreline.",
+        read_only=True,
+        low=0.1,
+        high=10.0,
+    ),
+    ParamSpec(
         "grip_names",
         "string_array",
         [],

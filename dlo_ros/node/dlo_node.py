@@ -46,6 +46,7 @@ from .engine import ShapeEngine, Update, build_solver
 from .fit_node import FitterLinks, NodeFitter
 from .health import Health, model_text
 from .envelope_publisher import EnvelopePublisher
+from . import params as P
 from .live_parameters import LiveParameters
 from .planning_scene_publisher import PlanningScenePublisher
 from .shape_outputs import ShapeOutputs
@@ -53,6 +54,7 @@ from .shape_services import ShapeServices
 from .startup import StartupError, prepare, start_recorder
 from .stream_log import StreamLog
 from .target_inputs import PoseReader, TargetInputs
+from .tf_grip_targets import TfGripTargets
 from .validation import TEXT_LIMIT, safe_text
 
 NODE_NAME = "dlo"
@@ -162,6 +164,16 @@ class DloCore:
             self.diagnostics.publish,
             self.refusal,
         )
+        frames = {g: self.node.get_parameter(P.grip_tf_frame(g)).value for g in self.grip_names}
+        self.tf_targets = None
+        if any(frames.values()):
+            self.tf_targets = TfGripTargets(
+                self.node,
+                {g: f for g, f in frames.items() if f},
+                poses.frame_pose,
+                self.inputs,
+                float(self.node.get_parameter("tf_targets.rate").value),
+            )
         self.shape_services = ShapeServices(
             self.node,
             poses,

@@ -7,6 +7,7 @@ exits with code 2.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 from dataclasses import dataclass, fields, replace
@@ -121,6 +122,7 @@ def prepare(node: Node) -> StartSettings:
             ignore_override=True,
         )
     declare(node, [replace(s, default=defaults.get(s.name, s.default)) for s in P.LIVE])
+    declare_tf_frames(node, grip_names)
     problem, options = initial_problem(scene, lambda name: value(name).value)
     try:
         mode = P.compile_mode(value("compile").value)
@@ -131,6 +133,48 @@ def prepare(node: Node) -> StartSettings:
             "1"  # read by dlo_ros.solver.build.compiled (this process only)
         )
     return StartSettings(scene, frame_id, grip_names, problem, options, mode)
+
+
+def declare_tf_frames(node: Node, grip_names: list[str]) -> None:
+    """Declare ``grips.<grip>.tf_frame`` per grip; check the values for the scene and for tf2.
+
+    A StartupError names the parameter: a grip the scene does not have, a value that is not a
+    frame id, or a frame set where tf2_ros cannot be imported (targets from tf need it).
+    """
+    # what -p / params files set for this node; rclpy silently drops an override that no
+    # declaration reads, so a misspelt grip would otherwise go unnoticed
+    overrides = getattr(node, "_parameter_overrides", {})
+    for name in overrides:
+        match = P.GRIP_TF_FRAME.match(name)
+        if match and match.group(1) not in grip_names:
+            raise StartupError(
+                f"parameter {name}: the scene has no grip '{match.group(1)}' (grips: "
+                f"{', '.join(grip_names)})"
+            )
+    spec = P.ParamSpec(
+        "",
+        "string",
+        "",
+        "The tf2 frame whose pose is this grip's target "
+        "(empty: targets from the target topics only).",
+        read_only=True,
+    )
+    declare(node, [replace(spec, name=P.grip_tf_frame(g)) for g in grip_names])
+    for g in grip_names:
+        frame = node.get_parameter(P.grip_tf_frame(g)).value
+        reason = P.check_value(P.grip_tf_frame(g), frame)
+        if reason:
+            raise StartupError(f"parameter {P.grip_tf_frame(g)}: {reason}")
+        if frame and not tf_available():
+            raise StartupError(
+                f"parameter {P.grip_tf_frame(g)}='{safe_text(frame, 60)}': targets from tf2 need "
+                "tf2_ros, which cannot be imported here (apt: ros-jazzy-tf2-ros-py; not on PyPI)"
+            )
+
+
+def tf_available() -> bool:
+    """Return whether tf2_ros can be imported."""
+    return importlib.util.find_spec("tf2_ros") is not None
 
 
 def read_scene(name: str) -> Scene:

@@ -14,7 +14,7 @@ from functools import partial
 from typing import Any, Callable
 
 import rclpy
-from geometry_msgs.msg import PoseArray, PoseStamped
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
@@ -39,6 +39,9 @@ except ImportError:  # pragma: no cover - depends on the installation
     tf2_ros = None
 
 
+IDENTITY = Pose()  # a frame's own origin and axes (geometry_msgs' default quaternion is w = 1)
+
+
 class PoseReader:
     """Check a pose message and bring it into the node's frame (with tf2 when ``use_tf``)."""
 
@@ -54,6 +57,10 @@ class PoseReader:
         t = self._tf_buffer.lookup_transform(target, source, rclpy.time.Time())
         tr, rot = t.transform.translation, t.transform.rotation
         return (tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w)
+
+    def frame_pose(self, frame: str, where: str) -> GripPose:
+        """Return tf2 frame ``frame``'s pose in the node's frame; TargetError naming ``where``."""
+        return self.checked(IDENTITY, frame, where)
 
     def checked(self, pose_msg: Any, frame_id: str, where: str) -> GripPose:
         """Return ``pose_msg`` (in ``frame_id``) checked and in the node's frame.
@@ -160,6 +167,12 @@ class TargetInputs:
         stamp = conv.time_to_ns(msg.header.stamp) or None
         self.log.recorder.log_targets(poses, update=self.log.update, ros_time_ns=stamp)
         self.engine.submit_targets(poses, stamp, received)
+
+    def take(self, poses: dict[str, GripPose], stamp_ns: int | None) -> None:
+        """Hand checked poses in the node's frame (read from tf2) to the engine, recorded."""
+        received = time.monotonic_ns()
+        self.log.recorder.log_targets(poses, update=self.log.update, ros_time_ns=stamp_ns)
+        self.engine.submit_targets(poses, stamp_ns, received)
 
     def check_accepting(self) -> None:
         """Raise TargetError('inactive') while the node refuses targets (a lifecycle state)."""

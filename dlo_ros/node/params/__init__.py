@@ -25,6 +25,7 @@ from .table import (
     DEFAULT_SCENE,
     FIT,
     FIT_PARAMETERS,
+    GRIP_TF_FRAME,
     LIVE,
     MODELS,
     PATH_CHARS,
@@ -34,6 +35,7 @@ from .table import (
     STATIC,
     STRING_FIELDS,
     ParamSpec,
+    grip_tf_frame,
 )
 from .values import (
     apply_string,
@@ -53,6 +55,7 @@ __all__ = [
     "DEFAULT_SCENE",
     "FIT",
     "FIT_PARAMETERS",
+    "GRIP_TF_FRAME",
     "LIVE",
     "MODELS",
     "PATH_CHARS",
@@ -63,6 +66,7 @@ __all__ = [
     "STRING_FIELDS",
     "NodeArgs",
     "ParamSpec",
+    "grip_tf_frame",
     "ParamsError",
     "apply_string",
     "check_live",

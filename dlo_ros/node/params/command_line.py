@@ -19,7 +19,7 @@ from typing import Any, Mapping, Sequence
 import yaml
 
 from ..validation import safe_text
-from .table import DEFAULT_SCENE, SPECS
+from .table import DEFAULT_SCENE
 from .values import check_value, describe_value, unknown_reason
 
 #: ROS arguments (inside --ros-args) that take a value: the value is skipped when looking for
@@ -231,7 +231,7 @@ def _check_all(values: Mapping[str, tuple[Any, str]]) -> list[str]:
     errors: list[str] = []
     for name, (value, where) in values.items():
         reason = unknown_reason(name)
-        if not reason and name in SPECS:
+        if not reason:
             reason = check_value(name, value)
         if reason:
             shown = (

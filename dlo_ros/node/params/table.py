@@ -7,6 +7,7 @@ file; ``read_only`` ones are fixed at start-up; the others may change at run tim
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +30,16 @@ class ParamSpec:
     constraints: str = ""
     from_scene: bool = False  # the default comes from the scene file
     dynamic: bool = False  # other types accepted too (see compile_mode)
+
+
+#: Per-grip parameters ``grips.<grip>.tf_frame`` (string, read-only, default ''): the tf2 frame
+#: whose pose is that grip's target (msg_docs/node.md, "Targets from tf2").  One per scene grip.
+GRIP_TF_FRAME = re.compile(r"^grips\.([A-Za-z_][A-Za-z0-9_]*)\.tf_frame$")
+
+
+def grip_tf_frame(grip: str) -> str:
+    """Return the name of grip ``grip``'s tf_frame parameter."""
+    return f"grips.{grip}.tf_frame"
 
 
 #: Parameters fixed at start-up.
@@ -216,6 +227,16 @@ STATIC = (
         read_only=True,
         low=0.1,
         high=10.0,
+    ),
+    ParamSpec(
+        "tf_targets.rate",
+        "double",
+        20.0,
+        "Rate [Hz] at which grips with a grips.<grip>.tf_frame read their target from tf2 (needs "
+        "tf2_ros); a target is handed to the solver only when it moved.",
+        read_only=True,
+        low=0.1,
+        high=1000.0,
     ),
     ParamSpec(
         "grip_names",

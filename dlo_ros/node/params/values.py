@@ -19,6 +19,7 @@ from ..validation import FRAME_ID_LIMIT, normalise_frame, safe_text
 from .table import (
     COMPILE_MODES,
     FIT_PARAMETERS,
+    GRIP_TF_FRAME,
     MODELS,
     PATH_CHARS,
     ROS_PARAMETER_PREFIXES,
@@ -160,6 +161,8 @@ def check_live(name: str, value: Any, problem: Problem) -> str:
 
 def check_value(name: str, value: Any) -> str:
     """Why ``name = value`` cannot be a start-up value of this node's parameter ('' if it can)."""
+    if GRIP_TF_FRAME.match(name):  # a frame id, or empty (no tf2 target)
+        return check_value("frame_id", value)
     spec = SPECS.get(name)
     if spec is None:
         return ""
@@ -230,6 +233,8 @@ def unknown_reason(name: str) -> str:
     if not name or not name.strip():
         return "a parameter name must not be empty"
     if name in SPECS or name in ROS_PARAMETERS or name.startswith(ROS_PARAMETER_PREFIXES):
+        return ""
+    if GRIP_TF_FRAME.match(name):  # one per grip: the grip is checked against the scene later
         return ""
     close = difflib.get_close_matches(name, list(SPECS), n=1, cutoff=0.6)
     hint = f"; did you mean '{close[0]}'?" if close else f" (parameters: {', '.join(SPECS)})"

@@ -301,6 +301,14 @@ def run(args: argparse.Namespace) -> int:
                 recorder.log_result(
                     result, update=0, ros_time_ns=stamp, targets=targets, warm=False
                 )
+                if isinstance(spread, Envelope):  # its 2 sigma tube, as the node records it
+                    recorder.log_envelope(
+                        spread.points,
+                        2.0 * spread.sigma,
+                        text=envelope_line(spread),
+                        update=0,
+                        ros_time_ns=stamp,
+                    )
         finally:
             close_recorder(recorder)
     if args.json:

@@ -443,3 +443,22 @@ def test_cli_solve_json_and_summary_carry_the_envelope(tmp_path, capfd):
     assert "--uncertainty.bend_stiffness: must be >= 0" in err and "Traceback" not in err
     assert cli.main(["solve", "default_cable", "--uncertainty", "stretch_stiffness=5"]) == 2
     assert "--uncertainty.stretch_stiffness" in capfd.readouterr().err
+
+
+def test_cli_solve_records_the_envelope(tmp_path, capfd):
+    """`dlo solve --rrd` with an uncertainty records the 2 sigma tube beside the shape."""
+    pytest.importorskip("rerun", reason="rerun-sdk needs Python >= 3.11")
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    rrd = tmp_path / "solve.rrd"
+    assert cli.main(["solve", "default_cable", "--json", "--points", "11", "--uncertainty",
+                     "bend_stiffness=0.002", "--rrd", str(rrd)]) == 0
+    sigma = json.loads(capfd.readouterr().out)["envelope"]["sigma"]
+    rerun = str(Path(sys.executable).parent / "rerun")
+    printed = subprocess.run([rerun, "rrd", "print", "--verbose", str(rrd)], capture_output=True, text=True,
+                             timeout=120)
+    text = printed.stdout + printed.stderr
+    assert "world/envelope" in text and "events/envelope" in text, text[-2000:]
+    assert max(sigma) > 1e-5

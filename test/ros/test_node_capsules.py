@@ -3,16 +3,14 @@ string.radius + padding/2 that contains every published centreline point's tube,
 shape when the targets move."""
 from __future__ import annotations
 
-import threading
 
 import numpy as np
 
 from dlo_ros.node.client import running_node
 from dlo_ros.scene import load_scene
-from support.node import TEST_SCENE, node_args, wait_until
+from support.node import TEST_SCENE, node_args
 from visualization_msgs.msg import Marker, MarkerArray
 
-from dlo_ros.node.qos import LATCHED_QOS
 
 LEFT = ((0.0, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))
 RIGHT = ((0.45, 0.1, 0.3), (0.0, 0.0, 0.0, 1.0))
@@ -39,27 +37,18 @@ def distance_to_chain(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nd
 def test_the_capsules_contain_the_published_cable(tmp_path):
     args = node_args(f"planning_scene.padding:={PADDING}", "planning_scene.rate:=20.0")
     with running_node(*args, log_path=tmp_path / "node.log") as (proc, client):
-        got: list[MarkerArray] = []
-        lock = threading.Lock()
-
-        def on_capsules(msg):
-            with lock:
-                got.append(msg)
-
-        client.node.create_subscription(MarkerArray, "/dlo/capsules", on_capsules, LATCHED_QOS)
-        assert wait_until(lambda: got, 10.0), proc.output()
+        got = client.collect(MarkerArray, "capsules")
+        assert client.wait_for(lambda: got, 10.0), proc.output()
         n = client.path_count
         client.publish_targets([LEFT, RIGHT])
         assert client.wait_for(lambda: client.path_count > n, 30.0)
         path = client.latest_path()
 
         def follows():  # the newest chain ends where the moved cable ends
-            with lock:
-                return got and np.allclose(segments(got[-1])[1][-1], path.points[-1], atol=1e-9)
+            return got and np.allclose(segments(got[-1])[1][-1], path.points[-1], atol=1e-9) and got[-1]
 
-        assert wait_until(follows, 10.0)
-        with lock:
-            msg = got[-1]
+        msg = client.wait_for(follows, 10.0)
+        assert msg
         a, b, radius = segments(msg)
         assert msg.markers[0].action == Marker.DELETEALL
         assert all(m.header.frame_id == "world" for m in msg.markers[1:])

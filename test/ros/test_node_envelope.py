@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import threading
 from dataclasses import replace
 from pathlib import Path
 
@@ -19,7 +18,7 @@ from dlo_ros.paths import config_path
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
 from dlo_ros.solver.results.envelope import envelope
-from support.node import TEST_MODEL, node_args, wait_until
+from support.node import TEST_MODEL, node_args
 from visualization_msgs.msg import Marker, MarkerArray
 
 Q = (0.0, 0.0, 0.0, 1.0)
@@ -57,26 +56,18 @@ def test_the_node_publishes_the_envelope_of_its_shape(tmp_path):
     args = ["--scene", str(scene), *node_args("envelope.rate:=20.0", f"envelope.k:={K}",
                                                f"record.rrd:={rrd}")[2:]]
     with running_node(*args, log_path=tmp_path / "node.log") as (proc, client):
-        got: list[MarkerArray] = []
-        lock = threading.Lock()
-
-        def on_envelope(msg):
-            with lock:
-                got.append(msg)
-
-        client.node.create_subscription(MarkerArray, "/dlo/envelope", on_envelope, LATCHED_QOS)
+        got = client.collect(MarkerArray, "envelope")  # appended under the client's lock
         n = client.path_count
         stamp = client.publish_targets([LEFT, RIGHT])
         assert client.wait_for(lambda: client.path_count > n, 30.0)
         assert client.wait_for_path(15.0, where=lambda e: e.stamp_ns == stamp) is not None
 
         def of_stamp():
-            with lock:
-                return next((m for m in reversed(got) if m.markers[-1].header.stamp.sec ==
-                             stamp // 1_000_000_000 and m.markers[-1].header.stamp.nanosec ==
-                             stamp % 1_000_000_000), None)
+            return next((m for m in reversed(got) if m.markers[-1].header.stamp.sec ==
+                         stamp // 1_000_000_000 and m.markers[-1].header.stamp.nanosec ==
+                         stamp % 1_000_000_000), None)
 
-        msg = wait_until(of_stamp, 20.0)
+        msg = client.wait_for(of_stamp, 20.0)
         assert msg is not None, proc.output()
         spheres = [m for m in msg.markers if m.type == Marker.SPHERE]
         path = client.latest_path()

@@ -10,7 +10,6 @@ import pytest
 
 from dlo_ros.node.client import DloClient, NodeProcess, allocate_domain_id
 from dlo_ros.node.client.lifecycle import LifecycleClient
-from dlo_ros.node.qos import LATCHED_QOS
 from visualization_msgs.msg import MarkerArray
 from support.node import node_args, wait_until
 from support.procs import children
@@ -50,8 +49,7 @@ def managed(tmp_path):
 
 def test_every_transition_and_what_each_state_publishes(managed):
     proc, client, lc, domain = managed
-    capsules = []
-    client.node.create_subscription(MarkerArray, "/dlo/capsules", capsules.append, LATCHED_QOS)
+    capsules = client.collect(MarkerArray, "capsules")
     assert lc.state(30.0) == "unconfigured"
     assert "configure" in lc.available()
     assert client.wait_for_path(1.0) is None  # nothing before configure

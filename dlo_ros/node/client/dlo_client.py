@@ -195,6 +195,21 @@ class DloClient:
             self.marker_count += 1
             self._cond.notify_all()
 
+    def collect(self, msg_type: type, topic: str, qos=LATCHED_QOS) -> list:
+        """Subscribe to the node's ``topic`` (e.g. 'capsules'); return the list messages go to.
+
+        Appended under the client's lock: read it inside :meth:`wait_for`'s predicate.
+        """
+        received: list = []
+
+        def on_message(msg) -> None:
+            with self._cond:
+                received.append(msg)
+                self._cond.notify_all()
+
+        self.node.create_subscription(msg_type, f"{self.node_name}/{topic}", on_message, qos)
+        return received
+
     # ---- waiting --------------------------------------------------------------------------------
     def wait_for(self, predicate: Callable[[], object], timeout: float) -> object:
         """Wait until ``predicate()`` (called with the lock held) is truthy; return its value.

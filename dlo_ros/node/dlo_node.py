@@ -33,6 +33,7 @@ builds one at once, ``managed.ManagedDloNode`` the lifecycle node that builds it
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from dataclasses import replace
 from typing import Any
@@ -86,10 +87,13 @@ class DloCore:
     ``activate``).  Raises StartupError for an unusable scene or parameter.
     """
 
-    def __init__(self, node: Node, *, active: bool = True) -> None:
+    def __init__(self, node: Node, *, active: bool = True, recording: int = 1) -> None:
         self.node = node
         self.closing = False
         self.active = active  # a managed node's lifecycle state is 'active'
+        # held while a shape is published and kept, and while the lifecycle state changes: an
+        # activation then republishes the newest shape, never one older than a concurrent update
+        self._gate = threading.Lock()
         settings = prepare(node)
         scene, problem, options = settings.scene, settings.problem, settings.options
         self.scene = scene
@@ -114,13 +118,21 @@ class DloCore:
             on_failure=self._on_failure,
             on_state=self._on_state,
         )
-        self._add_interfaces(problem)
         try:
-            self.stream_log.recorder = start_recorder(node, self.stream_log.scene, self.frame_id)
-        except StartupError:  # the last check: undo what outlives a node (a managed one's)
-            self.live.close()
+            self._add_interfaces(problem)
+            self.stream_log.recorder = start_recorder(
+                node, self.stream_log.scene, self.frame_id, recording
+            )  # the last check
+            self.shape_services.start_workers()  # replaces a dead or stuck worker
+        except BaseException:  # undo what would outlive a failed start (a managed node's)
+            if getattr(self, "live", None) is not None:
+                self.live.close()
+            fitter = getattr(self, "fitter", None)
+            if fitter is not None:
+                fitter.close(1.0)
+            if getattr(self, "shape_services", None) is not None:
+                self.shape_services.close(1.0)
             raise
-        self.shape_services.start_workers()  # replaces a dead or stuck worker; dies with the node
         self.node.get_logger().info(
             f"scene '{safe_text(scene.name)}' ({safe_text(scene.source)}): grips "
             f"{self.grip_names}, {len(problem.obstacles)} obstacle(s), frame "
@@ -200,6 +212,7 @@ class DloCore:
                     closing=closing,
                     publish_diagnostics=self.diagnostics.publish,
                     on_uncertainty=self.envelope.set_uncertainty,
+                    refusal=self.refusal,
                 )
             )
             self.diagnostics.extra.append(self.fitter.status)
@@ -223,16 +236,24 @@ class DloCore:
 
     def activate(self) -> None:
         """Accept targets and publish shapes; publish the newest shape (solved while inactive)."""
-        self.active = True
+        with self._gate:
+            self.active = True
+            self.outputs.republish()
         self.health.set_lifecycle("active")
-        self.outputs.republish()
         self.diagnostics.publish(immediate=True)
 
     def deactivate(self) -> None:
-        """Refuse targets and queries; the latched centreline stays as it is."""
-        self.active = False
+        """Refuse targets and queries; withdraw the capsules; the centreline stays latched."""
+        with self._gate:
+            self.active = False
+        self.withdraw()
         self.health.set_lifecycle("inactive")
         self.diagnostics.publish(immediate=True)
+
+    def withdraw(self) -> None:
+        """Take the cable out of planning scenes (a managed node deactivated or cleaned up)."""
+        if self.planning_scene is not None:
+            self.planning_scene.withdraw()
 
     @property
     def worker_compile(self) -> str:
@@ -282,14 +303,15 @@ class DloCore:
     def _publish_update(self, u: Update) -> None:
         r = u.result
         stamp = u.stamp_ns if u.stamp_ns else self.node.get_clock().now().nanoseconds
-        if self.active:  # the shape first: bookkeeping need not delay it
-            self.outputs.publish_shape(u, stamp)
+        with self._gate:  # the shape first: bookkeeping need not delay it
+            if self.active:
+                self.outputs.publish_shape(u, stamp)
+            self.outputs.hold(u, stamp)
         model_changed = self.stream_log.record_update(u, stamp)
         latency = None if u.received_ns is None else (time.monotonic_ns() - u.received_ns) / 1e6
         self.health.set_targets(self.engine.targets_received, self.engine.targets_coalesced)
         was_error = self.health.newest_is_error or self.health.updates == 0
         self.health.update(r, u.trigger, latency)
-        self.outputs.hold(u, stamp)
         if self.health.updates == 1:
             self.node.get_logger().info(
                 f"first shape {'published' if self.active else 'solved (published when active)'} "

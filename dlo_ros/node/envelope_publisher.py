@@ -63,12 +63,18 @@ def summary_values(spread: Envelope | EnvelopeUnavailable, k: float) -> dict[str
         "parameters": ",".join(spread.names),
         "note": spread.note,
     }
-    for name, g in spread.grips.items():
-        values[f"{name} force sigma N"] = float(np.linalg.norm(g.force_sigma))
+    for name, g in spread.grips.items():  # component σ: the bounds are F ± k σ, T ± k σ
+        values[f"{name} force N"] = _vector(g.force)
+        values[f"{name} force sigma N"] = _vector(g.force_sigma)
         values[f"{name} tension sigma N"] = g.tension_sigma
         if g.torque_sigma is not None:
-            values[f"{name} torque sigma N m"] = float(np.linalg.norm(g.torque_sigma))
+            values[f"{name} torque N m"] = _vector(g.torque)
+            values[f"{name} torque sigma N m"] = _vector(g.torque_sigma)
     return values
+
+
+def _vector(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{float(x):.6g}" for x in v) + "]"
 
 
 class EnvelopePublisher:
@@ -120,16 +126,26 @@ class EnvelopePublisher:
 
     def _done(self, job: Future, u: Update) -> None:
         """Publish, record and keep an envelope (solver thread)."""
-        if job.cancelled() or job.exception() is not None or self.quiet():
+        if job.cancelled() or self.quiet() or not self.node.context.ok():
             return
-        spread = job.result()
+        error = job.exception()
+        spread = (
+            EnvelopeUnavailable(f"the envelope raised {type(error).__name__}: {error}")
+            if error is not None
+            else job.result()
+        )
         self.computed += 1
         if isinstance(spread, EnvelopeUnavailable) and "committed equilibrium" in spread.reason:
             return  # the stream moved on before the solver was idle: the next tick asks again
         self.latest = spread
         stamp = u.stamp_ns or 0
         if isinstance(spread, Envelope):
-            self._pub.publish(tube_markers(spread, self.k, self.frame_id, stamp))
+            try:
+                self._pub.publish(tube_markers(spread, self.k, self.frame_id, stamp))
+            except Exception:  # noqa: BLE001 - the context was shut down under this envelope
+                if self.node.context.ok():
+                    raise
+                return
             self.log.recorder.log_envelope(
                 spread.points,
                 self.k * spread.sigma,

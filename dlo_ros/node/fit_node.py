@@ -61,6 +61,7 @@ class FitterLinks:
     ``worker_compile``: the compile mode of worker processes.  ``closing()``: true once the node is
     shutting down.  ``publish_diagnostics(immediate)``: publish the node's statuses.
     ``on_uncertainty(u)``: gets the covariance of each fit the node applied (the envelope's).
+    ``refusal()``: why fits are refused now ('' = allowed): a managed node that is not active.
     """
 
     node: Node
@@ -73,6 +74,7 @@ class FitterLinks:
     closing: Callable[[], bool]
     publish_diagnostics: Callable[[bool], None]
     on_uncertainty: Callable[[Uncertainty], None] = lambda u: None
+    refusal: Callable[[], str] = lambda: ""
 
 
 def warm_fit_worker() -> bool:
@@ -157,11 +159,17 @@ class NodeFitter:
         self.links.publish_diagnostics(True)
 
     def _on_fit(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        refused = self.links.refusal()
+        if refused:  # a fit would change the string of a node that is not active
+            response.success, response.message = False, refused
+            return response
         response.success, response.message = self.start(self._latest)
         return response
 
     def _on_timer(self) -> None:
         latest = self._latest
+        if self.links.refusal():
+            return
         if latest is not None and latest.number > self._last_fitted and self._running is None:
             ok, message = self.start(latest)
             if not ok and self.links.health.should_warn("fit:continuous"):

@@ -154,9 +154,15 @@ class Health:
             self.state = state
 
     def set_lifecycle(self, state: str) -> None:
-        """Set a managed node's lifecycle state ('inactive', 'active', ...)."""
+        """Set a managed node's lifecycle state ('inactive', 'active', ...).
+
+        Activating clears a newest error that was a refusal for being inactive: it said nothing
+        about the shape.
+        """
         with self._lock:
             self.lifecycle = state
+            if state == "active" and self.last_error_kind == "inactive":
+                self.newest_is_error = False
 
     def update(self, result: ShapeResult, trigger: str, latency_ms: float | None = None) -> None:
         """Count a converged streaming solve that was published."""

@@ -32,15 +32,26 @@ import ctypes
 import gc
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from .dlo_node import NODE_NAME, DloCore, StartupError
 from .validation import safe_text
 
+RCLError = _rclpy.RCLError
 STOP_TIMEOUT_S = 5.0  # how long cleanup / shutdown wait for the solve in progress [s]
-KINDS = ("publishers", "subscriptions", "services", "clients", "timers")
+#: the entities a core makes, and how each is destroyed (a guard condition left behind would keep
+#: its callback's object, and with it the old core and solver, alive)
+KINDS = {
+    "publishers": "destroy_publisher",
+    "subscriptions": "destroy_subscription",
+    "services": "destroy_service",
+    "clients": "destroy_client",
+    "timers": "destroy_timer",
+    "guards": "destroy_guard_condition",
+}
 
 
 class ManagedDloNode(LifecycleNode):
@@ -54,18 +65,34 @@ class ManagedDloNode(LifecycleNode):
         super().__init__(node_name, **kwargs)
         self.core: DloCore | None = None
         self.finished = threading.Event()
+        self.configured = 0  # successful configure transitions (each records to its own file)
+        self._stuck: DloCore | None = None  # a core whose solver thread outlived its release
         self._own = self._entities()  # rclpy's lifecycle interfaces: never destroyed by cleanup
+        # rclpy 7.1 raises out of the change_state service for a transition the current state
+        # does not have (ros2/rclpy#1209), which ends spin(): answer it with success = False
+        service = self._service_change_state
+        service.callback = refusing_unknown_transitions(service.callback, self.get_logger())
 
     # ---- transitions (executor thread) ----------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Build the core inactive and wait for its first shape (module docstring)."""
         log = self.get_logger()
+        if self._stuck is not None and self._stuck.engine.alive:
+            log.error(
+                "configure failed: the previous solver thread is still running (a long solve or "
+                "a compile); try again when it has ended"
+            )
+            return TransitionCallbackReturn.FAILURE
         log.info("configure: reading the scene and parameters, building the solver")
         try:
-            self.core = DloCore(self, active=False)
+            self.core = DloCore(self, active=False, recording=self.configured + 1)
             self.core.health.set_lifecycle("configuring")
         except StartupError as exc:
             log.error(f"configure failed: {safe_text(exc, 1000)}")
+            self._release()
+            return TransitionCallbackReturn.FAILURE
+        except Exception as exc:  # noqa: BLE001 - a bug: reported, the node stays unconfigured
+            log.error(f"configure failed: {type(exc).__name__}: {safe_text(exc, 1000)}")
             self._release()
             return TransitionCallbackReturn.FAILURE
         reason = self._wait_for_first_shape(float(self.get_parameter("configure_timeout").value))
@@ -74,6 +101,7 @@ class ManagedDloNode(LifecycleNode):
             self._release()
             return TransitionCallbackReturn.FAILURE
         self.core.health.set_lifecycle("inactive")
+        self.configured += 1
         log.info("configured: the first shape is held; activate to stream")
         return TransitionCallbackReturn.SUCCESS
 
@@ -94,8 +122,13 @@ class ManagedDloNode(LifecycleNode):
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Release the solver, the workers and every interface the node made."""
-        self._release()
-        self.get_logger().info("cleaned up: solver and workers released")
+        if self._release():
+            self.get_logger().info("cleaned up: solver and workers released")
+        else:
+            self.get_logger().warning(
+                f"cleaned up, but the solver thread is still busy after {STOP_TIMEOUT_S:g} s (a "
+                "long solve or a compile): it is released when it ends; configure waits for it"
+            )
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -130,19 +163,27 @@ class ManagedDloNode(LifecycleNode):
         return ""
 
     def close(self, timeout: float = STOP_TIMEOUT_S) -> bool:
-        """Release the core (SIGINT / SIGTERM); return whether the solver thread ended in time."""
-        return self._release(timeout)
+        """Release the core (SIGINT / SIGTERM); return whether every solver thread has ended.
+
+        False also after an earlier cleanup or shutdown whose solver thread did not end in time
+        (``run.stop`` then leaves without finalising the interpreter around it).
+        """
+        released = self._release(timeout)
+        return released and (self._stuck is None or not self._stuck.engine.alive)
 
     def _release(self, timeout: float = STOP_TIMEOUT_S) -> bool:
         """Stop the core, destroy what it made, return memory; True if its thread ended."""
         core, self.core = self.core, None
         stopped = True
         if core is not None:
+            core.withdraw()  # planners must not keep a cable this node no longer tracks
             stopped = core.close(timeout)
-        for kind in KINDS:
+            if not stopped:
+                self._stuck = core
+        for kind, destroy in KINDS.items():
             for entity in list(getattr(self, kind)):
                 if id(entity) not in self._own:
-                    getattr(self, f"destroy_{kind[:-1]}")(entity)
+                    getattr(self, destroy)(entity)
         del core
         gc.collect()
         trim_heap()
@@ -150,6 +191,23 @@ class ManagedDloNode(LifecycleNode):
 
     def _entities(self) -> set[int]:
         return {id(e) for kind in KINDS for e in getattr(self, kind)}
+
+
+def refusing_unknown_transitions(callback: Callable, log: Any) -> Callable:
+    """Wrap rclpy's change_state callback: a transition it cannot take answers success = False."""
+
+    def change_state(request: Any, response: Any) -> Any:
+        try:
+            return callback(request, response)
+        except RCLError as exc:  # "Transition is not registered": not one of this state's
+            log.warning(
+                f"change_state: transition {request.transition.id} "
+                f"'{safe_text(request.transition.label, 60)}' refused: {safe_text(exc, 200)}"
+            )
+            response.success = False
+            return response
+
+    return change_state
 
 
 def trim_heap() -> None:

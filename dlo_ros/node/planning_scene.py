@@ -165,3 +165,22 @@ def collision_object(
     obj.primitive_poses = [pose for _, pose in shapes]
     obj.operation = CollisionObject.ADD
     return obj
+
+
+def removal_markers(frame_id: str, stamp_ns: int, ns: str = CAPSULE_NS) -> MarkerArray:
+    """Return a MarkerArray that clears the capsules (a DELETEALL of ``ns``)."""
+    return MarkerArray(
+        markers=[Marker(header=header(frame_id, stamp_ns), ns=ns, action=Marker.DELETEALL)]
+    )
+
+
+def collision_removal(frame_id: str, stamp_ns: int, object_id: str = "dlo_cable") -> Any | None:
+    """Return a moveit_msgs/CollisionObject REMOVE of ``object_id``, None without MoveIt."""
+    CollisionObject = moveit_collision_object_type()
+    if CollisionObject is None:
+        return None
+    obj = CollisionObject()
+    obj.header = header(frame_id, stamp_ns)
+    obj.id = object_id
+    obj.operation = CollisionObject.REMOVE
+    return obj

@@ -16,7 +16,13 @@ from rclpy.node import Node
 from visualization_msgs.msg import MarkerArray
 
 from .capsules import capsule_chain
-from .planning_scene import capsule_markers, collision_object, moveit_collision_object_type
+from .planning_scene import (
+    capsule_markers,
+    collision_object,
+    collision_removal,
+    moveit_collision_object_type,
+    removal_markers,
+)
 from .qos import LATCHED_QOS
 from .shape_outputs import ShapeOutputs
 from .validation import safe_text
@@ -71,3 +77,14 @@ class PlanningScenePublisher:
         if self._objects is not None:
             self._objects.publish(collision_object(chain, self.frame_id, u.stamp_ns or 0))
         self.published += 1
+
+    def withdraw(self) -> None:
+        """Clear the capsules and remove the collision object (the node stops tracking)."""
+        stamp = self.node.get_clock().now().nanoseconds
+        self._drawn = None  # draw the newest shape again when publishing resumes
+        try:
+            self._markers.publish(removal_markers(self.frame_id, stamp))
+            if self._objects is not None:
+                self._objects.publish(collision_removal(self.frame_id, stamp))
+        except Exception:  # noqa: BLE001 - the context may be shutting down: nothing to withdraw
+            pass

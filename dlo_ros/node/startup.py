@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import re
+from pathlib import Path
 from dataclasses import dataclass, fields, replace
 from typing import Any, Iterable
 
@@ -19,8 +20,9 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     ParameterType,
 )
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidTopicNameException, ParameterException
 from rclpy.node import Node
+from rclpy.validate_topic_name import validate_topic_name
 
 from ..model.problem import Problem
 from ..recording import Recorder, RecordingUnavailable
@@ -123,6 +125,7 @@ def prepare(node: Node) -> StartSettings:
         )
     declare(node, [replace(s, default=defaults.get(s.name, s.default)) for s in P.LIVE])
     declare_tf_frames(node, grip_names)
+    check_topic(node, "planning_scene.topic")
     problem, options = initial_problem(scene, lambda name: value(name).value)
     try:
         mode = P.compile_mode(value("compile").value)
@@ -165,11 +168,26 @@ def declare_tf_frames(node: Node, grip_names: list[str]) -> None:
         reason = P.check_value(P.grip_tf_frame(g), frame)
         if reason:
             raise StartupError(f"parameter {P.grip_tf_frame(g)}: {reason}")
+        if frame and not node.get_parameter("use_tf").value:
+            raise StartupError(
+                f"parameter {P.grip_tf_frame(g)}='{safe_text(frame, 60)}': targets from tf2 need "
+                "use_tf: true"
+            )
         if frame and not tf_available():
             raise StartupError(
                 f"parameter {P.grip_tf_frame(g)}='{safe_text(frame, 60)}': targets from tf2 need "
                 "tf2_ros, which cannot be imported here (apt: ros-jazzy-tf2-ros-py; not on PyPI)"
             )
+
+
+def check_topic(node: Node, name: str) -> None:
+    """Raise StartupError naming parameter ``name`` when its value is not a valid topic name."""
+    topic = node.get_parameter(name).value
+    try:
+        validate_topic_name(topic)
+    except InvalidTopicNameException as exc:
+        first = str(exc).splitlines()[0]
+        raise StartupError(f"parameter {name}='{safe_text(topic, 60)}': {first}") from None
 
 
 def tf_available() -> bool:
@@ -226,13 +244,18 @@ def initial_problem(scene: Scene, value: Any) -> tuple[Problem, SolverOptions]:
     return problem, options
 
 
-def start_recorder(node: Node, scene: Scene, frame_id: str) -> Recorder:
+def start_recorder(node: Node, scene: Scene, frame_id: str, session: int = 1) -> Recorder:
     """Open the rerun recording of the ``record.*`` parameters and log ``scene`` into it.
 
     The recorder is off (every call a no-op) when both parameters are empty.  An unusable file or
-    address is a StartupError.
+    address is a StartupError.  ``session`` > 1 (a managed node configured again) records to
+    ``<stem>.<session><suffix>`` beside ``record.rrd``, so that no configure overwrites an
+    earlier one's file.
     """
     rrd = node.get_parameter("record.rrd").value or None
+    if rrd and session > 1:
+        path = Path(rrd)
+        rrd = str(path.with_name(f"{path.stem}.{session}{path.suffix}"))
     connect = node.get_parameter("record.connect").value or None
     try:
         recorder = Recorder(rrd=rrd, connect=connect)

@@ -20,6 +20,7 @@ class EnvelopeDrawing:
     _rr: Any
 
     def send_batches(self) -> None:  # pragma: no cover - the Writer's
+        """Send the buffered rows (``writer.Writer.send_batches``)."""
         raise NotImplementedError
 
     def _handle_envelope(self, item: QueueItem) -> None:

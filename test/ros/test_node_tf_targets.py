@@ -55,3 +55,15 @@ def test_the_shape_follows_a_broadcast_frame(tmp_path):
         broadcaster.sendTransform(t)
         ev = cl.wait_for_path(30.0, where=lambda e: np.allclose(e.points[-1], (0.5, 0.1, 0.35), atol=1e-6))
         assert ev is not None, proc.output()
+
+
+def test_a_tf_frame_needs_use_tf():
+    done = run_node(*node_args("use_tf:=false", "grips.right.tf_frame:=tool0"))
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "grips.right.tf_frame='tool0'" in done.stderr and "use_tf" in done.stderr
+
+
+def test_an_invalid_planning_scene_topic_is_named():
+    done = run_node(*node_args("planning_scene.topic:=bad topic!!"))
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "planning_scene.topic" in done.stderr and "Traceback" not in done.stderr

@@ -367,26 +367,56 @@ def test_every_update_carries_the_stamp_of_the_targets_it_solved(engine_factory)
         assert u.problem.grip("right").pose.position[0] == pytest.approx(u.result.points[-1][0], abs=1e-12)
 
 
+def until(predicate, timeout: float = 5.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.001)
+
+
 def test_idle_work_waits_for_the_stream_and_runs_in_the_solver_thread(engine_factory):
     """when_idle (the node's envelope): it runs in the solver's thread, after every pending target and
-    control job, one piece of work at a time, and stop cancels what has not run."""
-    eng, rec, solvers = engine_factory(delay=0.05)
+    control job, and stop cancels what has not run.  A solve blocked on an event orders the steps."""
+    release, blocked = threading.Event(), threading.Event()
+
+    class Gated(FakeSolver):
+        def solve(self, poses, **kwargs):
+            if float(poses["right"].position[0]) == 0.55:
+                blocked.set()
+                assert release.wait(10.0)
+            return super().solve(poses, **kwargs)
+
+    solvers = []
+
+    def make(problem, options):
+        solvers.append(Gated(problem, options))
+        return solvers[-1]
+
+    eng, rec, _ = engine_factory(make_solver=make)
     rec.wait(lambda: rec.updates)
     order = []
-    eng.submit_targets({"right": pose(0.55)}, stamp_ns=1)  # a solve of 50 ms begins
 
     def work(solver):
         order.append(("idle", len(solver.calls), threading.current_thread().name))
         return len(solver.calls)
 
+    eng.submit_targets({"right": pose(0.55)}, stamp_ns=1)  # a solve that waits for `release`
+    assert blocked.wait(5.0)
     done = eng.when_idle(work)
-    time.sleep(0.01)
-    eng.submit_targets({"right": pose(0.56)}, stamp_ns=2)  # pending when the first solve ends
+    eng.submit_targets({"right": pose(0.56)}, stamp_ns=2)  # pending when the blocked solve ends
     query = eng.query({"right": pose(0.57)})
+    release.set()
     assert done.result(5.0) == 4  # the initial solve, both targets and the query came first
     assert query.done() and rec.updates[-1].stamp_ns == 2
     assert order == [("idle", 4, "dlo-solver")] and solvers[0].max_active == 1
-    blocker = eng.query({"right": pose(0.58)})
+    release.clear()
+    blocked.clear()
+    eng.submit_targets({"right": pose(0.55)}, stamp_ns=3)  # blocked again
+    assert blocked.wait(5.0)
     later = eng.when_idle(work)
-    assert eng.stop(5.0)
-    assert blocker.done() and (later.cancelled() or later.done())
+    stopper = threading.Thread(target=eng.stop, args=(10.0,))
+    stopper.start()
+    until(later.cancelled)  # stop cancels it at once, while the solve still runs
+    release.set()
+    stopper.join(10.0)
+    assert later.cancelled() and len(order) == 1

@@ -120,8 +120,10 @@ def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
         # One thread: it only converts and checks messages (the solver has its own thread, and the
         # services await it as coroutines).  rclpy's MultiThreadedExecutor is slower per message
         # here and competes with the solver thread for the GIL. rclpy.experimental.EventsExecutor
-        # (rclpy 7.1.6 here) cannot serve this node: its raw target subscriptions delivered nothing
-        # under it, and coroutine services do not run (ros2/rclpy#1473).
+        # (rclpy 7.1.6 wheels) cannot serve this node: its spin() livelocks before dispatching
+        # anything (a steady-clock deadline of max() overflows in the wheel's
+        # pthread_cond_timedwait), coroutine services fail (ros2/rclpy#1473, not in Jazzy) and
+        # guard conditions are refused (bench/results/events_executor_raw.md).
         executor = new_executor()
         executor.add_node(node)
         if isinstance(node, ManagedDloNode):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -42,6 +43,13 @@ MODELS = {
     "planar, Chebyshev order 16": dict(model="planar", order=16),
     "3D director, Chebyshev order 16": dict(model="full"),
 }
+
+
+def uncommitted() -> str:
+    """' (with uncommitted changes to dlo_ros/)' when the package differs from the commit, else ''."""
+    changed = subprocess.run(["git", "status", "--porcelain", "--", "dlo_ros"], capture_output=True, text=True,
+                             cwd=Path(__file__).resolve().parents[2]).stdout.strip()
+    return " (with uncommitted changes to dlo_ros/)" if changed else ""
 
 
 def stream(solver, scene, uncertainty: Uncertainty, updates: int) -> dict:
@@ -95,8 +103,8 @@ def main() -> None:
     lines = [
         "# The envelope's cost per update", "",
         f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores (shared with other work), Python "
-        f"{info.get('python')}, load average {info['load_average'][0]:.2f} at the start; git {info.get('git', '?')} "
-        "(with the envelope's working-tree changes).", "",
+        f"{info.get('python')}, load average {info['load_average'][0]:.2f} at the start; git {info.get('git', '?')}"
+        f"{uncommitted()}.", "",
         f"`default_cable`, σ: {', '.join(f'{k} {v:g}' for k, v in zip(keys, args.uncertainty))} (SI); "
         f"{args.updates} warm updates of 1 % of L per row, each followed by the envelope of its answer. "
         "Wall time [ms] of the update (solve) and of the envelope: median and p90; the ratio envelope / solve "

@@ -72,6 +72,11 @@ class ManagedDloNode(LifecycleNode):
         # does not have (ros2/rclpy#1209), which ends spin(): answer it with success = False
         service = self._service_change_state
         service.callback = refusing_unknown_transitions(service.callback, self.get_logger())
+        name = self.get_fully_qualified_name()
+        self.get_logger().info(
+            f"managed node {name}: unconfigured; configure and activate it (e.g. ros2 lifecycle "
+            f"set {name} configure)"
+        )
 
     # ---- transitions (executor thread) ----------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:

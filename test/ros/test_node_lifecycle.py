@@ -161,8 +161,12 @@ def test_remapped_name_namespace_and_a_params_file(tmp_path):
 
 
 def _signalled(cmd: list[str], domain_id: int, signals: list[tuple[float, int]], timeout: float = 30.0):
-    """Run ``cmd``, send each (delay after the previous one [s], signal), and return (exit code, output)."""
-    env = dict(ros_env(domain_id))
+    """Run ``cmd``, send each (delay after the previous one [s], signal), and return (exit code, output).
+
+    Not under coverage: starting it (coverage's subprocess patch) delays the interpreter past the
+    first delays, so a signal would land before the node's handler exists, which these tests time."""
+    env = {k: v for k, v in ros_env(domain_id).items()
+           if k not in ("COVERAGE_PROCESS_START", "COVERAGE_PROCESS_CONFIG")}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             start_new_session=True)
     try:

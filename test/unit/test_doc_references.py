@@ -1,11 +1,11 @@
 """Every dotted ``dlo_ros.xxx.name`` the documentation names imports.
 
-The docs (msg_docs/*.md, README.md) name modules, classes, functions and constants by their dotted
-path, e.g. ``dlo_ros.recording.replay.read_recording``.  A rename or a move that forgets the docs
-leaves a reader with a name that no longer exists (msg_docs/recording.md documented
-``dlo_ros.replay.read_recording`` long after ``dlo_ros/replay.py`` had moved).  Each reference is
-resolved as Python would: the longest prefix that imports as a module, then attributes.  Nothing
-is skipped: a failing case names the file, the line and the reference.
+The docs (msg_docs/*.md, README.md, QUALITY_DECLARATION.md) name modules, classes, functions and
+constants by their dotted path, e.g. ``dlo_ros.recording.replay.read_recording``.  A rename or a
+move that forgets the docs leaves a reader with a name that no longer exists (msg_docs/recording.md
+documented ``dlo_ros.replay.read_recording`` long after ``dlo_ros/replay.py`` had moved).  Each
+reference is resolved as Python would: the longest prefix that imports as a module, then
+attributes.  Nothing is skipped: a failing case names the file, the line and the reference.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-DOCS = sorted((REPO / "msg_docs").glob("*.md")) + [REPO / "README.md"]
+DOCS = sorted((REPO / "msg_docs").glob("*.md")) + [REPO / "README.md",
+                                                   REPO / "QUALITY_DECLARATION.md"]
 REFERENCE = re.compile(r"(?<![\w./-])dlo_ros(?:\.[A-Za-z_]\w*)+")
 #: ``from dlo_ros.x import a, b as c``: each imported name is a reference ``dlo_ros.x.a``
 FROM_IMPORT = re.compile(r"from\s+(dlo_ros(?:\.\w+)*)\s+import\s+\(?([\w\s,]+)")

@@ -152,18 +152,15 @@ def collision_object(
     Publishing it again with the same ``object_id`` replaces the earlier shape in the scene.
     Typed Any: moveit_msgs has no wheel to type-check against.
     """
-    CollisionObject = moveit_collision_object_type()
-    if CollisionObject is None:
+    obj = _empty_object(frame_id, stamp_ns, object_id)
+    if obj is None:
         return None
-    obj = CollisionObject()
-    obj.header = header(frame_id, stamp_ns)
-    obj.id = object_id
     if hasattr(obj, "pose"):  # MoveIt 2's object pose; MoveIt warns on its all-zero quaternion
         obj.pose = arrays_to_pose((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
     shapes = primitives(chain)
     obj.primitives = [shape for shape, _ in shapes]
     obj.primitive_poses = [pose for _, pose in shapes]
-    obj.operation = CollisionObject.ADD
+    obj.operation = type(obj).ADD
     return obj
 
 
@@ -176,11 +173,18 @@ def removal_markers(frame_id: str, stamp_ns: int, ns: str = CAPSULE_NS) -> Marke
 
 def collision_removal(frame_id: str, stamp_ns: int, object_id: str = "dlo_cable") -> Any | None:
     """Return a moveit_msgs/CollisionObject REMOVE of ``object_id``, None without MoveIt."""
+    obj = _empty_object(frame_id, stamp_ns, object_id)
+    if obj is not None:
+        obj.operation = type(obj).REMOVE
+    return obj
+
+
+def _empty_object(frame_id: str, stamp_ns: int, object_id: str) -> Any | None:
+    """Return a CollisionObject with its header and id only, None without moveit_msgs."""
     CollisionObject = moveit_collision_object_type()
     if CollisionObject is None:
         return None
     obj = CollisionObject()
     obj.header = header(frame_id, stamp_ns)
     obj.id = object_id
-    obj.operation = CollisionObject.REMOVE
     return obj

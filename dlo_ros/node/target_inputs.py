@@ -144,9 +144,7 @@ class TargetInputs:
         except TargetError as exc:
             self.reject(exc, conv.time_to_ns(msg.header.stamp) if msg is not None else 0)
             return
-        stamp = conv.time_to_ns(msg.header.stamp) or None
-        self.log.recorder.log_targets({name: pose}, update=self.log.update, ros_time_ns=stamp)
-        self.engine.submit_targets({name: pose}, stamp, received)
+        self.take({name: pose}, conv.time_to_ns(msg.header.stamp) or None, received)
 
     def on_targets(self, data: bytes) -> None:
         """Take every grip's target at once (a serialised PoseArray in configuration order)."""
@@ -164,13 +162,16 @@ class TargetInputs:
         except TargetError as exc:
             self.reject(exc, conv.time_to_ns(msg.header.stamp) if msg is not None else 0)
             return
-        stamp = conv.time_to_ns(msg.header.stamp) or None
-        self.log.recorder.log_targets(poses, update=self.log.update, ros_time_ns=stamp)
-        self.engine.submit_targets(poses, stamp, received)
+        self.take(poses, conv.time_to_ns(msg.header.stamp) or None, received)
 
-    def take(self, poses: dict[str, GripPose], stamp_ns: int | None) -> None:
-        """Hand checked poses in the node's frame (read from tf2) to the engine, recorded."""
-        received = time.monotonic_ns()
+    def take(
+        self, poses: dict[str, GripPose], stamp_ns: int | None, received: int | None = None
+    ) -> None:
+        """Record checked poses in the node's frame and hand them to the engine.
+
+        ``received``: when their message arrived (monotonic ns); None: now (poses read from tf2).
+        """
+        received = time.monotonic_ns() if received is None else received
         self.log.recorder.log_targets(poses, update=self.log.update, ros_time_ns=stamp_ns)
         self.engine.submit_targets(poses, stamp_ns, received)
 

@@ -212,3 +212,41 @@ def test_the_models_kept_are_capped_and_the_evicted_ones_freed(monkeypatch):
         assert len(alive) <= AutoShapeSolver.POOL_SIZE, (len(alive), len(built))
     finally:
         solver.close()
+
+
+def test_a_refined_planar_mesh_comes_with_its_3d_model_built(builds):
+    """The check that refines a planar mesh also builds that mesh's 3D model (checks.py).
+
+    The main job's stream refines its planar mesh a few updates before the clamps twist it out of
+    the plane: the new model's first check (the 3D eigenvalue at the planar shape) and the switch
+    to 3D both need the new mesh's 3D model.  Built after the refinement took effect, it held up
+    the check due at update 98 by 0.27 s and the switch at 100 by 0.15 s.  Now it is pooled when
+    the refined mesh takes effect, and the worker builds nothing more; nothing is built on the
+    stream's thread.
+    """
+    from dlo_ros.node import demo
+    from dlo_ros.scene import load_scene
+    from dlo_ros.solver.auto.choice import full_choice
+
+    problem = load_scene("default_cable").problem
+    auto = make_solver(problem, SolverOptions(model="auto"), compile="off", checks="background")
+    try:
+        assert auto.solve().ok
+        auto._wait_for_check()  # the start-up builds (a node that has been up a few seconds)
+        start = len(builds)
+        for i in range(1, 100):
+            (pl, ql), (pr, qr) = demo.targets_at(i * 0.02)
+            r = auto.solve({"left": (pl, ql), "right": (pr, qr)})
+            assert r.ok, r.message
+            if any("mesh of" in c for c in r.model.changed):
+                break
+        else:
+            raise AssertionError("the planar mesh was not refined before the twist")
+        assert auto.choice.planar
+        assert auto.pool.pooled(full_choice(auto.choice, auto.problem)) is not None
+        built = len(builds)
+        auto._wait_for_check()  # the refined model's first check, and any build ahead
+        assert len(builds) == built, "the refined model's check or a build ahead built a model"
+        assert "MainThread" not in builds[start:]
+    finally:
+        auto.close()

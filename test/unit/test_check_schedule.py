@@ -25,6 +25,7 @@ K = 7  # the update whose shape is checked
 class FakeSnap:
     update: int = K
     generation: int = 0
+    full: object | None = None  # a 3D stream's: no 3D model checks it
 
 
 @dataclass

@@ -269,7 +269,10 @@ class AutoShapeSolver:
             if answer is not None:  # a query answered by a richer model
                 return answer
             run = (warm, commit, check_now, limited)
-            return self._update(problem, before_problem, run, notes, t0)
+            result = self._update(problem, before_problem, run, notes, t0)
+            if commit:
+                follow.build_ahead(self, problem)
+            return result
 
     def _update(
         self,

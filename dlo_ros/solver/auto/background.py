@@ -71,6 +71,14 @@ class CheckWorker:
             self._jobs.append((job, set(keys)))
         return job
 
+    def claim(self, key: tuple) -> None:
+        """Add ``key`` to the running job's models (worker thread), before it builds that model."""
+        with self._lock:
+            for job, keys in self._jobs:
+                if not job.done():
+                    keys.add(key)
+                    return
+
     def built(self, key: tuple) -> None:
         """Release ``key`` (worker thread): it is built, a switch to it need not wait.
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from .checks import CheckSnapshot, CheckVerdict
-from .choice import ORDERS, full_choice
+from .choice import ORDERS
 from .lead_in import LeadIn
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
@@ -117,8 +117,8 @@ def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
     if auto.worker.background:
         i = ORDERS.index(snap.choice.order)
         keys = {("",) + replace(snap.choice, order=o).key() for o in ORDERS[max(i - 1, 0) : i + 2]}
-        if not snap.choice.plane_kept:  # the 3D checker of a planar shape (shadows.py)
-            keys.add(("checker",) + full_choice(snap.choice, snap.problem).key())
+        if snap.full is not None:  # the 3D model that checks a planar shape (shadows.py)
+            keys.add(("",) + snap.full.key())
         decided: Future = Future()
         job = auto.worker.submit(_checked, keys, auto, snap, decided, lead)
         return PendingCheck(apply_at, job=job, decided=decided, lead=lead)

@@ -22,7 +22,7 @@ import numpy as np
 from ...model.problem import Problem
 from ..shape_solver import ShapeSolver
 from ..state import SolverState
-from .choice import ModelChoice
+from .choice import ModelChoice, full_choice
 from .mesh_check import MeshVerdict, has_elements, mesh_verdict
 from .policy import decide
 from .pool import ModelPool
@@ -47,6 +47,8 @@ class CheckSnapshot:
     ``touching``: it presses on an obstacle; ``update``: the streamed-update count then;
     ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (only a streamed
     update's check: a cold solve's or a query's runs to its end, ``update/time_limit.py``).
+    ``full``: the 3D model of a planar ``choice`` that checks it and that a switch to 3D would
+    stream on; None when the stream may not leave the plane.
     """
 
     inner: ShapeSolver
@@ -61,6 +63,7 @@ class CheckSnapshot:
     touching: bool = False
     update: int = 0
     limited: bool = True
+    full: ModelChoice | None = None
 
 
 @dataclass
@@ -99,6 +102,7 @@ class ShapeEvidence:
         self.pool, self.snap, self.tolerance = pool, snap, tolerance
         self.lower, self.lower_tried = lower
         self.problem = snap.problem
+        self.full = snap.full
         self.touching = snap.touching
         self.residual_m = snap.residual_m
         self.on_elements = has_elements(snap.inner) and snap.state is not None
@@ -203,6 +207,12 @@ class ModelChecks:
             self.pool.solver_for(
                 decision.choice, snap.problem, stream=False, source=snap.inner, state=snap.state
             )
+            if prepare and decision.choice.may_leave_plane:
+                # a refined planar mesh's 3D model too: its first check and a switch to 3D soon
+                # after would wait for that build (shadows.planar_3d_eigenvalue)
+                full = full_choice(decision.choice, snap.problem)
+                self.pool.worker.claim(("",) + full.key())
+                self.pool.solver_for(full, snap.problem, stream=False).prepare()
         # prepare only a pooled model: never build one here, the stream may be switching to it
         target = (
             self.pool.pooled(decision.choice) if decision.choice is not None and prepare else None

@@ -1,9 +1,9 @@
 """The pool of built models auto switches among, checks with and answers queries on.
 
 Building a ShapeSolver costs up to seconds, so auto keeps the models it built, keyed by
-``(tag,) + ModelChoice.key()`` (tag '' for a model a stream may switch to, 'checker' for the 3D
-checker of a planar stream, 'query' for a refined query's copy), newest last, at most
-:attr:`ModelPool.SIZE`.  The least recently used idle one is dropped first; the streaming model,
+``(tag,) + ModelChoice.key()`` (tag '' for a model a stream may switch to or a check measures
+with, the 3D model of a planar stream included; 'query' for a refined query's copy), newest last,
+at most :attr:`ModelPool.SIZE`.  The least recently used idle one is dropped first; the streaming model,
 the running job's models (:class:`.background.CheckWorker`), the 3D model a planar stream switches
 to and the two newest are never dropped.
 """
@@ -68,7 +68,7 @@ class ModelPool:
         It is warm-started from ``source`` (its ``state`` snapshot if given) and reset when that
         maps nothing.  Helpers (order shadow, 3D checker) never start a compile and create IPOPT
         lazily; a solver that streams compiles as ``compile`` says.  ``tag`` keeps a separate copy
-        (the 3D checker, so that a switch to 3D never waits for a check).  Sets ``choice.twist``
+        (a refined query's).  Sets ``choice.twist``
         from the model built.  ``built``: a solver of ``choice`` holding its own warm start (a
         mesh's lead-in, ``lead_in.py``), pooled under that key instead of the one there (give
         no ``source``).

@@ -47,20 +47,16 @@ def inertia(k: np.ndarray) -> tuple[int, int, int]:
     ldu, ipiv, info = _sytrf(k, lower=1)
     if info != 0:
         return 0, 0, size
-    values = []
-    i = 0
-    while i < size:
-        a = ldu[i, i]
-        if ipiv[i] > 0 or i + 1 == size:  # a 1 × 1 pivot
-            values.append(a)
-            i += 1
-            continue
-        b, c = ldu[i + 1, i], ldu[i + 1, i + 1]
-        mean, radius = 0.5 * (a + c), float(np.hypot(0.5 * (a - c), b))
-        large = mean + radius if mean >= 0.0 else mean - radius
-        values += [large, (a * c - b * b) / large if large != 0.0 else 0.0]
-        i += 2
-    d = np.asarray(values)
+    d = np.diagonal(ldu).copy()  # D's diagonal; each 2 × 2 block's two: its eigenvalues (below)
+    # LAPACK marks both rows k, k + 1 of a 2 × 2 block with the same negative ipiv: the sorted
+    # negative entries are those pairs, the last row never starts one
+    first = np.flatnonzero(ipiv < 0)[0::2]
+    first = first[first + 1 < size]
+    a, b, c = ldu[first, first], ldu[first + 1, first], ldu[first + 1, first + 1]
+    mean, radius = 0.5 * (a + c), np.hypot(0.5 * (a - c), b)
+    large = np.where(mean >= 0.0, mean + radius, mean - radius)
+    safe = np.where(large != 0.0, large, 1.0)
+    d[first], d[first + 1] = large, np.where(large != 0.0, (a * c - b * b) / safe, 0.0)
     tiny = ~(np.abs(d) > tol)
     return int(np.sum(~tiny & (d > 0))), int(np.sum(~tiny & (d < 0))), int(np.sum(tiny))
 

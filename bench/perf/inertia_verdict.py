@@ -199,6 +199,11 @@ def main() -> None:
         f"{alone.get('inertia_us', float('nan')):.1f} µs; eigenvalue (geqp3, orgqr, Nᵀ H N, syevr "
         f"for one pair) {alone.get('eigen_us', float('nan')):.1f} µs.  In C the difference per "
         "update is the 'after, eigenvalue' − 'after, inertia' medians above.",
+        "",
+        f"p99 is among the {max(1, count // 100)} slowest of {count} updates: with the "
+        "updates IPOPT answers (see the Newton column) and the shared machine's outliers it is "
+        "about the same in all three columns; the verdict shows in the median.  'after, "
+        "eigenvalue' against 'before' checks that nothing else changed.",
     ]
     argv = [f"--updates {args.updates}", f"--rounds {args.rounds}", f"--before {before_rev}"]
     write_report(lines, args.out, "bench/perf/inertia_verdict.py", [*argv, f"--out {args.out}"])

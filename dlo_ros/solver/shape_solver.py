@@ -48,7 +48,7 @@ from .parallel.batch import query_many
 from .results.outputs import ShapeOutputs, no_shape
 from .results.residual import EquilibriumResidual, PointAction, equilibrium_residual
 from .results.result import GripWrench, ShapeResult
-from .results.stability import is_stable, min_reduced_eigenvalue
+from .results.stability import is_stable, stability_verdict
 from .results.summary import ModelSummary
 from .results.wrenches import balance_inputs
 from .state import SolverState
@@ -311,11 +311,11 @@ class ShapeSolver:
             state = self._state
             if state is None:
                 return None
-            eig = min_reduced_eigenvalue(self.nlp, self.functions, state)
-            if eig is None:
+            stable, eig = stability_verdict(self.nlp, self.functions, state)
+            if stable:
                 return None
-            assert state.hessian is not None  # min_reduced_eigenvalue evaluated it
-            return None if is_stable(eig, state.hessian, state.unstable_direction) else eig
+            assert isinstance(eig, float)  # an unstable verdict is the eigenvalue path's number
+            return eig
 
     def reset(self) -> None:
         """Forget the warm start: the next solve starts cold."""

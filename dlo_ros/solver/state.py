@@ -11,6 +11,7 @@ NLP's scaled units (z: ``StringNLP`` unknowns, λ: IPOPT's multipliers, λ_SI = 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import Enum
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -18,6 +19,16 @@ import numpy as np
 if TYPE_CHECKING:  # for the annotation only: the contact modules' own states are not this module's
     from .contact.obstacle_slots import SlotMotion
     from .contact.self_contact import ContactSlots
+
+
+class Inertia(Enum):
+    """``SolverState.reduced_eigen`` when a compiled loop's verdict came from the inertia alone.
+
+    [∇²L Jᵀ; J 0] of the held rows had inertia (n, m, 0) with no tiny pivot
+    (``native/dlo_inertia.h``, ``results/inertia.py``): stable, and no eigenpair was computed.
+    """
+
+    STABLE = "stable: [H Jᵀ; J 0] of the held rows has inertia (n, m, 0)"
 
 
 @dataclass
@@ -38,9 +49,10 @@ class SolverState:
     #: eigenvector of the most negative reduced curvature
     unstable_direction: np.ndarray | None = None
     #: (λ_min, its eigenvector in z) of ``hessian`` reduced on the rows that
-    #: ``stability.min_reduced_eigenvalue`` holds, computed with it by a compiled loop
-    #: (``native/newton.py``); cleared with ``hessian``, None when not computed
-    reduced_eigen: tuple[float, np.ndarray] | None = None
+    #: ``stability.held_rows`` holds, computed with it by a compiled loop (``native/newton.py``),
+    #: or ``Inertia.STABLE`` when the loop's inertia settled the verdict without it; cleared with
+    #: ``hessian``, None when not computed
+    reduced_eigen: tuple[float, np.ndarray] | Inertia | None = None
     kkt: np.ndarray | None = None  # contact-free Newton matrix [∇²L Jᵀ; J 0] at z (free rows)
     residual: np.ndarray | None = None  # contact-free residual [∇f + Jᵀλ; g] at z (free rows)
     #: the self-contact pairs p holds (self-contact models)

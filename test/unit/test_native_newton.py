@@ -126,7 +126,11 @@ def test_one_call_takes_the_chord_steps_to_the_newton_root(solvers, move):
     p = native.pack_parameters(scene.problem.with_grip_poses({"right": GripPose(target, rot)}), state.z)
     kkt, residual, _, _ = (np.asarray(v) for v in nlp.kkt_free_fn(state.z, p, state.lam_g[:nf]))
     u0 = np.concatenate([state.z, state.lam_g[:nf]])
-    out = native.functions.newton_native(u0, p, kkt, residual[:, 0], 10)
+    native.functions.newton_native.lapack.inertia = 0  # the eigenpair, not the inertia's verdict
+    try:
+        out = native.functions.newton_native(u0, p, kkt, residual[:, 0], 10)
+    finally:
+        native.functions.newton_native.lapack.inertia = 1
     u, k, energies, steps, evaluations = chord_reference(nlp, u0, p, kkt, residual[:, 0], 10)
     assert out.code == 0 and (out.steps, out.evaluations) == (steps, evaluations)
     assert evaluations >= (2 if move > 0.05 else 1) and steps >= 3
@@ -249,7 +253,11 @@ def test_one_active_call_reaches_the_numpy_loops_answer(solvers):
         state.z)
     lam = np.where(active, state.lam_g, 0.0)
     switchable = nlp.contact_row & ~nlp.equality
-    out = native.functions.newton_active(state.z, lam, p, active, nlp.ubg, switchable, 4, 10)
+    native.functions.newton_active.lapack.inertia = 0  # the eigenpair, not the inertia's verdict
+    try:
+        out = native.functions.newton_active(state.z, lam, p, active, nlp.ubg, switchable, 4, 10)
+    finally:
+        native.functions.newton_active.lapack.inertia = 1
     z, lam_ref, grad, g, jac, hess, energies, steps, active_ref = active_steps(
         lambda *a: [np.asarray(v) for v in nlp.kkt_fn(*a)], state.z.copy(), lam.copy(), p, active, nlp.ubg,
         switchable, 4, 10, None)
@@ -428,6 +436,7 @@ def test_the_compiled_stability_rows_follow_the_one_python_setting(solvers, tmp_
              "left": GripPose(np.array([0.0, 0.0, 0.34]), rot)}
     p = solver.pack_parameters(scene.problem.with_grip_poses(moved), state.z)
     lam = np.where(active, state.lam_g, 0.0)
+    solver.functions.newton_active.lapack.inertia = 0  # the eigenpair, not the inertia's verdict
     out = solver.functions.newton_active(state.z, lam, p, active, nlp.ubg,
                                          nlp.contact_row & ~nlp.equality, 4, 10)
     assert out.code == 0 and out.eigen is not None
@@ -473,7 +482,7 @@ def test_the_library_keys_change_with_the_c_and_with_every_setting(solvers, monk
             changed = names()
         assert changed[0] != first[0] and changed[1] != first[1], setting
     read = native_build.read
-    for edited in ("dlo_common.h", "dlo_eigen.h", "newton_free.c", "newton_active.c"):
+    for edited in ("dlo_common.h", "dlo_eigen.h", "dlo_inertia.h", "newton_free.c", "newton_active.c"):
         with monkeypatch.context() as m:
             m.setattr(native_build, "read",
                       lambda name, e=edited: read(name) + ("\n/* */" if name == e else ""))

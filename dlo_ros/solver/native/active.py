@@ -17,9 +17,11 @@ import numpy as np
 from .cache_store import load as load_library
 from .blocks import NodeBlocks, eigen_lapack, lapack_pointer
 from .outputs import ComputedOutputs, UpdateOutputs
+from ..state import Inertia
 from .settings import (
     CONVERGED,
     EIGEN_FOUND,
+    EIGEN_INERTIA_STABLE,
     JOIN_TOLERANCE,
     LEAVE_TOLERANCE,
     NEWTON_CHORD_CONTRACTION,
@@ -82,10 +84,10 @@ class ActiveOutcome:
     steps: int
     active: np.ndarray
     evaluations: int = 0
-    #: once converged, the stability eigenvalue there and its eigenvector in z
-    #: (``SolverState.reduced_eigen``, on the rows ``stability.min_reduced_eigenvalue`` holds),
-    #: None if LAPACK failed
-    eigen: tuple[float, np.ndarray] | None = None
+    #: once converged, ``Inertia.STABLE`` when the held rows' KKT inertia showed the shape stable,
+    #: else the stability eigenvalue there and its eigenvector in z (``SolverState.reduced_eigen``,
+    #: on the rows ``stability.held_rows`` holds), None if LAPACK failed
+    eigen: tuple[float, np.ndarray] | Inertia | None = None
     #: the outputs at the answer, when the call evaluated them (``UpdateOutputs``)
     outputs: ComputedOutputs | None = None
 
@@ -116,7 +118,10 @@ class ActiveNewton:
         self._run = self._lib.dlo_newton_active_run
         self._run.restype = ctypes.c_int
         self._run.argtypes = _ARGTYPES
-        self._map, self._lapack = node_map, eigen_lapack()  # kept alive for the calls
+        self._map = node_map  # kept alive for the calls
+        #: the routines the stability verdict calls, kept alive for the calls; ``lapack.inertia =
+        #: 0`` makes the loop compute the eigenpair always, as before the inertia (comparisons)
+        self.lapack = eigen_lapack()
         self._equality = np.ascontiguousarray(equality, dtype=np.intc)
         self._eig_value, self._eig_code, self._direction = (
             ctypes.c_double(0.0),
@@ -125,7 +130,7 @@ class ActiveNewton:
         )
         self._eigen_args = (
             self._equality.ctypes.data,
-            ctypes.addressof(self._lapack),
+            ctypes.addressof(self.lapack),
             ctypes.addressof(self._eig_value),
             self._direction.ctypes.data,
             ctypes.addressof(self._eig_code),
@@ -212,6 +217,8 @@ class ActiveNewton:
         if code == CONVERGED:
             if self._eig_code.value == EIGEN_FOUND:
                 out.eigen = (self._eig_value.value, self._direction.copy())
+            elif self._eig_code.value == EIGEN_INERTIA_STABLE:
+                out.eigen = Inertia.STABLE
             if self.after is not None:
                 out.outputs = self.after.collect(z, p)[1]
         return out

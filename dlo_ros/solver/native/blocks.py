@@ -38,18 +38,21 @@ class EigenLapackStruct(ctypes.Structure):
         ("orgqr", ctypes.c_void_p),
         ("syevr", ctypes.c_void_p),
         ("gemm", ctypes.c_void_p),
+        ("sytrf", ctypes.c_void_p),
         ("chunk", ctypes.c_int),
+        ("inertia", ctypes.c_int),
     ]
 
 
-def eigen_lapack() -> EigenLapackStruct:
-    """Return SciPy's routines the drivers' stability eigenvalue calls.
+def eigen_lapack(inertia: bool = True) -> EigenLapackStruct:
+    """Return SciPy's routines the drivers' stability verdict calls.
 
-    SciPy's routines the drivers' stability eigenvalue calls, and its dgemm chunk.
+    SciPy's routines the drivers' stability verdict calls (the eigenpair's and dsytrf for the
+    inertia), its dgemm chunk, and whether the inertia is tried first (``dlo_stability``; False:
+    the eigenpair always, as before the inertia, for comparisons).
     """
-    return EigenLapackStruct(
-        *(lapack_pointer(name) for name in ("dgeqp3", "dorgqr", "dsyevr", "dgemm")), CHUNK_WORK
-    )
+    names = ("dgeqp3", "dorgqr", "dsyevr", "dgemm", "dsytrf")
+    return EigenLapackStruct(*(lapack_pointer(name) for name in names), CHUNK_WORK, int(inertia))
 
 
 class _NodeMapStruct(ctypes.Structure):

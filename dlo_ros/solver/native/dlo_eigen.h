@@ -1,9 +1,11 @@
-/* The stability eigenvalue (dlo_ros/solver/stability.py, min_reduced_eigenvalue) in C beside the
-   loops: the same LAPACK routines on the same matrices as the numpy path. */
+/* The stability verdict (dlo_ros/solver/results/stability.py, stability_verdict) in C beside the
+   loops: the inertia first (dlo_inertia.h), else the smallest eigenvalue (min_reduced_eigenvalue);
+   the same LAPACK routines on the same matrices as the numpy path. */
 #ifndef DLO_EIGEN_H
 #define DLO_EIGEN_H
 
 #include "dlo_native.h"
+#include "dlo_inertia.h"
 
 typedef void (*dlo_geqp3_t)(int *m, int *n, double *a, int *lda, int *jpvt, double *tau,
                             double *work, int *lwork, int *info);
@@ -14,14 +16,16 @@ typedef void (*dlo_syevr_t)(char *jobz, char *range, char *uplo, int *n, double 
                             double *w, double *z, int *ldz, int *isuppz, double *work, int *lwork,
                             int *iwork, int *liwork, int *info);
 
-/* SciPy's LAPACK and BLAS routines the eigenvalue needs; chunk: the most multiplications of one
-   dgemm */
+/* SciPy's LAPACK and BLAS routines the verdict needs; chunk: the most multiplications of one
+   dgemm; inertia: 1 to try the inertia first (dlo_stability), 0 for the eigenpair always */
 typedef struct {
   dlo_geqp3_t geqp3;
   dlo_orgqr_t orgqr;
   dlo_syevr_t syevr;
   dlo_gemm_t gemm;
+  dlo_sytrf_t sytrf;
   int chunk;
+  int inertia;
 } dlo_eigen_lapack;
 
 /* C = op(A) B column block by column block, each dgemm call within la->chunk multiplications (as
@@ -94,6 +98,16 @@ static int dlo_reduced_eigen(const dlo_eigen_lapack *la, const double *H, int ld
 done:
   free(qr); free(tau); free(Q); free(work); free(T); free(M); free(v); free(jpvt); free(iwork);
   return code;
+}
+
+/* The stability verdict at an answer, H and J as dlo_reduced_eigen's: DLO_EIGEN_INERTIA_STABLE
+   when the held rows leave freedom (m < n) and [H J^T; J 0] has inertia (n, m, 0) with no tiny
+   pivot (dlo_inertia_stable; no eigenpair computed); else dlo_reduced_eigen's code and pair. */
+static int dlo_stability(const dlo_eigen_lapack *la, const double *H, int ldh, const double *J,
+                         int ldj, int n, int m, double *value, double *direction) {
+  if (la->inertia && m < n && dlo_inertia_stable(la->sytrf, H, ldh, J, ldj, n, m))
+    return DLO_EIGEN_INERTIA_STABLE;
+  return dlo_reduced_eigen(la, H, ldh, J, ldj, n, m, value, direction);
 }
 
 #endif  /* DLO_EIGEN_H */

@@ -31,7 +31,8 @@
     !defined(DLO_STEP_TOO_LARGE) || !defined(DLO_EVALUATION_FAILED)
 #error "the return codes: -D flags from dlo_ros/solver/native/settings.py"
 #endif
-#if !defined(DLO_EIGEN_FOUND) || !defined(DLO_EIGEN_NO_FREEDOM) || !defined(DLO_EIGEN_FAILED)
+#if !defined(DLO_EIGEN_FOUND) || !defined(DLO_EIGEN_NO_FREEDOM) || !defined(DLO_EIGEN_FAILED) || \
+    !defined(DLO_EIGEN_INERTIA_STABLE) || !defined(DLO_INERTIA_PIVOT_TOLERANCE)
 #error "the eigenvalue's codes: -D flags from dlo_ros/solver/native/settings.py"
 #endif
 #if !defined(DLO_CONTACT_APPEARED_TOLERANCE) || !defined(DLO_STABILITY_MULTIPLIER_TOLERANCE) || \

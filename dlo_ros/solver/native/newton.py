@@ -19,8 +19,10 @@ one before, and where a step of an earlier iterate's K would exceed ``NEWTON_MAX
 Newton's own step from here is taken instead).  It stops once ‖r_dual‖∞ < 1e-9 and ‖r_primal‖∞ <
 1e-11 and the last step is below ``NEWTON_CHORD_TOLERANCE`` in every scaled unknown (or no longer
 shrinks: round-off), and then evaluates K, ∇f and the energies at the answer, which the next
-update's first step uses, and there the stability eigenvalue (``stability.min_reduced_eigenvalue``:
-the same LAPACK routines, geqp3, orgqr and syevr, on K's blocks, in the same call).  It also stops
+update's first step uses, and there the stability verdict (``stability.stability_verdict``: the
+inertia of K by LAPACK dsytrf, ``dlo_inertia.h``, and where it does not show the shape stable the
+eigenvalue, ``stability.min_reduced_eigenvalue``: geqp3, orgqr and syevr on K's blocks; the same
+routines as the numpy path, in the same call).  It also stops
 at ``NEWTON_CHORD_STEPS`` steps or ``max_steps`` evaluations of K, at a singular matrix, or at a
 step larger than ``NEWTON_MAX_STEP`` in any scaled unknown, with the same regularisation
 (``update/kkt.py``, ``regularised``) as the Python path.  The answer is the root the
@@ -73,9 +75,11 @@ from .build import (
     free_library_path,
 )
 from .outputs import ComputedOutputs, UpdateOutputs
+from ..state import Inertia
 from .settings import (
     CONVERGED,
     EIGEN_FOUND,
+    EIGEN_INERTIA_STABLE,
     EVALUATION_FAILED,
     NEWTON_CHORD_CONTRACTION,
     NEWTON_CHORD_START,
@@ -169,8 +173,9 @@ class NewtonOutcome:
     """What one ``NativeNewton`` call returns.
 
     What one call returns: ``code`` (CONVERGED, …), the last iterate u and K, r, ∇f, energies
-    there, the steps taken and the largest |Δz|; once converged, ``eigen``: the stability
-    eigenvalue there and its eigenvector in z (``stability.min_reduced_eigenvalue`` on K's blocks,
+    there, the steps taken and the largest |Δz|; once converged, ``eigen``: ``Inertia.STABLE``
+    when K's inertia showed the shape stable, else the stability eigenvalue there and its
+    eigenvector in z (``stability.min_reduced_eigenvalue`` on K's blocks,
     ``SolverState.reduced_eigen``), None when the free rows leave no freedom or LAPACK failed (the
     numpy path then decides).
     """
@@ -184,7 +189,7 @@ class NewtonOutcome:
     steps: int
     largest: float
     evaluations: int = 0
-    eigen: tuple[float, np.ndarray] | None = None
+    eigen: tuple[float, np.ndarray] | Inertia | None = None
     #: every row's value at the answer, when the call evaluated the obstacle rows
     #: (``UpdateOutputs``)
     g: np.ndarray | None = None
@@ -224,7 +229,10 @@ class NativeNewton:
             ctypes.c_double(0.0),
         )
         self._eig_value, self._eig_code = ctypes.c_double(0.0), ctypes.c_int(-1)
-        self._map, self._lapack = node_map, eigen_lapack()  # kept alive for the calls
+        self._map = node_map  # kept alive for the calls
+        #: the routines the stability verdict calls, kept alive for the calls; ``lapack.inertia =
+        #: 0`` makes the loop compute the eigenpair always, as before the inertia (comparisons)
+        self.lapack = eigen_lapack()
         self._head = (
             lapack_pointer("dgetrf"),
             lapack_pointer("dgetrs"),
@@ -251,7 +259,7 @@ class NativeNewton:
             ctypes.byref(self._steps),
             ctypes.byref(self._evaluations),
             ctypes.byref(self._largest),
-            ctypes.addressof(self._lapack),
+            ctypes.addressof(self.lapack),
             ctypes.byref(self._eig_value),
             self._direction.ctypes.data,
             ctypes.byref(self._eig_code),
@@ -301,6 +309,8 @@ class NativeNewton:
         if code == CONVERGED:
             if self._eig_code.value == EIGEN_FOUND:
                 out.eigen = (self._eig_value.value, self._direction.copy())
+            elif self._eig_code.value == EIGEN_INERTIA_STABLE:
+                out.eigen = Inertia.STABLE
             if after is not None:
                 out.g, out.outputs = after.collect(out.u[: self.n], self._p)
         return out

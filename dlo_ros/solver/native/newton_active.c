@@ -224,7 +224,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
   }
   *eig_code = DLO_EIGEN_FAILED;
   if (code == DLO_CONVERGED) {
-    /* the stability eigenvalue at the answer, on the rows stability.min_reduced_eigenvalue holds:
+    /* the stability verdict at the answer (dlo_stability), on the rows stability.held_rows holds:
        the equalities, the rows within DLO_STABILITY_BOUND_TOLERANCE of their bound, and those
        with |lambda| above DLO_STABILITY_MULTIPLIER_TOLERANCE and above their slack
        (stability.held_rows) */
@@ -237,8 +237,8 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
     for (int j = 0; j < n; ++j)
       for (int k = 0; k < held; ++k) J[k + (size_t)held * j] = jac[rows_held[k] + (size_t)rows *
           j];
-    *eig_code = dlo_reduced_eigen(eigen, hess, n, J, held > 0 ? held : 1, n, held, eig_value,
-                                  eig_direction);
+    *eig_code = dlo_stability(eigen, hess, n, J, held > 0 ? held : 1, n, held, eig_value,
+                              eig_direction);
     free(J); free(rows_held);
     if (after != NULL) dlo_after_run(after, z, p, lam, 1, NULL);
   }

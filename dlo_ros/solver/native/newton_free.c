@@ -137,8 +137,9 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
   }
   *eig_code = DLO_EIGEN_FAILED;
   if (code == DLO_CONVERGED) {
-    /* the stability eigenvalue at the answer: H = K's top-left block, J its bottom-left */
-    *eig_code = dlo_reduced_eigen(eigen, K, N, K + n, N, n, m, eig_value, eig_direction);
+    /* the stability verdict at the answer (dlo_stability): H = K's top-left block, J its
+       bottom-left */
+    *eig_code = dlo_stability(eigen, K, N, K + n, N, n, m, eig_value, eig_direction);
     if (after != NULL) dlo_after_run(after, u, p, u + n, 0, r + n);
   }
   free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv); free(W); free(buf);

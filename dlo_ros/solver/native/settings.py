@@ -59,8 +59,14 @@ CONTACT_APPEARED_TOLERANCE = 1e-9
 CONVERGED, NOT_CONVERGED, SINGULAR, STEP_TOO_LARGE, EVALUATION_FAILED = 0, 1, 2, 3, 4
 
 #: Codes of the drivers' stability eigenpair: found, no freedom (the held rows fix every
-#: unknown), LAPACK failed (the numpy path decides).
-EIGEN_FOUND, EIGEN_NO_FREEDOM, EIGEN_FAILED = 0, 1, -1
+#: unknown), LAPACK failed (the numpy path decides), stable by the inertia of the held rows' KKT
+#: matrix (no eigenpair computed: ``native/dlo_inertia.h``, ``results/inertia.py``).
+EIGEN_FOUND, EIGEN_NO_FREEDOM, EIGEN_FAILED, EIGEN_INERTIA_STABLE = 0, 1, -1, 2
+
+#: The inertia of [∇²L Jᵀ; J 0] (``results/inertia.py``) counts only when every eigenvalue of its
+#: LDLᵀ factor's pivot blocks D exceeds this times max(1, max|K|) in magnitude: a smaller one is
+#: round-off's to sign, and the eigenvalue path (``stability.is_stable``) decides instead.
+INERTIA_PIVOT_TOLERANCE = 1e-8
 
 _NAMES = (
     "STABILITY_MULTIPLIER_TOLERANCE",
@@ -74,6 +80,8 @@ _NAMES = (
     "EIGEN_FOUND",
     "EIGEN_NO_FREEDOM",
     "EIGEN_FAILED",
+    "EIGEN_INERTIA_STABLE",
+    "INERTIA_PIVOT_TOLERANCE",
 )
 
 

@@ -37,7 +37,7 @@ from .residual import FLOOR, EquilibriumResidual, PointAction, equilibrium_resid
 from .contacts import contact_loads
 from .result import ContactLoad, GripWrench, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
-from .stability import NO_FREEDOM, is_stable, min_reduced_eigenvalue
+from .stability import NO_FREEDOM, stability_verdict
 from ..state import SolverState
 from .wrenches import FramesOf, balance_inputs, wrench
 
@@ -327,18 +327,14 @@ class ShapeOutputs:
         'failed' on a flipped branch, 'unverified' over the residual's tolerance.
         """
         options = self.options
-        min_eig = min_reduced_eigenvalue(self.nlp, self.fns, state)  # also fills state.energies
-        # min_reduced_eigenvalue leaves both evaluated
-        assert state.energies is not None and state.hessian is not None
+        # the inertia's verdict, or the eigenvalue's (λ_min then deferred or a number); no freedom
+        # left by the active rows (min_eig None): no admissible perturbation, so nothing can lower
+        # the energy: stable, and the message says why there is no eigenvalue
+        stable: bool | None
+        stable, min_eig = stability_verdict(self.nlp, self.fns, state)  # fills state.energies
+        assert state.energies is not None  # stability_verdict leaves it evaluated
         moments = moment_work(self.nlp, problem, state.z, state.p) if problem.loads else None
         energy = energies(state.energies, moments)
-        # no freedom left by the active rows: no admissible perturbation, so nothing can lower the
-        # energy: stable, and the message says why there is no eigenvalue
-        stable: bool | None = (
-            True
-            if min_eig is None
-            else is_stable(min_eig, state.hessian, state.unstable_direction)
-        )
         status, message = (
             "ok",
             "converged"

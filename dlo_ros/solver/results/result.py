@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -12,6 +13,41 @@ from .summary import ModelSummary
 #: (equilibrium_residual_m over the tolerance) or passes through itself (passes_through_itself);
 #: it carries the shape for inspection, never a stability verdict
 STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
+
+
+class EigenSource(Protocol):
+    """A value computed when first read (``stability.DeferredEigen``)."""
+
+    def value(self) -> float:
+        """Return the value."""
+        ...
+
+
+class Deferred:
+    """A result field given as a number, None, or an ``EigenSource`` read into a number once.
+
+    ``ShapeResult.min_eigenvalue``: a state judged stable by its inertia
+    (``stability.stability_verdict``) hands over how to compute λ_min rather than λ_min, so that
+    only a caller who reads it pays for the eigenvalue; every read sees a number (or None).  A
+    dataclass field with this descriptor as its default keeps the constructor, ``replace``,
+    ``to_dict`` and pickling as they were (the default is None).
+    """
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._key = f"_{name}_given"
+
+    def __get__(self, obj: object, objtype: type | None = None) -> float | None:
+        if obj is None:  # the class's: the dataclass default
+            return None
+        given = obj.__dict__.get(self._key)
+        if given is None or isinstance(given, (float, int)):
+            return given
+        value = float(given.value())
+        obj.__dict__[self._key] = value
+        return value
+
+    def __set__(self, obj: object, value: float | EigenSource | None) -> None:
+        obj.__dict__[self._key] = value
 
 
 @dataclass
@@ -84,7 +120,8 @@ class ShapeResult:
     external_work and total are None when a dead point moment has no potential (its axis not
     normal to the string's plane, ``results/moment_work.py``), and energy_note then says why.
     min_eigenvalue: smallest eigenvalue of the Hessian of the Lagrangian reduced to the null space
-    of the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable.
+    of the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable;
+    where the inertia showed the shape stable, computed when first read (``Deferred``).
     constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
     equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as
     an equivalent centreline error (solver/results/residual.py); NaN when there is no shape.
@@ -112,7 +149,7 @@ class ShapeResult:
     grips: dict[str, GripWrench] = field(default_factory=dict)
     contact_forces: dict[int, np.ndarray] = field(default_factory=dict)
     stable: bool | None = None
-    min_eigenvalue: float | None = None
+    min_eigenvalue: Deferred = Deferred()
     iterations: int = 0
     solve_time_ms: float = 0.0
     constraint_violation: float = float("nan")

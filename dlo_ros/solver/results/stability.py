@@ -1,4 +1,4 @@
-"""Stability of an equilibrium: the smallest eigenvalue of the reduced Hessian of the Lagrangian.
+"""Stability of an equilibrium: the reduced Hessian of the Lagrangian, by inertia or eigenvalue.
 
     λ_min = min eig(Nᵀ ∇²L N),   N an orthonormal basis of the null space of the active rows'
     Jacobian
@@ -7,7 +7,9 @@
 round-off of a neutral mode, ``is_stable``) means a direction along which the energy decreases
 while every active constraint holds: the equilibrium is unstable, and its eigenvector is the way
 out (``SolverState.unstable_direction``).  Units: Rf_max/L per (scaled unknown)², as the NLP's
-objective.
+objective.  ``stability_verdict`` (every result's) asks the inertia of [∇²L Jᵀ; J 0] first
+(``inertia.py``): where it shows Nᵀ ∇²L N positive definite, stable, and λ_min is computed only
+when read (``DeferredEigen``); elsewhere the eigenvalue decides, as here.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from ..native import settings
 from ..build.functions import NlpFunctions
 from ..update.newton import derivatives
 from ..build.nlp import StringNLP
-from ..state import SolverState
+from ..state import Inertia, SolverState
+from .inertia import stable_by_inertia
 
 #: what a result says when its active rows leave the shape no freedom (no eigenvalue, stable)
 NO_FREEDOM = "stable: the constraints leave the shape no freedom (the reduced Hessian is empty)"
@@ -36,10 +39,51 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
     it is: it reduces on the free rows, and a contact-free state's obstacle rows have zero Jacobian
     rows, which leave the null space as it is.
     """
-    if state.reduced_eigen is not None and state.hessian is not None:
+    if isinstance(state.reduced_eigen, tuple) and state.hessian is not None:
         value, direction = state.reduced_eigen
         state.unstable_direction = signed(direction) if value < 0 else None
         return value
+    pair = reduced_eigenpair(*held_derivatives(nlp, fns, state))
+    if pair is None:
+        return None
+    value, direction = pair
+    state.unstable_direction = signed(direction) if value < 0 else None
+    return value
+
+
+def stability_verdict(
+    nlp: StringNLP, fns: NlpFunctions, state: SolverState
+) -> tuple[bool, float | DeferredEigen | None]:
+    """Return (stable, λ_min) of ``state``: the inertia first, the eigenvalue where it must.
+
+    Stable by the inertia of [H Jᵀ; J 0] of the held rows (the compiled loop's verdict,
+    ``Inertia.STABLE``, or ``inertia.stable_by_inertia`` here): (True, ``DeferredEigen``), λ_min
+    computed only when read.  Otherwise (more negative eigenvalues, a tiny pivot, a rank-deficient
+    J) λ_min = ``min_reduced_eigenvalue`` and ``is_stable``'s verdict, or (True, None) when the
+    held rows leave no freedom.  Both agree wherever λ_min's sign is clear of the neutral tolerance
+    (test_inertia_verdict.py).  Fills the state's derivatives as ``min_reduced_eigenvalue``.
+    """
+    if not isinstance(state.reduced_eigen, tuple) or state.hessian is None:
+        by_loop = state.reduced_eigen is Inertia.STABLE and state.hessian is not None
+        h, jac = held_derivatives(nlp, fns, state)
+        if by_loop or stable_by_inertia(h, jac):
+            state.unstable_direction = None
+            return True, DeferredEigen(np.array(h), np.array(jac))
+    value = min_reduced_eigenvalue(nlp, fns, state)
+    if value is None:
+        return True, None
+    assert state.hessian is not None  # min_reduced_eigenvalue evaluated it
+    return is_stable(value, state.hessian, state.unstable_direction), value
+
+
+def held_derivatives(
+    nlp: StringNLP, fns: NlpFunctions, state: SolverState
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return (∇²L, the held rows' Jacobian) at ``state``, its missing derivatives evaluated.
+
+    The rows are ``held_rows``'; the Hessian, Jacobian, energies and gradient are filled in the
+    state where it lacks them.
+    """
     active = np.zeros(0, dtype=bool)
     if nlp.lbg.size:
         g = state.g if state.g is not None else np.asarray(nlp.g_fn(state.z, state.p)).ravel()
@@ -49,15 +93,51 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
             nlp, fns, state.z, state.p, state.lam_g, active
         )
         state.gradient = gradient.ravel()
-    h = state.hessian
     assert state.jacobian is not None  # evaluated with the Hessian
-    jac = state.jacobian[active]
+    return state.hessian, state.jacobian[active]
+
+
+def reduced_eigenpair(h: np.ndarray, jac: np.ndarray) -> tuple[float, np.ndarray] | None:
+    """Return λ_min of Nᵀ H N and its eigenvector N v in z (N: ``null_space(jac)``).
+
+    None when the rows ``jac`` leave no freedom (N empty).
+    """
     basis = null_space(jac) if jac.size else np.eye(h.shape[0])
     if basis.shape[1] == 0:
         return None
     value, vector = lowest_eigenpair(basis.T @ h @ basis)
-    state.unstable_direction = signed(basis @ vector) if value < 0 else None
-    return value
+    return value, basis @ vector
+
+
+class DeferredEigen:
+    """λ_min = min eig(Nᵀ H N) of a state judged stable by its inertia, computed when first read.
+
+    What ``ShapeResult.min_eigenvalue`` holds until read (``result.py``): copies of H and the held
+    rows' J (the state goes on to the next update), so that a caller who asks (the CLI's JSON, a
+    dataset row, the node's diagnostics, a recording) gets the number ``min_reduced_eigenvalue``
+    gives, and a warm update that nobody asks pays only for the LDLᵀ.  The rows leave freedom
+    (the inertia counts m < n rows of full rank), so the value is a number, positive but for
+    round-off.  Pickled as that number: a result sent to another process carries no n² matrix.
+    """
+
+    def __init__(self, hessian: np.ndarray, jacobian: np.ndarray):
+        self._h, self._jac = hessian, jacobian
+        self._pair: tuple[float, np.ndarray] | None = None
+
+    def pair(self) -> tuple[float, np.ndarray]:
+        """Return (λ_min, its eigenvector in z), computed once."""
+        if self._pair is None:
+            pair = reduced_eigenpair(self._h, self._jac)
+            assert pair is not None  # m < n rows of full rank leave freedom
+            self._pair = pair
+        return self._pair
+
+    def value(self) -> float:
+        """Return λ_min (Rf_max/L per (scaled unknown)², as ``min_reduced_eigenvalue``)."""
+        return self.pair()[0]
+
+    def __reduce__(self) -> tuple[type, tuple[float]]:
+        return float, (self.value(),)
 
 
 def held_rows(

@@ -3,9 +3,9 @@
 Building a ShapeSolver costs up to seconds, so auto keeps the models it built, keyed by
 ``(tag,) + ModelChoice.key()`` (tag '' for a model a stream may switch to or a check measures
 with, the 3D model of a planar stream included; 'query' for a refined query's copy), newest last,
-at most :attr:`ModelPool.SIZE`.  The least recently used idle one is dropped first; the streaming model,
-the running job's models (:class:`.background.CheckWorker`), the 3D model a planar stream switches
-to and the two newest are never dropped.
+at most :attr:`ModelPool.SIZE`.  The least recently used idle one is dropped first; the streaming
+model, the running job's models (:class:`.background.CheckWorker`), the 3D model a planar stream
+switches to and the two newest are never dropped.
 """
 
 from __future__ import annotations

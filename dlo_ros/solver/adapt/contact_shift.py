@@ -76,8 +76,9 @@ HOVER = 1e-6
 END_STEP = 1e-4
 #: the difference step in z (unknowns of order one: unit quaternions, tangents, positions / L)
 Z_STEP = 1e-6
-#: a line contact's end rows pressing less than this part of its largest push are not its end
-TAIL = 1e-3
+#: a line contact's end rows pressing less than this part of the largest push in that end's half
+#: of the run are not its end: the end is the row of the concentrated force at the lift-off
+END_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -171,14 +172,20 @@ def point_contacts(nlp, problem, state, g: np.ndarray) -> list[PointContact]:
 def _run_ends(nlp, ob, i, rows, run, x, push, s_rows) -> list[PointContact]:
     """Return the first and last rows of a line contact as pinned run ends (not at a grip).
 
-    Rows at either end pressing less than TAIL of the run's largest push are not its end: past a
-    lift-off the strip leaves the surface by (s − s*)³, and rows crowded there by the refinement
-    hover within the solver's tolerance, each pressing 1e-5 of the lift-off's force (the paper's
-    Fig. 3 at ρ = 2000 on 227–290 nodes: 0.01–0.2 N beside 600–900 N); pinned there, the family's
-    step estimated 0.003–0.05 m for a true error of 5e-7–2e-5 m.
+    A lift-off carries a concentrated force, the largest push in its half of the run (the
+    paper's Fig. 3 at ρ = 2000: 500–900 N beside 0.1–10 N per row of the distributed weight).
+    Rows beyond it pressing less than END_SHARE of it are not the end: past a lift-off the strip
+    leaves the surface by (s − s*)³, and rows crowded there by the refinement hover within the
+    solver's tolerance, pressing 1e-5 to 1.6e-3 of the lift-off's force in a decaying sequence;
+    pinned at such a row, the family's step estimated 0.003–0.05 m (at 1.4e-3: 9.6e-4 m) for a
+    true error of 5e-7–2.8e-6 m.  Two rows sharing the force (the lift-off between them) both
+    press above END_SHARE: the outer one is the end.
     """
-    strong = np.flatnonzero(push[run] >= TAIL * np.max(push[run]))
-    run = run[strong[0] : strong[-1] + 1]
+    half = len(run) // 2  # (a run of three rows or more, point_contacts)
+    first, last = push[run[:half]], push[run[half:]]
+    start = int(np.flatnonzero(first >= END_SHARE * np.max(first))[0])
+    stop = half + int(np.flatnonzero(last >= END_SHARE * np.max(last))[-1])
+    run = run[start : stop + 1]
     length, out = nlp.length, []
     for j, side in ((run[0], -1), (run[-1], 1)):
         s = float(s_rows[j])

@@ -173,6 +173,21 @@ def frame_columns(q, lib):
     return t, d1, d2
 
 
+def tangent_column(q: np.ndarray) -> np.ndarray:
+    """Return t (3, M), ``frame_columns``' first column alone, of quaternion rows q (4, M).
+
+    The same expressions in the same order as ``frame_columns`` (so the same numbers, bit for
+    bit), without the two columns a tangent does not need.
+    """
+    x, y, z, w = q
+    n2 = x * x + y * y + z * z + w * w
+    out = np.empty((3, q.shape[1]))
+    np.divide(w * w + x * x - y * y - z * z, n2, out=out[0])
+    np.divide(2 * (x * y + w * z), n2, out=out[1])
+    np.divide(2 * (x * z - w * y), n2, out=out[2])
+    return out
+
+
 def integrands(rows, drows, frame: bool):
     """Return the bend and twist integrands and the unit tangent of a rotation field.
 
@@ -243,6 +258,9 @@ class DirectorModel:
         )
         #: matrices per arc-length array, remembered: a solver asks for the same s again
         self._matrices: ArrayMemo = ArrayMemo()
+        #: (z as bytes, ``quad_tangents(z)``, read-only) of the last z asked for: one update asks
+        #: for the positions of its answer up to three times (slots, self-pass, the next start)
+        self._tangents: tuple[bytes, np.ndarray] | None = None
 
     # ---- numpy ----------------------------------------------------------------------------------
     def node_values(self, z: np.ndarray) -> np.ndarray:
@@ -273,14 +291,21 @@ class DirectorModel:
         return self._matrices.get("B" + side, s, lambda x: self.mesh.interpolation(x, side))
 
     def quad_tangents(self, z: np.ndarray) -> np.ndarray:
-        """(1 + ε) t̂ at the quadrature nodes, (3, M)."""
+        """(1 + ε) t̂ at the quadrature nodes, (3, M), read-only (the last z's is remembered)."""
+        key = np.asarray(z, dtype=float).tobytes()
+        last = self._tangents  # one read: another thread may replace it
+        if last is not None and last[0] == key:
+            return last[1]
         v = self.B @ self.node_values(z)
         if self.layout.frame:
-            t = np.array(frame_columns(v.T, np)[0])
+            t = tangent_column(v.T)
         else:
             t = (v / np.linalg.norm(v, axis=1)[:, None]).T
         eps = self.strain_nodes(z)
-        return t if eps is None else t * (1 + self.B @ eps)[None, :]
+        t = t if eps is None else t * (1 + self.B @ eps)[None, :]
+        t.flags.writeable = False
+        self._tangents = (key, t)
+        return t
 
     def positions(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(len(s), 3) centreline positions [m]."""
@@ -292,7 +317,7 @@ class DirectorModel:
         """Return the unit tangents (len(s), 3)."""
         v = self.interpolation(s)[0] @ self.node_values(z)
         if self.layout.frame:
-            return np.array(frame_columns(v.T, np)[0]).T
+            return tangent_column(v.T).T
         return v / np.linalg.norm(v, axis=1)[:, None]
 
     def pose_frames(

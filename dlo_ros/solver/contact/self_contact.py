@@ -108,6 +108,11 @@ class ContactGeometry:
     def key(self) -> tuple:
         return (len(self.s), self.distance)
 
+    @functools.cached_property
+    def apart_plan(self) -> ApartPlan:
+        """``certainly_apart``'s plan of this sampling, worked out on first use."""
+        return apart_plan(self)
+
     def tolerance(self, curvature: float) -> float:
         """Return how far below 2r the centreline distance may come between samples [m].
 
@@ -264,8 +269,70 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
       T/2 of the middle one along the turning path);
     * pairs k ≥ K: none is within reach (their distances, from one Gram matrix, all above it);
     * no pair within K samples is placed by two different grips (their samples count as minima).
+
+    What depends on the sampling alone (m, K, the grips' test, the subsample) is worked out once
+    per geometry (``ApartPlan``); the per-shape work is array arithmetic on the N points.
     """
     n = len(points)
+    plan = geometry.apart_plan
+    m, big = plan.m, plan.big
+    if n < 3 or n > 401 or m >= n:
+        # no pair is far enough apart, or too many samples for the dense test
+        return n < 2 or m >= n
+    if plan.grips_close:
+        return False
+    steps = points[1:] - points[:-1]
+    lengths = np.sqrt(np.einsum("ij,ij->i", steps, steps))
+    # (a step this short would leave the strict inequalities to rounding)
+    if not lengths.min() > 0.1 * geometry.spacing:
+        return False
+    unit = steps / lengths[:, None]
+    cosines = np.einsum("ij,ij->i", unit[:-1], unit[1:])
+    # (np.clip's bounds as two ufuncs: the same numbers without its dispatch)
+    turns = np.arccos(np.minimum(np.maximum(cosines, -1.0), 1.0))
+    total = np.empty(n - 1)  # turning from the first segment to each
+    total[0] = 0.0
+    np.cumsum(turns, out=total[1:])
+
+    def most_turning(segments: int) -> float:
+        """Return the largest turning [rad] over ``segments`` consecutive segments."""
+        segments = min(segments, n - 1)
+        return float((total[segments - 1 :] - total[: n - segments]).max())
+
+    if not most_turning(big - 1) < np.pi / 2 - 1e-9:
+        return False
+    windows = np.empty(n)
+    windows[0] = 0.0
+    np.cumsum(lengths, out=windows[1:])
+    shortest = float((windows[m:] - windows[: n - m]).min())
+    if not np.cos(most_turning(m) / 2) * shortest > geometry.distance * (1 + 1e-9):
+        return False
+    reach = geometry.reach
+    # the turning bound over 2·SUBSAMPLE more segments lets the dense test start there, where a
+    # subsample of the points can settle it
+    wide = big + 2 * SUBSAMPLE
+    if wide <= n - 1 and most_turning(wide - 1) < np.pi / 2 - 1e-9:
+        if _subsample_apart(points, wide, reach, float(lengths.max())):
+            return True
+    return big > n - 1 or _min_squared(points, _off_band(n, big)) > reach**2 * (1 + 1e-9) + 1e-15
+
+
+@dataclass(frozen=True)
+class ApartPlan:
+    """What ``certainly_apart`` needs of a geometry alone.
+
+    m: the smallest sample separation the exclusion arc allows (as ``_far_pairs`` rounds it);
+    big: K, past which the dense test answers; grips_close: two grips' samples fewer than K
+    apart (the shortcut then declines).
+    """
+
+    m: int
+    big: int
+    grips_close: bool
+
+
+def apart_plan(geometry: ContactGeometry) -> ApartPlan:
+    """Return ``certainly_apart``'s plan of ``geometry`` (``ContactGeometry.apart_plan``)."""
     h, reach = geometry.spacing, geometry.reach
     near = geometry.exclusion - 1e-12
     m = int(np.ceil(near / h))
@@ -274,45 +341,18 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
     while m * h < near:
         m += 1
     big = max(m + 1, int(np.ceil(1.25 * reach / h)) + 1)
-    if n < 3 or n > 401 or m >= n:
-        # no pair is far enough apart, or too many samples for the dense test
-        return n < 2 or m >= n
+    close = False
     if geometry.held.size:
         grips = [
             np.flatnonzero(geometry.held == g)
             for g in np.unique(geometry.held[geometry.held >= 0])
         ]
-        for i, gi in enumerate(grips):
-            for gj in grips[i + 1 :]:
-                if np.abs(gi[:, None] - gj[None, :]).min() < big:
-                    return False
-    steps = np.diff(points, axis=0)
-    lengths = np.sqrt(np.einsum("ij,ij->i", steps, steps))
-    # (a step this short would leave the strict inequalities to rounding)
-    if not lengths.min() > 0.1 * h:
-        return False
-    unit = steps / lengths[:, None]
-    turns = np.arccos(np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0))
-    total = np.concatenate(([0.0], np.cumsum(turns)))
-
-    def most_turning(segments: int) -> float:
-        """Return the largest turning [rad] over ``segments`` consecutive segments."""
-        segments = min(segments, n - 1)
-        return float(np.max(total[segments - 1 :] - total[: n - segments]))
-
-    if not most_turning(big - 1) < np.pi / 2 - 1e-9:
-        return False
-    windows = np.concatenate(([0.0], np.cumsum(lengths)))
-    shortest = float(np.min(windows[m:] - windows[: n - m]))
-    if not np.cos(most_turning(m) / 2) * shortest > geometry.distance * (1 + 1e-9):
-        return False
-    # the turning bound over 2·SUBSAMPLE more segments lets the dense test start there, where a
-    # subsample of the points can settle it
-    wide = big + 2 * SUBSAMPLE
-    if wide <= n - 1 and most_turning(wide - 1) < np.pi / 2 - 1e-9:
-        if _subsample_apart(points, wide, reach, float(lengths.max())):
-            return True
-    return big > n - 1 or _min_squared(points, _off_band(n, big)) > reach**2 * (1 + 1e-9) + 1e-15
+        close = any(
+            np.abs(gi[:, None] - gj[None, :]).min() < big
+            for i, gi in enumerate(grips)
+            for gj in grips[i + 1 :]
+        )
+    return ApartPlan(m, big, bool(close))
 
 
 #: ``certainly_apart``'s dense test tries every SUBSAMPLE-th sample first
@@ -326,15 +366,28 @@ def _subsample_apart(points: np.ndarray, wide: int, reach: float, longest: float
     |x_a − x_b| ≥ |x_a' − x_b'| − j·``longest`` (the longest step), b' − a' ≥ ``wide`` − j: all
     such pairs beyond ``reach`` + j·``longest`` settle it with (n/j)² distances, not n².
     """
-    n, j = len(points), SUBSAMPLE
+    idx, band = _subsample_band(len(points), wide)
+    j = SUBSAMPLE
+    return _min_squared(points[idx], band) > (reach + j * longest) ** 2 * (1 + 1e-9) + 1e-15
+
+
+@functools.lru_cache(maxsize=8)
+def _subsample_band(n: int, wide: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``_subsample_apart``'s samples (every SUBSAMPLE-th and the last) and their band.
+
+    The band is 0 where two of them are at least ``wide`` − SUBSAMPLE apart, +inf elsewhere.
+    """
+    j = SUBSAMPLE
     idx = np.unique(np.append(np.arange(0, n, j), n - 1))
     band = np.where(idx[None, :] - idx[:, None] >= wide - j, 0.0, np.inf)
-    return _min_squared(points[idx], band) > (reach + j * longest) ** 2 * (1 + 1e-9) + 1e-15
+    idx.flags.writeable = band.flags.writeable = False
+    return idx, band
 
 
 def _min_squared(points: np.ndarray, band: np.ndarray) -> float:
     """Return the smallest squared distance between samples over the pairs ``band`` leaves 0."""
-    centred = points - points.mean(axis=0)  # smaller numbers: less rounding in |x|² + |y|² − 2 x·y
+    # smaller numbers: less rounding in |x|² + |y|² − 2 x·y (the mean as np.mean forms it)
+    centred = points - np.add.reduce(points, axis=0) / len(points)
     sq = np.einsum("ij,ij->i", centred, centred)
     return float((sq[:, None] + sq[None, :] - 2.0 * (centred @ centred.T) + band).min())
 

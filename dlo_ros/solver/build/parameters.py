@@ -37,8 +37,11 @@ from .nlp import StringNLP
 
 
 def _placed_key(problem: Problem, z: np.ndarray, keep: np.ndarray | None) -> tuple:
-    """Return what a slot placement depends on besides the NLP: the shape, the slots kept, the
-    obstacles (the objects: a stream replaces grip poses only) and the string's radius."""
+    """Return what a slot placement depends on besides the NLP.
+
+    The shape, the slots kept, the obstacles (the objects: a stream replaces grip poses only) and
+    the string's radius.
+    """
     return (
         np.asarray(z, dtype=float).tobytes(),
         None if keep is None else np.asarray(keep, dtype=float).tobytes(),

@@ -47,6 +47,13 @@ import numpy as np
 from .centreline import positions_sym, weight_energy_sym
 from .elements import ElementMesh
 from .memo import ArrayMemo
+from .quaternion_frames import (
+    continuous_signs,
+    frame_columns,
+    frame_to_quat,
+    quat_to_frame,
+    tangent_column,
+)
 from .rotations import cross3
 from .transport import transported_frames
 
@@ -90,87 +97,6 @@ class DirectorLayout:
     def eps(self) -> slice:
         start = 3 + self.width * self.nodes
         return slice(start, start + self.nodes)
-
-
-def quat_to_frame(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (…, 3, 3) of quaternions (…, 4) (x, y, z, w), any non-zero norm."""
-    x, y, z, w = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
-    n2 = x * x + y * y + z * z + w * w
-    r = np.stack(
-        [
-            np.stack(
-                [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1
-            ),
-            np.stack(
-                [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1
-            ),
-            np.stack(
-                [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1
-            ),
-        ],
-        -2,
-    )
-    return r / n2[..., None, None]
-
-
-def frame_to_quat(r: np.ndarray) -> np.ndarray:
-    """Return the unit quaternions (…, 4) (x, y, z, w) of rotation matrices (…, 3, 3).
-
-    Shepperd's method: each row from the largest of 1 + trace and the diagonal, so no division by
-    a small number.
-    """
-    r = np.asarray(r, dtype=float)
-    m = r.reshape(-1, 3, 3)
-    d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
-    tr = d0 + d1 + d2
-    which = np.argmax(np.stack([tr, d0, d1, d2], axis=1), axis=1)
-    out = np.empty((m.shape[0], 4))
-    k = which == 0
-    if np.any(k):
-        w = 0.5 * np.sqrt(1.0 + tr[k])
-        mk = m[k]
-        out[k] = np.stack(
-            [
-                (mk[:, 2, 1] - mk[:, 1, 2]) / (4 * w),
-                (mk[:, 0, 2] - mk[:, 2, 0]) / (4 * w),
-                (mk[:, 1, 0] - mk[:, 0, 1]) / (4 * w),
-                w,
-            ],
-            axis=1,
-        )
-    for a in range(3):  # the largest diagonal entry is a: q_a first
-        k = which == a + 1
-        if not np.any(k):
-            continue
-        b, c = (a + 1) % 3, (a + 2) % 3
-        mk = m[k]
-        v = 0.5 * np.sqrt(np.maximum(1.0 + mk[:, a, a] - mk[:, b, b] - mk[:, c, c], 0.0))
-        q = np.empty((mk.shape[0], 4))
-        q[:, a] = v
-        q[:, b] = (mk[:, a, b] + mk[:, b, a]) / (4 * v)
-        q[:, c] = (mk[:, a, c] + mk[:, c, a]) / (4 * v)
-        q[:, 3] = (mk[:, c, b] - mk[:, b, c]) / (4 * v)
-        out[k] = q
-    return out.reshape(r.shape[:-2] + (4,))
-
-
-def continuous_signs(q: np.ndarray) -> np.ndarray:
-    """Quaternions along s with signs flipped so that neighbours have a positive dot product."""
-    q = np.array(q, dtype=float)
-    for i in range(1, len(q)):
-        if np.dot(q[i], q[i - 1]) < 0:
-            q[i] = -q[i]
-    return q
-
-
-def frame_columns(q, lib):
-    """(t, d1, d2) of quaternion components (x, y, z, w) divided by |q|² (lib: casadi or numpy)."""
-    x, y, z, w = q
-    n2 = x * x + y * y + z * z + w * w
-    t = [(w * w + x * x - y * y - z * z) / n2, 2 * (x * y + w * z) / n2, 2 * (x * z - w * y) / n2]
-    d1 = [2 * (x * y - w * z) / n2, (w * w - x * x + y * y - z * z) / n2, 2 * (y * z + w * x) / n2]
-    d2 = [2 * (x * z + w * y) / n2, 2 * (y * z - w * x) / n2, (w * w - x * x - y * y + z * z) / n2]
-    return t, d1, d2
 
 
 def integrands(rows, drows, frame: bool):
@@ -243,6 +169,9 @@ class DirectorModel:
         )
         #: matrices per arc-length array, remembered: a solver asks for the same s again
         self._matrices: ArrayMemo = ArrayMemo()
+        #: (z as bytes, ``quad_tangents(z)``, read-only) of the last z asked for: one update asks
+        #: for the positions of its answer up to three times (slots, self-pass, the next start)
+        self._tangents: tuple[bytes, np.ndarray] | None = None
 
     # ---- numpy ----------------------------------------------------------------------------------
     def node_values(self, z: np.ndarray) -> np.ndarray:
@@ -273,14 +202,21 @@ class DirectorModel:
         return self._matrices.get("B" + side, s, lambda x: self.mesh.interpolation(x, side))
 
     def quad_tangents(self, z: np.ndarray) -> np.ndarray:
-        """(1 + ε) t̂ at the quadrature nodes, (3, M)."""
+        """(1 + ε) t̂ at the quadrature nodes, (3, M), read-only (the last z's is remembered)."""
+        key = np.asarray(z, dtype=float).tobytes()
+        last = self._tangents  # one read: another thread may replace it
+        if last is not None and last[0] == key:
+            return last[1]
         v = self.B @ self.node_values(z)
         if self.layout.frame:
-            t = np.array(frame_columns(v.T, np)[0])
+            t = tangent_column(v.T)
         else:
             t = (v / np.linalg.norm(v, axis=1)[:, None]).T
         eps = self.strain_nodes(z)
-        return t if eps is None else t * (1 + self.B @ eps)[None, :]
+        t = t if eps is None else t * (1 + self.B @ eps)[None, :]
+        t.flags.writeable = False
+        self._tangents = (key, t)
+        return t
 
     def positions(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(len(s), 3) centreline positions [m]."""
@@ -292,7 +228,7 @@ class DirectorModel:
         """Return the unit tangents (len(s), 3)."""
         v = self.interpolation(s)[0] @ self.node_values(z)
         if self.layout.frame:
-            return np.array(frame_columns(v.T, np)[0]).T
+            return tangent_column(v.T).T
         return v / np.linalg.norm(v, axis=1)[:, None]
 
     def pose_frames(

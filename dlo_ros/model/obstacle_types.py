@@ -40,7 +40,8 @@ from .rotations import check_quaternion, matrix_to_quat, quat_to_matrix, quat_z_
 NUMPY = SimpleNamespace(dot=np.dot, norm_2=np.linalg.norm, fmin=min, fmax=max)
 #: the same over the rows of an (N, 3) array of points (``HalfSpace.h_many``, ``Sphere.h_many``)
 ROWS = SimpleNamespace(
-    dot=lambda a, b: np.sum(a * b, axis=-1), norm_2=lambda v: np.sqrt(np.sum(v * v, axis=-1))
+    dot=lambda a, b: np.add.reduce(a * b, axis=-1),
+    norm_2=lambda v: np.sqrt(np.add.reduce(v * v, axis=-1)),
 )
 
 BOX_EXPONENT = 8

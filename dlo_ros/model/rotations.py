@@ -13,6 +13,7 @@ P e_y = e_x, P e_z = e_y, i.e. (x_out, y_out, z_out) = (ζ, ξ, η).
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -193,7 +194,7 @@ def _numbers(value: object, n: int, field: str, what: str) -> np.ndarray:
         raise PoseError("invalid", f"{field}: expected {n} numbers{what}, got {value!r}") from None
     if arr.size != n:
         raise PoseError("invalid", f"{field}: needs {n} numbers{what}, got {arr.size}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         shown = ", ".join("nan" if np.isnan(v) else f"{v:.6g}" for v in arr)
         raise PoseError("non_finite", f"{field}: [{shown}] contains NaN or infinity")
     return arr
@@ -218,7 +219,7 @@ def check_quaternion(q: object, field: str, tolerance: float = 1e-3) -> np.ndarr
     ValueError) naming ``field`` otherwise.
     """
     arr = _numbers(q, 4, field, " (x, y, z, w)")
-    norm = float(np.linalg.norm(arr))
+    norm = math.sqrt(float(arr.dot(arr)))  # np.linalg.norm's own sum, without its dispatch
     if norm < 1e-9:
         raise PoseError("quaternion", f"{field}: zero quaternion (no rotation)")
     if abs(norm - 1.0) > tolerance:

@@ -24,6 +24,7 @@ from reference.contact_rod import solve_contact_rod
 from reference.kirchhoff import blas_threads
 from test_fig2_reference import closest_self_approach, distance_modulo_chord_rotation
 
+from dlo_ros.solver.contact import apart
 from dlo_ros.solver.contact import self_contact as SC
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.shape_solver import ShapeSolver
@@ -591,13 +592,13 @@ def test_certainly_apart_settles_a_gentle_shape_on_a_subsample(monkeypatch):
     the steps skipped): on the gentle arcs it settles them there, and on a shape with a candidate
     pair it does not answer for the full test (``test_certainly_apart_never_hides_a_candidate``)."""
     seen = []
-    subsample = SC._subsample_apart
+    subsample = apart._subsample_apart
 
     def recorded(*args):
         seen.append(subsample(*args))
         return seen[-1]
 
-    monkeypatch.setattr(SC, "_subsample_apart", recorded)
+    monkeypatch.setattr(apart, "_subsample_apart", recorded)
     geometry = SC.contact_geometry(L, 0.005)
     s = geometry.s
     for radius in (1.0, 0.4):

@@ -36,6 +36,31 @@ from ..contact import obstacle_slots as OSL
 from .nlp import StringNLP
 
 
+def _placed_key(problem: Problem, z: np.ndarray, keep: np.ndarray | None) -> tuple:
+    """Return what a slot placement depends on besides the NLP.
+
+    The shape, the slots kept, the obstacles (the objects: a stream replaces grip poses only) and
+    the string's radius.
+    """
+    return (
+        np.asarray(z, dtype=float).tobytes(),
+        None if keep is None else np.asarray(keep, dtype=float).tobytes(),
+        problem.obstacles,
+        problem.string.radius,
+    )
+
+
+def _same_key(a: tuple, b: tuple) -> bool:
+    """Whether two ``_placed_key`` are of one placement (the obstacles compared as objects)."""
+    return (
+        a[0] == b[0]
+        and a[1] == b[1]
+        and len(a[2]) == len(b[2])
+        and all(x is y for x, y in zip(a[2], b[2]))
+        and a[3] == b[3]
+    )
+
+
 def check_moments(nlp: StringNLP, problem: Problem) -> None:
     """Raise ValueError (naming the load) for a point moment the NLP cannot apply exactly."""
     if nlp.director:  # moments about any axis (model/director.py)
@@ -66,6 +91,9 @@ class ProblemParameters:
         #: the contact slots the last ``pack`` found, per obstacle (read by the solver right after
         #: it)
         self.placements: list[OSL.SlotPlacement] = []
+        #: (what the last ``place_slots`` depended on, its placements): an update places the slots
+        #: on its answer, and the next update on that same shape again (``_placed_key``)
+        self._placed: tuple[tuple, list[OSL.SlotPlacement]] | None = None
 
     def pack(
         self,
@@ -141,6 +169,20 @@ class ProblemParameters:
         (``obstacle_slots``); ``keep``: a vector whose slots stay where they still fit.  Returns
         the placements (with the shape's clearance at each slot).
         """
+        key = _placed_key(problem, z, keep)
+        last = self._placed
+        if last is not None and _same_key(last[0], key):
+            for i, new in enumerate(last[1]):
+                self.write_slots(p, i, new, keep if new.kept else None)
+            return last[1]
+        placements = self._place_slots(problem, z, p, keep)
+        self._placed = (key, placements)
+        return placements
+
+    def _place_slots(
+        self, problem: Problem, z: np.ndarray, p: np.ndarray, keep: np.ndarray | None
+    ) -> list[OSL.SlotPlacement]:
+        """``place_slots`` worked out (not from the last call's)."""
         nlp, m = self.nlp, self.nlp.model
         L, S, radius = nlp.length, len(nlp.obstacle_s), problem.string.radius
         s_fine = OSL.fine_grid(L, S)

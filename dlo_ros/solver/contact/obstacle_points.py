@@ -27,6 +27,7 @@ the first-order line load their multipliers stand for).
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -96,7 +97,13 @@ def row_spacing(s: np.ndarray) -> float:
     For uniform samples, exactly the first gap (the samples' spacing, as before the rows could
     sit on nodes); for nodes, the widest (a slot looks for a dip at least half of it wide).
     """
-    s = np.asarray(s, dtype=float)
+    return _row_spacing(np.asarray(s, dtype=float).tobytes())
+
+
+@functools.lru_cache(maxsize=32)
+def _row_spacing(s_bytes: bytes) -> float:
+    """``row_spacing`` of the rows ``np.frombuffer(s_bytes)``: an NLP's rows ask every update."""
+    s = np.frombuffer(s_bytes)
     if s.size < 2:
         return 0.0
     gaps = np.diff(s)

@@ -43,6 +43,7 @@ a string held at one material point slides along a post until it cuts in beside 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Callable
 
@@ -114,9 +115,15 @@ class SlotMotion:
     on: np.ndarray
 
 
+@functools.lru_cache(maxsize=16)
 def fine_grid(length: float, samples: int) -> np.ndarray:
-    """Arc lengths [m] where the clearance is measured (FINE intervals per sample interval)."""
-    return np.linspace(0.0, length, min(FINE * (samples - 1), 4096) + 1)
+    """Arc lengths [m] where the clearance is measured (FINE intervals per sample interval).
+
+    Read-only, one array per (length, samples): every slot placement of a solver asks for it.
+    """
+    out = np.linspace(0.0, length, min(FINE * (samples - 1), 4096) + 1)
+    out.flags.writeable = False
+    return out
 
 
 def band(length: float, radius: float) -> float:

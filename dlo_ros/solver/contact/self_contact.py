@@ -73,6 +73,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .apart import ApartPlan, apart_plan
+from .apart import certainly_apart as certainly_apart  # (its callers ask for it here)
+
 #: how many times a solve is repeated with the pairs it penetrated added to the slots
 CONTACT_ROUNDS = 4
 
@@ -107,6 +110,11 @@ class ContactGeometry:
     @property
     def key(self) -> tuple:
         return (len(self.s), self.distance)
+
+    @functools.cached_property
+    def apart_plan(self) -> ApartPlan:
+        """``certainly_apart``'s plan of this sampling, worked out on first use."""
+        return apart_plan(self)
 
     def tolerance(self, curvature: float) -> float:
         """Return how far below 2r the centreline distance may come between samples [m].
@@ -244,108 +252,6 @@ def candidate_pairs(
     chosen = np.flatnonzero(along_a | along_b)
     chosen = chosen[np.argsort(dist[chosen], kind="stable")]
     return [((int(a[i]), int(b[i])), float(dist[i])) for i in chosen]
-
-
-def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
-    """Tell whether no two strands of ``points`` can be within reach (cheap, conservative).
-
-    True when ``candidate_pairs(points, geometry)`` is provably empty (no two strands within
-    reach), from O(N) turning angles and one dense distance test; False when this shortcut cannot
-    tell (then ``candidate_pairs`` decides).  Exact, never a guess:
-
-    * pairs k = b − a samples apart with m ≤ k < K (m the smallest separation the exclusion arc
-      allows, K ≈ 1.25 reach / h): if the polyline turns by less than 90° over every K − 1
-      consecutive segments, all segment directions between a and b are within 90° of each other,
-      so the inner neighbour pairs (a, b − 1) and (a + 1, b) are strictly closer than (a, b)
-      (|c + e|² − |c|² = 2 c·e + |e|² > 0 with e the step and c the rest of the chord): no such
-      pair is a local minimum, unless the inner neighbour is a step along the same strand (k = m);
-      those pairs are minima only when closer than D, and their chord is at least cos(T/2) × the
-      polyline's length over them (T the turning over those m segments: every direction is within
-      T/2 of the middle one along the turning path);
-    * pairs k ≥ K: none is within reach (their distances, from one Gram matrix, all above it);
-    * no pair within K samples is placed by two different grips (their samples count as minima).
-    """
-    n = len(points)
-    h, reach = geometry.spacing, geometry.reach
-    near = geometry.exclusion - 1e-12
-    m = int(np.ceil(near / h))
-    while m > 1 and (m - 1) * h >= near:  # the smallest k with k h ≥ near, as _far_pairs rounds it
-        m -= 1
-    while m * h < near:
-        m += 1
-    big = max(m + 1, int(np.ceil(1.25 * reach / h)) + 1)
-    if n < 3 or n > 401 or m >= n:
-        # no pair is far enough apart, or too many samples for the dense test
-        return n < 2 or m >= n
-    if geometry.held.size:
-        grips = [
-            np.flatnonzero(geometry.held == g)
-            for g in np.unique(geometry.held[geometry.held >= 0])
-        ]
-        for i, gi in enumerate(grips):
-            for gj in grips[i + 1 :]:
-                if np.abs(gi[:, None] - gj[None, :]).min() < big:
-                    return False
-    steps = np.diff(points, axis=0)
-    lengths = np.sqrt(np.einsum("ij,ij->i", steps, steps))
-    # (a step this short would leave the strict inequalities to rounding)
-    if not lengths.min() > 0.1 * h:
-        return False
-    unit = steps / lengths[:, None]
-    turns = np.arccos(np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0))
-    total = np.concatenate(([0.0], np.cumsum(turns)))
-
-    def most_turning(segments: int) -> float:
-        """Return the largest turning [rad] over ``segments`` consecutive segments."""
-        segments = min(segments, n - 1)
-        return float(np.max(total[segments - 1 :] - total[: n - segments]))
-
-    if not most_turning(big - 1) < np.pi / 2 - 1e-9:
-        return False
-    windows = np.concatenate(([0.0], np.cumsum(lengths)))
-    shortest = float(np.min(windows[m:] - windows[: n - m]))
-    if not np.cos(most_turning(m) / 2) * shortest > geometry.distance * (1 + 1e-9):
-        return False
-    # the turning bound over 2·SUBSAMPLE more segments lets the dense test start there, where a
-    # subsample of the points can settle it
-    wide = big + 2 * SUBSAMPLE
-    if wide <= n - 1 and most_turning(wide - 1) < np.pi / 2 - 1e-9:
-        if _subsample_apart(points, wide, reach, float(lengths.max())):
-            return True
-    return big > n - 1 or _min_squared(points, _off_band(n, big)) > reach**2 * (1 + 1e-9) + 1e-15
-
-
-#: ``certainly_apart``'s dense test tries every SUBSAMPLE-th sample first
-SUBSAMPLE = 4
-
-
-def _subsample_apart(points: np.ndarray, wide: int, reach: float, longest: float) -> bool:
-    """Tell (sufficient, not necessary) whether all pairs b − a ≥ ``wide`` are beyond ``reach``.
-
-    Every sample a is within j/2 steps of a' of every j-th (j = SUBSAMPLE) and the last, so
-    |x_a − x_b| ≥ |x_a' − x_b'| − j·``longest`` (the longest step), b' − a' ≥ ``wide`` − j: all
-    such pairs beyond ``reach`` + j·``longest`` settle it with (n/j)² distances, not n².
-    """
-    n, j = len(points), SUBSAMPLE
-    idx = np.unique(np.append(np.arange(0, n, j), n - 1))
-    band = np.where(idx[None, :] - idx[:, None] >= wide - j, 0.0, np.inf)
-    return _min_squared(points[idx], band) > (reach + j * longest) ** 2 * (1 + 1e-9) + 1e-15
-
-
-def _min_squared(points: np.ndarray, band: np.ndarray) -> float:
-    """Return the smallest squared distance between samples over the pairs ``band`` leaves 0."""
-    centred = points - points.mean(axis=0)  # smaller numbers: less rounding in |x|² + |y|² − 2 x·y
-    sq = np.einsum("ij,ij->i", centred, centred)
-    return float((sq[:, None] + sq[None, :] - 2.0 * (centred @ centred.T) + band).min())
-
-
-@functools.lru_cache(maxsize=8)
-def _off_band(n: int, k: int) -> np.ndarray:
-    """(n, n): 0 where b − a ≥ k, +inf elsewhere."""
-    out = np.full((n, n), np.inf)
-    out[np.triu_indices(n, k)] = 0.0
-    out.flags.writeable = False
-    return out
 
 
 def closest_distance(points: np.ndarray, geometry: ContactGeometry) -> float:

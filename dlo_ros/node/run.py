@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -25,6 +26,8 @@ from .signals import exit_on_second_signal, node_starting, terminate_children
 from .validation import safe_text
 
 STOP_TIMEOUT_S = 5.0  # how long shutdown waits for the solve in progress
+#: how long a managed node keeps spinning after its 'shutdown' transition [s]
+FINAL_LINGER_S = 0.3
 
 
 def argument_parser() -> argparse.ArgumentParser:
@@ -129,6 +132,10 @@ def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
         if isinstance(node, ManagedDloNode):
             while not node.finished.is_set():  # until the 'shutdown' transition
                 executor.spin_once(timeout_sec=0.2)
+            # a little longer, so that DDS can still resend the shutdown's response and event
+            linger = time.monotonic() + FINAL_LINGER_S
+            while time.monotonic() < linger:
+                executor.spin_once(timeout_sec=0.05)
         else:
             executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -44,6 +44,7 @@ from ..validation import Vector
 from .executors import make_executor
 
 SERVICE_SETTLE_S = 0.5  # wait after a service is first discovered, before the first call
+POLL_S = 0.02  # how often ``call`` looks at its ``answered`` evidence [s]
 
 
 @dataclass
@@ -348,8 +349,12 @@ class DloClient:
         self._grip_pubs[grip].publish(msg)
         return stamp
 
-    def call(self, client, request, timeout: float):
-        """Call the service of rclpy ``client``; return its response or raise TimeoutError."""
+    def call(self, client, request, timeout: float, answered: Callable[[], bool] | None = None):
+        """Call the service of rclpy ``client``; return its response or raise TimeoutError.
+
+        ``answered``: other evidence that the call took effect (polled every POLL_S); once it is
+        true before the response came, None is returned (a response lost on the way).
+        """
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f"service {client.srv_name} not available")
         if client not in self._settled:
@@ -362,9 +367,14 @@ class DloClient:
         future = client.call_async(request)
         done = threading.Event()
         future.add_done_callback(lambda _f: done.set())
-        if not done.wait(timeout):
-            client.remove_pending_request(future)
-            raise TimeoutError(f"service {client.srv_name}: no response within {timeout} s")
+        deadline = time.monotonic() + timeout
+        while not done.wait(min(POLL_S, max(deadline - time.monotonic(), 0.0))):
+            if answered is not None and answered():
+                client.remove_pending_request(future)
+                return None
+            if time.monotonic() >= deadline:
+                client.remove_pending_request(future)
+                raise TimeoutError(f"service {client.srv_name}: no response within {timeout} s")
         return future.result()
 
     def query(

@@ -149,8 +149,9 @@ def test_fig3_floor_at_each_weight_against_the_equilibrium_it_finds(rho, how):
     Measured (cold; true error / estimate): ρ = 1000 1.9e-4 / 2.3e-4 m, 2000 5.1e-5 / 9.8e-5 m,
     3000 1.1e-4 / 3.2e-4 m.  The lift-off points reported (the ends of the rows that press) lie
     within δ of the reference's at ρ = 3000, 1.09 mm (1.09 δ) at ρ = 1000: the shape leaves a
-    floor flat, by (s − s*)³, so its centreline pins the lift-off less tightly.  Before the run ends of a line contact were pinned like point
-    contacts (solver/adapt/contact_shift.py) the estimate was 8x and 2x below the true error at
+    floor flat, by (s − s*)³, so its centreline pins the lift-off less tightly.  Before the run
+    ends of a line contact were pinned like point contacts (solver/adapt/contact_shift.py) the
+    estimate was 8x and 2x below the true error at
     ρ = 1000 and 2000.  Streamed at ρ = 1000 the estimate was 10.9x the true error (2.9e-4 /
     2.6e-5 m: a touch between two rows 3 mm apart, whose answer is not on the pinned family) until
     the contact's error took the step onto the family (contact_shift.py); at ρ = 2000 the held
@@ -175,76 +176,6 @@ def test_fig3_floor_at_each_weight_against_the_equilibrium_it_finds(rho, how):
     )
     assert rods[k].stable is True and rods[k].kkt_residual < 1e-9
     estimate = result.model.estimated_error_m
-    assert error <= estimate <= 10 * error, (error, estimate)
-
-
-@pytest.mark.parametrize(
-    "rho, tol, how",
-    [
-        (1000.0, 1e-5, "cold"),
-        (2000.0, 1e-5, "cold"),
-        (3000.0, 1e-5, "cold"),
-        (3000.0, 1e-5, "streamed"),
-        (1000.0, 1e-6, "cold"),
-        (3000.0, 1e-6, "cold"),
-    ],
-)
-def test_fig3_floor_to_a_finer_tolerance(rho, tol, how):
-    """δ = 1e-5 L at each weight (ρ = 3000 also streamed as above) and 1e-6 L at ρ = 1000 and
-    3000: the default meets it against the floor reference, stable, with an estimate that bounds
-    the true error by at most 10x.
-
-    Measured (true error / estimate / nodes): 1e-5 L ρ = 1000 2.0e-6 / 3.5e-6 m / 123, 2000
-    2.1e-7 / 7.9e-7 m / 176, 3000 6.8e-7 / 1.7e-6 m / 211; 1e-6 L ρ = 1000 1.9e-7 / 3.8e-7 m / 267.
-    Before the residual's grid was split at the obstacle rows (solver/results/residual.py) these
-    answers were 'unverified' (the residual aliased the contact forces' sawtooth to 2.5e-5 m), and
-    before the refinement's cap grew below 1e-4 L (auto/mesh_check.py) ρ = 3000 stalled at 160
-    nodes.  1e-6 L at ρ = 3000: 1.2e-7 / 6.2e-7 m / 320, since a line contact's end rows pressing
-    under 1e-3 of its largest push are not its end (solver/adapt/contact_shift.py: the estimate was
-    1e3-1e4x the true error).  Not met, and said so: 1e-6 L at ρ = 2000 (below).
-    """
-    delta = tol * L
-    pr = fig3_floor(rho)
-    refs = [shoot(solve_discrete(pr, 200, start_angles(200, at))) for at in (0.2, 0.8)]
-    options = replace(
-        SCENE.options, output_points=401, update_time_limit=0.0, error_tolerance=delta
-    )
-    result = floor_answer(rho, options, how)
-    assert result.status == "ok" and result.stable is True, result.message
-    assert result.equilibrium_residual_m <= delta
-    assert result.model.as_dict()["tolerance_met"] is True
-    error, ref = nearest(result, refs)
-    estimate = result.model.estimated_error_m
-    assert error <= delta and error <= estimate <= 10 * error, (error, estimate)
-    assert result.energy["total"] == pytest.approx(ref.energy, abs=1e-6 * abs(ref.energy))
-
-
-@pytest.mark.parametrize("rho, how", [(1000.0, "streamed"), (2000.0, "cold")])
-def test_fig3_floor_to_1e6_reports_an_estimate_that_bounds_its_error(rho, how):
-    """At 1e-6 L (ρ = 1000 streamed, 2000 cold) the refinement reaches its cap (320 nodes per
-    field, auto/mesh_check.py) before the tolerance: whatever the answer says of the tolerance is
-    true, and the estimate it reports bounds its true error by at most 10x.
-
-    Measured: not met; ρ = 1000 streamed true error 2.7e-5 m, estimate 5.2e-5 m; ρ = 2000 cold
-    4.4e-6 m, 1.2e-5 m.  Before the step from the answer to its run end moved to the lift-off
-    (contact_shift.py) the estimate at ρ = 1000 was 5.2e-6 m, five times below the true error: a
-    run end pressing 0.8 mm past the lift-off, on a strip lying flat, along which the pinned
-    family barely moves.  Before a run's end was the row of its lift-off's concentrated force
-    (contact_shift.END_SHARE) the estimate at ρ = 2000 was 2.1e-3 m for 2.8e-6 m: pinned at a
-    row crowded past the lift-off, pressing 1.4e-3 of that force.
-    """
-    delta = 1e-6 * L
-    pr = fig3_floor(rho)
-    refs = [shoot(solve_discrete(pr, 200, start_angles(200, at))) for at in (0.2, 0.8)]
-    options = replace(
-        SCENE.options, output_points=401, update_time_limit=0.0, error_tolerance=delta
-    )
-    result = floor_answer(rho, options, how)
-    assert result.status == "ok" and result.stable is True, result.message
-    error, _ = nearest(result, refs)
-    estimate = result.model.estimated_error_m
-    if result.model.tolerance_met:
-        assert error <= delta
     assert error <= estimate <= 10 * error, (error, estimate)
 
 

@@ -156,6 +156,30 @@ def energies(values: np.ndarray, moments: MomentWork | None = None) -> dict[str,
     }
 
 
+class LaterContactLoads:
+    """``contacts.contact_loads`` of one state, worked out on first read (``result.DeferredList``).
+
+    What ``ShapeResult.contact_loads`` holds until read: copies of the state's z and p and its SI
+    multipliers (the state goes on to the next update; the NLP and the problem do not change).
+    Pickled as the list it gives.
+    """
+
+    def __init__(
+        self, nlp: StringNLP, problem: Problem, z: np.ndarray, p: np.ndarray, lam_si: np.ndarray
+    ):
+        self._args = (nlp, problem, z, p, lam_si)
+        self._value: list[ContactLoad] | None = None
+
+    def value(self) -> list[ContactLoad]:
+        """Return the obstacles' loads (computed once)."""
+        if self._value is None:
+            self._value = contact_loads(*self._args)
+        return self._value
+
+    def __reduce__(self) -> tuple[type, tuple[list[ContactLoad]]]:
+        return list, (self.value(),)
+
+
 class ShapeOutputs:
     """Builds the ShapeResult of a solved state of one NLP (see the module docstring)."""
 
@@ -381,11 +405,18 @@ class ShapeOutputs:
             contact_loads=self._contact_loads(problem, state),
         )
 
-    def _contact_loads(self, problem: Problem, state: SolverState) -> list[ContactLoad]:
-        """Return the obstacles' line loads and point forces (``contacts.contact_loads``)."""
+    def _contact_loads(
+        self, problem: Problem, state: SolverState
+    ) -> list[ContactLoad] | LaterContactLoads:
+        """Return the obstacles' line loads and point forces (``contacts.contact_loads``).
+
+        [] without obstacle rows; else how to work them out on first read (``LaterContactLoads``).
+        """
         nlp = self.nlp
+        if not nlp.obstacle_rows:
+            return []
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
-        return contact_loads(nlp, problem, state.z, state.p, lam_si)
+        return LaterContactLoads(nlp, problem, state.z.copy(), state.p.copy(), lam_si)
 
     def _self_contacts(
         self, z: np.ndarray, lam_si: np.ndarray, slots: ContactSlots | None

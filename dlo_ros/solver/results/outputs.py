@@ -34,7 +34,7 @@ from ..build.parameters import ProblemParameters
 from ..native.outputs import ComputedOutputs
 from .moment_work import MomentWork, moment_work
 from .residual import FLOOR, EquilibriumResidual, PointAction, equilibrium_residual
-from .contacts import contact_loads
+from .contacts import LaterContactLoads
 from .result import ContactLoad, GripWrench, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
 from .stability import NO_FREEDOM, stability_verdict
@@ -154,30 +154,6 @@ def energies(values: np.ndarray, moments: MomentWork | None = None) -> dict[str,
         "external_work": work,
         "total": bend + twist + stretch + grav - work,
     }
-
-
-class LaterContactLoads:
-    """``contacts.contact_loads`` of one state, worked out on first read (``result.DeferredList``).
-
-    What ``ShapeResult.contact_loads`` holds until read: copies of the state's z and p and its SI
-    multipliers (the state goes on to the next update; the NLP and the problem do not change).
-    Pickled as the list it gives.
-    """
-
-    def __init__(
-        self, nlp: StringNLP, problem: Problem, z: np.ndarray, p: np.ndarray, lam_si: np.ndarray
-    ):
-        self._args = (nlp, problem, z, p, lam_si)
-        self._value: list[ContactLoad] | None = None
-
-    def value(self) -> list[ContactLoad]:
-        """Return the obstacles' loads (computed once)."""
-        if self._value is None:
-            self._value = contact_loads(*self._args)
-        return self._value
-
-    def __reduce__(self) -> tuple[type, tuple[list[ContactLoad]]]:
-        return list, (self.value(),)
 
 
 class ShapeOutputs:
@@ -410,7 +386,8 @@ class ShapeOutputs:
     ) -> list[ContactLoad] | LaterContactLoads:
         """Return the obstacles' line loads and point forces (``contacts.contact_loads``).
 
-        [] without obstacle rows; else how to work them out on first read (``LaterContactLoads``).
+        [] without obstacle rows; else how to work them out on first read
+        (``contacts.LaterContactLoads``).
         """
         nlp = self.nlp
         if not nlp.obstacle_rows:

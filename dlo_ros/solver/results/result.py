@@ -51,7 +51,7 @@ class Deferred:
 
 
 class LoadsSource(Protocol):
-    """A list computed when first read (``outputs.LaterContactLoads``)."""
+    """A list computed when first read (``contacts.LaterContactLoads``)."""
 
     def value(self) -> list[ContactLoad]:
         """Return the list."""

@@ -7,6 +7,8 @@
 * ``quat_to_frame`` of a few quaternions in Python floats: the numpy path's numbers, bit for bit;
 * ``ProblemParameters.place_slots`` reuses the last placement only for the same shape, slots kept,
   obstacles and radius: the parameter vector and placements as worked out afresh;
+* ``ProblemParameters.pack`` of a director model: each grip's rows of p looked up once, its frame
+  entries remembered per GripPose object (as the Euler angles are);
 * ``quadrature._chebvander`` of a few points in Python floats: numpy's ``chebvander``, bit for bit,
   in its layout (and the matrix products after it); ``ElementMesh``'s matrices with the
   elements' columns as slices: the entries ``np.ix_`` wrote;
@@ -354,6 +356,8 @@ def test_streamed_results_as_without_remembered_values(model, on_table):
         target = {"right": GripPose(*path(4 * k, start))}  # 200 updates, 2.5 times the step
         forgetful.nlp.model._tangents = None
         forgetful.parameters._placed = None
+        forgetful.parameters._frame_cache.clear()
+        forgetful.parameters._grip_layout.clear()
         a, b = new.solve(target), forgetful.solve(target)
         assert a.ok and b.ok, (k, a.message, b.message)
         assert same(flat(a), flat(b)), k

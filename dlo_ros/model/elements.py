@@ -191,9 +191,10 @@ class ElementMesh:
         for e in np.unique(which):
             rows = np.flatnonzero(which == e)
             b, db = self.elements[e].matrices(s[rows] - self.breakpoints[e])
-            cols = np.arange(self.first[e], self.first[e] + self.elements[e].count)
-            B[np.ix_(rows, cols)] = b
-            dB[np.ix_(rows, cols)] = db
+            # the element's columns as a slice (np.ix_ built index arrays: the same entries)
+            cols = slice(self.first[e], self.first[e] + self.elements[e].count)
+            B[rows, cols] = b
+            dB[rows, cols] = db
         return B, dB
 
     def quad_interpolation(self, s) -> tuple[np.ndarray, np.ndarray]:
@@ -208,13 +209,13 @@ class ElementMesh:
         for e in np.unique(which):
             rows = np.flatnonzero(which == e)
             local = s[rows] - self.breakpoints[e]
-            cols = np.arange(self.quad_first[e], self.quad_first[e + 1])
+            cols = slice(self.quad_first[e], self.quad_first[e + 1])
             if self.quads is None:
                 b, db = self.elements[e].matrices(local)
             else:
                 b = self.quads[e].interpolation_matrix(local)
                 db = self.quads[e].derivative_matrix(local)
-            P[np.ix_(rows, cols)], dP[np.ix_(rows, cols)] = b, db
+            P[rows, cols], dP[rows, cols] = b, db
         return P, dP
 
     def integration_matrix(self, s) -> np.ndarray:
@@ -223,12 +224,12 @@ class ElementMesh:
         W = np.zeros((s.size, self.quad_count))
         for e, el in enumerate(self.elements):
             lo, hi = self.breakpoints[e], self.breakpoints[e + 1]
-            cols = np.arange(self.quad_first[e], self.quad_first[e + 1])
+            cols = slice(self.quad_first[e], self.quad_first[e + 1])
             full = s >= hi
-            W[np.ix_(full, cols)] = el.weights if self.quads is None else self.quads[e].weights
+            W[full, cols] = el.weights if self.quads is None else self.quads[e].weights
             part = (s > lo) & (s < hi)
             if np.any(part):
-                W[np.ix_(part, cols)] = (
+                W[part, cols] = (
                     el.integral(s[part] - lo)
                     if self.quads is None
                     else self.quads[e].integration_matrix(s[part] - lo)

@@ -7,6 +7,13 @@
 * ``quat_to_frame`` of a few quaternions in Python floats: the numpy path's numbers, bit for bit;
 * ``ProblemParameters.place_slots`` reuses the last placement only for the same shape, slots kept,
   obstacles and radius: the parameter vector and placements as worked out afresh;
+* ``ProblemParameters.pack`` of a director model: each grip's rows of p looked up once, its frame
+  entries remembered per GripPose object (as the Euler angles are);
+* ``quadrature._chebvander`` of a few points in Python floats: numpy's ``chebvander``, bit for bit,
+  in its layout (and the matrix products after it); ``ElementMesh``'s matrices with the
+  elements' columns as slices: the entries ``np.ix_`` wrote;
+* ``ShapeResult.contact_loads`` worked out on first read: ``contacts.contact_loads`` of the
+  state, through ``replace``, deep copies and pickling;
 * streamed updates (the closed 3D path of test_director_stream.py, both models of
   bench/perf/update_python.py, hanging and on the table) give the same results, field by field,
   as a solver whose remembered values are dropped before every update.
@@ -19,12 +26,20 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
+import copy
+import pickle
+
+from numpy.polynomial import chebyshev as C
+
 from dlo_ros.model import director as D
+from dlo_ros.model import quadrature as Q
+from dlo_ros.model.elements import ElementMesh
 from dlo_ros.model import quaternion_frames as QF
 from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import load_scene
 from dlo_ros.solver.contact import obstacle_slots as OSL
 from dlo_ros.solver.contact import self_contact as SC
+from dlo_ros.solver.results.result import ShapeResult
 from dlo_ros.solver.shape_solver import ShapeSolver
 
 from test_director_stream import path
@@ -155,6 +170,95 @@ def test_few_quaternions_to_frames_bit_for_bit():
         assert np.isnan(D.quat_to_frame(np.zeros((1, 4)))).all()  # numpy's answer, as before
 
 
+def test_few_point_chebvander_bit_for_bit():
+    rng = np.random.default_rng(5)
+    with np.errstate(all="ignore"):
+        for n in range(0, Q.FEW_POINTS + 3):
+            for deg in (0, 1, 2, 19, 20, 48):
+                x = rng.uniform(-1.0, 1.0, n)
+                x[:3] = [-1.0, 1.0, np.nan][: min(n, 3)]
+                want, got = C.chebvander(x, deg), Q._chebvander(x, deg)
+                assert got.shape == want.shape and got.strides == want.strides
+                assert np.array_equal(got, want, equal_nan=True), (n, deg)
+                m = rng.normal(size=(deg + 1, 7))
+                assert np.array_equal(got @ m, want @ m, equal_nan=True)
+
+
+def reference_mesh_matrices(mesh: ElementMesh, s: np.ndarray):
+    """``ElementMesh``'s interpolation, quad_interpolation and integration_matrix with np.ix_."""
+    B, dB = np.zeros((s.size, mesh.count)), np.zeros((s.size, mesh.count))
+    P, dP = np.zeros((s.size, mesh.quad_count)), np.zeros((s.size, mesh.quad_count))
+    W = np.zeros((s.size, mesh.quad_count))
+    which = mesh.element_of(s, "left")
+    for e in np.unique(which):
+        rows = np.flatnonzero(which == e)
+        b, db = mesh.elements[e].matrices(s[rows] - mesh.breakpoints[e])
+        cols = np.arange(mesh.first[e], mesh.first[e] + mesh.elements[e].count)
+        B[np.ix_(rows, cols)], dB[np.ix_(rows, cols)] = b, db
+        qcols = np.arange(mesh.quad_first[e], mesh.quad_first[e + 1])
+        local = s[rows] - mesh.breakpoints[e]
+        if mesh.quads is None:
+            pb, pdb = mesh.elements[e].matrices(local)
+        else:
+            pb = mesh.quads[e].interpolation_matrix(local)
+            pdb = mesh.quads[e].derivative_matrix(local)
+        P[np.ix_(rows, qcols)], dP[np.ix_(rows, qcols)] = pb, pdb
+    for e, el in enumerate(mesh.elements):
+        lo, hi = mesh.breakpoints[e], mesh.breakpoints[e + 1]
+        cols = np.arange(mesh.quad_first[e], mesh.quad_first[e + 1])
+        full, part = s >= hi, (s > lo) & (s < hi)
+        W[np.ix_(full, cols)] = el.weights if mesh.quads is None else mesh.quads[e].weights
+        if np.any(part):
+            W[np.ix_(part, cols)] = (
+                el.integral(s[part] - lo)
+                if mesh.quads is None
+                else mesh.quads[e].integration_matrix(s[part] - lo)
+            )
+    return (B, dB), (P, dP), W
+
+
+@pytest.mark.parametrize("order", [12, 24])
+def test_mesh_matrices_with_slices_as_with_ix(order):
+    sc = load_scene("default_cable")
+    for opts in (replace(sc.options, model="full", order=order), slots_options(sc.options)):
+        mesh = ShapeSolver(sc.problem, opts, compile="off").nlp.model.mesh
+        rng = np.random.default_rng(order)
+        length = float(mesh.breakpoints[-1])
+        for n in (1, 3, 9, 40):
+            s = np.sort(rng.uniform(0.0, length, n))
+            s[0] = mesh.breakpoints[min(1, len(mesh.breakpoints) - 1)]  # a breakpoint
+            (B, dB), (P, dP), W = reference_mesh_matrices(mesh, s)
+            got_b, got_db = mesh.interpolation(s)
+            got_p, got_dp = mesh.quad_interpolation(s)
+            assert np.array_equal(got_b, B) and np.array_equal(got_db, dB)
+            assert np.array_equal(got_p, P) and np.array_equal(got_dp, dP)
+            assert np.array_equal(mesh.integration_matrix(s), W)
+
+
+def test_contact_loads_worked_out_on_first_read():
+    sc = load_scene("default_cable")
+    problem = lowered(sc.problem)
+    solver = ShapeSolver(problem, replace(sc.options, model="full", order=12), compile="off")
+    assert solver.solve().ok
+    grip = problem.grip("right").pose
+    result = solver.solve({"right": GripPose(grip.position + [0.01, 0.0, 0.0], grip.orientation)})
+    assert result.ok and result.ipopt_status.startswith("Newton")
+    given = result.__dict__["_contact_loads_given"]
+    assert not isinstance(given, list)  # deferred
+    state = solver._state
+    nlp = solver.nlp
+    lam_si = state.lam_g / (nlp.row_scale * nlp.sigma)
+    from dlo_ros.solver.results.contacts import contact_loads
+
+    want = contact_loads(nlp, problem, state.z, state.p, lam_si)
+    assert want and same(flat(pickle.loads(pickle.dumps(result)).contact_loads), flat(want))
+    assert isinstance(pickle.loads(pickle.dumps(result)).__dict__["_contact_loads_given"], list)
+    for other in (copy.deepcopy(result), replace(result), result):
+        assert same(flat(other.contact_loads), flat(want))
+    assert result.__dict__["_contact_loads_given"] is result.contact_loads  # read once
+    assert ShapeResult("ok", "").contact_loads == []
+
+
 def slots_options(options):
     """bench/perf/update_python.py's 'slots 12': the model auto streams default_cable on."""
     return replace(
@@ -252,6 +356,8 @@ def test_streamed_results_as_without_remembered_values(model, on_table):
         target = {"right": GripPose(*path(4 * k, start))}  # 200 updates, 2.5 times the step
         forgetful.nlp.model._tangents = None
         forgetful.parameters._placed = None
+        forgetful.parameters._frame_cache.clear()
+        forgetful.parameters._grip_layout.clear()
         a, b = new.solve(target), forgetful.solve(target)
         assert a.ok and b.ok, (k, a.message, b.message)
         assert same(flat(a), flat(b)), k

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -88,6 +89,8 @@ class ProblemParameters:
         self.nlp = nlp
         self._scene_p: tuple | None = None  # (scene objects, gravity, p without grip targets)
         self._euler_cache: dict[int, tuple] = {}
+        self._frame_cache: dict[int, tuple] = {}  # (pose, its frame entries) by id (_pose_frame)
+        self._grip_layout: dict[str, tuple] = {}  # grip name: its rows of p (_grip_rows)
         #: the contact slots the last ``pack`` found, per obstacle (read by the solver right after
         #: it)
         self.placements: list[OSL.SlotPlacement] = []
@@ -115,11 +118,11 @@ class ProblemParameters:
             self.placements = self.place_slots(problem, z_reference, p, keep)
         if nlp.director:
             for g in problem.grips:
-                p[lay[f"grip:{g.name}:position"]] = g.pose.position
-                p[lay[f"grip:{g.name}:frame"]] = quat_to_matrix(g.pose.orientation).ravel(
-                    order="F"
-                )
-            self.centre_moments(problem, z_reference, p)
+                position, frame = self._grip_rows(g.name)
+                p[position] = g.pose.position
+                p[frame] = self._pose_frame(g.pose)
+            if problem.loads:
+                self.centre_moments(problem, z_reference, p)
             return p
         references = self._grip_reference_angles(problem, z_reference)
         for g, reference in zip(problem.grips, references):
@@ -274,6 +277,32 @@ class ProblemParameters:
             if d < best_d:
                 best, best_d = (ph, th, ps), d
         return np.array(best)
+
+    def _grip_rows(self, name: str) -> tuple[Any, Any]:
+        """Return the layout entries of grip ``name``'s position and frame, looked up once."""
+        rows = self._grip_layout.get(name)
+        if rows is None:
+            lay = self.nlp.params
+            rows = (lay[f"grip:{name}:position"], lay[f"grip:{name}:frame"])
+            self._grip_layout[name] = rows
+        return rows
+
+    def _pose_frame(self, pose: GripPose) -> np.ndarray:
+        """Return a director model's grip frame entries of p (R column by column), remembered.
+
+        Remembered for the pose objects of the last few calls, as ``_pose_euler``: a stream moves
+        one grip; the others keep their GripPose objects.  Read-only.
+        """
+        cache = self._frame_cache
+        hit = cache.get(id(pose))
+        if hit is not None and hit[0] is pose:
+            return hit[1]
+        if len(cache) > 16:
+            cache.clear()
+        frame = quat_to_matrix(pose.orientation).ravel(order="F")
+        frame.flags.writeable = False
+        cache[id(pose)] = (pose, frame)
+        return frame
 
     def _pose_euler(self, pose: GripPose) -> tuple[float, float, float]:
         """Return ``euler_from_frame`` of a grip pose in this NLP's frame, remembered.

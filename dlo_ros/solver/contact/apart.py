@@ -156,7 +156,13 @@ def _min_squared(points: np.ndarray, band: np.ndarray) -> float:
     # smaller numbers: less rounding in |x|² + |y|² − 2 x·y (the mean as np.mean forms it)
     centred = points - np.add.reduce(points, axis=0) / len(points)
     sq = np.einsum("ij,ij->i", centred, centred)
-    return float((sq[:, None] + sq[None, :] - 2.0 * (centred @ centred.T) + band).min())
+    # (sq_a + sq_b) − 2 x_a·x_b + band in place: the same operations, two (n, n) arrays fewer
+    out = np.add.outer(sq, sq)
+    gram = centred @ centred.T
+    gram *= 2.0
+    out -= gram
+    out += band
+    return float(out.min())
 
 
 @functools.lru_cache(maxsize=8)

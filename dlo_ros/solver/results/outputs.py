@@ -34,7 +34,7 @@ from ..build.parameters import ProblemParameters
 from ..native.outputs import ComputedOutputs
 from .moment_work import MomentWork, moment_work
 from .residual import FLOOR, EquilibriumResidual, PointAction, equilibrium_residual
-from .contacts import contact_loads
+from .contacts import LaterContactLoads
 from .result import ContactLoad, GripWrench, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
 from .stability import NO_FREEDOM, stability_verdict
@@ -381,11 +381,19 @@ class ShapeOutputs:
             contact_loads=self._contact_loads(problem, state),
         )
 
-    def _contact_loads(self, problem: Problem, state: SolverState) -> list[ContactLoad]:
-        """Return the obstacles' line loads and point forces (``contacts.contact_loads``)."""
+    def _contact_loads(
+        self, problem: Problem, state: SolverState
+    ) -> list[ContactLoad] | LaterContactLoads:
+        """Return the obstacles' line loads and point forces (``contacts.contact_loads``).
+
+        [] without obstacle rows; else how to work them out on first read
+        (``contacts.LaterContactLoads``).
+        """
         nlp = self.nlp
+        if not nlp.obstacle_rows:
+            return []
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
-        return contact_loads(nlp, problem, state.z, state.p, lam_si)
+        return LaterContactLoads(nlp, problem, state.z.copy(), state.p.copy(), lam_si)
 
     def _self_contacts(
         self, z: np.ndarray, lam_si: np.ndarray, slots: ContactSlots | None

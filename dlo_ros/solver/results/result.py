@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, overload
 
 import numpy as np
 
@@ -48,6 +48,47 @@ class Deferred:
 
     def __set__(self, obj: object, value: float | EigenSource | None) -> None:
         obj.__dict__[self._key] = value
+
+
+class LoadsSource(Protocol):
+    """A list computed when first read (``contacts.LaterContactLoads``)."""
+
+    def value(self) -> list[ContactLoad]:
+        """Return the list."""
+        ...
+
+
+class DeferredList:
+    """A result field given as a list, or a ``LoadsSource`` read into a list once.
+
+    ``ShapeResult.contact_loads``: a warm update hands over how to work out the obstacles' line
+    loads rather than the loads (most callers read the totals, ``contact_forces``), so that only a
+    caller who reads them pays; every read sees a list.  The dataclass default is None, stored as a
+    new empty list: the constructor, ``replace``, ``to_dict``, equality and pickling (the source
+    pickles as its list) work as with a plain field.
+    """
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._key = f"_{name}_given"
+
+    @overload
+    def __get__(self, obj: None, objtype: type | None = None) -> None: ...
+
+    @overload
+    def __get__(self, obj: object, objtype: type | None = None) -> list[ContactLoad]: ...
+
+    def __get__(self, obj: object, objtype: type | None = None) -> list[ContactLoad] | None:
+        if obj is None:  # the class's: the dataclass default
+            return None
+        given = obj.__dict__[self._key]
+        if isinstance(given, list):
+            return given
+        value = given.value()
+        obj.__dict__[self._key] = value
+        return value
+
+    def __set__(self, obj: object, value: list[ContactLoad] | LoadsSource | None) -> None:
+        obj.__dict__[self._key] = [] if value is None else value
 
 
 @dataclass
@@ -133,7 +174,8 @@ class ShapeResult:
     than 2·radius (solver/results/self_pass.py); such a result is 'unverified', never 'ok'.
     contact_loads: the obstacles' contact forces as the physics has them: distributed line loads
     over stretches of contact and point forces (``ContactLoad``); ``contact_forces`` keeps each
-    obstacle's total.  unstable_met: the first unstable stationary point (status ok, stable False)
+    obstacle's total; a warm update's are computed when first read (``DeferredList``).
+    unstable_met: the first unstable stationary point (status ok, stable False)
     this solve met and left along its negative-curvature mode before reaching this answer, None
     when it met none (its shape, energy and negative eigenvalue: the saddle next to this state).
     """
@@ -166,7 +208,7 @@ class ShapeResult:
     self_contacts: list[SelfContact] = field(default_factory=list)
     min_self_distance: float = float("nan")
     passes_through_itself: bool = False
-    contact_loads: list[ContactLoad] = field(default_factory=list)
+    contact_loads: DeferredList = DeferredList()
     unstable_met: ShapeResult | None = None
 
     @property

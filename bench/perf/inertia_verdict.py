@@ -25,8 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -103,28 +101,6 @@ def lapack_alone(solver, repeat: int = 2000) -> dict:
     }
 
 
-def start(path: str, columns: list[str]) -> subprocess.Popen:
-    env = {**os.environ, "PYTHONPATH": path, "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.Popen(
-        [sys.executable, __file__, "--worker", *columns],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
-    assert proc.stdout is not None
-    ready = json.loads(proc.stdout.readline())
-    print(f"{columns}: {ready['file']}", file=sys.stderr)
-    return proc
-
-
-def ask(proc: subprocess.Popen, column: str, first: int, count: int) -> dict:
-    assert proc.stdin is not None and proc.stdout is not None
-    proc.stdin.write(json.dumps([column, first, count]) + "\n")
-    proc.stdin.flush()
-    return json.loads(proc.stdout.readline())
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--updates", type=int, default=400)
@@ -137,23 +113,15 @@ def main() -> None:
         worker(args.worker)
         return
     sys.path.insert(0, str(ROOT))
+    from bench.before_after import ask, extract, revision, start
     from bench.common import machine, write_report
 
     info = machine()
-    git = ["git", "-C", str(ROOT)]
-    if not args.before:
-        base = subprocess.run([*git, "merge-base", "main", "HEAD"], capture_output=True, text=True)
-        args.before = base.stdout.strip()
-    before_rev = subprocess.run(
-        [*git, "rev-parse", "--short", args.before], capture_output=True, text=True
-    ).stdout.strip()
+    args.before, before_rev = revision(args.before)
     with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(
-            [*git, "archive", args.before, "dlo_ros"], capture_output=True, check=True
-        )
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive.stdout, check=True)
-        before = start(tmp, ["before"])
-        after = start(str(ROOT), ["after, eigenvalue", "after, inertia"])
+        extract(args.before, tmp)
+        before = start(__file__, tmp, ["before"])
+        after = start(__file__, str(ROOT), ["after, eigenvalue", "after, inertia"])
         procs = {"before": before, "after, eigenvalue": after, "after, inertia": after}
         times: dict[str, list[float]] = {c: [] for c in procs}
         newton = dict.fromkeys(procs, 0)
@@ -161,7 +129,7 @@ def main() -> None:
         for r in range(args.rounds):
             order = list(procs) if r % 2 == 0 else list(procs)[::-1]
             for column in order:
-                got = ask(procs[column], column, r * piece, piece)
+                got = ask(procs[column], [column, r * piece, piece])
                 times[column] += got["times"]
                 newton[column] += got["newton"]
         for proc in (before, after):

@@ -29,8 +29,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -150,28 +148,6 @@ def worker() -> None:
         )
 
 
-def start(path: str) -> subprocess.Popen:
-    env = {**os.environ, "PYTHONPATH": path, "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.Popen(
-        [sys.executable, __file__, "--worker"],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
-    assert proc.stdout is not None
-    ready = json.loads(proc.stdout.readline())
-    print(f"{path}: {ready['file']}", file=sys.stderr)
-    return proc
-
-
-def ask(proc: subprocess.Popen, request: list) -> dict:
-    assert proc.stdin is not None and proc.stdout is not None
-    proc.stdin.write(json.dumps(request) + "\n")
-    proc.stdin.flush()
-    return json.loads(proc.stdout.readline())
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--updates", type=int, default=2000)
@@ -184,16 +160,11 @@ def main() -> None:
         worker()
         return
     sys.path.insert(0, str(ROOT))
+    from bench.before_after import ask, extract, revision, start
     from bench.common import machine, write_report
 
     info = machine()
-    git = ["git", "-C", str(ROOT)]
-    if not args.before:
-        base = subprocess.run([*git, "merge-base", "main", "HEAD"], capture_output=True, text=True)
-        args.before = base.stdout.strip()
-    before_rev = subprocess.run(
-        [*git, "rev-parse", "--short", args.before], capture_output=True, text=True
-    ).stdout.strip()
+    args.before, before_rev = revision(args.before)
     columns = ("before", "after")
     keys = [(m, s) for s in STREAMS for m in MODELS]
     times = {(c, *k): [] for c in columns for k in keys}
@@ -201,11 +172,8 @@ def main() -> None:
     newton = dict.fromkeys(times, 0)
     worst, differing = dict.fromkeys(keys, 0.0), dict.fromkeys(keys, 0)
     with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(
-            [*git, "archive", args.before, "dlo_ros"], capture_output=True, check=True
-        )
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive.stdout, check=True)
-        procs = {"before": start(tmp), "after": start(str(ROOT))}
+        extract(args.before, tmp)
+        procs = {"before": start(__file__, tmp, []), "after": start(__file__, str(ROOT), [])}
         piece = args.updates // args.rounds
         for r in range(args.rounds):
             for key in keys:

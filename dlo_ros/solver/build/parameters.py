@@ -26,8 +26,8 @@ work −m·φ is exact); ``check_moments`` rejects others.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -35,6 +35,8 @@ from ...model.problem import GripPose, Problem
 from ...model.rotations import TANGENT_X, euler_from_frame, quat_to_matrix
 from ..contact import obstacle_slots as OSL
 from .nlp import StringNLP
+
+T = TypeVar("T")
 
 
 def _placed_key(problem: Problem, z: np.ndarray, keep: np.ndarray | None) -> tuple:
@@ -60,6 +62,23 @@ def _same_key(a: tuple, b: tuple) -> bool:
         and all(x is y for x, y in zip(a[2], b[2]))
         and a[3] == b[3]
     )
+
+
+def _by_pose(cache: dict[int, tuple], pose: GripPose, compute: Callable[[], T]) -> T:
+    """Return ``compute()`` for ``pose``, remembered in ``cache`` by the pose object.
+
+    A stream moves one grip; the others keep their GripPose objects, so what depends on a pose
+    alone is worked out once.  The cache holds (pose, value) by id, checked by identity (an id
+    may be reused after a pose is freed), and is emptied past 16 entries.
+    """
+    hit = cache.get(id(pose))
+    if hit is not None and hit[0] is pose:
+        return hit[1]
+    if len(cache) > 16:
+        cache.clear()
+    value = compute()
+    cache[id(pose)] = (pose, value)
+    return value
 
 
 def check_moments(nlp: StringNLP, problem: Problem) -> None:
@@ -290,35 +309,26 @@ class ProblemParameters:
     def _pose_frame(self, pose: GripPose) -> np.ndarray:
         """Return a director model's grip frame entries of p (R column by column), remembered.
 
-        Remembered for the pose objects of the last few calls, as ``_pose_euler``: a stream moves
-        one grip; the others keep their GripPose objects.  Read-only.
+        Remembered for the pose objects of the last few calls (``_by_pose``).  Read-only.
         """
-        cache = self._frame_cache
-        hit = cache.get(id(pose))
-        if hit is not None and hit[0] is pose:
-            return hit[1]
-        if len(cache) > 16:
-            cache.clear()
-        frame = quat_to_matrix(pose.orientation).ravel(order="F")
-        frame.flags.writeable = False
-        cache[id(pose)] = (pose, frame)
-        return frame
+
+        def frame() -> np.ndarray:
+            entries = quat_to_matrix(pose.orientation).ravel(order="F")
+            entries.flags.writeable = False
+            return entries
+
+        return _by_pose(self._frame_cache, pose, frame)
 
     def _pose_euler(self, pose: GripPose) -> tuple[float, float, float]:
         """Return ``euler_from_frame`` of a grip pose in this NLP's frame, remembered.
 
-        ``euler_from_frame`` of a grip pose in this NLP's frame, remembered for the pose objects
-        of the last few calls (a stream moves one grip; the others keep their GripPose objects).
+        Remembered for the pose objects of the last few calls (``_by_pose``).
         """
-        cache = self._euler_cache
-        hit = cache.get(id(pose))
-        if hit is not None and hit[0] is pose:
-            return hit[1]
-        if len(cache) > 16:
-            cache.clear()
-        angles = euler_from_frame(self.nlp.r0, quat_to_matrix(pose.orientation) @ TANGENT_X.T)
-        cache[id(pose)] = (pose, angles)
-        return angles
+        return _by_pose(
+            self._euler_cache,
+            pose,
+            lambda: euler_from_frame(self.nlp.r0, quat_to_matrix(pose.orientation) @ TANGENT_X.T),
+        )
 
     def _grip_reference_angles(self, problem: Problem, z: np.ndarray) -> list[list[float]]:
         """Return (φ, θ, ψ) of shape z at every grip's s.

@@ -14,6 +14,17 @@ from reference.floor_rod import fig3_floor, shoot, solve_discrete, start_angles
 from test_plane_keep import SCENE, L, floor_answer, nearest
 
 
+def answer_and_references(rho: float, delta: float, how: str):
+    """(the default's answer at weight ρ and tolerance δ [m], 'cold' or 'streamed'; the floor
+    reference's two curled equilibria at ρ)."""
+    pr = fig3_floor(rho)
+    refs = [shoot(solve_discrete(pr, 200, start_angles(200, at))) for at in (0.2, 0.8)]
+    options = replace(
+        SCENE.options, output_points=401, update_time_limit=0.0, error_tolerance=delta
+    )
+    return floor_answer(rho, options, how), refs
+
+
 @pytest.mark.parametrize(
     "rho, tol, how",
     [
@@ -40,12 +51,7 @@ def test_fig3_floor_to_a_finer_tolerance(rho, tol, how):
     1e3-1e4x the true error).  Not met, and said so: 1e-6 L at ρ = 2000 (below).
     """
     delta = tol * L
-    pr = fig3_floor(rho)
-    refs = [shoot(solve_discrete(pr, 200, start_angles(200, at))) for at in (0.2, 0.8)]
-    options = replace(
-        SCENE.options, output_points=401, update_time_limit=0.0, error_tolerance=delta
-    )
-    result = floor_answer(rho, options, how)
+    result, refs = answer_and_references(rho, delta, how)
     assert result.status == "ok" and result.stable is True, result.message
     assert result.equilibrium_residual_m <= delta
     assert result.model.as_dict()["tolerance_met"] is True
@@ -70,12 +76,7 @@ def test_fig3_floor_to_1e6_reports_an_estimate_that_bounds_its_error(rho, how):
     row crowded past the lift-off, pressing 1.4e-3 of that force.
     """
     delta = 1e-6 * L
-    pr = fig3_floor(rho)
-    refs = [shoot(solve_discrete(pr, 200, start_angles(200, at))) for at in (0.2, 0.8)]
-    options = replace(
-        SCENE.options, output_points=401, update_time_limit=0.0, error_tolerance=delta
-    )
-    result = floor_answer(rho, options, how)
+    result, refs = answer_and_references(rho, delta, how)
     assert result.status == "ok" and result.stable is True, result.message
     error, _ = nearest(result, refs)
     estimate = result.model.estimated_error_m

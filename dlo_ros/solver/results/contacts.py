@@ -158,27 +158,3 @@ def _slot_loads(
     return [
         ContactLoad(i, "point", np.array([sk]), xk[None, :], f) for sk, xk, f in zip(s, x, forces)
     ]
-
-
-class LaterContactLoads:
-    """``contact_loads`` of one state, worked out on first read (``result.DeferredList``).
-
-    What ``ShapeResult.contact_loads`` holds until read: copies of the state's z and p and its SI
-    multipliers (the state goes on to the next update; the NLP and the problem do not change).
-    Pickled as the list it gives.
-    """
-
-    def __init__(
-        self, nlp: StringNLP, problem: Problem, z: np.ndarray, p: np.ndarray, lam_si: np.ndarray
-    ):
-        self._args = (nlp, problem, z, p, lam_si)
-        self._value: list[ContactLoad] | None = None
-
-    def value(self) -> list[ContactLoad]:
-        """Return the obstacles' loads (computed once)."""
-        if self._value is None:
-            self._value = contact_loads(*self._args)
-        return self._value
-
-    def __reduce__(self) -> tuple[type, tuple[list[ContactLoad]]]:
-        return list, (self.value(),)

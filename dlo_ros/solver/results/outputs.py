@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, cast
 
 import numpy as np
@@ -34,8 +35,8 @@ from ..build.parameters import ProblemParameters
 from ..native.outputs import ComputedOutputs
 from .moment_work import MomentWork, moment_work
 from .residual import FLOOR, EquilibriumResidual, PointAction, equilibrium_residual
-from .contacts import LaterContactLoads
-from .result import ContactLoad, GripWrench, SelfContact, ShapeResult
+from .contacts import contact_loads
+from .result import ContactLoad, GripWrench, Later, SelfContact, ShapeResult
 from ..contact.self_contact import ContactSlots, slot_multiplier
 from .stability import NO_FREEDOM, stability_verdict
 from ..state import SolverState
@@ -383,17 +384,17 @@ class ShapeOutputs:
 
     def _contact_loads(
         self, problem: Problem, state: SolverState
-    ) -> list[ContactLoad] | LaterContactLoads:
+    ) -> list[ContactLoad] | Later[list[ContactLoad]]:
         """Return the obstacles' line loads and point forces (``contacts.contact_loads``).
 
-        [] without obstacle rows; else how to work them out on first read
-        (``contacts.LaterContactLoads``).
+        [] without obstacle rows; else worked out on first read (``result.Later``) from copies of
+        the state's z and p and its SI multipliers (the state goes on to the next update).
         """
         nlp = self.nlp
         if not nlp.obstacle_rows:
             return []
         lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
-        return LaterContactLoads(nlp, problem, state.z.copy(), state.p.copy(), lam_si)
+        return Later(partial(contact_loads, nlp, problem, state.z.copy(), state.p.copy(), lam_si))
 
     def _self_contacts(
         self, z: np.ndarray, lam_si: np.ndarray, slots: ContactSlots | None

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, overload
+from typing import Callable, Generic, TypeVar, overload
 
 import numpy as np
 
 from .summary import ModelSummary
+
+T = TypeVar("T")
+V = TypeVar("V", covariant=True)  # a Later of a float is a Later of an optional float
 
 #: 'unverified': the solver converged but the shape fails the equilibrium check
 #: (equilibrium_residual_m over the tolerance) or passes through itself (passes_through_itself);
@@ -15,58 +18,46 @@ from .summary import ModelSummary
 STATUSES = ("ok", "unverified", "unreachable", "infeasible", "failed", "invalid")
 
 
-class EigenSource(Protocol):
-    """A value computed when first read (``stability.DeferredEigen``)."""
-
-    def value(self) -> float:
-        """Return the value."""
-        ...
+def _the(value: T) -> T:
+    """Return ``value`` (what a pickled ``Later`` is unpickled as)."""
+    return value
 
 
-class Deferred:
-    """A result field given as a number, None, or an ``EigenSource`` read into a number once.
+class Later(Generic[V]):
+    """A value worked out on first read: ``compute()`` once, then remembered.
 
-    ``ShapeResult.min_eigenvalue``: a state judged stable by its inertia
-    (``stability.stability_verdict``) hands over how to compute λ_min rather than λ_min, so that
-    only a caller who reads it pays for the eigenvalue; every read sees a number (or None).  A
-    dataclass field with this descriptor as its default keeps the constructor, ``replace``,
-    ``to_dict`` and pickling as they were (the default is None).
+    What a ``Deferred`` result field holds until a caller reads it (``stability.DeferredEigen``,
+    the obstacles' loads of ``outputs.ShapeOutputs``).  Pickled as its value: a result sent to
+    another process carries the value, not what it is worked out from.
     """
 
-    def __set_name__(self, owner: type, name: str) -> None:
-        self._key = f"_{name}_given"
+    def __init__(self, compute: Callable[[], V]) -> None:
+        self._compute: Callable[[], V] | None = compute
+        self._value: V
 
-    def __get__(self, obj: object, objtype: type | None = None) -> float | None:
-        if obj is None:  # the class's: the dataclass default
-            return None
-        given = obj.__dict__.get(self._key)
-        if given is None or isinstance(given, (float, int)):
-            return given
-        value = float(given.value())
-        obj.__dict__[self._key] = value
-        return value
+    def value(self) -> V:
+        """Return the value, worked out on the first call (its inputs then dropped)."""
+        if self._compute is not None:
+            self._value, self._compute = self._compute(), None
+        return self._value
 
-    def __set__(self, obj: object, value: float | EigenSource | None) -> None:
-        obj.__dict__[self._key] = value
+    def __reduce__(self) -> tuple[Callable[[V], V], tuple[V]]:
+        return _the, (self.value(),)
 
 
-class LoadsSource(Protocol):
-    """A list computed when first read (``contacts.LaterContactLoads``)."""
+class Deferred(Generic[T]):
+    """A result field given as its value or as a ``Later`` of it, read into the value once.
 
-    def value(self) -> list[ContactLoad]:
-        """Return the list."""
-        ...
-
-
-class DeferredList:
-    """A result field given as a list, or a ``LoadsSource`` read into a list once.
-
-    ``ShapeResult.contact_loads``: a warm update hands over how to work out the obstacles' line
-    loads rather than the loads (most callers read the totals, ``contact_forces``), so that only a
-    caller who reads them pays; every read sees a list.  The dataclass default is None, stored as a
-    new empty list: the constructor, ``replace``, ``to_dict``, equality and pickling (the source
-    pickles as its list) work as with a plain field.
+    A solve hands over how to work out what most callers of one update do not read
+    (``ShapeResult.min_eigenvalue`` where the inertia showed the shape stable, ``contact_loads``),
+    so that only a caller who reads it pays; every read sees the value.  A dataclass field with
+    this descriptor as its default keeps the constructor, ``replace``, ``to_dict``, equality and
+    pickling as with a plain field (the class's default is None; ``empty``: what a None given
+    stands for, as a field's default factory).
     """
+
+    def __init__(self, empty: Callable[[], T] | None = None) -> None:
+        self._empty = empty
 
     def __set_name__(self, owner: type, name: str) -> None:
         self._key = f"_{name}_given"
@@ -75,20 +66,18 @@ class DeferredList:
     def __get__(self, obj: None, objtype: type | None = None) -> None: ...
 
     @overload
-    def __get__(self, obj: object, objtype: type | None = None) -> list[ContactLoad]: ...
+    def __get__(self, obj: object, objtype: type | None = None) -> T: ...
 
-    def __get__(self, obj: object, objtype: type | None = None) -> list[ContactLoad] | None:
+    def __get__(self, obj: object, objtype: type | None = None) -> T | None:
         if obj is None:  # the class's: the dataclass default
             return None
-        given = obj.__dict__[self._key]
-        if isinstance(given, list):
-            return given
-        value = given.value()
-        obj.__dict__[self._key] = value
-        return value
+        given = obj.__dict__.get(self._key)
+        if isinstance(given, Later):
+            given = obj.__dict__[self._key] = given.value()
+        return given
 
-    def __set__(self, obj: object, value: list[ContactLoad] | LoadsSource | None) -> None:
-        obj.__dict__[self._key] = [] if value is None else value
+    def __set__(self, obj: object, value: T | Later[T] | None) -> None:
+        obj.__dict__[self._key] = self._empty() if value is None and self._empty else value
 
 
 @dataclass
@@ -162,7 +151,7 @@ class ShapeResult:
     normal to the string's plane, ``results/moment_work.py``), and energy_note then says why.
     min_eigenvalue: smallest eigenvalue of the Hessian of the Lagrangian reduced to the null space
     of the active constraints, in units of Rf_max/L per (coefficient)² — negative means unstable;
-    where the inertia showed the shape stable, computed when first read (``Deferred``).
+    where the inertia showed the shape stable, worked out when first read (``Deferred``).
     constraint_violation [m or rad]: the largest residual of an equality or violated inequality.
     equilibrium_residual_m [m]: the strong-form force and moment balance of the returned shape, as
     an equivalent centreline error (solver/results/residual.py); NaN when there is no shape.
@@ -174,7 +163,7 @@ class ShapeResult:
     than 2·radius (solver/results/self_pass.py); such a result is 'unverified', never 'ok'.
     contact_loads: the obstacles' contact forces as the physics has them: distributed line loads
     over stretches of contact and point forces (``ContactLoad``); ``contact_forces`` keeps each
-    obstacle's total; a warm update's are computed when first read (``DeferredList``).
+    obstacle's total; a solve's are worked out when first read (``Deferred``).
     unstable_met: the first unstable stationary point (status ok, stable False)
     this solve met and left along its negative-curvature mode before reaching this answer, None
     when it met none (its shape, energy and negative eigenvalue: the saddle next to this state).
@@ -191,7 +180,7 @@ class ShapeResult:
     grips: dict[str, GripWrench] = field(default_factory=dict)
     contact_forces: dict[int, np.ndarray] = field(default_factory=dict)
     stable: bool | None = None
-    min_eigenvalue: Deferred = Deferred()
+    min_eigenvalue: Deferred[float | None] = Deferred()
     iterations: int = 0
     solve_time_ms: float = 0.0
     constraint_violation: float = float("nan")
@@ -208,7 +197,7 @@ class ShapeResult:
     self_contacts: list[SelfContact] = field(default_factory=list)
     min_self_distance: float = float("nan")
     passes_through_itself: bool = False
-    contact_loads: DeferredList = DeferredList()
+    contact_loads: Deferred[list[ContactLoad]] = Deferred(list)
     unstable_met: ShapeResult | None = None
 
     @property

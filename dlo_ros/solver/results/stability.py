@@ -25,6 +25,7 @@ from ..update.newton import derivatives
 from ..build.nlp import StringNLP
 from ..state import Inertia, SolverState
 from .inertia import stable_by_inertia
+from .result import Later
 
 #: what a result says when its active rows leave the shape no freedom (no eigenvalue, stable)
 NO_FREEDOM = "stable: the constraints leave the shape no freedom (the reduced Hessian is empty)"
@@ -109,35 +110,26 @@ def reduced_eigenpair(h: np.ndarray, jac: np.ndarray) -> tuple[float, np.ndarray
     return value, basis @ vector
 
 
-class DeferredEigen:
-    """λ_min = min eig(Nᵀ H N) of a state judged stable by its inertia, computed when first read.
+class DeferredEigen(Later[float]):
+    """λ_min = min eig(Nᵀ H N) of a state judged stable by its inertia, worked out when first read.
 
-    What ``ShapeResult.min_eigenvalue`` holds until read (``result.py``): copies of H and the held
-    rows' J (the state goes on to the next update), so that a caller who asks (the CLI's JSON, a
-    dataset row, the node's diagnostics, a recording) gets the number ``min_reduced_eigenvalue``
-    gives, and a warm update that nobody asks pays only for the LDLᵀ.  The rows leave freedom
-    (the inertia counts m < n rows of full rank), so the value is a number, positive but for
-    round-off.  Pickled as that number: a result sent to another process carries no n² matrix.
+    What ``ShapeResult.min_eigenvalue`` holds until read (``result.Deferred``): copies of H and
+    the held rows' J (the state goes on to the next update), so that a caller who asks (the CLI's
+    JSON, a dataset row, the node's diagnostics, a recording) gets the number
+    ``min_reduced_eigenvalue`` gives, and a warm update that nobody asks pays only for the LDLᵀ.
+    The rows leave freedom (the inertia counts m < n rows of full rank), so the value is a number,
+    positive but for round-off.  Pickled as that number (``result.Later``).
     """
 
     def __init__(self, hessian: np.ndarray, jacobian: np.ndarray):
-        self._h, self._jac = hessian, jacobian
-        self._pair: tuple[float, np.ndarray] | None = None
+        super().__init__(lambda: _smallest(hessian, jacobian))
 
-    def pair(self) -> tuple[float, np.ndarray]:
-        """Return (λ_min, its eigenvector in z), computed once."""
-        if self._pair is None:
-            pair = reduced_eigenpair(self._h, self._jac)
-            assert pair is not None  # m < n rows of full rank leave freedom
-            self._pair = pair
-        return self._pair
 
-    def value(self) -> float:
-        """Return λ_min (Rf_max/L per (scaled unknown)², as ``min_reduced_eigenvalue``)."""
-        return self.pair()[0]
-
-    def __reduce__(self) -> tuple[type, tuple[float]]:
-        return float, (self.value(),)
+def _smallest(hessian: np.ndarray, jacobian: np.ndarray) -> float:
+    """Return λ_min of Nᵀ H N (Rf_max/L per (scaled unknown)², as ``min_reduced_eigenvalue``)."""
+    pair = reduced_eigenpair(hessian, jacobian)
+    assert pair is not None  # m < n rows of full rank leave freedom
+    return float(pair[0])
 
 
 def held_rows(

@@ -81,7 +81,7 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
     if wide <= n - 1 and most_turning(wide - 1) < np.pi / 2 - 1e-9:
         if _subsample_apart(points, wide, reach, float(lengths.max())):
             return True
-    return big > n - 1 or _min_squared(points, _off_band(n, big)) > reach**2 * (1 + 1e-9) + 1e-15
+    return big > n - 1 or _min_squared(points, _band(n, 1, big)[1]) > reach**2 * (1 + 1e-9) + 1e-15
 
 
 @dataclass(frozen=True)
@@ -133,20 +133,20 @@ def _subsample_apart(points: np.ndarray, wide: int, reach: float, longest: float
     |x_a − x_b| ≥ |x_a' − x_b'| − j·``longest`` (the longest step), b' − a' ≥ ``wide`` − j: all
     such pairs beyond ``reach`` + j·``longest`` settle it with (n/j)² distances, not n².
     """
-    idx, band = _subsample_band(len(points), wide)
     j = SUBSAMPLE
+    idx, band = _band(len(points), j, wide - j)
     return _min_squared(points[idx], band) > (reach + j * longest) ** 2 * (1 + 1e-9) + 1e-15
 
 
-@functools.lru_cache(maxsize=8)
-def _subsample_band(n: int, wide: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``_subsample_apart``'s samples (every SUBSAMPLE-th and the last) and their band.
+@functools.lru_cache(maxsize=16)
+def _band(n: int, step: int, gap: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the samples (every ``step``-th of n, and the last) and their band, read-only.
 
-    The band is 0 where two of them are at least ``wide`` − SUBSAMPLE apart, +inf elsewhere.
+    The band is 0 where two of them are at least ``gap`` samples apart (b − a ≥ gap), +inf
+    elsewhere: ``_min_squared`` then measures those pairs alone.
     """
-    j = SUBSAMPLE
-    idx = np.unique(np.append(np.arange(0, n, j), n - 1))
-    band = np.where(idx[None, :] - idx[:, None] >= wide - j, 0.0, np.inf)
+    idx = np.unique(np.append(np.arange(0, n, step), n - 1))
+    band = np.where(idx[None, :] - idx[:, None] >= gap, 0.0, np.inf)
     idx.flags.writeable = band.flags.writeable = False
     return idx, band
 
@@ -163,12 +163,3 @@ def _min_squared(points: np.ndarray, band: np.ndarray) -> float:
     out -= gram
     out += band
     return float(out.min())
-
-
-@functools.lru_cache(maxsize=8)
-def _off_band(n: int, k: int) -> np.ndarray:
-    """(n, n): 0 where b − a ≥ k, +inf elsewhere."""
-    out = np.full((n, n), np.inf)
-    out[np.triu_indices(n, k)] = 0.0
-    out.flags.writeable = False
-    return out

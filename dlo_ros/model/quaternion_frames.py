@@ -17,52 +17,30 @@ FEW_QUATERNIONS = 8
 
 
 def quat_to_frame(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (…, 3, 3) of quaternions (…, 4) (x, y, z, w), any non-zero norm."""
+    """Rotation matrices (…, 3, 3) of quaternions (…, 4) (x, y, z, w), any non-zero norm.
+
+    The columns are ``frame_columns``' (t, d1, d2); a few quaternions in Python floats.
+    """
     q = np.asarray(q, dtype=float)
     if q.ndim == 2 and q.shape[0] <= FEW_QUATERNIONS and q.shape[1] == 4:
         few = _few_quat_to_frame(q.tolist())
         if few is not None:
             return few
-    x, y, z, w = np.moveaxis(q, -1, 0)
-    n2 = x * x + y * y + z * z + w * w
-    r = np.stack(
-        [
-            np.stack(
-                [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1
-            ),
-            np.stack(
-                [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1
-            ),
-            np.stack(
-                [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1
-            ),
-        ],
-        -2,
-    )
-    return r / n2[..., None, None]
+    columns = frame_columns(np.moveaxis(q, -1, 0), np)
+    return np.stack([np.stack(column, -1) for column in columns], -1)
 
 
 def _few_quat_to_frame(rows: list[list[float]]) -> np.ndarray | None:
-    """``quat_to_frame`` of a few quaternions, by its expressions in its order (the same numbers).
+    """``quat_to_frame`` of a few quaternions, by ``frame_columns`` on floats (the same numbers).
 
     None for a zero quaternion (numpy's path then gives its nan and warning).
     """
-    out = []
+    out: list[float] = []
     for x, y, z, w in rows:
-        n2 = x * x + y * y + z * z + w * w
-        if n2 == 0.0:
+        if x * x + y * y + z * z + w * w == 0.0:
             return None
-        out += [
-            (w * w + x * x - y * y - z * z) / n2,
-            2 * (x * y - w * z) / n2,
-            2 * (x * z + w * y) / n2,
-            2 * (x * y + w * z) / n2,
-            (w * w - x * x + y * y - z * z) / n2,
-            2 * (y * z - w * x) / n2,
-            2 * (x * z - w * y) / n2,
-            2 * (y * z + w * x) / n2,
-            (w * w - x * x - y * y + z * z) / n2,
-        ]
+        t, d1, d2 = frame_columns((x, y, z, w), None)
+        out += [t[0], d1[0], d2[0], t[1], d1[1], d2[1], t[2], d1[2], d2[2]]
     return np.array(out).reshape(len(rows), 3, 3)
 
 

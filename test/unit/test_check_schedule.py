@@ -25,7 +25,6 @@ K = 7  # the update whose shape is checked
 class FakeSnap:
     update: int = K
     generation: int = 0
-    full: object | None = None  # a 3D stream's: no 3D model checks it
 
 
 @dataclass
@@ -91,6 +90,7 @@ class FakeWorker:
 class FakeChoice:
     order: int = 12
     plane_kept: bool = True
+    may_leave_plane: bool = False  # no 3D model checks it
 
     def key(self):
         return (self.order,)

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from .checks import CheckSnapshot, CheckVerdict
-from .choice import ORDERS
+from .choice import ORDERS, full_choice
 from .lead_in import LeadIn
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
@@ -117,8 +117,8 @@ def start_check(auto: AutoShapeSolver, snap: CheckSnapshot) -> PendingCheck:
     if auto.worker.background:
         i = ORDERS.index(snap.choice.order)
         keys = {("",) + replace(snap.choice, order=o).key() for o in ORDERS[max(i - 1, 0) : i + 2]}
-        if snap.full is not None:  # the 3D model that checks a planar shape (shadows.py)
-            keys.add(("",) + snap.full.key())
+        if snap.choice.may_leave_plane:  # the 3D model that checks a planar shape (shadows.py)
+            keys.add(("",) + full_choice(snap.choice, snap.problem).key())
         decided: Future = Future()
         job = auto.worker.submit(_checked, keys, auto, snap, decided, lead)
         return PendingCheck(apply_at, job=job, decided=decided, lead=lead)

@@ -47,8 +47,6 @@ class CheckSnapshot:
     ``touching``: it presses on an obstacle; ``update``: the streamed-update count then;
     ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (only a streamed
     update's check: a cold solve's or a query's runs to its end, ``update/time_limit.py``).
-    ``full``: the 3D model of a planar ``choice`` that checks it and that a switch to 3D would
-    stream on; None when the stream may not leave the plane.
     """
 
     inner: ShapeSolver
@@ -63,7 +61,6 @@ class CheckSnapshot:
     touching: bool = False
     update: int = 0
     limited: bool = True
-    full: ModelChoice | None = None
 
 
 @dataclass
@@ -102,7 +99,6 @@ class ShapeEvidence:
         self.pool, self.snap, self.tolerance = pool, snap, tolerance
         self.lower, self.lower_tried = lower
         self.problem = snap.problem
-        self.full = snap.full
         self.touching = snap.touching
         self.residual_m = snap.residual_m
         self.on_elements = has_elements(snap.inner) and snap.state is not None

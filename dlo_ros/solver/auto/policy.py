@@ -36,12 +36,10 @@ class Evidence(Protocol):
     ``problem``: the scene of the shape; ``touching``: it presses on an obstacle;
     ``residual_m``: its strong-form equilibrium residual [m] (inf when unknown); ``on_elements``:
     its model is on an element mesh (and the state is known); ``node_rows``: its obstacle rows sit
-    on the mesh nodes (the mesh estimate counts the cut between them); ``full``: the 3D model of
-    a planar choice, which the planar-instability measurement uses (None: 3D, or not known).
+    on the mesh nodes (the mesh estimate counts the cut between them).
     """
 
     problem: Problem
-    full: ModelChoice | None
     touching: bool
     residual_m: float
     on_elements: bool
@@ -121,8 +119,7 @@ def decide(ev: Evidence, choice: ModelChoice, tolerance: float, coarsen: bool) -
     # a planar shape unstable in 3D leaves its plane (a twist-free strip under compression),
     # unless the scene holds it there (solver.plane: keep)
     if choice.may_leave_plane and (eig := ev.planar_instability()) is not None:
-        full = ev.full or full_choice(choice, ev.problem)
-        to = replace(full, estimated_error_m=NAN, order_error_m=NAN, reasons=list(full.reasons))
+        to = replace(full_choice(choice, ev.problem), estimated_error_m=NAN, order_error_m=NAN)
         why = f"planar shape unstable in 3D (eigenvalue {eig:.3g}): full model"
     # the string stretches by more than δ/2 under its grip forces
     elongation = None if to is not None or choice.stretch else ev.elongation_bound()

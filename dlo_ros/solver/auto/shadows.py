@@ -53,13 +53,12 @@ def shadow_error(pool: ModelPool, snap: CheckSnapshot, choice: ModelChoice) -> f
 def planar_3d_eigenvalue(pool: ModelPool, snap: CheckSnapshot) -> float | None:
     """Return the 3D model's smallest reduced-Hessian eigenvalue at the embedded planar shape.
 
-    None when that is stable.  The 3D model is the snapshot's ``full``, the pooled model a switch
-    to 3D streams on: a check that refines a planar mesh builds the new mesh's one too
-    (``checks.py``), so a check of the new model builds nothing, and a switch to 3D meanwhile
-    waits for the check at most.
+    None when that is stable.  The 3D model is the pooled model a switch to 3D streams on: a
+    check that refines a planar mesh builds the new mesh's one too (``checks.py``), so a check of
+    the new model builds nothing, and a switch to 3D meanwhile waits for the check at most.
     """
     full = pool.solver_for(
-        snap.full or full_choice(snap.choice, snap.problem),
+        full_choice(snap.choice, snap.problem),
         snap.problem,
         stream=False,
         source=snap.inner,

@@ -24,7 +24,7 @@ from ..shape_solver import ShapeSolver
 from . import escalate
 from .check_schedule import PendingCheck, due, lead_step, start_check
 from .checks import CheckSnapshot, CheckVerdict
-from .choice import ModelChoice, full_choice
+from .choice import ModelChoice
 from .reach import touches_obstacle
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
@@ -180,7 +180,6 @@ def snapshot(
         touches_obstacle(result),
         auto.book.index,
         limited,
-        full_choice(choice, problem) if choice.may_leave_plane else None,
     )
 
 

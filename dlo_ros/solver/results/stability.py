@@ -41,10 +41,12 @@ def min_reduced_eigenvalue(nlp: StringNLP, fns: NlpFunctions, state: SolverState
     rows, which leave the null space as it is.
     """
     if isinstance(state.reduced_eigen, tuple) and state.hessian is not None:
-        value, direction = state.reduced_eigen
-        state.unstable_direction = signed(direction) if value < 0 else None
-        return value
-    pair = reduced_eigenpair(*held_derivatives(nlp, fns, state))
+        return _noted(state, state.reduced_eigen)
+    return _noted(state, reduced_eigenpair(*held_derivatives(nlp, fns, state)))
+
+
+def _noted(state: SolverState, pair: tuple[float, np.ndarray] | None) -> float | None:
+    """Return λ_min of ``pair`` (None: no freedom), its eigenvector noted where it is negative."""
     if pair is None:
         return None
     value, direction = pair
@@ -60,20 +62,23 @@ def stability_verdict(
     Stable by the inertia of [H Jᵀ; J 0] of the held rows (the compiled loop's verdict,
     ``Inertia.STABLE``, or ``inertia.stable_by_inertia`` here): (True, ``DeferredEigen``), λ_min
     computed only when read.  Otherwise (more negative eigenvalues, a tiny pivot, a rank-deficient
-    J) λ_min = ``min_reduced_eigenvalue`` and ``is_stable``'s verdict, or (True, None) when the
-    held rows leave no freedom.  Both agree wherever λ_min's sign is clear of the neutral tolerance
-    (test_inertia_verdict.py).  Fills the state's derivatives as ``min_reduced_eigenvalue``.
+    J) λ_min as ``min_reduced_eigenvalue`` gives it, on the same H and J, and ``is_stable``'s
+    verdict, or (True, None) when the held rows leave no freedom.  Both agree wherever λ_min's
+    sign is clear of the neutral tolerance (test_inertia_verdict.py).  Fills the state's
+    derivatives as ``min_reduced_eigenvalue``.
     """
-    if not isinstance(state.reduced_eigen, tuple) or state.hessian is None:
+    if isinstance(state.reduced_eigen, tuple) and state.hessian is not None:
+        value = _noted(state, state.reduced_eigen)  # the compiled loop's pair
+    else:
         by_loop = state.reduced_eigen is Inertia.STABLE and state.hessian is not None
         h, jac = held_derivatives(nlp, fns, state)
         if by_loop or stable_by_inertia(h, jac):
             state.unstable_direction = None
             return True, DeferredEigen(np.array(h), np.array(jac))
-    value = min_reduced_eigenvalue(nlp, fns, state)
+        value = _noted(state, reduced_eigenpair(h, jac))
     if value is None:
         return True, None
-    assert state.hessian is not None  # min_reduced_eigenvalue evaluated it
+    assert state.hessian is not None  # held_derivatives evaluated it
     return is_stable(value, state.hessian, state.unstable_direction), value
 
 

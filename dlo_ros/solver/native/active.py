@@ -15,13 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from .cache_store import load as load_library
-from .blocks import NodeBlocks, eigen_lapack, lapack_pointer
+from .blocks import NodeBlocks, eigen_lapack, lapack_pointer, verdict
 from .outputs import ComputedOutputs, UpdateOutputs
 from ..state import Inertia
 from .settings import (
     CONVERGED,
-    EIGEN_FOUND,
-    EIGEN_INERTIA_STABLE,
     JOIN_TOLERANCE,
     LEAVE_TOLERANCE,
     NEWTON_CHORD_CONTRACTION,
@@ -215,10 +213,7 @@ class ActiveNewton:
             evaluations.value,
         )
         if code == CONVERGED:
-            if self._eig_code.value == EIGEN_FOUND:
-                out.eigen = (self._eig_value.value, self._direction.copy())
-            elif self._eig_code.value == EIGEN_INERTIA_STABLE:
-                out.eigen = Inertia.STABLE
+            out.eigen = verdict(self._eig_code.value, self._eig_value.value, self._direction)
             if self.after is not None:
                 out.outputs = self.after.collect(z, p)[1]
         return out

@@ -12,6 +12,9 @@ import ctypes
 import numpy as np
 from scipy.linalg import cython_blas, cython_lapack
 
+from ..state import Inertia
+from .settings import EIGEN_FOUND, EIGEN_INERTIA_STABLE
+
 
 def lapack_pointer(name: str) -> int:
     """Return the address of SciPy's LAPACK (or BLAS) routine ``name``.
@@ -53,6 +56,19 @@ def eigen_lapack(inertia: bool = True) -> EigenLapackStruct:
     """
     names = ("dgeqp3", "dorgqr", "dsyevr", "dgemm", "dsytrf")
     return EigenLapackStruct(*(lapack_pointer(name) for name in names), CHUNK_WORK, int(inertia))
+
+
+def verdict(
+    code: int, value: float, direction: np.ndarray
+) -> tuple[float, np.ndarray] | Inertia | None:
+    """Return what a loop's stability verdict says (``SolverState.reduced_eigen``).
+
+    ``code`` from ``dlo_stability``: the eigenpair (``value``, a copy of ``direction``) it found,
+    ``Inertia.STABLE`` when the inertia settled it, None otherwise (no freedom, LAPACK failed).
+    """
+    if code == EIGEN_FOUND:
+        return value, direction.copy()
+    return Inertia.STABLE if code == EIGEN_INERTIA_STABLE else None
 
 
 class _NodeMapStruct(ctypes.Structure):

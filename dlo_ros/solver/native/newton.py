@@ -65,7 +65,7 @@ import numpy as np
 from .cache_store import UnusableLibrary, load as load_library
 from .compiler import compiler, library_lock
 from .active import ActiveNewton, ActiveOutcome
-from .blocks import CHUNK_WORK, NodeBlocks, WithNodePart, eigen_lapack, lapack_pointer
+from .blocks import CHUNK_WORK, NodeBlocks, WithNodePart, eigen_lapack, lapack_pointer, verdict
 from .build import (
     ACTIVE_DRIVER,
     active_library_path,
@@ -78,8 +78,6 @@ from .outputs import ComputedOutputs, UpdateOutputs
 from ..state import Inertia
 from .settings import (
     CONVERGED,
-    EIGEN_FOUND,
-    EIGEN_INERTIA_STABLE,
     EVALUATION_FAILED,
     NEWTON_CHORD_CONTRACTION,
     NEWTON_CHORD_START,
@@ -307,10 +305,7 @@ class NativeNewton:
             self._evaluations.value,
         )
         if code == CONVERGED:
-            if self._eig_code.value == EIGEN_FOUND:
-                out.eigen = (self._eig_value.value, self._direction.copy())
-            elif self._eig_code.value == EIGEN_INERTIA_STABLE:
-                out.eigen = Inertia.STABLE
+            out.eigen = verdict(self._eig_code.value, self._eig_value.value, self._direction)
             if after is not None:
                 out.g, out.outputs = after.collect(out.u[: self.n], self._p)
         return out

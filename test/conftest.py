@@ -19,10 +19,21 @@ def pytest_collection_modifyitems(items):
             item.add_marker(pytest.mark.ros)
 
 
-@pytest.fixture(autouse=True)
-def _no_background_compile(monkeypatch):
+@pytest.fixture(scope="session", autouse=True)
+def _no_background_compile():
     """Tests use interpreted CasADi derivatives (compiling a scene takes gcc ~1 min); the compiled path
-    has its own test that opts back in."""
+    has its own tests that opt back in (and restore it).  Session-wide, so that module-scoped
+    fixtures, which pytest sets up before any function-scoped one, and the worker processes they
+    spawn solve interpreted too: a background gcc there took a CI core, and its library arriving
+    mid-chunk made a data set's answers depend on timing."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("DLO_NO_COMPILE", "1")
+        yield
+
+
+@pytest.fixture(autouse=True)
+def _no_compile_in_each_test(monkeypatch):
+    """Each test starts with compiling off, whatever a test before it left."""
     monkeypatch.setenv("DLO_NO_COMPILE", "1")
 
 

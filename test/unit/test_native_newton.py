@@ -34,16 +34,14 @@ def targets(scene, count: int) -> list[np.ndarray]:
 
 @pytest.fixture(scope="module")
 def solvers(tmp_path_factory):
-    import os
-
-    os.environ["DLO_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
-    os.environ.pop("DLO_NO_COMPILE", None)
-    scene = load_scene("default_cable")
-    options = SolverOptions(model="full", order=12)
-    native = ShapeSolver(scene.problem, options, compile="blocking")
-    interpreted = ShapeSolver(scene.problem, options, compile="off")
-    yield scene, native, interpreted
-    os.environ.pop("DLO_CACHE_DIR", None)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("DLO_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        mp.delenv("DLO_NO_COMPILE", raising=False)
+        scene = load_scene("default_cable")
+        options = SolverOptions(model="full", order=12)
+        native = ShapeSolver(scene.problem, options, compile="blocking")
+        interpreted = ShapeSolver(scene.problem, options, compile="off")
+        yield scene, native, interpreted
 
 
 def test_a_stream_with_the_compiled_loop_equals_the_interpreted_one(solvers):

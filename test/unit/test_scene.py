@@ -30,17 +30,6 @@ REQUIRED_SCENES = {
 }
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _no_compile():
-    """Solving here needs no compiled KKT function: skip the ~1 min gcc build of each new structure."""
-    with pytest.MonkeyPatch.context() as mp:
-        import os
-
-        if "DLO_NO_COMPILE" not in os.environ:
-            mp.setenv("DLO_NO_COMPILE", "1")
-        yield
-
-
 def minimal() -> dict:
     return {
         "name": "t",

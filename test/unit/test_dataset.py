@@ -403,17 +403,22 @@ def test_ctrl_c_keeps_the_written_shards_and_resume_finishes(tmp_path, stop):
     out = tmp_path / "out"
     args = ["dataset", "default_cable", "--plan", str(plan), "--out", str(out), "--workers", "2", "--quiet"]
     env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    # niced (its workers too): on a loaded machine this process, polling, must not wake only after
+    # the run has ended
     proc = subprocess.Popen([sys.executable, "-m", "dlo_ros.cli", *args], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=lambda: os.nice(10))
     deadline = time.monotonic() + 300
     while not list((out / "shards").glob("part-*.parquet")) and time.monotonic() < deadline:
-        time.sleep(0.05)
+        time.sleep(0.02)
+    assert proc.poll() is None, "the run ended before it could be interrupted"
     proc.send_signal(stop)
     _, err = proc.communicate(timeout=120)
     written = len(list((out / "shards").glob("part-*.parquet")))
     assert proc.returncode == 130 and "--resume" in err and "Traceback" not in err
     assert 1 <= written < 12 and not list((out / "shards").glob(".*tmp"))
     assert not read_manifest(out)["complete"]
+    if stop != signal.SIGINT:
+        return  # what --resume then does is the same after either signal: checked once, below
     r = _dlo(*args, "--resume")
     assert r.returncode == 0, r.stderr
     assert "60 of 60 samples stored" in r.stdout and f"{5 * written} were there already" in r.stdout

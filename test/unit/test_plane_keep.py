@@ -16,6 +16,7 @@ good shape kept), a scene out of one plane, and model 'full'.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 
 import numpy as np
@@ -34,11 +35,19 @@ L = SCENE.problem.string.length
 TOL = 1e-3 * L  # the default solver.error_tolerance
 
 
+@functools.lru_cache(maxsize=None)
+def floor_references(rho: float) -> tuple[list, list]:
+    """(the discrete rods, their shooting references) of the two curled equilibria at weight ρ
+    [N/m] (curl near s = 0 and near s = L): ~7 s each ρ, so computed once per process."""
+    pr = fig3_floor(rho)
+    rods = [solve_discrete(pr, 200, start_angles(200, at)) for at in (0.2, 0.8)]
+    return rods, [shoot(rod) for rod in rods]
+
+
 @pytest.fixture(scope="module")
 def references():
     """The two mirror-image lowest equilibria at ρ = 3000 (curl near s = 0 and near s = L)."""
-    pr = fig3_floor(3000.0)
-    return [shoot(solve_discrete(pr, 200, start_angles(200, at))) for at in (0.2, 0.8)]
+    return floor_references(3000.0)[1]
 
 
 def nearest(result, refs):
@@ -158,9 +167,7 @@ def test_fig3_floor_at_each_weight_against_the_equilibrium_it_finds(rho, how):
     stream's mesh changes moved the strip along the equal-energy slide its flat runs allow until
     the residual's grid was split at the obstacle rows (bench/results/fig3_floor_default.md).
     """
-    pr = fig3_floor(rho)
-    rods = [solve_discrete(pr, 200, start_angles(200, at)) for at in (0.2, 0.8)]
-    refs = [shoot(rod) for rod in rods]
+    rods, refs = floor_references(rho)
     # no update time limit: a test must not depend on timing
     options = replace(SCENE.options, output_points=401, update_time_limit=0.0)
     result = floor_answer(rho, options, how, until_checked=True)

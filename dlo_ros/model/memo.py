@@ -20,6 +20,17 @@ T = TypeVar("T")
 MEMO_BYTES = 64 * 2**20
 
 
+def _frozen(value: T) -> T:
+    """``value`` with its arrays read-only: an entry is shared by every caller, so one that wrote
+    into it would change what later callers read (a poisoned memo raises instead)."""
+    if isinstance(value, np.ndarray):
+        value.flags.writeable = False
+    elif isinstance(value, tuple):
+        for v in value:
+            _frozen(v)
+    return value
+
+
 def _nbytes(value: object) -> int:
     if isinstance(value, np.ndarray):
         return value.nbytes
@@ -44,7 +55,7 @@ class ArrayMemo(Generic[T]):
         if hit is not None:
             self._entries.move_to_end(key)
             return hit[0]
-        value = make(s)
+        value = _frozen(make(s))
         size = _nbytes(value)
         if size <= self.limit:
             self._entries[key] = (value, size)

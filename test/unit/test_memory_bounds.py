@@ -147,3 +147,16 @@ def test_the_models_matrix_memo_is_bounded_in_bytes():
     assert len(made) == 32
     big = memo.get("W", np.array([99.0]), lambda s: np.zeros(20_000))  # over the limit: not kept
     assert big.size == 20_000 and memo.nbytes <= memo.limit
+
+
+def test_a_memo_entry_cannot_be_written_into():
+    """Every caller shares a memo's entries: one written into in place would change what the next
+    caller reads.  Entries (arrays, and the arrays of a tuple) are read-only."""
+    from dlo_ros.model.memo import ArrayMemo
+
+    memo: ArrayMemo[tuple[np.ndarray, np.ndarray]] = ArrayMemo()
+    b, w = memo.get("BW", np.array([0.5]), lambda s: (np.ones((1, 3)), np.ones(1)))
+    for a in (b, w):
+        with pytest.raises(ValueError, match="read-only"):
+            a *= 2.0
+    assert memo.get("BW", np.array([0.5]), lambda s: (np.zeros((1, 3)), np.zeros(1)))[0][0, 0] == 1.0

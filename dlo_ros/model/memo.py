@@ -21,8 +21,11 @@ MEMO_BYTES = 64 * 2**20
 
 
 def _frozen(value: T) -> T:
-    """``value`` with its arrays read-only: an entry is shared by every caller, so one that wrote
-    into it would change what later callers read (a poisoned memo raises instead)."""
+    """Return ``value`` with its arrays made read-only.
+
+    An entry is shared by every caller: one that wrote into it would change what later callers
+    read, so a write raises instead.
+    """
     if isinstance(value, np.ndarray):
         value.flags.writeable = False
     elif isinstance(value, tuple):

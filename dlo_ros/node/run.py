@@ -21,6 +21,7 @@ from ..scene import SceneError, load_scene
 from ..text import one_line_warnings
 from . import params as P
 from .dlo_node import DloNode, StartupError
+from .hot_path import new_executor
 from .managed import ManagedDloNode
 from .signals import exit_on_second_signal, node_starting, terminate_children
 from .validation import safe_text
@@ -42,21 +43,6 @@ def default_params_file() -> str | None:
     except (FileNotFoundError, OSError):
         return None
     return str(path) if path.is_file() else None
-
-
-def new_executor(context: rclpy.context.Context | None = None) -> SingleThreadedExecutor:
-    """Build the node's executor (on ``context``, default rclpy's).
-
-    A SIGINT or SIGTERM during rclpy's constructor (which shuts the context down under it) leaves
-    a half-built executor whose ``__del__`` reads an attribute the constructor had not set yet:
-    "Exception ignored ... AttributeError: ... '_sigint_gc'" with a traceback at exit.  The
-    attribute is set first, so a failed construction leaves nothing for ``__del__`` to trip on.
-    """
-    executor = SingleThreadedExecutor.__new__(SingleThreadedExecutor)
-    # ignore: rclpy types the attribute as a guard condition; None is what its __del__ tolerates
-    executor._sigint_gc = None  # type: ignore[assignment]
-    executor.__init__(context=context)  # type: ignore[misc]  # __init__ called on purpose
-    return executor
 
 
 def check_only(prepared: P.NodeArgs) -> int:
@@ -120,13 +106,15 @@ def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
             )
             return 2
         node = ManagedDloNode() if prepared.managed else DloNode()
-        # One thread: it only converts and checks messages (the solver has its own thread, and the
-        # services await it as coroutines).  rclpy's MultiThreadedExecutor is slower per message
-        # here and competes with the solver thread for the GIL. rclpy.experimental.EventsExecutor
-        # (rclpy 7.1.6 wheels) cannot serve this node: its spin() livelocks before dispatching
-        # anything (a steady-clock deadline of max() overflows in the wheel's
-        # pthread_cond_timedwait), coroutine services fail (ros2/rclpy#1473, not in Jazzy) and
-        # guard conditions are refused (bench/results/events_executor_raw.md).
+        # One thread for the main node: it only converts and checks messages (the solver has its
+        # own thread, the services await it as coroutines, and the target subscriptions have
+        # their own small node, executor and thread: hot_path.py, stopped by node.close).  rclpy's
+        # MultiThreadedExecutor is slower per message here and competes with the solver thread
+        # for the GIL. rclpy.experimental.EventsExecutor (rclpy 7.1.6 wheels) cannot serve this
+        # node: its spin() livelocks before dispatching anything (a steady-clock deadline of max()
+        # overflows in the wheel's pthread_cond_timedwait), coroutine services fail
+        # (ros2/rclpy#1473, not in Jazzy) and guard conditions are refused
+        # (bench/results/events_executor_raw.md).
         executor = new_executor()
         executor.add_node(node)
         if isinstance(node, ManagedDloNode):

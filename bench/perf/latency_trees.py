@@ -64,9 +64,14 @@ def run(label: str, tree: Path, extra: list[str], out: Path) -> dict[str, float]
     """Run ``tree``'s node_latency.py with ``extra``; return its figures."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         p for p in (str(tree), os.environ.get("PYTHONPATH", "")) if p))
-    subprocess.run([sys.executable, str(tree / "bench/perf/node_latency.py"), *extra,
-                    "--out", str(out)], cwd=tree, env=env, check=True,
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=1800)
+    log = out.with_suffix(".log")
+    with open(log, "wb") as f:
+        done = subprocess.run([sys.executable, str(tree / "bench/perf/node_latency.py"), *extra,
+                               "--out", str(out)], cwd=tree, env=env, stdout=f,
+                              stderr=subprocess.STDOUT, timeout=1800)
+    if done.returncode != 0:
+        tail = log.read_text(errors="replace").splitlines()[-15:]
+        raise RuntimeError(f"{label}: node_latency.py failed ({done.returncode}):\n" + "\n".join(tail))
     return figures(out.read_text(encoding="utf-8"))
 
 

@@ -1,14 +1,20 @@
 """The node's hot path: the target subscriptions on a small hidden node, spun in their own thread.
 
 Why: rclpy's SingleThreadedExecutor rebuilds its wait set in Python, holding the GIL, on every
-wake-up, at a cost that grows with what it waits on.  The node's main executor waits on about 18
-entities (parameter and shape services, timers, guard conditions, QoS-event handlers) and took
-about 0.9 ms per wake-up; a target arriving waited for that, and so did the solver thread the
-target woke (bench/results/events_executor_raw.md, node_latency_hot.md).  Here a target wakes only
-a node that holds the target subscriptions (a wait set of those, their QoS-event handlers and the
-executor's two guard conditions), spun by its own executor in its own thread; the callback hands
-the checked poses straight to the engine's slot (a condition variable, no executor in between).
-Parameters, services and timers stay on the main node and its executor.
+wake-up, at a cost that grows with what it waits on.  The main node's executor waits on about 18
+entities (parameter and shape services, timers, guard conditions, QoS-event handlers); a target
+that woke it paid that before its callback ran, and the solver thread the target woke waited for
+the GIL through the next rebuild (bench/results/events_executor_raw.md).  Here a target wakes only
+a node that holds the target subscriptions, spun in its own thread; the callback hands the checked
+poses straight to the engine's slot (a condition variable, no executor in between).  Parameters,
+services and timers stay on the main node and its executor.
+
+The small node is spun by ``rclpy.experimental.EventsExecutor``: it dispatches from C++ without
+building a wait set, and measured lower latencies than a SingleThreadedExecutor on the same small
+node (bench/results/node_latency_hot.md).  The main node cannot use it (coroutine services, guard
+conditions); this node has neither.  Its ``spin()`` livelocks on the Jazzy PyPI wheels, so the
+thread calls ``spin_once`` with a timeout (``SPIN_TIMEOUT_S``), which is also how soon it notices
+:meth:`HotPath.close`.
 
 Names: each topic is resolved on the main node (its namespace, name and remappings), and the small
 node subscribes to that absolute name, so the node's interface is unchanged.  The small node is
@@ -18,8 +24,7 @@ leading underscore), reads no command-line arguments (the remappings are already
 nothing.
 
 Lifetime: :meth:`HotPath.start` starts the thread; :meth:`HotPath.close` stops it and destroys the
-small node (bounded, idempotent).  A shut-down context (SIGINT, SIGTERM) ends the thread's spin as
-well.
+small node (bounded, idempotent).  A shut-down context (SIGINT, SIGTERM) ends the thread as well.
 """
 
 from __future__ import annotations
@@ -28,12 +33,11 @@ import threading
 import traceback
 from typing import Any, Callable
 
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
-from rclpy.task import Future
 
 from .validation import TEXT_LIMIT, safe_text
 
@@ -41,27 +45,14 @@ from .validation import TEXT_LIMIT, safe_text
 THREAD_NAME = "dlo-targets"
 #: rclpy starts a ~/get_type_description service on every node unless this parameter is false
 TYPE_DESCRIPTION_PARAMETER = "start_type_description_service"
+#: the longest wait of one ``spin_once`` [s]: how soon the thread sees a stop (an event arriving
+#: returns at once)
+SPIN_TIMEOUT_S = 0.1
 
 
 def hidden_name(node_name: str) -> str:
     """Return the small node's name for a main node named ``node_name`` (hidden: ``_`` first)."""
     return f"_{node_name}_hot"
-
-
-def new_executor(context: rclpy.context.Context | None = None) -> SingleThreadedExecutor:
-    """Build a SingleThreadedExecutor on ``context`` (default rclpy's), safe against a signal.
-
-    A SIGINT or SIGTERM during rclpy's constructor (which shuts the context down under it) leaves
-    a half-built executor whose ``__del__`` reads an attribute the constructor had not set yet:
-    "Exception ignored ... AttributeError: ... '_sigint_gc'" with a traceback at exit.  The
-    attribute is set first, so a failed construction leaves nothing for ``__del__`` to trip on.
-    Both of the node's executors are built here.
-    """
-    executor = SingleThreadedExecutor.__new__(SingleThreadedExecutor)
-    # ignore: rclpy types the attribute as a guard condition; None is what its __del__ tolerates
-    executor._sigint_gc = None  # type: ignore[assignment]
-    executor.__init__(context=context)  # type: ignore[misc]  # __init__ called on purpose
-    return executor
 
 
 class HotPath:
@@ -86,14 +77,11 @@ class HotPath:
             parameter_overrides=[Parameter(TYPE_DESCRIPTION_PARAMETER, value=False)],
         )
         try:
-            self.executor = new_executor(node.context)
+            self.executor = EventsExecutor(context=node.context)
         except BaseException:  # a signal shut the context down under it: nothing left behind
             self.node.destroy_node()
             raise
-        self.executor.add_node(self.node)
-        # done = stop spinning: completing it wakes the executor's wait (a guard condition), so
-        # the thread never polls and a stop never races the executor's own shutdown
-        self._stop: Future = Future()
+        self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name=THREAD_NAME, daemon=True)
         self._closed = False
 
@@ -114,18 +102,20 @@ class HotPath:
         return self._thread.is_alive()
 
     def start(self) -> None:
-        """Start spinning the small node in its own thread."""
+        """Start spinning the small node (and the subscriptions made so far) in its own thread."""
+        self.executor.add_node(self.node)
         self._thread.start()
 
     def _spin(self) -> None:
-        while True:
+        context = self.node.context
+        while not self._stop.is_set() and context.ok():
             try:
-                self.executor.spin_until_future_complete(self._stop)
-                return  # close() completed the future, or the context was shut down
+                # never spin(): it livelocks on these wheels (module docstring)
+                self.executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
             except ExternalShutdownException:
                 return  # SIGINT / SIGTERM shut the context down: the node is stopping
             except Exception:  # noqa: BLE001 - a bug in a callback must not end the stream
-                if self._stop.done() or not self.node.context.ok():
+                if self._stop.is_set() or not context.ok():
                     return
                 self.main.get_logger().error(
                     f"target callback failed: {safe_text(traceback.format_exc(), 20 * TEXT_LIMIT)}"
@@ -139,10 +129,8 @@ class HotPath:
         """
         if self._closed:
             return not self._thread.is_alive()
-        if not self._stop.done():
-            self._stop.set_result(None)  # its done callback wakes the executor's wait
-        current = threading.current_thread() is self._thread
-        if self._thread.is_alive() and not current:
+        self._stop.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout)
         if self._thread.is_alive():
             return False

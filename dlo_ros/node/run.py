@@ -21,7 +21,6 @@ from ..scene import SceneError, load_scene
 from ..text import one_line_warnings
 from . import params as P
 from .dlo_node import DloNode, StartupError
-from .hot_path import new_executor
 from .managed import ManagedDloNode
 from .signals import exit_on_second_signal, node_starting, terminate_children
 from .validation import safe_text
@@ -43,6 +42,21 @@ def default_params_file() -> str | None:
     except (FileNotFoundError, OSError):
         return None
     return str(path) if path.is_file() else None
+
+
+def new_executor(context: rclpy.context.Context | None = None) -> SingleThreadedExecutor:
+    """Build the node's executor (on ``context``, default rclpy's).
+
+    A SIGINT or SIGTERM during rclpy's constructor (which shuts the context down under it) leaves
+    a half-built executor whose ``__del__`` reads an attribute the constructor had not set yet:
+    "Exception ignored ... AttributeError: ... '_sigint_gc'" with a traceback at exit.  The
+    attribute is set first, so a failed construction leaves nothing for ``__del__`` to trip on.
+    """
+    executor = SingleThreadedExecutor.__new__(SingleThreadedExecutor)
+    # ignore: rclpy types the attribute as a guard condition; None is what its __del__ tolerates
+    executor._sigint_gc = None  # type: ignore[assignment]
+    executor.__init__(context=context)  # type: ignore[misc]  # __init__ called on purpose
+    return executor
 
 
 def check_only(prepared: P.NodeArgs) -> int:
@@ -114,7 +128,8 @@ def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
         # node: its spin() livelocks before dispatching anything (a steady-clock deadline of max()
         # overflows in the wheel's pthread_cond_timedwait), coroutine services fail
         # (ros2/rclpy#1473, not in Jazzy) and guard conditions are refused
-        # (bench/results/events_executor_raw.md).
+        # (bench/results/events_executor_raw.md); the target node has none of these and runs on
+        # one (hot_path.py).
         executor = new_executor()
         executor.add_node(node)
         if isinstance(node, ManagedDloNode):

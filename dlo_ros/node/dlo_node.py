@@ -19,7 +19,7 @@ Interfaces (all documented in msg_docs/node.md):
 
 Threads: the main single-threaded executor (timers, parameters, and the services as coroutines)
 only checks inputs and hands them on; the target subscriptions have a small hidden node of their
-own (``hot_path``), spun by its own executor in the target thread, which checks each target and
+own (``hot_path``), spun by an EventsExecutor in the target thread, which checks each target and
 hands it straight to the engine's slot, so that a target never waits for the main executor's large
 wait set.  The ShapeEngine's single worker thread runs every solve and publishes the centreline
 and wrenches.  Markers are published by a timer from the latest shape.  Fits (``fit.enabled``) run

@@ -85,9 +85,10 @@ NOTE = (
     "callback to the solver thread starting the solve 0.43 ms (the callback, the executor's next wait-set "
     "rebuild, 0.16 ms idle, and the thread switch); the solve 1.9 ms; from the solve's end to the Path "
     "published 0.13 ms (its publish call 0.07 ms); the rest of the round trip is the DDS transport the echo "
-    "measures. rclpy.experimental.EventsExecutor would remove part of the wait-set rebuild (the echo's floor "
-    "above), but it does not run the node's coroutine services (ros2/rclpy#1473) and its raw target "
-    "subscriptions delivered nothing. rclpy's MultiThreadedExecutor, tried first, added 3-8 ms per update and "
+    "measures (the node before #38: its target subscriptions now have their own small node and thread, "
+    "bench/results/node_latency_hot.md). rclpy.experimental.EventsExecutor cannot run the main node (its "
+    "coroutine services: ros2/rclpy#1473; its spin() livelocks on these wheels), but spins the small "
+    "target node with spin_once. rclpy's MultiThreadedExecutor, tried first, added 3-8 ms per update and "
     "p99 outliers of several hundred ms (GIL contention with the solver thread)."
 )
 

@@ -17,17 +17,20 @@ Interfaces (all documented in msg_docs/node.md):
               ~/fit                  std_srvs/srv/Trigger            identify the string from the
                                                                      newest cloud (fit.enabled)
 
-Threads: a single-threaded executor (subscriptions, timers, parameters, and the services as
-coroutines) only checks inputs and hands them to the ShapeEngine's single worker thread, which runs
-every solve and publishes the centreline and wrenches.  Markers are published by a timer from the
-latest shape.  Fits (``fit.enabled``) run in their own worker process (fit_node.py).
+Threads: the main single-threaded executor (timers, parameters, and the services as coroutines)
+only checks inputs and hands them on; the target subscriptions have a small hidden node of their
+own (``hot_path``), spun by an EventsExecutor in the target thread, which checks each target and
+hands it straight to the engine's slot, so that a target never waits for the main executor's large
+wait set.  The ShapeEngine's single worker thread runs every solve and publishes the centreline
+and wrenches.  Markers are published by a timer from the latest shape.  Fits (``fit.enabled``) run
+in their own worker process (fit_node.py).
 
 The node's features live in their own modules: ``startup`` (parameters, scene, first problem),
-``target_inputs``, ``shape_outputs``, ``diagnostics``, ``shape_services``, ``live_parameters``,
-``stream_log`` (recording and model changes) and ``fit_node``.  :class:`DloCore` wires them to the
-engine and reports the engine's updates and failures; :class:`DloNode` is the plain node that
-builds one at once, ``managed.ManagedDloNode`` the lifecycle node that builds it on ``configure``;
-``run`` has the entry point.
+``hot_path`` (the target thread), ``target_inputs``, ``shape_outputs``, ``diagnostics``,
+``shape_services``, ``live_parameters``, ``stream_log`` (recording and model changes) and
+``fit_node``.  :class:`DloCore` wires them to the engine and reports the engine's updates and
+failures; :class:`DloNode` is the plain node that builds one at once, ``managed.ManagedDloNode``
+the lifecycle node that builds it on ``configure``; ``run`` has the entry point.
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ from .diagnostics import DiagnosticsPublisher
 from .engine import ShapeEngine, Update, build_solver
 from .fit_node import FitterLinks, NodeFitter
 from .health import Health, model_text
+from .hot_path import HotPath
 from .envelope_publisher import EnvelopePublisher
 from . import params as P
 from .live_parameters import LiveParameters
@@ -125,6 +129,8 @@ class DloCore:
             )  # the last check
             self.shape_services.start_workers()  # replaces a dead or stuck worker
         except BaseException:  # undo what would outlive a failed start (a managed node's)
+            if getattr(self, "hot", None) is not None:
+                self.hot.close(1.0)
             if getattr(self, "live", None) is not None:
                 self.live.close()
             fitter = getattr(self, "fitter", None)
@@ -140,6 +146,9 @@ class DloCore:
         )
         self._t_start = time.monotonic()
         self.engine.start()
+        # last: a target needs the recorder and the engine, and the thread must not outlive a
+        # failed start
+        self.hot.start()
 
     def _add_interfaces(self, problem: Problem) -> None:
         """Create the node's publishers, subscriptions, services, timers and fitter."""
@@ -166,8 +175,10 @@ class DloCore:
         )
         self.diagnostics.extra.append(self.envelope.status)
         poses = PoseReader(self.node, self.frame_id, bool(self.node.get_parameter("use_tf").value))
+        self.hot = HotPath(self.node)
         self.inputs = TargetInputs(
             self.node,
+            self.hot,
             poses,
             self.grip_names,
             self.engine,
@@ -354,11 +365,12 @@ class DloCore:
 
     # ---- shutdown -------------------------------------------------------------------------------
     def close(self, timeout: float = 10.0) -> bool:
-        """Stop the workers and the engine (after the solve in progress).
+        """Stop the target thread, the workers and the engine (after the solve in progress).
 
-        Returns whether the solver thread ended within ``timeout`` [s].
+        Returns whether the solver thread and the target thread ended within ``timeout`` [s].
         """
         self.closing = True
+        hot_stopped = self.hot.close(timeout)  # first: no target reaches the engine any more
         self.live.close()
         self.shape_services.close(timeout)
         if self.fitter is not None:
@@ -370,4 +382,9 @@ class DloCore:
             )  # bounded: the recording file is complete afterwards
         except Exception as exc:  # noqa: BLE001 - shutdown must go on
             print(f"dlo_node: warning: closing the recording failed: {exc}", file=sys.stderr)
-        return stopped
+        if not hot_stopped:
+            print(
+                f"dlo_node: warning: the target thread did not stop within {timeout:g} s",
+                file=sys.stderr,
+            )
+        return stopped and hot_stopped

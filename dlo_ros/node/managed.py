@@ -16,14 +16,18 @@ configure          declare the parameters, load the scene, build the solver (com
 activate           targets and queries are accepted; the held shape is published at once
 deactivate         targets and queries are refused with the reason; the latched centreline
                    stays (immediate)
-cleanup            the engine, query and fit workers and the recording are stopped, every
-                   interface the node made is destroyed, memory is returned to the system
-                   (bounded by ``STOP_TIMEOUT_S`` for the solve in progress, plus the workers')
+cleanup            the target thread (and its small node, ``hot_path``), the engine, query and
+                   fit workers and the recording are stopped, every interface the node made is
+                   destroyed, memory is returned to the system (bounded by ``STOP_TIMEOUT_S``
+                   for the solve in progress, plus the workers')
 shutdown           as cleanup, from any state; ``run`` then leaves with exit code 0
 =================  =========================================================================
 
-A transition callback runs on the executor's thread; ``configure`` blocks it until the first shape
-(the lifecycle service answers then), the solver's own thread keeps working meanwhile.
+The target subscriptions live on the core's hidden small node with its own executor and thread
+(``hot_path``), made on ``configure`` and destroyed with the core; while inactive their callbacks
+refuse every target.  A transition callback runs on the main executor's thread; ``configure``
+blocks it until the first shape (the lifecycle service answers then), the solver's own thread
+keeps working meanwhile.
 """
 
 from __future__ import annotations

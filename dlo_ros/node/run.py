@@ -120,13 +120,16 @@ def spin(prepared: P.NodeArgs, argv: list[str]) -> int:
             )
             return 2
         node = ManagedDloNode() if prepared.managed else DloNode()
-        # One thread: it only converts and checks messages (the solver has its own thread, and the
-        # services await it as coroutines).  rclpy's MultiThreadedExecutor is slower per message
-        # here and competes with the solver thread for the GIL. rclpy.experimental.EventsExecutor
-        # (rclpy 7.1.6 wheels) cannot serve this node: its spin() livelocks before dispatching
-        # anything (a steady-clock deadline of max() overflows in the wheel's
-        # pthread_cond_timedwait), coroutine services fail (ros2/rclpy#1473, not in Jazzy) and
-        # guard conditions are refused (bench/results/events_executor_raw.md).
+        # One thread for the main node: it only converts and checks messages (the solver has its
+        # own thread, the services await it as coroutines, and the target subscriptions have
+        # their own small node, executor and thread: hot_path.py, stopped by node.close).  rclpy's
+        # MultiThreadedExecutor is slower per message here and competes with the solver thread
+        # for the GIL. rclpy.experimental.EventsExecutor (rclpy 7.1.6 wheels) cannot serve this
+        # node: its spin() livelocks before dispatching anything (a steady-clock deadline of max()
+        # overflows in the wheel's pthread_cond_timedwait), coroutine services fail
+        # (ros2/rclpy#1473, not in Jazzy) and guard conditions are refused
+        # (bench/results/events_executor_raw.md); the target node has none of these and runs on
+        # one (hot_path.py).
         executor = new_executor()
         executor.add_node(node)
         if isinstance(node, ManagedDloNode):

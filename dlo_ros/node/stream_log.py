@@ -25,8 +25,8 @@ class StreamLog:
 
     ``scene``: the effective scene (parameters applied), which the recording holds.  ``recorder``
     is replaced by the node's own once it is open (the last start-up step).  Called from the
-    solver thread (updates, model changes) and the executor thread (targets, rejections read
-    ``update``).
+    solver thread (updates, model changes), the target thread and the main executor's (targets,
+    rejections read ``update``).
     """
 
     def __init__(self, scene: Scene, health: Health, logger: Any) -> None:

@@ -1,10 +1,13 @@
-"""The node's target inputs: ``~/grips/<grip>/target`` and ``~/grips/targets`` (executor thread).
+"""The node's target inputs: ``~/grips/<grip>/target`` and ``~/grips/targets`` (target thread).
 
-A target message is read raw (serialised): it is refused by its size before rclpy builds Python
-objects from it (a huge PoseArray costs seconds and memory to deserialise).  Each pose is checked
-(finite, unit quaternion, frame) and transformed into the node's frame, then handed to the
-engine's "latest pending targets" slot.  A refused message is logged (throttled), recorded and
-counted in the diagnostics; the last good shape stays published.
+The subscriptions live on the node's hot path (``hot_path.HotPath``: a small hidden node with its
+own executor and thread), so that a target wakes a wait set of its own rather than the main
+executor's; their topic names are the main node's.  A target message is read raw (serialised): it
+is refused by its size before rclpy builds Python objects from it (a huge PoseArray costs seconds
+and memory to deserialise).  Each pose is checked (finite, unit quaternion, frame) and
+transformed into the node's frame, then handed to the engine's "latest pending targets" slot.  A
+refused message is logged (throttled), recorded and counted in the diagnostics; the last good
+shape stays published.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from ..model.problem import GripPose
 from . import conversions as conv
 from .engine import ShapeEngine
 from .health import Health
+from .hot_path import HotPath
 from .qos import TARGET_QOS
 from .stream_log import StreamLog
 from .validation import (
@@ -97,11 +101,17 @@ def read_message(data: bytes, kind: type, where: str) -> Any:
 
 
 class TargetInputs:
-    """Subscribe to the grip targets and hand the checked poses to the engine."""
+    """Subscribe to the grip targets on ``hot`` and hand the checked poses to the engine.
+
+    The callbacks run in the hot path's thread, :meth:`take` also in the main executor's (tf2
+    targets): both only read ``refusal`` and use thread-safe parts (the engine's slot, the health,
+    the recorder, the diagnostics).  ``node`` (the main node) gives the logger and the clock.
+    """
 
     def __init__(
         self,
         node: Node,
+        hot: HotPath,
         poses: PoseReader,
         grip_names: list[str],
         engine: ShapeEngine,
@@ -119,18 +129,12 @@ class TargetInputs:
         self.health = health
         self.publish_diagnostics = publish_diagnostics
         self._grip_subs = [
-            node.create_subscription(
-                PoseStamped,
-                f"~/grips/{n}/target",
-                partial(self.on_grip_target, n),
-                TARGET_QOS,
-                raw=True,
+            hot.subscribe(
+                PoseStamped, f"~/grips/{n}/target", partial(self.on_grip_target, n), TARGET_QOS
             )
             for n in grip_names
         ]
-        self._all_sub = node.create_subscription(
-            PoseArray, "~/grips/targets", self.on_targets, TARGET_QOS, raw=True
-        )
+        self._all_sub = hot.subscribe(PoseArray, "~/grips/targets", self.on_targets, TARGET_QOS)
 
     def on_grip_target(self, name: str, data: bytes) -> None:
         """Take one grip's target (a serialised PoseStamped)."""

@@ -110,9 +110,20 @@ def encode_result(
     bend_stiffness: Any,
     targets: Any,
     warm: bool | None,
+    eigenvalue: bool = True,
 ) -> tuple:
-    """log_result's message: the result copied into a flat tuple of primitives and bytes."""
+    """log_result's message: the result copied into a flat tuple of primitives and bytes.
+
+    ``eigenvalue``: record ``min_eigenvalue`` even where the solve left it to be worked out on
+    first read (the inertia showed the shape stable); False records it only where it is known.
+    """
     energy, grips = result.energy, result.grips
+    if eigenvalue:
+        eig = result.min_eigenvalue
+    else:  # here, not at the top: the writer's child process imports this module, not the model
+        from ..solver.results.result import known
+
+        eig = known(result, "min_eigenvalue")
     return (
         "R",
         update,
@@ -120,7 +131,7 @@ def encode_result(
         str(result.status),
         str(result.message),
         result.stable,
-        None if result.min_eigenvalue is None else float(result.min_eigenvalue),
+        None if eig is None else float(eig),
         int(result.iterations),
         float(result.solve_time_ms),
         (bool(result.warm_started), warm),

@@ -18,7 +18,9 @@ Entity tree (world frame, right-handed, z up, metres; timelines ``update`` (sequ
 ``timeseries/solve_time_ms``   wall time of each solve [ms]
 ``timeseries/iterations``      Newton steps or IPOPT iterations
 ``timeseries/energy``          bend, twist, stretch, gravity, external_work, total [J]
-``timeseries/min_eigenvalue``  smallest reduced Hessian eigenvalue (< 0: unstable)
+``timeseries/min_eigenvalue``  smallest reduced Hessian eigenvalue (< 0: unstable); where the
+                               inertia alone showed the shape stable, at most once a second
+                               (``recorder.EIGEN_PERIOD_S``)
 ``model/<key>``                the solver's model per update (``ShapeResult.model``): ``order``,
                                ``variables``, ``planar`` (1/0), ``estimated_error_m``,
                                ``tolerance_m``

@@ -245,6 +245,39 @@ def test_an_auto_model_is_on_the_timeline(tmp_path, scene, solver):
 
 
 # ---- the recorder's mechanics ------------------------------------------------------------------------------
+def test_the_eigenvalue_a_solve_left_unread_is_recorded_at_most_once_a_period(
+        tmp_path, scene, solver, monkeypatch):
+    """Where the inertia showed a shape stable, the solve leaves ``min_eigenvalue`` to be worked out
+    on first read (an eigendecomposition): the recorder reads it at most once per EIGEN_PERIOD_S,
+    sends the others' as absent, and leaves them unread; one already read is sent."""
+    from dlo_ros.recording import recorder
+    from dlo_ros.solver.results.result import known
+
+    solver.reset()
+    q = scene.problem.grip("right").pose.orientation
+    start = scene.problem.grip("right").pose.position
+    results = [solver.solve({"right": (start - np.array([0.01 * k, 0.0, 0.0]), q)}, warm=k > 0)
+               for k in range(5)]
+    assert all(r.ok and r.stable for r in results)
+    assert all(known(r, "min_eigenvalue") is None for r in results[1:])  # the inertia decided
+    read_before = results[3].min_eigenvalue  # a caller read this one first
+
+    def sent(period: float) -> list:
+        monkeypatch.setattr(recorder, "EIGEN_PERIOD_S", period)
+        items: list = []
+        with R.Recorder(rrd=tmp_path / f"eigen{period:g}.rrd", backend="thread") as rec:
+            monkeypatch.setattr(rec, "_put", lambda item, keep=False: items.append(item))
+            for k, r in enumerate(results):
+                rec.log_result(r, update=k, warm=k > 0)
+        return [item[6] for item in items if item[0] == "R"]  # encode_result's eigenvalue
+
+    eig = sent(3600.0)
+    assert known(results[1], "min_eigenvalue") is None and known(results[4], "min_eigenvalue") is None
+    assert eig[0] == results[0].min_eigenvalue and eig[3] == read_before and read_before > 0
+    assert eig[1] is None and eig[2] is None and eig[4] is None
+    assert sent(0.0) == [r.min_eigenvalue for r in results]  # every one, with a period of zero
+
+
 def test_disabled_recorder_is_a_no_op(scene):
     rec = R.Recorder()
     assert not rec.enabled and rec.pending == 0 and rec.dropped == 0

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Generic, TypeVar, overload
+from typing import Any, Callable, Generic, TypeVar, overload
 
 import numpy as np
 
@@ -78,6 +78,16 @@ class Deferred(Generic[T]):
 
     def __set__(self, obj: object, value: T | Later[T] | None) -> None:
         obj.__dict__[self._key] = self._empty() if value is None and self._empty else value
+
+
+def known(obj: object, name: str) -> Any:
+    """Return ``obj``'s :class:`Deferred` field ``name`` if it is worked out, else None.
+
+    None also while it is still a ``Later`` (nothing is computed): for a caller that reports the
+    value where the solve had it anyway, and must not pay for it where it did not (the recorder).
+    """
+    given = obj.__dict__.get(f"_{name}_given")
+    return None if isinstance(given, Later) else given
 
 
 @dataclass

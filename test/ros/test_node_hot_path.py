@@ -23,7 +23,7 @@ from dlo_ros.node.dlo_node import DloNode
 from dlo_ros.node.hot_path import THREAD_NAME, HotPath
 from dlo_ros.node.managed import ManagedDloNode
 from dlo_ros.node.qos import TARGET_QOS
-from support.node import TEST_SCENE, group_processes, node_args, wait_until
+from support.node import TEST_SCENE, assert_stopped_cleanly, group_processes, node_args, wait_until
 
 LEFT = ((0.0, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))
 RIGHT = ((0.55, 0.0, 0.4), (0.0, 0.0, 0.0, 1.0))
@@ -167,9 +167,7 @@ def test_a_signal_while_targets_stream_stops_both_executors(tmp_path, sig, manag
                         t0 = time.monotonic()
                         proc.send_signal(sig)
                     time.sleep(0.005)
-                assert proc.wait(15.0) == 0, proc.output()
-                assert time.monotonic() - t0 < 10.0
-            assert wait_until(lambda: not group_processes(proc.pid), 5.0), f"left running: {group_processes(proc.pid)}"
+            assert_stopped_cleanly(proc, t0, 15.0, 10.0)
         finally:
             proc.stop()
     text = log.read_text()

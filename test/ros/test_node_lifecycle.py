@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from dlo_ros.node.client import NodeProcess, allocate_domain_id, ros_env, running_node
-from support.node import TEST_MODEL, TEST_SCENE, group_processes, node_args, wait_until
+from support.node import TEST_MODEL, TEST_SCENE, assert_stopped_cleanly, group_processes, node_args, wait_until
 
 NODE_ARGS = node_args()
 REPO = Path(__file__).resolve().parents[2]
@@ -130,9 +130,7 @@ def test_sigint_while_gcc_compiles_the_solver(tmp_path):
             time.sleep(1.0)  # gcc is running now (the C code generation takes a moment)
             t0 = time.monotonic()
             proc.send_signal(signal.SIGINT)
-            assert proc.wait(20.0) == 0, proc.output()
-            assert time.monotonic() - t0 < 15.0
-            assert wait_until(lambda: not group_processes(proc.pid), 5.0), f"left running: {group_processes(proc.pid)}"
+            assert_stopped_cleanly(proc, t0, 20.0, 15.0)
         finally:
             proc.stop()
     text = log.read_text()

@@ -61,6 +61,15 @@ def group_processes(pgid: int) -> list[str]:
     return out
 
 
+def assert_stopped_cleanly(proc, signalled_at: float, wait_s: float, within_s: float) -> None:
+    """The node process signalled at ``signalled_at`` (time.monotonic) exits with 0 within
+    ``wait_s`` s of this call and ``within_s`` s of the signal, and leaves nothing in its process
+    group."""
+    assert proc.wait(wait_s) == 0, proc.output()
+    assert time.monotonic() - signalled_at < within_s
+    assert wait_until(lambda: not group_processes(proc.pid), 5.0), f"left running: {group_processes(proc.pid)}"
+
+
 def wait_until(predicate: Callable[[], object], timeout: float, period: float = 0.05) -> object:
     """Poll ``predicate()`` until it is truthy or ``timeout`` s passed; its last value."""
     deadline = time.monotonic() + timeout

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
 from typing import Any, Callable, Generic, TypeVar, overload
 
@@ -79,6 +80,11 @@ class Deferred(Generic[T]):
     def __set__(self, obj: object, value: T | Later[T] | None) -> None:
         obj.__dict__[self._key] = self._empty() if value is None and self._empty else value
 
+    def known(self, obj: object) -> T | None:
+        """Return ``obj``'s value if it is worked out, else None (a ``Later`` is not run)."""
+        given = obj.__dict__.get(self._key)
+        return None if isinstance(given, Later) else given
+
 
 def known(obj: object, name: str) -> Any:
     """Return ``obj``'s :class:`Deferred` field ``name`` if it is worked out, else None.
@@ -86,8 +92,9 @@ def known(obj: object, name: str) -> Any:
     None also while it is still a ``Later`` (nothing is computed): for a caller that reports the
     value where the solve had it anyway, and must not pay for it where it did not (the recorder).
     """
-    given = obj.__dict__.get(f"_{name}_given")
-    return None if isinstance(given, Later) else given
+    field_ = inspect.getattr_static(type(obj), name)
+    assert isinstance(field_, Deferred), f"{name}: not a Deferred field"
+    return field_.known(obj)
 
 
 @dataclass

@@ -213,15 +213,27 @@ class Health:
         with self._lock:
             return self._tolerance_problem()
 
+    def tolerance_checked(self) -> bool:
+        """Tell whether a check has measured the model's error (met or not, it is known).
+
+        False between a change of model and its first check (``model.checked`` false, no
+        estimate): then neither "met" nor "not met" may be said of it.
+        """
+        with self._lock:
+            m = self.model
+            if self._tolerance_problem():
+                return True
+            return m.get("tolerance_met") is True and m.get("checked") is not False
+
     def _tolerance_problem(self) -> str:  # lock held
         m = self.model
         est, tol = m.get("estimated_error_m"), m.get("tolerance_m")
         over = isinstance(est, (int, float)) and isinstance(tol, (int, float)) and est > tol
         if not (over or m.get("tolerance_met") is False):
             return ""
-        text = "model: tolerance not met" + (
-            f" at order {m['order']}" if m.get("order") is not None else ""
-        )
+        size = [f"order {m['order']}"] if m.get("order") is not None else []
+        size += [f"{m['variables']} unknowns"] if m.get("variables") is not None else []
+        text = "model: tolerance not met" + (f" ({', '.join(size)})" if size else "")
         if isinstance(est, (int, float)) and isinstance(tol, (int, float)):
             text += f"; estimated error {est:.3g} m vs tolerance {tol:.3g} m"
         return text

@@ -78,12 +78,14 @@ class StreamLog:
             self.model_change(f"model now: {now}", ros_time_ns=stamp_ns)
         self.health.set_model(model, changes, stamp_ns=stamp_ns, update=self.update)
         problem = self.health.tolerance_problem()
-        if bool(problem) != self._tolerance_warned:
-            self._tolerance_warned = bool(problem)
-            if problem:
-                self.logger.warning(problem)
-            else:
-                self.logger.info(f"model meets its error tolerance again: {now}")
+        if problem and not self._tolerance_warned:
+            self._tolerance_warned = True
+            self.logger.warning(problem)
+        elif not problem and self._tolerance_warned and self.health.tolerance_checked():
+            # only a check's estimate says "met": a model not checked yet (just switched to) is
+            # neither
+            self._tolerance_warned = False
+            self.logger.info(f"model meets its error tolerance again: {now}")
         return changes
 
     def model_change(

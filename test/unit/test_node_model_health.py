@@ -117,3 +117,44 @@ def test_model_text():
 
 
 # ---- the node over DDS -----------------------------------------------------------------------------------------
+
+
+class _Logged:
+    """A logger that keeps its lines."""
+
+    def __init__(self):
+        self.lines: list[tuple[str, str]] = []
+
+    def info(self, text):
+        self.lines.append(("info", text))
+
+    def warning(self, text):
+        self.lines.append(("warn", text))
+
+
+class _Solved:
+    """What StreamLog.observe_model reads of a result: its model as a dict."""
+
+    def __init__(self, model: dict):
+        self.model = model
+
+    def model_dict(self) -> dict:
+        return self.model
+
+
+def test_stream_log_says_met_again_only_once_a_check_says_so():
+    # the main job logged "meets its error tolerance again: ... error not estimated yet" at each
+    # mesh switch: a model not checked yet is neither met nor not met
+    from dlo_ros.node.stream_log import StreamLog
+    from dlo_ros.scene import load_scene
+
+    log = _Logged()
+    stream = StreamLog(load_scene("default_cable"), Health(scene="s", grips=("left", "right")), log)
+    over = auto_model(estimated_error_m=0.176, tolerance_met=False, checked=True)
+    switched = auto_model(estimated_error_m=None, tolerance_met=None, checked=False)
+    met = auto_model(estimated_error_m=4e-4, tolerance_met=True, checked=True)
+    for model in (over, switched, switched, over, switched, met, met):
+        stream.observe_model(_Solved(model), 0)
+    said = [(kind, text.split(":")[0]) for kind, text in log.lines]
+    assert said == [("warn", "model"), ("info", "model meets its error tolerance again")], log.lines
+    assert "176 unknowns" not in log.lines[0][1] and "(order 12, 15 unknowns)" in log.lines[0][1]

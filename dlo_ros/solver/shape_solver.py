@@ -64,6 +64,7 @@ from .update.pipeline import run_update
 from .update.summary import ModelSummaries
 from .update.time_limit import LimitStrikes, is_limited, limit_message
 from .update.warm_start import Adoption, adopted_copy, adopted_state, held_poses, sample_source
+from .update.warm_start import only_mesh_differs
 
 __all__ = [
     "COMPILE_MODES",
@@ -266,6 +267,7 @@ class ShapeSolver:
             length = self.problem.string.length
             parts = self.nlp, self.functions, self.parameters
             state = adopted_state(*parts, at, source, contact, length)
+            state.remeshed = only_mesh_differs(self, other)
             self._state, self._clamp_turns, self._adopted = state, None, None
             if contact is None:  # what every query from it reuses: its derivatives, evaluated once
                 fill_start(self.nlp, self.functions, state)

@@ -63,6 +63,10 @@ class SolverState:
     #: how the obstacle contact slots moved over the update that reached this state
     #: (``contact/obstacle_slots.SlotMotion``, ``update/slot_rounds.py``), None: not tracked
     slot_motion: SlotMotion | None = None
+    #: adopted from another element mesh of the same model (``ShapeSolver.adopt_warm_start``):
+    #: that mesh's shape re-expanded on this one, not an equilibrium of this NLP; a saddle Newton
+    #: lands on from it is the mapping's, left by IPOPT from the start (``update/ladder.py``)
+    remeshed: bool = False
 
     def copy(self) -> SolverState:
         """Return a copy of z, λ and p (what another thread may adopt later).
@@ -76,4 +80,5 @@ class SolverState:
             self.p.copy(),
             contact=None if self.contact is None else self.contact.copy(),
             slot_motion=self.slot_motion,
+            remeshed=self.remeshed,
         )

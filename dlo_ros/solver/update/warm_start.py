@@ -32,6 +32,7 @@ from ..contact import self_contact as SC
 from ..build.nlp import StringNLP
 from ..build.parameters import ProblemParameters
 from ..state import SolverState
+from .inputs import structure_key
 
 if TYPE_CHECKING:
     from ..shape_solver import ShapeSolver
@@ -199,6 +200,21 @@ def held_poses(
     p = parameters.pack(problem, src.z, src.p)
     return (
         {g.name: g.pose for g in problem.grips} if np.array_equal(p[mask], src.p[mask]) else None
+    )
+
+
+def only_mesh_differs(target: ShapeSolver, source: ShapeSolver) -> bool:
+    """Tell whether ``target``'s model is ``source``'s on another element mesh, and nothing else.
+
+    The same options, scene structure and reference frame R0; another ``mesh_spec``.  A state
+    mapped between them is marked ``SolverState.remeshed``.
+    """
+    return (
+        target.mesh_spec != source.mesh_spec
+        and target.options == source.options
+        and structure_key(target.problem, target.options)
+        == structure_key(source.problem, source.options)
+        and np.array_equal(target.nlp.r0, source.nlp.r0)
     )
 
 

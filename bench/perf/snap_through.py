@@ -50,6 +50,19 @@ SOLVERS = ("slots 12", "auto")
 STREAMS = ("path3d on table", "ellipse")
 
 
+class Clock:
+    """A function with the seconds spent in it added up (``reset`` starts over)."""
+
+    def __init__(self, run) -> None:
+        self.run, self.seconds = run, 0.0
+
+    def __call__(self, *args, **kwargs):
+        t0 = time.perf_counter()
+        out = self.run(*args, **kwargs)
+        self.seconds += time.perf_counter() - t0
+        return out
+
+
 class Escapes:
     """``ladder.leave_saddle`` with a clock: each call's seconds and its final z, per update."""
 
@@ -77,7 +90,7 @@ def worker() -> None:
     from dlo_ros.scene import load_scene
     from dlo_ros.solver.auto.factory import make_solver
     from dlo_ros.solver.shape_solver import ShapeSolver
-    from dlo_ros.solver.update import ladder
+    from dlo_ros.solver.update import ladder, saddle
     from dlo_ros.solver.update.ipopt import LEFT_SADDLE
 
     sys.path.insert(0, str(ROOT / "test" / "unit"))
@@ -118,12 +131,16 @@ def worker() -> None:
         assert solver.solve().ok
     escapes = Escapes(ladder.leave_saddle)
     ladder.leave_saddle = escapes  # type: ignore[assignment]  # ladder calls it by this name
+    # the escape's polish: Newton from the point its shifted steps reached (either tree's)
+    polish = Clock(saddle.newton)
+    saddle.newton = polish  # type: ignore[assignment]
     print(json.dumps({"file": __import__("dlo_ros").__file__}), flush=True)
     for line in sys.stdin:
         name, stream, first, count = json.loads(line)
         solver, snaps = solvers[name, stream], []
         for k, target in enumerate(targets[stream][first : first + count]):
             escapes.reset()
+            polish.seconds = 0.0
             t0 = time.perf_counter()
             result = solver.solve(target)
             dt = time.perf_counter() - t0
@@ -133,6 +150,7 @@ def worker() -> None:
                         "update": first + k,
                         "ms": dt * 1e3,
                         "escape_ms": escapes.seconds * 1e3,
+                        "steps_ms": (escapes.seconds - polish.seconds) * 1e3,
                         "calls": escapes.calls,
                         "left": LEFT_SADDLE in result.message,
                         "status": result.status,
@@ -143,15 +161,17 @@ def worker() -> None:
 
 
 def summary(snaps: list[dict]) -> str:
-    """Return a table row's cells: count, left, median, max, escape share, escape median."""
+    """Return a table row's cells: count, left, median, max, escape share, escape median, its
+    shifted steps' median."""
     if not snaps:
-        return "0 | 0 | – | – | – | –"
+        return "0 | 0 | – | – | – | – | –"
     ms = np.array([s["ms"] for s in snaps])
     esc = np.array([s["escape_ms"] for s in snaps])
+    steps = np.array([s["steps_ms"] for s in snaps])
     left = sum(s["left"] for s in snaps)
     return (
         f"{len(snaps)} | {left} | {np.median(ms):.2f} | {ms.max():.2f} | "
-        f"{esc.sum() / ms.sum():.0%} | {np.median(esc):.2f}"
+        f"{esc.sum() / ms.sum():.0%} | {np.median(esc):.2f} | {np.median(steps):.2f}"
     )
 
 
@@ -224,11 +244,12 @@ def main() -> None:
         "a lap).  A snap-through update: its warm Newton answer was a saddle, "
         "left by shifted Newton steps (`saddle.leave_saddle`); 'left': the update's answer is "
         "that escape's.  Times are wall times of `solve` [ms]; 'escape share': the part of those "
-        "updates' time inside `leave_saddle`.",
+        "updates' time inside `leave_saddle`; 'steps': its shifted steps alone (less the polish "
+        "by `newton`).",
         "",
         "| stream | solver | column | snap-through updates | left | median | max | escape share "
-        "| escape median |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| escape median | steps median |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key in keys:
         for column in columns:
@@ -238,14 +259,17 @@ def main() -> None:
         for key in keys:
             a, b = snaps[("before", *key)], snaps[("after", *key)]
             worst, unpaired = escape_gap(a, b)
-            ratio = (
-                np.median([s["ms"] for s in b]) / np.median([s["ms"] for s in a])
+            ratio, esc, steps = (
+                [
+                    np.median([s[k] for s in b]) / np.median([s[k] for s in a])
+                    for k in ("ms", "escape_ms", "steps_ms")
+                ]
                 if a and b
-                else float("nan")
+                else [float("nan")] * 3
             )
             lines.append(
                 f"* {key[1]}, {key[0]}: median time of a snap-through update after / before = "
-                f"{ratio:.3f}; "
+                f"{ratio:.3f}, of its escape {esc:.3f}, of the shifted steps {steps:.3f}; "
                 f"largest difference of an escape's final z (scaled) {worst:.3g}; escapes that "
                 f"do not pair (another update, count or verdict): {unpaired}"
             )

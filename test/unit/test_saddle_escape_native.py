@@ -133,3 +133,17 @@ def test_the_escape_reaches_the_same_stable_state_either_way(case, monkeypatch):
         if ok_c:
             np.testing.assert_allclose(state_c.z, state_py.z, rtol=0.0, atol=1e-10)
             np.testing.assert_allclose(state_c.lam_g, state_py.lam_g, rtol=0.0, atol=1e-10)
+
+
+def test_a_compiled_call_leaves_the_callers_floating_point_mode(case):
+    """The drivers flush subnormals to zero inside their call only (dlo_fpmode.h): after the
+    escape's call this thread still computes a subnormal (numpy's and the Python path's numbers
+    are untouched)."""
+    solver, calls, _ = case
+    (nlp, fns, saddle, p, eigenvalue, *_), _ = calls[0]
+    idx = np.flatnonzero(nlp.equality)
+    z = saddle.z.copy()
+    z[np.abs(z) < 1e-300] = 1e-310  # subnormal inputs: read as zeros inside the call
+    fns.saddle_escape(nlp, fns, z, np.zeros(nlp.lbg.size), p, idx, nlp.ubg[idx], 1.0, 1.0)
+    tiny = np.array([1e-300]) * np.array([1e-10])
+    assert tiny[0] != 0.0 and tiny[0] == pytest.approx(1e-310, rel=1e-3)

@@ -3,6 +3,7 @@
    DLO_RESIDUAL (StringNLP.residual_fn), both given as -D names by native/build.py. */
 #include "dlo_native.h"
 #include "dlo_common.h"
+#include "dlo_fpmode.h"
 #include "dlo_eigen.h"
 #include "dlo_full.h"
 /* The regularised LU (dlo_regularised_lu) of [H J_A^T; J_A 0] of the m rows idx, into A
@@ -64,6 +65,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
     double *g, double *jac, double *hess, double *energies, int *steps, int *evaluations,
     const int *equality, const dlo_eigen_lapack *eigen, double *eig_value, double *eig_direction,
     int *eig_code, dlo_after *after) {
+  dlo_fpmode fp = dlo_fpmode_enter();  /* subnormals as zeros (dlo_fpmode.h) */
   int one = 1, info = 0, code = DLO_NOT_CONVERGED;
   char trans = 'N';
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -236,5 +238,6 @@ done:
   free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(lgrad); free(ipiv);
       free(W);
   free(buf);
+  dlo_fpmode_leave(fp);
   return code;
 }

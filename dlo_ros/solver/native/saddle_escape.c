@@ -4,6 +4,7 @@
    same library.  DLO_RESIDUAL is named by the build but not called here. */
 #include "dlo_native.h"
 #include "dlo_common.h"
+#include "dlo_fpmode.h"
 #include "dlo_full.h"
 
 /* numpy's sum of a[0..n) (pairwise_sum in numpy's loops_utils.h): sequential below 8 terms, eight
@@ -85,6 +86,7 @@ CASADI_SYMBOL_EXPORT int dlo_saddle_run(
     double reg, double tol_dual, double tol_prim, double floor, double growth, double decay,
     double sigma, double rho, double mu, double *z, const double *p, double *lam,
     const double *bound, int *steps) {
+  dlo_fpmode fp = dlo_fpmode_enter();  /* subnormals as zeros (dlo_fpmode.h) */
   int N = n + m, one = 1, info = 0, code = DLO_NOT_CONVERGED;
   char trans = 'N';
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -161,5 +163,6 @@ CASADI_SYMBOL_EXPORT int dlo_saddle_run(
   }
   free(arg); free(res); free(iw); free(w); free(W); free(buf); free(grad); free(g); free(jac);
   free(hess); free(A); free(rhs); free(r_prim); free(z_kept); free(lam_kept); free(ipiv);
+  dlo_fpmode_leave(fp);
   return code;
 }

@@ -37,7 +37,7 @@ def compile_c(native_dir: Path, name: str, *flags: str) -> subprocess.CompletedP
 
 
 def test_the_drivers_are_shipped():
-    assert native_build.c_files() == ["newton_active.c", "newton_free.c"]
+    assert native_build.c_files() == ["newton_active.c", "newton_free.c", "saddle_escape.c"]
 
 
 @pytest.mark.parametrize("name", native_build.c_files())

@@ -18,6 +18,8 @@ One ``NlpFunctions`` per ``StringNLP``:
   as
   one compiled call (``native.newton.ActiveNewton``, in the KKT function's own library; None until
   then);
+* ``saddle_escape``: with ``newton_active``, the shifted Newton steps that leave a saddle as one
+  compiled call (``native.saddle.NativeSaddle``, the same library; None until then);
 * ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles);
 * ``outputs(z, p, λ, prof)``: a solution's published outputs in one call (``output_function.py``;
   None
@@ -50,6 +52,7 @@ import casadi as ca
 import numpy as np
 
 from ..native import newton as native_newton
+from ..native import saddle as native_saddle
 from .assembled_contact import sparse
 from .compiled import (
     FLAGS,
@@ -89,6 +92,7 @@ class NlpFunctions:
         )
         self.newton_native = None
         self.newton_active: native_newton.ActiveNewton | None = None
+        self.saddle_escape: native_saddle.NativeSaddle | None = None
         #: the outputs' function and its structure (grid, profiles), None where numpy builds the
         #: outputs
         self.output_function = (
@@ -256,6 +260,7 @@ class NlpFunctions:
             self.newton_native = loop
         if name == "kkt":
             self.newton_active = self._active_loop(lib)
+            self.saddle_escape = native_saddle.load(lib, self.nlp)
         if name == "outputs":
             self.outputs_compiled = True
         self._attach()

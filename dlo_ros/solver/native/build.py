@@ -27,8 +27,11 @@ from . import settings as native_settings
 from .cache_store import cache_dir
 from .compiler import FLAGS, build_library, fingerprint
 
-#: the contact-free loop (``native.newton.NativeNewton``), the active-set loop (``ActiveNewton``)
-FREE_DRIVER, ACTIVE_DRIVER = "newton_free.c", "newton_active.c"
+#: the contact-free loop (``native.newton.NativeNewton``), the active-set loop (``ActiveNewton``),
+#: the saddle's escape (``native.saddle.NativeSaddle``)
+FREE_DRIVER, ACTIVE_DRIVER, SADDLE_DRIVER = "newton_free.c", "newton_active.c", "saddle_escape.c"
+#: the drivers appended to the full KKT function's library (both run that function)
+ACTIVE_DRIVERS = (ACTIVE_DRIVER, SADDLE_DRIVER)
 
 #: a local include: a file of the native directory, by a plain name
 _INCLUDE = re.compile(r'^#[ \t]*include[ \t]+"([A-Za-z0-9_]+\.h)"[ \t]*$', re.MULTILINE)
@@ -48,8 +51,12 @@ def read(name: str) -> str:
     return _native().joinpath(name).read_text(encoding="utf-8")
 
 
-def driver_source(name: str) -> str:
-    """Return the driver ``name`` with its local includes replaced by their text, each once."""
+def driver_source(*names: str) -> str:
+    """Return the drivers ``names`` in turn, their local includes replaced by the headers' text.
+
+    Each header's text comes once in the whole (its first include), so that drivers appended to
+    one library share it.
+    """
     seen: set[str] = set()
 
     def expand(text: str) -> str:
@@ -62,7 +69,7 @@ def driver_source(name: str) -> str:
 
         return _INCLUDE.sub(include, text)
 
-    return expand(read(name))
+    return "\n".join(expand(read(name)) for name in names)
 
 
 def settings_flags() -> tuple[str, ...]:
@@ -89,14 +96,14 @@ def driver_flags(system: ca.Function, residual: ca.Function) -> tuple[str, ...]:
     return (*settings_flags(), *names)
 
 
-def driver_digest(name: str) -> str:
-    """Return 8 hex digits of sha256 over a driver's source and ``settings_flags``.
+def driver_digest(*names: str) -> str:
+    """Return 8 hex digits of sha256 over drivers' source and ``settings_flags``.
 
-    8 hex digits of sha256 over the driver's assembled source and ``settings_flags``.  The
+    8 hex digits of sha256 over the drivers' assembled source and ``settings_flags``.  The
     functions' names are left out: the library's name carries the system function's name and
     fingerprint, which fixes its residual's code too.
     """
-    h = hashlib.sha256(driver_source(name).encode())
+    h = hashlib.sha256(driver_source(*names).encode())
     h.update("\0".join(settings_flags()).encode())
     return h.hexdigest()[:8]
 
@@ -115,10 +122,10 @@ def free_library_path(fn: ca.Function, kkt_lib: Path | None = None) -> Path:
 def active_library_path(fn: ca.Function) -> Path:
     """Return where ``fn``'s library with the active-set driver is (or will be) cached.
 
-    Where ``fn``'s library (``StringNLP.kkt_split_fn``) with the active-set driver appended is
-    (or will be) cached.
+    Where ``fn``'s library (``StringNLP.kkt_split_fn``) with the active-set driver and the
+    saddle's escape appended (``ACTIVE_DRIVERS``) is (or will be) cached.
     """
-    digest = driver_digest(ACTIVE_DRIVER)
+    digest = driver_digest(*ACTIVE_DRIVERS)
     return cache_dir() / f"{fn.name()}_{fingerprint(fn)}_active_{digest}.so"
 
 

@@ -79,7 +79,9 @@ typedef struct {
   int done;
 } dlo_after;
 
-static int dlo_call(dlo_casadi_t fn, dlo_work_t work, const double **in, double **out) {
+/* (static inline, as dlo_after_run: a driver that evaluates nothing after its loop, as
+   saddle_escape.c, compiles without an unused-function warning) */
+static inline int dlo_call(dlo_casadi_t fn, dlo_work_t work, const double **in, double **out) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   work(&sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 4 ? sz_arg : 4));
@@ -98,8 +100,8 @@ static int dlo_call(dlo_casadi_t fn, dlo_work_t work, const double **in, double 
    and the outputs are evaluated unless an obstacle row exceeds its bound by more than
    DLO_CONTACT_APPEARED_TOLERANCE (a contact appeared: the caller goes on with it active).  The
    active-set loop (g_free NULL) has every row: the outputs. */
-static void dlo_after_run(dlo_after *a, const double *z, const double *p, const double *lam,
-                          int all_rows, const double *g_free) {
+static inline void dlo_after_run(dlo_after *a, const double *z, const double *p,
+                                 const double *lam, int all_rows, const double *g_free) {
   a->done = 0;
   if (g_free != NULL) {  /* the contact-free loop: its obstacle rows, and none of them violated */
     memcpy(a->g, g_free, sizeof(double) * a->free_rows);

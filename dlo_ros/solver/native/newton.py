@@ -67,7 +67,7 @@ from .compiler import compiler, library_lock
 from .active import ActiveNewton, ActiveOutcome
 from .blocks import CHUNK_WORK, NodeBlocks, WithNodePart, eigen_lapack, lapack_pointer, verdict
 from .build import (
-    ACTIVE_DRIVER,
+    ACTIVE_DRIVERS,
     active_library_path,
     compile_free,
     driver_flags,
@@ -130,9 +130,9 @@ def active_source(fn: ca.Function, residual: ca.Function) -> str:
 
     The active-set driver's C, to append to the generated code of ``fn``
     (``StringNLP.kkt_split_fn``) and ``residual`` (``StringNLP.residual_fn``); compile it with
-    ``active_flags``.
+    ``active_flags``.  With it, the saddle's escape (``native.saddle``), which runs ``fn`` too.
     """
-    return driver_source(ACTIVE_DRIVER)
+    return driver_source(*ACTIVE_DRIVERS)
 
 
 def active_flags(fn: ca.Function, residual: ca.Function) -> tuple[str, ...]:

@@ -3,18 +3,9 @@
    DLO_RESIDUAL (StringNLP.residual_fn), both given as -D names by native/build.py. */
 #include "dlo_native.h"
 #include "dlo_common.h"
+#include "dlo_fpmode.h"
 #include "dlo_eigen.h"
-/* grad f, g, dg/dz, hess L, energies at arg into res[0..4]: the split function (hess L without its
-   per-node part), then that part added (dlo_add_node_part); nonzero if the function fails. */
-static int dlo_full_eval(const casadi_real **arg, casadi_real **res, casadi_int *iw,
-                         casadi_real *w, double *W, dlo_gemm_t gemm, const dlo_node_map *map,
-                         int rows_e, int n, double *buf) {
-  res[5] = W;
-  if (DLO_SYSTEM(arg, res, iw, w, 0) != 0) return 1;
-  dlo_add_node_part(gemm, map, W, rows_e, n, res[3], n, buf);
-  return 0;
-}
-
+#include "dlo_full.h"
 /* The regularised LU (dlo_regularised_lu) of [H J_A^T; J_A 0] of the m rows idx, into A
    (N = n + m). */
 static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double *jac,
@@ -74,6 +65,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
     double *g, double *jac, double *hess, double *energies, int *steps, int *evaluations,
     const int *equality, const dlo_eigen_lapack *eigen, double *eig_value, double *eig_direction,
     int *eig_code, dlo_after *after) {
+  dlo_fpmode fp = dlo_fpmode_enter();  /* subnormals as zeros (dlo_fpmode.h) */
   int one = 1, info = 0, code = DLO_NOT_CONVERGED;
   char trans = 'N';
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -246,5 +238,6 @@ done:
   free(arg); free(res); free(iw); free(w); free(idx); free(A); free(rhs); free(lgrad); free(ipiv);
       free(W);
   free(buf);
+  dlo_fpmode_leave(fp);
   return code;
 }

@@ -4,6 +4,7 @@
    native/build.py. */
 #include "dlo_native.h"
 #include "dlo_common.h"
+#include "dlo_fpmode.h"
 #include "dlo_eigen.h"
 static int dlo_converged(const double *r, int n, int m, double tol_dual, double tol_prim) {
   for (int i = 0; i < n; ++i) if (!(fabs(r[i]) < tol_dual)) return 0;
@@ -43,6 +44,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
                                         const dlo_eigen_lapack *eigen, double *eig_value,
                                         double *eig_direction, int *eig_code, dlo_after *after,
                                         int given) {
+  dlo_fpmode fp = dlo_fpmode_enter();  /* subnormals as zeros (dlo_fpmode.h) */
   int N = n + m, one = 1, info = 0, code = DLO_NOT_CONVERGED;
   char trans = 'N';
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -143,5 +145,6 @@ CASADI_SYMBOL_EXPORT int dlo_newton_run(dlo_getrf_t dgetrf, dlo_getrs_t dgetrs, 
     if (after != NULL) dlo_after_run(after, u, p, u + n, 0, r + n);
   }
   free(arg); free(res); free(iw); free(w); free(A); free(step); free(ipiv); free(W); free(buf);
+  dlo_fpmode_leave(fp);
   return code;
 }

@@ -40,6 +40,17 @@ NEWTON_CHORD_START, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHO
     40,
 )
 
+#: Leaving a saddle by shifted Newton steps (``update/saddle.py``, ``native/saddle_escape.c``): the
+#: first step's length (largest scaled unknown, as ``ipopt.escape_saddle``'s first step), which
+#: also bounds every step, and the most shifted steps taken before the point reached is polished.
+SADDLE_STEP, SADDLE_STEPS = 0.2, 40
+#: The shifted steps stop once ‖∇f + J_Aᵀλ_A‖∞ and ‖g_A − bound‖∞ (scaled) are below these: Newton
+#: polishes the point from there.
+SADDLE_DUAL_TOLERANCE, SADDLE_PRIMAL_TOLERANCE = 1e-6, 1e-8
+#: The shift μ: an uphill step is undone and μ ← SADDLE_SHIFT_GROWTH · max(μ, SADDLE_SHIFT_FLOOR ·
+#: max|∇²L|); after an accepted step μ ← μ / SADDLE_SHIFT_DECAY, or 0 once below that floor.
+SADDLE_SHIFT_GROWTH, SADDLE_SHIFT_DECAY, SADDLE_SHIFT_FLOOR = 4.0, 8.0, 1e-8
+
 #: δ / max|K| of the regularised Newton matrix K + diag(δ I, −δ_λ I) of every warm update, and
 #: δ_λ / (max|J|² / max|H|) (``update/kkt.py``, ``regularised``).
 NEWTON_REGULARISATION = 1e-10

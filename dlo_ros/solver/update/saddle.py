@@ -12,13 +12,20 @@ import numpy as np
 
 from ..build.functions import NlpFunctions
 from ..build.nlp import StringNLP
+from ..native.settings import (
+    SADDLE_DUAL_TOLERANCE,
+    SADDLE_PRIMAL_TOLERANCE,
+    SADDLE_SHIFT_DECAY,
+    SADDLE_SHIFT_FLOOR,
+    SADDLE_SHIFT_GROWTH,
+    SADDLE_STEP,
+    SADDLE_STEPS,
+)
 from ..state import SolverState
 from .kkt import active_rows, kkt_step
 from .newton import newton
 
-#: Leaving a saddle by shifted Newton steps: the first step's length (largest scaled unknown, as
-#: ``ipopt.escape_saddle``'s first step) and the most shifted steps taken before giving up.
-SADDLE_STEP, SADDLE_STEPS = 0.2, 40
+__all__ = ["SADDLE_STEP", "SADDLE_STEPS", "leave_saddle"]
 
 
 def leave_saddle(
@@ -51,7 +58,6 @@ def leave_saddle(
     fail = (False, saddle, 0, np.inf)
     if saddle.unstable_direction is None or not min_eigenvalue < 0:
         return fail
-    kkt_fn = fns.kkt
     g0 = saddle.g if saddle.g is not None else np.asarray(nlp.g_fn(saddle.z, saddle.p)).ravel()
     active = active_rows(nlp, saddle.lam_g, g0)
     idx = np.flatnonzero(active)
@@ -60,8 +66,37 @@ def leave_saddle(
     z = saddle.z + sign * SADDLE_STEP * d
     lam = np.where(active, saddle.lam_g, 0.0)
     rho = 2.0 * float(np.abs(lam).max(initial=0.0)) + 1.0
-    n = z.size
     mu = 2.0 * abs(min_eigenvalue)
+    # the compiled loop where the full KKT function is compiled (with newton's own compiled loop:
+    # ``fused``), else the interpreted one; both evaluate ``fns.kkt``'s function
+    escape = fns.saddle_escape if fused else None
+    ok, z, lam, steps = (escape or shifted_steps)(nlp, fns, z, lam, p, idx, bound, rho, mu)
+    if not ok:
+        return False, saddle, steps, np.inf
+    start = SolverState(z, lam, saddle.lam_x, p, g=np.asarray(nlp.g_fn(z, p)).ravel())
+    ok, state, it, viol = newton(nlp, fns, start, p, fused=fused)
+    return ok, state, steps + it, viol
+
+
+def shifted_steps(
+    nlp: StringNLP,
+    fns: NlpFunctions,
+    z: np.ndarray,
+    lam: np.ndarray,
+    p: np.ndarray,
+    idx: np.ndarray,
+    bound: np.ndarray,
+    rho: float,
+    mu: float,
+) -> tuple[bool, np.ndarray, np.ndarray, int]:
+    """Take ``leave_saddle``'s shifted Newton steps from (z, λ) in Python: (ok, z, λ, steps).
+
+    The rows ``idx`` are held at ``bound``; ρ weighs the merit's ‖g_A − bound‖₁, μ is the first
+    shift (the rules: ``leave_saddle``).  ``ok`` is False where a step's matrix is singular or
+    its step not finite; else (z, λ) is the point to polish.  The interpreted reference of the
+    compiled ``native.saddle.NativeSaddle``, which has this signature's effect.
+    """
+    n, kkt_fn = z.size, fns.kkt
     previous: tuple | None = None  # (merit, z, λ) of the last accepted point
     steps = 0
     for steps in range(1, SADDLE_STEPS + 1):
@@ -75,25 +110,26 @@ def leave_saddle(
             z, lam, mu = (
                 previous[1].copy(),
                 previous[2].copy(),
-                4.0 * max(mu, 1e-8 * np.abs(hess).max()),
+                SADDLE_SHIFT_GROWTH * max(mu, SADDLE_SHIFT_FLOOR * np.abs(hess).max()),
             )
             previous = None
             continue
         if previous is not None:
-            mu = mu / 8.0 if mu >= 1e-8 * np.abs(hess).max() else 0.0
+            mu = mu / SADDLE_SHIFT_DECAY if mu >= SADDLE_SHIFT_FLOOR * np.abs(hess).max() else 0.0
         ja = jac[idx]
         r_dual = grad + lam[idx] @ ja
-        if np.abs(r_dual).max(initial=0.0) < 1e-6 and np.abs(r_prim).max(initial=0.0) < 1e-8:
+        if (
+            np.abs(r_dual).max(initial=0.0) < SADDLE_DUAL_TOLERANCE
+            and np.abs(r_prim).max(initial=0.0) < SADDLE_PRIMAL_TOLERANCE
+        ):
             # a stationary point whatever μ was (μ only shapes the steps): newton() polishes it
             break
         previous = (merit, z.copy(), lam.copy())
         step = kkt_step(hess, ja, r_dual, r_prim, shift=mu)
         if step is None:
-            return False, saddle, steps, np.inf
+            return False, z, lam, steps
         scale = min(1.0, SADDLE_STEP / max(float(np.abs(step[:n]).max()), 1e-300))
         z = z + scale * step[:n]
         lam = lam.copy()
         lam[idx] += scale * step[n:]
-    start = SolverState(z, lam, saddle.lam_x, p, g=np.asarray(nlp.g_fn(z, p)).ravel())
-    ok, state, it, viol = newton(nlp, fns, start, p, fused=fused)
-    return ok, state, steps + it, viol
+    return True, z, lam, steps

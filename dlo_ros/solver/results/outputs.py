@@ -281,13 +281,13 @@ class ShapeOutputs:
         # the compiled loop's, at its answer (native/outputs.py); SolverState types it as object
         computed = cast(ComputedOutputs | None, state.outputs)
         if computed is not None and computed.matches(state.z, state.p, lam_si, prof):
-            points, v_out, forces, torques, contact, res, flip = computed.values
+            points, v_out, forces, torques, contact, res, flip = computed.values[:7]
         else:
             outputs = self.fns.outputs
             assert outputs is not None  # result() checked it
             points, v_out, forces, torques, contact, res, flip = outputs(
                 state.z, state.p, lam_si, prof
-            )
+            )[:7]
         grips = {
             name: GripWrench(force=forces[:, k], torque=torques[:, k])
             for k, name in enumerate(plan.grip_names)

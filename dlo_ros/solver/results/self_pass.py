@@ -28,16 +28,22 @@ result (radius > 0) gets ``min_self_distance``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
 from ...model.problem import Problem
+from ..build.nlp import StringNLP
 from ..contact import self_contact as SC
+from ..native.outputs import ComputedOutputs
+from ..state import SolverState
 from .result import ShapeResult
 
 #: a sample pair closer than 2r (1 − TOLERANCE) passes through itself (rounding and the solver's
 #: own tolerance never bring a shape that keeps 2r that far below it)
 TOLERANCE = 1e-3
+#: where the outputs' function gives the quadrature tangents (``output_function.py``)
+TANGENTS = 7
 
 
 @dataclass(frozen=True)
@@ -64,6 +70,24 @@ def geometry_of(problem: Problem, samples: int = 0) -> SC.ContactGeometry:
     """Return the self-contact sampling of ``problem``'s string (``samples``: 0 picks h = r)."""
     st = problem.string
     return SC.contact_geometry(st.length, st.radius, samples, tuple(g.s for g in problem.grips))
+
+
+def centreline(nlp: StringNLP, state: SolverState, s: np.ndarray) -> np.ndarray:
+    """Return the centreline points (len(s), 3) [m] of ``state`` at ``s``, the ones to test.
+
+    For a director model whose converged compiled loop evaluated the outputs at ``state.z``
+    (``native.outputs.ComputedOutputs``), from the quadrature tangents those carry (one matrix
+    product, ``DirectorModel.positions_with``); else ``model.positions``.  Equal to rounding.
+    """
+    computed = cast(ComputedOutputs | None, state.outputs)  # SolverState types it as object
+    if (
+        nlp.director
+        and computed is not None
+        and len(computed.values) > TANGENTS
+        and np.array_equal(computed.z, state.z)
+    ):
+        return nlp.model.positions_with(state.z, s, computed.values[TANGENTS])
+    return nlp.model.positions(state.z, s)
 
 
 def self_pass(points: np.ndarray, geometry: SC.ContactGeometry, radius: float) -> SelfPass:

@@ -324,6 +324,8 @@ class StringNLP:
             if not self.director:  # a director model's held frame R_g multiplies z in its rows
                 grip_only[lay[f"grip:{grip.name}:angles"]] = True
         self.grip_parameter_mask = grip_only
+        #: the rows of p that are not only grip targets (H and J depend on them), as indices
+        self.scene_parameter_rows = np.flatnonzero(~grip_only)
         # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale);
         # only those columns differentiated and kept (all of ∂g/∂p: 0.9 GB at 640 nodes)
         self._target_columns = np.flatnonzero(grip_only)

@@ -169,9 +169,15 @@ class ShapeOutputs:
     ):
         self.nlp, self.fns, self.parameters, self.options = nlp, fns, parameters, options
         self.s_out = output_s(nlp, options)
+        # λ_SI = λ / (row_scale · σ): the divisor of this NLP, formed once (the same numbers)
+        self._lam_div = nlp.row_scale * nlp.sigma
         #: the self-contact slots p holds in the solve under way (set by ShapeSolver; None: not
         #: modelled)
         self.contact_slots: ContactSlots | None = None
+
+    def si_multipliers(self, state: SolverState) -> np.ndarray:
+        """Return the state's multipliers in SI units, λ / (row_scale · σ), as a new array."""
+        return state.lam_g / self._lam_div if state.lam_g.size else state.lam_g
 
     def frames_of(self, current: Problem) -> FramesOf:
         """Material frames Q(z, s) with the twist-free frames anchored at ``current``'s grips."""
@@ -199,7 +205,7 @@ class ShapeOutputs:
         nlp, m = self.nlp, self.nlp.model
         z, p = state.z, state.p
         run = SolveRun(ipopt_status, iterations, violation, warm, steps)
-        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        lam_si = self.si_multipliers(state)
         if self.fns.outputs is not None and self.contact_slots is None:
             return self._compiled_result(problem, current, state, lam_si, run, summary)
         s_out = self.s_out.copy()
@@ -233,7 +239,7 @@ class ShapeOutputs:
             if slots is not None and c.gap <= slots.geometry.distance + 1e-7 * nlp.length
         ]
         evaluated = Evaluated(points, quats, grips, contacts, residual, flipped, touching)
-        return self._assemble(problem, state, summary, evaluated, run)
+        return self._assemble(problem, state, summary, evaluated, run, lam_si)
 
     def point_actions(
         self, problem: Problem, current: Problem, state: SolverState
@@ -244,7 +250,7 @@ class ShapeOutputs:
         of the residual along the string (``element_error.py``); the numpy path, always.
         """
         nlp = self.nlp
-        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        lam_si = self.si_multipliers(state)
         frames_of = self.frames_of(current)
         grips = {
             g.name: wrench(nlp, current.string, frames_of, g, state.z, lam_si)
@@ -312,7 +318,7 @@ class ShapeOutputs:
         else:
             quats = v_out.T
         evaluated = Evaluated(points.T, quats, grips, contacts, residual, flipped, [])
-        return self._assemble(problem, state, summary, evaluated, run)
+        return self._assemble(problem, state, summary, evaluated, run, lam_si)
 
     def _assemble(
         self,
@@ -321,11 +327,13 @@ class ShapeOutputs:
         summary: Any,
         out: Evaluated,
         run: SolveRun,
+        lam_si: np.ndarray,
     ) -> ShapeResult:
         """Return the ShapeResult of the evaluated outputs, with its status.
 
         The energies and the stability verdict come from the reduced Hessian; the status is
-        'failed' on a flipped branch, 'unverified' over the residual's tolerance.
+        'failed' on a flipped branch, 'unverified' over the residual's tolerance.  ``lam_si``: the
+        state's SI multipliers (``si_multipliers``), a new array the result may keep.
         """
         options = self.options
         # the inertia's verdict, or the eigenvalue's (λ_min then deferred or a number); no freedom
@@ -379,11 +387,11 @@ class ShapeOutputs:
             ipopt_status=run.ipopt_status,
             equilibrium_residual_m=out.residual.metres,
             self_contacts=out.self_contacts,
-            contact_loads=self._contact_loads(problem, state),
+            contact_loads=self._contact_loads(problem, state, lam_si),
         )
 
     def _contact_loads(
-        self, problem: Problem, state: SolverState
+        self, problem: Problem, state: SolverState, lam_si: np.ndarray
     ) -> list[ContactLoad] | Later[list[ContactLoad]]:
         """Return the obstacles' line loads and point forces (``contacts.contact_loads``).
 
@@ -393,7 +401,6 @@ class ShapeOutputs:
         nlp = self.nlp
         if not nlp.obstacle_rows:
             return []
-        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         return Later(partial(contact_loads, nlp, problem, state.z.copy(), state.p.copy(), lam_si))
 
     def _self_contacts(

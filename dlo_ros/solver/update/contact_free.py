@@ -22,7 +22,7 @@ from ..native.settings import (
     NEWTON_STEPS,
 )
 from ..state import SolverState
-from .kkt import all_rows, regularised, violation
+from .kkt import all_rows, regularised, same_scene, violation
 
 #: (ok, state, steps, constraint violation [m or rad], the converged contact-free point when a
 # contact appeared there, else None) of ``newton_free``
@@ -97,13 +97,10 @@ def first_steps(
     """
     nf, n = nlp.n_free_rows, start.z.size
     unknowns = np.concatenate([start.z, start.lam_g[:nf]])
-    keep = ~nlp.grip_parameter_mask
     native = fns.newton_native if fused else None
     kkt = residual = grad = energies = None
     if (
-        start.kkt is not None
-        and start.residual is not None
-        and np.array_equal(start.p[keep], p[keep])
+        start.kkt is not None and start.residual is not None and same_scene(nlp, start.p, p)
     ):  # targets enter g linearly
         kkt, residual = start.kkt, start.residual.copy()
         residual[n:] += nlp.target_shift(start.p, p)[:nf]

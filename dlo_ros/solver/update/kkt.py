@@ -45,6 +45,13 @@ def regularised(kkt: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def same_scene(nlp: StringNLP, p_old: np.ndarray, p_new: np.ndarray) -> bool:
+    """Whether two parameter vectors differ in grip targets at most (``np.array_equal`` there)."""
+    rows = nlp.scene_parameter_rows
+    a, b = p_old[rows], p_new[rows]
+    return a.shape == b.shape and bool((a == b).all())
+
+
 def violation(nlp: StringNLP, g: np.ndarray) -> float:
     """Return the largest constraint violation of the row values g, in SI (m or rad)."""
     if g.size == 0:

@@ -69,7 +69,6 @@ def newton(
     if nlp.obstacle_slots:  # a row p switches off (obstacle_slots.py) holds nothing
         active &= ~nlp.disabled_rows(p)
     steps = 0
-    z, lam = start.z.copy(), np.where(active, start.lam_g, 0.0)
     reuse = (
         kkt_fn is None
         and start.hessian is not None
@@ -86,6 +85,8 @@ def newton(
         z, lam, reuse = contact.z, contact.lam_g, False
         active = active.copy()
         active[np.argmax(violated)] = True
+    else:
+        z, lam = start.z.copy(), np.where(active, start.lam_g, 0.0)
     # the compiled loop only for the compiled KKT function it was built with
     native = fns.newton_active if kkt_fn is None and fused else None
     kkt_fn = kkt_fn or fns.kkt

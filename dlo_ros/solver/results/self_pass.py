@@ -35,6 +35,7 @@ import numpy as np
 from ...model.problem import Problem
 from ..build.nlp import StringNLP
 from ..contact import self_contact as SC
+from ..contact.apart_memo import ApartMemo
 from ..native.outputs import ComputedOutputs
 from ..state import SolverState
 from .result import ShapeResult
@@ -90,13 +91,22 @@ def centreline(nlp: StringNLP, state: SolverState, s: np.ndarray) -> np.ndarray:
     return nlp.model.positions(state.z, s)
 
 
-def self_pass(points: np.ndarray, geometry: SC.ContactGeometry, radius: float) -> SelfPass:
+def self_pass(
+    points: np.ndarray,
+    geometry: SC.ContactGeometry,
+    radius: float,
+    memo: ApartMemo | None = None,
+) -> SelfPass:
     """Return how close the centreline ``points`` (N, 3) [m] at ``geometry.s`` comes to itself.
 
-    ``radius`` > 0 [m]; see the module docstring for what is tested.
+    ``radius`` > 0 [m]; see the module docstring for what is tested.  ``memo``: the solver's
+    shape proved apart last (``contact/apart_memo.py``), whose proof may cover ``points``.
     """
     limit = 2.0 * radius * (1.0 - TOLERANCE)
-    if SC.certainly_apart(points, geometry):  # the usual answer, proved without the k-d tree
+    apart = (
+        memo.apart(points, geometry) if memo is not None else SC.certainly_apart(points, geometry)
+    )
+    if apart:  # the usual answer, proved without the k-d tree
         return SelfPass(float("inf"), None, limit, radius)
     candidates = SC.candidate_pairs(points, geometry)
     closest = min((d for _, d in candidates), default=float("inf"))

@@ -21,7 +21,8 @@ L = 1.0
 
 def arc(s: np.ndarray, radius: float) -> np.ndarray:
     """Points of a planar arc of ``radius`` along s."""
-    return np.stack([radius * np.sin(s / radius), radius * (1 - np.cos(s / radius)), 0 * s], axis=1)
+    angle = s / radius
+    return np.stack([radius * np.sin(angle), radius * (1 - np.cos(angle)), 0 * s], axis=1)
 
 
 def test_memo_never_claims_apart_where_a_candidate_is():
@@ -37,7 +38,8 @@ def test_memo_never_claims_apart_where_a_candidate_is():
         for _ in range(6):
             # a rigid move, a smooth bend and a fold towards closing the arc on itself
             shift = rng.normal(size=3) * amount
-            bend = np.outer(np.sin(np.pi * s / L * rng.integers(1, 4)), rng.normal(size=3)) * amount
+            wave = np.sin(np.pi * s / L * rng.integers(1, 4))
+            bend = np.outer(wave, rng.normal(size=3)) * amount
             fold = arc(s, 0.4 / (1 + 40 * amount)) - base
             for moved in (base + shift, base + bend, base + fold, base + shift + bend + fold):
                 said = AM.covers(proof, moved, geometry)
@@ -80,3 +82,50 @@ def test_stream_self_pass_with_memo_as_without():
         with_memo = SP.self_pass(pts, geometry, 0.005, memo)
         plain = SP.self_pass(pts, geometry, 0.005)
         assert with_memo == plain, k
+
+
+def test_linear_bound_never_claims_apart_where_a_candidate_is():
+    """Samples as a linear map of tangents (x_i = Σ_j W_ij T_j: piecewise constant tangents on M
+    cells, integrated exactly): the tangents' move alone settles most small moves, never one that
+    brings a candidate pair, and the samples are worked out only when it does not settle."""
+    geometry = SC.contact_geometry(L, 0.005, grip_s=(0.0, L))
+    s = geometry.s
+    cells = 300
+    ds = L / cells
+    rows = np.clip((s[:, None] - ds * np.arange(cells)[None, :]) / ds, 0.0, 1.0) * ds
+    rows.flags.writeable = False
+    mid = ds * (np.arange(cells) + 0.5)
+
+    def tangents(curvature: float, wobble: np.ndarray) -> np.ndarray:
+        angle = curvature * mid
+        t = np.stack([np.cos(angle), np.sin(angle), 0 * mid]) + wobble
+        return t / np.linalg.norm(t, axis=0)
+
+    memo = AM.ApartMemo()
+    base = tangents(2.5, np.zeros((3, cells)))
+    assert memo.apart_linear(geometry, rows, base, lambda: rows @ base.T)
+    rng = np.random.default_rng(5)
+    sampled = settled = crossing = 0
+    for amount in (1e-5, 1e-4, 1e-3, 1e-2, 0.05, 0.2):
+        for k in range(8):
+            wobble = np.outer(rng.normal(size=3), np.sin(np.pi * mid * (k % 3 + 1))) * amount
+            t = tangents(2.5 + 60 * amount * (k % 2), wobble)
+            asked = []
+
+            def points(t=t, asked=asked):
+                asked.append(1)
+                return rows @ t.T
+
+            said = memo.apart_linear(geometry, rows, t, points)
+            pts = rows @ t.T
+            found = SC.candidate_pairs(pts, geometry)
+            assert not (said and found), (amount, k)
+            assert said or found or not SC.certainly_apart(pts, geometry), (amount, k)
+            crossing += bool(found)
+            sampled += bool(asked)
+            settled += not asked
+    assert settled > 0 and sampled > 0 and crossing > 0
+    # another matrix (not the memoised object): the samples are asked for
+    asked = []
+    memo.apart_linear(geometry, rows.copy(), base, lambda: asked.append(1) or rows @ base.T)
+    assert asked

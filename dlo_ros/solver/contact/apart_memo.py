@@ -21,14 +21,23 @@ Q is apart, as certainly as ``certainly_apart`` would have found (the same state
 P's numbers; slack for their rounding: ``LENGTH_SLACK``, ``ANGLE_SLACK``).  Otherwise Q is proved
 afresh and, proved by the subsample test, becomes the memo's shape (``ApartMemo.apart``).
 
-Per solver (``ShapeSolver`` keeps one): the memo holds a copy of P and is keyed by its sampling
-(the ``ContactGeometry`` object); nothing is shared between solvers.
+Where the samples are a linear map of the shape's tangents at its quadrature nodes, x_i = x0 + Σ_j
+W_ij T_j (a director model: ``DirectorModel.positions_with``), ε and δ are bounded without sampling
+Q at all (``ApartMemo.apart_linear``): E_{i+1} − E_i = Σ_j (W_{i+1,j} − W_ij) ΔT_j and E_i − Ē =
+Σ_j (W_ij − W̄_j) ΔT_j (x0 cancels), so ε ≤ max_i Σ_j |W_{i+1,j} − W_ij| · max_j |ΔT_j| and δ ≤
+max_i Σ_j |W_ij − W̄_j| · max_j |ΔT_j| (``Linear``); Q's samples are worked out only when that
+does not settle it.
+
+Per solver (``ShapeSolver`` keeps one): the memo holds a copy of P (and of its tangents) and is
+keyed by its sampling (the ``ContactGeometry`` object, and W as the model's memo holds it);
+nothing is shared between solvers.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -42,6 +51,33 @@ if TYPE_CHECKING:
 LENGTH_SLACK = 1e-12
 #: added per segment to a turning bound [rad]: arccos's rounding of P's turns near 0 (~1e-8)
 ANGLE_SLACK = 1e-6
+
+
+@dataclass(frozen=True)
+class Linear:
+    """The proved samples as x0 + W T: W (N, M), P's tangents T (3, M) and W's two norms.
+
+    step_norm: max_i Σ_j |W_{i+1,j} − W_ij|; spread_norm: max_i Σ_j |W_ij − W̄_j| (W̄: the mean
+    row), the factors of max_j |ΔT_j| that bound ε and δ (module docstring).
+    """
+
+    rows: np.ndarray
+    tangents: np.ndarray
+    step_norm: float
+    spread_norm: float
+
+
+def linear(rows: np.ndarray, tangents: np.ndarray) -> Linear:
+    """Return ``Linear`` of the sample rows W and the proved shape's tangents T (copied)."""
+    mean = np.add.reduce(rows, axis=0) / len(rows)
+    held = np.array(tangents, dtype=float)
+    held.flags.writeable = False
+    return Linear(
+        rows,
+        held,
+        float(np.abs(rows[1:] - rows[:-1]).sum(axis=1).max()),
+        float(np.abs(rows - mean).sum(axis=1).max()),
+    )
 
 
 @dataclass(frozen=True)
@@ -63,23 +99,27 @@ class ApartProof:
     shortest: float
     turning_wide: float
     sub_distance: float
+    #: the samples as a linear map of the tangents, where they are one (``ApartMemo.apart_linear``)
+    linear: Linear | None = None
 
 
 def prove(points: np.ndarray, geometry: ContactGeometry) -> tuple[bool, ApartProof | None]:
     """Return (``certainly_apart(points, geometry)``, its proof by the subsample test or None).
 
     No proof where ``certainly_apart`` finds nothing or proves it otherwise (a short string, the
-    dense test): those shapes are not memoised.
+    dense test): those shapes are not memoised.  The proof's inequalities at no move (``holds``)
+    are the subsample test's with room to spare (the same numbers: ``certainly_apart``'s
+    arithmetic), so where they hold ``certainly_apart`` answers True and is not asked.
     """
-    if not certainly_apart(points, geometry):
-        return False, None
     n, plan = len(points), geometry.apart_plan
     m, big = plan.m, plan.big
     wide = big + 2 * SUBSAMPLE
     if n < 3 or n > 401 or m >= n or plan.grips_close or wide > n - 1:
-        return True, None
+        return certainly_apart(points, geometry), None
     steps = points[1:] - points[:-1]
     lengths = np.sqrt(np.einsum("ij,ij->i", steps, steps))
+    if not lengths.min() > 0.1 * geometry.spacing:
+        return certainly_apart(points, geometry), None
     unit = steps / lengths[:, None]
     cosines = np.einsum("ij,ij->i", unit[:-1], unit[1:])
     total = np.concatenate(([0.0], np.cumsum(np.arccos(np.clip(cosines, -1.0, 1.0)))))
@@ -102,8 +142,9 @@ def prove(points: np.ndarray, geometry: ContactGeometry) -> tuple[bool, ApartPro
         math.sqrt(max(min_squared(points[idx], band), 0.0)),
     )
     proof.points.flags.writeable = False
-    # the same inequalities at no move: the subsample test's, with the slack
-    return True, (proof if covers(proof, points, geometry) else None)
+    if holds(proof, geometry, LENGTH_SLACK, LENGTH_SLACK):
+        return True, proof
+    return certainly_apart(points, geometry), None
 
 
 def covers(proof: ApartProof, points: np.ndarray, geometry: ContactGeometry) -> bool:
@@ -119,9 +160,17 @@ def covers(proof: ApartProof, points: np.ndarray, geometry: ContactGeometry) -> 
     centred = moved - np.add.reduce(moved, axis=0) / len(moved)
     eps = math.sqrt(float(np.einsum("ij,ij->i", bend, bend).max())) + LENGTH_SLACK
     dev = math.sqrt(float(np.einsum("ij,ij->i", centred, centred).max())) + LENGTH_SLACK
+    return holds(proof, geometry, eps, dev)
+
+
+def holds(proof: ApartProof, geometry: ContactGeometry, eps: float, dev: float) -> bool:
+    """Tell whether ``certainly_apart``'s inequalities hold for P moved by ε and δ (bounds, m).
+
+    ``eps``: the largest change of a step; ``dev``: the largest displacement from the mean one.
+    """
     if not (eps < 0.5 * proof.lmin and dev < proof.sub_distance):  # (nan: not covered)
         return False
-    n, plan = len(points), geometry.apart_plan
+    n, plan = len(proof.points), geometry.apart_plan
     m, big = plan.m, plan.big
     alpha = math.asin(eps / proof.lmin)
 
@@ -166,4 +215,38 @@ class ApartMemo:
         apart, fresh = prove(points, geometry)
         if fresh is not None:
             self._proof = fresh
+        return apart
+
+    def apart_linear(
+        self,
+        geometry: ContactGeometry,
+        rows: np.ndarray,
+        tangents: np.ndarray,
+        points: Callable[[], np.ndarray],
+    ) -> bool:
+        """``apart`` for samples x0 + W Tᵀ: W = ``rows``, T = ``tangents`` (3, M).
+
+        From the memo's proof where its ``Linear`` bounds (module docstring) cover the move of
+        the tangents, without sampling; else ``apart(points())`` (``points``: the samples, worked
+        out on this call), a new proof keeping W and T.  W is the model's memoised matrix: another
+        object (evicted, or another sampling) is not covered.
+        """
+        proof = self._proof
+        lin = proof.linear if proof is not None else None
+        if (
+            proof is not None
+            and lin is not None
+            and proof.geometry is geometry
+            and lin.rows is rows
+            and tangents.shape == lin.tangents.shape
+        ):
+            d = tangents - lin.tangents
+            change = math.sqrt(float(np.einsum("ij,ij->j", d, d).max()))
+            eps = lin.step_norm * change + LENGTH_SLACK
+            dev = lin.spread_norm * change + LENGTH_SLACK
+            if holds(proof, geometry, eps, dev):
+                return True
+        apart, fresh = prove(points(), geometry)
+        if fresh is not None:
+            self._proof = replace(fresh, linear=linear(rows, tangents))
         return apart

@@ -73,22 +73,59 @@ def geometry_of(problem: Problem, samples: int = 0) -> SC.ContactGeometry:
     return SC.contact_geometry(st.length, st.radius, samples, tuple(g.s for g in problem.grips))
 
 
-def centreline(nlp: StringNLP, state: SolverState, s: np.ndarray) -> np.ndarray:
-    """Return the centreline points (len(s), 3) [m] of ``state`` at ``s``, the ones to test.
+def tangents(nlp: StringNLP, state: SolverState) -> np.ndarray:
+    """Return (1 + ε) t̂ at a director model's quadrature nodes (3, M) for ``state``.
 
-    For a director model whose converged compiled loop evaluated the outputs at ``state.z``
-    (``native.outputs.ComputedOutputs``), from the quadrature tangents those carry (one matrix
-    product, ``DirectorModel.positions_with``); else ``model.positions``.  Equal to rounding.
+    Those the converged compiled loop's outputs carry when it evaluated them at ``state.z``
+    (``native.outputs.ComputedOutputs``), else ``model.quad_tangents``: equal to rounding.
     """
     computed = cast(ComputedOutputs | None, state.outputs)  # SolverState types it as object
     if (
-        nlp.director
-        and computed is not None
+        computed is not None
         and len(computed.values) > TANGENTS
         and np.array_equal(computed.z, state.z)
     ):
-        return nlp.model.positions_with(state.z, s, computed.values[TANGENTS])
+        return computed.values[TANGENTS]
+    return nlp.model.quad_tangents(state.z)
+
+
+def centreline(nlp: StringNLP, state: SolverState, s: np.ndarray) -> np.ndarray:
+    """Return the centreline points (len(s), 3) [m] of ``state`` at ``s``, the ones to test.
+
+    A director model's from its ``tangents`` (one matrix product,
+    ``DirectorModel.positions_with``); else ``model.positions``.  Equal to rounding.
+    """
+    if nlp.director:
+        return nlp.model.positions_with(state.z, s, tangents(nlp, state))
     return nlp.model.positions(state.z, s)
+
+
+def check(
+    nlp: StringNLP,
+    state: SolverState,
+    geometry: SC.ContactGeometry,
+    radius: float,
+    memo: ApartMemo | None = None,
+) -> SelfPass:
+    """Return ``self_pass`` of ``state``'s centreline at ``geometry.s``.
+
+    With the solver's ``memo``, a director model's samples are worked out only where the memo's
+    proof does not cover the move of its tangents (``ApartMemo.apart_linear``).
+    """
+    if memo is None or not nlp.director:
+        return self_pass(centreline(nlp, state, geometry.s), geometry, radius, memo)
+    held = tangents(nlp, state)
+    sampled: list[np.ndarray] = []
+
+    def points() -> np.ndarray:
+        if not sampled:
+            sampled.append(nlp.model.positions_with(state.z, geometry.s, held))
+        return sampled[0]
+
+    rows = nlp.model.position_matrix(geometry.s)
+    if memo.apart_linear(geometry, rows, held, points):
+        return SelfPass(float("inf"), None, 2.0 * radius * (1.0 - TOLERANCE), radius)
+    return self_pass(points(), geometry, radius)
 
 
 def self_pass(

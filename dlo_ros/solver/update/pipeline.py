@@ -79,8 +79,7 @@ def run_update(
     nlp, radius = ctx.parts.nlp, problem.string.radius
     if state is not None and radius > 0 and not nlp.self_contact_slots:
         geometry = SP.geometry_of(problem, ctx.parts.options.self_contact_samples)
-        points = SP.centreline(nlp, state, geometry.s)
-        SP.flag(result, SP.self_pass(points, geometry, radius, apart))
+        SP.flag(result, SP.check(nlp, state, geometry, radius, apart))
     met = ctx.unstable_met
     if met is not None and met is not result and result.stable is not False:
         result.unstable_met = met  # the escape led elsewhere: the saddle it left

@@ -92,8 +92,11 @@ def test_linear_bound_never_claims_apart_where_a_candidate_is():
     s = geometry.s
     cells = 300
     ds = L / cells
-    rows = np.clip((s[:, None] - ds * np.arange(cells)[None, :]) / ds, 0.0, 1.0) * ds
-    rows.flags.writeable = False
+
+    def rows_at(s: np.ndarray) -> np.ndarray:
+        return np.clip((s[:, None] - ds * np.arange(cells)[None, :]) / ds, 0.0, 1.0) * ds
+
+    rows = rows_at(s)
     mid = ds * (np.arange(cells) + 0.5)
 
     def tangents(curvature: float, wobble: np.ndarray) -> np.ndarray:
@@ -103,7 +106,7 @@ def test_linear_bound_never_claims_apart_where_a_candidate_is():
 
     memo = AM.ApartMemo()
     base = tangents(2.5, np.zeros((3, cells)))
-    assert memo.apart_linear(geometry, rows, base, lambda: rows @ base.T)
+    assert memo.apart_linear(geometry, base, lambda: rows @ base.T, lambda: rows)
     rng = np.random.default_rng(5)
     sampled = settled = crossing = 0
     for amount in (1e-5, 1e-4, 1e-3, 1e-2, 0.05, 0.2):
@@ -116,7 +119,7 @@ def test_linear_bound_never_claims_apart_where_a_candidate_is():
                 asked.append(1)
                 return rows @ t.T
 
-            said = memo.apart_linear(geometry, rows, t, points)
+            said = memo.apart_linear(geometry, t, points, lambda: rows)
             pts = rows @ t.T
             found = SC.candidate_pairs(pts, geometry)
             assert not (said and found), (amount, k)
@@ -125,7 +128,9 @@ def test_linear_bound_never_claims_apart_where_a_candidate_is():
             sampled += bool(asked)
             settled += not asked
     assert settled > 0 and sampled > 0 and crossing > 0
-    # another matrix (not the memoised object): the samples are asked for
+    # another sampling: the samples are asked for
+    other = SC.contact_geometry(L, 0.004, grip_s=(0.0, L))
+    rows_o = rows_at(other.s)
     asked = []
-    memo.apart_linear(geometry, rows.copy(), base, lambda: asked.append(1) or rows @ base.T)
+    assert memo.apart_linear(other, base, lambda: asked.append(1) or rows_o @ base.T, lambda: rows_o)
     assert asked

@@ -220,16 +220,17 @@ class ApartMemo:
     def apart_linear(
         self,
         geometry: ContactGeometry,
-        rows: np.ndarray,
         tangents: np.ndarray,
         points: Callable[[], np.ndarray],
+        rows: Callable[[], np.ndarray],
     ) -> bool:
-        """``apart`` for samples x0 + W Tᵀ: W = ``rows``, T = ``tangents`` (3, M).
+        """``apart`` for samples x0 + W Tᵀ of the tangents T = ``tangents`` (3, M).
 
         From the memo's proof where its ``Linear`` bounds (module docstring) cover the move of
         the tangents, without sampling; else ``apart(points())`` (``points``: the samples, worked
-        out on this call), a new proof keeping W and T.  W is the model's memoised matrix: another
-        object (evicted, or another sampling) is not covered.
+        out on this call), a new proof keeping W = ``rows()`` and T.  W is the one model's at
+        ``geometry.s`` (the memo is one solver's, made anew with its model): a proof of the same
+        geometry keeps it.
         """
         proof = self._proof
         lin = proof.linear if proof is not None else None
@@ -237,7 +238,6 @@ class ApartMemo:
             proof is not None
             and lin is not None
             and proof.geometry is geometry
-            and lin.rows is rows
             and tangents.shape == lin.tangents.shape
         ):
             d = tangents - lin.tangents
@@ -248,5 +248,5 @@ class ApartMemo:
                 return True
         apart, fresh = prove(points(), geometry)
         if fresh is not None:
-            self._proof = replace(fresh, linear=linear(rows, tangents))
+            self._proof = replace(fresh, linear=linear(rows(), tangents))
         return apart

@@ -135,7 +135,7 @@ def energies(values: np.ndarray, moments: MomentWork | None = None) -> dict[str,
     ``moments``: the point moments' correction of the work (``moment_work.py``); its None makes
     external_work and total None (a dead moment without a potential).
     """
-    bend, twist, stretch, grav, work = (float(v) for v in values.ravel())
+    bend, twist, stretch, grav, work = values.ravel().tolist()
     correction = 0.0 if moments is None else moments.correction
     if correction is None:
         return {
@@ -301,12 +301,13 @@ class ShapeOutputs:
         contacts = {i: contact[:, i] for i in range(plan.n_obstacles)}
         # frames.flipped_grips: t against the target's x axis, and d1 against its y axis for a
         # clamp
+        tangent_dots, d1_dots = flip[0].tolist(), flip[1].tolist()  # (one read each, as floats)
         flipped = ", ".join(
             g.name
             for k, g in enumerate(problem.grips)
-            if g.mode != "pin" and (flip[0, k] < 0 or (g.mode == "clamp" and flip[1, k] < 0))
+            if g.mode != "pin" and (tangent_dots[k] < 0 or (g.mode == "clamp" and d1_dots[k] < 0))
         )
-        residual = EquilibriumResidual(float(res[0, 0]), float(res[1, 0]), float(res[2, 0]))
+        residual = EquilibriumResidual(*res[:3, 0].tolist())
         if plan.planar:  # v_out is φ: the orientations as ``sample`` and the numpy path make them
             phi = v_out.ravel()
             quats = pose_quaternions(

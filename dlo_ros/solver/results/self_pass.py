@@ -122,8 +122,10 @@ def check(
             sampled.append(nlp.model.positions_with(state.z, geometry.s, held))
         return sampled[0]
 
-    rows = nlp.model.position_matrix(geometry.s)
-    if memo.apart_linear(geometry, rows, held, points):
+    def rows() -> np.ndarray:
+        return nlp.model.position_matrix(geometry.s)
+
+    if memo.apart_linear(geometry, held, points, rows):
         return SelfPass(float("inf"), None, 2.0 * radius * (1.0 - TOLERANCE), radius)
     return self_pass(points(), geometry, radius)
 

@@ -248,5 +248,11 @@ class ApartMemo:
                 return True
         apart, fresh = prove(points(), geometry)
         if fresh is not None:
-            self._proof = replace(fresh, linear=linear(rows(), tangents))
+            if lin is None or proof is None or proof.geometry is not geometry:
+                lin = linear(rows(), tangents)  # W's norms: once per sampling
+            else:
+                held = np.array(tangents, dtype=float)
+                held.flags.writeable = False
+                lin = replace(lin, tangents=held)
+            self._proof = replace(fresh, linear=lin)
         return apart

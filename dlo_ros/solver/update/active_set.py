@@ -120,9 +120,9 @@ def switchable_rows(nlp: StringNLP, p: np.ndarray) -> np.ndarray:
     The contact rows (a row p switches off holds nothing: ``obstacle_slots.py``); fold guards may
     not switch.
     """
-    switchable = nlp.contact_row & ~nlp.equality
+    switchable = nlp.switchable_rows  # read-only: a new array where slots switch rows off
     if nlp.obstacle_slots:
-        switchable &= ~nlp.disabled_rows(p)
+        switchable = switchable & ~nlp.disabled_rows(p)
     return switchable
 
 

@@ -85,8 +85,8 @@ def newton(
         z, lam, reuse = contact.z, contact.lam_g, False
         active = active.copy()
         active[np.argmax(violated)] = True
-    else:
-        z, lam = start.z.copy(), np.where(active, start.lam_g, 0.0)
+    else:  # (newton_active copies z and zeroes λ off the active rows itself)
+        z, lam = start.z, start.lam_g
     # the compiled loop only for the compiled KKT function it was built with
     native = fns.newton_active if kkt_fn is None and fused else None
     kkt_fn = kkt_fn or fns.kkt

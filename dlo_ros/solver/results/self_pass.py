@@ -36,7 +36,7 @@ from ...model.problem import Problem
 from ..build.nlp import StringNLP
 from ..contact import self_contact as SC
 from ..contact.apart_memo import ApartMemo
-from ..native.outputs import ComputedOutputs
+from ..native.outputs import ComputedOutputs, same
 from ..state import SolverState
 from .result import ShapeResult
 
@@ -80,11 +80,7 @@ def tangents(nlp: StringNLP, state: SolverState) -> np.ndarray:
     (``native.outputs.ComputedOutputs``), else ``model.quad_tangents``: equal to rounding.
     """
     computed = cast(ComputedOutputs | None, state.outputs)  # SolverState types it as object
-    if (
-        computed is not None
-        and len(computed.values) > TANGENTS
-        and np.array_equal(computed.z, state.z)
-    ):
+    if computed is not None and len(computed.values) > TANGENTS and same(computed.z, state.z):
         return computed.values[TANGENTS]
     return nlp.model.quad_tangents(state.z)
 

@@ -153,7 +153,7 @@ def converged(
     lam[:nf] = lam_free
     tol = settings.CONTACT_APPEARED_TOLERANCE  # the compiled loop's too (dlo_after_run)
     # a contact appeared (or a fold guard: no equilibrium)
-    if np.any(g[nf:] > nlp.ubg[nf:] + tol):
+    if (g[nf:] > nlp.ubg[nf:] + tol).any():
         guards = ~nlp.contact_row[nf:]
         contact = np.all(g[nf:][guards] <= nlp.ubg[nf:][guards] + tol)
         point = SolverState(z.copy(), lam, start.lam_x, p, g=g) if contact else None

@@ -75,7 +75,7 @@ def newton(
         and start.g is not None
         and start.gradient is not None
     )
-    if kkt_fn is None and not np.any(active[nlp.n_free_rows :]):
+    if kkt_fn is None and not active[nlp.n_free_rows :].any():
         ok, state, steps, viol, contact = newton_free(nlp, fns, start, p, max_steps, fused, prof)
         if ok or contact is None:
             return ok, state, steps, viol

@@ -220,9 +220,15 @@ class DirectorModel:
 
     def positions(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(len(s), 3) centreline positions [m]."""
-        return (np.asarray(z[0:3]) * self.length)[None, :] + self.position_matrix(
-            s
-        ) @ self.quad_tangents(z).T
+        return self.positions_with(z, s, self.quad_tangents(z))
+
+    def positions_with(self, z: np.ndarray, s: np.ndarray, tangents: np.ndarray) -> np.ndarray:
+        """``positions`` from the tangents (1 + ε) t̂ at the quadrature nodes (3, M) given.
+
+        E.g. as the compiled outputs' function evaluated them at z (``output_function.py``): the
+        same expressions, equal to rounding.
+        """
+        return (np.asarray(z[0:3]) * self.length)[None, :] + self.position_matrix(s) @ tangents.T
 
     def tangents_at(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Return the unit tangents (len(s), 3)."""

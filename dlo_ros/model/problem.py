@@ -7,6 +7,7 @@ is the string's tangent, pointing toward increasing s.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -235,10 +236,9 @@ class Problem:
         """
         for i, a in enumerate(self.grips):
             for b in self.grips[i + 1 :]:
-                dist, span = (
-                    float(np.linalg.norm(a.pose.position - b.pose.position)),
-                    abs(a.s - b.s) * reach,
-                )
+                d = a.pose.position - b.pose.position
+                # np.linalg.norm's own sqrt(d·d) of a vector, without its dispatch
+                dist, span = math.sqrt(float(d.dot(d))), abs(a.s - b.s) * reach
                 if dist > span + 1e-12:
                     return a, b, dist, span
         return None

@@ -194,7 +194,8 @@ def _numbers(value: object, n: int, field: str, what: str) -> np.ndarray:
         raise PoseError("invalid", f"{field}: expected {n} numbers{what}, got {value!r}") from None
     if arr.size != n:
         raise PoseError("invalid", f"{field}: needs {n} numbers{what}, got {arr.size}")
-    if not np.isfinite(arr).all():
+    # (math.isfinite on the few floats: np.isfinite's answer without its dispatch)
+    if not all(map(math.isfinite, arr.tolist())):
         shown = ", ".join("nan" if np.isnan(v) else f"{v:.6g}" for v in arr)
         raise PoseError("non_finite", f"{field}: [{shown}] contains NaN or infinity")
     return arr

@@ -43,6 +43,7 @@ from .build.mesh import MeshSpec
 from .build.nlp import StringNLP
 from .build.parameters import ProblemParameters, check_moments
 from .contact import topology as TP
+from .contact.apart_memo import ApartMemo
 from .options import SolverOptions
 from .parallel.batch import query_many
 from .results.outputs import ShapeOutputs, no_shape
@@ -157,6 +158,8 @@ class ShapeSolver:
         # since; topology.ClampTurns, the linking-number check), and the frames computed for them
         self._clamp_turns: TP.ClampTurns | None = None
         self._turn_tracker = ClampTurnTracker(nlp)
+        # the shape the self-pass check proved apart last (contact/apart_memo.py)
+        self._apart = ApartMemo()
         self._strikes = LimitStrikes()  # update/time_limit.py: one strike of the time limit
         self.build_time_s = time.perf_counter() - t0
 
@@ -379,7 +382,7 @@ class ShapeSolver:
             warm, limit = warm and self._state is not None, self.options.update_time_limit
             ctx.streamed = is_limited(warm, commit, limited)
             ctx.deadline = self._strikes.deadline(t0, limit, ctx.streamed)
-            result, state = run_update(ctx, problem, warm, self._turn_tracker)
+            result, state = run_update(ctx, problem, warm, self._turn_tracker, self._apart)
             if self._strikes.stopped(ctx.deadline, result.status):
                 result.message = limit_message(limit, result.message)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3

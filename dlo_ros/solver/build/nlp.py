@@ -193,6 +193,8 @@ class StringNLP:
             [kind[0] in ("obstacle", "slot", "self") for kind in self.row_kind], dtype=bool
         )
         self.row_scale = np.array(rows.scale)
+        self.switchable_rows = self.contact_row & ~self.equality  #: inequality contact rows
+        self.switchable_rows.flags.writeable = False
         self.nlp = {"x": z, "p": p, "f": objective, "g": g}
         self.z_sym, self.p_sym, self.g_sym = z, p, g
 
@@ -324,6 +326,7 @@ class StringNLP:
             if not self.director:  # a director model's held frame R_g multiplies z in its rows
                 grip_only[lay[f"grip:{grip.name}:angles"]] = True
         self.grip_parameter_mask = grip_only
+        self.scene_parameter_rows = np.flatnonzero(~grip_only)  #: the other rows (H, J read them)
         # ∂g/∂p restricted to grip targets: constant (each target enters one row as −target/scale);
         # only those columns differentiated and kept (all of ∂g/∂p: 0.9 GB at 640 nodes)
         self._target_columns = np.flatnonzero(grip_only)

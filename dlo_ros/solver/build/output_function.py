@@ -1,7 +1,6 @@
 """A returned shape's outputs as one CasADi function.
 
-A returned shape's outputs as one CasADi function (frame director models and the planar model,
-no self-contact slots).
+For frame director models and the planar model, without self-contact slots.
 
 ``ShapeOutputs`` builds a result from many small numpy evaluations: the centreline and frames at
 the output points, each grip's reaction, each obstacle's contact force and the equilibrium residual
@@ -10,7 +9,7 @@ for the planar model (what ``solver.model: auto`` streams while a scene stays in
 one of them is a fixed composition of matrix products with the structure's constant interpolation
 matrices, so this module writes them as one function
 
-    outputs(z, p, λ, prof) → (x(s_out), q(s_out), F_grips, T_grips, F_obstacles, residual, flip)
+    outputs(z, p, λ, prof) → (x(s_out), q(s_out), F_grips, T_grips, F_obstacles, residual, flip, T)
 
 evaluated in one call (compiled C when the solver's derivatives are compiled, CasADi's virtual
 machine until then). ``λ``: every row's SI multiplier; ``prof`` = (Rf, Rt, a strip's Rl) at the
@@ -18,7 +17,8 @@ residual's grid and Rf_min, from the string (``OutputFunction.profiles``); ``q``
 orientations, the interpolated nodal quaternions made unit with ``director.frame_to_quat``'s sign
 (4 × K), for the planar model φ (1 × K); ``flip``: per grip t·R_g e_x and d1·R_g e_y at its node
 (negative: the flipped sheet, ``frames.flipped_grips``; ones for the planar model, which has no
-flipped sheet).
+flipped sheet); ``T``: (1 + ε) t̂ at the quadrature nodes (3 × M), the centreline anywhere in one
+product (``DirectorModel.positions_with``: the samples of ``results/self_pass.py``).
 
 The arithmetic is the numpy path's, term for term (``wrenches.wrench``, ``wrenches.equilibrium``,
 ``residual.equilibrium_residual``), on the same grid (``wrenches.residual_grid``: split at the
@@ -452,6 +452,7 @@ class OutputFunction:
                 ca.horzcat(*contact_totals) if contact_totals else zero,
                 residual,
                 flip,
+                f.tq,
             ],
             ["z", "p", "lam", "prof"],
             [
@@ -462,6 +463,7 @@ class OutputFunction:
                 "contacts",
                 "residual",
                 "flip",
+                "tangents",
             ],
         )
         self._profile_key: tuple | None = None

@@ -81,7 +81,10 @@ def certainly_apart(points: np.ndarray, geometry: ContactGeometry) -> bool:
     if wide <= n - 1 and most_turning(wide - 1) < np.pi / 2 - 1e-9:
         if _subsample_apart(points, wide, reach, float(lengths.max())):
             return True
-    return big > n - 1 or _min_squared(points, _band(n, 1, big)[1]) > reach**2 * (1 + 1e-9) + 1e-15
+    return (
+        big > n - 1
+        or min_squared(points, subsample_band(n, 1, big)[1]) > reach**2 * (1 + 1e-9) + 1e-15
+    )
 
 
 @dataclass(frozen=True)
@@ -134,16 +137,16 @@ def _subsample_apart(points: np.ndarray, wide: int, reach: float, longest: float
     such pairs beyond ``reach`` + j·``longest`` settle it with (n/j)² distances, not n².
     """
     j = SUBSAMPLE
-    idx, band = _band(len(points), j, wide - j)
-    return _min_squared(points[idx], band) > (reach + j * longest) ** 2 * (1 + 1e-9) + 1e-15
+    idx, band = subsample_band(len(points), j, wide - j)
+    return min_squared(points[idx], band) > (reach + j * longest) ** 2 * (1 + 1e-9) + 1e-15
 
 
 @functools.lru_cache(maxsize=16)
-def _band(n: int, step: int, gap: int) -> tuple[np.ndarray, np.ndarray]:
+def subsample_band(n: int, step: int, gap: int) -> tuple[np.ndarray, np.ndarray]:
     """Return the samples (every ``step``-th of n, and the last) and their band, read-only.
 
     The band is 0 where two of them are at least ``gap`` samples apart (b − a ≥ gap), +inf
-    elsewhere: ``_min_squared`` then measures those pairs alone.
+    elsewhere: ``min_squared`` then measures those pairs alone.
     """
     idx = np.unique(np.append(np.arange(0, n, step), n - 1))
     band = np.where(idx[None, :] - idx[:, None] >= gap, 0.0, np.inf)
@@ -151,7 +154,7 @@ def _band(n: int, step: int, gap: int) -> tuple[np.ndarray, np.ndarray]:
     return idx, band
 
 
-def _min_squared(points: np.ndarray, band: np.ndarray) -> float:
+def min_squared(points: np.ndarray, band: np.ndarray) -> float:
     """Return the smallest squared distance between samples over the pairs ``band`` leaves 0."""
     # smaller numbers: less rounding in |x|² + |y|² − 2 x·y (the mean as np.mean forms it)
     centred = points - np.add.reduce(points, axis=0) / len(points)

@@ -254,8 +254,13 @@ def clamp_turn(frame0: np.ndarray, frame1: np.ndarray) -> float:
     ``signed_angle`` on one vector, in floats: numpy's per-call cost is most of it at this
     size).
     """
-    (a0, a1, _), (b0, b1, _), (c0, c1, _) = frame0.tolist()
-    (p0, p1, _), (q0, q1, _), (r0, r1, _) = frame1.tolist()
+    return _turn_of_rows(frame0.tolist(), frame1.tolist())
+
+
+def _turn_of_rows(rows0: list, rows1: list) -> float:
+    """Return ``clamp_turn`` of two frames given as nested lists of their rows."""
+    (a0, a1, _), (b0, b1, _), (c0, c1, _) = rows0
+    (p0, p1, _), (q0, q1, _), (r0, r1, _) = rows1
     t0, v, t1, d1 = (a0, b0, c0), (a1, b1, c1), (p0, q0, r0), (p1, q1, r1)
     c = _fdot(t0, t1)
     k = _fcross(t0, t1)
@@ -279,9 +284,13 @@ def _turn(frame0: np.ndarray | None, frame1: np.ndarray) -> float:
     ``clamp_turn``, 0 without a previous frame, and exactly 0 for an unchanged frame without
     computing it (a stream that moves grips without turning them: the usual case).
     """
-    if frame0 is None or np.array_equal(frame0, frame1):
+    if frame0 is None or frame0 is frame1:
         return 0.0
-    return clamp_turn(frame0, frame1)
+    rows0, rows1 = frame0.tolist(), frame1.tolist()
+    # (equal lists of floats: np.array_equal's answer, nan unequal to itself alike)
+    if rows0 == rows1:
+        return 0.0
+    return _turn_of_rows(rows0, rows1)
 
 
 @dataclass(frozen=True)

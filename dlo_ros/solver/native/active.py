@@ -36,15 +36,17 @@ from .settings import (
 #: ``dlo_newton_active_run``'s argument types (``newton_active.c``), in its order: the LAPACK/BLAS
 #: pointers and the node map (4 pointers, 2 ints), n, rows, the active and switchable flags, the
 #: switches, step limits and whether ``first`` is given (4 ints), the settings (9 doubles), the
-#: arrays (9), the counters (2), then the eigenpair's and the outputs' pointers (6).
-_DP, _IP, _VP = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
+#: arrays (9), the counters (2), then the eigenpair's and the outputs' pointers (6).  The flags'
+#: and the arrays' pointers are passed as addresses (``ndarray.ctypes.data``: a typed pointer,
+#: ``data_as``, costs twice that per argument and call).
+_IP, _VP = ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
 _ARGTYPES: list[Any] = [
     *[_VP] * 4,
     *[ctypes.c_int] * 4,
-    *[_IP] * 2,
+    *[_VP] * 2,
     *[ctypes.c_int] * 4,
     *[ctypes.c_double] * 9,
-    *[_DP] * 9,
+    *[_VP] * 9,
     *[_IP] * 2,
     *[_VP] * 6,
 ]
@@ -186,14 +188,14 @@ class ActiveNewton:
             *self._head,
             n,
             rows,
-            act.ctypes.data_as(_IP),
-            switch.ctypes.data_as(_IP),
+            act.ctypes.data,
+            switch.ctypes.data,
             int(switches),
             int(max_steps),
             NEWTON_CHORD_STEPS,
             int(first is not None),
             *_SETTINGS,
-            *(a.ctypes.data_as(_DP) for a in arrays),
+            *(a.ctypes.data for a in arrays),
             ctypes.byref(steps),
             ctypes.byref(evaluations),
             *self._eigen_args,

@@ -30,12 +30,18 @@ class ComputedOutputs:
     values: list[np.ndarray]
 
     def matches(self, z: np.ndarray, p: np.ndarray, lam_si: np.ndarray, prof: np.ndarray) -> bool:
+        """Whether these are the outputs at (z, p, λ_SI, prof) (``same`` arrays each)."""
         return (
-            np.array_equal(self.z, z)
-            and np.array_equal(self.p, p)
-            and np.array_equal(self.lam_si, lam_si)
+            same(self.z, z)
+            and same(self.p, p)
+            and same(self.lam_si, lam_si)
             and (self.prof is prof or np.array_equal(self.prof, prof))
         )
+
+
+def same(a: np.ndarray, b: np.ndarray) -> bool:
+    """``np.array_equal`` of two arrays (nan unequal), without its conversions: one of them."""
+    return a is b or (a.shape == b.shape and bool((a == b).all()))
 
 
 class _AfterStruct(ctypes.Structure):
@@ -82,6 +88,9 @@ class UpdateOutputs:
         )
         self._g, self._lam_si = np.zeros(max(rows, 1)), np.zeros(max(rows, 1))
         self._prof: np.ndarray | None = None
+        # (the prof last given, its address) when it is itself contiguous floats (no copy read
+        # instead): a stream's profiles are one array (``OutputFunction.profiles``, per string)
+        self._prof_given: tuple | None = None
         self._shapes = outputs.out_shapes if outputs is not None else []
         self._out = [np.zeros(max(r * c, 1)) for r, c in self._shapes]
         self._struct = _AfterStruct()
@@ -112,8 +121,13 @@ class UpdateOutputs:
             self._prof = None
         else:
             st.outputs, st.outputs_work = self.outputs
-            self._prof = prof = np.ascontiguousarray(prof, dtype=float)
-            st.prof = prof.ctypes.data
+            given = self._prof_given
+            if given is None or given[0] is not prof:
+                held = np.ascontiguousarray(prof, dtype=float)
+                given = (held, held.ctypes.data)
+                self._prof_given = given if held is prof else None
+            self._prof = given[0]
+            st.prof = given[1]
         return self.address
 
     def collect(

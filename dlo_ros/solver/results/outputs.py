@@ -135,7 +135,7 @@ def energies(values: np.ndarray, moments: MomentWork | None = None) -> dict[str,
     ``moments``: the point moments' correction of the work (``moment_work.py``); its None makes
     external_work and total None (a dead moment without a potential).
     """
-    bend, twist, stretch, grav, work = (float(v) for v in values.ravel())
+    bend, twist, stretch, grav, work = values.ravel().tolist()
     correction = 0.0 if moments is None else moments.correction
     if correction is None:
         return {
@@ -169,9 +169,15 @@ class ShapeOutputs:
     ):
         self.nlp, self.fns, self.parameters, self.options = nlp, fns, parameters, options
         self.s_out = output_s(nlp, options)
+        # λ_SI = λ / (row_scale · σ): the divisor of this NLP, formed once (the same numbers)
+        self._lam_div = nlp.row_scale * nlp.sigma
         #: the self-contact slots p holds in the solve under way (set by ShapeSolver; None: not
         #: modelled)
         self.contact_slots: ContactSlots | None = None
+
+    def si_multipliers(self, state: SolverState) -> np.ndarray:
+        """Return the state's multipliers in SI units, λ / (row_scale · σ), as a new array."""
+        return state.lam_g / self._lam_div if state.lam_g.size else state.lam_g
 
     def frames_of(self, current: Problem) -> FramesOf:
         """Material frames Q(z, s) with the twist-free frames anchored at ``current``'s grips."""
@@ -199,7 +205,7 @@ class ShapeOutputs:
         nlp, m = self.nlp, self.nlp.model
         z, p = state.z, state.p
         run = SolveRun(ipopt_status, iterations, violation, warm, steps)
-        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        lam_si = self.si_multipliers(state)
         if self.fns.outputs is not None and self.contact_slots is None:
             return self._compiled_result(problem, current, state, lam_si, run, summary)
         s_out = self.s_out.copy()
@@ -233,7 +239,7 @@ class ShapeOutputs:
             if slots is not None and c.gap <= slots.geometry.distance + 1e-7 * nlp.length
         ]
         evaluated = Evaluated(points, quats, grips, contacts, residual, flipped, touching)
-        return self._assemble(problem, state, summary, evaluated, run)
+        return self._assemble(problem, state, summary, evaluated, run, lam_si)
 
     def point_actions(
         self, problem: Problem, current: Problem, state: SolverState
@@ -244,7 +250,7 @@ class ShapeOutputs:
         of the residual along the string (``element_error.py``); the numpy path, always.
         """
         nlp = self.nlp
-        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
+        lam_si = self.si_multipliers(state)
         frames_of = self.frames_of(current)
         grips = {
             g.name: wrench(nlp, current.string, frames_of, g, state.z, lam_si)
@@ -281,13 +287,13 @@ class ShapeOutputs:
         # the compiled loop's, at its answer (native/outputs.py); SolverState types it as object
         computed = cast(ComputedOutputs | None, state.outputs)
         if computed is not None and computed.matches(state.z, state.p, lam_si, prof):
-            points, v_out, forces, torques, contact, res, flip = computed.values
+            points, v_out, forces, torques, contact, res, flip = computed.values[:7]
         else:
             outputs = self.fns.outputs
             assert outputs is not None  # result() checked it
             points, v_out, forces, torques, contact, res, flip = outputs(
                 state.z, state.p, lam_si, prof
-            )
+            )[:7]
         grips = {
             name: GripWrench(force=forces[:, k], torque=torques[:, k])
             for k, name in enumerate(plan.grip_names)
@@ -295,12 +301,13 @@ class ShapeOutputs:
         contacts = {i: contact[:, i] for i in range(plan.n_obstacles)}
         # frames.flipped_grips: t against the target's x axis, and d1 against its y axis for a
         # clamp
+        tangent_dots, d1_dots = flip[0].tolist(), flip[1].tolist()  # (one read each, as floats)
         flipped = ", ".join(
             g.name
             for k, g in enumerate(problem.grips)
-            if g.mode != "pin" and (flip[0, k] < 0 or (g.mode == "clamp" and flip[1, k] < 0))
+            if g.mode != "pin" and (tangent_dots[k] < 0 or (g.mode == "clamp" and d1_dots[k] < 0))
         )
-        residual = EquilibriumResidual(float(res[0, 0]), float(res[1, 0]), float(res[2, 0]))
+        residual = EquilibriumResidual(*res[:3, 0].tolist())
         if plan.planar:  # v_out is φ: the orientations as ``sample`` and the numpy path make them
             phi = v_out.ravel()
             quats = pose_quaternions(
@@ -312,7 +319,7 @@ class ShapeOutputs:
         else:
             quats = v_out.T
         evaluated = Evaluated(points.T, quats, grips, contacts, residual, flipped, [])
-        return self._assemble(problem, state, summary, evaluated, run)
+        return self._assemble(problem, state, summary, evaluated, run, lam_si)
 
     def _assemble(
         self,
@@ -321,11 +328,13 @@ class ShapeOutputs:
         summary: Any,
         out: Evaluated,
         run: SolveRun,
+        lam_si: np.ndarray,
     ) -> ShapeResult:
         """Return the ShapeResult of the evaluated outputs, with its status.
 
         The energies and the stability verdict come from the reduced Hessian; the status is
-        'failed' on a flipped branch, 'unverified' over the residual's tolerance.
+        'failed' on a flipped branch, 'unverified' over the residual's tolerance.  ``lam_si``: the
+        state's SI multipliers (``si_multipliers``), a new array the result may keep.
         """
         options = self.options
         # the inertia's verdict, or the eigenvalue's (λ_min then deferred or a number); no freedom
@@ -379,11 +388,11 @@ class ShapeOutputs:
             ipopt_status=run.ipopt_status,
             equilibrium_residual_m=out.residual.metres,
             self_contacts=out.self_contacts,
-            contact_loads=self._contact_loads(problem, state),
+            contact_loads=self._contact_loads(problem, state, lam_si),
         )
 
     def _contact_loads(
-        self, problem: Problem, state: SolverState
+        self, problem: Problem, state: SolverState, lam_si: np.ndarray
     ) -> list[ContactLoad] | Later[list[ContactLoad]]:
         """Return the obstacles' line loads and point forces (``contacts.contact_loads``).
 
@@ -393,7 +402,6 @@ class ShapeOutputs:
         nlp = self.nlp
         if not nlp.obstacle_rows:
             return []
-        lam_si = state.lam_g / (nlp.row_scale * nlp.sigma) if state.lam_g.size else state.lam_g
         return Later(partial(contact_loads, nlp, problem, state.z.copy(), state.p.copy(), lam_si))
 
     def _self_contacts(

@@ -28,16 +28,23 @@ result (radius > 0) gets ``min_self_distance``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
 from ...model.problem import Problem
+from ..build.nlp import StringNLP
 from ..contact import self_contact as SC
+from ..contact.apart_memo import ApartMemo
+from ..native.outputs import ComputedOutputs, same
+from ..state import SolverState
 from .result import ShapeResult
 
 #: a sample pair closer than 2r (1 − TOLERANCE) passes through itself (rounding and the solver's
 #: own tolerance never bring a shape that keeps 2r that far below it)
 TOLERANCE = 1e-3
+#: where the outputs' function gives the quadrature tangents (``output_function.py``)
+TANGENTS = 7
 
 
 @dataclass(frozen=True)
@@ -66,13 +73,75 @@ def geometry_of(problem: Problem, samples: int = 0) -> SC.ContactGeometry:
     return SC.contact_geometry(st.length, st.radius, samples, tuple(g.s for g in problem.grips))
 
 
-def self_pass(points: np.ndarray, geometry: SC.ContactGeometry, radius: float) -> SelfPass:
+def tangents(nlp: StringNLP, state: SolverState) -> np.ndarray:
+    """Return (1 + ε) t̂ at a director model's quadrature nodes (3, M) for ``state``.
+
+    Those the converged compiled loop's outputs carry when it evaluated them at ``state.z``
+    (``native.outputs.ComputedOutputs``), else ``model.quad_tangents``: equal to rounding.
+    """
+    computed = cast(ComputedOutputs | None, state.outputs)  # SolverState types it as object
+    if computed is not None and len(computed.values) > TANGENTS and same(computed.z, state.z):
+        return computed.values[TANGENTS]
+    return nlp.model.quad_tangents(state.z)
+
+
+def centreline(nlp: StringNLP, state: SolverState, s: np.ndarray) -> np.ndarray:
+    """Return the centreline points (len(s), 3) [m] of ``state`` at ``s``, the ones to test.
+
+    A director model's from its ``tangents`` (one matrix product,
+    ``DirectorModel.positions_with``); else ``model.positions``.  Equal to rounding.
+    """
+    if nlp.director:
+        return nlp.model.positions_with(state.z, s, tangents(nlp, state))
+    return nlp.model.positions(state.z, s)
+
+
+def check(
+    nlp: StringNLP,
+    state: SolverState,
+    geometry: SC.ContactGeometry,
+    radius: float,
+    memo: ApartMemo | None = None,
+) -> SelfPass:
+    """Return ``self_pass`` of ``state``'s centreline at ``geometry.s``.
+
+    With the solver's ``memo``, a director model's samples are worked out only where the memo's
+    proof does not cover the move of its tangents (``ApartMemo.apart_linear``).
+    """
+    if memo is None or not nlp.director:
+        return self_pass(centreline(nlp, state, geometry.s), geometry, radius, memo)
+    held = tangents(nlp, state)
+    sampled: list[np.ndarray] = []
+
+    def points() -> np.ndarray:
+        if not sampled:
+            sampled.append(nlp.model.positions_with(state.z, geometry.s, held))
+        return sampled[0]
+
+    def rows() -> np.ndarray:
+        return nlp.model.position_matrix(geometry.s)
+
+    if memo.apart_linear(geometry, held, points, rows):
+        return SelfPass(float("inf"), None, 2.0 * radius * (1.0 - TOLERANCE), radius)
+    return self_pass(points(), geometry, radius)
+
+
+def self_pass(
+    points: np.ndarray,
+    geometry: SC.ContactGeometry,
+    radius: float,
+    memo: ApartMemo | None = None,
+) -> SelfPass:
     """Return how close the centreline ``points`` (N, 3) [m] at ``geometry.s`` comes to itself.
 
-    ``radius`` > 0 [m]; see the module docstring for what is tested.
+    ``radius`` > 0 [m]; see the module docstring for what is tested.  ``memo``: the solver's
+    shape proved apart last (``contact/apart_memo.py``), whose proof may cover ``points``.
     """
     limit = 2.0 * radius * (1.0 - TOLERANCE)
-    if SC.certainly_apart(points, geometry):  # the usual answer, proved without the k-d tree
+    apart = (
+        memo.apart(points, geometry) if memo is not None else SC.certainly_apart(points, geometry)
+    )
+    if apart:  # the usual answer, proved without the k-d tree
         return SelfPass(float("inf"), None, limit, radius)
     candidates = SC.candidate_pairs(points, geometry)
     closest = min((d for _, d in candidates), default=float("inf"))

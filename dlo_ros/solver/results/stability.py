@@ -74,7 +74,8 @@ def stability_verdict(
         h, jac = held_derivatives(nlp, fns, state)
         if by_loop or stable_by_inertia(h, jac):
             state.unstable_direction = None
-            return True, DeferredEigen(np.array(h), np.array(jac))
+            # (jac: the held rows picked by a mask, a copy already)
+            return True, DeferredEigen(np.array(h), jac)
         value = _noted(state, reduced_eigenpair(h, jac))
     if value is None:
         return True, None
@@ -87,8 +88,8 @@ def held_derivatives(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Return (∇²L, the held rows' Jacobian) at ``state``, its missing derivatives evaluated.
 
-    The rows are ``held_rows``'; the Hessian, Jacobian, energies and gradient are filled in the
-    state where it lacks them.
+    The Jacobian's rows are a new array (picked by the mask ``held_rows``); the Hessian, Jacobian,
+    energies and gradient are filled in the state where it lacks them.
     """
     active = np.zeros(0, dtype=bool)
     if nlp.lbg.size:

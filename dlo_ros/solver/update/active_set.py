@@ -22,7 +22,7 @@ from ..native.settings import (
     NEWTON_STEP_SWITCHES,
 )
 from ..state import SolverState
-from .kkt import kkt_step
+from .kkt import kkt_step, same_scene
 
 
 def newton_active(
@@ -120,9 +120,9 @@ def switchable_rows(nlp: StringNLP, p: np.ndarray) -> np.ndarray:
     The contact rows (a row p switches off holds nothing: ``obstacle_slots.py``); fold guards may
     not switch.
     """
-    switchable = nlp.contact_row & ~nlp.equality
+    switchable = nlp.switchable_rows  # read-only: a new array where slots switch rows off
     if nlp.obstacle_slots:
-        switchable &= ~nlp.disabled_rows(p)
+        switchable = switchable & ~nlp.disabled_rows(p)
     return switchable
 
 
@@ -135,8 +135,7 @@ def first_derivatives(
     stored at the start stay exact and g shifts by a known amount: the first step needs no
     evaluation.
     """
-    keep = ~nlp.grip_parameter_mask
-    if not (reuse and np.array_equal(start.p[keep], p[keep])):
+    if not (reuse and same_scene(nlp, start.p, p)):
         return None
     return start.gradient, start.g + nlp.target_shift(start.p, p), start.jacobian, start.hessian
 

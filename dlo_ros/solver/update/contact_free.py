@@ -22,7 +22,7 @@ from ..native.settings import (
     NEWTON_STEPS,
 )
 from ..state import SolverState
-from .kkt import all_rows, regularised, violation
+from .kkt import all_rows, regularised, same_scene, violation
 
 #: (ok, state, steps, constraint violation [m or rad], the converged contact-free point when a
 # contact appeared there, else None) of ``newton_free``
@@ -97,13 +97,10 @@ def first_steps(
     """
     nf, n = nlp.n_free_rows, start.z.size
     unknowns = np.concatenate([start.z, start.lam_g[:nf]])
-    keep = ~nlp.grip_parameter_mask
     native = fns.newton_native if fused else None
     kkt = residual = grad = energies = None
     if (
-        start.kkt is not None
-        and start.residual is not None
-        and np.array_equal(start.p[keep], p[keep])
+        start.kkt is not None and start.residual is not None and same_scene(nlp, start.p, p)
     ):  # targets enter g linearly
         kkt, residual = start.kkt, start.residual.copy()
         residual[n:] += nlp.target_shift(start.p, p)[:nf]
@@ -156,7 +153,7 @@ def converged(
     lam[:nf] = lam_free
     tol = settings.CONTACT_APPEARED_TOLERANCE  # the compiled loop's too (dlo_after_run)
     # a contact appeared (or a fold guard: no equilibrium)
-    if np.any(g[nf:] > nlp.ubg[nf:] + tol):
+    if (g[nf:] > nlp.ubg[nf:] + tol).any():
         guards = ~nlp.contact_row[nf:]
         contact = np.all(g[nf:][guards] <= nlp.ubg[nf:][guards] + tol)
         point = SolverState(z.copy(), lam, start.lam_x, p, g=g) if contact else None

@@ -45,15 +45,23 @@ def regularised(kkt: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def same_scene(nlp: StringNLP, p_old: np.ndarray, p_new: np.ndarray) -> bool:
+    """Whether two parameter vectors differ in grip targets at most (``np.array_equal`` there)."""
+    rows = nlp.scene_parameter_rows
+    a, b = p_old[rows], p_new[rows]
+    return a.shape == b.shape and bool((a == b).all())
+
+
 def violation(nlp: StringNLP, g: np.ndarray) -> float:
     """Return the largest constraint violation of the row values g, in SI (m or rad)."""
     if g.size == 0:
         return 0.0
-    return float(
-        np.max(
-            np.maximum(np.maximum(nlp.lbg - g, 0.0), np.maximum(g - nlp.ubg, 0.0)) * nlp.row_scale
-        )
-    )
+    # max_i max(l_i − g_i, g_i − u_i, 0) s_i with s_i > 0: the zero taken once, after the scaling
+    # (the same numbers; nan stays nan)
+    over = np.maximum(nlp.lbg - g, g - nlp.ubg)
+    over *= nlp.row_scale
+    worst = float(over.max())
+    return worst if not worst < 0.0 else 0.0
 
 
 def active_rows(nlp: StringNLP, lam: np.ndarray, g: np.ndarray) -> np.ndarray:

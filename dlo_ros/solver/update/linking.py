@@ -55,6 +55,12 @@ class ClampTurnTracker:
         # (the clamps' target quaternions as bytes, their frames, (ClampTurns, it advanced to
         # them) or None)
         self._clamp_frames: tuple | None = None
+        # ((name, s, mode) of every grip, the indices of linking_clamps' grips among them): the
+        # clamps of the grips last seen (a stream's grips differ in their poses alone)
+        self._clamp_index: tuple[tuple, list[int]] | None = None
+        # clamp name → (its target quaternion as bytes, its frame): a grip that did not turn keeps
+        # its frame (the same object, so ``topology._turn`` sees it unchanged at once)
+        self._frame_of: dict[str, tuple[bytes, np.ndarray]] = {}
 
     def advance(
         self, start: SolverState | None, clamp_turns: TP.ClampTurns | None, problem: Problem
@@ -66,17 +72,17 @@ class ClampTurnTracker:
         """
         if start is None:
             return None
-        clamps = linking_clamps(self.nlp, problem)
+        clamps = self.clamps(problem)
         if not clamps:
             return None
         turns = clamp_turns
         if turns is None or set(turns.frames) != {g.name for g in clamps}:
             turns = self.committed_turns(start, clamps)
-        orientations = np.array([g.pose.orientation for g in clamps])
-        key = orientations.tobytes()
+        keys = [np.asarray(g.pose.orientation, dtype=float).tobytes() for g in clamps]
+        key = b"".join(keys)
         if self._clamp_frames is None or self._clamp_frames[0] != key:
             # grips that moved without turning: kept
-            self._clamp_frames = (key, quat_to_frame(orientations), None)
+            self._clamp_frames = (key, self._frames(clamps, keys), None)
         key, frames, last = self._clamp_frames
         if last is not None and last[0] is turns:
             # the same step as the last time (queries from one shape)
@@ -84,6 +90,32 @@ class ClampTurnTracker:
         advanced = turns.advanced({g.name: f for g, f in zip(clamps, frames)})
         self._clamp_frames = (key, frames, (turns, advanced))
         return advanced
+
+    def clamps(self, problem: Problem) -> list[Grip]:
+        """Return the clamps ``linking_clamps`` picks of ``problem`` (remembered per layout)."""
+        layout = tuple((g.name, g.s, g.mode) for g in problem.grips)
+        known = self._clamp_index
+        if known is None or known[0] != layout:
+            chosen = linking_clamps(self.nlp, problem)
+            index = [next(i for i, g in enumerate(problem.grips) if g is c) for c in chosen]
+            known = self._clamp_index = (layout, index)
+        return [problem.grips[i] for i in known[1]]
+
+    def _frames(self, clamps: list[Grip], keys: list[bytes]) -> list[np.ndarray]:
+        """Return the clamps' target frames (``quat_to_frame``), a clamp that did not turn kept.
+
+        Each frame is ``quat_to_frame`` of its quaternion alone (the same numbers as a row of
+        several: ``quaternion_frames._few_quat_to_frame`` works row by row).
+        """
+        frames = []
+        for g, key in zip(clamps, keys):
+            known = self._frame_of.get(g.name)
+            if known is None or known[0] != key:
+                frame = quat_to_frame(np.frombuffer(key)[None, :])[0]
+                frame.flags.writeable = False  # kept in every ClampTurns advanced to it
+                known = self._frame_of[g.name] = (key, frame)
+            frames.append(known[1])
+        return frames
 
     def committed_turns(self, start: SolverState, clamps: list[Grip]) -> TP.ClampTurns:
         """Return no turn yet, from ``start``'s own clamp frames.

@@ -69,14 +69,13 @@ def newton(
     if nlp.obstacle_slots:  # a row p switches off (obstacle_slots.py) holds nothing
         active &= ~nlp.disabled_rows(p)
     steps = 0
-    z, lam = start.z.copy(), np.where(active, start.lam_g, 0.0)
     reuse = (
         kkt_fn is None
         and start.hessian is not None
         and start.g is not None
         and start.gradient is not None
     )
-    if kkt_fn is None and not np.any(active[nlp.n_free_rows :]):
+    if kkt_fn is None and not active[nlp.n_free_rows :].any():
         ok, state, steps, viol, contact = newton_free(nlp, fns, start, p, max_steps, fused, prof)
         if ok or contact is None:
             return ok, state, steps, viol
@@ -86,6 +85,8 @@ def newton(
         z, lam, reuse = contact.z, contact.lam_g, False
         active = active.copy()
         active[np.argmax(violated)] = True
+    else:  # (newton_active copies z and zeroes λ off the active rows itself)
+        z, lam = start.z, start.lam_g
     # the compiled loop only for the compiled KKT function it was built with
     native = fns.newton_active if kkt_fn is None and fused else None
     kkt_fn = kkt_fn or fns.kkt

@@ -21,6 +21,7 @@ one, as ``slot_rounds`` and ``substeps`` do), called from here.
 from __future__ import annotations
 
 from ...model.problem import Problem
+from ..contact.apart_memo import ApartMemo
 from . import linking as LK
 from ..results import self_pass as SP
 from .contact_rounds import solve_self_contact
@@ -59,12 +60,17 @@ def solve_update(ctx: UpdateContext, problem: Problem, warm: bool) -> Outcome:
 
 
 def run_update(
-    ctx: UpdateContext, problem: Problem, warm: bool, tracker: ClampTurnTracker
+    ctx: UpdateContext,
+    problem: Problem,
+    warm: bool,
+    tracker: ClampTurnTracker,
+    apart: ApartMemo | None = None,
 ) -> Outcome:
     """Solve ``problem`` (``solve_update``); a warm update refused as a jump again in substeps.
 
     Every answer of a model without self-contact rows, of a string with a radius, is tested for
-    passing through itself (``results.self_pass``): cold, warm and queries alike.  An answer
+    passing through itself (``results.self_pass``): cold, warm and queries alike (``apart``: the
+    solver's shape proved apart last, ``contact/apart_memo.py``).  An answer
     reached by leaving an unstable stationary point carries that point (``unstable_met``).
     """
     result, state = solve_update(ctx, problem, warm)
@@ -73,8 +79,7 @@ def run_update(
     nlp, radius = ctx.parts.nlp, problem.string.radius
     if state is not None and radius > 0 and not nlp.self_contact_slots:
         geometry = SP.geometry_of(problem, ctx.parts.options.self_contact_samples)
-        points = nlp.model.positions(state.z, geometry.s)
-        SP.flag(result, SP.self_pass(points, geometry, radius))
+        SP.flag(result, SP.check(nlp, state, geometry, radius, apart))
     met = ctx.unstable_met
     if met is not None and met is not result and result.stable is not False:
         result.unstable_met = met  # the escape led elsewhere: the saddle it left

@@ -40,6 +40,7 @@ from bench.common import machine  # noqa: E402
 
 from dlo_ros.scene import load_scene  # noqa: E402
 from dlo_ros.solver.build.compiled import FLAGS, InterpretedFunction, NativeFunction  # noqa: E402
+from dlo_ros.solver.native import cache_store  # noqa: E402
 from dlo_ros.solver.options import SolverOptions  # noqa: E402
 from dlo_ros.solver.shape_solver import ShapeSolver  # noqa: E402
 
@@ -87,10 +88,14 @@ def cost(fn: ca.Function, args: list, flags: tuple[str, ...] = FLAGS) -> dict:
         generate_s = time.perf_counter() - t0
         source = Path(tmp, fn.name() + ".c")
         t0 = time.perf_counter()
-        subprocess.run(["gcc", "-shared", "-fPIC", *flags, "-o", str(Path(tmp, "lib.so")), str(source), "-lm"],
-                       check=True)
+        built = Path(tmp, "built.so")
+        subprocess.run(["gcc", "-shared", "-fPIC", *flags, "-o", str(built), str(source), "-lm"], check=True)
         gcc_s = time.perf_counter() - t0
-        native = NativeFunction(Path(tmp, "lib.so"), fn)
+        # the cache loads a library only with its sha256 record (cache_store.py): stored as the package does
+        lib = Path(tmp, "cache", "lib.so")
+        if not cache_store.store(lib, built.read_bytes()):
+            raise RuntimeError(f"could not store {lib}")
+        native = NativeFunction(lib, fn)
         interpreted = InterpretedFunction(fn)
         error = max(float(np.max(np.abs(a - b))) for a, b in zip(native(*args), interpreted(*args)))
         return {"instructions": fn.n_instructions(), "c_kb": source.stat().st_size // 1024, "generate_s": generate_s,

@@ -446,3 +446,19 @@ def test_background_checks_compile_their_order_shadows_ahead(checks, monkeypatch
             assert not shadows
     finally:
         solver.close()
+
+
+def test_an_unverified_answer_of_auto_does_not_advise_raising_the_order():
+    """A fixed model's 'unverified' says to raise solver.order; auto chooses its order and mesh
+    itself (the main job with both cores busy published two such answers at its switch to 3D)."""
+    import time as _time
+
+    from dlo_ros.solver.auto import report
+    from dlo_ros.solver.results.outputs import unverified_because
+    from dlo_ros.solver.results.result import ShapeResult
+
+    message = unverified_because(1.16e-3, 1e-3, 1.0)
+    assert "raise solver.order" in message
+    auto = report.finished(ShapeResult(status="unverified", message=message), _time.perf_counter(), (0,), 1)
+    assert "raise solver.order" not in auto.message and report.AUTO_REFINES in auto.message
+    assert auto.message.startswith("not a verified equilibrium: the equilibrium residual is 0.00116 m")

@@ -12,6 +12,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..results.element_error import SAFETY
+from ..results.outputs import RAISE_ORDER
 from ..results.result import ShapeResult
 from ..results.summary import ModelSummary
 from ..shape_solver import ShapeSolver
@@ -95,6 +96,10 @@ def with_own_residual(model: ModelSummary, residual_m: float) -> ModelSummary:
     return replace(model, estimated_error_m=own, tolerance_met=met)
 
 
+#: what an 'unverified' answer of auto says in place of a fixed model's advice (``RAISE_ORDER``)
+AUTO_REFINES = "; auto refines its model as far as its checks can"
+
+
 def finished(
     result: ShapeResult, t0: float, obstacles: tuple[int, ...], scene_obstacles: int
 ) -> ShapeResult:
@@ -104,6 +109,8 @@ def finished(
     the obstacles in the model that solved it, ``scene_obstacles`` how many the scene has.
     """
     result.solve_time_ms = (time.perf_counter() - t0) * 1e3
+    if result.status == "unverified":  # auto chooses the model: no advice to raise its order
+        result.message = result.message.replace(RAISE_ORDER, AUTO_REFINES)
     if result.ok and result.contact_forces and len(obstacles) != scene_obstacles:
         result.contact_forces = {
             obstacles[i]: f for i, f in result.contact_forces.items() if i < len(obstacles)

@@ -85,6 +85,11 @@ def sample(
     return points, b_out @ cphi, theta
 
 
+#: what a fixed model's 'unverified' message advises (``unverified_because``); with
+#: ``solver.model: auto`` the answer says instead that auto refines its model (``auto/report.py``)
+RAISE_ORDER = "; raise solver.order"
+
+
 def unverified_because(residual_m: float, tolerance: float, length: float) -> str:
     """Return why a converged shape is no verified equilibrium to ``tolerance`` [m], or ''.
 
@@ -94,7 +99,7 @@ def unverified_because(residual_m: float, tolerance: float, length: float) -> st
     if not residual_m <= tolerance:
         return (
             f"not a verified equilibrium: the equilibrium residual is {residual_m:.3g} m, over "
-            f"the tolerance {tolerance:.3g} m (solver.error_tolerance; raise solver.order)"
+            f"the tolerance {tolerance:.3g} m (solver.error_tolerance{RAISE_ORDER})"
         )
     if tolerance < FLOOR * length:
         return (

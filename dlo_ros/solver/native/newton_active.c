@@ -6,28 +6,9 @@
 #include "dlo_fpmode.h"
 #include "dlo_eigen.h"
 #include "dlo_full.h"
-/* The regularised LU (dlo_regularised_lu) of [H J_A^T; J_A 0] of the m rows idx, into A
-   (N = n + m). */
-static int dlo_active_factor(dlo_getrf_t getrf, const double *hess, const double *jac,
-                             const int *idx, int n, int m, int rows, double reg, double *A,
-                             int *ipiv) {
-  int N = n + m;
-  for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i) A[i + (size_t)j * N] = hess[i + (size_t)j * n];
-  for (int k = 0; k < m; ++k) {
-    for (int j = 0; j < n; ++j) {
-      double a = jac[idx[k] + (size_t)j * rows];
-      A[(n + k) + (size_t)j * N] = a;
-      A[j + (size_t)(n + k) * N] = a;
-    }
-    for (int l = 0; l < m; ++l) A[(n + k) + (size_t)(n + l) * N] = 0.0;
-  }
-  return dlo_regularised_lu(getrf, A, ipiv, n, N, reg);
-}
-
 /* Evaluate the full KKT function here into out = (grad f, g, dg/dz, hess L, energies), counted
-   in *evaluations, and factor [H J_A^T; J_A 0] of the m rows idx there (dlo_active_factor): 0, or
-   the code to stop with (DLO_EVALUATION_FAILED, DLO_SINGULAR). */
+   in *evaluations, and factor [H J_A^T; J_A 0] of the m rows idx there (dlo_kkt_factor, no
+   shift): 0, or the code to stop with (DLO_EVALUATION_FAILED, DLO_SINGULAR). */
 static int dlo_evaluate_and_factor(const casadi_real **arg, casadi_real **res, casadi_int *iw,
                                    casadi_real *w, double *W, dlo_gemm_t gemm,
                                    const dlo_node_map *map, int rows_e, int n, double *buf,
@@ -38,7 +19,7 @@ static int dlo_evaluate_and_factor(const casadi_real **arg, casadi_real **res, c
   if (dlo_full_eval(arg, res, iw, w, W, gemm, map, rows_e, n, buf) != 0)
     return DLO_EVALUATION_FAILED;
   ++*evaluations;
-  if (dlo_active_factor(getrf, out[3], out[2], idx, n, m, rows, reg, A, ipiv) != 0)
+  if (dlo_kkt_factor(getrf, out[3], out[2], idx, n, m, rows, 0.0, reg, A, ipiv) != 0)
     return DLO_SINGULAR;
   return 0;
 }
@@ -164,7 +145,7 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
     }
     if (*steps == max_steps) { code = DLO_NOT_CONVERGED; break; }
     if (!factored || switched) {
-      if (dlo_active_factor(getrf, hess, jac, idx, n, m, rows, reg, A, ipiv) != 0) {
+      if (dlo_kkt_factor(getrf, hess, jac, idx, n, m, rows, 0.0, reg, A, ipiv) != 0) {
         code = DLO_SINGULAR;
         break;
       }

@@ -42,27 +42,6 @@ static double dlo_max_abs(const double *a, size_t n) {
   return big;
 }
 
-/* The regularised LU (dlo_regularised_lu) of [H + shift I, J_A^T; J_A, 0] of the m rows idx into
-   A (N = n + m), as update/kkt.py's kkt_step builds it. */
-static int dlo_shifted_factor(dlo_getrf_t getrf, const double *hess, const double *jac,
-                              const int *idx, int n, int m, int rows, double shift, double reg,
-                              double *A, int *ipiv) {
-  int N = n + m;
-  for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < n; ++i) A[i + (size_t)j * N] = hess[i + (size_t)j * n];
-    if (shift != 0.0) A[j + (size_t)j * N] += shift;
-  }
-  for (int k = 0; k < m; ++k) {
-    for (int j = 0; j < n; ++j) {
-      double a = jac[idx[k] + (size_t)j * rows];
-      A[(n + k) + (size_t)j * N] = a;
-      A[j + (size_t)(n + k) * N] = a;
-    }
-    for (int l = 0; l < m; ++l) A[(n + k) + (size_t)(n + l) * N] = 0.0;
-  }
-  return dlo_regularised_lu(getrf, A, ipiv, n, N, reg);
-}
-
 /* From z (n) and lam (rows, zero off the m rows idx, which are held at bound[k]), at most
    max_steps iterations of update/saddle.py's leave_saddle loop, each one evaluation of the full
    KKT function at (z, p, lam):
@@ -146,7 +125,7 @@ CASADI_SYMBOL_EXPORT int dlo_saddle_run(
     kept = 1;
     for (int j = 0; j < n; ++j) rhs[j] = -rhs[j];
     for (int i = 0; i < m; ++i) rhs[n + i] = -r_prim[i];
-    if (dlo_shifted_factor(getrf, hess, jac, idx, n, m, rows, mu, reg, A, ipiv) != 0) {
+    if (dlo_kkt_factor(getrf, hess, jac, idx, n, m, rows, mu, reg, A, ipiv) != 0) {
       code = DLO_SINGULAR;
       break;
     }

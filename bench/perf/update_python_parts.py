@@ -51,10 +51,29 @@ PARTS = (
     (
         "pipeline and ladder (stages, slot rounds, linking check)",
         lambda a, total: (
-            a("run_update") - a("self_pass") - a("pack") - a("newton_to") - a("result")
+            a("run_update")
+            - a("self_pass")
+            - a("pack")
+            - a("newton_to")
+            - a("result")
+            - sum(a(label) for label in SLOT_CLOCKS)
         ),
     ),
 )
+
+#: the slots model's parts (``--model slots``), each timed in place and taken out of the
+#: pipeline's part above (the placement: its time in ``slot_offset``; a first solve's ``pack``
+#: that places the slots itself, where no prediction stands, counts it in pack and here)
+SLOT_PARTS = (
+    ("slots: predicted_slots (the first solve's slots)", "predicted"),
+    ("slots: carry_slots (the start's multipliers moved)", "carry"),
+    ("slots: slot_offset less its placement (the answer's slots against their minima)", "offset"),
+    ("slots: the placement on the answer (minima, assign, rows of p)", "place"),
+    ("slots: placed_slots (the next round's slots)", "placed"),
+    ("slots: slot_motion (the drift recorded)", "motion"),
+)
+#: the clocks of SLOT_PARTS outside ``pack`` (``offset`` includes ``place`` here)
+SLOT_CLOCKS = ("predicted", "carry", "offset", "placed", "motion")
 
 
 def main() -> None:
@@ -71,6 +90,11 @@ def main() -> None:
     import dlo_ros.solver.shape_solver as SS
     import dlo_ros.solver.update.attempts as AT
     import dlo_ros.solver.update.contact_free as CF
+    import dlo_ros.solver.update.ladder as LD
+    import dlo_ros.solver.update.moments as MO
+    import dlo_ros.solver.update.pipeline as PL
+    import dlo_ros.solver.update.slot_rounds as SR
+    from dlo_ros.solver.build.parameters import ProblemParameters
     from dlo_ros.model.problem import GripPose
     from dlo_ros.scene import load_scene
     from test_director_stream import path
@@ -115,13 +139,41 @@ def main() -> None:
     clocked(AT, "result", "result")
     clocked(OU, "stability_verdict", "stability")
     clocked(SP, "check", "self_pass")
+    solves = [0]
+    if args.model == "slots":
+        for owner in (LD, MO):
+            clocked(owner, "carry_slots", "carry")
+        clocked(PL, "predicted_slots", "predicted")
+        offset = SR.slot_offset
+
+        def offset_clocked(*a, **k):  # the placement's time inside it kept apart
+            t0, placing = time.perf_counter(), clocks["place"]
+            try:
+                return offset(*a, **k)
+            finally:
+                clocks["offset"] += time.perf_counter() - t0
+                clocks["place in offset"] += clocks["place"] - placing
+
+        SR.slot_offset = offset_clocked
+        clocked(SR, "placed_slots", "placed")
+        clocked(SR, "slot_motion", "motion")
+        clocked(ProblemParameters, "_place_slots", "place")
+        counted = PL.solve_with_moments
+
+        def counting(*a, **k):
+            solves[0] += 1
+            return counted(*a, **k)
+
+        PL.solve_with_moments = counting
     start = problem.grip("right").pose.position
     targets = [{"right": GripPose(*path(k, start))} for k in range(1, 2001)]
     for target in targets[:50]:
         solver.solve(target)
     rows = defaultdict(list)
+    rounds: dict[int, int] = defaultdict(int)
     for target in targets[50 : 50 + args.updates]:
         clocks.clear()
+        solves[0] = 0
         t0 = time.perf_counter()
         solver.solve(target)
         total = time.perf_counter() - t0
@@ -131,6 +183,12 @@ def main() -> None:
 
         for label, part in PARTS:
             rows[label].append(part(a, total))
+        if args.model == "slots":
+            rounds[solves[0]] += 1
+            rows[SLOT_PARTS[2][0]].append(a("offset") - a("place in offset"))
+            for label, clock in SLOT_PARTS:
+                if clock != "offset":
+                    rows[label].append(a(clock))
         rows["Python in all"].append(total - a("C"))
         rows["C (the compiled loop)"].append(a("C"))
     print(f"{args.model} 12, {args.stream}, {args.updates} updates: [ms]\n")
@@ -138,6 +196,9 @@ def main() -> None:
     for label, values in rows.items():
         median, p90 = np.median(values) * 1e3, np.percentile(values, 90) * 1e3
         print(f"| {label} | {median:.3f} | {p90:.3f} |")
+    if rounds:
+        counts = ", ".join(f"{k}: {rounds[k]}" for k in sorted(rounds))
+        print(f"\nsolves per update (the first and the slot rounds' repeats): {counts}")
 
 
 if __name__ == "__main__":

@@ -116,6 +116,7 @@ class ProblemParameters:
         #: (what the last ``place_slots`` depended on, its placements): an update places the slots
         #: on its answer, and the next update on that same shape again (``_placed_key``)
         self._placed: tuple[tuple, list[OSL.SlotPlacement]] | None = None
+        self._slot_entries: np.ndarray | None = None  # (slot_entries)
 
     def pack(
         self,
@@ -148,6 +149,24 @@ class ProblemParameters:
             p[lay[f"grip:{g.name}:position"]] = g.pose.position
             p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, reference)
         return p
+
+    def slot_entries(self) -> np.ndarray:
+        """Return the rows of p that hold the obstacles' contact slots, worked out once.
+
+        Every obstacle's ``StringNLP.slot_parameters`` in their order, as one read-only index
+        array (empty without slots).
+        """
+        if self._slot_entries is None:
+            nlp, lay = self.nlp, self.nlp.params
+            rows = [
+                np.arange(lay.size)[lay[name]]
+                for i in range(len(nlp.slot_rows))
+                for name in nlp.slot_parameters(i)
+            ]
+            entries = np.concatenate(rows) if rows else np.zeros(0, dtype=int)
+            entries.flags.writeable = False
+            self._slot_entries = entries
+        return self._slot_entries
 
     def slots(self, p: np.ndarray, i: int) -> OSL.SlotPlacement:
         """Obstacle i's contact slots as p holds them (clearance unknown: inf)."""

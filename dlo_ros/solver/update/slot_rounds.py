@@ -28,6 +28,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ...model.problem import Problem
+from ..build.nlp import StringNLP
 from ..contact import obstacle_slots as OSL
 from ..results.result import ShapeResult
 from ..state import SolverState
@@ -224,38 +225,60 @@ def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> Solver
     nlp, parameters = parts.nlp, parts.parameters
     if not nlp.obstacle_slots:
         return start
-    lay = nlp.params
-    names = [n for i in range(len(nlp.slot_rows)) for n in nlp.slot_parameters(i)]
-    if all(np.array_equal(start.p[lay[n]], p[lay[n]]) for n in names):
+    entries = parameters.slot_entries()
+    new_entries = p[entries]
+    if np.array_equal(start.p[entries], new_entries):
         return start
     moved = start.p.copy()
-    for n in names:
-        moved[lay[n]] = p[lay[n]]
+    moved[entries] = new_entries
     lam = start.lam_g.copy()
-    reach = 0.25 * nlp.obstacle_spacing
     held: list[int] = []  # the rows of moved slots that carry a force
     for i, slot_rows in enumerate(nlp.slot_rows):
-        rows = np.concatenate([nlp.obstacle_rows[i], slot_rows])
+        rows = [*nlp.obstacle_rows[i], *slot_rows]
         old, new = parameters.slots(start.p, i), parameters.slots(moved, i)
-        on_old = np.flatnonzero(np.concatenate([old.samples_on, old.on]) > 0)
-        on_new = np.flatnonzero(np.concatenate([new.samples_on, new.on]) > 0)
-        s_old = np.concatenate([nlp.obstacle_s, old.s])
-        s_new = np.concatenate([nlp.obstacle_s, new.s])
-        carried = np.zeros(rows.size)
-        for j in on_new:  # the start's row nearest along s, within a quarter sample spacing
-            k = on_old[int(np.argmin(np.abs(s_old[on_old] - s_new[j])))] if on_old.size else None
-            if k is not None and abs(s_old[k] - s_new[j]) <= reach:
-                carried[j] = start.lam_g[rows[k]]
+        carried = _carried(nlp, old, new, start.lam_g[rows].tolist())
         lam[rows] = carried
-        shifted = (new.s != old.s) & (carried[-len(slot_rows) :] > 0)
-        held.extend(int(r) for r in np.asarray(slot_rows)[shifted])
-    g = np.asarray(nlp.g_fn(start.z, moved)).ravel()
+        moved_s, old_s = new.s.tolist(), old.s.tolist()
+        k0 = len(rows) - len(slot_rows)
+        held.extend(
+            int(r)
+            for k, r in enumerate(slot_rows)
+            if moved_s[k] != old_s[k] and carried[k0 + k] > 0
+        )
+    g = parts.functions.g(start.z, moved)[0].ravel()
     # a moved slot that carries the contact's force holds it: its row counts as at its bound
     # (``kkt.active_rows``), though the start's shape leaves the obstacle there by the slot's
     # move (the sagging bottom of a cable on a table, slot moved 0.8 mm: 2e-6 m); Newton then
     # keeps the contact instead of starting contact-free and falling back to IPOPT
     g[held] = np.maximum(g[held], nlp.ubg[held])
     return SolverState(start.z, lam, start.lam_x, moved, g=g, contact=start.contact)
+
+
+def _carried(
+    nlp: StringNLP, old: OSL.SlotPlacement, new: OSL.SlotPlacement, lam: list[float]
+) -> list[float]:
+    """Return one obstacle's multipliers carried from ``old`` to ``new`` (``carry_slots``).
+
+    ``lam``: the start's multipliers of the obstacle's rows (its samples, then its slots).  Each
+    row ``new`` switches on takes that of the row ``old`` had on nearest to it along s (the first
+    of equals), when within a quarter of the sample spacing; the others 0.
+    """
+    reach = 0.25 * nlp.obstacle_spacing
+    samples = nlp.obstacle_s.tolist()
+    s_old, s_new = samples + old.s.tolist(), samples + new.s.tolist()
+    switches = (
+        old.samples_on.tolist() + old.on.tolist(),
+        new.samples_on.tolist() + new.on.tolist(),
+    )
+    on_old = [k for k, on in enumerate(switches[0]) if on > 0]
+    carried = [0.0] * len(s_new)
+    for j, on in enumerate(switches[1]):
+        if on > 0 and on_old:
+            # the start's row nearest along s (the first of equals, as np.argmin)
+            k = min(on_old, key=lambda k: abs(s_old[k] - s_new[j]))
+            if abs(s_old[k] - s_new[j]) <= reach:
+                carried[j] = lam[k]
+    return carried
 
 
 def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:

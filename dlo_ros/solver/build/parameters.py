@@ -190,6 +190,11 @@ class ProblemParameters:
             np.full(self.nlp.obstacle_slots, np.inf),
         )
 
+    def slot_lists(self, p: np.ndarray, i: int) -> tuple[list[float], list[float]]:
+        """Return obstacle i's slots as p holds them: (σ [m], on) as lists of floats."""
+        s, on = self._slot_slices(i)[:2]
+        return p[s].tolist(), p[on].tolist()
+
     def write_slots(
         self, p: np.ndarray, i: int, placement: OSL.SlotPlacement, keep: np.ndarray | None = None
     ) -> None:
@@ -248,6 +253,16 @@ class ProblemParameters:
         placements = self._place_slots(problem, z, p, keep)
         self._placed = (key, placements)
         return placements
+
+    def place_on(
+        self, problem: Problem, z: np.ndarray, keep: np.ndarray
+    ) -> list[OSL.SlotPlacement]:
+        """Place the slots on shape z as ``pack(problem, z, keep)`` does, the rest of p unpacked.
+
+        Sets and returns ``placements`` (the slots written into a copy of ``keep``, dropped).
+        """
+        self.placements = self.place_slots(problem, z, keep.copy(), keep)
+        return self.placements
 
     def _place_slots(
         self, problem: Problem, z: np.ndarray, p: np.ndarray, keep: np.ndarray | None

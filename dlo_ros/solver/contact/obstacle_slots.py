@@ -135,8 +135,8 @@ def band(length: float, radius: float) -> float:
     return max(2.0 * radius, length / 200.0)
 
 
-def _clip(x: float, lo: float, hi: float) -> float:
-    """Return ``np.clip(x, lo, hi)`` of floats: its max, then min, each keeping a NaN x."""
+def clip(x: float, lo: float, hi: float) -> float:
+    """Return x clipped to [lo, hi] in floats as numpy clips: max, then min, keeping a NaN x."""
     if x == x:
         x = x if x > lo else lo
     if x == x:
@@ -152,7 +152,7 @@ def _vertex(s: list[float], c: list[float]) -> float:
     """
     curvature = c[0] - 2 * c[1] + c[2]
     shift = 0.5 * (s[2] - s[1]) * (c[0] - c[2]) / curvature if curvature > 0 else 0.0
-    return _clip(s[1] + shift, s[0], s[2])
+    return clip(s[1] + shift, s[0], s[2])
 
 
 def _triples(values: list[float]) -> list[list[float]]:
@@ -194,13 +194,11 @@ def minima(
         for j in k.tolist()
     ]
     for r in (h / 4, h / 16):
-        pts = [_clip(x, 0.0, length) for sj in s for x in (sj - r, sj, sj + r)]
+        pts = [clip(x, 0.0, length) for sj in s for x in (sj - r, sj, sj + r)]
         values = clearance_at(np.array(pts)).tolist()
         s = [_vertex(p, v) for p, v in zip(_triples(pts), _triples(values))]
     half = 0.5 * h_s
-    ends = [_clip(sj - half, 0.0, length) for sj in s] + [
-        _clip(sj + half, 0.0, length) for sj in s
-    ]
+    ends = [clip(sj - half, 0.0, length) for sj in s] + [clip(sj + half, 0.0, length) for sj in s]
     both = clearance_at(np.array(s + ends)).tolist()
     n, floor = len(s), dip * length
     found = []
@@ -289,9 +287,21 @@ def rows_on(samples: np.ndarray, filled: np.ndarray, length: float) -> np.ndarra
     place it touches: on the post, the error estimate 13× the true error).
     """
     samples = np.asarray(samples, dtype=float)
-    out = np.ones(len(samples))
-    if filled.size:
+    if not filled.size:
+        return np.ones(len(samples))
+    points, slots = samples.tolist(), filled.tolist()
+    if any(x != x for x in points + slots):  # NaN: numpy's argmin and min as they treat it
+        out = np.ones(len(samples))
         out[nearest_row(samples, filled)] = 0.0
         near = np.min(np.abs(samples[:, None] - filled[None, :]), axis=1) < CLEAR * length
         out[near] = 0.0
-    return out
+        return out
+    # in floats: the nearest row (the first of equals), and the rows nearer than CLEAR·L
+    reach = CLEAR * length
+    off = {min(range(len(points)), key=lambda j: abs(points[j] - sigma)) for sigma in slots}
+    return np.array(
+        [
+            0.0 if j in off or any(abs(x - sigma) < reach for sigma in slots) else 1.0
+            for j, x in enumerate(points)
+        ]
+    )

@@ -123,9 +123,8 @@ def slot_offset(parts: SolverParts, problem: Problem, state: SolverState) -> flo
     ``state`` in ``parts.parameters.placements``.
     """
     nlp, parameters = parts.nlp, parts.parameters
-    parameters.pack(problem, state.z, keep=state.p)
     worst = 0.0
-    for i, new in enumerate(parameters.placements):
+    for i, new in enumerate(parameters.place_on(problem, state.z, state.p)):
         if new.kept:
             continue
         used = parameters.slots(state.p, i)
@@ -189,29 +188,36 @@ def slot_motion(
     With ``placed`` (``parts.parameters.placements`` holds the placement on ``state``): each
     slot's fixed point is its minimum s* there and ``on`` that placement's (a slot whose minimum
     is gone empties, a new one fills at it); else σ and ``state``'s slots.  drift: the move from
-    the start's fixed point [m]; steady: within half of itself of the update before's.
+    the start's fixed point [m]; steady: within half of itself of the update before's.  Worked
+    out in floats, slot by slot.
     """
     nlp, parameters = parts.nlp, parts.parameters
     shape = (len(nlp.slot_rows), nlp.obstacle_slots)
-    fixed, drift, on = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     motion = start.slot_motion
-    before = motion.fixed if motion is not None else None
+    before = motion.fixed.tolist() if motion is not None else None
+    rows: list[tuple[list[float], list[float], list[float]]] = []  # fixed, drift, on
     for i in range(shape[0]):
-        old, new = parameters.slots(start.p, i), parameters.slots(state.p, i)
-        fixed[i], on[i] = new.s, new.on
+        s_old, on_old = parameters.slot_lists(start.p, i)
+        fixed, on_new = parameters.slot_lists(state.p, i)
+        on = on_new
         if placed:
             found = parameters.placements[i]
-            on[i] = found.on
-            moved = found.on > 0
-            fixed[i, moved] = found.s[moved]
-        both = (old.on > 0) & (new.on > 0) & (on[i] > 0)
-        origin = old.s if before is None else before[i]
-        drift[i, both] = fixed[i, both] - origin[both]
-    if not np.any(on):
+            on = found.on.tolist()
+            fixed = [f if o > 0 else x for f, o, x in zip(found.s.tolist(), on, fixed)]
+        origin = s_old if before is None else before[i]
+        drift = [
+            f - o if (a > 0 and b > 0 and c > 0) else 0.0
+            for f, o, a, b, c in zip(fixed, origin, on_old, on_new, on)
+        ]
+        rows.append((fixed, drift, on))
+    on_all = np.array([r[2] for r in rows], dtype=float).reshape(shape)
+    if not np.any(on_all):
         return None
+    fixed_all = np.array([r[0] for r in rows], dtype=float).reshape(shape)
+    drift_all = np.array([r[1] for r in rows], dtype=float).reshape(shape)
     last = motion.drift if motion is not None else np.zeros(shape)
-    steady = (drift != 0) & (np.abs(drift - last) <= 0.5 * np.abs(drift))
-    return OSL.SlotMotion(fixed, drift, steady, on)
+    steady = (drift_all != 0) & (np.abs(drift_all - last) <= 0.5 * np.abs(drift_all))
+    return OSL.SlotMotion(fixed_all, drift_all, steady, on_all)
 
 
 def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> SolverState:
@@ -295,12 +301,14 @@ def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:
     if motion is None:
         return None
     nlp = parts.nlp
+    length, limit = nlp.length, PREDICTED * nlp.length
     out = []
-    for i in range(len(nlp.slot_rows)):
-        on = motion.on[i]
-        small = np.abs(motion.drift[i]) <= PREDICTED * nlp.length
-        drift = np.where(motion.steady[i] & small, motion.drift[i], 0.0)
-        moved = np.clip(motion.fixed[i] + drift, 0.0, nlp.length)
-        s = np.where(on > 0, moved, 0.0)
-        out.append(_placement(nlp, s, on, np.full(on.shape, np.inf)))
+    for on, fixed, drift, steady in zip(
+        motion.on, motion.fixed.tolist(), motion.drift.tolist(), motion.steady.tolist()
+    ):
+        s = [
+            OSL.clip(f + (d if (st and abs(d) <= limit) else 0.0), 0.0, length) if o > 0 else 0.0
+            for o, f, d, st in zip(on.tolist(), fixed, drift, steady)
+        ]
+        out.append(_placement(nlp, np.array(s, dtype=float), on, np.full(on.shape, np.inf)))
     return out

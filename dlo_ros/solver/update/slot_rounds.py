@@ -267,24 +267,41 @@ def _carried(
 
     ``lam``: the start's multipliers of the obstacle's rows (its samples, then its slots).  Each
     row ``new`` switches on takes that of the row ``old`` had on nearest to it along s (the first
-    of equals), when within a quarter of the sample spacing; the others 0.
+    of equals, as np.argmin), when within a quarter of the sample spacing; the others 0.  A
+    sample row on in both is its own nearest (the samples strictly increasing, no NaN).
     """
     reach = 0.25 * nlp.obstacle_spacing
     samples = nlp.obstacle_s.tolist()
     s_old, s_new = samples + old.s.tolist(), samples + new.s.tolist()
-    switches = (
-        old.samples_on.tolist() + old.on.tolist(),
-        new.samples_on.tolist() + new.on.tolist(),
-    )
-    on_old = [k for k, on in enumerate(switches[0]) if on > 0]
+    was_on = old.samples_on.tolist() + old.on.tolist()
+    on_old = [k for k, on in enumerate(was_on) if on > 0]
     carried = [0.0] * len(s_new)
-    for j, on in enumerate(switches[1]):
-        if on > 0 and on_old:
-            # the start's row nearest along s (the first of equals, as np.argmin)
-            k = min(on_old, key=lambda k: abs(s_old[k] - s_new[j]))
-            if abs(s_old[k] - s_new[j]) <= reach:
-                carried[j] = lam[k]
+    if not on_old:
+        return carried
+    # a sample row on in both is nearest to itself (np.argmin would pick a NaN first)
+    own = all(a < b for a, b in zip(samples, samples[1:])) and all(
+        s_old[k] == s_old[k] for k in on_old
+    )
+    for j, on in enumerate(new.samples_on.tolist() + new.on.tolist()):
+        if not on > 0:
+            continue
+        if own and j < len(samples) and was_on[j] > 0:
+            carried[j] = lam[j]
+            continue
+        k = _nearest(on_old, s_old, s_new[j])
+        if abs(s_old[k] - s_new[j]) <= reach:
+            carried[j] = lam[k]
     return carried
+
+
+def _nearest(rows: list[int], s: list[float], at: float) -> int:
+    """Return the row of ``rows`` whose s is nearest ``at``, as np.argmin picks it.
+
+    The first with a NaN distance, else the first of equals.
+    """
+    d = [abs(s[k] - at) for k in rows]
+    nan = next((i for i, x in enumerate(d) if x != x), None)
+    return rows[nan if nan is not None else min(range(len(d)), key=d.__getitem__)]
 
 
 def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:

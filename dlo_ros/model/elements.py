@@ -207,8 +207,10 @@ class ElementMesh:
         breakpoint: the one before it), and its s-derivative.
         """
         s = np.atleast_1d(np.asarray(s, dtype=float))
-        P, dP = np.zeros((s.size, self.quad_count)), np.zeros((s.size, self.quad_count))
         inside = self.inside_one(s)
+        if inside is not None and self.quads is not None and len(self.elements) == 1:
+            return self._quad_matrices(0, s)  # (new arrays: all of P and P')
+        P, dP = np.zeros((s.size, self.quad_count)), np.zeros((s.size, self.quad_count))
         if inside is not None:  # every point in one element: its rows are all the rows
             P[:, inside[1]], dP[:, inside[1]] = self._quad_matrices(inside[0], s)
             return P, dP
@@ -247,8 +249,10 @@ class ElementMesh:
     def integration_matrix(self, s) -> np.ndarray:
         """W of shape (len(s), quad_count) with ∫_0^s f ≈ W f_quad."""
         s = np.atleast_1d(np.asarray(s, dtype=float))
-        W = np.zeros((s.size, self.quad_count))
         inside = self.inside_one(s)
+        if inside is not None and self.quads is not None and len(self.elements) == 1:
+            return self._integral(0, s - self.breakpoints[0])  # (a new array: all of W)
+        W = np.zeros((s.size, self.quad_count))
         if inside is not None:  # the elements before in full, element e's part: every row alike
             e = inside[0]
             for k in range(e):

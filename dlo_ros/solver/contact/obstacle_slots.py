@@ -246,13 +246,12 @@ def assign(
         free.sort(key=lambda k: old_on[k] > 0)
     for (sj, cj), k in zip(pending, free):
         s[k], on[k], c[k] = sj, 1.0, cj
-    s_, on_ = np.array(s), np.array(on)
-    kept = (
-        previous is not None
-        and np.array_equal(on_, previous.on)
-        and np.array_equal(s_, previous.s)
+    # np.array_equal of the arrays: the lists equal and no NaN (a list compares a NaN to itself)
+    kept = previous is not None and on == old_on and s == old_s and all(x == x for x in s)
+    filled = np.array([x for x, o in zip(s, on) if o > 0], dtype=float)
+    return SlotPlacement(
+        np.array(s), np.array(on), rows_on(samples, filled, length), np.array(c), kept
     )
-    return SlotPlacement(s_, on_, rows_on(samples, s_[on_ > 0], length), np.array(c), bool(kept))
 
 
 def _nearest_slot(

@@ -210,9 +210,9 @@ def slot_motion(
             for f, o, a, b, c in zip(fixed, origin, on_old, on_new, on)
         ]
         rows.append((fixed, drift, on))
-    on_all = np.array([r[2] for r in rows], dtype=float).reshape(shape)
-    if not np.any(on_all):
+    if not any(o != 0 for r in rows for o in r[2]):  # (np.any: a NaN counts)
         return None
+    on_all = np.array([r[2] for r in rows], dtype=float).reshape(shape)
     fixed_all = np.array([r[0] for r in rows], dtype=float).reshape(shape)
     drift_all = np.array([r[1] for r in rows], dtype=float).reshape(shape)
     last = motion.drift if motion is not None else np.zeros(shape)

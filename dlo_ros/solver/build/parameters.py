@@ -190,10 +190,10 @@ class ProblemParameters:
             np.full(self.nlp.obstacle_slots, np.inf),
         )
 
-    def slot_lists(self, p: np.ndarray, i: int) -> tuple[list[float], list[float]]:
-        """Return obstacle i's slots as p holds them: (σ [m], on) as lists of floats."""
-        s, on = self._slot_slices(i)[:2]
-        return p[s].tolist(), p[on].tolist()
+    def slot_lists(self, p: np.ndarray, i: int) -> tuple[list[float], list[float], list[float]]:
+        """Return obstacle i's slots as p holds them: σ [m], on, the samples' switches (floats)."""
+        s, on, _, _, _, samples_on = self._slot_slices(i)
+        return p[s].tolist(), p[on].tolist(), p[samples_on].tolist()
 
     def write_slots(
         self, p: np.ndarray, i: int, placement: OSL.SlotPlacement, keep: np.ndarray | None = None

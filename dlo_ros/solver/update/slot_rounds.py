@@ -52,6 +52,9 @@ PREDICTED = 1e-2
 #: ``kkt.active_rows``)
 ACTIVE = 1e-8
 
+#: one obstacle's slots: σ [m], on, the samples' switches (``ProblemParameters.slot_lists``)
+Slots = tuple[list[float], list[float], list[float]]
+
 #: a solve with the context's start and slots (``pipeline.solve_pairs_fixed``)
 Solve = Callable[[UpdateContext, Problem, bool], Outcome]
 
@@ -197,8 +200,8 @@ def slot_motion(
     before = motion.fixed.tolist() if motion is not None else None
     rows: list[tuple[list[float], list[float], list[float]]] = []  # fixed, drift, on
     for i in range(shape[0]):
-        s_old, on_old = parameters.slot_lists(start.p, i)
-        fixed, on_new = parameters.slot_lists(state.p, i)
+        s_old, on_old, _ = parameters.slot_lists(start.p, i)
+        fixed, on_new, _ = parameters.slot_lists(state.p, i)
         on = on_new
         if placed:
             found = parameters.placements[i]
@@ -241,10 +244,10 @@ def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> Solver
     held: list[int] = []  # the rows of moved slots that carry a force
     for i, slot_rows in enumerate(nlp.slot_rows):
         rows = [*nlp.obstacle_rows[i], *slot_rows]
-        old, new = parameters.slots(start.p, i), parameters.slots(moved, i)
+        old, new = parameters.slot_lists(start.p, i), parameters.slot_lists(moved, i)
         carried = _carried(nlp, old, new, start.lam_g[rows].tolist())
         lam[rows] = carried
-        moved_s, old_s = new.s.tolist(), old.s.tolist()
+        moved_s, old_s = new[0], old[0]
         k0 = len(rows) - len(slot_rows)
         held.extend(
             int(r)
@@ -260,11 +263,10 @@ def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> Solver
     return SolverState(start.z, lam, start.lam_x, moved, g=g, contact=start.contact)
 
 
-def _carried(
-    nlp: StringNLP, old: OSL.SlotPlacement, new: OSL.SlotPlacement, lam: list[float]
-) -> list[float]:
+def _carried(nlp: StringNLP, old: Slots, new: Slots, lam: list[float]) -> list[float]:
     """Return one obstacle's multipliers carried from ``old`` to ``new`` (``carry_slots``).
 
+    ``old``, ``new``: the slots (σ, on, the samples' switches: ``ProblemParameters.slot_lists``);
     ``lam``: the start's multipliers of the obstacle's rows (its samples, then its slots).  Each
     row ``new`` switches on takes that of the row ``old`` had on nearest to it along s (the first
     of equals, as np.argmin), when within a quarter of the sample spacing; the others 0.  A
@@ -272,8 +274,8 @@ def _carried(
     """
     reach = 0.25 * nlp.obstacle_spacing
     samples = nlp.obstacle_s.tolist()
-    s_old, s_new = samples + old.s.tolist(), samples + new.s.tolist()
-    was_on = old.samples_on.tolist() + old.on.tolist()
+    s_old, s_new = samples + old[0], samples + new[0]
+    was_on = old[2] + old[1]
     on_old = [k for k, on in enumerate(was_on) if on > 0]
     carried = [0.0] * len(s_new)
     if not on_old:
@@ -282,7 +284,7 @@ def _carried(
     own = all(a < b for a, b in zip(samples, samples[1:])) and all(
         s_old[k] == s_old[k] for k in on_old
     )
-    for j, on in enumerate(new.samples_on.tolist() + new.on.tolist()):
+    for j, on in enumerate(new[2] + new[1]):
         if not on > 0:
             continue
         if own and j < len(samples) and was_on[j] > 0:

@@ -205,7 +205,8 @@ def main() -> None:
         line = f"| {label} | {np.median(v):.3f} | {np.percentile(v, 90):.3f} |"
         if rounds:
             twice = v[np.array(rounds) == 2]
-            line += f" {np.median(v[once]):.3f} | {np.median(twice) if twice.size else 0:.3f} |"
+            second = f"{np.median(twice):.3f}" if twice.size else "–"
+            line += f" {np.median(v[once]):.3f} | {second} |"
         print(line)
     if rounds:
         counts = ", ".join(f"{k}: {rounds.count(k)}" for k in sorted(set(rounds)))

@@ -22,11 +22,13 @@ Hessian costs O(E n³) instead of O(E n² m) for m separate quadrature nodes.
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 from numpy.polynomial import chebyshev as C
 from numpy.polynomial import legendre as Leg
 
-from .quadrature import ChebyshevQuadrature
+from .quadrature import FEW_POINTS, ChebyshevQuadrature
 
 
 def lgl_nodes(count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -149,6 +151,7 @@ class ElementMesh:
             self.quad_nodes = np.concatenate([lo + q.nodes for lo, q in zip(starts, self.quads)])
             self.weights = np.concatenate([q.weights for q in self.quads])
         self.quad_count = self.quad_nodes.size
+        self._bounds: list[float] = self.breakpoints.tolist()  # (inside_one)
         # B: global nodal values → values at the quadrature nodes (a selection when collocated);
         # dB: derivatives
         self.B = np.zeros((self.quad_count, self.count))
@@ -204,37 +207,77 @@ class ElementMesh:
         breakpoint: the one before it), and its s-derivative.
         """
         s = np.atleast_1d(np.asarray(s, dtype=float))
+        inside = self.inside_one(s)
+        if inside is not None and self.quads is not None and len(self.elements) == 1:
+            return self._quad_matrices(0, s)  # (new arrays: all of P and P')
         P, dP = np.zeros((s.size, self.quad_count)), np.zeros((s.size, self.quad_count))
+        if inside is not None:  # every point in one element: its rows are all the rows
+            P[:, inside[1]], dP[:, inside[1]] = self._quad_matrices(inside[0], s)
+            return P, dP
         which = self.element_of(s, "left")
         for e in np.unique(which):
             rows = np.flatnonzero(which == e)
-            local = s[rows] - self.breakpoints[e]
             cols = slice(self.quad_first[e], self.quad_first[e + 1])
-            if self.quads is None:
-                b, db = self.elements[e].matrices(local)
-            else:
-                b = self.quads[e].interpolation_matrix(local)
-                db = self.quads[e].derivative_matrix(local)
-            P[rows, cols], dP[rows, cols] = b, db
+            P[rows, cols], dP[rows, cols] = self._quad_matrices(e, s[rows])
         return P, dP
+
+    def _quad_matrices(self, e: int, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return element e's (P, P') at the arc lengths ``s`` on it (``quad_interpolation``)."""
+        local = s - self.breakpoints[e]
+        if self.quads is None:
+            return self.elements[e].matrices(local)
+        return self.quads[e].interpolation_matrix(local), self.quads[e].derivative_matrix(local)
+
+    def inside_one(self, s: np.ndarray) -> tuple[int, slice] | None:
+        """Return (e, its quadrature columns) when a few ``s`` lie strictly inside element e.
+
+        Up to FEW_POINTS points, checked in Python floats; None otherwise (more points, a point
+        on a breakpoint or outside, NaN).  The matrices then hold one block per row.
+        """
+        if not 0 < s.size <= FEW_POINTS:
+            return None
+        points = s.tolist()
+        bounds = self._bounds
+        e = bisect.bisect_right(bounds, points[0]) - 1
+        if not 0 <= e < len(self.elements):
+            return None
+        lo, hi = bounds[e], bounds[e + 1]
+        if not all(lo < x < hi for x in points):
+            return None
+        return e, slice(int(self.quad_first[e]), int(self.quad_first[e + 1]))
 
     def integration_matrix(self, s) -> np.ndarray:
         """W of shape (len(s), quad_count) with ∫_0^s f ≈ W f_quad."""
         s = np.atleast_1d(np.asarray(s, dtype=float))
+        inside = self.inside_one(s)
+        if inside is not None and self.quads is not None and len(self.elements) == 1:
+            return self._integral(0, s - self.breakpoints[0])  # (a new array: all of W)
         W = np.zeros((s.size, self.quad_count))
-        for e, el in enumerate(self.elements):
+        if inside is not None:  # the elements before in full, element e's part: every row alike
+            e = inside[0]
+            for k in range(e):
+                W[:, self.quad_first[k] : self.quad_first[k + 1]] = self._quad_weights(k)
+            W[:, inside[1]] = self._integral(e, s - self.breakpoints[e])
+            return W
+        for e in range(len(self.elements)):
             lo, hi = self.breakpoints[e], self.breakpoints[e + 1]
             cols = slice(self.quad_first[e], self.quad_first[e + 1])
             full = s >= hi
-            W[full, cols] = el.weights if self.quads is None else self.quads[e].weights
+            W[full, cols] = self._quad_weights(e)
             part = (s > lo) & (s < hi)
             if np.any(part):
-                W[part, cols] = (
-                    el.integral(s[part] - lo)
-                    if self.quads is None
-                    else self.quads[e].integration_matrix(s[part] - lo)
-                )
+                W[part, cols] = self._integral(e, s[part] - lo)
         return W
+
+    def _quad_weights(self, e: int) -> np.ndarray:
+        """Return element e's quadrature weights (its row of W at its end)."""
+        return self.elements[e].weights if self.quads is None else self.quads[e].weights
+
+    def _integral(self, e: int, local: np.ndarray) -> np.ndarray:
+        """Return element e's rows of W at the local arc lengths ``local`` inside it."""
+        if self.quads is None:
+            return self.elements[e].integral(local)
+        return self.quads[e].integration_matrix(local)
 
 
 def element_mesh_of(model) -> ElementMesh | None:

@@ -29,15 +29,31 @@ def _chebvander(x: np.ndarray, deg: int) -> np.ndarray:
     """
     if not 0 < x.size <= FEW_POINTS:
         return C.chebvander(x, deg)
+    return _vander_floats(x.tolist(), deg)
+
+
+def _vander_floats(points: list[float], deg: int) -> np.ndarray:
+    """Return ``_chebvander`` of a few points given as floats (its recurrence and layout)."""
     columns = []
-    for t in x.tolist():
+    for t in points:
         a, b, t2 = t * 0.0 + 1.0, t, 2.0 * t
         col = [a, b]
         for _ in range(2, deg + 1):
             a, b = b, b * t2 - a
             col.append(b)
         columns.append(col[: deg + 1])
-    return np.array(list(zip(*columns)), dtype=float).reshape(deg + 1, x.size).T
+    return np.array(list(zip(*columns)), dtype=float).reshape(deg + 1, len(points)).T
+
+
+def _vander_at(s: np.ndarray, length: float, deg: int) -> np.ndarray:
+    """Return ``_chebvander(τ, deg)`` at τ = 2 s / length − 1 of the flattened ``s``.
+
+    Up to FEW_POINTS points τ too in Python floats (numpy's operations, in its order).
+    """
+    s = np.asarray(s, dtype=float).ravel()
+    if not 0 < s.size <= FEW_POINTS:
+        return _chebvander(2.0 * s / length - 1.0, deg)
+    return _vander_floats([2.0 * x / length - 1.0 for x in s.tolist()], deg)
 
 
 class ChebyshevQuadrature:
@@ -56,28 +72,25 @@ class ChebyshevQuadrature:
 
     def integration_matrix(self, s: np.ndarray) -> np.ndarray:
         """W[q, j] with ∫_0^{s_q} f ds ≈ Σ_j W[q, j] f(s_j), shape (len(s), count)."""
-        tau_q = 2.0 * np.asarray(s, dtype=float).ravel() / self.length - 1.0
         if not hasattr(self, "_antiderivatives"):  # column k: the Chebyshev series of ∫_{-1}^τ T_k
             self._antiderivatives = C.chebint(np.eye(self.count), lbnd=-1.0)
         return (
             0.5
             * self.length
-            * (_chebvander(tau_q, self.count) @ self._antiderivatives)
+            * (_vander_at(s, self.length, self.count) @ self._antiderivatives)
             @ self._vinv
         )
 
     def interpolation_matrix(self, s: np.ndarray) -> np.ndarray:
         """P[q, j] with f(s_q) ≈ Σ_j P[q, j] f(s_j) (polynomial interpolation)."""
-        tau_q = 2.0 * np.asarray(s, dtype=float).ravel() / self.length - 1.0
-        return _chebvander(tau_q, self.count - 1) @ self._vinv
+        return _vander_at(s, self.length, self.count - 1) @ self._vinv
 
     def derivative_matrix(self, s: np.ndarray) -> np.ndarray:
         """P'[q, j] with f'(s_q) ≈ Σ_j P'[q, j] f(s_j): the interpolant's s-derivative."""
-        tau_q = 2.0 * np.asarray(s, dtype=float).ravel() / self.length - 1.0
         if not hasattr(self, "_derivatives"):  # column k: the Chebyshev series of dT_k/dτ
             self._derivatives = C.chebder(np.eye(self.count))
         return (
             (2.0 / self.length)
-            * (_chebvander(tau_q, self.count - 2) @ self._derivatives)
+            * (_vander_at(s, self.length, self.count - 2) @ self._derivatives)
             @ self._vinv
         )

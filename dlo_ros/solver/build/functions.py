@@ -21,6 +21,8 @@ One ``NlpFunctions`` per ``StringNLP``:
 * ``saddle_escape``: with ``newton_active``, the shifted Newton steps that leave a saddle as one
   compiled call (``native.saddle.NativeSaddle``, the same library; None until then);
 * ``obstacle_g(z, p)`` → the obstacle rows' values (None without obstacles);
+* ``g(z, p)`` → every row's value, ``StringNLP.g_fn`` interpreted through its buffer (the same
+  numbers as calling it, without the conversions to and from DM);
 * ``outputs(z, p, λ, prof)``: a solution's published outputs in one call (``output_function.py``;
   None
   for the models it does not cover, whose outputs numpy evaluates), compiled last.
@@ -90,6 +92,7 @@ class NlpFunctions:
         self.obstacle_g = (
             InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
         )
+        self.g = InterpretedFunction(nlp.g_fn)
         self.newton_native = None
         self.newton_active: native_newton.ActiveNewton | None = None
         self.saddle_escape: native_saddle.NativeSaddle | None = None

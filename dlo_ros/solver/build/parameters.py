@@ -116,6 +116,10 @@ class ProblemParameters:
         #: (what the last ``place_slots`` depended on, its placements): an update places the slots
         #: on its answer, and the next update on that same shape again (``_placed_key``)
         self._placed: tuple[tuple, list[OSL.SlotPlacement]] | None = None
+        self._slot_entries: np.ndarray | None = None  # (slot_entries)
+        self._slices: dict[int, tuple[slice, ...]] = {}  # obstacle: its slots' slices of p
+        #: obstacle: (σ and on as bytes, the slot rows written last) (``_slot_matrices``)
+        self._matrices: dict[int, tuple[bytes, np.ndarray]] = {}
 
     def pack(
         self,
@@ -149,15 +153,47 @@ class ProblemParameters:
             p[lay[f"grip:{g.name}:angles"]] = self.grip_angles(g.pose, reference)
         return p
 
+    def slot_entries(self) -> np.ndarray:
+        """Return the rows of p that hold the obstacles' contact slots, worked out once.
+
+        Every obstacle's ``StringNLP.slot_parameters`` in their order, as one read-only index
+        array (empty without slots).
+        """
+        if self._slot_entries is None:
+            nlp, lay = self.nlp, self.nlp.params
+            rows = [
+                np.arange(lay.size)[lay[name]]
+                for i in range(len(nlp.slot_rows))
+                for name in nlp.slot_parameters(i)
+            ]
+            entries = np.concatenate(rows) if rows else np.zeros(0, dtype=int)
+            entries.flags.writeable = False
+            self._slot_entries = entries
+        return self._slot_entries
+
+    def _slot_slices(self, i: int) -> tuple[slice, ...]:
+        """Return the slices of p of obstacle i's ``slot_parameters``, looked up once."""
+        found = self._slices.get(i)
+        if found is None:
+            lay = self.nlp.params
+            found = tuple(lay[name] for name in self.nlp.slot_parameters(i))
+            self._slices[i] = found
+        return found
+
     def slots(self, p: np.ndarray, i: int) -> OSL.SlotPlacement:
         """Obstacle i's contact slots as p holds them (clearance unknown: inf)."""
-        lay = self.nlp.params
+        s, on, _, _, _, samples_on = self._slot_slices(i)
         return OSL.SlotPlacement(
-            p[lay[f"slots:{i}:s"]].copy(),
-            p[lay[f"slots:{i}:on"]].copy(),
-            p[lay[f"samples:{i}:on"]].copy(),
+            p[s].copy(),
+            p[on].copy(),
+            p[samples_on].copy(),
             np.full(self.nlp.obstacle_slots, np.inf),
         )
+
+    def slot_lists(self, p: np.ndarray, i: int) -> tuple[list[float], list[float], list[float]]:
+        """Return obstacle i's slots as p holds them: σ [m], on, the samples' switches (floats)."""
+        s, on, _, _, _, samples_on = self._slot_slices(i)
+        return p[s].tolist(), p[on].tolist(), p[samples_on].tolist()
 
     def write_slots(
         self, p: np.ndarray, i: int, placement: OSL.SlotPlacement, keep: np.ndarray | None = None
@@ -165,22 +201,39 @@ class ProblemParameters:
         """Write obstacle i's slots of p (in place) from ``placement``.
 
         Obstacle i's slots of p (in place) from ``placement`` (``keep``: a vector holding its
-        rows already).
+        rows already).  The rows W, P, P' of the last slots written are remembered per obstacle
+        (a stream writes the slots it placed on an answer again as the next solve's).
         """
-        nlp, lay = self.nlp, self.nlp.params
+        slices = self._slot_slices(i)
         if keep is not None:
-            for name in nlp.slot_parameters(i):
-                p[lay[name]] = keep[lay[name]]
+            for rows_of_p in slices:
+                p[rows_of_p] = keep[rows_of_p]
             return
+        s, on, w, t, k, samples_on = slices
+        rows = self._slot_matrices(i, placement)
+        p[s], p[on] = placement.s, placement.on
+        p[w], p[t], p[k] = rows[0].ravel(), rows[1].ravel(), rows[2].ravel()
+        p[samples_on] = placement.samples_on
+
+    def _slot_matrices(self, i: int, placement: OSL.SlotPlacement) -> np.ndarray:
+        """Return obstacle i's slot rows [W; P; P'] (3, K, M) at ``placement``'s filled slots.
+
+        Zero rows where a slot is empty.  Remembered for the last (σ, on) of each obstacle
+        (read-only).
+        """
+        key = placement.s.tobytes() + placement.on.tobytes()
+        last = self._matrices.get(i)
+        if last is not None and last[0] == key:
+            return last[1]
+        nlp = self.nlp
         rows = np.zeros((3, nlp.obstacle_slots, nlp.model.quad.count))
         filled = placement.on > 0
         if np.any(filled):
             rows[0, filled] = nlp.model.position_rows(placement.s[filled])
             rows[1, filled], rows[2, filled] = nlp.model.tangent_rows(placement.s[filled])
-        p[lay[f"slots:{i}:s"]], p[lay[f"slots:{i}:on"]] = placement.s, placement.on
-        for part, values in zip("wtk", rows):
-            p[lay[f"slots:{i}:{part}"]] = values.ravel()
-        p[lay[f"samples:{i}:on"]] = placement.samples_on
+        rows.flags.writeable = False
+        self._matrices[i] = (key, rows)
+        return rows
 
     def place_slots(
         self, problem: Problem, z: np.ndarray, p: np.ndarray, keep: np.ndarray | None = None
@@ -200,6 +253,16 @@ class ProblemParameters:
         placements = self._place_slots(problem, z, p, keep)
         self._placed = (key, placements)
         return placements
+
+    def place_on(
+        self, problem: Problem, z: np.ndarray, keep: np.ndarray
+    ) -> list[OSL.SlotPlacement]:
+        """Place the slots on shape z as ``pack(problem, z, keep)`` does, the rest of p unpacked.
+
+        Sets and returns ``placements`` (the slots written into a copy of ``keep``, dropped).
+        """
+        self.placements = self.place_slots(problem, z, keep.copy(), keep)
+        return self.placements
 
     def _place_slots(
         self, problem: Problem, z: np.ndarray, p: np.ndarray, keep: np.ndarray | None

@@ -135,16 +135,29 @@ def band(length: float, radius: float) -> float:
     return max(2.0 * radius, length / 200.0)
 
 
-def _vertices(s: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Return, per row, the vertex of the parabola through three equally spaced points.
+def clip(x: float, lo: float, hi: float) -> float:
+    """Return x clipped to [lo, hi] in floats as numpy clips: max, then min, keeping a NaN x."""
+    if x == x:
+        x = x if x > lo else lo
+    if x == x:
+        x = x if x < hi else hi
+    return x
 
-    Per row, the vertex of the parabola through three equally spaced points, clipped to their
-    span.
+
+def _vertex(s: list[float], c: list[float]) -> float:
+    """Return the vertex of the parabola through three equally spaced points, clipped to them.
+
+    ``s``, ``c``: the points' arc lengths and values; the middle point where the parabola does
+    not curve up.  numpy's operations of the vectorised form, in its order, on floats.
     """
-    curvature = c[:, 0] - 2 * c[:, 1] + c[:, 2]
-    safe = np.where(curvature > 0, curvature, 1.0)
-    shift = np.where(curvature > 0, 0.5 * (s[:, 2] - s[:, 1]) * (c[:, 0] - c[:, 2]) / safe, 0.0)
-    return np.clip(s[:, 1] + shift, s[:, 0], s[:, 2])
+    curvature = c[0] - 2 * c[1] + c[2]
+    shift = 0.5 * (s[2] - s[1]) * (c[0] - c[2]) / curvature if curvature > 0 else 0.0
+    return clip(s[1] + shift, s[0], s[2])
+
+
+def _triples(values: list[float]) -> list[list[float]]:
+    """Return ``values`` in consecutive threes."""
+    return [values[j : j + 3] for j in range(0, len(values), 3)]
 
 
 def minima(
@@ -163,7 +176,9 @@ def minima(
     c at any arc lengths; each minimum is refined by two parabola steps through evaluated points).
     ``flat`` (an obstacle without curvature): FLAT_DIP·L instead of DIP·L, and only minima not
     more than FLAT_DIP·L through the plane (a shape through it, such as a cold solve's first
-    guess, says nothing of where it will touch).
+    guess, says nothing of where it will touch).  The few minima are refined in Python floats
+    (the same operations numpy would do on their arrays), ``clearance_at`` asked once per step for
+    all of them.
     """
     dip = FLAT_DIP if flat else DIP
     inner = clearance[1:-1]
@@ -173,23 +188,27 @@ def minima(
     )
     if not k.size:
         return np.zeros(0), np.zeros(0)
-    h = s_fine[1] - s_fine[0]
-    s = _vertices(
-        s_fine[np.stack([k - 1, k, k + 1], axis=1)], clearance[np.stack([k - 1, k, k + 1], axis=1)]
-    )
+    h = float(s_fine[1] - s_fine[0])
+    s = [
+        _vertex(s_fine[j - 1 : j + 2].tolist(), clearance[j - 1 : j + 2].tolist())
+        for j in k.tolist()
+    ]
     for r in (h / 4, h / 16):
-        pts = np.clip(np.stack([s - r, s, s + r], axis=1), 0.0, length)
-        s = _vertices(pts, clearance_at(pts.ravel()).reshape(-1, 3))
-    both = clearance_at(
-        np.concatenate([s, np.clip(s - 0.5 * h_s, 0, length), np.clip(s + 0.5 * h_s, 0, length)])
-    )
-    c, left, right = both[: s.size], both[s.size : 2 * s.size], both[2 * s.size :]
-    deep = np.minimum(left, right) - c >= dip * length
-    if flat:
-        deep &= c >= -dip * length
-    s, c = s[deep], c[deep]
-    order = np.argsort(c, kind="stable")
-    return s[order], c[order]
+        pts = [clip(x, 0.0, length) for sj in s for x in (sj - r, sj, sj + r)]
+        values = clearance_at(np.array(pts)).tolist()
+        s = [_vertex(p, v) for p, v in zip(_triples(pts), _triples(values))]
+    half = 0.5 * h_s
+    ends = [clip(sj - half, 0.0, length) for sj in s] + [clip(sj + half, 0.0, length) for sj in s]
+    both = clearance_at(np.array(s + ends)).tolist()
+    n, floor = len(s), dip * length
+    found = []
+    for j, (sj, c, left, right) in enumerate(zip(s, both, both[n:], both[2 * n :])):
+        lower = left if (left < right or left != left) else right  # np.minimum: NaN wins
+        if lower - c >= floor and (not flat or c >= -floor):
+            found.append((c, j, sj))
+    found.sort()  # by depth, then as found (argsort, stable; a NaN depth is not deep)
+    places, depths = [f[2] for f in found], [f[0] for f in found]
+    return np.array(places, dtype=float), np.array(depths, dtype=float)
 
 
 def assign(
@@ -210,39 +229,43 @@ def assign(
     """
     h_s = row_spacing(samples)
     keep = TOLERANCE * length if within is None else within
-    s_new, c_new = found[0][:slots], found[1][:slots]
-    s, on, c = np.zeros(slots), np.zeros(slots), np.full(slots, np.inf)
+    s, on, c = [0.0] * slots, [0.0] * slots, [np.inf] * slots
     free = list(range(slots))
     pending = []
-    for sj, cj in zip(s_new, c_new):
-        k = None
-        if previous is not None:
-            d = np.where(
-                (previous.on > 0) & np.isin(np.arange(slots), free),
-                np.abs(previous.s - sj),
-                np.inf,
-            )
-            if d.size and np.min(d) <= 2 * h_s:
-                k = int(np.argmin(d))
+    old_s = previous.s.tolist() if previous is not None else []
+    old_on = previous.on.tolist() if previous is not None else []
+    for sj, cj in zip(found[0][:slots].tolist(), found[1][:slots].tolist()):
+        k = _nearest_slot(old_s, old_on, free, sj, 2 * h_s)
         if k is None:
             pending.append((sj, cj))
             continue
-        assert previous is not None  # k is one of previous's slots
         free.remove(k)
-        s[k], on[k], c[k] = (
-            (previous.s[k] if abs(previous.s[k] - sj) <= keep else sj),
-            1.0,
-            cj,
-        )
+        s[k], on[k], c[k] = (old_s[k] if abs(old_s[k] - sj) <= keep else sj), 1.0, cj
     if previous is not None:
         # free indices: those empty before first (a slot that lost its minimum holds no force)
-        free.sort(key=lambda k: previous.on[k] > 0)
+        free.sort(key=lambda k: old_on[k] > 0)
     for (sj, cj), k in zip(pending, free):
         s[k], on[k], c[k] = sj, 1.0, cj
-    kept = (
-        previous is not None and np.array_equal(on, previous.on) and np.array_equal(s, previous.s)
+    # np.array_equal of the arrays: the lists equal and no NaN (a list compares a NaN to itself)
+    kept = previous is not None and on == old_on and s == old_s and all(x == x for x in s)
+    filled = np.array([x for x, o in zip(s, on) if o > 0], dtype=float)
+    return SlotPlacement(
+        np.array(s), np.array(on), rows_on(samples, filled, length), np.array(c), kept
     )
-    return SlotPlacement(s, on, rows_on(samples, s[on > 0], length), c, bool(kept))
+
+
+def _nearest_slot(
+    old_s: list[float], old_on: list[float], free: list[int], s: float, within: float
+) -> int | None:
+    """Return the free filled slot of a previous placement nearest to ``s`` (within ``within``).
+
+    The first of equals; None where there is none that near (or a distance is NaN).
+    """
+    d = [abs(old_s[k] - s) if (old_on[k] > 0 and k in free) else np.inf for k in range(len(old_s))]
+    if not d or any(x != x for x in d):
+        return None
+    best = min(range(len(d)), key=d.__getitem__)
+    return best if d[best] <= within else None
 
 
 def slot_tolerance(length: float, error_tolerance: float) -> float:
@@ -263,9 +286,21 @@ def rows_on(samples: np.ndarray, filled: np.ndarray, length: float) -> np.ndarra
     place it touches: on the post, the error estimate 13× the true error).
     """
     samples = np.asarray(samples, dtype=float)
-    out = np.ones(len(samples))
-    if filled.size:
+    if not filled.size:
+        return np.ones(len(samples))
+    points, slots = samples.tolist(), filled.tolist()
+    if any(x != x for x in points + slots):  # NaN: numpy's argmin and min as they treat it
+        out = np.ones(len(samples))
         out[nearest_row(samples, filled)] = 0.0
         near = np.min(np.abs(samples[:, None] - filled[None, :]), axis=1) < CLEAR * length
         out[near] = 0.0
-    return out
+        return out
+    # in floats: the nearest row (the first of equals), and the rows nearer than CLEAR·L
+    reach = CLEAR * length
+    off = {min(range(len(points)), key=lambda j: abs(points[j] - sigma)) for sigma in slots}
+    return np.array(
+        [
+            0.0 if j in off or any(abs(x - sigma) < reach for sigma in slots) else 1.0
+            for j, x in enumerate(points)
+        ]
+    )

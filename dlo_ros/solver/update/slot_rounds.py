@@ -28,6 +28,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ...model.problem import Problem
+from ..build.nlp import StringNLP
 from ..contact import obstacle_slots as OSL
 from ..results.result import ShapeResult
 from ..state import SolverState
@@ -50,6 +51,9 @@ PREDICTED = 1e-2
 #: a slot row's multiplier above this carries force (IPOPT leaves ~1e-10 on free rows; as
 #: ``kkt.active_rows``)
 ACTIVE = 1e-8
+
+#: one obstacle's slots: σ [m], on, the samples' switches (``ProblemParameters.slot_lists``)
+Slots = tuple[list[float], list[float], list[float]]
 
 #: a solve with the context's start and slots (``pipeline.solve_pairs_fixed``)
 Solve = Callable[[UpdateContext, Problem, bool], Outcome]
@@ -122,9 +126,8 @@ def slot_offset(parts: SolverParts, problem: Problem, state: SolverState) -> flo
     ``state`` in ``parts.parameters.placements``.
     """
     nlp, parameters = parts.nlp, parts.parameters
-    parameters.pack(problem, state.z, keep=state.p)
     worst = 0.0
-    for i, new in enumerate(parameters.placements):
+    for i, new in enumerate(parameters.place_on(problem, state.z, state.p)):
         if new.kept:
             continue
         used = parameters.slots(state.p, i)
@@ -188,29 +191,36 @@ def slot_motion(
     With ``placed`` (``parts.parameters.placements`` holds the placement on ``state``): each
     slot's fixed point is its minimum s* there and ``on`` that placement's (a slot whose minimum
     is gone empties, a new one fills at it); else σ and ``state``'s slots.  drift: the move from
-    the start's fixed point [m]; steady: within half of itself of the update before's.
+    the start's fixed point [m]; steady: within half of itself of the update before's.  Worked
+    out in floats, slot by slot.
     """
     nlp, parameters = parts.nlp, parts.parameters
     shape = (len(nlp.slot_rows), nlp.obstacle_slots)
-    fixed, drift, on = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     motion = start.slot_motion
-    before = motion.fixed if motion is not None else None
+    before = motion.fixed.tolist() if motion is not None else None
+    rows: list[tuple[list[float], list[float], list[float]]] = []  # fixed, drift, on
     for i in range(shape[0]):
-        old, new = parameters.slots(start.p, i), parameters.slots(state.p, i)
-        fixed[i], on[i] = new.s, new.on
+        s_old, on_old, _ = parameters.slot_lists(start.p, i)
+        fixed, on_new, _ = parameters.slot_lists(state.p, i)
+        on = on_new
         if placed:
             found = parameters.placements[i]
-            on[i] = found.on
-            moved = found.on > 0
-            fixed[i, moved] = found.s[moved]
-        both = (old.on > 0) & (new.on > 0) & (on[i] > 0)
-        origin = old.s if before is None else before[i]
-        drift[i, both] = fixed[i, both] - origin[both]
-    if not np.any(on):
+            on = found.on.tolist()
+            fixed = [f if o > 0 else x for f, o, x in zip(found.s.tolist(), on, fixed)]
+        origin = s_old if before is None else before[i]
+        drift = [
+            f - o if (a > 0 and b > 0 and c > 0) else 0.0
+            for f, o, a, b, c in zip(fixed, origin, on_old, on_new, on)
+        ]
+        rows.append((fixed, drift, on))
+    if not any(o != 0 for r in rows for o in r[2]):  # (np.any: a NaN counts)
         return None
+    on_all = np.array([r[2] for r in rows], dtype=float).reshape(shape)
+    fixed_all = np.array([r[0] for r in rows], dtype=float).reshape(shape)
+    drift_all = np.array([r[1] for r in rows], dtype=float).reshape(shape)
     last = motion.drift if motion is not None else np.zeros(shape)
-    steady = (drift != 0) & (np.abs(drift - last) <= 0.5 * np.abs(drift))
-    return OSL.SlotMotion(fixed, drift, steady, on)
+    steady = (drift_all != 0) & (np.abs(drift_all - last) <= 0.5 * np.abs(drift_all))
+    return OSL.SlotMotion(fixed_all, drift_all, steady, on_all)
 
 
 def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> SolverState:
@@ -224,38 +234,76 @@ def carry_slots(parts: SolverParts, start: SolverState, p: np.ndarray) -> Solver
     nlp, parameters = parts.nlp, parts.parameters
     if not nlp.obstacle_slots:
         return start
-    lay = nlp.params
-    names = [n for i in range(len(nlp.slot_rows)) for n in nlp.slot_parameters(i)]
-    if all(np.array_equal(start.p[lay[n]], p[lay[n]]) for n in names):
+    entries = parameters.slot_entries()
+    new_entries = p[entries]
+    if np.array_equal(start.p[entries], new_entries):
         return start
     moved = start.p.copy()
-    for n in names:
-        moved[lay[n]] = p[lay[n]]
+    moved[entries] = new_entries
     lam = start.lam_g.copy()
-    reach = 0.25 * nlp.obstacle_spacing
     held: list[int] = []  # the rows of moved slots that carry a force
     for i, slot_rows in enumerate(nlp.slot_rows):
-        rows = np.concatenate([nlp.obstacle_rows[i], slot_rows])
-        old, new = parameters.slots(start.p, i), parameters.slots(moved, i)
-        on_old = np.flatnonzero(np.concatenate([old.samples_on, old.on]) > 0)
-        on_new = np.flatnonzero(np.concatenate([new.samples_on, new.on]) > 0)
-        s_old = np.concatenate([nlp.obstacle_s, old.s])
-        s_new = np.concatenate([nlp.obstacle_s, new.s])
-        carried = np.zeros(rows.size)
-        for j in on_new:  # the start's row nearest along s, within a quarter sample spacing
-            k = on_old[int(np.argmin(np.abs(s_old[on_old] - s_new[j])))] if on_old.size else None
-            if k is not None and abs(s_old[k] - s_new[j]) <= reach:
-                carried[j] = start.lam_g[rows[k]]
+        rows = [*nlp.obstacle_rows[i], *slot_rows]
+        old, new = parameters.slot_lists(start.p, i), parameters.slot_lists(moved, i)
+        carried = _carried(nlp, old, new, start.lam_g[rows].tolist())
         lam[rows] = carried
-        shifted = (new.s != old.s) & (carried[-len(slot_rows) :] > 0)
-        held.extend(int(r) for r in np.asarray(slot_rows)[shifted])
-    g = np.asarray(nlp.g_fn(start.z, moved)).ravel()
+        moved_s, old_s = new[0], old[0]
+        k0 = len(rows) - len(slot_rows)
+        held.extend(
+            int(r)
+            for k, r in enumerate(slot_rows)
+            if moved_s[k] != old_s[k] and carried[k0 + k] > 0
+        )
+    g = parts.functions.g(start.z, moved)[0].ravel()
     # a moved slot that carries the contact's force holds it: its row counts as at its bound
     # (``kkt.active_rows``), though the start's shape leaves the obstacle there by the slot's
     # move (the sagging bottom of a cable on a table, slot moved 0.8 mm: 2e-6 m); Newton then
     # keeps the contact instead of starting contact-free and falling back to IPOPT
     g[held] = np.maximum(g[held], nlp.ubg[held])
     return SolverState(start.z, lam, start.lam_x, moved, g=g, contact=start.contact)
+
+
+def _carried(nlp: StringNLP, old: Slots, new: Slots, lam: list[float]) -> list[float]:
+    """Return one obstacle's multipliers carried from ``old`` to ``new`` (``carry_slots``).
+
+    ``old``, ``new``: the slots (σ, on, the samples' switches: ``ProblemParameters.slot_lists``);
+    ``lam``: the start's multipliers of the obstacle's rows (its samples, then its slots).  Each
+    row ``new`` switches on takes that of the row ``old`` had on nearest to it along s (the first
+    of equals, as np.argmin), when within a quarter of the sample spacing; the others 0.  A
+    sample row on in both is its own nearest (the samples strictly increasing, no NaN).
+    """
+    reach = 0.25 * nlp.obstacle_spacing
+    samples = nlp.obstacle_s.tolist()
+    s_old, s_new = samples + old[0], samples + new[0]
+    was_on = old[2] + old[1]
+    on_old = [k for k, on in enumerate(was_on) if on > 0]
+    carried = [0.0] * len(s_new)
+    if not on_old:
+        return carried
+    # a sample row on in both is nearest to itself (np.argmin would pick a NaN first)
+    own = all(a < b for a, b in zip(samples, samples[1:])) and all(
+        s_old[k] == s_old[k] for k in on_old
+    )
+    for j, on in enumerate(new[2] + new[1]):
+        if not on > 0:
+            continue
+        if own and j < len(samples) and was_on[j] > 0:
+            carried[j] = lam[j]
+            continue
+        k = _nearest(on_old, s_old, s_new[j])
+        if abs(s_old[k] - s_new[j]) <= reach:
+            carried[j] = lam[k]
+    return carried
+
+
+def _nearest(rows: list[int], s: list[float], at: float) -> int:
+    """Return the row of ``rows`` whose s is nearest ``at``, as np.argmin picks it.
+
+    The first with a NaN distance, else the first of equals.
+    """
+    d = [abs(s[k] - at) for k in rows]
+    nan = next((i for i, x in enumerate(d) if x != x), None)
+    return rows[nan if nan is not None else min(range(len(d)), key=d.__getitem__)]
 
 
 def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:
@@ -272,12 +320,14 @@ def predicted_slots(parts: SolverParts, start: SolverState) -> list | None:
     if motion is None:
         return None
     nlp = parts.nlp
+    length, limit = nlp.length, PREDICTED * nlp.length
     out = []
-    for i in range(len(nlp.slot_rows)):
-        on = motion.on[i]
-        small = np.abs(motion.drift[i]) <= PREDICTED * nlp.length
-        drift = np.where(motion.steady[i] & small, motion.drift[i], 0.0)
-        moved = np.clip(motion.fixed[i] + drift, 0.0, nlp.length)
-        s = np.where(on > 0, moved, 0.0)
-        out.append(_placement(nlp, s, on, np.full(on.shape, np.inf)))
+    for on, fixed, drift, steady in zip(
+        motion.on, motion.fixed.tolist(), motion.drift.tolist(), motion.steady.tolist()
+    ):
+        s = [
+            OSL.clip(f + (d if (st and abs(d) <= limit) else 0.0), 0.0, length) if o > 0 else 0.0
+            for o, f, d, st in zip(on.tolist(), fixed, drift, steady)
+        ]
+        out.append(_placement(nlp, np.array(s, dtype=float), on, np.full(on.shape, np.inf)))
     return out

@@ -15,7 +15,7 @@ known, so the streaming thread's switch builds nothing.
 from __future__ import annotations
 
 from concurrent.futures import Future
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -44,7 +44,8 @@ class CheckSnapshot:
     of its model; ``points``: its output points [m]; ``max_grip_force`` [N]; ``generation``: the
     AutoShapeSolver's switch count then (an older verdict is stale); ``residual_m``: its
     strong-form equilibrium residual (solver/results/residual.py, inf when unknown);
-    ``touching``: it presses on an obstacle; ``update``: the streamed-update count then;
+    ``touching``: it presses on an obstacle, ``contacts``: which, with their total forces [N]
+    (``reach.pressed_obstacles``); ``update``: the streamed-update count then;
     ``limited``: the check's re-solves stop at ``solver.update_time_limit`` (only a streamed
     update's check: a cold solve's or a query's runs to its end, ``update/time_limit.py``).
     """
@@ -61,6 +62,7 @@ class CheckSnapshot:
     touching: bool = False
     update: int = 0
     limited: bool = True
+    contacts: dict[int, float] = field(default_factory=dict)
 
 
 @dataclass

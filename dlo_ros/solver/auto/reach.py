@@ -26,15 +26,34 @@ def obstacle_distance(ob: Obstacle, x: np.ndarray) -> float:
     return ob.obstacle_type.distance_bound(np.asarray(x, dtype=float), p)
 
 
+#: a shape's contacts are another's (``same_contacts``) while each obstacle's total contact force
+#: stays within this factor of the other's
+CONTACT_FORCE_FACTOR = 2.0
+
+
 def touches_obstacle(result: ShapeResult) -> bool:
-    """Tell whether the result presses on an obstacle.
+    """Tell whether the result presses on an obstacle (``pressed_obstacles``)."""
+    return bool(pressed_obstacles(result))
+
+
+def pressed_obstacles(result: ShapeResult) -> dict[int, float]:
+    """Return the obstacles the result presses on: their total contact force [N], by key.
 
     A contact force above 1e-6 of the largest grip force counts (an interior-point answer leaves
     ~1e-10 N of barrier multipliers on samples that do not touch).
     """
     scale = max((float(np.linalg.norm(w.force)) for w in result.grips.values()), default=0.0)
-    return any(
-        float(np.linalg.norm(f)) > 1e-6 * max(scale, 1e-3) for f in result.contact_forces.values()
+    forces = {k: float(np.linalg.norm(f)) for k, f in result.contact_forces.items()}
+    return {k: f for k, f in forces.items() if f > 1e-6 * max(scale, 1e-3)}
+
+
+def same_contacts(a: dict[int, float], b: dict[int, float]) -> bool:
+    """Tell whether two shapes press on the same obstacles with forces within CONTACT_FORCE_FACTOR.
+
+    ``a``, ``b``: ``pressed_obstacles`` of each.
+    """
+    return a.keys() == b.keys() and all(
+        b[k] <= CONTACT_FORCE_FACTOR * f and f <= CONTACT_FORCE_FACTOR * b[k] for k, f in a.items()
     )
 
 

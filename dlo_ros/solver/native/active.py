@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .cache_store import load as load_library
-from .blocks import NodeBlocks, eigen_lapack, lapack_pointer, verdict
+from .blocks import NodeBlocks, driver_head, eigen_lapack, verdict
 from .outputs import ComputedOutputs, UpdateOutputs
 from ..state import Inertia
 from .settings import (
@@ -137,14 +137,7 @@ class ActiveNewton:
         )
         #: what a converged call also evaluates (``UpdateOutputs``), None: nothing
         self.after: UpdateOutputs | None = None
-        self._head = (
-            lapack_pointer("dgetrf"),
-            lapack_pointer("dgetrs"),
-            lapack_pointer("dgemm"),
-            ctypes.addressof(node_map.struct),
-            node_map.rows_w,
-            node_map.buf_size,
-        )
+        self._head = (*driver_head(node_map),)
         self.n, self.rows = n, rows
 
     def __call__(

@@ -16,6 +16,22 @@ from ..state import Inertia
 from .settings import EIGEN_FOUND, EIGEN_INERTIA_STABLE
 
 
+def driver_head(node_map) -> tuple[int, int, int, int, int, int]:
+    """Return the first arguments of every compiled driver: dgetrf, dgetrs, dgemm, the node map.
+
+    The LAPACK/BLAS addresses (``lapack_pointer``), the address of ``node_map``'s struct, its
+    W rows and buffer size (``NodeBlocks``: the caller keeps ``node_map`` alive for the calls).
+    """
+    return (
+        lapack_pointer("dgetrf"),
+        lapack_pointer("dgetrs"),
+        lapack_pointer("dgemm"),
+        ctypes.addressof(node_map.struct),
+        node_map.rows_w,
+        node_map.buf_size,
+    )
+
+
 def lapack_pointer(name: str) -> int:
     """Return the address of SciPy's LAPACK (or BLAS) routine ``name``.
 

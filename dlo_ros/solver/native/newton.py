@@ -65,7 +65,7 @@ import numpy as np
 from .cache_store import UnusableLibrary, load as load_library
 from .compiler import compiler, library_lock
 from .active import ActiveNewton, ActiveOutcome
-from .blocks import CHUNK_WORK, NodeBlocks, WithNodePart, eigen_lapack, lapack_pointer, verdict
+from .blocks import CHUNK_WORK, NodeBlocks, WithNodePart, driver_head, eigen_lapack, verdict
 from .build import (
     ACTIVE_DRIVERS,
     active_library_path,
@@ -232,12 +232,7 @@ class NativeNewton:
         #: 0`` makes the loop compute the eigenpair always, as before the inertia (comparisons)
         self.lapack = eigen_lapack()
         self._head = (
-            lapack_pointer("dgetrf"),
-            lapack_pointer("dgetrs"),
-            lapack_pointer("dgemm"),
-            ctypes.addressof(node_map.struct),
-            node_map.rows_w,
-            node_map.buf_size,
+            *driver_head(node_map),
             n,
             nf,
         )

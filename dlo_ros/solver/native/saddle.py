@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .blocks import NodeBlocks, lapack_pointer
+from .blocks import NodeBlocks, driver_head
 from .cache_store import load as load_library
 from .settings import (
     CONVERGED,
@@ -76,12 +76,7 @@ class NativeSaddle:
         self._run.argtypes = _ARGTYPES
         self._map = node_map  # kept alive for the calls
         self._head = (
-            lapack_pointer("dgetrf"),
-            lapack_pointer("dgetrs"),
-            lapack_pointer("dgemm"),
-            ctypes.addressof(node_map.struct),
-            node_map.rows_w,
-            node_map.buf_size,
+            *driver_head(node_map),
             n,
             rows,
         )

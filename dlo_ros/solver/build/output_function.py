@@ -44,6 +44,13 @@ from ..results.residual import ResidualGrid
 from ..results.wrenches import residual_grid
 
 
+#: the outputs' function's outputs, in order (the module docstring); ``TANGENTS``: where the
+#: quadrature tangents are, after the published outputs (``results/outputs.py``) that come first
+OUTPUTS = ("points", "quaternions", "grip_forces", "grip_torques", "contacts", "residual")
+OUTPUTS += ("flip", "tangents")
+TANGENTS = OUTPUTS.index("tangents")
+
+
 def _unit_quaternion() -> ca.Function:
     """Build the function v → the unit quaternion of v, with ``frame_to_quat``'s sign.
 
@@ -455,16 +462,7 @@ class OutputFunction:
                 f.tq,
             ],
             ["z", "p", "lam", "prof"],
-            [
-                "points",
-                "quaternions",
-                "grip_forces",
-                "grip_torques",
-                "contacts",
-                "residual",
-                "flip",
-                "tangents",
-            ],
+            list(OUTPUTS),
         )
         self._profile_key: tuple | None = None
 

@@ -29,6 +29,7 @@ from ...model.rotations import pose_quaternions
 from ..build import frames as F
 from ..build.functions import NlpFunctions
 from ..build.nlp import StringNLP
+from ..build.output_function import TANGENTS
 from ..build.slot_envelope import slot_contact_points
 from ..options import SolverOptions
 from ..build.parameters import ProblemParameters
@@ -292,13 +293,13 @@ class ShapeOutputs:
         # the compiled loop's, at its answer (native/outputs.py); SolverState types it as object
         computed = cast(ComputedOutputs | None, state.outputs)
         if computed is not None and computed.matches(state.z, state.p, lam_si, prof):
-            points, v_out, forces, torques, contact, res, flip = computed.values[:7]
+            points, v_out, forces, torques, contact, res, flip = computed.values[:TANGENTS]
         else:
             outputs = self.fns.outputs
             assert outputs is not None  # result() checked it
             points, v_out, forces, torques, contact, res, flip = outputs(
                 state.z, state.p, lam_si, prof
-            )[:7]
+            )[:TANGENTS]
         grips = {
             name: GripWrench(force=forces[:, k], torque=torques[:, k])
             for k, name in enumerate(plan.grip_names)

@@ -34,6 +34,7 @@ import numpy as np
 
 from ...model.problem import Problem
 from ..build.nlp import StringNLP
+from ..build.output_function import TANGENTS
 from ..contact import self_contact as SC
 from ..contact.apart_memo import ApartMemo
 from ..native.outputs import ComputedOutputs, same
@@ -43,8 +44,6 @@ from .result import ShapeResult
 #: a sample pair closer than 2r (1 − TOLERANCE) passes through itself (rounding and the solver's
 #: own tolerance never bring a shape that keeps 2r that far below it)
 TOLERANCE = 1e-3
-#: where the outputs' function gives the quadrature tangents (``output_function.py``)
-TANGENTS = 7
 
 
 @dataclass(frozen=True)

@@ -46,8 +46,8 @@ from ..results.wrenches import residual_grid
 
 #: the outputs' function's outputs, in order (the module docstring); ``TANGENTS``: where the
 #: quadrature tangents are, after the published outputs (``results/outputs.py``) that come first
-OUTPUTS = ("points", "quaternions", "grip_forces", "grip_torques", "contacts", "residual")
-OUTPUTS += ("flip", "tangents")
+OUTPUTS: tuple[str, ...] = ("points", "quaternions", "grip_forces", "grip_torques", "contacts")
+OUTPUTS += ("residual", "flip", "tangents")
 TANGENTS = OUTPUTS.index("tangents")
 
 

@@ -47,6 +47,7 @@ import numpy as np
 from .centreline import positions_sym, weight_energy_sym
 from .elements import ElementMesh
 from .memo import ArrayMemo
+from .mesh_geometry import geometry_vectors
 from .quaternion_frames import (
     continuous_signs,
     frame_columns,
@@ -294,18 +295,24 @@ class DirectorModel:
 
     # ---- CasADi ---------------------------------------------------------------------------------
     def material_sizes(self) -> dict[str, int]:
-        return {"weight_moments": self.mesh.quad_count, "weight_total": 1}
+        """Return the sizes of p's slices ``material_terms`` fills."""
+        M = self.mesh.quad_count
+        return {"weight_moments": M, "weight_total": 1, "mesh:j": M, "mesh:w": M}
 
     def material_terms(self, profiles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Return the gravity terms that depend on the material alone, assembled once.
+        """Return the gravity terms that depend on the material alone, and the mesh's geometry.
 
         Σ_j w_j D_j x(σ_j) = x0 ΣwD + Σ_k m_k (1+ε_k) t_k with m = W(σ)ᵀ (w ∘ D), assembled
-        once.
+        once; and the geometry vectors j = 2/h and w at the quadrature nodes, which the assembled
+        KKT functions read (``model/mesh_geometry.py``, ``solver/build/mesh_parameters.py``).
         """
         wd = self.mesh.weights * profiles["D"]
+        j, w = geometry_vectors(self.mesh)
         return {
             "weight_moments": self.position_matrix(self.mesh.quad_nodes).T @ wd,
             "weight_total": np.array([wd.sum()]),
+            "mesh:j": j,
+            "mesh:w": w,
         }
 
     def quad_nodes(self) -> np.ndarray:

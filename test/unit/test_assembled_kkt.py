@@ -15,6 +15,7 @@ from dlo_ros.model.problem import Load, RelativePosition
 from dlo_ros.model.profile import Profile
 from dlo_ros.scene import load_scene
 from dlo_ros.solver.build.compiled import NativeFunction, compiled, compiler
+from dlo_ros.model.mesh_geometry import geometry_vectors
 from dlo_ros.solver.build.nlp import StringNLP
 from dlo_ros.solver.options import SolverOptions
 from random_scenes import random_scene
@@ -26,6 +27,18 @@ def flattened(nlp: StringNLP) -> ca.Function:
     lam = ca.SX.sym("lam", g.shape[0])
     return ca.Function("flat", [x, p, lam], [ca.gradient(f, x), g, ca.jacobian(g, x),
                                              ca.hessian(f + ca.dot(lam, g), x)[0]])
+
+
+def random_p(nlp: StringNLP, rng) -> np.ndarray:
+    """Return a random p in [0.5, 1.5] whose mesh geometry is the built mesh's.
+
+    The assembled functions read the element mesh's geometry from p (j = 2/h, w:
+    ``solver/build/mesh_parameters.py``); the flattened reference has the built mesh's.
+    """
+    p = rng.uniform(0.5, 1.5, nlp.p_sym.shape[0])
+    if "mesh:j" in nlp.params.slices:
+        p[nlp.params["mesh:j"]], p[nlp.params["mesh:w"]] = geometry_vectors(nlp.model.mesh)
+    return p
 
 
 def reference_kkt(nlp: StringNLP, z, p, lam_free):
@@ -45,7 +58,7 @@ def assert_equal_systems(fn, nlp: StringNLP, trials: int = 2, rtol: float = 1e-1
     rng = np.random.default_rng(7)
     n, n_p, nf = nlp.z_sym.shape[0], nlp.p_sym.shape[0], nlp.n_free_rows
     for _ in range(trials):
-        z, p, lam = rng.normal(size=n), rng.uniform(0.5, 1.5, n_p), rng.normal(size=nf)
+        z, p, lam = rng.normal(size=n), random_p(nlp, rng), rng.normal(size=nf)
         for name, got, want in zip(["K", "r", "grad f", "energies"], fn(z, p, lam), reference_kkt(nlp, z, p, lam)):
             got = np.asarray(got, dtype=float).reshape(np.shape(want))
             scale = 1.0 + np.max(np.abs(want))
@@ -104,7 +117,7 @@ def test_the_assembled_system_of_every_row_equals_the_flattened_one(case):
     rng = np.random.default_rng(11)
     rows = nlp.g_sym.shape[0]
     for _ in range(2):
-        z, p, lam = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0]), rng.normal(size=rows)
+        z, p, lam = rng.normal(size=nlp.z_sym.shape[0]), random_p(nlp, rng), rng.normal(size=rows)
         got = nlp.kkt_fn(z, p, lam)
         want = reference(z, p, lam)
         for name, a, b in zip(["grad f", "g", "jacobian", "hessian"], got, want):
@@ -123,7 +136,7 @@ def test_the_compiled_assembled_system_equals_the_interpreted_one(tmp_path, monk
     native, ok = compiled(nlp.kkt_free_fn)
     assert ok and isinstance(native, NativeFunction)
     rng = np.random.default_rng(3)
-    args = [rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0]),
+    args = [rng.normal(size=nlp.z_sym.shape[0]), random_p(nlp, rng),
             rng.normal(size=nlp.n_free_rows)]
     for got, want in zip(native(*args), nlp.kkt_free_fn(*args)):
         want = np.asarray(want)
@@ -136,7 +149,7 @@ def test_the_assembled_inequality_rows_equal_the_flattened_ones(slots):
     values = ca.Function("g", [nlp.z_sym, nlp.p_sym], [nlp.g_sym[nlp.n_free_rows:]])
     rng = np.random.default_rng(5)
     for _ in range(2):
-        z, p = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0])
+        z, p = rng.normal(size=nlp.z_sym.shape[0]), random_p(nlp, rng)
         got, want = ca.DM(nlp.obstacle_g_fn(z, p)).full(), ca.DM(values(z, p)).full()
         assert np.max(np.abs(got - want)) <= 1e-12 * (1.0 + np.max(np.abs(want)))
 
@@ -145,7 +158,7 @@ def test_the_assembled_constraint_jacobian_equals_the_flattened_one():
     nlp = StringNLP(obstacle_scene(), SolverOptions(model="full", order=12, self_contact_pairs=2, obstacle_slots=2))
     reference = ca.Function("flat_jacobian", [nlp.z_sym, nlp.p_sym], [ca.jacobian(nlp.g_sym, nlp.z_sym)])
     rng = np.random.default_rng(9)
-    z, p = rng.normal(size=nlp.z_sym.shape[0]), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0])
+    z, p = rng.normal(size=nlp.z_sym.shape[0]), random_p(nlp, rng)
     got, want = ca.DM(nlp.jac_g_fn(z, p)).full(), ca.DM(ca.densify(reference(z, p))).full()
     assert np.max(np.abs(got - want)) <= 1e-12 * (1.0 + np.max(np.abs(want)))
 
@@ -183,7 +196,7 @@ def test_the_split_systems_plus_their_node_part_equal_the_flattened_ones(case):
     reference = flattened(nlp)
     rng = np.random.default_rng(5)
     rows = nlp.g_sym.shape[0]
-    z, p, lam = rng.normal(size=n), rng.uniform(0.5, 1.5, nlp.p_sym.shape[0]), rng.normal(size=rows)
+    z, p, lam = rng.normal(size=n), random_p(nlp, rng), rng.normal(size=rows)
     grad_f, g, jac, hess, _, weighted = (np.asarray(a, dtype=float) for a in nlp.kkt_split_fn(z, p, lam))
     for name, a, b in zip(["grad f", "g", "jacobian", "hessian"], [grad_f, g, jac, hess + E.T @ weighted],
                           reference(z, p, lam)):

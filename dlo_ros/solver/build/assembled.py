@@ -44,9 +44,11 @@ from .assembled_contact import (
     inequality_g,
     nonlinear_rows,
     sparse,
+    spread,
     x0_columns,
 )
 from .assembled_local import local_rows_function
+from .mesh_parameters import KktGeometry
 
 
 class AssembledKKT:
@@ -75,6 +77,8 @@ class AssembledKKT:
         self.M = model.quad.count
         self.n = lay.size
         self.E = self._node_map()
+        #: the node map, weights and integration rows: read from p (``mesh_parameters.py``)
+        self.geometry = KktGeometry(self)
         self._rows()
 
     # ---- constants ------------------------------------------------------------------------------
@@ -101,6 +105,7 @@ class AssembledKKT:
         grips = {g.name: g for g in P.grips}
         pos, local = [], []
         C, Om, kappa = [], [], []
+        at: list[tuple[float, ...]] = []  # the arc lengths of each position row's W (b − a)
         target = np.zeros((0, nlp.params.size))
         for r, kind in enumerate(nlp.row_kind):
             row_target = np.zeros(nlp.params.size)
@@ -109,6 +114,7 @@ class AssembledKKT:
                 g = grips[kind[1]]
                 C.append(axis)
                 Om.append(model.position_matrix(np.array([g.s]))[0])
+                at.append((g.s,))
                 kappa.append(1.0)
                 row_target[nlp.params[f"grip:{g.name}:position"]] = axis
             elif kind[0] == "relative":
@@ -119,6 +125,7 @@ class AssembledKKT:
                 C.append(axis)
                 W = model.position_matrix(np.array([rel.s_a, rel.s_b]))
                 Om.append(W[1] - W[0])
+                at.append((rel.s_a, rel.s_b))
                 kappa.append(0.0)
                 row_target[nlp.params[f"relative:{kind[1]}"]] = axis
             elif kind[0] in (
@@ -144,11 +151,13 @@ class AssembledKKT:
             if P.loads
             else np.zeros((0, self.M))
         )
+        #: the arc lengths of the position rows' and the loads' W (``KktGeometry.rows``)
+        self.position_points, self.load_points = at, [(ld.s,) for ld in P.loads]
 
     # ---- the per-node function ------------------------------------------------------------------
     def _node_coefficients(self, p, a):
         """c_k (a column per node) of ``node_function`` from the parameters and a_k (3 × M)."""
-        lay, weights = self.nlp.params, ca.DM(self.model.mesh.weights).T
+        lay, weights = self.nlp.params, self.geometry.weights(p)
         return ca.vertcat(
             weights * p[lay["Rf"]].T, weights * p[lay["Rt"]].T, weights * p[lay["Re"]].T, a
         )
@@ -333,14 +342,14 @@ class AssembledKKT:
     def _position_rows(self, T, jt, x0, p, E):
         """(g, ∂g/∂z) of the position rows: c_r · (κ_r x0 + Σ_k W_rk T_k − target_r) / L."""
         L, d, n = self.nlp.length, self.d, self.n
-        X = ca.mtimes(T, ca.DM(self.Omega).T)  # 3 × rows: Σ_k W_rk T_k
+        omega = self.geometry.rows(p, self.position_points)
+        X = ca.mtimes(T, omega.T)  # 3 × rows: Σ_k W_rk T_k
         g = (
             ca.DM(self.kappa) * ca.mtimes(ca.DM(self.C), x0)
             + ca.sum1(ca.DM(self.C).T * X).T
             - ca.mtimes(sparse(self.target), p)
         ) / L
-        omega_rep = np.repeat(self.Omega, d, axis=1)  # W_rk at column j + d k
-        jac = ca.mtimes(ca.mtimes(ca.DM(self.C), jt) * ca.DM(omega_rep), E) / L
+        jac = ca.mtimes(ca.mtimes(ca.DM(self.C), jt) * spread(omega, 1, d, self.M), E) / L
         return g, jac + sparse(x0_columns(self.C * self.kappa[:, None], n))
 
     def jacobian(self) -> ca.Function:
@@ -348,7 +357,7 @@ class AssembledKKT:
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         rows = nlp.g_sym.shape[0]
         z, p = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size)
-        E = sparse(self.E)
+        E = self.geometry.node_map(p)
         u = ca.reshape(ca.mtimes(E, z), d, M)
         t = self.tangent_function
         uu = ca.SX.sym("u", d)
@@ -392,11 +401,12 @@ class AssembledKKT:
         forces = [p[lay[f"load:{i}:force"]] for i in range(len(nlp.problem.loads))]
         F = ca.horzcat(*forces) if forces else None
         if F is not None:
-            a -= sigma * ca.mtimes(F, ca.DM(self.loads_W))
+            a -= sigma * ca.mtimes(F, self.geometry.rows(p, self.load_points))
         lam_pos = lam[pos_rows.tolist()] if pos_rows.size else ca.MX(0, 1)
         if pos_rows.size:
             a += ca.mtimes(
-                ca.DM(self.C).T * ca.repmat((lam_pos / L).T, 3, 1), ca.DM(self.Omega)
+                ca.DM(self.C).T * ca.repmat((lam_pos / L).T, 3, 1),
+                self.geometry.rows(p, self.position_points),
             )  # Σ_r c_r λ_r/L W_r
         dx0 = -sigma * L * gravity * p[lay["weight_total"]]
         if F is not None:
@@ -420,8 +430,9 @@ class AssembledKKT:
         )
         grav = -ca.dot(gravity, x0 * p[lay["weight_total"]] + ca.mtimes(T, m))
         work = moments
+        loads = self.geometry.rows(p, self.load_points) if forces else None
         for i, force in enumerate(forces):
-            work += ca.dot(force, x0 + ca.mtimes(T, ca.DM(self.loads_W[i])))
+            work += ca.dot(force, x0 + ca.mtimes(T, loads[i, :].T))
         return ca.vertcat(bend, twist, stretch, grav, work)
 
     def _system(self, z, p, lam, rows: int, split: bool = False):
@@ -433,7 +444,7 @@ class AssembledKKT:
         """
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         lay = nlp.params
-        E = sparse(self.E)
+        E = self.geometry.node_map(p)
         u = ca.reshape(ca.mtimes(E, z), d, M)
         x0 = z[0:3] * L
         pos_rows = self.pos_rows[self.pos_rows < rows]

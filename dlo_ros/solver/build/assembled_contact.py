@@ -96,9 +96,9 @@ def nonlinear_rows(kkt, z, p, lam, T):
     rows_all, g_all, a, dx0, groups = [], [], ca.MX.zeros(3, M), ca.MX.zeros(3, 1), []
     radius = p[lay["radius"]][0]
     if P.obstacles:
-        omega = kkt.model.position_matrix(nlp.obstacle_s)  # S × M
+        omega = kkt.geometry.obstacle_rows(p)  # S × M
         S = omega.shape[0]
-        X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)
+        X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, omega.T)
         spread3 = sparse(np.kron(np.eye(S), np.ones((1, 3))))  # λ_j → column 3j + c
         weighted, grads = None, []
         for i, ob in enumerate(P.obstacles):
@@ -115,7 +115,7 @@ def nonlinear_rows(kkt, z, p, lam, T):
                 grad = dh * ca.repmat(on.T, 3, 1)
             else:
                 g_all.append((h.T + radius) / L)
-            a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), ca.DM(omega))
+            a += ca.mtimes(dh * ca.repmat(li.T, 3, 1), omega)
             dx0 += L * ca.mtimes(dh, li)
             if curved:  # a half-space's h is linear: no curvature term
                 term = d2h * ca.repmat(ca.mtimes(li.T, spread3), 3, 1)
@@ -245,15 +245,16 @@ def inequality_g(kkt) -> ca.Function:
     nlp, M, d, n, L = kkt.nlp, kkt.M, kkt.d, kkt.n, kkt.nlp.length
     lay, P, nf = nlp.params, nlp.problem, nlp.n_free_rows
     z, p = ca.MX.sym("z", n), ca.MX.sym("p", lay.size)
-    T = kkt.tangent_function.map(M, "serial")(ca.reshape(ca.mtimes(sparse(kkt.E), z), d, M))
+    u = ca.reshape(ca.mtimes(kkt.geometry.node_map(p), z), d, M)
+    T = kkt.tangent_function.map(M, "serial")(u)
     parts = []
     local = kkt.local_rows[kkt.local_rows >= nf]
     if local.size:
         parts.append((local, kkt.local_function(local)(z, p, ca.MX(local.size, 1))[0]))
     if P.obstacles:
-        omega = kkt.model.position_matrix(nlp.obstacle_s)
+        omega = kkt.geometry.obstacle_rows(p)
         S = omega.shape[0]
-        X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, ca.DM(omega).T)
+        X = ca.repmat(z[0:3] * L, 1, S) + ca.mtimes(T, omega.T)
         for i, ob in enumerate(P.obstacles):
             x, po = ca.SX.sym("x", 3), ca.SX.sym("po", OBSTACLE_TYPES[ob.type].size)
             h = ca.Function(f"dlo_h_{ob.type}_value", [x, po], [OBSTACLE_TYPES[ob.type].h(x, po)])

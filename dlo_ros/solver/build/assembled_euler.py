@@ -41,6 +41,7 @@ import numpy as np
 
 from ...model.ritz import RitzModel
 from .assembled import AssembledKKT
+from .mesh_parameters import KktGeometry
 
 
 class AssembledEulerKKT(AssembledKKT):
@@ -69,6 +70,7 @@ class AssembledEulerKKT(AssembledKKT):
         self.M = model.quad.count
         self.n = lay.size
         self.E = self._node_map()
+        self.geometry = KktGeometry(self)  # the built model's constants (no mesh in p)
         self._rows()
 
     def _node_map(self) -> np.ndarray:

@@ -29,8 +29,9 @@ class AssembledStripKKT(AssembledKKT):
 
     def _node_coefficients(self, p, a):
         """``AssembledKKT``'s c_k with w Rl appended."""
-        weights = ca.DM(self.model.mesh.weights).T
-        return ca.vertcat(super()._node_coefficients(p, a), weights * p[self.nlp.params["Rl"]].T)
+        return ca.vertcat(
+            super()._node_coefficients(p, a), self.geometry.weights(p) * p[self.nlp.params["Rl"]].T
+        )
 
     @functools.cached_property
     def node_function(self) -> ca.Function:

@@ -1,0 +1,132 @@
+"""The element mesh's geometry read from p by the assembled KKT functions (director models).
+
+A director model's p carries "mesh:j" and "mesh:w": j_k = 2/h_e and the weight w_k at every
+quadrature node (``model/mesh_geometry.py``; filled with the material terms,
+``DirectorModel.material_terms``).  The assembled KKT functions (``assembled.py``,
+``assembled_contact.py``) take every geometric factor from them:
+
+* the node map E = E_value + diag(J) E_rate (J: j_k on each of node k's d rows), u_k = E_k z;
+* the weights of the per-node energies, w_k;
+* the integration rows at the grips, the loads, the relative positions' ends and the obstacles'
+  node rows, W = A ∘ w + R ∘ (1/j) (A, R fixed by the topology).
+
+So one built function serves every mesh of its topology (the same node counts per element):
+evaluated with another mesh's p, it is that mesh's function (``test_mesh_parameters.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import casadi as ca
+import numpy as np
+
+from ...model.mesh_geometry import ReferenceGeometry
+from .assembled_contact import sparse
+
+#: p's slices of the geometry vectors
+J_NAME, W_NAME = "mesh:j", "mesh:w"
+
+
+class MeshParameters:
+    """The geometric factors of one assembled KKT builder as expressions of p (module doc)."""
+
+    def __init__(self, kkt) -> None:
+        """Split ``kkt``'s node map by its model's mesh (``kkt``: an ``AssembledKKT``)."""
+        model, lay = kkt.model, kkt.nlp.params
+        self.reference = ReferenceGeometry(model.mesh)
+        self.d, self.M = kkt.d, kkt.M
+        self._j, self._w = lay[J_NAME], lay[W_NAME]
+        value, rate = np.zeros_like(kkt.E), np.zeros_like(kkt.E)
+        ref, width, d = self.reference, kkt.width, kkt.d
+        cols = 3 + width * np.arange(model.layout.nodes)
+        for k in range(self.M):
+            for a in range(width):
+                value[d * k + a, cols + a] = ref.value[k]
+                rate[d * k + width + a, cols + a] = ref.rate[k]
+            if model.layout.stretch:
+                value[d * k + 2 * width, model.layout.eps] = ref.value[k]
+        self._value, self._rate = sparse(value), sparse(rate)
+
+    def j(self, p) -> ca.MX:
+        """Return the vector j = 2/h of the quadrature nodes (M × 1) from p."""
+        return p[self._j]
+
+    def w(self, p) -> ca.MX:
+        """Return the quadrature weights (M × 1) from p."""
+        return p[self._w]
+
+    def node_map(self, p) -> ca.MX:
+        """Return E (d·M × n) at p's geometry: E_value + diag(J) E_rate."""
+        rows = ca.vec(ca.repmat(self.j(p).T, self.d, 1))  # j_k on node k's d rows
+        return self._value + ca.mtimes(ca.diag(rows), self._rate)
+
+    def integration_rows(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return (A, R) of W at ``s`` [m] (``ReferenceGeometry.integration_rows``)."""
+        return self.reference.integration_rows(s)
+
+    def rows(self, p, A: np.ndarray, R: np.ndarray) -> ca.MX:
+        """Return W = A ∘ w + R ∘ (1/j) (rows × M) at p's geometry."""
+        n = A.shape[0]
+        out = ca.MX(n, self.M)
+        if np.any(A):
+            out += sparse(A) * ca.repmat(self.w(p).T, n, 1)
+        if np.any(R):
+            out += sparse(R) * ca.repmat((1 / self.j(p)).T, n, 1)
+        return out
+
+
+class KktGeometry:
+    """The geometric factors an assembled KKT builder writes its functions with.
+
+    Read from p (:class:`MeshParameters`) when p holds the mesh's geometry, else the built
+    model's constants (the Euler-angle models).  ``kkt``: an ``AssembledKKT`` (its node map
+    ``E``, model and NLP).
+    """
+
+    def __init__(self, kkt) -> None:
+        """Return the factors of ``kkt``'s model (from p when its layout has "mesh:j")."""
+        self.kkt = kkt
+        self.params = MeshParameters(kkt) if J_NAME in kkt.nlp.params.slices else None
+        self._rows: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+    def node_map(self, p) -> ca.DM | ca.MX:
+        """Return the node map E (d·M × n)."""
+        return sparse(self.kkt.E) if self.params is None else self.params.node_map(p)
+
+    def weights(self, p) -> ca.DM | ca.MX:
+        """Return the quadrature weights w (1 × M)."""
+        if self.params is None:
+            return ca.DM(self.kkt.model.quad.weights).T
+        return self.params.w(p).T
+
+    def rows(self, p, points: Sequence[tuple[float, ...]]) -> ca.DM | ca.MX:
+        """Return a row of W per entry of ``points`` (len × M).
+
+        W(s) for an entry (s,), W(s_b) − W(s_a) for (s_a, s_b) (a relative position's ends).
+        """
+        if self.params is None:
+            W = np.zeros((len(points), self.kkt.M))
+            for r, s in enumerate(points):
+                rows = self.kkt.model.position_matrix(np.array(s, dtype=float))
+                W[r] = rows[0] if len(s) == 1 else rows[1] - rows[0]
+            return ca.DM(W)
+        key = tuple(points)
+        if key not in self._rows:
+            A, R = np.zeros((len(points), self.kkt.M)), np.zeros((len(points), self.kkt.M))
+            for r, s in enumerate(points):
+                a, rr = self.params.integration_rows(np.array(s, dtype=float))
+                A[r], R[r] = (a[0], rr[0]) if len(s) == 1 else (a[1] - a[0], rr[1] - rr[0])
+            self._rows[key] = (A, R)
+        return self.params.rows(p, *self._rows[key])
+
+    def obstacle_rows(self, p) -> ca.DM | ca.MX:
+        """Return W at the obstacle rows' arc lengths (S × M).
+
+        Rows on the mesh's nodes follow p's geometry; rows on uniform samples (other points of
+        other elements on another mesh) are the built mesh's constants.
+        """
+        nlp = self.kkt.nlp
+        if self.params is not None and nlp.options.obstacle_points == "nodes":
+            return self.params.rows(p, *self.params.integration_rows(nlp.obstacle_s))
+        return ca.DM(self.kkt.model.position_matrix(nlp.obstacle_s))

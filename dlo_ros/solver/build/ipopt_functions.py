@@ -49,20 +49,30 @@ def ipopt_options(
     return ipopt
 
 
-def ipopt_problem(nlp: dict, g_fn: ca.Function) -> dict[str, ca.MX]:
+def ipopt_problem(
+    nlp: dict, g_fn: ca.Function, values: tuple[ca.Function, ...] | None = None
+) -> dict[str, ca.MX]:
     """Return nlpsol's problem (x, p, f, g) as calls of functions built once.
 
-    ``nlp``: the SX expressions (x, p, f, g); ``g_fn``: (x, p) → g, already built.  Given the
-    expressions themselves, every nlpsol built its own function of the whole graph: most of an
-    IPOPT solver's creation (a new mesh's two solvers took a third of a second, 80 ms so).
+    ``nlp``: the SX expressions (x, p, f, g); ``g_fn``: (x, p) → g, already built;
+    ``values``: the assembled (objective, energy, rows) whose energy (x, p) → f replaces ``nlp``'s
+    f (``assembled_values.py``).
+    Given the expressions themselves, every nlpsol built its own function of the whole graph: most
+    of an IPOPT solver's creation (a new mesh's two solvers took a third of a second, 80 ms so).
     """
     z, p = ca.MX.sym("x", nlp["x"].shape[0]), ca.MX.sym("p", nlp["p"].shape[0])
+    if values is not None:
+        return {"x": z, "p": p, "f": values[1](z, p), "g": g_fn(z, p)}
     f = ca.Function("f", [nlp["x"], nlp["p"]], [nlp["f"]])
     return {"x": z, "p": p, "f": f(z, p), "g": g_fn(z, p)}
 
 
 def ipopt_derivatives(
-    nlp: dict, hessian_fn: ca.Function, g_fn: ca.Function, jac_g_fn: ca.Function
+    nlp: dict,
+    hessian_fn: ca.Function,
+    g_fn: ca.Function,
+    jac_g_fn: ca.Function,
+    values: tuple[ca.Function, ...] | None = None,
 ) -> dict[str, ca.Function]:
     """Build IPOPT's derivative functions (nlpsol's grad_f, jac_g and hess_lag).
 
@@ -89,16 +99,17 @@ def ipopt_derivatives(
     hess = hessian_fn(z, p, lam) + ca.if_else(
         gamma == 1, ca.MX.zeros(n, n), (gamma - 1) * hessian_fn(z, p, zero), True
     )
-    x, f = nlp["x"], nlp["f"]
+    if values is not None:  # (x, p) → [f, ∇f] assembled (``assembled_values.py``)
+        value, gradient = values[0](z, p)
+        names = (["x", "p"], ["f", "grad_f_x"])
+        grad_f = ca.Function("nlp_grad_f", [z, p], [value, gradient], *names)
+    else:  # the gradient alone: the KKT function would evaluate the Hessian as well
+        x, f = nlp["x"], nlp["f"]
+        grad_f = ca.Function(
+            "nlp_grad_f", [x, nlp["p"]], [f, ca.gradient(f, x)], ["x", "p"], ["f", "grad_f_x"]
+        )
     return {
-        # the gradient alone: the KKT function would evaluate the Hessian as well
-        "grad_f": ca.Function(
-            "nlp_grad_f",
-            [x, nlp["p"]],
-            [f, ca.gradient(f, x)],
-            ["x", "p"],
-            ["f", "grad_f_x"],
-        ),
+        "grad_f": grad_f,
         "jac_g": ca.Function(
             "nlp_jac_g",
             [z, p],

@@ -58,8 +58,7 @@ class MeshParameters:
 
     def node_map(self, p) -> ca.MX:
         """Return E (d·M × n) at p's geometry: E_value + diag(J) E_rate."""
-        rows = ca.vec(ca.repmat(self.j(p).T, self.d, 1))  # j_k on node k's d rows
-        return self._value + ca.mtimes(ca.diag(rows), self._rate)
+        return self._value + scaled(self._rate, self.j(p), rows=True, width=self.d)
 
     def integration_rows(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return (A, R) of W at ``s`` [m] (``ReferenceGeometry.integration_rows``)."""
@@ -67,13 +66,27 @@ class MeshParameters:
 
     def rows(self, p, A: np.ndarray, R: np.ndarray) -> ca.MX:
         """Return W = A ∘ w + R ∘ (1/j) (rows × M) at p's geometry."""
-        n = A.shape[0]
-        out = ca.MX(n, self.M)
+        out = ca.MX(A.shape[0], self.M)
         if np.any(A):
-            out += sparse(A) * ca.repmat(self.w(p).T, n, 1)
+            out += scaled(A, self.w(p))
         if np.any(R):
-            out += sparse(R) * ca.repmat((1 / self.j(p)).T, n, 1)
+            out += scaled(R, 1 / self.j(p))
         return out
+
+
+def scaled(matrix, factors: ca.MX, rows: bool = False, width: int = 1) -> ca.MX:
+    """Return ``matrix`` (numpy, or a CasADi DM) with its columns scaled by ``factors``.
+
+    ``rows``: its rows instead, factor k on rows width·k … width·k + width − 1.  Written on the
+    matrix's non-zeros (one product each: a product with diag(factors) or a repeated row was a
+    general sparse product or a dense matrix per call).
+    """
+    dm = matrix if isinstance(matrix, ca.DM) else sparse(matrix)
+    sp = dm.sparsity()
+    cols, rows_of = sp.get_col(), sp.row()
+    index = [r // width for r in rows_of] if rows else cols
+    values = ca.DM(dm.nonzeros()) * factors[index]
+    return ca.sparsity_cast(values, sp)
 
 
 class KktGeometry:

@@ -47,6 +47,7 @@ from .assembled import AssembledKKT
 from .mesh import MeshSpec, element_mesh
 from .assembled_euler import AssembledEulerKKT
 from .assembled_strip import AssembledStripKKT
+from .assembled_values import value_functions
 from .ipopt_functions import ipopt_derivatives, ipopt_options, ipopt_problem
 from .constraint_rows import (
     ConstraintRows,
@@ -86,11 +87,7 @@ __all__ = [
 
 
 class StringNLP:
-    """CasADi functions of one scene structure: the NLP, reactions, energies, Hessian.
-
-    CasADi functions of one scene structure: the NLP, reactions, energies and the Lagrangian
-    Hessian.
-    """
+    """CasADi functions of one scene structure: the NLP, reactions, energies, Hessian."""
 
     def __init__(
         self,
@@ -308,7 +305,10 @@ class StringNLP:
         )
         self.jac_g_fn = assembled.jacobian()
         self.newton_fn = self.newton_function()
-        self.g_fn = ca.Function("g", [z, p], [g])
+        #: IPOPT's objective [f, ∇f] and every row's value g: assembled from p's mesh geometry
+        #: (director models: ``assembled_values.py``), else the flattened expressions
+        self.value_fns = value_functions(assembled, self.obstacle_g_fn)
+        self.g_fn = self.value_fns[2] if self.value_fns else ca.Function("g", [z, p], [g])
         # ∂h/∂x of each obstacle type, evaluated only where a contact is active (for contact
         # forces)
         self.obstacle_gradient = {}
@@ -357,19 +357,15 @@ class StringNLP:
     def newton_function(self, kkt_free: ca.Function | None = None) -> ca.Function:
         """Build a contact-free warm update as one MX function around ``kkt_free``.
 
-        A contact-free warm update in one call: an MX function around ``kkt_free`` (default
-        ``kkt_free_fn``; the compiled one loaded with ``casadi.external`` has the same inputs and
-        outputs).
-
-        Inputs u = [z; λ_free], p, and the Newton system (K0, r0) at u for the new targets.  It
-        takes NEWTON_STEPS steps u ← u − K⁻¹ r (the first with K0, r0: for new grip targets the
-        start's own K and a shifted r, so it costs no evaluation; then one evaluation per step) and
-        evaluates the system once more at the end.  Outputs: u, K, r, ∇f and the energies at that
-        u, and
-        max |Δz| over the steps (the caller rejects a step > 0.5 and checks r for convergence).
-        The steps use LAPACK's LU ('lapacklu'), which CasADi cannot generate C for, so this
-        function stays interpreted (a thin MX layer); CasADi's own QR, which it can generate, costs
-        more per solve than the LU.
+        ``kkt_free``: default ``kkt_free_fn``; the compiled one loaded with ``casadi.external`` has
+        the same inputs and outputs.  Inputs u = [z; λ_free], p, and the Newton system (K0, r0) at
+        u for the new targets.  It takes NEWTON_STEPS steps u ← u − K⁻¹ r (the first with K0, r0:
+        for new grip targets the start's own K and a shifted r, so it costs no evaluation; then one
+        evaluation per step) and evaluates the system once more at the end.  Outputs: u, K, r, ∇f
+        and the energies at that u, and max |Δz| over the steps (the caller rejects a step > 0.5
+        and checks r for convergence).  The steps use LAPACK's LU ('lapacklu'), which CasADi cannot
+        generate C for, so this function stays interpreted (a thin MX layer); CasADi's own QR,
+        which it can generate, costs more per solve than the LU.
         """
         kkt_free = kkt_free or self.kkt_free_fn
         n, nf, n_p = self.z_sym.shape[0], self.n_free_rows, self.p_sym.shape[0]
@@ -486,7 +482,7 @@ class StringNLP:
     @functools.cached_property
     def ipopt_nlp(self) -> dict[str, ca.MX]:
         """The problem nlpsol is given (``ipopt_functions.ipopt_problem``), made once per NLP."""
-        return ipopt_problem(self.nlp, self.g_fn)
+        return ipopt_problem(self.nlp, self.g_fn, self.value_fns)
 
     def ipopt_derivatives(self) -> dict[str, ca.Function]:
         """Give IPOPT's derivative functions, built once and shared by the cold and warm solver.
@@ -495,6 +491,6 @@ class StringNLP:
         """
         if self._ipopt_derivatives is None:
             self._ipopt_derivatives = ipopt_derivatives(
-                self.nlp, self.hessian_fn, self.g_fn, self.jac_g_fn
+                self.nlp, self.hessian_fn, self.g_fn, self.jac_g_fn, self.value_fns
             )
         return self._ipopt_derivatives

@@ -54,9 +54,6 @@ from .mesh_parameters import KktGeometry
 class AssembledKKT:
     """Builds the KKT functions of a director-model ``StringNLP`` (module docstring).
 
-    Builds the KKT functions (see the module docstring) for a ``StringNLP`` whose model is a
-    DirectorModel.
-
     The model-specific parts are ``_node_map``, ``_node_coefficients``, ``node_function``,
     ``tangent_function`` and ``direct_terms``; ``assembled_euler.AssembledEulerKKT`` overrides
     them for the Euler-angle models (planar and 3D).
@@ -444,8 +441,8 @@ class AssembledKKT:
         """
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         lay = nlp.params
-        E = self.geometry.node_map(p)
-        u = ca.reshape(ca.mtimes(E, z), d, M)
+        E = self.geometry.node_map(p)  # (for ∂g/∂z and ∇²L: ∇L and g need E z, Eᵀ v alone)
+        u = ca.reshape(self.geometry.apply(p, z, E), d, M)
         x0 = z[0:3] * L
         pos_rows = self.pos_rows[self.pos_rows < rows]
         local_rows = self.local_rows[self.local_rows < rows]
@@ -463,7 +460,8 @@ class AssembledKKT:
         )
 
         # ∇L: per-node part, the x0 part, the node-local part
-        grad = ca.mtimes(E.T, ca.vec(grad_k)) + ca.vertcat(dx0, ca.MX(n - 3, 1))
+        grad = self.geometry.apply_transpose(p, ca.vec(grad_k), E)
+        grad += ca.vertcat(dx0, ca.MX(n - 3, 1))
         lam_local = lam[local_rows.tolist()] if local_rows.size else ca.MX(0, 1)
         g_loc, j_loc, grad_loc, hess_loc, moments, direct = self.local_function(local_rows)(
             z, p, lam_local

@@ -245,7 +245,7 @@ def inequality_g(kkt) -> ca.Function:
     nlp, M, d, n, L = kkt.nlp, kkt.M, kkt.d, kkt.n, kkt.nlp.length
     lay, P, nf = nlp.params, nlp.problem, nlp.n_free_rows
     z, p = ca.MX.sym("z", n), ca.MX.sym("p", lay.size)
-    u = ca.reshape(ca.mtimes(kkt.geometry.node_map(p), z), d, M)
+    u = ca.reshape(kkt.geometry.apply(p, z), d, M)
     T = kkt.tangent_function.map(M, "serial")(u)
     parts = []
     local = kkt.local_rows[kkt.local_rows >= nf]

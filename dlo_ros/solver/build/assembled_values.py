@@ -38,8 +38,7 @@ def objective_function(kkt, gradient: bool = True) -> ca.Function:
     nlp, M, d, n, L = kkt.nlp, kkt.M, kkt.d, kkt.n, kkt.nlp.length
     lay = nlp.params
     z, p = ca.MX.sym("z", n), ca.MX.sym("p", lay.size)
-    E = kkt.geometry.node_map(p)
-    u = ca.reshape(ca.mtimes(E, z), d, M)
+    u = ca.reshape(kkt.geometry.apply(p, z), d, M)
     x0 = z[0:3] * L
     gravity, m = p[lay["gravity"]], p[lay["weight_moments"]]
     none = np.zeros(0, dtype=int)
@@ -52,7 +51,8 @@ def objective_function(kkt, gradient: bool = True) -> ca.Function:
     f = nlp.sigma * (energies[0] + energies[1] + energies[2] + energies[3] - energies[4])
     if not gradient:
         return ca.Function("dlo_energy", [z, p], [f])
-    grad = ca.mtimes(E.T, ca.vec(per_node[4])) + ca.vertcat(dx0, ca.MX(n - 3, 1)) + grad_loc
+    grad = kkt.geometry.apply_transpose(p, ca.vec(per_node[4]))
+    grad += ca.vertcat(dx0, ca.MX(n - 3, 1)) + grad_loc
     return ca.Function("dlo_objective", [z, p], [f, ca.densify(grad)])
 
 
@@ -66,7 +66,7 @@ def rows_function(kkt, inequality_g: ca.Function | None) -> ca.Function:
     z, p = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size)
     parts: list[tuple[np.ndarray, ca.MX]] = []
     if kkt.pos_rows.size:
-        u = ca.reshape(ca.mtimes(kkt.geometry.node_map(p), z), d, M)
+        u = ca.reshape(kkt.geometry.apply(p, z), d, M)
         T = kkt.tangent_function.map(M, "serial")(u)
         X = ca.mtimes(T, kkt.geometry.rows(p, kkt.position_points).T)  # 3 × rows
         C = ca.DM(kkt.C)

@@ -60,6 +60,18 @@ class MeshParameters:
         """Return E (d·M × n) at p's geometry: E_value + diag(J) E_rate."""
         return self._value + scaled(self._rate, self.j(p), rows=True, width=self.d)
 
+    def _rows_j(self, p) -> ca.MX:
+        """Return J (d·M × 1): j_k on each of node k's d rows."""
+        return ca.vec(ca.repmat(self.j(p).T, self.d, 1))
+
+    def apply(self, p, z) -> ca.MX:
+        """Return E z at p's geometry without forming E: E_value z + J ∘ (E_rate z)."""
+        return ca.mtimes(self._value, z) + self._rows_j(p) * ca.mtimes(self._rate, z)
+
+    def apply_transpose(self, p, v) -> ca.MX:
+        """Return Eᵀ v at p's geometry without forming E: E_valueᵀ v + E_rateᵀ (J ∘ v)."""
+        return ca.mtimes(self._value.T, v) + ca.mtimes(self._rate.T, self._rows_j(p) * v)
+
     def integration_rows(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return (A, R) of W at ``s`` [m] (``ReferenceGeometry.integration_rows``)."""
         return self.reference.integration_rows(s)
@@ -106,6 +118,21 @@ class KktGeometry:
     def node_map(self, p) -> ca.DM | ca.MX:
         """Return the node map E (d·M × n)."""
         return sparse(self.kkt.E) if self.params is None else self.params.node_map(p)
+
+    def apply(self, p, z, E: ca.DM | ca.MX | None = None) -> ca.MX:
+        """Return E z (the per-node values u); ``E``: the node map already at hand, if any.
+
+        From p's geometry without forming E (a residual needs E z and Eᵀ v alone).
+        """
+        if self.params is None:
+            return ca.mtimes(sparse(self.kkt.E) if E is None else E, z)
+        return self.params.apply(p, z)
+
+    def apply_transpose(self, p, v, E: ca.DM | ca.MX | None = None) -> ca.MX:
+        """Return Eᵀ v (a per-node gradient's part of ∇L), as :meth:`apply`."""
+        if self.params is None:
+            return ca.mtimes((sparse(self.kkt.E) if E is None else E).T, v)
+        return self.params.apply_transpose(p, v)
 
     def weights(self, p) -> ca.DM | ca.MX:
         """Return the quadrature weights w (1 × M)."""

@@ -462,3 +462,19 @@ def test_an_unverified_answer_of_auto_does_not_advise_raising_the_order():
     auto = report.finished(ShapeResult(status="unverified", message=message), _time.perf_counter(), (0,), 1)
     assert "raise solver.order" not in auto.message and report.AUTO_REFINES in auto.message
     assert auto.message.startswith("not a verified equilibrium: the equilibrium residual is 0.00116 m")
+
+
+def test_moments_auto_cannot_follow_say_which_orders_it_tried():
+    """Random scene 146 (bench/suite/random_scenes.py): point moments that turn the string more
+    than any order's nodes follow.  auto tries every order; its failure says so instead of the
+    fixed model's advice to raise solver.order, which it has followed."""
+    from random_scenes import random_scene
+
+    problem = random_scene(146)
+    options = SolverOptions(error_tolerance=1e-3 * problem.string.length)
+    result = make_solver(problem, options, compile="off", checks="sync").solve()
+    assert result.status == "failed"
+    assert result.message.startswith("point moments: unresolved:")
+    assert "raise solver.order" not in result.message
+    assert "(auto tried every order up to 32)" in result.message
+    assert result.model.order == 32

@@ -17,7 +17,7 @@ from ..contact import self_contact as SC
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from ..update import recovery as RC
-from ..update.moments import UNRESOLVED_MESSAGE
+from ..update.moments import RAISE_ORDER_ADVICE, UNRESOLVED_MESSAGE
 from .choice import ORDERS, ModelChoice, full_choice
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
@@ -54,6 +54,10 @@ def richer_for_topology(
         result = auto.inner.solve(poses, warm=True, commit=True, checked=True, limited=limited)
         if refusal(result) is None:
             return result
+    if refusal(result) == UNRESOLVED_MESSAGE:  # a fixed model's advice, which auto has followed
+        result.message = result.message.replace(
+            RAISE_ORDER_ADVICE, f"(auto tried every order up to {auto.choice.order})"
+        )
     return result
 
 

@@ -39,6 +39,8 @@ FOLD_MARGIN = 0.01
 UNRESOLVED = "unresolved:"
 #: the start of that failure's whole message
 UNRESOLVED_MESSAGE = f"point moments: {UNRESOLVED}"
+#: that failure's advice to a fixed model (auto says which orders it tried instead)
+RAISE_ORDER_ADVICE = "(raise solver.order)"
 
 #: Newton solves along one path of raising the moments from zero (``moment_paths``)
 MOMENT_CONTINUATION_SOLVES = MP.PATH_SOLVES
@@ -153,7 +155,7 @@ def solve_moments(
     if any(note.endswith("(at a fold guard)") for note in notes):
         why = (
             f"{UNRESOLVED} the string turns by 120° between neighbouring nodes of its rotation "
-            "field on the way to them (raise solver.order): " + "; ".join(notes)
+            f"field on the way to them {RAISE_ORDER_ADVICE}: " + "; ".join(notes)
         )
     else:
         why = (

@@ -95,13 +95,14 @@ class AssembledKKT:
     def _rows(self) -> None:
         """Sort the rows into position rows, node-local rows and rows nonlinear in x.
 
-        Sort the rows: position rows (c_r, W_r, κ_r, target), node-local rows, and (left to
-        ``_nonlinear_rows``) obstacle rows and self-contact slots.
+        Sort the rows: position rows (c_r, the arc lengths of W_r, κ_r, target), node-local rows,
+        and (left to ``_nonlinear_rows``) obstacle rows and self-contact slots.  W_r and the
+        loads' W are ``KktGeometry.rows`` of those arc lengths.
         """
-        nlp, P, model = self.nlp, self.nlp.problem, self.model
+        nlp, P = self.nlp, self.nlp.problem
         grips = {g.name: g for g in P.grips}
         pos, local = [], []
-        C, Om, kappa = [], [], []
+        C, kappa = [], []
         at: list[tuple[float, ...]] = []  # the arc lengths of each position row's W (b − a)
         target = np.zeros((0, nlp.params.size))
         for r, kind in enumerate(nlp.row_kind):
@@ -110,7 +111,6 @@ class AssembledKKT:
                 axis = np.array(kind[3], dtype=float)
                 g = grips[kind[1]]
                 C.append(axis)
-                Om.append(model.position_matrix(np.array([g.s]))[0])
                 at.append((g.s,))
                 kappa.append(1.0)
                 row_target[nlp.params[f"grip:{g.name}:position"]] = axis
@@ -120,8 +120,6 @@ class AssembledKKT:
                     kind[2]
                 ]  # as StringNLP's rows
                 C.append(axis)
-                W = model.position_matrix(np.array([rel.s_a, rel.s_b]))
-                Om.append(W[1] - W[0])
                 at.append((rel.s_a, rel.s_b))
                 kappa.append(0.0)
                 row_target[nlp.params[f"relative:{kind[1]}"]] = axis
@@ -140,14 +138,8 @@ class AssembledKKT:
                 raise ValueError(f"position row {kind} is not scaled by L")
         self.pos_rows, self.local_rows = np.array(pos, dtype=int), np.array(local, dtype=int)
         self.C = np.array(C).reshape(-1, 3)
-        self.Omega = np.array(Om).reshape(-1, self.M)
         self.kappa = np.array(kappa)
         self.target = target
-        self.loads_W = (
-            model.position_matrix(np.array([ld.s for ld in P.loads]))
-            if P.loads
-            else np.zeros((0, self.M))
-        )
         #: the arc lengths of the position rows' and the loads' W (``KktGeometry.rows``)
         self.position_points, self.load_points = at, [(ld.s,) for ld in P.loads]
 

@@ -145,19 +145,19 @@ class KktGeometry:
 
         W(s) for an entry (s,), W(s_b) − W(s_a) for (s_a, s_b) (a relative position's ends).
         """
-        if self.params is None:
-            W = np.zeros((len(points), self.kkt.M))
-            for r, s in enumerate(points):
-                rows = self.kkt.model.position_matrix(np.array(s, dtype=float))
-                W[r] = rows[0] if len(s) == 1 else rows[1] - rows[0]
-            return ca.DM(W)
         key = tuple(points)
-        if key not in self._rows:
+        if key not in self._rows:  # (W, 0) of the built model, or (A, R) of the topology
             A, R = np.zeros((len(points), self.kkt.M)), np.zeros((len(points), self.kkt.M))
             for r, s in enumerate(points):
-                a, rr = self.params.integration_rows(np.array(s, dtype=float))
+                at = np.array(s, dtype=float)
+                if self.params is None:
+                    a, rr = self.kkt.model.position_matrix(at), np.zeros((len(s), self.kkt.M))
+                else:
+                    a, rr = self.params.integration_rows(at)
                 A[r], R[r] = (a[0], rr[0]) if len(s) == 1 else (a[1] - a[0], rr[1] - rr[0])
             self._rows[key] = (A, R)
+        if self.params is None:
+            return ca.DM(self._rows[key][0])
         return self.params.rows(p, *self._rows[key])
 
     def obstacle_rows(self, p) -> ca.DM | ca.MX:

@@ -48,7 +48,7 @@ from .assembled_contact import (
     x0_columns,
 )
 from .assembled_local import local_rows_function
-from .mesh_parameters import KktGeometry
+from .mesh_parameters import KktGeometry, node_map_of
 
 
 class AssembledKKT:
@@ -81,16 +81,8 @@ class AssembledKKT:
     # ---- constants ------------------------------------------------------------------------------
     def _node_map(self) -> np.ndarray:
         """E (d·M × n): row j + d k of E z is component j of u_k (E is block-sparse by element)."""
-        lay, mesh, d, w = self.model.layout, self.model.mesh, self.d, self.width
-        E = np.zeros((d * self.M, self.n))
-        for k in range(self.M):
-            for a in range(w):
-                cols = 3 + w * np.arange(lay.nodes) + a
-                E[d * k + a, cols] = mesh.B[k]
-                E[d * k + w + a, cols] = mesh.dB[k]
-            if lay.stretch:
-                E[d * k + 2 * w, lay.eps] = mesh.B[k]
-        return E
+        mesh = self.model.mesh
+        return node_map_of(self.model.layout, self.d, mesh.B, mesh.dB)
 
     def _rows(self) -> None:
         """Sort the rows into position rows, node-local rows and rows nonlinear in x.

@@ -28,6 +28,25 @@ from .assembled_contact import sparse
 J_NAME, W_NAME = "mesh:j", "mesh:w"
 
 
+def node_map_of(layout, d: int, values: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """Return a director model's node map (d·M × n) from per-quadrature-node rows (M × N).
+
+    Row d k + a of E z is component a of u_k = (v(σ_k), v'(σ_k), ε(σ_k)): ``values`` places the
+    rotation field's and ε's values, ``rates`` its derivatives (the mesh's B and B' give
+    ``AssembledKKT``'s E; the reference geometry's B and B̂' its two parts here).
+    """
+    M, width = values.shape[0], layout.width
+    E = np.zeros((d * M, layout.size))
+    cols = 3 + width * np.arange(layout.nodes)
+    for k in range(M):
+        for a in range(width):
+            E[d * k + a, cols + a] = values[k]
+            E[d * k + width + a, cols + a] = rates[k]
+        if layout.stretch:
+            E[d * k + 2 * width, layout.eps] = values[k]
+    return E
+
+
 class MeshParameters:
     """The geometric factors of one assembled KKT builder as expressions of p (module doc)."""
 
@@ -37,16 +56,9 @@ class MeshParameters:
         self.reference = ReferenceGeometry(model.mesh)
         self.d, self.M = kkt.d, kkt.M
         self._j, self._w = lay[J_NAME], lay[W_NAME]
-        value, rate = np.zeros_like(kkt.E), np.zeros_like(kkt.E)
-        ref, width, d = self.reference, kkt.width, kkt.d
-        cols = 3 + width * np.arange(model.layout.nodes)
-        for k in range(self.M):
-            for a in range(width):
-                value[d * k + a, cols + a] = ref.value[k]
-                rate[d * k + width + a, cols + a] = ref.rate[k]
-            if model.layout.stretch:
-                value[d * k + 2 * width, model.layout.eps] = ref.value[k]
-        self._value, self._rate = sparse(value), sparse(rate)
+        ref, zero = self.reference, np.zeros_like(self.reference.value)
+        self._value = sparse(node_map_of(model.layout, kkt.d, ref.value, zero))
+        self._rate = sparse(node_map_of(model.layout, kkt.d, zero, ref.rate))
 
     def j(self, p) -> ca.MX:
         """Return the vector j = 2/h of the quadrature nodes (M × 1) from p."""

@@ -40,6 +40,7 @@ from .build import frames as F
 from .build.functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .build.initial_guess import initial_guess
 from .build.mesh import MeshSpec
+from .build.mesh_clone import clone_or_build
 from .build.nlp import StringNLP
 from .build.parameters import ProblemParameters, check_moments
 from .contact import topology as TP
@@ -88,6 +89,8 @@ class ShapeSolver:
     # set by _build (which frees the previous ones when it rebuilds)
     _ipopt: IpoptSolvers
     functions: NlpFunctions
+    nlp: StringNLP
+    _key: tuple
 
     def __init__(
         self,
@@ -97,6 +100,7 @@ class ShapeSolver:
         lazy_ipopt: bool = False,
         reference_frame: np.ndarray | None = None,
         mesh: MeshSpec | None = None,
+        template: ShapeSolver | None = None,
     ):
         """Build the NLP of ``problem``'s structure; raise ValueError naming a refused field.
 
@@ -108,7 +112,8 @@ class ShapeSolver:
         that may only take Newton steps); otherwise now, so that a stream's first IPOPT fallback
         does not pay for them.  reference_frame: a fixed R0 for the Euler angles (3D models;
         default: chosen from the scene, ``choose_reference_frame``).  mesh: the element mesh a
-        refinement chose (``build/mesh.py``; default: the scene's breakpoints).
+        refinement chose (``build/mesh.py``; default: the scene's breakpoints).  template: a solver
+        of this structure whose functions serve ``mesh`` too (``build/mesh_clone.py``), or None.
         """
         check_compile_mode(compile)
         self.options = options or SolverOptions()
@@ -123,12 +128,14 @@ class ShapeSolver:
         # a compile is about to start (AutoShapeSolver._compile_ahead)
         self.compile_pending = False
         self._summaries = ModelSummaries()
-        self._build(problem)
+        self._build(problem, template)
 
-    def _build(self, problem: Problem) -> None:
+    def _build(self, problem: Problem, template: ShapeSolver | None = None) -> None:
         """Build the NLP of ``problem``'s structure and its parts; forget the warm start."""
         t0 = time.perf_counter()
-        nlp = StringNLP(problem, self.options, self.reference_frame, self.mesh_spec)
+        same = template is not None and template._key == structure_key(problem, self.options)
+        shared = template.nlp if same and template is not None else None
+        nlp = clone_or_build(problem, self.options, self.reference_frame, self.mesh_spec, shared)
         # before anything is replaced: a refused scene leaves the solver as it was
         check_moments(nlp, problem)
         self.nlp = nlp
@@ -403,16 +410,8 @@ class ShapeSolver:
         What ``solve`` hands down the stages of ``solver/update/``; also a test's way to run one
         stage by itself.
         """
-        parts = SolverParts(
-            self.nlp,
-            self.functions,
-            self.parameters,
-            self.outputs,
-            self._ipopt,
-            self.options,
-            self.fused_newton,
-            self.model_summary,
-        )
+        own = (self.nlp, self.functions, self.parameters, self.outputs, self._ipopt)
+        parts = SolverParts(*own, self.options, self.fused_newton, self.model_summary)
         return UpdateContext(parts, self.problem, self._state, self._clamp_turns)
 
     def query_many(self, targets, executor=None) -> list[ShapeResult]:

@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import threading
 
+from ...model.mesh_geometry import MeshTopology
 from ...model.problem import Problem
+from ..build.mesh import element_mesh
 from ..shape_solver import ShapeSolver
 from ..update.ipopt import IPOPT_LOCK
 from .background import CheckWorker
@@ -87,6 +89,7 @@ class ModelPool:
                 lazy_ipopt=not stream,
                 reference_frame=choice.reference_frame(),
                 mesh=choice.mesh,
+                template=self._template(opts, reduced, choice.mesh),
             )
         else:
             solver.set_problem(reduced)
@@ -97,6 +100,22 @@ class ModelPool:
         if source is not None and not solver.adopt_warm_start(source, state):
             solver.reset()  # nothing to map: never keep an older, unrelated warm start
         return solver
+
+    def _template(self, options, problem: Problem, mesh) -> ShapeSolver | None:
+        """Return the newest pooled model whose functions serve ``mesh`` too, or None.
+
+        Built with ``options`` on a mesh of ``mesh``'s topology; ``ShapeSolver`` clones it where
+        the structure matches too (``build/mesh_clone.py``) and builds anew otherwise.
+        """
+        if mesh is None or options.model == "planar" or options.rotation != "director":
+            return None
+        topology = MeshTopology.of(element_mesh(problem, options, mesh))
+        with self._lock:
+            built = [s for s in self._models.values() if s.options == options]
+        for solver in reversed(built):
+            if MeshTopology.of(solver.nlp.model.mesh) == topology:
+                return solver
+        return None
 
     def _insert(self, key: tuple, solver: ShapeSolver) -> None:
         """Pool ``solver`` as the newest under ``key``; drop the least recently used idle ones."""

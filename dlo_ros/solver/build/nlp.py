@@ -89,6 +89,9 @@ __all__ = [
 class StringNLP:
     """CasADi functions of one scene structure: the NLP, reactions, energies, Hessian."""
 
+    #: False on a clone onto another mesh (``mesh_clone.py``): nlp/g_sym are the template mesh's
+    own_symbols: bool = True
+
     def __init__(
         self,
         problem: Problem,

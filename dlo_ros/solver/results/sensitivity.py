@@ -44,6 +44,7 @@ import numpy as np
 from ...model.profile import Profile
 from ...model.rotations import quat_to_matrix
 from ..update.kkt import active_rows
+from ..build.mesh_clone import symbolic_nlp
 from ..build.nlp import StringNLP
 from ..shape_solver import ShapeSolver
 from .wrenches import director_torque
@@ -95,6 +96,8 @@ class _Functions:
     """CasADi functions of one NLP that the sensitivity needs (built once per NLP)."""
 
     def __init__(self, nlp: StringNLP):
+        # a clone's graph is its template mesh's (``build/mesh_clone.py``): differentiate its own
+        nlp = symbolic_nlp(nlp)
         z, p, g = nlp.z_sym, nlp.p_sym, nlp.g_sym
         lam = ca.SX.sym("lam", g.shape[0])
         residual = ca.vertcat(ca.gradient(nlp.nlp["f"] + ca.dot(lam, g), z), g)

@@ -11,7 +11,10 @@ parts numpy computes from the geometry:
 
 * the model (``DirectorModel`` on mesh B: positions, slot placement, transfer of shapes);
 * the obstacle rows' arc lengths, weights and spacing (the rows on the mesh's nodes);
-* the node map E (``node_map_of`` with B's B and B') and its dense blocks (the compiled drivers').
+* the node map E (``node_map_of`` with B's B and B') and its dense blocks (the compiled drivers');
+* the reference frame R0, chosen from its own scene as a build would (the cold start's plane; a
+  3D director model's functions do not depend on it): with A's, a data set's answers depended on
+  the order its samples came to a worker.
 
 What stays A's: the flattened SX graph (``nlp['f']``, ``g_sym``, ``z_sym``, ``p_sym``), whose sizes
 and sparsity hold for B and whose values do not.  ``own_symbols`` is False on a clone, and
@@ -33,7 +36,7 @@ from ...model.problem import Problem
 from ..contact.obstacle_points import obstacle_arc_lengths, row_spacing, row_weights
 from .mesh import MeshSpec, element_mesh
 from .mesh_parameters import node_map_of
-from .nlp import StringNLP
+from .nlp import StringNLP, choose_reference_frame
 from ..options import SolverOptions
 from .structure import breakpoints, models_twist
 
@@ -55,22 +58,28 @@ def clone_or_build(
     ``structure_key``), or None.
     """
     if template is not None and mesh_spec is not None and template.options == options:
-        if reference_frame is None or np.array_equal(reference_frame, template.r0):
-            try:
-                return clone_nlp(template, problem, mesh_spec)
-            except ValueError:
-                pass  # another topology or layout: built below
+        try:
+            return clone_nlp(template, problem, mesh_spec, reference_frame)
+        except ValueError:
+            pass  # another topology or layout: built below
     return StringNLP(problem, options, reference_frame, mesh_spec)
 
 
-def clone_nlp(template: StringNLP, problem: Problem, mesh_spec: MeshSpec) -> StringNLP:
+def clone_nlp(
+    template: StringNLP,
+    problem: Problem,
+    mesh_spec: MeshSpec,
+    reference_frame: np.ndarray | None = None,
+) -> StringNLP:
     """Return the NLP of ``problem`` on ``mesh_spec``, sharing ``template``'s functions.
 
     ``problem`` must have ``template.problem``'s structure (the caller's ``structure_key``);
     raise ValueError when the mesh does not fit ``template``'s functions (module docstring).
+    ``reference_frame``: R0 (default: chosen from ``problem``, as a build would; a 3D director
+    model's functions do not depend on it, its cold start does).
     """
-    if not template.director:
-        raise ValueError("a clone needs a director model (its functions read the mesh from p)")
+    if not template.director or template.planar:
+        raise ValueError("a clone needs a 3D director model (its functions read the mesh from p)")
     problem.validate()
     if models_twist(problem, template.options) != template.twist:
         raise ValueError("the scene's twist field differs from the template's")
@@ -86,6 +95,11 @@ def clone_nlp(template: StringNLP, problem: Problem, mesh_spec: MeshSpec) -> Str
     clone = object.__new__(StringNLP)
     clone.__dict__.update({k: v for k, v in template.__dict__.items() if k not in _OWN})
     clone.problem, clone.mesh_spec = problem, mesh_spec
+    clone.r0 = (
+        np.asarray(reference_frame, dtype=float)
+        if reference_frame is not None
+        else choose_reference_frame(problem, template.options.frame)
+    )
     base = template.model
     clone.model = DirectorModel(
         template.length, mesh, base.layout.frame, base.layout.stretch, lateral=base.lateral
@@ -99,7 +113,7 @@ def clone_nlp(template: StringNLP, problem: Problem, mesh_spec: MeshSpec) -> Str
     # the flattened energies are the template mesh's (tests build them for their own mesh)
     clone.__dict__["energy_fn"] = None
     clone.own_symbols = False
-    clone.__dict__["_symbolic_of"] = (template.r0, mesh_spec)
+    clone.__dict__["_symbolic_of"] = (clone.r0, mesh_spec)
     return clone
 
 

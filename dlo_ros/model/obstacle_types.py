@@ -11,7 +11,8 @@ vector ``p`` (its pose and size, the NLP's layout in ``fields``):
 * whether it lies clear of a plane (``clear_of_plane``) or fits in it (``planarity_violation``):
   the planar model's two questions;
 * whether it is ``flat`` (no curvature: ``solver.obstacle_slots`` gives it slots only at isolated
-  touches);
+  touches), and whether a string lying on it touches it at ``points`` (a sphere) rather than
+  along a line (a bar, a box's edge): ``solver.slotted_obstacles: points``;
 * a ``Primitive``: the shape the node's markers and the rerun recording draw, without knowing the
   type.
 
@@ -144,6 +145,9 @@ class ObstacleType(ABC):
     #: where each named field sits in p (``Obstacle``'s accessors)
     fields: ClassVar[dict[str, slice | int]]
     flat: ClassVar[bool] = False  # no curvature: slots at isolated touches only (obstacle_slots)
+    #: a string resting on it touches at isolated points, never along a line (a sphere; a bar's or
+    #: a box's contact may run along the string): 'points' slots it (``solver.slotted_obstacles``)
+    points: ClassVar[bool] = False
 
     @abstractmethod
     def parse(self, d: Mapping[str, Any], where: str) -> np.ndarray:
@@ -302,6 +306,7 @@ class Sphere(ObstacleType):
 
     name = "sphere"
     size = 4
+    points = True
     keys = {"center": Key("vector", True), "radius": Key("number", True)}
     fields = {"centre": slice(0, 3), "radius": 3}
 

@@ -12,7 +12,7 @@ ROTATIONS = ("director", "euler")
 BASES = ("chebyshev", "fourier", "elements")
 #: where the obstacle rows sit: uniform samples, or the element mesh's own nodes
 OBSTACLE_POINTS = ("samples", "nodes")
-SLOTTED_OBSTACLES = ("all", "flat")
+SLOTTED_OBSTACLES = ("all", "flat", "points")
 #: whether model 'auto' may leave the scene's plane ('keep': a string held in it)
 PLANES = ("auto", "keep")
 
@@ -31,9 +31,11 @@ class SolverOptions:
     uniformly spaced (spacing L/(samples−1)), where h(x(s)) + r ≤ 0 is imposed.  obstacle_slots:
     per obstacle, rows whose arc lengths are parameters, placed at the string's closest approaches
     to the obstacle and moved with them (solver/contact/obstacle_slots.py); 0 (default): the
-    samples alone.  slotted_obstacles: which obstacles get them: 'all' (default) or 'flat' (only
-    those without curvature, such as a table; auto's element models, which follow a curved
-    contact by refining the mesh about it).  obstacle_points: where the obstacle rows sit:
+    samples alone.  slotted_obstacles: which obstacles get them: 'all' (default), 'flat' (only
+    those without curvature, such as a table) or 'points' (those and the ones a string touches at
+    points, such as a sphere, not along a line as a bar: auto's element models, which follow a
+    contact along a bar by refining the mesh about it).  obstacle_points: where the obstacle rows
+    sit:
     'samples' (default: the ``obstacle_samples`` uniform arc lengths) or 'nodes' (the element
     mesh's LGL nodes, so a mesh refined near a contact resolves it finer; element models only:
     model 'full' with rotation 'director', or basis 'elements'; solver/contact/obstacle_points.py).

@@ -298,17 +298,19 @@ def test_a_slot_at_a_breakpoint_holds_the_contact_to_round_off(cache):
     assert Reference(problem_at(LAST), result).error(result) < 1e-8
 
 
+SLOTTED = dict(model="full", obstacle_points="nodes", obstacle_slots=2, output_points=POINTS,
+               update_time_limit=0.0)  # fmt: skip
+INSIDE = MeshSpec((0.49, 0.51), (16, 6, 16))  # either branch's contact 6-7 mm from a breakpoint
+
+
 def test_a_contact_inside_an_element_is_split_at_not_estimated():
     """A fixed 3D model whose contact lies inside an element (breakpoints 0.49 and 0.51 m, either
-    branch's contact 6–7 mm from one of them), the post in a slot: the mesh check cannot bound
-    the error the unresolved kink carries (measured on a mesh split at 0.51 m alone: the
-    residual's estimate 1.3e-6 m against a true 4.8e-6 m), so it reports no estimate (inf:
-    tolerance not met) and proposes the mesh split at the contact."""
-    options = replace(
-        scene().options, model="full", obstacle_points="nodes", obstacle_slots=2,
-        output_points=POINTS, update_time_limit=0.0,
-    )  # fmt: skip
-    spec = MeshSpec((0.49, 0.51), (16, 6, 16))
+    branch's contact 6–7 mm from one of them), the post in a slot: without a solve on another
+    mesh the check cannot bound the error the unresolved kink carries (measured on a mesh split
+    at 0.51 m alone: the residual's estimate 1.3e-6 m against a true 4.8e-6 m), so it reports no
+    estimate (inf: tolerance not met) and proposes the mesh split at the contact."""
+    options = replace(scene().options, **SLOTTED)
+    spec = INSIDE
     solver = ShapeSolver(problem_at(LAST), options, compile="off", mesh=spec)
     result = solver.solve()
     assert result.ok, result.message
@@ -321,3 +323,46 @@ def test_a_contact_inside_an_element_is_split_at_not_estimated():
     assert verdict.choice is not None and verdict.choice.mesh is not None
     # split at the slot's σ, within the slot tolerance (4e-5 m here) of where the force acts
     assert min(abs(b - load.s_start) for b in verdict.choice.mesh.breakpoints) < 4e-5
+
+
+@pytest.mark.parametrize("counts, tolerance", [((16, 6, 16), 1e-3), ((8, 6, 8), 1e-4)])
+def test_a_contact_inside_an_element_is_bounded_by_a_mesh_moved_onto_it(counts, tolerance):
+    """The shape of a mesh whose contact lies inside an element (breakpoints 0.49 and 0.51 m),
+    checked with a solve on the mesh whose nearer breakpoint is moved onto the contact (the same
+    counts: a clone of the NLP, auto/mesh_check.py ``moved_verdict``): the estimate, max_s
+    |x − x_moved| + the moved mesh's own, bounds the true error against the exact reference by
+    at most 10x.  16-node elements at δ = 1e-3 m: within δ/2, the mesh is kept; 8-node ones at
+    1e-4 m: not, and the check switches to the moved mesh (refined as its own check says), with
+    a breakpoint at the contact.  Measured: true 2.2e-7 / estimate 4.2e-7 m; 2.4e-5 / 1.1e-4 m.
+    """
+    mesh = MeshSpec(INSIDE.breakpoints, counts)
+    options = replace(scene().options, **SLOTTED, error_tolerance=tolerance)
+    solver = ShapeSolver(problem_at(LAST), options, compile="off", mesh=mesh)
+    result = solver.solve()
+    assert result.ok, result.message
+    (load,) = result.contact_loads
+    shadows = []
+
+    def moved_shadow(spec):
+        other = ShapeSolver(problem_at(LAST), options, compile="off", mesh=spec, template=solver)
+        assert other.nlp.own_symbols is False  # the same counts: a clone
+        other.adopt_warm_start(solver)
+        shadows.append(spec)
+        return other, other.solve(targets(LAST))
+
+    choice = ModelChoice(planar=False, twist=True, stretch=False, gravity=True, order=12,
+                         obstacles=(0, 1), mesh=mesh)  # fmt: skip
+    verdict = mesh_verdict(
+        solver, solver.committed_state, choice, solver.problem, tolerance, False, moved_shadow
+    )
+    (moved,) = shadows
+    assert moved.counts == counts
+    assert min(abs(b - load.s_start) for b in moved.breakpoints) < 4e-5  # onto the slot's σ
+    error = Reference(problem_at(LAST), result).error(result)
+    assert error <= verdict.estimate <= 10 * error, (verdict.estimate, error)
+    if tolerance == 1e-3:
+        assert verdict.choice is None  # within δ/2: kept
+    else:
+        assert verdict.choice is not None and "moved onto it" in verdict.reason, verdict.reason
+        at = verdict.choice.mesh.breakpoints
+        assert min(abs(b - load.s_start) for b in at) < 4e-5

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ...model.problem import Problem
+from ..build.mesh import MeshSpec
+from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from ..state import SolverState
 from .choice import ModelChoice, full_choice
@@ -32,6 +34,7 @@ from .shadows import (
     pole_angle,
     planar_3d_eigenvalue,
     shadow_error,
+    shadow_solve,
     turned_frame,
 )
 
@@ -134,8 +137,12 @@ class ShapeEvidence:
         snap = self.snap
         assert snap.state is not None
         reduced = self.pool.reduced.reduce(snap.choice, snap.problem)[0]
+
+        def moved_shadow(spec: MeshSpec) -> tuple[ShapeSolver, ShapeResult]:
+            return shadow_solve(self.pool, snap, replace(snap.choice, mesh=spec))
+
         return mesh_verdict(
-            snap.inner, snap.state, snap.choice, reduced, self.tolerance, coarsen=coarsen
+            snap.inner, snap.state, snap.choice, reduced, self.tolerance, coarsen, moved_shadow
         )
 
     def order_change(self, order: int) -> float:

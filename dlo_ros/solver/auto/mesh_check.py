@@ -27,15 +27,18 @@ keeps the order ladder (``checks.py``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from ...model.elements import element_mesh_of
 from ..adapt.contact_shift import ContactShift, contact_shift_error
+from ..adapt.moved_breakpoints import moved_onto
 from ..adapt.rule import ElementEstimates, RefinementRule, next_mesh, unknowns
 from ..adapt.smoothness import contact_kinks, pressing_inside, row_survey
-from ..build.mesh import mesh_spec
+from ..build.mesh import MeshSpec, mesh_spec
 from ..build.structure import breakpoints
 from ..results.element_error import SAFETY, element_errors
 from ..results.residual import FLOOR
@@ -124,7 +127,13 @@ def _splits(spec, points: tuple[float, ...], within: float) -> bool:
 
 
 def mesh_verdict(
-    solver, state, choice: ModelChoice, problem, tolerance: float, coarsen: bool
+    solver,
+    state,
+    choice: ModelChoice,
+    problem,
+    tolerance: float,
+    coarsen: bool,
+    moved_shadow: Callable[[MeshSpec], tuple[Any, Any]] | None = None,
 ) -> MeshVerdict:
     """Return the verdict on ``state``, committed by ``solver`` (a model of ``choice``).
 
@@ -133,6 +142,8 @@ def mesh_verdict(
     updates get cheaper; a cold solve's answer is final, so a coarser rebuild would only cost).
     In a stream's check the contact points are the rule's anchors: a breakpoint no contact holds
     any more (the lift-off slid on) merges away between two calm elements (``adapt/rule.py``).
+    ``moved_shadow``: solves the checked shape on another mesh, for a slot pressing inside an
+    element (:func:`moved_verdict`; None: split there, with no estimate).
     """
     length = problem.string.length
     survey = row_survey(solver, state)
@@ -171,9 +182,13 @@ def mesh_verdict(
         anchors=contact_points(solver, survey, state, shift) if coarsen else None,
         unresolved=inside,
     )
+    following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
+    check = (choice, problem, tolerance, coarsen)
+    moved = _inside(solver, state, check, inside, spec, following, rule.min_size, moved_shadow)
+    if moved is not None:
+        return moved
     if inside:
         estimate = float("inf")
-    following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
     if following is None or not _splits(following, inside, rule.min_size):
         # (a contact inside an element that the unknowns cap left unsplit: kept, no estimate)
         return MeshVerdict(None, "", estimate)
@@ -185,16 +200,77 @@ def mesh_verdict(
     why = _reason(inside, estimate, tolerance, coarsen and after < before)
     if not why:
         return MeshVerdict(None, "", estimate)
+    return _switch(choice, spec, following, why, estimate)
+
+
+def _switch(choice: ModelChoice, spec, following, why: str, estimate: float) -> MeshVerdict:
+    """Return the verdict that switches from mesh ``spec`` to ``following``, saying ``why``."""
+    before, after = unknowns(spec.counts or ()), unknowns(following.counts or ())
+    nan = float("nan")
     refined = replace(
         choice,
         mesh=following,
-        estimated_error_m=float("nan"),
-        order_error_m=float("nan"),
+        estimated_error_m=nan,
+        order_error_m=nan,
         reasons=list(choice.reasons),
     )
-    return MeshVerdict(
-        refined,
-        f"{why}: mesh of {len(following.counts or ())} elements, {after} nodes (was "
-        f"{len(spec.counts or ())}, {before})",
-        estimate,
+    sizes = f"{len(following.counts or ())} elements, {after} nodes"
+    was = f"{len(spec.counts or ())}, {before}"
+    return MeshVerdict(refined, f"{why}: mesh of {sizes} (was {was})", estimate)
+
+
+def _inside(solver, state, check, inside, spec, following, min_size, moved_shadow):
+    """Return :func:`moved_verdict` on a mesh with a breakpoint at each slot ``inside``, or None.
+
+    The same counts with a breakpoint moved onto each, else the rule's ``following`` mesh where
+    it splits at them; None without ``moved_shadow`` or either mesh.
+    """
+    if not inside or moved_shadow is None:
+        return None
+    length, fixed = check[1].string.length, breakpoints(check[1])
+    moved = moved_onto(spec, length, inside, fixed, min_size)
+    if moved is None and following is not None and _splits(following, inside, min_size):
+        moved = following
+    return moved_verdict(solver, state, check, inside, moved, moved_shadow) if moved else None
+
+
+def moved_verdict(
+    solver, state, check: tuple, inside, moved: MeshSpec,
+    moved_shadow: Callable[[MeshSpec], tuple[Any, Any]],
+) -> MeshVerdict | None:  # fmt: skip
+    """Return the verdict on a shape with slots pressing ``inside`` elements, by a mesh ``moved``.
+
+    ``moved``: a mesh with a breakpoint at each such slot, the same counts with a breakpoint
+    moved onto it (``adapt/moved_breakpoints.py``: a clone of the NLP, no build) or the rule's
+    split there; solved from the shape (``moved_shadow``), its own check (:func:`mesh_verdict`)
+    holds no slot inside an element.  The shape's error is bounded by the triangle inequality,
+    max_s |x(s) − x_moved(s)| + the moved mesh's estimate: kept when that is within δ/2, else
+    the moved mesh (or the refinement its check proposes) is taken.  None where the moved solve
+    fails or its own estimate is unknown (the caller splits at the slot, with no estimate).
+    ``check``: :func:`mesh_verdict`'s (choice, problem, tolerance δ [m], coarsen).
+    """
+    choice, problem, tolerance, coarsen = check
+    length = problem.string.length
+    other, result = moved_shadow(moved)
+    other_state = other.committed_state
+    if not result.ok or other_state is None:
+        return None
+    on_moved = replace(choice, mesh=moved, reasons=list(choice.reasons))
+    sub = mesh_verdict(other, other_state, on_moved, problem, tolerance, coarsen)
+    if not np.isfinite(sub.estimate):
+        return None
+    s = np.linspace(0.0, length, SHIFT_GRID)
+    x, x_moved = (
+        solver.nlp.model.positions(state.z, s),
+        other.nlp.model.positions(other_state.z, s),
     )
+    estimate = float(np.max(np.linalg.norm(x - x_moved, axis=1))) + sub.estimate
+    if estimate <= tolerance / 2:
+        return MeshVerdict(None, "", estimate)
+    at = ", ".join(f"{c:.4g}" for c in inside)
+    why = f"a contact inside an element (s = {at} m), error estimate {estimate:.3g} m"
+    spec = choice.mesh or mesh_spec(solver.nlp.model.mesh)
+    how = "moved onto it" if moved.counts == spec.counts else "split there"
+    if sub.choice is not None:
+        return MeshVerdict(sub.choice, f"{why}: {how}; {sub.reason}", estimate)
+    return _switch(choice, spec, moved, f"{why}: {how}", estimate)

@@ -70,13 +70,13 @@ class ReducedModels:
                 **planar,
                 obstacle_points=points,
                 obstacle_slots=slots,
-                # auto's own slots on half-spaces only (a scene's obstacle_slots keep its
-                # slotted_obstacles): on curved obstacles they held the main job's post to 1e-6 m
-                # cold in 2 s (rows: 1e-5 m in 19 s), but a cable draped over a bar (a line
-                # contact) cycled its slot rounds at every held update (2.8 s each, rows 6-15
-                # ms), and a contact sliding along a post sat inside an element at most checks,
-                # its error estimate unknown for most of the slide
-                slotted_obstacles="flat"
+                # auto's own slots on half-spaces and spheres (a scene's obstacle_slots keep its
+                # slotted_obstacles): on the main job's post they held the shape to 1e-6 m cold
+                # in 2 s (rows: 1e-5 m in 19 s), and a contact sliding inside an element is
+                # bounded by a mesh with a breakpoint moved onto it (mesh_check.moved_verdict);
+                # not on a bar: a cable draped over one (a line contact) cycled its slot rounds at
+                # every held update (2.8 s each, rows 6-15 ms)
+                slotted_obstacles="points"
                 if points == "nodes" and not self.options.obstacle_slots
                 else self.options.slotted_obstacles,
                 order=choice.order,

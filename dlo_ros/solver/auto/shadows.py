@@ -15,6 +15,8 @@ import numpy as np
 from ...model import rotations
 from ...model.rotations import frame_with_pole, pole_angle_deg
 from ..build.nlp import has_point_moments
+from ..results.result import ShapeResult
+from ..shape_solver import ShapeSolver
 from .choice import ModelChoice, full_choice
 from .pool import ModelPool
 
@@ -37,6 +39,19 @@ def shadow_error(pool: ModelPool, snap: CheckSnapshot, choice: ModelChoice) -> f
     an escalation switches to.  With background checks it is compiled ahead
     (``ModelPool.compile_ahead``), as the models a switch or the queries use.
     """
+    result = shadow_solve(pool, snap, choice)[1]
+    if not result.ok:
+        return float("nan")
+    return float(np.max(np.linalg.norm(result.points - snap.points, axis=1)))
+
+
+def shadow_solve(
+    pool: ModelPool, snap: CheckSnapshot, choice: ModelChoice
+) -> tuple[ShapeSolver, ShapeResult]:
+    """Return the pooled model of ``choice`` and its answer at the snapshot's poses, from it.
+
+    The answer is committed (the model's warm start for a switch to it, ``lead_in.py``).
+    """
     shadow = pool.solver_for(
         choice, snap.problem, stream=False, source=snap.inner, state=snap.state
     )
@@ -44,10 +59,7 @@ def shadow_error(pool: ModelPool, snap: CheckSnapshot, choice: ModelChoice) -> f
         # beside a stream: an interpreted shadow holds the GIL through long CasADi calls, and the
         # stream's updates during a check waited for them (compiled once, later checks release it)
         pool.compile_ahead(shadow)
-    result = shadow.solve(snap.poses, limited=snap.limited)
-    if not result.ok:
-        return float("nan")
-    return float(np.max(np.linalg.norm(result.points - snap.points, axis=1)))
+    return shadow, shadow.solve(snap.poses, limited=snap.limited)
 
 
 def planar_3d_eigenvalue(pool: ModelPool, snap: CheckSnapshot) -> float | None:

@@ -280,7 +280,7 @@ class ProblemParameters:
                 return -ob.h_many(m.positions_at_rows(z, m.position_rows(s))) - radius
 
             flat = ob.type in OSL.FLAT
-            if not flat and nlp.options.slotted_obstacles == "flat":
+            if not OSL.slotted(ob.type, nlp.options.slotted_obstacles):
                 found = (np.zeros(0), np.zeros(0))
             else:
                 found = OSL.minima(

@@ -69,6 +69,19 @@ DIP = 1e-6
 #: obstacle types without curvature: a slot only at an isolated touch (a string on a plane does not
 #: cut in between the samples beyond its own sag, and a flat contact has no point to slide to)
 FLAT = tuple(name for name, kind in OBSTACLE_TYPES.items() if kind.flat)
+#: the types each ``solver.slotted_obstacles`` value slots (None: every type)
+SLOTTED: dict[str, tuple[str, ...] | None] = {
+    "all": None,
+    "flat": FLAT,
+    "points": FLAT + tuple(name for name, kind in OBSTACLE_TYPES.items() if kind.points),
+}
+
+
+def slotted(kind: str, which: str) -> bool:
+    """Tell whether ``solver.slotted_obstacles: which`` slots an obstacle of type ``kind``."""
+    types = SLOTTED[which]
+    return types is None or kind in types
+
 
 #: on a ``FLAT`` obstacle a closest approach gets a slot when it lies this × L below the clearance
 #: half a sample spacing to each side: a point where a sagging string touches the plane, not the

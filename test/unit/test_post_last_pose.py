@@ -33,15 +33,16 @@ most 10x.  And the contact's part of that estimate on its own (solver/adapt/cont
 family of equilibria pinned at the contact's arc length), on a fixed coarse mesh: where the
 answer's contact sits along s against the reference's, and the error that stands for.
 
-Measured (true error / estimate / unknowns): cold 1e-3 6.06e-5 / 1.40e-4 / 163; cold 1e-4
-2.09e-5 / 4.30e-5 / 235; streamed 1e-3 4.14e-5 / 1.29e-4 / 251 (the mirror branch); streamed 1e-4
-4.56e-5 / 9.55e-5 / 287; cold 1e-5 2.28e-6 / 4.96e-6 / 283 (28 refinement passes: the contact's
-error falls by about 0.8 per pass; with at most 12 it ended 1.5e-5 m from the reference, not met).
-Not asserted: 1e-5 m streamed (the hold's 120 updates give ten refinements).  Before the pinned family (the contact's shift from the answer's own clearance, −g'/g'', and
-the shape's response with the contact row held) the estimate was 1.6–3x below the true error,
-and at 1e-4 cold the answer said the tolerance was met 1.25e-4 m from the reference: the error is
-a swing of the loop about the post (the soft mode above), which only a shape free to move with
-its contact follows.  About 130 s of CPU in all (compile off).
+Measured with auto's slot on the post (``solver.slotted_obstacles: points``; true error /
+estimate / unknowns, wall time): cold 1e-3 5.7e-5 / 1.4e-4 / 63, 0.9 s; streamed 1e-3 3.3e-5 /
+1.2e-4 / 63; cold 1e-4 2.8e-6 / 1.1e-5 / 127, 4.0 s; streamed 1e-4 2.0e-5 / 2.3e-5 / 87; cold
+1e-5 3.2e-8 / 1.3e-7 / 147, 2.4 s.  With the post's contact on node rows (before, auto's): cold
+1e-3 6.06e-5 / 1.40e-4 / 163; cold 1e-5 2.28e-6 / 4.96e-6 / 283 after 28 refinement passes (the
+contact's error fell by about 0.8 per pass).  Not asserted: 1e-5 m streamed.  Before the pinned
+family (the contact's shift from the answer's own clearance, −g'/g'', and the shape's response
+with the contact row held) the rows' estimate was 1.6–3x below the true error: the error is a
+swing of the loop about the post (the soft mode above), which only a shape free to move with its
+contact follows.
 """
 
 from __future__ import annotations

@@ -28,11 +28,10 @@ def moved_onto(
     point lies inside an element.
     """
     bounds = np.concatenate([[0.0], np.asarray(spec.breakpoints, dtype=float), [length]])
-    scene = [abs(bounds - s) <= MERGE * length for s in fixed]
     locked = np.zeros(bounds.size, dtype=bool)
     locked[[0, -1]] = True
-    for near in scene:
-        locked |= near
+    for s in fixed:  # the scene's own breakpoints stay
+        locked |= np.abs(bounds - s) <= MERGE * length
     moved = False
     for c in sorted(float(s) for s in points):
         k = int(np.searchsorted(bounds, c)) - 1  # the element [b_k, b_k+1] holding c

@@ -184,7 +184,9 @@ def mesh_verdict(
     )
     following = next_mesh(spec, problem.string.length, estimates, rule, fixed=breakpoints(problem))
     check = (choice, problem, tolerance, coarsen)
-    moved = _inside(solver, state, check, inside, spec, following, rule.min_size, moved_shadow)
+    moved = _moved_check(
+        solver, state, check, inside, spec, following, rule.min_size, moved_shadow
+    )
     if moved is not None:
         return moved
     if inside:
@@ -219,7 +221,7 @@ def _switch(choice: ModelChoice, spec, following, why: str, estimate: float) -> 
     return MeshVerdict(refined, f"{why}: mesh of {sizes} (was {was})", estimate)
 
 
-def _inside(solver, state, check, inside, spec, following, min_size, moved_shadow):
+def _moved_check(solver, state, check, inside, spec, following, min_size, moved_shadow):
     """Return :func:`moved_verdict` on a mesh with a breakpoint at each slot ``inside``, or None.
 
     The same counts with a breakpoint moved onto each, else the rule's ``following`` mesh where

@@ -113,7 +113,6 @@ def clone_nlp(
     # the flattened energies are the template mesh's (tests build them for their own mesh)
     clone.__dict__["energy_fn"] = None
     clone.own_symbols = False
-    clone.__dict__["_symbolic_of"] = (clone.r0, mesh_spec)
     return clone
 
 
@@ -126,8 +125,7 @@ def symbolic_nlp(nlp: StringNLP) -> StringNLP:
         return nlp
     built = nlp.__dict__.get("_symbolic")
     if built is None:
-        r0, spec = nlp.__dict__["_symbolic_of"]
-        built = StringNLP(nlp.problem, nlp.options, r0, spec)
+        built = StringNLP(nlp.problem, nlp.options, nlp.r0, nlp.mesh_spec)
         nlp.__dict__["_symbolic"] = built
     return built
 

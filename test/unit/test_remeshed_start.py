@@ -23,7 +23,7 @@ from dlo_ros.scene import load_scene
 from dlo_ros.solver import ShapeSolver, make_solver
 from dlo_ros.solver.build.mesh import MeshSpec
 from dlo_ros.solver.options import SolverOptions
-from dlo_ros.solver.update import ladder
+from dlo_ros.solver.update import ladder, slot_rounds
 
 FULL = SolverOptions(model="full", order=8, output_points=101)
 
@@ -66,12 +66,16 @@ def saddles(monkeypatch):
     return seen
 
 
-def test_a_saddle_met_from_another_mesh_is_left_by_ipopt(saddles):
+def test_a_saddle_met_from_another_mesh_is_left_by_ipopt(saddles, monkeypatch):
     """The main job's last pose on the post, solved cold by the default at 1e-3 m: its refinement
     maps each mesh's answer onto the next; Newton lands on a saddle from one of them (measured:
     1), IPOPT from the start answers a stable equilibrium, no higher in energy than the last mesh's
     own cold solve from its initial guess; test_post_last_pose.py holds this answer to the exact
-    contact reference."""
+    contact reference.  The saddle is met where a slot round moves the post's slot alone after its
+    contact jumped out of its reach (as before ``slot_rounds._jumped``, which keeps it beside the
+    new one and so reaches the stable answer by Newton), set here to exercise the ladder's way
+    out."""
+    monkeypatch.setattr(slot_rounds, "HELD", float("inf"))
     problem = problem_at(LAST)
     options = replace(load_scene("default_cable").options, output_points=401, update_time_limit=0.0)
     auto = make_solver(problem, options, compile="off", checks="sync")
@@ -85,6 +89,8 @@ def test_a_saddle_met_from_another_mesh_is_left_by_ipopt(saddles):
     # the last mesh's own cold solve, from its own initial guess: the same equilibrium
     cold = ShapeSolver(inner.problem, inner.options, compile="off", mesh=mesh)
     alone = cold.solve(warm=False)
-    assert alone.ok and alone.stable is True
+    # its slot rounds end 9 mm from the contact (unverified, slot_rounds._flag_unsettled; "ok" and
+    # stable before that flag): not an equilibrium, its energy still no lower than the answer's
+    assert alone.status in ("ok", "unverified"), alone.message
     # (it lands on another branch, 0.19 m away and 1.6e-3 J higher: never below the answer)
     assert result.energy["total"] <= alone.energy["total"] + 1e-9 * abs(alone.energy["total"])

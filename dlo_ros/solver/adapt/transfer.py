@@ -15,8 +15,8 @@ Multipliers, row by row of the new NLP (in SI, λ_SI = λ / (row_scale · σ)):
 * obstacle rows: each old row's force goes to the new row nearest along s (rows on the nodes
   move between meshes; rows on uniform samples sit at the same arc lengths and copy theirs); a
   sample that a contact slot switched off on the new mesh gets 0;
-* contact slots copy the old slot's multiplier at the same arc length (within
-  ``obstacle_slots.TOLERANCE`` · L, as ``update/warm_start.py`` does across models);
+* contact slots copy the multiplier of the old slot nearest along s (within
+  ``obstacle_slots.CARRIED`` · L, as ``update/warm_start.py`` does across models);
 * the unit-norm row of node i takes λ_i = −½ v_i · (∇_{v_i} f + Σ_other J_{k,v_i} λ_k), the
   stationarity equation projected on that node's normal direction.  A nodal multiplier is a
   weighted integral of the continuous one over the node's basis function (it scales with the
@@ -101,8 +101,8 @@ def _slot_multipliers(
         for k, row in enumerate(rows):
             if now.on[k] <= 0 or not src_s.size:
                 continue
-            j = int(np.argmin(np.abs(src_s - now.s[k])))
-            if abs(src_s[j] - now.s[k]) <= OSL.TOLERANCE * L:
+            j = OSL.carried_slot(src_s, float(now.s[k]), L)
+            if j is not None:
                 out[row] = float(src_lam[j])
     return out
 

@@ -56,6 +56,12 @@ from .obstacle_points import nearest_row, row_spacing
 #: than SLOT_SHARE × the error tolerance: ``slot_tolerance``)
 TOLERANCE = 3e-4
 
+#: a slot of a shape mapped onto another model or mesh takes the force of the source's slot
+#: nearest it within this × L (``carried_slot``): the mapped shape's minimum moves by the
+#: mapping's error (0.3 mm at one of the main job's mesh switches, where TOLERANCE·L dropped the
+#: post's force and the first solve on the new mesh cut 5 cm into the post)
+CARRIED = 1e-2
+
 #: a slot may sit this fraction of the error tolerance δ from its fixed point
 SLOT_SHARE = 0.04
 
@@ -279,6 +285,18 @@ def _nearest_slot(
         return None
     best = min(range(len(d)), key=d.__getitem__)
     return best if d[best] <= within else None
+
+
+def carried_slot(source_s: np.ndarray, s: float, length: float) -> int | None:
+    """Return the index of the source slot whose force a slot at ``s`` [m] takes, or None.
+
+    ``source_s``: the source's filled slots' arc lengths [m]; the nearest, within CARRIED·L (the
+    first of equals).
+    """
+    if not source_s.size:
+        return None
+    j = int(np.argmin(np.abs(source_s - s)))
+    return j if abs(source_s[j] - s) <= CARRIED * length else None
 
 
 def slot_tolerance(length: float, error_tolerance: float) -> float:

@@ -29,6 +29,7 @@ import numpy as np
 
 from ...model.problem import Problem
 from ..build.nlp import StringNLP
+from ..build.slot_envelope import shift_bound
 from ..contact import obstacle_slots as OSL
 from ..results.result import ShapeResult
 from ..state import SolverState
@@ -47,6 +48,14 @@ COLD_SLOT_ROUNDS = 8
 #: cable slides 1.8–2.8 mm per update along its post once it has landed, and a cap of 2 mm left
 #: each of those updates solved twice; a landing's jump (25 mm on the post) is not carried on
 PREDICTED = 1e-2
+
+#: an answer whose slot ends over this × δ from its minimum is unverified (``_flag_unsettled``):
+#: the centreline moves about 1.3× a point contact's shift (``adapt/contact_shift.py``)
+UNSETTLED = 0.5
+
+#: a slot whose multiplier kept this share of the solve's start's holds the string
+#: (``_jumped``: 59 % where the string swung about a post, 0.6 % where it rolled off the slot)
+HELD = 0.25
 
 #: a slot row's multiplier above this carries force (IPOPT leaves ~1e-10 on free rows; as
 #: ``kkt.active_rows``)
@@ -84,6 +93,7 @@ def place_slots_again(
     nlp = ctx.parts.nlp
     tolerance = OSL.slot_tolerance(nlp.length, nlp.options.error_tolerance)
     best: tuple[float, ShapeResult, SolverState | None] | None = None
+    before = start  # the state the last solve started from
     for round_ in range(rounds + 1):
         if state is None or result.status not in ("ok", "unverified"):
             break
@@ -93,20 +103,21 @@ def place_slots_again(
         if offset <= tolerance or round_ == rounds:
             break
         # not a streamed update: a fresh history each round, so no secant
-        override = placed_slots(ctx.parts, state, history if ctx.streamed else {})
+        override = placed_slots(ctx.parts, state, history if ctx.streamed else {}, before)
         with ctx.scoped(start=state, slot_override=override):
             again, new_state = solve(ctx, problem, True)
         iterations += again.iterations
         if new_state is None or again.status not in ("ok", "unverified"):
             break
-        result, state = again, new_state
+        before, result, state = state, again, new_state
     # the rounds' answer whose slots sat closest to their minima; the placement on it is the
     # last one made when it is the last answer checked
     placed = best is not None and best[2] is state
     if best is not None:
-        _, result, state = best
+        offset, result, state = best
         if state is not None and start is not None:
             state.slot_motion = slot_motion(ctx.parts, start, state, placed)
+        _flag_unsettled(result, offset, nlp)
     # the rounds refine the answer the first solve found: its method and warm start describe the
     # result
     result.iterations, result.ipopt_status, result.warm_started = (
@@ -115,6 +126,27 @@ def place_slots_again(
         first.warm_started,
     )
     return result, state
+
+
+def _flag_unsettled(result: ShapeResult, offset: float, nlp: StringNLP) -> None:
+    """Report (in place) an answer whose slot sits over UNSETTLED·δ from its minimum: unverified.
+
+    δ: ``solver.error_tolerance`` (0: 1e-3·L).  The force acts at the slot, the string is
+    closest to the obstacle elsewhere: that is no equilibrium of the contact, and the residual on
+    the answer's own rows cannot see it.  An offset of inf (a touching minimum without a slot) is
+    left to the mesh check, which bounds a contact held by rows.
+    """
+    delta = nlp.options.error_tolerance or 1e-3 * nlp.length
+    if not np.isfinite(offset) or offset <= UNSETTLED * delta:
+        return
+    if result.status not in ("ok", "unverified"):
+        return
+    result.status, result.stable = "unverified", None
+    result.message = (
+        f"an obstacle contact did not settle: its slot is {offset:.3g} m from the string's "
+        f"closest approach after the slot rounds (over {UNSETTLED:g}·solver.error_tolerance); "
+        f"{result.message}"
+    )
 
 
 def slot_offset(parts: SolverParts, problem: Problem, state: SolverState) -> float:
@@ -146,7 +178,10 @@ def slot_offset(parts: SolverParts, problem: Problem, state: SolverState) -> flo
 
 
 def placed_slots(
-    parts: SolverParts, state: SolverState, history: dict[tuple[int, int], list]
+    parts: SolverParts,
+    state: SolverState,
+    history: dict[tuple[int, int], list],
+    before: SolverState | None = None,
 ) -> list:
     """Return each obstacle's slots for the next round, from the placement on the last answer.
 
@@ -158,13 +193,22 @@ def placed_slots(
     amplitude.  With an empty ``history`` each round (not a streamed update: a cold solve's
     first answers pass through the obstacle at several places and their minima jump between
     them; a secant across two of them sent the post's cold solve at 1e-5 m through six
-    refinements instead of three) each goes to its s*.  The rows about the slots are off.
+    refinements instead of three) each goes to its s*.  The rows about the slots are off.  A
+    slot still holding the string while its minimum jumped out of its reach keeps its place
+    beside the minimum's (``_jumped``; ``before``: the state the solve of ``state`` started
+    from, None: no slot is kept).
     """
     nlp, parameters = parts.nlp, parts.parameters
     out = []
     for i, new in enumerate(parameters.placements):
-        used, s = parameters.slots(state.p, i), new.s.copy()
-        for k in np.flatnonzero((new.on > 0) & (used.on > 0)):
+        used, s, on = parameters.slots(state.p, i), new.s.copy(), new.on.copy()
+        jumped = dict(_jumped(nlp, state, before, i, used, new))
+        for k, j in jumped.items():
+            s[j], on[j] = used.s[k], 1.0
+            history.pop((i, k), None)
+        for k in np.flatnonzero((new.on > 0) & (used.on > 0)).tolist():
+            if k in jumped:
+                continue
             trail = history.setdefault((i, k), [])
             trail.append((float(used.s[k]), float(new.s[k])))
             if len(trail) >= 2:  # secant on g(σ) = s*(σ) − σ where σ ← s* overshot
@@ -173,7 +217,45 @@ def placed_slots(
                 if ga * gb < 0 and abs(gb) > 0.5 * abs(ga):
                     secant = b - gb * (b - a) / (gb - ga)
                     s[k] = float(np.clip(secant, min(a, b, fa, fb), max(a, b, fa, fb)))
-        out.append(_placement(nlp, s, new.on, new.clearance))
+        out.append(_placement(nlp, s, on, new.clearance))
+    return out
+
+
+def _jumped(
+    nlp: StringNLP,
+    state: SolverState,
+    before: SolverState | None,
+    i: int,
+    used: OSL.SlotPlacement,
+    new: OSL.SlotPlacement,
+) -> list[tuple[int, int]]:
+    """Return (slot, free slot) pairs of obstacle i whose contact jumped out of the slot's reach.
+
+    A slot that still holds the string on ``state`` (``used``; its multiplier at least HELD of
+    the force it carried on ``before``, which must be known: a start interpolated from another
+    mesh carries no slot multipliers) while the placement on ``state`` (``new``) finds that slot's
+    minimum cutting into the obstacle more than half the envelope's reach away
+    (``slot_envelope.shift_bound``: the row models the closest approach within it) keeps its
+    place in a free slot, and the minimum takes the slot: the next round holds the string at both
+    places, and the slot whose minimum is gone empties on the round after.  Moved alone, such a
+    slot swung the string about the post by more each round (the main job's landing, σ ← s*
+    jumping 2.4 → 4 → 3.7 cm: four rounds spent and the answer 1.5 cm off; the slot had kept 59 %
+    of its force).  A slot that lets go (the same cable rolling off its contact later, 0.6 %
+    kept) moves alone: kept beside its minimum it pinched the cable between two slots at 2 N
+    each, no equilibrium of the cable (residual 2.7 mm).
+    """
+    if before is None:
+        return []
+    free = [j for j in range(len(new.on)) if new.on[j] == 0 and used.on[j] == 0]
+    rows = np.asarray(nlp.slot_rows[i], dtype=int)
+    lam, had = state.lam_g[rows], before.lam_g[rows]
+    far, cut = 0.5 * shift_bound(nlp.length), -OSL.TOUCH * nlp.length
+    out = []
+    holds = (had > ACTIVE) & (lam >= HELD * had)
+    for k in np.flatnonzero((new.on > 0) & (used.on > 0) & holds):
+        k = int(k)
+        if free and new.clearance[k] < cut and abs(new.s[k] - used.s[k]) > far:
+            out.append((k, free.pop(0)))
     return out
 
 

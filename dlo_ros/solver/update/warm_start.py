@@ -171,8 +171,8 @@ def warm_state(
         src_s, src_lam = source.slots[i]
         for k, row in enumerate(rows):
             if p[lay_p[f"slots:{i}:on"]][k] > 0:
-                j = int(np.argmin(np.abs(src_s - p[lay_p[f"slots:{i}:s"]][k])))
-                if abs(src_s[j] - p[lay_p[f"slots:{i}:s"]][k]) <= OSL.TOLERANCE * nlp.length:
+                j = OSL.carried_slot(src_s, p[lay_p[f"slots:{i}:s"]][k], nlp.length)
+                if j is not None:
                     lam[row] = src_lam[j] * nlp.row_scale[row] * nlp.sigma
     if nlp.director:
         # rows the source had no twin for (unit norms, folds, the frame rows): least-squares

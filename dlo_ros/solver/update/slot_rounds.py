@@ -18,7 +18,10 @@ A slot's row bounds the obstacle's reach at the closest approach near it
 the rounds are the plain fixed-point iteration σ ← s* (the row held at σ alone made s* move by
 −2.5 σ on the table, and a secant was needed).  A contact sliding along the obstacle at v per
 update starts from its slot moved on by v, and the first solve lands within the slot tolerance
-of its fixed point while the sliding is steady.
+of its fixed point while the sliding is steady.  A contact that jumps out of its slot's reach
+while the slot still holds the string is held at both places for a round (``_jumped``); an answer
+the rounds leave with a slot over UNSETTLED·δ from its minimum is unverified
+(``_flag_unsettled``).
 """
 
 from __future__ import annotations

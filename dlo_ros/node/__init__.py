@@ -16,7 +16,11 @@ Importing this package does not import rclpy; its ROS modules do.
 
 from __future__ import annotations
 
+import faulthandler
+import sys
+
 from ..blas_threads import one_blas_thread
+from ..casadi_threads import CasadiUnsupported
 from .signals import ignore_signals_at_exit, stop_on_first_signal
 
 
@@ -27,12 +31,16 @@ def main(argv: list[str] | None = None, prog: str = "python -m dlo_ros.node") ->
     :mod:`dlo_ros.node.signals`).
     """
     stop_on_first_signal()
+    faulthandler.enable()  # a crash in native code prints every thread's Python stack
     one_blas_thread()  # before numpy loads (blas_threads.py)
     try:
         # not at the top: the signal handling above must be in place before rclpy and CasADi load
         from .run import main as _main
 
         return _main(argv, prog=prog)
+    except CasadiUnsupported as exc:  # one line naming the fix (casadi_threads.py)
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:  # Ctrl-C / SIGTERM while importing rclpy / CasADi
         return 0
     finally:

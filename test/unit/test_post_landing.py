@@ -31,14 +31,19 @@ TOLERANCE = 1e-3
 FIRST, LANDED = 390, (411, 412, 413)
 
 
-def stream(last: int) -> dict:
-    """The default's answers at targets FIRST + 1 … ``last`` streamed from a cold solve at FIRST."""
-    # interpreted, checks inline, no update time limit: a test must not depend on timing
+def solver_at(k: int):
+    """The default at δ = TOLERANCE on the problem at target k, interpreted, checks inline, no
+    update time limit: a test must not depend on timing."""
     options = replace(
         post.scene().options, model="auto", error_tolerance=TOLERANCE,
         output_points=post.POINTS, update_time_limit=0.0,
     )  # fmt: skip
-    solver = make_solver(post.problem_at(FIRST), options, compile="off", checks="sync")
+    return make_solver(post.problem_at(k), options, compile="off", checks="sync")
+
+
+def stream(last: int) -> dict:
+    """The default's answers at targets FIRST + 1 … ``last`` streamed from a cold solve at FIRST."""
+    solver = solver_at(FIRST)
     try:
         assert solver.solve().ok
         return {k: solver.solve(post.targets(k)) for k in range(FIRST + 1, last + 1)}
@@ -64,11 +69,7 @@ def test_the_landing_streamed_is_within_the_tolerance(streamed, k):
 
 @pytest.mark.parametrize("k", LANDED[:1])
 def test_the_landing_cold_is_within_the_tolerance(k):
-    options = replace(
-        post.scene().options, model="auto", error_tolerance=TOLERANCE,
-        output_points=post.POINTS, update_time_limit=0.0,
-    )  # fmt: skip
-    solver = make_solver(post.problem_at(k), options, compile="off", checks="sync")
+    solver = solver_at(k)
     try:
         result = solver.solve()
     finally:

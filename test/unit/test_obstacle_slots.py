@@ -178,3 +178,15 @@ def test_a_slot_keeps_its_index_and_stays_put_within_the_tolerance():
     # a minimum gone: its slot empties, and the sample under it is on again
     gone = OSL.assign((np.array([0.3]), np.array([0.0])), samples, 2, same, 1.0)
     assert gone.on.tolist() == [1.0, 0.0] and gone.samples_on[29] == 1.0
+
+
+def test_a_mapped_slot_takes_the_force_of_the_source_slot_nearest_it():
+    """``carried_slot``: the nearest source slot within CARRIED·L (a mapped minimum 0.3 mm from
+    its source, which the old window of TOLERANCE·L = 0.3 mm on a 1 m string missed), else none."""
+    length, source = 1.0, np.array([0.2, 0.49759])
+    assert OSL.carried_slot(source, 0.4979, length) == 1
+    assert OSL.carried_slot(source, 0.2 - 0.9 * OSL.CARRIED, length) == 0
+    assert OSL.carried_slot(source, 0.35, length) is None  # 15 cm from both: another contact
+    assert OSL.carried_slot(np.zeros(0), 0.5, length) is None
+    assert OSL.carried_slot(source, 0.4979, 2.0) == 1  # the window scales with L
+    assert OSL.carried_slot(source, 0.2 + 1.1 * OSL.CARRIED, length) is None

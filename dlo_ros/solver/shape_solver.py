@@ -133,8 +133,8 @@ class ShapeSolver:
     def _build(self, problem: Problem, template: ShapeSolver | None = None) -> None:
         """Build the NLP of ``problem``'s structure and its parts; forget the warm start."""
         t0 = time.perf_counter()
-        same = template is not None and template._key == structure_key(problem, self.options)
-        shared = template.nlp if same and template is not None else None
+        key = structure_key(problem, self.options) if template is not None else None
+        shared = template.nlp if template is not None and template._key == key else None
         nlp = clone_or_build(problem, self.options, self.reference_frame, self.mesh_spec, shared)
         # before anything is replaced: a refused scene leaves the solver as it was
         check_moments(nlp, problem)

@@ -233,25 +233,29 @@ def _moved_check(solver, state, check, inside, spec, following, min_size, moved_
     moved = moved_onto(spec, length, inside, fixed, min_size)
     if moved is None and following is not None and _splits(following, inside, min_size):
         moved = following
-    return moved_verdict(solver, state, check, inside, moved, moved_shadow) if moved else None
+    if moved is None:
+        return None
+    return moved_verdict(solver, state, check, inside, (spec, moved), moved_shadow)
 
 
 def moved_verdict(
-    solver, state, check: tuple, inside, moved: MeshSpec,
+    solver, state, check: tuple, inside, meshes: tuple[MeshSpec, MeshSpec],
     moved_shadow: Callable[[MeshSpec], tuple[Any, Any]],
 ) -> MeshVerdict | None:  # fmt: skip
     """Return the verdict on a shape with slots pressing ``inside`` elements, by a mesh ``moved``.
 
-    ``moved``: a mesh with a breakpoint at each such slot, the same counts with a breakpoint
-    moved onto it (``adapt/moved_breakpoints.py``: a clone of the NLP, no build) or the rule's
-    split there; solved from the shape (``moved_shadow``), its own check (:func:`mesh_verdict`)
-    holds no slot inside an element.  The shape's error is bounded by the triangle inequality,
-    max_s |x(s) − x_moved(s)| + the moved mesh's estimate: kept when that is within δ/2, else
-    the moved mesh (or the refinement its check proposes) is taken.  None where the moved solve
-    fails or its own estimate is unknown (the caller splits at the slot, with no estimate).
+    ``meshes``: (the checked mesh, ``moved``), ``moved`` a mesh with a breakpoint at each such
+    slot, the same counts with a breakpoint moved onto it (``adapt/moved_breakpoints.py``: a
+    clone of the NLP, no build) or the rule's split there; solved from the shape
+    (``moved_shadow``), its own check (:func:`mesh_verdict`) holds no slot inside an element.
+    The shape's error is bounded by the triangle inequality, max_s |x(s) − x_moved(s)| + the
+    moved mesh's estimate: kept when that is within δ/2, else the moved mesh (or the refinement
+    its check proposes) is taken.  None where the moved solve fails or its own estimate is
+    unknown (the caller splits at the slot, with no estimate).
     ``check``: :func:`mesh_verdict`'s (choice, problem, tolerance δ [m], coarsen).
     """
     choice, problem, tolerance, coarsen = check
+    spec, moved = meshes
     length = problem.string.length
     other, result = moved_shadow(moved)
     other_state = other.committed_state
@@ -271,7 +275,6 @@ def moved_verdict(
         return MeshVerdict(None, "", estimate)
     at = ", ".join(f"{c:.4g}" for c in inside)
     why = f"a contact inside an element (s = {at} m), error estimate {estimate:.3g} m"
-    spec = choice.mesh or mesh_spec(solver.nlp.model.mesh)
     how = "moved onto it" if moved.counts == spec.counts else "split there"
     if sub.choice is not None:
         return MeshVerdict(sub.choice, f"{why}: {how}; {sub.reason}", estimate)

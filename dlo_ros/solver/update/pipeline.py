@@ -10,7 +10,7 @@ nothing.  The stages, each its own module:
 ``ladder``                Newton, saddle escape, IPOPT, continuation, cold fallback
 ``slot_rounds``           obstacle contact slots placed again on the answer
 ``linking``               the linking-number check of the clamped span
-``substeps``              a refused jump retried in substeps of the grip poses
+``substeps``              a refused jump or an unsettled contact retried in substeps
 ``results.self_pass``     an answer without self-contact rows that passes through itself
 ========================  ============================================================
 
@@ -28,7 +28,13 @@ from .contact_rounds import solve_self_contact
 from .context import Outcome, UpdateContext
 from .linking import ClampTurnTracker
 from .moments import solve_with_moments
-from .slot_rounds import COLD_SLOT_ROUNDS, SLOT_ROUNDS, place_slots_again, predicted_slots
+from .slot_rounds import (
+    COLD_SLOT_ROUNDS,
+    SLOT_ROUNDS,
+    place_slots_again,
+    predicted_slots,
+    unsettled,
+)
 from .substeps import JUMP_REFUSALS, in_substeps
 
 
@@ -66,7 +72,11 @@ def run_update(
     tracker: ClampTurnTracker,
     apart: ApartMemo | None = None,
 ) -> Outcome:
-    """Solve ``problem`` (``solve_update``); a warm update refused as a jump again in substeps.
+    """Solve ``problem`` (``solve_update``); a refused or unsettled warm update in substeps.
+
+    A warm update refused as a jump, or whose obstacle contact did not settle
+    (``slot_rounds.unsettled``), is solved again in substeps of the grip poses; an unsettled one
+    whose substeps fail stands as it was.
 
     Every answer of a model without self-contact rows, of a string with a radius, is tested for
     passing through itself (``results.self_pass``): cold, warm and queries alike (``apart``: the
@@ -76,6 +86,12 @@ def run_update(
     result, state = solve_update(ctx, problem, warm)
     if warm and result.status == "failed" and result.message.startswith(JUMP_REFUSALS):
         result, state = in_substeps(ctx, problem, result, solve_update, tracker)
+    elif warm and unsettled(result):
+        # a contact moved faster than the slot rounds follow: the smaller moves of substeps
+        # keep each slot within reach; if they fail too, the unverified answer stands
+        retried, retried_state = in_substeps(ctx, problem, result, solve_update, tracker)
+        if retried_state is not None:
+            result, state = retried, retried_state
     nlp, radius = ctx.parts.nlp, problem.string.radius
     if state is not None and radius > 0 and not nlp.self_contact_slots:
         geometry = SP.geometry_of(problem, ctx.parts.options.self_contact_samples)

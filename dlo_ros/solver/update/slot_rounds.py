@@ -64,6 +64,9 @@ HELD = 0.25
 #: ``kkt.active_rows``)
 ACTIVE = 1e-8
 
+#: how an answer ``_flag_unsettled`` reported begins (``unsettled``)
+UNSETTLED_MESSAGE = "an obstacle contact did not settle"
+
 #: one obstacle's slots: σ [m], on, the samples' switches (``ProblemParameters.slot_lists``)
 Slots = tuple[list[float], list[float], list[float]]
 
@@ -146,10 +149,15 @@ def _flag_unsettled(result: ShapeResult, offset: float, nlp: StringNLP) -> None:
         return
     result.status, result.stable = "unverified", None
     result.message = (
-        f"an obstacle contact did not settle: its slot is {offset:.3g} m from the string's "
+        f"{UNSETTLED_MESSAGE}: its slot is {offset:.3g} m from the string's "
         f"closest approach after the slot rounds (over {UNSETTLED:g}·solver.error_tolerance); "
         f"{result.message}"
     )
+
+
+def unsettled(result: ShapeResult) -> bool:
+    """Tell whether ``result`` is an answer ``_flag_unsettled`` reported (a slot off its min)."""
+    return result.status == "unverified" and result.message.startswith(UNSETTLED_MESSAGE)
 
 
 def slot_offset(parts: SolverParts, problem: Problem, state: SolverState) -> float:

@@ -12,11 +12,13 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import pytest
 
 from dlo_ros.solver.auto import check_schedule as cs
+from dlo_ros.solver.auto.choice import ModelChoice
+from dlo_ros.solver.build.mesh import MeshSpec
 
 K = 7  # the update whose shape is checked
 
@@ -131,3 +133,53 @@ def test_a_check_that_fails_before_deciding_raises_in_the_stream():
     pending = started(FakeChecks(choice=None, fail_before_deciding=True))
     with pytest.raises(RuntimeError, match="check failed"):
         cs.due(pending, K + cs.CHECK_LAG, 0)
+
+
+# ---- held_refinement: the finer mesh a held verdict carries into a switch of physics ----------
+def planar_choice(mesh=None):
+    return ModelChoice(True, False, False, True, 12, (0,), mesh=mesh)
+
+
+def refining(estimate: float, generation: int = 0, **changes):
+    """A held verdict: the planar choice on a 2-element mesh (``changes`` on top), ``estimate``."""
+    finer = replace(planar_choice(MeshSpec((0.5,), (8, 8))), **changes)
+    verdict = FakeVerdict(FakeSnap(generation=generation), finer)
+    verdict.estimate = estimate
+    return held(verdict), finer.mesh
+
+
+TOL = 1e-3
+
+
+def test_a_held_refinement_is_carried():
+    pending, mesh = refining(0.6 * TOL)
+    assert cs.held_refinement(pending, planar_choice(), 0, TOL, wait=True) == mesh
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["coarsening", "stale", "other physics", "nothing held", "keeps the model"],
+)
+def test_no_refinement_is_carried(case):
+    pending, _ = {
+        "coarsening": lambda: refining(0.01 * TOL),  # the estimate says the mesh is fine
+        "stale": lambda: refining(0.6 * TOL, generation=1),
+        "other physics": lambda: refining(0.6 * TOL, order=16),
+        "nothing held": lambda: (None, None),
+        "keeps the model": lambda: (held(FakeVerdict()), None),
+    }[case]()
+    assert cs.held_refinement(pending, planar_choice(), 0, TOL, wait=True) is None
+
+
+def test_an_undecided_background_check_is_waited_for_only_when_asked():
+    pending, mesh = refining(0.6 * TOL)
+    undecided: Future = Future()
+    background = cs.PendingCheck(K + cs.CHECK_LAG, decided=undecided)
+    assert cs.held_refinement(background, planar_choice(), 0, TOL, wait=False) is None
+    undecided.set_result(pending.verdict)
+    assert cs.held_refinement(background, planar_choice(), 0, TOL, wait=True) == mesh
+
+
+def test_a_check_that_raised_carries_nothing():
+    failed = cs.PendingCheck(K + cs.CHECK_LAG, error=RuntimeError("boom"))
+    assert cs.held_refinement(failed, planar_choice(), 0, TOL, wait=True) is None

@@ -159,6 +159,8 @@ class AutoShapeSolver:
         self.choice = choice
         self.book.unchecked = True
         self.book.generation += 1
+        # a held verdict is about the model left: dropped now, so that this one's check starts
+        self.book.pending = None
 
     # ---- public API -----------------------------------------------------------------------------
     @property

@@ -22,7 +22,8 @@ no other check starts until its verdict has taken effect:
 
 So both modes, on a fast or a loaded machine, switch models at the same updates and solve the
 same shapes.  A verdict about a model the stream has left meanwhile (an escalation inside an
-update, a reset, a scene change) is dropped in both.  Solves that are not streamed updates (a
+update, a reset, a scene change) is dropped in both, at the switch; a switch of physics first takes
+the finer mesh such a verdict decided (:func:`held_refinement`).  Solves that are not streamed updates (a
 cold solve, ``check_now``) are checked before they return, in both modes (``AutoShapeSolver``).
 """
 
@@ -32,8 +33,9 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
+from ..build.mesh import MeshSpec
 from .checks import CheckSnapshot, CheckVerdict
-from .choice import ORDERS, full_choice
+from .choice import ORDERS, ModelChoice, full_choice
 from .lead_in import LeadIn
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
@@ -164,3 +166,37 @@ def due(pending: PendingCheck, update: int, generation: int) -> bool:
     pending.switching = True
     pending.apply_at += BUILD_LAG
     return update >= pending.apply_at
+
+
+def held_refinement(
+    pending: PendingCheck | None,
+    choice: ModelChoice,
+    generation: int,
+    tolerance: float,
+    wait: bool,
+) -> MeshSpec | None:
+    """Return the finer mesh a held check decided for the streaming model ``choice``, else None.
+
+    The check must be of this model (``generation``: the stream's switch count now) and its verdict
+    the same physics on another mesh because the current one is too coarse (its estimate over
+    δ/2, ``tolerance`` = δ [m]: the mesh check's refinement).  A switch of physics before that
+    verdict takes effect carries the finer mesh with it (``follow.follow_scene``: the main job's
+    3D model started on the planar mesh the check had just found too coarse, and its answers were
+    unverified until the 3D model's own check refined it 30 updates later).  ``wait``: wait for a
+    background decision (a switch reads it, so that both check modes switch alike); else None
+    while it is undecided (what is built ahead).  A check that raised gives None.
+    """
+    if pending is None:
+        return None
+    if not wait and pending.decided is not None and not pending.decided.done():
+        return None
+    try:
+        verdict = pending.decision()
+    except Exception:  # noqa: BLE001 - reported when it is due, as any check's failure
+        return None
+    if verdict is None or verdict.choice is None or verdict.snapshot.generation != generation:
+        return None
+    new = verdict.choice
+    if new.mesh is None or replace(new, mesh=choice.mesh).key() != choice.key():
+        return None
+    return new.mesh if verdict.estimate > tolerance / 2 else None

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from ...model.problem import Problem
 from ..results.result import ShapeResult
+from .check_schedule import held_refinement
 from .choice import ORDERS, ModelChoice, full_choice
 from .query_refine import refine_query
 from .reach import in_plane_obstacles, not_planar, reachable_obstacles, stretch_needed
@@ -71,7 +72,9 @@ def follow_scene(
     stretch_why = "" if auto.choice.stretch else stretch_needed(problem, auto.tolerance / 2)
     if why or entering or stretch_why:
         richer = (
-            full_choice(auto.choice, problem) if why else replace(auto.choice, obstacles=obstacles)
+            full_choice(_refined(auto, wait=commit), problem)
+            if why
+            else replace(auto.choice, obstacles=obstacles)
         )
         if stretch_why:
             richer = replace(richer, stretch=True, reasons=list(richer.reasons))
@@ -108,7 +111,7 @@ def build_ahead(auto: AutoShapeSolver, problem: Problem) -> None:
     if not (auto.worker.background and auto.worker.idle):
         return
     if auto.choice.may_leave_plane:
-        full = full_choice(auto.choice, problem)
+        full = full_choice(_refined(auto, wait=False), problem)
         auto.pool.full_key = ("",) + full.key()
         if auto.pool.pooled(full) is None:
             auto.worker.submit(prebuild, {auto.pool.full_key}, auto, [full], problem)
@@ -121,6 +124,16 @@ def build_ahead(auto: AutoShapeSolver, problem: Problem) -> None:
         ahead = replace(auto.choice, obstacles=tuple(sorted(near | set(auto.choice.obstacles))))
         if auto.pool.pooled(ahead) is None:
             auto.worker.submit(prebuild, {("",) + ahead.key()}, auto, [ahead], problem)
+
+
+def _refined(auto: AutoShapeSolver, wait: bool) -> ModelChoice:
+    """Return the streaming choice on the finer mesh a held check decided for it, if any.
+
+    (``check_schedule.held_refinement``; ``wait``: for a background decision.)
+    """
+    book = auto.book
+    mesh = held_refinement(book.pending, auto.choice, book.generation, auto.tolerance, wait)
+    return auto.choice if mesh is None else replace(auto.choice, mesh=mesh)
 
 
 def prebuild(auto: AutoShapeSolver, choices: list[ModelChoice], problem: Problem) -> None:

@@ -22,9 +22,10 @@ no other check starts until its verdict has taken effect:
 
 So both modes, on a fast or a loaded machine, switch models at the same updates and solve the
 same shapes.  A verdict about a model the stream has left meanwhile (an escalation inside an
-update, a reset, a scene change) is dropped in both, at the switch; a switch of physics first takes
-the finer mesh such a verdict decided (:func:`held_refinement`).  Solves that are not streamed updates (a
-cold solve, ``check_now``) are checked before they return, in both modes (``AutoShapeSolver``).
+update, a reset, a scene change) is dropped in both, at the switch; a switch of physics first
+takes the finer mesh such a verdict decided (:func:`held_refinement`).  Solves that are not
+streamed updates (a cold solve, ``check_now``) are checked before they return, in both modes
+(``AutoShapeSolver``).
 """
 
 from __future__ import annotations

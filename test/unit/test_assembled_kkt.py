@@ -15,6 +15,7 @@ from dlo_ros.model.problem import Load, RelativePosition
 from dlo_ros.model.profile import Profile
 from dlo_ros.scene import load_scene
 from dlo_ros.solver.build.compiled import NativeFunction, compiled, compiler
+from dlo_ros.solver.native.blocks import add_contact_part
 from dlo_ros.model.mesh_geometry import geometry_vectors
 from dlo_ros.solver.build.nlp import StringNLP
 from dlo_ros.solver.options import SolverOptions
@@ -197,8 +198,13 @@ def test_the_split_systems_plus_their_node_part_equal_the_flattened_ones(case):
     rng = np.random.default_rng(5)
     rows = nlp.g_sym.shape[0]
     z, p, lam = rng.normal(size=n), random_p(nlp, rng), rng.normal(size=rows)
-    grad_f, g, jac, hess, _, weighted = (np.asarray(a, dtype=float) for a in nlp.kkt_split_fn(z, p, lam))
-    for name, a, b in zip(["grad f", "g", "jacobian", "hessian"], [grad_f, g, jac, hess + E.T @ weighted],
+    outputs = (np.asarray(a, dtype=float) for a in nlp.kkt_split_fn(z, p, lam))
+    grad_f, g, jac, hess, _, weighted, d, w = outputs
+    hess += E.T @ weighted
+    add_contact_part(hess, d, w.ravel(), nlp.contact_sizes)  # every row carries a multiplier here
+    if case in ("stretched 2, 2 self-contact slots", "obstacles of every type, slots"):
+        assert nlp.contact_sizes  # rows nonlinear in the positions: curvature blocks to add
+    for name, a, b in zip(["grad f", "g", "jacobian", "hessian"], [grad_f, g, jac, hess],
                           reference(z, p, lam)):
         b = ca.DM(ca.densify(b)).full()
         assert np.max(np.abs(a.reshape(b.shape) - b)) <= 1e-12 * (1.0 + np.max(np.abs(b))), (name, nf)

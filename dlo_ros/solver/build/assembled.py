@@ -39,6 +39,7 @@ import numpy as np
 from ...model.director import DirectorModel, integrands
 from .structure import breakpoint_node
 from .assembled_contact import (
+    contact_blocks,
     group_terms,
     in_row_order,
     inequality_g,
@@ -259,7 +260,7 @@ class AssembledKKT:
         """
         nlp, n, nf = self.nlp, self.n, self.nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam_free", nf)
-        grad, hess, g, jac, grad_f, energies, weighted = self._system(z, p, lam, nf, split=True)
+        grad, hess, g, jac, grad_f, energies, weighted, _ = self._system(z, p, lam, nf, split=True)
         kkt = ca.blockcat([[hess, jac.T], [jac, ca.MX(nf, nf)]])
         return ca.Function(
             "dlo_kkt_free_split",
@@ -273,16 +274,21 @@ class AssembledKKT:
             ],
         )
 
-    def kkt_split(self) -> ca.Function:
-        """Build ``kkt``'s function with ∇²L's per-node part left out, and W last.
+    def kkt_split(self) -> tuple[ca.Function, tuple[int, ...]]:
+        """Build ``kkt``'s function with ∇²L's per-node part and the rows' curvature left out.
 
-        ``dlo_kkt_split``: ``kkt``'s outputs with ∇²L's per-node part Eᵀ W left out, and W last
-        (as ``kkt_free_split``).
+        (``dlo_kkt_split``, sizes): ``kkt``'s outputs with ∇²L's per-node part Eᵀ W left out, then
+        W (as ``kkt_free_split``), then the curvature term of the rows nonlinear in the positions
+        as blocks D, w (``assembled_contact.contact_blocks``), which ∇²L lacks too; and the
+        blocks' sizes.
         """
         nlp, n, rows = self.nlp, self.n, self.nlp.g_sym.shape[0]
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.params.size), ca.MX.sym("lam", rows)
-        _, hess, g, jac, grad_f, energies, weighted = self._system(z, p, lam, rows, split=True)
-        return ca.Function(
+        _, hess, g, jac, grad_f, energies, weighted, contact = self._system(
+            z, p, lam, rows, split=True
+        )
+        d, w, sizes = contact
+        fn = ca.Function(
             "dlo_kkt_split",
             [z, p, lam],
             [
@@ -292,8 +298,11 @@ class AssembledKKT:
                 ca.densify(hess),
                 ca.densify(energies),
                 ca.densify(weighted),
+                ca.densify(d),
+                ca.densify(w),
             ],
         )
+        return fn, sizes
 
     def kkt(self) -> tuple[ca.Function, ca.Function]:
         """Build the full KKT function over every row, and its residual alone.
@@ -420,8 +429,9 @@ class AssembledKKT:
         """Return ∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows.
 
         ∇L, ∇²L, g, ∂g/∂z, ∇f and the energies over the first ``rows`` rows (λ: their
-        multipliers). ``split``: ∇²L without its per-node part Eᵀ W, and W = diag(∇²φ_k) E as a
-        seventh item.
+        multipliers). ``split``: ∇²L without its per-node part Eᵀ W nor the curvature of the rows
+        nonlinear in the positions; then W = diag(∇²φ_k) E and those rows' blocks (D, w, sizes:
+        ``assembled_contact.contact_blocks``) as seventh and eighth items.
         """
         nlp, M, d, n, L = self.nlp, self.M, self.d, self.n, self.nlp.length
         lay = nlp.params
@@ -466,10 +476,15 @@ class AssembledKKT:
         if local_rows.size:
             parts.append((local_rows, g_loc, j_loc))
         rows_nl, g_nl, _, _, groups = nonlinear
+        # the split's curvature blocks (none)
+        contact: tuple[ca.MX, ca.MX, tuple[int, ...]] = (ca.MX(0, n), ca.MX(0, 1), ())
         if rows_nl:
-            jac_nl, contact_hess = group_terms(self, groups, jt_k, E, n)
+            # split: the rows' curvature as blocks (``contact_blocks``), not summed
+            jac_nl, contact_hess = group_terms(self, groups, jt_k, E, n, hessian=not split)
             if contact_hess is not None:
                 hess += contact_hess
+            if split:
+                contact = contact_blocks(self, groups, jt_k, E, n)
             parts.append((np.array(rows_nl, dtype=int), ca.vertcat(*g_nl), ca.vertcat(*jac_nl)))
         g, jac = in_row_order(parts, rows)
 
@@ -478,5 +493,5 @@ class AssembledKKT:
             p, x0, T, (bend_k, twist_k, stretch_k), direct, moments, forces, gravity, m
         )
         if split:
-            return grad, hess, g, jac, grad_f, energies, weighted_E
+            return grad, hess, g, jac, grad_f, energies, weighted_E, contact
         return grad, hess, g, jac, grad_f, energies

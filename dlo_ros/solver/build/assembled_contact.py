@@ -217,23 +217,52 @@ def group_terms(kkt, groups, jt, E, n: int, hessian: bool = True):
         if isinstance(omega, tuple):
             rows = [group_jacobian(kkt, g, jt, E, o, k, n) for g, o, k in zip(grads, omega, kappa)]
             jac.append(rows[0] + rows[1] + rows[2])
-            if not hessian or weighted is None:
-                continue
-            K = omega[0].shape[0]
-            D = ca.vertcat(
-                *[position_derivatives(kkt, jt, E, o, k, n) for o, k in zip(omega, kappa)]
-            )
-            order = [c * 3 * K + 3 * j + m for j in range(K) for c in range(3) for m in range(3)]
-            D = D[order, :]
-            term = ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted, 9), D))
         else:
             jac += [group_jacobian(kkt, gr, jt, E, omega, kappa, n) for gr in grads]
-            if not hessian or weighted is None:
-                continue
-            D = position_derivatives(kkt, jt, E, omega, kappa, n)
-            term = ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted), D))
+        if not hessian or weighted is None:
+            continue
+        D, size = group_position_derivatives(kkt, omega, kappa, jt, E, n)
+        term = ca.mtimes(D.T, ca.mtimes(block_diagonal(weighted, size), D))
         hess = term if hess is None else hess + term
     return jac, hess
+
+
+def group_position_derivatives(kkt, omega, kappa, jt, E, n: int) -> tuple[ca.MX, int]:
+    """Return one group's D (b·rows × n, rows j·b … j·b + b − 1 for row j) and its block size b.
+
+    b = 3 for rows ψ(X_j) (``position_derivatives``); b = 9 for a slot group's rows
+    ψ(X_j, X'_j, X''_j), whose D interleaves the three parts per row.
+    """
+    if not isinstance(omega, tuple):
+        return position_derivatives(kkt, jt, E, omega, kappa, n), 3
+    K = omega[0].shape[0]
+    D = ca.vertcat(*[position_derivatives(kkt, jt, E, o, k, n) for o, k in zip(omega, kappa)])
+    order = [c * 3 * K + 3 * j + m for j in range(K) for c in range(3) for m in range(3)]
+    return D[order, :], 9
+
+
+def contact_blocks(kkt, groups, jt, E, n: int) -> tuple[ca.MX, ca.MX, tuple[int, ...]]:
+    """Return the curvature term of the rows nonlinear in the positions as blocks, unsummed.
+
+    (D, w, sizes): Σ_j D_jᵀ W_j D_j is ``group_terms``' Hessian term, one block j per row whose
+    ψ is curved (a curved obstacle's sample, a contact slot, a self-contact slot), in the groups'
+    order: D_j the rows of D (R × n) from Σ_{i<j} b_i on, b_j = ``sizes[j]``; W_j = λ_j ∇²ψ_j/L
+    (b_j × b_j) column-major in w (Σ b_j² × 1) from Σ_{i<j} b_i² on.  The compiled split KKT
+    function outputs them, and its callers add only the blocks whose W_j is not zero: a row's
+    curvature counts only where its multiplier does, and on the main job's post 1 of 48 rows
+    carried force while the full sum was half the function's time.
+    """
+    ds, ws, sizes = [], [], []
+    for omega, kappa, _, weighted in groups:
+        if weighted is None:
+            continue
+        D, size = group_position_derivatives(kkt, omega, kappa, jt, E, n)
+        ds.append(D)
+        ws.append(ca.vec(weighted))  # block j: columns j·b … j·b + b − 1, column-major
+        sizes += [size] * (D.shape[0] // size)
+    if not ds:
+        return ca.MX(0, n), ca.MX(0, 1), ()
+    return ca.vertcat(*ds), ca.vertcat(*ws), tuple(sizes)
 
 
 def inequality_g(kkt) -> ca.Function:

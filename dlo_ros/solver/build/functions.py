@@ -253,10 +253,12 @@ class NlpFunctions:
         the contact-free one with its compiled Newton step and loop ``loop``, the full one with its
         active-set loop.
         """
-        if name in ("kkt_free", "kkt"):
-            native = native_newton.WithNodePart(
-                native, self.nlp.node_blocks, 0 if name == "kkt_free" else 3
-            )
+        if name == "kkt_free":
+            native = native_newton.WithNodePart(native, self.nlp.node_blocks, 0)
+        if name == "kkt":  # the drivers in its library add its curvature blocks too
+            sizes = self.nlp.contact_sizes
+            self.nlp.node_blocks.attach_contact(sizes)
+            native = native_newton.WithNodePart(native, self.nlp.node_blocks, 3, sizes)
         setattr(self, name, native)
         if name == "kkt_free":
             self.newton_step = self._compiled_newton_step(fn, lib)

@@ -453,6 +453,15 @@ class StringNLP:
     @functools.cached_property
     def kkt_split_fn(self) -> ca.Function:
         """``kkt_fn`` split as ``kkt_free_split_fn`` (the compiled active-set loop's)."""
+        return self._kkt_split[0]
+
+    @property
+    def contact_sizes(self) -> tuple[int, ...]:
+        """The sizes of ``kkt_split_fn``'s curvature blocks (``contact_blocks``)."""
+        return self._kkt_split[1]
+
+    @functools.cached_property
+    def _kkt_split(self) -> tuple[ca.Function, tuple[int, ...]]:
         return self._assembled.kkt_split()
 
     def target_shift(self, p_old: np.ndarray, p_new: np.ndarray) -> np.ndarray:

@@ -97,6 +97,10 @@ class _NodeMapStruct(ctypes.Structure):
         ("row", ctypes.c_void_p),
         ("col", ctypes.c_void_p),
         ("block", ctypes.c_void_p),
+        ("contact_blocks", ctypes.c_int),
+        ("contact_rows", ctypes.c_int),
+        ("contact_wsize", ctypes.c_int),
+        ("contact_size", ctypes.c_void_p),
     ]
 
 
@@ -140,33 +144,82 @@ class NodeBlocks:
             self.row.ctypes.data,
             self.col.ctypes.data,
             self.block.ctypes.data,
+            0,
+            0,
+            0,
+            None,
         )
+        #: the split full KKT function's curvature blocks' sizes (``attach_contact``)
+        self.contact_sizes: tuple[int, ...] | None = None
+        self._contact_size: np.ndarray = np.zeros(1, dtype=np.intc)
+
+    def attach_contact(self, sizes: tuple[int, ...]) -> None:
+        """Tell the drivers the sizes of the split full KKT function's curvature blocks.
+
+        (``StringNLP.contact_sizes``, ``assembled_contact.contact_blocks``.)  Once per NLP,
+        before a driver of that function runs (``functions`` installs its library); later calls
+        change nothing, so that no driver ever reads the struct while it is written.
+        """
+        if self.contact_sizes is not None:
+            return
+        self._contact_size = np.ascontiguousarray(np.array(sizes or (0,), dtype=np.intc))
+        self.struct.contact_size = self._contact_size.ctypes.data
+        self.struct.contact_rows = int(sum(sizes))
+        self.struct.contact_wsize = int(sum(b * b for b in sizes))
+        self.struct.contact_blocks = len(sizes)
+        self.contact_sizes = tuple(sizes)
+
+
+def add_contact_part(h: np.ndarray, d: np.ndarray, w: np.ndarray, sizes) -> None:
+    """Add the rows' curvature term Σ_j D_jᵀ W_j D_j to ``h`` (n × n) in place.
+
+    Over the blocks j whose W_j is not zero (``assembled_contact.contact_blocks``: D (R × n),
+    w the b_j × b_j blocks column-major, b_j = ``sizes[j]``), as ``dlo_add_contact_part`` in C.
+    """
+    if not len(sizes):
+        return
+    b = np.asarray(sizes)
+    at = np.concatenate(([0], np.cumsum(b * b)))
+    row = np.concatenate(([0], np.cumsum(b)))
+    carrying = np.flatnonzero(np.add.reduceat(np.abs(w), at[:-1]) > 0)
+    for j in carrying.tolist():
+        k = int(b[j])
+        dj = d[row[j] : row[j] + k]
+        h += dj.T @ (w[at[j] : at[j + 1]].reshape(k, k, order="F") @ dj)
 
 
 class WithNodePart:
     """A compiled split function called as the whole one: Eᵀ W added back.
 
     A compiled split function (``StringNLP.kkt_free_split_fn``, ``kkt_split_fn``) called as the
-    whole one: its last output W dropped and Eᵀ W added to the top-left n × n block of output
-    ``target`` (K, ∇²L), one product per ``NodeBlocks`` group (numpy: each below OpenBLAS's
+    whole one: its output W dropped and Eᵀ W added to the top-left n × n block of output
+    ``target`` (K, ∇²L), one product per ``NodeBlocks`` group, and the full one's curvature
+    blocks of sizes ``contact`` (``add_contact_part``) (numpy: each below OpenBLAS's
     threshold for threads), so that the evaluations Python makes (a saddle's escape, the
     derivatives at an adopted start, the stability check of a state without them) take the same
     shortcut as the compiled loops.  Not re-entrant (the split function's buffers): callers
     serialise calls, as for ``compiled.NativeFunction``.
     """
 
-    def __init__(self, split, blocks: NodeBlocks, target: int):
-        self._split, self._target = split, target
+    def __init__(self, split, blocks: NodeBlocks, target: int, contact: tuple[int, ...] = ()):
+        self._split, self._target, self._contact = split, target, contact
         self._groups = [
             (rows, cols, np.ascontiguousarray(block.T)) for rows, cols, block in blocks.groups
         ]
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
-        *out, weighted = self._split(*args)
+        out = self._split(*args)
+        if len(out) == 8:  # the full one (``kkt_split_fn``): its rows' curvature blocks last
+            *out, weighted, d, w = out
+        else:
+            *out, weighted = out
+            d = None
         h = out[self._target]
         n = weighted.shape[1]
         for rows, cols, block_t in self._groups:
             h[cols, :n] += block_t @ weighted[rows]
+        if d is not None and d.size:
+            add_contact_part(h[:n, :n], d, w.ravel(), self._contact)
         return out
 
 

@@ -31,6 +31,10 @@ typedef struct {
   int groups, chunk;
   const int *count, *row, *col;
   const double *block;
+  /* the split full KKT function's curvature blocks (assembled_contact.contact_blocks): how many,
+     the rows of D (the sum of their sizes), the doubles of w (the sum of the squares), each size */
+  int contact_blocks, contact_rows, contact_wsize;
+  const int *contact_size;
 } dlo_node_map;
 
 /* The Hessian's per-node part added to a split function's output: H += E^T W, W = diag(hess_k) E
@@ -56,6 +60,29 @@ static void dlo_add_node_part(dlo_gemm_t gemm, const dlo_node_map *map, const do
         for (int j = 0; j < C; ++j) H[col[j] + (size_t)ldh * c] += out[j + (size_t)C * c];
     }
     row += R; col += C; block += (size_t)R * C;
+  }
+}
+
+/* The rows' curvature added to H (n x n at leading dimension ldh): H += D_j^T W_j D_j over the
+   blocks j whose W_j (b x b, column-major in w) is not zero, D (map->contact_rows x n,
+   column-major) and w as the split full KKT function gives them; block j's rows of D and entries
+   of w follow the earlier blocks'.  A row's curvature counts where its multiplier does: most
+   rows carry none.  tmp: 9 x n (the largest block). */
+static inline void dlo_add_contact_part(dlo_gemm_t gemm, const dlo_node_map *map, const double *D,
+                                 const double *w, double *tmp, int n, double *H, int ldh) {
+  char t = 'T', no = 'N';
+  double one = 1.0, zero = 0.0;
+  int rows_d = map->contact_rows, row = 0;
+  for (int j = 0; j < map->contact_blocks; ++j) {
+    int b = map->contact_size[j], nonzero = 0;
+    for (int i = 0; i < b * b; ++i)
+      if (w[i] != 0.0) { nonzero = 1; break; }
+    if (nonzero) {
+      gemm(&no, &no, &b, &n, &b, &one, (double *)w, &b, (double *)D + row, &rows_d, &zero, tmp, &b);
+      gemm(&t, &no, &n, &n, &b, &one, (double *)D + row, &rows_d, tmp, &b, &one, H, &ldh);
+    }
+    row += b;
+    w += (size_t)b * b;
   }
 }
 

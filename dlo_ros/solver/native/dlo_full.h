@@ -8,14 +8,25 @@
 #include "dlo_native.h"
 #include "dlo_common.h"
 
+/* The doubles a driver allocates for W and, after it, the curvature blocks and their scratch. */
+static size_t dlo_full_w_size(const dlo_node_map *map, int rows_e, int n) {
+  return (size_t)(rows_e + map->contact_rows + 9) * n + (size_t)map->contact_wsize;
+}
+
 /* grad f, g, dg/dz, hess L, energies at arg into res[0..4]: the split function (hess L without its
-   per-node part), then that part added (dlo_add_node_part); nonzero if the function fails. */
+   per-node part and the rows' curvature), then both added (dlo_add_node_part,
+   dlo_add_contact_part); W: dlo_full_w_size doubles; nonzero if the function fails. */
 static int dlo_full_eval(const casadi_real **arg, casadi_real **res, casadi_int *iw,
                          casadi_real *w, double *W, dlo_gemm_t gemm, const dlo_node_map *map,
                          int rows_e, int n, double *buf) {
+  double *D = W + (size_t)rows_e * n, *blocks = D + (size_t)map->contact_rows * n;
+  double *tmp = blocks + map->contact_wsize;
   res[5] = W;
+  res[6] = D;
+  res[7] = blocks;
   if (DLO_SYSTEM(arg, res, iw, w, 0) != 0) return 1;
   dlo_add_node_part(gemm, map, W, rows_e, n, res[3], n, buf);
+  dlo_add_contact_part(gemm, map, D, blocks, tmp, n, res[3], n);
   return 0;
 }
 

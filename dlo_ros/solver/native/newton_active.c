@@ -52,8 +52,8 @@ CASADI_SYMBOL_EXPORT int dlo_newton_active_run(
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   dlo_work(DLO_SYSTEM_WORK, DLO_RESIDUAL_WORK, &sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
-  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 6 ? sz_res : 6));
-  double *W = malloc(sizeof(double) * rows_e * n);
+  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 8 ? sz_res : 8));
+  double *W = malloc(sizeof(double) * dlo_full_w_size(map, rows_e, n));
   double *buf = malloc(sizeof(double) * (buf_size > 1 ? buf_size : 1));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
   casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));

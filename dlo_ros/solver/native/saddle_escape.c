@@ -71,10 +71,10 @@ CASADI_SYMBOL_EXPORT int dlo_saddle_run(
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   dlo_work(DLO_SYSTEM_WORK, DLO_RESIDUAL_WORK, &sz_arg, &sz_res, &sz_iw, &sz_w);
   const casadi_real **arg = malloc(sizeof(casadi_real *) * (sz_arg > 3 ? sz_arg : 3));
-  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 6 ? sz_res : 6));
+  casadi_real **res = malloc(sizeof(casadi_real *) * (sz_res > 8 ? sz_res : 8));
   casadi_int *iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
   casadi_real *w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
-  double *W = malloc(sizeof(double) * rows_e * n);
+  double *W = malloc(sizeof(double) * dlo_full_w_size(map, rows_e, n));
   double *buf = malloc(sizeof(double) * (buf_size > 1 ? buf_size : 1));
   double *grad = malloc(sizeof(double) * n), *g = malloc(sizeof(double) * (rows > 0 ? rows : 1));
   double *jac = malloc(sizeof(double) * ((size_t)rows * n + 1));

@@ -22,6 +22,17 @@ under load) moves it 4 cm in one update, and the rounds' σ ← s* does not conv
 string nearly conforms to the sphere, s*(σ) − σ kept one sign over 2.5 cm of σ).  Asserted: such an
 update is solved again in substeps of the grip poses (``pipeline.run_update``: two 2 cm moves the
 rounds follow) and is ``ok`` within δ of the reference; without that retry it is ``unverified``.
+(The other stream's rounds settle by themselves since a round that lets go of the post and falls
+into it is not followed: ``slot_rounds._let_go``.)
+
+The main job's own stream lands on a mesh split at the middle (the breakpoint 0.5, 8 + 8 nodes:
+the planar check's refinement, kept in 3D).  Its round at update 411 moved the slot 1.3 cm to
+the answer's closest approach; that solve let go of the post (multiplier 0) and the cable fell
+2.8 mm into it at s = 0.516, the rounds followed the cut, and the stream ended the update on the
+mirror equilibrium (contact 0.524 instead of 0.476: the cable on the post's other side) and
+stayed there.  Asserted on that mesh, fixed (``model: full``): streamed 410–413 the contact stays
+on its side and slides as the reference's does, each answer ``ok`` within δ of the reference;
+with such rounds followed the stream flips.
 """
 
 from __future__ import annotations
@@ -32,7 +43,9 @@ import pytest
 import test_post_last_pose as post
 
 from dlo_ros.solver.auto import make_solver
-from dlo_ros.solver.update import pipeline
+from dlo_ros.solver.build.mesh import MeshSpec
+from dlo_ros.solver.shape_solver import ShapeSolver
+from dlo_ros.solver.update import pipeline, slot_rounds
 
 TOLERANCE = 1e-3
 FIRST, LANDED = 390, (411, 412, 413)
@@ -116,10 +129,11 @@ def stream_every(first: int, step: int, last: int):
 
 
 @pytest.mark.parametrize("first, step, last", ROLLING)
-def test_a_contact_rolling_faster_than_the_rounds_is_solved_in_substeps(first, step, last):
+def test_a_contact_rolling_faster_than_the_rounds_is_within_the_tolerance(first, step, last):
     result = stream_every(first, step, last)
     assert result.status == "ok", result.message
-    assert "substeps" in result.message and "did not settle" in result.message
+    if (first, step, last) == ROLLING[0]:
+        assert "substeps" in result.message and "did not settle" in result.message
     assert true_error(last, result) <= TOLERANCE
 
 
@@ -140,3 +154,41 @@ def test_the_rolled_contact_cold_is_within_the_tolerance(k):
         solver.close()
     assert result.status == "ok", result.message
     assert true_error(k, result) <= TOLERANCE
+
+
+#: the main job's mesh when its cable lands on the post (the planar check's, kept in 3D)
+LANDING_MESH = MeshSpec((0.5,), (8, 8))
+
+
+def fixed_landing() -> dict:
+    """The fixed model on LANDING_MESH, cold at 409, streamed 410–413."""
+    options = replace(
+        post.scene().options, model="full", obstacle_points="nodes", obstacle_slots=2,
+        slotted_obstacles="points", output_points=post.POINTS, update_time_limit=0.0,
+    )  # fmt: skip
+    solver = ShapeSolver(post.problem_at(409), options, compile="off", mesh=LANDING_MESH)
+    assert solver.solve().ok
+    return {k: solver.solve(post.targets(k)) for k in range(410, 414)}
+
+
+def contact_s(result) -> float:
+    (load,) = result.contact_loads
+    return load.s_start
+
+
+def test_the_landing_on_the_split_mesh_keeps_its_side_of_the_post():
+    answers = fixed_landing()
+    assert contact_s(answers[410]) < 0.5  # the side it lands on
+    for k, result in answers.items():
+        assert result.status == "ok", (k, result.message)
+        assert contact_s(result) < 0.5, k
+        assert true_error(k, result) <= TOLERANCE, k
+    # sliding as the reference's contact does (0.491 → 0.476 → 0.468 → 0.461)
+    slides = [contact_s(answers[k]) - contact_s(answers[k + 1]) for k in range(410, 413)]
+    assert all(0.0 < d < 0.02 for d in slides), slides
+
+
+def test_following_a_round_that_let_go_flips_the_landing_to_the_mirror(monkeypatch):
+    monkeypatch.setattr(slot_rounds, "_let_go", lambda *args: False)
+    answers = fixed_landing()
+    assert contact_s(answers[411]) > 0.5

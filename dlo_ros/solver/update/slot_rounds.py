@@ -115,6 +115,8 @@ def place_slots_again(
         iterations += again.iterations
         if new_state is None or again.status not in ("ok", "unverified"):
             break
+        if ctx.streamed and _let_go(ctx.parts, problem, state, new_state):
+            break  # left the stream's contact: the answers before stand
         before, result, state = state, again, new_state
     # the rounds' answer whose slots sat closest to their minima; the placement on it is the
     # last one made when it is the last answer checked
@@ -268,6 +270,31 @@ def _jumped(
         if free and new.clearance[k] < cut and abs(new.s[k] - used.s[k]) > far:
             out.append((k, free.pop(0)))
     return out
+
+
+def _let_go(
+    parts: SolverParts, problem: Problem, state: SolverState, new_state: SolverState
+) -> bool:
+    """Tell whether a round's answer let go of the string and fell into the obstacle elsewhere.
+
+    A slot that carried force on ``state`` (the answer the round started from, its slots moved
+    since) carries none on ``new_state`` while the string cuts into that obstacle (a minimum
+    below −TOUCH·L): the solve's active set dropped the contact with the slot moved and the
+    string fell through between the sampled rows.  Followed, the rounds moved the slot to the cut
+    and the main job's cable landing on its post ended on the mirror equilibrium, the cable on
+    the post's other side (contact s = 0.524 instead of 0.476), in one update.  A streamed
+    update's rounds stop there (the answer left unsettled is solved again in substeps,
+    ``pipeline.run_update``); a cold solve has no contact to keep, and its first answers pass
+    through the obstacle at several places.
+    """
+    nlp, parameters = parts.nlp, parts.parameters
+    for i, new in enumerate(parameters.place_on(problem, new_state.z, new_state.p)):
+        rows = np.asarray(nlp.slot_rows[i], dtype=int)
+        had, lam = state.lam_g[rows], new_state.lam_g[rows]
+        dropped = np.any((had > ACTIVE) & (lam <= ACTIVE))
+        if dropped and np.any((new.on > 0) & (new.clearance < -OSL.TOUCH * nlp.length)):
+            return True
+    return False
 
 
 def _placement(nlp, s: np.ndarray, on: np.ndarray, clearance: np.ndarray) -> OSL.SlotPlacement:

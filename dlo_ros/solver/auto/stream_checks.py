@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...model.problem import Problem
+from ..contact.obstacle_slots import CARRIED
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from . import escalate
@@ -240,6 +241,9 @@ def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
         return  # a prebuild, or stale
     if verdict.choice is None:
         keep(auto, verdict)
+    elif contact_left(auto, verdict.choice):
+        book.unchecked = True  # about a contact that has moved on: checked again from here
+        notes.append(f"model check dropped (its contact has moved on): {verdict.reason}")
     else:
         # the new mesh's own equilibrium of the last update when it led in (lead_in.py), else
         # the latest committed shape mapped (not the snapshot's)
@@ -247,3 +251,36 @@ def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
         led = pending.lead.ready(book.index) if pending.lead is not None else None
         auto.switch(verdict.choice, verdict.reason, led=led)
         notes.append(auto.changes[-1][1])
+
+
+def contact_left(auto: AutoShapeSolver, choice: ModelChoice) -> bool:
+    """Tell whether a verdict moving breakpoints onto contacts comes due after they moved away.
+
+    ``choice``: the verdict's model, the streaming one with the same element counts and some
+    breakpoints moved (``mesh_check.moved_verdict``: onto contacts inside elements, checked
+    CHECK_LAG + BUILD_LAG updates earlier).  True when a moved breakpoint has no contact of the
+    streaming model's committed shape (its filled obstacle slots) within CARRIED·L of it: the
+    main job's cable rolled its contact from s = 0.417 to 0.503 on its post meanwhile, and the
+    breakpoint moved to 0.417 left the new contact inside an element (the true error 3e-5 →
+    6.1e-4 m).
+    """
+    new, now = choice.mesh, auto.choice.mesh
+    if new is None or now is None or new.counts != now.counts:
+        return False
+    if replace(choice, mesh=now).key() != auto.choice.key():
+        return False
+    moved = [
+        b for b in new.breakpoints if min((abs(b - c) for c in now.breakpoints), default=1.0) > 0
+    ]
+    state = auto.inner.committed_state
+    if not moved or state is None:
+        return False
+    solver = auto.inner
+    contacts = [
+        sigma
+        for i in range(len(solver.nlp.slot_rows))
+        for sigma, on in zip(*solver.parameters.slot_lists(state.p, i)[:2])
+        if on > 0
+    ]
+    near = CARRIED * auto.problem.string.length
+    return any(min((abs(b - c) for c in contacts), default=np.inf) > near for b in moved)

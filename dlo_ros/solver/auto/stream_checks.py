@@ -26,7 +26,7 @@ from . import escalate
 from .check_schedule import PendingCheck, due, lead_step, start_check
 from .checks import CheckSnapshot, CheckVerdict
 from .choice import ModelChoice
-from .reach import pressed_obstacles, same_contacts
+from .reach import contact_arcs, pressed_obstacles, same_contacts
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -78,7 +78,8 @@ class CheckBook:
     whose verdict is held (:mod:`.check_schedule`); ``generation``: bumped by every switch, reset
     and scene change (an older verdict is stale); ``checked_contacts``: the obstacles the checked
     shape pressed on and their forces (a streamed shape whose contacts differ is unchecked again:
-    ``committed``).
+    ``committed``); ``contact_arcs``: where the last committed shape's contacts act
+    (``reach.contact_arcs``).
     """
 
     updates: int = 0
@@ -89,6 +90,7 @@ class CheckBook:
     pending: PendingCheck | None = None
     generation: int = 0
     checked_contacts: dict[int, float] = field(default_factory=dict)
+    contact_arcs: tuple[float, ...] = ()
 
 
 def committed(
@@ -110,6 +112,7 @@ def committed(
     book = auto.book
     auto.problem = problem
     book.since_check += 1
+    book.contact_arcs = contact_arcs(result)
     if limited and not (
         book.unchecked or same_contacts(pressed_obstacles(result), book.checked_contacts)
     ):
@@ -243,7 +246,6 @@ def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
         keep(auto, verdict)
     elif contact_left(auto, verdict.choice):
         book.unchecked = True  # about a contact that has moved on: checked again from here
-        notes.append(f"model check dropped (its contact has moved on): {verdict.reason}")
     else:
         # the new mesh's own equilibrium of the last update when it led in (lead_in.py), else
         # the latest committed shape mapped (not the snapshot's)
@@ -259,7 +261,8 @@ def contact_left(auto: AutoShapeSolver, choice: ModelChoice) -> bool:
     ``choice``: the verdict's model, the streaming one with the same element counts and some
     breakpoints moved (``mesh_check.moved_verdict``: onto contacts inside elements, checked
     CHECK_LAG + BUILD_LAG updates earlier).  True when a moved breakpoint has no contact of the
-    streaming model's committed shape (its filled obstacle slots) within CARRIED·L of it: the
+    last committed shape (``CheckBook.contact_arcs``: point contacts, line contacts' ends) within
+    CARRIED·L of it: the
     main job's cable rolled its contact from s = 0.417 to 0.503 on its post meanwhile, and the
     breakpoint moved to 0.417 left the new contact inside an element (the true error 3e-5 →
     6.1e-4 m).
@@ -272,15 +275,5 @@ def contact_left(auto: AutoShapeSolver, choice: ModelChoice) -> bool:
     moved = [
         b for b in new.breakpoints if min((abs(b - c) for c in now.breakpoints), default=1.0) > 0
     ]
-    state = auto.inner.committed_state
-    if not moved or state is None:
-        return False
-    solver = auto.inner
-    contacts = [
-        sigma
-        for i in range(len(solver.nlp.slot_rows))
-        for sigma, on in zip(*solver.parameters.slot_lists(state.p, i)[:2])
-        if on > 0
-    ]
-    near = CARRIED * auto.problem.string.length
+    contacts, near = auto.book.contact_arcs, CARRIED * auto.problem.string.length
     return any(min((abs(b - c) for c in contacts), default=np.inf) > near for b in moved)

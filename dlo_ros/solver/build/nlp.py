@@ -433,24 +433,18 @@ class StringNLP:
 
     @functools.cached_property
     def kkt_free_split_fn(self) -> ca.Function:
-        """``kkt_free_fn`` with K's per-node Hessian part left out and W last.
+        """``kkt_free_fn`` with K's per-node Hessian part Eᵀ W left out and W last.
 
-        ``kkt_free_fn`` with K's per-node Hessian part Eᵀ W left out and W last
         (``assembled.py``): what the compiled contact-free loop evaluates, adding Eᵀ W by BLAS.
-        Built when first asked for.
         """
         return self._assembled.kkt_free_split()
 
     @functools.cached_property
     def node_blocks(self):
-        """The node map as the dense blocks the compiled functions add Eᵀ W by.
-
-        The node map as the dense blocks the compiled functions add Eᵀ W by
-        (``native.newton.NodeBlocks``), made once per NLP.
-        """
+        """The node map as the dense blocks the compiled functions add Eᵀ W by, once per NLP."""
         return NodeBlocks(self.node_map, self.node_width)
 
-    @functools.cached_property
+    @property
     def kkt_split_fn(self) -> ca.Function:
         """``kkt_fn`` split as ``kkt_free_split_fn`` (the compiled active-set loop's)."""
         return self._kkt_split[0]
@@ -465,11 +459,7 @@ class StringNLP:
         return self._assembled.kkt_split()
 
     def target_shift(self, p_old: np.ndarray, p_new: np.ndarray) -> np.ndarray:
-        """Return g(z, p_new) − g(z, p_old) when only grip targets differ.
-
-        g(z, p_new) − g(z, p_old) when only grip targets differ (exact: they enter g
-        linearly).
-        """
+        """Return g(z, p_new) − g(z, p_old) when only grip targets differ (exact: g is linear)."""
         columns = self._target_columns
         return self._target_jacobian @ (p_new[columns] - p_old[columns])
 

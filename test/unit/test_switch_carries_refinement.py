@@ -15,34 +15,21 @@ carried mesh the 3D model's first answer is unverified.
 from __future__ import annotations
 
 import pytest
+import test_post_last_pose as post  # the main job's scene and targets
 
-from dlo_ros.model.problem import GripPose
-from dlo_ros.node import demo
-from dlo_ros.scene import load_scene, scene_from_dict, scene_to_dict
 from dlo_ros.solver.auto import follow, make_solver
 
-PERIOD, STEP, LAST = 0.02, 2, 130  # the demo's 50 Hz targets, every STEP-th, up to LAST
-
-
-def scene():
-    d = scene_to_dict(load_scene(demo.DEMO_SCENE))
-    d["obstacles"] = list(d.get("obstacles", [])) + [dict(demo.POST)]
-    return scene_from_dict(d)
-
-
-def targets(k: int) -> dict:
-    (pl, ql), (pr, qr) = demo.targets_at(k * PERIOD)
-    return {"left": GripPose(pl, ql), "right": GripPose(pr, qr)}
+STEP, LAST = 2, 130  # the demo's 50 Hz targets, every STEP-th, up to LAST
 
 
 def stream(checks: str) -> dict:
     """The default (interpreted, no update time limit: no timing) by every STEP-th target."""
-    s = scene()
+    s = post.scene()
     options = s.options.__class__(**{**vars(s.options), "update_time_limit": 0.0})
     solver = make_solver(s.problem, options, compile="off", checks=checks)
     try:
         assert solver.solve().ok
-        return {k: solver.solve(targets(k)) for k in range(STEP, LAST + 1, STEP)}
+        return {k: solver.solve(post.targets(k)) for k in range(STEP, LAST + 1, STEP)}
     finally:
         solver.close()
 

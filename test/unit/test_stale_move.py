@@ -5,8 +5,9 @@ A stream's mesh check may find a slot's contact inside an element and move a bre
 shape it checked.  On the main job's post the contact rolled from s = 0.417 to 0.503 meanwhile,
 and the breakpoint moved to 0.417 left the new contact inside an element: the true error went
 from 3e-5 to 6.1e-4 m.  ``stream_checks.contact_left`` tells such a verdict from one whose contact
-is still there (a point contact, or a line contact's end, of the last committed shape within
-CARRIED·L of the moved breakpoint); ``apply_due`` drops it and checks the shape again.  (A strip on
+is still there (a slot carrying force within CARRIED·L of the moved breakpoint, or an obstacle row
+carrying force within the rows' spacing: ``contact_places``); ``apply_due`` drops it and checks
+the shape again.  (A strip on
 a floor, whose breakpoints move onto its line contact's ends: test_plane_keep.py's streamed Fig. 3,
 whose estimate bounds its error within 10×.)  Asserted on a solver pressed on the post (the fixed model on the main job's landing
 mesh, its contact at s = 0.476), with the verdicts a check could make.
@@ -22,7 +23,6 @@ import test_post_landing as landing
 import test_post_last_pose as post
 
 from dlo_ros.solver.auto.choice import ModelChoice
-from dlo_ros.solver.auto.reach import contact_arcs
 from dlo_ros.solver.auto.stream_checks import contact_left
 from dlo_ros.solver.build.mesh import MeshSpec
 from dlo_ros.solver.shape_solver import ShapeSolver
@@ -42,8 +42,7 @@ def pressed():
     (load,) = result.contact_loads
     choice = ModelChoice(planar=False, twist=True, stretch=False, gravity=True, order=12,
                          obstacles=(0, 1), mesh=landing.LANDING_MESH)  # fmt: skip
-    book = SimpleNamespace(contact_arcs=contact_arcs(result))  # as stream_checks.committed keeps it
-    auto = SimpleNamespace(choice=choice, problem=solver.problem, book=book)
+    auto = SimpleNamespace(choice=choice, inner=solver, problem=solver.problem)
     return auto, load.s_start
 
 

@@ -57,14 +57,6 @@ def same_contacts(a: dict[int, float], b: dict[int, float]) -> bool:
     )
 
 
-def contact_arcs(result: ShapeResult) -> tuple[float, ...]:
-    """Return where [m] the result's contacts act: each point contact, each line contact's ends."""
-    out: list[float] = []
-    for load in result.contact_loads:
-        out += [load.s_start] if load.kind == "point" else [float(load.s[0]), float(load.s[-1])]
-    return tuple(out)
-
-
 def reachable_obstacles(problem: Problem, margin: float) -> tuple[int, ...]:
     """Return the indices of the obstacles the string can reach from every grip.
 

@@ -20,13 +20,14 @@ import numpy as np
 
 from ...model.problem import Problem
 from ..contact.obstacle_slots import CARRIED
+from ..update.slot_rounds import ACTIVE
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
 from . import escalate
 from .check_schedule import PendingCheck, due, lead_step, start_check
 from .checks import CheckSnapshot, CheckVerdict
 from .choice import ModelChoice
-from .reach import contact_arcs, pressed_obstacles, same_contacts
+from .reach import pressed_obstacles, same_contacts
 
 if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -78,8 +79,7 @@ class CheckBook:
     whose verdict is held (:mod:`.check_schedule`); ``generation``: bumped by every switch, reset
     and scene change (an older verdict is stale); ``checked_contacts``: the obstacles the checked
     shape pressed on and their forces (a streamed shape whose contacts differ is unchecked again:
-    ``committed``); ``contact_arcs``: where the last committed shape's contacts act
-    (``reach.contact_arcs``).
+    ``committed``).
     """
 
     updates: int = 0
@@ -90,7 +90,6 @@ class CheckBook:
     pending: PendingCheck | None = None
     generation: int = 0
     checked_contacts: dict[int, float] = field(default_factory=dict)
-    contact_arcs: tuple[float, ...] = ()
 
 
 def committed(
@@ -112,7 +111,6 @@ def committed(
     book = auto.book
     auto.problem = problem
     book.since_check += 1
-    book.contact_arcs = contact_arcs(result)
     if limited and not (
         book.unchecked or same_contacts(pressed_obstacles(result), book.checked_contacts)
     ):
@@ -260,12 +258,11 @@ def contact_left(auto: AutoShapeSolver, choice: ModelChoice) -> bool:
 
     ``choice``: the verdict's model, the streaming one with the same element counts and some
     breakpoints moved (``mesh_check.moved_verdict``: onto contacts inside elements, checked
-    CHECK_LAG + BUILD_LAG updates earlier).  True when a moved breakpoint has no contact of the
-    last committed shape (``CheckBook.contact_arcs``: point contacts, line contacts' ends) within
-    CARRIED·L of it: the
-    main job's cable rolled its contact from s = 0.417 to 0.503 on its post meanwhile, and the
-    breakpoint moved to 0.417 left the new contact inside an element (the true error 3e-5 →
-    6.1e-4 m).
+    CHECK_LAG + BUILD_LAG updates earlier).  True when a moved breakpoint is near no contact of
+    the streaming model's committed shape (:func:`contact_places`): the main job's cable rolled
+    its contact from s = 0.417 to 0.503 on its post meanwhile, and the breakpoint moved to 0.417
+    left the new contact inside an element (the true error 3e-5 → 6.1e-4 m).  Read from the
+    committed state when such a verdict comes due, never on other updates.
     """
     new, now = choice.mesh, auto.choice.mesh
     if new is None or now is None or new.counts != now.counts:
@@ -275,5 +272,28 @@ def contact_left(auto: AutoShapeSolver, choice: ModelChoice) -> bool:
     moved = [
         b for b in new.breakpoints if min((abs(b - c) for c in now.breakpoints), default=1.0) > 0
     ]
-    contacts, near = auto.book.contact_arcs, CARRIED * auto.problem.string.length
-    return any(min((abs(b - c) for c in contacts), default=np.inf) > near for b in moved)
+    state = auto.inner.committed_state
+    if not moved or state is None:
+        return False
+    places = contact_places(auto.inner, state, CARRIED * auto.problem.string.length)
+    return any(all(abs(b - s) > near for s, near in places) for b in moved)
+
+
+def contact_places(solver: ShapeSolver, state, near: float) -> list[tuple[float, float]]:
+    """Return where ``state``'s contacts act, each with how near [m] a breakpoint counts as on it.
+
+    A filled contact slot carrying force: its σ, within ``near``; an obstacle row carrying force
+    (a line contact's rows, a lift-off among them): its sample's s, within the rows' spacing (a
+    lift-off lies between two rows).
+    """
+    nlp, parameters = solver.nlp, solver.parameters
+    places: list[tuple[float, float]] = []
+    for i in range(len(nlp.slot_rows)):
+        sigma, on = parameters.slot_lists(state.p, i)[:2]
+        force = state.lam_g[np.asarray(nlp.slot_rows[i], dtype=int)]
+        places += [(x, near) for x, o, f in zip(sigma, on, force) if o > 0 and f > ACTIVE]
+    spacing = max(near, float(nlp.obstacle_spacing))
+    for rows in nlp.obstacle_rows:
+        force = state.lam_g[np.asarray(rows, dtype=int)]
+        places += [(float(x), spacing) for x in np.asarray(nlp.obstacle_s)[force > ACTIVE]]
+    return places

@@ -288,13 +288,17 @@ def _let_go(
     through the obstacle at several places.
     """
     nlp, parameters = parts.nlp, parts.parameters
-    for i, new in enumerate(parameters.place_on(problem, new_state.z, new_state.p)):
-        rows = np.asarray(nlp.slot_rows[i], dtype=int)
-        had, lam = state.lam_g[rows], new_state.lam_g[rows]
-        dropped = np.any((had > ACTIVE) & (lam <= ACTIVE))
-        if dropped and np.any((new.on > 0) & (new.clearance < -OSL.TOUCH * nlp.length)):
-            return True
-    return False
+    dropped = [
+        bool(np.any((state.lam_g[rows] > ACTIVE) & (new_state.lam_g[rows] <= ACTIVE)))
+        for rows in (np.asarray(r, dtype=int) for r in nlp.slot_rows)
+    ]
+    if not any(dropped):  # the common round: no placement needed (the next round makes it)
+        return False
+    placements = parameters.place_on(problem, new_state.z, new_state.p)
+    return any(
+        drop and np.any((new.on > 0) & (new.clearance < -OSL.TOUCH * nlp.length))
+        for drop, new in zip(dropped, placements)
+    )
 
 
 def _placement(nlp, s: np.ndarray, on: np.ndarray, clearance: np.ndarray) -> OSL.SlotPlacement:

@@ -121,6 +121,9 @@ def test_fig2_cold(c, references):
 
 
 KNOTS = (0.4, 0.3)
+#: the loops below 0.5 L share one reference followed down from 0.5 L (~30 s of shooting):
+#: the whole suite's run (CI) leaves them out (pytest.ini); chords 0.8-0.5 L stay in it
+SLOW = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
@@ -145,12 +148,14 @@ def check_knot(result, c, knot_references):
     print(f"\nchord {c} L: closest self-approach {d:.2e} L (s = {a:.3f}, {b:.3f}); reference {d_ref:.2e} L")
 
 
+@SLOW
 @pytest.mark.parametrize("c", KNOTS)
 def test_fig2_knot_cold(c, knot_references):
     solver = ShapeSolver(fig2(c), SolverOptions(model="full", order=ORDER, output_points=51), compile="off")
     check_knot(solver.solve(), c, knot_references)
 
 
+@SLOW
 def test_fig2_streamed(references, knot_references):
     """From 0.8 L down to 0.3 L in steps of 0.01 L, each a warm update: the stream follows the planar
     branch while it is stable, leaves it for the stable non-planar shape once it is not, and follows
@@ -166,6 +171,7 @@ def test_fig2_streamed(references, knot_references):
             check_knot(r, c, knot_references)
 
 
+@SLOW
 def test_fig2_knot_cold_at_the_default_order_leaves_the_unstable_branch(knot_references):
     """Order 16, cold, at 0.4 L: IPOPT stops near an unstable equilibrium that the residual check cannot
     confirm at this order (unverified, a negative eigenvalue); the solver leaves it along that mode and

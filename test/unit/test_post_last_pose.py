@@ -226,8 +226,8 @@ def test_discrete_rod_agrees(cache):
     [
         (1e-3, "cold"),
         (1e-3, "streamed"),
-        (1e-4, "cold"),
-        # ~20 s each: the whole suite's run (CI) leaves them out (pytest.ini)
+        # ~15-20 s each: the whole suite's run (CI) leaves them out (pytest.ini)
+        pytest.param(1e-4, "cold", marks=pytest.mark.slow),
         pytest.param(1e-4, "streamed", marks=pytest.mark.slow),
         pytest.param(1e-5, "cold", marks=pytest.mark.slow),
     ],

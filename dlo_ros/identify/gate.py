@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
-from scipy.stats import chi2 as chi2_distribution
+from scipy.special import chdtri
 
 from ..model.problem import Problem
 from .observations import Observation, ObservationSet
@@ -81,7 +81,8 @@ class Gate:
 def threshold(dof: int) -> float:
     """Return the bound on the reduced χ² for ``dof`` degrees of freedom (see the module)."""
     dof = max(int(dof), 1)
-    return max(float(chi2_distribution.ppf(QUANTILE, dof)) / dof, MODEL_ERROR_FLOOR)
+    # chdtri(k, 1 - q): the chi-square quantile q (scipy.stats.chi2.ppf, without importing stats)
+    return max(float(chdtri(dof, 1.0 - QUANTILE)) / dof, MODEL_ERROR_FLOOR)
 
 
 def precheck(problem: Problem, data: ObservationSet) -> str:

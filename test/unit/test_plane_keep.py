@@ -141,8 +141,7 @@ def floor_answer(rho: float, options, how: str, until_checked: bool = False):
     "rho, how",
     [
         (1000.0, "cold"),
-        # ~19 s: the whole suite's run leaves it out (pytest.ini); its streamed twin stays
-        pytest.param(2000.0, "cold", marks=pytest.mark.slow),
+        (2000.0, "cold"),
         (3000.0, "cold"),
         (1000.0, "streamed"),
         (2000.0, "streamed"),

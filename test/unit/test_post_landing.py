@@ -23,7 +23,11 @@ string nearly conforms to the sphere, s*(σ) − σ kept one sign over 2.5 cm of
 update is solved again in substeps of the grip poses (``pipeline.run_update``: two 2 cm moves the
 rounds follow) and is ``ok`` within δ of the reference; without that retry it is ``unverified``.
 (The other stream's rounds settle by themselves since a round that lets go of the post and falls
-into it is not followed: ``slot_rounds._let_go``.)
+into it is not followed: ``slot_rounds._let_go``.)  The whole manoeuvre by every third target
+moves the contact 2 cm in the third quarter of update 429's move and 0.7 cm in its first half: a
+substep that does not settle is split in two again (``substeps.in_substeps``, down to an eighth);
+every update is ``ok``, 429 and 432 within δ of the reference; with quarters at the finest they
+are ``unverified``.
 
 The main job's own stream lands on a mesh split at the middle (the breakpoint 0.5, 8 + 8 nodes:
 the planar check's refinement, kept in 3D).  Its round at update 411 moved the slot 1.3 cm to
@@ -45,7 +49,7 @@ import test_post_last_pose as post
 from dlo_ros.solver.auto import make_solver
 from dlo_ros.solver.build.mesh import MeshSpec
 from dlo_ros.solver.shape_solver import ShapeSolver
-from dlo_ros.solver.update import pipeline, slot_rounds
+from dlo_ros.solver.update import pipeline, slot_rounds, substeps
 
 TOLERANCE = 1e-3
 FIRST, LANDED = 390, (411, 412, 413)
@@ -66,7 +70,7 @@ def solver_at(k: int):
 
 
 def stream(last: int) -> dict:
-    """The default's answers at targets FIRST + 1 … ``last`` streamed from a cold solve at FIRST."""
+    """The default's answers at targets FIRST + 1 … ``last``, streamed from cold at FIRST."""
     solver = solver_at(FIRST)
     try:
         assert solver.solve().ok
@@ -143,6 +147,33 @@ def test_without_the_substeps_the_rolling_contact_is_unverified(monkeypatch):
     result = stream_every(first, step, last)
     assert result.status == "unverified" and result.stable is None
     assert "did not settle" in result.message
+
+
+def manoeuvre_by_every(step: int) -> dict:
+    """The default's answers along the main job's whole manoeuvre by every ``step``-th target,
+    streamed from a cold solve at its start (target 0), by target."""
+    solver = solver_at(0)
+    try:
+        assert solver.solve().ok
+        return {k: solver.solve(post.targets(k)) for k in range(step, post.LAST + 1, step)}
+    finally:
+        solver.close()
+
+
+def test_the_manoeuvre_by_every_third_target_settles_in_finer_substeps():
+    answers = manoeuvre_by_every(3)
+    assert all(r.status == "ok" for r in answers.values()), [
+        (k, r.message) for k, r in answers.items() if r.status != "ok"
+    ]
+    assert "substeps" in answers[429].message
+    for k in (429, 432):
+        assert true_error(k, answers[k]) <= TOLERANCE, k
+
+
+def test_with_quarters_at_the_finest_the_third_targets_contact_is_unverified(monkeypatch):
+    monkeypatch.setattr(substeps, "FINEST", 1 / 4)
+    answers = manoeuvre_by_every(3)
+    assert answers[429].status == "unverified" and "did not settle" in answers[429].message
 
 
 #: the main job's mesh when its cable lands on the post (the planar check's, kept in 3D)

@@ -6,8 +6,9 @@ Contract:
   ``start.p`` to ``p1`` in SUBSTEPS equal parts, as a Newton attempt (ok, state, steps,
   violation); the ladder's rung between plain Newton and IPOPT;
 * ``in_substeps(ctx, problem, refused, solve, tracker)``: a warm update refused as a jump
-  (``JUMP_REFUSALS``) solved again as SUBSTEPS[k] warm updates of the grip poses, each by
-  ``solve`` (``pipeline.solve_update``) from the last; it gives the last substep's outcome,
+  (``JUMP_REFUSALS``) or left with an unsettled contact solved again as warm updates of the grip
+  poses, each by ``solve`` (``pipeline.solve_update``) from the last: halves of the move, a half
+  that fails split in two again down to FINEST of the move; it gives the last substep's outcome,
   uncommitted, or ``refused`` with the substeps' outcome added.  ``ctx.start``, ``ctx.scene``,
   ``ctx.clamp_turns`` and ``ctx.turns`` are restored when it returns.
 
@@ -34,9 +35,14 @@ JUMP_REFUSALS = (
     "self-contact: this shape is not reached",
     "topology:",
 )
-#: substeps a refused warm update, or one Newton cannot take at once, is retried in (each count in
-#: turn)
+#: substeps Newton's path is split into when it cannot take a move at once (each count in turn)
 SUBSTEPS = (2, 4)
+#: the smallest substep of a whole update retried (``in_substeps``), as a share of its move: the
+#: main job's cable by every 3rd target (a planner at 17 Hz, or the node coalescing) rolls its
+#: contact on the post 2 cm in the third quarter of update 429's move and 0.7 cm in the first
+#: half; uniform quarters left that quarter unsettled (the slot rounds crawl when the cable nearly
+#: conforms to the post), its eighths settle
+FINEST = 1 / 8
 
 #: a warm or cold solve from the context's start (``pipeline.solve_update``)
 Solve = Callable[[UpdateContext, Problem, bool], Outcome]
@@ -94,38 +100,44 @@ def in_substeps(
     solve: Solve,
     tracker: ClampTurnTracker,
 ) -> Outcome:
-    """Solve a warm update refused as a jump again, in SUBSTEPS[k] warm updates.
+    """Solve a refused or unsettled warm update again in substeps of its move.
 
     The refusal: the string passed through itself, or turns of twist were released
-    (``JUMP_REFUSALS``).  The substeps go from the committed poses (``ctx.scene``'s) to
+    (``JUMP_REFUSALS``); unsettled: a contact moved faster than the slot rounds follow
+    (``slot_rounds.unsettled``).  The substeps go from the committed poses (``ctx.scene``'s) to
     ``problem``'s, each checked as any update is: IPOPT's iterates need not keep the contact rows,
-    and a smaller move keeps it on the branch (Fig. 2 at radius 0).  Returns the last substep's
-    (result, state), uncommitted; or ``refused`` (with the substeps' outcome added) when a substep
-    fails too.  The context's start is restored either way: ``ShapeSolver.solve`` commits.
+    and a smaller move keeps it on the branch (Fig. 2 at radius 0).  The move is taken in halves;
+    a substep that is not ``ok`` is tried again as two of half its length from the same start, down
+    to FINEST of the move, so that the substeps are short only where the shape moves fast.  Returns
+    the last substep's (result, state), uncommitted; or ``refused`` (with the outcome of the
+    substep that failed added) when one of FINEST fails too.  The context's start is restored
+    either way: ``ShapeSolver.solve`` commits.
     """
-    committed = (ctx.start, ctx.scene, ctx.clamp_turns)
     start = {g.name: g.pose for g in ctx.scene.grips}
-    why = ""
     with ctx.scoped(
         start=ctx.start, scene=ctx.scene, clamp_turns=ctx.clamp_turns, turns=ctx.turns
     ):
-        for k in SUBSTEPS:
-            ctx.start, ctx.scene, ctx.clamp_turns = committed
-            for i in range(1, k + 1):
-                step = substep_scene(problem, start, i / k) if i < k else problem
-                ctx.turns = tracker.advance(ctx.start, ctx.clamp_turns, step)
-                result, state = solve(ctx, step, True)
-                if result.status != "ok" or state is None:
-                    # a rescue must be a verified equilibrium
-                    why = f"; in {k} substeps, substep {i} {result.status}: {result.message}"
-                    break
-                if i == k:
-                    result.message += (
-                        f"; solved in {k} substeps (one update was refused: {refused.message})"
-                    )
-                    result.continuation_steps = k
-                    return result, state
-                ctx.start, ctx.scene = state, step  # the next substep starts here
-                ctx.clamp_turns = None if ctx.turns is None else ctx.turns.committed()
-    refused.message += why
-    return refused, None
+        done, length, solved = 0.0, 0.5, 0  # binary fractions: their sums are exact
+        while True:
+            to = done + length
+            step = substep_scene(problem, start, to) if to < 1.0 else problem
+            ctx.turns = tracker.advance(ctx.start, ctx.clamp_turns, step)
+            result, state = solve(ctx, step, True)
+            if result.status != "ok" or state is None:  # a rescue must be a verified equilibrium
+                if length / 2 >= FINEST:
+                    length /= 2
+                    continue
+                refused.message += (
+                    f"; in substeps, the one from {done:g} to {to:g} of the move "
+                    f"{result.status}: {result.message}"
+                )
+                return refused, None
+            solved += 1
+            if to >= 1.0:
+                result.message += (
+                    f"; solved in {solved} substeps (one update was refused: {refused.message})"
+                )
+                result.continuation_steps = solved
+                return result, state
+            ctx.start, ctx.scene, done = state, step, to  # the next substep starts here
+            ctx.clamp_turns = None if ctx.turns is None else ctx.turns.committed()

@@ -7,10 +7,11 @@ Contract:
   violation); the ladder's rung between plain Newton and IPOPT;
 * ``in_substeps(ctx, problem, refused, solve, tracker)``: a warm update refused as a jump
   (``JUMP_REFUSALS``) or left with an unsettled contact solved again as warm updates of the grip
-  poses, each by ``solve`` (``pipeline.solve_update``) from the last: halves of the move, a half
-  that fails split in two again down to FINEST of the move; it gives the last substep's outcome,
-  uncommitted, or ``refused`` with the substeps' outcome added.  ``ctx.start``, ``ctx.scene``,
-  ``ctx.clamp_turns`` and ``ctx.turns`` are restored when it returns.
+  poses, each by ``solve`` (``pipeline.solve_update``) from the last: two halves of the move, else
+  four quarters, a quarter that fails split in two again down to FINEST; it gives the last
+  substep's outcome, uncommitted, or ``refused`` with the substeps' outcome added.
+  ``ctx.start``, ``ctx.scene``, ``ctx.clamp_turns`` and ``ctx.turns`` are restored when it
+  returns.
 
 ``newton_in_substeps`` is called through this module's attribute, so a test may wrap it.
 """
@@ -41,7 +42,8 @@ SUBSTEPS = (2, 4)
 #: main job's cable by every 3rd target (a planner at 17 Hz, or the node coalescing) rolls its
 #: contact on the post 2 cm in the third quarter of update 429's move and 0.7 cm in the first
 #: half; uniform quarters left that quarter unsettled (the slot rounds crawl when the cable nearly
-#: conforms to the post), its eighths settle
+#: conforms to the post), its eighths settle.  (Halves split on failure instead of quarters from
+#: the start flipped the landing's stream, interpreted, to the mirror side of the post at 411.)
 FINEST = 1 / 8
 
 #: a warm or cold solve from the context's start (``pipeline.solve_update``)
@@ -106,38 +108,67 @@ def in_substeps(
     (``JUMP_REFUSALS``); unsettled: a contact moved faster than the slot rounds follow
     (``slot_rounds.unsettled``).  The substeps go from the committed poses (``ctx.scene``'s) to
     ``problem``'s, each checked as any update is: IPOPT's iterates need not keep the contact rows,
-    and a smaller move keeps it on the branch (Fig. 2 at radius 0).  The move is taken in halves;
-    a substep that is not ``ok`` is tried again as two of half its length from the same start, down
-    to FINEST of the move, so that the substeps are short only where the shape moves fast.  Returns
-    the last substep's (result, state), uncommitted; or ``refused`` (with the outcome of the
-    substep that failed added) when one of FINEST fails too.  The context's start is restored
-    either way: ``ShapeSolver.solve`` commits.
+    and a smaller move keeps it on the branch (Fig. 2 at radius 0).  First two halves of the move;
+    if one fails, four quarters from the start again, a quarter that is not ``ok`` split in two
+    from its own start, down to FINEST of the move.  Returns the last substep's (result, state),
+    uncommitted; or ``refused`` (with the outcome of the substep that failed added) when that
+    fails too.  The context's start is restored either way: ``ShapeSolver.solve`` commits.
     """
-    start = {g.name: g.pose for g in ctx.scene.grips}
+    committed = (ctx.start, ctx.scene, ctx.clamp_turns)
+    why = ""
     with ctx.scoped(
         start=ctx.start, scene=ctx.scene, clamp_turns=ctx.clamp_turns, turns=ctx.turns
     ):
-        done, length, solved = 0.0, 0.5, 0  # binary fractions: their sums are exact
-        while True:
-            to = done + length
-            step = substep_scene(problem, start, to) if to < 1.0 else problem
-            ctx.turns = tracker.advance(ctx.start, ctx.clamp_turns, step)
-            result, state = solve(ctx, step, True)
-            if result.status != "ok" or state is None:  # a rescue must be a verified equilibrium
-                if length / 2 >= FINEST:
-                    length /= 2
-                    continue
-                refused.message += (
+        for first, finest in ((0.5, 0.5), (0.25, FINEST)):
+            ctx.start, ctx.scene, ctx.clamp_turns = committed
+            result, state, why = _split_move(ctx, problem, solve, tracker, first, finest)
+            if state is not None:
+                result.message += (
+                    f"; solved in {result.continuation_steps} substeps "
+                    f"(one update was refused: {refused.message})"
+                )
+                return result, state
+    refused.message += why
+    return refused, None
+
+
+def _split_move(
+    ctx: UpdateContext,
+    problem: Problem,
+    solve: Solve,
+    tracker: ClampTurnTracker,
+    length: float,
+    finest: float,
+) -> tuple[ShapeResult, SolverState | None, str]:
+    """Take the move from ``ctx.scene``'s poses to ``problem``'s in substeps of ``length``.
+
+    A substep that is not ``ok`` is tried again as two of half its length from its own start,
+    down to ``finest`` (binary fractions of the move: their sums are exact).  Returns the last
+    substep's result and state (``continuation_steps``: how many were solved), or (the failed
+    substep's result, None, what failed).  Moves ``ctx.start``, ``ctx.scene`` and the turns on.
+    """
+    start = {g.name: g.pose for g in ctx.scene.grips}
+    done, solved = 0.0, 0
+    while True:
+        to = done + length
+        step = substep_scene(problem, start, to) if to < 1.0 else problem
+        ctx.turns = tracker.advance(ctx.start, ctx.clamp_turns, step)
+        result, state = solve(ctx, step, True)
+        if result.status != "ok" or state is None:  # a rescue must be a verified equilibrium
+            if length / 2 >= finest:
+                length /= 2
+                continue
+            return (
+                result,
+                None,
+                (
                     f"; in substeps, the one from {done:g} to {to:g} of the move "
                     f"{result.status}: {result.message}"
-                )
-                return refused, None
-            solved += 1
-            if to >= 1.0:
-                result.message += (
-                    f"; solved in {solved} substeps (one update was refused: {refused.message})"
-                )
-                result.continuation_steps = solved
-                return result, state
-            ctx.start, ctx.scene, done = state, step, to  # the next substep starts here
-            ctx.clamp_turns = None if ctx.turns is None else ctx.turns.committed()
+                ),
+            )
+        solved += 1
+        if to >= 1.0:
+            result.continuation_steps = solved
+            return result, state, ""
+        ctx.start, ctx.scene, done = state, step, to  # the next substep starts here
+        ctx.clamp_turns = None if ctx.turns is None else ctx.turns.committed()

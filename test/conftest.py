@@ -3,7 +3,13 @@ test/random_scenes.py and test/reference/; this directory is on sys.path (pytest
 conftest import), so both halves import them the same way."""
 from __future__ import annotations
 
+import os
 from dataclasses import replace
+
+# gcc at -O0 for every library the tests compile (``native.compiler.optimize_flags``: a third of
+# -O3's time; the tests compare compiled with interpreted values, the same at every level), set
+# before dlo_ros is imported; test_compiled_cache.py builds at the release level -O3 too
+os.environ.setdefault("DLO_OPTIMIZE", "0")
 from pathlib import Path
 
 import pytest

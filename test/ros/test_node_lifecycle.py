@@ -114,7 +114,8 @@ def compiling_node(tmp_path, mode: str, domain_id: int, log) -> NodeProcess:
 
     if shutil.which("gcc") is None and shutil.which("cc") is None:
         pytest.skip("no C compiler")
-    env = dict(os.environ, DLO_CACHE_DIR=str(tmp_path / "cache"))
+    # the release level: gcc at -O3 runs long enough to be interrupted (the suite's -O0 might not)
+    env = dict(os.environ, DLO_CACHE_DIR=str(tmp_path / "cache"), DLO_OPTIMIZE="3")
     env.pop("DLO_NO_COMPILE", None)
     return NodeProcess(["--scene", TEST_SCENE, "--ros-args", "-p", f"compile:={mode}"], domain_id, log_path=log, env=env)
 

@@ -51,6 +51,29 @@ def test_the_key_holds_the_flags_the_name_and_the_sources(monkeypatch):
     assert native_compiler.fingerprint(f) != key
 
 
+
+def test_the_optimisation_level_is_dlo_optimize_and_the_release_level_compiles_alike(tmp_path, monkeypatch):
+    """``$DLO_OPTIMIZE`` picks gcc's level (default -O3; a bad one: a warning naming it, and -O3).
+    The suite compiles at -O0 (test/conftest.py); the release level builds the same function and
+    gives the same values, to rounding."""
+    assert native_compiler.optimize_flags(None) == ("-O3",)
+    assert native_compiler.optimize_flags("0") == ("-O0",)
+    with pytest.warns(UserWarning, match="DLO_OPTIMIZE='-O9; rm'"):
+        assert native_compiler.optimize_flags("-O9; rm") == ("-O3",)
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.delenv("DLO_NO_COMPILE")
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    nlp = StringNLP(clamped_pair(right=(0.6, 0.0, 0.0), weight=0.1), PLANAR)
+    args = [np.linspace(0.1, 0.9, nlp.kkt_fn.size1_in(i)) for i in range(nlp.kkt_fn.n_in())]
+    exact = [np.asarray(ca.DM(v).full()) for v in nlp.kkt_fn(*args)]
+    for flags in (("-O3",), native_compiler.FLAGS):
+        native, ok = compiled.compiled(nlp.kkt_fn, flags=flags)
+        assert ok, flags
+        for got, want in zip(native(*args), exact):
+            np.testing.assert_allclose(np.reshape(got, want.shape), want, rtol=1e-13, atol=1e-13)
+    assert len(list(tmp_path.glob("dlo_kkt_*.so"))) == (1 if native_compiler.FLAGS == ("-O3",) else 2)
+
 def test_a_cached_library_is_found_and_used_without_generating_c(tmp_path, monkeypatch):
     if compiled.compiler() is None:
         pytest.skip("no C compiler")

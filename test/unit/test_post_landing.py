@@ -170,6 +170,7 @@ def test_the_manoeuvre_by_every_third_target_settles_in_finer_substeps():
         assert true_error(k, answers[k]) <= TOLERANCE, k
 
 
+@pytest.mark.slow  # ~7 s: the counterfactual of the test above, left out of the whole suite's run
 def test_with_quarters_at_the_finest_the_third_targets_contact_is_unverified(monkeypatch):
     monkeypatch.setattr(substeps, "FINEST", 1 / 4)
     answers = manoeuvre_by_every(3)

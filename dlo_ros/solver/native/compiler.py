@@ -16,6 +16,7 @@ import shutil
 import subprocess
 import tempfile
 import threading
+import warnings
 from pathlib import Path
 from typing import Iterator
 
@@ -25,9 +26,29 @@ import numpy as np
 from . import cache_store
 
 
-#: gcc's flags.  The assembled KKT functions compile in about the same time at -O1 and -O3, and run
-#: faster at -O3 (bench/results/compile_cost.md); the flattened ones took minutes at any level.
-FLAGS = ("-O3",)
+#: gcc's optimisation levels ``$DLO_OPTIMIZE`` may name (the default: 3)
+LEVELS = ("0", "1", "2", "3", "s")
+
+
+def optimize_flags(level: str | None) -> tuple[str, ...]:
+    """Return gcc's flags for the optimisation level ``level`` (``$DLO_OPTIMIZE``; None: 3).
+
+    The assembled KKT functions run faster at -O3 (bench/results/compile_cost.md); -O0 compiles
+    the default cable's libraries in a third of the time (the test suite's choice: its solves
+    compare compiled with interpreted code, and IEEE arithmetic is the same at every level
+    without -ffast-math).  A level not in LEVELS gives one warning naming it, and -O3.
+    """
+    if level is None or level.strip() in LEVELS:
+        return (f"-O{(level or '3').strip()}",)
+    warnings.warn(
+        f"DLO_OPTIMIZE={level!r} is not one of {', '.join(LEVELS)}: compiling with -O3",
+        stacklevel=2,
+    )
+    return ("-O3",)
+
+
+#: gcc's flags, chosen once per process (``optimize_flags``); part of every cache key
+FLAGS = optimize_flags(os.environ.get("DLO_OPTIMIZE"))
 
 
 def compiler() -> str | None:

@@ -26,14 +26,20 @@ def pytest_collection_modifyitems(items):
 
 
 @pytest.fixture(scope="session", autouse=True)
-def _no_background_compile():
+def _no_background_compile(tmp_path_factory):
     """Tests use interpreted CasADi derivatives (compiling a scene takes gcc ~1 min); the compiled path
     has its own tests that opt back in (and restore it).  Session-wide, so that module-scoped
     fixtures, which pytest sets up before any function-scoped one, and the worker processes they
     spawn solve interpreted too: a background gcc there took a CI core, and its library arriving
-    mid-chunk made a data set's answers depend on timing."""
+    mid-chunk made a data set's answers depend on timing.
+
+    What a test compiles goes to a cache of this run (``DLO_CACHE_DIR``; tests of the cache itself
+    set their own), never to the user's ~/.cache/dlo_ros: a run here then compiles what a fresh CI
+    machine does, whatever earlier runs left (the compiled inertia corpus took 2 s on a warm
+    cache and 48 s on an empty one)."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("DLO_NO_COMPILE", "1")
+        mp.setenv("DLO_CACHE_DIR", str(tmp_path_factory.mktemp("compiled")))
         yield
 
 

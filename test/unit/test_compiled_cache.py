@@ -58,6 +58,7 @@ def test_the_optimisation_level_is_dlo_optimize_and_the_release_level_compiles_a
     gives the same values, to rounding."""
     assert native_compiler.optimize_flags(None) == ("-O3",)
     assert native_compiler.optimize_flags("0") == ("-O0",)
+    assert native_compiler.optimize_flags(" ") == ("-O3",)  # set but empty: the default
     with pytest.warns(UserWarning, match="DLO_OPTIMIZE='-O9; rm'"):
         assert native_compiler.optimize_flags("-O9; rm") == ("-O3",)
     if compiled.compiler() is None:

@@ -31,15 +31,16 @@ LEVELS = ("0", "1", "2", "3", "s")
 
 
 def optimize_flags(level: str | None) -> tuple[str, ...]:
-    """Return gcc's flags for the optimisation level ``level`` (``$DLO_OPTIMIZE``; None: 3).
+    """Return gcc's flags for the optimisation level ``level`` (``$DLO_OPTIMIZE``; None, '': 3).
 
     The assembled KKT functions run faster at -O3 (bench/results/compile_cost.md); -O0 compiles
     the default cable's libraries in a third of the time (the test suite's choice: its solves
     compare compiled with interpreted code, and IEEE arithmetic is the same at every level
     without -ffast-math).  A level not in LEVELS gives one warning naming it, and -O3.
     """
-    if level is None or level.strip() in LEVELS:
-        return (f"-O{(level or '3').strip()}",)
+    chosen = (level or "").strip() or "3"
+    if chosen in LEVELS:
+        return (f"-O{chosen}",)
     warnings.warn(
         f"DLO_OPTIMIZE={level!r} is not one of {', '.join(LEVELS)}: compiling with -O3",
         stacklevel=2,

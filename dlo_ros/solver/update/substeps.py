@@ -143,7 +143,8 @@ def _split_move(
     """Take the move from ``ctx.scene``'s poses to ``problem``'s in substeps of ``length``.
 
     A substep that is not ``ok`` is tried again as two of half its length from its own start,
-    down to ``finest`` (binary fractions of the move: their sums are exact).  Returns the last
+    down to ``finest``, and the substeps after it keep the shorter length (binary fractions of the
+    move: their sums are exact).  Returns the last
     substep's result and state (``continuation_steps``: how many were solved), or (the failed
     substep's result, None, what failed).  Moves ``ctx.start``, ``ctx.scene`` and the turns on.
     """

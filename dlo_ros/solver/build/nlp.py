@@ -435,7 +435,8 @@ class StringNLP:
     def kkt_free_split_fn(self) -> ca.Function:
         """``kkt_free_fn`` with K's per-node Hessian part Eᵀ W left out and W last.
 
-        (``assembled.py``): what the compiled contact-free loop evaluates, adding Eᵀ W by BLAS.
+        Built by ``assembled.py``: what the compiled contact-free loop evaluates, adding Eᵀ W by
+        BLAS.
         """
         return self._assembled.kkt_free_split()
 

@@ -144,9 +144,9 @@ def _split_move(
 
     A substep that is not ``ok`` is tried again as two of half its length from its own start,
     down to ``finest``, and the substeps after it keep the shorter length (binary fractions of the
-    move: their sums are exact).  Returns the last
-    substep's result and state (``continuation_steps``: how many were solved), or (the failed
-    substep's result, None, what failed).  Moves ``ctx.start``, ``ctx.scene`` and the turns on.
+    move: their sums are exact).  Returns the last substep's result and state
+    (``continuation_steps``: how many were solved), or (the failed substep's result, None, what
+    failed).  Moves ``ctx.start``, ``ctx.scene`` and the turns on.
     """
     start = {g.name: g.pose for g in ctx.scene.grips}
     done, solved = 0.0, 0

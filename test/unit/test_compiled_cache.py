@@ -3,6 +3,7 @@ is found and used without generating C (generating it costs seconds for a 3D sce
 switch in a streaming node must not pay that; issue 6's stalls)."""
 from __future__ import annotations
 
+import gc
 from dataclasses import replace
 
 import casadi as ca
@@ -50,6 +51,26 @@ def test_the_key_holds_the_flags_the_name_and_the_sources(monkeypatch):
     monkeypatch.setattr(native_compiler, "_source_digest", lambda: b"edited sources")
     assert native_compiler.fingerprint(f) != key
 
+
+
+def test_a_function_is_fingerprinted_once_while_it_lives(monkeypatch):
+    """A clone on another mesh shares its template's functions (build/mesh_clone.py): their keys
+    are computed once per function object, per flags and sources, and forgotten with it."""
+    calls = []
+    real = native_compiler._fingerprint
+    monkeypatch.setattr(native_compiler, "_fingerprint", lambda fn, flags: calls.append(fn.name()) or real(fn, flags))
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("f_once", [x], [x * x])
+    key = native_compiler.fingerprint(f)
+    assert native_compiler.fingerprint(f) == key and len(calls) == 1
+    assert native_compiler.fingerprint(f, native_compiler.FLAGS + ("-DDLO_OTHER",)) != key and len(calls) == 2
+    twin = ca.Function("f_once", [x], [x * x])  # equal, another object: computed again, the same key
+    assert native_compiler.fingerprint(twin) == key and len(calls) == 3
+    known = len(native_compiler._KNOWN)
+    del f
+    gc.collect()
+    assert len(native_compiler._KNOWN) == known - 2  # its two entries went with it
+    assert native_compiler.fingerprint(twin) == key and len(calls) == 3
 
 
 def test_the_optimisation_level_is_dlo_optimize_and_the_release_level_compiles_alike(tmp_path, monkeypatch):

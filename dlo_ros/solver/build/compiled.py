@@ -14,7 +14,7 @@ look-up costs an evaluation, never a code generation (bench/results/compile_cost
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, Callable
 from pathlib import Path
 
 import ctypes
@@ -36,6 +36,7 @@ from ..native.compiler import (
 __all__ = [
     "FLAGS",
     "COMPILER_LOCK",
+    "DeferredFunction",
     "InterpretedFunction",
     "NativeFunction",
     "UnusableLibrary",
@@ -172,6 +173,35 @@ class InterpretedFunction:
             out.reshape(shape, order="F").copy()
             for out, shape in zip(self._outputs, self._out_shapes)
         ]
+
+
+class DeferredFunction:
+    """An :class:`InterpretedFunction` built by ``make`` when it is first called or looked at.
+
+    For an evaluator a solver may never call: the contact-free Newton steps around a compiled
+    library (``functions.NlpFunctions``) serve only while that library's own compiled loop is
+    missing, and building them took a share of every clone's build (``build/mesh_clone.py``).
+    Callers serialise calls, as for the functions it stands for.
+    """
+
+    def __init__(self, make: Callable[[], InterpretedFunction]) -> None:
+        """Build with ``make`` on first use."""
+        self._make = make
+        self._built: InterpretedFunction | None = None
+
+    def built(self) -> InterpretedFunction:
+        """Return the function, built now if it was not."""
+        if self._built is None:
+            self._built = self._make()
+        return self._built
+
+    @property
+    def function(self) -> ca.Function:
+        """The casadi.Function this evaluates."""
+        return self.built().function
+
+    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        return self.built()(*args)
 
 
 def library_path(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> Path:

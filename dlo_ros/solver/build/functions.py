@@ -58,6 +58,7 @@ from ..native import saddle as native_saddle
 from .assembled_contact import sparse
 from .compiled import (
     FLAGS,
+    DeferredFunction,
     InterpretedFunction,
     NativeFunction,
     compiled,
@@ -88,7 +89,9 @@ class NlpFunctions:
         self.nlp = nlp
         self.kkt = InterpretedFunction(nlp.kkt_fn)
         self.kkt_free = InterpretedFunction(nlp.kkt_free_fn)
-        self.newton_step = InterpretedFunction(nlp.newton_fn)
+        self.newton_step: InterpretedFunction | DeferredFunction = InterpretedFunction(
+            nlp.newton_fn
+        )
         self.obstacle_g = (
             InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
         )
@@ -261,7 +264,11 @@ class NlpFunctions:
             native = native_newton.WithNodePart(native, self.nlp.node_blocks, 3, sizes)
         setattr(self, name, native)
         if name == "kkt_free":
-            self.newton_step = self._compiled_newton_step(fn, lib)
+            # built on first use: with the loop loaded (as a rule) it is never called
+            interpreted = self.newton_step
+            self.newton_step = DeferredFunction(
+                lambda: self._compiled_newton_step(fn, lib, interpreted)
+            )
             self.newton_native = loop
         if name == "kkt":
             self.newton_active = self._active_loop(lib)
@@ -314,19 +321,23 @@ class NlpFunctions:
         except (OSError, AttributeError):
             return None
 
-    def _compiled_newton_step(self, split: ca.Function, lib) -> InterpretedFunction:
+    def _compiled_newton_step(
+        self, split: ca.Function, lib, interpreted: InterpretedFunction | DeferredFunction
+    ) -> InterpretedFunction:
         """Build ``newton_fn`` around the compiled split contact-free function.
 
         ``newton_fn`` around the compiled split contact-free function (``casadi.external``) plus
         the Hessian's per-node part (a CasADi product: this path serves only while the loop is
-        missing); the current one if the library cannot be loaded (then the steps are still right,
-        only slower).
+        missing); ``interpreted``, the one before, if the library cannot be loaded (then the steps
+        are still right, only slower).
         """
         nlp = self.nlp
         try:
             external = ca.external(split.name(), str(lib))
         except RuntimeError:
-            return self.newton_step
+            if isinstance(interpreted, DeferredFunction):
+                return interpreted.built()
+            return interpreted
         n, nf = nlp.z_sym.shape[0], nlp.n_free_rows
         z, p, lam = ca.MX.sym("z", n), ca.MX.sym("p", nlp.p_sym.shape[0]), ca.MX.sym("lam", nf)
         kkt, residual, grad, energies, weighted = external(z, p, lam)

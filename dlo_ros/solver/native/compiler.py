@@ -17,6 +17,7 @@ import subprocess
 import tempfile
 import threading
 import warnings
+import weakref
 from pathlib import Path
 from typing import Iterator
 
@@ -86,10 +87,17 @@ def _source_digest() -> bytes:
     return _SOURCE_DIGEST
 
 
-def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
-    """Return a cache key of ``fn`` that needs no code generation.
+#: fingerprints already computed, by (id of the function, flags, source digest): the function's
+#: weak reference and its key.  A function is immutable, so its key is computed once per process:
+#: every clone of an NLP on another mesh shares the template's functions (``build/mesh_clone.py``)
+#: and each clone looked their libraries up again, evaluating each function twice (a check on the
+#: main job's post clones a moved mesh in most checks).  An entry goes with its function.
+_KNOWN: dict[tuple, tuple[weakref.ref, str]] = {}
+_KNOWN_LOCK = threading.Lock()
 
-    A cache key of ``fn`` that needs no code generation.
+
+def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
+    """Return a cache key of ``fn`` that needs no code generation (computed once per function).
 
     It hashes the CasADi version, the compiler flags, the dlo_ros sources that build NLPs, the
     function's name, input/output shapes and instruction count, and its outputs at two fixed
@@ -97,6 +105,24 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
     R0, the objective scale σ, the basis and quadrature matrices) change those outputs, so two NLPs
     that differ in any of them get different keys.
     """
+    key = (id(fn), tuple(flags), _source_digest())
+    with _KNOWN_LOCK:
+        known = _KNOWN.get(key)
+    if known is not None and known[0]() is fn:
+        return known[1]
+    digest = _fingerprint(fn, flags)
+
+    def forget(_: weakref.ref, key: tuple = key) -> None:
+        with _KNOWN_LOCK:
+            _KNOWN.pop(key, None)
+
+    with _KNOWN_LOCK:
+        _KNOWN[key] = (weakref.ref(fn, forget), digest)
+    return digest
+
+
+def _fingerprint(fn: ca.Function, flags: tuple[str, ...]) -> str:
+    """Compute ``fingerprint``'s key of ``fn`` (it evaluates ``fn`` twice)."""
     h = hashlib.sha256()
     version = ca.__version__  # type: ignore[attr-defined]  # casadi's stubs omit it
     h.update(version.encode() + " ".join(flags).encode() + _source_digest() + fn.name().encode())

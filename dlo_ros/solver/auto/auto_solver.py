@@ -46,7 +46,9 @@ class AutoShapeSolver:
     no build.  'background' lowers the process's ``sys.setswitchinterval`` to SWITCH_INTERVAL_S, so
     that the worker's Python holds the stream thread up for at most that long.  Until the first
     check of a model has taken effect, ``model.checked`` is false and ``estimated_error_m`` is
-    None.
+    None.  ``compile`` is each streaming model's compile mode (``ShapeSolver``), but 'blocking'
+    holds for the models of the first committed solve only: a model a later update switches to
+    compiles in the background, so that no update waits for gcc.
     """
 
     POOL_SIZE = ModelPool.SIZE
@@ -274,6 +276,11 @@ class AutoShapeSolver:
             result = self._update(problem, before_problem, run, notes, t0)
             if commit:
                 follow.build_ahead(self, problem)
+                if self.pool.compile == "blocking":
+                    # 'blocking' compiles the models of the first solve before it returns; a model
+                    # a later update switches to compiles in the background: a switch that ran gcc
+                    # on the stream's thread held a node's centrelines back for over 10 s
+                    self.pool.compile = "background"
             return result
 
     def _update(

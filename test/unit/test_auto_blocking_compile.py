@@ -1,0 +1,46 @@
+"""``compile='blocking'`` under ``solver.model: auto``: the first solve runs compiled; a model a later
+update switches to compiles in the background, never on the stream's thread.
+
+The node's ``compile:=blocking`` promises compiled derivatives before its first solve (msg_docs/node.md).
+Every later switch of auto's model (to 3D, a refined mesh, an obstacle coming within reach) compiled
+blocking too, on the stream's thread: on an empty cache a node held its centrelines back for over 10 s
+at such a switch (bench/perf/node_latency.py --mode native: "no centreline for target 183").
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dlo_ros.model.problem import GripPose
+from dlo_ros.scene import load_scene
+from dlo_ros.solver import make_solver
+from dlo_ros.solver.build import compiled
+
+
+@pytest.fixture
+def empty_cache(tmp_path, monkeypatch):
+    """An empty compiled-code cache, compiling allowed."""
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    return tmp_path
+
+
+def test_a_switch_after_the_first_solve_compiles_in_the_background(empty_cache):
+    scene = load_scene("default_cable")
+    auto = make_solver(scene.problem, replace(scene.options, model="auto"), compile="blocking", checks="sync")
+    first = auto.solve()
+    assert first.ok and auto.choice.planar
+    assert auto.inner.kkt_compiled  # 'blocking': compiled before the first answer
+    right = scene.problem.grip("right").pose
+    # the right grip 5 cm out of the cable's plane: auto switches to its 3D model
+    moved = auto.solve({"right": GripPose(right.position + np.array([0.0, 0.05, 0.0]), right.orientation)})
+    assert moved.ok and not auto.choice.planar, moved.model.changed
+    assert auto.inner.compile_mode == "background" and not auto.inner.kkt_compiled
+    assert auto.inner.wait_for_compile(600.0)  # compiled beside the stream
+    again = auto.solve({"right": GripPose(right.position + np.array([0.0, 0.06, 0.0]), right.orientation)})
+    assert again.ok and again.derivatives == "compiled"

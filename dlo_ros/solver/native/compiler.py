@@ -91,9 +91,10 @@ def _source_digest() -> bytes:
 #: weak reference and its key.  A function is immutable, so its key is computed once per process:
 #: every clone of an NLP on another mesh shares the template's functions (``build/mesh_clone.py``)
 #: and each clone looked their libraries up again, evaluating each function twice (a check on the
-#: main job's post clones a moved mesh in most checks).  An entry goes with its function.
+#: main job's post clones a moved mesh in most checks).  An entry goes with its function.  No
+#: lock: each access is one dict operation (atomic under the GIL), and the weak reference's
+#: callback may run from the garbage collector on any thread, inside any code.
 _KNOWN: dict[tuple, tuple[weakref.ref, str]] = {}
-_KNOWN_LOCK = threading.Lock()
 
 
 def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
@@ -106,18 +107,15 @@ def fingerprint(fn: ca.Function, flags: tuple[str, ...] = FLAGS) -> str:
     that differ in any of them get different keys.
     """
     key = (id(fn), tuple(flags), _source_digest())
-    with _KNOWN_LOCK:
-        known = _KNOWN.get(key)
+    known = _KNOWN.get(key)
     if known is not None and known[0]() is fn:
         return known[1]
     digest = _fingerprint(fn, flags)
 
     def forget(_: weakref.ref, key: tuple = key) -> None:
-        with _KNOWN_LOCK:
-            _KNOWN.pop(key, None)
+        _KNOWN.pop(key, None)
 
-    with _KNOWN_LOCK:
-        _KNOWN[key] = (weakref.ref(fn, forget), digest)
+    _KNOWN[key] = (weakref.ref(fn, forget), digest)
     return digest
 
 

@@ -55,9 +55,13 @@ def shadow_solve(
     shadow = pool.solver_for(
         choice, snap.problem, stream=False, source=snap.inner, state=snap.state
     )
-    if pool.worker.background:
+    if pool.worker.background and not shadow.kkt_compiled:
         # beside a stream: an interpreted shadow holds the GIL through long CasADi calls, and the
-        # stream's updates during a check waited for them (compiled once, later checks release it)
+        # stream's updates during a check waited for them (compiled once, later checks release
+        # it).  Only for its derivatives: a shadow whose derivatives are compiled (a clone of a
+        # compiled mesh, build/mesh_clone.py) lacks at most its outputs' library, which pays only
+        # for a model that streams (a switch compiles it); each check on the main job's post
+        # started gcc on the outputs of a moved mesh that was never used again
         pool.compile_ahead(shadow)
     return shadow, shadow.solve(snap.poses, limited=snap.limited)
 

@@ -18,7 +18,10 @@ Contract:
   process also holds the module-wide ``IPOPT_LOCK`` (Newton updates and derivative evaluations do
   not).
 * With ``lazy_ipopt`` the IPOPT solvers are created on first use (``prepare()`` creates them
-  ahead): a helper used only for Newton updates or stability checks never needs them.
+  ahead): a helper used only for Newton updates or stability checks never needs them.  With
+  ``lazy_outputs`` the outputs' function (``output_function.py``) is built at the second solve,
+  or when the solver starts to compile: a model solved once (a check's shadow, a moved mesh)
+  answers through numpy, which costs less than building the function.
 
 ShapeSolver holds the lock, the state (NLP, scene, committed equilibrium, compile thread) and the
 public API; the work is done by the stages named above and by ``functions.py`` (the NLP's
@@ -37,7 +40,7 @@ import numpy as np
 
 from ..model.problem import GripPose, Problem
 from .build import frames as F
-from .build.functions import COMPILE_MODES, NlpFunctions, check_compile_mode
+from .build.functions import COMPILE_MODES, WAITING_MODES, NlpFunctions, check_compile_mode
 from .build.initial_guess import initial_guess
 from .build.mesh import MeshSpec
 from .build.mesh_clone import clone_or_build
@@ -101,6 +104,7 @@ class ShapeSolver:
         reference_frame: np.ndarray | None = None,
         mesh: MeshSpec | None = None,
         template: ShapeSolver | None = None,
+        lazy_outputs: bool = False,
     ):
         """Build the NLP of ``problem``'s structure; raise ValueError naming a refused field.
 
@@ -110,15 +114,18 @@ class ShapeSolver:
         a query finds a library missing, then compile it: ``build/functions.py``), or 'off'.
         $DLO_NO_COMPILE forces 'off'.  lazy_ipopt: create the IPOPT solvers on first use (helpers
         that may only take Newton steps); otherwise now, so that a stream's first IPOPT fallback
-        does not pay for them.  reference_frame: a fixed R0 for the Euler angles (3D models;
-        default: chosen from the scene, ``choose_reference_frame``).  mesh: the element mesh a
-        refinement chose (``build/mesh.py``; default: the scene's breakpoints).  template: a solver
-        of this structure whose functions serve ``mesh`` too (``build/mesh_clone.py``), or None.
+        does not pay for them.  lazy_outputs: build the outputs' function at the second solve or
+        a compile (a model expected to be solved once).
+        reference_frame: a fixed R0 for the Euler angles (3D models; default: chosen from the
+        scene, ``choose_reference_frame``).  mesh: the element mesh a refinement chose
+        (``build/mesh.py``; default: the scene's breakpoints).  template: a solver of this
+        structure whose functions serve ``mesh`` too (``build/mesh_clone.py``), or None.
         """
         check_compile_mode(compile)
         self.options = options or SolverOptions()
         self.compile_mode = compile
         self.lazy_ipopt = lazy_ipopt
+        self.lazy_outputs = lazy_outputs
         self.reference_frame = (
             None if reference_frame is None else np.array(reference_frame, dtype=float)
         )
@@ -128,6 +135,7 @@ class ShapeSolver:
         # a compile is about to start (AutoShapeSolver._compile_ahead)
         self.compile_pending = False
         self._summaries = ModelSummaries()
+        self._solves = 0  # calls of ``solve``: a lazy helper's outputs' function from the second
         self._build(problem, template)
 
     def _build(self, problem: Problem, template: ShapeSolver | None = None) -> None:
@@ -146,7 +154,7 @@ class ShapeSolver:
             self._ipopt.prepare()
         if hasattr(self, "functions"):
             self.functions.retire()  # a compile still running for the old NLP stops there
-        self.functions = NlpFunctions(self.nlp)
+        self.functions = NlpFunctions(self.nlp, lazy_outputs=self.lazy_outputs)
         # the first Newton steps in one call of newton_fn (around the compiled contact-free
         # function once that is loaded); False: one evaluation and one LAPACK solve per step from
         # Python
@@ -186,6 +194,8 @@ class ShapeSolver:
         check_compile_mode(mode)
         with self._lock:
             self.compile_mode = mode
+            if mode not in WAITING_MODES:  # it streams now: its outputs compile with it
+                self.functions.build_outputs()
             if not self.all_compiled and self._compile_thread is None:
                 self._start_compile()
 
@@ -384,6 +394,9 @@ class ShapeSolver:
             problem = admitted
             ctx = self.update_context()
             ctx.turns = self._turn_tracker.advance(self._state, self._clamp_turns, problem)
+            self._solves += 1
+            if self._solves > 1:  # solved again (``lazy_outputs``): it is not a one-off
+                self.functions.build_outputs(self.compile_mode)
             started = self.functions.refresh(self.compile_mode, not commit, self._lock)
             self._compile_thread = started or self._compile_thread
             warm, limit = warm and self._state is not None, self.options.update_time_limit

@@ -243,3 +243,26 @@ def test_kkt_compiled_speaks_of_the_derivatives_alone(tmp_path, monkeypatch):
     r = solver.solve()
     assert r.ok and r.derivatives == "compiled", r.message
     assert_same(r, numpy_result(solver))
+
+
+@pytest.mark.parametrize("make", [default_cable, planar(default_cable)], ids=["full", "planar"])
+def test_a_model_solved_once_answers_through_numpy_and_builds_the_function_when_solved_again(make):
+    """``lazy_outputs`` (a check's shadow, the model a verdict names: solved once, as a rule) builds no
+    outputs' function for its first answer, which numpy gives, equal to the function's; solved again,
+    the function is built and answers, as an eager solver's does.  A compile builds it too."""
+    problem, options = make()
+    lazy = ShapeSolver(problem, options, compile="off", lazy_outputs=True)
+    eager = ShapeSolver(problem, options, compile="off")
+    assert lazy.functions.output_function is None and lazy.functions.outputs is None
+    assert eager.functions.outputs is not None
+    a, b = lazy.solve(), eager.solve()
+    assert lazy.functions.outputs is None  # one answer: numpy
+    assert_same(a, b)
+    for targets in stream(problem, 0.3, 3, axis="y" if options.model == "planar" else "x"):
+        a, b = lazy.solve(targets), eager.solve(targets)
+        assert isinstance(lazy.functions.outputs, InterpretedFunction)  # solved again: the function
+        assert_same(a, b)
+        np.testing.assert_array_equal(a.points, b.points)  # the same path from the second answer on
+    other = ShapeSolver(problem, options, compile="off", lazy_outputs=True)
+    other.start_compile("background")  # a model that compiles streams: its outputs compile with it
+    assert other.functions.outputs is not None

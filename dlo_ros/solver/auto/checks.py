@@ -210,7 +210,12 @@ class ModelChecks:
             decided.set_result(verdict)
         if decision.build and decision.choice is not None:
             self.pool.solver_for(
-                decision.choice, snap.problem, stream=False, source=snap.inner, state=snap.state
+                decision.choice,
+                snap.problem,
+                stream=False,
+                source=snap.inner,
+                state=snap.state,
+                once=True,
             )
             if prepare and decision.choice.may_leave_plane:
                 # a refined planar mesh's 3D model too: its first check and a switch to 3D soon

@@ -64,6 +64,7 @@ class ModelPool:
         state=None,
         tag: str = "",
         built: ShapeSolver | None = None,
+        once: bool = False,
     ) -> ShapeSolver:
         """Return the pooled ShapeSolver of ``choice`` set to ``problem`` (built if new).
 
@@ -73,7 +74,9 @@ class ModelPool:
         (a refined query's).  Sets ``choice.twist``
         from the model built.  ``built``: a solver of ``choice`` holding its own warm start (a
         mesh's lead-in, ``lead_in.py``), pooled under that key instead of the one there (give
-        no ``source``).
+        no ``source``).  ``once``: a model built here is expected to be solved once (a check's
+        shadow, the model a verdict names): its outputs' function is built only if it is solved
+        again or compiled (``ShapeSolver``'s ``lazy_outputs``).
         """
         reduced, opts = self.reduced.reduce(choice, problem)
         key = (tag,) + choice.key()
@@ -90,6 +93,7 @@ class ModelPool:
                 reference_frame=choice.reference_frame(),
                 mesh=choice.mesh,
                 template=self._template(opts, reduced, choice.mesh),
+                lazy_outputs=once and not stream,
             )
         else:
             solver.set_problem(reduced)

@@ -53,7 +53,7 @@ def shadow_solve(
     The answer is committed (the model's warm start for a switch to it, ``lead_in.py``).
     """
     shadow = pool.solver_for(
-        choice, snap.problem, stream=False, source=snap.inner, state=snap.state
+        choice, snap.problem, stream=False, source=snap.inner, state=snap.state, once=True
     )
     if pool.worker.background and not shadow.kkt_compiled:
         # beside a stream: an interpreted shadow holds the GIL through long CasADi calls, and the

@@ -85,7 +85,13 @@ def check_compile_mode(mode: str) -> None:
 class NlpFunctions:
     """The evaluators of one NLP's functions (see the module docstring)."""
 
-    def __init__(self, nlp: StringNLP):
+    def __init__(self, nlp: StringNLP, lazy_outputs: bool = False):
+        """Wrap ``nlp``'s functions, interpreted until a compile swaps them.
+
+        ``lazy_outputs``: build the outputs' function only when :meth:`build_outputs` is called
+        (a helper's: a model solved once, a check's shadow or a moved mesh, answers through numpy,
+        which costs less than building the function).
+        """
         self.nlp = nlp
         self.kkt = InterpretedFunction(nlp.kkt_fn)
         self.kkt_free = InterpretedFunction(nlp.kkt_free_fn)
@@ -100,19 +106,9 @@ class NlpFunctions:
         self.newton_active: native_newton.ActiveNewton | None = None
         self.saddle_escape: native_saddle.NativeSaddle | None = None
         #: the outputs' function and its structure (grid, profiles), None where numpy builds the
-        #: outputs
-        self.output_function = (
-            OutputFunction(
-                nlp, nlp.problem, np.linspace(0.0, nlp.length, nlp.options.output_points)
-            )
-            if OutputFunction.applies(nlp)
-            else None
-        )
-        self.outputs = (
-            InterpretedFunction(self.output_function.function)
-            if self.output_function is not None
-            else None
-        )
+        #: outputs (a model it does not cover, or one not built yet: ``lazy_outputs``)
+        self.output_function: OutputFunction | None = None
+        self.outputs: InterpretedFunction | NativeFunction | None = None
         self.compiled = False  # every derivative function runs compiled C
         self.outputs_compiled = False  # the outputs' function runs compiled C
         self.compile_time_s = 0.0  # wall time of the compile that finished them [s]
@@ -121,6 +117,28 @@ class NlpFunctions:
         #: at the start
         self.waiting: list[tuple[str, ca.Function, Path]] = []
         self._cache_checked = time.monotonic()  # the last look into the cache for them
+        if not lazy_outputs:
+            self.build_outputs()
+
+    def build_outputs(self, mode: str = "off") -> None:
+        """Build the outputs' function (interpreted) if it covers this model and is not built.
+
+        ``mode``: the solver's compile mode; in 'cached' and 'on_query' the cache is looked into
+        for its library (swapped in if there, else waited for as the other libraries missing at
+        the start are).  The compiling modes build it before they compile (``start_compile``).
+        """
+        if self.output_function is not None or not OutputFunction.applies(self.nlp):
+            return
+        nlp = self.nlp
+        plan = OutputFunction(
+            nlp, nlp.problem, np.linspace(0.0, nlp.length, nlp.options.output_points)
+        )
+        self.output_function, self.outputs = plan, InterpretedFunction(plan.function)
+        compiling = compiler() is not None and not os.environ.get("DLO_NO_COMPILE")
+        if mode in WAITING_MODES and compiling:
+            lib = library_path(plan.function)
+            if not self._load("outputs", plan.function, lib):
+                self.waiting.append(("outputs", plan.function, lib))
 
     def retire(self) -> None:
         """Mark these functions unused: a background compile stops before its next swap.
@@ -140,6 +158,8 @@ class NlpFunctions:
             mode = "off"
         if mode == "off" or compiler() is None:
             return None
+        if mode not in WAITING_MODES:  # a model that compiles streams: its outputs too
+            self.build_outputs()
         nlp = self.nlp
         # the contact-free function first: it is the one a stream uses while nothing touches
         todo = []

@@ -1,5 +1,8 @@
-"""``compile='blocking'`` under ``solver.model: auto``: the first solve runs compiled; a model a later
-update switches to compiles in the background, never on the stream's thread.
+"""What auto compiles, and when.
+
+``compile='blocking'`` under ``solver.model: auto``: the first solve runs compiled; a model a later
+update switches to compiles in the background, never on the stream's thread.  A checked solve that
+escalates (a cold solve refining its mesh) compiles only the model it answers with.
 
 The node's ``compile:=blocking`` promises compiled derivatives before its first solve (msg_docs/node.md).
 Every later switch of auto's model (to 3D, a refined mesh, an obstacle coming within reach) compiled
@@ -9,6 +12,7 @@ at such a switch (bench/perf/node_latency.py --mode native: "no centreline for t
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -18,6 +22,7 @@ from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
 from dlo_ros.solver.build import compiled
+from dlo_ros.solver.build.functions import NlpFunctions
 
 
 @pytest.fixture
@@ -44,3 +49,25 @@ def test_a_switch_after_the_first_solve_compiles_in_the_background(empty_cache):
     assert auto.inner.wait_for_compile(600.0)  # compiled beside the stream
     again = auto.solve({"right": GripPose(right.position + np.array([0.0, 0.06, 0.0]), right.orientation)})
     assert again.ok and again.derivatives == "compiled"
+
+
+def test_a_checked_solves_escalations_compile_only_the_model_it_answers_with(empty_cache, monkeypatch):
+    """The paper's Fig. 3 strip on its floor, cold: auto refines its mesh in several passes, each a
+    model the solve streams on for one answer.  Each started a background compile (gcc on a model
+    used once; code generation holding the GIL beside the solve: a sixth of the cold solve's time);
+    now the first model (built before the solve) and the one the answer comes from compile."""
+    started = []
+
+    def compile_recorded(self, todo, mode, lock):  # a compile thread that runs no gcc
+        started.append(self.nlp)
+        thread = threading.Thread(target=lambda: None)
+        thread.start()
+        return thread
+
+    monkeypatch.setattr(NlpFunctions, "_compile", compile_recorded)
+    scene = load_scene("bench_fig3_floor")
+    auto = make_solver(scene.problem, scene.options, compile="background", checks="sync")
+    first = auto.inner.nlp
+    result = auto.solve()
+    assert result.ok and len(result.model.changed) >= 2, result.model.changed  # it escalated
+    assert started == [first, auto.inner.nlp] and first is not auto.inner.nlp

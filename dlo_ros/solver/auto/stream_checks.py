@@ -142,6 +142,18 @@ def check_now(
     lowest estimate, or after CHECK_NOW_PASSES, the last answer keeps its model with its estimate
     (the tolerance then reported as not met), never unchecked.
     """
+    auto.pool.hold_compiles = True
+    try:
+        return _escalated(auto, snap, result, notes)
+    finally:
+        auto.pool.hold_compiles = False
+        auto.inner.start_compile(auto.pool.compile)  # the model it answers with
+
+
+def _escalated(
+    auto: AutoShapeSolver, snap: CheckSnapshot, result: ShapeResult, notes: list[str]
+) -> ShapeResult:
+    """Run ``check_now``'s escalations (the pool holds its compiles meanwhile)."""
     escalations = Escalations()
     while True:
         if result.passes_through_itself and not auto.choice.self_contact:

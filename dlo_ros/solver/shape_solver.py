@@ -40,7 +40,7 @@ import numpy as np
 
 from ..model.problem import GripPose, Problem
 from .build import frames as F
-from .build.functions import COMPILE_MODES, WAITING_MODES, NlpFunctions, check_compile_mode
+from .build.functions import COMPILE_MODES, NlpFunctions, check_compile_mode
 from .build.initial_guess import initial_guess
 from .build.mesh import MeshSpec
 from .build.mesh_clone import clone_or_build
@@ -194,7 +194,7 @@ class ShapeSolver:
         check_compile_mode(mode)
         with self._lock:
             self.compile_mode = mode
-            if mode not in WAITING_MODES:  # it streams now: its outputs compile with it
+            if mode in ("background", "blocking"):  # it streams now: its outputs compile too
                 self.functions.build_outputs()
             if not self.all_compiled and self._compile_thread is None:
                 self._start_compile()

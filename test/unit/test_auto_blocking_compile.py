@@ -71,3 +71,22 @@ def test_a_checked_solves_escalations_compile_only_the_model_it_answers_with(emp
     result = auto.solve()
     assert result.ok and len(result.model.changed) >= 2, result.model.changed  # it escalated
     assert started == [first, auto.inner.nlp] and first is not auto.inner.nlp
+
+
+def test_a_checked_solves_passes_do_not_look_for_libraries_keyed_by_their_own_meshes(empty_cache, monkeypatch):
+    """'cached' (the CLI's mode): a pass's new model is keyed by its own mesh, whose libraries are almost
+    never in the cache, and its key costs two evaluations of each of its functions.  Only the first model
+    and the one the answer comes from look into the cache (the Fig. 3 strip: three passes between)."""
+    from dlo_ros.solver.native import compiler as native_compiler
+
+    keyed = []
+    real = native_compiler._fingerprint
+    monkeypatch.setattr(native_compiler, "_fingerprint", lambda fn, flags: keyed.append(fn.name()) or real(fn, flags))
+    scene = load_scene("bench_fig3_floor")
+    auto = make_solver(scene.problem, scene.options, compile="cached", checks="sync")
+    per_model = len(keyed)
+    assert per_model >= 3  # the first model looked for its derivatives' libraries
+    result = auto.solve()
+    assert result.ok and len(result.model.changed) >= 3, result.model.changed
+    # and the model it answers with (its derivatives'; its outputs' function is built when it streams)
+    assert per_model < len(keyed) <= 2 * per_model, keyed

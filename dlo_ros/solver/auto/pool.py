@@ -90,22 +90,30 @@ class ModelPool:
             solver = built
         helper = "off" if self.compile == "off" else "cached"
         # a model of a checked solve's escalations compiles once that solve has its answer
-        mode = self.compile if stream and not self.hold_compiles else helper
+        holding = stream and self.hold_compiles
+        mode = self.compile if stream and not holding else helper
+        # one expected to be solved once, or streamed during those escalations, looks into the
+        # cache only as a clone (build/mesh_clone.py), whose functions' keys are known: a new
+        # model's libraries, keyed by its own mesh, are almost never there, and their keys cost
+        # two evaluations of each function (the paper's Fig. 3: a seventh of its cold solve)
+        quiet = (once or holding) and mode == "cached"
         if solver is None:
             solver = ShapeSolver(
                 reduced,
                 opts,
-                compile=mode,
+                compile="off" if quiet else mode,
                 lazy_ipopt=not stream,
                 reference_frame=choice.reference_frame(),
                 mesh=choice.mesh,
                 template=self._template(opts, reduced, choice.mesh),
                 lazy_outputs=once and not stream,
             )
+            if quiet and not getattr(solver.nlp, "own_symbols", True):
+                solver.start_compile("cached")
         else:
             solver.set_problem(reduced)
         self._insert(key, solver)
-        if stream:
+        if stream and not quiet:
             solver.start_compile(mode)
         choice.twist = solver.model.layout.twist
         if source is not None and not solver.adopt_warm_start(source, state):

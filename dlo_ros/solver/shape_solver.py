@@ -18,10 +18,8 @@ Contract:
   process also holds the module-wide ``IPOPT_LOCK`` (Newton updates and derivative evaluations do
   not).
 * With ``lazy_ipopt`` the IPOPT solvers are created on first use (``prepare()`` creates them
-  ahead): a helper used only for Newton updates or stability checks never needs them.  With
-  ``lazy_outputs`` the outputs' function (``output_function.py``) is built at the second solve,
-  or when the solver starts to compile: a model solved once (a check's shadow, a moved mesh)
-  answers through numpy, which costs less than building the function.
+  ahead): a helper used only for Newton updates or stability checks never needs them.
+  ``lazy_outputs``: ``NlpFunctions``' (``functions.py``).
 
 ShapeSolver holds the lock, the state (NLP, scene, committed equilibrium, compile thread) and the
 public API; the work is done by the stages named above and by ``functions.py`` (the NLP's
@@ -114,18 +112,16 @@ class ShapeSolver:
         a query finds a library missing, then compile it: ``build/functions.py``), or 'off'.
         $DLO_NO_COMPILE forces 'off'.  lazy_ipopt: create the IPOPT solvers on first use (helpers
         that may only take Newton steps); otherwise now, so that a stream's first IPOPT fallback
-        does not pay for them.  lazy_outputs: build the outputs' function at the second solve or
-        a compile (a model expected to be solved once).
-        reference_frame: a fixed R0 for the Euler angles (3D models; default: chosen from the
-        scene, ``choose_reference_frame``).  mesh: the element mesh a refinement chose
-        (``build/mesh.py``; default: the scene's breakpoints).  template: a solver of this
-        structure whose functions serve ``mesh`` too (``build/mesh_clone.py``), or None.
+        does not pay for them.  lazy_outputs: ``NlpFunctions``'.  reference_frame: a fixed R0 for
+        the Euler angles (3D models; default: chosen from the scene, ``choose_reference_frame``).
+        mesh: the element mesh a refinement chose (``build/mesh.py``; default: the scene's
+        breakpoints).  template: a solver of this structure whose functions serve ``mesh`` too
+        (``build/mesh_clone.py``), or None.
         """
         check_compile_mode(compile)
         self.options = options or SolverOptions()
         self.compile_mode = compile
-        self.lazy_ipopt = lazy_ipopt
-        self.lazy_outputs = lazy_outputs
+        self.lazy_ipopt, self.lazy_outputs = lazy_ipopt, lazy_outputs
         self.reference_frame = (
             None if reference_frame is None else np.array(reference_frame, dtype=float)
         )
@@ -135,7 +131,6 @@ class ShapeSolver:
         # a compile is about to start (AutoShapeSolver._compile_ahead)
         self.compile_pending = False
         self._summaries = ModelSummaries()
-        self._solves = 0  # calls of ``solve``: a lazy helper's outputs' function from the second
         self._build(problem, template)
 
     def _build(self, problem: Problem, template: ShapeSolver | None = None) -> None:
@@ -394,9 +389,7 @@ class ShapeSolver:
             problem = admitted
             ctx = self.update_context()
             ctx.turns = self._turn_tracker.advance(self._state, self._clamp_turns, problem)
-            self._solves += 1
-            if self._solves > 1:  # solved again (``lazy_outputs``): it is not a one-off
-                self.functions.build_outputs(self.compile_mode)
+            self.functions.solved(self.compile_mode)
             started = self.functions.refresh(self.compile_mode, not commit, self._lock)
             self._compile_thread = started or self._compile_thread
             warm, limit = warm and self._state is not None, self.options.update_time_limit
@@ -499,13 +492,8 @@ class ShapeSolver:
     # ---- results -------------------------------------------------------------------------------
     def _failure(self, status: str, message: str, t0: float) -> ShapeResult:
         """Return the result without a shape: ``status`` and ``message``, timed from ``t0``."""
-        return no_shape(
-            self.options,
-            self.model_summary(),
-            status,
-            message,
-            solve_time_ms=(time.perf_counter() - t0) * 1e3,
-        )
+        ms = (time.perf_counter() - t0) * 1e3
+        return no_shape(self.options, self.model_summary(), status, message, solve_time_ms=ms)
 
     def model_summary(self) -> ModelSummary:
         """Return what this solver models (the ``model`` of a result; ``update/summary.py``)."""

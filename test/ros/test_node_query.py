@@ -133,6 +133,18 @@ def test_parameters(node, node_scene):
     assert proc.alive()
 
 
+def matched(client, attempts: int = 3) -> np.ndarray:
+    """The points of a first query that matches ``client`` to the node's service, asked again when
+    the discovery race lost the answer (at most ``attempts`` times, 20 s each)."""
+    for attempt in range(attempts):
+        try:
+            return client.query(LEFT, ((0.5, 0.0, 0.42), Q), timeout=20.0)[0]
+        except TimeoutError:
+            if attempt == attempts - 1:
+                raise
+    raise AssertionError("unreachable")
+
+
 def test_concurrent_queries_beside_the_stream(tmp_path):
     """query_workers (default 1): queries are answered by a worker process while the stream goes on;
     several clients at once each get a plan through their goal, or at once an empty one ('busy') when
@@ -148,12 +160,15 @@ def test_concurrent_queries_beside_the_stream(tmp_path):
         errors: list[BaseException] = []
 
         # every client is matched to the service first, one at a time (a brand-new client can lose its
-        # first answer in Fast DDS's discovery race, ros2/rclpy#1181: that is not what is tested here)
+        # first answer in Fast DDS's discovery race, ros2/rclpy#1181: that is not what is tested here).
+        # Asked again if it did: the node's answer was lost on the way (its log: "failed to send
+        # response (timeout)"; CI under load, once), and the node counts it as answered
         clients = [DloClient(proc.domain_id, client_name=f"query_client_{i}") for i in range(len(goals))]
         for qc in clients:
-            assert len(qc.query(LEFT, ((0.5, 0.0, 0.42), Q), timeout=60.0)[0])
-        got = cl.wait_for_diagnostics(lambda v, s: v.get("queries") == str(len(goals)), 10.0)
+            assert len(matched(qc))
+        got = cl.wait_for_diagnostics(lambda v, s: int(v.get("queries", 0)) >= len(goals), 10.0)
         assert got is not None and got[0]["queries failed"] == "0"
+        before = int(got[0]["queries"])
 
         def ask(i: int) -> None:
             try:
@@ -181,7 +196,7 @@ def test_concurrent_queries_beside_the_stream(tmp_path):
             np.testing.assert_allclose(answers[i][0][-1], goals[i][0], atol=1e-6)
         assert cl.path_count > n0, "no centreline while the queries were answered"
         refused = len(goals) - len(shaped)
-        got = cl.wait_for_diagnostics(lambda v, s: v.get("queries") == str(2 * len(goals)), 5.0)
+        got = cl.wait_for_diagnostics(lambda v, s: v.get("queries") == str(before + len(goals)), 5.0)
         assert got is not None and int(got[0]["queries failed"]) == refused, cl.diagnostic_values()
         if refused:
             assert "busy" in proc.output()

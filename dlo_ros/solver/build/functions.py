@@ -88,9 +88,9 @@ class NlpFunctions:
     def __init__(self, nlp: StringNLP, lazy_outputs: bool = False):
         """Wrap ``nlp``'s functions, interpreted until a compile swaps them.
 
-        ``lazy_outputs``: build the outputs' function only when :meth:`build_outputs` is called
-        (a helper's: a model solved once, a check's shadow or a moved mesh, answers through numpy,
-        which costs less than building the function).
+        ``lazy_outputs``: build the outputs' function at the second solve (:meth:`solved`) or a
+        compile, not now: a model solved once (a check's shadow, a moved mesh) answers through
+        numpy, which costs less than building the function.
         """
         self.nlp = nlp
         self.kkt = InterpretedFunction(nlp.kkt_fn)
@@ -117,8 +117,15 @@ class NlpFunctions:
         #: at the start
         self.waiting: list[tuple[str, ca.Function, Path]] = []
         self._cache_checked = time.monotonic()  # the last look into the cache for them
+        self._solves = 0  # :meth:`solved`'s count
         if not lazy_outputs:
             self.build_outputs()
+
+    def solved(self, mode: str) -> None:
+        """Count a solve; from the second on, build the outputs' function (``build_outputs``)."""
+        self._solves += 1
+        if self._solves > 1:
+            self.build_outputs(mode)
 
     def build_outputs(self, mode: str = "off") -> None:
         """Build the outputs' function (interpreted) if it covers this model and is not built.

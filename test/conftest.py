@@ -49,6 +49,19 @@ def _no_compile_in_each_test(monkeypatch):
     monkeypatch.setenv("DLO_NO_COMPILE", "1")
 
 
+@pytest.fixture
+def empty_cache(tmp_path, monkeypatch):
+    """An empty compiled-code cache of this test, compiling allowed (spawned workers inherit the
+    environment); skips without a C compiler."""
+    from dlo_ros.solver.build import compiled
+
+    if compiled.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)
+    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
+    return tmp_path
+
+
 @pytest.fixture(scope="module")
 def node_scene():
     """(the node tests' scene with their solver.model, the node's solver factory): what the node under

@@ -16,23 +16,12 @@ import threading
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from dlo_ros.model.problem import GripPose
 from dlo_ros.scene import load_scene
 from dlo_ros.solver import make_solver
-from dlo_ros.solver.build import compiled
 from dlo_ros.solver.build.functions import NlpFunctions
 
-
-@pytest.fixture
-def empty_cache(tmp_path, monkeypatch):
-    """An empty compiled-code cache, compiling allowed."""
-    if compiled.compiler() is None:
-        pytest.skip("no C compiler")
-    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)
-    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
-    return tmp_path
 
 
 def test_a_switch_after_the_first_solve_compiles_in_the_background(empty_cache):

@@ -16,10 +16,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from dlo_ros.solver import ShapeSolver
-from dlo_ros.solver.build import compiled
 from dlo_ros.solver.options import SolverOptions
 from dlo_ros.solver.parallel.batch import process_pool, query_many, stop_pool
 
@@ -29,15 +27,6 @@ from support.problems import clamped_pair
 PLANAR = SolverOptions(model="planar", order=6, quadrature_nodes=20, error_tolerance=1.0)
 QUERIES = [{"right": ((0.6 - 0.01 * k, 0.0, 0.02 * k), (0.0, 0.0, 0.0, 1.0))} for k in range(1, 5)]
 
-
-@pytest.fixture
-def empty_cache(tmp_path, monkeypatch):
-    """An empty compiled-code cache, compiling allowed (spawned workers inherit the environment)."""
-    if compiled.compiler() is None:
-        pytest.skip("no C compiler")
-    monkeypatch.delenv("DLO_NO_COMPILE", raising=False)
-    monkeypatch.setenv("DLO_CACHE_DIR", str(tmp_path))
-    return tmp_path
 
 
 def test_an_on_query_solver_compiles_once_it_answers_a_query(empty_cache):

@@ -122,10 +122,11 @@ class NlpFunctions:
             self.build_outputs()
 
     def solved(self, mode: str) -> None:
-        """Count a solve; from the second on, build the outputs' function (``build_outputs``)."""
-        self._solves += 1
-        if self._solves > 1:
-            self.build_outputs(mode)
+        """Count a solve; at the second, build the outputs' function (``build_outputs``)."""
+        if self._solves < 2:  # (every update calls this: one comparison after the second)
+            self._solves += 1
+            if self._solves == 2:
+                self.build_outputs(mode)
 
     def build_outputs(self, mode: str = "off") -> None:
         """Build the outputs' function (interpreted) if it covers this model and is not built.

@@ -209,7 +209,7 @@ class ModelChecks:
         if decided is not None:
             decided.set_result(verdict)
         if decision.build and decision.choice is not None:
-            self.pool.solver_for(
+            named = self.pool.solver_for(
                 decision.choice,
                 snap.problem,
                 stream=False,
@@ -217,6 +217,11 @@ class ModelChecks:
                 state=snap.state,
                 once=True,
             )
+            if snap.limited:
+                # a stream's verdict names the model it switches to (a shadow of this check, maybe,
+                # built for one answer): its outputs' function is built here, on the worker, not
+                # at the switch on the stream's thread; a checked solve's answers on it once
+                named.functions.build_outputs(named.compile_mode)
             if prepare and decision.choice.may_leave_plane:
                 # a refined planar mesh's 3D model too: its first check and a switch to 3D soon
                 # after would wait for that build (shadows.planar_3d_eigenvalue)

@@ -30,8 +30,8 @@ answer):
   10.9x its true error (the bound allows 10x); with it, 3.7x.
 
 test_post_last_pose.py checks the step and the error against an exact contact reference.  ∂_c by
-central differences at ``STEP`` · L, ∂/∂z by central differences of ``model.positions`` at
-``Z_STEP``.
+central differences at ``STEP`` · L, ∂/∂z by central differences of the centreline's tangents
+at ``Z_STEP`` (:class:`PositionJacobian`).
 
 A line contact (a strip lying on a floor) has the same error at its ends: the concentrated force
 where it lifts off sits at the run's first or last row.  Its family pins that row's point at c
@@ -236,11 +236,64 @@ def row_bracket(rows: np.ndarray, first: float, last: float, length: float) -> t
     )
 
 
-def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, kkt=None):
+class PositionJacobian:
+    """x(s) and ∂x(s)/∂z at one answer z, for any s, from one sweep of differences over z.
+
+    The models' centreline is linear in their tangents at the quadrature nodes:
+    x(s) = x₀(z) + W(s) T(z)ᵀ (``positions_at_rows``).  So central differences of (x₀, T) over
+    z, taken once (2n evaluations at ``Z_STEP``, on the first call), give every
+    ∂x(s)/∂z = ∂x₀/∂z + W(s) ∂Tᵀ/∂z by a product.  One answer's contacts ask at several sets of
+    arc lengths; each used to take its own 2n evaluations.
+    """
+
+    def __init__(self, model, z: np.ndarray):
+        self.model, self.z = model, np.asarray(z, dtype=float)
+        self._sweep: np.ndarray | None = None  # (1 + M, 3, n): ∂x₀/∂z, then ∂Tᵀ/∂z
+
+    def at(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return x(s) (len(s), 3) and ∂x(s)/∂z (len(s), 3, len(z))."""
+        w = self.model.position_rows(np.asarray(s, dtype=float))
+        x = np.asarray(self.model.positions_at_rows(self.z, w)).reshape(-1, 3)
+        sweep = self._differences(w.shape[1])
+        return x, sweep[0][None] + np.einsum("pm,mik->pik", w, sweep[1:])
+
+    def positions(self, s: np.ndarray) -> np.ndarray:
+        """Return x(s) (len(s), 3) [m]."""
+        w = self.model.positions_at_rows(self.z, self.model.position_rows(np.asarray(s, float)))
+        return np.asarray(w).reshape(-1, 3)
+
+    def _differences(self, m: int) -> np.ndarray:
+        if self._sweep is None:
+            z, n = self.z, self.z.size
+            rows = np.vstack([np.zeros((1, m)), np.eye(m)])  # x₀, then x₀ + each tangent
+            sweep = np.empty((1 + m, 3, n))
+            step = np.zeros(n)
+            for k in range(n):
+                step[k] = Z_STEP
+                plus = np.asarray(self.model.positions_at_rows(z + step, rows))
+                minus = np.asarray(self.model.positions_at_rows(z - step, rows))
+                diff = (plus - minus) / (2 * Z_STEP)
+                diff[1:] -= diff[0]  # the tangents' rows without x₀'s part
+                sweep[:, :, k] = diff
+                step[k] = 0.0
+            self._sweep = sweep
+        return self._sweep
+
+
+def pinned_family(
+    nlp,
+    problem,
+    state,
+    contact: PointContact,
+    grid: np.ndarray,
+    kkt=None,
+    jacobian: PositionJacobian | None = None,
+):
     """Return the pinned family's Newton step at ``contact`` (module docstring), or None.
 
     None at an end of the string (the grip decides where it touches) or where the KKT matrix is
-    singular.  ``kkt``: ``nlp.kkt_fn``'s outputs at the answer, when the caller has them.
+    singular.  ``kkt``: ``nlp.kkt_fn``'s outputs at the answer, and ``jacobian``: the
+    centreline's at the answer, when the caller has them.
     """
     length, z = nlp.length, np.asarray(state.z, dtype=float)
     c = contact.s + STEP * length * np.array([-1.0, 0.0, 1.0])
@@ -254,7 +307,8 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
     _, g, jac, hess, _ = kkt
     ob, n = problem.obstacles[contact.obstacle], z.size
     points = np.concatenate([c, ends[1]]) if contact.side else c
-    x, jx = _positions_and_jacobian(nlp.model, z, points)
+    jacobian = jacobian or PositionJacobian(nlp.model, z)
+    x, jx = jacobian.at(points)
     grads = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
     v = ob.h_many(x) + problem.string.radius
     gz = np.einsum("pi,pik->pk", grads, jx)  # ∇_z v at c₀ − h, c₀, c₀ + h (and the stencil)
@@ -267,7 +321,7 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
         weights = np.array([2.0, -5.0, 4.0, -1.0]) / big**2
 
         def at(s: np.ndarray) -> np.ndarray:
-            return ob.h_many(np.asarray(nlp.model.positions(z, s)).reshape(-1, 3))
+            return ob.h_many(jacobian.positions(s))
 
         tau = float(weights @ v[3:])
         tau_c = float(weights @ at(ends[2]) - weights @ at(ends[0])) / (2 * big)
@@ -293,7 +347,7 @@ def pinned_family(nlp, problem, state, contact: PointContact, grid: np.ndarray, 
     steps = [shift * dz + (swap if swap is not None else 0.0)]
     if contact.side and abs(shift) <= contact.bracket[1] - contact.bracket[0]:
         # a run end: also the step to its row moved to the predicted lift-off
-        x, jx = _positions_and_jacobian(nlp.model, z, np.array([contact.s + shift]))
+        x, jx = jacobian.at(np.array([contact.s + shift]))
         grad = np.asarray(nlp.obstacle_gradient[ob.type](x.T, ob.params)).reshape(3, -1).T
         value = float(ob.h_many(x)[0] + problem.string.radius)
         moved = _moved_onto(state, kkt, held, contact, grad[0] @ jx[0], value)
@@ -330,20 +384,6 @@ def _centreline_change(nlp, z: np.ndarray, dz: np.ndarray, grid: np.ndarray) -> 
     return size * float(np.max(np.linalg.norm(dx, axis=1)))
 
 
-def _positions_and_jacobian(model, z: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return x(s) (len(s), 3) and ∂x(s)/∂z (len(s), 3, len(z)), by central differences."""
-    x = np.asarray(model.positions(z, s)).reshape(-1, 3)
-    jx = np.zeros((len(s), 3, z.size))
-    step = np.zeros(z.size)
-    for k in range(z.size):
-        step[k] = Z_STEP
-        plus = np.asarray(model.positions(z + step, s)).reshape(-1, 3)
-        minus = np.asarray(model.positions(z - step, s)).reshape(-1, 3)
-        jx[:, :, k] = (plus - minus) / (2 * Z_STEP)
-        step[k] = 0.0
-    return x, jx
-
-
 def contact_shift_error(nlp, problem, state, grid: np.ndarray) -> ContactShift:
     """Return the centreline error [m] of the point contacts' positions (module docstring).
 
@@ -359,8 +399,9 @@ def contact_shift_error(nlp, problem, state, grid: np.ndarray) -> ContactShift:
     if not contacts:
         return ContactShift(0.0, ())
     parts, touches, length = [], [], nlp.length
+    jacobian = PositionJacobian(nlp.model, state.z)
     for contact in contacts:
-        family = pinned_family(nlp, problem, state, contact, grid, kkt)
+        family = pinned_family(nlp, problem, state, contact, grid, kkt, jacobian)
         if family is None or family.shift == 0.0:
             continue
         parts.append((contact.s, family.error_m))

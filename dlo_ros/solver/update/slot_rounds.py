@@ -100,6 +100,7 @@ def place_slots_again(
     tolerance = OSL.slot_tolerance(nlp.length, nlp.options.error_tolerance)
     best: tuple[float, ShapeResult, SolverState | None] | None = None
     before = start  # the state the last solve started from
+    tried: list[tuple[SolverState, list]] = []  # each round's start and slots
     for round_ in range(rounds + 1):
         if state is None or result.status not in ("ok", "unverified"):
             break
@@ -110,6 +111,9 @@ def place_slots_again(
             break
         # not a streamed update: a fresh history each round, so no secant
         override = placed_slots(ctx.parts, state, history if ctx.streamed else {}, before)
+        if any(_repeats(earlier, state, override, nlp.length) for earlier in tried):
+            break  # a round made before: its answers again, in a cycle
+        tried.append((state, override))
         with ctx.scoped(start=state, slot_override=override):
             again, new_state = solve(ctx, problem, True)
         iterations += again.iterations
@@ -134,6 +138,38 @@ def place_slots_again(
         first.warm_started,
     )
     return result, state
+
+
+#: two starts of a slot round whose unknowns differ by at most this (relative to the largest), with
+#: slots at arc lengths that differ by at most this × L, are the same start (``_repeats``): two
+#: Newton answers of the same rows differ by ~1e-10 (1.1e-10 measured), a slot placed on each by
+#: rounding
+SAME_START = 1e-8
+
+
+def _repeats(
+    earlier: tuple[SolverState, list], state: SolverState, override: list, length: float
+) -> bool:
+    """Tell whether a round would start where an earlier one did, with the same slots.
+
+    ``earlier``: that round's start and slots; ``length``: L [m].  Its answer is then that
+    round's answer again (the solve is a function of its start and slots), and so are the rounds
+    after it: the rounds cycle.  The paper's Fig. 3 strip at ρ = 1000, cold, on its fifth mesh:
+    a slot placed at the touching minimum gave a saddle, left to an answer on which that slot
+    carried force with no minimum left (offset inf); the slot emptied, the answer came back, and
+    so on until the rounds ran out (8 rounds, 4 saddle escapes of 41 ms each).
+    """
+    start, slots = earlier
+    if len(slots) != len(override) or start.z.shape != state.z.shape:
+        return False
+    scale = max(1.0, float(np.max(np.abs(start.z), initial=0.0)))
+    if not np.max(np.abs(state.z - start.z), initial=0.0) <= SAME_START * scale:
+        return False
+    near = SAME_START * length
+    return all(
+        np.array_equal(a.on, b.on) and np.max(np.abs(a.s - b.s), initial=0.0) <= near
+        for a, b in zip(slots, override)
+    )
 
 
 def _flag_unsettled(result: ShapeResult, offset: float, nlp: StringNLP) -> None:

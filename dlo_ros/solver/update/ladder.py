@@ -11,7 +11,8 @@ Contract: ``solve_once(ctx, problem, warm)`` gives an outcome (result, state or 
    each of the lead-ins of its refined meshes that met one, 0.17 and 1.4 s of steps that
    failed, then IPOPT in 33 and 10 iterations).  Either of the latter sets ``ctx.newton_far``;
 2. warm IPOPT, then the continuation: the jump split into 2, 4, … ``max_continuation_steps`` equal
-   steps (skipped when the cold solve also finds the targets infeasible);
+   steps (skipped when the cold solve also finds the targets infeasible, or when there is no jump:
+   the parameters are the start's);
 3. an unstable IPOPT answer is left along its negative-curvature mode (``escape_unstable``), or
    replaced by a stable, lower cold answer (``stable_cold``);
 4. the cold fallback: IPOPT from the buckled initial guess; a warm answer over the residual
@@ -97,6 +98,11 @@ def ipopt_rungs(
         iterations += cold[3]
         if not cold[0] and cold[2] == INFEASIBLE:
             k, agreed = max_steps + 1, True
+    if np.array_equal(p1, start.p):
+        # no jump to split: each step of the continuation would be the warm solve just made, from
+        # the same start (a refinement pass's start mapped from the mesh before: the paper's Fig. 3
+        # floor at ρ = 2000, cold, spent 4 × 180 ms failing IPOPT's same 200 iterations)
+        k = max_steps + 1
     while not ok and k <= max_steps:
         state, ok = start, True
         for i in range(1, k + 1):

@@ -9,7 +9,8 @@ Contract:
   (``JUMP_REFUSALS``) or left with an unsettled contact solved again as warm updates of the grip
   poses, each by ``solve`` (``pipeline.solve_update``) from the last: two halves of the move, else
   four quarters, a quarter that fails split in two again down to FINEST; it gives the last
-  substep's outcome, uncommitted, or ``refused`` with the substeps' outcome added.
+  substep's outcome, uncommitted, or ``refused`` with the substeps' outcome added (``refused``
+  as it was when the grips did not move: ``moves``).
   ``ctx.start``, ``ctx.scene``, ``ctx.clamp_turns`` and ``ctx.turns`` are restored when it
   returns.
 
@@ -95,6 +96,17 @@ def substep_scene(problem: Problem, start: dict[str, GripPose], t: float) -> Pro
     )
 
 
+def moves(scene: Problem, problem: Problem) -> bool:
+    """Tell whether ``problem``'s grip poses differ from ``scene``'s (a move to split)."""
+    held = {g.name: g.pose for g in scene.grips}
+    return any(
+        g.name not in held
+        or not np.array_equal(held[g.name].position, g.pose.position)
+        or not np.array_equal(held[g.name].orientation, g.pose.orientation)
+        for g in problem.grips
+    )
+
+
 def in_substeps(
     ctx: UpdateContext,
     problem: Problem,
@@ -114,6 +126,11 @@ def in_substeps(
     uncommitted; or ``refused`` (with the outcome of the substep that failed added) when that
     fails too.  The context's start is restored either way: ``ShapeSolver.solve`` commits.
     """
+    if not moves(ctx.scene, problem):
+        # no move to split: each substep would be the refused solve again, from its start (the
+        # main job's post cold at 1e-4 m: a refinement pass at the same poses, unsettled, then
+        # twice three substeps that each came back as unsettled, 4 s each time)
+        return refused, None
     committed = (ctx.start, ctx.scene, ctx.clamp_turns)
     why = ""
     with ctx.scoped(

@@ -3,7 +3,7 @@
 The contact cases whose cold solves refine their mesh (auto's checked escalations, each pass a
 Newton or IPOPT solve with the obstacle slot rounds): the paper's Fig. 3 strip on its floor
 (config/scenes/bench_fig3_floor.yaml) at ρ = 1000, 2000, 3000 N/m at the default tolerance, and
-at ρ = 2000 at 1e-4 L; the main job's last pose on its post at δ = 1e-3 m
+at ρ = 2000 at 1e-4 L; the main job's last pose on its post at δ = 1e-3 and 1e-4 m
 (test/unit/test_post_last_pose.py's cold solve).  ``make_solver`` with inline checks, compile off
 (what gcc would do beside the solve is left out: the cases compare the solves themselves),
 building included.
@@ -38,6 +38,7 @@ CASES = [
     ("Fig. 3 floor ρ = 3000", "floor", 3000.0, 1e-3),
     ("Fig. 3 floor ρ = 2000, 1e-4 L", "floor", 2000.0, 1e-4),
     ("main job's post, 1e-3 m", "post", None, 1e-3),
+    ("main job's post, 1e-4 m", "post", None, 1e-4),
 ]
 
 

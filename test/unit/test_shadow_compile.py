@@ -35,7 +35,10 @@ class Shadow:
         self.kkt_compiled = kkt_compiled
 
     def solve(self, poses, **kwargs):
-        return SimpleNamespace(ok=True, poses=poses)
+        return SimpleNamespace(ok=True, status="ok", poses=poses)
+
+    def snapshot(self):
+        return None  # (no state committed: nothing for ``snap.answers``)
 
 
 SNAP = SimpleNamespace(problem=None, inner=None, state=None, poses={"right": None}, limited=True)

@@ -66,6 +66,9 @@ class CheckSnapshot:
     update: int = 0
     limited: bool = True
     contacts: dict[int, float] = field(default_factory=dict)
+    #: the check's own solves of other models at ``poses`` from this shape (``shadows``): model
+    #: key → (its answer, a copy of the state it committed)
+    answers: dict[tuple, tuple[ShapeResult, SolverState]] = field(default_factory=dict)
 
 
 @dataclass
@@ -73,7 +76,10 @@ class CheckVerdict:
     """A check's outcome: escalate to ``choice`` (with ``reason``), or keep with ``estimate``.
 
     ``estimate`` [m]: the kept model's error estimate (order part + sampling part);
-    ``order_error``/``sampling_error`` [m]: its two parts (nan: not measured).
+    ``order_error``/``sampling_error`` [m]: its two parts (nan: not measured).  ``answer``: the
+    answer of ``choice`` at the snapshot's poses, solved by the check from the snapshot's shape,
+    and the state it committed (None: not solved there) — what a re-solve on the switched-to
+    model at those poses would repeat.
     """
 
     snapshot: CheckSnapshot
@@ -82,6 +88,7 @@ class CheckVerdict:
     estimate: float = float("nan")
     order_error: float = float("nan")
     sampling_error: float = float("nan")
+    answer: tuple[ShapeResult, SolverState] | None = None
 
 
 class ShapeEvidence:
@@ -205,6 +212,7 @@ class ModelChecks:
             decision.estimate,
             decision.order_error,
             decision.sampling_error,
+            None if decision.choice is None else snap.answers.get(decision.choice.key()),
         )
         if decided is not None:
             decided.set_result(verdict)

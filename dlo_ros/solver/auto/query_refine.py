@@ -89,6 +89,10 @@ def refine_query(
             choice, problem, stream=False, source=solver, tag="query" if same else ""
         )
         poses = auto.reduced.poses(choice, problem)
-        answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
+        if verdict.answer is not None and not same:  # the check solved it there: not again
+            answer, state = verdict.answer
+            solver.install_warm_start(state.copy())
+        else:
+            answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
     answer = verified_answer(answer, estimate, auto.tolerance, stopped)
     return auto.finish(answer, t0, [], choice=choice, solver=solver, estimate=estimate)

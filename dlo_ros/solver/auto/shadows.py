@@ -50,7 +50,9 @@ def shadow_solve(
 ) -> tuple[ShapeSolver, ShapeResult]:
     """Return the pooled model of ``choice`` and its answer at the snapshot's poses, from it.
 
-    The answer is committed (the model's warm start for a switch to it, ``lead_in.py``).
+    The answer is committed (the model's warm start for a switch to it, ``lead_in.py``), and
+    kept in ``snap.answers`` with a copy of that state: a checked solve that switches to this
+    model at these poses takes it instead of solving it again (``stream_checks.check_now``).
     """
     shadow = pool.solver_for(
         choice, snap.problem, stream=False, source=snap.inner, state=snap.state, once=True
@@ -63,7 +65,11 @@ def shadow_solve(
         # for a model that streams (a switch compiles it); each check on the main job's post
         # started gcc on the outputs of a moved mesh that was never used again
         pool.compile_ahead(shadow)
-    return shadow, shadow.solve(snap.poses, limited=snap.limited)
+    result = shadow.solve(snap.poses, limited=snap.limited)
+    state = shadow.snapshot()
+    if result.status in ("ok", "unverified") and state is not None:
+        snap.answers[choice.key()] = (result, state)
+    return shadow, result
 
 
 def planar_3d_eigenvalue(pool: ModelPool, snap: CheckSnapshot) -> float | None:

@@ -165,7 +165,7 @@ def _escalated(
             return result
         auto.switch(verdict.choice, verdict.reason)
         notes.append(auto.changes[-1][1])
-        previous, result = result, auto.inner.solve(snap.poses, limited=snap.limited)
+        previous, result = result, answer_on_switch(auto, verdict, snap)
         if result.status not in ("ok", "unverified"):  # keep the answer we had, and say so
             previous.message += (
                 f"; the richer model failed to solve ({result.message}): "
@@ -173,6 +173,21 @@ def _escalated(
             )
             return previous
         snap = snapshot(auto, snap.problem, snap.poses, result, limited=snap.limited)
+
+
+def answer_on_switch(auto: AutoShapeSolver, verdict: CheckVerdict, snap: CheckSnapshot):
+    """Return the answer at ``snap``'s poses of the model ``verdict`` switched to.
+
+    The check's own answer there when it solved that model from the snapshot's shape
+    (``verdict.answer``: its state installed as the warm start, where the switch mapped the same
+    shape): a solve again would repeat it (the main job's post cold at 1e-4 m: a moved mesh's
+    answer, unsettled, solved twice for 1.5 s each); else a solve.
+    """
+    if verdict.answer is not None:
+        result, state = verdict.answer
+        auto.inner.install_warm_start(state.copy())
+        return result
+    return auto.inner.solve(snap.poses, limited=snap.limited)
 
 
 def snapshot(

@@ -10,6 +10,7 @@ the same machine at the same time, so their times are compared as ratios.
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -59,3 +60,16 @@ def ask(proc: subprocess.Popen, request: list) -> dict:
     proc.stdin.write(json.dumps(request) + "\n")
     proc.stdin.flush()
     return json.loads(proc.stdout.readline())
+
+
+def arguments(doc: str, out: str, rounds: int, **counts: int) -> argparse.Namespace:
+    """Parse a before/after bench's command line: --before, --rounds, --out, --worker, and
+    ``counts`` (name → default) as more integer options (``--updates 2000``)."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    for name, default in counts.items():
+        ap.add_argument(f"--{name}", type=int, default=default)
+    ap.add_argument("--rounds", type=int, default=rounds)
+    ap.add_argument("--before", default="", help="git revision (default: merge-base main HEAD)")
+    ap.add_argument("--out", default=out)
+    ap.add_argument("--worker", action="store_true")
+    return ap.parse_args()

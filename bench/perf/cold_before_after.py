@@ -20,7 +20,6 @@ or not).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
@@ -87,19 +86,14 @@ def worker() -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--before", default="", help="git revision (default: merge-base main HEAD)")
-    ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--out", default="bench/results/cold_before_after.md")
-    ap.add_argument("--worker", action="store_true")
-    args = ap.parse_args()
+    sys.path.insert(0, str(ROOT))
+    from bench.before_after import arguments, ask, extract, revision, start
+    from bench.common import machine, write_report
+
+    args = arguments(__doc__, "bench/results/cold_before_after.md", rounds=3)
     if args.worker:
         worker()
         return
-    sys.path.insert(0, str(ROOT))
-    from bench.before_after import ask, extract, revision, start
-    from bench.common import machine, write_report
-
     info = machine()
     args.before, before_rev = revision(args.before)
     trees = ("before", "after")

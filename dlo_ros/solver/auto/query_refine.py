@@ -19,7 +19,7 @@ from .choice import ModelChoice
 from .escalate import contact_for_query
 from .query_verify import verified_answer
 from .reach import touches_obstacle
-from .stream_checks import Escalations, snapshot
+from .stream_checks import Escalations, checks_answer, snapshot
 
 if TYPE_CHECKING:  # the solver calls this function (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -89,10 +89,7 @@ def refine_query(
             choice, problem, stream=False, source=solver, tag="query" if same else ""
         )
         poses = auto.reduced.poses(choice, problem)
-        if verdict.answer is not None and not same:  # the check solved it there: not again
-            answer, state = verdict.answer
-            solver.install_warm_start(state.copy())
-        else:
-            answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
+        taken = None if same else checks_answer(solver, verdict)  # solved there: not again
+        answer = taken or solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
     answer = verified_answer(answer, estimate, auto.tolerance, stopped)
     return auto.finish(answer, t0, [], choice=choice, solver=solver, estimate=estimate)

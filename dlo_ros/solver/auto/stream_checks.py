@@ -178,16 +178,27 @@ def _escalated(
 def answer_on_switch(auto: AutoShapeSolver, verdict: CheckVerdict, snap: CheckSnapshot):
     """Return the answer at ``snap``'s poses of the model ``verdict`` switched to.
 
-    The check's own answer there when it solved that model from the snapshot's shape
-    (``verdict.answer``: its state installed as the warm start, where the switch mapped the same
-    shape): a solve again would repeat it (the main job's post cold at 1e-4 m: a moved mesh's
-    answer, unsettled, solved twice for 1.5 s each); else a solve.
+    The check's own answer there (:func:`checks_answer`), else a solve.
     """
-    if verdict.answer is not None:
-        result, state = verdict.answer
-        auto.inner.install_warm_start(state.copy())
-        return result
-    return auto.inner.solve(snap.poses, limited=snap.limited)
+    answer = checks_answer(auto.inner, verdict)
+    if answer is None:
+        answer = auto.inner.solve(snap.poses, limited=snap.limited)
+    return answer
+
+
+def checks_answer(solver: ShapeSolver, verdict: CheckVerdict) -> ShapeResult | None:
+    """Return the check's answer on the model it names, its state installed on ``solver``.
+
+    ``verdict.answer``: that model solved by the check at the snapshot's poses from the
+    snapshot's shape, as the model switched to (``solver``) would solve it from the same shape
+    mapped: a solve again would repeat it (the main job's post cold at 1e-4 m: a moved mesh's
+    answer, unsettled, solved twice for 1.5 s each).  None when the check did not solve it.
+    """
+    if verdict.answer is None:
+        return None
+    result, state = verdict.answer
+    solver.install_warm_start(state.copy())
+    return result
 
 
 def snapshot(

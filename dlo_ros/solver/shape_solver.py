@@ -130,6 +130,8 @@ class ShapeSolver:
         self._compile_thread: threading.Thread | None = None
         # a compile is about to start (AutoShapeSolver._compile_ahead)
         self.compile_pending = False
+        #: (answer, its state) of the last solve that did not commit: a refined query's start
+        self.query_answer: tuple[ShapeResult, SolverState] | None = None
         self._summaries = ModelSummaries()
         self._build(problem, template)
 
@@ -396,6 +398,7 @@ class ShapeSolver:
             ctx.streamed = is_limited(warm, commit, limited)
             ctx.deadline = self._strikes.deadline(t0, limit, ctx.streamed)
             result, state = run_update(ctx, problem, warm, self._turn_tracker, self._apart)
+            self.query_answer = None if commit or state is None else (result, state)
             if self._strikes.stopped(ctx.deadline, result.status):
                 result.message = limit_message(limit, result.message)
             result.solve_time_ms = (time.perf_counter() - t0) * 1e3
@@ -457,10 +460,7 @@ class ShapeSolver:
         return F.strain(self.nlp, z, s)
 
     def frames_psi(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
-        """Return ψ(s) as published: the solved field, or the zero-twist ψ.
-
-        The zero-twist ψ is anchored at the first held grip.
-        """
+        """Return ψ(s) as published: the solved field, or the zero-twist ψ from the first grip."""
         return F.frames_psi(self.nlp, self.parameters, self.problem, z, s, p)
 
     def pose_frames(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
@@ -468,10 +468,7 @@ class ShapeSolver:
         return F.pose_frames(self.nlp, self.parameters, self.problem, z, s, p)
 
     def frames(self, z: np.ndarray, s: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
-        """Return the material frames Q(s) (columns ξ, η, ζ) of solution z.
-
-        ψ from the zero-twist rule where it is not solved.
-        """
+        """Return the material frames Q(s) (columns ξ, η, ζ) of z (zero-twist ψ if unsolved)."""
         return F.frames(self.nlp, self.parameters, self.problem, z, s, p)
 
     def equilibrium(

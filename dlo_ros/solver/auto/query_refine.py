@@ -12,9 +12,12 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from ...model.problem import Problem
 from ..results.result import ShapeResult
 from ..shape_solver import ShapeSolver
+from ..state import SolverState
 from .choice import ModelChoice
 from .escalate import contact_for_query
 from .query_verify import verified_answer
@@ -56,13 +59,21 @@ def refine_query(
     auto.worker.wait()  # a running check may hold the pooled models the refinement uses
     base = choice or auto.choice
     choice = replace(base, reasons=list(base.reasons))
-    # the same answer again on a copy that keeps its state (the checks start from it); the copy
-    # is tagged apart from the stream's model, which a query never touches
+    # the answer on a copy that keeps its state (the checks start from it); the copy is tagged
+    # apart from the stream's model, which a query never touches
+    source = solver or auto.inner
+    held = _held_answer(source, result)
     solver = auto.pool.solver_for(
-        choice, problem, stream=False, source=solver or auto.inner, tag="query"
+        choice, problem, stream=False, source=source if held is None else None, tag="query"
     )
     poses = auto.reduced.poses(choice, problem)
-    answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
+    if held is not None and (solver.nlp.director or np.array_equal(solver.nlp.r0, source.nlp.r0)):
+        solver.install_warm_start(held.copy())  # solved again, it would give this very answer
+        answer = result
+    else:
+        if held is not None and not solver.adopt_warm_start(source):  # (another frame R0)
+            solver.reset()  # as solver_for does
+        answer = solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
     estimate, stopped, escalations = None, "", Escalations()
     while True:
         if answer.status not in ("ok", "unverified"):
@@ -93,3 +104,14 @@ def refine_query(
         answer = taken or solver.solve(poses, warm=True, commit=True, checked=True, limited=False)
     answer = verified_answer(answer, estimate, auto.tolerance, stopped)
     return auto.finish(answer, t0, [], choice=choice, solver=solver, estimate=estimate)
+
+
+def _held_answer(solver: ShapeSolver, result: ShapeResult) -> SolverState | None:
+    """Return the state of ``result`` if it is ``solver``'s last query answer (else None).
+
+    The copy that refines it would otherwise solve the same poses again from the same start:
+    10–60 ms of a refined query's 80–250 ms (bench/perf/queries_first_batch.py's refined
+    answers).
+    """
+    held = solver.query_answer
+    return held[1] if held is not None and held[0] is result else None

@@ -98,6 +98,47 @@ def planarity_violation(problem: Problem, normal: np.ndarray, tolerance: float =
                 f"grips[{i}].orientation: the strip's width (the grip's y-axis) is not normal to "
                 "the plane (it would bend about its lateral axis)"
             )
+    return _scene_planarity(problem, origin, n, tolerance)
+
+
+#: ``_scene_planarity``'s verdicts by their inputs' bytes (cleared when full)
+_SCENE_VERDICTS: dict[tuple, str] = {}
+
+
+def _scene_planarity(problem: Problem, origin: np.ndarray, n: np.ndarray, tolerance: float) -> str:
+    """Say why gravity, the loads, the offsets or the obstacles leave the plane ('' if none does).
+
+    ``planarity_violation``'s tests of what does not move with the grips, in the plane through
+    ``origin`` with unit normal ``n``.  A stream asks them of every planar target with the same
+    scene: computed once per plane.
+    """
+    key = (
+        np.asarray(origin, dtype=float).tobytes(),
+        n.tobytes(),
+        tolerance,
+        problem.string.length,
+        np.asarray(problem.gravity, dtype=float).tobytes(),
+        tuple(
+            np.concatenate([np.asarray(ld.force, float), np.asarray(ld.moment, float)]).tobytes()
+            for ld in problem.loads
+        ),
+        tuple(np.asarray(rel.offset, dtype=float).tobytes() for rel in problem.relative_positions),
+        tuple((ob.type, np.asarray(ob.params, dtype=float).tobytes()) for ob in problem.obstacles),
+    )
+    why = _SCENE_VERDICTS.get(key)
+    if why is None:
+        why = _scene_planarity_of(problem, origin, n, tolerance)
+        if len(_SCENE_VERDICTS) >= 256:
+            _SCENE_VERDICTS.clear()
+        _SCENE_VERDICTS[key] = why
+    return why
+
+
+def _scene_planarity_of(
+    problem: Problem, origin: np.ndarray, n: np.ndarray, tolerance: float
+) -> str:
+    """``_scene_planarity``, computed."""
+    L = problem.string.length
     if abs(np.dot(problem.gravity_unit, n)) > tolerance:
         return "gravity.direction is not in the plane"
     for i, ld in enumerate(problem.loads):

@@ -478,6 +478,11 @@ class StringNLP:
                 "ipopt": ipopt,
                 "print_time": False,
                 "error_on_fail": False,
+                # no λ_p and so no "nlp_grad" (the reverse derivative of the whole problem, built
+                # at the creation of each solver of a new NLP: 30-40 ms of the 40-45 of a Fig. 3
+                # mesh's first solver); nothing here reads λ_p or differentiates a solver
+                "calc_lam_p": False,
+                "no_nlp_grad": True,
                 **self.ipopt_derivatives(),
             },
         )

@@ -22,7 +22,7 @@ from .choice import ModelChoice
 from .escalate import contact_for_query
 from .query_verify import verified_answer
 from .reach import touches_obstacle
-from .stream_checks import Escalations, checks_answer, snapshot
+from .stream_checks import Escalations, checks_answer, moves_breakpoints, snapshot
 
 if TYPE_CHECKING:  # the solver calls this function (auto_solver.py imports this module)
     from .auto_solver import AutoShapeSolver
@@ -89,7 +89,7 @@ def refine_query(
         if verdict.choice is None:
             estimate = verdict.estimate
             break
-        if escalations.spent(verdict.estimate):
+        if escalations.spent(verdict.estimate, moves_breakpoints(choice, verdict.choice)):
             stopped = "the model checks kept escalating"
             break
         choice = replace(

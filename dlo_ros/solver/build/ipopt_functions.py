@@ -11,6 +11,18 @@ import casadi as ca
 from ..options import SolverOptions
 
 
+#: nlpsol's own options: quiet, a failed solve is a status (not an exception), and no λ_p, so
+#: no "nlp_grad" (the reverse derivative of the whole problem, built at each new NLP's first
+#: solver: 30-40 ms of the 40-45 a Fig. 3 mesh's took); nothing here reads λ_p or differentiates
+#: a solver
+NLPSOL_OPTIONS = {
+    "print_time": False,
+    "error_on_fail": False,
+    "calc_lam_p": False,
+    "no_nlp_grad": True,
+}
+
+
 def ipopt_options(
     options: SolverOptions, warm: bool, max_iterations: int | None, max_wall_time: float
 ) -> dict:

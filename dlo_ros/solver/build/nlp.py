@@ -48,7 +48,7 @@ from .mesh import MeshSpec, element_mesh
 from .assembled_euler import AssembledEulerKKT
 from .assembled_strip import AssembledStripKKT
 from .assembled_values import value_functions
-from .ipopt_functions import ipopt_derivatives, ipopt_options, ipopt_problem
+from .ipopt_functions import NLPSOL_OPTIONS, ipopt_derivatives, ipopt_options, ipopt_problem
 from .constraint_rows import (
     ConstraintRows,
     RowSymbols,
@@ -476,13 +476,7 @@ class StringNLP:
             self.ipopt_nlp,
             {
                 "ipopt": ipopt,
-                "print_time": False,
-                "error_on_fail": False,
-                # no λ_p and so no "nlp_grad" (the reverse derivative of the whole problem, built
-                # at the creation of each solver of a new NLP: 30-40 ms of the 40-45 of a Fig. 3
-                # mesh's first solver); nothing here reads λ_p or differentiates a solver
-                "calc_lam_p": False,
-                "no_nlp_grad": True,
+                **NLPSOL_OPTIONS,
                 **self.ipopt_derivatives(),
             },
         )

@@ -431,7 +431,7 @@ def test_background_checks_compile_their_order_shadows_ahead(checks, monkeypatch
     models of a switch or a query are: interpreted, they held the GIL through long CasADi calls while the
     stream's updates waited.  A one-shot solve (sync checks) compiles nothing it does not stream."""
     ahead = []
-    monkeypatch.setattr(ModelPool, "compile_ahead", lambda self, solver: ahead.append(solver))
+    monkeypatch.setattr(ModelPool, "compile_ahead", lambda self, solver, switch=False: ahead.append(solver))
     # the order shadows check the models off the element family (#37): here the fourier planar one
     options = SolverOptions(output_points=51, basis="fourier", order=12)
     solver = make_solver(hanging(), options, compile="off", checks=checks)

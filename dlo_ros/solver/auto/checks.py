@@ -242,4 +242,6 @@ class ModelChecks:
         )
         if target is not None:
             target.prepare()
+            if snap.limited:  # a stream switches to it
+                self.pool.compile_ahead(target, switch=True)
         return verdict

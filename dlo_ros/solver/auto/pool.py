@@ -159,13 +159,18 @@ class ModelPool:
         ):  # freeing IPOPT/MUMPS instances must not overlap a solve in another thread
             evicted.clear()
 
-    def compile_ahead(self, solver: ShapeSolver) -> None:
+    def compile_ahead(self, solver: ShapeSolver, switch: bool = False) -> None:
         """Compile in the background a model that a switch, the queries or a check will use.
 
         It starts once the streaming model's own compile is done (the stream reaches full speed
         first), and only if the stream compiles at all ('on_query': at the model's first query).
-        Its libraries land in the cache, where the query workers find them.
+        Its libraries land in the cache, where the query workers find them.  ``switch``: a held
+        verdict's model, which the stream switches to: compiled even if it was built not to look
+        into the cache (``solver_for``'s ``once``), so that the switch neither builds the compile's
+        functions nor looks up its libraries on the stream's thread.
         """
+        if switch and solver.compile_mode == "off" and self.compile in ("background", "blocking"):
+            solver.compile_mode = "cached"
         if self.compile == "on_query" and solver.compile_mode == "cached":
             # a query worker's: compiled once a query uses it, not a one-off refinement's copy
             solver.compile_mode = "on_query"

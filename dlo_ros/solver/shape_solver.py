@@ -177,9 +177,10 @@ class ShapeSolver:
 
     # ---- compiled derivatives and IPOPT instances ---------------------------------------------
     def prepare(self) -> None:
-        """Create the IPOPT solvers now (they are otherwise created on first use)."""
+        """Create the IPOPT solvers and the contact-free Newton functions now, not on first use."""
         with self._lock:
             self._ipopt.prepare()
+            self.functions.prepare_newton()
 
     def start_compile(self, mode: str) -> None:
         """Switch the compile mode and start compiling if that mode asks for it.

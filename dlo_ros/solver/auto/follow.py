@@ -148,4 +148,6 @@ def prebuild(auto: AutoShapeSolver, choices: list[ModelChoice], problem: Problem
         if key == auto.pool.full_key or choice.obstacles != auto.choice.obstacles:
             solver.prepare()
             auto.pool.compile_ahead(solver)
+        else:  # its contact-free Newton functions (built on first use): not on the stream's thread
+            solver.functions.prepare_newton()
         auto.worker.built(key)  # built: a switch to it need not wait

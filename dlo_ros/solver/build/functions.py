@@ -66,6 +66,7 @@ from .compiled import (
     library_path,
     load_native,
 )
+from .newton_function import newton_function
 from .nlp import StringNLP
 from .output_function import OutputFunction
 
@@ -94,9 +95,12 @@ class NlpFunctions:
         """
         self.nlp = nlp
         self.kkt = InterpretedFunction(nlp.kkt_fn)
-        self.kkt_free = InterpretedFunction(nlp.kkt_free_fn)
-        self.newton_step: InterpretedFunction | DeferredFunction = InterpretedFunction(
-            nlp.newton_fn
+        # the contact-free ones on first use (``StringNLP.kkt_free_fn``), or ``prepare_newton``
+        self.kkt_free: InterpretedFunction | DeferredFunction | native_newton.WithNodePart = (
+            DeferredFunction(lambda: InterpretedFunction(nlp.kkt_free_fn))
+        )
+        self.newton_step: InterpretedFunction | DeferredFunction = DeferredFunction(
+            lambda: InterpretedFunction(nlp.newton_fn)
         )
         self.obstacle_g = (
             InterpretedFunction(nlp.obstacle_g_fn) if nlp.obstacle_g_fn is not None else None
@@ -127,6 +131,16 @@ class NlpFunctions:
             self._solves += 1
             if self._solves == 2:
                 self.build_outputs(mode)
+
+    def prepare_newton(self) -> None:
+        """Build the contact-free Newton functions now if they are still to be built on first use.
+
+        For a model a stream may switch to, built on the worker: its first contact-free update
+        then builds nothing on the stream's thread.
+        """
+        for fn in (self.kkt_free, self.newton_step):
+            if isinstance(fn, DeferredFunction):
+                fn.built()
 
     def build_outputs(self, mode: str = "off") -> None:
         """Build the outputs' function (interpreted) if it covers this model and is not built.
@@ -372,7 +386,7 @@ class NlpFunctions:
         node = ca.mtimes(sparse(nlp.node_map).T, weighted)
         kkt = kkt + ca.blockcat([[node, ca.MX(n, nf)], [ca.MX(nf, n), ca.MX(nf, nf)]])
         return InterpretedFunction(
-            nlp.newton_function(
-                ca.Function("dlo_kkt_free", [z, p, lam], [kkt, residual, grad, energies])
+            newton_function(
+                nlp, ca.Function("dlo_kkt_free", [z, p, lam], [kkt, residual, grad, energies])
             )
         )

@@ -37,10 +37,6 @@ from ...model.obstacles import OBSTACLE_TYPES
 from ...model.problem import Problem
 from ...model.ritz import RitzModel
 from ..native.blocks import NodeBlocks
-from ..native.settings import (
-    NEWTON_REGULARISATION,
-    NEWTON_STEPS,
-)
 from ..contact.obstacle_points import obstacle_arc_lengths, row_spacing, row_weights
 from ..options import SolverOptions
 from .assembled import AssembledKKT
@@ -48,6 +44,7 @@ from .mesh import MeshSpec, element_mesh
 from .assembled_euler import AssembledEulerKKT
 from .assembled_strip import AssembledStripKKT
 from .assembled_values import value_functions
+from .newton_function import newton_function
 from .ipopt_functions import NLPSOL_OPTIONS, ipopt_derivatives, ipopt_options, ipopt_problem
 from .constraint_rows import (
     ConstraintRows,
@@ -294,7 +291,6 @@ class StringNLP:
         self._assembled = assembled
         #: E (d·M × n): the unknowns → the per-node values u_k (``assembled.py``), d = node_width
         self.node_map, self.node_width = assembled.E, assembled.d
-        self.kkt_free_fn, self.residual_free_fn = assembled.kkt_free()
         self.kkt_fn, self.residual_fn = assembled.kkt()
         if nf < g.shape[0]:
             self.obstacle_g_fn = assembled.inequality_g()
@@ -307,7 +303,6 @@ class StringNLP:
             "lagrangian_hessian", [zm, pm, lm], [self.kkt_fn(zm, pm, lm)[3]]
         )
         self.jac_g_fn = assembled.jacobian()
-        self.newton_fn = self.newton_function()
         #: IPOPT's objective [f, ∇f] and every row's value g: assembled from p's mesh geometry
         #: (director models: ``assembled_values.py``), else the flattened expressions
         self.value_fns = value_functions(assembled, self.obstacle_g_fn)
@@ -357,40 +352,6 @@ class StringNLP:
         """Return W(σ) (K × M) of obstacle i's slots from p (``part`` "t": P(σ), "k": P'(σ))."""
         return slot_matrix(p, self.params, i, self.obstacle_slots, self.model.quad.count, part)
 
-    def newton_function(self, kkt_free: ca.Function | None = None) -> ca.Function:
-        """Build a contact-free warm update as one MX function around ``kkt_free``.
-
-        ``kkt_free``: default ``kkt_free_fn``; the compiled one loaded with ``casadi.external`` has
-        the same inputs and outputs.  Inputs u = [z; λ_free], p, and the Newton system (K0, r0) at
-        u for the new targets.  It takes NEWTON_STEPS steps u ← u − K⁻¹ r (the first with K0, r0:
-        for new grip targets the start's own K and a shifted r, so it costs no evaluation; then one
-        evaluation per step) and evaluates the system once more at the end.  Outputs: u, K, r, ∇f
-        and the energies at that u, and max |Δz| over the steps (the caller rejects a step > 0.5
-        and checks r for convergence).  The steps use LAPACK's LU ('lapacklu'), which CasADi cannot
-        generate C for, so this function stays interpreted (a thin MX layer); CasADi's own QR,
-        which it can generate, costs more per solve than the LU.
-        """
-        kkt_free = kkt_free or self.kkt_free_fn
-        n, nf, n_p = self.z_sym.shape[0], self.n_free_rows, self.p_sym.shape[0]
-        u0, pp = ca.MX.sym("u", n + nf), ca.MX.sym("p", n_p)
-        k0, r0 = ca.MX.sym("K0", n + nf, n + nf), ca.MX.sym("r0", n + nf)
-        u, kkt, residual, largest = u0, k0, r0, ca.MX(0)
-        # kkt.regularised: K + diag(δ I, −δ_λ I) bounds the step along a symmetry of the scene
-        primal = ca.DM(np.concatenate([np.ones(n), np.zeros(nf)]))
-        for _ in range(NEWTON_STEPS):
-            delta = NEWTON_REGULARISATION * ca.fmax(ca.mmax(ca.fabs(kkt)), 1.0)
-            j_max = ca.mmax(ca.fabs(kkt[n:, :n])) if nf else ca.MX(0)
-            h_max = ca.fmax(ca.mmax(ca.fabs(kkt[:n, :n])), 1.0)
-            delta_rows = NEWTON_REGULARISATION * j_max * j_max / h_max
-            shift = delta * primal - delta_rows * (1 - primal)
-            step = ca.solve(kkt + ca.diag(shift), residual, "lapacklu")
-            largest = ca.fmax(largest, ca.norm_inf(step[:n]))
-            u = u - step
-            kkt, residual, grad, energies = kkt_free(u[:n], pp, u[n:])
-        return ca.Function(
-            "dlo_newton", [u0, pp, k0, r0], [u, kkt, residual, grad, energies, largest]
-        )
-
     def moment_stiffness_fn(self) -> ca.Function:
         """Build the moment stiffness C that the pseudo-potential's Hessian lacks.
 
@@ -430,6 +391,26 @@ class StringNLP:
         profiles = {k: p[lay[k]] for k in ("Rf", "Rt", "Re", "D")}
         for name, value in self.model.material_terms(profiles).items():
             p[lay[name]] = value.ravel(order="F")
+
+    @functools.cached_property
+    def _kkt_free(self) -> tuple[ca.Function, ca.Function]:
+        # built on first use: the passes of a cold refinement on contact never evaluate it
+        return self._assembled.kkt_free()
+
+    @property
+    def kkt_free_fn(self) -> ca.Function:
+        """The KKT function of the rows before the obstacle rows (module docstring)."""
+        return self._kkt_free[0]
+
+    @property
+    def residual_free_fn(self) -> ca.Function:
+        """``kkt_free_fn``'s residual alone."""
+        return self._kkt_free[1]
+
+    @functools.cached_property
+    def newton_fn(self) -> ca.Function:
+        """A contact-free warm update's first Newton steps as one function (newton_function.py)."""
+        return newton_function(self)
 
     @functools.cached_property
     def kkt_free_split_fn(self) -> ca.Function:

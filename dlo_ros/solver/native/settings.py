@@ -5,7 +5,7 @@ those flags (``native.build``), so a change here reaches both paths and rebuilds
 The Python side reads them from this module at call time (``stability.min_reduced_eigenvalue``,
 ``newton``'s contact check).  Newton's step settings (``NEWTON_*``, ``JOIN_TOLERANCE``,
 ``LEAVE_TOLERANCE``) reach the drivers as call arguments instead; they live here too, beside the
-others, and the Python Newton (``update/newton.py``) and ``StringNLP.newton_function`` read them
+others, and the Python Newton (``update/newton.py``) and ``build/newton_function.py`` read them
 from here.
 """
 

@@ -1,11 +1,13 @@
-"""The contact-free Newton functions are built on first use; ``ShapeSolver.prepare`` builds them.
+"""The contact-free Newton functions and IPOPT's Jacobian are built on first use.
 
 A cold refinement's passes on contact never take a contact-free step (the paper's Fig. 3 floor
 evaluated the full KKT function 115 times and the contact-free one never), so the contact-free
-KKT function and the Newton-step function around it are built when a solve first needs them.  A
-model a stream may switch to is prepared on the worker, so that its first contact-free update
-builds nothing on the stream's thread.  And the lazy functions are the eager ones: a warm update
-through them equals one through functions built before it.
+KKT function and the Newton-step function around it are built when a solve first needs them, and
+the rows' Jacobian, which only IPOPT evaluates, with the first IPOPT solver (a refined query's
+meshes are answered by Newton).  ``ShapeSolver.prepare`` builds them all: a model a stream may
+switch to is prepared on the worker, so that its first update builds nothing on the stream's
+thread.  And the lazy functions are the eager ones: a warm update through them equals one through
+functions built before it.
 """
 
 from __future__ import annotations
@@ -31,8 +33,10 @@ def test_prepare_builds_the_contact_free_functions():
     scene = load_scene("default_cable")
     solver = ShapeSolver(scene.problem, scene.options, compile="off", lazy_ipopt=True)
     assert deferred_unbuilt(solver) == ["kkt_free", "newton_step"]
+    assert "jac_g_fn" not in vars(solver.nlp)  # IPOPT's alone: built with its first solver
     solver.prepare()
     assert deferred_unbuilt(solver) == []
+    assert "jac_g_fn" in vars(solver.nlp)
 
 
 def test_a_lazily_built_update_equals_a_prepared_one():

@@ -302,7 +302,6 @@ class StringNLP:
         self.hessian_fn = ca.Function(
             "lagrangian_hessian", [zm, pm, lm], [self.kkt_fn(zm, pm, lm)[3]]
         )
-        self.jac_g_fn = assembled.jacobian()
         #: IPOPT's objective [f, ∇f] and every row's value g: assembled from p's mesh geometry
         #: (director models: ``assembled_values.py``), else the flattened expressions
         self.value_fns = value_functions(assembled, self.obstacle_g_fn)
@@ -406,6 +405,11 @@ class StringNLP:
     def residual_free_fn(self) -> ca.Function:
         """``kkt_free_fn``'s residual alone."""
         return self._kkt_free[1]
+
+    @functools.cached_property
+    def jac_g_fn(self) -> ca.Function:
+        """The rows' Jacobian ∂g/∂z, IPOPT's alone: built with its first IPOPT solver."""
+        return self._assembled.jacobian()
 
     @functools.cached_property
     def newton_fn(self) -> ca.Function:

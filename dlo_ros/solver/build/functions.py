@@ -136,11 +136,13 @@ class NlpFunctions:
         """Build the contact-free Newton functions now if they are still to be built on first use.
 
         For a model a stream may switch to, built on the worker: its first contact-free update
-        then builds nothing on the stream's thread.
+        then builds nothing on the stream's thread.  Not the steps around a compiled library,
+        which serve only while its compiled loop is missing (``_install``).
         """
-        for fn in (self.kkt_free, self.newton_step):
-            if isinstance(fn, DeferredFunction):
-                fn.built()
+        if isinstance(self.kkt_free, DeferredFunction):
+            self.kkt_free.built()
+        if self.newton_native is None and isinstance(self.newton_step, DeferredFunction):
+            self.newton_step.built()
 
     def build_outputs(self, mode: str = "off") -> None:
         """Build the outputs' function (interpreted) if it covers this model and is not built.

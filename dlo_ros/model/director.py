@@ -208,16 +208,46 @@ class DirectorModel:
         last = self._tangents  # one read: another thread may replace it
         if last is not None and last[0] == key:
             return last[1]
-        v = self.B @ self.node_values(z)
-        if self.layout.frame:
-            t = tangent_column(v.T)
-        else:
-            t = (v / np.linalg.norm(v, axis=1)[:, None]).T
+        t = self._unit_tangents(self.B @ self.node_values(z))
         eps = self.strain_nodes(z)
         t = t if eps is None else t * (1 + self.B @ eps)[None, :]
         t.flags.writeable = False
         self._tangents = (key, t)
         return t
+
+    def shifted_tangents(self, z: np.ndarray, step: float) -> np.ndarray:
+        """``quad_tangents`` at z ± step·e_k for every unknown k: (2, n, 3, M), + first.
+
+        The same numbers, bit for bit, as ``quad_tangents(z ± step e_k)`` one k at a time (each
+        rotation unknown's is the same matrix product, batched, and the rest the same elementwise
+        operations on stacked arrays), for the differences of the centreline over z
+        (``adapt/contact_shift.PositionJacobian``).
+        """
+        z = np.asarray(z, dtype=float)
+        lay = self.layout
+        base = self.quad_tangents(z)
+        out = np.broadcast_to(base, (2, z.size, *base.shape)).copy()  # x0's: T unchanged
+        eps = self.strain_nodes(z)
+        rot = np.arange(z.size)[lay.rotation]
+        for side, sign in enumerate((1.0, -1.0)):
+            nodes = np.repeat(z[None, lay.rotation], rot.size, axis=0)
+            nodes[np.arange(rot.size), np.arange(rot.size)] = z[rot] + sign * step
+            v = np.matmul(self.B[None], nodes.reshape(rot.size, lay.nodes, lay.width))
+            t = self._unit_tangents(v)
+            out[side, rot] = t if eps is None else t * (1 + self.B @ eps)[None, None, :]
+            if eps is not None:
+                unit = self._unit_tangents(self.B @ self.node_values(z))
+                shifted = np.repeat(eps[:, None], eps.size, axis=1)  # column j: eps ± step e_j
+                shifted[np.arange(eps.size), np.arange(eps.size)] = eps + sign * step
+                scales = [1 + self.B @ shifted[:, j] for j in range(eps.size)]
+                out[side, lay.eps] = unit[None] * np.stack(scales)[:, None, :]
+        return out
+
+    def _unit_tangents(self, v: np.ndarray) -> np.ndarray:
+        """t̂ (…, 3, M) of the rotation field's values v (…, M, width) at the quadrature nodes."""
+        if self.layout.frame:
+            return np.moveaxis(tangent_column(np.moveaxis(v, -1, 0)), 0, -2)
+        return np.swapaxes(v / np.linalg.norm(v, axis=-1)[..., None], -1, -2)
 
     def positions(self, z: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(len(s), 3) centreline positions [m]."""

@@ -107,12 +107,14 @@ def frame_columns(q, lib):
 def tangent_column(q: np.ndarray) -> np.ndarray:
     """Return t (3, M), ``frame_columns``' first column alone, of quaternion rows q (4, M).
 
+    (Or (3, K, M) of q (4, K, M): the same expressions elementwise.)
+
     The same expressions in the same order as ``frame_columns`` (so the same numbers, bit for
     bit), without the two columns a tangent does not need.
     """
     x, y, z, w = q
     n2 = x * x + y * y + z * z + w * w
-    out = np.empty((3, q.shape[1]))
+    out = np.empty((3, *q.shape[1:]))  # (3, M), or (3, K, M) for stacked q
     np.divide(w * w + x * x - y * y - z * z, n2, out=out[0])
     np.divide(2 * (x * y + w * z), n2, out=out[1])
     np.divide(2 * (x * z - w * y), n2, out=out[2])

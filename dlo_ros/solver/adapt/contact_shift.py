@@ -264,20 +264,46 @@ class PositionJacobian:
 
     def _differences(self, m: int) -> np.ndarray:
         if self._sweep is None:
-            z, n = self.z, self.z.size
-            rows = np.vstack([np.zeros((1, m)), np.eye(m)])  # x₀, then x₀ + each tangent
-            sweep = np.empty((1 + m, 3, n))
-            step = np.zeros(n)
-            for k in range(n):
-                step[k] = Z_STEP
-                plus = np.asarray(self.model.positions_at_rows(z + step, rows))
-                minus = np.asarray(self.model.positions_at_rows(z - step, rows))
-                diff = (plus - minus) / (2 * Z_STEP)
-                diff[1:] -= diff[0]  # the tangents' rows without x₀'s part
-                sweep[:, :, k] = diff
-                step[k] = 0.0
-            self._sweep = sweep
+            shifted = getattr(self.model, "shifted_tangents", None)  # director models: batched
+            self._sweep = (
+                self._batched(shifted(self.z, Z_STEP)) if shifted is not None else self._swept(m)
+            )
         return self._sweep
+
+    def _swept(self, m: int) -> np.ndarray:
+        """Return the sweep by ``positions_at_rows`` at z ± Z_STEP e_k, one k at a time."""
+        z, n = self.z, self.z.size
+        rows = np.vstack([np.zeros((1, m)), np.eye(m)])  # x₀, then x₀ + each tangent
+        sweep = np.empty((1 + m, 3, n))
+        step = np.zeros(n)
+        for k in range(n):
+            step[k] = Z_STEP
+            plus = np.asarray(self.model.positions_at_rows(z + step, rows))
+            minus = np.asarray(self.model.positions_at_rows(z - step, rows))
+            diff = (plus - minus) / (2 * Z_STEP)
+            diff[1:] -= diff[0]  # the tangents' rows without x₀'s part
+            sweep[:, :, k] = diff
+            step[k] = 0.0
+        return sweep
+
+    def _batched(self, tangents: np.ndarray) -> np.ndarray:
+        """``_swept``'s numbers, bit for bit, from the tangents at every z ± Z_STEP e_k.
+
+        ``tangents``: (2, n, 3, M), ``shifted_tangents``; ``positions_at_rows`` of the rows
+        [0; I] is x₀ L, then x₀ L + each tangent; the rest is elementwise, over every k at once.
+        """
+        z, n, length = self.z, self.z.size, self.model.length
+        shift = np.zeros((n, z.size))
+        shift[np.arange(n), np.arange(n)] = Z_STEP
+        sides = []
+        for sign, t in ((1.0, tangents[0]), (-1.0, tangents[1])):
+            x0 = (z[None, :] + sign * shift)[:, 0:3] * length  # (n, 3)
+            sides.append(
+                np.concatenate([x0[:, None, :] + 0.0, x0[:, None, :] + np.swapaxes(t, 1, 2)], 1)
+            )
+        diff = (sides[0] - sides[1]) / (2 * Z_STEP)  # (n, 1 + M, 3)
+        diff[:, 1:] -= diff[:, :1]  # the tangents' rows without x₀'s part
+        return np.ascontiguousarray(np.moveaxis(diff, 0, -1))
 
 
 def pinned_family(

@@ -228,15 +228,17 @@ class DirectorModel:
         base = self.quad_tangents(z)
         out = np.broadcast_to(base, (2, z.size, *base.shape)).copy()  # x0's: T unchanged
         eps = self.strain_nodes(z)
+        if eps is not None:  # the rotation unknowns' scale, and the strain unknowns' directions
+            scale = (1 + self.B @ eps)[None, None, :]
+            unit = self._unit_tangents(self.B @ self.node_values(z))
         rot = np.arange(z.size)[lay.rotation]
         for side, sign in enumerate((1.0, -1.0)):
             nodes = np.repeat(z[None, lay.rotation], rot.size, axis=0)
             nodes[np.arange(rot.size), np.arange(rot.size)] = z[rot] + sign * step
             v = np.matmul(self.B[None], nodes.reshape(rot.size, lay.nodes, lay.width))
             t = self._unit_tangents(v)
-            out[side, rot] = t if eps is None else t * (1 + self.B @ eps)[None, None, :]
+            out[side, rot] = t if eps is None else t * scale
             if eps is not None:
-                unit = self._unit_tangents(self.B @ self.node_values(z))
                 shifted = np.repeat(eps[:, None], eps.size, axis=1)  # column j: eps ± step e_j
                 shifted[np.arange(eps.size), np.arange(eps.size)] = eps + sign * step
                 scales = [1 + self.B @ shifted[:, j] for j in range(eps.size)]

@@ -293,11 +293,12 @@ class PositionJacobian:
         [0; I] is x₀ L, then x₀ L + each tangent; the rest is elementwise, over every k at once.
         """
         z, n, length = self.z, self.z.size, self.model.length
-        shift = np.zeros((n, z.size))
-        shift[np.arange(n), np.arange(n)] = Z_STEP
+        own = np.arange(3)  # the unknowns x₀ itself: z[0:3]
         sides = []
         for sign, t in ((1.0, tangents[0]), (-1.0, tangents[1])):
-            x0 = (z[None, :] + sign * shift)[:, 0:3] * length  # (n, 3)
+            x0 = np.repeat(z[None, 0:3], n, axis=0)  # x₀ of each shifted z, (n, 3)
+            x0[own, own] = z[own] + sign * Z_STEP
+            x0 = x0 * length
             sides.append(
                 np.concatenate([x0[:, None, :] + 0.0, x0[:, None, :] + np.swapaxes(t, 1, 2)], 1)
             )

@@ -26,6 +26,9 @@ class Basis(Protocol):
     def derivatives(self, s: np.ndarray) -> np.ndarray:
         """B'[i, k] = db_k/ds (s_i) [1/m], shape (len(s), size)."""
 
+    def values_and_derivatives(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(B, B') at s: ``values`` and ``derivatives`` (one evaluation where a basis has one)."""
+
 
 class ChebyshevBasis:
     """b_k(s) = T_k(τ), τ = 2 s / L − 1, k = 0 … n−1 (Chebyshev polynomials of the first kind).
@@ -57,6 +60,9 @@ class ChebyshevBasis:
             coef[k] = 1.0
             out[:, k] = C.chebval(tau, C.chebder(coef)) * (2.0 / self.length)
         return out
+
+    def values_and_derivatives(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.values(s), self.derivatives(s)
 
 
 class FourierBasis:
@@ -97,6 +103,9 @@ class FourierBasis:
             cols.append(-w * np.sin(2 * n * np.pi * u))
             n += 1
         return np.stack(cols[: self.size], axis=1)
+
+    def values_and_derivatives(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.values(s), self.derivatives(s)
 
 
 BASES: dict[str, type[ChebyshevBasis] | type[FourierBasis]] = {

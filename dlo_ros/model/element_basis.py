@@ -37,6 +37,10 @@ class ElementBasis:
         """B'[i, k] = db_k/ds (s_i) [1/m]; at a breakpoint the element on ``side``'s."""
         return self.mesh.interpolation(s, side)[1]
 
+    def values_and_derivatives(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(B, B') at s (the left element's B' at a breakpoint): one interpolation for both."""
+        return self.mesh.interpolation(s)
+
 
 class CompositeQuadrature:
     """The mesh's composite quadrature under ``ChebyshevQuadrature``'s names.

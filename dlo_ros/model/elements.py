@@ -23,6 +23,7 @@ Hessian costs O(E n³) instead of O(E n² m) for m separate quadrature nodes.
 from __future__ import annotations
 
 import bisect
+import functools
 
 import numpy as np
 from numpy.polynomial import chebyshev as C
@@ -54,19 +55,11 @@ class NodalElement:
 
     def __init__(self, count: int, size: float) -> None:
         self.count, self.size = int(count), float(size)
-        self.tau, weights = lgl_nodes(count)
+        # what depends on the count alone: every element of n nodes shares it (a mesh's
+        # elements mostly have the same count, and each refinement pass builds a new mesh)
+        self.tau, weights, self._vinv, self._der, self._int = _reference(self.count)
         self.nodes = 0.5 * self.size * (self.tau + 1.0)
         self.weights = 0.5 * self.size * weights
-        self._vinv = np.linalg.inv(
-            C.chebvander(self.tau, count - 1)
-        )  # nodal values → Chebyshev coefficients
-        eye = np.eye(count)
-        self._der = np.stack(
-            [np.concatenate([C.chebder(eye[k]), [0.0]]) for k in range(count)], axis=1
-        )
-        self._int = np.stack(
-            [C.chebint(eye[k], lbnd=-1.0) for k in range(count)], axis=1
-        )  # (count+1, count)
         self.D = self.matrices(self.nodes)[1]  # differentiation matrix at the element's own nodes
 
     def matrices(self, local_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -83,6 +76,25 @@ class NodalElement:
         """
         tau = 2.0 * np.asarray(local_s, dtype=float) / self.size - 1.0
         return 0.5 * self.size * (C.chebvander(tau, self.count) @ self._int) @ self._vinv
+
+
+@functools.lru_cache(maxsize=128)
+def _reference(count: int) -> tuple[np.ndarray, ...]:
+    """Return the reference element's arrays for ``count`` LGL nodes (read-only).
+
+    (τ, weights on [−1, 1], the inverse Chebyshev–Vandermonde matrix (nodal values → Chebyshev
+    coefficients), and the coefficient maps of the derivative and of the integral from −1, the
+    latter (count + 1) × count).
+    """
+    tau, weights = lgl_nodes(count)
+    vinv = np.linalg.inv(C.chebvander(tau, count - 1))
+    eye = np.eye(count)
+    der = np.stack([np.concatenate([C.chebder(eye[k]), [0.0]]) for k in range(count)], axis=1)
+    integral = np.stack([C.chebint(eye[k], lbnd=-1.0) for k in range(count)], axis=1)
+    out = (tau, weights, vinv, der, integral)
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 #: fewest LGL nodes of one element (a cubic-and-more polynomial per piece)

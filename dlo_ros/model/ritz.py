@@ -142,11 +142,7 @@ class RitzModel:
         return self._memo.get(
             "matrices",
             s,
-            lambda s: (
-                self.basis.values(s),
-                self.basis.derivatives(s),
-                self.quad.integration_matrix(s),
-            ),
+            lambda s: (*self.basis.values_and_derivatives(s), self.quad.integration_matrix(s)),
         )
 
     def position_matrix(self, s: np.ndarray) -> np.ndarray:

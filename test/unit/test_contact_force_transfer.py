@@ -105,3 +105,52 @@ def test_mesh_transfer_keeps_the_force_where_it_acts(solved_old, mesh):
     moved = transferred_state(old, new)
     assert moved is not None
     check_carried(old, forces_old, new, row_forces(new, moved.state))
+
+
+def test_a_line_load_is_carried_onto_every_row_under_it():
+    """Rows 3-7 of 11 (spacing 0.1 m) carry 2 N/m, row 5 not pressing (a coarse shape lifting
+    off between two nodes): onto rows 0.025 m apart, every row from 0.3 to 0.7 m takes its share
+    of that load, the total is kept, and no row outside the run takes any."""
+    src = np.linspace(0.0, 1.0, 11)
+    forces = np.zeros(11)
+    forces[[3, 4, 6, 7]] = 2.0 * 0.1  # q w: the trapezoid weight of an inner row is 0.1 m
+    dst = np.linspace(0.0, 1.0, 41)
+    out = carried_forces(src, forces, dst)
+    inside = (dst > 0.3 - 1e-12) & (dst < 0.7 + 1e-12)
+    assert out.sum() == pytest.approx(forces.sum(), rel=1e-12)
+    assert np.all(out[~inside] == 0.0) and np.all(out[inside] > 0.0)
+    # the load is uniform: every row under it holds the same force (its weight is the same)
+    assert np.ptp(out[inside]) == pytest.approx(0.0, abs=1e-15)
+    # the rows' own quadrature weights: a load q w_j on rows of weights w_j is carried as q
+    w_src, w_dst = np.full(11, 0.1), np.full(41, 0.025)
+    out = carried_forces(src, forces, dst, w_src, w_dst)
+    assert np.allclose(out[inside] / w_dst[inside], out[inside][0] / 0.025)
+    # the same rows with the same weights copy their forces, bit for bit
+    assert np.array_equal(carried_forces(src, forces, src, w_src, w_src), forces)
+
+
+def test_a_refined_mesh_under_the_floor_starts_where_newton_converges():
+    """The paper's Fig. 3 strip (ρ = 3000) on its floor: solved on 4 elements, adopted by the
+    8-element mesh auto's refinement goes to next, and solved again at the same targets.  Carried
+    row by row to the nearest node, the floor's force left most rows of the finer mesh's run
+    without one; Newton added them five at a time and gave up, and IPOPT answered in 72
+    iterations.  Carried as a line load, Newton answers, and its answer is the finer mesh's cold
+    solve (IPOPT from the initial guess)."""
+    from dlo_ros.scene.reading import scene_from_dict
+    from dlo_ros.scene.writing import scene_to_dict
+
+    d = scene_to_dict(load_scene("bench_fig3_floor"))
+    d["string"]["weight_per_length"] = 3000.0
+    scene = scene_from_dict(d)
+    options = replace(scene.options, model="planar", basis="elements", obstacle_points="nodes")
+    coarse = MeshSpec((0.253, 0.636, 0.711), (8, 8, 8, 8))
+    fine = MeshSpec((0.237, 0.253, 0.52, 0.636, 0.666, 0.711, 0.77), (9, 8, 8, 8, 8, 8, 8, 8))
+    old = ShapeSolver(scene.problem, options, compile="off", mesh=coarse)
+    assert old.solve().status in ("ok", "unverified")
+    new = ShapeSolver(scene.problem, options, compile="off", mesh=fine)
+    assert new.adopt_warm_start(old)
+    warm = new.solve()
+    assert warm.ok and warm.ipopt_status == "Newton", (warm.status, warm.ipopt_status)
+    cold = ShapeSolver(scene.problem, options, compile="off", mesh=fine).solve()
+    assert cold.ok and cold.ipopt_status != "Newton"
+    assert np.max(np.linalg.norm(cold.points - warm.points, axis=1)) < 1e-8

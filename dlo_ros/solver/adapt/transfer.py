@@ -129,7 +129,11 @@ def transfer_multipliers(
     lam = np.zeros(len(nnlp.row_kind))
     carried = {
         k: carried_forces(
-            onlp.obstacle_s, lam_si[np.asarray(onlp.obstacle_rows[k])], nnlp.obstacle_s
+            onlp.obstacle_s,
+            lam_si[np.asarray(onlp.obstacle_rows[k])],
+            nnlp.obstacle_s,
+            onlp.obstacle_weights,
+            nnlp.obstacle_weights,
         )
         for k in range(min(len(nnlp.obstacle_rows), len(onlp.obstacle_rows)))
     }

@@ -118,17 +118,88 @@ def nearest_row(s: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     return np.argmin(np.abs(s[None, :] - sigma[:, None]), axis=1).astype(int)
 
 
-def carried_forces(src_s: np.ndarray, src_forces: np.ndarray, dst_s: np.ndarray) -> np.ndarray:
-    """Return the rows ``dst_s``' forces [N] when each row of ``src_s`` hands its force on.
+#: consecutive pressing rows that carry a line load (``results/contacts.py``'s rule: two
+#: neighbours may share one point contact that sits between them, three cannot)
+LINE_RUN = 3
+#: a row presses when its force exceeds this share of the largest: an interior-point answer
+#: leaves ~1e-10 N of barrier multipliers on rows that do not touch
+PRESSING_SHARE = 1e-6
+#: rows that do not press between two that do, within one line load: a coarse mesh's shape
+#: lying on a surface lifts off it between some nodes (the paper's Fig. 3 strip on 4 elements:
+#: the rows of its run pressed with gaps of one or two)
+LINE_GAP = 2
 
-    Each nonzero force of the source rows goes to the destination row nearest along s (forces
-    landing on one row add up): a contact force stays where it acts when the rows move, as the
-    rows on the nodes do between two meshes.  Rows at the same arc lengths copy their forces.
+
+def carried_forces(
+    src_s: np.ndarray,
+    src_forces: np.ndarray,
+    dst_s: np.ndarray,
+    src_weights: np.ndarray | None = None,
+    dst_weights: np.ndarray | None = None,
+) -> np.ndarray:
+    """Return the rows ``dst_s``' forces [N] when the rows ``src_s`` hand theirs on.
+
+    A contact force stays where it acts when the rows move, as the rows on the nodes do between
+    two meshes.  A point force (a run of fewer than LINE_RUN pressing rows, and a row that does
+    not press) goes to the destination row nearest along s; forces landing on one row add up.
+    A run of LINE_RUN or more pressing rows (with gaps of up to LINE_GAP rows that do not) is a
+    line load q_j = f_j / w_j [N/m] at its pressing rows (w_j: the rows' quadrature weights,
+    ``row_weights``; the trapezoid rule's on ``src_s`` / ``dst_s`` when not given): each
+    destination row from the run's first to its last gets q, interpolated linearly along s
+    between pressing rows, times its own weight, scaled so that the run's total force is kept
+    (none inside: all of it to the row nearest the run's middle).  On a finer mesh every row of
+    the run then holds its share of the load, not only the rows nearest the coarser mesh's
+    (the paper's Fig. 3 strip on its floor: Newton from the refined mesh's start added the
+    missing rows five at a time and gave up).
+    Rows at the same arc lengths with the same weights copy their forces.
     """
-    out = np.zeros(np.asarray(dst_s).size)
+    src_s, dst_s = np.asarray(src_s, dtype=float), np.asarray(dst_s, dtype=float)
+    out = np.zeros(dst_s.size)
     forces = np.asarray(src_forces, dtype=float)
-    pressing = np.flatnonzero(forces != 0.0)
-    if out.size and pressing.size:
-        rows = nearest_row(dst_s, np.asarray(src_s, dtype=float)[pressing])
-        np.add.at(out, rows, forces[pressing])
+    if not out.size or not np.any(forces != 0.0):
+        return out
+    same_weights = (src_weights is None) == (dst_weights is None) and (
+        src_weights is None or np.array_equal(src_weights, dst_weights)
+    )
+    if same_weights and np.array_equal(src_s, dst_s):
+        return forces.copy()
+    pressing = np.abs(forces) > PRESSING_SHARE * np.abs(forces).max()
+    runs = [r for r in _runs(np.flatnonzero(pressing), LINE_GAP) if r.size >= LINE_RUN]
+    line = np.zeros(forces.size, dtype=bool)
+    for run in runs:
+        line[run[0] : run[-1] + 1] = True  # its gaps' tiny forces are part of the load
+    points = np.flatnonzero((forces != 0.0) & ~line)
+    if points.size:
+        np.add.at(out, nearest_row(dst_s, src_s[points]), forces[points])
+    if runs:
+        w_src = trapezoid_weights(src_s) if src_weights is None else np.asarray(src_weights)
+        w_dst = trapezoid_weights(dst_s) if dst_weights is None else np.asarray(dst_weights)
+        for run in runs:
+            total = forces[run[0] : run[-1] + 1].sum()
+            _carry_line(out, src_s[run], forces[run] / w_src[run], total, dst_s, w_dst)
     return out
+
+
+def _carry_line(
+    out: np.ndarray,
+    s: np.ndarray,
+    q: np.ndarray,
+    total: float,
+    dst_s: np.ndarray,
+    dst_weights: np.ndarray,
+) -> None:
+    """Add to ``out`` the line load q [N/m] at the run's rows ``s``, as ``carried_forces`` does."""
+    span = 1e-12 * max(abs(float(s[-1])), 1.0)
+    inside = np.flatnonzero((dst_s >= s[0] - span) & (dst_s <= s[-1] + span))
+    share = np.interp(dst_s[inside], s, q) * dst_weights[inside]
+    if not inside.size or not share.sum() > 0.0:
+        out[nearest_row(dst_s, np.array([0.5 * (s[0] + s[-1])]))[0]] += total
+        return
+    out[inside] += share * (total / share.sum())
+
+
+def _runs(indices: np.ndarray, gap: int = 0) -> list[np.ndarray]:
+    """Split ascending ``indices`` into runs with at most ``gap`` integers missing between two."""
+    if not indices.size:
+        return []
+    return np.split(indices, np.flatnonzero(np.diff(indices) > 1 + gap) + 1)

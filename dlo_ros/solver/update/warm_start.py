@@ -7,8 +7,9 @@ re-extracting the Euler angles of the material frames in the target's reference 
 along s) when the frames differ.  Multipliers are matched by constraint-row identity (grip, name,
 component), the grip position rows through the reaction force vector (each model may use other axes
 for them), an obstacle's contact slots by their arc length (each model places its own:
-``obstacle_slots.py``), its rows by arc length too (each force to the target's row nearest along
-s: rows on the nodes of an element mesh move between meshes); rows the source did not have get
+``obstacle_slots.py``), its rows by arc length too (a point force to the target's row nearest
+along s, a line load spread over the target's rows under it: rows on the nodes of an element mesh
+move between meshes, ``obstacle_points.carried_forces``); rows the source did not have get
 zero, and a director target gets least-squares multipliers of its equality rows at the adopted
 shape, ∇f + J_freeᵀ λ ≈ 0 (zeros would make its first Newton update fail).
 """
@@ -52,8 +53,9 @@ class SourceShape:
     slots: list[
         tuple[np.ndarray, np.ndarray]
     ]  # per obstacle: its filled contact slots' s [m] and SI multipliers
-    #: per obstacle of the source: (the obstacle, its rows' s [m], their SI multipliers [N])
-    obstacle_rows: list[tuple[Obstacle, np.ndarray, np.ndarray]]
+    #: per obstacle of the source: (the obstacle, its rows' s [m], their SI multipliers [N], the
+    #: rows' quadrature weights [m])
+    obstacle_rows: list[tuple[Obstacle, np.ndarray, np.ndarray, np.ndarray]]
 
 
 def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> SourceShape:
@@ -100,7 +102,7 @@ def sample_source(source: ShapeSolver, src: SolverState, target: StringNLP) -> S
         if kind[0] not in ("slot", "obstacle")
     }
     obstacle_rows = [
-        (ob, nlp.obstacle_s, lam_src[np.asarray(nlp.obstacle_rows[i])])
+        (ob, nlp.obstacle_s, lam_src[np.asarray(nlp.obstacle_rows[i])], nlp.obstacle_weights)
         for i, ob in enumerate(nlp.problem.obstacles)
     ]
     slots = []
@@ -156,10 +158,12 @@ def warm_state(
             continue
         lam[i] = value * nlp.row_scale[i] * nlp.sigma
     for k, ob in enumerate(nlp.problem.obstacles):  # each force to the row nearest along s
-        for src_ob, src_s, src_lam in source.obstacle_rows:
+        for src_ob, src_s, src_lam, src_w in source.obstacle_rows:
             if src_ob == ob:
                 held = np.asarray(nlp.obstacle_rows[k])
-                carried = carried_forces(src_s, src_lam, nlp.obstacle_s)
+                carried = carried_forces(
+                    src_s, src_lam, nlp.obstacle_s, src_w, nlp.obstacle_weights
+                )
                 lam[held] = carried * np.asarray(nlp.row_scale)[held] * nlp.sigma
                 break
     p = parameters.pack(problem, z)

@@ -158,8 +158,10 @@ def carried_forces(
     forces = np.asarray(src_forces, dtype=float)
     if not out.size or not np.any(forces != 0.0):
         return out
-    same_weights = (src_weights is None) == (dst_weights is None) and (
-        src_weights is None or np.array_equal(src_weights, dst_weights)
+    same_weights = (
+        src_weights is None
+        if dst_weights is None
+        else src_weights is not None and np.array_equal(src_weights, dst_weights)
     )
     if same_weights and np.array_equal(src_s, dst_s):
         return forces.copy()

@@ -165,8 +165,8 @@ def carried_forces(
     )
     if same_weights and np.array_equal(src_s, dst_s):
         return forces.copy()
-    pressing = np.abs(forces) > PRESSING_SHARE * np.abs(forces).max()
-    runs = [r for r in _runs(np.flatnonzero(pressing), LINE_GAP) if r.size >= LINE_RUN]
+    pressing = forces > PRESSING_SHARE * max(float(forces.max()), 0.0)
+    runs = [r for r in index_runs(np.flatnonzero(pressing), LINE_GAP) if r.size >= LINE_RUN]
     line = np.zeros(forces.size, dtype=bool)
     for run in runs:
         line[run[0] : run[-1] + 1] = True  # its gaps' tiny forces are part of the load
@@ -200,7 +200,7 @@ def _carry_line(
     out[inside] += share * (total / share.sum())
 
 
-def _runs(indices: np.ndarray, gap: int = 0) -> list[np.ndarray]:
+def index_runs(indices: np.ndarray, gap: int = 0) -> list[np.ndarray]:
     """Split ascending ``indices`` into runs with at most ``gap`` integers missing between two."""
     if not indices.size:
         return []

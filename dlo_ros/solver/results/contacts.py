@@ -22,6 +22,7 @@ import numpy as np
 from ...model.problem import Problem
 from ..build.nlp import StringNLP
 from ..build.slot_envelope import slot_contact_points
+from ..contact.obstacle_points import index_runs
 from .result import ContactLoad, ShapeResult
 
 
@@ -99,7 +100,7 @@ def contact_loads(
         # a row on the surface belongs to its stretch even when its multiplier is zero
         touch = gap <= ROW_TOUCH * L
         forces = row_forces(nlp, ob, x, lam)
-        for run in _runs(np.flatnonzero(touch)):
+        for run in index_runs(np.flatnonzero(touch)):
             run = run[(run >= run[lam[run] > 0].min())] if np.any(lam[run] > 0) else run[:0]
             run = run[run <= run[lam[run] > 0].max()] if run.size else run
             if not run.size:
@@ -132,13 +133,6 @@ def row_forces(nlp: StringNLP, ob, x: np.ndarray, lam: np.ndarray) -> np.ndarray
         grads = np.asarray(nlp.obstacle_gradient[ob.type](x[on].T, ob.params)).reshape(3, -1).T
         forces[on] = -lam[on, None] * grads
     return forces
-
-
-def _runs(indices: np.ndarray) -> list[np.ndarray]:
-    """Split ascending ``indices`` into runs of consecutive integers."""
-    if not indices.size:
-        return []
-    return np.split(indices, np.flatnonzero(np.diff(indices) != 1) + 1)
 
 
 def _slot_loads(

@@ -51,6 +51,10 @@ def start(script: str, path: str, args: list[str]) -> subprocess.Popen:
     assert proc.stdout is not None
     ready = json.loads(proc.stdout.readline())
     print(f"{path} {args}: {ready['file']}", file=sys.stderr)
+    # a worker that imported another tree's dlo_ros compares that tree with itself
+    if not Path(ready["file"]).resolve().is_relative_to(Path(path).resolve()):
+        proc.kill()
+        raise RuntimeError(f"the worker for {path} imported {ready['file']}: not that tree's")
     return proc
 
 

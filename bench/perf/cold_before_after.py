@@ -86,7 +86,9 @@ def worker() -> None:
 
 
 def main() -> None:
-    sys.path.insert(0, str(ROOT))
+    # last on the path: a worker's dlo_ros is its tree's (PYTHONPATH), not this one's (until
+    # 2026-12-08 both workers imported this tree's and every "same answer" was 0 m)
+    sys.path.append(str(ROOT))
     from bench.before_after import arguments, ask, extract, revision, start
     from bench.common import machine, write_report
 

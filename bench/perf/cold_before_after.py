@@ -6,7 +6,9 @@ Newton or IPOPT solve with the obstacle slot rounds): the paper's Fig. 3 strip o
 at ρ = 2000 at 1e-4 L; the main job's last pose on its post at δ = 1e-3 and 1e-4 m
 (test/unit/test_post_last_pose.py's cold solve).  ``make_solver`` with inline checks, compile off
 (what gcc would do beside the solve is left out: the cases compare the solves themselves),
-building included.
+building included; ``--background 1``: the floor cases with ``make_solver``'s own checks mode, a
+worker thread (as a planner or the node creates it: the first solve is checked before it
+returns all the same, after the worker's start-up builds).
 
 Each tree runs in a worker process of its own (``bench/before_after.py``: the earlier revision's
 ``dlo_ros`` extracted with ``git archive``), the cases in ``--rounds`` interleaved rounds, the
@@ -15,7 +17,7 @@ unknowns of each, and the largest distance between the two trees' centrelines (t
 or not).
 
     bash scripts/dlo-env run python bench/perf/cold_before_after.py [--before REV] [--rounds 3]
-        [--out bench/results/cold_before_after.md]
+        [--background 1] [--out bench/results/cold_before_after.md]
 """
 
 from __future__ import annotations
@@ -41,8 +43,11 @@ CASES = [
 ]
 
 
-def worker() -> None:
-    """Serve cases over stdin/stdout: a line [index] → {seconds, status, variables, points}."""
+def worker(checks: str) -> None:
+    """Serve cases over stdin/stdout: a line [index] → {seconds, status, variables, points}.
+
+    ``checks``: the floor cases' checks mode ('sync' or 'background').
+    """
     from dataclasses import replace
 
     from dlo_ros.scene import load_scene
@@ -62,7 +67,7 @@ def worker() -> None:
         options = replace(
             scene.options, error_tolerance=tolerance * scene.problem.string.length
         )
-        solver = make_solver(scene.problem, options, compile="off", checks="sync")
+        solver = make_solver(scene.problem, options, compile="off", checks=checks)
         try:
             return solver.solve()
         finally:
@@ -92,9 +97,10 @@ def main() -> None:
     from bench.before_after import arguments, ask, extract, revision, start
     from bench.common import machine, write_report
 
-    args = arguments(__doc__, "bench/results/cold_before_after.md", rounds=3)
+    args = arguments(__doc__, "bench/results/cold_before_after.md", rounds=3, background=0)
+    checks = "background" if args.background else "sync"
     if args.worker:
-        worker()
+        worker(checks)
         return
     info = machine()
     args.before, before_rev = revision(args.before)
@@ -102,7 +108,8 @@ def main() -> None:
     got: dict[tuple[str, int], list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         extract(args.before, tmp)
-        procs = {"before": start(__file__, tmp, []), "after": start(__file__, str(ROOT), [])}
+        flags = ["--background", str(args.background)]
+        procs = {"before": start(__file__, tmp, flags), "after": start(__file__, str(ROOT), flags)}
         for r in range(args.rounds):
             for index in range(len(CASES)):
                 for tree in trees if (r + index) % 2 == 0 else trees[::-1]:
@@ -119,9 +126,9 @@ def main() -> None:
         f"Python {info.get('python')}, load average {info['load_average'][0]:.2f} at the start; "
         f"git {info.get('git', '?')} (after) against {before_rev} (before); {args.rounds} rounds.",
         "",
-        "`make_solver(..., compile='off', checks='sync')`, building included; median wall time of "
-        "the rounds.  Same answer: the largest distance between the two trees' centrelines (the "
-        "last round's).",
+        f"`make_solver(..., compile='off', checks='{checks}')` for the floor cases, the post's as "
+        "test_post_last_pose.py solves it, building included; median wall time of the rounds.  "
+        "Same answer: the largest distance between the two trees' centrelines (the last round's).",
         "",
         "| case | before [s] | after [s] | after / before | status before / after | "
         "unknowns before / after | tolerance met before / after | same answer [m] |",
@@ -138,7 +145,8 @@ def main() -> None:
             f"{a[-1]['status']} | {b[-1]['variables']} / {a[-1]['variables']} | "
             f"{b[-1]['met']} / {a[-1]['met']} | {apart:.1e} |"
         )
-    argv = [f"--before {before_rev}", f"--rounds {args.rounds}", f"--out {args.out}"]
+    argv = [f"--before {before_rev}", f"--rounds {args.rounds}", f"--background {args.background}",
+            f"--out {args.out}"]
     write_report(lines, args.out, "bench/perf/cold_before_after.py", argv)
 
 

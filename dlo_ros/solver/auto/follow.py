@@ -17,6 +17,7 @@ from ...model.problem import Problem
 from ..results.result import ShapeResult
 from .check_schedule import held_refinement
 from .choice import ORDERS, ModelChoice, full_choice
+from .mesh_check import has_elements
 from .query_refine import refine_query
 from .reach import in_plane_obstacles, not_planar, reachable_obstacles, stretch_needed
 
@@ -27,15 +28,19 @@ if TYPE_CHECKING:  # the solver calls these functions (auto_solver.py imports th
 def build_first(auto: AutoShapeSolver, problem: Problem) -> None:
     """Build ahead: the 3D model a stream leaving the plane switches to, then the shadows.
 
-    The order shadows are the ones the first check needs.  Returns once the 3D model is built,
-    so that a stream leaving the plane at its first update never waits for the build.
+    The order shadows are the ones the first check needs; an element model's check solves none
+    (its estimate comes from the shape itself), so none is built for it.  Returns once the 3D
+    model is built, so that a stream leaving the plane at its first update never waits for the
+    build.
     """
     i = ORDERS.index(auto.choice.order)
     ahead = [full_choice(auto.choice, problem)] if auto.choice.may_leave_plane else []
     auto.pool.full_key = ("",) + ahead[0].key() if ahead else ()
-    ahead += [
-        replace(auto.choice, order=o) for o in ORDERS[i + 1 : i + 2] + ORDERS[max(i - 1, 0) : i]
-    ]
+    if not has_elements(auto.inner):  # an element model's checks solve no shadow
+        ahead += [
+            replace(auto.choice, order=o)
+            for o in ORDERS[i + 1 : i + 2] + ORDERS[max(i - 1, 0) : i]
+        ]
     auto.worker.submit(prebuild, {("",) + c.key() for c in ahead}, auto, ahead, problem)
     while auto.pool.full_key and auto.worker.busy_with(auto.pool.full_key):
         time.sleep(0.002)

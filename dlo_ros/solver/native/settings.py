@@ -44,6 +44,11 @@ NEWTON_CHORD_START, NEWTON_CHORD_TOLERANCE, NEWTON_CHORD_CONTRACTION, NEWTON_CHO
 #: first step's length (largest scaled unknown, as ``ipopt.escape_saddle``'s first step), which
 #: also bounds every step, and the most shifted steps taken before the point reached is polished.
 SADDLE_STEP, SADDLE_STEPS = 0.2, 40
+#: The first step of a second try, both ways, where neither way of the first (SADDLE_STEP) reached
+#: a stable point below the saddle: a weakly unstable saddle (λ_min ≈ −0.1) can rise over a step of
+#: 0.2 before it falls, and the descent from there ends on another branch above the saddle (the
+#: main job's cable lowered onto its post, update 409: IPOPT took the update instead, 60-100 ms).
+SADDLE_RETRY_STEP = SADDLE_STEP / 8
 #: The shifted steps stop once ‖∇f + J_Aᵀλ_A‖∞ and ‖g_A − bound‖∞ (scaled) are below these: Newton
 #: polishes the point from there.
 SADDLE_DUAL_TOLERANCE, SADDLE_PRIMAL_TOLERANCE = 1e-6, 1e-8

@@ -35,7 +35,8 @@ from . import attempts as AT
 from . import substeps as SS
 from .context import Outcome, UpdateContext
 from .ipopt import INFEASIBLE, LEFT_SADDLE, Attempt, escape_saddle, lower_than, witness
-from .saddle import leave_saddle
+from ..native.settings import SADDLE_RETRY_STEP
+from .saddle import SADDLE_STEP, leave_saddle
 from .slot_rounds import carry_slots
 
 #: what the warm rungs leave to the cold fallback: (iterations, IPOPT's unverified warm answer,
@@ -185,37 +186,43 @@ def leave_newton_saddle(
 ) -> tuple[Outcome | None, int]:
     """Continue a warm Newton update that landed on a saddle downhill, by shifted Newton steps.
 
-    ``saddle.leave_saddle``, either way along the unstable mode: (the first stable, verified result
-    of lower energy, or None: then IPOPT and ``escape_unstable`` take over; the iterations counted
-    so far).  Where the steps reach only a lower but still unstable equilibrium, that one is left
-    by ``escape_unstable`` (a cable lying on a table that buckles out of its plane: the steps hold
-    the table's contacts and stop on a lower saddle; IPOPT's warm start from the update's start
-    falls back onto the first saddle, whose escapes can run to their iteration limit).
+    ``saddle.leave_saddle``, either way along the unstable mode, with a first step of SADDLE_STEP
+    and, where neither way found a point below the saddle, of SADDLE_RETRY_STEP: (the first stable,
+    verified result of lower energy, or None: then IPOPT and ``escape_unstable`` take over; the
+    iterations counted so far).  Where the steps reach only a lower but still unstable
+    equilibrium, that one is left by ``escape_unstable`` (a cable lying on a table that buckles
+    out of its plane: the steps hold the table's contacts and stop on a lower saddle; IPOPT's warm
+    start from the update's start falls back onto the first saddle, whose escapes can run to
+    their iteration limit).
     """
     parts = ctx.parts
     assert saddle.min_eigenvalue is not None  # an unstable result has its eigenvalue
     lower: tuple[ShapeResult, SolverState] | None = None
-    for sign in (1.0, -1.0):
-        ok, new, it, viol = leave_saddle(
-            parts.nlp,
-            parts.functions,
-            state,
-            state.p,
-            saddle.min_eigenvalue,
-            sign,
-            fused=parts.fused_newton,
-        )
-        iterations += it
-        if not ok:
-            continue
-        result = AT.result(ctx, problem, new, "Newton", iterations, viol, True, 0)
-        if result.status != "ok" or not lower_than(result, saddle):
-            continue
-        if result.stable:
-            result.message += LEFT_SADDLE
-            return (result, new), iterations
-        if result.stable is False and lower is None:
-            lower = (result, new)
+    for first_step in (SADDLE_STEP, SADDLE_RETRY_STEP):
+        for sign in (1.0, -1.0):
+            ok, new, it, viol = leave_saddle(
+                parts.nlp,
+                parts.functions,
+                state,
+                state.p,
+                saddle.min_eigenvalue,
+                sign,
+                fused=parts.fused_newton,
+                first_step=first_step,
+            )
+            iterations += it
+            if not ok:
+                continue
+            result = AT.result(ctx, problem, new, "Newton", iterations, viol, True, 0)
+            if result.status != "ok" or not lower_than(result, saddle):
+                continue
+            if result.stable:
+                result.message += LEFT_SADDLE
+                return (result, new), iterations
+            if result.stable is False and lower is None:
+                lower = (result, new)
+        if lower is not None:  # a lower saddle: left by escape_unstable below
+            break
     if lower is not None:
         lower[0].iterations = iterations
         result, new = escape_unstable(ctx, problem, *lower)  # type: ignore[assignment]

@@ -36,6 +36,7 @@ def leave_saddle(
     min_eigenvalue: float,
     sign: float = 1.0,
     fused: bool = True,
+    first_step: float = SADDLE_STEP,
 ) -> tuple[bool, SolverState, int, float]:
     """Go from the unstable stationary point ``saddle`` downhill to a stationary point nearby.
 
@@ -52,8 +53,8 @@ def leave_saddle(
     steps are Newton's.  Once the residual is small (1e-6 dual, 1e-8 primal, scaled) the point
     reached is polished by ``newton`` (which also adapts the active set).  Returns ``newton``'s
     (ok, state, steps, violation); the caller checks that the state is stable and lower than the
-    saddle.  The first step goes ``sign`` × the unstable direction; ``fused`` is passed to
-    ``newton``.
+    saddle.  The first step goes ``sign`` × the unstable direction, ``first_step`` long (largest
+    scaled unknown); ``fused`` is passed to ``newton``.
     """
     fail = (False, saddle, 0, np.inf)
     if saddle.unstable_direction is None or not min_eigenvalue < 0:
@@ -63,7 +64,7 @@ def leave_saddle(
     idx = np.flatnonzero(active)
     bound = nlp.ubg[idx]
     d = saddle.unstable_direction / np.max(np.abs(saddle.unstable_direction))
-    z = saddle.z + sign * SADDLE_STEP * d
+    z = saddle.z + sign * first_step * d
     lam = np.where(active, saddle.lam_g, 0.0)
     rho = 2.0 * float(np.abs(lam).max(initial=0.0)) + 1.0
     mu = 2.0 * abs(min_eigenvalue)

@@ -15,6 +15,8 @@ mesh, its contact at s = 0.476), with the verdicts a check could make.
 
 from __future__ import annotations
 
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -23,7 +25,8 @@ import test_post_landing as landing
 import test_post_last_pose as post
 
 from dlo_ros.solver.auto.choice import ModelChoice
-from dlo_ros.solver.auto.stream_checks import contact_left
+from dlo_ros.solver.auto.check_schedule import PendingCheck
+from dlo_ros.solver.auto.stream_checks import CheckBook, apply_due, contact_left
 from dlo_ros.solver.build.mesh import MeshSpec
 from dlo_ros.solver.shape_solver import ShapeSolver
 
@@ -69,3 +72,32 @@ def test_other_verdicts_are_not_moves(pressed):
     other = replace(moved_to(auto, 0.417), order=16)  # another model
     assert not contact_left(auto, other)
     assert not contact_left(auto, auto.choice)  # nothing moved
+
+
+def test_a_dropped_move_cancels_its_lead_ins_queued_solves(pressed):
+    """Its lead-in's solves still queued on the worker never run: the check started next would
+    wait behind them (the main job: a lead-in solve of 0.24-0.3 s, and those after it, ran after
+    the switch they led into was dropped, and update 449 waited 39 ms for the next check)."""
+    auto, _ = pressed
+    choice = moved_to(auto, 0.417)
+    book = CheckBook(updates=446, index=445, generation=3)
+    verdict = SimpleNamespace(choice=choice, snapshot=SimpleNamespace(generation=3), reason="")
+    decided, job = Future(), Future()
+    decided.set_result(verdict)
+    job.set_result(verdict)
+    ran: list[int] = []
+    release = threading.Event()
+    with ThreadPoolExecutor(1) as worker:
+        busy = worker.submit(release.wait, 10.0)  # the lead-in solve the worker is running
+        steps = [worker.submit(ran.append, k) for k in (443, 444, 445)]
+        pending = PendingCheck(445, job=job, decided=decided, switching=True, steps=steps)
+        book.pending = pending
+        stand_in = SimpleNamespace(**vars(auto), book=book)
+        notes: list[str] = []
+        apply_due(stand_in, notes)
+        release.set()
+        busy.result()
+    assert book.pending is None and book.unchecked  # dropped: checked again from here
+    assert all(step.cancelled() for step in steps)
+    assert ran == []
+    assert notes == []  # no switch

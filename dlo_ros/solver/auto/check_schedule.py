@@ -91,6 +91,18 @@ class PendingCheck:
             return self.job.result()
         return self.decision()
 
+    def drop_lead_in(self) -> None:
+        """Cancel the lead-in's queued solves: its switch will not be made.
+
+        A solve the worker has started runs to its end; the others never run, so that the check
+        started next does not queue behind them (the main job: a switch dropped at update 446,
+        its lead-in's solves of 0.1-0.3 s each still ran, and the next check's update waited).
+        The new mesh's pooled solver is never streamed on from where they stopped: a later
+        verdict naming it maps its check's snapshot onto it first (``ModelChecks.evaluate``).
+        """
+        for step in self.steps:
+            step.cancel()
+
 
 def _checked(
     auto: AutoShapeSolver, snap: CheckSnapshot, decided: Future, lead: LeadIn

@@ -296,6 +296,7 @@ def apply_due(auto: AutoShapeSolver, notes: list[str]) -> None:
     if verdict.choice is None:
         keep(auto, verdict)
     elif contact_left(auto, verdict.choice):
+        pending.drop_lead_in()
         book.unchecked = True  # about a contact that has moved on: checked again from here
     else:
         # the new mesh's own equilibrium of the last update when it led in (lead_in.py), else

@@ -64,6 +64,8 @@ class Recording:
     centrelines: dict[int, np.ndarray]  # update -> (N, 3) as drawn (float32 in the file)
     # model/<key>: [(update, value)]
     model_series: dict[str, list[tuple[int, float]]] = field(default_factory=dict)
+    # timeseries/solve_time_ms: [(update, ms)], each solve's wall time as recorded
+    solve_times: list[tuple[int, float]] = field(default_factory=list)
     truncated: bool = False  # it ends early (a killed writer): read to its last complete message
     file_bytes: int = 0
     complete_bytes: int = 0  # bytes of the complete messages read (== file_bytes unless truncated)
@@ -194,6 +196,7 @@ class _Reader:
             key: _Rows(f"{P.E_MODEL_SERIES}/{key}", n, self.budget, keep)
             for key in P.MODEL_SCALARS
         }
+        self.solve_times = _Rows(P.E_SOLVE_TIME, n, self.budget, keep)
 
     def chunk(self, entity: str, batch: Any) -> None:
         if entity not in self.entities:
@@ -242,18 +245,22 @@ class _Reader:
             and entity.startswith(P.E_MODEL_SERIES + "/")
             and entity[len(P.E_MODEL_SERIES) + 1 :] in self.series
         ):
-            values = [
-                None if v is None or not len(v) else float(v[0])
-                for v in cols.numbers("Scalars:scalars", finite=False)
-            ]
-            # only the rows on the update timeline: the writer's static series-name row
-            # (SeriesLines) is no value and must not count against the updates limit
-            rows = [
-                t for t in zip(updates_of(cols, False), cols.row_ids(), values) if t[0] is not None
-            ]
-            self.series[entity[len(P.E_MODEL_SERIES) + 1 :]].add(
-                [t[0] for t in rows], [t[1] for t in rows], [t[2] for t in rows]
-            )
+            self._scalars(cols, self.series[entity[len(P.E_MODEL_SERIES) + 1 :]])
+        elif self.keep and entity == P.E_SOLVE_TIME:  # --resolve names the slowest solves
+            self._scalars(cols, self.solve_times)
+
+    def _scalars(self, cols: Columns, rows: _Rows) -> None:
+        """Add a Scalars entity's values on the update timeline to ``rows``."""
+        values = [
+            None if v is None or not len(v) else float(v[0])
+            for v in cols.numbers("Scalars:scalars", finite=False)
+        ]
+        # only the rows on the update timeline: the writer's static series-name row
+        # (SeriesLines) is no value and must not count against the updates limit
+        kept = [
+            t for t in zip(updates_of(cols, False), cols.row_ids(), values) if t[0] is not None
+        ]
+        rows.add([t[0] for t in kept], [t[1] for t in kept], [t[2] for t in kept])
 
     def _results(self, cols: Columns) -> None:
         where = P.E_DATA_RESULT
@@ -327,6 +334,9 @@ class _Reader:
             events=[(e, None if u < 0 else u, t or "") for e in EVENTS for u, _, t in rows[e]],
             centrelines={u: c for u, _, c in rows[P.E_CABLE] if u >= 0 and c is not None},
             model_series={k: v for k, v in series.items() if v},
+            solve_times=[
+                (u, v) for u, _, v in self.solve_times.sorted() if u >= 0 and v is not None
+            ],
             truncated=layout.truncated,
             file_bytes=layout.file_bytes,
             complete_bytes=layout.complete_bytes,

@@ -36,6 +36,7 @@ from .resolve_report import (
     model_history,
     model_key,
     recorded_models,
+    slowest,
     switches,
 )
 
@@ -164,6 +165,7 @@ def resolve_report(
         updates=rows,
         models=model_history(recorded_models(rec.model_series), models),
         switches=switches(*made),
+        slowest=slowest(rec.solve_times),
     )
 
 

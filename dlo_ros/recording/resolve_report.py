@@ -11,6 +11,9 @@ updates at which the recorded stream changed model (``model/<key>`` series) and 
 re-solve did, and the first update at which the two models differ.  It is reported only; it does
 not change :attr:`ResolveReport.ok`.
 
+The recording's slowest solves (``timeseries/solve_time_ms``: where a stream stalled, as the
+recording machine timed them) are named too, reported only.
+
 ``ok`` (exit 0 of ``dlo replay --resolve``) means no status change and no shape deviation.
 """
 
@@ -29,6 +32,8 @@ AGREE, DEVIATES, STATUS_CHANGED = "agree", "deviates", "status_changed"
 MODEL_KEYS = ("order", "variables", "planar")
 #: At most this many update numbers per list in the text summary (the JSON has them all).
 SHOWN = 20
+#: The recording's slowest solves named in the report.
+SLOWEST = 5
 
 ModelKey = tuple[float, ...]
 
@@ -107,6 +112,8 @@ class ResolveReport:
     updates: list[UpdateComparison]
     models: ModelHistory
     switches: Switches = field(default_factory=Switches)
+    #: (update, recorded solve time [ms]) of the SLOWEST slowest solves, slowest first
+    slowest: list[tuple[int, float]] = field(default_factory=list)
 
     def of(self, verdict: str) -> list[int]:
         """Return the updates with this verdict, in order."""
@@ -153,8 +160,23 @@ class ResolveReport:
                 "resolved": [list(c) for c in self.switches.resolved],
                 "first_difference": self.switches.first_difference,
             },
+            "slowest_recorded_solves": [
+                {"update": u, "solve_time_ms": ms} for u, ms in self.slowest
+            ],
             "ok": self.ok,
         }
+
+
+def slowest(solve_times: list[tuple[int, float]]) -> list[tuple[int, float]]:
+    """Return the SLOWEST (update, ms) of the recorded solve times, slowest first.
+
+    Finite times only; an update recorded twice counts once, at its longest.
+    """
+    longest: dict[int, float] = {}
+    for update, ms in solve_times:
+        if np.isfinite(ms):
+            longest[update] = max(ms, longest.get(update, ms))
+    return sorted(longest.items(), key=lambda t: (-t[1], t[0]))[:SLOWEST]
 
 
 def compare(recorded: RecordedResult, result: Any, tolerance: float) -> UpdateComparison:
@@ -262,6 +284,11 @@ def format_report(report: ResolveReport) -> str:
                 if sw.first_difference is None
                 else f"first differs at update {sw.first_difference}"
             )
+        )
+    if report.slowest:
+        lines.append(
+            "time    slowest recorded solves: "
+            + ", ".join(f"update {u} {ms:.1f} ms" for u, ms in report.slowest)
         )
     agree, deviates, changed = (report.of(v) for v in (AGREE, DEVIATES, STATUS_CHANGED))
     worst = report.worst()

@@ -159,6 +159,24 @@ def test_resolve_reproduces_the_recording(recorded):
     assert report["count"] == UPDATES + 1 and report["max_deviation_m"] <= 1e-9
 
 
+def test_the_solve_times_are_read_back_and_resolve_names_the_slowest(recorded, tmp_path, scene, solver):
+    """timeseries/solve_time_ms, read back per update, and the report's slowest solves: where a
+    recorded stream stalled (the main job's node: its maximum latency was update 113's solve)."""
+    path, results = recorded
+    rec = read_recording(path)
+    assert rec.solve_times == [(k, r.solve_time_ms) for k, r in enumerate(results)]  # float64: exact
+    report = resolve(rec, tolerance=1e-9, compile="off")
+    slowest = sorted(((k, r.solve_time_ms) for k, r in enumerate(results)), key=lambda t: -t[1])[:5]
+    assert [(d["update"], d["solve_time_ms"]) for d in report["slowest_recorded_solves"]] == slowest
+    # a recording without the series (dropped, as two runs are compared): nothing named, no error
+    filtered = tmp_path / "no_times.rrd"
+    out = rerun_tool("rrd", "filter", "--drop-entity", "/" + R.E_SOLVE_TIME, str(path), "-o", str(filtered))
+    assert out.returncode == 0, out.stderr
+    without = read_recording(filtered)
+    assert without.solve_times == [] and len(without.results) == len(results)
+    assert resolve(without, tolerance=1e-9, compile="off")["slowest_recorded_solves"] == []
+
+
 def test_two_runs_compare_equal_and_a_different_run_does_not(recorded, tmp_path, scene, solver):
     again = tmp_path / "run2.rrd"
     record(again, scene, solver, backend="thread")  # other backend: other chunking, same data

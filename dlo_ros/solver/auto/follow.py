@@ -33,10 +33,10 @@ def build_first(auto: AutoShapeSolver, problem: Problem) -> None:
     model is built, so that a stream leaving the plane at its first update never waits for the
     build.
     """
-    i = ORDERS.index(auto.choice.order)
     ahead = [full_choice(auto.choice, problem)] if auto.choice.may_leave_plane else []
     auto.pool.full_key = ("",) + ahead[0].key() if ahead else ()
     if not has_elements(auto.inner):  # an element model's checks solve no shadow
+        i = ORDERS.index(auto.choice.order)
         ahead += [
             replace(auto.choice, order=o)
             for o in ORDERS[i + 1 : i + 2] + ORDERS[max(i - 1, 0) : i]

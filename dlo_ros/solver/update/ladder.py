@@ -35,8 +35,8 @@ from . import attempts as AT
 from . import substeps as SS
 from .context import Outcome, UpdateContext
 from .ipopt import INFEASIBLE, LEFT_SADDLE, Attempt, escape_saddle, lower_than, witness
-from ..native.settings import SADDLE_RETRY_STEP
-from .saddle import SADDLE_STEP, leave_saddle
+from ..native.settings import SADDLE_RETRY_STEP, SADDLE_STEP
+from .saddle import leave_saddle
 from .slot_rounds import carry_slots
 
 #: what the warm rungs leave to the cold fallback: (iterations, IPOPT's unverified warm answer,
